@@ -1,0 +1,1 @@
+"""Run a filter over logged data and return estimates with their uncertainty."""

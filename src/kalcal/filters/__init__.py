@@ -1,0 +1,1 @@
+"""Pure filter functions over a model and data."""

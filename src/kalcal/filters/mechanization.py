@@ -1,0 +1,92 @@
+"""Integration of accelerometer samples into a nominal position and velocity (the strapdown step).
+
+Schemes, for samples a_j at t_j with step dt_j = t_{j+1} - t_j::
+
+    euler (the report):  v_{j+1} = v_j + a_j dt_j
+                         p_{j+1} = p_j + v_j dt_j + a_j dt_j^2 / 2
+    trapezoid:           v_{j+1} = v_j + (a_j + a_{j+1}) dt_j / 2
+                         p_{j+1} = p_j + v_j dt_j + (a_j + a_{j+1}) dt_j^2 / 4
+
+Euler holds each sample over the step that follows it, which lags the signal by half a sample; the
+trapezoid rule removes that lag. Both are exact for a constant acceleration, so a constant bias enters
+both exactly as the filter's model says.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+
+from kalcal.errors import ConfigError
+
+Scheme = Literal["euler", "trapezoid"]
+SCHEMES: tuple[str, ...] = ("euler", "trapezoid")
+
+
+def _step_accel(accel: np.ndarray, scheme: str) -> np.ndarray:
+    if scheme == "euler":
+        return accel[..., :-1]
+    if scheme == "trapezoid":
+        return 0.5 * (accel[..., :-1] + accel[..., 1:])
+    raise ConfigError(f"scenario.integration: expected one of {', '.join(SCHEMES)}, got {scheme!r}")
+
+
+def integrate(
+    accel: np.ndarray,
+    dt: float | np.ndarray,
+    p0: float | np.ndarray,
+    v0: float | np.ndarray,
+    scheme: Scheme = "euler",
+) -> tuple[np.ndarray, np.ndarray]:
+    """Integrate samples into position and velocity at every sample time.
+
+    Parameters
+    ----------
+    accel : ndarray, shape (..., J + 1)
+        Accelerometer samples a_0 .. a_J, m/s^2 (Euler does not use a_J).
+    dt : float or ndarray, shape (J,)
+        Step lengths, s.
+    p0, v0 : float or ndarray, shape (...)
+        Position (m) and velocity (m/s) at sample 0.
+    scheme : {"euler", "trapezoid"}
+
+    Returns
+    -------
+    position, velocity : ndarray, shape (..., J + 1)
+        The recursion above, evaluated with cumulative sums (equal to a loop over samples up to the
+        rounding of the order of additions).
+    """
+    accel = np.asarray(accel, dtype=float)
+    step = _step_accel(accel, scheme)
+    dt = np.broadcast_to(np.asarray(dt, dtype=float), step.shape[-1:])
+    p0 = np.asarray(p0, dtype=float)[..., None]
+    v0 = np.asarray(v0, dtype=float)[..., None]
+    shape = np.broadcast_shapes(step.shape[:-1], p0.shape[:-1], v0.shape[:-1]) + (step.shape[-1] + 1,)
+    # cumsum over [x_0, increment_0, increment_1, ...] adds the increments in the loop's order.
+    velocity = np.empty(shape)
+    velocity[..., :1] = v0
+    velocity[..., 1:] = step * dt
+    np.cumsum(velocity, axis=-1, out=velocity)
+    position = np.empty(shape)
+    position[..., :1] = p0
+    position[..., 1:] = velocity[..., :-1] * dt + step * (0.5 * dt * dt)
+    np.cumsum(position, axis=-1, out=position)
+    return position, velocity
+
+
+def interval_weights(scheme: Scheme, dt: float, steps: int) -> np.ndarray:
+    """Weights of the samples in the position and velocity gained over one interval of ``steps`` samples.
+
+    Over samples s .. s + m (m = steps), with the nominal starting from rest at the origin,
+    [p, v]_{s+m} = sum_{i=0}^{m} C[i] a_{s+i}: the integration scheme written as a linear map, found by
+    integrating unit impulses.
+
+    Returns
+    -------
+    ndarray, shape (m + 1, 2)
+        C[:, 0] in m per (m/s^2), C[:, 1] in m/s per (m/s^2); C[m] is zero for Euler.
+    """
+    impulses = np.eye(steps + 1)
+    position, velocity = integrate(impulses, dt, 0.0, 0.0, scheme)
+    return np.stack([position[:, -1], velocity[:, -1]], axis=-1)

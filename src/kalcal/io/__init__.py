@@ -1,0 +1,1 @@
+"""Readers of sensor logs and writers of results."""

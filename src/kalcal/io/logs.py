@@ -1,0 +1,89 @@
+"""Read sensor logs (CSV or Parquet, chosen by extension) into validated float columns.
+
+Every problem raises :class:`~kalcal.errors.DataError` naming the file, the column and, where there is
+one, the row (1-based, counting data rows after the header) and the value.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from kalcal.errors import DataError
+
+READERS = {".csv": "csv", ".parquet": "parquet", ".pq": "parquet"}
+
+
+def read_table(path: str | Path) -> pd.DataFrame:
+    """Read a CSV or Parquet file into a DataFrame; refuse missing, unreadable or empty files."""
+    path = Path(path)
+    kind = READERS.get(path.suffix.lower())
+    if kind is None:
+        raise DataError(f"{path}: unknown file type {path.suffix!r} (expected .csv or .parquet)")
+    if not path.is_file():
+        raise DataError(f"{path}: no such file")
+    try:
+        frame = pd.read_csv(path, skipinitialspace=True) if kind == "csv" else pd.read_parquet(path)
+    except pd.errors.EmptyDataError:
+        raise DataError(f"{path}: file is empty") from None
+    except (pd.errors.ParserError, UnicodeDecodeError, OSError, ValueError) as exc:
+        first_line = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise DataError(f"{path}: cannot be read as {kind} ({first_line})") from None
+    if frame.shape[0] == 0:
+        raise DataError(f"{path}: has a header but no data rows")
+    frame.columns = [str(c).strip() for c in frame.columns]
+    return frame
+
+
+def numeric_columns(
+    frame: pd.DataFrame,
+    path: str | Path,
+    columns: Mapping[str, str] | Sequence[str],
+    *,
+    allow_nan: Sequence[str] = (),
+) -> dict[str, np.ndarray]:
+    """Extract columns as float arrays.
+
+    Parameters
+    ----------
+    columns : mapping or sequence
+        ``{role: column name in the file}`` (or names, each its own role).
+    allow_nan : sequence of str
+        Roles whose empty or NaN cells are kept as NaN; elsewhere they are errors. Infinite values are
+        always errors.
+    """
+    mapping = dict(columns) if isinstance(columns, Mapping) else {name: name for name in columns}
+    result: dict[str, np.ndarray] = {}
+    for role, name in mapping.items():
+        if name not in frame.columns:
+            raise DataError(
+                f"{path}: missing column {name!r}" + (f" for {role}" if role != name else "")
+                + f" (columns: {', '.join(map(str, frame.columns))})"
+            )
+        raw = frame[name]
+        values = pd.to_numeric(raw, errors="coerce").to_numpy(dtype=float)
+        bad_text = np.isnan(values) & raw.notna().to_numpy() & (raw.astype(str).str.strip().str.lower() != "nan").to_numpy()
+        if np.any(bad_text):
+            row = int(np.argmax(bad_text))
+            raise DataError(f"{path}: row {row + 1}, column {name!r}: not a number: {raw.iloc[row]!r}")
+        not_finite = ~np.isfinite(values) if role not in allow_nan else np.isinf(values)
+        if np.any(not_finite):
+            row = int(np.argmax(not_finite))
+            raise DataError(f"{path}: row {row + 1}, column {name!r}: value is {raw.iloc[row]!r}, expected a finite number")
+        result[role] = values
+    return result
+
+
+def require_increasing(time: np.ndarray, path: str | Path, column: str = "time") -> None:
+    """Raise DataError unless ``time`` increases strictly."""
+    steps = np.diff(time)
+    bad = ~(steps > 0)
+    if np.any(bad):
+        row = int(np.argmax(bad)) + 1
+        raise DataError(
+            f"{path}: row {row + 1}, column {column!r}: time {time[row]!r} does not increase "
+            f"(previous row {time[row - 1]!r})"
+        )

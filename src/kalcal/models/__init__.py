@@ -1,0 +1,1 @@
+"""What a system is: immutable descriptions, no algorithms."""

@@ -1,0 +1,30 @@
+"""Built-in scenarios by name, and their construction from defaults, a TOML file and overrides."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+from kalcal.errors import ConfigError
+from kalcal.models.accel_gps import AccelGpsScenario
+from kalcal.models.config import apply_settings, load_toml, parse_assignments
+
+SCENARIOS: dict[str, type] = {AccelGpsScenario.NAME: AccelGpsScenario}
+
+
+def build_scenario(
+    name: str,
+    config: str | Path | None = None,
+    assignments: Iterable[str] = (),
+    defaults: Mapping[str, Any] | None = None,
+):
+    """The named scenario with ``defaults``, then the TOML file, then ``section.key=value`` applied."""
+    if name not in SCENARIOS:
+        raise ConfigError(f"unknown scenario {name!r} (known: {', '.join(SCENARIOS)})")
+    scenario = SCENARIOS[name]()
+    settings: dict[str, Any] = dict(defaults or {})
+    if config is not None:
+        settings.update(load_toml(config))
+    settings.update(parse_assignments(assignments))
+    return apply_settings(scenario, settings)

@@ -1,0 +1,1 @@
+"""The batched Monte Carlo engine and its streaming statistics."""

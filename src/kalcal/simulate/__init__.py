@@ -1,0 +1,1 @@
+"""Random realizations: an explicit numpy Generator in, arrays out."""

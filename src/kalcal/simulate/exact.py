@@ -1,0 +1,154 @@
+"""Exact sampling of the truth at the update rate.
+
+Between two updates the truth is linear in its noise samples, so the state at the next update is
+Gaussian given the state now: its noise over one interval is drawn with a covariance computed once,
+instead of sample by sample. A scheme that shares a noise sample between neighbouring intervals (the
+trapezoid rule uses each accelerometer sample in two steps) draws that boundary sample explicitly.
+Deterministic model error (an integration scheme against an analytic truth) is computed once and added.
+
+The truth at update k (k = 0..K-1, after k + 1 intervals)::
+
+    y_0 = x_0 ~ N(x0_mean, F0 F0^T),   u_0 ~ N(0, 1)
+    y_{k+1} = A y_k + L xi_k + b_in u_k + b_out u_{k+1},     xi_k ~ N(0, I_r),  u_k ~ N(0, 1)
+    x_k = y_{k+1} + D_k,    z_k = H x_k + G eta_k,           eta_k ~ N(0, I_p)
+
+Draw order for n realizations: ``(n, d0 + c)`` for x_0 and u_0, then ``(K, n, r + c + p)``, where c is 1
+when a boundary sample is shared and 0 when it is not (the intervals are then independent).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from kalcal.filters.kalman import interval_transition
+from kalcal.filters.mechanization import integrate, interval_weights
+from kalcal.linalg import psd_factor
+from kalcal.models.accel_gps import AccelGpsScenario
+from kalcal.models.linear import LinearGaussianModel
+
+
+@dataclass(frozen=True)
+class UpdateRateTruth:
+    """The truth at the update rate. d states, p measurements, K updates, r independent noise directions."""
+
+    transition: np.ndarray  #: A, (d, d)
+    noise_factor: np.ndarray  #: L, (d, r)
+    boundary_in: np.ndarray  #: b_in, weight of the shared sample that opens an interval, (d,)
+    boundary_out: np.ndarray  #: b_out, weight of the shared sample that closes it, (d,)
+    model_error: np.ndarray  #: D_k, deterministic error added at each update, (K, d)
+    x0_mean: np.ndarray  #: (d,)
+    x0_factor: np.ndarray  #: F0, (d, d0)
+    h: np.ndarray  #: (p, d)
+    measurement_factor: np.ndarray  #: G, (p, p)
+
+    @property
+    def n_updates(self) -> int:
+        return self.model_error.shape[0]
+
+    @property
+    def shares_boundary(self) -> bool:
+        """Whether neighbouring intervals share a noise sample."""
+        return bool(np.any(self.boundary_in != 0.0) or np.any(self.boundary_out != 0.0))
+
+    @property
+    def normals_per_realization(self) -> int:
+        """Standard normals one realization draws: the cost the engine is measured against."""
+        c = int(self.shares_boundary)
+        return self.x0_factor.shape[1] + c + self.n_updates * (self.noise_factor.shape[1] + c + self.h.shape[0])
+
+
+def truth_from_model(model: LinearGaussianModel, n_updates: int, model_error: np.ndarray | None = None) -> UpdateRateTruth:
+    """A linear Gaussian model sampled exactly at its update rate (independent intervals)."""
+    phi_m, q_m = interval_transition(model.phi, model.gamma, model.w, model.steps_per_update)
+    d = model.state_dim
+    return UpdateRateTruth(
+        transition=phi_m,
+        noise_factor=psd_factor(q_m),
+        boundary_in=np.zeros(d),
+        boundary_out=np.zeros(d),
+        model_error=np.zeros((n_updates, d)) if model_error is None else np.asarray(model_error, dtype=float),
+        x0_mean=model.x0,
+        x0_factor=psd_factor(model.m0),
+        h=model.h,
+        measurement_factor=np.linalg.cholesky(model.v),
+    )
+
+
+def accel_gps_model_error(scenario: AccelGpsScenario) -> np.ndarray:
+    """D_k: the error state left by integrating the noise-free, bias-free a(t_j) against the truth.
+
+    Zero for ``truth = "discrete"``; for the analytic truth it is the integration scheme's own error
+    (the rectangle rule's half-sample lag for Euler). Shape (K, 3), m and m/s (bias column zero).
+    """
+    s = scenario.scenario
+    error = np.zeros((s.n_updates, 3))
+    if s.truth == "discrete":
+        return error
+    fix_index = np.arange(1, s.n_updates + 1) * s.steps_per_update
+    true_accel = scenario.true_accel(s.sample_times())
+    position, velocity = integrate(true_accel, s.sample_period, 0.0, 0.0, s.integration)
+    exact_position, exact_velocity = scenario.analytic_motion(s.update_times())
+    error[:, 0] = exact_position - position[fix_index]
+    error[:, 1] = exact_velocity - velocity[fix_index]
+    return error
+
+
+def accel_gps_truth(scenario: AccelGpsScenario) -> UpdateRateTruth:
+    """The accelerometer/GPS error state at the fixes, exactly in distribution for either scheme."""
+    s = scenario.scenario
+    model = scenario.truth_model()
+    m = s.steps_per_update
+    # The error state gains -C_i sigma_a w_{s+i} from each accelerometer sample of the interval.
+    weights = np.zeros((m + 1, 3))
+    weights[:, :2] = -scenario.truth.accel_noise_std * interval_weights(s.integration, s.sample_period, m)
+    shared = bool(np.any(weights[m] != 0.0))
+    interior = weights[1:m] if shared else weights[:m]
+    base = truth_from_model(model, s.n_updates, accel_gps_model_error(scenario))
+    return UpdateRateTruth(
+        transition=base.transition,
+        noise_factor=psd_factor(interior.T @ interior),
+        boundary_in=weights[0] if shared else np.zeros(3),
+        boundary_out=weights[m],
+        model_error=base.model_error,
+        x0_mean=base.x0_mean,
+        x0_factor=base.x0_factor,
+        h=base.h,
+        measurement_factor=base.measurement_factor,
+    )
+
+
+def sample_exact(truth: UpdateRateTruth, rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Draw n realizations of the states and measurements at every update.
+
+    Returns
+    -------
+    states : ndarray, shape (n, K, d)
+    measurements : ndarray, shape (n, K, p)
+    """
+    d, r = truth.noise_factor.shape
+    d0 = truth.x0_factor.shape[1]
+    p = truth.h.shape[0]
+    c = int(truth.shares_boundary)
+    n_updates = truth.n_updates
+    first = rng.standard_normal((n, d0 + c))
+    draws = rng.standard_normal((n_updates, n, r + c + p))
+    y = truth.x0_mean + first[:, :d0] @ truth.x0_factor.T
+    u = first[:, d0:]  # (n, c): the boundary sample that opens the next interval
+    transition_t = truth.transition.T
+    # Stack [L | b_out] so that one product adds the independent noise and the closing boundary sample.
+    noise_t = np.vstack([truth.noise_factor.T, truth.boundary_out[None, :]][: 1 + c])
+    boundary_in = truth.boundary_in[None, :][:c]
+    measure_t = truth.measurement_factor.T
+    h_t = truth.h.T
+    states = np.empty((n, n_updates, d))
+    measurements = np.empty((n, n_updates, p))
+    for k in range(n_updates):
+        step = draws[k]
+        y = y @ transition_t + step[:, : r + c] @ noise_t + u @ boundary_in
+        u = step[:, r : r + c]
+        x = y + truth.model_error[k]
+        states[:, k] = x
+        measurements[:, k] = x @ h_t + step[:, r + c :] @ measure_t
+    return states, measurements

@@ -1,0 +1,144 @@
+"""Per-sample sensor streams of the accelerometer/GPS scenario, as the report simulates them.
+
+Random numbers are drawn in one fixed order so that a log and the Monte Carlo's sampled engine see the
+same realizations for the same generator state:
+
+1. ``(n, 4)``: standard normals for p0, v0, b and the noise of accelerometer sample 0;
+2. for each GPS interval k = 0..K-1, ``(n, m + 2)``: the noise of samples k m + 1 .. (k + 1) m, then the
+   position and velocity noise of fix k.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from kalcal.filters.mechanization import integrate, interval_weights
+from kalcal.models.accel_gps import AccelGpsScenario
+
+
+@dataclass(frozen=True)
+class AccelGpsLogs:
+    """n realizations of the recorded streams. J + 1 accelerometer samples, K fixes."""
+
+    sample_time: np.ndarray  #: t_j, s, (J + 1,)
+    accel: np.ndarray  #: measured a_c(t_j), m/s^2, (n, J + 1)
+    true_accel: np.ndarray  #: a(t_j), m/s^2, (J + 1,)
+    position: np.ndarray  #: true p(t_j), m, (n, J + 1)
+    velocity: np.ndarray  #: true v(t_j), m/s, (n, J + 1)
+    bias: np.ndarray  #: true b, m/s^2, (n,)
+    fix_index: np.ndarray  #: sample index of each fix, (K,)
+    gps_position: np.ndarray  #: m, (n, K)
+    gps_velocity: np.ndarray  #: m/s, (n, K)
+
+    @property
+    def fix_time(self) -> np.ndarray:
+        """Times of the fixes, s, (K,)."""
+        return self.sample_time[self.fix_index]
+
+
+def _initial_draws(scenario: AccelGpsScenario, rng: np.random.Generator, n: int):
+    t = scenario.truth
+    xi = rng.standard_normal((n, 4))
+    p0 = t.position0_mean + t.position0_std * xi[:, 0]
+    v0 = t.velocity0_mean + t.velocity0_std * xi[:, 1]
+    bias = t.bias_std * xi[:, 2]
+    return p0, v0, bias, t.accel_noise_std * xi[:, 3]
+
+
+def deterministic_motion(scenario: AccelGpsScenario, times: np.ndarray, sample_accel: np.ndarray) -> np.ndarray:
+    """Position and velocity due to a(t) alone, from rest at the origin, at ``times`` (m, m/s), (len, 2).
+
+    ``analytic`` truth: the closed form. ``discrete`` truth: ``sample_accel`` (a(t_j) at every sample up to
+    the last of ``times``) integrated with the scenario's own scheme.
+    """
+    settings = scenario.scenario
+    if settings.truth == "analytic":
+        return np.stack(scenario.analytic_motion(times), axis=-1)
+    position, velocity = integrate(sample_accel, settings.sample_period, 0.0, 0.0, settings.integration)
+    index = np.rint(np.asarray(times) / settings.sample_period).astype(int)
+    return np.stack([position[index], velocity[index]], axis=-1)
+
+
+def sample_accel_gps_logs(scenario: AccelGpsScenario, rng: np.random.Generator, n: int = 1) -> AccelGpsLogs:
+    """Draw n realizations of the full accelerometer and GPS logs.
+
+    Memory is n (J + 1) doubles per stream: meant for writing logs, not for large ensembles.
+    """
+    s, t = scenario.scenario, scenario.truth
+    m, n_updates = s.steps_per_update, s.n_updates
+    times = s.sample_times()
+    p0, v0, bias, noise0 = _initial_draws(scenario, rng, n)
+    noise = np.empty((n, s.n_samples + 1))
+    noise[:, 0] = noise0
+    gps_noise = np.empty((n, n_updates, 2))
+    for k in range(n_updates):
+        draw = rng.standard_normal((n, m + 2))
+        noise[:, k * m + 1 : (k + 1) * m + 1] = t.accel_noise_std * draw[:, :m]
+        gps_noise[:, k] = draw[:, m:]
+    true_accel = scenario.true_accel(times)
+    motion = deterministic_motion(scenario, times, true_accel)
+    position = p0[:, None] + v0[:, None] * times + motion[:, 0]
+    velocity = v0[:, None] + motion[:, 1] + np.zeros((n, 1))
+    fix_index = np.arange(1, n_updates + 1) * m
+    return AccelGpsLogs(
+        sample_time=times,
+        accel=true_accel + bias[:, None] + noise,
+        true_accel=true_accel,
+        position=position,
+        velocity=velocity,
+        bias=bias,
+        fix_index=fix_index,
+        gps_position=position[:, fix_index] + t.gps_position_std * gps_noise[:, :, 0],
+        gps_velocity=velocity[:, fix_index] + t.gps_velocity_std * gps_noise[:, :, 1],
+    )
+
+
+def sample_accel_gps_errors(
+    scenario: AccelGpsScenario, rng: np.random.Generator, n: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """The error states and error measurements at every fix, simulated sample by sample.
+
+    Same draws as :func:`sample_accel_gps_logs`, streamed one GPS interval at a time so that memory is
+    O(n m), not O(n J). Each interval integrates its m accelerometer samples with the scenario's scheme
+    (written as the linear map of :func:`~kalcal.filters.mechanization.interval_weights`).
+
+    Returns
+    -------
+    states : ndarray, shape (n, K, 3)
+        dx = [p - p_c, v - v_c, b] at each fix.
+    measurements : ndarray, shape (n, K, 2)
+        dz = [gps_position - p_c, gps_velocity - v_c] at each fix.
+    """
+    s, t = scenario.scenario, scenario.truth
+    m, n_updates, dt = s.steps_per_update, s.n_updates, s.sample_period
+    interval = m * dt
+    weights = interval_weights(s.integration, dt, m)  # (m + 1, 2)
+    times = s.sample_times()
+    true_accel = scenario.true_accel(times)
+    fix_times = s.update_times()
+    motion = deterministic_motion(scenario, fix_times, true_accel)
+    p0, v0, bias, noise = _initial_draws(scenario, rng, n)
+    pc0, vc0 = scenario.nominal_start()
+    nominal = np.empty((n, 2))
+    nominal[:, 0], nominal[:, 1] = pc0, vc0
+    states = np.empty((n, n_updates, 3))
+    measurements = np.empty((n, n_updates, 2))
+    block = np.empty((n, m + 1))
+    block[:, 0] = noise
+    gps_std = np.array([t.gps_position_std, t.gps_velocity_std])
+    for k in range(n_updates):
+        draw = rng.standard_normal((n, m + 2))
+        block[:, 1:] = t.accel_noise_std * draw[:, :m]
+        measured = block + (true_accel[k * m : (k + 1) * m + 1] + bias[:, None])
+        # p_c(t + T) = p_c(t) + v_c(t) T + sum_i C_i,p a_i;   v_c(t + T) = v_c(t) + sum_i C_i,v a_i
+        increment = measured @ weights
+        nominal[:, 0] += nominal[:, 1] * interval + increment[:, 0]
+        nominal[:, 1] += increment[:, 1]
+        states[:, k, 0] = p0 + v0 * fix_times[k] + motion[k, 0] - nominal[:, 0]
+        states[:, k, 1] = v0 + motion[k, 1] - nominal[:, 1]
+        states[:, k, 2] = bias
+        measurements[:, k] = states[:, k, :2] + gps_std * draw[:, m:]
+        block[:, 0] = block[:, m]
+    return states, measurements

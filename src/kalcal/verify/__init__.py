@@ -1,0 +1,1 @@
+"""Statistical checks of a filter against its Monte Carlo ensemble."""
