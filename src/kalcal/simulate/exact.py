@@ -12,8 +12,9 @@ The truth at update k (k = 0..K-1, after k + 1 intervals)::
     y_{k+1} = A y_k + L xi_k + b_in u_k + b_out u_{k+1},     xi_k ~ N(0, I_r),  u_k ~ N(0, 1)
     x_k = y_{k+1} + D_k,    z_k = H x_k + G eta_k,           eta_k ~ N(0, I_p)
 
-Draw order for n realizations: ``(n, d0 + c)`` for x_0 and u_0, then ``(K, n, r + c + p)``, where c is 1
-when a boundary sample is shared and 0 when it is not (the intervals are then independent).
+Draw order for n realizations: ``(d0 + c, n)`` for x_0 and u_0, then ``(K, r + c + p, n)``, where c is 1
+when a boundary sample is shared and 0 when it is not (the intervals are then independent). The
+realization index is the last, contiguous axis, as the compiled engine reads it.
 """
 
 from __future__ import annotations
@@ -132,8 +133,8 @@ def sample_exact(truth: UpdateRateTruth, rng: np.random.Generator, n: int) -> tu
     p = truth.h.shape[0]
     c = int(truth.shares_boundary)
     n_updates = truth.n_updates
-    first = rng.standard_normal((n, d0 + c))
-    draws = rng.standard_normal((n_updates, n, r + c + p))
+    first = rng.standard_normal((d0 + c, n)).T
+    draws = rng.standard_normal((n_updates, r + c + p, n)).transpose(0, 2, 1)
     y = truth.x0_mean + first[:, :d0] @ truth.x0_factor.T
     u = first[:, d0:]  # (n, c): the boundary sample that opens the next interval
     transition_t = truth.transition.T

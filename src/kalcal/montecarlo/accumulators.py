@@ -1,0 +1,153 @@
+"""Mergeable streaming sums of a Monte Carlo ensemble, and the statistics derived from them.
+
+Each block of realizations becomes a :class:`MomentSums`; sums merge by addition, so memory is flat in
+the number of realizations and any grouping of blocks, merged in block order, gives the same bits.
+Second moments are raw sums; central moments are derived at the end in float64 (the errors' means are
+small against their spread, so the subtraction loses no meaningful precision).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from typing import NamedTuple
+
+import numpy as np
+from scipy.linalg.blas import dsyrk
+
+
+
+class BlockResult(NamedTuple):
+    """n realizations of a filter run, K updates, d states, p measurements."""
+
+    error: np.ndarray  #: e_k = x_k - xhat_k, (n, K, d)
+    estimate: np.ndarray  #: xhat_k, (n, K, d)
+    residual: np.ndarray  #: r_k = z_k - H xbar_k, (n, K, p)
+    nees: np.ndarray  #: e_k^T P_k^{-1} e_k, (n, K)
+    nis: np.ndarray  #: r_k^T S_k^{-1} r_k, (n, K)
+    filter_cov_sum: np.ndarray  #: sum over the n realizations of the filter's P_k, (K, d, d)
+
+
+class ResidualProducts:
+    """The sum of r r^T over the stacked residual vector, kept as its upper triangle."""
+
+    @staticmethod
+    def upper(stacked: np.ndarray) -> np.ndarray:
+        """Upper triangle of stacked^T stacked for stacked (n, K p), by BLAS syrk."""
+        n, width = stacked.shape
+        if n == 0:
+            return np.zeros((width, width))
+        # dsyrk computes A A^T for a Fortran-ordered A; the C-ordered (n, Kp) array is (Kp, n) in F order.
+        return np.triu(dsyrk(1.0, stacked.T, lower=0))
+
+    @staticmethod
+    def diagonal_blocks(upper: np.ndarray, n_updates: int, p: int) -> np.ndarray:
+        """The (K, p, p) blocks sum r_k r_k^T on the diagonal, symmetrized."""
+        blocks = upper.reshape(n_updates, p, n_updates, p)[np.arange(n_updates), :, np.arange(n_updates), :]
+        return blocks + np.triu(blocks, 1).swapaxes(-1, -2)
+
+
+@dataclass
+class MomentSums:
+    """Sums over realizations. K updates, d states, p measurements.
+
+    ``residual_outer`` holds the upper triangle of sum r r^T over the stacked residual vector
+    [r_0, r_1, ..., r_{K-1}] (length K p, update-major); its lower triangle is zero until
+    :func:`residual_second_moment` fills it.
+    """
+
+    count: int
+    error: np.ndarray  #: sum e_k, (K, d)
+    error_outer: np.ndarray  #: sum e_k e_k^T, (K, d, d)
+    estimate: np.ndarray  #: sum xhat_k, (K, d)
+    estimate_outer: np.ndarray  #: sum xhat_k xhat_k^T, (K, d, d)
+    error_estimate: np.ndarray  #: sum e_k xhat_k^T, (K, d, d)
+    nees: np.ndarray  #: sum e^T P^{-1} e, (K,)
+    nis: np.ndarray  #: sum r^T S^{-1} r, (K,)
+    residual: np.ndarray  #: sum r_k, (K, p)
+    residual_outer: np.ndarray  #: upper triangle of sum r r^T, (K p, K p)
+    filter_cov: np.ndarray  #: sum of the filter's P_k, (K, d, d)
+
+    @classmethod
+    def from_block(cls, block: BlockResult) -> MomentSums:
+        """The sums of one block (n realizations)."""
+        e = np.ascontiguousarray(block.error.transpose(1, 0, 2))  # (K, n, d)
+        x = np.ascontiguousarray(block.estimate.transpose(1, 0, 2))
+        n, n_updates, p = block.residual.shape
+        outer = ResidualProducts.upper(np.ascontiguousarray(block.residual.reshape(n, n_updates * p)))
+        return cls(
+            count=n,
+            error=e.sum(axis=1),
+            error_outer=np.swapaxes(e, 1, 2) @ e,
+            estimate=x.sum(axis=1),
+            estimate_outer=np.swapaxes(x, 1, 2) @ x,
+            error_estimate=np.swapaxes(e, 1, 2) @ x,
+            nees=block.nees.sum(axis=0),
+            nis=block.nis.sum(axis=0),
+            residual=block.residual.sum(axis=0),
+            residual_outer=outer,
+            filter_cov=np.asarray(block.filter_cov_sum, dtype=float),
+        )
+
+    def merge(self, other: MomentSums) -> MomentSums:
+        """The sums of both ensembles (self first, then other: the order fixes the rounding)."""
+        return MomentSums(
+            count=self.count + other.count,
+            **{f.name: getattr(self, f.name) + getattr(other, f.name) for f in fields(self) if f.name != "count"},
+        )
+
+    def as_arrays(self) -> dict[str, np.ndarray]:
+        """Every field as an array (for checkpoints)."""
+        return {f.name: np.asarray(getattr(self, f.name)) for f in fields(self)}
+
+    @classmethod
+    def from_arrays(cls, arrays: dict[str, np.ndarray]) -> MomentSums:
+        return cls(**{f.name: (int(arrays[f.name]) if f.name == "count" else np.asarray(arrays[f.name])) for f in fields(cls)})
+
+
+def residual_second_moment(sums: MomentSums) -> np.ndarray:
+    """E[r_k r_j^T] for every pair, as the full symmetric (K, p, K, p) array."""
+    upper = sums.residual_outer
+    full = upper + np.triu(upper, 1).T
+    n_updates, p = sums.residual.shape
+    return (full / sums.count).reshape(n_updates, p, n_updates, p)
+
+
+@dataclass(frozen=True)
+class EnsembleStatistics:
+    """Per-update statistics of the ensemble. N realizations, K updates."""
+
+    count: int
+    mean_error: np.ndarray  #: (K, d)
+    error_cov: np.ndarray  #: ensemble covariance of e, divisor N - 1, (K, d, d)
+    error_second_moment: np.ndarray  #: E[e e^T], (K, d, d)
+    estimate_second_moment: np.ndarray  #: E[xhat xhat^T], (K, d, d)
+    error_estimate: np.ndarray  #: E[e xhat^T], (K, d, d)
+    mean_estimate: np.ndarray  #: (K, d)
+    filter_cov: np.ndarray  #: mean of the filter's P_k, (K, d, d)
+    mean_nees: np.ndarray  #: (K,)
+    mean_nis: np.ndarray  #: (K,)
+    mean_residual: np.ndarray  #: (K, p)
+    residual_second_moment: np.ndarray  #: E[r_k r_j^T], (K, p, K, p)
+
+
+def ensemble_statistics(sums: MomentSums) -> EnsembleStatistics:
+    """Means and (co)variances from the sums."""
+    n = sums.count
+    if n < 2:
+        raise ValueError(f"need at least two realizations for ensemble statistics, got {n}")
+    mean_error = sums.error / n
+    centered = sums.error_outer - n * mean_error[:, :, None] * mean_error[:, None, :]
+    return EnsembleStatistics(
+        count=n,
+        mean_error=mean_error,
+        error_cov=centered / (n - 1),
+        error_second_moment=sums.error_outer / n,
+        estimate_second_moment=sums.estimate_outer / n,
+        error_estimate=sums.error_estimate / n,
+        mean_estimate=sums.estimate / n,
+        filter_cov=sums.filter_cov / n,
+        mean_nees=sums.nees / n,
+        mean_nis=sums.nis / n,
+        mean_residual=sums.residual / n,
+        residual_second_moment=residual_second_moment(sums),
+    )

@@ -1,0 +1,143 @@
+"""Fused loops of the Monte Carlo hot path, compiled with numba.
+
+numpy spends its time here on many passes over small arrays: one realization-step costs about seventy
+multiply-adds spread over some thirty array operations, each with its own temporary. These kernels make
+the same passes inside one compiled function, with the realizations as the innermost, contiguous axis
+(structure of arrays: a state is (d, n), a draw (q, n)), so that every inner loop vectorizes and nothing
+leaves the cache. ``benchmarks/bench_montecarlo.py`` measures the factor against the numpy reference
+path (``sample_exact`` + ``run_with_gains`` + ``MomentSums.from_block``), which stays as the tests'
+oracle: both consume the same draws and agree to rounding.
+
+The reductions over realizations are compiled with reassociation allowed (so that they vectorize):
+a given block on a given machine always gives the same bits, but a different CPU may round differently.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+_FAST = {"reassoc", "contract"}
+
+
+@numba.njit(nogil=True, cache=True, fastmath=_FAST)
+def _affine(out, matrix, vectors, add):
+    """out[a, :] = (add ? out[a, :] : 0) + sum_b matrix[a, b] vectors[b, :]  for (d, n) arrays."""
+    rows, cols = matrix.shape
+    n = vectors.shape[1]
+    for a in range(rows):
+        if not add:
+            for i in range(n):
+                out[a, i] = 0.0
+        for b in range(cols):
+            coef = matrix[a, b]
+            if coef != 0.0:
+                for i in range(n):
+                    out[a, i] += coef * vectors[b, i]
+
+
+@numba.njit(nogil=True, cache=True, fastmath=_FAST)
+def _dot(u, v):
+    acc = 0.0
+    for i in range(u.shape[0]):
+        acc += u[i] * v[i]
+    return acc
+
+
+@numba.njit(nogil=True, cache=True, fastmath=_FAST)
+def _filter_and_accumulate(k, truth, z, x, xbar, residual, phi, h, gains, sums_e, sums_ee, sums_x, sums_xx, sums_ex, sums_r, residuals):
+    """One update of the fixed-gain filter for every realization, then the moment sums at update k.
+
+    truth (d, n): states; z (p, n): measurements; x (d, n): posterior, updated in place.
+    """
+    d, n = x.shape
+    p = z.shape[0]
+    _affine(xbar, phi, x, False)  # xbar = Phi x
+    for a in range(p):  # r = z - H xbar
+        for i in range(n):
+            residual[a, i] = z[a, i]
+    _affine(residual, -h, xbar, True)
+    for a in range(d):  # x = xbar + K r
+        for i in range(n):
+            x[a, i] = xbar[a, i]
+    _affine(x, gains[k], residual, True)
+    for a in range(d):  # truth becomes the error e = x_true - xhat
+        for i in range(n):
+            truth[a, i] -= x[a, i]
+    for a in range(d):
+        sums_e[k, a] += truth[a].sum()
+        sums_x[k, a] += x[a].sum()
+        for b in range(d):
+            sums_ex[k, a, b] += _dot(truth[a], x[b])
+            if b >= a:
+                sums_ee[k, a, b] += _dot(truth[a], truth[b])
+                sums_xx[k, a, b] += _dot(x[a], x[b])
+    for a in range(d):
+        for b in range(a):
+            sums_ee[k, a, b] = sums_ee[k, b, a]
+            sums_xx[k, a, b] = sums_xx[k, b, a]
+    for a in range(p):
+        sums_r[k, a] += residual[a].sum()
+        for i in range(n):
+            residuals[i, k * p + a] = residual[a, i]
+
+
+@numba.njit(nogil=True, cache=True, fastmath=_FAST)
+def exact_block_moments(
+    y0, u0, draws, transition, noise, boundary_in, model_error, h_truth, measure,
+    phi, h, gains, x0, sums_e, sums_ee, sums_x, sums_xx, sums_ex, sums_r, residuals,
+):
+    """Sample the exact update-rate truth (:mod:`kalcal.simulate.exact`) and filter it, in one pass.
+
+    y0 (d, n) truth at sample 0; u0 (c, n) its opening boundary sample; draws (K, r + c + p, n);
+    transition (d, d); noise (d, r + c) = [L | b_out]; boundary_in (d, c); model_error (K, d);
+    h_truth (p, d); measure (p, p) = G. Filter: phi (d, d) over one interval, h (p, d), gains (K, d, p),
+    x0 (d,). Sums are added to; residuals (n, K p) receives every innovation.
+    """
+    d, n = y0.shape
+    n_updates = draws.shape[0]
+    rc = noise.shape[1]
+    c = boundary_in.shape[1]
+    r = rc - c
+    p = h.shape[0]
+    y = y0.copy()
+    y_next = np.empty((d, n))
+    state = np.empty((d, n))
+    z = np.empty((p, n))
+    x = np.empty((d, n))
+    for a in range(d):
+        x[a, :] = x0[a]
+    xbar = np.empty((d, n))
+    residual = np.empty((p, n))
+    for k in range(n_updates):
+        step = draws[k]
+        _affine(y_next, transition, y, False)
+        _affine(y_next, noise, step[:rc], True)
+        if c:
+            _affine(y_next, boundary_in, u0 if k == 0 else draws[k - 1, r:rc], True)
+        y, y_next = y_next, y
+        for a in range(d):
+            shift = model_error[k, a]
+            for i in range(n):
+                state[a, i] = y[a, i] + shift
+        _affine(z, h_truth, state, False)
+        _affine(z, measure, step[rc:], True)
+        _filter_and_accumulate(k, state, z, x, xbar, residual, phi, h, gains, sums_e, sums_ee, sums_x, sums_xx, sums_ex, sums_r, residuals)
+
+
+@numba.njit(nogil=True, cache=True, fastmath=_FAST)
+def filter_block_moments(states, measurements, phi, h, gains, x0, sums_e, sums_ee, sums_x, sums_xx, sums_ex, sums_r, residuals):
+    """Filter given truths and accumulate, for samplers other than the exact one.
+
+    states (K, d, n) (overwritten with the errors), measurements (K, p, n); the rest as in
+    :func:`exact_block_moments`.
+    """
+    n_updates, d, n = states.shape
+    p = h.shape[0]
+    x = np.empty((d, n))
+    for a in range(d):
+        x[a, :] = x0[a]
+    xbar = np.empty((d, n))
+    residual = np.empty((p, n))
+    for k in range(n_updates):
+        _filter_and_accumulate(k, states[k], measurements[k], x, xbar, residual, phi, h, gains, sums_e, sums_ee, sums_x, sums_xx, sums_ex, sums_r, residuals)

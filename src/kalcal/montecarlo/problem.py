@@ -1,0 +1,205 @@
+"""What the Monte Carlo engine verifies: a truth to sample and a filter to run on it.
+
+A problem turns a generator and a count n into a :class:`BlockResult` (the filter's errors, estimates,
+innovations and normalized squares for n realizations); the engine does seeding, batching, threads and
+merging. :class:`FixedGainProblem` serves every time-invariant linear model whose gains can be computed
+ahead of the data (the report's filter); problems with data-dependent gains implement the same protocol.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+from kalcal.filters.kalman import GainSchedule, UpdateForm, covariance_pass, run_with_gains
+from kalcal.linalg import whitener
+from kalcal.models.linear import LinearGaussianModel
+from kalcal.montecarlo import kernels
+from kalcal.montecarlo.accumulators import BlockResult, MomentSums, ResidualProducts
+from kalcal.simulate.exact import UpdateRateTruth, sample_exact
+
+Sampler = Callable[[np.random.Generator, int], tuple[np.ndarray, np.ndarray]]
+
+
+@dataclass(frozen=True)
+class ProblemInfo:
+    """Names, units and times that label the statistics."""
+
+    scenario: str
+    update_times: np.ndarray  #: s, (K,)
+    state_names: tuple[str, ...]
+    state_units: tuple[str, ...]
+    measurement_names: tuple[str, ...]
+    measurement_units: tuple[str, ...]
+
+
+class Problem(Protocol):
+    """The engine's view of a verification problem."""
+
+    info: ProblemInfo
+    engines: tuple[str, ...]
+
+    def run_block(self, rng: np.random.Generator, n: int, engine: str) -> BlockResult:
+        """Simulate n realizations with ``engine`` and run the filter on them."""
+
+    def block_sums(self, rng: np.random.Generator, n: int, engine: str) -> MomentSums:
+        """The moment sums of ``run_block`` with the same generator (a problem may fuse the two)."""
+
+    def normals_per_realization(self, engine: str) -> int:
+        """Standard normals one realization draws (the cost the engine is measured against)."""
+
+    def expected_mean_error(self) -> np.ndarray:
+        """E[e_k] implied by the truth's means and deterministic model error, (K, d)."""
+
+
+def _inverse_spd(cov: np.ndarray) -> np.ndarray:
+    """W^T W for the Cholesky whitener W: the inverse of each symmetric positive definite matrix."""
+    w = whitener(cov)
+    return np.swapaxes(w, -1, -2) @ w
+
+
+@dataclass(frozen=True)
+class FixedGainProblem:
+    """A time-invariant filter with precomputed gains against an update-rate truth.
+
+    Parameters
+    ----------
+    info : ProblemInfo
+    filter_model : LinearGaussianModel
+        What the filter believes.
+    truth : UpdateRateTruth
+        What the world does, sampled exactly at the update rate (engine "exact").
+    sampled : callable, optional
+        ``sampled(rng, n) -> (states (n, K, d), measurements (n, K, p))`` simulating every sample
+        (engine "sampled").
+    form : {"joseph", "standard"}
+    """
+
+    info: ProblemInfo
+    filter_model: LinearGaussianModel
+    truth: UpdateRateTruth
+    sampled: Sampler | None = None
+    sampled_normals: int = 0
+    form: UpdateForm = "joseph"
+    schedule: GainSchedule = field(init=False)
+    _state_whitener: np.ndarray = field(init=False, repr=False)
+    _innovation_whitener: np.ndarray = field(init=False, repr=False)
+    _state_inverse: np.ndarray = field(init=False, repr=False)
+    _innovation_inverse: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        schedule = covariance_pass(self.filter_model, self.truth.n_updates, self.form)
+        object.__setattr__(self, "schedule", schedule)
+        object.__setattr__(self, "_state_whitener", whitener(schedule.posterior_cov))
+        object.__setattr__(self, "_innovation_whitener", whitener(schedule.innovation_cov))
+        # sum_i e_i^T P^{-1} e_i = tr(P^{-1} sum_i e_i e_i^T): NEES and NIS sums from the second moments.
+        object.__setattr__(self, "_state_inverse", _inverse_spd(schedule.posterior_cov))
+        object.__setattr__(self, "_innovation_inverse", _inverse_spd(schedule.innovation_cov))
+
+    @property
+    def engines(self) -> tuple[str, ...]:
+        return ("exact", "sampled") if self.sampled is not None else ("exact",)
+
+    def normals_per_realization(self, engine: str) -> int:
+        return self.truth.normals_per_realization if engine == "exact" else self.sampled_normals
+
+    def sample(self, rng: np.random.Generator, n: int, engine: str) -> tuple[np.ndarray, np.ndarray]:
+        """States (n, K, d) and measurements (n, K, p) from the chosen engine."""
+        if engine == "exact":
+            return sample_exact(self.truth, rng, n)
+        if engine == "sampled" and self.sampled is not None:
+            return self.sampled(rng, n)
+        raise ValueError(f"engine {engine!r} is not available for {self.info.scenario} (have {', '.join(self.engines)})")
+
+    def filter(self, measurements: np.ndarray):
+        """The filter's run over measurements (n, K, p)."""
+        return run_with_gains(self.schedule, self.filter_model.h, measurements, self.filter_model.x0)
+
+    def run_block(self, rng: np.random.Generator, n: int, engine: str) -> BlockResult:
+        states, measurements = self.sample(rng, n, engine)
+        run = self.filter(measurements)
+        error = states - run.posterior
+        whitened_error = np.einsum("kij,nkj->nki", self._state_whitener, error)
+        whitened_residual = np.einsum("kij,nkj->nki", self._innovation_whitener, run.residual)
+        return BlockResult(
+            error=error,
+            estimate=run.posterior,
+            residual=run.residual,
+            nees=np.einsum("nki,nki->nk", whitened_error, whitened_error),
+            nis=np.einsum("nki,nki->nk", whitened_residual, whitened_residual),
+            filter_cov_sum=n * self.schedule.posterior_cov,
+        )
+
+    def block_sums(self, rng: np.random.Generator, n: int, engine: str) -> MomentSums:
+        """The moment sums of n realizations through the compiled kernels (same draws as ``run_block``)."""
+        n_updates, d, p = self.truth.n_updates, self.filter_model.state_dim, self.filter_model.measurement_dim
+        sums = {
+            "error": np.zeros((n_updates, d)),
+            "error_outer": np.zeros((n_updates, d, d)),
+            "estimate": np.zeros((n_updates, d)),
+            "estimate_outer": np.zeros((n_updates, d, d)),
+            "error_estimate": np.zeros((n_updates, d, d)),
+            "residual": np.zeros((n_updates, p)),
+        }
+        residuals = np.empty((n, n_updates * p))
+        gains = (self.schedule.phi_interval, self.filter_model.h, self.schedule.gain, self.filter_model.x0)
+        order = ("error", "error_outer", "estimate", "estimate_outer", "error_estimate", "residual")
+        if engine == "exact":
+            truth = self.truth
+            c = int(truth.shares_boundary)
+            d0 = truth.x0_factor.shape[1]
+            first = rng.standard_normal((d0 + c, n))
+            draws = rng.standard_normal((n_updates, truth.noise_factor.shape[1] + c + p, n))
+            noise = np.column_stack([truth.noise_factor] + ([truth.boundary_out] if c else []))
+            kernels.exact_block_moments(
+                truth.x0_mean[:, None] + truth.x0_factor @ first[:d0],
+                np.ascontiguousarray(first[d0:]),
+                draws,
+                truth.transition,
+                np.ascontiguousarray(noise),
+                np.ascontiguousarray(truth.boundary_in[:, None][:, :c]),
+                truth.model_error,
+                truth.h,
+                truth.measurement_factor,
+                *gains,
+                *(sums[name] for name in order),
+                residuals,
+            )
+        else:
+            states, measurements = self.sample(rng, n, engine)
+            kernels.filter_block_moments(
+                np.ascontiguousarray(states.transpose(1, 2, 0)),
+                np.ascontiguousarray(measurements.transpose(1, 2, 0)),
+                *gains,
+                *(sums[name] for name in order),
+                residuals,
+            )
+        outer = ResidualProducts.upper(residuals)
+        blocks = ResidualProducts.diagonal_blocks(outer, n_updates, p)
+        return MomentSums(
+            count=n,
+            **sums,
+            nees=np.einsum("kij,kij->k", self._state_inverse, sums["error_outer"]),
+            nis=np.einsum("kij,kij->k", self._innovation_inverse, blocks),
+            residual_outer=outer,
+            filter_cov=n * self.schedule.posterior_cov,
+        )
+
+    def expected_mean_error(self) -> np.ndarray:
+        """The filter's response to the truth's mean trajectory: E[x_k] - E[xhat_k], (K, d).
+
+        E[x_k] = A^{k+1} x0_mean + D_k; the filter is linear, so its mean estimate is its run on
+        H E[x_k]. Nonzero only when the truth's prior mean differs from the filter's or the truth carries
+        deterministic model error.
+        """
+        truth = self.truth
+        mean = np.empty((truth.n_updates, truth.transition.shape[0]))
+        y = truth.x0_mean
+        for k in range(truth.n_updates):
+            y = truth.transition @ y
+            mean[k] = y + truth.model_error[k]
+        run = self.filter((mean @ truth.h.T)[None])
+        return mean - run.posterior[0]
