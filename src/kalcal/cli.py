@@ -14,6 +14,7 @@ from typing import Annotated, Optional
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from kalcal.errors import KalcalError
@@ -90,6 +91,125 @@ def calibrate(
         table.add_row(name, f"{summary[name]:.6g}", f"{summary[name + '_std']:.3g}", unit)
     console.print(table)
     console.print(f"wrote {Path(out) / 'estimates.csv'} and {Path(out) / 'summary.json'}")
+
+
+def _progress_bar(total_label: str):
+    """A rich progress bar on a terminal, nothing otherwise: returns (context manager, callback or None)."""
+    if not error_console.is_terminal:
+        return contextlib.nullcontext(), None
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    bar = Progress(
+        TextColumn(total_label),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+        console=error_console,
+        transient=True,
+    )
+    task = bar.add_task(total_label, total=None)
+
+    def update(done: int, total: int) -> None:
+        bar.update(task, completed=done, total=total)
+
+    return bar, update
+
+
+def _print_checks(summary: dict) -> None:
+    """The checks as one table, then one paragraph per failed check saying why."""
+    table = Table(
+        title=(
+            f"kalcal verify {summary['scenario']}: {summary['realizations']:,} realizations "
+            f"({summary['engine']}) in {summary['timing']['monte_carlo_s']:.2f} s, verdict: {summary['verdict'].upper()}"
+        ),
+    )
+    table.add_column("check")
+    table.add_column("statistic", justify="right")
+    table.add_column("bounds", justify="right")
+    table.add_column("result")
+    for test in summary["tests"]:
+        lower = "" if test["lower"] is None else f"{test['lower']:.4g} .. "
+        result = "[green]pass[/green]" if test["passed"] else "[bold red]FAIL[/bold red]"
+        table.add_row(test["name"], f"{test['statistic']:.4g}", f"{lower}{test['upper']:.4g}", result)
+    console.print(table)
+    for test in summary["tests"]:
+        if not test["passed"]:
+            console.print(f"[bold]{test['name']}[/bold]: {escape(test['detail'])}")
+
+
+@app.command()
+def verify(
+    scenario: Annotated[str, typer.Argument(help=f"Scenario: {', '.join(SCENARIOS)}.")] = "accel-gps",
+    n: Annotated[int, typer.Option("-n", "--realizations", help="Monte Carlo realizations.")] = 300_000,
+    seed: Annotated[int, typer.Option("--seed", help="Root seed; the same seed gives the same numbers.")] = 0,
+    out: Annotated[Path, typer.Option("--out", help="Directory for summary.json, stats.nc and the report.")] = Path(
+        "kalcal-out"
+    ),
+    engine: Annotated[str, typer.Option("--engine", help="exact (update-rate sampling) or sampled (every sample).")] = "exact",
+    confidence: Annotated[float, typer.Option("--confidence", help="Family-wise confidence of each check.")] = 0.99,
+    workers: Annotated[Optional[int], typer.Option("--workers", help="Threads (default: all cores).")] = None,
+    strict: Annotated[bool, typer.Option("--strict", help="Exit with status 1 when a check fails.")] = False,
+    long_run: Annotated[
+        Optional[float],
+        typer.Option("--long-run", help="Seconds of the extra long-horizon mean-error study (0: none; accel-gps: 120)."),
+    ] = None,
+    no_report: Annotated[bool, typer.Option("--no-report", help="Do not draw the figures and report.html.")] = False,
+    realization: Annotated[int, typer.Option("--realization", help="Realization shown in the single-run figures.")] = 0,
+    set_: SetOpt = None,
+    config: ConfigOpt = None,
+) -> None:
+    """Verify the filter with a Monte Carlo: mean error, covariance, orthogonality, whiteness, NIS."""
+    import shlex
+
+    from kalcal.jobs.verify import verify as run_verify
+
+    with user_errors():
+        model = build_scenario(scenario, config, set_ or ())
+        if workers is not None and workers < 1:
+            raise KalcalError(f"--workers: expected a positive number, got {workers}")
+        bar, update = _progress_bar(f"{scenario} x {n:,}")
+        with bar:
+            outcome = run_verify(
+                model,
+                n,
+                seed,
+                out,
+                engine=engine,
+                confidence=confidence,
+                workers=workers,
+                progress=update,
+                command=shlex.join(["kalcal", *sys.argv[1:]]),
+                long_run=long_run,
+            )
+        if not no_report:
+            from kalcal.jobs.report import render_report
+
+            outcome.paths["report"] = render_report(Path(out), realization=realization)
+    _print_checks(outcome.summary)
+    pair = outcome.summary["residual_correlation"]
+    console.print(
+        f"E[r_k r_j^T] at k = {pair['k_time']:g} s, j = {pair['j_time']:g} s: "
+        f"{pair['matrix'].tolist()} (standard errors {pair['standard_error'].round(6).tolist()})",
+        markup=False,
+    )
+    for path in outcome.paths.values():
+        console.print(f"wrote {path}")
+    if strict and outcome.summary["verdict"] != "pass":
+        raise typer.Exit(1)
+
+
+@app.command()
+def report(
+    directory: Annotated[Path, typer.Argument(help="A directory written by kalcal verify.")],
+    realization: Annotated[int, typer.Option("--realization", help="Realization shown in the single-run figures.")] = 0,
+) -> None:
+    """Redraw the figures and report.html of a verification run from its summary.json and stats.nc."""
+    from kalcal.jobs.report import render_report
+
+    with user_errors():
+        page = render_report(directory, realization=realization)
+    console.print(f"wrote {page}")
 
 
 def main() -> None:  # pragma: no cover - the console script

@@ -39,12 +39,6 @@ class ResidualProducts:
         # dsyrk computes A A^T for a Fortran-ordered A; the C-ordered (n, Kp) array is (Kp, n) in F order.
         return np.triu(dsyrk(1.0, stacked.T, lower=0))
 
-    @staticmethod
-    def diagonal_blocks(upper: np.ndarray, n_updates: int, p: int) -> np.ndarray:
-        """The (K, p, p) blocks sum r_k r_k^T on the diagonal, symmetrized."""
-        blocks = upper.reshape(n_updates, p, n_updates, p)[np.arange(n_updates), :, np.arange(n_updates), :]
-        return blocks + np.triu(blocks, 1).swapaxes(-1, -2)
-
 
 @dataclass
 class MomentSums:
@@ -52,7 +46,8 @@ class MomentSums:
 
     ``residual_outer`` holds the upper triangle of sum r r^T over the stacked residual vector
     [r_0, r_1, ..., r_{K-1}] (length K p, update-major); its lower triangle is zero until
-    :func:`residual_second_moment` fills it.
+    :func:`residual_second_moment` fills it. It is None when the run did not keep the pairs (it costs
+    O(N K^2 p^2)); ``residual_own`` (the same update's products, for NIS) is always kept.
     """
 
     count: int
@@ -64,7 +59,8 @@ class MomentSums:
     nees: np.ndarray  #: sum e^T P^{-1} e, (K,)
     nis: np.ndarray  #: sum r^T S^{-1} r, (K,)
     residual: np.ndarray  #: sum r_k, (K, p)
-    residual_outer: np.ndarray  #: upper triangle of sum r r^T, (K p, K p)
+    residual_own: np.ndarray  #: sum r_k r_k^T, (K, p, p)
+    residual_outer: np.ndarray | None  #: upper triangle of sum r r^T over all pairs, (K p, K p)
     filter_cov: np.ndarray  #: sum of the filter's P_k, (K, d, d)
 
     @classmethod
@@ -84,29 +80,28 @@ class MomentSums:
             nees=block.nees.sum(axis=0),
             nis=block.nis.sum(axis=0),
             residual=block.residual.sum(axis=0),
+            residual_own=np.einsum("nka,nkb->kab", block.residual, block.residual),
             residual_outer=outer,
             filter_cov=np.asarray(block.filter_cov_sum, dtype=float),
         )
 
     def merge(self, other: MomentSums) -> MomentSums:
         """The sums of both ensembles (self first, then other: the order fixes the rounding)."""
+        def add(a, b):
+            return None if a is None or b is None else a + b
+
         return MomentSums(
             count=self.count + other.count,
-            **{f.name: getattr(self, f.name) + getattr(other, f.name) for f in fields(self) if f.name != "count"},
+            **{f.name: add(getattr(self, f.name), getattr(other, f.name)) for f in fields(self) if f.name != "count"},
         )
 
-    def as_arrays(self) -> dict[str, np.ndarray]:
-        """Every field as an array (for checkpoints)."""
-        return {f.name: np.asarray(getattr(self, f.name)) for f in fields(self)}
-
-    @classmethod
-    def from_arrays(cls, arrays: dict[str, np.ndarray]) -> MomentSums:
-        return cls(**{f.name: (int(arrays[f.name]) if f.name == "count" else np.asarray(arrays[f.name])) for f in fields(cls)})
 
 
-def residual_second_moment(sums: MomentSums) -> np.ndarray:
-    """E[r_k r_j^T] for every pair, as the full symmetric (K, p, K, p) array."""
+def residual_second_moment(sums: MomentSums) -> np.ndarray | None:
+    """E[r_k r_j^T] for every pair, as the full symmetric (K, p, K, p) array (None if not kept)."""
     upper = sums.residual_outer
+    if upper is None:
+        return None
     full = upper + np.triu(upper, 1).T
     n_updates, p = sums.residual.shape
     return (full / sums.count).reshape(n_updates, p, n_updates, p)
@@ -127,7 +122,8 @@ class EnsembleStatistics:
     mean_nees: np.ndarray  #: (K,)
     mean_nis: np.ndarray  #: (K,)
     mean_residual: np.ndarray  #: (K, p)
-    residual_second_moment: np.ndarray  #: E[r_k r_j^T], (K, p, K, p)
+    residual_own_moment: np.ndarray  #: E[r_k r_k^T], (K, p, p)
+    residual_second_moment: np.ndarray | None  #: E[r_k r_j^T] over all pairs, (K, p, K, p), if kept
 
 
 def ensemble_statistics(sums: MomentSums) -> EnsembleStatistics:
@@ -149,5 +145,6 @@ def ensemble_statistics(sums: MomentSums) -> EnsembleStatistics:
         mean_nees=sums.nees / n,
         mean_nis=sums.nis / n,
         mean_residual=sums.residual / n,
+        residual_own_moment=sums.residual_own / n,
         residual_second_moment=residual_second_moment(sums),
     )

@@ -45,10 +45,13 @@ def _dot(u, v):
 
 
 @numba.njit(nogil=True, cache=True, fastmath=_FAST)
-def _filter_and_accumulate(k, truth, z, x, xbar, residual, phi, h, gains, sums_e, sums_ee, sums_x, sums_xx, sums_ex, sums_r, residuals):
+def _filter_and_accumulate(
+    k, truth, z, x, xbar, residual, phi, h, gains, sums_e, sums_ee, sums_x, sums_xx, sums_ex, sums_r, sums_rr, residuals
+):
     """One update of the fixed-gain filter for every realization, then the moment sums at update k.
 
-    truth (d, n): states; z (p, n): measurements; x (d, n): posterior, updated in place.
+    truth (d, n): states; z (p, n): measurements; x (d, n): posterior, updated in place. ``residuals``
+    with zero rows means "do not keep the innovations".
     """
     d, n = x.shape
     p = z.shape[0]
@@ -78,21 +81,24 @@ def _filter_and_accumulate(k, truth, z, x, xbar, residual, phi, h, gains, sums_e
             sums_xx[k, a, b] = sums_xx[k, b, a]
     for a in range(p):
         sums_r[k, a] += residual[a].sum()
-        for i in range(n):
-            residuals[i, k * p + a] = residual[a, i]
+        for b in range(p):
+            sums_rr[k, a, b] += _dot(residual[a], residual[b])
+        if residuals.shape[0]:
+            for i in range(n):
+                residuals[i, k * p + a] = residual[a, i]
 
 
 @numba.njit(nogil=True, cache=True, fastmath=_FAST)
 def exact_block_moments(
     y0, u0, draws, transition, noise, boundary_in, model_error, h_truth, measure,
-    phi, h, gains, x0, sums_e, sums_ee, sums_x, sums_xx, sums_ex, sums_r, residuals,
+    phi, h, gains, x0, sums_e, sums_ee, sums_x, sums_xx, sums_ex, sums_r, sums_rr, residuals,
 ):
     """Sample the exact update-rate truth (:mod:`kalcal.simulate.exact`) and filter it, in one pass.
 
     y0 (d, n) truth at sample 0; u0 (c, n) its opening boundary sample; draws (K, r + c + p, n);
     transition (d, d); noise (d, r + c) = [L | b_out]; boundary_in (d, c); model_error (K, d);
     h_truth (p, d); measure (p, p) = G. Filter: phi (d, d) over one interval, h (p, d), gains (K, d, p),
-    x0 (d,). Sums are added to; residuals (n, K p) receives every innovation.
+    x0 (d,). Sums are added to; residuals (n, K p) receives every innovation (or (0, K p): none kept).
     """
     d, n = y0.shape
     n_updates = draws.shape[0]
@@ -122,11 +128,15 @@ def exact_block_moments(
                 state[a, i] = y[a, i] + shift
         _affine(z, h_truth, state, False)
         _affine(z, measure, step[rc:], True)
-        _filter_and_accumulate(k, state, z, x, xbar, residual, phi, h, gains, sums_e, sums_ee, sums_x, sums_xx, sums_ex, sums_r, residuals)
+        _filter_and_accumulate(
+            k, state, z, x, xbar, residual, phi, h, gains, sums_e, sums_ee, sums_x, sums_xx, sums_ex, sums_r, sums_rr, residuals
+        )
 
 
 @numba.njit(nogil=True, cache=True, fastmath=_FAST)
-def filter_block_moments(states, measurements, phi, h, gains, x0, sums_e, sums_ee, sums_x, sums_xx, sums_ex, sums_r, residuals):
+def filter_block_moments(
+    states, measurements, phi, h, gains, x0, sums_e, sums_ee, sums_x, sums_xx, sums_ex, sums_r, sums_rr, residuals
+):
     """Filter given truths and accumulate, for samplers other than the exact one.
 
     states (K, d, n) (overwritten with the errors), measurements (K, p, n); the rest as in
@@ -140,4 +150,7 @@ def filter_block_moments(states, measurements, phi, h, gains, x0, sums_e, sums_e
     xbar = np.empty((d, n))
     residual = np.empty((p, n))
     for k in range(n_updates):
-        _filter_and_accumulate(k, states[k], measurements[k], x, xbar, residual, phi, h, gains, sums_e, sums_ee, sums_x, sums_xx, sums_ex, sums_r, residuals)
+        _filter_and_accumulate(
+            k, states[k], measurements[k], x, xbar, residual, phi, h, gains,
+            sums_e, sums_ee, sums_x, sums_xx, sums_ex, sums_r, sums_rr, residuals,
+        )

@@ -84,6 +84,7 @@ class FixedGainProblem:
     sampled: Sampler | None = None
     sampled_normals: int = 0
     form: UpdateForm = "joseph"
+    residual_pairs: bool = True  #: keep E[r_k r_j^T] over all pairs (O(N K^2 p^2)) for the whiteness check
     schedule: GainSchedule = field(init=False)
     _state_whitener: np.ndarray = field(init=False, repr=False)
     _innovation_whitener: np.ndarray = field(init=False, repr=False)
@@ -143,10 +144,11 @@ class FixedGainProblem:
             "estimate_outer": np.zeros((n_updates, d, d)),
             "error_estimate": np.zeros((n_updates, d, d)),
             "residual": np.zeros((n_updates, p)),
+            "residual_own": np.zeros((n_updates, p, p)),
         }
-        residuals = np.empty((n, n_updates * p))
+        residuals = np.empty((n if self.residual_pairs else 0, n_updates * p))
         gains = (self.schedule.phi_interval, self.filter_model.h, self.schedule.gain, self.filter_model.x0)
-        order = ("error", "error_outer", "estimate", "estimate_outer", "error_estimate", "residual")
+        order = ("error", "error_outer", "estimate", "estimate_outer", "error_estimate", "residual", "residual_own")
         if engine == "exact":
             truth = self.truth
             c = int(truth.shares_boundary)
@@ -177,14 +179,12 @@ class FixedGainProblem:
                 *(sums[name] for name in order),
                 residuals,
             )
-        outer = ResidualProducts.upper(residuals)
-        blocks = ResidualProducts.diagonal_blocks(outer, n_updates, p)
         return MomentSums(
             count=n,
             **sums,
             nees=np.einsum("kij,kij->k", self._state_inverse, sums["error_outer"]),
-            nis=np.einsum("kij,kij->k", self._innovation_inverse, blocks),
-            residual_outer=outer,
+            nis=np.einsum("kij,kij->k", self._innovation_inverse, sums["residual_own"]),
+            residual_outer=ResidualProducts.upper(residuals) if self.residual_pairs else None,
             filter_cov=n * self.schedule.posterior_cov,
         )
 

@@ -17,7 +17,9 @@ from kalcal.simulate.exact import accel_gps_truth
 from kalcal.simulate.sampled import sample_accel_gps_errors
 
 
-def accel_gps_problem(scenario: AccelGpsScenario, form: UpdateForm = "joseph") -> FixedGainProblem:
+def accel_gps_problem(
+    scenario: AccelGpsScenario, form: UpdateForm = "joseph", residual_pairs: bool = True
+) -> FixedGainProblem:
     """The report's filter against its truth, with the exact and the per-sample (sampled) engines."""
     s = scenario.scenario
     info = ProblemInfo(
@@ -36,4 +38,29 @@ def accel_gps_problem(scenario: AccelGpsScenario, form: UpdateForm = "joseph") -
         # p0, v0, b, the first sample; then m samples and 2 fix noises per interval
         sampled_normals=4 + s.n_updates * (s.steps_per_update + 2),
         form=form,
+        residual_pairs=residual_pairs,
     )
+
+
+def accel_gps_model_error_cause(scenario: AccelGpsScenario) -> str:
+    """A sentence naming what makes the truth depart from the filter's model, for check details."""
+    s = scenario.scenario
+    causes = []
+    if s.truth == "analytic":
+        lag = " (the rectangle rule lags a(t) by half a sample)" if s.integration == "euler" else ""
+        causes.append(f"the {s.integration} integration of the accelerometer against the analytic truth{lag}")
+    f, t = scenario.filter_settings, scenario.truth
+    if (f.position0_mean, f.velocity0_mean) != (t.position0_mean, t.velocity0_mean):
+        causes.append("the filter's prior mean differing from the truth's")
+    return " and ".join(causes)
+
+
+def build_problem(scenario, form: UpdateForm = "joseph", residual_pairs: bool = True) -> tuple[FixedGainProblem, str]:
+    """The verification problem of a built-in scenario and the sentence naming its model error.
+
+    ``residual_pairs=False`` skips E[r_k r_j^T] over all pairs (and so the whiteness check), for long
+    horizons where only the other statistics are wanted.
+    """
+    if isinstance(scenario, AccelGpsScenario):
+        return accel_gps_problem(scenario, form, residual_pairs), accel_gps_model_error_cause(scenario)
+    raise TypeError(f"no verification problem for {type(scenario).__name__}")

@@ -1,0 +1,96 @@
+"""The Monte Carlo engine: compiled path against the numpy reference, seeding, merging, engines."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from kalcal.models.accel_gps import AccelGpsScenario
+from kalcal.models.config import apply_settings
+from kalcal.montecarlo.accumulators import MomentSums, ensemble_statistics
+from kalcal.montecarlo.engine import block_generator, block_sizes, realization, run_monte_carlo
+from kalcal.montecarlo.scenarios import accel_gps_problem
+
+SHORT = {"scenario.duration": 4.0}
+
+
+def _problem(**settings):
+    return accel_gps_problem(apply_settings(AccelGpsScenario(), {**SHORT, **settings}))
+
+
+def _fields(sums: MomentSums):
+    return {f.name: getattr(sums, f.name) for f in dataclasses.fields(sums)}
+
+
+@pytest.mark.parametrize("integration", ["euler", "trapezoid"])
+@pytest.mark.parametrize("engine", ["exact", "sampled"])
+def test_compiled_block_equals_numpy_reference(integration, engine):
+    problem = _problem(**{"scenario.integration": integration})
+    fused = _fields(problem.block_sums(block_generator(7, 3), 300, engine))
+    reference = _fields(MomentSums.from_block(problem.run_block(block_generator(7, 3), 300, engine)))
+    assert fused["count"] == reference["count"] == 300
+    for name, value in reference.items():
+        if name == "count":
+            continue
+        scale = max(np.abs(value).max(), 1e-300)
+        assert np.abs(fused[name] - value).max() <= 1e-11 * scale, name
+
+
+def test_same_seed_same_numbers_whatever_the_threads():
+    problem = _problem()
+    one = run_monte_carlo(problem, 9000, seed=11, workers=1, block_size=1000)
+    two = run_monte_carlo(problem, 9000, seed=11, workers=2, block_size=1000)
+    for name, value in _fields(one.sums).items():
+        assert np.array_equal(value, _fields(two.sums)[name]), name
+
+
+def test_merge_of_block_sums_equals_the_run():
+    problem = _problem()
+    run = run_monte_carlo(problem, 2500, seed=5, workers=2, block_size=1000)
+    parts = [problem.block_sums(block_generator(5, b), size, "exact") for b, size in enumerate(block_sizes(2500, 1000))]
+    merged = parts[0].merge(parts[1]).merge(parts[2])
+    for name, value in _fields(run.sums).items():
+        assert np.array_equal(value, _fields(merged)[name]), name
+
+
+def test_different_seeds_give_different_draws():
+    problem = _problem()
+    a = run_monte_carlo(problem, 500, seed=1, workers=1)
+    b = run_monte_carlo(problem, 500, seed=2, workers=1)
+    assert not np.array_equal(a.sums.error, b.sums.error)
+
+
+def test_realization_is_the_kth_of_the_ensemble():
+    problem = _problem()
+    index = 1234
+    single = realization(problem, seed=3, index=index, engine="exact", block_size=1000)
+    block = problem.run_block(block_generator(3, 1), 1000, "exact")
+    assert np.array_equal(single.error[0], block.error[234])
+    assert np.allclose(single.filter_cov_sum, problem.schedule.posterior_cov)
+
+
+def test_block_sizes():
+    assert block_sizes(10, 4) == [4, 4, 2]
+    assert block_sizes(8, 4) == [4, 4]
+    with pytest.raises(ValueError):
+        block_sizes(0, 4)
+
+
+@pytest.mark.parametrize("integration", ["euler", "trapezoid"])
+def test_exact_and_sampled_engines_agree_within_sampling_error(integration):
+    """Means: |difference| < z se; covariances: the ratio of the two ensembles' variances is F-distributed."""
+    problem = _problem(**{"scenario.integration": integration, "scenario.duration": 6.0})
+    n = 20000
+    exact = ensemble_statistics(run_monte_carlo(problem, n, seed=21, engine="exact").sums)
+    sampled = ensemble_statistics(run_monte_carlo(problem, n, seed=22, engine="sampled").sums)
+    var_exact = np.diagonal(exact.error_cov, axis1=1, axis2=2)
+    var_sampled = np.diagonal(sampled.error_cov, axis1=1, axis2=2)
+    comparisons = var_exact.size
+    from scipy import stats
+
+    z = stats.norm.isf(0.001 / (2 * comparisons))
+    se = np.sqrt((var_exact + var_sampled) / n)
+    assert np.all(np.abs(exact.mean_error - sampled.mean_error) <= z * se)
+    low, high = stats.f.ppf([0.001 / (2 * comparisons), 1 - 0.001 / (2 * comparisons)], n - 1, n - 1)
+    ratio = var_exact / var_sampled
+    assert np.all((ratio > low) & (ratio < high))
