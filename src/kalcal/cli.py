@@ -42,7 +42,8 @@ def user_errors() -> Iterator[None]:
     """Turn a KalcalError into one line on stderr and exit status 2."""
     try:
         yield
-    except KalcalError as exc:
+    except (KalcalError, OSError) as exc:
+        # OSError: an output path that cannot be written (a file where a directory should be, no permission)
         error_console.print(f"kalcal: error: {exc}", markup=False)
         raise typer.Exit(2) from None
 

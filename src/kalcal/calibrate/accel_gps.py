@@ -38,11 +38,16 @@ class AccelGpsCalibration:
         return np.sqrt(np.diagonal(self.covariance, axis1=1, axis2=2))
 
 
+def _time_tolerance(times: np.ndarray, period: float) -> float:
+    """Timing slack, s: a millionth of a sample, or the rounding of the time stamps if that is coarser."""
+    return max(1e-6 * period, 8.0 * float(np.spacing(np.max(np.abs(times)))))
+
+
 def _regular_period(imu_time: np.ndarray, source: str) -> float:
     steps = np.diff(imu_time)
     period = float(np.median(steps))
     worst = int(np.argmax(np.abs(steps - period)))
-    if abs(steps[worst] - period) > 1e-6 * period:
+    if abs(steps[worst] - period) > _time_tolerance(imu_time, period):
         raise DataError(
             f"{source}: accelerometer samples must be evenly spaced; step {worst + 1} is "
             f"{steps[worst]:.9g} s against {period:.9g} s elsewhere"
@@ -60,6 +65,7 @@ def calibrate_accel_gps(
     *,
     form: UpdateForm = "joseph",
     source: str = "gps",
+    imu_source: str = "imu",
 ) -> AccelGpsCalibration:
     """Run the report's filter over one log.
 
@@ -74,21 +80,29 @@ def calibrate_accel_gps(
     gps_time, gps_position, gps_velocity : ndarray, shape (K,)
         Fix times (s, on accelerometer sample times), positions (m) and velocities (m/s).
     form : {"joseph", "standard"}
-    source : str
-        Name of the GPS log, quoted in errors.
+    source, imu_source : str
+        Names of the GPS and accelerometer logs, quoted in errors.
     """
-    period = _regular_period(imu_time, "imu")
-    index = np.rint((gps_time - imu_time[0]) / period).astype(np.int64)
-    off_tick = np.abs(imu_time[0] + index * period - gps_time) > 1e-6 * period
-    if np.any(off_tick):
-        row = int(np.argmax(off_tick))
-        raise DataError(f"{source}: row {row + 1}: fix time {gps_time[row]:.9g} s is not on an accelerometer sample")
-    outside = (index < 0) | (index >= imu_time.size)
+    period = _regular_period(imu_time, imu_source)
+    tolerance = _time_tolerance(imu_time, period)
+    outside = (gps_time < imu_time[0] - tolerance) | (gps_time > imu_time[-1] + tolerance)
     if np.any(outside):
         row = int(np.argmax(outside))
         raise DataError(
             f"{source}: row {row + 1}: fix time {gps_time[row]:.9g} s lies outside the accelerometer log "
             f"[{imu_time[0]:.9g}, {imu_time[-1]:.9g}] s"
+        )
+    index = np.clip(np.rint((gps_time - imu_time[0]) / period).astype(np.int64), 0, imu_time.size - 1)
+    off_tick = np.abs(imu_time[index] - gps_time) > tolerance
+    if np.any(off_tick):
+        row = int(np.argmax(off_tick))
+        raise DataError(f"{source}: row {row + 1}: fix time {gps_time[row]:.9g} s is not on an accelerometer sample")
+    backwards = np.flatnonzero(np.diff(index) <= 0)
+    if backwards.size:
+        row = int(backwards[0]) + 1
+        raise DataError(
+            f"{source}: row {row + 1}: fix time {gps_time[row]:.9g} s does not come after the previous fix "
+            f"({gps_time[row - 1]:.9g} s)"
         )
     p_c, v_c = integrate(accel, period, *scenario.nominal_start(), scenario.scenario.integration)
     model = scenario.filter_model()

@@ -72,7 +72,7 @@ def numeric_columns(
         not_finite = ~np.isfinite(values) if role not in allow_nan else np.isinf(values)
         if np.any(not_finite):
             row = int(np.argmax(not_finite))
-            raise DataError(f"{path}: row {row + 1}, column {name!r}: value is {raw.iloc[row]!r}, expected a finite number")
+            raise DataError(f"{path}: row {row + 1}, column {name!r}: value is {float(values[row])!r}, expected a finite number")
         result[role] = values
     return result
 
@@ -84,6 +84,6 @@ def require_increasing(time: np.ndarray, path: str | Path, column: str = "time")
     if np.any(bad):
         row = int(np.argmax(bad)) + 1
         raise DataError(
-            f"{path}: row {row + 1}, column {column!r}: time {time[row]!r} does not increase "
-            f"(previous row {time[row - 1]!r})"
+            f"{path}: row {row + 1}, column {column!r}: time {time[row]:.9g} does not increase "
+            f"(previous row {time[row - 1]:.9g})"
         )

@@ -27,7 +27,14 @@ def calibrate_accel_gps_files(
     if imu["time"].size < 2:
         raise DataError(f"{imu_path}: needs at least two accelerometer samples, got {imu['time'].size}")
     result = calibrate_accel_gps(
-        scenario, imu["time"], imu["accel"], gps["time"], gps["position"], gps["velocity"], source=str(gps_path)
+        scenario,
+        imu["time"],
+        imu["accel"],
+        gps["time"],
+        gps["position"],
+        gps["velocity"],
+        source=str(gps_path),
+        imu_source=str(imu_path),
     )
     std = result.std
     out = Path(out)
