@@ -32,12 +32,18 @@ class ResidualProducts:
 
     @staticmethod
     def upper(stacked: np.ndarray) -> np.ndarray:
-        """Upper triangle of stacked^T stacked for stacked (n, K p), by BLAS syrk."""
-        n, width = stacked.shape
+        """Upper triangle of sum_i r_i r_i^T for the innovations of n realizations, by BLAS syrk.
+
+        Parameters
+        ----------
+        stacked : ndarray, shape (K p, n), C-ordered
+            One column per realization, its K stacked innovations (update-major).
+        """
+        width, n = stacked.shape
         if n == 0:
             return np.zeros((width, width))
-        # dsyrk computes A A^T for a Fortran-ordered A; the C-ordered (n, Kp) array is (Kp, n) in F order.
-        return np.triu(dsyrk(1.0, stacked.T, lower=0))
+        # The C-ordered (Kp, n) array is an F-ordered (n, Kp) one: syrk with trans=1 forms A^T A without a copy.
+        return np.triu(dsyrk(1.0, stacked.T, trans=1, lower=0))
 
 
 @dataclass
@@ -69,7 +75,7 @@ class MomentSums:
         e = np.ascontiguousarray(block.error.transpose(1, 0, 2))  # (K, n, d)
         x = np.ascontiguousarray(block.estimate.transpose(1, 0, 2))
         n, n_updates, p = block.residual.shape
-        outer = ResidualProducts.upper(np.ascontiguousarray(block.residual.reshape(n, n_updates * p)))
+        outer = ResidualProducts.upper(np.ascontiguousarray(block.residual.reshape(n, n_updates * p).T))
         return cls(
             count=n,
             error=e.sum(axis=1),

@@ -50,8 +50,8 @@ def _filter_and_accumulate(
 ):
     """One update of the fixed-gain filter for every realization, then the moment sums at update k.
 
-    truth (d, n): states; z (p, n): measurements; x (d, n): posterior, updated in place. ``residuals``
-    with zero rows means "do not keep the innovations".
+    truth (d, n): states; z (p, n): measurements; x (d, n): posterior, updated in place; residuals
+    (K p, n) receives the innovations, update-major (zero rows: do not keep them).
     """
     d, n = x.shape
     p = z.shape[0]
@@ -84,8 +84,7 @@ def _filter_and_accumulate(
         for b in range(p):
             sums_rr[k, a, b] += _dot(residual[a], residual[b])
         if residuals.shape[0]:
-            for i in range(n):
-                residuals[i, k * p + a] = residual[a, i]
+            residuals[k * p + a, :] = residual[a, :]
 
 
 @numba.njit(nogil=True, cache=True, fastmath=_FAST)
@@ -98,7 +97,7 @@ def exact_block_moments(
     y0 (d, n) truth at sample 0; u0 (c, n) its opening boundary sample; draws (K, r + c + p, n);
     transition (d, d); noise (d, r + c) = [L | b_out]; boundary_in (d, c); model_error (K, d);
     h_truth (p, d); measure (p, p) = G. Filter: phi (d, d) over one interval, h (p, d), gains (K, d, p),
-    x0 (d,). Sums are added to; residuals (n, K p) receives every innovation (or (0, K p): none kept).
+    x0 (d,). Sums are added to; residuals (K p, n) receives every innovation (or (0, n): none kept).
     """
     d, n = y0.shape
     n_updates = draws.shape[0]

@@ -146,7 +146,7 @@ class FixedGainProblem:
             "residual": np.zeros((n_updates, p)),
             "residual_own": np.zeros((n_updates, p, p)),
         }
-        residuals = np.empty((n if self.residual_pairs else 0, n_updates * p))
+        residuals = np.empty((n_updates * p if self.residual_pairs else 0, n))
         gains = (self.schedule.phi_interval, self.filter_model.h, self.schedule.gain, self.filter_model.x0)
         order = ("error", "error_outer", "estimate", "estimate_outer", "error_estimate", "residual", "residual_own")
         if engine == "exact":

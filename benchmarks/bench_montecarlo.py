@@ -1,0 +1,204 @@
+"""Monte Carlo throughput, as ratios measured in one run on this machine.
+
+    python benchmarks/bench_montecarlo.py [--n 300000] [--quick]
+
+Prints, for the accelerometer/GPS scenario of the source report (3 states, 150 GPS updates, 40
+accelerometer samples between them):
+
+* the exact engine with every statistic against the raw cost of drawing its standard normals with the
+  same generator, blocks and threads;
+* the sampled engine (every 200 Hz sample) against the raw cost of its own draws;
+* the compiled block path against the numpy reference path on the same block;
+* realizations per second of kalcal against FilterPy (and simdkalman, and dynamax when installed) run
+  in this process on the same workload;
+* peak memory of a whole verify run at N = 3 x 10^5 and 3 x 10^6 (in a child process).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import resource
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+from kalcal.models.accel_gps import AccelGpsScenario
+from kalcal.montecarlo.accumulators import MomentSums
+from kalcal.montecarlo.engine import BLOCK_SIZE, block_generator, block_sizes, run_monte_carlo
+from kalcal.montecarlo.scenarios import accel_gps_problem
+
+WORKERS = len(os.sched_getaffinity(0))
+
+
+def best_of(repeats, function, *args, **kwargs) -> float:
+    """The fastest of ``repeats`` timings, s."""
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        function(*args, **kwargs)
+        times.append(time.perf_counter() - start)
+    return min(times)
+
+
+def raw_draws(n: int, normals_per_realization: int, seed: int = 0) -> None:
+    """Draw exactly the normals of n realizations, block by block, on the engine's threads."""
+    sizes = block_sizes(n)
+
+    def draw(block: int) -> None:
+        block_generator(seed, block).standard_normal(sizes[block] * normals_per_realization)
+
+    with ThreadPoolExecutor(WORKERS) as pool:
+        list(pool.map(draw, range(len(sizes))))
+
+
+def filterpy_rate(problem, realizations: int, per_sample: bool) -> float:
+    """Realizations per second of FilterPy's KalmanFilter on the report's filter (one at a time)."""
+    from filterpy.kalman import KalmanFilter
+
+    model = problem.filter_model
+    _, measurements = problem.sample(np.random.default_rng(1), realizations, "exact")
+    steps = model.steps_per_update if per_sample else 1
+    phi = model.phi if per_sample else problem.schedule.phi_interval
+    q = model.gamma @ model.w @ model.gamma.T if per_sample else problem.schedule.q_interval
+    start = time.perf_counter()
+    for i in range(realizations):
+        kf = KalmanFilter(dim_x=3, dim_z=2)
+        kf.F, kf.Q, kf.H, kf.R, kf.P, kf.x = phi, q, model.h, model.v, model.m0.copy(), model.x0.copy()
+        for k in range(measurements.shape[1]):
+            for _ in range(steps):
+                kf.predict()
+            kf.update(measurements[i, k])
+    return realizations / (time.perf_counter() - start)
+
+
+def simdkalman_rate(problem, realizations: int) -> float | None:
+    """Realizations per second of simdkalman (vectorized over series) on the update-rate model."""
+    try:
+        import simdkalman
+    except ImportError:
+        return None
+    model = problem.filter_model
+    _, measurements = problem.sample(np.random.default_rng(2), realizations, "exact")
+    kf = simdkalman.KalmanFilter(
+        state_transition=problem.schedule.phi_interval,
+        process_noise=problem.schedule.q_interval,
+        observation_model=model.h,
+        observation_noise=model.v,
+    )
+    # simdkalman's prior is at the first observation; propagate the report's prior one interval first.
+    mean = problem.schedule.phi_interval @ model.x0
+    cov = problem.schedule.phi_interval @ model.m0 @ problem.schedule.phi_interval.T + problem.schedule.q_interval
+    start = time.perf_counter()
+    kf.compute(measurements, 0, initial_value=mean, initial_covariance=cov, filtered=True, smoothed=False)
+    return realizations / (time.perf_counter() - start)
+
+
+def dynamax_rate(problem, realizations: int) -> float | None:
+    """Realizations per second of dynamax (jit + vmap on the CPU), when it is installed."""
+    try:
+        import jax
+        import jax.numpy as jnp
+        from dynamax.linear_gaussian_ssm import LinearGaussianSSM
+        from dynamax.linear_gaussian_ssm.inference import lgssm_filter
+    except ImportError:
+        return None
+    model = problem.filter_model
+    _, measurements = problem.sample(np.random.default_rng(3), realizations, "exact")
+    ssm = LinearGaussianSSM(state_dim=3, emission_dim=2)
+    phi, q = problem.schedule.phi_interval, problem.schedule.q_interval
+    params, _ = ssm.initialize(
+        initial_mean=jnp.asarray(phi @ model.x0),
+        initial_covariance=jnp.asarray(phi @ model.m0 @ phi.T + q),
+        dynamics_weights=jnp.asarray(phi),
+        dynamics_covariance=jnp.asarray(q),
+        emission_weights=jnp.asarray(model.h),
+        emission_covariance=jnp.asarray(model.v),
+    )
+    run = jax.jit(jax.vmap(lambda ys: lgssm_filter(params, ys).filtered_means))
+    run(jnp.asarray(measurements[:2])).block_until_ready()
+    start = time.perf_counter()
+    run(jnp.asarray(measurements)).block_until_ready()
+    return realizations / (time.perf_counter() - start)
+
+
+def peak_memory_mib(n: int) -> float:
+    """Peak resident memory (MiB) of a child process running ``kalcal verify -n n --no-report``."""
+    # ru_maxrss survives exec on Linux (the child would report this process's peak); VmHWM belongs
+    # to the child's own address space.
+    code = (
+        "import sys, tempfile\n"
+        "from kalcal.cli import app\n"
+        "out = tempfile.mkdtemp()\n"
+        f"sys.argv = ['kalcal', 'verify', '-n', '{n}', '--out', out, '--no-report', '--long-run', '0']\n"
+        "try:\n    app(prog_name='kalcal')\nexcept SystemExit:\n    pass\n"
+        "status = open('/proc/self/status').read().split('VmHWM:')[1].split()\n"
+        "print(status[0])\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    return int(result.stdout.strip().splitlines()[-1]) / 1024  # kB -> MiB
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--n", type=int, default=300_000, help="realizations of the exact engine")
+    parser.add_argument("--quick", action="store_true", help="smaller runs, no memory measurement")
+    args = parser.parse_args()
+    n = args.n // 10 if args.quick else args.n
+    problem = accel_gps_problem(AccelGpsScenario())
+    print(f"kalcal Monte Carlo benchmark: accel-gps, {WORKERS} threads, block {BLOCK_SIZE}, numpy {np.__version__}")
+    run_monte_carlo(problem, 2 * BLOCK_SIZE, seed=0)  # compile and warm up
+
+    exact_normals = problem.normals_per_realization("exact")
+    no_pairs = accel_gps_problem(AccelGpsScenario(), residual_pairs=False)
+    run_monte_carlo(no_pairs, BLOCK_SIZE, seed=0)
+    t_draw = best_of(3, raw_draws, n, exact_normals)
+    t_exact = best_of(3, lambda: run_monte_carlo(problem, n, seed=0))
+    t_no_pairs = best_of(3, lambda: run_monte_carlo(no_pairs, n, seed=0))
+    pair_flops = n * (2 * problem.truth.n_updates) * (2 * problem.truth.n_updates + 1)
+    print(f"\nexact engine, N = {n:,}:")
+    print(f"  raw draws ({exact_normals} normals/realization): {t_draw:7.3f} s")
+    print(f"  kalcal, every statistic:                {t_exact:7.3f} s   ratio {t_exact / t_draw:5.2f}x the draws")
+    print(f"  kalcal, without E[r_k r_j^T] pairs:      {t_no_pairs:7.3f} s   ratio {t_no_pairs / t_draw:5.2f}x the draws")
+    print(f"  the pairs alone are {pair_flops / 1e9:.0f} GFLOP (BLAS syrk): {(t_exact - t_no_pairs):.3f} s, "
+          f"{pair_flops / 1e9 / max(t_exact - t_no_pairs, 1e-9) / WORKERS:.0f} GFLOP/s per thread")
+
+    n_sampled = max(BLOCK_SIZE, n // 10)
+    sampled_normals = problem.normals_per_realization("sampled")
+    t_draw_s = best_of(2, raw_draws, n_sampled, sampled_normals)
+    t_sampled = best_of(2, lambda: run_monte_carlo(problem, n_sampled, seed=0, engine="sampled"))
+    print(f"\nsampled engine (every 200 Hz sample), N = {n_sampled:,}:")
+    print(f"  raw draws ({sampled_normals} normals/realization): {t_draw_s:7.3f} s")
+    print(f"  kalcal sampled engine:                    {t_sampled:7.3f} s   ratio {t_sampled / t_draw_s:5.2f}x the draws")
+    print(f"  normals per realization, sampled / exact: {sampled_normals / exact_normals:.1f}")
+
+    t_numpy = best_of(3, lambda: MomentSums.from_block(problem.run_block(block_generator(0, 0), BLOCK_SIZE, "exact")))
+    t_fused = best_of(3, lambda: problem.block_sums(block_generator(0, 0), BLOCK_SIZE, "exact"))
+    print(f"\none block of {BLOCK_SIZE}, one thread: numpy reference {t_numpy * 1e3:.1f} ms, compiled {t_fused * 1e3:.1f} ms, "
+          f"factor {t_numpy / t_fused:.1f}x")
+
+    kalcal_rate = n / t_exact
+    print("\nrealizations per second on the same filter (report's 3-state model, 150 updates):")
+    print(f"  kalcal (exact engine, all statistics): {kalcal_rate:12,.0f}")
+    count = 4 if args.quick else 20
+    rate = filterpy_rate(problem, count, per_sample=True)
+    print(f"  FilterPy, per-sample predict (6000 + 150 updates): {rate:8,.1f}   kalcal is {kalcal_rate / rate:,.0f}x")
+    rate = filterpy_rate(problem, 5 * count, per_sample=False)
+    print(f"  FilterPy, update-rate model (150 steps):           {rate:8,.1f}   kalcal is {kalcal_rate / rate:,.0f}x")
+    rate = simdkalman_rate(problem, 20_000 if not args.quick else 2_000)
+    print("  simdkalman: not installed" if rate is None else f"  simdkalman (filter only, vectorized):              {rate:8,.0f}   kalcal is {kalcal_rate / rate:,.1f}x")
+    rate = dynamax_rate(problem, 20_000 if not args.quick else 2_000)
+    print("  dynamax: not installed (pip install dynamax to compare)" if rate is None else f"  dynamax (jit + vmap, CPU):                          {rate:8,.0f}   kalcal is {kalcal_rate / rate:,.1f}x")
+
+    if not args.quick:
+        print("\npeak resident memory of `kalcal verify --no-report` (child process):")
+        for size in (300_000, 3_000_000):
+            print(f"  N = {size:>9,}: {peak_memory_mib(size):7.0f} MiB")
+    print(f"\n(this process peaked at {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB)")
+
+
+if __name__ == "__main__":
+    main()
