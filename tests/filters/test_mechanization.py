@@ -22,7 +22,7 @@ def _loop(accel, dt, p0, v0, scheme):
             p[j + 1] = p[j] + v[j] * dt[j] + accel[j] * dt[j] ** 2 / 2
         else:
             v[j + 1] = v[j] + (accel[j] + accel[j + 1]) * dt[j] / 2
-            p[j + 1] = p[j] + v[j] * dt[j] + (accel[j] + accel[j + 1]) * dt[j] ** 2 / 4
+            p[j + 1] = p[j] + v[j] * dt[j] + (2 * accel[j] + accel[j + 1]) * dt[j] ** 2 / 6
     return p, v
 
 
@@ -115,9 +115,10 @@ def test_trapezoid_weights_closed_form():
     weights = interval_weights("trapezoid", dt, m)
     i = np.arange(m + 1)
     # Sample i closes step i - 1 (if i >= 1) and opens step i (if i < m); each use adds dt/2 to the
-    # velocity, dt^2/4 to the position in that step, and dt/2 * dt to the position per later step.
-    closes = (i >= 1) * (dt**2 / 4 + (m - i) * dt**2 / 2)
-    opens = (i < m) * (dt**2 / 4 + (m - 1 - i) * dt**2 / 2)
+    # velocity and dt/2 * dt to the position per later step; in its own step it adds dt^2/3 to the
+    # position as the opening sample and dt^2/6 as the closing one (the line between them, integrated).
+    closes = (i >= 1) * (dt**2 / 6 + (m - i) * dt**2 / 2)
+    opens = (i < m) * (dt**2 / 3 + (m - 1 - i) * dt**2 / 2)
     np.testing.assert_allclose(weights[:, 0], closes + opens, rtol=1e-12)
     np.testing.assert_allclose(weights[:, 1], np.where((i == 0) | (i == m), dt / 2, dt), rtol=1e-12)
     assert weights[m, 0] > 0 and weights[m, 1] > 0
@@ -135,3 +136,21 @@ def test_interval_weights_are_the_integration_map(scheme):
 def test_unknown_scheme_is_config_error():
     with pytest.raises(ConfigError, match="integration"):
         integrate(np.zeros(3), 0.1, 0.0, 0.0, "rk4")  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("scheme", ["euler", "trapezoid"])
+def test_partial_step_cut_anywhere_matches_the_whole_step(scheme):
+    """A step cut at tau and continued by the line's remainder ends where the whole step ends."""
+    from kalcal.filters.mechanization import partial_step
+
+    a0, a1, dt, p0, v0 = 0.7, -1.3, 0.005, 12.0, 3.0
+    p_whole, v_whole = integrate(np.array([a0, a1]), dt, p0, v0, scheme)
+    p_end, v_end = partial_step(a0, a1, dt, dt, p0, v0, scheme)
+    assert p_end == pytest.approx(p_whole[-1], rel=1e-14) and v_end == pytest.approx(v_whole[-1], rel=1e-14)
+    if scheme == "trapezoid":
+        # exact for an acceleration that is a straight line in time: a(t) = a0 + (a1 - a0) t / dt
+        tau = 0.3 * dt
+        p_cut, v_cut = partial_step(a0, a1, dt, tau, p0, v0, scheme)
+        slope = (a1 - a0) / dt
+        assert v_cut == pytest.approx(v0 + a0 * tau + slope * tau**2 / 2, rel=1e-14)
+        assert p_cut == pytest.approx(p0 + v0 * tau + a0 * tau**2 / 2 + slope * tau**3 / 6, rel=1e-14)

@@ -80,9 +80,12 @@ def _loop_integrate(accel, dt, scheme):
     p = np.zeros(accel.shape)
     v = np.zeros(accel.shape)
     for j in range(accel.shape[-1] - 1):
-        a = accel[..., j] if scheme == "euler" else 0.5 * (accel[..., j] + accel[..., j + 1])
+        if scheme == "euler":
+            a, a_position = accel[..., j], accel[..., j] / 2
+        else:
+            a, a_position = 0.5 * (accel[..., j] + accel[..., j + 1]), (2 * accel[..., j] + accel[..., j + 1]) / 6
         v[..., j + 1] = v[..., j] + a * dt
-        p[..., j + 1] = p[..., j] + v[..., j] * dt + a * dt * dt / 2
+        p[..., j + 1] = p[..., j] + v[..., j] * dt + a_position * dt * dt
     return p, v
 
 
@@ -271,7 +274,7 @@ def test_trapezoid_exact_noise_splits_the_interval_covariance():
     m, dt = s.steps_per_update, s.sample_period
     i = np.arange(m + 1)
     # Closed-form trapezoid weights (see tests/filters/test_mechanization.py).
-    cp = (i >= 1) * (dt**2 / 4 + (m - i) * dt**2 / 2) + (i < m) * (dt**2 / 4 + (m - 1 - i) * dt**2 / 2)
+    cp = (i >= 1) * (dt**2 / 6 + (m - i) * dt**2 / 2) + (i < m) * (dt**2 / 3 + (m - 1 - i) * dt**2 / 2)
     cv = np.where((i == 0) | (i == m), dt / 2, dt)
     c = -sigma * np.stack([cp, cv, np.zeros(m + 1)], axis=1)
     assert truth.shares_boundary

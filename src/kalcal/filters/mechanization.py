@@ -5,11 +5,12 @@ Schemes, for samples a_j at t_j with step dt_j = t_{j+1} - t_j::
     euler (the report):  v_{j+1} = v_j + a_j dt_j
                          p_{j+1} = p_j + v_j dt_j + a_j dt_j^2 / 2
     trapezoid:           v_{j+1} = v_j + (a_j + a_{j+1}) dt_j / 2
-                         p_{j+1} = p_j + v_j dt_j + (a_j + a_{j+1}) dt_j^2 / 4
+                         p_{j+1} = p_j + v_j dt_j + (2 a_j + a_{j+1}) dt_j^2 / 6
 
-Euler holds each sample over the step that follows it, which lags the signal by half a sample; the
-trapezoid rule removes that lag. Both are exact for a constant acceleration, so a constant bias enters
-both exactly as the filter's model says.
+Euler holds each sample over the step that follows it, which lags the signal by half a sample. The
+trapezoid scheme integrates the straight line between two samples exactly (twice), which removes that
+lag and lets a step be cut anywhere (:func:`partial_step`) consistently with the whole step. Both are
+exact for a constant acceleration, so a constant bias enters both exactly as the filter's model says.
 """
 
 from __future__ import annotations
@@ -24,11 +25,14 @@ Scheme = Literal["euler", "trapezoid"]
 SCHEMES: tuple[str, ...] = ("euler", "trapezoid")
 
 
-def _step_accel(accel: np.ndarray, scheme: str) -> np.ndarray:
+def _step_accel(accel: np.ndarray, scheme: str) -> tuple[np.ndarray, np.ndarray]:
+    """Per step: the mean acceleration (velocity gain / dt) and the position gain beyond v dt, over dt^2."""
     if scheme == "euler":
-        return accel[..., :-1]
+        held = accel[..., :-1]
+        return held, 0.5 * held
     if scheme == "trapezoid":
-        return 0.5 * (accel[..., :-1] + accel[..., 1:])
+        start, end = accel[..., :-1], accel[..., 1:]
+        return 0.5 * (start + end), (2.0 * start + end) / 6.0
     raise ConfigError(f"scenario.integration: expected one of {', '.join(SCHEMES)}, got {scheme!r}")
 
 
@@ -58,7 +62,7 @@ def integrate(
         rounding of the order of additions).
     """
     accel = np.asarray(accel, dtype=float)
-    step = _step_accel(accel, scheme)
+    step, step_position = _step_accel(accel, scheme)
     dt = np.broadcast_to(np.asarray(dt, dtype=float), step.shape[-1:])
     p0 = np.asarray(p0, dtype=float)[..., None]
     v0 = np.asarray(v0, dtype=float)[..., None]
@@ -70,7 +74,7 @@ def integrate(
     np.cumsum(velocity, axis=-1, out=velocity)
     position = np.empty(shape)
     position[..., :1] = p0
-    position[..., 1:] = velocity[..., :-1] * dt + step * (0.5 * dt * dt)
+    position[..., 1:] = velocity[..., :-1] * dt + step_position * (dt * dt)
     np.cumsum(position, axis=-1, out=position)
     return position, velocity
 
@@ -90,3 +94,30 @@ def interval_weights(scheme: Scheme, dt: float, steps: int) -> np.ndarray:
     impulses = np.eye(steps + 1)
     position, velocity = integrate(impulses, dt, 0.0, 0.0, scheme)
     return np.stack([position[:, -1], velocity[:, -1]], axis=-1)
+
+
+def partial_step(
+    accel_start: np.ndarray,
+    accel_end: np.ndarray,
+    step: np.ndarray,
+    into: np.ndarray,
+    position: np.ndarray,
+    velocity: np.ndarray,
+    scheme: Scheme = "euler",
+) -> tuple[np.ndarray, np.ndarray]:
+    """Position and velocity a time ``into`` (0 <= into <= step) after a sample, inside its step.
+
+    Euler holds a_j; trapezoid integrates the line from a_j to a_{j+1}. At ``into = step`` both give
+    the whole step of :func:`integrate`. All arguments broadcast; times in s, SI units.
+    """
+    tau = np.asarray(into, dtype=float)
+    if scheme == "euler":
+        slope = 0.0
+    elif scheme == "trapezoid":
+        slope = (np.asarray(accel_end) - np.asarray(accel_start)) / np.asarray(step, dtype=float)
+    else:
+        raise ConfigError(f"scenario.integration: expected one of {', '.join(SCHEMES)}, got {scheme!r}")
+    return (
+        position + velocity * tau + accel_start * (0.5 * tau * tau) + slope * (tau**3 / 6.0),
+        velocity + accel_start * tau + slope * (0.5 * tau * tau),
+    )
