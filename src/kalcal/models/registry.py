@@ -9,8 +9,9 @@ from typing import Any
 from kalcal.errors import ConfigError
 from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.models.config import apply_settings, load_toml, parse_assignments
+from kalcal.models.scale_bias import ScaleBiasScenario
 
-SCENARIOS: dict[str, type] = {AccelGpsScenario.NAME: AccelGpsScenario}
+SCENARIOS: dict[str, type] = {AccelGpsScenario.NAME: AccelGpsScenario, ScaleBiasScenario.NAME: ScaleBiasScenario}
 
 
 def build_scenario(

@@ -12,7 +12,9 @@ from kalcal.models.accel_gps import (
     STATE_UNITS,
     AccelGpsScenario,
 )
+from kalcal.models.scale_bias import ScaleBiasScenario
 from kalcal.montecarlo.problem import FixedGainProblem, ProblemInfo
+from kalcal.montecarlo.scale_bias import ScaleBiasProblem, model_error_cause
 from kalcal.simulate.exact import accel_gps_truth
 from kalcal.simulate.sampled import sample_accel_gps_errors
 
@@ -63,4 +65,7 @@ def build_problem(scenario, form: UpdateForm = "joseph", residual_pairs: bool = 
     """
     if isinstance(scenario, AccelGpsScenario):
         return accel_gps_problem(scenario, form, residual_pairs), accel_gps_model_error_cause(scenario)
+    if isinstance(scenario, ScaleBiasScenario):
+        # The scale/bias filter's update form is its own setting, filter.form ("joseph" or "note").
+        return ScaleBiasProblem(scenario, residual_pairs=residual_pairs), model_error_cause(scenario)
     raise TypeError(f"no verification problem for {type(scenario).__name__}")

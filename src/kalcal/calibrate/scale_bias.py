@@ -1,0 +1,101 @@
+"""Calibrate a sensor's scale-factor error and bias against a reference, from one log.
+
+The note's filter runs over the samples in order: theta = [theta1, theta2] with
+reference_k = theta1 sensor_k + theta2 + w_k, then a = 1 - 1 / theta1 and b = theta2 / theta1 with
+their covariance by the delta method, J P J^T, J = d(a, b) / d(theta1, theta2). A sample whose reference
+or sensor value is missing (NaN) is skipped: only the time propagation (Q) is applied.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from kalcal.errors import DataError
+from kalcal.filters.scale_bias import filter_scale_bias
+from kalcal.models.scale_bias import ScaleBiasScenario, scale_bias_from_theta, scale_bias_jacobian
+
+
+@dataclass(frozen=True)
+class ScaleBiasCalibration:
+    """The filter's estimates after each of the K samples of a log (signal unit: the log's)."""
+
+    time: np.ndarray  #: s, (K,)
+    theta: np.ndarray  #: posterior [theta1 (1), theta2 (signal unit)], (K, 2)
+    covariance: np.ndarray  #: posterior P, (K, 2, 2)
+    residual: np.ndarray  #: innovations r_k, NaN where skipped, (K,)
+    innovation_var: np.ndarray  #: S_k, NaN where skipped, (K,)
+    used: np.ndarray  #: whether sample k updated the filter, bool (K,)
+
+    @property
+    def std(self) -> np.ndarray:
+        """1-sigma of theta1 and theta2 from P, (K, 2)."""
+        return np.sqrt(np.diagonal(self.covariance, axis1=1, axis2=2))
+
+    @property
+    def samples_used(self) -> int:
+        return int(np.count_nonzero(self.used))
+
+    def scale_bias(self) -> tuple[float, float, np.ndarray]:
+        """a, b and their 2 x 2 covariance (delta method) from the final theta and P."""
+        theta, cov = self.theta[-1], self.covariance[-1]
+        a, b = scale_bias_from_theta(theta)
+        jac = scale_bias_jacobian(theta)
+        ab_cov = jac @ cov @ jac.T
+        return float(a), float(b), 0.5 * (ab_cov + ab_cov.T)
+
+    @property
+    def mean_nis(self) -> float:
+        """The mean of r_k^2 / S_k over the samples used: about 1 when the noise settings fit the log."""
+        used = self.used
+        return float(np.mean(self.residual[used] ** 2 / self.innovation_var[used]))
+
+
+def calibrate_scale_bias(
+    scenario: ScaleBiasScenario,
+    time: np.ndarray,
+    reference: np.ndarray,
+    sensor: np.ndarray,
+    *,
+    source: str = "data",
+) -> ScaleBiasCalibration:
+    """Run the filter (``filter`` settings of ``scenario``) over one log.
+
+    Parameters
+    ----------
+    scenario : ScaleBiasScenario
+        Its ``filter`` settings give the prior, the noise, Q and the update form.
+    time : ndarray, shape (K,)
+        Sample times, s (labels only: Q applies per sample).
+    reference, sensor : ndarray, shape (K,)
+        v_k and z_k in the signal's unit; NaN marks a missing value.
+    source : str
+        The log's name, quoted in errors.
+
+    Raises
+    ------
+    DataError
+        When no sample has both values, or the final theta1 is not positive (the sensor does not follow
+        the reference, so a = 1 - 1 / theta1 means nothing).
+    """
+    reference = np.asarray(reference, dtype=float)
+    sensor = np.asarray(sensor, dtype=float)
+    if not np.any(np.isfinite(reference) & np.isfinite(sensor)):
+        raise DataError(f"{source}: no sample has both a reference and a sensor value")
+    run = filter_scale_bias(scenario, reference, sensor)
+    result = ScaleBiasCalibration(
+        time=np.asarray(time, dtype=float),
+        theta=run.posterior,
+        covariance=run.cov,
+        residual=run.residual,
+        innovation_var=run.innovation_var,
+        used=run.used,
+    )
+    theta1 = float(result.theta[-1, 0])
+    if not theta1 > 0:
+        raise DataError(
+            f"{source}: the estimated theta1 = {theta1:.6g} is not positive: the sensor does not follow the "
+            "reference (swapped or inverted columns?)"
+        )
+    return result

@@ -1,0 +1,166 @@
+"""A Kalman filter for a regression with time-varying regressors, batched over realizations.
+
+The parameters x follow a random walk (Phi = I) and each step brings one scalar measurement whose
+regressor row h_k is data (it differs per realization and per step)::
+
+    x_k = x_{k-1} + omega_{k-1},   omega ~ N(0, Q)            (Q = 0: constant parameters)
+    y_k = h_k x_k + w_k,           w_k ~ N(0, R),   k = 1..K
+
+    x_0 ~ N(x0, P0) is the estimate x_0^+ before the first measurement.
+
+Each step is the time propagation x^- = x^+, P^- = P^+ + Q, then a measurement update. Three update
+forms give the same estimates in exact arithmetic:
+
+* ``"joseph"``: :func:`kalcal.filters.kalman.update` in Joseph form (the package default);
+* ``"standard"``: the same function's P^+ = P^- - K H P^-;
+* ``"note"``: the calibration note's eqs. (14)-(18) written out for a scalar measurement,
+  r = y - h x^-,  S = h P^- h^T + R,  K = P^- h^T / S,  P^+ = P^- - K (h P^-),  x^+ = x^- + K r
+  (S is a scalar, so K needs a division and no solve).
+
+A measurement that is NaN (or whose regressor row holds a NaN) is skipped: that step only propagates.
+"""
+
+from __future__ import annotations
+
+from typing import Literal, NamedTuple
+
+import numpy as np
+
+from kalcal.errors import ConfigError
+from kalcal.filters.kalman import update
+from kalcal.linalg import symmetrize
+
+RegressionForm = Literal["joseph", "standard", "note"]
+REGRESSION_FORMS: tuple[str, ...] = ("joseph", "standard", "note")
+
+
+class ScalarUpdate(NamedTuple):
+    """One scalar measurement update. Leading axes follow the inputs."""
+
+    x: np.ndarray  #: x^+, (..., d)
+    cov: np.ndarray  #: P^+, (..., d, d)
+    residual: np.ndarray  #: r = y - h x^-, (...)
+    innovation_var: np.ndarray  #: S = h P^- h^T + R, (...)
+    gain: np.ndarray  #: K, (..., d)
+
+
+def note_update(x: np.ndarray, cov: np.ndarray, y: np.ndarray, h: np.ndarray, r: float) -> ScalarUpdate:
+    """The note's measurement update, eqs. (14)-(18), for one scalar measurement.
+
+    r_k = y_k - h_k x^-;  S_k = h_k P^- h_k^T + R;  K_k = P^- h_k^T / S_k;
+    P^+ = P^- - K_k (h_k P^-);  x^+ = x^- + K_k r_k.
+
+    Parameters
+    ----------
+    x : ndarray, shape (..., d)
+        Prior estimate x^-.
+    cov : ndarray, shape (..., d, d)
+        Prior covariance P^-.
+    y : ndarray, shape (...)
+        The measurement.
+    h : ndarray, shape (d,) or (..., d)
+        The regressor row.
+    r : float
+        Measurement-noise variance R (the note's sigma_w^2).
+    """
+    hp = np.einsum("...i,...ij->...j", h, cov)  # h P^- (P^- is symmetric, so this is also (P^- h^T)^T)
+    s = np.einsum("...j,...j->...", hp, h) + r
+    gain = hp / s[..., None]
+    residual = y - np.einsum("...i,...i->...", h, x)
+    posterior = cov - gain[..., :, None] * hp[..., None, :]
+    return ScalarUpdate(x + gain * residual[..., None], symmetrize(posterior), residual, s, gain)
+
+
+def scalar_update(
+    x: np.ndarray, cov: np.ndarray, y: np.ndarray, h: np.ndarray, r: float, form: RegressionForm = "joseph"
+) -> ScalarUpdate:
+    """One update in the chosen form; ``"joseph"`` and ``"standard"`` go through :func:`kalman.update`.
+
+    Shapes as in :func:`note_update`.
+    """
+    if form == "note":
+        return note_update(x, cov, y, h, r)
+    h_row = np.asarray(h, dtype=float)[..., None, :]  # (..., 1, d)
+    result = update(x, cov, np.asarray(y, dtype=float)[..., None], h_row, np.array([[float(r)]]), form)
+    return ScalarUpdate(result.x, result.cov, result.residual[..., 0], result.innovation_cov[..., 0, 0], result.gain[..., 0])
+
+
+class RegressionRun(NamedTuple):
+    """A filter run over K steps. Leading axes ``...`` are the realizations (none for one series)."""
+
+    prior: np.ndarray  #: x_k^-, (..., K, d)
+    posterior: np.ndarray  #: x_k^+, (..., K, d)
+    cov: np.ndarray  #: P_k^+, (..., K, d, d)
+    residual: np.ndarray  #: r_k = y_k - h_k x_k^-, NaN where skipped, (..., K)
+    innovation_var: np.ndarray  #: S_k = h_k P_k^- h_k^T + R, NaN where skipped, (..., K)
+    used: np.ndarray  #: whether step k updated, bool (..., K)
+
+
+def run_regression_filter(
+    y: np.ndarray,
+    h: np.ndarray,
+    x0: np.ndarray,
+    cov0: np.ndarray,
+    r: float,
+    q: np.ndarray,
+    form: RegressionForm = "joseph",
+) -> RegressionRun:
+    """Filter K scalar measurements with time-varying regressors, for a batch of series at once.
+
+    Parameters
+    ----------
+    y : ndarray, shape (..., K)
+        Measurements y_k; NaN marks a missing one.
+    h : ndarray, shape (..., K, d)
+        Regressor rows h_k, always time-varying (a fixed row is passed repeated along K).
+    x0 : ndarray, shape (d,) or (..., d)
+        x_0^+, the estimate before the first measurement.
+    cov0 : ndarray, shape (d, d) or (..., d, d)
+        P_0^+.
+    r : float
+        Measurement-noise variance R > 0.
+    q : ndarray, shape (d, d)
+        Process-noise covariance Q per step (zeros for constant parameters).
+    form : {"joseph", "standard", "note"}
+
+    Returns
+    -------
+    RegressionRun
+    """
+    if form not in REGRESSION_FORMS:
+        raise ConfigError(f"form: expected one of {', '.join(REGRESSION_FORMS)}, got {form!r}")
+    y = np.asarray(y, dtype=float)
+    h = np.asarray(h, dtype=float)
+    lead, n_steps = y.shape[:-1], y.shape[-1]
+    d = h.shape[-1]
+    if h.shape[:-1] != y.shape:
+        raise ValueError(f"h: expected shape {y.shape + (d,)} to match y {y.shape}, got {h.shape}")
+    q = np.asarray(q, dtype=float)
+    x = np.broadcast_to(np.asarray(x0, dtype=float), lead + (d,)).copy()
+    cov = np.broadcast_to(np.asarray(cov0, dtype=float), lead + (d, d)).copy()
+    used = np.isfinite(y) & np.all(np.isfinite(h), axis=-1)
+    all_used = bool(np.all(used))
+    prior = np.empty(lead + (n_steps, d))
+    posterior = np.empty(lead + (n_steps, d))
+    covs = np.empty(lead + (n_steps, d, d))
+    residual = np.empty(lead + (n_steps,))
+    innovation = np.empty(lead + (n_steps,))
+    for k in range(n_steps):
+        # (9), (12): x^- = x^+, P^- = P^+ + Q. Phi = I, so kalman.predict's Phi P Phi^T would only cost
+        # two stacked matrix products per step.
+        cov = cov + q
+        prior[..., k, :] = x
+        if all_used:
+            step = scalar_update(x, cov, y[..., k], h[..., k, :], r, form)
+            x, cov = step.x, step.cov
+            residual[..., k], innovation[..., k] = step.residual, step.innovation_var
+        else:
+            ok = used[..., k]
+            step = scalar_update(x, cov, np.where(ok, y[..., k], 0.0), np.where(ok[..., None], h[..., k, :], 0.0), r, form)
+            x = np.where(ok[..., None], step.x, x)
+            cov = np.where(ok[..., None, None], step.cov, cov)
+            residual[..., k] = np.where(ok, step.residual, np.nan)
+            innovation[..., k] = np.where(ok, step.innovation_var, np.nan)
+        posterior[..., k, :] = x
+        covs[..., k, :, :] = cov
+    return RegressionRun(prior, posterior, covs, residual, innovation, used)

@@ -1,0 +1,113 @@
+"""``kalcal simulate scale-bias`` and ``kalcal calibrate scale-bias``: files in, files out."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from kalcal.calibrate.scale_bias import calibrate_scale_bias
+from kalcal.errors import DataError
+from kalcal.io.logs import numeric_columns, read_table, require_increasing
+from kalcal.io.results import write_csv, write_json
+from kalcal.models.config import section_values
+from kalcal.models.scale_bias import STATE_NAMES, ScaleBiasScenario, scale_bias_from_theta
+from kalcal.simulate.scale_bias import sample_scale_bias
+
+
+def simulate_scale_bias(scenario: ScaleBiasScenario, seed: int, out: str | Path) -> dict[str, Path]:
+    """Write ``data.csv`` and ``truth.json`` for one realization drawn with ``seed``.
+
+    data.csv: time [s], reference [signal unit], sensor [signal unit], one row per sample.
+    truth.json: the drawn scale_error a, bias b and theta at the last sample (all samples unless the
+    truth drifts; then also the paths theta1, theta2 per sample), the noise and the settings.
+    """
+    samples = sample_scale_bias(scenario, np.random.default_rng(seed), 1)
+    theta = samples.theta[0]
+    a, b = scale_bias_from_theta(theta)
+    out = Path(out)
+    data = write_csv(out / "data.csv", {"time": samples.time, "reference": samples.reference[0], "sensor": samples.sensor[0]})
+    truth: dict[str, Any] = {
+        "scenario": scenario.NAME,
+        "seed": seed,
+        "unit": scenario.scenario.unit,
+        "scale_error": a[-1],
+        "bias": b[-1],
+        "theta": theta[-1],
+        "reference_noise_std": scenario.truth.reference_noise_std,
+        "sensor_noise_std": scenario.truth.sensor_noise_std,
+        "drift": scenario.scenario.drift,
+        "samples": int(samples.time.size),
+    }
+    if scenario.scenario.drift != "none":
+        truth.update(
+            {"scale_error_path": a, "bias_path": b, "theta1_path": theta[:, 0], "theta2_path": theta[:, 1]}
+        )
+    truth["settings"] = section_values(scenario)
+    return {"data": data, "truth": write_json(out / "truth.json", truth)}
+
+
+def calibrate_scale_bias_file(
+    scenario: ScaleBiasScenario,
+    data_path: str | Path,
+    out: str | Path,
+    *,
+    reference: str = "reference",
+    sensor: str = "sensor",
+) -> dict[str, Any]:
+    """Calibrate from a log (CSV or Parquet) with a reference and a sensor column.
+
+    A ``time`` column [s] is used when the log has one (it must increase); otherwise sample k = 1..K is
+    put at k / ``scenario.rate``. Empty cells in the two signal columns are skipped samples. Writes
+    ``out/estimates.csv`` (time, theta1, theta2, theta1_std, theta2_std after each sample) and
+    ``out/summary.json``; returns the summary.
+    """
+    frame = read_table(data_path)
+    if reference == sensor:
+        raise DataError(f"{data_path}: --reference and --sensor name the same column {reference!r}")
+    columns = numeric_columns(frame, data_path, {"reference": reference, "sensor": sensor}, allow_nan=("reference", "sensor"))
+    if "time" in frame.columns and "time" not in (reference, sensor):
+        time = numeric_columns(frame, data_path, ("time",))["time"]
+        require_increasing(time, data_path)
+        time_source = "column 'time'"
+    else:
+        time = np.arange(1, len(frame) + 1) / scenario.scenario.rate
+        time_source = f"row number / scenario.rate ({scenario.scenario.rate:g} Hz)"
+    result = calibrate_scale_bias(scenario, time, columns["reference"], columns["sensor"], source=str(data_path))
+    std = result.std
+    out = Path(out)
+    write_csv(
+        out / "estimates.csv",
+        {
+            "time": result.time,
+            "theta1": result.theta[:, 0],
+            "theta2": result.theta[:, 1],
+            "theta1_std": std[:, 0],
+            "theta2_std": std[:, 1],
+        },
+    )
+    a, b, ab_cov = result.scale_bias()
+    unit = scenario.scenario.unit
+    summary = {
+        "scenario": scenario.NAME,
+        "settings": section_values(scenario),
+        "data": str(data_path),
+        "columns": {"reference": reference, "sensor": sensor, "time": time_source},
+        "samples": int(result.time.size),
+        "samples_used": result.samples_used,
+        "time": float(result.time[-1]),
+        "theta": result.theta[-1],
+        "theta_covariance": result.covariance[-1],
+        "theta_states": list(STATE_NAMES),
+        "theta_std": std[-1],
+        "scale_error": a,
+        "scale_error_std": float(np.sqrt(ab_cov[0, 0])),
+        "bias": b,
+        "bias_std": float(np.sqrt(ab_cov[1, 1])),
+        "scale_bias_correlation": float(ab_cov[0, 1] / np.sqrt(ab_cov[0, 0] * ab_cov[1, 1])),
+        "mean_nis": result.mean_nis,
+        "units": {"time": "s", "theta1": "1", "theta2": unit, "scale_error": "1", "bias": unit},
+    }
+    write_json(out / "summary.json", summary)
+    return summary

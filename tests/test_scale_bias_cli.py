@@ -1,0 +1,145 @@
+"""``kalcal simulate/calibrate/verify scale-bias``: the files, the round trip, and one-line errors (exit 2)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+from kalcal.cli import app
+
+ESTIMATE_COLUMNS = ["time", "theta1", "theta2", "theta1_std", "theta2_std"]
+SUMMARY_KEYS = {"theta", "theta_covariance", "scale_error", "scale_error_std", "bias", "bias_std", "samples_used"}
+
+
+def _invoke(*args):
+    return CliRunner().invoke(app, [str(a) for a in args], catch_exceptions=False)
+
+
+def _one_line_error(result, *fragments: str) -> None:
+    assert result.exit_code == 2, result.output + result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("kalcal: error: "), result.stderr
+    for fragment in fragments:
+        assert fragment in lines[0], lines[0]
+
+
+@pytest.fixture(scope="module")
+def simulated(tmp_path_factory):
+    out = tmp_path_factory.mktemp("sim")
+    result = _invoke("simulate", "scale-bias", "--seed", 7, "--out", out)
+    assert result.exit_code == 0, result.output + result.stderr
+    return out
+
+
+def test_simulate_writes_data_and_truth(simulated):
+    data = pd.read_csv(simulated / "data.csv")
+    assert list(data.columns) == ["time", "reference", "sensor"] and len(data) == 300
+    assert data["time"].iloc[0] == pytest.approx(0.1) and data["time"].iloc[-1] == pytest.approx(30.0)
+    truth = json.loads((simulated / "truth.json").read_text())
+    assert {"scale_error", "bias", "theta", "settings"} <= set(truth)
+    assert truth["theta"][0] == pytest.approx(1 / (1 - truth["scale_error"]), rel=1e-12)
+    assert truth["theta"][1] == pytest.approx(truth["bias"] / (1 - truth["scale_error"]), rel=1e-12)
+
+
+def test_round_trip_recovers_the_truth(simulated, tmp_path):
+    result = _invoke("calibrate", "scale-bias", "--data", simulated / "data.csv", "--out", tmp_path)
+    assert result.exit_code == 0, result.output + result.stderr
+    assert "scale_error" in result.output
+    estimates = pd.read_csv(tmp_path / "estimates.csv")
+    assert list(estimates.columns) == ESTIMATE_COLUMNS and len(estimates) == 300
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert SUMMARY_KEYS <= set(summary)
+    assert summary["samples_used"] == 300
+    assert np.array(summary["theta_covariance"]).shape == (2, 2)
+    truth = json.loads((simulated / "truth.json").read_text())
+    for name in ("scale_error", "bias"):
+        assert abs(summary[name] - truth[name]) < 4 * summary[f"{name}_std"], name
+    assert summary["theta"] == pytest.approx(estimates[["theta1", "theta2"]].iloc[-1].tolist(), rel=1e-15)
+
+
+def test_parquet_renamed_columns_and_no_time(simulated, tmp_path):
+    data = pd.read_csv(simulated / "data.csv")
+    csv = _invoke("calibrate", "scale-bias", "--data", simulated / "data.csv", "--out", tmp_path / "csv")
+    assert csv.exit_code == 0
+    path = tmp_path / "log.parquet"
+    data.rename(columns={"reference": "ref_g", "sensor": "dut_g"}).to_parquet(path)
+    result = _invoke("calibrate", "scale-bias", "--data", path, "--reference", "ref_g", "--sensor", "dut_g", "--out", tmp_path / "pq")
+    assert result.exit_code == 0, result.output + result.stderr
+    from_csv = json.loads((tmp_path / "csv" / "summary.json").read_text())
+    from_parquet = json.loads((tmp_path / "pq" / "summary.json").read_text())
+    assert from_parquet["theta"] == from_csv["theta"] and from_parquet["bias_std"] == from_csv["bias_std"]
+    # A two-column log: sample k is put at k / scenario.rate.
+    two = tmp_path / "two.csv"
+    data[["reference", "sensor"]].to_csv(two, index=False, float_format="%.17g")
+    result = _invoke("calibrate", "scale-bias", "--data", two, "--out", tmp_path / "two")
+    assert result.exit_code == 0, result.output + result.stderr
+    estimates = pd.read_csv(tmp_path / "two" / "estimates.csv")
+    np.testing.assert_allclose(estimates["time"], data["time"], rtol=1e-12)
+    assert json.loads((tmp_path / "two" / "summary.json").read_text())["theta"] == from_csv["theta"]
+
+
+def test_settings_reach_the_filter(simulated, tmp_path):
+    result = _invoke(
+        "calibrate", "scale-bias", "--data", simulated / "data.csv", "--out", tmp_path,
+        "--set", "filter.reference_noise_std=0.4", "--set", "scenario.unit=K",
+    )
+    assert result.exit_code == 0, result.output + result.stderr
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["settings"]["filter"]["reference_noise_std"] == 0.4
+    assert summary["units"]["bias"] == "K"
+    assert summary["mean_nis"] < 0.5  # the filter now expects twice the noise
+
+
+@pytest.fixture()
+def bad_logs(tmp_path):
+    base = pd.DataFrame({"time": [0.1, 0.2, 0.3], "reference": [1.0, 2.0, 3.0], "sensor": [1.1, 2.1, 2.9]})
+    logs = {}
+    logs["text"] = base.astype(object).copy()
+    logs["text"].loc[1, "sensor"] = "oops"
+    logs["backwards"] = base.copy()
+    logs["backwards"].loc[2, "time"] = 0.15
+    paths = {}
+    for name, frame in logs.items():
+        paths[name] = tmp_path / f"{name}.csv"
+        frame.to_csv(paths[name], index=False)
+    paths["empty"] = tmp_path / "empty.csv"
+    paths["empty"].write_text("time,reference,sensor\n")
+    paths["good"] = tmp_path / "good.csv"
+    base.to_csv(paths["good"], index=False)
+    return paths
+
+
+def test_bad_inputs_are_one_line_errors(bad_logs, tmp_path):
+    out = tmp_path / "out"
+    _one_line_error(_invoke("calibrate", "scale-bias", "--out", out), "--data", "required")
+    _one_line_error(_invoke("calibrate", "scale-bias", "--data", tmp_path / "nope.csv", "--out", out), "nope.csv", "no such file")
+    _one_line_error(_invoke("calibrate", "scale-bias", "--data", bad_logs["text"], "--out", out), "text.csv", "row 2", "'sensor'", "oops")
+    _one_line_error(_invoke("calibrate", "scale-bias", "--data", bad_logs["backwards"], "--out", out), "backwards.csv", "row 3", "time")
+    _one_line_error(_invoke("calibrate", "scale-bias", "--data", bad_logs["empty"], "--out", out), "empty.csv", "no data rows")
+    _one_line_error(
+        _invoke("calibrate", "scale-bias", "--data", bad_logs["good"], "--sensor", "dut", "--out", out), "missing column 'dut'"
+    )
+    _one_line_error(
+        _invoke("calibrate", "scale-bias", "--data", bad_logs["good"], "--imu", bad_logs["good"], "--out", out), "--imu/--gps"
+    )
+    _one_line_error(
+        _invoke("calibrate", "scale-bias", "--data", bad_logs["good"], "--set", "truth.scale_error=2", "--out", out),
+        "truth.scale_error",
+    )
+    _one_line_error(_invoke("calibrate", "accel-gps", "--gps", bad_logs["good"], "--out", out), "--imu", "required for accel-gps")
+    _one_line_error(_invoke("simulate", "scale-bias", "--set", "scenario.drift=often", "--out", out), "scenario.drift")
+    _one_line_error(
+        _invoke("verify", "scale-bias", "-n", 50, "--engine", "sampled", "--no-report", "--out", out), "--engine", "scale-bias"
+    )
+
+
+def test_verify_command_writes_summary_and_statistics(tmp_path):
+    result = _invoke("verify", "scale-bias", "-n", 1000, "--no-report", "--set", "scenario.duration=5", "--out", tmp_path)
+    assert result.exit_code == 0, result.output + result.stderr
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["scenario"] == "scale-bias" and summary["realizations"] == 1000
+    assert (tmp_path / "stats.nc").is_file()
