@@ -1,1 +1,13 @@
-"""Matplotlib figures: one function per figure, presentation only."""
+"""Matplotlib figures: one function per figure, presentation only.
+
+Each function takes data that is already computed (a ``stats.nc`` Dataset, or one realization as
+:class:`~kalcal.plots.realization.RealizationData`) and a path, and writes a PNG of a fixed pixel size
+(900 px wide; see each docstring for the height) whose bytes depend only on the data.
+
+- :mod:`kalcal.plots.realization`: one realization, true and estimated states, errors with +-1 sigma
+  (source report figures 5.1-5.6).
+- :mod:`kalcal.plots.ensemble`: ensemble mean error, covariance and orthogonality with their bands (5.7-5.12).
+- :mod:`kalcal.plots.consistency`: mean NEES and NIS, the residual-correlation map, the model-error response.
+
+Only this package imports matplotlib; it uses the Agg canvas directly and never pyplot.
+"""

@@ -1,0 +1,142 @@
+"""``kalcal report``: redraw the figures and ``report.html`` of a saved verification run.
+
+Reads ``DIR/summary.json`` and ``DIR/stats.nc`` (and ``DIR/stats_long.nc`` when present), rebuilds the
+scenario from the saved settings to redraw one realization with the run's seed, and writes
+``DIR/figures/*.png`` and ``DIR/report.html``. The Monte Carlo is not rerun. The same directory always
+gives the same page, byte for byte.
+"""
+
+from __future__ import annotations
+
+import json
+import operator
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from kalcal.errors import ConfigError, DataError
+from kalcal.io.statistics import read_statistics
+from kalcal.models.registry import build_scenario
+from kalcal.montecarlo.accumulators import BlockResult
+from kalcal.montecarlo.engine import realization
+from kalcal.montecarlo.scenarios import build_problem
+from kalcal.plots.realization import RealizationData
+from kalcal.report.figures import render_figures
+from kalcal.report.html import build_page, write_page
+
+FIGURE_DIR = "figures"
+PAGE = "report.html"
+_REQUIRED = ("scenario", "settings", "realizations", "seed", "engine", "confidence", "tests")
+
+
+def read_summary(path: Path) -> dict[str, Any]:
+    """``summary.json`` of a verification run, with the keys the report needs checked."""
+    if not path.is_file():
+        raise DataError(f"{path}: no such file (not a kalcal verify output directory?)")
+    try:
+        summary = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise DataError(f"{path}: not valid JSON ({exc})") from None
+    if not isinstance(summary, dict):
+        raise DataError(f"{path}: expected a JSON object, got {type(summary).__name__}")
+    missing = [key for key in _REQUIRED if key not in summary]
+    if missing:
+        raise DataError(f"{path}: missing {', '.join(missing)} (not a kalcal verify summary)")
+    if not isinstance(summary["settings"], dict) or not all(isinstance(v, dict) for v in summary["settings"].values()):
+        raise DataError(f"{path}: 'settings' must map sections to {{key: value}} tables")
+    return summary
+
+
+def settings_assignments(settings: Mapping[str, Mapping[str, Any]]) -> list[str]:
+    """``{"truth": {"bias_std": 0.1, "x": None}}`` -> ``["truth.bias_std=0.1"]`` (None: left at its default)."""
+    return [
+        f"{section}.{key}={value}"
+        for section, values in settings.items()
+        for key, value in values.items()
+        if value is not None
+    ]
+
+
+def _realization_index(realization: Any, count: int) -> int:
+    try:
+        index = operator.index(realization)
+    except TypeError:
+        raise ConfigError(f"--realization: expected a whole number, got {realization!r}") from None
+    if not 0 <= index < count:
+        raise ConfigError(f"--realization: expected 0 <= K < {count:,} (the run's realizations), got {index}")
+    return index
+
+
+def draw_realization(problem, seed: int, index: int, n: int, engine: str) -> tuple[BlockResult, np.ndarray]:
+    """Realization ``index`` of the n-realization ensemble: its BlockResult (a block of one) and P, (K, d, d)."""
+    one = realization(problem, seed, index, n, engine)
+    return one, one.filter_cov_sum
+
+
+def render_report(out: str | Path, *, realization: int = 0) -> Path:
+    """Draw the figures into ``out/figures/`` and write ``out/report.html`` from a saved run.
+
+    Parameters
+    ----------
+    out : path
+        A ``kalcal verify`` output directory (``summary.json``, ``stats.nc``, optionally ``stats_long.nc``).
+    realization : int
+        Which realization of the ensemble (0-based, below the run's N) the single-run figures show.
+
+    Returns
+    -------
+    Path
+        The page, ``out/report.html``.
+
+    Raises
+    ------
+    DataError
+        The directory, ``summary.json`` or ``stats.nc`` is missing or unreadable, or they disagree.
+    ConfigError
+        ``realization`` is not in [0, N), or the saved settings no longer build a scenario.
+    """
+    out = Path(out)
+    if not out.is_dir():
+        raise DataError(f"{out}: no such run directory")
+    summary_path = out / "summary.json"
+    summary = read_summary(summary_path)
+    try:
+        count = int(summary["realizations"])
+        seed = int(summary["seed"])
+    except (TypeError, ValueError):
+        raise DataError(f"{summary_path}: realizations and seed must be whole numbers") from None
+    index = _realization_index(realization, count)
+    dataset = read_statistics(out / "stats.nc")
+    long_path = out / "stats_long.nc"
+    long_dataset = read_statistics(long_path) if long_path.is_file() else None
+
+    try:
+        scenario = build_scenario(str(summary["scenario"]), None, settings_assignments(summary["settings"]))
+    except ConfigError as exc:
+        raise ConfigError(f"{summary_path}: {exc}") from None
+    problem, _ = build_problem(scenario)
+    times = problem.info.update_times
+    if dataset.sizes.get("time") != times.size or not np.allclose(dataset["time"].values, times):
+        raise DataError(
+            f"{out / 'stats.nc'}: its {dataset.sizes.get('time')} update times do not match the {times.size} "
+            f"of the settings in {summary_path}"
+        )
+    if str(summary["engine"]) not in problem.engines:
+        raise DataError(f"{summary_path}: engine {summary['engine']!r} is not one of {', '.join(problem.engines)}")
+
+    one, filter_cov = draw_realization(problem, seed, index, count, str(summary["engine"]))
+    data = RealizationData(
+        index=index,
+        times=times,
+        truth=one.error[0] + one.estimate[0],
+        estimate=one.estimate[0],
+        error=one.error[0],
+        filter_cov=filter_cov,
+        state_names=tuple(problem.info.state_names),
+        state_units=tuple(problem.info.state_units),
+    )
+    figures, skipped = render_figures(dataset, data, out / FIGURE_DIR, long_dataset, scenario=str(summary["scenario"]))
+    page = build_page(summary, figures, skipped, realization=index, figure_dir_name=FIGURE_DIR)
+    return write_page(out / PAGE, page)

@@ -1,0 +1,320 @@
+"""The report's figures: which to draw from a run, their files, numbers and one-line captions.
+
+Every figure of the source report (5.1-5.12) plus NEES, NIS, the residual-correlation map and the
+model-error response. Figures are drawn by :mod:`kalcal.plots`; this module only decides what goes in,
+in what order, and what a reader should look for in each.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import xarray as xr
+
+from kalcal.plots import consistency, ensemble
+from kalcal.plots import realization as single
+from kalcal.plots.realization import RealizationData
+
+#: the scenario of the source report, whose figure numbers the page quotes
+REPORT_SCENARIO = "accel-gps"
+#: figures of the source report, by file stem
+REPORT_NUMBERS = {
+    "state_bias": "5.1",
+    "state_velocity": "5.2",
+    "state_position": "5.3",
+    "error_position": "5.4",
+    "error_velocity": "5.5",
+    "error_bias": "5.6",
+    "mean_error": "5.7",
+    "mean_error_long": "5.8",
+    "variance_diagonal": "5.9",
+    "variance_offdiagonal": "5.10",
+    "orthogonality_diagonal": "5.11",
+    "orthogonality_offdiagonal": "5.12",
+}
+
+GROUPS = (
+    ("realization", "One realization"),
+    ("ensemble", "Ensemble statistics"),
+    ("consistency", "Consistency, whiteness and model error"),
+)
+
+
+@dataclass(frozen=True)
+class FigureEntry:
+    """One drawn figure: ``path`` is its PNG; ``number`` the source report's figure number, if any."""
+
+    key: str
+    group: str
+    title: str
+    caption: str
+    path: Path
+    number: str | None = None
+
+
+@dataclass(frozen=True)
+class SkippedFigure:
+    """A figure that could not be drawn from this run, and why."""
+
+    key: str
+    group: str
+    title: str
+    reason: str
+    number: str | None = None
+
+
+@dataclass(frozen=True)
+class _Spec:
+    key: str
+    group: str
+    title: str
+    caption: str
+    draw: Callable[[Path], Path]
+
+
+def _sort_key(item) -> tuple:
+    """Report figures in the report's order, then the rest in catalog order (stable sort keeps it)."""
+    if item.number is None:
+        return (1, 0, 0)
+    major, minor = item.number.split(".")
+    return (0, int(major), int(minor))
+
+
+def _realization_specs(data: RealizationData) -> list[_Spec]:
+    specs = []
+    k, last = data.index, len(data.state_names) - 1
+    for i, name in enumerate(data.state_names):
+        extra = (
+            " The bias is never measured: it is inferred from the position and velocity fixes, so it converges more slowly."
+            if name == "bias"
+            else ""
+        )
+        specs.append(
+            _Spec(
+                f"state_{name}",
+                "realization",
+                f"True and estimated {name} state, realization {k}",
+                f"Look for the estimate (dashed) converging onto the truth (black), with the truth inside the "
+                f"shaded ±1σ band about two times in three.{extra}",
+                lambda path, i=i: single.plot_state_estimate(data, i, path),
+            )
+        )
+    for i, name in enumerate(data.state_names):
+        if i == last:
+            specs.append(
+                _Spec(
+                    f"error_{name}",
+                    "realization",
+                    f"Estimation error of {name} with ±1σ, whole run (a) and magnified (b), realization {k}",
+                    "The bound shrinks towards zero as the state is learned, so (b) magnifies the last two thirds "
+                    "of the run: the error should stay near the band there too; a long excursion to one side is the "
+                    "mean error of the model (see the model-error figure), not noise.",
+                    lambda path, i=i: single.plot_estimation_error_magnified(data, i, path),
+                )
+            )
+        else:
+            specs.append(
+                _Spec(
+                    f"error_{name}",
+                    "realization",
+                    f"Estimation error of {name} with ±1σ from P, realization {k}",
+                    "The error x − x̂ should stay inside the filter's ±1σ band about 68% of the time and "
+                    "cross zero often; a band far wider or narrower than the scatter means P is wrong.",
+                    lambda path, i=i: single.plot_estimation_error(data, i, path),
+                )
+            )
+    return specs
+
+
+def _ensemble_specs(dataset: xr.Dataset, long_dataset: xr.Dataset | None) -> list[_Spec]:
+    specs = [
+        _Spec(
+            "mean_error",
+            "ensemble",
+            "Ensemble mean error with its confidence band and the expected model-error mean",
+            "Inside the shaded band the mean error is zero within sampling noise; where it leaves the band it "
+            "should follow the dashed curve, the mean that deterministic model error alone predicts — then "
+            "the model (e.g. Euler integration), not the filter, is the cause.",
+            lambda path: ensemble.plot_mean_error(dataset, path),
+        ),
+    ]
+    if long_dataset is not None:
+        horizon = float(long_dataset["time"].values[-1])
+        count = int(long_dataset.attrs["realizations"])
+        specs.append(
+            _Spec(
+                "mean_error_long",
+                "ensemble",
+                f"Ensemble mean error over a longer run: {horizon:g} s, N = {count:,}",
+                "Over the longer horizon the mean error should keep tracking the dashed model-error curve "
+                "(it follows the acceleration profile); a drift away from it would be a filter error.",
+                lambda path: ensemble.plot_mean_error(
+                    long_dataset, path, title=f"Ensemble mean error over [0, {horizon:g}] s, N = {count:,}"
+                ),
+            )
+        )
+    specs += [
+        _Spec(
+            "variance_diagonal",
+            "ensemble",
+            "Ensemble variance against the filter's variance (diagonal of P)",
+            "Left, the curves should overlap; right, the ratio ensemble / filter should wander about 1 inside "
+            "the band: above it the filter is overconfident, below it underconfident.",
+            lambda path: ensemble.plot_variance_diagonal(dataset, path),
+        ),
+        _Spec(
+            "variance_offdiagonal",
+            "ensemble",
+            "Ensemble covariance against the filter's covariance (off-diagonal terms of P)",
+            "Left, the ensemble and filter correlations should overlap; right, the deviation of the ensemble "
+            "covariance from P, in standard deviations, should stay inside ±z.",
+            lambda path: ensemble.plot_variance_offdiagonal(dataset, path),
+        ),
+        _Spec(
+            "orthogonality_diagonal",
+            "ensemble",
+            "Orthogonality of error and estimate: diagonal elements of E[e x̂ᵀ]",
+            "For an optimal filter the error is orthogonal to the estimate: each curve should stay inside its "
+            "band; a systematic excursion comes from a mean error (see the mean-error figure) or suboptimal gains.",
+            lambda path: ensemble.plot_orthogonality_diagonal(dataset, path),
+        ),
+        _Spec(
+            "orthogonality_offdiagonal",
+            "ensemble",
+            "Orthogonality of error and estimate: off-diagonal elements of E[e x̂ᵀ]",
+            "As for the diagonal elements: every curve should stay inside its band (row i is the error of "
+            "state i against the estimate of each other state).",
+            lambda path: ensemble.plot_orthogonality_offdiagonal(dataset, path),
+        ),
+    ]
+    return specs
+
+
+def _consistency_specs(dataset: xr.Dataset) -> list[_Spec]:
+    specs = [
+        _Spec(
+            "nees",
+            "consistency",
+            "Mean NEES against time with chi-square bounds",
+            "The mean of eᵀP⁻¹e should stay in the band around d: above it the errors are larger than P "
+            "says (overconfident, or a mean error); below it P is too large.",
+            lambda path: consistency.plot_nees(dataset, path),
+        ),
+        _Spec(
+            "nis",
+            "consistency",
+            "Mean NIS against time with chi-square bounds",
+            "The mean of rᵀS⁻¹r should stay in the band around p; it needs only measurements, so it is the "
+            "check that also works on real data. A rise above the band means larger innovations than S.",
+            lambda path: consistency.plot_nis(dataset, path),
+        ),
+    ]
+    if "residual_second_moment" in dataset:
+        specs.append(
+            _Spec(
+                "residual_correlation",
+                "consistency",
+                "Residual correlation E[r_k r_jᵀ] over pairs of update times",
+                "White innovations give pale, structureless noise within the bound marked on the colour bar; "
+                "a coloured block means innovations correlated in time (here, a growing mean residual).",
+                lambda path: consistency.plot_residual_correlation(dataset, path),
+            )
+        )
+    specs.append(
+        _Spec(
+            "model_error",
+            "consistency",
+            "Deterministic model-error response in units of the filter's σ",
+            "The mean error that the truth's departure from the filter's model alone produces: values near "
+            "±1σ shift the filter's bounds by a whole sigma; the measured means (dots) should lie on the curves.",
+            lambda path: consistency.plot_model_error(dataset, path),
+        )
+    )
+    return specs
+
+
+def figure_files(state_names) -> list[str]:
+    """Every PNG name the report may write for a scenario with these states (for removing stale ones)."""
+    keys = [f"state_{name}" for name in state_names] + [f"error_{name}" for name in state_names]
+    keys += [
+        "mean_error",
+        "mean_error_long",
+        "variance_diagonal",
+        "variance_offdiagonal",
+        "orthogonality_diagonal",
+        "orthogonality_offdiagonal",
+        "nees",
+        "nis",
+        "residual_correlation",
+        "model_error",
+    ]
+    return [f"{key}.png" for key in keys]
+
+
+def render_figures(
+    dataset: xr.Dataset,
+    data: RealizationData,
+    figure_dir: str | Path,
+    long_dataset: xr.Dataset | None = None,
+    *,
+    scenario: str = REPORT_SCENARIO,
+) -> tuple[list[FigureEntry], list[SkippedFigure]]:
+    """Draw every figure of the report into ``figure_dir``.
+
+    Parameters
+    ----------
+    dataset : xarray.Dataset
+        The run's ``stats.nc``.
+    data : RealizationData
+        The realization shown in the single-run figures.
+    figure_dir : path
+        Folder for the PNGs (created; PNGs of the report that this run does not produce are removed so
+        that the folder matches the page).
+    long_dataset : xarray.Dataset, optional
+        ``stats_long.nc`` of the same run, for figure 5.8.
+    scenario : str
+        The run's scenario: figures carry the source report's numbers only for ``REPORT_SCENARIO``.
+
+    Returns
+    -------
+    figures : list of FigureEntry
+        In page order (report figures by number, then the rest).
+    skipped : list of SkippedFigure
+    """
+    figure_dir = Path(figure_dir)
+    figure_dir.mkdir(parents=True, exist_ok=True)
+    numbers = REPORT_NUMBERS if scenario == REPORT_SCENARIO else {}
+    specs = _realization_specs(data) + _ensemble_specs(dataset, long_dataset) + _consistency_specs(dataset)
+    figures = [
+        FigureEntry(spec.key, spec.group, spec.title, spec.caption, spec.draw(figure_dir / f"{spec.key}.png"), numbers.get(spec.key))
+        for spec in specs
+    ]
+    skipped = []
+    if long_dataset is None:
+        skipped.append(
+            SkippedFigure(
+                "mean_error_long",
+                "ensemble",
+                "Ensemble mean error over a longer run",
+                "this run has no stats_long.nc (kalcal verify writes it for scenarios with a longer study, "
+                "unless --long-run 0 is given)",
+                numbers.get("mean_error_long"),
+            )
+        )
+    if "residual_second_moment" not in dataset:
+        skipped.append(
+            SkippedFigure(
+                "residual_correlation",
+                "consistency",
+                "Residual correlation over pairs of update times",
+                "stats.nc holds no E[r_k r_j^T] over pairs of updates (the run did not keep them)",
+            )
+        )
+    drawn = {entry.path.name for entry in figures}
+    for name in figure_files(data.state_names):
+        stale = figure_dir / name
+        if name not in drawn and stale.is_file():
+            stale.unlink()
+    return sorted(figures, key=_sort_key), sorted(skipped, key=_sort_key)
