@@ -15,8 +15,11 @@ from kalcal.cli import app
 from kalcal.models.registry import build_scenario
 from kalcal.simulate.sampled import sample_accel_gps_logs
 
-ESTIMATE_COLUMNS = ["time", "position", "velocity", "bias", "position_std", "velocity_std", "bias_std"]
-SUMMARY_KEYS = {"bias", "bias_std", "position", "velocity", "covariance", "fixes_used"}
+ESTIMATE_COLUMNS = [
+    "time", "position", "velocity", "bias", "position_std", "velocity_std", "bias_std",
+    "nis", "innovation_position", "innovation_velocity",
+]
+SUMMARY_KEYS = {"bias", "bias_std", "position", "velocity", "covariance", "fixes_used", "diagnostics"}
 
 
 def _invoke(*args: str):
@@ -77,10 +80,10 @@ def test_calibrate_writes_estimates_and_summary(simulated, calibrated):
     out, result = calibrated
     estimates = pd.read_csv(out / "estimates.csv")
     assert list(estimates.columns) == ESTIMATE_COLUMNS
-    assert len(estimates) == 150
+    assert len(estimates) == 149  # the first fix starts the nominal
     summary = json.loads((out / "summary.json").read_text())
     assert SUMMARY_KEYS <= set(summary)
-    assert summary["fixes_used"] == 150
+    assert summary["fixes_used"] == 149 and summary["init"] == "first-fix"
     covariance = np.array(summary["covariance"])
     assert covariance.shape == (3, 3)
     np.testing.assert_allclose(covariance, covariance.T, rtol=0, atol=0)
@@ -91,7 +94,10 @@ def test_calibrate_writes_estimates_and_summary(simulated, calibrated):
     imu, gps = pd.read_csv(simulated / "imu.csv"), pd.read_csv(simulated / "gps.csv")
     scenario = build_scenario("accel-gps", assignments=["scenario.integration=trapezoid"])
     direct = calibrate_accel_gps(
-        scenario, *(imu[c].to_numpy() for c in ("time", "accel")), *(gps[c].to_numpy() for c in ("time", "position", "velocity"))
+        scenario,
+        *(imu[c].to_numpy() for c in ("time", "accel")),
+        *(gps[c].to_numpy() for c in ("time", "position", "velocity")),
+        init="first-fix",
     )
     assert summary["bias"] == direct.bias[-1]
     assert summary["position"] == direct.position[-1] and summary["velocity"] == direct.velocity[-1]
@@ -227,13 +233,13 @@ CASES = {
         lambda imu, gps, d: (_csv(imu, d / "imu.csv"), _csv(gps, d / "gps.csv"), ["--config", str(d / "no.toml")]),
         r"no\.toml: no such config file",
     ),
-    "fix outside the log": (
-        lambda imu, gps, d: (_csv(imu, d / "imu.csv"), _csv(_imu_with(gps, 4, "time", 1.2), d / "gps.csv"), []),
-        r"gps\.csv: row 5: fix time 1\.2 s lies outside the accelerometer log",
+    "no overlap between the logs": (
+        lambda imu, gps, d: (_csv(imu, d / "imu.csv"), _csv(gps.assign(time=gps["time"] + 100.0), d / "gps.csv"), []),
+        r"gps\.csv: no fix lies within the accelerometer log",
     ),
-    "fix off the ticks": (
-        lambda imu, gps, d: (_csv(imu, d / "imu.csv"), _csv(_imu_with(gps, 1, "time", 0.4021), d / "gps.csv"), []),
-        r"gps\.csv: row 2: fix time 0\.4021 s is not on an accelerometer sample",
+    "fewer than two fixes": (
+        lambda imu, gps, d: (_csv(imu, d / "imu.csv"), _csv(gps.iloc[:1], d / "gps.csv"), []),
+        r"gps\.csv: needs at least two usable fixes",
     ),
     "single accelerometer sample": (
         lambda imu, gps, d: (_csv(imu.iloc[:1], d / "imu.csv"), _csv(gps, d / "gps.csv"), []),
@@ -264,7 +270,8 @@ def test_short_logs_themselves_are_fine(short_logs, tmp_path):
         "--out", tmp_path / "out",
     )
     assert result.exit_code == 0, result.stderr
-    assert json.loads((tmp_path / "out" / "summary.json").read_text())["fixes_used"] == 5
+    # recorded data start from the first fix, which is then not an update
+    assert json.loads((tmp_path / "out" / "summary.json").read_text())["fixes_used"] == 4
 
 
 def test_simulate_bad_setting_is_exit_status_2(tmp_path):
@@ -284,17 +291,16 @@ def test_unknown_scenario_is_exit_status_2(tmp_path):
 # regressions of bugs found when this suite was written
 
 
-def test_uneven_accelerometer_spacing_names_the_imu_file(short_logs, tmp_path):
+def test_a_stopping_accelerometer_gap_names_the_imu_file(short_logs, tmp_path):
     imu, gps = short_logs
-    uneven = imu.copy()
-    uneven.loc[100:, "time"] += 0.001
+    gapped = imu.drop(index=range(100, 110))
     result = _invoke(
-        "calibrate", "accel-gps", "--imu", _csv(uneven, tmp_path / "uneven_imu.csv"), "--gps",
-        _csv(gps, tmp_path / "gps.csv"), "--out", tmp_path / "out",
+        "calibrate", "accel-gps", "--imu", _csv(gapped, tmp_path / "gapped_imu.csv"), "--gps",
+        _csv(gps, tmp_path / "gps.csv"), "--out", tmp_path / "out", "--on-gap", "stop",
     )
     assert result.exit_code == 2
-    assert "evenly spaced" in result.stderr
-    assert "uneven_imu.csv" in result.stderr, result.stderr
+    assert "gap" in result.stderr and "--max-imu-gap" in result.stderr
+    assert "gapped_imu.csv" in result.stderr, result.stderr
 
 
 def test_out_path_that_is_a_file_is_exit_status_2(short_logs, tmp_path):

@@ -111,8 +111,9 @@ def test_fix_at_time_zero_is_an_update_without_propagation():
     scenario = _scenario()
     logs = sample_accel_gps_logs(scenario, np.random.default_rng(4), 1)
     model = scenario.filter_model()
+    fixes = np.array([0, logs.fix_index[0]])
     result = calibrate_accel_gps(
-        scenario, logs.sample_time, logs.accel[0], np.array([0.0]), logs.position[0, :1], logs.velocity[0, :1]
+        scenario, logs.sample_time, logs.accel[0], logs.sample_time[fixes], logs.position[0, fixes], logs.velocity[0, fixes]
     )
     # One update of the prior M0 with V: diagonal, so each measured state combines two variances.
     m0, v = np.diag(model.m0), np.diag(model.v)
@@ -142,12 +143,12 @@ def test_log_starting_later_gives_the_same_estimates():
 @pytest.mark.parametrize(
     "gps_time, pattern",
     [
-        (np.array([0.2, 0.2013]), r"row 2: fix time 0\.2013 s is not on an accelerometer sample"),
-        (np.array([0.2, 30.2]), r"row 2: fix time 30\.2 s lies outside the accelerometer log"),
-        (np.array([-0.2, 0.2]), r"row 1: fix time -0\.2 s lies outside the accelerometer log"),
+        (np.array([0.2, 30.2]), r"gps\.csv: needs at least two usable fixes .*1 outside the log"),
+        (np.array([-0.2, 0.2]), r"gps\.csv: needs at least two usable fixes .*1 outside the log"),
+        (np.array([30.2, 30.4]), r"gps\.csv: no fix lies within the accelerometer log"),
     ],
 )
-def test_bad_fix_times_raise_data_error(gps_time, pattern):
+def test_too_few_fixes_inside_the_log_raise_data_error(gps_time, pattern):
     scenario = _scenario()
     logs = sample_accel_gps_logs(scenario, np.random.default_rng(6), 1)
     with pytest.raises(DataError, match=pattern):
@@ -156,13 +157,28 @@ def test_bad_fix_times_raise_data_error(gps_time, pattern):
         )
 
 
-def test_uneven_accelerometer_spacing_is_data_error():
+def test_fixes_outside_the_log_are_skipped_and_counted():
+    scenario = _scenario()
+    logs = sample_accel_gps_logs(scenario, np.random.default_rng(6), 1)
+    times = np.concatenate([[-0.2], logs.fix_time, [30.2]])
+    position = np.concatenate([[0.0], logs.gps_position[0], [0.0]])
+    velocity = np.concatenate([[0.0], logs.gps_velocity[0], [0.0]])
+    result = calibrate_accel_gps(scenario, logs.sample_time, logs.accel[0], times, position, velocity)
+    inside = _calibrate(scenario, logs)
+    assert result.skipped_outside == 2 and result.time.size == logs.fix_time.size
+    np.testing.assert_array_equal(result.error_state, inside.error_state)
+
+
+def test_uneven_accelerometer_spacing_uses_each_step():
+    """A shifted clock for part of the log is integrated step by step: no gap, and the process noise of the
+    longer step enters the covariance."""
     scenario = _scenario()
     logs = sample_accel_gps_logs(scenario, np.random.default_rng(7), 1)
     time = logs.sample_time.copy()
     time[100:] += 0.001
-    with pytest.raises(DataError, match=r"evenly spaced.*step 100"):
-        _calibrate(scenario, dataclasses.replace(logs, sample_time=time))
+    fixes = time[logs.fix_index]
+    result = calibrate_accel_gps(scenario, time, logs.accel[0], fixes, logs.gps_position[0], logs.gps_velocity[0])
+    assert not result.gaps and np.all(np.isfinite(result.error_state))
 
 
 # --------------------------------------------------------------------------------------------------
@@ -188,7 +204,7 @@ def test_fixes_on_samples_of_a_log_stamped_in_gps_time_of_week_are_accepted():
 def test_fix_far_outside_the_log_is_reported_as_outside(late):
     scenario = _scenario()
     logs = sample_accel_gps_logs(scenario, np.random.default_rng(6), 1)
-    with pytest.raises(DataError, match=r"row 2: .*lies outside the accelerometer log"):
+    with pytest.raises(DataError, match=r"1 outside the log"):
         calibrate_accel_gps(
             scenario, logs.sample_time, logs.accel[0], np.array([0.2, late]), np.zeros(2), np.zeros(2), source="gps.csv"
         )

@@ -1,27 +1,59 @@
 """Calibrate an accelerometer's bias from logged accelerometer samples and GPS fixes.
 
-The accelerometer is integrated open loop into a nominal p_c, v_c (the scenario's scheme); at each fix
-the filter updates the error state dx = [p - p_c, v - v_c, b] with dz = [gps_position - p_c,
-gps_velocity - v_c]; between fixes it propagates with the report's model over the samples in between.
+The accelerometer is integrated open loop into a nominal p_c, v_c (the scenario's scheme, each sample
+with its own interval); at each fix the filter updates the error state dx = [p - p_c, v - v_c, b] with
+dz = [gps_position - p_c, gps_velocity - v_c]; between fixes it propagates with the report's model.
 Estimates: p = p_c + dp, v = v_c + dv, b.
+
+Real logs, as they are:
+
+* **Fixes between samples.** The nominal is carried to the exact fix time by a partial step
+  (:func:`~kalcal.filters.mechanization.partial_step`) and the covariance with it.
+* **Irregular or dropped samples.** Each step uses its own dt; its noise enters through Gamma(dt), so the
+  process noise scales with the step. A step longer than ``max_imu_gap`` sample periods is a gap: it is
+  reported, and the run stops if asked to.
+* **GPS outages** are simply long intervals: the covariance grows as the model says.
+* **Fixes with a NaN** field are skipped and counted; fixes outside the accelerometer log likewise.
+* **Per-fix accuracy** (``position_std``, ``velocity_std``) replaces the filter's GPS noise for that fix.
+
+The model's transition depends on elapsed time only, Phi(s) = exp(A s) with A = [[0, 1, 0],
+[0, 0, -1], [0, 0, 0]], so the transition between fixes is Phi(t_k - t_{k-1}), and a step of length h
+ending s before the fix adds noise g = [h^2/2 + s h, h, 0] sigma_a: both are computed for every step at
+once, and only the 3x3 update runs in a loop over fixes. A step cut by a fix is treated as two steps
+with independent noise (the same sample's noise really enters both; the difference is one sample's
+share of a whole interval).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from functools import lru_cache
+from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 
 from kalcal.errors import DataError
-from kalcal.filters.kalman import UpdateForm, interval_transition, predict, update
-from kalcal.filters.mechanization import integrate
+from kalcal.filters.kalman import UpdateForm, predict, update
+from kalcal.filters.mechanization import integrate, partial_step
+from kalcal.filters.sequential import SequentialRun, sequential_filter
+from kalcal.linalg import symmetrize
 from kalcal.models.accel_gps import AccelGpsScenario
+
+Init = Literal["prior", "first-fix"]
+INITS: tuple[str, ...] = ("prior", "first-fix")
+
+
+@dataclass(frozen=True)
+class ImuGap:
+    """A step between two accelerometer samples longer than the allowed gap."""
+
+    row: int  #: 1-based data row of the sample that ends the gap
+    start: float  #: s
+    length: float  #: s
 
 
 @dataclass(frozen=True)
 class AccelGpsCalibration:
-    """The filter's estimates at each of K fixes used."""
+    """The filter's estimates at each of the K fixes used."""
 
     time: np.ndarray  #: fix times, s, (K,)
     position: np.ndarray  #: p_c + dp, m, (K,)
@@ -31,28 +63,64 @@ class AccelGpsCalibration:
     covariance: np.ndarray  #: posterior P of [dp, dv, b], (K, 3, 3)
     residual: np.ndarray  #: innovations r_k, [m, m/s], (K, 2)
     innovation_cov: np.ndarray  #: S_k, (K, 2, 2)
+    fix_rows: np.ndarray  #: 1-based rows of the GPS log used, (K,)
+    skipped_nan: int = 0  #: fixes skipped for a NaN field
+    skipped_outside: int = 0  #: fixes skipped outside the accelerometer log
+    gaps: list[ImuGap] = field(default_factory=list)
+    init: str = "prior"
+    start_time: float = 0.0  #: s, where the nominal starts
 
     @property
     def std(self) -> np.ndarray:
         """1-sigma of [dp, dv, b] from P, (K, 3)."""
         return np.sqrt(np.diagonal(self.covariance, axis1=1, axis2=2))
 
+    @property
+    def normalized_innovations(self) -> np.ndarray:
+        """L_k^{-1} r_k with S_k = L_k L_k^T: N(0, I) for a consistent filter, (K, 2)."""
+        lower = np.linalg.cholesky(self.innovation_cov)
+        return np.linalg.solve(lower, self.residual[..., None])[..., 0]
 
-def _time_tolerance(times: np.ndarray, period: float) -> float:
-    """Timing slack, s: a millionth of a sample, or the rounding of the time stamps if that is coarser."""
-    return max(1e-6 * period, 8.0 * float(np.spacing(np.max(np.abs(times)))))
+    @property
+    def nis(self) -> np.ndarray:
+        """r_k^T S_k^{-1} r_k, (K,)."""
+        return np.sum(self.normalized_innovations**2, axis=-1)
 
 
-def _regular_period(imu_time: np.ndarray, source: str) -> float:
-    steps = np.diff(imu_time)
-    period = float(np.median(steps))
-    worst = int(np.argmax(np.abs(steps - period)))
-    if abs(steps[worst] - period) > _time_tolerance(imu_time, period):
-        raise DataError(
-            f"{source}: accelerometer samples must be evenly spaced; step {worst + 1} is "
-            f"{steps[worst]:.9g} s against {period:.9g} s elsewhere"
-        )
-    return period
+def transition(elapsed: np.ndarray) -> np.ndarray:
+    """Phi(s) of the error state for elapsed times s (s), (..., 3, 3)."""
+    s = np.asarray(elapsed, dtype=float)
+    phi = np.zeros(s.shape + (3, 3))
+    phi[..., 0, 0] = phi[..., 1, 1] = phi[..., 2, 2] = 1.0
+    phi[..., 0, 1] = s
+    phi[..., 0, 2] = -0.5 * s * s
+    phi[..., 1, 2] = -s
+    return phi
+
+
+def _interval_noise(cuts: np.ndarray, interval_end: np.ndarray, owner: np.ndarray, n_intervals: int, variance: float):
+    """Q_k = sigma^2 sum over the steps of interval k of g g^T, g = [h^2/2 + s h, h, 0]."""
+    h = np.diff(cuts)
+    s = interval_end[owner] - cuts[1:]
+    g0 = 0.5 * h * h + s * h
+    q = np.zeros((n_intervals, 3, 3))
+    for (a, b), terms in {(0, 0): g0 * g0, (0, 1): g0 * h, (1, 1): h * h}.items():
+        q[:, a, b] = q[:, b, a] = variance * np.bincount(owner, weights=terms, minlength=n_intervals)
+    return q
+
+
+def _python_filter(phis, noise, h, v, dz, x0, m0, form: UpdateForm) -> SequentialRun:
+    """The same filter with :func:`predict` and :func:`update`, one fix at a time."""
+    n_fixes = dz.shape[0]
+    states, covariances = np.empty((n_fixes, 3)), np.empty((n_fixes, 3, 3))
+    residuals, innovations = np.empty((n_fixes, 2)), np.empty((n_fixes, 2, 2))
+    x, cov = x0, m0
+    for k in range(n_fixes):
+        x, cov = predict(x, cov, phis[k], noise[k])
+        result = update(x, cov, dz[k], h, v[k], form)
+        x, cov = result.x, result.cov
+        states[k], covariances[k], residuals[k], innovations[k] = x, cov, result.residual, result.innovation_cov
+    return SequentialRun(states, covariances, residuals, innovations)
 
 
 def calibrate_accel_gps(
@@ -63,6 +131,11 @@ def calibrate_accel_gps(
     gps_position: np.ndarray,
     gps_velocity: np.ndarray,
     *,
+    position_std: np.ndarray | None = None,
+    velocity_std: np.ndarray | None = None,
+    init: Init = "prior",
+    max_imu_gap: float = 5.0,
+    stop_on_gap: bool = False,
     form: UpdateForm = "joseph",
     source: str = "gps",
     imu_source: str = "imu",
@@ -74,63 +147,133 @@ def calibrate_accel_gps(
     scenario : AccelGpsScenario
         Its ``filter`` settings give the noise and the prior; ``scenario.integration`` the scheme.
     imu_time : ndarray, shape (J + 1,)
-        Accelerometer sample times, s, strictly increasing and evenly spaced.
+        Accelerometer sample times, s, strictly increasing.
     accel : ndarray, shape (J + 1,)
-        Measured specific force, m/s^2.
-    gps_time, gps_position, gps_velocity : ndarray, shape (K,)
-        Fix times (s, on accelerometer sample times), positions (m) and velocities (m/s).
-    form : {"joseph", "standard"}
+        Measured specific force, m/s^2, finite.
+    gps_time, gps_position, gps_velocity : ndarray, shape (F,)
+        Fix times (s, strictly increasing), positions (m) and velocities (m/s); NaN marks a bad field.
+    position_std, velocity_std : ndarray, shape (F,), optional
+        Each fix's own 1-sigma (m, m/s); NaN or absent means the filter's setting.
+    init : {"prior", "first-fix"}
+        Start the nominal at the first accelerometer sample with the scenario's prior (the report), or
+        at the first usable fix with its position and velocity and the GPS noise as their covariance.
+    max_imu_gap : float
+        A step longer than this many median sample periods is reported as a gap.
+    stop_on_gap : bool
+        Raise DataError at the first gap instead of going on.
     source, imu_source : str
         Names of the GPS and accelerometer logs, quoted in errors.
     """
-    period = _regular_period(imu_time, imu_source)
-    tolerance = _time_tolerance(imu_time, period)
-    outside = (gps_time < imu_time[0] - tolerance) | (gps_time > imu_time[-1] + tolerance)
-    if np.any(outside):
-        row = int(np.argmax(outside))
+    if init not in INITS:
+        raise DataError(f"--init: expected one of {', '.join(INITS)}, got {init!r}")
+    if not max_imu_gap > 1:
+        raise DataError(f"--max-imu-gap: expected a number of sample periods above 1, got {max_imu_gap!r}")
+    imu_time, accel = np.asarray(imu_time, dtype=float), np.asarray(accel, dtype=float)
+    gps_time = np.asarray(gps_time, dtype=float)
+    if imu_time.size < 2:
+        raise DataError(f"{imu_source}: needs at least two accelerometer samples, got {imu_time.size}")
+    steps = np.diff(imu_time)
+    if not np.all(steps > 0):
+        row = int(np.argmax(~(steps > 0))) + 2
+        raise DataError(f"{imu_source}: row {row}: time {imu_time[row - 1]:.9g} s does not increase")
+    if gps_time.size > 1 and not np.all(np.diff(gps_time) > 0):
+        row = int(np.argmax(~(np.diff(gps_time) > 0))) + 2
+        raise DataError(f"{source}: row {row}: time {gps_time[row - 1]:.9g} s does not increase")
+    period = float(np.median(steps))
+    gaps = [
+        ImuGap(row=int(j) + 2, start=float(imu_time[j]), length=float(steps[j]))
+        for j in np.flatnonzero(steps > max_imu_gap * period)
+    ]
+    if gaps and stop_on_gap:
+        gap = gaps[0]
         raise DataError(
-            f"{source}: row {row + 1}: fix time {gps_time[row]:.9g} s lies outside the accelerometer log "
-            f"[{imu_time[0]:.9g}, {imu_time[-1]:.9g}] s"
+            f"{imu_source}: row {gap.row}: a gap of {gap.length:.6g} s after t = {gap.start:.9g} s exceeds "
+            f"--max-imu-gap {max_imu_gap:g} sample periods ({max_imu_gap * period:.6g} s)"
         )
-    index = np.clip(np.rint((gps_time - imu_time[0]) / period).astype(np.int64), 0, imu_time.size - 1)
-    off_tick = np.abs(imu_time[index] - gps_time) > tolerance
-    if np.any(off_tick):
-        row = int(np.argmax(off_tick))
-        raise DataError(f"{source}: row {row + 1}: fix time {gps_time[row]:.9g} s is not on an accelerometer sample")
-    backwards = np.flatnonzero(np.diff(index) <= 0)
-    if backwards.size:
-        row = int(backwards[0]) + 1
+
+    settings = scenario.filter_settings
+    scheme = scenario.scenario.integration
+    fix_std_p = np.full(gps_time.size, settings.gps_position_std) if position_std is None else np.asarray(position_std, float)
+    fix_std_v = np.full(gps_time.size, settings.gps_velocity_std) if velocity_std is None else np.asarray(velocity_std, float)
+    fix_std_p = np.where(np.isfinite(fix_std_p), fix_std_p, settings.gps_position_std)
+    fix_std_v = np.where(np.isfinite(fix_std_v), fix_std_v, settings.gps_velocity_std)
+    for name, values in (("position_std", fix_std_p), ("velocity_std", fix_std_v)):
+        if np.any(values <= 0):
+            row = int(np.argmax(values <= 0)) + 1
+            raise DataError(f"{source}: row {row}, column {name!r}: must be positive, got {values[row - 1]:.6g}")
+
+    finite = np.isfinite(gps_position) & np.isfinite(gps_velocity) & np.isfinite(gps_time)
+    inside = (gps_time >= imu_time[0]) & (gps_time <= imu_time[-1])
+    usable = np.flatnonzero(finite & inside)
+    if np.count_nonzero(inside) == 0:
         raise DataError(
-            f"{source}: row {row + 1}: fix time {gps_time[row]:.9g} s does not come after the previous fix "
-            f"({gps_time[row - 1]:.9g} s)"
+            f"{source}: no fix lies within the accelerometer log [{imu_time[0]:.9g}, {imu_time[-1]:.9g}] s "
+            f"(fixes span [{np.nanmin(gps_time):.9g}, {np.nanmax(gps_time):.9g}] s)"
         )
-    p_c, v_c = integrate(accel, period, *scenario.nominal_start(), scenario.scenario.integration)
-    model = scenario.filter_model()
+    if usable.size < 2:
+        raise DataError(
+            f"{source}: needs at least two usable fixes within the accelerometer log, got {usable.size} "
+            f"({np.count_nonzero(~finite)} with a NaN field, {np.count_nonzero(finite & ~inside)} outside the log)"
+        )
+    if init == "first-fix":
+        first, usable = usable[0], usable[1:]
+        start_time = float(gps_time[first])
+    else:
+        start_time = float(imu_time[0])
 
-    @lru_cache(maxsize=None)
-    def transition(steps: int) -> tuple[np.ndarray, np.ndarray]:
-        return interval_transition(model.phi, model.gamma, model.w, steps)
+    # Nominal from rest at the first sample, then moved to the chosen start (the nominal is linear in
+    # its initial conditions): p_c(t) = p0 + v0 (t - t0) + [P(t) - P(t0) - V(t0) (t - t0)].
+    free_p, free_v = integrate(accel, steps, 0.0, 0.0, scheme)
 
-    n_fixes = gps_time.size
-    states = np.empty((n_fixes, 3))
-    covariances = np.empty((n_fixes, 3, 3))
-    residuals = np.empty((n_fixes, 2))
-    innovations = np.empty((n_fixes, 2, 2))
-    x, cov, at = model.x0, model.m0, 0
-    for k in range(n_fixes):
-        x, cov = predict(x, cov, *transition(int(index[k] - at)))
-        at = int(index[k])
-        dz = np.array([gps_position[k] - p_c[at], gps_velocity[k] - v_c[at]])
-        result = update(x, cov, dz, model.h, model.v, form)
-        x, cov = result.x, result.cov
-        states[k], covariances[k], residuals[k], innovations[k] = x, cov, result.residual, result.innovation_cov
+    def free_at(t: np.ndarray):
+        j = np.clip(np.searchsorted(imu_time, t, side="right") - 1, 0, imu_time.size - 2)
+        return partial_step(accel[j], accel[j + 1], steps[j], t - imu_time[j], free_p[j], free_v[j], scheme)
+
+    fix_times = gps_time[usable]
+    p_fix, v_fix = free_at(fix_times)
+    p_start, v_start = free_at(np.array([start_time]))
+    if init == "first-fix":
+        p0, v0 = float(gps_position[first]), float(gps_velocity[first])
+        x0 = np.zeros(3)
+        m0 = np.diag([fix_std_p[first] ** 2, fix_std_v[first] ** 2, settings.bias_std**2])
+    else:
+        p0, v0 = scenario.nominal_start()
+        model = scenario.filter_model()
+        x0, m0 = model.x0, model.m0
+    elapsed = fix_times - start_time
+    nominal_p = p0 + v0 * elapsed + (p_fix - p_start[0] - v_start[0] * elapsed)
+    nominal_v = v0 + (v_fix - v_start[0])
+
+    # Every step between the start and the last fix, cut at the fixes, assigned to the fix that ends it.
+    last = fix_times[-1]
+    samples = imu_time[(imu_time > start_time) & (imu_time < last)]
+    cuts = np.union1d(np.concatenate([[start_time], samples]), fix_times)
+    owner = np.searchsorted(fix_times, cuts[1:], side="left")
+    noise = _interval_noise(cuts, fix_times, owner, fix_times.size, settings.accel_noise_std**2)
+    phis = transition(np.diff(np.concatenate([[start_time], fix_times])))
+
+    h = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    v = np.zeros((fix_times.size, 2, 2))
+    v[:, 0, 0], v[:, 1, 1] = fix_std_p[usable] ** 2, fix_std_v[usable] ** 2
+    dz = np.stack([gps_position[usable] - nominal_p, gps_velocity[usable] - nominal_v], axis=1)
+    if form == "joseph":
+        run = sequential_filter(phis, noise, h, v, dz, x0, m0)
+    else:  # the standard form is kept for comparison only; it needs no speed
+        run = _python_filter(phis, noise, h, v, dz, x0, m0, form)
+    states, covariances, residuals, innovations = run
     return AccelGpsCalibration(
-        time=np.asarray(gps_time, dtype=float),
-        position=p_c[index] + states[:, 0],
-        velocity=v_c[index] + states[:, 1],
+        time=fix_times,
+        position=nominal_p + states[:, 0],
+        velocity=nominal_v + states[:, 1],
         bias=states[:, 2].copy(),
         error_state=states,
-        covariance=covariances,
+        covariance=symmetrize(covariances),
         residual=residuals,
         innovation_cov=innovations,
+        fix_rows=usable + 1,
+        skipped_nan=int(np.count_nonzero(~finite)),
+        skipped_outside=int(np.count_nonzero(finite & ~inside)),
+        gaps=gaps,
+        init=init,
+        start_time=start_time,
     )

@@ -65,10 +65,14 @@ def numeric_columns(
             )
         raw = frame[name]
         values = pd.to_numeric(raw, errors="coerce").to_numpy(dtype=float)
-        bad_text = np.isnan(values) & raw.notna().to_numpy() & (raw.astype(str).str.strip().str.lower() != "nan").to_numpy()
-        if np.any(bad_text):
-            row = int(np.argmax(bad_text))
-            raise DataError(f"{path}: row {row + 1}, column {name!r}: not a number: {raw.iloc[row]!r}")
+        # Cells that did not parse: empty or "nan" stay NaN (allowed or not below); anything else is text.
+        unparsed = np.flatnonzero(np.isnan(values))
+        if unparsed.size:
+            text = raw.iloc[unparsed]
+            is_text = text.notna().to_numpy() & (text.astype(str).str.strip().str.lower() != "nan").to_numpy()
+            if np.any(is_text):
+                row = int(unparsed[np.argmax(is_text)])
+                raise DataError(f"{path}: row {row + 1}, column {name!r}: not a number: {raw.iloc[row]!r}")
         not_finite = ~np.isfinite(values) if role not in allow_nan else np.isinf(values)
         if np.any(not_finite):
             row = int(np.argmax(not_finite))
@@ -87,3 +91,20 @@ def require_increasing(time: np.ndarray, path: str | Path, column: str = "time")
             f"{path}: row {row + 1}, column {column!r}: time {time[row]:.9g} does not increase "
             f"(previous row {time[row - 1]:.9g})"
         )
+
+
+def parse_column_map(text: str | None, roles: tuple[str, ...], option: str) -> dict[str, str]:
+    """``"time=t,accel=ax"`` -> ``{"time": "t", "accel": "ax"}``; roles not named keep their own name.
+
+    Raises DataError for a role that is not one of ``roles`` or a malformed item.
+    """
+    mapping = {role: role for role in roles}
+    for item in filter(None, (part.strip() for part in (text or "").split(","))):
+        role, sep, column = item.partition("=")
+        role, column = role.strip(), column.strip()
+        if not sep or not column:
+            raise DataError(f"{option} {text!r}: expected role=column pairs, e.g. time=t,accel=ax")
+        if role not in roles:
+            raise DataError(f"{option}: unknown role {role!r} (roles: {', '.join(roles)})")
+        mapping[role] = column
+    return mapping

@@ -41,8 +41,8 @@ def write_json(path: str | Path, document: dict[str, Any]) -> Path:
 
 
 def write_csv(path: str | Path, columns: dict[str, np.ndarray]) -> Path:
-    """Write equal-length columns as a CSV table with full float precision."""
+    """Write equal-length columns as a CSV table; floats in their shortest exact (round-trip) form."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    pd.DataFrame(columns).to_csv(path, index=False, float_format="%.17g")
+    pd.DataFrame(columns).to_csv(path, index=False)
     return path

@@ -1,0 +1,102 @@
+"""Calibration of a long log: one hour at 200 Hz (720,001 accelerometer rows, 18,000 fixes).
+
+    python benchmarks/bench_calibrate.py
+
+Prints the time to read the logs (CSV and Parquet), the filter alone, and the whole job (read, filter,
+diagnostics, estimates.csv, summary.json, the figure), after start-up; and the job's peak memory
+against the size of the input, measured in a child process.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from kalcal.calibrate.accel_gps import calibrate_accel_gps
+from kalcal.io.logs import numeric_columns, read_table
+from kalcal.jobs.calibrate import calibrate_accel_gps_files
+from kalcal.models.registry import build_scenario
+
+HOURS = 1.0
+
+
+def make_logs(directory: Path) -> dict[str, Path]:
+    """An hour of the report's motion, simulated directly (no per-sample Python loop)."""
+    rng = np.random.default_rng(0)
+    dt, duration = 0.005, 3600.0 * HOURS
+    t = np.arange(0.0, duration + dt / 2, dt)
+    a = 10 * np.sin(0.1 * t)
+    bias = 0.05
+    accel = a + bias + 0.02 * rng.standard_normal(t.size)
+    fixes = np.arange(0.2, duration + 1e-9, 0.2)
+    v = 100 + 100 * (1 - np.cos(0.1 * fixes))
+    p = (100 + 100) * fixes - 1000 * np.sin(0.1 * fixes)
+    imu = pd.DataFrame({"time": t, "accel": accel})
+    gps = pd.DataFrame(
+        {
+            "time": fixes,
+            "position": p + rng.standard_normal(fixes.size),
+            "velocity": v + 0.04 * rng.standard_normal(fixes.size),
+        }
+    )
+    paths = {}
+    for kind in ("csv", "parquet"):
+        paths[f"imu.{kind}"] = directory / f"imu.{kind}"
+        paths[f"gps.{kind}"] = directory / f"gps.{kind}"
+        if kind == "csv":
+            imu.to_csv(paths["imu.csv"], index=False)
+            gps.to_csv(paths["gps.csv"], index=False)
+        else:
+            imu.to_parquet(paths["imu.parquet"])
+            gps.to_parquet(paths["gps.parquet"])
+    return paths
+
+
+def peak_memory_mib(imu: Path, gps: Path, out: Path) -> float:
+    code = (
+        "from kalcal.jobs.calibrate import calibrate_accel_gps_files\n"
+        "from kalcal.models.registry import build_scenario\n"
+        f"calibrate_accel_gps_files(build_scenario('accel-gps', None, [], defaults={{'scenario.integration': 'trapezoid'}}), "
+        f"{str(imu)!r}, {str(gps)!r}, {str(out)!r})\n"
+        "print(open('/proc/self/status').read().split('VmHWM:')[1].split()[0])\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    return int(result.stdout.split()[-1]) / 1024
+
+
+def main() -> None:
+    scenario = build_scenario("accel-gps", None, [], defaults={"scenario.integration": "trapezoid"})
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        paths = make_logs(tmp)
+        imu_frame = read_table(paths["imu.parquet"])
+        gps_frame = read_table(paths["gps.parquet"])
+        imu = numeric_columns(imu_frame, "imu", ("time", "accel"))
+        gps = numeric_columns(gps_frame, "gps", ("time", "position", "velocity"))
+        input_mib = (sum(a.nbytes for a in imu.values()) + sum(a.nbytes for a in gps.values())) / 2**20
+        print(f"kalcal calibrate benchmark: {imu['time'].size:,} accelerometer rows, {gps['time'].size:,} fixes "
+              f"({input_mib:.1f} MiB as float64)")
+        for kind in ("csv", "parquet"):
+            start = time.perf_counter()
+            read_table(paths[f"imu.{kind}"])
+            read_table(paths[f"gps.{kind}"])
+            print(f"  read {kind:8s}                      {time.perf_counter() - start:6.2f} s")
+        start = time.perf_counter()
+        result = calibrate_accel_gps(scenario, imu["time"], imu["accel"], gps["time"], gps["position"], gps["velocity"], init="first-fix")
+        print(f"  filter alone                       {time.perf_counter() - start:6.2f} s   bias {result.bias[-1]:.5f} ± {result.std[-1, 2]:.1g} (true 0.05)")
+        for kind in ("parquet", "csv"):
+            start = time.perf_counter()
+            calibrate_accel_gps_files(scenario, paths[f"imu.{kind}"], paths[f"gps.{kind}"], tmp / f"out-{kind}")
+            print(f"  whole job from {kind:8s}           {time.perf_counter() - start:6.2f} s")
+        peak = peak_memory_mib(paths["imu.parquet"], paths["gps.parquet"], tmp / "out-peak")
+        print(f"  peak memory of the job (Parquet):  {peak:6.0f} MiB (with the interpreter and libraries)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,73 @@
+"""A compiled sequential Kalman filter for long logs: one predict and one Joseph update per fix.
+
+The same equations as :func:`kalcal.filters.kalman.predict` and :func:`~kalcal.filters.kalman.update`
+(which the tests hold it equal to), for a single realization with a transition, process noise and
+measurement noise of its own at every fix. numpy spends ~70 us per fix on the dozen tiny 3x3 products;
+compiled, a fix costs about a microsecond, so an hour of 5 Hz fixes filters in milliseconds.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numba
+import numpy as np
+
+
+class SequentialRun(NamedTuple):
+    """K fixes, d states, p measurements."""
+
+    state: np.ndarray  #: posterior x_k, (K, d)
+    cov: np.ndarray  #: posterior P_k (Joseph form), (K, d, d)
+    residual: np.ndarray  #: r_k = z_k - H xbar_k, (K, p)
+    innovation_cov: np.ndarray  #: S_k, (K, p, p)
+
+
+@numba.njit(cache=True, nogil=True)
+def _run(phis, qs, h, vs, z, x0, m0, states, covs, residuals, innovations):
+    n_fixes, d = states.shape
+    p = h.shape[0]
+    x = x0.copy()
+    cov = m0.copy()
+    eye = np.eye(d)
+    for k in range(n_fixes):
+        x = phis[k] @ x
+        cov = phis[k] @ cov @ phis[k].T + qs[k]
+        cov = 0.5 * (cov + cov.T)
+        hm = h @ cov
+        s = hm @ h.T + vs[k]
+        s = 0.5 * (s + s.T)
+        gain = np.linalg.solve(s, hm).T
+        r = z[k] - h @ x
+        x = x + gain @ r
+        i_kh = eye - gain @ h
+        cov = i_kh @ cov @ i_kh.T + gain @ vs[k] @ gain.T
+        cov = 0.5 * (cov + cov.T)
+        states[k] = x
+        covs[k] = cov
+        residuals[k] = r
+        innovations[k] = s
+
+
+def sequential_filter(
+    phis: np.ndarray, qs: np.ndarray, h: np.ndarray, vs: np.ndarray, z: np.ndarray, x0: np.ndarray, m0: np.ndarray
+) -> SequentialRun:
+    """Filter one measurement sequence with per-fix models.
+
+    Parameters
+    ----------
+    phis, qs : ndarray, shape (K, d, d)
+        Transition and process-noise covariance from the previous fix (or the prior) to fix k.
+    h : ndarray, shape (p, d)
+    vs : ndarray, shape (K, p, p)
+        Measurement-noise covariance of each fix.
+    z : ndarray, shape (K, p)
+    x0, m0 : ndarray, shapes (d,), (d, d)
+        Prior mean and covariance before the first fix.
+    """
+    n_fixes, d, p = z.shape[0], x0.shape[0], h.shape[0]
+    states, covs = np.empty((n_fixes, d)), np.empty((n_fixes, d, d))
+    residuals, innovations = np.empty((n_fixes, p)), np.empty((n_fixes, p, p))
+    as_float = lambda a: np.ascontiguousarray(a, dtype=float)  # noqa: E731
+    _run(as_float(phis), as_float(qs), as_float(h), as_float(vs), as_float(z), as_float(x0), as_float(m0), states, covs, residuals, innovations)
+    return SequentialRun(states, covs, residuals, innovations)
