@@ -56,12 +56,16 @@ def simulate(
     set_: SetOpt = None,
     config: ConfigOpt = None,
 ) -> None:
-    """Simulate one realization and write it as recorded logs (imu.csv, gps.csv, truth.csv)."""
+    """Simulate one realization and write it as recorded logs.
+
+    accel-gps: imu.csv, gps.csv, truth.csv; scale-bias: data.csv (time, reference, sensor), truth.json.
+    """
+    from kalcal.jobs.scale_bias import simulate_scale_bias
     from kalcal.jobs.simulate import simulate_accel_gps
 
     with user_errors():
         model = build_scenario(scenario, config, set_ or ())
-        paths = simulate_accel_gps(model, seed, out)
+        paths = (simulate_scale_bias if scenario == "scale-bias" else simulate_accel_gps)(model, seed, out)
     for name, path in paths.items():
         console.print(f"wrote {name:5s} {path}")
 
@@ -69,20 +73,72 @@ def simulate(
 @app.command()
 def calibrate(
     scenario: ScenarioArg,
-    imu: Annotated[Path, typer.Option("--imu", help="Accelerometer log (CSV or Parquet): time [s], accel [m/s^2].")],
-    gps: Annotated[Path, typer.Option("--gps", help="GPS log (CSV or Parquet): time [s], position [m], velocity [m/s].")],
+    imu: Annotated[
+        Optional[Path], typer.Option("--imu", help="accel-gps: accelerometer log (CSV or Parquet): time [s], accel [m/s^2].")
+    ] = None,
+    gps: Annotated[
+        Optional[Path],
+        typer.Option("--gps", help="accel-gps: GPS log (CSV or Parquet): time [s], position [m], velocity [m/s]."),
+    ] = None,
+    data: Annotated[
+        Optional[Path],
+        typer.Option("--data", help="scale-bias: log (CSV or Parquet) of a reference and a sensor column (time [s] optional)."),
+    ] = None,
+    reference: Annotated[str, typer.Option("--reference", help="scale-bias: the reference's column.")] = "reference",
+    sensor: Annotated[str, typer.Option("--sensor", help="scale-bias: the sensor's column.")] = "sensor",
+    imu_columns: Annotated[
+        Optional[str], typer.Option("--imu-columns", help="accel-gps: map roles to columns, e.g. time=t,accel=ax.")
+    ] = None,
+    gps_columns: Annotated[
+        Optional[str],
+        typer.Option(
+            "--gps-columns",
+            help="accel-gps: map roles (time, position, velocity, position_std, velocity_std) to columns.",
+        ),
+    ] = None,
+    init: Annotated[
+        str, typer.Option("--init", help="accel-gps: first-fix (start at the first fix) or prior (the report).")
+    ] = "first-fix",
+    max_imu_gap: Annotated[
+        float, typer.Option("--max-imu-gap", help="accel-gps: a step longer than this many sample periods is a gap.")
+    ] = 5.0,
+    on_gap: Annotated[str, typer.Option("--on-gap", help="accel-gps: continue (report gaps) or stop.")] = "continue",
     out: Annotated[Path, typer.Option("--out", help="Directory for estimates.csv and summary.json.")] = Path(
         "kalcal-cal"
     ),
     set_: SetOpt = None,
     config: ConfigOpt = None,
 ) -> None:
-    """Calibrate the accelerometer bias from logged data (integration defaults to trapezoid for logs)."""
+    """Calibrate from logged data: accel-gps (--imu, --gps) or scale-bias (--data).
+
+    Units are SI: time in s, position in m, velocity in m/s, acceleration and bias in m/s^2. accel-gps
+    accepts irregular accelerometer samples, fixes between samples, outages and NaN fields in fixes
+    (skipped and counted); the GPS log may carry position_std [m] and velocity_std [m/s] per fix.
+    """
+    if scenario == "scale-bias":
+        return _calibrate_scale_bias(data, reference, sensor, out, set_, config, imu is not None or gps is not None)
     from kalcal.jobs.calibrate import calibrate_accel_gps_files
 
     with user_errors():
         model = build_scenario(scenario, config, set_ or (), defaults={"scenario.integration": "trapezoid"})
-        summary = calibrate_accel_gps_files(model, imu, gps, out)
+        missing = [name for name, path in (("--imu", imu), ("--gps", gps)) if path is None]
+        if missing:
+            raise KalcalError(f"{' and '.join(missing)}: required for {scenario}")
+        if data is not None:
+            raise KalcalError(f"--data: not used by {scenario} (it reads --imu and --gps)")
+        if on_gap not in ("continue", "stop"):
+            raise KalcalError(f"--on-gap: expected continue or stop, got {on_gap!r}")
+        summary = calibrate_accel_gps_files(
+            model,
+            imu,
+            gps,
+            out,
+            imu_columns=imu_columns,
+            gps_columns=gps_columns,
+            init=init,
+            max_imu_gap=max_imu_gap,
+            stop_on_gap=on_gap == "stop",
+        )
     table = Table(title=f"kalcal calibrate {scenario}: {summary['fixes_used']} fixes, t = {summary['time']:g} s")
     table.add_column("quantity")
     table.add_column("estimate", justify="right")
@@ -90,6 +146,39 @@ def calibrate(
     table.add_column("unit")
     for name, unit in (("bias", "m/s^2"), ("position", "m"), ("velocity", "m/s")):
         table.add_row(name, f"{summary[name]:.6g}", f"{summary[name + '_std']:.3g}", unit)
+    console.print(table)
+    for warning in summary["warnings"]:
+        error_console.print(f"kalcal: warning: {warning}", markup=False)
+    diagnostics = summary["diagnostics"]
+    style = "green" if diagnostics["consistent"] else "bold red"
+    console.print(f"diagnostics: [{style}]{escape(diagnostics['verdict'])}[/{style}]")
+    console.print(f"wrote {Path(out) / 'estimates.csv'}, {Path(out) / 'summary.json'} and {Path(out) / 'calibration.png'}")
+
+
+def _calibrate_scale_bias(data, reference, sensor, out, set_, config, imu_or_gps: bool) -> None:
+    """``kalcal calibrate scale-bias``: the scale error and bias of a sensor against a reference."""
+    from kalcal.jobs.scale_bias import calibrate_scale_bias_file
+
+    with user_errors():
+        model = build_scenario("scale-bias", config, set_ or ())
+        if data is None:
+            raise KalcalError("--data: required for scale-bias (a log with a reference and a sensor column)")
+        if imu_or_gps:
+            raise KalcalError("--imu/--gps: not used by scale-bias (it reads --data)")
+        summary = calibrate_scale_bias_file(model, data, out, reference=reference, sensor=sensor)
+    unit = summary["units"]["bias"]
+    table = Table(title=f"kalcal calibrate scale-bias: {summary['samples_used']} samples, t = {summary['time']:g} s")
+    table.add_column("quantity")
+    table.add_column("estimate", justify="right")
+    table.add_column("1-sigma", justify="right")
+    table.add_column("unit")
+    for name, value, std, unit_ in (
+        ("scale_error", summary["scale_error"], summary["scale_error_std"], "1"),
+        ("bias", summary["bias"], summary["bias_std"], unit),
+        ("theta1", summary["theta"][0], summary["theta_std"][0], "1"),
+        ("theta2", summary["theta"][1], summary["theta_std"][1], unit),
+    ):
+        table.add_row(name, f"{value:.6g}", f"{std:.3g}", unit_)
     console.print(table)
     console.print(f"wrote {Path(out) / 'estimates.csv'} and {Path(out) / 'summary.json'}")
 
@@ -149,7 +238,19 @@ def verify(
     ),
     engine: Annotated[str, typer.Option("--engine", help="exact (update-rate sampling) or sampled (every sample).")] = "exact",
     confidence: Annotated[float, typer.Option("--confidence", help="Family-wise confidence of each check.")] = 0.99,
-    workers: Annotated[Optional[int], typer.Option("--workers", help="Threads (default: all cores).")] = None,
+    threads: Annotated[Optional[int], typer.Option("--threads", help="Local threads (default: all cores).")] = None,
+    workers: Annotated[
+        Optional[int], typer.Option("--workers", help="Run on a local Dask cluster of this many processes.")
+    ] = None,
+    scheduler: Annotated[
+        Optional[str], typer.Option("--scheduler", help="Run on an existing Dask cluster (e.g. tcp://host:8786).")
+    ] = None,
+    batch_size: Annotated[
+        Optional[int], typer.Option("--batch-size", help="Realizations per task (whole blocks of 4096).")
+    ] = None,
+    checkpoint: Annotated[
+        Optional[Path], typer.Option("--checkpoint", help="Save progress here; rerunning the command resumes.")
+    ] = None,
     strict: Annotated[bool, typer.Option("--strict", help="Exit with status 1 when a check fails.")] = False,
     long_run: Annotated[
         Optional[float],
@@ -164,13 +265,14 @@ def verify(
     import shlex
 
     from kalcal.jobs.verify import verify as run_verify
+    from kalcal.montecarlo.distributed import dask_client
 
     with user_errors():
         model = build_scenario(scenario, config, set_ or ())
-        if workers is not None and workers < 1:
-            raise KalcalError(f"--workers: expected a positive number, got {workers}")
+        if threads is not None and threads < 1:
+            raise KalcalError(f"--threads: expected a positive number, got {threads}")
         bar, update = _progress_bar(f"{scenario} x {n:,}")
-        with bar:
+        with dask_client(workers, scheduler) as client, bar:
             outcome = run_verify(
                 model,
                 n,
@@ -178,10 +280,13 @@ def verify(
                 out,
                 engine=engine,
                 confidence=confidence,
-                workers=workers,
+                workers=threads,
                 progress=update,
                 command=shlex.join(["kalcal", *sys.argv[1:]]),
                 long_run=long_run,
+                client=client,
+                batch_size=batch_size,
+                checkpoint=checkpoint,
             )
         if not no_report:
             from kalcal.jobs.report import render_report
@@ -198,6 +303,48 @@ def verify(
         console.print(f"wrote {path}")
     if strict and outcome.summary["verdict"] != "pass":
         raise typer.Exit(1)
+
+
+@app.command()
+def sweep(
+    scenario: Annotated[str, typer.Argument(help=f"Scenario: {', '.join(SCENARIOS)}.")] = "accel-gps",
+    n: Annotated[int, typer.Option("-n", "--realizations", help="Monte Carlo realizations per value.")] = 100_000,
+    seed: Annotated[int, typer.Option("--seed", help="Root seed, the same for every value.")] = 0,
+    out: Annotated[Path, typer.Option("--out", help="Directory for sweep.csv, sweep.png and one run per value.")] = Path(
+        "kalcal-sweep"
+    ),
+    engine: Annotated[str, typer.Option("--engine", help="exact or sampled.")] = "exact",
+    threads: Annotated[Optional[int], typer.Option("--threads", help="Local threads (default: all cores).")] = None,
+    workers: Annotated[Optional[int], typer.Option("--workers", help="Local Dask cluster of this many processes.")] = None,
+    scheduler: Annotated[Optional[str], typer.Option("--scheduler", help="Existing Dask cluster address.")] = None,
+    set_: SetOpt = None,
+    config: ConfigOpt = None,
+) -> None:
+    """Verify once per value of one setting (--set key=v1,v2,...) and draw the tuning curve."""
+    from kalcal.jobs.sweep import split_sweep
+    from kalcal.jobs.sweep import sweep as run_sweep
+    from kalcal.models.config import parse_assignments
+    from kalcal.montecarlo.distributed import dask_client
+    from kalcal.plots.sweep import plot_sweep
+
+    with user_errors():
+        key, values, fixed = split_sweep(parse_assignments(set_ or ()))
+        model = build_scenario(scenario, config, [f"{k}={v}" for k, v in fixed.items()])
+        with dask_client(workers, scheduler) as client:
+            result = run_sweep(
+                model, key, values, n, seed, out, engine=engine, workers=threads, client=client, long_run=0
+            )
+        figure = plot_sweep(result.table, key, Path(out) / "sweep.png")
+    table = Table(title=f"kalcal sweep {scenario}: {key}, {n:,} realizations per value")
+    table.add_column(key, justify="right")
+    checks = [c[: -len("_passed")] for c in result.table.columns if c.endswith("_passed")]
+    for check in checks:
+        table.add_column(check, justify="right")
+    for _, row in result.table.iterrows():
+        cells = [f"{row[f'{c}_statistic']:.4g}" + ("" if row[f"{c}_passed"] else " [red]x[/red]") for c in checks]
+        table.add_row(str(row[key]), *cells)
+    console.print(table)
+    console.print(f"wrote {result.paths['table']} and {figure}")
 
 
 @app.command()

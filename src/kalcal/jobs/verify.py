@@ -16,7 +16,7 @@ from kalcal.io.results import write_json
 from kalcal.io.statistics import statistics_dataset, write_statistics
 from kalcal.models.config import apply_settings, section_values
 from kalcal.montecarlo.accumulators import EnsembleStatistics, ensemble_statistics
-from kalcal.montecarlo.engine import Progress, run_monte_carlo
+from kalcal.montecarlo.engine import BLOCK_SIZE, Progress, run_monte_carlo
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.verify.checks import REPORT_RESIDUAL_PAIR, CheckResult, residual_pair, run_checks, verdict
 
@@ -25,6 +25,11 @@ ENGINES = ("exact", "sampled")
 LONG_RUN_SECONDS = {"accel-gps": 120.0}
 #: Realizations of that study at most (the report used 5 x 10^4).
 LONG_RUN_REALIZATIONS = 50_000
+
+
+def info_name(scenario) -> str:
+    """The registry name of a scenario object."""
+    return type(scenario).NAME
 
 
 @dataclass(frozen=True)
@@ -50,11 +55,16 @@ def verify(
     progress: Progress | None = None,
     command: str = "",
     long_run: float | None = None,
+    client=None,
+    batch_size: int | None = None,
+    checkpoint: str | Path | None = None,
 ) -> VerifyOutcome:
     """Run n realizations, check the filter, write ``out/summary.json`` and ``out/stats.nc``.
 
     ``long_run`` (s; default per scenario, 0 for none) adds a study of the ensemble statistics over a
     longer horizon with min(n, 50 000) realizations, without the residual pairs, in ``out/stats_long.nc``.
+    ``client`` runs the blocks on a Dask cluster, ``batch_size`` realizations per task (rounded up to
+    whole blocks); ``checkpoint`` resumes from and saves to a file. None of them changes the numbers.
     """
     if n < 2:
         raise ConfigError(f"-n: need at least 2 realizations, got {n}")
@@ -62,9 +72,25 @@ def verify(
         raise ConfigError(f"--engine: expected one of {', '.join(ENGINES)}, got {engine!r}")
     if not 0.0 < confidence < 1.0:
         raise ConfigError(f"--confidence: expected a number in (0, 1), got {confidence!r}")
+    if batch_size is not None and batch_size < 1:
+        raise ConfigError(f"--batch-size: expected a positive number of realizations, got {batch_size}")
     started = time.perf_counter()
     problem, cause = build_problem(scenario)
-    run = run_monte_carlo(problem, n, seed, engine=engine, workers=workers, progress=progress)
+    if engine not in problem.engines:
+        raise ConfigError(f"--engine: {engine!r} is not available for {problem.info.scenario} (have {', '.join(problem.engines)})")
+    settings = section_values(scenario)
+    run = run_monte_carlo(
+        problem,
+        n,
+        seed,
+        engine=engine,
+        workers=workers,
+        progress=progress,
+        client=client,
+        blocks_per_task=-(-(batch_size or BLOCK_SIZE) // BLOCK_SIZE),
+        checkpoint=checkpoint,
+        checkpoint_key={"scenario": info_name(scenario), "settings": settings},
+    )
     statistics = ensemble_statistics(run.sums)
     expected = problem.expected_mean_error()
     checks = run_checks(statistics, problem.info, confidence, expected, cause)
@@ -83,7 +109,7 @@ def verify(
         long_n = min(n, LONG_RUN_REALIZATIONS)
         long_scenario = apply_settings(scenario, {"scenario.duration": long_seconds})
         long_problem, _ = build_problem(long_scenario, residual_pairs=False)
-        long = run_monte_carlo(long_problem, long_n, seed, engine=engine, workers=workers)
+        long = run_monte_carlo(long_problem, long_n, seed, engine=engine, workers=workers, client=client)
         long_stats = ensemble_statistics(long.sums)
         long_dataset = statistics_dataset(
             long_stats,
@@ -95,7 +121,7 @@ def verify(
         long_summary = {"duration": long_seconds, "realizations": long_n, "monte_carlo_s": long.wall_s}
     summary = {
         "scenario": info.scenario,
-        "settings": section_values(scenario),
+        "settings": settings,
         "realizations": n,
         "seed": seed,
         "engine": engine,
@@ -122,6 +148,8 @@ def verify(
             "total_s": time.perf_counter() - started,
             "realizations_per_s": n / run.wall_s if run.wall_s > 0 else None,
             "workers": run.workers,
+            "backend": "dask" if client is not None else "threads",
+            "resumed_blocks": run.resumed_blocks,
             "normals_per_realization": problem.normals_per_realization(engine),
         },
         "long_run": long_summary,

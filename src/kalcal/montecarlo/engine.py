@@ -1,25 +1,32 @@
 """The batched Monte Carlo engine: blocks of realizations in threads, merged in block order.
 
 Seeding: realizations are drawn in blocks of ``BLOCK_SIZE``; block b uses ``SFC64`` seeded with
-``SeedSequence(seed).spawn(...)[b]``, so realization i is the same whatever the number of threads or
-workers, and block sums merged in block order give identical statistics for a given seed and N.
-Threads share the work because numpy releases the GIL while it draws random numbers and does array
-arithmetic; BLAS is held to one thread per block so that threads do not oversubscribe the cores.
+``SeedSequence(seed, spawn_key=(b,))``, so realization i is the same whatever runs it, and block sums
+folded in block order give identical statistics for a given seed and N: local threads (the compiled
+kernels release the GIL), or Dask tasks on a cluster (``client``), in any grouping of blocks per task.
+A checkpoint holds the fold of the blocks finished so far; a killed run resumes from it.
 """
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import os
 import time
 from collections.abc import Callable
-from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor
+from concurrent.futures import wait as futures_wait
 from dataclasses import dataclass
+from functools import partial
+from pathlib import Path
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 
 from kalcal.montecarlo.accumulators import MomentSums
+from kalcal.montecarlo.checkpoint import fingerprint
+from kalcal.montecarlo.checkpoint import load as load_checkpoint
+from kalcal.montecarlo.checkpoint import save as save_checkpoint
 from kalcal.montecarlo.problem import BlockResult, Problem
 
 BLOCK_SIZE = 4096
@@ -45,14 +52,21 @@ def run_block(problem: Problem, seed: int, block: int, size: int, engine: str) -
     return problem.run_block(block_generator(seed, block), size, engine)
 
 
-def realization(problem: Problem, seed: int, index: int, engine: str, block_size: int = BLOCK_SIZE) -> BlockResult:
-    """The ``index``-th realization of the ensemble drawn with ``seed``, as a block of one.
+def realization(
+    problem: Problem, seed: int, index: int, n: int, engine: str, block_size: int = BLOCK_SIZE
+) -> BlockResult:
+    """Realization ``index`` of the n-realization ensemble drawn with ``seed``, as a block of one.
 
-    Reruns its whole block (the draws of a block are interleaved across its realizations).
+    Reruns its whole block at that block's size in the ensemble (the last block is shorter, and the
+    draws of a block are interleaved across its realizations). ``filter_cov_sum`` is that
+    realization's P, (K, d, d).
     """
+    if not 0 <= index < n:
+        raise ValueError(f"realization index must lie in [0, {n}), got {index}")
     block, offset = divmod(index, block_size)
-    result = run_block(problem, seed, block, block_size, engine)
-    return BlockResult(*(a[offset : offset + 1] for a in result[:5]), result.filter_cov_sum / block_size)
+    result = run_block(problem, seed, block, block_sizes(n, block_size)[block], engine)
+    size = result.error.shape[0]
+    return BlockResult(*(a[offset : offset + 1] for a in result[:5]), result.filter_cov_sum / size)
 
 
 @dataclass(frozen=True)
@@ -65,14 +79,30 @@ class MonteCarloRun:
     block_size: int
     wall_s: float
     workers: int
+    resumed_blocks: int = 0  #: blocks taken from a checkpoint instead of computed
+
+
+def block_task(problem: Problem, seed: int, blocks: list[tuple[int, int]], engine: str) -> list[tuple[int, MomentSums]]:
+    """The sums of consecutive blocks ``[(index, size), ...]``, each on its own (a thread or a Dask task).
+
+    BLAS is held to one thread: the engine's parallelism is over blocks.
+    """
+    with threadpool_limits(limits=1, user_api="blas"):
+        return [(b, problem.block_sums(block_generator(seed, b), size, engine)) for b, size in blocks]
 
 
 def _merge_in_order(pending: dict[int, MomentSums], merged: MomentSums | None, next_block: int):
+    """Fold the finished blocks that continue the prefix [0, next_block) into ``merged``."""
     while next_block in pending:
         part = pending.pop(next_block)
         merged = part if merged is None else merged.merge(part)
         next_block += 1
     return merged, next_block
+
+
+def _chunks(first: int, sizes: list[int], per_task: int) -> list[list[tuple[int, int]]]:
+    todo = [(b, sizes[b]) for b in range(first, len(sizes))]
+    return [todo[i : i + per_task] for i in range(0, len(todo), per_task)]
 
 
 def run_monte_carlo(
@@ -84,6 +114,10 @@ def run_monte_carlo(
     workers: int | None = None,
     block_size: int = BLOCK_SIZE,
     progress: Progress | None = None,
+    client=None,
+    blocks_per_task: int = 1,
+    checkpoint: str | Path | None = None,
+    checkpoint_key: dict | None = None,
 ) -> MonteCarloRun:
     """Run n realizations of ``problem`` and return their merged sums.
 
@@ -97,39 +131,75 @@ def run_monte_carlo(
     engine : str
         One of ``problem.engines``.
     workers : int, optional
-        Threads (default: the number of cores available to this process).
+        Threads when ``client`` is None (default: the cores available to this process).
     block_size : int
-        Realizations per block: part of the random stream's definition, so results depend on it only
-        through which draws make up each realization.
+        Realizations per block: part of the random stream's definition.
     progress : callable, optional
-        ``progress(done, total)`` after each block, in realizations.
+        ``progress(done, total)`` as blocks finish, in realizations.
+    client : dask.distributed.Client, optional
+        Run the blocks as Dask tasks on its cluster instead of local threads.
+    blocks_per_task : int
+        Consecutive blocks per task (the batch): changes scheduling, never the numbers.
+    checkpoint : path, optional
+        Resume from this file if it exists and save the merged sums to it as blocks finish.
+    checkpoint_key : dict, optional
+        What else identifies the run for the checkpoint (the scenario's settings); N, seed, engine and
+        block size are always included.
+
+    Returns
+    -------
+    MonteCarloRun
+        Whatever runs the blocks and however they are grouped, the sums are folded in block order, so
+        a given seed and N give identical numbers.
     """
     if engine not in problem.engines:
         raise ValueError(f"engine {engine!r} is not available (have {', '.join(problem.engines)})")
     sizes = block_sizes(n, block_size)
-    workers = max(1, workers or len(os.sched_getaffinity(0)))
+    digest = fingerprint({"n": n, "seed": seed, "engine": engine, "block_size": block_size, **(checkpoint_key or {})})
     start = time.perf_counter()
     merged: MomentSums | None = None
+    next_block = 0
+    if checkpoint is not None and (saved := load_checkpoint(checkpoint, digest)) is not None:
+        merged, next_block = saved
+    resumed = next_block
+    done = sum(sizes[:next_block])
+    if progress is not None:
+        progress(done, n)
+    chunks = _chunks(next_block, sizes, max(1, int(blocks_per_task)))
     pending: dict[int, MomentSums] = {}
-    next_block, done = 0, 0
 
-    def task(b: int) -> tuple[int, MomentSums]:
-        return b, problem.block_sums(block_generator(seed, b), sizes[b], engine)
+    if client is None:
+        workers = max(1, workers or len(os.sched_getaffinity(0)))
+        pool = ThreadPoolExecutor(max_workers=workers)
+        submit, first_done = pool.submit, partial(futures_wait, return_when=FIRST_COMPLETED)
+        in_flight_limit = 2 * workers
+    else:
+        from distributed import wait as dask_wait
 
-    with threadpool_limits(limits=1, user_api="blas"), ThreadPoolExecutor(max_workers=workers) as pool:
-        queue = iter(range(len(sizes)))
-        running = {pool.submit(task, b) for b in itertools.islice(queue, 2 * workers)}
+        pool = contextlib.nullcontext()
+        workers = max(1, sum(client.nthreads().values()))
+        submit = partial(client.submit, pure=False)
+        first_done = partial(dask_wait, return_when="FIRST_COMPLETED")
+        in_flight_limit = 2 * workers
+
+    with pool:
+        queue = iter(chunks)
+        running = {submit(block_task, problem, seed, chunk, engine) for chunk in itertools.islice(queue, in_flight_limit)}
         while running:
-            finished, running = wait(running, return_when=FIRST_COMPLETED)
+            finished, running = first_done(running)
+            running = set(running)
             for future in finished:
-                b, part = future.result()
-                pending[b] = part
-                done += sizes[b]
-                for b_next in queue:
-                    running.add(pool.submit(task, b_next))
-                    break
+                for b, part in future.result():
+                    pending[b] = part
+                    done += sizes[b]
+                for chunk in itertools.islice(queue, 1):
+                    running.add(submit(block_task, problem, seed, chunk, engine))
+            before = next_block
             merged, next_block = _merge_in_order(pending, merged, next_block)
+            if checkpoint is not None and next_block > before:
+                save_checkpoint(checkpoint, merged, next_block, digest)
             if progress is not None:
                 progress(done, n)
-    assert merged is not None and not pending
-    return MonteCarloRun(merged, seed, engine, block_size, time.perf_counter() - start, workers)
+    if merged is None or pending or next_block != len(sizes):
+        raise RuntimeError("Monte Carlo run ended with blocks missing")  # a bug, not a user error
+    return MonteCarloRun(merged, seed, engine, block_size, time.perf_counter() - start, workers, resumed)

@@ -1,0 +1,73 @@
+"""``kalcal sweep``: the verification run for each value of one setting, and the tuning curve."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from kalcal.errors import ConfigError
+from kalcal.io.results import write_json
+from kalcal.jobs.verify import verify
+from kalcal.models.config import apply_settings
+
+
+@dataclass(frozen=True)
+class SweepResult:
+    """One row per swept value: every check's statistic, bounds and verdict."""
+
+    key: str
+    table: pd.DataFrame
+    paths: dict[str, Path]
+
+
+def split_sweep(assignments: dict[str, str]) -> tuple[str, list[str], dict[str, str]]:
+    """Find the one ``key=v1,v2,...`` among ``--set`` assignments; the others stay fixed."""
+    swept = {key: value for key, value in assignments.items() if "," in value}
+    if len(swept) != 1:
+        raise ConfigError(
+            "sweep: give exactly one --set with a comma-separated list of values, e.g. "
+            f"filter.accel_noise_std=0.01,0.02 (got {len(swept)})"
+        )
+    key, values = next(iter(swept.items()))
+    values_list = [v.strip() for v in values.split(",") if v.strip()]
+    if len(values_list) < 2:
+        raise ConfigError(f"--set {key}={values}: a sweep needs at least two values")
+    return key, values_list, {k: v for k, v in assignments.items() if k != key}
+
+
+def sweep(scenario, key: str, values: list[str], n: int, seed: int, out: str | Path, **verify_options: Any) -> SweepResult:
+    """Verify ``scenario`` with ``key`` set to each value; write ``sweep.csv`` and one run directory per value.
+
+    Every value uses the same seed, so the curves compare filters on the same realizations.
+    """
+    out = Path(out)
+    rows = []
+    for value in values:
+        run_dir = out / f"{key}={value}"
+        outcome = verify(apply_settings(scenario, {key: value}), n, seed, run_dir, **verify_options)
+        row: dict[str, Any] = {key: float(value) if _is_number(value) else value, "verdict": outcome.summary["verdict"]}
+        for check in outcome.checks:
+            row[f"{check.name}_statistic"] = check.statistic
+            row[f"{check.name}_lower"] = check.lower
+            row[f"{check.name}_upper"] = check.upper
+            row[f"{check.name}_passed"] = check.passed
+        rows.append(row)
+    table = pd.DataFrame(rows)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {"table": out / "sweep.csv"}
+    table.to_csv(paths["table"], index=False)
+    paths["summary"] = write_json(
+        out / "sweep.json", {"key": key, "values": values, "realizations": n, "seed": seed, "rows": rows}
+    )
+    return SweepResult(key, table, paths)
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True

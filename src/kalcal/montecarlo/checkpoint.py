@@ -1,0 +1,72 @@
+"""Checkpoints of a Monte Carlo run: the merged sums of the blocks finished so far.
+
+Blocks merge in block order, so a checkpoint holds the sums of blocks 0 .. b-1 and the index b: a
+resumed run continues from block b and ends with exactly the sums of an uninterrupted one. The file is
+written to a temporary name and renamed, so a run killed while writing leaves the previous checkpoint
+whole. A fingerprint of the run's settings (scenario, N, seed, engine, block size) is stored with it,
+and a checkpoint written for other settings is refused.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from kalcal.errors import ConfigError
+from kalcal.montecarlo.accumulators import MomentSums
+
+_NONE = "__none__"
+
+
+def fingerprint(settings: dict) -> str:
+    """A stable digest of a run's settings (any JSON-serializable mapping)."""
+    text = json.dumps(settings, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def save(path: str | Path, sums: MomentSums, next_block: int, digest: str) -> None:
+    """Write the sums of blocks [0, next_block) atomically."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    arrays = {}
+    for field in dataclasses.fields(sums):
+        value = getattr(sums, field.name)
+        arrays[field.name] = np.array(_NONE) if value is None else np.asarray(value)
+    temporary = path.with_name(path.name + ".tmp")
+    with temporary.open("wb") as handle:
+        np.savez(handle, next_block=next_block, fingerprint=digest, **arrays)
+        handle.flush()
+        os.fsync(handle.fileno())
+    os.replace(temporary, path)
+
+
+def load(path: str | Path, digest: str) -> tuple[MomentSums, int] | None:
+    """The sums and next block of an existing checkpoint, None when there is none.
+
+    Raises ConfigError when the checkpoint belongs to a run with other settings or cannot be read.
+    """
+    path = Path(path)
+    if not path.exists():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            stored = str(data["fingerprint"])
+            next_block = int(data["next_block"])
+            values = {}
+            for field in dataclasses.fields(MomentSums):
+                value = data[field.name]
+                values[field.name] = None if value.dtype.kind == "U" and str(value) == _NONE else value
+    except (OSError, ValueError, KeyError) as exc:
+        raise ConfigError(f"--checkpoint {path}: not a kalcal checkpoint ({exc})") from None
+    if stored != digest:
+        raise ConfigError(
+            f"--checkpoint {path}: written by a run with other settings (scenario, -n, --seed, --engine); "
+            "use another file or delete it"
+        )
+    values["count"] = int(values["count"])
+    return MomentSums(**values), next_block

@@ -1,0 +1,31 @@
+"""``kalcal sweep``: one verification per value and the tuning curve."""
+
+import pandas as pd
+from typer.testing import CliRunner
+
+from kalcal.cli import app
+
+runner = CliRunner()
+
+
+def test_sweep_draws_the_tuning_curve(tmp_path):
+    result = runner.invoke(
+        app,
+        [
+            "sweep", "-n", "4000", "--out", str(tmp_path),
+            "--set", "filter.accel_noise_std=0.002,0.02",
+            "--set", "scenario.truth=discrete",
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    table = pd.read_csv(tmp_path / "sweep.csv")
+    assert list(table["filter.accel_noise_std"]) == [0.002, 0.02]
+    # ten times too little process noise is caught; the true setting passes
+    assert list(table["covariance_passed"]) == [False, True]
+    assert (tmp_path / "sweep.png").stat().st_size > 0
+    assert (tmp_path / "filter.accel_noise_std=0.02" / "summary.json").exists()
+
+
+def test_sweep_needs_exactly_one_list(tmp_path):
+    result = runner.invoke(app, ["sweep", "-n", "100", "--out", str(tmp_path), "--set", "truth.bias_std=0.1"])
+    assert result.exit_code == 2 and "exactly one --set" in result.stderr
