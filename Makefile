@@ -20,7 +20,8 @@ $(VENV)/.test-installed: pyproject.toml | $(BIN)/python
 	touch $@
 
 run: $(VENV)/.run-installed
-	$(BIN)/kalcal verify
+	$(BIN)/kalcal verify --out kalcal-out
+	@echo "report: $(CURDIR)/kalcal-out/report.html"
 
 test: $(VENV)/.test-installed
 	$(BIN)/python -m pytest -n 2 -q
