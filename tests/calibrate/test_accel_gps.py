@@ -36,7 +36,7 @@ def test_bias_recovered_within_four_sigma_over_seeds(integration):
         logs = sample_accel_gps_logs(scenario, np.random.default_rng(seed), 1)
         result = _calibrate(scenario, logs)
         assert result.bias.shape == (150,)
-        z = (result.bias[-1] - logs.bias[0]) / result.std[-1, 2]
+        z = (result.bias[-1] - logs.bias[0, -1]) / result.std[-1, 2]
         assert abs(z) <= 4.0, f"seed {seed}: bias error {z:.2f} sigma"
         # The estimate is informative: its sigma is far below the prior's 0.1 m/s^2.
         assert result.std[-1, 2] < 0.01 * scenario.truth.bias_std
@@ -82,7 +82,7 @@ def test_normalized_bias_errors_are_standard_normal_without_model_error():
     for seed in range(n_seeds):
         logs = sample_accel_gps_logs(scenario, np.random.default_rng(1000 + seed), 1)
         result = _calibrate(scenario, logs)
-        z[seed] = (result.bias[-1] - logs.bias[0]) / result.std[-1, 2]
+        z[seed] = (result.bias[-1] - logs.bias[0, -1]) / result.std[-1, 2]
     assert abs(z.mean()) <= 3 / np.sqrt(n_seeds), f"mean {z.mean():.3f}"
     low = stats.chi2.ppf(0.0005, n_seeds - 1) / (n_seeds - 1)
     high = stats.chi2.isf(0.0005, n_seeds - 1) / (n_seeds - 1)

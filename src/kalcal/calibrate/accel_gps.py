@@ -17,10 +17,11 @@ Real logs, as they are:
 * **Per-fix accuracy** (``position_std``, ``velocity_std``) replaces the filter's GPS noise for that fix.
 
 The model's transition depends on elapsed time only, Phi(s) = exp(A s) with A = [[0, 1, 0],
-[0, 0, -1], [0, 0, 0]], so the transition between fixes is Phi(t_k - t_{k-1}), and a step of length h
-ending s before the fix adds noise g = [h^2/2 + s h, h, 0] sigma_a: both are computed for every step at
-once, and only the 3x3 update runs in a loop over fixes. A step cut by a fix is treated as two steps
-with independent noise (the same sample's noise really enters both; the difference is one sample's
+[0, 0, -1], [0, 0, -1/tau]] (tau the bias's correlation time; the last entry is 0 for a constant or
+random-walk bias), so the transition between fixes is Phi(t_k - t_{k-1}), and a step of length h ending
+s before the fix adds noise g = [h^2/2 + s h, h, 0] sigma_a (and the bias's own noise, carried by
+Phi(s)): both are computed for every step at once, and only the 3x3 update runs in a loop over fixes.
+A step cut by a fix is treated as two steps with independent noise (the same sample's noise really enters both; the difference is one sample's
 share of a whole interval).
 """
 
@@ -32,7 +33,16 @@ from typing import Literal
 import numpy as np
 
 from kalcal.errors import DataError
-from kalcal.filters.kalman import UpdateForm, predict, update
+from kalcal.filters.kalman import (
+    UpdateForm,
+    check_form,
+    cholesky_factor,
+    gram,
+    predict,
+    sqrt_predict,
+    sqrt_update,
+    update,
+)
 from kalcal.filters.mechanization import integrate, partial_step
 from kalcal.filters.sequential import SequentialRun, sequential_filter
 from kalcal.linalg import symmetrize
@@ -69,6 +79,11 @@ class AccelGpsCalibration:
     gaps: list[ImuGap] = field(default_factory=list)
     init: str = "prior"
     start_time: float = 0.0  #: s, where the nominal starts
+    form: str = "joseph"  #: the filter's update form
+    # What the RTS smoother needs (kalcal.calibrate.smoothing):
+    prior_state: np.ndarray | None = None  #: xbar_k before fix k, [dp, dv, b], (K, 3)
+    prior_covariance: np.ndarray | None = None  #: M_k before fix k, (K, 3, 3)
+    transitions: np.ndarray | None = None  #: Phi_k from the previous fix (or the start) to fix k, (K, 3, 3)
 
     @property
     def std(self) -> np.ndarray:
@@ -87,40 +102,90 @@ class AccelGpsCalibration:
         return np.sum(self.normalized_innovations**2, axis=-1)
 
 
-def transition(elapsed: np.ndarray) -> np.ndarray:
-    """Phi(s) of the error state for elapsed times s (s), (..., 3, 3)."""
+def _bias_column(s: np.ndarray, tau: float) -> np.ndarray:
+    """Phi(s)[:, 2]: what a unit bias at the start does to [dp, dv, b] after s seconds, (..., 3).
+
+    Constant bias (tau = 0 means none): [-s^2/2, -s, 1]. Gauss-Markov with time constant tau:
+    [-(tau s - tau^2 (1 - e^{-s/tau})), -tau (1 - e^{-s/tau}), e^{-s/tau}], the first entry by its series
+    where s / tau is small (it is a difference of nearly equal terms).
+    """
+    s = np.asarray(s, dtype=float)
+    column = np.empty(s.shape + (3,))
+    if tau <= 0:
+        column[..., 0], column[..., 1], column[..., 2] = -0.5 * s * s, -s, 1.0
+        return column
+    x = s / tau
+    one_minus = -np.expm1(-x)
+    small = x < 1e-3
+    # tau s - tau^2 (1 - e^{-x}) = tau^2 (x - 1 + e^{-x}) = tau^2 (x^2/2 - x^3/6 + x^4/24 - ...)
+    series = tau * tau * (x * x / 2 - x**3 / 6 + x**4 / 24)
+    column[..., 0] = -np.where(small, series, tau * s - tau * tau * one_minus)
+    column[..., 1] = -tau * one_minus
+    column[..., 2] = np.exp(-x)
+    return column
+
+
+def transition(elapsed: np.ndarray, bias_correlation_time: float = 0.0) -> np.ndarray:
+    """Phi(s) of the error state for elapsed times s (s), (..., 3, 3): exp(A s) with
+    A = [[0, 1, 0], [0, 0, -1], [0, 0, -1/tau]] (the last entry 0 for a constant or random-walk bias)."""
     s = np.asarray(elapsed, dtype=float)
     phi = np.zeros(s.shape + (3, 3))
-    phi[..., 0, 0] = phi[..., 1, 1] = phi[..., 2, 2] = 1.0
+    phi[..., 0, 0] = phi[..., 1, 1] = 1.0
     phi[..., 0, 1] = s
-    phi[..., 0, 2] = -0.5 * s * s
-    phi[..., 1, 2] = -s
+    phi[..., :, 2] = _bias_column(s, bias_correlation_time)
     return phi
 
 
-def _interval_noise(cuts: np.ndarray, interval_end: np.ndarray, owner: np.ndarray, n_intervals: int, variance: float):
-    """Q_k = sigma^2 sum over the steps of interval k of g g^T, g = [h^2/2 + s h, h, 0]."""
+def _interval_noise(cuts, interval_end, owner, n_intervals, settings, period) -> np.ndarray:
+    """Q_k for every interval at once: the noise of each step (piece) carried to the fix that ends it.
+
+    A piece of length h ending s before its fix adds sigma_a^2 g g^T with g = [h^2/2 + s h, h, 0] (the
+    accelerometer sample held over the piece) and, when the bias has noise of its own, q_b(h) c c^T with
+    c = Phi(s)[:, 2] (the bias noise enters at the end of the piece): q_b(h) = bias_walk_std^2 h / period
+    + bias_std^2 (1 - e^{-2h/tau}).
+    """
     h = np.diff(cuts)
     s = interval_end[owner] - cuts[1:]
-    g0 = 0.5 * h * h + s * h
+    accel = np.stack([0.5 * h * h + s * h, h, np.zeros_like(h)], axis=1) * settings.accel_noise_std
+    inputs = [accel]
+    tau = settings.bias_correlation_time
+    bias_variance = settings.bias_walk_std**2 * h / period
+    if tau > 0:
+        bias_variance = bias_variance - settings.bias_std**2 * np.expm1(-2.0 * h / tau)
+    if np.any(bias_variance > 0):
+        inputs.append(_bias_column(s, tau) * np.sqrt(bias_variance)[:, None])
     q = np.zeros((n_intervals, 3, 3))
-    for (a, b), terms in {(0, 0): g0 * g0, (0, 1): g0 * h, (1, 1): h * h}.items():
-        q[:, a, b] = q[:, b, a] = variance * np.bincount(owner, weights=terms, minlength=n_intervals)
+    for a in range(3):
+        for b in range(a, 3):
+            terms = sum(g[:, a] * g[:, b] for g in inputs)
+            q[:, a, b] = q[:, b, a] = np.bincount(owner, weights=terms, minlength=n_intervals)
     return q
 
 
 def _python_filter(phis, noise, h, v, dz, x0, m0, form: UpdateForm) -> SequentialRun:
-    """The same filter with :func:`predict` and :func:`update`, one fix at a time."""
-    n_fixes = dz.shape[0]
-    states, covariances = np.empty((n_fixes, 3)), np.empty((n_fixes, 3, 3))
-    residuals, innovations = np.empty((n_fixes, 2)), np.empty((n_fixes, 2, 2))
+    """The same filter with :func:`predict` and :func:`update` (or, for form "sqrt", :func:`sqrt_predict`
+    and :func:`sqrt_update` carrying a factor of P), one fix at a time."""
+    (n_fixes, p), d = dz.shape, x0.shape[0]
+    states, covariances = np.empty((n_fixes, d)), np.empty((n_fixes, d, d))
+    residuals, innovations = np.empty((n_fixes, p)), np.empty((n_fixes, p, p))
+    prior_states, prior_covariances = np.empty((n_fixes, d)), np.empty((n_fixes, d, d))
     x, cov = x0, m0
+    if form == "sqrt":
+        chol, noise_chol, v_chol = cholesky_factor(m0), cholesky_factor(noise), cholesky_factor(v)
     for k in range(n_fixes):
-        x, cov = predict(x, cov, phis[k], noise[k])
-        result = update(x, cov, dz[k], h, v[k], form)
-        x, cov = result.x, result.cov
-        states[k], covariances[k], residuals[k], innovations[k] = x, cov, result.residual, result.innovation_cov
-    return SequentialRun(states, covariances, residuals, innovations)
+        if form == "sqrt":
+            x, chol = sqrt_predict(x, chol, phis[k], noise_chol[k])
+            prior_states[k], prior_covariances[k] = x, gram(chol)
+            result = sqrt_update(x, chol, dz[k], h, v_chol[k])
+            x, chol = result.x, result.chol
+            cov, innovation = gram(chol), gram(result.innovation_chol)
+        else:
+            x, cov = predict(x, cov, phis[k], noise[k])
+            prior_states[k], prior_covariances[k] = x, cov
+            result = update(x, cov, dz[k], h, v[k], form)
+            x, cov, innovation = result.x, result.cov, result.innovation_cov
+        states[k], covariances[k], residuals[k], innovations[k] = x, cov, result.residual, innovation
+    return SequentialRun(states, covariances, residuals, innovations, prior_states, prior_covariances)
 
 
 def calibrate_accel_gps(
@@ -161,11 +226,14 @@ def calibrate_accel_gps(
         A step longer than this many median sample periods is reported as a gap.
     stop_on_gap : bool
         Raise DataError at the first gap instead of going on.
+    form : {"joseph", "standard", "sqrt"}
+        The update form: Joseph (the default, compiled), standard or square-root (numpy loops).
     source, imu_source : str
         Names of the GPS and accelerometer logs, quoted in errors.
     """
     if init not in INITS:
         raise DataError(f"--init: expected one of {', '.join(INITS)}, got {init!r}")
+    check_form(form, "--form")
     if not max_imu_gap > 1:
         raise DataError(f"--max-imu-gap: expected a number of sample periods above 1, got {max_imu_gap!r}")
     imu_time, accel = np.asarray(imu_time, dtype=float), np.asarray(accel, dtype=float)
@@ -249,8 +317,8 @@ def calibrate_accel_gps(
     samples = imu_time[(imu_time > start_time) & (imu_time < last)]
     cuts = np.union1d(np.concatenate([[start_time], samples]), fix_times)
     owner = np.searchsorted(fix_times, cuts[1:], side="left")
-    noise = _interval_noise(cuts, fix_times, owner, fix_times.size, settings.accel_noise_std**2)
-    phis = transition(np.diff(np.concatenate([[start_time], fix_times])))
+    noise = _interval_noise(cuts, fix_times, owner, fix_times.size, settings, period)
+    phis = transition(np.diff(np.concatenate([[start_time], fix_times])), settings.bias_correlation_time)
 
     h = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
     v = np.zeros((fix_times.size, 2, 2))
@@ -258,9 +326,9 @@ def calibrate_accel_gps(
     dz = np.stack([gps_position[usable] - nominal_p, gps_velocity[usable] - nominal_v], axis=1)
     if form == "joseph":
         run = sequential_filter(phis, noise, h, v, dz, x0, m0)
-    else:  # the standard form is kept for comparison only; it needs no speed
+    else:  # the standard and square-root forms are kept for comparison; they need no speed
         run = _python_filter(phis, noise, h, v, dz, x0, m0, form)
-    states, covariances, residuals, innovations = run
+    states, covariances, residuals, innovations = run.state, run.cov, run.residual, run.innovation_cov
     return AccelGpsCalibration(
         time=fix_times,
         position=nominal_p + states[:, 0],
@@ -276,4 +344,8 @@ def calibrate_accel_gps(
         gaps=gaps,
         init=init,
         start_time=start_time,
+        form=form,
+        prior_state=run.prior_state,
+        prior_covariance=symmetrize(run.prior_cov),
+        transitions=phis,
     )

@@ -16,7 +16,7 @@ def simulate_accel_gps(scenario: AccelGpsScenario, seed: int, out: str | Path) -
 
     imu.csv: time [s], accel [m/s^2], one row per accelerometer sample from t = 0.
     gps.csv: time [s], position [m], velocity [m/s], one row per fix.
-    truth.csv: time [s], position [m], velocity [m/s], accel [m/s^2], bias [m/s^2] at the samples.
+    truth.csv: time [s], position [m], velocity [m/s], accel [m/s^2] (true), bias [m/s^2] at the samples.
     """
     logs = sample_accel_gps_logs(scenario, np.random.default_rng(seed), 1)
     out = Path(out)
@@ -33,7 +33,7 @@ def simulate_accel_gps(scenario: AccelGpsScenario, seed: int, out: str | Path) -
                 "position": logs.position[0],
                 "velocity": logs.velocity[0],
                 "accel": logs.true_accel,
-                "bias": np.full(logs.sample_time.size, logs.bias[0]),
+                "bias": logs.bias[0],
             },
         ),
     }

@@ -23,6 +23,10 @@ Choices where the report is silent or inconsistent, documented in docs/accel-gps
 * ``truth = "discrete"`` integrates the true acceleration samples with the same scheme as the nominal,
   so the error state follows the filter's model with no deterministic model error (with Euler this is
   exactly the report's p_E, v_E).
+
+Beyond the report, the bias may drift (``bias_walk_std``: a random walk, the increment's std per sample)
+or be first-order Gauss-Markov (``bias_correlation_time`` tau > 0: b_{j+1} = exp(-dt/tau) b_j + noise,
+stationary with std ``bias_std``): Phi[2, 2] = exp(-dt/tau) and the bias gets a noise input of its own.
 """
 
 from __future__ import annotations
@@ -113,6 +117,8 @@ class AccelGpsTruth:
     velocity0_std: float = 1.0  # m/s
     gps_position_std: float = 1.0  # m
     gps_velocity_std: float = 0.04  # m/s
+    bias_walk_std: float = 0.0  # std of the bias increment per accelerometer sample, m/s^2 (0: no walk)
+    bias_correlation_time: float = 0.0  # s; > 0 makes the bias first-order Gauss-Markov (0: constant)
 
     SECTION: ClassVar[str] = "truth"
 
@@ -129,7 +135,22 @@ class AccelGpsTruth:
             position0_std=self.position0_std,
             velocity0_std=self.velocity0_std,
             accel_frequency=self.accel_frequency,
+            bias_walk_std=self.bias_walk_std,
+            bias_correlation_time=self.bias_correlation_time,
         )
+
+    def bias_decay(self, dt: float) -> float:
+        """phi_b = exp(-dt / tau) of the bias over dt seconds (1 for a constant or random-walk bias)."""
+        return float(np.exp(-dt / self.bias_correlation_time)) if self.bias_correlation_time > 0 else 1.0
+
+    def bias_step_variance(self, dt: float) -> float:
+        """Variance of the bias's own noise over one step of dt s (the sample period for the walk), (m/s^2)^2.
+
+        Random walk: bias_walk_std^2 per sample. Gauss-Markov: bias_std^2 (1 - phi_b^2), which keeps the
+        bias stationary with std bias_std. Both may be set; their variances add.
+        """
+        decay = self.bias_decay(dt)
+        return self.bias_walk_std**2 + (1.0 - decay * decay) * self.bias_std**2
 
 
 @dataclass(frozen=True)
@@ -144,6 +165,8 @@ class AccelGpsFilter:
     velocity0_std: float | None = None
     gps_position_std: float | None = None
     gps_velocity_std: float | None = None
+    bias_walk_std: float | None = None
+    bias_correlation_time: float | None = None
 
     SECTION: ClassVar[str] = "filter"
 
@@ -156,6 +179,9 @@ class AccelGpsFilter:
             bias_std=self.bias_std,
             position0_std=self.position0_std,
             velocity0_std=self.velocity0_std,
+        )
+        require_nonnegative(
+            self.SECTION, bias_walk_std=self.bias_walk_std, bias_correlation_time=self.bias_correlation_time
         )
 
     def resolved(self, truth: AccelGpsTruth) -> AccelGpsTruth:
@@ -191,13 +217,19 @@ class AccelGpsScenario:
 
     def _model(self, values: AccelGpsTruth, x0: np.ndarray) -> LinearGaussianModel:
         dt = self.scenario.sample_period
-        phi = np.array([[1.0, dt, -0.5 * dt * dt], [0.0, 1.0, -dt], [0.0, 0.0, 1.0]])
+        phi = np.array([[1.0, dt, -0.5 * dt * dt], [0.0, 1.0, -dt], [0.0, 0.0, values.bias_decay(dt)]])
         gamma = np.array([[0.5 * dt * dt], [dt], [0.0]])
+        w = np.array([[values.accel_noise_std**2]])
+        bias_noise = values.bias_step_variance(dt)
+        if bias_noise > 0:
+            # the bias's own noise enters after the step: a second input on the bias state
+            gamma = np.hstack([gamma, [[0.0], [0.0], [1.0]]])
+            w = np.diag([values.accel_noise_std**2, bias_noise])
         return LinearGaussianModel(
             phi=phi,
             gamma=gamma,
             h=np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]),
-            w=np.array([[values.accel_noise_std**2]]),
+            w=w,
             v=np.diag([values.gps_position_std**2, values.gps_velocity_std**2]),
             x0=x0,
             m0=np.diag([values.position0_std**2, values.velocity0_std**2, values.bias_std**2]),

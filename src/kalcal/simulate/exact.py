@@ -106,10 +106,14 @@ def accel_gps_truth(scenario: AccelGpsScenario) -> UpdateRateTruth:
     weights[:, :2] = -scenario.truth.accel_noise_std * interval_weights(s.integration, s.sample_period, m)
     shared = bool(np.any(weights[m] != 0.0))
     interior = weights[1:m] if shared else weights[:m]
+    noise = interior.T @ interior
+    if model.gamma.shape[1] > 1:
+        # The bias's own noise (random walk or Gauss-Markov), independent of the accelerometer's.
+        noise = noise + interval_transition(model.phi, model.gamma[:, 1:], model.w[1:, 1:], m)[1]
     base = truth_from_model(model, s.n_updates, accel_gps_model_error(scenario))
     return UpdateRateTruth(
         transition=base.transition,
-        noise_factor=psd_factor(interior.T @ interior),
+        noise_factor=psd_factor(noise),
         boundary_in=weights[0] if shared else np.zeros(3),
         boundary_out=weights[m],
         model_error=base.model_error,

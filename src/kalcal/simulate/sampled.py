@@ -5,7 +5,8 @@ same realizations for the same generator state:
 
 1. ``(n, 4)``: standard normals for p0, v0, b and the noise of accelerometer sample 0;
 2. for each GPS interval k = 0..K-1, ``(n, m + 2)``: the noise of samples k m + 1 .. (k + 1) m, then the
-   position and velocity noise of fix k.
+   position and velocity noise of fix k; and, when the bias has noise of its own (a random walk or
+   Gauss-Markov), ``(n, m)`` more: the bias noise of steps k m .. (k + 1) m - 1.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.signal import lfilter
 
 from kalcal.filters.mechanization import integrate, interval_weights
 from kalcal.models.accel_gps import AccelGpsScenario
@@ -27,7 +29,7 @@ class AccelGpsLogs:
     true_accel: np.ndarray  #: a(t_j), m/s^2, (J + 1,)
     position: np.ndarray  #: true p(t_j), m, (n, J + 1)
     velocity: np.ndarray  #: true v(t_j), m/s, (n, J + 1)
-    bias: np.ndarray  #: true b, m/s^2, (n,)
+    bias: np.ndarray  #: true b at every sample, m/s^2, (n, J + 1) (constant unless it drifts)
     fix_index: np.ndarray  #: sample index of each fix, (K,)
     gps_position: np.ndarray  #: m, (n, K)
     gps_velocity: np.ndarray  #: m/s, (n, K)
@@ -45,6 +47,25 @@ def _initial_draws(scenario: AccelGpsScenario, rng: np.random.Generator, n: int)
     v0 = t.velocity0_mean + t.velocity0_std * xi[:, 1]
     bias = t.bias_std * xi[:, 2]
     return p0, v0, bias, t.accel_noise_std * xi[:, 3]
+
+
+def _bias_path(scenario: AccelGpsScenario, start: np.ndarray, draw: np.ndarray | None) -> np.ndarray:
+    """The bias at the m + 1 samples of an interval, (n, m + 1), from its value at the first (n,).
+
+    b_{j+1} = phi_b b_j + sqrt(q_b) xi_j; ``draw`` (n, m) holds the xi, None when the bias is constant
+    (then the result is (n, 1), which broadcasts over the interval).
+    """
+    if draw is None:
+        return start[:, None]
+    t, dt = scenario.truth, scenario.scenario.sample_period
+    decay = t.bias_decay(dt)
+    path = lfilter([1.0], [1.0, -decay], np.sqrt(t.bias_step_variance(dt)) * draw, axis=1, zi=decay * start[:, None])[0]
+    return np.concatenate([start[:, None], path], axis=1)
+
+
+def _bias_draw(scenario: AccelGpsScenario, rng: np.random.Generator, n: int, m: int) -> np.ndarray | None:
+    dt = scenario.scenario.sample_period
+    return rng.standard_normal((n, m)) if scenario.truth.bias_step_variance(dt) > 0 else None
 
 
 def deterministic_motion(scenario: AccelGpsScenario, times: np.ndarray, sample_accel: np.ndarray) -> np.ndarray:
@@ -69,14 +90,17 @@ def sample_accel_gps_logs(scenario: AccelGpsScenario, rng: np.random.Generator, 
     s, t = scenario.scenario, scenario.truth
     m, n_updates = s.steps_per_update, s.n_updates
     times = s.sample_times()
-    p0, v0, bias, noise0 = _initial_draws(scenario, rng, n)
+    p0, v0, bias0, noise0 = _initial_draws(scenario, rng, n)
     noise = np.empty((n, s.n_samples + 1))
     noise[:, 0] = noise0
+    bias = np.empty((n, s.n_samples + 1))
+    bias[:, 0] = bias0
     gps_noise = np.empty((n, n_updates, 2))
     for k in range(n_updates):
         draw = rng.standard_normal((n, m + 2))
         noise[:, k * m + 1 : (k + 1) * m + 1] = t.accel_noise_std * draw[:, :m]
         gps_noise[:, k] = draw[:, m:]
+        bias[:, k * m : (k + 1) * m + 1] = _bias_path(scenario, bias[:, k * m], _bias_draw(scenario, rng, n, m))
     true_accel = scenario.true_accel(times)
     motion = deterministic_motion(scenario, times, true_accel)
     position = p0[:, None] + v0[:, None] * times + motion[:, 0]
@@ -84,7 +108,7 @@ def sample_accel_gps_logs(scenario: AccelGpsScenario, rng: np.random.Generator, 
     fix_index = np.arange(1, n_updates + 1) * m
     return AccelGpsLogs(
         sample_time=times,
-        accel=true_accel + bias[:, None] + noise,
+        accel=true_accel + bias + noise,
         true_accel=true_accel,
         position=position,
         velocity=velocity,
@@ -119,7 +143,7 @@ def sample_accel_gps_errors(
     true_accel = scenario.true_accel(times)
     fix_times = s.update_times()
     motion = deterministic_motion(scenario, fix_times, true_accel)
-    p0, v0, bias, noise = _initial_draws(scenario, rng, n)
+    p0, v0, bias_now, noise = _initial_draws(scenario, rng, n)
     pc0, vc0 = scenario.nominal_start()
     nominal = np.empty((n, 2))
     nominal[:, 0], nominal[:, 1] = pc0, vc0
@@ -131,14 +155,16 @@ def sample_accel_gps_errors(
     for k in range(n_updates):
         draw = rng.standard_normal((n, m + 2))
         block[:, 1:] = t.accel_noise_std * draw[:, :m]
-        measured = block + (true_accel[k * m : (k + 1) * m + 1] + bias[:, None])
+        bias = _bias_path(scenario, bias_now, _bias_draw(scenario, rng, n, m))
+        bias_now = bias[:, -1]
+        measured = block + true_accel[k * m : (k + 1) * m + 1] + bias
         # p_c(t + T) = p_c(t) + v_c(t) T + sum_i C_i,p a_i;   v_c(t + T) = v_c(t) + sum_i C_i,v a_i
         increment = measured @ weights
         nominal[:, 0] += nominal[:, 1] * interval + increment[:, 0]
         nominal[:, 1] += increment[:, 1]
         states[:, k, 0] = p0 + v0 * fix_times[k] + motion[k, 0] - nominal[:, 0]
         states[:, k, 1] = v0 + motion[k, 1] - nominal[:, 1]
-        states[:, k, 2] = bias
+        states[:, k, 2] = bias_now
         measurements[:, k] = states[:, k, :2] + gps_std * draw[:, m:]
         block[:, 0] = block[:, m]
     return states, measurements
