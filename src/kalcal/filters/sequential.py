@@ -1,5 +1,8 @@
 """A compiled sequential Kalman filter for long logs: one predict and one Joseph update per fix.
 
+It keeps each fix's prior (xbar_k, M_k) besides the posterior, for the RTS smoother
+(:mod:`kalcal.filters.smoother`).
+
 The same equations as :func:`kalcal.filters.kalman.predict` and :func:`~kalcal.filters.kalman.update`
 (which the tests hold it equal to), for a single realization with a transition, process noise and
 measurement noise of its own at every fix. numpy spends ~70 us per fix on the dozen tiny 3x3 products;
@@ -21,10 +24,12 @@ class SequentialRun(NamedTuple):
     cov: np.ndarray  #: posterior P_k (Joseph form), (K, d, d)
     residual: np.ndarray  #: r_k = z_k - H xbar_k, (K, p)
     innovation_cov: np.ndarray  #: S_k, (K, p, p)
+    prior_state: np.ndarray  #: xbar_k = Phi_k x_{k-1}, (K, d) (what a smoother needs)
+    prior_cov: np.ndarray  #: M_k = Phi_k P_{k-1} Phi_k^T + Q_k, (K, d, d)
 
 
 @numba.njit(cache=True, nogil=True)
-def _run(phis, qs, h, vs, z, x0, m0, states, covs, residuals, innovations):
+def _run(phis, qs, h, vs, z, x0, m0, states, covs, residuals, innovations, prior_states, prior_covs):
     n_fixes, d = states.shape
     p = h.shape[0]
     x = x0.copy()
@@ -34,6 +39,8 @@ def _run(phis, qs, h, vs, z, x0, m0, states, covs, residuals, innovations):
         x = phis[k] @ x
         cov = phis[k] @ cov @ phis[k].T + qs[k]
         cov = 0.5 * (cov + cov.T)
+        prior_states[k] = x
+        prior_covs[k] = cov
         hm = h @ cov
         s = hm @ h.T + vs[k]
         s = 0.5 * (s + s.T)
@@ -68,6 +75,7 @@ def sequential_filter(
     n_fixes, d, p = z.shape[0], x0.shape[0], h.shape[0]
     states, covs = np.empty((n_fixes, d)), np.empty((n_fixes, d, d))
     residuals, innovations = np.empty((n_fixes, p)), np.empty((n_fixes, p, p))
+    prior_states, prior_covs = np.empty((n_fixes, d)), np.empty((n_fixes, d, d))
     as_float = lambda a: np.ascontiguousarray(a, dtype=float)  # noqa: E731
-    _run(as_float(phis), as_float(qs), as_float(h), as_float(vs), as_float(z), as_float(x0), as_float(m0), states, covs, residuals, innovations)
-    return SequentialRun(states, covs, residuals, innovations)
+    _run(as_float(phis), as_float(qs), as_float(h), as_float(vs), as_float(z), as_float(x0), as_float(m0), states, covs, residuals, innovations, prior_states, prior_covs)
+    return SequentialRun(states, covs, residuals, innovations, prior_states, prior_covs)

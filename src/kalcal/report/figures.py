@@ -11,11 +11,14 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import xarray as xr
 
 from kalcal.plots import consistency, ensemble
 from kalcal.plots import realization as single
 from kalcal.plots.realization import RealizationData
+from kalcal.plots.steady_state import plot_steady_state
+from kalcal.report.steady_state import SteadyStateView
 
 #: the scenario of the source report, whose figure numbers the page quotes
 REPORT_SCENARIO = "accel-gps"
@@ -39,6 +42,7 @@ GROUPS = (
     ("realization", "One realization"),
     ("ensemble", "Ensemble statistics"),
     ("consistency", "Consistency, whiteness and model error"),
+    ("steady_state", "Steady state"),
 )
 
 
@@ -249,8 +253,33 @@ def figure_files(state_names) -> list[str]:
         "nis",
         "residual_correlation",
         "model_error",
+        "steady_state",
     ]
     return [f"{key}.png" for key in keys]
+
+
+def _steady_state_spec(steady: SteadyStateView) -> _Spec:
+    def draw(path: Path) -> Path:
+        return plot_steady_state(
+            steady.times,
+            np.diagonal(steady.posterior_cov, axis1=1, axis2=2),
+            np.diagonal(steady.result.posterior_cov),
+            steady.state_names,
+            steady.state_units,
+            path,
+            stabilizing=steady.result.stabilizing,
+            converged_time=steady.converged_time(),
+        )
+
+    caption = (
+        "Each variance of the time-varying filter should flatten onto the dashed steady-state value from the "
+        "discrete algebraic Riccati equation; a dotted line marks where ||P_k − P∞|| / ||P∞|| stays below 1e-3 "
+        "(none when that is not within the run)."
+        if steady.result.stabilizing
+        else "The dashed lines are the DARE's solution, which is not stabilizing (see the table): a variance "
+        "without a dashed line (zero in that solution) keeps shrinking and never settles."
+    )
+    return _Spec("steady_state", "steady_state", "Filter variance P_k against the steady state P∞", caption, draw)
 
 
 def render_figures(
@@ -260,6 +289,7 @@ def render_figures(
     long_dataset: xr.Dataset | None = None,
     *,
     scenario: str = REPORT_SCENARIO,
+    steady: SteadyStateView | None = None,
 ) -> tuple[list[FigureEntry], list[SkippedFigure]]:
     """Draw every figure of the report into ``figure_dir``.
 
@@ -276,6 +306,8 @@ def render_figures(
         ``stats_long.nc`` of the same run, for figure 5.8.
     scenario : str
         The run's scenario: figures carry the source report's numbers only for ``REPORT_SCENARIO``.
+    steady : SteadyStateView, optional
+        The filter's steady state, drawn against P_k (or a note saying why there is none).
 
     Returns
     -------
@@ -287,6 +319,8 @@ def render_figures(
     figure_dir.mkdir(parents=True, exist_ok=True)
     numbers = REPORT_NUMBERS if scenario == REPORT_SCENARIO else {}
     specs = _realization_specs(data) + _ensemble_specs(dataset, long_dataset) + _consistency_specs(dataset)
+    if steady is not None and steady.has_matrices:
+        specs.append(_steady_state_spec(steady))
     figures = [
         FigureEntry(spec.key, spec.group, spec.title, spec.caption, spec.draw(figure_dir / f"{spec.key}.png"), numbers.get(spec.key))
         for spec in specs
@@ -312,6 +346,9 @@ def render_figures(
                 "stats.nc holds no E[r_k r_j^T] over pairs of updates (the run did not keep them)",
             )
         )
+    if steady is not None and not steady.has_matrices:
+        why = f"{'steady state does not apply' if not steady.applies else 'no stabilizing solution'}: {steady.reason}"
+        skipped.append(SkippedFigure("steady_state", "steady_state", "Filter variance P_k against the steady state", why))
     drawn = {entry.path.name for entry in figures}
     for name in figure_files(data.state_names):
         stale = figure_dir / name

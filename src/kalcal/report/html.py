@@ -15,7 +15,10 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from kalcal.report.figures import GROUPS, FigureEntry, SkippedFigure
+from kalcal.report.steady_state import SteadyStateView
 
 CSS = """
 :root { --ok: #1a7f37; --bad: #c62828; --ink: #1f2328; --muted: #59636e; --line: #d0d7de; --soft: #f6f8fa; }
@@ -175,6 +178,7 @@ def _settings(summary: Mapping[str, Any]) -> str:
         ("realizations N", summary["realizations"]),
         ("seed", summary["seed"]),
         ("engine", summary["engine"]),
+        ("update form", summary.get("form", "joseph")),
         ("confidence", summary["confidence"]),
     ]
     run_rows = [f"<tr><td>{esc(k)}</td><td>{esc(fmt(v, 6))}</td></tr>" for k, v in run]
@@ -246,7 +250,68 @@ def _skipped(entry: SkippedFigure) -> str:
     )
 
 
-def _figures(summary, figures: list[FigureEntry], skipped: list[SkippedFigure], realization: int, figure_dir_name: str) -> str:
+def _steady_state(view: SteadyStateView | None) -> str:
+    """The steady state's table beside the time-varying filter (nothing when there are no matrices: the
+    skipped figure's note says why)."""
+    if view is None or not view.has_matrices:
+        return ""
+    result, progress = view.result, view.convergence
+    last = view.posterior_cov[-1]
+    intro = (
+        "<p class='sub'>From the discrete algebraic Riccati equation over one update interval "
+        "(<code>scipy.linalg.solve_discrete_are</code>), beside the time-varying filter at its last update; "
+        f"spectral radius of Φ(I − K∞H): {esc(fmt(result.spectral_radius))}.</p>"
+    )
+    if not result.stabilizing:
+        intro += (
+            f'<p class="note"><strong>No stabilizing solution:</strong> {esc(result.reason)}. The values below are '
+            "the solution scipy returned; P_k approaches it only in the states the noise reaches.</p>"
+        )
+    elif progress is not None:
+        tolerance = fmt(progress.tolerance)
+        if progress.update is None:
+            intro += (
+                f"<p>P_k does not settle within {esc(tolerance)} of P∞ (relative Frobenius norm) within the run: the "
+                f"gap at the last update is {esc(fmt(float(progress.relative_gap[-1]), 3))}.</p>"
+            )
+        else:
+            intro += (
+                f"<p>P_k stays within {esc(tolerance)} of P∞ (‖P_k − P∞‖ / ‖P∞‖, Frobenius) from update "
+                f"{esc(progress.update + 1)} of {esc(len(view.times))}, t = {esc(fmt(view.converged_time()))} s.</p>"
+            )
+    rows = []
+    for i, (name, unit) in enumerate(zip(view.state_names, view.state_units)):
+        if progress is None:
+            settled = "—"
+        elif progress.state_update[i] is None:
+            settled = "not within the run"
+        else:
+            k = progress.state_update[i]
+            settled = f"update {k + 1}, t = {fmt(float(view.times[k]))} s"
+        gains = ", ".join(fmt(float(g), 4) for g in result.gain[i])
+        cells = (
+            fmt(float(np.sqrt(max(result.posterior_cov[i, i], 0.0)))),
+            fmt(float(np.sqrt(max(last[i, i], 0.0)))),
+            fmt(float(np.sqrt(max(result.prior_cov[i, i], 0.0)))),
+        )
+        rows.append(
+            f"<tr><td>{esc(name)}</td><td>{esc(unit)}</td>"
+            + "".join(f"<td class='num'>{esc(c)}</td>" for c in cells)
+            + f"<td class='num'>{esc(gains)}</td><td>{esc(settled)}</td></tr>"
+        )
+    within = f"P_ii within {fmt(progress.tolerance)} of P∞,ii from" if progress is not None else "P_ii settles"
+    header = ("state", "unit", "σ∞ = √P∞,ii", "σ_k at the last update", "prior σ∞ = √M∞,ii", "row of K∞", within)
+    return intro + _table(header, rows)
+
+
+def _figures(
+    summary,
+    figures: list[FigureEntry],
+    skipped: list[SkippedFigure],
+    realization: int,
+    figure_dir_name: str,
+    steady: SteadyStateView | None = None,
+) -> str:
     parts = ['<h2 id="figures">Figures</h2>']
     for group, heading in GROUPS:
         members = [f for f in figures if f.group == group]
@@ -262,6 +327,8 @@ def _figures(summary, figures: list[FigureEntry], skipped: list[SkippedFigure], 
         body = "".join(_figure(f, figure_dir_name) for f in members) + "".join(_skipped(s) for s in missing)
         if group == "consistency":
             body += _residual_pair(summary)
+        if group == "steady_state":
+            body = _steady_state(steady) + body
         parts.append(f'<h3 id="group-{esc(group)}">{esc(heading)}</h3>{intro}{body}')
     return "".join(parts)
 
@@ -307,6 +374,7 @@ def build_page(
     *,
     realization: int = 0,
     figure_dir_name: str = "figures",
+    steady_state: SteadyStateView | None = None,
 ) -> str:
     """The report page as one HTML string.
 
@@ -322,6 +390,8 @@ def build_page(
         Index of the realization drawn in the single-run figures.
     figure_dir_name : str
         Folder of the PNG files relative to the page (named in each caption).
+    steady_state : SteadyStateView, optional
+        The filter's steady state, tabled beside its figure.
     """
     verdict = "pass" if all(t["passed"] for t in summary["tests"]) else "fail"
     title = f"kalcal verification report: {summary['scenario']}"
@@ -339,7 +409,7 @@ def build_page(
         + _verdicts(summary)
         + _settings(summary)
         + _final(summary)
-        + _figures(summary, list(figures), list(skipped), realization, figure_dir_name)
+        + _figures(summary, list(figures), list(skipped), realization, figure_dir_name, steady_state)
         + _timing(summary)
         + _reproduce(summary, realization)
         + f"<footer>Written by kalcal {esc(summary.get('kalcal_version', ''))} from summary.json and stats.nc.</footer>"
