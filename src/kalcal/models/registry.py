@@ -22,7 +22,8 @@ def build_scenario(
 ):
     """The named scenario with ``defaults``, then the TOML file, then ``section.key=value`` applied."""
     if name not in SCENARIOS:
-        raise ConfigError(f"unknown scenario {name!r} (known: {', '.join(SCENARIOS)})")
+        hint = "; a model file (.toml) works with kalcal verify" if str(name).lower().endswith(".toml") else ""
+        raise ConfigError(f"unknown scenario {name!r} (known: {', '.join(SCENARIOS)}{hint})")
     scenario = SCENARIOS[name]()
     settings: dict[str, Any] = dict(defaults or {})
     if config is not None:
