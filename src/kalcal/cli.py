@@ -103,6 +103,12 @@ def calibrate(
         float, typer.Option("--max-imu-gap", help="accel-gps: a step longer than this many sample periods is a gap.")
     ] = 5.0,
     on_gap: Annotated[str, typer.Option("--on-gap", help="accel-gps: continue (report gaps) or stop.")] = "continue",
+    form: Annotated[
+        str, typer.Option("--form", help="accel-gps: the filter's update form, joseph (default), standard or sqrt.")
+    ] = "joseph",
+    smooth: Annotated[
+        bool, typer.Option("--smooth", help="accel-gps: add RTS-smoothed states and their 1-sigma to the outputs.")
+    ] = False,
     out: Annotated[Path, typer.Option("--out", help="Directory for estimates.csv and summary.json.")] = Path(
         "kalcal-cal"
     ),
@@ -116,6 +122,10 @@ def calibrate(
     (skipped and counted); the GPS log may carry position_std [m] and velocity_std [m/s] per fix.
     """
     if scenario == "scale-bias":
+        if form != "joseph" or smooth:
+            option = "--form" if form != "joseph" else "--smooth"
+            with user_errors():
+                raise KalcalError(f"{option}: not available for scale-bias (accel-gps only)")
         return _calibrate_scale_bias(data, reference, sensor, out, set_, config, imu is not None or gps is not None)
     from kalcal.jobs.calibrate import calibrate_accel_gps_files
 
@@ -138,15 +148,25 @@ def calibrate(
             init=init,
             max_imu_gap=max_imu_gap,
             stop_on_gap=on_gap == "stop",
+            form=form,
+            smooth=smooth,
         )
     table = Table(title=f"kalcal calibrate {scenario}: {summary['fixes_used']} fixes, t = {summary['time']:g} s")
     table.add_column("quantity")
     table.add_column("estimate", justify="right")
     table.add_column("1-sigma", justify="right")
     table.add_column("unit")
-    for name, unit in (("bias", "m/s^2"), ("position", "m"), ("velocity", "m/s")):
-        table.add_row(name, f"{summary[name]:.6g}", f"{summary[name + '_std']:.3g}", unit)
+    for name in ("bias", "scale", "position", "velocity"):
+        if name in summary:
+            table.add_row(name, f"{summary[name]:.6g}", f"{summary[name + '_std']:.3g}", summary["units"][name])
     console.print(table)
+    if "smoothed" in summary:
+        smoothed = summary["smoothed"]
+        console.print(
+            f"smoothed (RTS) at the first fix, t = {smoothed['time']:g} s: bias {smoothed['bias']:.6g} ± "
+            f"{smoothed['bias_std']:.3g} m/s^2, position {smoothed['position']:.6g} ± {smoothed['position_std']:.3g} m",
+            markup=False,
+        )
     for warning in summary["warnings"]:
         error_console.print(f"kalcal: warning: {warning}", markup=False)
     diagnostics = summary["diagnostics"]
@@ -228,9 +248,24 @@ def _print_checks(summary: dict) -> None:
             console.print(f"[bold]{test['name']}[/bold]: {escape(test['detail'])}")
 
 
+def _verify_scenario(scenario: str, config, assignments, engine: str, long_run):
+    """A built-in scenario by name, or a model file (a path ending in .toml) with what it supports."""
+    from kalcal.models.custom import is_model_file, load_model_file
+
+    if not is_model_file(scenario):
+        return build_scenario(scenario, config, assignments)
+    if engine == "sampled":
+        raise KalcalError(f"--engine: 'sampled' is not available for a model file ({scenario}); use the exact engine")
+    if long_run:
+        raise KalcalError(f"--long-run: not available for a model file ({scenario}); set updates in the file instead")
+    return load_model_file(scenario, assignments, config=config)
+
+
 @app.command()
 def verify(
-    scenario: Annotated[str, typer.Argument(help=f"Scenario: {', '.join(SCENARIOS)}.")] = "accel-gps",
+    scenario: Annotated[
+        str, typer.Argument(help=f"Scenario: {', '.join(SCENARIOS)}, or a model file (.toml, docs/custom-models.md).")
+    ] = "accel-gps",
     n: Annotated[int, typer.Option("-n", "--realizations", help="Monte Carlo realizations.")] = 300_000,
     seed: Annotated[int, typer.Option("--seed", help="Root seed; the same seed gives the same numbers.")] = 0,
     out: Annotated[Path, typer.Option("--out", help="Directory for summary.json, stats.nc and the report.")] = Path(
@@ -256,6 +291,9 @@ def verify(
         Optional[float],
         typer.Option("--long-run", help="Seconds of the extra long-horizon mean-error study (0: none; accel-gps: 120)."),
     ] = None,
+    form: Annotated[
+        str, typer.Option("--form", help="The filter's update form: joseph (default), standard or sqrt.")
+    ] = "joseph",
     no_report: Annotated[bool, typer.Option("--no-report", help="Do not draw the figures and report.html.")] = False,
     realization: Annotated[int, typer.Option("--realization", help="Realization shown in the single-run figures.")] = 0,
     set_: SetOpt = None,
@@ -268,7 +306,7 @@ def verify(
     from kalcal.montecarlo.distributed import dask_client
 
     with user_errors():
-        model = build_scenario(scenario, config, set_ or ())
+        model = _verify_scenario(scenario, config, set_ or (), engine, long_run)
         if threads is not None and threads < 1:
             raise KalcalError(f"--threads: expected a positive number, got {threads}")
         bar, update = _progress_bar(f"{scenario} x {n:,}")
@@ -287,6 +325,7 @@ def verify(
                 client=client,
                 batch_size=batch_size,
                 checkpoint=checkpoint,
+                form=form,
             )
         if not no_report:
             from kalcal.jobs.report import render_report
@@ -345,6 +384,63 @@ def sweep(
         table.add_row(str(row[key]), *cells)
     console.print(table)
     console.print(f"wrote {result.paths['table']} and {figure}")
+
+
+@app.command()
+def noise(
+    imu: Annotated[
+        Optional[Path], typer.Option("--imu", help="Static accelerometer log (CSV or Parquet): time [s], accel [m/s^2].")
+    ] = None,
+    out: Annotated[Path, typer.Option("--out", help="Directory for summary.json, allan.csv, allan.png, filter.toml.")] = Path(
+        "kalcal-noise"
+    ),
+    imu_columns: Annotated[
+        Optional[str], typer.Option("--imu-columns", help="Map roles to columns, e.g. time=t,accel=ax.")
+    ] = None,
+) -> None:
+    """Identify accelerometer noise from a static log: Allan deviation, N, B, K and the [filter] settings.
+
+    N (velocity random walk, m/s/sqrt(s)) from the -1/2 slope, B (bias instability, m/s^2) from the flat
+    minimum, K (rate random walk, m/s^2/sqrt(s)) from the +1/2 slope; filter.toml holds accel_noise_std
+    = N sqrt(rate) and, where K is seen, bias_walk_std = K sqrt(dt), for calibrate --config.
+    """
+    from rich import box
+
+    from kalcal.jobs.noise import identify_noise_file
+
+    with user_errors():
+        if imu is None:
+            raise KalcalError("--imu: required (a static accelerometer log: time [s], accel [m/s^2])")
+        summary = identify_noise_file(imu, out, imu_columns=imu_columns)
+    table = Table(
+        title=(
+            f"kalcal noise: {summary['samples']:,} samples at {summary['rate']['value']:.6g} Hz, "
+            f"{summary['duration']['value']:.6g} s"
+        ),
+        box=box.SIMPLE_HEAD,
+        pad_edge=False,
+    )
+    table.add_column("quantity", no_wrap=True)
+    table.add_column("value", justify="right", no_wrap=True)
+    table.add_column(f"{100 * summary['confidence']:g}% interval", justify="right", no_wrap=True)
+    table.add_column("unit", no_wrap=True)
+    regions = []
+    for name in ("accel_noise_std", "velocity_random_walk", "bias_instability", "rate_random_walk", "bias_walk_std"):
+        item = summary[name]
+        if item["identified"]:
+            table.add_row(name, f"{item['value']:.4g}", f"{item['ci_low']:.3g}-{item['ci_high']:.3g}", item["unit"])
+            if name in ("velocity_random_walk", "bias_instability", "rate_random_walk"):
+                first, last = item["tau_range"]
+                regions.append(f"{name} at tau = {first:.3g}" + ("" if first == last else f"-{last:.3g}") + " s")
+        else:
+            table.add_row(name, "not seen", f"< {item['upper_bound']:.3g}", item["unit"])
+    console.print(table)
+    if regions:
+        console.print("read off the curve: " + "; ".join(regions), markup=False)
+    for note in summary["notes"]:
+        console.print(f"note: {escape(note)}")
+    files = summary["files"]
+    console.print(f"wrote {files['summary']}, {files['allan']}, {files['plot']} and {files['filter']}")
 
 
 @app.command()

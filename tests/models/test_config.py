@@ -27,6 +27,8 @@ NON_DEFAULT = {
     "truth.velocity0_mean": 50.0,
     "truth.velocity0_std": 2.0,
     "truth.gps_position_std": 2.0,
+    "truth.scale_std": 1e-3,
+    "filter.scale_std": 2e-3,
     "truth.bias_walk_std": 1e-4,
     "truth.bias_correlation_time": 60.0,
     "filter.bias_walk_std": 2e-4,

@@ -113,3 +113,10 @@ def test_sigkill_mid_run_then_resume_equals_uninterrupted(tmp_path):
     assert b["timing"]["resumed_blocks"] > 0
     for key in ("tests", "final", "residual_correlation", "verdict"):
         assert a[key] == b[key], key
+
+
+def test_fingerprint_sees_every_digit_of_an_array():
+    a = {"w": np.array([[0.123456789012345]])}
+    b = {"w": np.array([[0.123456789012346]])}
+    assert checkpoint.fingerprint(a) != checkpoint.fingerprint(b)
+    assert checkpoint.fingerprint(a) == checkpoint.fingerprint({"w": np.array([[0.123456789012345]])})

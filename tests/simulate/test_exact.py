@@ -256,7 +256,7 @@ def test_euler_exact_noise_covariance_is_the_truth_models_q_m():
     assert not truth.shares_boundary
     np.testing.assert_array_equal(truth.boundary_in, 0.0)
     np.testing.assert_array_equal(truth.boundary_out, 0.0)
-    np.testing.assert_allclose(truth.transition, phi_m, rtol=1e-14, atol=1e-16)
+    np.testing.assert_allclose(truth.transitions, np.broadcast_to(phi_m, truth.transitions.shape), rtol=1e-14, atol=1e-16)
     lq = truth.noise_factor @ truth.noise_factor.T
     np.testing.assert_allclose(lq, q_m, rtol=1e-10, atol=1e-10 * np.abs(q_m).max())
     np.testing.assert_allclose(truth.x0_factor @ truth.x0_factor.T, model.m0, rtol=1e-12)

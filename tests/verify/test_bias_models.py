@@ -72,3 +72,57 @@ def test_calibrating_a_walk_matches_the_covariance_pass():
     )
     expected = covariance_pass(scenario.filter_model(), scenario.scenario.n_updates).posterior_cov
     np.testing.assert_allclose(result.covariance, expected, rtol=1e-9, atol=1e-15)
+
+
+SCALE = ["truth.scale_std=1e-3"]
+
+
+def test_a_filter_with_the_scale_state_is_consistent():
+    checks = _checks(SCALE)
+    assert all(c.passed for c in checks.values()), {n: c.detail for n, c in checks.items() if not c.passed}
+
+
+def test_a_filter_that_ignores_the_scale_factor_is_overconfident():
+    checks = _checks(SCALE + ["filter.scale_std=1e-9"])
+    assert not checks["covariance"].passed and "overconfident" in checks["covariance"].detail
+
+
+def test_scale_exact_and_sampled_engines_agree():
+    """Means within 4.5 standard errors of the difference; variance ratios inside their F bounds."""
+    from scipy import stats as sps
+
+    scenario = build_scenario("accel-gps", None, [*SCALE, "scenario.duration=6", "scenario.integration=trapezoid"])
+    problem, _ = build_problem(scenario)
+    n = 20000
+    exact = ensemble_statistics(run_monte_carlo(problem, n, seed=31, engine="exact").sums)
+    sampled = ensemble_statistics(run_monte_carlo(problem, n, seed=32, engine="sampled").sums)
+    var_e = np.diagonal(exact.error_cov, axis1=1, axis2=2)
+    var_s = np.diagonal(sampled.error_cov, axis1=1, axis2=2)
+    m = var_e.size
+    assert np.all(np.abs(exact.mean_error - sampled.mean_error) <= sps.norm.isf(0.001 / (2 * m)) * np.sqrt((var_e + var_s) / n))
+    low, high = sps.f.ppf([0.001 / (2 * m), 1 - 0.001 / (2 * m)], n - 1, n - 1)
+    assert np.all((var_e / var_s > low) & (var_e / var_s < high))
+
+
+def test_calibrating_a_scale_factor_from_logs_is_consistent():
+    """30 logs with a 1% scale error: the filter of a log works in b' = b/(1+s), s' = s/(1+s), which make its
+    model exact with the measured acceleration; converted back, (estimate - truth) / sigma ~ N(0, 1)."""
+    from scipy import stats as sps
+
+    scenario = build_scenario(
+        "accel-gps", None, ["truth.scale_std=1e-2", "scenario.integration=trapezoid", "scenario.duration=60"]
+    )
+    n = 30
+    z_bias, z_scale = [], []
+    for seed in range(n):
+        logs = sample_accel_gps_logs(scenario, np.random.default_rng(seed), 1)
+        result = calibrate_accel_gps(
+            scenario, logs.sample_time, logs.accel[0], logs.fix_time, logs.gps_position[0], logs.gps_velocity[0],
+            init="first-fix",
+        )
+        z_bias.append((result.bias[-1] - logs.bias[0, -1]) / result.std[-1, 2])
+        z_scale.append((result.error_state[-1, 3] - logs.scale[0]) / result.std[-1, 3])
+    low, high = sps.chi2.ppf([0.0005, 0.9995], n - 1) / (n - 1)
+    for z in (np.array(z_bias), np.array(z_scale)):
+        assert abs(z.mean()) < sps.norm.isf(0.0005) / np.sqrt(n)
+        assert low < z.var(ddof=1) < high

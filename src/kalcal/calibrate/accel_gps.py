@@ -80,9 +80,12 @@ class AccelGpsCalibration:
     init: str = "prior"
     start_time: float = 0.0  #: s, where the nominal starts
     form: str = "joseph"  #: the filter's update form
-    # What the RTS smoother needs (kalcal.calibrate.smoothing):
-    prior_state: np.ndarray | None = None  #: xbar_k before fix k, [dp, dv, b], (K, 3)
-    prior_covariance: np.ndarray | None = None  #: M_k before fix k, (K, 3, 3)
+    # What the RTS smoother needs (kalcal.calibrate.smoothing), in the filter's own state (which differs
+    # from error_state when a scale factor is estimated: [dp, dv, b', s'], see _scale_parameters):
+    filter_state: np.ndarray | None = None  #: posterior x_k of the filter, (K, d)
+    filter_covariance: np.ndarray | None = None  #: its P_k, (K, d, d)
+    prior_state: np.ndarray | None = None  #: xbar_k before fix k, (K, d)
+    prior_covariance: np.ndarray | None = None  #: M_k before fix k, (K, d, d)
     transitions: np.ndarray | None = None  #: Phi_k from the previous fix (or the start) to fix k, (K, 3, 3)
 
     @property
@@ -160,6 +163,25 @@ def _interval_noise(cuts, interval_end, owner, n_intervals, settings, period) ->
             terms = sum(g[:, a] * g[:, b] for g in inputs)
             q[:, a, b] = q[:, b, a] = np.bincount(owner, weights=terms, minlength=n_intervals)
     return q
+
+
+def _scale_parameters(states: np.ndarray, covariances: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """From the filter's [dp, dv, b', s'] to [dp, dv, b, s], b = b' / (1 - s'), s = s' / (1 - s').
+
+    With a scale-factor error the measured acceleration is a_c = (1 + s) a + b + w, so the true one is
+    a = (1 - s') a_c - b' - w / (1 + s) with s' = s / (1 + s), b' = b / (1 + s): the error dynamics are
+    exactly linear in (b', s') with the measured a_c in the transition, which is what a filter of a log
+    has. The covariance follows by the delta method, J P J^T.
+    """
+    b_prime, s_prime = states[:, 2], states[:, 3]
+    one_minus = 1.0 - s_prime
+    converted = states.copy()
+    converted[:, 2], converted[:, 3] = b_prime / one_minus, s_prime / one_minus
+    jacobian = np.broadcast_to(np.eye(4), covariances.shape).copy()
+    jacobian[:, 2, 2] = 1.0 / one_minus
+    jacobian[:, 2, 3] = b_prime / one_minus**2
+    jacobian[:, 3, 3] = 1.0 / one_minus**2
+    return converted, symmetrize(jacobian @ covariances @ np.swapaxes(jacobian, 1, 2))
 
 
 def _python_filter(phis, noise, h, v, dz, x0, m0, form: UpdateForm) -> SequentialRun:
@@ -302,8 +324,8 @@ def calibrate_accel_gps(
     p_start, v_start = free_at(np.array([start_time]))
     if init == "first-fix":
         p0, v0 = float(gps_position[first]), float(gps_velocity[first])
-        x0 = np.zeros(3)
-        m0 = np.diag([fix_std_p[first] ** 2, fix_std_v[first] ** 2, settings.bias_std**2])
+        x0 = np.zeros(4 if scenario.has_scale else 3)
+        m0 = np.diag([fix_std_p[first] ** 2, fix_std_v[first] ** 2, settings.bias_std**2, settings.scale_std**2][: x0.size])
     else:
         p0, v0 = scenario.nominal_start()
         model = scenario.filter_model()
@@ -319,8 +341,18 @@ def calibrate_accel_gps(
     owner = np.searchsorted(fix_times, cuts[1:], side="left")
     noise = _interval_noise(cuts, fix_times, owner, fix_times.size, settings, period)
     phis = transition(np.diff(np.concatenate([[start_time], fix_times])), settings.bias_correlation_time)
-
     h = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    if scenario.has_scale:
+        # s multiplies the measured acceleration: its column over an interval is minus the position and
+        # velocity that acceleration alone produces from rest, the free integration's increments.
+        free_p_all = np.concatenate([p_start, p_fix])
+        free_v_all = np.concatenate([v_start, v_fix])
+        spans = np.diff(np.concatenate([[start_time], fix_times]))
+        phis, noise = np.pad(phis, ((0, 0), (0, 1), (0, 1))), np.pad(noise, ((0, 0), (0, 1), (0, 1)))
+        phis[:, 3, 3] = 1.0
+        phis[:, 0, 3] = -(np.diff(free_p_all) - free_v_all[:-1] * spans)
+        phis[:, 1, 3] = -np.diff(free_v_all)
+        h = np.pad(h, ((0, 0), (0, 1)))
     v = np.zeros((fix_times.size, 2, 2))
     v[:, 0, 0], v[:, 1, 1] = fix_std_p[usable] ** 2, fix_std_v[usable] ** 2
     dz = np.stack([gps_position[usable] - nominal_p, gps_velocity[usable] - nominal_v], axis=1)
@@ -329,6 +361,8 @@ def calibrate_accel_gps(
     else:  # the standard and square-root forms are kept for comparison; they need no speed
         run = _python_filter(phis, noise, h, v, dz, x0, m0, form)
     states, covariances, residuals, innovations = run.state, run.cov, run.residual, run.innovation_cov
+    if scenario.has_scale:
+        states, covariances = _scale_parameters(states, covariances)
     return AccelGpsCalibration(
         time=fix_times,
         position=nominal_p + states[:, 0],
@@ -345,6 +379,8 @@ def calibrate_accel_gps(
         init=init,
         start_time=start_time,
         form=form,
+        filter_state=run.state,
+        filter_covariance=symmetrize(run.cov),
         prior_state=run.prior_state,
         prior_covariance=symmetrize(run.prior_cov),
         transitions=phis,

@@ -5,11 +5,14 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from kalcal.calibrate.accel_gps import calibrate_accel_gps
 from kalcal.calibrate.diagnostics import innovation_diagnostics
+from kalcal.calibrate.smoothing import smooth_calibration
 from kalcal.io.logs import numeric_columns, parse_column_map, read_table, require_increasing
 from kalcal.io.results import write_csv, write_json
-from kalcal.models.accel_gps import STATE_NAMES, AccelGpsScenario
+from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.models.config import section_values
 from kalcal.plots.calibration import plot_calibration
 
@@ -29,12 +32,17 @@ def calibrate_accel_gps_files(
     init: str = "first-fix",
     max_imu_gap: float = 5.0,
     stop_on_gap: bool = False,
+    form: str = "joseph",
+    smooth: bool = False,
 ) -> dict[str, Any]:
     """Calibrate from an accelerometer log (time [s], accel [m/s^2]) and a GPS log (time [s], position [m],
     velocity [m/s], optionally position_std [m] and velocity_std [m/s] per fix).
 
     Writes ``out/estimates.csv`` (one row per fix used), ``out/summary.json`` and ``out/calibration.png``;
-    returns the summary. Column names are mapped with ``"role=column,..."``.
+    returns the summary. Column names are mapped with ``"role=column,..."``. ``form`` is the filter's
+    update form (joseph, standard or sqrt); ``smooth`` adds the RTS-smoothed states and their 1-sigma
+    (``smoothed_position``, ..., ``smoothed_bias_std``) to ``estimates.csv`` and a ``smoothed`` object to
+    ``summary.json``.
     """
     imu_map = parse_column_map(imu_columns, IMU_ROLES, "--imu-columns")
     gps_map = parse_column_map(gps_columns, GPS_ROLES, "--gps-columns")
@@ -61,12 +69,22 @@ def calibrate_accel_gps_files(
         init=init,
         max_imu_gap=max_imu_gap,
         stop_on_gap=stop_on_gap,
+        form=form,
         source=str(gps_path),
         imu_source=str(imu_path),
     )
     std = result.std
     normalized = result.normalized_innovations
     out = Path(out)
+    smoothed = smooth_calibration(result) if smooth else None
+    smoothed_columns = {}
+    if smoothed is not None:
+        smoothed_std = smoothed.std
+        names = scenario.state_names
+        smoothed_columns = {
+            **{f"smoothed_{name}": getattr(smoothed, name) for name in names},
+            **{f"smoothed_{name}_std": smoothed_std[:, i] for i, name in enumerate(names)},
+        }
     write_csv(
         out / "estimates.csv",
         {
@@ -74,10 +92,12 @@ def calibrate_accel_gps_files(
             "position": result.position,
             "velocity": result.velocity,
             "bias": result.bias,
-            **{f"{name}_std": std[:, i] for i, name in enumerate(STATE_NAMES)},
+            **({"scale": result.error_state[:, 3]} if scenario.has_scale else {}),
+            **{f"{name}_std": std[:, i] for i, name in enumerate(scenario.state_names)},
             "nis": result.nis,
             "innovation_position": normalized[:, 0],
             "innovation_velocity": normalized[:, 1],
+            **smoothed_columns,
         },
     )
     diagnostics = innovation_diagnostics(normalized)
@@ -98,6 +118,7 @@ def calibrate_accel_gps_files(
         "imu": str(imu_path),
         "gps": str(gps_path),
         "init": result.init,
+        "form": result.form,
         "start_time": result.start_time,
         "fixes_used": int(result.time.size),
         "fixes_skipped_nan": result.skipped_nan,
@@ -111,11 +132,29 @@ def calibrate_accel_gps_files(
         "velocity": float(result.velocity[-1]),
         "velocity_std": float(std[-1, 1]),
         "covariance": result.covariance[-1],
-        "covariance_states": list(STATE_NAMES),
+        "covariance_states": list(scenario.state_names),
         "diagnostics": diagnostics.as_dict(),
         "warnings": warnings,
-        "units": {"time": "s", "position": "m", "velocity": "m/s", "bias": "m/s^2"},
+        "units": {"time": "s", **dict(zip(scenario.state_names, scenario.state_units))},
     }
+    if scenario.has_scale:
+        summary["scale"], summary["scale_std"] = float(result.error_state[-1, 3]), float(std[-1, 3])
+    if smoothed is not None:
+        summary["smoothed"] = _smoothed_summary(smoothed, std, scenario.state_names)
     write_json(out / "summary.json", summary)
     plot_calibration(result.time, result.bias, std[:, 2], normalized, out / "calibration.png")
+    return summary
+
+
+def _smoothed_summary(smoothed, filter_std, names: tuple[str, ...]) -> dict[str, Any]:
+    """The smoothed estimates at the first fix (where smoothing gains most; at the last fix they equal
+    the filter's) and, per state, the mean of smoothed sigma / filter sigma over the fixes."""
+    std = smoothed.std
+    summary: dict[str, Any] = {"method": "rts", "time": float(smoothed.time[0])}
+    for i, name in enumerate(names):
+        summary[name] = float(getattr(smoothed, name)[0])
+        summary[f"{name}_std"] = float(std[0, i])
+    summary["covariance"] = smoothed.covariance[0]
+    summary["covariance_states"] = list(names)
+    summary["mean_std_ratio"] = {name: float(np.mean(std[:, i] / filter_std[:, i])) for i, name in enumerate(names)}
     return summary

@@ -17,7 +17,9 @@ from typing import Any
 import numpy as np
 
 from kalcal.errors import ConfigError, DataError
+from kalcal.filters.kalman import check_form
 from kalcal.io.statistics import read_statistics
+from kalcal.models.custom import CustomModelScenario, is_custom_settings
 from kalcal.models.registry import build_scenario
 from kalcal.montecarlo.accumulators import BlockResult
 from kalcal.montecarlo.engine import realization
@@ -25,6 +27,7 @@ from kalcal.montecarlo.scenarios import build_problem
 from kalcal.plots.realization import RealizationData
 from kalcal.report.figures import render_figures
 from kalcal.report.html import build_page, write_page
+from kalcal.report.steady_state import steady_state_view
 
 FIGURE_DIR = "figures"
 PAGE = "report.html"
@@ -113,10 +116,15 @@ def render_report(out: str | Path, *, realization: int = 0) -> Path:
     long_dataset = read_statistics(long_path) if long_path.is_file() else None
 
     try:
-        scenario = build_scenario(str(summary["scenario"]), None, settings_assignments(summary["settings"]))
+        if is_custom_settings(summary["settings"]):  # a model file's run: its matrices are the settings
+            scenario = CustomModelScenario.from_settings(summary["settings"])
+        else:
+            scenario = build_scenario(str(summary["scenario"]), None, settings_assignments(summary["settings"]))
     except ConfigError as exc:
         raise ConfigError(f"{summary_path}: {exc}") from None
-    problem, _ = build_problem(scenario)
+    form = str(summary.get("form", "joseph"))  # runs before --form existed used the Joseph form
+    check_form(form, f"{summary_path}: form")
+    problem, _ = build_problem(scenario, form)
     times = problem.info.update_times
     if dataset.sizes.get("time") != times.size or not np.allclose(dataset["time"].values, times):
         raise DataError(
@@ -137,6 +145,9 @@ def render_report(out: str | Path, *, realization: int = 0) -> Path:
         state_names=tuple(problem.info.state_names),
         state_units=tuple(problem.info.state_units),
     )
-    figures, skipped = render_figures(dataset, data, out / FIGURE_DIR, long_dataset, scenario=str(summary["scenario"]))
-    page = build_page(summary, figures, skipped, realization=index, figure_dir_name=FIGURE_DIR)
+    steady = steady_state_view(problem)
+    figures, skipped = render_figures(
+        dataset, data, out / FIGURE_DIR, long_dataset, scenario=str(summary["scenario"]), steady=steady
+    )
+    page = build_page(summary, figures, skipped, realization=index, figure_dir_name=FIGURE_DIR, steady_state=steady)
     return write_page(out / PAGE, page)

@@ -12,6 +12,7 @@ import xarray as xr
 
 from kalcal import __version__
 from kalcal.errors import ConfigError
+from kalcal.filters.kalman import check_form
 from kalcal.io.results import write_json
 from kalcal.io.statistics import statistics_dataset, write_statistics
 from kalcal.models.config import apply_settings, section_values
@@ -58,6 +59,7 @@ def verify(
     client=None,
     batch_size: int | None = None,
     checkpoint: str | Path | None = None,
+    form: str = "joseph",
 ) -> VerifyOutcome:
     """Run n realizations, check the filter, write ``out/summary.json`` and ``out/stats.nc``.
 
@@ -65,6 +67,7 @@ def verify(
     longer horizon with min(n, 50 000) realizations, without the residual pairs, in ``out/stats_long.nc``.
     ``client`` runs the blocks on a Dask cluster, ``batch_size`` realizations per task (rounded up to
     whole blocks); ``checkpoint`` resumes from and saves to a file. None of them changes the numbers.
+    ``form`` is the filter's update form (joseph, standard or sqrt; see :mod:`kalcal.filters.kalman`).
     """
     if n < 2:
         raise ConfigError(f"-n: need at least 2 realizations, got {n}")
@@ -74,8 +77,9 @@ def verify(
         raise ConfigError(f"--confidence: expected a number in (0, 1), got {confidence!r}")
     if batch_size is not None and batch_size < 1:
         raise ConfigError(f"--batch-size: expected a positive number of realizations, got {batch_size}")
+    check_form(form, "--form")
     started = time.perf_counter()
-    problem, cause = build_problem(scenario)
+    problem, cause = build_problem(scenario, form)
     if engine not in problem.engines:
         raise ConfigError(f"--engine: {engine!r} is not available for {problem.info.scenario} (have {', '.join(problem.engines)})")
     settings = section_values(scenario)
@@ -89,7 +93,12 @@ def verify(
         client=client,
         blocks_per_task=-(-(batch_size or BLOCK_SIZE) // BLOCK_SIZE),
         checkpoint=checkpoint,
-        checkpoint_key={"scenario": info_name(scenario), "settings": settings},
+        # the form joins the key only when it is not the default, so that older checkpoints still resume
+        checkpoint_key={
+            "scenario": info_name(scenario),
+            "settings": settings,
+            **({"form": form} if form != "joseph" else {}),
+        },
     )
     statistics = ensemble_statistics(run.sums)
     expected = problem.expected_mean_error()
@@ -108,7 +117,7 @@ def verify(
     if long_seconds and long_seconds > info.update_times[-1]:
         long_n = min(n, LONG_RUN_REALIZATIONS)
         long_scenario = apply_settings(scenario, {"scenario.duration": long_seconds})
-        long_problem, _ = build_problem(long_scenario, residual_pairs=False)
+        long_problem, _ = build_problem(long_scenario, form, residual_pairs=False)
         long = run_monte_carlo(long_problem, long_n, seed, engine=engine, workers=workers, client=client)
         long_stats = ensemble_statistics(long.sums)
         long_dataset = statistics_dataset(
@@ -125,6 +134,7 @@ def verify(
         "realizations": n,
         "seed": seed,
         "engine": engine,
+        "form": form,
         "confidence": confidence,
         "verdict": verdict(checks),
         "tests": [c.as_dict() for c in checks],

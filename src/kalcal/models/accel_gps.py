@@ -27,6 +27,11 @@ Choices where the report is silent or inconsistent, documented in docs/accel-gps
 Beyond the report, the bias may drift (``bias_walk_std``: a random walk, the increment's std per sample)
 or be first-order Gauss-Markov (``bias_correlation_time`` tau > 0: b_{j+1} = exp(-dt/tau) b_j + noise,
 stationary with std ``bias_std``): Phi[2, 2] = exp(-dt/tau) and the bias gets a noise input of its own.
+A scale-factor error (``scale_std`` > 0: a_c = (1 + s) a + b + w) adds a fourth, constant state s whose
+column of Phi over a step is -[a dt^2/2, a dt, 0]: it depends on the acceleration, so the transition is
+time-varying (over an interval: minus the position and velocity the acceleration alone produces). In the
+Monte Carlo the filter uses the true acceleration profile for that column; on a log it uses the measured
+one (a second-order difference, s times the accelerometer's own errors).
 """
 
 from __future__ import annotations
@@ -119,6 +124,7 @@ class AccelGpsTruth:
     gps_velocity_std: float = 0.04  # m/s
     bias_walk_std: float = 0.0  # std of the bias increment per accelerometer sample, m/s^2 (0: no walk)
     bias_correlation_time: float = 0.0  # s; > 0 makes the bias first-order Gauss-Markov (0: constant)
+    scale_std: float = 0.0  # std of the scale-factor error s (dimensionless): a_c = (1 + s) a + b + w
 
     SECTION: ClassVar[str] = "truth"
 
@@ -137,6 +143,7 @@ class AccelGpsTruth:
             accel_frequency=self.accel_frequency,
             bias_walk_std=self.bias_walk_std,
             bias_correlation_time=self.bias_correlation_time,
+            scale_std=self.scale_std,
         )
 
     def bias_decay(self, dt: float) -> float:
@@ -167,6 +174,7 @@ class AccelGpsFilter:
     gps_velocity_std: float | None = None
     bias_walk_std: float | None = None
     bias_correlation_time: float | None = None
+    scale_std: float | None = None
 
     SECTION: ClassVar[str] = "filter"
 
@@ -181,7 +189,10 @@ class AccelGpsFilter:
             velocity0_std=self.velocity0_std,
         )
         require_nonnegative(
-            self.SECTION, bias_walk_std=self.bias_walk_std, bias_correlation_time=self.bias_correlation_time
+            self.SECTION,
+            bias_walk_std=self.bias_walk_std,
+            bias_correlation_time=self.bias_correlation_time,
+            scale_std=self.scale_std,
         )
 
     def resolved(self, truth: AccelGpsTruth) -> AccelGpsTruth:
@@ -196,6 +207,9 @@ class AccelGpsFilter:
 
 STATE_NAMES = ("position", "velocity", "bias")
 STATE_UNITS = ("m", "m/s", "m/s^2")
+#: with a scale-factor error the state gains a fourth component
+SCALE_STATE_NAMES = (*STATE_NAMES, "scale")
+SCALE_STATE_UNITS = (*STATE_UNITS, "1")
 MEASUREMENT_NAMES = ("position", "velocity")
 MEASUREMENT_UNITS = ("m", "m/s")
 
@@ -209,6 +223,26 @@ class AccelGpsScenario:
     filter: AccelGpsFilter = field(default_factory=AccelGpsFilter)
 
     NAME: ClassVar[str] = "accel-gps"
+
+    def __post_init__(self) -> None:
+        if self.truth.scale_std > 0 and self.filter_settings.scale_std == 0:
+            raise ConfigError(
+                "filter.scale_std: 0 against a truth with a scale-factor error; to see a filter that "
+                "ignores it, give it a tiny filter.scale_std (say 1e-9)"
+            )
+
+    @property
+    def has_scale(self) -> bool:
+        """Whether the state carries the scale-factor error s (4 states instead of 3)."""
+        return self.filter_settings.scale_std > 0
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        return SCALE_STATE_NAMES if self.has_scale else STATE_NAMES
+
+    @property
+    def state_units(self) -> tuple[str, ...]:
+        return SCALE_STATE_UNITS if self.has_scale else STATE_UNITS
 
     @property
     def filter_settings(self) -> AccelGpsTruth:
@@ -225,14 +259,25 @@ class AccelGpsScenario:
             # the bias's own noise enters after the step: a second input on the bias state
             gamma = np.hstack([gamma, [[0.0], [0.0], [1.0]]])
             w = np.diag([values.accel_noise_std**2, bias_noise])
+        h = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+        m0 = np.diag([values.position0_std**2, values.velocity0_std**2, values.bias_std**2])
+        if self.has_scale:
+            # s is constant; its column of Phi depends on the acceleration of each step, so it is zero
+            # here and the interval transitions add it (kalcal.simulate.exact.accel_gps_truth)
+            phi = np.pad(phi, ((0, 1), (0, 1)))
+            phi[3, 3] = 1.0
+            gamma = np.pad(gamma, ((0, 1), (0, 0)))
+            h = np.pad(h, ((0, 0), (0, 1)))
+            m0 = np.diag([*np.diag(m0), values.scale_std**2])
+            x0 = np.append(x0, 0.0)
         return LinearGaussianModel(
             phi=phi,
             gamma=gamma,
-            h=np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]),
+            h=h,
             w=w,
             v=np.diag([values.gps_position_std**2, values.gps_velocity_std**2]),
             x0=x0,
-            m0=np.diag([values.position0_std**2, values.velocity0_std**2, values.bias_std**2]),
+            m0=m0,
             steps_per_update=self.scenario.steps_per_update,
             sample_period=dt,
         )

@@ -23,9 +23,14 @@ from kalcal.montecarlo.accumulators import MomentSums
 _NONE = "__none__"
 
 
+def _exact(value):
+    """numpy arrays and scalars as exact JSON (lists of round-trip floats), not their abbreviated text."""
+    return value.tolist() if hasattr(value, "tolist") else str(value)
+
+
 def fingerprint(settings: dict) -> str:
-    """A stable digest of a run's settings (any JSON-serializable mapping)."""
-    text = json.dumps(settings, sort_keys=True, default=str)
+    """A stable digest of a run's settings (any JSON-serializable mapping; numpy values exactly)."""
+    text = json.dumps(settings, sort_keys=True, default=_exact)
     return hashlib.sha256(text.encode()).hexdigest()
 
 

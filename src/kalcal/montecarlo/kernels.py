@@ -89,15 +89,15 @@ def _filter_and_accumulate(
 
 @numba.njit(nogil=True, cache=True, fastmath=_FAST)
 def exact_block_moments(
-    y0, u0, draws, transition, noise, boundary_in, model_error, h_truth, measure,
-    phi, h, gains, x0, sums_e, sums_ee, sums_x, sums_xx, sums_ex, sums_r, sums_rr, residuals,
+    y0, u0, draws, transitions, noise, boundary_in, model_error, h_truth, measure,
+    phis, h, gains, x0, sums_e, sums_ee, sums_x, sums_xx, sums_ex, sums_r, sums_rr, residuals,
 ):
     """Sample the exact update-rate truth (:mod:`kalcal.simulate.exact`) and filter it, in one pass.
 
     y0 (d, n) truth at sample 0; u0 (c, n) its opening boundary sample; draws (K, r + c + p, n);
-    transition (d, d); noise (d, r + c) = [L | b_out]; boundary_in (d, c); model_error (K, d);
-    h_truth (p, d); measure (p, p) = G. Filter: phi (d, d) over one interval, h (p, d), gains (K, d, p),
-    x0 (d,). Sums are added to; residuals (K p, n) receives every innovation (or (0, n): none kept).
+    transitions (K, d, d) of the truth over each interval; noise (d, r + c) = [L | b_out]; boundary_in
+    (d, c); model_error (K, d); h_truth (p, d); measure (p, p) = G. Filter: phis (K, d, d) over each
+    interval, h (p, d), gains (K, d, p), x0 (d,). Sums are added to; residuals (K p, n) receives every innovation (or (0, n): none kept).
     """
     d, n = y0.shape
     n_updates = draws.shape[0]
@@ -116,7 +116,7 @@ def exact_block_moments(
     residual = np.empty((p, n))
     for k in range(n_updates):
         step = draws[k]
-        _affine(y_next, transition, y, False)
+        _affine(y_next, transitions[k], y, False)
         _affine(y_next, noise, step[:rc], True)
         if c:
             _affine(y_next, boundary_in, u0 if k == 0 else draws[k - 1, r:rc], True)
@@ -128,13 +128,13 @@ def exact_block_moments(
         _affine(z, h_truth, state, False)
         _affine(z, measure, step[rc:], True)
         _filter_and_accumulate(
-            k, state, z, x, xbar, residual, phi, h, gains, sums_e, sums_ee, sums_x, sums_xx, sums_ex, sums_r, sums_rr, residuals
+            k, state, z, x, xbar, residual, phis[k], h, gains, sums_e, sums_ee, sums_x, sums_xx, sums_ex, sums_r, sums_rr, residuals
         )
 
 
 @numba.njit(nogil=True, cache=True, fastmath=_FAST)
 def filter_block_moments(
-    states, measurements, phi, h, gains, x0, sums_e, sums_ee, sums_x, sums_xx, sums_ex, sums_r, sums_rr, residuals
+    states, measurements, phis, h, gains, x0, sums_e, sums_ee, sums_x, sums_xx, sums_ex, sums_r, sums_rr, residuals
 ):
     """Filter given truths and accumulate, for samplers other than the exact one.
 
@@ -150,6 +150,6 @@ def filter_block_moments(
     residual = np.empty((p, n))
     for k in range(n_updates):
         _filter_and_accumulate(
-            k, states[k], measurements[k], x, xbar, residual, phi, h, gains,
+            k, states[k], measurements[k], x, xbar, residual, phis[k], h, gains,
             sums_e, sums_ee, sums_x, sums_xx, sums_ex, sums_r, sums_rr, residuals,
         )

@@ -75,7 +75,8 @@ class FixedGainProblem:
     sampled : callable, optional
         ``sampled(rng, n) -> (states (n, K, d), measurements (n, K, p))`` simulating every sample
         (engine "sampled").
-    form : {"joseph", "standard"}
+    form : {"joseph", "standard", "sqrt"}
+        The covariance update of the gain schedule (:func:`~kalcal.filters.kalman.covariance_pass`).
     """
 
     info: ProblemInfo
@@ -85,6 +86,7 @@ class FixedGainProblem:
     sampled_normals: int = 0
     form: UpdateForm = "joseph"
     residual_pairs: bool = True  #: keep E[r_k r_j^T] over all pairs (O(N K^2 p^2)) for the whiteness check
+    filter_transitions: np.ndarray | None = None  #: the filter's transition of each interval, (K, d, d), if time-varying
     schedule: GainSchedule = field(init=False)
     _state_whitener: np.ndarray = field(init=False, repr=False)
     _innovation_whitener: np.ndarray = field(init=False, repr=False)
@@ -92,7 +94,7 @@ class FixedGainProblem:
     _innovation_inverse: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        schedule = covariance_pass(self.filter_model, self.truth.n_updates, self.form)
+        schedule = covariance_pass(self.filter_model, self.truth.n_updates, self.form, self.filter_transitions)
         object.__setattr__(self, "schedule", schedule)
         object.__setattr__(self, "_state_whitener", whitener(schedule.posterior_cov))
         object.__setattr__(self, "_innovation_whitener", whitener(schedule.innovation_cov))
@@ -147,7 +149,8 @@ class FixedGainProblem:
             "residual_own": np.zeros((n_updates, p, p)),
         }
         residuals = np.empty((n_updates * p if self.residual_pairs else 0, n))
-        gains = (self.schedule.phi_interval, self.filter_model.h, self.schedule.gain, self.filter_model.x0)
+        phis = np.ascontiguousarray(self.schedule.transitions)
+        gains = (phis, self.filter_model.h, self.schedule.gain, self.filter_model.x0)
         order = ("error", "error_outer", "estimate", "estimate_outer", "error_estimate", "residual", "residual_own")
         if engine == "exact":
             truth = self.truth
@@ -160,7 +163,7 @@ class FixedGainProblem:
                 truth.x0_mean[:, None] + truth.x0_factor @ first[:d0],
                 np.ascontiguousarray(first[d0:]),
                 draws,
-                truth.transition,
+                np.ascontiguousarray(truth.transitions),
                 np.ascontiguousarray(noise),
                 np.ascontiguousarray(truth.boundary_in[:, None][:, :c]),
                 truth.model_error,
@@ -196,10 +199,10 @@ class FixedGainProblem:
         deterministic model error.
         """
         truth = self.truth
-        mean = np.empty((truth.n_updates, truth.transition.shape[0]))
+        mean = np.empty((truth.n_updates, truth.state_dim))
         y = truth.x0_mean
         for k in range(truth.n_updates):
-            y = truth.transition @ y
+            y = truth.transitions[k] @ y
             mean[k] = y + truth.model_error[k]
         run = self.filter((mean @ truth.h.T)[None])
         return mean - run.posterior[0]

@@ -1,22 +1,29 @@
-"""Verification problems for the built-in scenarios."""
+"""Verification problems for the built-in scenarios and for model files (custom linear models)."""
 
 from __future__ import annotations
 
 from functools import partial
 
+import numpy as np
+
+from kalcal.errors import ConfigError
 from kalcal.filters.kalman import UpdateForm
-from kalcal.models.accel_gps import (
-    MEASUREMENT_NAMES,
-    MEASUREMENT_UNITS,
-    STATE_NAMES,
-    STATE_UNITS,
-    AccelGpsScenario,
-)
+from kalcal.models.accel_gps import MEASUREMENT_NAMES, MEASUREMENT_UNITS, AccelGpsScenario
+from kalcal.models.custom import CustomModelScenario
 from kalcal.models.scale_bias import ScaleBiasScenario
 from kalcal.montecarlo.problem import FixedGainProblem, ProblemInfo
 from kalcal.montecarlo.scale_bias import ScaleBiasProblem, model_error_cause
-from kalcal.simulate.exact import accel_gps_truth
+from kalcal.simulate.exact import accel_gps_truth, truth_from_model
 from kalcal.simulate.sampled import sample_accel_gps_errors
+
+
+def sampled_normals_per_realization(scenario: AccelGpsScenario) -> int:
+    """Normals the per-sample engine draws: p0, v0, b, sample 0 (and s); per interval m samples and 2 fix
+    noises (and m bias-noise draws when the bias drifts). See :mod:`kalcal.simulate.sampled`."""
+    s = scenario.scenario
+    m = s.steps_per_update
+    drifts = scenario.truth.bias_step_variance(s.sample_period) > 0
+    return 4 + int(scenario.has_scale) + s.n_updates * (m + 2 + (m if drifts else 0))
 
 
 def accel_gps_problem(
@@ -27,18 +34,20 @@ def accel_gps_problem(
     info = ProblemInfo(
         scenario=scenario.NAME,
         update_times=s.update_times(),
-        state_names=STATE_NAMES,
-        state_units=STATE_UNITS,
+        state_names=scenario.state_names,
+        state_units=scenario.state_units,
         measurement_names=MEASUREMENT_NAMES,
         measurement_units=MEASUREMENT_UNITS,
     )
+    truth = accel_gps_truth(scenario)
     return FixedGainProblem(
         info=info,
         filter_model=scenario.filter_model(),
-        truth=accel_gps_truth(scenario),
+        truth=truth,
+        # the filter's transitions carry the scale column of the same (true) acceleration profile
+        filter_transitions=np.array(truth.transitions) if scenario.has_scale else None,
         sampled=partial(sample_accel_gps_errors, scenario),
-        # p0, v0, b, the first sample; then m samples and 2 fix noises per interval
-        sampled_normals=4 + s.n_updates * (s.steps_per_update + 2),
+        sampled_normals=sampled_normals_per_realization(scenario),
         form=form,
         residual_pairs=residual_pairs,
     )
@@ -57,6 +66,41 @@ def accel_gps_model_error_cause(scenario: AccelGpsScenario) -> str:
     return " and ".join(causes)
 
 
+def custom_problem(
+    scenario: CustomModelScenario, form: UpdateForm = "joseph", residual_pairs: bool = True
+) -> FixedGainProblem:
+    """A model file's filter against its truth, sampled exactly at the update rate (no per-sample engine)."""
+    m = scenario.model
+    info = ProblemInfo(
+        scenario=m.name,
+        update_times=scenario.update_times,
+        state_names=m.state_names,
+        state_units=m.state_units,
+        measurement_names=m.measurement_names,
+        measurement_units=m.measurement_units,
+    )
+    try:
+        return FixedGainProblem(
+            info=info,
+            filter_model=scenario.filter,
+            truth=truth_from_model(scenario.truth, m.updates),
+            form=form,
+            residual_pairs=residual_pairs,
+        )
+    except np.linalg.LinAlgError:
+        # NEES needs P_k^{-1}: a state that neither the prior, the process noise nor the fixes make uncertain
+        raise ConfigError(
+            f"{m.file}: the filter's covariance P_k is singular at some update (give the unobserved states "
+            "prior variance in m0 or process noise through gamma and w)"
+        ) from None
+
+
+def custom_model_error_cause(scenario: CustomModelScenario) -> str:
+    """The matrices of a model file's truth that can move the filter's mean error (x0, phi, h)."""
+    keys = [k for k in scenario.differing() if k in ("x0", "phi", "h")]
+    return f"the truth's {' and '.join(keys)} differing from the filter's" if keys else ""
+
+
 def build_problem(scenario, form: UpdateForm = "joseph", residual_pairs: bool = True) -> tuple[FixedGainProblem, str]:
     """The verification problem of a built-in scenario and the sentence naming its model error.
 
@@ -67,5 +111,9 @@ def build_problem(scenario, form: UpdateForm = "joseph", residual_pairs: bool = 
         return accel_gps_problem(scenario, form, residual_pairs), accel_gps_model_error_cause(scenario)
     if isinstance(scenario, ScaleBiasScenario):
         # The scale/bias filter's update form is its own setting, filter.form ("joseph" or "note").
+        if form != "joseph":
+            raise ConfigError(f"--form: {form!r} is not available for scale-bias (set filter.form=joseph or note instead)")
         return ScaleBiasProblem(scenario, residual_pairs=residual_pairs), model_error_cause(scenario)
+    if isinstance(scenario, CustomModelScenario):
+        return custom_problem(scenario, form, residual_pairs), custom_model_error_cause(scenario)
     raise TypeError(f"no verification problem for {type(scenario).__name__}")

@@ -9,7 +9,7 @@ Deterministic model error (an integration scheme against an analytic truth) is c
 The truth at update k (k = 0..K-1, after k + 1 intervals)::
 
     y_0 = x_0 ~ N(x0_mean, F0 F0^T),   u_0 ~ N(0, 1)
-    y_{k+1} = A y_k + L xi_k + b_in u_k + b_out u_{k+1},     xi_k ~ N(0, I_r),  u_k ~ N(0, 1)
+    y_{k+1} = A_k y_k + L xi_k + b_in u_k + b_out u_{k+1},   xi_k ~ N(0, I_r),  u_k ~ N(0, 1)
     x_k = y_{k+1} + D_k,    z_k = H x_k + G eta_k,           eta_k ~ N(0, I_p)
 
 Draw order for n realizations: ``(d0 + c, n)`` for x_0 and u_0, then ``(K, r + c + p, n)``, where c is 1
@@ -34,7 +34,7 @@ from kalcal.models.linear import LinearGaussianModel
 class UpdateRateTruth:
     """The truth at the update rate. d states, p measurements, K updates, r independent noise directions."""
 
-    transition: np.ndarray  #: A, (d, d)
+    transitions: np.ndarray  #: A_k over interval k, (K, d, d) (time-invariant models repeat one)
     noise_factor: np.ndarray  #: L, (d, r)
     boundary_in: np.ndarray  #: b_in, weight of the shared sample that opens an interval, (d,)
     boundary_out: np.ndarray  #: b_out, weight of the shared sample that closes it, (d,)
@@ -47,6 +47,10 @@ class UpdateRateTruth:
     @property
     def n_updates(self) -> int:
         return self.model_error.shape[0]
+
+    @property
+    def state_dim(self) -> int:
+        return self.transitions.shape[-1]
 
     @property
     def shares_boundary(self) -> bool:
@@ -65,7 +69,7 @@ def truth_from_model(model: LinearGaussianModel, n_updates: int, model_error: np
     phi_m, q_m = interval_transition(model.phi, model.gamma, model.w, model.steps_per_update)
     d = model.state_dim
     return UpdateRateTruth(
-        transition=phi_m,
+        transitions=np.broadcast_to(phi_m, (n_updates,) + phi_m.shape),
         noise_factor=psd_factor(q_m),
         boundary_in=np.zeros(d),
         boundary_out=np.zeros(d),
@@ -81,10 +85,10 @@ def accel_gps_model_error(scenario: AccelGpsScenario) -> np.ndarray:
     """D_k: the error state left by integrating the noise-free, bias-free a(t_j) against the truth.
 
     Zero for ``truth = "discrete"``; for the analytic truth it is the integration scheme's own error
-    (the rectangle rule's half-sample lag for Euler). Shape (K, 3), m and m/s (bias column zero).
+    (the rectangle rule's half-sample lag for Euler). Shape (K, d), m and m/s (bias and scale columns zero).
     """
     s = scenario.scenario
-    error = np.zeros((s.n_updates, 3))
+    error = np.zeros((s.n_updates, 4 if scenario.has_scale else 3))
     if s.truth == "discrete":
         return error
     fix_index = np.arange(1, s.n_updates + 1) * s.steps_per_update
@@ -96,13 +100,29 @@ def accel_gps_model_error(scenario: AccelGpsScenario) -> np.ndarray:
     return error
 
 
+def accel_gps_transitions(scenario: AccelGpsScenario, transitions: np.ndarray) -> np.ndarray:
+    """The transition of each interval with the scale factor's column: minus the position and velocity
+    the true acceleration alone produces over the interval (from rest, with the scenario's scheme).
+
+    ``transitions`` (K, 4, 4) are those of the model without it; returns a new (K, 4, 4) array.
+    """
+    s = scenario.scenario
+    m = s.steps_per_update
+    accel = scenario.true_accel(s.sample_times())
+    weights = interval_weights(s.integration, s.sample_period, m)  # (m + 1, 2)
+    windows = np.lib.stride_tricks.sliding_window_view(accel, m + 1)[::m][: s.n_updates]  # (K, m + 1)
+    result = np.array(transitions, dtype=float)
+    result[:, :2, 3] = -(windows @ weights)
+    return result
+
+
 def accel_gps_truth(scenario: AccelGpsScenario) -> UpdateRateTruth:
     """The accelerometer/GPS error state at the fixes, exactly in distribution for either scheme."""
     s = scenario.scenario
     model = scenario.truth_model()
     m = s.steps_per_update
     # The error state gains -C_i sigma_a w_{s+i} from each accelerometer sample of the interval.
-    weights = np.zeros((m + 1, 3))
+    weights = np.zeros((m + 1, model.state_dim))
     weights[:, :2] = -scenario.truth.accel_noise_std * interval_weights(s.integration, s.sample_period, m)
     shared = bool(np.any(weights[m] != 0.0))
     interior = weights[1:m] if shared else weights[:m]
@@ -111,10 +131,11 @@ def accel_gps_truth(scenario: AccelGpsScenario) -> UpdateRateTruth:
         # The bias's own noise (random walk or Gauss-Markov), independent of the accelerometer's.
         noise = noise + interval_transition(model.phi, model.gamma[:, 1:], model.w[1:, 1:], m)[1]
     base = truth_from_model(model, s.n_updates, accel_gps_model_error(scenario))
+    transitions = accel_gps_transitions(scenario, base.transitions) if scenario.has_scale else base.transitions
     return UpdateRateTruth(
-        transition=base.transition,
+        transitions=transitions,
         noise_factor=psd_factor(noise),
-        boundary_in=weights[0] if shared else np.zeros(3),
+        boundary_in=weights[0] if shared else np.zeros(model.state_dim),
         boundary_out=weights[m],
         model_error=base.model_error,
         x0_mean=base.x0_mean,
@@ -141,7 +162,6 @@ def sample_exact(truth: UpdateRateTruth, rng: np.random.Generator, n: int) -> tu
     draws = rng.standard_normal((n_updates, r + c + p, n)).transpose(0, 2, 1)
     y = truth.x0_mean + first[:, :d0] @ truth.x0_factor.T
     u = first[:, d0:]  # (n, c): the boundary sample that opens the next interval
-    transition_t = truth.transition.T
     # Stack [L | b_out] so that one product adds the independent noise and the closing boundary sample.
     noise_t = np.vstack([truth.noise_factor.T, truth.boundary_out[None, :]][: 1 + c])
     boundary_in = truth.boundary_in[None, :][:c]
@@ -151,7 +171,7 @@ def sample_exact(truth: UpdateRateTruth, rng: np.random.Generator, n: int) -> tu
     measurements = np.empty((n, n_updates, p))
     for k in range(n_updates):
         step = draws[k]
-        y = y @ transition_t + step[:, : r + c] @ noise_t + u @ boundary_in
+        y = y @ truth.transitions[k].T + step[:, : r + c] @ noise_t + u @ boundary_in
         u = step[:, r : r + c]
         x = y + truth.model_error[k]
         states[:, k] = x

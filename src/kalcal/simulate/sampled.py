@@ -3,7 +3,8 @@
 Random numbers are drawn in one fixed order so that a log and the Monte Carlo's sampled engine see the
 same realizations for the same generator state:
 
-1. ``(n, 4)``: standard normals for p0, v0, b and the noise of accelerometer sample 0;
+1. ``(n, 4)``: standard normals for p0, v0, b and the noise of accelerometer sample 0 (``(n, 5)`` with a
+   scale-factor error s last);
 2. for each GPS interval k = 0..K-1, ``(n, m + 2)``: the noise of samples k m + 1 .. (k + 1) m, then the
    position and velocity noise of fix k; and, when the bias has noise of its own (a random walk or
    Gauss-Markov), ``(n, m)`` more: the bias noise of steps k m .. (k + 1) m - 1.
@@ -30,6 +31,7 @@ class AccelGpsLogs:
     position: np.ndarray  #: true p(t_j), m, (n, J + 1)
     velocity: np.ndarray  #: true v(t_j), m/s, (n, J + 1)
     bias: np.ndarray  #: true b at every sample, m/s^2, (n, J + 1) (constant unless it drifts)
+    scale: np.ndarray  #: true scale-factor error s, dimensionless, (n,) (zero without one)
     fix_index: np.ndarray  #: sample index of each fix, (K,)
     gps_position: np.ndarray  #: m, (n, K)
     gps_velocity: np.ndarray  #: m/s, (n, K)
@@ -41,12 +43,14 @@ class AccelGpsLogs:
 
 
 def _initial_draws(scenario: AccelGpsScenario, rng: np.random.Generator, n: int):
+    """p0, v0, b, the noise of sample 0 and the scale-factor error s (drawn only in a scale scenario)."""
     t = scenario.truth
-    xi = rng.standard_normal((n, 4))
+    xi = rng.standard_normal((n, 5 if scenario.has_scale else 4))
     p0 = t.position0_mean + t.position0_std * xi[:, 0]
     v0 = t.velocity0_mean + t.velocity0_std * xi[:, 1]
     bias = t.bias_std * xi[:, 2]
-    return p0, v0, bias, t.accel_noise_std * xi[:, 3]
+    scale = t.scale_std * xi[:, 4] if scenario.has_scale else np.zeros(n)
+    return p0, v0, bias, t.accel_noise_std * xi[:, 3], scale
 
 
 def _bias_path(scenario: AccelGpsScenario, start: np.ndarray, draw: np.ndarray | None) -> np.ndarray:
@@ -90,7 +94,7 @@ def sample_accel_gps_logs(scenario: AccelGpsScenario, rng: np.random.Generator, 
     s, t = scenario.scenario, scenario.truth
     m, n_updates = s.steps_per_update, s.n_updates
     times = s.sample_times()
-    p0, v0, bias0, noise0 = _initial_draws(scenario, rng, n)
+    p0, v0, bias0, noise0, scale = _initial_draws(scenario, rng, n)
     noise = np.empty((n, s.n_samples + 1))
     noise[:, 0] = noise0
     bias = np.empty((n, s.n_samples + 1))
@@ -108,11 +112,12 @@ def sample_accel_gps_logs(scenario: AccelGpsScenario, rng: np.random.Generator, 
     fix_index = np.arange(1, n_updates + 1) * m
     return AccelGpsLogs(
         sample_time=times,
-        accel=true_accel + bias + noise,
+        accel=(1.0 + scale[:, None]) * true_accel + bias + noise,
         true_accel=true_accel,
         position=position,
         velocity=velocity,
         bias=bias,
+        scale=scale,
         fix_index=fix_index,
         gps_position=position[:, fix_index] + t.gps_position_std * gps_noise[:, :, 0],
         gps_velocity=velocity[:, fix_index] + t.gps_velocity_std * gps_noise[:, :, 1],
@@ -130,8 +135,8 @@ def sample_accel_gps_errors(
 
     Returns
     -------
-    states : ndarray, shape (n, K, 3)
-        dx = [p - p_c, v - v_c, b] at each fix.
+    states : ndarray, shape (n, K, d)
+        dx = [p - p_c, v - v_c, b] at each fix (and s, with a scale-factor error).
     measurements : ndarray, shape (n, K, 2)
         dz = [gps_position - p_c, gps_velocity - v_c] at each fix.
     """
@@ -143,11 +148,12 @@ def sample_accel_gps_errors(
     true_accel = scenario.true_accel(times)
     fix_times = s.update_times()
     motion = deterministic_motion(scenario, fix_times, true_accel)
-    p0, v0, bias_now, noise = _initial_draws(scenario, rng, n)
+    p0, v0, bias_now, noise, scale = _initial_draws(scenario, rng, n)
+    d = 4 if scenario.has_scale else 3
     pc0, vc0 = scenario.nominal_start()
     nominal = np.empty((n, 2))
     nominal[:, 0], nominal[:, 1] = pc0, vc0
-    states = np.empty((n, n_updates, 3))
+    states = np.empty((n, n_updates, d))
     measurements = np.empty((n, n_updates, 2))
     block = np.empty((n, m + 1))
     block[:, 0] = noise
@@ -157,7 +163,7 @@ def sample_accel_gps_errors(
         block[:, 1:] = t.accel_noise_std * draw[:, :m]
         bias = _bias_path(scenario, bias_now, _bias_draw(scenario, rng, n, m))
         bias_now = bias[:, -1]
-        measured = block + true_accel[k * m : (k + 1) * m + 1] + bias
+        measured = block + (1.0 + scale[:, None]) * true_accel[k * m : (k + 1) * m + 1] + bias
         # p_c(t + T) = p_c(t) + v_c(t) T + sum_i C_i,p a_i;   v_c(t + T) = v_c(t) + sum_i C_i,v a_i
         increment = measured @ weights
         nominal[:, 0] += nominal[:, 1] * interval + increment[:, 0]
@@ -165,6 +171,8 @@ def sample_accel_gps_errors(
         states[:, k, 0] = p0 + v0 * fix_times[k] + motion[k, 0] - nominal[:, 0]
         states[:, k, 1] = v0 + motion[k, 1] - nominal[:, 1]
         states[:, k, 2] = bias_now
+        if d == 4:
+            states[:, k, 3] = scale
         measurements[:, k] = states[:, k, :2] + gps_std * draw[:, m:]
         block[:, 0] = block[:, m]
     return states, measurements
