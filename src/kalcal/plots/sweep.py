@@ -4,16 +4,17 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+import pandas as pd
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
+from kalcal.plots._common import new_figure, save, styled
 
 
+@styled
 def plot_sweep(table: pd.DataFrame, key: str, path: str | Path) -> Path:
     """One panel per check: the statistic (dots; red where it failed) and its bounds against ``key``.
+
+    900 x 400 px.
 
     Parameters
     ----------
@@ -25,8 +26,9 @@ def plot_sweep(table: pd.DataFrame, key: str, path: str | Path) -> Path:
     x = table[key].to_numpy()
     numeric = np.issubdtype(np.asarray(x).dtype, np.number)
     positions = x if numeric else np.arange(len(x))
-    fig, axes = plt.subplots(1, len(checks), figsize=(3.2 * len(checks), 3.2), constrained_layout=True)
-    for ax, check in zip(np.atleast_1d(axes), checks):
+    figure, axes = new_figure(1, len(checks), sharex=False)
+    axes = axes[0]
+    for ax, check in zip(axes, checks):
         stat = table[f"{check}_statistic"].to_numpy(dtype=float)
         passed = table[f"{check}_passed"].to_numpy(dtype=bool)
         upper = table[f"{check}_upper"].to_numpy(dtype=float)
@@ -45,9 +47,6 @@ def plot_sweep(table: pd.DataFrame, key: str, path: str | Path) -> Path:
         ax.set_xticks(positions, [f"{v:g}" if numeric else str(v) for v in x])
         if np.all(stat > 0) and stat.max() / max(stat.min(), 1e-300) > 50:
             ax.set_yscale("log")
-    np.atleast_1d(axes)[0].set_ylabel("statistic")
-    np.atleast_1d(axes)[0].legend(fontsize="small")
-    path = Path(path)
-    fig.savefig(path, dpi=100, metadata={"Software": None})
-    plt.close(fig)
-    return path
+    axes[0].set_ylabel("statistic")
+    axes[0].legend()
+    return save(figure, path)
