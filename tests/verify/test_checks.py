@@ -32,7 +32,7 @@ def test_report_default_flags_the_euler_mean_error_and_says_why():
     checks = _checks(20000)
     mean = checks["mean_error"]
     assert not mean.passed and mean.statistic > mean.upper
-    assert "euler integration" in mean.detail and "Explained by deterministic model error" in mean.detail
+    assert "euler integration" in mean.detail and "Explained by the predicted systematic error" in mean.detail
     # the spread is right: the failure is the mean, reported once
     assert checks["covariance"].passed
     for name in ("orthogonality", "residual_whiteness"):

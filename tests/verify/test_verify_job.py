@@ -83,7 +83,7 @@ def test_report_defaults_at_full_size(tmp_path):
     """3 x 10^5 realizations: the Euler mean error (2.0 sigma in velocity at 30 s, 1.6 sigma in bias at 18 s)."""
     outcome = verify(build_scenario("accel-gps"), 300_000, 0, tmp_path, long_run=0)
     checks = {c.name: c for c in outcome.checks}
-    assert not checks["mean_error"].passed and "Explained by deterministic model error" in checks["mean_error"].detail
+    assert not checks["mean_error"].passed and "Explained by the predicted systematic error" in checks["mean_error"].detail
     s = outcome.statistics
     sigma = np.sqrt(np.diagonal(s.filter_cov, axis1=1, axis2=2))
     in_sigma = s.mean_error / sigma

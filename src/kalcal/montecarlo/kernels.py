@@ -87,6 +87,17 @@ def _filter_and_accumulate(
             residuals[k * p + a, :] = residual[a, :]
 
 
+@numba.njit(nogil=True, cache=True)
+def _filter_buffers(x0, p, n):
+    """The filter's posterior (d, n), started at x0 in every realization, and its prior and innovation
+    buffers (d, n) and (p, n)."""
+    d = x0.shape[0]
+    x = np.empty((d, n))
+    for a in range(d):
+        x[a, :] = x0[a]
+    return x, np.empty((d, n)), np.empty((p, n))
+
+
 @numba.njit(nogil=True, cache=True, fastmath=_FAST)
 def exact_block_moments(
     y0, u0, draws, transitions, noise, boundary_in, model_error, h_truth, measure,
@@ -109,11 +120,7 @@ def exact_block_moments(
     y_next = np.empty((d, n))
     state = np.empty((d, n))
     z = np.empty((p, n))
-    x = np.empty((d, n))
-    for a in range(d):
-        x[a, :] = x0[a]
-    xbar = np.empty((d, n))
-    residual = np.empty((p, n))
+    x, xbar, residual = _filter_buffers(x0, p, n)
     for k in range(n_updates):
         step = draws[k]
         _affine(y_next, transitions[k], y, False)
@@ -142,12 +149,7 @@ def filter_block_moments(
     :func:`exact_block_moments`.
     """
     n_updates, d, n = states.shape
-    p = h.shape[0]
-    x = np.empty((d, n))
-    for a in range(d):
-        x[a, :] = x0[a]
-    xbar = np.empty((d, n))
-    residual = np.empty((p, n))
+    x, xbar, residual = _filter_buffers(x0, h.shape[0], n)
     for k in range(n_updates):
         _filter_and_accumulate(
             k, states[k], measurements[k], x, xbar, residual, phis[k], h, gains,

@@ -11,7 +11,7 @@ from kalcal.filters.kalman import UpdateForm
 from kalcal.models.accel_gps import MEASUREMENT_NAMES, MEASUREMENT_UNITS, AccelGpsScenario
 from kalcal.models.custom import CustomModelScenario
 from kalcal.models.scale_bias import ScaleBiasScenario
-from kalcal.montecarlo.problem import FixedGainProblem, ProblemInfo
+from kalcal.montecarlo.problem import FixedGainProblem, Problem, ProblemInfo
 from kalcal.montecarlo.scale_bias import ScaleBiasProblem, model_error_cause
 from kalcal.simulate.exact import accel_gps_truth, truth_from_model
 from kalcal.simulate.sampled import sample_accel_gps_errors
@@ -101,7 +101,7 @@ def custom_model_error_cause(scenario: CustomModelScenario) -> str:
     return f"the truth's {' and '.join(keys)} differing from the filter's" if keys else ""
 
 
-def build_problem(scenario, form: UpdateForm = "joseph", residual_pairs: bool = True) -> tuple[FixedGainProblem, str]:
+def build_problem(scenario, form: UpdateForm = "joseph", residual_pairs: bool = True) -> tuple[Problem, str]:
     """The verification problem of a built-in scenario and the sentence naming its model error.
 
     ``residual_pairs=False`` skips E[r_k r_j^T] over all pairs (and so the whiteness check), for long

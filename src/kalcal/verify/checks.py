@@ -106,13 +106,13 @@ def check_mean_error(
         rest, _ = _max_abs(_safe_ratio(s.mean_error - expected, se))
         if predicted > 0 and rest <= bound:
             detail += (
-                f". Explained by deterministic model error: {cause or 'the truth departs from the filter model'} "
+                f". Explained by the predicted systematic error: {cause or 'the truth departs from the filter model'} "
                 f"predicts a mean error of up to {predicted:.2f} sigma ({_where(info, kp, info.state_names[ip])}); "
                 f"after removing it the largest deviation is {rest:.2f} standard errors, within {bound:.2f}"
             )
         elif predicted > 0:
             detail += (
-                f". Deterministic model error ({cause or 'truth against filter model'}) predicts up to "
+                f". The predicted systematic error ({cause or 'truth against filter model'}) reaches "
                 f"{predicted:.2f} sigma but does not explain all of it ({rest:.2f} standard errors remain)"
             )
         else:
