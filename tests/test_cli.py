@@ -314,3 +314,17 @@ def test_out_path_that_is_a_file_is_exit_status_2(short_logs, tmp_path):
     )
     assert result.exit_code == 2
     assert result.stderr.count("\n") <= 1 and "not_a_directory" in result.stderr
+
+
+def test_console_script_usage_errors_are_one_line_with_status_2():
+    """Errors of the option parser itself (not kalcal's own checks) go through main() too."""
+    import subprocess
+    import sys
+
+    for args in (["verify", "-n", "abc"], ["verify", "--bogus"], ["calibrate"]):
+        done = subprocess.run([sys.executable, "-m", "kalcal.cli", *args], capture_output=True, text=True)
+        assert done.returncode == 2, (args, done.stderr)
+        lines = [line for line in done.stderr.splitlines() if line.strip()]
+        assert len(lines) == 1 and lines[0].startswith("kalcal: error: "), (args, done.stderr)
+    done = subprocess.run([sys.executable, "-m", "kalcal.cli"], capture_output=True, text=True)
+    assert done.returncode == 0 and "Usage" in done.stdout

@@ -34,7 +34,7 @@ SetOpt = Annotated[
     Optional[list[str]],
     typer.Option("--set", help="Override a setting, section.key=value (repeatable), e.g. truth.bias_std=0.2."),
 ]
-ConfigOpt = Annotated[Optional[Path], typer.Option("--config", help="TOML file of [scenario], [truth], [filter] settings.")]
+ConfigOpt = Annotated[Optional[Path], typer.Option("--config", help="TOML file of \\[scenario], \\[truth], \\[filter] settings.")]
 
 
 @contextlib.contextmanager
@@ -398,7 +398,7 @@ def noise(
         Optional[str], typer.Option("--imu-columns", help="Map roles to columns, e.g. time=t,accel=ax.")
     ] = None,
 ) -> None:
-    """Identify accelerometer noise from a static log: Allan deviation, N, B, K and the [filter] settings.
+    """Identify accelerometer noise from a static log: Allan deviation, N, B, K and the \\[filter] settings.
 
     N (velocity random walk, m/s/sqrt(s)) from the -1/2 slope, B (bias instability, m/s^2) from the flat
     minimum, K (rate random walk, m/s^2/sqrt(s)) from the +1/2 slope; filter.toml holds accel_noise_std
@@ -456,9 +456,25 @@ def report(
     console.print(f"wrote {page}")
 
 
-def main() -> None:  # pragma: no cover - the console script
-    app(prog_name="kalcal")
+def main() -> None:
+    """The console script: the app, with click's own usage errors (a bad option value, a missing
+    argument) as one line on stderr and exit status 2, like every other bad input."""
+    # typer carries its own copy of click: TyperException is the base of its usage errors
+    from typer.exceptions import TyperException
+
+    try:
+        code = app(prog_name="kalcal", standalone_mode=False)
+    except typer.Abort:
+        error_console.print("kalcal: aborted", markup=False)
+        sys.exit(130)
+    except TyperException as exc:
+        if type(exc).__name__ == "NoArgsIsHelpError":  # bare `kalcal`: the help, as the user asked for nothing
+            app(["--help"], prog_name="kalcal")
+        message = exc.format_message() if hasattr(exc, "format_message") else str(exc)
+        error_console.print(f"kalcal: error: {message}", markup=False)
+        sys.exit(getattr(exc, "exit_code", 2) or 2)
+    sys.exit(code or 0)
 
 
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+if __name__ == "__main__":
+    main()
