@@ -54,7 +54,7 @@ def test_curve_is_the_overlapping_allan_deviation_from_its_definition():
     rate, accel = 100.0, static_log(0, 100.0, 30.0, 0.03, walk=1e-3)
     curve = allan_curve(accel, rate)
     phase = np.concatenate([[0.0], np.cumsum(accel - accel.mean()) / rate])  # velocity, m/s
-    for i, m in enumerate([1, 4, 32, 256]):
+    for m in [1, 4, 32, 256]:
         second = phase[2 * m :] - 2 * phase[m:-m] + phase[: -2 * m]
         tau = m / rate
         expected = np.sqrt(np.sum(second**2) / (2 * tau**2 * second.size))

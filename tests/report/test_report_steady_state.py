@@ -79,7 +79,7 @@ def test_stabilizing_steady_state_is_tabled_beside_the_time_varying_filter(repor
     assert "No stabilizing solution" not in section and 'id="fig-steady_state"' in section
     sigma = np.sqrt(view.result.posterior_cov[0, 0])
     assert f"<td class='num'>{sigma:.4g}</td>" in section
-    for i, k_i in enumerate(view.convergence.state_update):
+    for k_i in view.convergence.state_update:
         assert f"update {k_i + 1}, t = {view.times[k_i]:.4g} s" in section
 
 

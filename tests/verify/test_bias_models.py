@@ -43,7 +43,7 @@ def test_gauss_markov_and_walk_bias_statistics_of_the_sampler(model):
     """The per-sample bias path: its variance at 30 s is sigma_b^2 + K q_b (walk) or sigma_b^2 (stationary)."""
     scenario = build_scenario("accel-gps", None, model)
     states, _ = sample_accel_gps_errors(scenario, np.random.default_rng(3), 20000)
-    t, dt = scenario.truth, scenario.scenario.sample_period
+    t = scenario.truth
     samples = scenario.scenario.n_samples
     expected = t.bias_std**2 + samples * t.bias_walk_std**2 if t.bias_correlation_time == 0 else t.bias_std**2
     # sample variance of N normals: relative sd sqrt(2 / (N - 1)); 4.5 sd

@@ -31,7 +31,6 @@ class SequentialRun(NamedTuple):
 @numba.njit(cache=True, nogil=True)
 def _run(phis, qs, h, vs, z, x0, m0, states, covs, residuals, innovations, prior_states, prior_covs):
     n_fixes, d = states.shape
-    p = h.shape[0]
     x = x0.copy()
     cov = m0.copy()
     eye = np.eye(d)
