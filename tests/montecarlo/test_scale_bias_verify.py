@@ -41,6 +41,9 @@ def test_compiled_block_sums_equal_the_numpy_path(settings):
     for f in fields(MomentSums):
         if f.name == "count":
             continue
+        if getattr(slow, f.name) is None:  # optional sums neither path keeps for this problem
+            assert getattr(fast, f.name) is None, f.name
+            continue
         a, b = np.asarray(getattr(fast, f.name)), np.asarray(getattr(slow, f.name))
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-11 * max(np.abs(b).max(), 1e-300), err_msg=f.name)
     without = ScaleBiasProblem(problem.scenario, residual_pairs=False).block_sums(np.random.default_rng(11), 300, "exact")

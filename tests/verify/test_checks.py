@@ -87,3 +87,12 @@ def test_mean_error_z_scores_are_standard_normal_on_a_correct_model():
     # one state per update time is nearly independent across well-separated updates: take every 5th
     z = (s.mean_error / np.sqrt(np.diagonal(s.error_cov, axis1=1, axis2=2) / s.count))[::5, 0]
     assert stats.kstest(z, "norm").pvalue > 0.001
+
+
+def test_nis_failure_is_attributed_to_the_mean_residuals_or_to_the_noise():
+    """The centered mean NIS (E|nu|^2 - |E nu|^2) separates a biased filter from a mistuned one."""
+    biased = _checks(20000, seed=5)["nis"]  # Euler against the analytic truth: mean innovations
+    assert not biased.passed and "nonzero mean residuals account for it" in biased.detail
+    mistuned = _checks(20000, seed=6, **{"scenario.truth": "discrete", "filter.gps_position_std": 0.5})["nis"]
+    assert not mistuned.passed and mistuned.statistic > mistuned.upper
+    assert "noise settings are too small" in mistuned.detail and "account for it" not in mistuned.detail

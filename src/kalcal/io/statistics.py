@@ -41,6 +41,11 @@ def statistics_dataset(
         "mean_nis": (("time",), s.mean_nis, "mean of r^T S^-1 r"),
         "mean_residual": (("time", "measurement"), s.mean_residual, "ensemble mean of the innovation r"),
         "residual_own_moment": (("time", "measurement", "measurement2"), s.residual_own_moment, "E[r_k r_k^T]"),
+        "mean_normalized_residual": (
+            ("time", "measurement"),
+            s.mean_normalized_residual,
+            "E[L_k^-1 r_k], S_k = L_k L_k^T (where the filter's S is known)",
+        ),
         "residual_second_moment": (
             ("time", "measurement", "time2", "measurement2"),
             s.residual_second_moment,
@@ -104,6 +109,9 @@ def statistics_from_dataset(dataset: xr.Dataset) -> EnsembleStatistics:
         residual_own_moment=dataset["residual_own_moment"].values,
         residual_second_moment=(
             dataset["residual_second_moment"].values if "residual_second_moment" in dataset else None
+        ),
+        mean_normalized_residual=(
+            dataset["mean_normalized_residual"].values if "mean_normalized_residual" in dataset else None
         ),
     )
 

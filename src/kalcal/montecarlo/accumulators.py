@@ -25,6 +25,7 @@ class BlockResult(NamedTuple):
     nees: np.ndarray  #: e_k^T P_k^{-1} e_k, (n, K)
     nis: np.ndarray  #: r_k^T S_k^{-1} r_k, (n, K)
     filter_cov_sum: np.ndarray  #: sum over the n realizations of the filter's P_k, (K, d, d)
+    normalized_residual: np.ndarray | None = None  #: L_k^{-1} r_k with S_k = L_k L_k^T, (n, K, p), if known
 
 
 class ResidualProducts:
@@ -68,6 +69,7 @@ class MomentSums:
     residual_own: np.ndarray  #: sum r_k r_k^T, (K, p, p)
     residual_outer: np.ndarray | None  #: upper triangle of sum r r^T over all pairs, (K p, K p)
     filter_cov: np.ndarray  #: sum of the filter's P_k, (K, d, d)
+    normalized_residual: np.ndarray | None = None  #: sum of L_k^{-1} r_k, (K, p), where the problem knows S_k
 
     @classmethod
     def from_block(cls, block: BlockResult) -> MomentSums:
@@ -89,6 +91,7 @@ class MomentSums:
             residual_own=np.einsum("nka,nkb->kab", block.residual, block.residual),
             residual_outer=outer,
             filter_cov=np.asarray(block.filter_cov_sum, dtype=float),
+            normalized_residual=None if block.normalized_residual is None else block.normalized_residual.sum(axis=0),
         )
 
     def merge(self, other: MomentSums) -> MomentSums:
@@ -130,6 +133,7 @@ class EnsembleStatistics:
     mean_residual: np.ndarray  #: (K, p)
     residual_own_moment: np.ndarray  #: E[r_k r_k^T], (K, p, p)
     residual_second_moment: np.ndarray | None  #: E[r_k r_j^T] over all pairs, (K, p, K, p), if kept
+    mean_normalized_residual: np.ndarray | None = None  #: E[L_k^{-1} r_k], (K, p), where known
 
 
 def ensemble_statistics(sums: MomentSums) -> EnsembleStatistics:
@@ -153,4 +157,5 @@ def ensemble_statistics(sums: MomentSums) -> EnsembleStatistics:
         mean_residual=sums.residual / n,
         residual_own_moment=sums.residual_own / n,
         residual_second_moment=residual_second_moment(sums),
+        mean_normalized_residual=None if sums.normalized_residual is None else sums.normalized_residual / n,
     )

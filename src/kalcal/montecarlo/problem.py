@@ -134,6 +134,7 @@ class FixedGainProblem:
             nees=np.einsum("nki,nki->nk", whitened_error, whitened_error),
             nis=np.einsum("nki,nki->nk", whitened_residual, whitened_residual),
             filter_cov_sum=n * self.schedule.posterior_cov,
+            normalized_residual=whitened_residual,
         )
 
     def block_sums(self, rng: np.random.Generator, n: int, engine: str) -> MomentSums:
@@ -189,6 +190,8 @@ class FixedGainProblem:
             nis=np.einsum("kij,kij->k", self._innovation_inverse, sums["residual_own"]),
             residual_outer=ResidualProducts.upper(residuals) if self.residual_pairs else None,
             filter_cov=n * self.schedule.posterior_cov,
+            # the whitening is linear, so the sum of L^{-1} r is L^{-1} times the sum of r
+            normalized_residual=np.einsum("kij,kj->ki", self._innovation_whitener, sums["residual"]),
         )
 
     def expected_mean_error(self) -> np.ndarray:

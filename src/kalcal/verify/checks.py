@@ -234,10 +234,20 @@ def check_nis(s: EnsembleStatistics, info: ProblemInfo, confidence: float) -> Ch
         f"t = {info.update_times[k]:g} s"
     )
     if not passed:
+        if s.mean_normalized_residual is not None:
+            # E|nu - E nu|^2 = E|nu|^2 - |E nu|^2 for the normalized innovations nu = L^{-1} r
+            centered = s.mean_nis - np.sum(s.mean_normalized_residual**2, axis=1)
+            if np.all((centered >= low) & (centered <= high)):
+                detail += (
+                    f". Centered on the mean innovations the mean NIS lies within the bounds "
+                    f"({centered.min():.4f} to {centered.max():.4f}): the nonzero mean residuals account for it "
+                    "(see mean_error)"
+                )
+                return CheckResult("nis", passed, worst, low, high, confidence, n_updates, detail)
         detail += (
-            ". Innovations larger than the filter's S: noise settings too small or a mean error in the residuals"
+            ". Innovations larger than the filter's S: the noise settings are too small"
             if worst > p
-            else ". Innovations smaller than the filter's S: noise settings too large"
+            else ". Innovations smaller than the filter's S: the noise settings are too large"
         )
     return CheckResult("nis", passed, worst, low, high, confidence, n_updates, detail)
 
