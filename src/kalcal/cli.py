@@ -112,6 +112,9 @@ def calibrate(
     out: Annotated[Path, typer.Option("--out", help="Directory for estimates.csv and summary.json.")] = Path(
         "kalcal-cal"
     ),
+    strict: Annotated[
+        bool, typer.Option("--strict", help="Exit with status 1 when a warning is raised or the diagnostics say inconsistent.")
+    ] = False,
     set_: SetOpt = None,
     config: ConfigOpt = None,
 ) -> None:
@@ -126,7 +129,9 @@ def calibrate(
             option = "--form" if form != "joseph" else "--smooth"
             with user_errors():
                 raise KalcalError(f"{option}: not available for scale-bias (accel-gps only)")
-        return _calibrate_scale_bias(data, reference, sensor, out, set_, config, imu is not None or gps is not None)
+        return _calibrate_scale_bias(
+            data, reference, sensor, out, set_, config, imu is not None or gps is not None, strict
+        )
     from kalcal.jobs.calibrate import calibrate_accel_gps_files
 
     with user_errors():
@@ -167,15 +172,22 @@ def calibrate(
             f"{smoothed['bias_std']:.3g} m/s^2, position {smoothed['position']:.6g} ± {smoothed['position_std']:.3g} m",
             markup=False,
         )
-    for warning in summary["warnings"]:
-        error_console.print(f"kalcal: warning: {warning}", markup=False)
+    _print_warnings(summary)
     diagnostics = summary["diagnostics"]
     style = "green" if diagnostics["consistent"] else "bold red"
     console.print(f"diagnostics: [{style}]{escape(diagnostics['verdict'])}[/{style}]")
     console.print(f"wrote {Path(out) / 'estimates.csv'}, {Path(out) / 'summary.json'} and {Path(out) / 'calibration.png'}")
+    if strict and (summary["warnings"] or not diagnostics["consistent"]):
+        raise typer.Exit(1)
 
 
-def _calibrate_scale_bias(data, reference, sensor, out, set_, config, imu_or_gps: bool) -> None:
+def _print_warnings(summary: dict) -> None:
+    """Each of the summary's warnings as one line on stderr."""
+    for warning in summary["warnings"]:
+        error_console.print(f"kalcal: warning: {warning['message']}", markup=False)
+
+
+def _calibrate_scale_bias(data, reference, sensor, out, set_, config, imu_or_gps: bool, strict: bool = False) -> None:
     """``kalcal calibrate scale-bias``: the scale error and bias of a sensor against a reference."""
     from kalcal.jobs.scale_bias import calibrate_scale_bias_file
 
@@ -200,7 +212,10 @@ def _calibrate_scale_bias(data, reference, sensor, out, set_, config, imu_or_gps
     ):
         table.add_row(name, f"{value:.6g}", f"{std:.3g}", unit_)
     console.print(table)
+    _print_warnings(summary)
     console.print(f"wrote {Path(out) / 'estimates.csv'} and {Path(out) / 'summary.json'}")
+    if strict and summary["warnings"]:
+        raise typer.Exit(1)
 
 
 def _progress_bar(total_label: str):
@@ -397,6 +412,9 @@ def noise(
     imu_columns: Annotated[
         Optional[str], typer.Option("--imu-columns", help="Map roles to columns, e.g. time=t,accel=ax.")
     ] = None,
+    strict: Annotated[
+        bool, typer.Option("--strict", help="Refuse (exit status 2, nothing written) a log that does not look static.")
+    ] = False,
 ) -> None:
     """Identify accelerometer noise from a static log: Allan deviation, N, B, K and the \\[filter] settings.
 
@@ -411,7 +429,7 @@ def noise(
     with user_errors():
         if imu is None:
             raise KalcalError("--imu: required (a static accelerometer log: time [s], accel [m/s^2])")
-        summary = identify_noise_file(imu, out, imu_columns=imu_columns)
+        summary = identify_noise_file(imu, out, imu_columns=imu_columns, strict=strict)
     table = Table(
         title=(
             f"kalcal noise: {summary['samples']:,} samples at {summary['rate']['value']:.6g} Hz, "
@@ -439,6 +457,7 @@ def noise(
         console.print("read off the curve: " + "; ".join(regions), markup=False)
     for note in summary["notes"]:
         console.print(f"note: {escape(note)}")
+    _print_warnings(summary)
     files = summary["files"]
     console.print(f"wrote {files['summary']}, {files['allan']}, {files['plot']} and {files['filter']}")
 

@@ -14,7 +14,11 @@ Real logs, as they are:
   reported, and the run stops if asked to.
 * **GPS outages** are simply long intervals: the covariance grows as the model says.
 * **Fixes with a NaN** field are skipped and counted; fixes outside the accelerometer log likewise.
-* **Per-fix accuracy** (``position_std``, ``velocity_std``) replaces the filter's GPS noise for that fix.
+* **Per-fix accuracy** (``position_std``, ``velocity_std``) replaces the filter's GPS noise for that fix;
+  a NaN there means the filter's setting, and the fixes that took it are counted and flagged.
+* **Implausible logs** are refused before any filtering (:mod:`kalcal.calibrate.plausibility`): a rate
+  outside its sensor's range, a value beyond its physical limit, velocity fixes in another unit than
+  the positions' finite differences; a gross velocity/position disagreement of no known unit is flagged.
 
 The model's transition depends on elapsed time only, Phi(s) = exp(A s) with A = [[0, 1, 0],
 [0, 0, -1], [0, 0, -1/tau]] (tau the bias's correlation time; the last entry is 0 for a constant or
@@ -27,11 +31,14 @@ share of a whole interval).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
 
+from kalcal.calibrate import plausibility
+from kalcal.calibrate.plausibility import CalibrationWarning
 from kalcal.errors import DataError
 from kalcal.filters.kalman import (
     UpdateForm,
@@ -77,6 +84,9 @@ class AccelGpsCalibration:
     skipped_nan: int = 0  #: fixes skipped for a NaN field
     skipped_outside: int = 0  #: fixes skipped outside the accelerometer log
     gaps: list[ImuGap] = field(default_factory=list)
+    #: fixes used whose position_std / velocity_std was NaN and took the filter's setting
+    default_std: dict[str, int] = field(default_factory=lambda: {"position_std": 0, "velocity_std": 0})
+    warnings: list[CalibrationWarning] = field(default_factory=list)  #: what the log's user must know
     init: str = "prior"
     start_time: float = 0.0  #: s, where the nominal starts
     form: str = "joseph"  #: the filter's update form
@@ -226,6 +236,9 @@ def calibrate_accel_gps(
     form: UpdateForm = "joseph",
     source: str = "gps",
     imu_source: str = "imu",
+    imu_rate: float | None = None,
+    gps_rate: float | None = None,
+    columns: Mapping[str, str] | None = None,
 ) -> AccelGpsCalibration:
     """Run the report's filter over one log.
 
@@ -252,6 +265,18 @@ def calibrate_accel_gps(
         The update form: Joseph (the default, compiled), standard or square-root (numpy loops).
     source, imu_source : str
         Names of the GPS and accelerometer logs, quoted in errors.
+    imu_rate, gps_rate : float, optional
+        Rates the user stated (Hz, ``scenario.imu_rate`` / ``gps_rate``): the logs' median rates must lie
+        within a factor 2 of them. Whether or not given, each rate must be plausible for its sensor
+        (:mod:`kalcal.calibrate.plausibility`).
+    columns : mapping, optional
+        ``{role: column name in its file}`` for the roles time (of the GPS log), imu_time, accel,
+        position, velocity, position_std, velocity_std, quoted in errors (default: the role's name).
+
+    Raises
+    ------
+    DataError
+        For a log that cannot be used or is implausible, naming the log, the row or rate, and the value.
     """
     if init not in INITS:
         raise DataError(f"--init: expected one of {', '.join(INITS)}, got {init!r}")
@@ -269,6 +294,10 @@ def calibrate_accel_gps(
     if gps_time.size > 1 and not np.all(np.diff(gps_time) > 0):
         row = int(np.argmax(~(np.diff(gps_time) > 0))) + 2
         raise DataError(f"{source}: row {row}: time {gps_time[row - 1]:.9g} s does not increase")
+    _check_plausible(
+        imu_time, accel, gps_time, gps_position, gps_velocity, position_std, velocity_std,
+        source, imu_source, imu_rate, gps_rate, dict(columns or {}),
+    )
     period = float(np.median(steps))
     gaps = [
         ImuGap(row=int(j) + 2, start=float(imu_time[j]), length=float(steps[j]))
@@ -285,8 +314,9 @@ def calibrate_accel_gps(
     scheme = scenario.scenario.integration
     fix_std_p = np.full(gps_time.size, settings.gps_position_std) if position_std is None else np.asarray(position_std, float)
     fix_std_v = np.full(gps_time.size, settings.gps_velocity_std) if velocity_std is None else np.asarray(velocity_std, float)
-    fix_std_p = np.where(np.isfinite(fix_std_p), fix_std_p, settings.gps_position_std)
-    fix_std_v = np.where(np.isfinite(fix_std_v), fix_std_v, settings.gps_velocity_std)
+    nan_std_p, nan_std_v = ~np.isfinite(fix_std_p), ~np.isfinite(fix_std_v)
+    fix_std_p = np.where(nan_std_p, settings.gps_position_std, fix_std_p)
+    fix_std_v = np.where(nan_std_v, settings.gps_velocity_std, fix_std_v)
     for name, values in (("position_std", fix_std_p), ("velocity_std", fix_std_v)):
         if np.any(values <= 0):
             row = int(np.argmax(values <= 0)) + 1
@@ -305,6 +335,14 @@ def calibrate_accel_gps(
             f"{source}: needs at least two usable fixes within the accelerometer log, got {usable.size} "
             f"({np.count_nonzero(~finite)} with a NaN field, {np.count_nonzero(finite & ~inside)} outside the log)"
         )
+    warnings = _fix_warnings(
+        usable, gps_time, gps_position, gps_velocity, fix_std_p, fix_std_v, nan_std_p, nan_std_v,
+        settings, source, dict(columns or {}),
+    )
+    default_std = {
+        "position_std": int(np.count_nonzero(nan_std_p[usable])),
+        "velocity_std": int(np.count_nonzero(nan_std_v[usable])),
+    }
     if init == "first-fix":
         first, usable = usable[0], usable[1:]
         start_time = float(gps_time[first])
@@ -376,6 +414,8 @@ def calibrate_accel_gps(
         skipped_nan=int(np.count_nonzero(~finite)),
         skipped_outside=int(np.count_nonzero(finite & ~inside)),
         gaps=gaps,
+        default_std=default_std,
+        warnings=warnings,
         init=init,
         start_time=start_time,
         form=form,
@@ -385,3 +425,57 @@ def calibrate_accel_gps(
         prior_covariance=symmetrize(run.prior_cov),
         transitions=phis,
     )
+
+
+def _check_plausible(
+    imu_time, accel, gps_time, position, velocity, position_std, velocity_std,
+    source: str, imu_source: str, imu_rate: float | None, gps_rate: float | None, columns: dict[str, str],
+) -> None:
+    """Refuse implausible logs (DataError): rates, then every value against its physical limit (fix times
+    excepted: a fix outside the accelerometer log is skipped and counted)."""
+
+    def name(role: str, default: str | None = None) -> str:
+        return columns.get(role, default or role)
+
+    rate = plausibility.check_rate(
+        imu_time, "accelerometer", imu_source, name("imu_time", "time"), expected=imu_rate, setting="scenario.imu_rate"
+    )
+    fix_rate = plausibility.check_rate(gps_time, "gnss", source, name("time"), expected=gps_rate, setting="scenario.gps_rate")
+    plausibility.check_imu_faster(rate, fix_rate, imu_source)
+    checks = [
+        (imu_time, "time", imu_source, name("imu_time", "time")),
+        (accel, "accel", imu_source, name("accel")),
+        (position, "position", source, name("position")),
+        (velocity, "velocity", source, name("velocity")),
+        (position_std, "position", source, name("position_std")),
+        (velocity_std, "velocity", source, name("velocity_std")),
+    ]
+    for values, quantity, log, column in checks:
+        if values is not None:
+            plausibility.check_limit(values, quantity, log, column)
+
+
+def _fix_warnings(
+    usable, gps_time, position, velocity, std_p, std_v, nan_std_p, nan_std_v, settings, source: str,
+    columns: dict[str, str],
+) -> list[CalibrationWarning]:
+    """What the fixes used need said: per-fix stds that were NaN, velocities that disagree with positions."""
+    warnings = []
+    for role, nan, default in (
+        ("position_std", nan_std_p, settings.gps_position_std),
+        ("velocity_std", nan_std_v, settings.gps_velocity_std),
+    ):
+        count = int(np.count_nonzero(nan[usable]))
+        if count:
+            warnings.append(
+                CalibrationWarning(
+                    "default-fix-std",
+                    f"{source}: column {columns.get(role, role)!r}: {count} fix(es) used have no value (NaN) and "
+                    f"took the filter's setting {default:g}",
+                )
+            )
+    mismatch = plausibility.velocity_consistency(
+        gps_time[usable], position[usable], velocity[usable], std_p[usable], std_v[usable], source,
+        (columns.get("position", "position"), columns.get("velocity", "velocity")),
+    )
+    return warnings + ([mismatch] if mismatch is not None else [])

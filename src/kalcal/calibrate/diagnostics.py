@@ -9,6 +9,7 @@ N(0, I). Two tests, each at the stated confidence (Bonferroni over the measured 
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -60,7 +61,11 @@ def innovation_diagnostics(
     lags = int(max(1, min(20, n_fixes // 5)))
     statistics, pvalues = [], []
     for component in range(p):
-        table = acorr_ljungbox(normalized[:, component], lags=[lags])
+        # A degenerate series (constant, or too short for the lags) would make statsmodels divide by zero:
+        # its NaN p-value then fails no test, and no library warning reaches the user.
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            table = acorr_ljungbox(normalized[:, component], lags=[lags])
         statistics.append(float(table["lb_stat"].iloc[0]))
         pvalues.append(float(table["lb_pvalue"].iloc[0]))
     problems = []

@@ -4,6 +4,11 @@ The note's filter runs over the samples in order: theta = [theta1, theta2] with
 reference_k = theta1 sensor_k + theta2 + w_k, then a = 1 - 1 / theta1 and b = theta2 / theta1 with
 their covariance by the delta method, J P J^T, J = d(a, b) / d(theta1, theta2). A sample whose reference
 or sensor value is missing (NaN) is skipped: only the time propagation (Q) is applied.
+
+Observability. A parameter the log does not excite (a sensor that reads a constant: only theta1 z + theta2
+is seen, not theta1 and theta2 apart) keeps about the sigma it would have with no data at all,
+sqrt(P_0,ii + K Q_ii) after K samples. Where the final posterior sigma is above ``UNOBSERVABLE_RATIO``
+times that, the parameter is reported as unobservable (:meth:`ScaleBiasCalibration.unobservable`).
 """
 
 from __future__ import annotations
@@ -12,9 +17,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from kalcal.calibrate.plausibility import CalibrationWarning
 from kalcal.errors import DataError
 from kalcal.filters.scale_bias import filter_scale_bias
-from kalcal.models.scale_bias import ScaleBiasScenario, scale_bias_from_theta, scale_bias_jacobian
+from kalcal.models.scale_bias import STATE_NAMES, ScaleBiasScenario, scale_bias_from_theta, scale_bias_jacobian
+
+#: a final sigma above this share of the no-data sigma means the log taught the filter little about it
+UNOBSERVABLE_RATIO = 0.5
 
 
 @dataclass(frozen=True)
@@ -27,6 +36,32 @@ class ScaleBiasCalibration:
     residual: np.ndarray  #: innovations r_k, NaN where skipped, (K,)
     innovation_var: np.ndarray  #: S_k, NaN where skipped, (K,)
     used: np.ndarray  #: whether sample k updated the filter, bool (K,)
+    #: sigma of theta1, theta2 with no data after the K samples, sqrt(P_0,ii + K Q_ii), (2,)
+    prior_std: np.ndarray | None = None
+
+    @property
+    def std_ratio(self) -> np.ndarray:
+        """Final sigma / no-data sigma of theta1 and theta2, (2,): near 1 where nothing was learned."""
+        return self.std[-1] / self.prior_std
+
+    def unobservable(self, threshold: float = UNOBSERVABLE_RATIO) -> list[str]:
+        """The parameters (of theta1, theta2) whose final sigma is above ``threshold`` times the no-data sigma."""
+        return [name for name, ratio in zip(STATE_NAMES, self.std_ratio) if ratio > threshold]
+
+    def warnings(self, source: str = "data") -> list[CalibrationWarning]:
+        """An ``unobservable`` warning naming the parameters the log did not excite, if any."""
+        names = self.unobservable()
+        if not names:
+            return []
+        ratios = ", ".join(f"{name} {ratio:.2f}" for name, ratio in zip(STATE_NAMES, self.std_ratio) if name in names)
+        return [
+            CalibrationWarning(
+                "unobservable",
+                f"{source}: {' and '.join(names)} unobservable (no excitation): the final sigma is above "
+                f"{UNOBSERVABLE_RATIO:g} of the sigma with no data ({ratios}), so the estimate is the prior's, not "
+                "the log's; the sensor must vary over its range (scale_error and bias follow from both)",
+            )
+        ]
 
     @property
     def std(self) -> np.ndarray:
@@ -91,6 +126,7 @@ def calibrate_scale_bias(
         residual=run.residual,
         innovation_var=run.innovation_var,
         used=run.used,
+        prior_std=np.sqrt(np.diag(scenario.filter_prior().cov + reference.size * scenario.filter_process_noise())),
     )
     theta1 = float(result.theta[-1, 0])
     if not theta1 > 0:

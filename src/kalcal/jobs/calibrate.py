@@ -9,16 +9,28 @@ import numpy as np
 
 from kalcal.calibrate.accel_gps import calibrate_accel_gps
 from kalcal.calibrate.diagnostics import innovation_diagnostics
+from kalcal.calibrate.plausibility import CalibrationWarning
 from kalcal.calibrate.smoothing import smooth_calibration
 from kalcal.io.logs import numeric_columns, parse_column_map, read_table, require_increasing
 from kalcal.io.results import write_csv, write_json
-from kalcal.models.accel_gps import AccelGpsScenario
+from kalcal.models.accel_gps import AccelGpsScenario, AccelGpsSettings
 from kalcal.models.config import section_values
 from kalcal.plots.calibration import plot_calibration
 
 
 IMU_ROLES = ("time", "accel")
 GPS_ROLES = ("time", "position", "velocity", "position_std", "velocity_std")
+
+
+def stated_rates(scenario: AccelGpsScenario) -> dict[str, float]:
+    """``scenario.imu_rate`` and ``gps_rate`` where set to other than their defaults (200 Hz, 5 Hz): the
+    rates the logs are then held to (Hz), as ``{"imu_rate": ..., "gps_rate": ...}``."""
+    defaults = AccelGpsSettings()
+    return {
+        key: getattr(scenario.scenario, key)
+        for key in ("imu_rate", "gps_rate")
+        if getattr(scenario.scenario, key) != getattr(defaults, key)
+    }
 
 
 def calibrate_accel_gps_files(
@@ -43,6 +55,10 @@ def calibrate_accel_gps_files(
     update form (joseph, standard or sqrt); ``smooth`` adds the RTS-smoothed states and their 1-sigma
     (``smoothed_position``, ..., ``smoothed_bias_std``) to ``estimates.csv`` and a ``smoothed`` object to
     ``summary.json``.
+
+    Implausible logs are refused (:mod:`kalcal.calibrate.plausibility`); the summary's ``warnings`` is a
+    list of ``{"code", "message"}`` (empty when none), and ``fixes_default_std`` counts the fixes used whose
+    ``position_std`` / ``velocity_std`` was NaN and took the filter's setting.
     """
     imu_map = parse_column_map(imu_columns, IMU_ROLES, "--imu-columns")
     gps_map = parse_column_map(gps_columns, GPS_ROLES, "--gps-columns")
@@ -72,6 +88,8 @@ def calibrate_accel_gps_files(
         form=form,
         source=str(gps_path),
         imu_source=str(imu_path),
+        **stated_rates(scenario),
+        columns={**{role: gps_map[role] for role in GPS_ROLES}, "imu_time": imu_map["time"], "accel": imu_map["accel"]},
     )
     std = result.std
     normalized = result.normalized_innovations
@@ -101,16 +119,23 @@ def calibrate_accel_gps_files(
         },
     )
     diagnostics = innovation_diagnostics(normalized)
-    warnings = []
+    warnings = list(result.warnings)
     if result.skipped_nan:
-        warnings.append(f"{result.skipped_nan} fix(es) with a NaN field skipped")
+        warnings.append(CalibrationWarning("fixes-skipped-nan", f"{result.skipped_nan} fix(es) with a NaN field skipped"))
     if result.skipped_outside:
-        warnings.append(f"{result.skipped_outside} fix(es) outside the accelerometer log skipped")
+        warnings.append(
+            CalibrationWarning(
+                "fixes-skipped-outside", f"{result.skipped_outside} fix(es) outside the accelerometer log skipped"
+            )
+        )
     if result.gaps:
         longest = max(result.gaps, key=lambda gap: gap.length)
         warnings.append(
-            f"{len(result.gaps)} accelerometer gap(s) longer than {max_imu_gap:g} sample periods, the longest "
-            f"{longest.length:.6g} s after t = {longest.start:.9g} s (row {longest.row})"
+            CalibrationWarning(
+                "imu-gaps",
+                f"{len(result.gaps)} accelerometer gap(s) longer than {max_imu_gap:g} sample periods, the longest "
+                f"{longest.length:.6g} s after t = {longest.start:.9g} s (row {longest.row})",
+            )
         )
     summary = {
         "scenario": scenario.NAME,
@@ -123,6 +148,7 @@ def calibrate_accel_gps_files(
         "fixes_used": int(result.time.size),
         "fixes_skipped_nan": result.skipped_nan,
         "fixes_skipped_outside": result.skipped_outside,
+        "fixes_default_std": result.default_std,
         "imu_gaps": [gap.__dict__ for gap in result.gaps],
         "time": float(result.time[-1]),
         "bias": float(result.bias[-1]),
@@ -134,7 +160,7 @@ def calibrate_accel_gps_files(
         "covariance": result.covariance[-1],
         "covariance_states": list(scenario.state_names),
         "diagnostics": diagnostics.as_dict(),
-        "warnings": warnings,
+        "warnings": [warning.as_dict() for warning in warnings],
         "units": {"time": "s", **dict(zip(scenario.state_names, scenario.state_units))},
     }
     if scenario.has_scale:

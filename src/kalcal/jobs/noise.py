@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from kalcal.calibrate.noise import NoiseIdentification, identify_noise, regular_rate
+from kalcal.calibrate.plausibility import CalibrationWarning, check_limit, check_rate
 from kalcal.errors import DataError
 from kalcal.io.logs import numeric_columns, parse_column_map, read_table, require_increasing
 from kalcal.io.results import write_csv, write_json
@@ -54,13 +55,22 @@ def filter_toml(result: NoiseIdentification, settings: dict[str, float], source:
 
 
 def identify_noise_file(
-    imu_path: str | Path, out: str | Path, *, imu_columns: str | None = None, confidence: float = 0.95
+    imu_path: str | Path,
+    out: str | Path,
+    *,
+    imu_columns: str | None = None,
+    confidence: float = 0.95,
+    strict: bool = False,
 ) -> dict[str, Any]:
     """Identify the noise of a static accelerometer log (time [s], accel [m/s^2]; CSV or Parquet).
 
     Writes ``out/summary.json``, ``out/allan.csv`` (tau [s], adev and its bounds [m/s^2], edf, noise type),
     ``out/allan.png`` and ``out/filter.toml``; returns the summary. The log must be evenly sampled (steps
-    within 1% of the median step). Columns are mapped with ``"time=t,accel=ax"``.
+    within 1% of the median step), at a plausible accelerometer rate, with every sample within the physical
+    limit (:mod:`kalcal.calibrate.plausibility`). Columns are mapped with ``"time=t,accel=ax"``. A log that
+    does not look static (:func:`~kalcal.calibrate.noise.motion_warnings`) is flagged in the summary's
+    ``warnings`` (``{"code", "message"}`` each, empty when none) and at the top of ``filter.toml``; with
+    ``strict`` it is refused (DataError) before anything is written.
     """
     imu_map = parse_column_map(imu_columns, IMU_ROLES, "--imu-columns")
     frame = read_table(imu_path)
@@ -68,10 +78,15 @@ def identify_noise_file(
     time, accel = imu["time"], imu["accel"]
     require_increasing(time, imu_path, imu_map["time"])
     rate = regular_rate(time, str(imu_path), imu_map["time"])
+    check_rate(time, "accelerometer", str(imu_path), imu_map["time"])
+    check_limit(time, "time", str(imu_path), imu_map["time"])
     try:
         result = identify_noise(accel, rate, confidence, duration=float(time[-1] - time[0]))
     except DataError as exc:
         raise DataError(f"{imu_path}: column {imu_map['accel']!r}: {exc}") from None
+    warnings = [CalibrationWarning(w.code, f"{imu_path}: {w.message}") for w in result.warnings]
+    if strict and warnings:
+        raise DataError(f"{warnings[0].message} (--strict: refused, nothing written)")
 
     out = Path(out)
     settings = filter_settings(result)
@@ -96,7 +111,8 @@ def identify_noise_file(
         },
     )
     plot_allan(result, paths["plot"], title=f"kalcal noise: {Path(imu_path).name}")
-    paths["filter"].write_text(filter_toml(result, settings, str(imu_path)))
+    flagged = "".join(f"# WARNING: {w.message}\n" for w in warnings)
+    paths["filter"].write_text(flagged + filter_toml(result, settings, str(imu_path)))
     summary = {
         "imu": str(imu_path),
         "columns": imu_map,
@@ -126,6 +142,7 @@ def identify_noise_file(
             "units": {"tau": "s", "adev": "m/s^2"},
         },
         "files": {name: str(path) for name, path in paths.items()},
+        "warnings": [warning.as_dict() for warning in warnings],
     }
     write_json(paths["summary"], summary)
     return summary

@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from kalcal.calibrate.scale_bias import calibrate_scale_bias
+from kalcal.calibrate.scale_bias import UNOBSERVABLE_RATIO, calibrate_scale_bias
 from kalcal.errors import DataError
 from kalcal.io.logs import numeric_columns, read_table, require_increasing
 from kalcal.io.results import write_csv, write_json
@@ -61,7 +61,9 @@ def calibrate_scale_bias_file(
     A ``time`` column [s] is used when the log has one (it must increase); otherwise sample k = 1..K is
     put at k / ``scenario.rate``. Empty cells in the two signal columns are skipped samples. Writes
     ``out/estimates.csv`` (time, theta1, theta2, theta1_std, theta2_std after each sample) and
-    ``out/summary.json``; returns the summary.
+    ``out/summary.json``; returns the summary. ``summary["observability"]`` holds each theta's final sigma
+    over its no-data sigma and the parameters above ``UNOBSERVABLE_RATIO`` (0.5), which ``warnings`` (a
+    list of ``{"code", "message"}``, empty when none) then names.
     """
     frame = read_table(data_path)
     if reference == sensor:
@@ -107,6 +109,13 @@ def calibrate_scale_bias_file(
         "bias_std": float(np.sqrt(ab_cov[1, 1])),
         "scale_bias_correlation": float(ab_cov[0, 1] / np.sqrt(ab_cov[0, 0] * ab_cov[1, 1])),
         "mean_nis": result.mean_nis,
+        "observability": {
+            "std_ratio": dict(zip(STATE_NAMES, result.std_ratio.tolist())),
+            "threshold": UNOBSERVABLE_RATIO,
+            "unobservable": result.unobservable(),
+            "note": "final sigma / sigma with no data; above the threshold the log did not excite the parameter",
+        },
+        "warnings": [warning.as_dict() for warning in result.warnings(str(data_path))],
         "units": {"time": "s", "theta1": "1", "theta2": unit, "scale_error": "1", "bias": unit},
     }
     write_json(out / "summary.json", summary)

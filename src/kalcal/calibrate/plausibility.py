@@ -1,0 +1,251 @@
+"""Is a log plausible for the sensor it claims to be? Rates, physical limits and unit slips.
+
+A log with times in milliseconds, a velocity in km/h or one corrupt sample of 1e300 still runs through a
+Kalman filter and gives a confident number; these checks refuse such logs (:class:`~kalcal.errors.DataError`,
+naming the file, the row or the rate and the likely unit) or flag them (:class:`CalibrationWarning`, a
+code and a message that the jobs write into ``summary.json`` ``warnings`` and the CLI prints).
+
+The ranges and limits, chosen wide enough for every sensor kalcal is meant for and narrow enough to
+catch the usual unit slips:
+
+==============================  =======================  ==========================================
+quantity                        plausible                why
+==============================  =======================  ==========================================
+accelerometer sample rate       1 Hz .. 100 kHz          the median sample interval; an IMU below
+                                                         1 Hz or above 100 kHz is a unit slip
+GNSS fix rate                   0.01 Hz .. 100 Hz        one fix per 100 s .. a 100 Hz receiver
+accelerometer rate vs GNSS      at least the fix rate    the accelerometer is the fast sensor
+a rate the user set             within a factor of 2     ``scenario.imu_rate`` / ``gps_rate``
+abs(acceleration)               <= 1e4 m/s^2             about 1000 g, beyond any navigation or
+                                                         high-g MEMS accelerometer (a few hundred g)
+abs(position), position_std     <= 1e9 m                 beyond the Moon
+abs(velocity), velocity_std     <= 1e5 m/s               ten times the escape velocity
+abs(time) of the accelerometer  <= 1e11 s                about 3000 years (epoch seconds are 2e9)
+==============================  =======================  ==========================================
+
+Rates are median intervals, checked for logs of at least four samples. A rate outside its range names the unit that would bring it inside (times in ms, us or ns, or in
+minutes or hours). The velocity fixes are compared with the positions' finite differences, see
+:func:`velocity_consistency`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from kalcal.errors import DataError
+
+#: plausible accelerometer sample rates, Hz (median sample interval)
+IMU_RATE_RANGE = (1.0, 1e5)
+#: plausible GNSS fix rates, Hz (median fix interval)
+GNSS_RATE_RANGE = (0.01, 100.0)
+#: fewest samples whose median interval is checked as a rate (three intervals)
+MIN_RATE_SAMPLES = 4
+#: a rate the user set (scenario.imu_rate / gps_rate) and the log's may differ by at most this factor
+RATE_FACTOR = 2.0
+#: physical limits of the magnitude of each quantity, in its SI unit
+LIMITS = {"accel": 1e4, "position": 1e9, "velocity": 1e5, "time": 1e11}
+UNITS = {"accel": "m/s^2", "position": "m", "velocity": "m/s", "time": "s"}
+#: times in these units instead of s give a rate this many times too low (first) or too high (last)
+TIME_UNITS = (("milliseconds", 1e3), ("microseconds", 1e6), ("nanoseconds", 1e9), ("minutes", 1 / 60), ("hours", 1 / 3600))
+#: velocity units whose factor to m/s the fitted ratio is tested against: v [m/s] = factor * v [unit]
+VELOCITY_UNITS = (("km/h", 1 / 3.6), ("mph", 0.44704), ("knots", 1852 / 3600))
+#: a fitted ratio within this relative distance of a unit's factor names that unit
+UNIT_TOLERANCE = 0.05
+#: median |z| of velocity minus finite difference above which the fixes disagree grossly (0.67 expected)
+VELOCITY_Z = 5.0
+#: pairs of fixes farther apart than this many median fix intervals are not compared (an outage)
+PAIR_SPAN = 1.5
+
+
+@dataclass(frozen=True)
+class CalibrationWarning:
+    """Something a calibration's user must know: a short stable ``code`` and a one-line ``message``."""
+
+    code: str
+    message: str
+
+    def as_dict(self) -> dict[str, str]:
+        return asdict(self)
+
+
+def median_rate(time: np.ndarray) -> float:
+    """1 / the median interval of strictly increasing ``time`` (s), Hz; NaN for fewer than
+    :data:`MIN_RATE_SAMPLES` samples (too few intervals for a median to mean a rate)."""
+    time = np.asarray(time, dtype=float)
+    return float(1.0 / np.median(np.diff(time))) if time.size >= MIN_RATE_SAMPLES else float("nan")
+
+
+def _unit_hint(rate: float, low: float, high: float, typical: float) -> str:
+    """': are the times in X?' for the time unit that brings ``rate`` into [low, high] nearest ``typical``."""
+    fits = [(abs(np.log(rate * factor / typical)), unit) for unit, factor in TIME_UNITS if low <= rate * factor <= high]
+    return f": are the times in {min(fits)[1]}?" if fits else ": are the times in seconds?"
+
+
+def check_rate(
+    time: np.ndarray,
+    sensor: str,
+    source: str,
+    column: str = "time",
+    *,
+    expected: float | None = None,
+    setting: str = "",
+) -> float:
+    """The log's median sample rate (Hz), refused when implausible for ``sensor``.
+
+    Parameters
+    ----------
+    time : ndarray, shape (n,)
+        Sample times, s, strictly increasing.
+    sensor : {"accelerometer", "gnss"}
+        Whose range applies: :data:`IMU_RATE_RANGE` or :data:`GNSS_RATE_RANGE`.
+    source, column : str
+        The log and its time column, quoted in the error.
+    expected : float, optional
+        A rate the user set (Hz): the log's must lie within a factor :data:`RATE_FACTOR` of it.
+    setting : str
+        The setting's name (e.g. ``scenario.imu_rate``), quoted in the error.
+
+    Raises
+    ------
+    DataError
+        Naming the rate, the range and the likely unit of the times.
+    """
+    rate = median_rate(time)
+    if not np.isfinite(rate):
+        return rate
+    low, high = IMU_RATE_RANGE if sensor == "accelerometer" else GNSS_RATE_RANGE
+    name = "accelerometer sample rate" if sensor == "accelerometer" else "GPS fix rate"
+    typical = 200.0 if sensor == "accelerometer" else 5.0
+    if not low <= rate <= high:
+        raise DataError(
+            f"{source}: column {column!r}: {name} {rate:.6g} Hz (median step {1 / rate:.6g}) is implausible "
+            f"(expected {low:g} Hz to {high:g} Hz){_unit_hint(rate, low, high, typical)}"
+        )
+    if expected is not None and not expected / RATE_FACTOR <= rate <= expected * RATE_FACTOR:
+        raise DataError(
+            f"{source}: column {column!r}: {name} {rate:.6g} Hz differs from {setting or 'the set rate'} = "
+            f"{expected:g} Hz by more than a factor {RATE_FACTOR:g}"
+            f"{_unit_hint(rate, expected / RATE_FACTOR, expected * RATE_FACTOR, expected)}"
+        )
+    return rate
+
+
+def check_imu_faster(imu_rate: float, gps_rate: float, imu_source: str) -> None:
+    """Refuse an accelerometer that samples less often than the GPS fixes (its times likely in ms)."""
+    if np.isfinite(gps_rate) and imu_rate < gps_rate:
+        low, high = max(IMU_RATE_RANGE[0], gps_rate), IMU_RATE_RANGE[1]
+        raise DataError(
+            f"{imu_source}: accelerometer sample rate {imu_rate:.6g} Hz is below the GPS fix rate {gps_rate:.6g} Hz "
+            f"(the accelerometer is the fast sensor){_unit_hint(imu_rate, low, high, 200.0)}"
+        )
+
+
+def check_limit(values: np.ndarray, quantity: str, source: str = "", column: str = "") -> None:
+    """Refuse any value whose magnitude exceeds the physical limit of ``quantity``.
+
+    Parameters
+    ----------
+    values : ndarray, shape (n,)
+        In the SI unit of ``quantity`` (NaN is passed over).
+    quantity : {"accel", "position", "velocity", "time"}
+        Which of :data:`LIMITS` applies.
+    source, column : str
+        Quoted in the error with the 1-based data row, where given.
+    """
+    limit, unit = LIMITS[quantity], UNITS[quantity]
+    values = np.asarray(values, dtype=float)
+    with np.errstate(invalid="ignore"):
+        beyond = np.abs(values) > limit
+    if np.any(beyond):
+        row = int(np.argmax(beyond))
+        where = (f"{source}: " if source else "") + f"row {row + 1}" + (f", column {column!r}" if column else "")
+        raise DataError(
+            f"{where}: {float(values[row]):.6g} {unit} is beyond the physical limit of {limit:g} {unit} for "
+            f"{quantity} (a corrupt sample, or not in {unit}?)"
+        )
+
+
+def velocity_consistency(
+    time: np.ndarray,
+    position: np.ndarray,
+    velocity: np.ndarray,
+    position_std: np.ndarray,
+    velocity_std: np.ndarray,
+    source: str,
+    columns: Sequence[str] = ("position", "velocity"),
+) -> CalibrationWarning | None:
+    """Compare the velocity fixes with the positions' finite differences, on the scale of the stated noise.
+
+    For consecutive usable fixes i, i + 1 (at most :data:`PAIR_SPAN` median intervals apart),
+    d_i = (p_{i+1} - p_i) / dt_i - (v_i + v_{i+1}) / 2, whose standard deviation from the stated noise is
+    s_i = sqrt(sigma_p,i^2 + sigma_p,i+1^2) / dt_i (+) sqrt(sigma_v,i^2 + sigma_v,i+1^2) / 2 (+) m_i (in
+    quadrature), m_i = |v_{j+1} - 2 v_j + v_{j-1}| / 12 (the larger at j = i, i + 1) for the trapezoid's own
+    error, dt^2 jerk / 12, under motion. For consistent fixes
+    z_i = d_i / s_i has a median |z| of about 0.67 (less when the position noise is correlated in time).
+    When the median |z| exceeds :data:`VELOCITY_Z` the fixes disagree grossly: the ratio
+    c = sum(f_i vbar_i) / sum(vbar_i^2) of the finite differences f_i to the mean velocities vbar_i is
+    fitted, and a c within :data:`UNIT_TOLERANCE` of a unit's factor (1/3.6 for km/h, 0.447 for mph,
+    0.514 for knots, or their inverses) is an error naming the unit; any other gross disagreement is a
+    warning (the noise settings far too small, or the two not of the same antenna).
+
+    Parameters
+    ----------
+    time, position, velocity, position_std, velocity_std : ndarray, shape (F,)
+        The usable fixes (finite), s, m, m/s, m, m/s.
+    source : str
+        The GPS log, quoted in the error or warning.
+
+    Returns
+    -------
+    CalibrationWarning or None
+
+    Raises
+    ------
+    DataError
+        When the ratio points to a unit.
+    """
+    time, position, velocity = (np.asarray(a, dtype=float) for a in (time, position, velocity))
+    if time.size < 4:
+        return None
+    dt = np.diff(time)
+    pairs = dt <= PAIR_SPAN * np.median(dt)
+    if np.count_nonzero(pairs) < 3:
+        return None
+    sp2, sv2 = np.asarray(position_std, dtype=float) ** 2, np.asarray(velocity_std, dtype=float) ** 2
+    finite_difference = np.diff(position)[pairs] / dt[pairs]
+    mean_velocity = 0.5 * (velocity[1:] + velocity[:-1])[pairs]
+    # The motion's share: the trapezoid's error dt^2 jerk / 12, with dt^2 jerk read off the velocities'
+    # second difference at either end of the pair (the larger).
+    second = np.abs(np.diff(velocity, 2))
+    motion = np.maximum(np.concatenate([[0.0], second]), np.concatenate([second, [0.0]]))[pairs] / 12.0
+    scale = np.sqrt(
+        (sp2[1:] + sp2[:-1])[pairs] / dt[pairs] ** 2 + 0.25 * (sv2[1:] + sv2[:-1])[pairs] + motion**2
+    )
+    z = (finite_difference - mean_velocity) / scale
+    median_z = float(np.median(np.abs(z)))
+    if not median_z > VELOCITY_Z:
+        return None
+    p_column, v_column = columns
+    energy = float(np.sum(mean_velocity**2))
+    ratio = float(np.sum(finite_difference * mean_velocity) / energy) if energy > 0 else float("nan")
+    detail = (
+        f"the velocity fixes disagree with the positions' finite differences (median |difference| "
+        f"{median_z:.3g} times its standard deviation from the stated noise, about 0.67 expected; "
+        f"finite difference / velocity = {ratio:.4g})"
+    )
+    for unit, factor in VELOCITY_UNITS:
+        if abs(ratio / factor - 1) <= UNIT_TOLERANCE:
+            raise DataError(f"{source}: column {v_column!r}: {detail}: is the velocity in {unit} instead of m/s?")
+        if abs(ratio * factor - 1) <= UNIT_TOLERANCE:
+            raise DataError(
+                f"{source}: column {v_column!r}: {detail}: the velocity looks {1 / factor:.4g} times too small "
+                f"(converted from {unit} to m/s twice?)"
+            )
+    return CalibrationWarning(
+        "velocity-position-mismatch",
+        f"{source}: columns {p_column!r} and {v_column!r}: {detail}: are both in SI units (m, m/s) and is the "
+        "GPS noise setting right?",
+    )

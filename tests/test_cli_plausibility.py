@@ -1,0 +1,144 @@
+"""Implausible logs at the command line: one-line errors (exit 2) naming the likely unit, warnings on
+stderr and in summary.json, and ``--strict`` (exit 1 for calibrate; a refusal for noise)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+from kalcal.cli import app
+
+
+def _invoke(*args):
+    return CliRunner().invoke(app, [str(a) for a in args], catch_exceptions=False)
+
+
+@pytest.fixture(scope="module")
+def sim(tmp_path_factory):
+    out = tmp_path_factory.mktemp("sim")
+    assert _invoke("simulate", "accel-gps", "--seed", "3", "--out", out).exit_code == 0
+    assert _invoke("simulate", "scale-bias", "--seed", "3", "--out", out / "sb").exit_code == 0
+    return out
+
+
+def _calibrate(sim, tmp_path, imu=None, gps=None, *extra):
+    paths = {}
+    for name, frame in (("imu", imu), ("gps", gps)):
+        if frame is None:
+            paths[name] = sim / f"{name}.csv"
+        else:
+            paths[name] = tmp_path / f"{name}.csv"
+            frame.to_csv(paths[name], index=False)
+    return _invoke(
+        "calibrate", "accel-gps", "--imu", paths["imu"], "--gps", paths["gps"], "--out", tmp_path / "cal", *extra
+    )
+
+
+def _one_line_error(result, *fragments):
+    assert result.exit_code == 2, result.output + result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("kalcal: error: "), result.stderr  # no raw library warning
+    for fragment in fragments:
+        assert fragment in lines[0], lines[0]
+
+
+def test_times_in_milliseconds_are_exit_status_2(sim, tmp_path):
+    imu, gps = pd.read_csv(sim / "imu.csv"), pd.read_csv(sim / "gps.csv")
+    imu["time"] *= 1000
+    gps["time"] *= 1000
+    result = _calibrate(sim, tmp_path, imu, gps)
+    _one_line_error(result, "accelerometer sample rate 0.2 Hz", "implausible", "are the times in milliseconds?")
+    assert not (tmp_path / "cal" / "summary.json").exists()
+
+
+def test_velocity_in_kmh_is_exit_status_2(sim, tmp_path):
+    gps = pd.read_csv(sim / "gps.csv")
+    gps["velocity"] *= 3.6
+    _one_line_error(_calibrate(sim, tmp_path, None, gps), "column 'velocity'", "is the velocity in km/h instead of m/s?")
+
+
+def test_one_huge_sample_is_exit_status_2_naming_the_row(sim, tmp_path):
+    imu = pd.read_csv(sim / "imu.csv")
+    imu.loc[1000, "accel"] = 1e300
+    _one_line_error(_calibrate(sim, tmp_path, imu), "row 1001, column 'accel'", "beyond the physical limit")
+
+
+def test_mapped_columns_are_named_in_the_errors(sim, tmp_path):
+    imu = pd.read_csv(sim / "imu.csv").rename(columns={"time": "t", "accel": "ax"})
+    imu.loc[5, "ax"] = 1e300
+    result = _calibrate(sim, tmp_path, imu, None, "--imu-columns", "time=t,accel=ax")
+    _one_line_error(result, "row 6, column 'ax'")
+
+
+def test_genuine_log_has_an_empty_warnings_list_and_passes_strict(sim, tmp_path):
+    result = _calibrate(sim, tmp_path, None, None, "--strict")
+    assert result.exit_code == 0, result.output + result.stderr
+    summary = json.loads((tmp_path / "cal" / "summary.json").read_text())
+    assert summary["warnings"] == [] and summary["diagnostics"]["consistent"]
+    assert summary["fixes_default_std"] == {"position_std": 0, "velocity_std": 0}
+    assert "warning" not in result.stderr
+
+
+def test_nan_per_fix_std_is_a_warning_and_strict_exits_1(sim, tmp_path):
+    gps = pd.read_csv(sim / "gps.csv")
+    gps["position_std"], gps["velocity_std"] = 1.0, 0.04
+    gps.loc[[3, 7], "velocity_std"] = np.nan
+    for strict, status in (((), 0), (("--strict",), 1)):
+        result = _calibrate(sim, tmp_path, None, gps, *strict)
+        assert result.exit_code == status, result.output + result.stderr
+        summary = json.loads((tmp_path / "cal" / "summary.json").read_text())
+        assert summary["fixes_default_std"] == {"position_std": 0, "velocity_std": 2}
+        assert [w["code"] for w in summary["warnings"]] == ["default-fix-std"]
+        assert "column 'velocity_std': 2 fix(es) used have no value (NaN)" in summary["warnings"][0]["message"]
+        lines = result.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("kalcal: warning: ") and "velocity_std" in lines[0]
+
+
+def test_strict_exits_1_when_the_diagnostics_say_inconsistent(sim, tmp_path):
+    result = _calibrate(sim, tmp_path, None, None, "--set", "filter.gps_position_std=0.05")
+    assert result.exit_code == 0, result.output + result.stderr
+    summary = json.loads((tmp_path / "cal" / "summary.json").read_text())
+    assert not summary["diagnostics"]["consistent"]
+    assert _calibrate(sim, tmp_path, None, None, "--set", "filter.gps_position_std=0.05", "--strict").exit_code == 1
+
+
+def test_noise_on_a_moving_log_warns_and_strict_refuses(sim, tmp_path):
+    result = _invoke("noise", "--imu", sim / "imu.csv", "--out", tmp_path / "n")
+    assert result.exit_code == 0, result.output + result.stderr
+    summary = json.loads((tmp_path / "n" / "summary.json").read_text())
+    assert summary["warnings"] and {w["code"] for w in summary["warnings"]} == {"not-static"}
+    assert "kalcal: warning: " in result.stderr and "does not look static" in result.stderr
+    assert (tmp_path / "n" / "filter.toml").read_text().startswith("# WARNING: ")
+    refused = _invoke("noise", "--imu", sim / "imu.csv", "--out", tmp_path / "s", "--strict")
+    _one_line_error(refused, "does not look static", "--strict")
+    assert not (tmp_path / "s" / "filter.toml").exists()
+
+
+def test_noise_refuses_times_in_milliseconds(tmp_path):
+    rng = np.random.default_rng(2)
+    frame = pd.DataFrame({"time": np.arange(4096) * 5.0, "accel": 9.81 + 0.02 * rng.standard_normal(4096)})
+    frame.to_csv(tmp_path / "static.csv", index=False)
+    result = _invoke("noise", "--imu", tmp_path / "static.csv", "--out", tmp_path / "n")
+    _one_line_error(result, "accelerometer sample rate 0.2 Hz", "milliseconds")
+
+
+def test_scale_bias_constant_sensor_is_flagged_unobservable(sim, tmp_path):
+    data = pd.read_csv(sim / "sb" / "data.csv")
+    good = _invoke("calibrate", "scale-bias", "--data", sim / "sb" / "data.csv", "--out", tmp_path / "g", "--strict")
+    assert good.exit_code == 0, good.output + good.stderr
+    summary = json.loads((tmp_path / "g" / "summary.json").read_text())
+    assert summary["warnings"] == [] and summary["observability"]["unobservable"] == []
+    data["sensor"] = 1.0
+    data.to_csv(tmp_path / "constant.csv", index=False)
+    for strict, status in (((), 0), (("--strict",), 1)):
+        result = _invoke("calibrate", "scale-bias", "--data", tmp_path / "constant.csv", "--out", tmp_path / "c", *strict)
+        assert result.exit_code == status, result.output + result.stderr
+        assert "kalcal: warning: " in result.stderr and "unobservable (no excitation)" in result.stderr
+    summary = json.loads((tmp_path / "c" / "summary.json").read_text())
+    assert "theta1" in summary["observability"]["unobservable"]
+    assert summary["observability"]["std_ratio"]["theta1"] > 0.9
+    assert [w["code"] for w in summary["warnings"]] == ["unobservable"]
