@@ -253,6 +253,7 @@ def test_constant_sensor_is_reported_unobservable():
     excited = calibrate_scale_bias(scenario, time, reference, sensor)
     assert excited.unobservable() == [] and excited.warnings() == []
     assert np.all(excited.std_ratio < UNOBSERVABLE_RATIO)
+    np.testing.assert_allclose(excited.std_ratio, [0.36, 0.11], atol=0.01)  # the values docs/scale-bias.md quotes
     constant = calibrate_scale_bias(scenario, time, reference, np.full(sensor.size, 1.0), source="d.csv")
     assert "theta1" in constant.unobservable()
     assert constant.std_ratio[0] > 0.9  # theta1 keeps the prior's sigma: nothing was learned about it
