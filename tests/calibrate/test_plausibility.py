@@ -59,6 +59,14 @@ def test_genuine_logs_raise_and_warn_of_nothing(name):
         assert result.warnings == [], f"{name}, seed {seed}: {result.warnings}"
 
 
+@pytest.mark.parametrize("name", ["gnss-20hz", "imu-100hz"])
+def test_other_rates_are_welcome_without_being_stated(name):
+    """A 20 Hz GNSS or 100 Hz IMU log calibrated with the default scenario (rates not set)."""
+    logs = _logs(_scenario(*GENUINE[name]))
+    assert stated_rates(_scenario()) == {}
+    assert _calibrate(_scenario(), *logs, **stated_rates(_scenario())).warnings == []
+
+
 @pytest.mark.parametrize("name", list(GENUINE))
 def test_velocity_check_statistic_of_genuine_logs_is_near_its_expectation(name):
     """The median |z| of consistent fixes is about 0.67 (that of a standard normal), far below the
@@ -67,7 +75,6 @@ def test_velocity_check_statistic_of_genuine_logs_is_near_its_expectation(name):
     for seed in range(8):
         _, _, time, position, velocity = _logs(scenario, seed)
         ones = np.ones(time.size)
-        z = []
         original = plausibility.VELOCITY_Z
         try:
             plausibility.VELOCITY_Z = 0.0  # report the statistic whatever its value
