@@ -66,7 +66,8 @@ def test_realization_is_the_kth_of_the_ensemble():
     single = realization(problem, seed=3, index=index, n=5000, engine="exact", block_size=1000)
     block = problem.run_block(block_generator(3, 1), 1000, "exact")
     assert np.array_equal(single.error[0], block.error[234])
-    assert np.allclose(single.filter_cov_sum, problem.schedule.posterior_cov)
+    assert np.array_equal(single.filter_cov_sum, problem.schedule.posterior_cov)
+    assert np.array_equal(single.normalized_residual[0], block.normalized_residual[234])
     # in a short last block (n = 2500: blocks of 1000, 1000, 500) the draws are those of a 500-block
     last = realization(problem, seed=3, index=2300, n=2500, engine="exact", block_size=1000)
     short = problem.run_block(block_generator(3, 2), 500, "exact")
