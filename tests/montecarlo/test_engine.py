@@ -101,3 +101,47 @@ def test_exact_and_sampled_engines_agree_within_sampling_error(integration):
     low, high = stats.f.ppf([0.001 / (2 * comparisons), 1 - 0.001 / (2 * comparisons)], n - 1, n - 1)
     ratio = var_exact / var_sampled
     assert np.all((ratio > low) & (ratio < high))
+
+
+def test_blas_limit_is_set_once_per_run_held_throughout_and_restored(monkeypatch):
+    """The BLAS limit is process-global: one entry per local run (not one per block or thread), one BLAS
+    thread inside every block, the original count back afterwards, and the same numbers."""
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    from kalcal.montecarlo import engine
+
+    controller = engine._thread_pools()
+    entries = []
+
+    class Counting:
+        def limit(self, **kwargs):
+            entries.append(kwargs)
+            return controller.limit(**kwargs)
+
+    def blas_threads():
+        return {i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"}
+
+    problem = _problem()
+    seen = []
+
+    class Recording:
+        info, engines = problem.info, problem.engines
+
+        def block_sums(self, rng, n, engine_name):
+            seen.append(blas_threads())
+            return problem.block_sums(rng, n, engine_name)
+
+    monkeypatch.setattr(engine, "_thread_pools", lambda: Counting())
+    with threadpool_limits(limits=2, user_api="blas"):
+        before = blas_threads()
+        run = run_monte_carlo(Recording(), 6000, seed=5, workers=2, block_size=1000)
+        after = blas_threads()
+    assert before == after == {2}
+    assert entries == [{"limits": 1, "user_api": "blas"}]
+    assert len(seen) == 6 and all(s == {1} for s in seen)
+    parts = [problem.block_sums(block_generator(5, b), 1000, "exact") for b in range(6)]
+    merged = parts[0]
+    for part in parts[1:]:
+        merged = merged.merge(part)
+    for name, value in _fields(run.sums).items():
+        assert np.array_equal(value, _fields(merged)[name]), name
