@@ -83,10 +83,18 @@ def test_block_sizes():
         block_sizes(0, 4)
 
 
+BIAS_MODELS = {
+    "constant": {},
+    "walk": {"truth.bias_walk_std": 5e-3},
+    "markov": {"truth.bias_correlation_time": 0.5, "truth.bias_std": 0.5},
+}
+
+
+@pytest.mark.parametrize("bias", list(BIAS_MODELS))
 @pytest.mark.parametrize("integration", ["euler", "trapezoid"])
-def test_exact_and_sampled_engines_agree_within_sampling_error(integration):
+def test_exact_and_sampled_engines_agree_within_sampling_error(integration, bias):
     """Means: |difference| < z se; covariances: the ratio of the two ensembles' variances is F-distributed."""
-    problem = _problem(**{"scenario.integration": integration, "scenario.duration": 6.0})
+    problem = _problem(**{"scenario.integration": integration, "scenario.duration": 6.0, **BIAS_MODELS[bias]})
     n = 20000
     exact = ensemble_statistics(run_monte_carlo(problem, n, seed=21, engine="exact").sums)
     sampled = ensemble_statistics(run_monte_carlo(problem, n, seed=22, engine="sampled").sums)
