@@ -128,6 +128,17 @@ def test_the_filter_that_calibrates_is_the_filter_that_is_verified(case):
     np.testing.assert_allclose(result.covariance, schedule.posterior_cov, rtol=1e-9, atol=1e-15)
 
 
+def test_calibrating_a_walk_matches_the_covariance_pass():
+    """On a regular log the real-log path's covariance (pieces, composed) equals the per-sample model's."""
+    scenario = build_scenario("accel-gps", None, ["scenario.truth=discrete", *WALK])
+    logs = sample_accel_gps_logs(scenario, np.random.default_rng(4), 1)
+    result = calibrate_accel_gps(
+        scenario, logs.sample_time, logs.accel[0], logs.fix_time, logs.gps_position[0], logs.gps_velocity[0], init="prior"
+    )
+    expected = covariance_pass(scenario.filter_model(), scenario.scenario.n_updates).posterior_cov
+    np.testing.assert_allclose(result.covariance, expected, rtol=1e-9, atol=1e-15)
+
+
 SCALE = ["truth.scale_std=1e-3"]
 
 
