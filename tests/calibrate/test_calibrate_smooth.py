@@ -17,13 +17,14 @@ from scipy import stats
 from scipy.linalg import block_diag
 from typer.testing import CliRunner
 
-from kalcal.calibrate.accel_gps import _python_filter, calibrate_accel_gps, transition
+from kalcal.calibrate.accel_gps import _python_filter, calibrate_accel_gps
 from kalcal.calibrate.smoothing import smooth_calibration
 from kalcal.cli import app
 from kalcal.errors import ConfigError, DataError
 from kalcal.filters.kalman import interval_transition
 from kalcal.filters.mechanization import integrate
 from kalcal.filters.sequential import sequential_filter
+from kalcal.models.accel_gps import error_transition
 from kalcal.models.registry import build_scenario
 from kalcal.simulate.sampled import sample_accel_gps_logs
 from tests._helpers import assert_close, cov_atol
@@ -32,6 +33,12 @@ SMOOTHED_COLUMNS = [
     "smoothed_position", "smoothed_velocity", "smoothed_bias",
     "smoothed_position_std", "smoothed_velocity_std", "smoothed_bias_std",
 ]
+
+
+def transition(elapsed):
+    """exp(A s) of the error state with a constant bias, (..., 3, 3): [[1, s, -s^2/2], [0, 1, -s], [0, 0, 1]]."""
+    s = np.asarray(elapsed, dtype=float)
+    return error_transition(0.0, s, s, 1.0, "euler")[0]
 
 
 def _scenario(*extra):

@@ -8,12 +8,19 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from kalcal.calibrate.accel_gps import calibrate_accel_gps, transition
+from kalcal.calibrate.accel_gps import calibrate_accel_gps
+from kalcal.models.accel_gps import error_transition
 from kalcal.models.registry import build_scenario
 
 AMPLITUDES = np.array([1.5, 0.8, 0.4])
 OMEGAS = np.array([0.3, 1.1, 2.3])
 STEP = 2.0  # m/s^2, a tanh step of width 2 s at 12 s
+
+
+def transition(elapsed):
+    """exp(A s) of the error state with a constant bias, (..., 3, 3): [[1, s, -s^2/2], [0, 1, -s], [0, 0, 1]]."""
+    s = np.asarray(elapsed, dtype=float)
+    return error_transition(0.0, s, s, 1.0, "euler")[0]
 
 
 def _motion(t, phases):

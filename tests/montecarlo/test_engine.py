@@ -66,7 +66,8 @@ def test_realization_is_the_kth_of_the_ensemble():
     single = realization(problem, seed=3, index=index, n=5000, engine="exact", block_size=1000)
     block = problem.run_block(block_generator(3, 1), 1000, "exact")
     assert np.array_equal(single.error[0], block.error[234])
-    assert np.allclose(single.filter_cov_sum, problem.schedule.posterior_cov)
+    assert np.array_equal(single.filter_cov_sum, problem.schedule.posterior_cov)
+    assert np.array_equal(single.normalized_residual[0], block.normalized_residual[234])
     # in a short last block (n = 2500: blocks of 1000, 1000, 500) the draws are those of a 500-block
     last = realization(problem, seed=3, index=2300, n=2500, engine="exact", block_size=1000)
     short = problem.run_block(block_generator(3, 2), 500, "exact")
@@ -82,10 +83,18 @@ def test_block_sizes():
         block_sizes(0, 4)
 
 
+BIAS_MODELS = {
+    "constant": {},
+    "walk": {"truth.bias_walk_std": 5e-3},
+    "markov": {"truth.bias_correlation_time": 0.5, "truth.bias_std": 0.5},
+}
+
+
+@pytest.mark.parametrize("bias", list(BIAS_MODELS))
 @pytest.mark.parametrize("integration", ["euler", "trapezoid"])
-def test_exact_and_sampled_engines_agree_within_sampling_error(integration):
+def test_exact_and_sampled_engines_agree_within_sampling_error(integration, bias):
     """Means: |difference| < z se; covariances: the ratio of the two ensembles' variances is F-distributed."""
-    problem = _problem(**{"scenario.integration": integration, "scenario.duration": 6.0})
+    problem = _problem(**{"scenario.integration": integration, "scenario.duration": 6.0, **BIAS_MODELS[bias]})
     n = 20000
     exact = ensemble_statistics(run_monte_carlo(problem, n, seed=21, engine="exact").sums)
     sampled = ensemble_statistics(run_monte_carlo(problem, n, seed=22, engine="sampled").sums)
@@ -100,3 +109,47 @@ def test_exact_and_sampled_engines_agree_within_sampling_error(integration):
     low, high = stats.f.ppf([0.001 / (2 * comparisons), 1 - 0.001 / (2 * comparisons)], n - 1, n - 1)
     ratio = var_exact / var_sampled
     assert np.all((ratio > low) & (ratio < high))
+
+
+def test_blas_limit_is_set_once_per_run_held_throughout_and_restored(monkeypatch):
+    """The BLAS limit is process-global: one entry per local run (not one per block or thread), one BLAS
+    thread inside every block, the original count back afterwards, and the same numbers."""
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    from kalcal.montecarlo import engine
+
+    controller = engine._thread_pools()
+    entries = []
+
+    class Counting:
+        def limit(self, **kwargs):
+            entries.append(kwargs)
+            return controller.limit(**kwargs)
+
+    def blas_threads():
+        return {i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"}
+
+    problem = _problem()
+    seen = []
+
+    class Recording:
+        info, engines = problem.info, problem.engines
+
+        def block_sums(self, rng, n, engine_name):
+            seen.append(blas_threads())
+            return problem.block_sums(rng, n, engine_name)
+
+    monkeypatch.setattr(engine, "_thread_pools", lambda: Counting())
+    with threadpool_limits(limits=2, user_api="blas"):
+        before = blas_threads()
+        run = run_monte_carlo(Recording(), 6000, seed=5, workers=2, block_size=1000)
+        after = blas_threads()
+    assert before == after == {2}
+    assert entries == [{"limits": 1, "user_api": "blas"}]
+    assert len(seen) == 6 and all(s == {1} for s in seen)
+    parts = [problem.block_sums(block_generator(5, b), 1000, "exact") for b in range(6)]
+    merged = parts[0]
+    for part in parts[1:]:
+        merged = merged.merge(part)
+    for name, value in _fields(run.sums).items():
+        assert np.array_equal(value, _fields(merged)[name]), name

@@ -131,3 +131,25 @@ def test_drift_needs_the_matching_q(tmp_path):
 def test_sampled_engine_is_refused(tmp_path):
     with pytest.raises(ConfigError, match="--engine: 'sampled' is not available for scale-bias"):
         verify(build_scenario("scale-bias", assignments=SHORT), 100, 0, tmp_path, engine="sampled")
+
+
+@pytest.mark.parametrize("index", [0, 1037, 2499])
+def test_a_realization_carries_its_own_filter_covariance(index):
+    """The scale/bias filter's P depends on the data: realization K's P is its own filter run's, not the
+    mean over its block (which the report's +-1 sigma bands once showed)."""
+    from kalcal.montecarlo.engine import block_generator, block_sizes, realization
+    from kalcal.simulate.scale_bias import sample_scale_bias
+
+    scenario = build_scenario("scale-bias", assignments=SHORT)
+    problem = ScaleBiasProblem(scenario)
+    n, size = 2500, 1000
+    one = realization(problem, seed=4, index=index, n=n, engine="exact", block_size=size)
+    block, offset = divmod(index, size)
+    data = sample_scale_bias(scenario, block_generator(4, block), block_sizes(n, size)[block])
+    own = filter_scale_bias(scenario, data.reference[offset], data.sensor[offset])
+    np.testing.assert_allclose(one.filter_cov_sum, own.cov, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(one.filter_cov[0], own.cov, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(one.estimate[0], own.posterior, rtol=1e-12, atol=1e-15)
+    # and it is not the block's mean (the realizations' P differ measurably)
+    whole = problem.run_block(block_generator(4, block), block_sizes(n, size)[block], "exact")
+    assert not np.allclose(one.filter_cov_sum, whole.filter_cov_sum / whole.error.shape[0], rtol=1e-6)

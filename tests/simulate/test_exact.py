@@ -67,6 +67,46 @@ CONFIGS = {
         "scenario.duration=4",
         *NOISY,
     ],
+    # A drifting bias: the trapezoid rule integrates the line between two bias samples, so the bias's
+    # own noise enters dp and dv within the step it is drawn in (loud, to make that visible).
+    "trapezoid-walk-m2": [
+        "scenario.integration=trapezoid",
+        "scenario.truth=analytic",
+        "scenario.imu_rate=10",
+        "scenario.gps_rate=5",
+        "scenario.duration=4",
+        "truth.bias_walk_std=0.05",
+        *NOISY,
+    ],
+    "trapezoid-markov-m2": [
+        "scenario.integration=trapezoid",
+        "scenario.truth=discrete",
+        "scenario.imu_rate=10",
+        "scenario.gps_rate=5",
+        "scenario.duration=4",
+        "truth.bias_correlation_time=0.3",
+        *NOISY,
+        "truth.bias_std=0.5",
+    ],
+    "euler-markov-walk-m2": [
+        "scenario.integration=euler",
+        "scenario.truth=analytic",
+        "scenario.imu_rate=10",
+        "scenario.gps_rate=5",
+        "scenario.duration=4",
+        "truth.bias_correlation_time=0.3",
+        "truth.bias_walk_std=0.05",
+        *NOISY,
+        "truth.bias_std=0.5",
+    ],
+    "trapezoid-markov-walk": [
+        "scenario.integration=trapezoid",
+        "scenario.truth=discrete",
+        "scenario.duration=6",
+        "truth.bias_correlation_time=2",
+        "truth.bias_walk_std=2e-3",
+        "filter.velocity0_mean=99.5",
+    ],
 }
 
 
@@ -114,15 +154,32 @@ def _dense_moments(name):
         dp_det = dv_det = np.zeros(s.n_updates)
     offset_p, offset_v = t.position0_mean - f.position0_mean, t.velocity0_mean - f.velocity0_mean
     mean = np.stack([offset_p + offset_v * tk + dp_det, offset_v + dv_det, np.zeros(s.n_updates)], axis=1)
-    # Draws xi = [p0, v0, b, w_0 .. w_J], independent with these variances.
+    # The bias at every sample, written out from the per-sample recursion b_{j+1} = phi b_j + sqrt(q) n_j
+    # (phi = e^{-dt/tau}, q = bias_std^2 (1 - phi^2) + bias_walk_std^2), as a map of [b_0, n_0 .. n_{J-1}].
+    phi = np.exp(-dt / t.bias_correlation_time) if t.bias_correlation_time > 0 else 1.0
+    q = t.bias_walk_std**2 + (t.bias_std**2 * (1 - phi**2) if t.bias_correlation_time > 0 else 0.0)
+    j = np.arange(n_samples + 1)
+    path = np.zeros((n_samples + 1, 1 + n_samples))
+    path[:, 0] = phi**j
+    lag = j[:, None] - 1 - np.arange(n_samples)[None, :]
+    path[:, 1:] = np.where(lag >= 0, np.sqrt(q) * phi ** np.maximum(lag, 0), 0.0)
+    # Draws xi = [p0, v0, w_0 .. w_J, b_0, n_0 .. n_{J-1}], independent with these variances; the nominal
+    # integrates a_c = a + b + w sample by sample, so b_j enters exactly as w_j does.
     var = np.concatenate(
-        [[t.position0_std**2, t.velocity0_std**2, t.bias_std**2], np.full(n_samples + 1, t.accel_noise_std**2)]
+        [
+            [t.position0_std**2, t.velocity0_std**2],
+            np.full(n_samples + 1, t.accel_noise_std**2),
+            [t.bias_std**2],
+            np.ones(n_samples),
+        ]
     )
     k = s.n_updates
-    b = np.zeros((k, 3, 3 + n_samples + 1))
-    b[:, 0, 0], b[:, 0, 1], b[:, 0, 2], b[:, 0, 3:] = 1.0, tk, -(tk**2) / 2, -gp.T
-    b[:, 1, 1], b[:, 1, 2], b[:, 1, 3:] = 1.0, -tk, -gv.T
-    b[:, 2, 2] = 1.0
+    w = slice(2, 3 + n_samples)
+    bias = slice(3 + n_samples, None)
+    b = np.zeros((k, 3, var.size))
+    b[:, 0, 0], b[:, 0, 1], b[:, 0, w], b[:, 0, bias] = 1.0, tk, -gp.T, -gp.T @ path
+    b[:, 1, 1], b[:, 1, w], b[:, 1, bias] = 1.0, -gv.T, -gv.T @ path
+    b[:, 2, bias] = path[fix]
     b = b.reshape(3 * k, -1)
     cov = (b * var) @ b.T
     v = np.diag([t.gps_position_std**2, t.gps_velocity_std**2])
@@ -192,6 +249,48 @@ def test_exact_model_error_equals_dense_oracle(name):
     motion = np.abs(_report_motion(tk, t.accel_amplitude, t.accel_frequency)).max()
     rounding = scenario.scenario.n_samples * np.finfo(float).eps * max(motion, 1.0)
     np.testing.assert_allclose(accel_gps_model_error(scenario), deterministic, rtol=0, atol=rounding)
+
+
+def _update_rate_moments(truth):
+    """Mean (K, d) and the covariances Cov(x_k, x_k), Cov(x_k, x_{k+1}) of the exact sampler's model.
+
+    y_{k+1} = A_k y_k + L xi_k + b_in u_k + b_out u_{k+1}: with C_k = Cov(y_k, u_k) (0 at k = 0),
+    Cov(y_{k+1}) = A S A^T + L L^T + b_in b_in^T + b_out b_out^T + A C b_in^T + b_in C^T A^T, C_{k+1} = b_out.
+    """
+    n_updates, d = truth.n_updates, truth.state_dim
+    mean, own, next_ = np.empty((n_updates, d)), np.empty((n_updates, d, d)), np.empty((n_updates - 1, d, d))
+    y, cov, cross = truth.x0_mean, truth.x0_factor @ truth.x0_factor.T, np.zeros(d)
+    noise = truth.noise_factor @ truth.noise_factor.T
+    b_in, b_out = truth.boundary_in, truth.boundary_out
+    for k in range(n_updates):
+        a = truth.transitions[k]
+        y = a @ y
+        ac = np.outer(a @ cross, b_in)
+        cov = a @ cov @ a.T + noise + np.outer(b_in, b_in) + np.outer(b_out, b_out) + ac + ac.T
+        cross = b_out
+        mean[k], own[k] = y + truth.model_error[k], cov
+        if k + 1 < n_updates:
+            a_next = truth.transitions[k + 1]
+            next_[k] = cov @ a_next.T + np.outer(cross, b_in)
+    return mean, own, next_
+
+
+@pytest.mark.parametrize("name", sorted(CONFIGS))
+def test_exact_sampler_moments_equal_dense_oracle(name):
+    """No sampling error: the update-rate truth's own mean and covariances are the per-sample truth's."""
+    mean, cov, _ = _dense_moments(name)
+    e_mean, e_own, e_next = _update_rate_moments(accel_gps_truth(_scenario(name)))
+    k = mean.shape[0]
+    blocks = cov.reshape(k, 3, k, 3)
+    own = np.stack([blocks[i, :, i] for i in range(k)])
+    nxt = np.stack([blocks[i, :, i + 1] for i in range(k - 1)])
+    scale = np.sqrt(np.einsum("kii->ki", own))
+    # correlations to 1e-9: rounding, where a 4.5% variance error is what the old truth had
+    pairs = (("Cov(x_k)", e_own, own, scale, scale), ("Cov(x_k, x_k+1)", e_next, nxt, scale[:-1], scale[1:]))
+    for what, got, want, rows, cols in pairs:
+        norm = rows[:, :, None] * cols[:, None, :]
+        np.testing.assert_allclose(got / norm, want / norm, rtol=0, atol=1e-9, err_msg=f"{name}: {what}")
+    np.testing.assert_allclose(e_mean, mean, rtol=0, atol=1e-9 * (1 + np.abs(mean).max()))
 
 
 @pytest.mark.parametrize("integration", ["euler", "trapezoid"])

@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from kalcal.calibrate.accel_gps import calibrate_accel_gps, transition
+from kalcal.calibrate.accel_gps import calibrate_accel_gps
 from kalcal.filters.kalman import covariance_pass
+from kalcal.models.accel_gps import bias_discretization, error_transition
 from kalcal.models.registry import build_scenario
 from kalcal.montecarlo.accumulators import ensemble_statistics
 from kalcal.montecarlo.engine import run_monte_carlo
@@ -24,7 +25,14 @@ def _checks(assignments, n=20000, seed=0):
     return {c.name: c for c in run_checks(stats, problem.info, 0.99, problem.expected_mean_error(), cause)}
 
 
-@pytest.mark.parametrize("model", [WALK, MARKOV], ids=["random walk", "Gauss-Markov"])
+TRAPEZOID = ["scenario.integration=trapezoid"]
+
+
+@pytest.mark.parametrize(
+    "model",
+    [WALK, MARKOV, WALK + TRAPEZOID, MARKOV + TRAPEZOID],
+    ids=["random walk", "Gauss-Markov", "random walk, trapezoid", "Gauss-Markov, trapezoid"],
+)
 def test_a_filter_that_models_the_drift_is_consistent(model):
     checks = _checks(model)
     assert all(c.passed for c in checks.values()), {n: c.detail for n, c in checks.items() if not c.passed}
@@ -55,16 +63,73 @@ def test_gauss_markov_and_walk_bias_statistics_of_the_sampler(model):
         assert abs(corr - np.exp(-lag / t.bias_correlation_time)) < 4.5 * (1 - np.exp(-2)) / np.sqrt(20000)
 
 
-@pytest.mark.parametrize("tau", [0.0, 5.0, 1e6])
-def test_transition_is_the_matrix_exponential(tau):
-    rate = 1 / tau if tau > 0 else 0.0
-    a = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, -1.0], [0.0, 0.0, -rate]])
+@pytest.mark.parametrize("scheme", ["euler", "trapezoid"])
+def test_constant_bias_transition_is_the_matrix_exponential(scheme):
+    """With a constant bias both schemes integrate it exactly: any piece of length s is exp(A s),
+    A = [[0, 1, 0], [0, 0, -1], [0, 0, 0]]."""
+    a = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, -1.0], [0.0, 0.0, 0.0]])
     for s in (1e-7, 0.005, 0.2, 3.0, 40.0):
-        np.testing.assert_allclose(transition(s, tau), expm(a * s), rtol=1e-12, atol=1e-15)
+        for start in (0.0, 0.3 * s):
+            phi, noise = error_transition(start, start + s, 2.0 * s, 1.0, scheme, closes=False)
+            np.testing.assert_allclose(phi, expm(a * s), rtol=1e-12, atol=1e-15)
+
+
+def test_gauss_markov_discretization_is_exact_over_any_steps():
+    """phi and q are the exact discrete Gauss-Markov at the sample times: stationary over any step, and two
+    steps compose into their sum (the decays multiply, the variances carry)."""
+    settings = build_scenario("accel-gps", None, MARKOV).truth
+    steps = np.array([1e-6, 0.005, 0.37, 4.0, 60.0])
+    decay, q = bias_discretization(settings, steps, 0.005)
+    np.testing.assert_allclose(decay, np.exp(-steps / 5.0), rtol=1e-15)
+    np.testing.assert_allclose(decay**2 * settings.bias_std**2 + q, settings.bias_std**2, rtol=1e-13)
+    d1, q1 = bias_discretization(settings, 0.3, 0.005)
+    d2, q2 = bias_discretization(settings, 0.45, 0.005)
+    d12, q12 = bias_discretization(settings, 0.75, 0.005)
+    np.testing.assert_allclose([d2 * d1, d2 * d2 * q1 + q2], [d12, q12], rtol=1e-13)
+    walk = build_scenario("accel-gps", None, WALK).truth
+    np.testing.assert_allclose(bias_discretization(walk, [0.005, 0.0125], 0.005)[1], [4e-8, 1e-7], rtol=1e-13)
+
+
+def test_per_sample_transition_of_the_trapezoid_rule_with_a_drifting_bias():
+    """The nominal integrates (b_j + b_{j+1}) / 2 over a step; b_{j+1} = phi b_j + n_j."""
+    dt, phi = 0.005, 0.93
+    transition, noise = error_transition(0.0, dt, dt, phi, "trapezoid")
+    np.testing.assert_allclose(transition[:, 2], [-dt * dt * (2 + phi) / 6, -dt * (1 + phi) / 2, phi], rtol=1e-14)
+    np.testing.assert_allclose(noise, [-dt * dt / 6, -dt / 2, 1.0], rtol=1e-14)
+    # two pieces of a step, cut at a fix, carry b_j's mean the same way as the whole step
+    first, _ = error_transition(0.0, 0.3 * dt, dt, phi, "trapezoid", closes=False)
+    second, _ = error_transition(0.3 * dt, dt, dt, phi, "trapezoid", closes=True)
+    np.testing.assert_allclose(second @ first, transition, rtol=1e-13, atol=1e-20)
+
+
+BIAS_CASES = {
+    "walk": WALK,
+    "markov": MARKOV,
+    "markov-and-walk": MARKOV + WALK,
+    "markov-trapezoid": MARKOV + ["scenario.integration=trapezoid"],
+    "walk-trapezoid": WALK + ["scenario.integration=trapezoid"],
+    "markov-fast-trapezoid": ["truth.bias_correlation_time=0.05", "scenario.integration=trapezoid"],
+}
+
+
+@pytest.mark.parametrize("case", list(BIAS_CASES))
+def test_the_filter_that_calibrates_is_the_filter_that_is_verified(case):
+    """On a regular log with fixes on samples, ``calibrate``'s transitions, process noise and covariances
+    are those of the filter ``verify`` runs (covariance_pass of the per-sample model), for every bias model."""
+    scenario = build_scenario("accel-gps", None, ["scenario.truth=discrete", *BIAS_CASES[case]])
+    logs = sample_accel_gps_logs(scenario, np.random.default_rng(4), 1)
+    result = calibrate_accel_gps(
+        scenario, logs.sample_time, logs.accel[0], logs.fix_time, logs.gps_position[0], logs.gps_velocity[0], init="prior"
+    )
+    problem, _ = build_problem(scenario)
+    schedule = problem.schedule
+    np.testing.assert_allclose(result.transitions, schedule.transitions, rtol=1e-10, atol=1e-16)
+    np.testing.assert_allclose(result.prior_covariance, schedule.prior_cov, rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(result.covariance, schedule.posterior_cov, rtol=1e-9, atol=1e-15)
 
 
 def test_calibrating_a_walk_matches_the_covariance_pass():
-    """On a regular log the real-log path's covariance (pieces, closed forms) equals the per-sample model's."""
+    """On a regular log the real-log path's covariance (pieces, composed) equals the per-sample model's."""
     scenario = build_scenario("accel-gps", None, ["scenario.truth=discrete", *WALK])
     logs = sample_accel_gps_logs(scenario, np.random.default_rng(4), 1)
     result = calibrate_accel_gps(

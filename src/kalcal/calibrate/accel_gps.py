@@ -20,13 +20,17 @@ Real logs, as they are:
   outside its sensor's range, a value beyond its physical limit, velocity fixes in another unit than
   the positions' finite differences; a gross velocity/position disagreement of no known unit is flagged.
 
-The model's transition depends on elapsed time only, Phi(s) = exp(A s) with A = [[0, 1, 0],
-[0, 0, -1], [0, 0, -1/tau]] (tau the bias's correlation time; the last entry is 0 for a constant or
-random-walk bias), so the transition between fixes is Phi(t_k - t_{k-1}), and a step of length h ending
-s before the fix adds noise g = [h^2/2 + s h, h, 0] sigma_a (and the bias's own noise, carried by
-Phi(s)): both are computed for every step at once, and only the 3x3 update runs in a loop over fixes.
-A step cut by a fix is treated as two steps with independent noise (the same sample's noise really enters both; the difference is one sample's
-share of a whole interval).
+Between two fixes the filter propagates with the model of the Monte Carlo, piece by piece: the steps
+between samples, cut at the fixes. Each piece's transition is
+:func:`~kalcal.models.accel_gps.error_transition` (the bias as the scheme integrates its samples, with
+the decay and noise of :func:`~kalcal.models.accel_gps.bias_discretization`: a Gauss-Markov bias decays
+by exp(-dt_j / tau) at each sample, with the exact discrete noise, over each step's own dt_j), and a piece
+of length h adds the accelerometer noise g = [h^2/2, h, 0] sigma_a. The products over each interval's
+pieces are composed in one compiled pass, and only the 3x3 update runs in a loop over fixes. On a log
+whose fixes fall on samples this is exactly the filter that ``verify`` runs (the same per-sample Phi,
+Gamma and W). A step cut by a fix is treated as two pieces with independent noise (the same sample's
+noise, and with the trapezoid rule the same bias noise, really enters both; the difference is one
+sample's share of a whole interval).
 """
 
 from __future__ import annotations
@@ -35,6 +39,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Literal
 
+import numba
 import numpy as np
 
 from kalcal.calibrate import plausibility
@@ -53,7 +58,7 @@ from kalcal.filters.kalman import (
 from kalcal.filters.mechanization import integrate, partial_step
 from kalcal.filters.sequential import SequentialRun, sequential_filter
 from kalcal.linalg import symmetrize
-from kalcal.models.accel_gps import AccelGpsScenario
+from kalcal.models.accel_gps import AccelGpsScenario, bias_discretization, error_transition
 
 Init = Literal["prior", "first-fix"]
 INITS: tuple[str, ...] = ("prior", "first-fix")
@@ -115,64 +120,66 @@ class AccelGpsCalibration:
         return np.sum(self.normalized_innovations**2, axis=-1)
 
 
-def _bias_column(s: np.ndarray, tau: float) -> np.ndarray:
-    """Phi(s)[:, 2]: what a unit bias at the start does to [dp, dv, b] after s seconds, (..., 3).
+def _pieces(imu_time, steps, cuts, settings, period, scheme) -> tuple[np.ndarray, np.ndarray]:
+    """Every piece between two cuts (samples and fixes): its transition and noise inputs.
 
-    Constant bias (tau = 0 means none): [-s^2/2, -s, 1]. Gauss-Markov with time constant tau:
-    [-(tau s - tau^2 (1 - e^{-s/tau})), -tau (1 - e^{-s/tau}), e^{-s/tau}], the first entry by its series
-    where s / tau is small (it is a difference of nearly equal terms).
+    A piece [c_i, c_{i+1}] lies in the sample step [t_j, t_{j+1}]; its transition is
+    :func:`~kalcal.models.accel_gps.error_transition` over its part of that step, with the step's bias
+    decay and noise (:func:`~kalcal.models.accel_gps.bias_discretization`). Its noise inputs are the
+    accelerometer sample held over it, g = [h^2/2, h, 0] sigma_a, and, when the bias has noise of its own,
+    that noise's weights times sqrt(q_j).
+
+    Returns
+    -------
+    phis : ndarray, shape (N, 3, 3)
+    inputs : ndarray, shape (N, 3, r), r = 1 or 2
     """
-    s = np.asarray(s, dtype=float)
-    column = np.empty(s.shape + (3,))
-    if tau <= 0:
-        column[..., 0], column[..., 1], column[..., 2] = -0.5 * s * s, -s, 1.0
-        return column
-    x = s / tau
-    one_minus = -np.expm1(-x)
-    small = x < 1e-3
-    # tau s - tau^2 (1 - e^{-x}) = tau^2 (x - 1 + e^{-x}) = tau^2 (x^2/2 - x^3/6 + x^4/24 - ...)
-    series = tau * tau * (x * x / 2 - x**3 / 6 + x**4 / 24)
-    column[..., 0] = -np.where(small, series, tau * s - tau * tau * one_minus)
-    column[..., 1] = -tau * one_minus
-    column[..., 2] = np.exp(-x)
-    return column
-
-
-def transition(elapsed: np.ndarray, bias_correlation_time: float = 0.0) -> np.ndarray:
-    """Phi(s) of the error state for elapsed times s (s), (..., 3, 3): exp(A s) with
-    A = [[0, 1, 0], [0, 0, -1], [0, 0, -1/tau]] (the last entry 0 for a constant or random-walk bias)."""
-    s = np.asarray(elapsed, dtype=float)
-    phi = np.zeros(s.shape + (3, 3))
-    phi[..., 0, 0] = phi[..., 1, 1] = 1.0
-    phi[..., 0, 1] = s
-    phi[..., :, 2] = _bias_column(s, bias_correlation_time)
-    return phi
-
-
-def _interval_noise(cuts, interval_end, owner, n_intervals, settings, period) -> np.ndarray:
-    """Q_k for every interval at once: the noise of each step (piece) carried to the fix that ends it.
-
-    A piece of length h ending s before its fix adds sigma_a^2 g g^T with g = [h^2/2 + s h, h, 0] (the
-    accelerometer sample held over the piece) and, when the bias has noise of its own, q_b(h) c c^T with
-    c = Phi(s)[:, 2] (the bias noise enters at the end of the piece): q_b(h) = bias_walk_std^2 h / period
-    + bias_std^2 (1 - e^{-2h/tau}).
-    """
-    h = np.diff(cuts)
-    s = interval_end[owner] - cuts[1:]
-    accel = np.stack([0.5 * h * h + s * h, h, np.zeros_like(h)], axis=1) * settings.accel_noise_std
-    inputs = [accel]
-    tau = settings.bias_correlation_time
-    bias_variance = settings.bias_walk_std**2 * h / period
-    if tau > 0:
-        bias_variance = bias_variance - settings.bias_std**2 * np.expm1(-2.0 * h / tau)
+    starts, ends = cuts[:-1], cuts[1:]
+    j = np.clip(np.searchsorted(imu_time, starts, side="right") - 1, 0, imu_time.size - 2)
+    step = steps[j]
+    closes = ends == imu_time[j + 1]
+    decay, bias_variance = bias_discretization(settings, step, period)
+    into_end = np.where(closes, step, ends - imu_time[j])
+    phis, bias_input = error_transition(starts - imu_time[j], into_end, step, decay, scheme, closes)
+    h = ends - starts
+    inputs = [np.stack([0.5 * h * h, h, np.zeros_like(h)], axis=1) * settings.accel_noise_std]
     if np.any(bias_variance > 0):
-        inputs.append(_bias_column(s, tau) * np.sqrt(bias_variance)[:, None])
-    q = np.zeros((n_intervals, 3, 3))
-    for a in range(3):
-        for b in range(a, 3):
-            terms = sum(g[:, a] * g[:, b] for g in inputs)
-            q[:, a, b] = q[:, b, a] = np.bincount(owner, weights=terms, minlength=n_intervals)
-    return q
+        inputs.append(bias_input * np.sqrt(bias_variance)[:, None])
+    return phis, np.stack(inputs, axis=-1)
+
+
+@numba.njit(cache=True, nogil=True)
+def _compose(phis, inputs, owner, n_intervals):
+    """Phi_k = T_last ... T_first and Q_k = sum_i (T_last ... T_{i+1}) G_i G_i^T (...)^T over the pieces
+    of each interval (``owner``, nondecreasing, names each piece's interval; one with none is I, 0)."""
+    out_phi = np.zeros((n_intervals, 3, 3))
+    out_q = np.zeros((n_intervals, 3, 3))
+    for k in range(n_intervals):
+        for a in range(3):
+            out_phi[k, a, a] = 1.0
+    tmp = np.empty((3, 3))
+    for i in range(phis.shape[0]):
+        k = owner[i]
+        t = phis[i]
+        for a in range(3):
+            for b in range(3):
+                tmp[a, b] = t[a, 0] * out_phi[k, 0, b] + t[a, 1] * out_phi[k, 1, b] + t[a, 2] * out_phi[k, 2, b]
+        out_phi[k] = tmp
+        for a in range(3):
+            for b in range(3):
+                tmp[a, b] = t[a, 0] * out_q[k, 0, b] + t[a, 1] * out_q[k, 1, b] + t[a, 2] * out_q[k, 2, b]
+        for a in range(3):
+            for b in range(3):
+                value = tmp[a, 0] * t[b, 0] + tmp[a, 1] * t[b, 1] + tmp[a, 2] * t[b, 2]
+                for r in range(inputs.shape[2]):
+                    value += inputs[i, a, r] * inputs[i, b, r]
+                out_q[k, a, b] = value
+    for k in range(n_intervals):
+        for a in range(3):
+            for b in range(a + 1, 3):
+                mean = 0.5 * (out_q[k, a, b] + out_q[k, b, a])
+                out_q[k, a, b] = out_q[k, b, a] = mean
+    return out_phi, out_q
 
 
 def _scale_parameters(states: np.ndarray, covariances: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -377,8 +384,7 @@ def calibrate_accel_gps(
     samples = imu_time[(imu_time > start_time) & (imu_time < last)]
     cuts = np.union1d(np.concatenate([[start_time], samples]), fix_times)
     owner = np.searchsorted(fix_times, cuts[1:], side="left")
-    noise = _interval_noise(cuts, fix_times, owner, fix_times.size, settings, period)
-    phis = transition(np.diff(np.concatenate([[start_time], fix_times])), settings.bias_correlation_time)
+    phis, noise = _compose(*_pieces(imu_time, steps, cuts, settings, period, scheme), owner, fix_times.size)
     h = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
     if scenario.has_scale:
         # s multiplies the measured acceleration: its column over an interval is minus the position and

@@ -13,6 +13,7 @@ import contextlib
 import functools
 import itertools
 import os
+import threading
 import time
 from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor
@@ -60,14 +61,21 @@ def realization(
 
     Reruns its whole block at that block's size in the ensemble (the last block is shorter, and the
     draws of a block are interleaved across its realizations). ``filter_cov_sum`` is that
-    realization's P, (K, d, d).
+    realization's own P, (K, d, d): the same for every realization of a fixed-gain filter, its own for
+    a filter whose gains depend on the data (scale-bias). A problem whose ``run_block`` does not give
+    each realization's P (``filter_cov``) must have data-independent gains; its block mean is used.
     """
     if not 0 <= index < n:
         raise ValueError(f"realization index must lie in [0, {n}), got {index}")
     block, offset = divmod(index, block_size)
     result = run_block(problem, seed, block, block_sizes(n, block_size)[block], engine)
-    size = result.error.shape[0]
-    return BlockResult(*(a[offset : offset + 1] for a in result[:5]), result.filter_cov_sum / size)
+    one = slice(offset, offset + 1)
+    if result.filter_cov is not None:
+        own = np.array(result.filter_cov[offset])
+    else:
+        own = result.filter_cov_sum / result.error.shape[0]
+    normalized = None if result.normalized_residual is None else result.normalized_residual[one]
+    return BlockResult(*(a[one] for a in result[:5]), own, normalized, own[None])
 
 
 @dataclass(frozen=True)
@@ -89,12 +97,42 @@ def _thread_pools() -> ThreadpoolController:
     return ThreadpoolController()
 
 
+_blas_lock = threading.Lock()
+_blas_users = 0
+_blas_limiter = None
+
+
+@contextlib.contextmanager
+def single_threaded_blas():
+    """Hold this process's BLAS to one thread while any caller is inside (the engine's parallelism is
+    over blocks).
+
+    The limit is process-global, so it is counted, not nested: the first caller to enter sets it, the
+    last to leave restores the original, and callers in between (a run's worker threads, the tasks of a
+    multi-threaded Dask worker) change nothing. A local run enters once, around its whole pool.
+    """
+    global _blas_users, _blas_limiter
+    with _blas_lock:
+        if _blas_users == 0:
+            _blas_limiter = _thread_pools().limit(limits=1, user_api="blas")
+        _blas_users += 1
+    try:
+        yield
+    finally:
+        with _blas_lock:
+            _blas_users -= 1
+            if _blas_users == 0:
+                _blas_limiter.restore_original_limits()
+                _blas_limiter = None
+
+
 def block_task(problem: Problem, seed: int, blocks: list[tuple[int, int]], engine: str) -> list[tuple[int, MomentSums]]:
     """The sums of consecutive blocks ``[(index, size), ...]``, each on its own (a thread or a Dask task).
 
-    BLAS is held to one thread: the engine's parallelism is over blocks.
+    BLAS is held to one thread (:func:`single_threaded_blas`; inside a local run that limit is already
+    in force and this only counts).
     """
-    with _thread_pools().limit(limits=1, user_api="blas"):
+    with single_threaded_blas():
         return [(b, problem.block_sums(block_generator(seed, b), size, engine)) for b, size in blocks]
 
 
@@ -177,19 +215,23 @@ def run_monte_carlo(
 
     if client is None:
         workers = max(1, workers or len(os.sched_getaffinity(0)))
-        pool = ThreadPoolExecutor(max_workers=workers)
-        submit, first_done = pool.submit, partial(futures_wait, return_when=FIRST_COMPLETED)
+        executor = ThreadPoolExecutor(max_workers=workers)
+        # the BLAS limit is process-global: set once for the whole run (entered first, left last)
+        contexts = [single_threaded_blas(), executor]
+        submit, first_done = executor.submit, partial(futures_wait, return_when=FIRST_COMPLETED)
         in_flight_limit = 2 * workers
     else:
         from distributed import wait as dask_wait
 
-        pool = contextlib.nullcontext()
+        contexts = []
         workers = max(1, sum(client.nthreads().values()))
         submit = partial(client.submit, pure=False)
         first_done = partial(dask_wait, return_when="FIRST_COMPLETED")
         in_flight_limit = 2 * workers
 
-    with pool:
+    with contextlib.ExitStack() as stack:
+        for context in contexts:
+            stack.enter_context(context)
         queue = iter(chunks)
         running = {submit(block_task, problem, seed, chunk, engine) for chunk in itertools.islice(queue, in_flight_limit)}
         while running:

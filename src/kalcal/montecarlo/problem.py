@@ -135,6 +135,7 @@ class FixedGainProblem:
             nis=np.einsum("nki,nki->nk", whitened_residual, whitened_residual),
             filter_cov_sum=n * self.schedule.posterior_cov,
             normalized_residual=whitened_residual,
+            filter_cov=np.broadcast_to(self.schedule.posterior_cov, (n, *self.schedule.posterior_cov.shape)),
         )
 
     def block_sums(self, rng: np.random.Generator, n: int, engine: str) -> MomentSums:

@@ -163,6 +163,7 @@ class ScaleBiasProblem:
             nees=nees,
             nis=run.residual**2 / run.innovation_var,
             filter_cov_sum=run.cov.sum(axis=0),
+            filter_cov=run.cov,
         )
 
     def block_sums(self, rng: np.random.Generator, n: int, engine: str) -> MomentSums:

@@ -7,13 +7,14 @@ from functools import partial
 import numpy as np
 
 from kalcal.errors import ConfigError
-from kalcal.filters.kalman import UpdateForm
+from kalcal.filters.kalman import UpdateForm, interval_transition
 from kalcal.models.accel_gps import MEASUREMENT_NAMES, MEASUREMENT_UNITS, AccelGpsScenario
 from kalcal.models.custom import CustomModelScenario
+from kalcal.models.linear import LinearGaussianModel
 from kalcal.models.scale_bias import ScaleBiasScenario
 from kalcal.montecarlo.problem import FixedGainProblem, Problem, ProblemInfo
 from kalcal.montecarlo.scale_bias import ScaleBiasProblem, model_error_cause
-from kalcal.simulate.exact import accel_gps_truth, truth_from_model
+from kalcal.simulate.exact import accel_gps_transitions, accel_gps_truth, truth_from_model
 from kalcal.simulate.sampled import sample_accel_gps_errors
 
 
@@ -24,6 +25,18 @@ def sampled_normals_per_realization(scenario: AccelGpsScenario) -> int:
     m = s.steps_per_update
     drifts = scenario.truth.bias_step_variance(s.sample_period) > 0
     return 4 + int(scenario.has_scale) + s.n_updates * (m + 2 + (m if drifts else 0))
+
+
+def accel_gps_filter_transitions(scenario: AccelGpsScenario, filter_model: LinearGaussianModel) -> np.ndarray:
+    """The filter's transition of each interval with a scale-factor state, (K, 4, 4).
+
+    The filter's own Phi^m (its bias decay, from the filter's settings) with the scale column of the
+    acceleration profile, the one thing the filter shares with the truth: it depends on no truth setting
+    but ``accel_amplitude`` and ``accel_frequency``.
+    """
+    s = scenario.scenario
+    phi_m, _ = interval_transition(filter_model.phi, filter_model.gamma, filter_model.w, s.steps_per_update)
+    return accel_gps_transitions(scenario, np.broadcast_to(phi_m, (s.n_updates, *phi_m.shape)))
 
 
 def accel_gps_problem(
@@ -40,12 +53,12 @@ def accel_gps_problem(
         measurement_units=MEASUREMENT_UNITS,
     )
     truth = accel_gps_truth(scenario)
+    filter_model = scenario.filter_model()
     return FixedGainProblem(
         info=info,
-        filter_model=scenario.filter_model(),
+        filter_model=filter_model,
         truth=truth,
-        # the filter's transitions carry the scale column of the same (true) acceleration profile
-        filter_transitions=np.array(truth.transitions) if scenario.has_scale else None,
+        filter_transitions=accel_gps_filter_transitions(scenario, filter_model) if scenario.has_scale else None,
         sampled=partial(sample_accel_gps_errors, scenario),
         sampled_normals=sampled_normals_per_realization(scenario),
         form=form,
