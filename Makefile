@@ -16,7 +16,7 @@ $(VENV)/.run-installed: pyproject.toml | $(BIN)/python
 	touch $@
 
 $(VENV)/.test-installed: pyproject.toml | $(BIN)/python
-	$(PIP) -e '.[test,distributed]'
+	$(PIP) -e '.[test]'
 	touch $@
 
 run: $(VENV)/.run-installed

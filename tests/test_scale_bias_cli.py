@@ -133,7 +133,7 @@ def test_bad_inputs_are_one_line_errors(bad_logs, tmp_path):
     _one_line_error(_invoke("calibrate", "accel-gps", "--gps", bad_logs["good"], "--out", out), "--imu", "required for accel-gps")
     _one_line_error(_invoke("simulate", "scale-bias", "--set", "scenario.drift=often", "--out", out), "scenario.drift")
     _one_line_error(
-        _invoke("verify", "scale-bias", "-n", 50, "--engine", "sampled", "--no-report", "--out", out), "--engine", "scale-bias"
+        _invoke("verify", "scale-bias", "-n", 200, "--engine", "sampled", "--no-report", "--out", out), "--engine", "scale-bias"
     )
 
 

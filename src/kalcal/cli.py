@@ -16,7 +16,9 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
+from rich.text import Text
 
+from kalcal import __version__
 from kalcal.errors import KalcalError
 from kalcal.models.registry import SCENARIOS, build_scenario
 
@@ -24,6 +26,9 @@ app = typer.Typer(
     add_completion=False,
     no_args_is_help=True,
     pretty_exceptions_enable=False,
+    # plain help text: rich markup would take the units in brackets ("time [s]", "[filter]") for tags
+    rich_markup_mode=None,
+    context_settings={"help_option_names": ["-h", "--help"]},
     help="Kalman-filter sensor calibration with Monte Carlo verification (SI units throughout).",
 )
 console = Console()
@@ -34,7 +39,32 @@ SetOpt = Annotated[
     Optional[list[str]],
     typer.Option("--set", help="Override a setting, section.key=value (repeatable), e.g. truth.bias_std=0.2."),
 ]
-ConfigOpt = Annotated[Optional[Path], typer.Option("--config", help="TOML file of \\[scenario], \\[truth], \\[filter] settings.")]
+ConfigOpt = Annotated[Optional[Path], typer.Option("--config", help="TOML file of [scenario], [truth], [filter] settings.")]
+
+
+def _print_version(value: bool) -> None:
+    if value:
+        console.print(f"kalcal {__version__}", markup=False, highlight=False)
+        raise typer.Exit()
+
+
+@app.callback()
+def _options(
+    version: Annotated[
+        bool, typer.Option("--version", help="Print kalcal's version and exit.", is_eager=True, callback=_print_version)
+    ] = False,
+) -> None:
+    """Kalman-filter sensor calibration with Monte Carlo verification (SI units throughout)."""
+
+
+def _table(*phrases: str, **options) -> Table:
+    """A table titled by ``phrases`` joined with commas, never broken inside a phrase: the table is at
+    least as wide as its title, and where the console is narrower each phrase gets a line of its own."""
+    title = ", ".join(phrases)
+    if len(title) > console.width:
+        title = ",\n".join(phrases)
+    width = max(len(line) for line in title.splitlines())
+    return Table(title=Text(title), min_width=min(width, console.width), **options)
 
 
 @contextlib.contextmanager
@@ -156,7 +186,7 @@ def calibrate(
             form=form,
             smooth=smooth,
         )
-    table = Table(title=f"kalcal calibrate {scenario}: {summary['fixes_used']} fixes, t = {summary['time']:g} s")
+    table = _table(f"kalcal calibrate {scenario}: {summary['fixes_used']} fixes", f"t = {summary['time']:g} s")
     table.add_column("quantity")
     table.add_column("estimate", justify="right")
     table.add_column("1-sigma", justify="right")
@@ -199,7 +229,7 @@ def _calibrate_scale_bias(data, reference, sensor, out, set_, config, imu_or_gps
             raise KalcalError("--imu/--gps: not used by scale-bias (it reads --data)")
         summary = calibrate_scale_bias_file(model, data, out, reference=reference, sensor=sensor)
     unit = summary["units"]["bias"]
-    table = Table(title=f"kalcal calibrate scale-bias: {summary['samples_used']} samples, t = {summary['time']:g} s")
+    table = _table(f"kalcal calibrate scale-bias: {summary['samples_used']} samples", f"t = {summary['time']:g} s")
     table.add_column("quantity")
     table.add_column("estimate", justify="right")
     table.add_column("1-sigma", justify="right")
@@ -218,36 +248,55 @@ def _calibrate_scale_bias(data, reference, sensor, out, set_, config, imu_or_gps
         raise typer.Exit(1)
 
 
-def _progress_bar(total_label: str):
-    """A rich progress bar on a terminal, nothing otherwise: returns (context manager, callback or None)."""
+def _progress_bar(title: str):
+    """A rich progress bar on a terminal, nothing otherwise: returns (context manager, callback or None).
+
+    The callback is a job's ``progress(stage, done, total)`` (:mod:`kalcal.jobs.progress`): the bar shows
+    the stage, its count of units and its time.
+    """
     if not error_console.is_terminal:
         return contextlib.nullcontext(), None
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
+    from kalcal.jobs.progress import STAGES
+
     bar = Progress(
-        TextColumn(total_label),
+        TextColumn("{task.description}", markup=False),
         BarColumn(),
         MofNCompleteColumn(),
+        TextColumn("{task.fields[unit]}", markup=False),
         TimeElapsedColumn(),
         TimeRemainingColumn(),
         console=error_console,
         transient=True,
     )
-    task = bar.add_task(total_label, total=None)
+    task = bar.add_task(title, total=None, unit="")
 
-    def update(done: int, total: int) -> None:
-        bar.update(task, completed=done, total=total)
+    def update(stage: str, done: int, total: int) -> None:
+        bar.update(task, description=f"{title}: {stage}", completed=done, total=total, unit=STAGES.get(stage, ""))
 
     return bar, update
 
 
+def _wrote(out: Path, paths) -> str:
+    """One line naming what a job wrote: ``wrote OUT/: summary.json, stats.nc, report.html, figures/``."""
+    names = []
+    for path in paths:
+        path = Path(path)
+        try:
+            name = str(path.relative_to(out))
+        except ValueError:  # not inside the output folder: its full path
+            name = str(path)
+        names.append(name + ("/" if path.is_dir() else ""))
+    return f"wrote {out}/: {', '.join(names)}"
+
+
 def _print_checks(summary: dict) -> None:
     """The checks as one table, then one paragraph per failed check saying why."""
-    table = Table(
-        title=(
-            f"kalcal verify {summary['scenario']}: {summary['realizations']:,} realizations "
-            f"({summary['engine']}) in {summary['timing']['monte_carlo_s']:.2f} s, verdict: {summary['verdict'].upper()}"
-        ),
+    table = _table(
+        f"kalcal verify {summary['scenario']}: {summary['realizations']:,} realizations ({summary['engine']}) "
+        f"in {summary['timing']['monte_carlo_s']:.2f} s",
+        f"verdict: {summary['verdict'].upper()}",
     )
     table.add_column("check")
     table.add_column("statistic", justify="right")
@@ -342,19 +391,27 @@ def verify(
                 checkpoint=checkpoint,
                 form=form,
             )
-        if not no_report:
-            from kalcal.jobs.report import render_report
+            if not no_report:
+                from kalcal.jobs.report import FIGURE_DIR, render_report
 
-            outcome.paths["report"] = render_report(Path(out), realization=realization)
+                outcome.paths["report"] = render_report(Path(out), realization=realization, progress=update)
+                outcome.paths["figures"] = Path(out) / FIGURE_DIR
     _print_checks(outcome.summary)
     pair = outcome.summary["residual_correlation"]
-    console.print(
-        f"E[r_k r_j^T] at k = {pair['k_time']:g} s, j = {pair['j_time']:g} s: "
-        f"{pair['matrix'].tolist()} (standard errors {pair['standard_error'].round(6).tolist()})",
-        markup=False,
-    )
-    for path in outcome.paths.values():
-        console.print(f"wrote {path}")
+    if pair is not None:  # only runs that have the source report's pair of updates
+        rows = ", ".join(
+            "[" + ", ".join(f"{m:.3g} ± {se:.2g}" for m, se in zip(row, errors)) + "]"
+            for row, errors in zip(pair["matrix"], pair["standard_error"])
+        )
+        console.print(
+            f"E[r_k r_j^T] at t_k = {pair['k_time']:g} s, t_j = {pair['j_time']:g} s (± standard error): [{rows}]",
+            markup=False,
+            soft_wrap=True,
+        )
+    order = ("summary", "stats", "stats_long", "report", "figures")
+    written = [outcome.paths[key] for key in order if key in outcome.paths]
+    written += [path for key, path in outcome.paths.items() if key not in order]
+    console.print(_wrote(Path(out), written), markup=False, soft_wrap=True)
     if strict and outcome.summary["verdict"] != "pass":
         raise typer.Exit(1)
 
@@ -389,7 +446,7 @@ def sweep(
                 model, key, values, n, seed, out, engine=engine, workers=threads, client=client, long_run=0
             )
         figure = plot_sweep(result.table, key, Path(out) / "sweep.png")
-    table = Table(title=f"kalcal sweep {scenario}: {key}, {n:,} realizations per value")
+    table = _table(f"kalcal sweep {scenario}: {key}", f"{n:,} realizations per value")
     table.add_column(key, justify="right")
     checks = [c[: -len("_passed")] for c in result.table.columns if c.endswith("_passed")]
     for check in checks:
@@ -416,7 +473,7 @@ def noise(
         bool, typer.Option("--strict", help="Refuse (exit status 2, nothing written) a log that does not look static.")
     ] = False,
 ) -> None:
-    """Identify accelerometer noise from a static log: Allan deviation, N, B, K and the \\[filter] settings.
+    """Identify accelerometer noise from a static log: Allan deviation, N, B, K and the [filter] settings.
 
     N (velocity random walk, m/s/sqrt(s)) from the -1/2 slope, B (bias instability, m/s^2) from the flat
     minimum, K (rate random walk, m/s^2/sqrt(s)) from the +1/2 slope; filter.toml holds accel_noise_std
@@ -430,11 +487,9 @@ def noise(
         if imu is None:
             raise KalcalError("--imu: required (a static accelerometer log: time [s], accel [m/s^2])")
         summary = identify_noise_file(imu, out, imu_columns=imu_columns, strict=strict)
-    table = Table(
-        title=(
-            f"kalcal noise: {summary['samples']:,} samples at {summary['rate']['value']:.6g} Hz, "
-            f"{summary['duration']['value']:.6g} s"
-        ),
+    table = _table(
+        f"kalcal noise: {summary['samples']:,} samples at {summary['rate']['value']:.6g} Hz",
+        f"{summary['duration']['value']:.6g} s",
         box=box.SIMPLE_HEAD,
         pad_edge=False,
     )
@@ -470,9 +525,13 @@ def report(
     """Redraw the figures and report.html of a verification run from its summary.json and stats.nc."""
     from kalcal.jobs.report import render_report
 
+    from kalcal.jobs.report import FIGURE_DIR
+
     with user_errors():
-        page = render_report(directory, realization=realization)
-    console.print(f"wrote {page}")
+        bar, update = _progress_bar(str(directory))
+        with bar:
+            page = render_report(directory, realization=realization, progress=update)
+    console.print(_wrote(Path(directory), [page, Path(directory) / FIGURE_DIR]), markup=False, soft_wrap=True)
 
 
 def main() -> None:

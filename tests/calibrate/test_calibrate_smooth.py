@@ -109,10 +109,7 @@ def test_smoothed_position_errors_are_standard_normal_over_seeds():
 
 def test_smoothing_with_a_scale_factor_state():
     """The smoother runs on the filter's [dp, dv, b', s'] and converts as the filter does."""
-    try:
-        scenario = _scenario("truth.scale_std=1e-3")
-    except ConfigError:
-        pytest.skip("this accel-gps scenario has no scale_std setting")
+    scenario = _scenario("truth.scale_std=1e-3")
     logs = sample_accel_gps_logs(scenario, np.random.default_rng(8), 1)
     result = _calibrate(scenario, logs)
     smoothed = smooth_calibration(result)
@@ -159,10 +156,7 @@ def test_numpy_loops_of_every_form_equal_the_compiled_joseph_loop(form):
 
 @pytest.mark.parametrize("extra", [(), ("truth.bias_walk_std=2e-5",)], ids=["constant bias", "bias walk"])
 def test_the_three_forms_agree_through_calibrate(extra):
-    try:
-        scenario = _scenario("scenario.integration=trapezoid", *extra)
-    except ConfigError:
-        pytest.skip("this accel-gps scenario has no bias_walk_std setting")
+    scenario = _scenario("scenario.integration=trapezoid", *extra)
     logs = sample_accel_gps_logs(scenario, np.random.default_rng(5), 1)
     results = {form: _calibrate(scenario, logs, init="first-fix", form=form) for form in ("joseph", "standard", "sqrt")}
     joseph = results["joseph"]

@@ -14,7 +14,6 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from kalcal.errors import ConfigError
 from kalcal.filters.kalman import covariance_pass, interval_transition
 from kalcal.filters.steady_state import convergence, steady_state
 from kalcal.models.linear import LinearGaussianModel
@@ -88,10 +87,7 @@ def test_steady_state_is_where_the_riccati_recursion_settles(which):
 
 def test_bias_walk_setting_of_the_scenario_has_a_steady_state():
     """The same through the scenario's own setting, where it exists (filter.bias_walk_std)."""
-    try:
-        scenario = build_scenario("accel-gps", assignments=["filter.bias_walk_std=1e-5"])
-    except ConfigError:
-        pytest.skip("this accel-gps scenario has no bias_walk_std setting")
+    scenario = build_scenario("accel-gps", assignments=["filter.bias_walk_std=1e-5"])
     result = steady_state(scenario.filter_model(), NAMES)
     assert result.exists, result.reason
     assert result.posterior_cov[2, 2] > 0

@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pandas as pd
 import pytest
 
 from kalcal.errors import DataError
 from kalcal.io.logs import numeric_columns, read_table, require_increasing
-from kalcal.io.results import to_jsonable, write_csv, write_json
+from kalcal.io.results import SCHEMA_VERSION, to_jsonable, write_csv, write_json
 
 
 def _write(path, text):
@@ -135,10 +137,34 @@ def test_write_json_and_to_jsonable(tmp_path):
     document = {"a": np.float64(1.5), "b": np.arange(3), "c": np.nan, "d": np.bool_(True), "e": (np.int64(2),)}
     assert to_jsonable(document) == {"a": 1.5, "b": [0, 1, 2], "c": None, "d": True, "e": [2]}
     path = write_json(tmp_path / "s.json", document)
-    import json
-
-    assert json.loads(path.read_text()) == {"a": 1.5, "b": [0, 1, 2], "c": None, "d": True, "e": [2]}
+    assert json.loads(path.read_text()) == {
+        "schema_version": SCHEMA_VERSION,
+        "a": 1.5,
+        "b": [0, 1, 2],
+        "c": None,
+        "d": True,
+        "e": [2],
+        "nonfinite": {"count": 1, "fields": {"c": 1}},
+    }
     assert not (tmp_path / "s.json.tmp").exists()
+
+
+def test_every_nonfinite_value_written_as_null_is_counted_by_field(tmp_path):
+    """JSON has no NaN: each one written as null is counted under its field, so that none is silent."""
+    document = {
+        "final": {"cov": np.array([[1.0, np.nan], [np.inf, -np.inf]]), "mean": [0.0, 1.0]},
+        "tests": [{"statistic": np.float64(np.nan)}, {"statistic": 2.0}, {"statistic": float("nan")}],
+        "ok": 3.0,
+    }
+    counted: dict[str, int] = {}
+    plain = to_jsonable(document, counted)
+    assert plain["final"]["cov"] == [[1.0, None], [None, None]]
+    assert counted == {"final.cov": 3, "tests.statistic": 2}
+    written = json.loads(write_json(tmp_path / "s.json", document).read_text())
+    assert written["nonfinite"] == {"count": 5, "fields": {"final.cov": 3, "tests.statistic": 2}}
+    assert list(written)[0] == "schema_version" and written["schema_version"] == SCHEMA_VERSION == 1
+    clean = json.loads(write_json(tmp_path / "t.json", {"ok": 3.0}).read_text())
+    assert clean["nonfinite"] == {"count": 0, "fields": {}}
 
 
 @pytest.mark.parametrize("case", ["inf cell", "non-increasing time"])

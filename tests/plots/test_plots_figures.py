@@ -24,7 +24,7 @@ FIGURES = [
     ("variance_offdiagonal", lambda s, l, r, p: ensemble.plot_variance_offdiagonal(s, p), (WIDE, THREE_ROWS)),
     ("orthogonality_diagonal", lambda s, l, r, p: ensemble.plot_orthogonality_diagonal(s, p), (WIDE, THREE_ROWS)),
     ("orthogonality_offdiagonal", lambda s, l, r, p: ensemble.plot_orthogonality_offdiagonal(s, p), (WIDE, THREE_ROWS)),
-    ("nees", lambda s, l, r, p: consistency.plot_nees(s, p), (WIDE, ONE_ROW)),
+    ("nees", lambda s, l, r, p: consistency.plot_nees(s, p), (WIDE, TWO_ROWS)),
     ("nis", lambda s, l, r, p: consistency.plot_nis(s, p), (WIDE, ONE_ROW)),
     ("residual_correlation", lambda s, l, r, p: consistency.plot_residual_correlation(s, p), (WIDE, 800)),
     ("model_error", lambda s, l, r, p: consistency.plot_model_error(s, p), (WIDE, ONE_ROW)),

@@ -1,15 +1,29 @@
 """The page in a real browser: headless Chromium loads it offline and every figure decodes.
 
-Skipped when no ``chromium`` is on PATH (Debian's ``chromium`` package provides it).
+Skipped when no ``chromium`` is on PATH (Debian's ``chromium`` package provides it), except under CI
+(``CI=true``), where ``.ci/run`` installs it: there a missing browser is an error, not a skip.
 """
 
 import html
 import json
+import os
 import re
 import shutil
 import subprocess
+import sys
 
 import pytest
+
+CHROMIUM = shutil.which("chromium")
+IN_CI = os.environ.get("CI", "").strip().lower() == "true"
+
+
+@pytest.fixture(scope="session")
+def chromium():
+    """The browser's path; under CI its absence fails the test (before the run it would check is made)."""
+    if CHROMIUM is None:
+        pytest.fail("CI=true but chromium is not on PATH: .ci/run installs Debian's chromium package")
+    return CHROMIUM
 
 CHECK = """<script>
 window.addEventListener("load", function () {
@@ -26,14 +40,16 @@ window.addEventListener("load", function () {
 """
 
 
-@pytest.mark.skipif(shutil.which("chromium") is None, reason="chromium is not installed")
-def test_page_renders_in_headless_chromium_with_no_broken_image(report_run, tmp_path):
+@pytest.mark.skipif(
+    CHROMIUM is None and not IN_CI, reason="chromium is not installed (Debian's chromium package; CI installs it)"
+)
+def test_page_renders_in_headless_chromium_with_no_broken_image(chromium, report_run, tmp_path):
     out, page = report_run
     source = page.read_text(encoding="utf-8")
     probe = tmp_path / "probe.html"
     probe.write_text(source.replace("</body>", CHECK + "</body>"), encoding="utf-8")
     command = [
-        shutil.which("chromium"),
+        chromium,
         "--headless",
         "--no-sandbox",
         "--disable-gpu",
@@ -55,3 +71,22 @@ def test_page_renders_in_headless_chromium_with_no_broken_image(report_run, tmp_
     assert report["count"] == expected == 17
     assert report["broken"] == []
     assert all(width == 900 for width in report["widths"])
+
+
+@pytest.mark.parametrize("ci, outcome", [("true", "1 error"), ("", "1 skipped")])
+def test_without_chromium_the_check_skips_but_fails_under_ci(tmp_path, ci, outcome):
+    """Run the browser test with no chromium on PATH: a skip with its reason, or under CI an error."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("PYTEST_")}
+    env.update(PATH="", CI=ci)  # an empty PATH finds no chromium; python is called by its full path
+    result = subprocess.run(
+        [
+            sys.executable, "-m", "pytest", __file__, "-q", "-p", "no:cacheprovider", "-p", "no:xdist",
+            "-k", "headless_chromium", f"--basetemp={tmp_path / 'inner'}", "-rs",
+        ],
+        capture_output=True, text=True, timeout=300, env=env,
+    )
+    assert outcome in result.stdout, result.stdout[-3000:] + result.stderr[-2000:]
+    if ci:
+        assert result.returncode == 1 and "chromium is not on PATH" in result.stdout
+    else:
+        assert result.returncode == 0 and "chromium is not installed" in result.stdout

@@ -96,20 +96,14 @@ def test_scale_bias_has_no_steady_state_and_the_page_says_why(copy_run, monkeypa
 
 
 def test_accel_gps_view_with_a_bias_walk_is_stabilizing():
-    try:
-        scenario = build_scenario("accel-gps", assignments=["scenario.duration=4", "truth.bias_walk_std=2e-4"])
-    except ConfigError:
-        pytest.skip("this accel-gps scenario has no bias_walk_std setting")
+    scenario = build_scenario("accel-gps", assignments=["scenario.duration=4", "truth.bias_walk_std=2e-4"])
     view = steady_state_view(build_problem(scenario)[0])
     assert view.applies and view.result.exists and view.convergence is not None
     assert view.convergence.update is None  # 20 updates are too few to settle
 
 
 def test_accel_gps_with_a_scale_factor_state_is_not_time_invariant():
-    try:
-        scenario = build_scenario("accel-gps", assignments=["scenario.duration=2", "truth.scale_std=1e-3"])
-    except ConfigError:
-        pytest.skip("this accel-gps scenario has no scale_std setting")
+    scenario = build_scenario("accel-gps", assignments=["scenario.duration=2", "truth.scale_std=1e-3"])
     view = steady_state_view(build_problem(scenario)[0])
     assert not view.applies and "scale-factor" in view.reason
 

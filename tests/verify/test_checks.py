@@ -68,7 +68,7 @@ def test_correct_model_passes_at_about_the_stated_rate():
     """80 independent small ensembles of a correct filter: each check may fail with probability <= 1%.
 
     The number of failures of each check is then stochastically below Binomial(80, 0.01), whose 99.9%
-    quantile is 4.
+    quantile is 5 (``scipy.stats.binom.ppf(0.999, 80, 0.01)``; P(X > 5) = 1.6e-4, P(X > 4) = 1.3e-3).
     """
     runs = 80
     limit = stats.binom.ppf(0.999, runs, 0.01)

@@ -19,6 +19,7 @@ import numpy as np
 from kalcal.errors import ConfigError, DataError
 from kalcal.filters.kalman import check_form
 from kalcal.io.statistics import read_statistics
+from kalcal.jobs.progress import JobProgress, stage
 from kalcal.models.custom import CustomModelScenario, is_custom_settings
 from kalcal.models.registry import build_scenario
 from kalcal.montecarlo.accumulators import BlockResult
@@ -78,7 +79,7 @@ def draw_realization(problem, seed: int, index: int, n: int, engine: str) -> tup
     return one, one.filter_cov_sum
 
 
-def render_report(out: str | Path, *, realization: int = 0) -> Path:
+def render_report(out: str | Path, *, realization: int = 0, progress: JobProgress | None = None) -> Path:
     """Draw the figures into ``out/figures/`` and write ``out/report.html`` from a saved run.
 
     Parameters
@@ -87,6 +88,9 @@ def render_report(out: str | Path, *, realization: int = 0) -> Path:
         A ``kalcal verify`` output directory (``summary.json``, ``stats.nc``, optionally ``stats_long.nc``).
     realization : int
         Which realization of the ensemble (0-based, below the run's N) the single-run figures show.
+    progress : callable, optional
+        ``progress(stage, done, total)``: ``"figures"`` after each figure, ``"report"`` once the page is
+        written (see :mod:`kalcal.jobs.progress`).
 
     Returns
     -------
@@ -144,10 +148,20 @@ def render_report(out: str | Path, *, realization: int = 0) -> Path:
         filter_cov=filter_cov,
         state_names=tuple(problem.info.state_names),
         state_units=tuple(problem.info.state_units),
+        state_labels=getattr(scenario, "state_labels", None),  # accel-gps: its error states δp, δv
     )
     steady = steady_state_view(problem)
     figures, skipped = render_figures(
-        dataset, data, out / FIGURE_DIR, long_dataset, scenario=str(summary["scenario"]), steady=steady
+        dataset,
+        data,
+        out / FIGURE_DIR,
+        long_dataset,
+        scenario=str(summary["scenario"]),
+        steady=steady,
+        progress=stage(progress, "figures"),
     )
     page = build_page(summary, figures, skipped, realization=index, figure_dir_name=FIGURE_DIR, steady_state=steady)
-    return write_page(out / PAGE, page)
+    written = write_page(out / PAGE, page)
+    if progress is not None:
+        progress("report", 1, 1)
+    return written

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -15,9 +16,10 @@ from kalcal.errors import ConfigError
 from kalcal.filters.kalman import check_form
 from kalcal.io.results import write_json
 from kalcal.io.statistics import statistics_dataset, write_statistics
+from kalcal.jobs.progress import JobProgress, stage
 from kalcal.models.config import apply_settings, section_values
 from kalcal.montecarlo.accumulators import EnsembleStatistics, ensemble_statistics
-from kalcal.montecarlo.engine import BLOCK_SIZE, Progress, run_monte_carlo
+from kalcal.montecarlo.engine import BLOCK_SIZE, run_monte_carlo
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.verify.checks import REPORT_RESIDUAL_PAIR, CheckResult, residual_pair, run_checks, verdict
 
@@ -26,11 +28,26 @@ ENGINES = ("exact", "sampled")
 LONG_RUN_SECONDS = {"accel-gps": 120.0}
 #: Realizations of that study at most (the report used 5 x 10^4).
 LONG_RUN_REALIZATIONS = 50_000
+#: Fewest realizations a verification accepts: below it the normal approximations behind the checks'
+#: bounds (mean within z se, covariance within its asymptotic spread) are too coarse to mean much.
+MIN_REALIZATIONS = 100
 
 
 def info_name(scenario) -> str:
     """The registry name of a scenario object."""
     return type(scenario).NAME
+
+
+def report_residual_pair(statistics: EnsembleStatistics, info) -> dict[str, Any] | None:
+    """E[r_k r_j^T] at the source report's pair (accel-gps, t_k = 23.8 s, t_j = 5.8 s), or None where the
+    run has no update at one of those times (another GPS rate or a shorter run), no pairs were kept, or
+    the scenario is not the report's: the nearest updates would be another pair under the report's name."""
+    if info.scenario != "accel-gps" or statistics.residual_second_moment is None:
+        return None
+    times = np.asarray(info.update_times)
+    if not all(np.any(np.abs(times - t) <= 1e-6) for t in REPORT_RESIDUAL_PAIR):
+        return None
+    return residual_pair(statistics, info, *REPORT_RESIDUAL_PAIR)
 
 
 @dataclass(frozen=True)
@@ -53,7 +70,7 @@ def verify(
     engine: str = "exact",
     confidence: float = 0.99,
     workers: int | None = None,
-    progress: Progress | None = None,
+    progress: JobProgress | None = None,
     command: str = "",
     long_run: float | None = None,
     client=None,
@@ -63,14 +80,23 @@ def verify(
 ) -> VerifyOutcome:
     """Run n realizations, check the filter, write ``out/summary.json`` and ``out/stats.nc``.
 
-    ``long_run`` (s; default per scenario, 0 for none) adds a study of the ensemble statistics over a
-    longer horizon with min(n, 50 000) realizations, without the residual pairs, in ``out/stats_long.nc``.
+    ``n`` is at least :data:`MIN_REALIZATIONS` (100). ``long_run`` (s; default per scenario, 0 for none)
+    adds a study of the ensemble statistics over a longer horizon with min(n, 50 000) realizations,
+    without the residual pairs, in ``out/stats_long.nc``; a negative one, or one not longer than the run,
+    is refused (the scenario's default is skipped when the run is already that long).
     ``client`` runs the blocks on a Dask cluster, ``batch_size`` realizations per task (rounded up to
     whole blocks); ``checkpoint`` resumes from and saves to a file. None of them changes the numbers.
     ``form`` is the filter's update form (joseph, standard or sqrt; see :mod:`kalcal.filters.kalman`).
+    ``progress(stage, done, total)`` hears of every stage: ``"monte carlo"`` and ``"long run"`` in
+    realizations, ``"statistics"`` in files written (see :mod:`kalcal.jobs.progress`).
     """
-    if n < 2:
-        raise ConfigError(f"-n: need at least 2 realizations, got {n}")
+    if n < MIN_REALIZATIONS:
+        raise ConfigError(
+            f"-n: need at least {MIN_REALIZATIONS} realizations for meaningful bounds (the checks use the "
+            f"normal approximation of ensemble means and covariances), got {n}"
+        )
+    if long_run is not None and not (math.isfinite(long_run) and long_run >= 0):
+        raise ConfigError(f"--long-run: expected 0 (no long-run study) or a positive number of seconds, got {long_run:g}")
     if engine not in ENGINES:
         raise ConfigError(f"--engine: expected one of {', '.join(ENGINES)}, got {engine!r}")
     if not 0.0 < confidence < 1.0:
@@ -82,6 +108,11 @@ def verify(
     problem, cause = build_problem(scenario, form)
     if engine not in problem.engines:
         raise ConfigError(f"--engine: {engine!r} is not available for {problem.info.scenario} (have {', '.join(problem.engines)})")
+    horizon = float(problem.info.update_times[-1])
+    if long_run and long_run <= horizon:
+        raise ConfigError(
+            f"--long-run: {long_run:g} s is not longer than the run itself ({horizon:g} s); give more, or 0 for none"
+        )
     settings = section_values(scenario)
     run = run_monte_carlo(
         problem,
@@ -89,7 +120,7 @@ def verify(
         seed,
         engine=engine,
         workers=workers,
-        progress=progress,
+        progress=stage(progress, "monte carlo"),
         client=client,
         blocks_per_task=-(-(batch_size or BLOCK_SIZE) // BLOCK_SIZE),
         checkpoint=checkpoint,
@@ -111,14 +142,20 @@ def verify(
         {"scenario": info.scenario, "seed": seed, "engine": engine, "confidence": confidence},
     )
     out = Path(out)
-    paths = {"stats": write_statistics(out / "stats.nc", dataset)}
     long_seconds = LONG_RUN_SECONDS.get(info.scenario, 0.0) if long_run is None else long_run
+    has_long = bool(long_seconds and long_seconds > info.update_times[-1])
+    files = 3 if has_long else 2  # stats.nc, stats_long.nc, summary.json
+    file_written = stage(progress, "statistics") or (lambda done, total: None)
+    paths = {"stats": write_statistics(out / "stats.nc", dataset)}
+    file_written(1, files)
     long_summary = None
-    if long_seconds and long_seconds > info.update_times[-1]:
+    if has_long:
         long_n = min(n, LONG_RUN_REALIZATIONS)
         long_scenario = apply_settings(scenario, {"scenario.duration": long_seconds})
         long_problem, _ = build_problem(long_scenario, form, residual_pairs=False)
-        long = run_monte_carlo(long_problem, long_n, seed, engine=engine, workers=workers, client=client)
+        long = run_monte_carlo(
+            long_problem, long_n, seed, engine=engine, workers=workers, client=client, progress=stage(progress, "long run")
+        )
         long_stats = ensemble_statistics(long.sums)
         long_dataset = statistics_dataset(
             long_stats,
@@ -127,6 +164,7 @@ def verify(
             {"scenario": info.scenario, "seed": seed, "engine": engine, "confidence": confidence},
         )
         paths["stats_long"] = write_statistics(out / "stats_long.nc", long_dataset)
+        file_written(2, files)
         long_summary = {"duration": long_seconds, "realizations": long_n, "monte_carlo_s": long.wall_s}
     summary = {
         "scenario": info.scenario,
@@ -146,7 +184,7 @@ def verify(
             "ensemble_covariance": statistics.error_cov[-1],
             "ensemble_mean_error": statistics.mean_error[-1],
         },
-        "residual_correlation": residual_pair(statistics, info, *REPORT_RESIDUAL_PAIR),
+        "residual_correlation": report_residual_pair(statistics, info),
         "model_error": {
             "cause": cause,
             "max_expected_mean_error_sigma": float(
@@ -167,4 +205,5 @@ def verify(
         "kalcal_version": __version__,
     }
     paths["summary"] = write_json(out / "summary.json", summary)
+    file_written(files, files)
     return VerifyOutcome(summary, statistics, checks, dataset, paths)

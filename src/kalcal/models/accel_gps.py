@@ -296,6 +296,10 @@ STATE_UNITS = ("m", "m/s", "m/s^2")
 #: with a scale-factor error the state gains a fourth component
 SCALE_STATE_NAMES = (*STATE_NAMES, "scale")
 SCALE_STATE_UNITS = (*STATE_UNITS, "1")
+#: what each state is, for figures: the errors of the nominal p_c, v_c that the accelerometer integrates,
+#: then the bias (and the scale-factor error) themselves
+STATE_LABELS = ("δp = p − p_c", "δv = v − v_c", "b")
+SCALE_STATE_LABELS = (*STATE_LABELS, "s")
 MEASUREMENT_NAMES = ("position", "velocity")
 MEASUREMENT_UNITS = ("m", "m/s")
 
@@ -329,6 +333,11 @@ class AccelGpsScenario:
     @property
     def state_units(self) -> tuple[str, ...]:
         return SCALE_STATE_UNITS if self.has_scale else STATE_UNITS
+
+    @property
+    def state_labels(self) -> tuple[str, ...]:
+        """What each state is: ``δp = p − p_c``, ``δv = v − v_c`` (error states of the nominal), ``b`` (, ``s``)."""
+        return SCALE_STATE_LABELS if self.has_scale else STATE_LABELS
 
     @property
     def filter_settings(self) -> AccelGpsTruth:

@@ -2,8 +2,8 @@
 
 The engine submits blocks of realizations as Dask tasks (:func:`kalcal.montecarlo.engine.block_task`)
 and folds their sums in block order, so the numbers do not depend on the cluster. A worker that dies
-mid-task has its task rerun by the scheduler on another worker. Dask is the optional extra
-``kalcal[distributed]``.
+mid-task has its task rerun by the scheduler on another worker. Dask (``dask[distributed]``) is a
+default dependency of kalcal.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ def dask_client(workers: int | None = None, scheduler: str | None = None) -> Ite
     try:
         from distributed import Client, LocalCluster
     except ImportError:
-        raise ConfigError("--workers/--scheduler need Dask: pip install 'kalcal[distributed]'") from None
+        raise ConfigError("--workers/--scheduler need Dask, a dependency of kalcal: pip install 'dask[distributed]'") from None
     if scheduler is not None:
         try:
             client = Client(scheduler, timeout="10s")

@@ -24,10 +24,21 @@ from kalcal.plots._common import (
     styled,
     time_label,
 )
-from kalcal.verify.checks import chi2_mean_bounds, normal_bound
+from kalcal.verify.checks import centered_nees, centered_nees_bounds, chi2_mean_bounds, normal_bound
 
 #: pixel height of the residual correlation map (its width is the common 900 px)
 CORRELATION_HEIGHT_PX = 800
+
+
+def _chi2_panel(ax, times, values, expected, low, high, band: str, what: str) -> None:
+    """One mean chi-square statistic against time with its bounds band and expected value."""
+    ax.axhspan(low, high, color=BAND, alpha=0.22, linewidth=0.0, label=band)
+    ax.axhline(expected, color=FILTER, linestyle="--", linewidth=1.2, label=f"expected value {expected:g}")
+    ax.plot(times, values, color=ENSEMBLE, linewidth=1.0, marker=".", markersize=3, label=what)
+    ax.set_ylabel("dimensionless")
+    ax.legend(loc="upper left")
+    span = max(high - low, float(np.max(np.abs(values - expected))) * 2.0)
+    ax.set_ylim(expected - 0.75 * span, expected + 0.75 * span)
 
 
 def _mean_chi2(dataset: xr.Dataset, variable: str, dof: int, what: str, path) -> Path:
@@ -38,25 +49,21 @@ def _mean_chi2(dataset: xr.Dataset, variable: str, dof: int, what: str, path) ->
     low, high = chi2_mean_bounds(confidence, times.size, dof * count, count)
     figure, axes = new_figure(1)
     ax = axes[0, 0]
-    ax.axhspan(low, high, color=BAND, alpha=0.22, linewidth=0.0, label=f"χ²({dof}N)/N bounds, {percent(confidence)} over {times.size} updates")
-    ax.axhline(dof, color=FILTER, linestyle="--", linewidth=1.2, label=f"expected value {dof}")
-    ax.plot(times, values, color=ENSEMBLE, linewidth=1.0, marker=".", markersize=3, label=f"mean {what}")
+    band = f"χ²({dof}N)/N bounds, {percent(confidence)} over {times.size} updates"
+    _chi2_panel(ax, times, values, dof, low, high, band, f"mean {what}")
     ax.set_xlabel(time_label())
     ax.set_ylabel(f"mean {what} (dimensionless)")
-    ax.legend(loc="upper left")
-    span = max(high - low, float(np.max(np.abs(values - dof))) * 2.0)
-    ax.set_ylim(dof - 0.75 * span, dof + 0.75 * span)
     ax.set_title(f"Mean {what} against time, N = {count:,} (bounds [{low:.4g}, {high:.4g}])")
     return save(figure, path)
 
 
 @styled
 def plot_nees(dataset: xr.Dataset, path: str | Path) -> Path:
-    """Mean normalized estimation error squared, mean over realizations of e_k^T P_k^-1 e_k, against time.
-
-    For a consistent filter N times the mean is chi-square with N d degrees of freedom; the band is
-    :func:`~kalcal.verify.checks.chi2_mean_bounds` at the run's confidence for K comparisons. The NEES uses
-    the raw error, so a mean error lifts it. 900 x 400 px.
+    """(a) The centered mean NEES, tr(P_k^-1 C_k) with C_k the ensemble covariance of e_k (divisor N - 1),
+    the statistic the ``covariance`` check holds against chi-square(d (N - 1)) / (N - 1) bounds for K
+    comparisons (:func:`~kalcal.verify.checks.centered_nees`, the same bounds as the check); (b) the raw
+    mean NEES, mean over realizations of e_k^T P_k^-1 e_k, with chi-square(N d) / N bounds: it uses the
+    raw error, so a mean error lifts it, and no check tests it. 900 x 650 px.
 
     Parameters
     ----------
@@ -64,7 +71,40 @@ def plot_nees(dataset: xr.Dataset, path: str | Path) -> Path:
         A ``stats.nc`` Dataset (attributes ``realizations`` and ``confidence``).
     path : path of the PNG to write
     """
-    return _mean_chi2(dataset, "mean_nees", dataset.sizes["state"], "NEES", path)
+    times = dataset["time"].values
+    count = int(dataset.attrs["realizations"])
+    confidence = float(dataset.attrs["confidence"])
+    d = dataset.sizes["state"]
+    figure, axes = new_figure(2)
+    centered = centered_nees(dataset["error_cov"].values, dataset["filter_cov"].values)
+    low, high = centered_nees_bounds(confidence, times.size, d, count)
+    _chi2_panel(
+        axes[0, 0],
+        times,
+        centered,
+        d,
+        low,
+        high,
+        f"covariance check bounds, χ²({d}(N−1))/(N−1), {percent(confidence)} over {times.size} updates",
+        "centered mean NEES tr(P⁻¹ Cov e)",
+    )
+    axes[0, 0].set_title(
+        f"(a) Centered mean NEES, the covariance check's statistic, N = {count:,} (bounds [{low:.4g}, {high:.4g}])"
+    )
+    raw_low, raw_high = chi2_mean_bounds(confidence, times.size, d * count, count)
+    _chi2_panel(
+        axes[1, 0],
+        times,
+        dataset["mean_nees"].values,
+        d,
+        raw_low,
+        raw_high,
+        f"χ²({d}N)/N bounds, {percent(confidence)} over {times.size} updates",
+        "mean NEES eᵀP⁻¹e",
+    )
+    axes[1, 0].set_title("(b) Mean NEES of the raw error (a mean error lifts it; not a check)")
+    axes[1, 0].set_xlabel(time_label())
+    return save(figure, path)
 
 
 @styled

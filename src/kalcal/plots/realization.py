@@ -40,6 +40,9 @@ class RealizationData:
     filter_cov : ndarray, shape (K, d, d)
         The filter's covariance P_k of e_k.
     state_names, state_units : tuple of str, length d
+    state_labels : tuple of str, length d, optional
+        What each state is, for the figures (accel-gps: ``δp = p − p_c``, ``δv = v − v_c``, ``b``: error
+        states of the nominal, not the position and velocity); the names where not given.
     """
 
     index: int
@@ -50,6 +53,11 @@ class RealizationData:
     filter_cov: np.ndarray
     state_names: tuple[str, ...]
     state_units: tuple[str, ...]
+    state_labels: tuple[str, ...] | None = None
+
+    def state_label(self, state: int) -> str:
+        """The label of state ``state`` (its name where no labels are given)."""
+        return self.state_names[state] if self.state_labels is None else self.state_labels[state]
 
     def sigma(self, state: int) -> np.ndarray:
         """sqrt(P_k[i, i]) of state ``state``, (K,)."""
@@ -69,17 +77,18 @@ def plot_state_estimate(data: RealizationData, state: int, path: str | Path) -> 
         Index i of the state to draw.
     path : path of the PNG to write
     """
-    name, unit = data.state_names[state], data.state_units[state]
+    name, unit, symbol = data.state_names[state], data.state_units[state], data.state_label(state)
     sigma = data.sigma(state)
     figure, axes = new_figure(1)
     ax = axes[0, 0]
     estimate = data.estimate[:, state]
     shade_band(ax, data.times, estimate - sigma, estimate + sigma, "estimate ± 1σ (filter P)", SIGMA)
-    ax.plot(data.times, data.truth[:, state], color=TRUTH, linewidth=1.4, label=f"true {name}")
-    ax.plot(data.times, estimate, color=ESTIMATE, linewidth=1.1, linestyle="--", marker=".", markersize=3, label=f"estimated {name}")
+    ax.plot(data.times, data.truth[:, state], color=TRUTH, linewidth=1.4, label=f"true {symbol}")
+    ax.plot(data.times, estimate, color=ESTIMATE, linewidth=1.1, linestyle="--", marker=".", markersize=3, label=f"estimated {symbol.partition(' = ')[0]}")
     ax.set_xlabel(time_label())
-    ax.set_ylabel(label(f"{name} state", unit))
-    ax.set_title(f"{name.capitalize()}: true and estimated, realization {data.index}")
+    ax.set_ylabel(label(f"{name} state" if symbol == name else symbol, unit))
+    what = f"{name.capitalize()} state" + ("" if symbol == name else f" {symbol}")
+    ax.set_title(f"{what}: true and estimated, realization {data.index}")
     ax.legend(loc="best")
     return save(figure, path)
 

@@ -90,16 +90,22 @@ def _realization_specs(data: RealizationData) -> list[_Spec]:
     specs = []
     k, last = data.index, len(data.state_names) - 1
     for i, name in enumerate(data.state_names):
+        symbol = data.state_label(i)
         extra = (
             " The bias is never measured: it is inferred from the position and velocity fixes, so it converges more slowly."
             if name == "bias"
             else ""
         )
+        if symbol != name and "_c" in symbol:
+            extra = (
+                f" The state is the error state {symbol} of the nominal that the accelerometer integrates, "
+                f"not the {name} itself." + extra
+            )
         specs.append(
             _Spec(
                 f"state_{name}",
                 "realization",
-                f"True and estimated {name} state, realization {k}",
+                f"True and estimated {name} state" + ("" if symbol == name else f" {symbol}") + f", realization {k}",
                 f"Look for the estimate (dashed) converging onto the truth (black), with the truth inside the "
                 f"shaded ±1σ band about two times in three.{extra}",
                 lambda path, i=i: single.plot_state_estimate(data, i, path),
@@ -201,9 +207,11 @@ def _consistency_specs(dataset: xr.Dataset) -> list[_Spec]:
         _Spec(
             "nees",
             "consistency",
-            "Mean NEES against time with chi-square bounds",
-            "The mean of eᵀP⁻¹e should stay in the band around d: above it the errors are larger than P "
-            "says (overconfident, or a mean error); below it P is too large.",
+            "Centered mean NEES (the covariance check's statistic) and mean NEES against time, with chi-square bounds",
+            "(a) What the covariance check tests: tr(P⁻¹ Cov e), the NEES with the ensemble mean error taken "
+            "out, should stay in the band around d; above it the errors spread wider than P says "
+            "(overconfident), below it P is too large. (b) The raw mean of eᵀP⁻¹e, which no check tests: a "
+            "mean error lifts it above (a).",
             lambda path: consistency.plot_nees(dataset, path),
         ),
         _Spec(
@@ -290,6 +298,7 @@ def render_figures(
     *,
     scenario: str = REPORT_SCENARIO,
     steady: SteadyStateView | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> tuple[list[FigureEntry], list[SkippedFigure]]:
     """Draw every figure of the report into ``figure_dir``.
 
@@ -308,6 +317,8 @@ def render_figures(
         The run's scenario: figures carry the source report's numbers only for ``REPORT_SCENARIO``.
     steady : SteadyStateView, optional
         The filter's steady state, drawn against P_k (or a note saying why there is none).
+    progress : callable, optional
+        ``progress(done, total)`` after each figure is drawn (``total`` figures in all).
 
     Returns
     -------
@@ -321,10 +332,12 @@ def render_figures(
     specs = _realization_specs(data) + _ensemble_specs(dataset, long_dataset) + _consistency_specs(dataset)
     if steady is not None and steady.has_matrices:
         specs.append(_steady_state_spec(steady))
-    figures = [
-        FigureEntry(spec.key, spec.group, spec.title, spec.caption, spec.draw(figure_dir / f"{spec.key}.png"), numbers.get(spec.key))
-        for spec in specs
-    ]
+    figures = []
+    for done, spec in enumerate(specs, start=1):
+        path = spec.draw(figure_dir / f"{spec.key}.png")
+        figures.append(FigureEntry(spec.key, spec.group, spec.title, spec.caption, path, numbers.get(spec.key)))
+        if progress is not None:
+            progress(done, len(specs))
     skipped = []
     if long_dataset is None:
         skipped.append(

@@ -120,6 +120,19 @@ def check_mean_error(
     return CheckResult("mean_error", bool(passed), worst, None, bound, confidence, m, detail)
 
 
+def centered_nees(error_cov: np.ndarray, filter_cov: np.ndarray) -> np.ndarray:
+    """Centered mean NEES tr(P_k^-1 C_k), (K,), from the ensemble covariance C of e (K, d, d) and P (K, d, d).
+
+    For a consistent filter (N - 1) times it is chi-square with d (N - 1) degrees of freedom (the mean
+    error taken out, so a mean error does not lift it)."""
+    return np.trace(np.linalg.solve(filter_cov, error_cov), axis1=1, axis2=2)
+
+
+def centered_nees_bounds(confidence: float, n_updates: int, d: int, count: int) -> tuple[float, float]:
+    """Bounds of :func:`centered_nees` for K = ``n_updates`` comparisons of N = ``count`` realizations."""
+    return chi2_mean_bounds(confidence, n_updates, d * (count - 1), count - 1)
+
+
 def check_covariance(s: EnsembleStatistics, info: ProblemInfo, confidence: float) -> CheckResult:
     """Ensemble covariance of e equals the filter's P, element by element and through the centered NEES."""
     n_updates, d, _ = s.filter_cov.shape
@@ -132,16 +145,16 @@ def check_covariance(s: EnsembleStatistics, info: ProblemInfo, confidence: float
     z = _safe_ratio(s.error_cov - p, sd)[:, upper[0], upper[1]]
     worst, (k, e) = _max_abs(z)
     i, l = int(upper[0][e]), int(upper[1][e])
-    centered_nees = np.trace(np.linalg.solve(p, s.error_cov), axis1=1, axis2=2)
-    low, high = chi2_mean_bounds(confidence, n_updates, d * (s.count - 1), s.count - 1)
-    nees_ok = bool(np.all((centered_nees >= low) & (centered_nees <= high)))
+    centered = centered_nees(s.error_cov, p)
+    low, high = centered_nees_bounds(confidence, n_updates, d, s.count)
+    nees_ok = bool(np.all((centered >= low) & (centered <= high)))
     ratio = _safe_ratio(np.diagonal(s.error_cov, axis1=1, axis2=2), diag)
     rk, ri = np.unravel_index(int(np.argmax(np.abs(np.log(np.where(ratio > 0, ratio, 1.0))))), ratio.shape)
     detail = (
         f"largest deviation {worst:.2f} sd in element ({info.state_names[i]}, {info.state_names[l]}) at "
         f"t = {info.update_times[k]:g} s; ensemble/filter variance ratio from {ratio.min():.3f} to {ratio.max():.3f} "
         f"(extreme: {info.state_names[ri]} at t = {info.update_times[rk]:g} s); centered mean NEES from "
-        f"{centered_nees.min():.4f} to {centered_nees.max():.4f}, bounds [{low:.4f}, {high:.4f}]"
+        f"{centered.min():.4f} to {centered.max():.4f}, bounds [{low:.4f}, {high:.4f}]"
     )
     passed = worst <= bound and nees_ok
     if not passed:

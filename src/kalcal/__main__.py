@@ -1,0 +1,5 @@
+"""``python -m kalcal``: the ``kalcal`` command."""
+
+from kalcal.cli import main
+
+main()

@@ -1,0 +1,90 @@
+"""What the figures say: the states of accel-gps are error states, and the NEES figure shows the
+statistic the covariance check tests, with the check's own bounds."""
+
+import dataclasses
+import re
+
+import numpy as np
+import pytest
+
+from kalcal.models.registry import build_scenario
+from kalcal.montecarlo.accumulators import ensemble_statistics
+from kalcal.montecarlo.engine import run_monte_carlo
+from kalcal.montecarlo.scenarios import build_problem
+from kalcal.plots import consistency
+from kalcal.plots import realization as single
+from kalcal.verify.checks import centered_nees, centered_nees_bounds, check_covariance
+
+
+@pytest.fixture
+def captured(monkeypatch):
+    """The matplotlib Figure each plot function saves, in order."""
+    figures = []
+
+    def keep(module):
+        original = module.save
+
+        def save(figure, path):
+            figures.append(figure)
+            return original(figure, path)
+
+        monkeypatch.setattr(module, "save", save)
+
+    keep(single)
+    keep(consistency)
+    return figures
+
+
+def test_accel_gps_states_are_labelled_as_error_states():
+    assert build_scenario("accel-gps").state_labels == ("δp = p − p_c", "δv = v − v_c", "b")
+    assert build_scenario("accel-gps", None, ["truth.scale_std=1e-3", "filter.scale_std=1e-3"]).state_labels[-1] == "s"
+
+
+@pytest.mark.parametrize("state, symbol", [(0, "δp = p − p_c"), (1, "δv = v − v_c"), (2, "b")])
+def test_state_figure_names_the_error_state_not_the_true_velocity(plots_run, captured, tmp_path, state, symbol):
+    _, _, data = plots_run
+    labelled = dataclasses.replace(data, state_labels=build_scenario("accel-gps").state_labels)
+    single.plot_state_estimate(labelled, state, tmp_path / "state.png")
+    ax = captured[-1].axes[0]
+    legend = [text.get_text() for text in ax.get_legend().get_texts()]
+    assert f"true {symbol}" in legend and f"estimated {symbol.partition(' = ')[0]}" in legend
+    assert symbol in ax.get_ylabel() and symbol in ax.get_title()
+    name = data.state_names[state]
+    assert f"true {name}" not in legend
+
+
+def test_state_figure_without_labels_keeps_the_names(plots_run, captured, tmp_path):
+    _, _, data = plots_run
+    single.plot_state_estimate(data, 1, tmp_path / "state.png")
+    legend = [text.get_text() for text in captured[-1].axes[0].get_legend().get_texts()]
+    assert "true velocity" in legend
+
+
+def test_nees_figure_shows_the_covariance_checks_statistic_and_bounds(plots_run, captured, tmp_path):
+    stats, _, _ = plots_run
+    consistency.plot_nees(stats, tmp_path / "nees.png")
+    tested, raw = captured[-1].axes
+    count, confidence = int(stats.attrs["realizations"]), float(stats.attrs["confidence"])
+    expected = centered_nees(stats["error_cov"].values, stats["filter_cov"].values)
+    (line,) = [l for l in tested.get_lines() if "centered mean NEES" in l.get_label()]
+    np.testing.assert_allclose(line.get_ydata(), expected)
+    low, high = centered_nees_bounds(confidence, stats.sizes["time"], stats.sizes["state"], count)
+    band = tested.patches[0]  # axhspan: a rectangle spanning the axes in x, in data units in y
+    assert band.get_y() == pytest.approx(low) and band.get_y() + band.get_height() == pytest.approx(high)
+    assert "covariance check" in tested.get_title()
+    (raw_line,) = [l for l in raw.get_lines() if "mean NEES" in l.get_label()]
+    np.testing.assert_allclose(raw_line.get_ydata(), stats["mean_nees"].values)
+    assert "not a check" in raw.get_title()
+
+
+def test_the_figures_nees_is_the_one_the_check_holds_against_its_bounds():
+    scenario = build_scenario("accel-gps", None, ["scenario.duration=2", "scenario.truth=discrete"])
+    problem, _ = build_problem(scenario)
+    s = ensemble_statistics(run_monte_carlo(problem, 2000, seed=5).sums)
+    result = check_covariance(s, problem.info, 0.99)
+    values = centered_nees(s.error_cov, s.filter_cov)
+    low, high = centered_nees_bounds(0.99, s.filter_cov.shape[0], s.filter_cov.shape[1], s.count)
+    match = re.search(r"centered mean NEES from ([-\d.]+) to ([-\d.]+), bounds \[([-\d.]+), ([-\d.]+)\]", result.detail)
+    assert match, result.detail
+    reported = [float(v) for v in match.groups()]
+    np.testing.assert_allclose(reported, [values.min(), values.max(), low, high], atol=5e-5)

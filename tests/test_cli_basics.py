@@ -1,0 +1,164 @@
+"""What a user meets first: --version and -h, help that keeps its units, titles that keep their
+phrases, the E[r_k r_j^T] line only for the report's pair, one closing line naming what was written."""
+
+from __future__ import annotations
+
+import io
+import json
+import re
+import subprocess
+import sys
+
+import pytest
+from rich.console import Console
+from typer.testing import CliRunner
+
+from kalcal import __version__, cli
+from kalcal.cli import app
+
+runner = CliRunner()
+# CliRunner names the program "root"; the console script calls it kalcal
+SHORT = ["--set", "scenario.duration=4", "--no-report", "--long-run", "0"]
+
+
+def _flat(text: str) -> str:
+    """Whitespace runs as one space: help text is rewrapped to the terminal's width."""
+    return " ".join(text.split())
+
+
+def test_version_prints_the_package_version():
+    result = runner.invoke(app, ["--version"])
+    assert result.exit_code == 0 and result.output.strip() == f"kalcal {__version__}"
+
+
+def test_python_dash_m_kalcal_is_the_command():
+    result = subprocess.run([sys.executable, "-m", "kalcal", "--version"], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0 and result.stdout.strip() == f"kalcal {__version__}", result.stderr
+
+
+@pytest.mark.parametrize("command", [[], ["verify"], ["calibrate"], ["noise"], ["report"]])
+def test_dash_h_is_help(command):
+    short = runner.invoke(app, [*command, "-h"])
+    long = runner.invoke(app, [*command, "--help"])
+    assert short.exit_code == 0 and "Usage: " in short.output and "--help" in short.output
+    assert short.output == long.output
+
+
+def _help_texts():
+    """(command, text) for every piece of help that holds a [bracket] (units, TOML sections)."""
+    for info in app.registered_commands:
+        name = info.name or info.callback.__name__
+        doc = info.callback.__doc__ or ""
+        for match in re.finditer(r"[^.;]*\[[^\]]+\][^.;]*", doc):
+            yield name, match.group(0)
+        for parameter in cli.typer.main.get_command(app).commands[name].params:
+            help_text = getattr(parameter, "help", None) or ""
+            if "[" in help_text:
+                yield name, help_text
+
+
+def test_every_help_text_with_brackets_is_found():
+    pairs = list(_help_texts())
+    assert ("calibrate", "accel-gps: accelerometer log (CSV or Parquet): time [s], accel [m/s^2].") in pairs
+    assert len(pairs) >= 6
+
+
+@pytest.mark.parametrize("command, text", list(_help_texts()))
+def test_help_keeps_the_units_in_brackets(command, text):
+    output = runner.invoke(app, [command, "--help"]).output
+    assert _flat(text.replace("\\[", "[")) in _flat(output), output
+
+
+@pytest.mark.parametrize("width", [40, 60, 80, 120])
+def test_table_titles_break_only_between_phrases(monkeypatch, width):
+    phrases = ("kalcal verify accel-gps: 300,000 realizations (exact) in 12.34 s", "verdict: FAIL")
+    buffer = io.StringIO()
+    monkeypatch.setattr(cli, "console", Console(file=buffer, width=width, color_system=None))
+    table = cli._table(*phrases)
+    table.add_column("check")
+    table.add_row("mean_error")
+    cli.console.print(table)
+    lines = [line.strip() for line in buffer.getvalue().splitlines()]
+    title = lines[: next(i for i, line in enumerate(lines) if line.startswith(("┏", "+", "┌")))]
+    if width >= len(", ".join(phrases)):
+        assert title == [", ".join(phrases)]
+    elif width >= len(phrases[0]) + 1:
+        assert title == [phrases[0] + ",", phrases[1]]
+    else:  # a phrase longer than the console itself: nothing to keep it whole
+        assert "verdict: FAIL" in title
+
+
+def test_verify_closes_with_one_line_naming_what_it_wrote(tmp_path):
+    out = tmp_path / "out"
+    result = runner.invoke(app, ["verify", "-n", "300", "--out", str(out), "--set", "scenario.duration=2", "--long-run", "4"])
+    assert result.exit_code == 0, result.output
+    last = result.output.strip().splitlines()[-1]
+    assert last == f"wrote {out}/: summary.json, stats.nc, stats_long.nc, report.html, figures/"
+    assert sum(line.startswith("wrote") for line in result.output.splitlines()) == 1
+
+
+def test_report_closes_with_one_line_naming_what_it_wrote(tmp_path):
+    out = tmp_path / "out"
+    assert runner.invoke(app, ["verify", "-n", "300", "--out", str(out), *SHORT]).exit_code == 0
+    result = runner.invoke(app, ["report", str(out)])
+    assert result.exit_code == 0, result.output
+    assert result.output.strip().splitlines()[-1] == f"wrote {out}/: report.html, figures/"
+
+
+def test_no_pair_line_where_the_run_has_not_the_reports_pair(tmp_path):
+    result = runner.invoke(app, ["verify", "-n", "300", "--out", str(tmp_path), *SHORT])
+    assert result.exit_code == 0, result.output
+    assert "E[r_k r_j^T]" not in result.output
+    assert json.loads((tmp_path / "summary.json").read_text())["residual_correlation"] is None
+
+
+def test_the_reports_pair_in_readable_numbers(tmp_path):
+    result = runner.invoke(app, ["verify", "-n", "300", "--out", str(tmp_path), "--no-report", "--long-run", "0"])
+    assert result.exit_code == 0, result.output
+    (line,) = [line for line in result.output.splitlines() if "E[r_k r_j^T]" in line]
+    assert line.startswith("E[r_k r_j^T] at t_k = 23.8 s, t_j = 5.8 s (± standard error): [[")
+    numbers = re.findall(r"-?\d[\d.e+-]*", line.split(": ", 1)[1])
+    assert len(numbers) == 8  # 2 x 2 entries, each with its standard error
+    assert all(len(n.lstrip("-").replace(".", "").split("e")[0].lstrip("0")) <= 3 for n in numbers), line
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["residual_correlation"]["k_time"] == pytest.approx(23.8)
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["-n", "99"], "-n: need at least 100 realizations"),
+        (["--long-run", "-5"], "--long-run: expected 0 (no long-run study) or a positive number of seconds, got -5"),
+        (["--long-run", "nan"], "--long-run: expected 0"),
+        (["--long-run", "3"], "--long-run: 3 s is not longer than the run itself (4 s)"),
+    ],
+)
+def test_too_few_realizations_or_a_bad_long_run_is_refused(tmp_path, args, message):
+    base = ["verify", "-n", "300", "--out", str(tmp_path), "--set", "scenario.duration=4", "--no-report"]
+    result = runner.invoke(app, [*base, *args])
+    assert result.exit_code == 2
+    lines = [line for line in result.output.splitlines() if line.strip()]
+    assert len(lines) == 1 and message in lines[0], result.output
+    assert not (tmp_path / "summary.json").exists()
+
+
+def test_the_progress_bar_shows_each_stage_with_its_units(monkeypatch):
+    monkeypatch.setattr(cli, "error_console", Console(file=io.StringIO(), force_terminal=True, width=120))
+    bar, update = cli._progress_bar("accel-gps x 300")
+    assert update is not None
+    with bar:
+        update("monte carlo", 100, 300)
+        (task,) = bar.tasks
+        assert (task.description, task.completed, task.total, task.fields["unit"]) == (
+            "accel-gps x 300: monte carlo", 100, 300, "realizations"
+        )
+        update("figures", 3, 17)
+        assert (task.description, task.completed, task.total, task.fields["unit"]) == (
+            "accel-gps x 300: figures", 3, 17, "figures"
+        )
+
+
+def test_no_progress_bar_off_a_terminal(monkeypatch):
+    monkeypatch.setattr(cli, "error_console", Console(file=io.StringIO(), force_terminal=False))
+    _, update = cli._progress_bar("x")
+    assert update is None

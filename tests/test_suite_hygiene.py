@@ -1,0 +1,47 @@
+"""The test suite itself: no guard that turns a regression into a skip, and Dask a default dependency."""
+
+import ast
+import tomllib
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+TESTS = sorted(Path(__file__).resolve().parent.rglob("test_*.py"))
+
+
+def _calls(node: ast.AST, dotted: str) -> bool:
+    """Whether ``node`` contains a call of ``dotted`` (e.g. ``pytest.skip``)."""
+    owner, _, name = dotted.rpartition(".")
+    return any(
+        isinstance(call, ast.Call)
+        and isinstance(call.func, ast.Attribute)
+        and call.func.attr == name
+        and isinstance(call.func.value, ast.Name)
+        and call.func.value.id == owner
+        for call in ast.walk(node)
+    )
+
+
+def test_no_error_is_turned_into_a_skip():
+    """``except SomeError: pytest.skip(...)`` hides a regression (a setting that stops existing) as a skip."""
+    offenders = []
+    for path in TESTS:
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ExceptHandler) and any(_calls(stmt, "pytest.skip") for stmt in node.body):
+                offenders.append(f"{path.relative_to(ROOT)}:{node.lineno}")
+    assert not offenders, offenders
+
+
+def test_no_module_level_skip_on_a_dependency():
+    """A dependency of kalcal that is missing must fail the tests that need it, not skip a whole module."""
+    offenders = []
+    for path in TESTS:
+        for stmt in ast.parse(path.read_text(encoding="utf-8")).body:
+            if _calls(stmt, "pytest.importorskip"):
+                offenders.append(f"{path.relative_to(ROOT)}:{stmt.lineno}")
+    assert not offenders, offenders
+
+
+def test_dask_is_a_default_dependency():
+    """Dask is the scale-out engine (--workers, --scheduler): every install has it."""
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]
+    assert any(req.replace(" ", "").startswith("dask[distributed]") for req in project["dependencies"])
