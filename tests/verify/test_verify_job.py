@@ -85,6 +85,8 @@ def test_a_state_without_spread_and_with_a_mean_error_fails_mean_error(tmp_path)
     assert "10 comparison(s) with zero standard error and a nonzero mean error, counted as failed" in mean_error["detail"]
     # the filter run on the truth's mean predicts exactly this offset
     assert mean_error["cause"]["explained_by"] == "model_error"
+    # x3's ensemble variance is 0 against P = 1: underconfident (a variance ratio of 0 used to be passed over)
+    assert summary["tests"][1]["cause"]["direction"] == "underconfident"
     assert re.search(r"mean_error\s*│\s*inf\s*│\s*\S+\s*│\s*0\s*│\s*FAIL", result.output), result.output
 
 
