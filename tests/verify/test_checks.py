@@ -11,7 +11,7 @@ from kalcal.models.config import apply_settings
 from kalcal.montecarlo.accumulators import ensemble_statistics
 from kalcal.montecarlo.engine import run_monte_carlo
 from kalcal.montecarlo.scenarios import build_problem
-from kalcal.verify.checks import chi2_mean_bounds, normal_bound, run_checks, verdict
+from kalcal.verify.checks import chi2_mean_bounds, covariance_element_bound, normal_bound, run_checks, verdict
 
 
 def _checks(n, seed=0, **settings):
@@ -166,6 +166,7 @@ def test_covariance_check_splits_its_alpha_between_its_two_parts():
     elements, nees = cov.parts
     assert (elements.name, nees.name) == ("elements", "centered_nees")
     assert elements.upper == pytest.approx(normal_bound(0.99, 2 * elements.comparisons))
+    assert elements.upper == covariance_element_bound(0.99, 150, 3)  # the band of the report's figures
     low, high = chi2_mean_bounds(0.995, nees.comparisons, 3 * (20000 - 1), 20000 - 1)
     assert (nees.lower, nees.upper) == (pytest.approx(low), pytest.approx(high))
     assert nees.comparisons == 150 and elements.comparisons == 150 * 6

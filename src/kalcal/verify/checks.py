@@ -63,6 +63,7 @@ __all__ = [
     "check_orthogonality",
     "check_residual_whiteness",
     "chi2_mean_bounds",
+    "covariance_element_bound",
     "normal_bound",
     "residual_pair",
     "run_checks",
@@ -94,6 +95,11 @@ def _normal_bound(alpha: float, comparisons: int) -> float:
 def _chi2_bounds(alpha: float, comparisons: int, dof: float, count: float) -> tuple[float, float]:
     tail = alpha / (2.0 * comparisons)
     return float(sps.chi2.ppf(tail, dof) / count), float(sps.chi2.isf(tail, dof) / count)
+
+
+def covariance_element_bound(confidence: float, n_updates: int, d: int) -> float:
+    """The bound of the covariance check's element-wise part: K d (d + 1) / 2 comparisons at alpha / 2."""
+    return _normal_bound((1.0 - confidence) / len(COVARIANCE_PARTS), n_updates * d * (d + 1) // 2)
 
 
 def verdict_false_alarm_bound(confidence: float, checks: int) -> float:
@@ -241,7 +247,7 @@ def check_covariance(s: EnsembleStatistics, info: ProblemInfo, confidence: float
     n_updates, d, _ = s.filter_cov.shape
     upper = np.triu_indices(d)
     m = n_updates * upper[0].size
-    bound = _normal_bound(share, m)
+    bound = covariance_element_bound(confidence, n_updates, d)
     p = s.filter_cov
     diag = np.diagonal(p, axis1=1, axis2=2)
     sd = np.sqrt((p**2 + diag[:, :, None] * diag[:, None, :]) / s.count)
