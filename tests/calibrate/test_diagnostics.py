@@ -79,6 +79,15 @@ def test_correlated_component_is_named():
     assert "position innovations correlated in time" in d.verdict and "velocity innovations" not in d.verdict
 
 
+def test_untestable_whiteness_is_not_a_pass():
+    """A constant component has no Ljung-Box statistic (NaN): the whiteness part fails and says why."""
+    innovations = np.random.default_rng(2).standard_normal((300, 2))
+    innovations[:, 1] = 0.0
+    d = innovation_diagnostics(innovations, confidence=0.99)
+    assert not d.parts[1].passed and np.isnan(d.parts[1].pvalue) and not d.consistent
+    assert "velocity innovations not testable for whiteness" in d.verdict and "position innovations" not in d.verdict
+
+
 def test_confidence_outside_the_unit_interval_is_refused():
     with pytest.raises(ValueError, match="confidence"):
         innovation_diagnostics(np.zeros((10, 2)), confidence=1.0)

@@ -103,7 +103,8 @@ def innovation_diagnostics(
     statistics, pvalues = [], []
     for component in range(p):
         # A degenerate series (constant, or too short for the lags) would make statsmodels divide by zero:
-        # its NaN p-value then fails no test, and no library warning reaches the user.
+        # its NaN p-value then fails the whiteness part (untestable is not white), and no library warning
+        # reaches the user.
         with np.errstate(all="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             table = acorr_ljungbox(normalized[:, component], lags=[lags])
@@ -125,9 +126,13 @@ def innovation_diagnostics(
         direction = "underconfident"
         problems.append(f"innovations too small (mean NIS {mean_nis:.3g} below {lower:.3g}): the noise settings are too large")
     correlated = [names[c] for c in range(p) if p * pvalues[c] < share]
-    if not whiteness.passed and not correlated:
-        problems.append(f"whiteness not testable (Ljung-Box statistic {statistics}): the innovations are constant")
-    elif not whiteness.passed:
+    untestable = [names[c] for c in range(p) if np.isnan(pvalues[c])]
+    if untestable:
+        problems.append(
+            f"{' and '.join(untestable)} innovations not testable for whiteness (constant, or too short for "
+            f"{lags} lags)"
+        )
+    if correlated:
         problems.append(
             f"{' and '.join(correlated)} innovations correlated in time (Ljung-Box over {lags} lags, "
             f"p = {min(pvalues):.2g} against {share / p:.2g}): the model misses a dynamic (a drifting bias, a scale "
