@@ -301,11 +301,14 @@ def _print_checks(summary: dict) -> None:
     table.add_column("check")
     table.add_column("statistic", justify="right")
     table.add_column("bounds", justify="right")
+    table.add_column("p-value", justify="right")
     table.add_column("result")
     for test in summary["tests"]:
         lower = "" if test["lower"] is None else f"{test['lower']:.4g} .. "
         result = "[green]pass[/green]" if test["passed"] else "[bold red]FAIL[/bold red]"
-        table.add_row(test["name"], f"{test['statistic']:.4g}", f"{lower}{test['upper']:.4g}", result)
+        table.add_row(
+            test["name"], f"{test['statistic']:.4g}", f"{lower}{test['upper']:.4g}", f"{test['pvalue']:.3g}", result
+        )
     console.print(table)
     for test in summary["tests"]:
         if not test["passed"]:

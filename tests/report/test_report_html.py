@@ -1,13 +1,14 @@
 """The report page: self-contained, references every figure and check, leads failures with their cause."""
 
 import base64
+import html
 import json
 import re
 
 import pytest
 
 from kalcal.report.figures import REPORT_NUMBERS, FigureEntry, SkippedFigure
-from kalcal.report.html import build_page, png_size, shortfall, split_detail
+from kalcal.report.html import build_page, measured_text, png_size, shortfall
 
 
 def _failures_section(page: str) -> str:
@@ -51,10 +52,28 @@ def test_failed_check_detail_leads_the_failures_section(report_run):
     assert any(t["name"] == "mean_error" for t in failed)  # Euler integration against the analytic truth
     section = _failures_section(page)
     assert page.index('class="failures"') < page.index('id="verdicts"')
+    text = html.unescape(section)
     for test in failed:
-        measured, cause = split_detail(test["detail"])
-        assert f"Likely cause: {cause}" in section.replace("&#x27;", "'")
-        assert section.index(cause[:40]) < section.index(measured[:40].replace("|", "|"))
+        reason = test["cause"]["reason"]  # the cause as data, never split out of the detail
+        assert reason and f"Likely cause: {reason.rstrip('.')}." in text
+        measured = measured_text(test)
+        assert test["detail"] == f"{measured}. {reason}"
+        assert text.index(reason[:40]) < text.index(f"Measured:</strong> {measured}.")
+    mean_error = next(t for t in failed if t["name"] == "mean_error")
+    assert mean_error["cause"]["explained_by"] == "model_error"
+    assert "Accounted for by:</strong> the mean error the filter's model predicts" in text
+
+
+def test_header_states_each_checks_level_and_the_verdicts_bound(report_run):
+    """Five checks at 99% each: a correct filter fails a given one with probability <= 1%, the verdict <= 5%."""
+    page = html.unescape(report_run[1].read_text(encoding="utf-8"))
+    assert "family-wise confidence" not in page
+    statement = (
+        "each check at 99% confidence (a correct filter fails it with probability at most 1%); a correct filter "
+        "fails at least one of the 5 checks with probability at most 5% (Bonferroni)"
+    )
+    header = page[page.index("<h1>") : page.index("<nav>")]
+    assert statement in header
 
 
 def _summary(tests, **extra):
@@ -72,20 +91,33 @@ def _summary(tests, **extra):
     return base | extra
 
 
-def _test(name, passed, statistic, upper, detail, lower=None):
+def _test(name, passed, statistic, upper, detail, lower=None, reason=None, parts=(), **cause):
     return {"name": name, "passed": passed, "statistic": statistic, "lower": lower, "upper": upper,
-            "confidence": 0.99, "comparisons": 10, "detail": detail}
+            "pvalue": 0.5 if passed else 0.001, "confidence": 0.99, "comparisons": 10,
+            "detail": detail if reason is None else f"{detail}. {reason}",
+            "cause": {"explained_by": cause.get("explained_by"), "direction": cause.get("direction"), "reason": reason},
+            "parts": list(parts)}
+
+
+def _part(name, passed, statistic, upper, lower=None):
+    return {"name": name, "statistic": statistic, "pvalue": 0.5 if passed else 0.001, "lower": lower, "upper": upper,
+            "confidence": 0.995, "alpha": 0.005, "comparisons": 10, "passed": passed}
 
 
 def test_failure_says_what_by_how_much_and_why_escaped():
     tests = [
-        _test("mean_error", False, 12.0, 4.0, "largest 12 standard errors (x<y & z). Explained by <Euler> integration"),
-        _test("nis", False, 1.5, 2.1, "mean NIS 1.5. Innovations smaller than S", lower=1.9),
+        _test("mean_error", False, 12.0, 4.0, "largest 12 standard errors (x<y & z)",
+              reason="Explained by <Euler> integration", explained_by="model_error"),
+        _test("nis", False, 1.5, 2.1, "mean NIS 1.5", lower=1.9, reason="Innovations smaller than S",
+              direction="underconfident"),
         _test("covariance", True, 1.0, 4.0, "fine"),
     ]
     page = build_page(_summary(tests), [], [])
     section = _failures_section(page)
     assert "Likely cause: Explained by &lt;Euler&gt; integration." in section
+    assert "Measured:</strong> largest 12 standard errors (x&lt;y &amp; z).</p>" in section
+    assert "Direction:</strong> underconfident: the actual spread is smaller" in section
+    assert "(p = 0.001 against 0.01)" in section
     assert "12 against an upper bound of 4: 8 above it (3 times the bound)" in section
     assert "1.5 against a lower bound of 1.9: 0.4 below it" in section
     assert "x&lt;y &amp; z" in section and "<Euler>" not in page and "x<y" not in page
@@ -105,14 +137,26 @@ def test_skipped_figure_is_noted():
     assert "Figure 5.8 (Longer run) is not shown:" in page and "stats_long.nc" in page
 
 
-def test_shortfall_when_a_second_criterion_failed():
-    text = shortfall(_test("covariance", False, 3.0, 4.0, "centered NEES out of bounds"))
-    assert "within ≤ 4" in text
+def test_shortfall_names_the_part_that_failed():
+    parts = [_part("elements", True, 3.0, 4.0), _part("centered_nees", False, 3.2, 3.1, lower=2.9)]
+    text = shortfall(_test("covariance", False, 3.0, 4.0, "centered NEES out of bounds", parts=parts))
+    assert text == "centered NEES: 3.2 against an upper bound of 3.1: 0.1 above it (1.03 times the bound)"
 
 
-def test_split_detail():
-    assert split_detail("measured 3.2 sd (t = 1 s). Cause: x. More") == ("measured 3.2 sd (t = 1 s)", "Cause: x. More")
-    assert split_detail("only 2.5 units.") == ("only 2.5 units", "")
+def test_verdicts_table_shows_every_bound_and_pvalue():
+    parts = [_part("elements", True, 3.0, 4.0), _part("centered_nees", False, 3.2, 3.1, lower=2.9)]
+    page = html.unescape(build_page(_summary([_test("covariance", False, 3.0, 4.0, "d", parts=parts)]), [], []))
+    assert "element-wise ≤ 4; centered NEES [2.9, 3.1]" in page
+    assert ("99% confidence, 10 comparisons, p = 0.001; element-wise at 99.5%, 10 comparisons, p = 0.5; "
+            "centered NEES at 99.5%, 10 comparisons, p = 0.001") in page
+
+
+def test_measured_text_drops_only_the_reason():
+    assert measured_text(_test("x", False, 1.0, 0.5, "measured 3.2 sd (t = 1 s)", reason="Cause: x. More")) == (
+        "measured 3.2 sd (t = 1 s)"
+    )
+    # a detail with sentences of its own and no reason stays whole
+    assert measured_text(_test("x", False, 1.0, 0.5, "only 2.5 units. Then more.")) == "only 2.5 units. Then more"
 
 
 def test_figure_entry_embeds_png(tmp_path, report_run):

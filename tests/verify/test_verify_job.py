@@ -1,6 +1,7 @@
 """``kalcal verify`` end to end: outputs, exit codes, and the report's headline numbers."""
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -29,7 +30,17 @@ def test_verify_writes_summary_and_statistics(tmp_path):
     assert summary["realizations"] == 3000 and summary["seed"] == 4 and summary["engine"] == "exact"
     assert [t["name"] for t in summary["tests"]] == ["mean_error", "covariance", "orthogonality", "residual_whiteness", "nis"]
     for test in summary["tests"]:
-        assert set(test) >= {"name", "passed", "statistic", "lower", "upper", "detail"}
+        assert set(test) >= {"name", "passed", "statistic", "lower", "upper", "detail", "confidence", "comparisons"}
+        # p-values and causes as data, not only in the detail
+        assert test["passed"] == (test["pvalue"] >= 1 - test["confidence"])
+        assert set(test["cause"]) == {"explained_by", "direction", "reason"}
+        assert test["cause"]["reason"] is None or test["detail"].endswith(test["cause"]["reason"])
+    covariance = summary["tests"][1]
+    assert [part["name"] for part in covariance["parts"]] == ["elements", "centered_nees"]
+    assert all(part["alpha"] == pytest.approx(0.005) for part in covariance["parts"])
+    assert all(test["parts"] == [] for test in summary["tests"] if test["name"] != "covariance")
+    mean_error = summary["tests"][0]
+    assert not mean_error["passed"] and mean_error["cause"]["explained_by"] == "model_error"
     assert np.array(summary["final"]["filter_covariance"]).shape == (3, 3)
     assert summary["timing"]["monte_carlo_s"] > 0
     with xr.open_dataset(tmp_path / "stats.nc") as stats:
@@ -37,6 +48,46 @@ def test_verify_writes_summary_and_statistics(tmp_path):
         assert stats["residual_second_moment"].dims == ("time", "measurement", "time2", "measurement2")
         np.testing.assert_allclose(stats["filter_cov"].values[-1], summary["final"]["filter_covariance"])
     assert "mean_error" in result.output and "FAIL" in result.output
+
+
+ZERO_SPREAD_MODEL = """
+steps_per_update = 10
+updates = 10
+sample_period = 0.1
+phi   = [[1.0, 0.1, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+gamma = [[0.005], [0.1], [0.0]]
+h     = [[1.0, 0.0, 0.0]]
+w     = [[0.04]]
+v     = [[4.0]]
+x0    = [0.0, 10.0, 0.0]
+m0    = [[25.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+
+[truth]
+x0 = [0.0, 10.0, 0.5]
+m0 = [[25.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.0]]
+"""
+
+
+def test_a_state_without_spread_and_with_a_mean_error_fails_mean_error(tmp_path):
+    """x3 is 0.5 in every realization of the truth and never observed: e_3 = 0.5 with zero variance.
+
+    Zero standard error used to count as a pass; a nonzero mean with no spread is a failure.
+    """
+    model = tmp_path / "zero_spread.toml"
+    model.write_text(ZERO_SPREAD_MODEL)
+    result = runner.invoke(app, ["verify", str(model), "-n", "2000", "--out", str(tmp_path / "out"), "--no-report"])
+    assert result.exit_code == 0, result.output
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    mean_error = summary["tests"][0]
+    assert not mean_error["passed"] and mean_error["pvalue"] == 0.0
+    assert mean_error["statistic"] is None  # infinite: JSON has no inf
+    assert "x3 at t = 1 s: mean error 0.5 with zero standard error" in mean_error["detail"]
+    assert "10 comparison(s) with zero standard error and a nonzero mean error, counted as failed" in mean_error["detail"]
+    # the filter run on the truth's mean predicts exactly this offset
+    assert mean_error["cause"]["explained_by"] == "model_error"
+    # x3's ensemble variance is 0 against P = 1: underconfident (a variance ratio of 0 used to be passed over)
+    assert summary["tests"][1]["cause"]["direction"] == "underconfident"
+    assert re.search(r"mean_error\s*│\s*inf\s*│\s*\S+\s*│\s*0\s*│\s*FAIL", result.output), result.output
 
 
 def test_strict_exit_status_follows_the_verdict(tmp_path):

@@ -28,7 +28,7 @@ from kalcal.plots._common import (
     unit_product,
     unit_square,
 )
-from kalcal.verify.checks import normal_bound
+from kalcal.verify.checks import covariance_element_bound, normal_bound
 
 
 def _names(dataset: xr.Dataset) -> tuple[list[str], list[str]]:
@@ -87,8 +87,8 @@ def plot_variance_diagonal(dataset: xr.Dataset, path: str | Path) -> Path:
 
     Left column: both on a log scale. Right column: the ratio C_ii / P_ii with the band
     1 +- z sqrt(2 / N) (a variance estimated from N Gaussian samples has standard deviation
-    P_ii sqrt(2 / N)); z is the normal quantile for K d (d + 1) / 2 comparisons, as in the ``covariance``
-    check. A ratio above the band means an overconfident filter, below it an underconfident one.
+    P_ii sqrt(2 / N)); z is the bound of the ``covariance`` check's element-wise part (the normal quantile
+    for K d (d + 1) / 2 comparisons at half its alpha). A ratio above the band means an overconfident filter, below it an underconfident one.
 
     d rows of two panels: 900 x (150 + 250 d) px.
 
@@ -104,7 +104,7 @@ def plot_variance_diagonal(dataset: xr.Dataset, path: str | Path) -> Path:
     d = len(names)
     ensemble = np.diagonal(dataset["error_cov"].values, axis1=1, axis2=2)
     filt = np.diagonal(dataset["filter_cov"].values, axis1=1, axis2=2)
-    z = normal_bound(confidence, times.size * d * (d + 1) // 2)
+    z = covariance_element_bound(confidence, times.size, d)
     half = z * np.sqrt(2.0 / count)
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.where(filt > 0, ensemble / np.where(filt > 0, filt, 1.0), np.nan)
@@ -135,8 +135,8 @@ def plot_variance_offdiagonal(dataset: xr.Dataset, path: str | Path) -> Path:
     Left column: the covariances as correlation coefficients, C_il / sqrt(C_ii C_ll) and
     P_il / sqrt(P_ii P_ll) (dimensionless, so the early transient and the settled values share one
     linear axis). Right column: the deviation (C_il - P_il) / sd_il in standard deviations,
-    sd_il^2 = (P_il^2 + P_ii P_ll) / N, with the band +- z of the ``covariance`` check (z for
-    K d (d + 1) / 2 comparisons).
+    sd_il^2 = (P_il^2 + P_ii P_ll) / N, with the band +- z of the ``covariance`` check's element-wise
+    part (z for K d (d + 1) / 2 comparisons at half its alpha).
 
     d (d - 1) / 2 rows of two panels: 900 x (150 + 250 d (d - 1) / 2) px.
 
@@ -152,7 +152,7 @@ def plot_variance_offdiagonal(dataset: xr.Dataset, path: str | Path) -> Path:
     ensemble = dataset["error_cov"].values
     filt = dataset["filter_cov"].values
     pairs = [(i, l) for i in range(d) for l in range(i + 1, d)]
-    z = normal_bound(confidence, times.size * d * (d + 1) // 2)
+    z = covariance_element_bound(confidence, times.size, d)
     figure, axes = new_figure(max(1, len(pairs)), 2)
     for row, (i, l) in enumerate(pairs):
         with np.errstate(divide="ignore", invalid="ignore"):

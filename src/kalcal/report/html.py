@@ -19,6 +19,7 @@ import numpy as np
 
 from kalcal.report.figures import GROUPS, FigureEntry, SkippedFigure
 from kalcal.report.steady_state import SteadyStateView
+from kalcal.verify.checks import verdict_false_alarm_bound
 
 CSS = """
 :root { --ok: #1a7f37; --bad: #c62828; --ink: #1f2328; --muted: #59636e; --line: #d0d7de; --soft: #f6f8fa; }
@@ -80,23 +81,77 @@ def png_size(data: bytes) -> tuple[int, int]:
 
 
 def bounds_text(test: Mapping[str, Any]) -> str:
-    """``<= upper`` for a one-sided check, ``[lower, upper]`` for a two-sided one."""
+    """``<= upper`` for a one-sided test, ``[lower, upper]`` for a two-sided one."""
     if test.get("lower") is None:
         return f"≤ {fmt(test['upper'])}"
     return f"[{fmt(test['lower'])}, {fmt(test['upper'])}]"
 
 
-def split_detail(detail: str) -> tuple[str, str]:
-    """(measurement, cause): a check's detail states what it measured, then after ``". "`` why it failed."""
-    measured, sep, cause = detail.partition(". ")
-    return (measured.rstrip("."), cause.rstrip(".")) if sep else (detail.rstrip("."), "")
+#: how the page names a check's parts
+PART_LABELS = {"elements": "element-wise", "centered_nees": "centered NEES", "nis": "NIS", "ljung_box": "Ljung-Box"}
+#: what a failure's ``cause.explained_by`` means, in words
+EXPLAINED_BY = {
+    "model_error": "the mean error the filter's model predicts against the truth (the deterministic model error)",
+    "mean_error": "the nonzero mean error (centered on the ensemble means this check passes; see mean_error)",
+}
+#: what a failure's ``cause.direction`` means, in words
+DIRECTION = {
+    "overconfident": "overconfident: the actual spread is larger than the filter's P (noise settings too small)",
+    "underconfident": "underconfident: the actual spread is smaller than the filter's P (noise settings too large)",
+}
 
 
-def shortfall(test: Mapping[str, Any]) -> str:
-    """How far a failed check's statistic lies from its bounds, in words."""
+def _tests_of(test: Mapping[str, Any]) -> list[Mapping[str, Any]]:
+    """The parts of a check made of several tests, else the check itself."""
+    return list(test.get("parts") or []) or [test]
+
+
+def _part_label(part: Mapping[str, Any]) -> str:
+    return PART_LABELS.get(part["name"], part["name"])
+
+
+def check_bounds_text(test: Mapping[str, Any]) -> str:
+    """Every bound a check was held against: its own, or each part's, labelled."""
+    parts = test.get("parts") or []
+    if not parts:
+        return bounds_text(test)
+    return "; ".join(f"{_part_label(part)} {bounds_text(part)}" for part in parts)
+
+
+def _pvalue_text(pvalue: Any) -> str:
+    return "p not recorded" if pvalue is None else f"p = {fmt(pvalue, 3)}"
+
+
+def levels_text(test: Mapping[str, Any]) -> str:
+    """Confidence, comparisons and family-wise p-value of a check and of each of its parts."""
+    text = (
+        f"{fmt(100 * test['confidence'])}% confidence, {fmt(test['comparisons'])} comparisons, "
+        f"{_pvalue_text(test.get('pvalue'))}"
+    )
+    for part in test.get("parts") or []:
+        text += (
+            f"; {_part_label(part)} at {fmt(100 * part['confidence'])}%, {fmt(part['comparisons'])} comparisons, "
+            f"{_pvalue_text(part.get('pvalue'))}"
+        )
+    return text
+
+
+def _cause(test: Mapping[str, Any]) -> Mapping[str, Any]:
+    return test.get("cause") or {}
+
+
+def measured_text(test: Mapping[str, Any]) -> str:
+    """The detail without its last sentence, the cause's ``reason`` (which the page shows on its own)."""
+    detail, reason = test["detail"], _cause(test).get("reason")
+    if reason and detail.endswith(reason):
+        detail = detail[: -len(reason)].rstrip().removesuffix(".")
+    return detail.rstrip(".")
+
+
+def _one_shortfall(test: Mapping[str, Any]) -> str:
     statistic, upper, lower = test["statistic"], test["upper"], test.get("lower")
     if statistic is None:
-        return "the statistic is not a finite number"
+        return "the statistic is not a finite number (see the detail)"
     if statistic > upper:
         text = f"{fmt(statistic)} against an upper bound of {fmt(upper)}: {fmt(statistic - upper, 3)} above it"
         if upper > 0:
@@ -104,10 +159,16 @@ def shortfall(test: Mapping[str, Any]) -> str:
         return text
     if lower is not None and statistic < lower:
         return f"{fmt(statistic)} against a lower bound of {fmt(lower)}: {fmt(lower - statistic, 3)} below it"
-    return (
-        f"the headline statistic {fmt(statistic)} is within {bounds_text(test)}, but a second criterion of the "
-        "check failed (see its detail)"
-    )
+    return f"{fmt(statistic)}, within {bounds_text(test)}"
+
+
+def shortfall(test: Mapping[str, Any]) -> str:
+    """How far a failed check's statistics lie from their bounds (each failed part's), in words."""
+    parts = test.get("parts") or []
+    if not parts:
+        return _one_shortfall(test)
+    failed = [part for part in parts if not part["passed"]]
+    return "; ".join(f"{_part_label(part)}: {_one_shortfall(part)}" for part in failed or parts)
 
 
 def _table(header: Iterable[str], rows: Iterable[str]) -> str:
@@ -115,25 +176,42 @@ def _table(header: Iterable[str], rows: Iterable[str]) -> str:
     return f"<table><thead><tr>{head}</tr></thead><tbody>{''.join(rows)}</tbody></table>"
 
 
+def confidence_statement(summary: Mapping[str, Any]) -> str:
+    """What the page's verdict means: each check's level and the verdict's family-wise false-alarm bound."""
+    confidence, checks = summary["confidence"], len(summary["tests"])
+    bound = verdict_false_alarm_bound(confidence, checks)
+    return (
+        f"each check at {fmt(100 * confidence)}% confidence (a correct filter fails it with probability at most "
+        f"{fmt(100 * (1 - confidence))}%); a correct filter fails at least one of the {checks} checks with "
+        f"probability at most {fmt(100 * bound)}% (Bonferroni)"
+    )
+
+
 def _failures(summary: Mapping[str, Any]) -> str:
     failed = [t for t in summary["tests"] if not t["passed"]]
     if not failed:
         return (
-            '<section class="allpass" id="failures"><strong>Every check passed</strong> at '
-            f"{esc(fmt(100 * summary['confidence']))}% family-wise confidence.</section>"
+            '<section class="allpass" id="failures"><strong>Every check passed</strong>: '
+            f"{esc(confidence_statement(summary))}.</section>"
         )
     items = []
     for test in failed:
-        measured, cause = split_detail(test["detail"])
+        cause = _cause(test)
+        reason = cause.get("reason")
         lead = (
-            f'<p class="cause">Likely cause: {esc(cause)}.</p>'
-            if cause
+            f'<p class="cause">Likely cause: {esc(reason.rstrip("."))}.</p>'
+            if reason
             else '<p class="cause">Likely cause: not identified by the check; see the figures below.</p>'
         )
+        if cause.get("explained_by") in EXPLAINED_BY:
+            lead += f"<p><strong>Accounted for by:</strong> {esc(EXPLAINED_BY[cause['explained_by']])}.</p>"
+        if cause.get("direction") in DIRECTION:
+            lead += f"<p><strong>Direction:</strong> {esc(DIRECTION[cause['direction']])}.</p>"
         items.append(
             f'<h3 id="fail-{esc(test["name"])}">{esc(test["name"])}</h3>{lead}'
-            f"<p><strong>By how much:</strong> {esc(shortfall(test))}.</p>"
-            f"<p><strong>Measured:</strong> {esc(measured)}.</p>"
+            f"<p><strong>By how much:</strong> {esc(shortfall(test))} ({esc(_pvalue_text(test.get('pvalue')))} "
+            f"against {esc(fmt(1 - test['confidence'], 3))}).</p>"
+            f"<p><strong>Measured:</strong> {esc(measured_text(test))}.</p>"
         )
     names = ", ".join(t["name"] for t in failed)
     return (
@@ -149,10 +227,9 @@ def _verdicts(summary: Mapping[str, Any]) -> str:
         rows.append(
             f'<tr class="{state}" id="check-{esc(test["name"])}"><td><code>{esc(test["name"])}</code></td>'
             f'<td class="num">{esc(fmt(test["statistic"]))}</td>'
-            f'<td class="num">{esc(bounds_text(test))}</td>'
+            f'<td class="num">{esc(check_bounds_text(test))}</td>'
             f'<td class="{state}">{"passed" if test["passed"] else "FAILED"}</td>'
-            f"<td>{esc(test['detail'])}<br><small>{esc(fmt(100 * test['confidence']))}% family-wise, "
-            f"{esc(fmt(test['comparisons']))} comparisons</small></td></tr>"
+            f"<td>{esc(test['detail'])}<br><small>{esc(levels_text(test))}</small></td></tr>"
         )
     return (
         '<h2 id="verdicts">Verdicts</h2>'
@@ -400,7 +477,7 @@ def build_page(
     header = (
         f'<h1>{esc(title)} <span class="badge {verdict}">{verdict.upper()}</span></h1>'
         f"<p class='sub'>{esc(fmt(summary['realizations']))} realizations ({esc(summary['engine'])} engine), seed "
-        f"{esc(summary['seed'])}, checks at {esc(fmt(100 * summary['confidence']))}% family-wise confidence; "
+        f"{esc(summary['seed'])}; {esc(confidence_statement(summary))}; "
         f"kalcal {esc(summary.get('kalcal_version', ''))}.</p>"
         '<nav><a href="#failures">failures</a><a href="#verdicts">verdicts</a><a href="#scenario">scenario</a>'
         '<a href="#figures">figures</a><a href="#timing">timing</a><a href="#reproduce">reproduce</a></nav>'

@@ -1,68 +1,113 @@
-"""Statistical checks of a filter against its Monte Carlo ensemble, each with computed bounds.
+"""Statistical checks of a filter against its Monte Carlo ensemble, each with computed bounds and a p-value.
 
 Every check tests one property the theory promises for a correct filter, over all update times (and all
-elements) at once: the family of comparisons is held to the stated confidence by a Bonferroni
+elements) at once: the family of comparisons is held to alpha = 1 - confidence by a Bonferroni
 correction (alpha / m for m comparisons), so a correct filter fails a check with probability at most
-1 - confidence. N realizations, K updates, d states, p measurements.
+alpha. The covariance check is made of two tests, each at alpha / 2. N realizations, K updates,
+d states, p measurements.
 
 ==================== ===================================================== =====================================
 check                statistic                                             bound
 ==================== ===================================================== =====================================
 mean_error           max |mean(e) / se|, se = sqrt(ensemble var / N)       normal quantile, m = K d
-covariance           max |ensemble cov - P| / sd, sd^2 = (P_il^2 +          normal quantile, m = K d (d + 1) / 2;
-                     P_ii P_ll) / N; and mean centered NEES                 chi-square(d (N - 1)) / (N - 1), m = K
+covariance           max |ensemble cov - P| / sd, sd^2 = (P_il^2 +          at alpha / 2: normal quantile,
+                     P_ii P_ll) / N; and mean centered NEES                 m = K d (d + 1) / 2; and at alpha / 2:
+                                                                           chi-square(d (N - 1)) / (N - 1), m = K
 orthogonality        max |mean(e x^T)| / sqrt(E[e^2] E[x^2] / N)            normal quantile, m = K d^2
 residual_whiteness   max over j < k of |mean(r_k r_j^T)| /                  normal quantile, m = p^2 K (K - 1) / 2
                      sqrt(E[r_k^2] E[r_j^2] / N)
 nis                  mean NIS at the update farthest from p                 chi-square(N p) / N, m = K
 ==================== ===================================================== =====================================
 
+Each result carries its family-wise p-value (:mod:`kalcal.verify.results`), with
+``passed == (pvalue >= 1 - confidence)``, and the cause of a failure as data (:class:`Cause`).
+
+A comparison whose standard error is zero (no spread over the ensemble) passes when its value is
+exactly zero and fails otherwise (its z is infinite: no spread cannot hide a nonzero mean); the detail
+counts both kinds.
+
 The covariance check compares the *centered* ensemble covariance, so that a mean error is reported once,
 by ``mean_error``; orthogonality, whiteness and NIS use raw moments, as the source report does, and
-when they fail their detail says whether the mean error accounts for it (the centered statistic passes).
+when they fail their cause says whether the mean error accounts for it (the centered statistic passes).
+
+The verdict is over the five checks: a correct filter passes every one with probability at least
+1 - 5 alpha (Bonferroni over the checks; :func:`verdict_false_alarm_bound`).
 """
 
 from __future__ import annotations
-
-from dataclasses import asdict, dataclass
 
 import numpy as np
 from scipy import stats as sps
 
 from kalcal.montecarlo.accumulators import EnsembleStatistics
 from kalcal.montecarlo.problem import ProblemInfo
+from kalcal.verify.results import (
+    Cause,
+    CheckPart,
+    CheckResult,
+    chi2_two_sided_pvalues,
+    combined_pvalue,
+    family_pvalue,
+    normal_family_pvalue,
+)
+
+__all__ = [
+    "DEFAULT_CONFIDENCE",
+    "REPORT_RESIDUAL_PAIR",
+    "Cause",
+    "CheckPart",
+    "CheckResult",
+    "check_covariance",
+    "check_mean_error",
+    "check_nis",
+    "check_orthogonality",
+    "check_residual_whiteness",
+    "chi2_mean_bounds",
+    "covariance_element_bound",
+    "normal_bound",
+    "residual_pair",
+    "run_checks",
+    "verdict",
+    "verdict_false_alarm_bound",
+]
 
 DEFAULT_CONFIDENCE = 0.99
 #: where the source report quotes E[r_k r_j^T]
 REPORT_RESIDUAL_PAIR = (23.8, 5.8)
-
-
-@dataclass(frozen=True)
-class CheckResult:
-    """One check: its statistic, the bounds it was held against, and the verdict."""
-
-    name: str
-    passed: bool
-    statistic: float
-    lower: float | None
-    upper: float
-    confidence: float
-    comparisons: int
-    detail: str
-
-    def as_dict(self) -> dict:
-        return asdict(self)
+#: the tests of the covariance check, each held to an equal share of its alpha
+COVARIANCE_PARTS = ("elements", "centered_nees")
 
 
 def normal_bound(confidence: float, comparisons: int) -> float:
     """Two-sided normal quantile for a family of ``comparisons`` at family-wise ``confidence``."""
-    return float(sps.norm.isf((1.0 - confidence) / (2.0 * comparisons)))
+    return _normal_bound(1.0 - confidence, comparisons)
 
 
 def chi2_mean_bounds(confidence: float, comparisons: int, dof: float, count: float) -> tuple[float, float]:
     """Bounds on the mean of ``count`` terms whose sum is chi-square with ``dof`` degrees of freedom."""
-    tail = (1.0 - confidence) / (2.0 * comparisons)
+    return _chi2_bounds(1.0 - confidence, comparisons, dof, count)
+
+
+def _normal_bound(alpha: float, comparisons: int) -> float:
+    return float(sps.norm.isf(alpha / (2.0 * comparisons)))
+
+
+def _chi2_bounds(alpha: float, comparisons: int, dof: float, count: float) -> tuple[float, float]:
+    tail = alpha / (2.0 * comparisons)
     return float(sps.chi2.ppf(tail, dof) / count), float(sps.chi2.isf(tail, dof) / count)
+
+
+def covariance_element_bound(confidence: float, n_updates: int, d: int) -> float:
+    """The bound of the covariance check's element-wise part: K d (d + 1) / 2 comparisons at alpha / 2."""
+    return _normal_bound((1.0 - confidence) / len(COVARIANCE_PARTS), n_updates * d * (d + 1) // 2)
+
+
+def verdict_false_alarm_bound(confidence: float, checks: int) -> float:
+    """Bound on the probability that a correct filter fails at least one of ``checks`` checks.
+
+    min(1, checks * (1 - confidence)) (Bonferroni over the checks, each at ``confidence``).
+    """
+    return float(min(1.0, checks * (1.0 - confidence)))
 
 
 def _where(info: ProblemInfo, k: int, *names: str) -> str:
@@ -75,8 +120,49 @@ def _max_abs(z: np.ndarray) -> tuple[float, tuple[int, ...]]:
 
 
 def _safe_ratio(num: np.ndarray, den: np.ndarray) -> np.ndarray:
+    """num / den, 0 where den is not positive: for display only, never for a test."""
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(den > 0, num / np.where(den > 0, den, 1.0), 0.0)
+
+
+def _standardized(num: np.ndarray, se: np.ndarray, mask: np.ndarray | None = None) -> tuple[np.ndarray, int, int]:
+    """z = num / se, where a zero standard error gives z = 0 for an exactly zero num and +-inf otherwise.
+
+    Returns z (masked entries set to 0), and how many comparisons (within ``mask``) had zero standard
+    error with a zero value (passing) and with a nonzero value (failing).
+    """
+    num, se = np.broadcast_arrays(np.asarray(num, dtype=float), np.asarray(se, dtype=float))
+    keep = np.ones(num.shape, dtype=bool) if mask is None else np.broadcast_to(mask, num.shape)
+    zero = (se == 0) & keep
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = np.where(zero, np.where(num == 0, 0.0, np.copysign(np.inf, num)), num / np.where(zero, 1.0, se))
+    z = np.where(keep, z, 0.0)
+    return z, int(np.count_nonzero(zero & (num == 0))), int(np.count_nonzero(zero & (num != 0)))
+
+
+def _zero_se_text(passing: int, failing: int, what: str) -> str:
+    """The detail's account of the comparisons that had zero standard error."""
+    texts = []
+    if passing:
+        texts.append(f"{passing} comparison(s) with zero standard error and an exactly zero {what}, counted as passed")
+    if failing:
+        texts.append(
+            f"{failing} comparison(s) with zero standard error and a nonzero {what}, counted as failed (no spread "
+            "over the ensemble cannot account for a nonzero value)"
+        )
+    return "".join(f"; {text}" for text in texts)
+
+
+def _sd_text(value: float) -> str:
+    return "inf" if np.isinf(value) else f"{value:.2f}"
+
+
+def _failed(reason: str, explained_by: str | None = None, direction: str | None = None) -> Cause:
+    return Cause(explained_by=explained_by, direction=direction, reason=reason)
+
+
+def _with_reason(detail: str, cause: Cause) -> str:
+    return f"{detail}. {cause.reason}" if cause.reason else detail
 
 
 def check_mean_error(
@@ -86,38 +172,60 @@ def check_mean_error(
     expected: np.ndarray | None = None,
     cause: str = "",
 ) -> CheckResult:
-    """E[e_k] = 0 for every update and state."""
+    """E[e_k] = 0 for every update and state.
+
+    When it fails and ``expected`` (K, d) is the mean error the filter's model predicts against the truth,
+    the failure is ``explained_by="model_error"`` if removing it leaves every deviation inside the bound.
+    ``cause`` names what makes the truth depart from the filter's model, for the detail.
+    """
+    alpha = 1.0 - confidence
     n_updates, d = s.mean_error.shape
     m = n_updates * d
     bound = normal_bound(confidence, m)
-    se = np.sqrt(np.diagonal(s.error_cov, axis1=1, axis2=2) / s.count)
-    z = _safe_ratio(s.mean_error, se)
+    se = np.sqrt(np.maximum(np.diagonal(s.error_cov, axis1=1, axis2=2), 0.0) / s.count)
+    z, zero_pass, zero_fail = _standardized(s.mean_error, se)
     worst, (k, i) = _max_abs(z)
+    pvalue = normal_family_pvalue(worst, m)
+    passed = pvalue >= alpha
     sigma = np.sqrt(np.diagonal(s.filter_cov, axis1=1, axis2=2))
-    in_sigma = _safe_ratio(s.mean_error, sigma)
-    big, (kb, ib) = _max_abs(in_sigma)
+    big, (kb, ib) = _max_abs(_safe_ratio(s.mean_error, sigma))
     detail = (
-        f"largest |mean error| {worst:.2f} standard errors ({_where(info, k, info.state_names[i])}); "
-        f"largest in filter sigma {big:.2f} sigma ({_where(info, kb, info.state_names[ib])})"
+        f"largest |mean error| {_sd_text(worst)} standard errors ({_where(info, k, info.state_names[i])}"
+        + (f": mean error {s.mean_error[k, i]:.6g} with zero standard error" if np.isinf(worst) else "")
+        + f"); largest in filter sigma {big:.2f} sigma ({_where(info, kb, info.state_names[ib])})"
+        + _zero_se_text(zero_pass, zero_fail, "mean error")
     )
-    passed = worst <= bound
-    if not passed and expected is not None:
+    diagnosis = Cause()
+    if not passed and expected is not None and np.any(expected != 0):
         predicted, (kp, ip) = _max_abs(_safe_ratio(expected, sigma))
-        rest, _ = _max_abs(_safe_ratio(s.mean_error - expected, se))
-        if predicted > 0 and rest <= bound:
-            detail += (
-                f". Explained by the predicted systematic error: {cause or 'the truth departs from the filter model'} "
+        rest_z, _, _ = _standardized(s.mean_error - expected, se)
+        rest, _ = _max_abs(rest_z)
+        if normal_family_pvalue(rest, m) >= alpha:
+            diagnosis = _failed(
+                f"Explained by the predicted systematic error: {cause or 'the truth departs from the filter model'} "
                 f"predicts a mean error of up to {predicted:.2f} sigma ({_where(info, kp, info.state_names[ip])}); "
-                f"after removing it the largest deviation is {rest:.2f} standard errors, within {bound:.2f}"
-            )
-        elif predicted > 0:
-            detail += (
-                f". The predicted systematic error ({cause or 'truth against filter model'}) reaches "
-                f"{predicted:.2f} sigma but does not explain all of it ({rest:.2f} standard errors remain)"
+                f"after removing it the largest deviation is {rest:.2f} standard errors, within {bound:.2f}",
+                explained_by="model_error",
             )
         else:
-            detail += ". The filter model predicts no mean error: its model or prior mean differs from the truth"
-    return CheckResult("mean_error", bool(passed), worst, None, bound, confidence, m, detail)
+            diagnosis = _failed(
+                f"The predicted systematic error ({cause or 'truth against filter model'}) reaches "
+                f"{predicted:.2f} sigma but does not explain all of it ({_sd_text(rest)} standard errors remain)"
+            )
+    elif not passed:
+        diagnosis = _failed("The filter model predicts no mean error: its model or prior mean differs from the truth")
+    return CheckResult(
+        name="mean_error",
+        statistic=worst,
+        pvalue=pvalue,
+        lower=None,
+        upper=bound,
+        confidence=confidence,
+        comparisons=m,
+        passed=passed,
+        detail=_with_reason(detail, diagnosis),
+        cause=diagnosis,
+    )
 
 
 def centered_nees(error_cov: np.ndarray, filter_cov: np.ndarray) -> np.ndarray:
@@ -129,63 +237,157 @@ def centered_nees(error_cov: np.ndarray, filter_cov: np.ndarray) -> np.ndarray:
 
 
 def centered_nees_bounds(confidence: float, n_updates: int, d: int, count: int) -> tuple[float, float]:
-    """Bounds of :func:`centered_nees` for K = ``n_updates`` comparisons of N = ``count`` realizations."""
-    return chi2_mean_bounds(confidence, n_updates, d * (count - 1), count - 1)
+    """Bounds of :func:`centered_nees` in the covariance check, whose confidence is ``confidence``.
+
+    K = ``n_updates`` comparisons of N = ``count`` realizations at the part's share of alpha (alpha / 2,
+    see :func:`check_covariance`)."""
+    share = (1.0 - confidence) / len(COVARIANCE_PARTS)
+    return _chi2_bounds(share, n_updates, d * (count - 1), count - 1)
 
 
 def check_covariance(s: EnsembleStatistics, info: ProblemInfo, confidence: float) -> CheckResult:
-    """Ensemble covariance of e equals the filter's P, element by element and through the centered NEES."""
+    """Ensemble covariance of e equals the filter's P, element by element and through the centered NEES.
+
+    Two parts, each at half the check's alpha, so that the check's false-alarm rate is at most alpha:
+
+    * ``elements``: max over k, i <= l of |C_k,il - P_k,il| / sd, sd^2 = (P_il^2 + P_ii P_ll) / N (C the
+      centered ensemble covariance, divisor N - 1), normal quantile for K d (d + 1) / 2 comparisons;
+    * ``centered_nees``: tr(P_k^{-1} C_k), whose (N - 1) multiple is chi-square(d (N - 1)) for a correct
+      filter (Wishart), two-sided for K comparisons.
+
+    The headline statistic and bounds are the element-wise part's. The direction of a failure is the
+    sign of the largest diagonal deviation (C_ii > P_ii: overconfident), or the side the centered NEES
+    left its bounds on when only that part failed.
+    """
+    alpha = 1.0 - confidence
+    share = alpha / len(COVARIANCE_PARTS)
     n_updates, d, _ = s.filter_cov.shape
     upper = np.triu_indices(d)
     m = n_updates * upper[0].size
-    bound = normal_bound(confidence, m)
+    bound = covariance_element_bound(confidence, n_updates, d)
     p = s.filter_cov
     diag = np.diagonal(p, axis1=1, axis2=2)
     sd = np.sqrt((p**2 + diag[:, :, None] * diag[:, None, :]) / s.count)
-    z = _safe_ratio(s.error_cov - p, sd)[:, upper[0], upper[1]]
+    deviation = s.error_cov - p
+    z_full, _, _ = _standardized(deviation, sd)
+    z, zero_pass, zero_fail = _standardized(deviation[:, upper[0], upper[1]], sd[:, upper[0], upper[1]])
     worst, (k, e) = _max_abs(z)
     i, l = int(upper[0][e]), int(upper[1][e])
-    centered = centered_nees(s.error_cov, p)
-    low, high = centered_nees_bounds(confidence, n_updates, d, s.count)
-    nees_ok = bool(np.all((centered >= low) & (centered <= high)))
-    ratio = _safe_ratio(np.diagonal(s.error_cov, axis1=1, axis2=2), diag)
-    rk, ri = np.unravel_index(int(np.argmax(np.abs(np.log(np.where(ratio > 0, ratio, 1.0))))), ratio.shape)
-    detail = (
-        f"largest deviation {worst:.2f} sd in element ({info.state_names[i]}, {info.state_names[l]}) at "
-        f"t = {info.update_times[k]:g} s; ensemble/filter variance ratio from {ratio.min():.3f} to {ratio.max():.3f} "
-        f"(extreme: {info.state_names[ri]} at t = {info.update_times[rk]:g} s); centered mean NEES from "
-        f"{centered.min():.4f} to {centered.max():.4f}, bounds [{low:.4f}, {high:.4f}]"
+    p_elements = normal_family_pvalue(worst, m)
+    elements = CheckPart(
+        name="elements",
+        statistic=worst,
+        pvalue=p_elements,
+        lower=None,
+        upper=bound,
+        confidence=1.0 - share,
+        alpha=share,
+        comparisons=m,
+        passed=p_elements >= share,
     )
-    passed = worst <= bound and nees_ok
+    nees_values = centered_nees(s.error_cov, p)
+    dof = d * (s.count - 1)
+    low, high = centered_nees_bounds(confidence, n_updates, d, s.count)
+    nees_p = chi2_two_sided_pvalues(nees_values, dof, s.count - 1)
+    kn = int(np.nanargmin(nees_p)) if not np.all(np.isnan(nees_p)) else 0
+    p_nees = family_pvalue(nees_p)
+    nees = CheckPart(
+        name="centered_nees",
+        statistic=float(nees_values[kn]),
+        pvalue=p_nees,
+        lower=low,
+        upper=high,
+        confidence=1.0 - share,
+        alpha=share,
+        comparisons=n_updates,
+        passed=p_nees >= share,
+    )
+    parts = (elements, nees)
+    pvalue = combined_pvalue(parts)
+    passed = pvalue >= alpha
+    ratio = _safe_ratio(np.diagonal(s.error_cov, axis1=1, axis2=2), diag)
+    detail = (
+        f"largest deviation {_sd_text(worst)} sd in element ({info.state_names[i]}, {info.state_names[l]}) at "
+        f"t = {info.update_times[k]:g} s, bound {bound:.2f} (at alpha / 2 = {share:.3g}); ensemble/filter variance "
+        f"ratio from {ratio.min():.3f} to {ratio.max():.3f}; centered mean NEES from {nees_values.min():.4f} to "
+        f"{nees_values.max():.4f}, bounds [{low:.4f}, {high:.4f}] (at alpha / 2)"
+        + _zero_se_text(zero_pass, zero_fail, "deviation")
+    )
+    diagnosis = Cause()
     if not passed:
-        if ratio[rk, ri] > 1:
-            detail += ". The filter is overconfident: its P is smaller than the actual spread (noise settings too small)"
+        if elements.passed:
+            overconfident = nees.statistic > high
         else:
-            detail += ". The filter is underconfident: its P is larger than the actual spread (noise settings too large)"
-    return CheckResult("covariance", bool(passed), worst, None, bound, confidence, m, detail)
+            z_diag = np.diagonal(z_full, axis1=1, axis2=2)
+            kd, idx = np.unravel_index(int(np.argmax(np.abs(z_diag))), z_diag.shape)
+            overconfident = bool(z_diag[kd, idx] > 0)
+        diagnosis = (
+            _failed(
+                "The filter is overconfident: its P is smaller than the actual spread (noise settings too small)",
+                direction="overconfident",
+            )
+            if overconfident
+            else _failed(
+                "The filter is underconfident: its P is larger than the actual spread (noise settings too large)",
+                direction="underconfident",
+            )
+        )
+    return CheckResult(
+        name="covariance",
+        statistic=worst,
+        pvalue=pvalue,
+        lower=None,
+        upper=bound,
+        confidence=confidence,
+        comparisons=m + n_updates,
+        passed=passed,
+        detail=_with_reason(detail, diagnosis),
+        cause=diagnosis,
+        parts=parts,
+    )
 
 
 def check_orthogonality(s: EnsembleStatistics, info: ProblemInfo, confidence: float) -> CheckResult:
     """E[e_k xhat_k^T] = 0: the error is orthogonal to the estimate."""
+    alpha = 1.0 - confidence
     n_updates, d, _ = s.error_estimate.shape
     m = n_updates * d * d
     bound = normal_bound(confidence, m)
     e2 = np.diagonal(s.error_second_moment, axis1=1, axis2=2)
     x2 = np.diagonal(s.estimate_second_moment, axis1=1, axis2=2)
-    z = _safe_ratio(s.error_estimate, np.sqrt(e2[:, :, None] * x2[:, None, :] / s.count))
+    z, zero_pass, zero_fail = _standardized(s.error_estimate, np.sqrt(e2[:, :, None] * x2[:, None, :] / s.count))
     worst, (k, i, l) = _max_abs(z)
-    detail = f"largest |E[e xhat^T]| {worst:.2f} standard errors (e_{info.state_names[i]} x xhat_{info.state_names[l]} at t = {info.update_times[k]:g} s)"
-    passed = worst <= bound
+    pvalue = normal_family_pvalue(worst, m)
+    passed = pvalue >= alpha
+    detail = (
+        f"largest |E[e xhat^T]| {_sd_text(worst)} standard errors (e_{info.state_names[i]} x "
+        f"xhat_{info.state_names[l]} at t = {info.update_times[k]:g} s)" + _zero_se_text(zero_pass, zero_fail, "moment")
+    )
+    diagnosis = Cause()
     if not passed:
         centered = s.error_estimate - s.mean_error[:, :, None] * s.mean_estimate[:, None, :]
-        var_e = np.diagonal(s.error_cov, axis1=1, axis2=2)
-        var_x = x2 - s.mean_estimate**2
-        rest, _ = _max_abs(_safe_ratio(centered, np.sqrt(var_e[:, :, None] * var_x[:, None, :] / s.count)))
-        detail += (
-            f". Centered on the means the largest is {rest:.2f}: "
-            + ("the mean error accounts for it (see mean_error)" if rest <= bound else "error and estimate are correlated: the gains are not optimal for the truth")
+        var_e = np.maximum(np.diagonal(s.error_cov, axis1=1, axis2=2), 0.0)
+        var_x = np.maximum(x2 - s.mean_estimate**2, 0.0)
+        rest_z, _, _ = _standardized(centered, np.sqrt(var_e[:, :, None] * var_x[:, None, :] / s.count))
+        rest, _ = _max_abs(rest_z)
+        lead = f"Centered on the means the largest is {_sd_text(rest)}: "
+        diagnosis = (
+            _failed(lead + "the mean error accounts for it (see mean_error)", explained_by="mean_error")
+            if normal_family_pvalue(rest, m) >= alpha
+            else _failed(lead + "error and estimate are correlated: the gains are not optimal for the truth")
         )
-    return CheckResult("orthogonality", bool(passed), worst, None, bound, confidence, m, detail)
+    return CheckResult(
+        name="orthogonality",
+        statistic=worst,
+        pvalue=pvalue,
+        lower=None,
+        upper=bound,
+        confidence=confidence,
+        comparisons=m,
+        passed=passed,
+        detail=_with_reason(detail, diagnosis),
+        cause=diagnosis,
+    )
 
 
 def residual_pair(s: EnsembleStatistics, info: ProblemInfo, t_k: float, t_j: float) -> dict:
@@ -206,6 +408,7 @@ def residual_pair(s: EnsembleStatistics, info: ProblemInfo, t_k: float, t_j: flo
 
 def check_residual_whiteness(s: EnsembleStatistics, info: ProblemInfo, confidence: float) -> CheckResult:
     """E[r_k r_j^T] = 0 for every j < k: the innovations are white."""
+    alpha = 1.0 - confidence
     moment = s.residual_second_moment  # (K, p, K, p)
     n_updates, p = moment.shape[:2]
     pairs = n_updates * (n_updates - 1) // 2
@@ -213,56 +416,96 @@ def check_residual_whiteness(s: EnsembleStatistics, info: ProblemInfo, confidenc
     bound = normal_bound(confidence, m)
     power = np.diagonal(moment.reshape(n_updates * p, n_updates * p)).reshape(n_updates, p)
     scale = np.sqrt(np.einsum("ka,jb->kajb", power, power) / s.count)
-    z = _safe_ratio(moment, scale)
-    lower = np.tril(np.ones((n_updates, n_updates), dtype=bool), -1)  # j < k
-    masked = np.where(lower[:, None, :, None], z, 0.0)
-    worst, (k, a, j, b) = _max_abs(masked)
+    lower = np.tril(np.ones((n_updates, n_updates), dtype=bool), -1)[:, None, :, None]  # j < k
+    z, zero_pass, zero_fail = _standardized(moment, scale, lower)
+    worst, (k, a, j, b) = _max_abs(z)
+    pvalue = normal_family_pvalue(worst, m)
+    passed = pvalue >= alpha
     detail = (
-        f"largest |E[r_k r_j^T]| {worst:.2f} standard errors ({info.measurement_names[a]} at t = {info.update_times[k]:g} s "
-        f"with {info.measurement_names[b]} at t = {info.update_times[j]:g} s) over {pairs} pairs of updates"
+        f"largest |E[r_k r_j^T]| {_sd_text(worst)} standard errors ({info.measurement_names[a]} at "
+        f"t = {info.update_times[k]:g} s with {info.measurement_names[b]} at t = {info.update_times[j]:g} s) over "
+        f"{pairs} pairs of updates" + _zero_se_text(zero_pass, zero_fail, "moment")
     )
-    passed = worst <= bound
+    diagnosis = Cause()
     if not passed:
         mean = s.mean_residual
         centered = moment - np.einsum("ka,jb->kajb", mean, mean)
-        var = power - mean**2
-        cz = _safe_ratio(centered, np.sqrt(np.einsum("ka,jb->kajb", var, var) / s.count))
-        rest, _ = _max_abs(np.where(lower[:, None, :, None], cz, 0.0))
-        detail += (
-            f". Centered on the residual means the largest is {rest:.2f}: "
-            + ("nonzero mean residuals account for it (see mean_error)" if rest <= bound else "the innovations are correlated in time: the model's dynamics or noise are wrong")
+        var = np.maximum(power - mean**2, 0.0)
+        rest_z, _, _ = _standardized(centered, np.sqrt(np.einsum("ka,jb->kajb", var, var) / s.count), lower)
+        rest, _ = _max_abs(rest_z)
+        lead = f"Centered on the residual means the largest is {_sd_text(rest)}: "
+        diagnosis = (
+            _failed(lead + "nonzero mean residuals account for it (see mean_error)", explained_by="mean_error")
+            if normal_family_pvalue(rest, m) >= alpha
+            else _failed(lead + "the innovations are correlated in time: the model's dynamics or noise are wrong")
         )
-    return CheckResult("residual_whiteness", bool(passed), worst, None, bound, confidence, m, detail)
+    return CheckResult(
+        name="residual_whiteness",
+        statistic=worst,
+        pvalue=pvalue,
+        lower=None,
+        upper=bound,
+        confidence=confidence,
+        comparisons=m,
+        passed=passed,
+        detail=_with_reason(detail, diagnosis),
+        cause=diagnosis,
+    )
 
 
 def check_nis(s: EnsembleStatistics, info: ProblemInfo, confidence: float) -> CheckResult:
-    """Mean NIS at each update within its chi-square(N p) / N bounds."""
+    """Mean NIS at each update within its chi-square(N p) / N bounds.
+
+    The statistic is the mean NIS at the update with the smallest two-sided p-value. A failure is
+    ``explained_by="mean_error"`` when the mean NIS centered on the mean normalized innovations lies
+    within the bounds; otherwise its direction is ``"overconfident"`` (innovations larger than the
+    filter's S) or ``"underconfident"``.
+    """
+    alpha = 1.0 - confidence
     n_updates, p = s.mean_residual.shape
     low, high = chi2_mean_bounds(confidence, n_updates, p * s.count, s.count)
-    k = int(np.argmax(np.abs(s.mean_nis - p)))
+    per_update = chi2_two_sided_pvalues(s.mean_nis, p * s.count, s.count)
+    k = int(np.nanargmin(per_update)) if not np.all(np.isnan(per_update)) else 0
     worst = float(s.mean_nis[k])
-    passed = bool(np.all((s.mean_nis >= low) & (s.mean_nis <= high)))
+    pvalue = family_pvalue(per_update)
+    passed = pvalue >= alpha
     detail = (
         f"mean NIS from {s.mean_nis.min():.4f} to {s.mean_nis.max():.4f} (expected {p}); farthest at "
         f"t = {info.update_times[k]:g} s"
     )
+    diagnosis = Cause()
     if not passed:
+        centered = None
         if s.mean_normalized_residual is not None:
             # E|nu - E nu|^2 = E|nu|^2 - |E nu|^2 for the normalized innovations nu = L^{-1} r
             centered = s.mean_nis - np.sum(s.mean_normalized_residual**2, axis=1)
-            if np.all((centered >= low) & (centered <= high)):
-                detail += (
-                    f". Centered on the mean innovations the mean NIS lies within the bounds "
-                    f"({centered.min():.4f} to {centered.max():.4f}): the nonzero mean residuals account for it "
-                    "(see mean_error)"
-                )
-                return CheckResult("nis", passed, worst, low, high, confidence, n_updates, detail)
-        detail += (
-            ". Innovations larger than the filter's S: the noise settings are too small"
-            if worst > p
-            else ". Innovations smaller than the filter's S: the noise settings are too large"
-        )
-    return CheckResult("nis", passed, worst, low, high, confidence, n_updates, detail)
+        if centered is not None and np.all((centered >= low) & (centered <= high)):
+            diagnosis = _failed(
+                f"Centered on the mean innovations the mean NIS lies within the bounds "
+                f"({centered.min():.4f} to {centered.max():.4f}): the nonzero mean residuals account for it "
+                "(see mean_error)",
+                explained_by="mean_error",
+            )
+        elif worst > p:
+            diagnosis = _failed(
+                "Innovations larger than the filter's S: the noise settings are too small", direction="overconfident"
+            )
+        else:
+            diagnosis = _failed(
+                "Innovations smaller than the filter's S: the noise settings are too large", direction="underconfident"
+            )
+    return CheckResult(
+        name="nis",
+        statistic=worst,
+        pvalue=pvalue,
+        lower=low,
+        upper=high,
+        confidence=confidence,
+        comparisons=n_updates,
+        passed=passed,
+        detail=_with_reason(detail, diagnosis),
+        cause=diagnosis,
+    )
 
 
 def run_checks(

@@ -1,0 +1,194 @@
+"""The result objects of the statistical checks, and the family-wise p-values they carry.
+
+A check holds a family of m comparisons to a false-alarm rate alpha = 1 - confidence. Its p-value is
+family-wise adjusted (Bonferroni), so that ``passed == (pvalue >= alpha)`` holds exactly:
+
+* a family of m two-sided normal comparisons with largest |z|: ``min(1, m * 2 * (1 - Phi(|z|)))``;
+* a family of m two-sided chi-square comparisons: ``min(1, m * min_k 2 * min(F(x_k), 1 - F(x_k)))``;
+* a check made of several parts (e.g. the covariance check: element-wise family and centered NEES), each
+  held to an equal share alpha / n_parts: ``min(1, n_parts * min(part p-values))``.
+
+Each of these passes exactly when every comparison lies inside its Bonferroni bound, so a correct filter
+fails a check with probability at most alpha (the bounds are exact quantiles; for the normal families
+up to the normal approximation of the ensemble means and covariances).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+from scipy import stats as sps
+
+#: what a failure is accounted for by
+EXPLAINED_BY = ("model_error", "mean_error")
+#: which way a filter's covariance is wrong
+DIRECTIONS = ("overconfident", "underconfident")
+
+
+@dataclass(frozen=True)
+class Cause:
+    """Why a check failed, as data.
+
+    Attributes
+    ----------
+    explained_by : {"model_error", "mean_error"} or None
+        ``"model_error"``: the mean error the filter's model predicts against the truth (the filter run on
+        the truth's mean trajectory) accounts for the failure; ``"mean_error"``: the failure of a raw-moment
+        check goes away once centered on the ensemble means (see the ``mean_error`` check); None: not
+        accounted for (or the check passed).
+    direction : {"overconfident", "underconfident"} or None
+        ``"overconfident"``: the actual spread is larger than the filter's covariance says (noise
+        settings too small); ``"underconfident"``: smaller. None where the check says nothing about it.
+    reason : str or None
+        The same diagnosis in one sentence (the end of the check's ``detail``); None when there is none.
+    """
+
+    explained_by: str | None = None
+    direction: str | None = None
+    reason: str | None = None
+
+    def __post_init__(self):
+        if self.explained_by not in (None, *EXPLAINED_BY):
+            raise ValueError(f"explained_by: expected one of {EXPLAINED_BY} or None, got {self.explained_by!r}")
+        if self.direction not in (None, *DIRECTIONS):
+            raise ValueError(f"direction: expected one of {DIRECTIONS} or None, got {self.direction!r}")
+
+
+NO_CAUSE = Cause()
+
+
+def _check_invariant(kind: str, name: str, pvalue: float, alpha: float, passed: bool) -> None:
+    if not 0.0 < alpha < 1.0:
+        raise ValueError(f"{kind} {name!r}: the false-alarm rate must lie in (0, 1), got {alpha!r}")
+    if bool(passed) != bool(pvalue >= alpha):
+        raise ValueError(f"{kind} {name!r}: passed={passed} disagrees with pvalue {pvalue!r} at alpha {alpha!r}")
+
+
+@dataclass(frozen=True)
+class CheckPart:
+    """One test of a check made of several, at its share of the check's alpha.
+
+    Attributes
+    ----------
+    name : str
+        ``"elements"`` or ``"centered_nees"`` (covariance), ``"nis"`` or ``"ljung_box"`` (calibrate).
+    statistic : float
+        The comparison that decides the part (largest |z|, or the value with the smallest p-value).
+    pvalue : float
+        Family-wise over the part's comparisons; ``passed == (pvalue >= alpha)`` (``alpha``, not
+        ``1 - confidence``, which may differ from it in the last bit).
+    lower, upper : float or None
+        The bounds every comparison of the part was held against (None for a one-sided part).
+    confidence : float
+        The part's own level, 1 - alpha.
+    alpha : float
+        The part's share of the check's false-alarm rate.
+    comparisons : int
+        Comparisons in the part's Bonferroni family.
+    passed : bool
+    """
+
+    name: str
+    statistic: float
+    pvalue: float
+    lower: float | None
+    upper: float | None
+    confidence: float
+    alpha: float
+    comparisons: int
+    passed: bool
+
+    def __post_init__(self):
+        _check_invariant("part", self.name, self.pvalue, self.alpha, self.passed)
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class CheckResult:
+    """One check: its statistic, family-wise p-value, every bound it was held against, and the verdict.
+
+    Attributes
+    ----------
+    name : str
+    statistic : float
+        The headline statistic: for a check of one family its deciding comparison; for a check of
+        several parts, the first part's (every part's own is in ``parts``).
+    pvalue : float
+        Family-wise adjusted p-value; ``passed == (pvalue >= 1 - confidence)``.
+    lower, upper : float or None
+        The headline statistic's bounds (None for a one-sided check); for a check of several parts, the
+        first part's (at its share of alpha).
+    confidence : float
+        The check's level: a correct filter fails it with probability at most 1 - confidence.
+    comparisons : int
+        Comparisons the check's verdict rests on (over all its parts).
+    passed : bool
+    detail : str
+        What was measured, where, and (on failure) why, in words.
+    cause : Cause
+        The diagnosis as data (all None when the check passed).
+    parts : tuple of CheckPart
+        The tests of a check made of several (empty for a check of one family).
+    """
+
+    name: str
+    statistic: float
+    pvalue: float
+    lower: float | None
+    upper: float | None
+    confidence: float
+    comparisons: int
+    passed: bool
+    detail: str
+    cause: Cause = NO_CAUSE
+    parts: tuple[CheckPart, ...] = field(default_factory=tuple)
+
+    def __post_init__(self):
+        _check_invariant("check", self.name, self.pvalue, 1.0 - self.confidence, self.passed)
+
+    def as_dict(self) -> dict:
+        """The entry of ``summary.json``'s ``tests`` list (``parts`` as a list of dicts)."""
+        document = asdict(self)
+        document["parts"] = [part.as_dict() for part in self.parts]
+        return document
+
+
+def normal_family_pvalue(worst: float, comparisons: int) -> float:
+    """Bonferroni p-value of a family of ``comparisons`` two-sided normal tests with largest |z| ``worst``.
+
+    min(1, m * 2 * (1 - Phi(|z|))); 0 for an infinite |z| (a nonzero value with zero standard error),
+    NaN for a NaN statistic.
+    """
+    if math.isnan(worst):
+        return math.nan
+    return float(min(1.0, comparisons * 2.0 * sps.norm.sf(abs(worst))))
+
+
+def chi2_two_sided_pvalues(values: np.ndarray, dof: float, count: float) -> np.ndarray:
+    """Two-sided p-values of means of ``count`` terms whose sum is chi-square with ``dof`` degrees of freedom.
+
+    p_k = min(1, 2 * min(F(count * x_k), 1 - F(count * x_k))), F the chi-square(dof) distribution.
+    """
+    total = np.asarray(values, dtype=float) * count
+    return np.minimum(1.0, 2.0 * np.minimum(sps.chi2.cdf(total, dof), sps.chi2.sf(total, dof)))
+
+
+def family_pvalue(pvalues: np.ndarray | Sequence[float], comparisons: int | None = None) -> float:
+    """Bonferroni: min(1, m * min(p)) over m comparisons (default: as many as p-values); NaN if any is NaN."""
+    pvalues = np.asarray(pvalues, dtype=float).ravel()
+    if pvalues.size == 0:
+        return 1.0
+    if np.isnan(pvalues).any():
+        return math.nan
+    m = pvalues.size if comparisons is None else comparisons
+    return float(min(1.0, m * float(pvalues.min())))
+
+
+def combined_pvalue(parts: Sequence[CheckPart]) -> float:
+    """A check of n parts, each at alpha / n: min(1, n * min(part p-values))."""
+    return family_pvalue([part.pvalue for part in parts])
