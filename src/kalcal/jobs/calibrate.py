@@ -11,6 +11,7 @@ from kalcal.calibrate.accel_gps import calibrate_accel_gps
 from kalcal.calibrate.diagnostics import innovation_diagnostics
 from kalcal.calibrate.smoothing import smooth_calibration
 from kalcal.io.logs import numeric_columns, parse_column_map, read_table, require_increasing
+from kalcal.io.outputs import writes_outputs
 from kalcal.io.results import write_csv, write_json
 from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.models.config import section_values
@@ -21,6 +22,9 @@ IMU_ROLES = ("time", "accel")
 GPS_ROLES = ("time", "position", "velocity", "position_std", "velocity_std")
 
 
+@writes_outputs(
+    "calibrate accel-gps", names=("estimates.csv", "summary.json", "calibration.png"), inputs=("imu_path", "gps_path")
+)
 def calibrate_accel_gps_files(
     scenario: AccelGpsScenario,
     imu_path: str | Path,

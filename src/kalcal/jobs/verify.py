@@ -13,6 +13,7 @@ import xarray as xr
 from kalcal import __version__
 from kalcal.errors import ConfigError
 from kalcal.filters.kalman import check_form
+from kalcal.io.outputs import writes_outputs
 from kalcal.io.results import write_json
 from kalcal.io.statistics import statistics_dataset, write_statistics
 from kalcal.models.config import apply_settings, section_values
@@ -43,7 +44,11 @@ class VerifyOutcome:
     dataset: xr.Dataset
     paths: dict[str, Path]
 
+#: the files a verification run (with its report) may write, relative to its folder
+OUTPUT_NAMES = ("summary.json", "stats.nc", "stats_long.nc", "report.html", "figures/*.png")
 
+
+@writes_outputs("verify", names=OUTPUT_NAMES, inputs=("checkpoint",))
 def verify(
     scenario,
     n: int,
@@ -60,6 +65,8 @@ def verify(
     batch_size: int | None = None,
     checkpoint: str | Path | None = None,
     form: str = "joseph",
+    report: bool = False,
+    realization: int = 0,
 ) -> VerifyOutcome:
     """Run n realizations, check the filter, write ``out/summary.json`` and ``out/stats.nc``.
 
@@ -68,6 +75,9 @@ def verify(
     ``client`` runs the blocks on a Dask cluster, ``batch_size`` realizations per task (rounded up to
     whole blocks); ``checkpoint`` resumes from and saves to a file. None of them changes the numbers.
     ``form`` is the filter's update form (joseph, standard or sqrt; see :mod:`kalcal.filters.kalman`).
+    ``report`` also draws ``out/figures/`` and ``out/report.html`` (showing realization ``realization``).
+    The files are put in ``out`` together when the run ends, replacing the previous run's set there
+    (:mod:`kalcal.io.outputs`); a run that fails or is interrupted leaves ``out`` as it was.
     """
     if n < 2:
         raise ConfigError(f"-n: need at least 2 realizations, got {n}")
@@ -167,4 +177,8 @@ def verify(
         "kalcal_version": __version__,
     }
     paths["summary"] = write_json(out / "summary.json", summary)
+    if report:
+        from kalcal.jobs.report import render_report  # the page joins this run's set of outputs
+
+        paths["report"] = render_report(out, realization=realization)
     return VerifyOutcome(summary, statistics, checks, dataset, paths)
