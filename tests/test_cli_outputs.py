@@ -104,12 +104,12 @@ def test_a_model_file_run_into_an_accel_gps_folder_leaves_none_of_its_files(prev
 def test_a_run_that_fails_in_the_middle_leaves_the_previous_set_byte_identical(previous, monkeypatch):
     out, before = previous
 
-    def broken_page(path, page):
-        raise RuntimeError("the page writer failed")
+    def broken_writer(path, document):
+        raise RuntimeError("the summary writer failed")  # after stats.nc is written, before the page
 
-    monkeypatch.setattr("kalcal.jobs.report.write_page", broken_page)
+    monkeypatch.setattr("kalcal.jobs.verify.write_json", broken_writer)
     result = _invoke("verify", *SMALL, "--seed", "7", "--long-run", "0", "--out", out, catch=True)
-    assert isinstance(result.exception, RuntimeError)
+    assert isinstance(result.exception, RuntimeError) and "summary writer" in str(result.exception)
     assert _tree(out) == before
     assert not list(out.glob(".kalcal-partial-*"))
 
@@ -245,3 +245,31 @@ def test_the_command_lines_files_are_never_removed(tmp_path):
     assert sorted(_tree(noise)) == sorted([MANIFEST, "calibration.png", "estimates.csv", "filter.toml", "summary.json"])
     assert (noise / "filter.toml").read_bytes() == config
     assert "fixes_used" in json.loads((noise / "summary.json").read_text())
+
+
+def test_a_checkpoint_in_the_folder_is_never_part_of_a_set(tmp_path):
+    out = tmp_path / "out"
+    checkpoint = out / "run.ckpt"
+    args = ("verify", "-n", "5000", "--set", "scenario.duration=2", "--long-run", "0", "--no-report", "--out", out)
+    _ok(*args, "--checkpoint", checkpoint)
+    saved = checkpoint.read_bytes()
+    assert "run.ckpt" not in read_manifest(out).files
+    _ok(*args, "--checkpoint", checkpoint)  # resumes from it
+    _ok(*args, "--seed", "4")  # another run into the folder, without the checkpoint
+    assert checkpoint.read_bytes() == saved
+    assert sorted(_tree(out)) == sorted([MANIFEST, "run.ckpt", "stats.nc", "summary.json"])
+
+
+def test_the_jobs_return_the_final_paths(tmp_path):
+    """The Python jobs write through the same staging: what they return is where the files now are."""
+    from kalcal.jobs.simulate import simulate_accel_gps
+    from kalcal.jobs.verify import verify
+    from kalcal.models.registry import build_scenario
+
+    scenario = build_scenario("accel-gps", None, ["scenario.duration=2"])
+    outcome = verify(scenario, 200, 0, tmp_path / "v", long_run=0)
+    assert set(outcome.paths) == {"stats", "summary"}
+    assert all(path.parent == tmp_path / "v" and path.is_file() for path in outcome.paths.values())
+    paths = simulate_accel_gps(scenario, 0, tmp_path / "s")
+    assert paths == {name: tmp_path / "s" / f"{name}.csv" for name in ("imu", "gps", "truth")}
+    assert all(path.is_file() for path in paths.values())

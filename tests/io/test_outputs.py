@@ -6,6 +6,7 @@ import json
 import os
 import signal
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -239,6 +240,22 @@ def test_the_decorator_hands_the_job_the_staging_folder_and_returns_final_paths(
     assert (tmp_path / "out" / "a.txt").read_text() == "y"
     with pytest.raises(OutputError, match="would replace its own input"):
         job(tmp_path / "out" / "a.txt", tmp_path / "out")
+
+
+@dataclass(frozen=True)
+class _Outcome:
+    paths: dict
+    value: float
+
+
+def test_paths_inside_a_returned_dataclass_are_moved_and_other_values_kept(tmp_path):
+    @writes_outputs("job")
+    def job(out):
+        (out / "a.txt").write_text("a")
+        return _Outcome({"a": out / "a.txt"}, 1.5)
+
+    result = job(tmp_path / "out")
+    assert result == _Outcome({"a": tmp_path / "out" / "a.txt"}, 1.5)
 
 
 def test_staging_folders_of_dead_runs_are_removed(tmp_path):

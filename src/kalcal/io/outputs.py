@@ -187,11 +187,11 @@ def _relocate(value: Any, staging: Path, target: Path) -> Any:
         except ValueError:
             return value
     if isinstance(value, dict):
-        return {k: _relocate(v, staging, target) for k, v in value.items()}
-    if isinstance(value, list):
-        return [_relocate(v, staging, target) for v in value]
-    if isinstance(value, tuple) and not hasattr(value, "_fields"):
-        return tuple(_relocate(v, staging, target) for v in value)
+        moved = {k: _relocate(v, staging, target) for k, v in value.items()}
+        return value if all(moved[k] is v for k, v in value.items()) else moved
+    if isinstance(value, (list, tuple)) and not hasattr(value, "_fields"):
+        items = [_relocate(v, staging, target) for v in value]
+        return value if all(a is b for a, b in zip(items, value)) else type(value)(items)
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
         changes = {}
         for field in dataclasses.fields(value):
@@ -404,13 +404,12 @@ def writes_outputs(
     inputs: Iterable[str] = (),
     out_arg: str = "out",
     replaces: Iterable[str] | None = None,
-    create: bool = True,
 ) -> Callable:
     """Decorate a job whose argument ``out_arg`` is its output folder: it runs inside :func:`run_outputs`.
 
     The job is called with the staging folder in place of ``out``; Paths under it in its return value
-    are moved to ``out``. ``inputs`` names the job's arguments that are input files (protected).
-    ``create=False``: a missing ``out`` is the job's own error to raise (it is called unchanged).
+    (also inside dicts, lists, tuples and dataclasses) are moved to ``out``. ``inputs`` names the job's
+    arguments that are input files (protected).
     """
     names, inputs = tuple(names), tuple(inputs)
     replaces = None if replaces is None else tuple(replaces)
@@ -423,8 +422,6 @@ def writes_outputs(
             bound = signature.bind(*args, **kwargs)
             bound.apply_defaults()
             out = Path(bound.arguments[out_arg])
-            if not create and not out.is_dir():
-                return job(*bound.args, **bound.kwargs)
             protect = [bound.arguments.get(name) for name in inputs]
             with run_outputs(out, command, names=names, protect=protect, replaces=replaces) as staging:
                 bound.arguments[out_arg] = staging

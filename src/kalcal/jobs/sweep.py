@@ -40,9 +40,16 @@ def split_sweep(assignments: dict[str, str]) -> tuple[str, list[str], dict[str, 
     return key, values_list, {k: v for k, v in assignments.items() if k != key}
 
 
-@writes_outputs(
-    "sweep", names=("sweep.csv", "sweep.json", "sweep.png", *(f"*=*/{name}" for name in ("summary.json", "stats.nc", "stats_long.nc")))
+#: the files of a sweep: its table and curve, and each value's run in a folder ``key=value``
+OUTPUT_NAMES = (
+    "sweep.csv",
+    "sweep.json",
+    "sweep.png",
+    *(f"*=*/{name}" for name in ("summary.json", "stats.nc", "stats_long.nc")),
 )
+
+
+@writes_outputs("sweep", names=OUTPUT_NAMES)
 def sweep(scenario, key: str, values: list[str], n: int, seed: int, out: str | Path, **verify_options: Any) -> SweepResult:
     """Verify ``scenario`` with ``key`` set to each value; write ``sweep.csv``, ``sweep.json``, the tuning
     curve ``sweep.png`` and one run directory ``key=value`` per value, all as one set of outputs.
