@@ -273,3 +273,18 @@ def test_the_jobs_return_the_final_paths(tmp_path):
     paths = simulate_accel_gps(scenario, 0, tmp_path / "s")
     assert paths == {name: tmp_path / "s" / f"{name}.csv" for name in ("imu", "gps", "truth")}
     assert all(path.is_file() for path in paths.values())
+
+
+def test_an_interrupted_redraw_leaves_the_old_page_and_figures(previous, monkeypatch):
+    out, before = previous
+
+    def half_drawn(dataset, data, figure_dir, *args, **kwargs):
+        figure_dir.mkdir(parents=True, exist_ok=True)
+        (figure_dir / "state_position.png").write_bytes(b"half a figure")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr("kalcal.jobs.report.render_figures", half_drawn)
+    result = _invoke("report", out, "--realization", "3", catch=True)
+    assert result.exit_code != 0
+    assert _tree(out) == before
+    assert not list(out.glob(".kalcal-partial-*"))
