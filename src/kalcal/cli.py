@@ -393,12 +393,9 @@ def verify(
                 batch_size=batch_size,
                 checkpoint=checkpoint,
                 form=form,
+                report=not no_report,
+                realization=realization,
             )
-            if not no_report:
-                from kalcal.jobs.report import FIGURE_DIR, render_report
-
-                outcome.paths["report"] = render_report(Path(out), realization=realization, progress=update)
-                outcome.paths["figures"] = Path(out) / FIGURE_DIR
     _print_checks(outcome.summary)
     pair = outcome.summary["residual_correlation"]
     if pair is not None:  # only runs that have the source report's pair of updates
@@ -439,7 +436,6 @@ def sweep(
     from kalcal.jobs.sweep import sweep as run_sweep
     from kalcal.models.config import parse_assignments
     from kalcal.montecarlo.distributed import dask_client
-    from kalcal.plots.sweep import plot_sweep
 
     with user_errors():
         key, values, fixed = split_sweep(parse_assignments(set_ or ()))
@@ -448,7 +444,6 @@ def sweep(
             result = run_sweep(
                 model, key, values, n, seed, out, engine=engine, workers=threads, client=client, long_run=0
             )
-        figure = plot_sweep(result.table, key, Path(out) / "sweep.png")
     table = _table(f"kalcal sweep {scenario}: {key}", f"{n:,} realizations per value")
     table.add_column(key, justify="right")
     checks = [c[: -len("_passed")] for c in result.table.columns if c.endswith("_passed")]
@@ -458,7 +453,7 @@ def sweep(
         cells = [f"{row[f'{c}_statistic']:.4g}" + ("" if row[f"{c}_passed"] else " [red]x[/red]") for c in checks]
         table.add_row(str(row[key]), *cells)
     console.print(table)
-    console.print(f"wrote {result.paths['table']} and {figure}")
+    console.print(f"wrote {result.paths['table']} and {result.paths['figure']}")
 
 
 @app.command()
@@ -526,9 +521,7 @@ def report(
     realization: Annotated[int, typer.Option("--realization", help="Realization shown in the single-run figures.")] = 0,
 ) -> None:
     """Redraw the figures and report.html of a verification run from its summary.json and stats.nc."""
-    from kalcal.jobs.report import render_report
-
-    from kalcal.jobs.report import FIGURE_DIR
+    from kalcal.jobs.report import FIGURE_DIR, render_report
 
     with user_errors():
         bar, update = _progress_bar(str(directory))
@@ -537,16 +530,34 @@ def report(
     console.print(_wrote(Path(directory), [page, Path(directory) / FIGURE_DIR]), markup=False, soft_wrap=True)
 
 
+def _named_files(args: list[str]) -> list[str]:
+    """The existing files named on the command line (``--opt PATH``, ``--opt=PATH``, arguments): inputs."""
+    candidates = [part for arg in args for part in (arg, arg.partition("=")[2]) if part]
+    return [c for c in candidates if Path(c).is_file()]
+
+
 def main() -> None:
     """The console script: the app, with click's own usage errors (a bad option value, a missing
-    argument) as one line on stderr and exit status 2, like every other bad input."""
+    argument) as one line on stderr and exit status 2, like every other bad input.
+
+    SIGINT (Ctrl-C) and SIGTERM stop a run with one line, ``kalcal: interrupted``, and exit status
+    128 + the signal (130, 143), after the run's staged outputs are removed (its --out folder is left as
+    it was). No file named on the command line is ever removed or replaced by the outputs.
+    """
     # typer carries its own copy of click: TyperException is the base of its usage errors
     from typer.exceptions import TyperException
 
+    from kalcal.interrupts import Interrupted, raise_on_signals
+    from kalcal.io.outputs import protected
+
     try:
-        code = app(prog_name="kalcal", standalone_mode=False)
+        with raise_on_signals(), protected(*_named_files(sys.argv[1:])):
+            code = app(prog_name="kalcal", standalone_mode=False)
+    except Interrupted as exc:
+        error_console.print("kalcal: interrupted", markup=False)
+        sys.exit(exc.exit_status)
     except typer.Abort:
-        error_console.print("kalcal: aborted", markup=False)
+        error_console.print("kalcal: interrupted", markup=False)
         sys.exit(130)
     except TyperException as exc:
         if type(exc).__name__ == "NoArgsIsHelpError":  # bare `kalcal`: the help, as the user asked for nothing

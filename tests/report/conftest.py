@@ -20,7 +20,8 @@ N = 5000
 SEED = 3
 REALIZATION = 4321  # in the short last block of the ensemble (4096 + 904)
 COMMAND = "kalcal verify -n 5000 --seed 3 --set scenario.duration=6"
-RUN_FILES = ("summary.json", "stats.nc", "stats_long.nc")
+# with the manifest of the files kalcal wrote there: a copy of a run folder (cp -r) carries it
+RUN_FILES = ("summary.json", "stats.nc", "stats_long.nc", ".kalcal-manifest.json")
 
 
 @contextlib.contextmanager

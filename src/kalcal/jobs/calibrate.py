@@ -12,6 +12,7 @@ from kalcal.calibrate.diagnostics import innovation_diagnostics
 from kalcal.calibrate.plausibility import CalibrationWarning
 from kalcal.calibrate.smoothing import smooth_calibration
 from kalcal.io.logs import numeric_columns, parse_column_map, read_table, require_increasing
+from kalcal.io.outputs import writes_outputs
 from kalcal.io.results import write_csv, write_json
 from kalcal.models.accel_gps import AccelGpsScenario, AccelGpsSettings
 from kalcal.models.config import section_values
@@ -33,6 +34,9 @@ def stated_rates(scenario: AccelGpsScenario) -> dict[str, float]:
     }
 
 
+@writes_outputs(
+    "calibrate accel-gps", names=("estimates.csv", "summary.json", "calibration.png"), inputs=("imu_path", "gps_path")
+)
 def calibrate_accel_gps_files(
     scenario: AccelGpsScenario,
     imu_path: str | Path,

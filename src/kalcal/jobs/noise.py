@@ -11,6 +11,7 @@ from kalcal.calibrate.noise import NoiseIdentification, identify_noise, regular_
 from kalcal.calibrate.plausibility import CalibrationWarning, check_limit, check_rate
 from kalcal.errors import DataError
 from kalcal.io.logs import numeric_columns, parse_column_map, read_table, require_increasing
+from kalcal.io.outputs import final_path, writes_outputs
 from kalcal.io.results import write_csv, write_json
 from kalcal.models.accel_gps import AccelGpsFilter
 from kalcal.plots.allan import plot_allan
@@ -54,6 +55,7 @@ def filter_toml(result: NoiseIdentification, settings: dict[str, float], source:
     return "\n".join(lines) + "\n"
 
 
+@writes_outputs("noise", names=("summary.json", "allan.csv", "allan.png", "filter.toml"), inputs=("imu_path",))
 def identify_noise_file(
     imu_path: str | Path,
     out: str | Path,
@@ -141,7 +143,7 @@ def identify_noise_file(
             "terms": curve.terms,
             "units": {"tau": "s", "adev": "m/s^2"},
         },
-        "files": {name: str(path) for name, path in paths.items()},
+        "files": {name: str(final_path(path)) for name, path in paths.items()},
         "warnings": [warning.as_dict() for warning in warnings],
     }
     write_json(paths["summary"], summary)

@@ -4,6 +4,11 @@ Reads ``DIR/summary.json`` and ``DIR/stats.nc`` (and ``DIR/stats_long.nc`` when 
 scenario from the saved settings to redraw one realization with the run's seed, and writes
 ``DIR/figures/*.png`` and ``DIR/report.html``. The Monte Carlo is not rerun. The same directory always
 gives the same page, byte for byte.
+
+The page and figures replace those of the folder's run as one set (:mod:`kalcal.io.outputs`): the
+previous page stays whole until the new one is complete. ``stats_long.nc`` is drawn only when the run's
+``summary.json`` says it made a long study, and only when its seed is the run's; a folder whose last
+kalcal run was cut short is refused.
 """
 
 from __future__ import annotations
@@ -18,6 +23,7 @@ import numpy as np
 
 from kalcal.errors import ConfigError, DataError
 from kalcal.filters.kalman import check_form
+from kalcal.io.outputs import require_complete, run_outputs
 from kalcal.io.statistics import read_statistics
 from kalcal.jobs.progress import JobProgress, stage
 from kalcal.models.custom import CustomModelScenario, is_custom_settings
@@ -32,6 +38,8 @@ from kalcal.report.steady_state import steady_state_view
 
 FIGURE_DIR = "figures"
 PAGE = "report.html"
+#: what a redraw replaces in a run's folder (glob patterns relative to it)
+REPORT_OUTPUTS = (PAGE, f"{FIGURE_DIR}/*")
 _REQUIRED = ("scenario", "settings", "realizations", "seed", "engine", "confidence", "tests")
 
 
@@ -103,10 +111,13 @@ def render_report(out: str | Path, *, realization: int = 0, progress: JobProgres
         The directory, ``summary.json`` or ``stats.nc`` is missing or unreadable, or they disagree.
     ConfigError
         ``realization`` is not in [0, N), or the saved settings no longer build a scenario.
+    OutputError
+        The folder's last kalcal run did not finish, or it holds a page or figure kalcal did not write.
     """
     out = Path(out)
     if not out.is_dir():
         raise DataError(f"{out}: no such run directory")
+    require_complete(out)
     summary_path = out / "summary.json"
     summary = read_summary(summary_path)
     try:
@@ -116,8 +127,13 @@ def render_report(out: str | Path, *, realization: int = 0, progress: JobProgres
         raise DataError(f"{summary_path}: realizations and seed must be whole numbers") from None
     index = _realization_index(realization, count)
     dataset = read_statistics(out / "stats.nc")
+    _require_same_run(dataset, summary, out / "stats.nc", summary_path)
     long_path = out / "stats_long.nc"
-    long_dataset = read_statistics(long_path) if long_path.is_file() else None
+    long_dataset = None
+    # a stats_long.nc the run did not write (a summary without a long study) is not this run's
+    if long_path.is_file() and summary.get("long_run", True) is not None:
+        long_dataset = read_statistics(long_path)
+        _require_same_run(long_dataset, summary, long_path, summary_path)
 
     try:
         if is_custom_settings(summary["settings"]):  # a model file's run: its matrices are the settings
@@ -151,17 +167,26 @@ def render_report(out: str | Path, *, realization: int = 0, progress: JobProgres
         state_labels=getattr(scenario, "state_labels", None),  # accel-gps: its error states δp, δv
     )
     steady = steady_state_view(problem)
-    figures, skipped = render_figures(
-        dataset,
-        data,
-        out / FIGURE_DIR,
-        long_dataset,
-        scenario=str(summary["scenario"]),
-        steady=steady,
-        progress=stage(progress, "figures"),
-    )
-    page = build_page(summary, figures, skipped, realization=index, figure_dir_name=FIGURE_DIR, steady_state=steady)
-    written = write_page(out / PAGE, page)
+    with run_outputs(out, "report", names=(PAGE, f"{FIGURE_DIR}/*.png"), replaces=REPORT_OUTPUTS) as staging:
+        figures, skipped = render_figures(
+            dataset,
+            data,
+            staging / FIGURE_DIR,
+            long_dataset,
+            scenario=str(summary["scenario"]),
+            steady=steady,
+            progress=stage(progress, "figures"),
+        )
+        page = build_page(summary, figures, skipped, realization=index, figure_dir_name=FIGURE_DIR, steady_state=steady)
+        write_page(staging / PAGE, page)
     if progress is not None:
         progress("report", 1, 1)
-    return written
+    return out / PAGE
+
+
+def _require_same_run(dataset, summary: dict[str, Any], path: Path, summary_path: Path) -> None:
+    """A statistics file whose seed or scenario is not the summary's belongs to another run."""
+    for key in ("seed", "scenario"):
+        saved = dataset.attrs.get(key)
+        if saved is not None and str(saved) != str(summary[key]):
+            raise DataError(f"{path}: from another run ({key} {saved}, {summary_path} says {summary[key]})")

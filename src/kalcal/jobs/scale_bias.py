@@ -10,12 +10,14 @@ import numpy as np
 from kalcal.calibrate.scale_bias import UNOBSERVABLE_RATIO, calibrate_scale_bias
 from kalcal.errors import DataError
 from kalcal.io.logs import numeric_columns, read_table, require_increasing
+from kalcal.io.outputs import writes_outputs
 from kalcal.io.results import write_csv, write_json
 from kalcal.models.config import section_values
 from kalcal.models.scale_bias import STATE_NAMES, ScaleBiasScenario, scale_bias_from_theta
 from kalcal.simulate.scale_bias import sample_scale_bias
 
 
+@writes_outputs("simulate scale-bias", names=("data.csv", "truth.json"))
 def simulate_scale_bias(scenario: ScaleBiasScenario, seed: int, out: str | Path) -> dict[str, Path]:
     """Write ``data.csv`` and ``truth.json`` for one realization drawn with ``seed``.
 
@@ -48,6 +50,7 @@ def simulate_scale_bias(scenario: ScaleBiasScenario, seed: int, out: str | Path)
     return {"data": data, "truth": write_json(out / "truth.json", truth)}
 
 
+@writes_outputs("calibrate scale-bias", names=("estimates.csv", "summary.json"), inputs=("data_path",))
 def calibrate_scale_bias_file(
     scenario: ScaleBiasScenario,
     data_path: str | Path,

@@ -6,11 +6,13 @@ from pathlib import Path
 
 import numpy as np
 
+from kalcal.io.outputs import writes_outputs
 from kalcal.io.results import write_csv
 from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.simulate.sampled import sample_accel_gps_logs
 
 
+@writes_outputs("simulate accel-gps", names=("imu.csv", "gps.csv", "truth.csv"))
 def simulate_accel_gps(scenario: AccelGpsScenario, seed: int, out: str | Path) -> dict[str, Path]:
     """Write ``imu.csv``, ``gps.csv`` and ``truth.csv`` for one realization drawn with ``seed``.
 

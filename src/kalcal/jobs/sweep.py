@@ -9,9 +9,11 @@ from typing import Any
 import pandas as pd
 
 from kalcal.errors import ConfigError
+from kalcal.io.outputs import writes_outputs
 from kalcal.io.results import write_json
 from kalcal.jobs.verify import verify
 from kalcal.models.config import apply_settings
+from kalcal.plots.sweep import plot_sweep
 
 
 @dataclass(frozen=True)
@@ -38,8 +40,19 @@ def split_sweep(assignments: dict[str, str]) -> tuple[str, list[str], dict[str, 
     return key, values_list, {k: v for k, v in assignments.items() if k != key}
 
 
+#: the files of a sweep: its table and curve, and each value's run in a folder ``key=value``
+OUTPUT_NAMES = (
+    "sweep.csv",
+    "sweep.json",
+    "sweep.png",
+    *(f"*=*/{name}" for name in ("summary.json", "stats.nc", "stats_long.nc")),
+)
+
+
+@writes_outputs("sweep", names=OUTPUT_NAMES)
 def sweep(scenario, key: str, values: list[str], n: int, seed: int, out: str | Path, **verify_options: Any) -> SweepResult:
-    """Verify ``scenario`` with ``key`` set to each value; write ``sweep.csv`` and one run directory per value.
+    """Verify ``scenario`` with ``key`` set to each value; write ``sweep.csv``, ``sweep.json``, the tuning
+    curve ``sweep.png`` and one run directory ``key=value`` per value, all as one set of outputs.
 
     Every value uses the same seed, so the curves compare filters on the same realizations.
     """
@@ -62,6 +75,7 @@ def sweep(scenario, key: str, values: list[str], n: int, seed: int, out: str | P
     paths["summary"] = write_json(
         out / "sweep.json", {"key": key, "values": values, "realizations": n, "seed": seed, "rows": rows}
     )
+    paths["figure"] = plot_sweep(table, key, out / "sweep.png")
     return SweepResult(key, table, paths)
 
 

@@ -14,6 +14,7 @@ import xarray as xr
 from kalcal import __version__
 from kalcal.errors import ConfigError
 from kalcal.filters.kalman import check_form
+from kalcal.io.outputs import writes_outputs
 from kalcal.io.results import write_json
 from kalcal.io.statistics import statistics_dataset, write_statistics
 from kalcal.jobs.progress import JobProgress, stage
@@ -60,7 +61,11 @@ class VerifyOutcome:
     dataset: xr.Dataset
     paths: dict[str, Path]
 
+#: the files a verification run (with its report) may write, relative to its folder
+OUTPUT_NAMES = ("summary.json", "stats.nc", "stats_long.nc", "report.html", "figures/*.png")
 
+
+@writes_outputs("verify", names=OUTPUT_NAMES, inputs=("checkpoint",))
 def verify(
     scenario,
     n: int,
@@ -77,6 +82,8 @@ def verify(
     batch_size: int | None = None,
     checkpoint: str | Path | None = None,
     form: str = "joseph",
+    report: bool = False,
+    realization: int = 0,
 ) -> VerifyOutcome:
     """Run n realizations, check the filter, write ``out/summary.json`` and ``out/stats.nc``.
 
@@ -89,6 +96,9 @@ def verify(
     ``form`` is the filter's update form (joseph, standard or sqrt; see :mod:`kalcal.filters.kalman`).
     ``progress(stage, done, total)`` hears of every stage: ``"monte carlo"`` and ``"long run"`` in
     realizations, ``"statistics"`` in files written (see :mod:`kalcal.jobs.progress`).
+    ``report`` also draws ``out/figures/`` and ``out/report.html`` (showing realization ``realization``).
+    The files are put in ``out`` together when the run ends, replacing the previous run's set there
+    (:mod:`kalcal.io.outputs`); a run that fails or is interrupted leaves ``out`` as it was.
     """
     if n < MIN_REALIZATIONS:
         raise ConfigError(
@@ -206,4 +216,9 @@ def verify(
     }
     paths["summary"] = write_json(out / "summary.json", summary)
     file_written(files, files)
+    if report:
+        from kalcal.jobs.report import FIGURE_DIR, render_report  # the page joins this run's set of outputs
+
+        paths["report"] = render_report(out, realization=realization, progress=progress)
+        paths["figures"] = out / FIGURE_DIR
     return VerifyOutcome(summary, statistics, checks, dataset, paths)
