@@ -21,6 +21,8 @@ fixes. For K above that, the reference is the null of the shorter series, whose 
 (the chi-square excess shrinks as K grows; measured: ``tests/calibrate/test_ljung_box.py``), so the
 p-value of a long series is conservative: still valid, slightly larger than exact. ``REFERENCE_FIXES``
 is above the length (5 m = 100) from which the lags stop growing, so the reference has the same m.
+The cost, B min(K, REFERENCE_FIXES) m, grows as 1 / tail: about 0.15 s of CPU at the 0.25% tail of
+``calibrate``'s 99% (B = 7,999), a hundred times that for a tail a hundred times smaller.
 """
 
 from __future__ import annotations
