@@ -20,8 +20,8 @@ def test_white_innovations_are_called_inconsistent_at_most_at_the_stated_rate():
     """600 logs of K = 1000 white N(0, I) innovations at 90% confidence.
 
     NIS OR Ljung-Box, each at the full alpha, called 106 of them inconsistent (60 now). With alpha split,
-    the NIS part is exact at alpha / 2 and the Ljung-Box part (asymptotic; about 1.05 times its nominal
-    rate at this K) near it, so the count stays below the 99.9% quantile of Binomial(600, 0.1), 84.
+    the NIS part is exact at alpha / 2 and the Ljung-Box part (simulated null) at most at it, so the count
+    stays below the 99.9% quantile of Binomial(600, 0.1), 84.
     """
     runs, confidence = 600, 0.9
     rng = np.random.default_rng(11)
@@ -53,7 +53,8 @@ def test_pvalue_bounds_parts_and_cause_agree(case):
     # every bound is in the result, and each part passes exactly when its statistics lie inside
     assert (size.lower, size.upper) == (d.nis_lower, d.nis_upper)
     assert size.passed == (d.nis_lower <= d.mean_nis <= d.nis_upper)
-    assert whiteness.upper == d.ljung_box_upper == pytest.approx(stats.chi2.isf(0.005 / 2, d.ljung_box_lags))
+    # the bound is the simulated null's, whose tail at K = 400 is heavier than the asymptotic chi-square's
+    assert whiteness.upper == d.ljung_box_upper > stats.chi2.isf(0.005 / 2, d.ljung_box_lags)
     assert whiteness.passed == all(q <= d.ljung_box_upper for q in d.ljung_box_statistic)
     assert whiteness.pvalue == pytest.approx(min(1.0, 2 * min(d.ljung_box_pvalue)))
     expected = {"white": (True, True), "too_large": (False, True), "too_small": (False, True), "correlated": (True, False)}
