@@ -7,7 +7,7 @@ import pytest
 
 from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.models.config import apply_settings
-from kalcal.montecarlo.accumulators import MomentSums, ensemble_statistics
+from kalcal.montecarlo.accumulators import BlockResult, MomentSums, ensemble_statistics
 from kalcal.montecarlo.engine import block_generator, block_sizes, realization, run_monte_carlo
 from kalcal.montecarlo.scenarios import accel_gps_problem
 
@@ -74,6 +74,18 @@ def test_realization_is_the_kth_of_the_ensemble():
     assert np.array_equal(last.error[0], short.error[300])
     with pytest.raises(ValueError):
         realization(problem, seed=3, index=2500, n=2500, engine="exact", block_size=1000)
+
+
+def test_a_block_result_needs_each_realizations_filter_cov():
+    """A realization's P comes from the block's filter_cov; there is no block-mean stand-in to fall back on."""
+    n, k, d, p = 2, 3, 3, 2
+    parts = dict(
+        error=np.zeros((n, k, d)), estimate=np.zeros((n, k, d)), residual=np.zeros((n, k, p)),
+        nees=np.zeros((n, k)), nis=np.zeros((n, k)), filter_cov_sum=np.zeros((k, d, d)),
+    )
+    with pytest.raises(TypeError):
+        BlockResult(**parts)
+    assert BlockResult(**parts, filter_cov=np.zeros((n, k, d, d))).normalized_residual is None
 
 
 def test_block_sizes():
