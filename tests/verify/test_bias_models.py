@@ -117,7 +117,11 @@ def test_the_pieces_of_a_cut_step_share_its_bias_noise(scheme, decay):
         np.testing.assert_allclose(noise, whole_noise, rtol=1e-13, atol=1e-20)
 
 
-@pytest.mark.parametrize("bias", [["truth.bias_walk_std=0.2"], ["truth.bias_correlation_time=0.3", "truth.bias_std=0.5"]], ids=["walk", "Gauss-Markov"])
+@pytest.mark.parametrize(
+    "bias",
+    [["truth.bias_walk_std=0.2"], ["truth.bias_correlation_time=0.3", "truth.bias_std=0.5"]],
+    ids=["walk", "Gauss-Markov"],
+)
 def test_a_fix_between_samples_takes_the_bias_noise_share_of_its_piece(bias):
     """Fixes 0.4 samples after a tick, the trapezoid rule, a drifting bias: P before and after the first
     fix equals a dense oracle, the per-sample model over the whole steps and, over the piece of length u
