@@ -285,7 +285,9 @@ def test_exact_sampler_moments_equal_dense_oracle(name):
     own = np.stack([blocks[i, :, i] for i in range(k)])
     nxt = np.stack([blocks[i, :, i + 1] for i in range(k - 1)])
     scale = np.sqrt(np.einsum("kii->ki", own))
-    # correlations to 1e-9: rounding, where a 4.5% variance error is what the old truth had
+    # correlations to 1e-9: rounding. The truth of 9c72f6e, which left the bias noise's share out of the
+    # trapezoid's dp and dv, had variances off by up to 3.7% (trapezoid-walk-m2) and 2.8%
+    # (trapezoid-markov-m2), and normalized covariances by up to 0.086 (trapezoid-markov-m2)
     pairs = (("Cov(x_k)", e_own, own, scale, scale), ("Cov(x_k, x_k+1)", e_next, nxt, scale[:-1], scale[1:]))
     for what, got, want, rows, cols in pairs:
         norm = rows[:, :, None] * cols[:, None, :]

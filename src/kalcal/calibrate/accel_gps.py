@@ -26,9 +26,13 @@ between samples, cut at the fixes. Each piece's transition is
 the decay and noise of :func:`~kalcal.models.accel_gps.bias_discretization`: a Gauss-Markov bias decays
 by exp(-dt_j / tau) at each sample, with the exact discrete noise, over each step's own dt_j), and a piece
 of length h adds the accelerometer noise g = [h^2/2, h, 0] sigma_a. The products over each interval's
-pieces are composed in one compiled pass, and only the 3x3 update runs in a loop over fixes. On a log
-whose fixes fall on samples this is exactly the filter that ``verify`` runs (the same per-sample Phi,
-Gamma and W). A step cut by a fix is treated as two pieces with independent noise (the same sample's
+pieces are composed in one compiled pass, and only the 3x3 update runs in a loop over fixes. This is
+exactly the filter that ``verify`` runs (the same per-sample Phi, Gamma and W, the same prior and
+updates) on a log that is evenly spaced at the scenario's rates, with a fix on every
+``steps_per_update``-th sample from the first and none skipped or given its own accuracy, without a
+scale state (``scale_std`` = 0: here the scale column uses the measured acceleration, in ``verify`` the
+true profile) and with ``init="prior"`` (``"first-fix"`` starts later, from the first fix and the GPS
+noise). A step cut by a fix is treated as two pieces with independent noise (the same sample's
 noise, and with the trapezoid rule the same bias noise, really enters both; the difference is one
 sample's share of a whole interval).
 """

@@ -29,8 +29,11 @@ or be first-order Gauss-Markov (``bias_correlation_time`` tau > 0: b_{j+1} = exp
 stationary with std ``bias_std``): Phi[2, 2] = exp(-dt/tau) and the bias gets a noise input of its own.
 The bias is discretized at the samples, where the accelerometer reads it, and enters dp, dv as the
 scheme integrates it (:func:`bias_discretization`, :func:`error_transition`: with the trapezoid rule and
-a drifting bias, Phi[:2, 2] and the bias noise's input differ from the Euler ones above); the truth, the
-filter and ``calibrate`` all use these two functions.
+a drifting bias, Phi[:2, 2] and the bias noise's input differ from the Euler ones above). The exact
+engine's truth, the filter of ``verify`` and that of ``calibrate`` use both functions; the sampled
+engine uses only :func:`bias_discretization` (through :meth:`AccelGpsTruth.bias_decay` and
+:meth:`AccelGpsTruth.bias_step_variance`, for its bias recursion) and integrates its samples itself,
+which keeps it an independent check of the other two.
 A scale-factor error (``scale_std`` > 0: a_c = (1 + s) a + b + w) adds a fourth, constant state s whose
 column of Phi over a step is -[a dt^2/2, a dt, 0]: it depends on the acceleration, so the transition is
 time-varying (over an interval: minus the position and velocity the acceleration alone produces). In the

@@ -25,8 +25,10 @@ class BlockResult(NamedTuple):
     nees: np.ndarray  #: e_k^T P_k^{-1} e_k, (n, K)
     nis: np.ndarray  #: r_k^T S_k^{-1} r_k, (n, K)
     filter_cov_sum: np.ndarray  #: sum over the n realizations of the filter's P_k, (K, d, d)
+    #: each realization's own P_k, (n, K, d, d): a broadcast view of one schedule for fixed gains, its own
+    #: for data-dependent gains; required, so that a realization's P is never a block mean
+    filter_cov: np.ndarray
     normalized_residual: np.ndarray | None = None  #: L_k^{-1} r_k with S_k = L_k L_k^T, (n, K, p), if known
-    filter_cov: np.ndarray | None = None  #: each realization's own P_k, (n, K, d, d) (data-dependent gains), if known
 
 
 class ResidualProducts:

@@ -61,21 +61,18 @@ def realization(
 
     Reruns its whole block at that block's size in the ensemble (the last block is shorter, and the
     draws of a block are interleaved across its realizations). ``filter_cov_sum`` is that
-    realization's own P, (K, d, d): the same for every realization of a fixed-gain filter, its own for
-    a filter whose gains depend on the data (scale-bias). A problem whose ``run_block`` does not give
-    each realization's P (``filter_cov``) must have data-independent gains; its block mean is used.
+    realization's own P, (K, d, d) (the block's ``filter_cov``, which every problem gives): the same for
+    every realization of a fixed-gain filter, its own for a filter whose gains depend on the data
+    (scale-bias).
     """
     if not 0 <= index < n:
         raise ValueError(f"realization index must lie in [0, {n}), got {index}")
     block, offset = divmod(index, block_size)
     result = run_block(problem, seed, block, block_sizes(n, block_size)[block], engine)
     one = slice(offset, offset + 1)
-    if result.filter_cov is not None:
-        own = np.array(result.filter_cov[offset])
-    else:
-        own = result.filter_cov_sum / result.error.shape[0]
+    own = np.array(result.filter_cov[offset])
     normalized = None if result.normalized_residual is None else result.normalized_residual[one]
-    return BlockResult(*(a[one] for a in result[:5]), own, normalized, own[None])
+    return BlockResult(*(a[one] for a in result[:5]), own, own[None], normalized)
 
 
 @dataclass(frozen=True)
