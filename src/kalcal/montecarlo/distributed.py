@@ -46,7 +46,15 @@ def dask_client(workers: int | None = None, scheduler: str | None = None) -> Ite
     # the worker processes start with SIGINT ignored: Ctrl-C (sent to the whole process group) stops this
     # process, which then closes the cluster, instead of every worker printing its own traceback
     with _sigint_ignored():
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
+        cluster = LocalCluster(
+            n_workers=workers,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            # no dashboard, and the scheduler's HTTP server on a free port: on its default, 8787, a second
+            # run at the same time printed a warning that the port was in use
+            scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
+        )
     with cluster, Client(cluster) as client:
         try:
             yield client
