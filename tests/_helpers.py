@@ -85,3 +85,11 @@ def assert_gaussian_moments(samples, mean, cov, *, family_alpha: float = 1e-4, w
     z = (np.cov(samples, rowvar=False) - cov)[iu] / sd[iu]
     bad = np.abs(z) > k
     assert not np.any(bad), f"{what}: covariances differ at {[(int(i), int(j)) for i, j in zip(iu[0][bad], iu[1][bad])]}: z = {z[bad]} (k = {k:.2f})"
+
+
+def tree(folder) -> dict[str, bytes]:
+    """Every file under ``folder`` (dot files included), relative with ``/`` separators, and its bytes."""
+    from pathlib import Path
+
+    folder = Path(folder)
+    return {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}

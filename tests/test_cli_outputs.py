@@ -6,10 +6,12 @@ interrupted or failing run leaves the previous set byte-identical, and a bad --o
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -22,6 +24,7 @@ from typer.testing import CliRunner
 
 from kalcal.cli import app
 from kalcal.io.outputs import MANIFEST, read_manifest
+from tests._helpers import tree as _tree
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "constant_velocity.toml"
 SMALL = ("-n", "2000", "--set", "scenario.duration=6")
@@ -35,10 +38,6 @@ def _ok(*args):
     result = _invoke(*args)
     assert result.exit_code == 0, result.output + result.stderr
     return result
-
-
-def _tree(folder: Path) -> dict[str, bytes]:
-    return {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
 
 
 def _inodes(folder: Path) -> dict[str, int]:
@@ -161,20 +160,33 @@ def test_simulate_and_calibrate_reruns_replace_the_whole_set_and_keep_user_files
     (out / "README.txt").write_text("mine")
     _ok("simulate", "accel-gps", "--set", "scenario.duration=2", "--out", out)
     first = _inodes(out)
-    _ok("simulate", "scale-bias", "--out", out)
+    _ok("simulate", "accel-gps", "--set", "scenario.duration=3", "--seed", "4", "--out", out)
     assert _files_from(first, out) == ["README.txt"]
-    assert sorted(_tree(out)) == sorted([MANIFEST, "README.txt", "data.csv", "truth.json"])
+    assert sorted(_tree(out)) == sorted([MANIFEST, "README.txt", "gps.csv", "imu.csv", "truth.csv"])
 
     cal = tmp_path / "cal"
-    sim = tmp_path / "sim"
-    _ok("simulate", "accel-gps", "--set", "scenario.duration=4", "--out", sim)
-    _ok("calibrate", "accel-gps", "--imu", sim / "imu.csv", "--gps", sim / "gps.csv", "--out", cal)
+    _ok("calibrate", "accel-gps", "--imu", out / "imu.csv", "--gps", out / "gps.csv", "--out", cal)
     assert (cal / "calibration.png").is_file()
-    _ok("calibrate", "scale-bias", "--data", out / "data.csv", "--out", cal)
-    assert sorted(_tree(cal)) == sorted([MANIFEST, "estimates.csv", "summary.json"])
-    # calibrating a simulated log into its own folder: the input stays, the simulation's other file goes
-    _ok("calibrate", "scale-bias", "--data", out / "data.csv", "--out", out)
-    assert sorted(_tree(out)) == sorted([MANIFEST, "README.txt", "data.csv", "estimates.csv", "summary.json"])
+    first = _inodes(cal)
+    # the README's scale-bias calibration into a folder of its own, twice: the second replaces the first
+    sb, sb_cal = tmp_path / "sb", tmp_path / "sb-cal"
+    _ok("simulate", "scale-bias", "--out", sb)
+    _ok("calibrate", "scale-bias", "--data", sb / "data.csv", "--out", sb_cal)
+    first = _inodes(sb_cal)
+    _ok("calibrate", "scale-bias", "--data", sb / "data.csv", "--set", "filter.bias_std=0.2", "--out", sb_cal)
+    assert _files_from(first, sb_cal) == []
+    assert sorted(_tree(sb_cal)) == sorted([MANIFEST, "estimates.csv", "summary.json"])
+
+
+def test_another_commands_folder_is_refused_and_left_whole(tmp_path):
+    """`kalcal calibrate ... --out sim` into the simulation's folder would remove its truth.csv: refused."""
+    sim = tmp_path / "sim"
+    _ok("simulate", "accel-gps", "--set", "scenario.duration=2", "--out", sim)
+    before = _tree(sim)
+    result = _invoke("calibrate", "accel-gps", "--imu", sim / "imu.csv", "--gps", sim / "gps.csv", "--out", sim)
+    _one_line_error(result, f"--out {sim}: holds the outputs of `kalcal simulate accel-gps`; choose another folder")
+    _one_line_error(_invoke("simulate", "scale-bias", "--out", sim), "holds the outputs of `kalcal simulate accel-gps`")
+    assert _tree(sim) == before
 
 
 def test_a_sweep_rerun_with_other_values_leaves_no_run_of_the_first(tmp_path):
@@ -227,24 +239,39 @@ def test_report_refuses_an_incomplete_folder_and_statistics_of_another_run(previ
 
 
 def test_the_command_lines_files_are_never_removed(tmp_path):
-    """`kalcal calibrate --config noise/filter.toml --out noise`: the config written by `kalcal noise` stays."""
-    rng = np.random.default_rng(3)
-    pd.DataFrame({"time": np.arange(20_000) / 200.0, "accel": 0.02 * rng.standard_normal(20_000)}).to_csv(
-        tmp_path / "static.csv", index=False
-    )
-    noise, sim = tmp_path / "noise", tmp_path / "sim"
-    _ok("noise", "--imu", tmp_path / "static.csv", "--out", noise)
-    _ok("simulate", "accel-gps", "--set", "scenario.duration=4", "--out", sim)
-    config = (noise / "filter.toml").read_bytes()
+    """A log named on the command line that the folder's own previous run listed (a calibration's
+    estimates.csv fed back as its IMU log) is kept and stays the folder's."""
+    sim, cal = tmp_path / "sim", tmp_path / "cal"
+    _ok("simulate", "accel-gps", "--set", "scenario.duration=2", "--out", sim)
+    _ok("calibrate", "accel-gps", "--imu", sim / "imu.csv", "--gps", sim / "gps.csv", "--out", cal)
+    shutil.copy2(sim / "imu.csv", cal / "imu-copy.csv")
+    manifest = json.loads((cal / MANIFEST).read_text())
+    (cal / MANIFEST).write_text(json.dumps({**manifest, "files": [*manifest["files"], "imu-copy.csv"]}))
+    log = (cal / "imu-copy.csv").read_bytes()
     done = subprocess.run(
-        [sys.executable, "-m", "kalcal.cli", "calibrate", "accel-gps", "--imu", str(sim / "imu.csv"),
-         "--gps", str(sim / "gps.csv"), "--config", str(noise / "filter.toml"), "--out", str(noise)],
+        [sys.executable, "-m", "kalcal.cli", "calibrate", "accel-gps", "--imu", str(cal / "imu-copy.csv"),
+         "--gps", str(sim / "gps.csv"), "--out", str(cal)],
         capture_output=True, text=True, env={**os.environ, "COLUMNS": "200"},
     )
     assert done.returncode == 0, done.stderr
-    assert sorted(_tree(noise)) == sorted([MANIFEST, "calibration.png", "estimates.csv", "filter.toml", "summary.json"])
-    assert (noise / "filter.toml").read_bytes() == config
-    assert "fixes_used" in json.loads((noise / "summary.json").read_text())
+    assert (cal / "imu-copy.csv").read_bytes() == log
+    assert "imu-copy.csv" in read_manifest(cal).files
+
+
+def test_a_python_job_keeps_the_config_its_scenario_was_read_from(tmp_path):
+    """No command line names the config here: the scenario carries it (docs/outputs.md)."""
+    from kalcal.jobs.simulate import simulate_accel_gps
+    from kalcal.models.registry import build_scenario
+
+    out = tmp_path / "sim"
+    simulate_accel_gps(build_scenario("accel-gps", None, ["scenario.duration=2"]), 0, out)
+    config = out / "settings.toml"
+    config.write_text("[scenario]\nduration = 3\n")
+    manifest = json.loads((out / MANIFEST).read_text())  # the config is a file of the folder's set
+    (out / MANIFEST).write_text(json.dumps({**manifest, "files": [*manifest["files"], "settings.toml"]}))
+    simulate_accel_gps(build_scenario("accel-gps", config), 1, out)
+    assert config.read_text() == "[scenario]\nduration = 3\n"
+    assert sorted(_tree(out)) == sorted([MANIFEST, "gps.csv", "imu.csv", "settings.toml", "truth.csv"])
 
 
 def test_a_checkpoint_in_the_folder_is_never_part_of_a_set(tmp_path):
@@ -288,3 +315,76 @@ def test_an_interrupted_redraw_leaves_the_old_page_and_figures(previous, monkeyp
     assert result.exit_code != 0
     assert _tree(out) == before
     assert not list(out.glob(".kalcal-partial-*"))
+
+
+def test_ctrl_c_with_workers_is_one_line(tmp_path):
+    """Ctrl-C signals the whole process group, the Dask worker processes too: still one line on stderr."""
+    out = tmp_path / "out"
+    busy = socket.socket()  # Dask's default HTTP port taken, as by another run at the same time
+    with contextlib.suppress(OSError):
+        busy.bind(("0.0.0.0", 8787))
+        busy.listen()
+    process = subprocess.Popen(
+        [sys.executable, "-m", "kalcal.cli", "verify", "-n", "10000000", "--workers", "1", "--no-report",
+         "--long-run", "0", "--out", str(out)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+    )  # fmt: skip
+    try:
+        deadline = time.monotonic() + 45
+        # the staging folder exists once the cluster is up and the job has started
+        while not list(out.glob(".kalcal-partial-*")) and process.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert process.poll() is None, process.communicate()
+        time.sleep(1.0)  # into the Monte Carlo, on the worker
+        os.killpg(process.pid, signal.SIGINT)
+        _, stderr = process.communicate(timeout=30)
+    finally:
+        busy.close()
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.wait()
+    assert process.returncode == 130, stderr
+    assert stderr.splitlines() == ["kalcal: interrupted"]
+    assert not out.exists()
+
+
+def test_a_file_where_kalcal_writes_a_folder_is_refused_before_the_run(tmp_path, monkeypatch):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "figures").write_text("mine")
+
+    def no_monte_carlo(*args, **kwargs):
+        raise AssertionError("the Monte Carlo ran")
+
+    monkeypatch.setattr("kalcal.jobs.verify.run_monte_carlo", no_monte_carlo)
+    result = _invoke("verify", *SMALL, "--out", out)
+    _one_line_error(result, f"--out {out}: figures is a file where kalcal writes a folder")
+    assert _tree(out) == {"figures": b"mine"}
+
+
+def test_report_names_its_folder_argument_and_how_to_adopt_an_old_folder(previous):
+    """A run folder from a kalcal version without manifests: `kalcal report DIR` has no --out to change."""
+    out, _ = previous
+    (out / MANIFEST).unlink()
+    result = _invoke("report", out)
+    _one_line_error(
+        result, f"kalcal: error: {out}: report.html was not written by kalcal here", "move report.html and figures/ out of it"
+    )
+    assert "--out" not in result.stderr
+    # doing as it says adopts the folder: the page is drawn, and the manifest lists the page and figures
+    (out / "report.html").unlink()
+    shutil.rmtree(out / "figures")
+    _ok("report", out)
+    manifest = read_manifest(out)
+    assert manifest.complete and "report.html" in manifest.files
+    assert set(manifest.files) == {"report.html", *(f for f in _tree(out) if f.startswith("figures/"))}
+
+
+def test_a_failing_first_run_removes_every_folder_it_created(tmp_path):
+    (tmp_path / "bad.csv").write_text("time,accel\n0,not a number\n")
+    out = tmp_path / "a" / "b" / "c"
+    bad = tmp_path / "bad.csv"
+    result = _invoke("calibrate", "accel-gps", "--imu", bad, "--gps", bad, "--out", out)
+    assert result.exit_code == 2, result.output
+    assert str(bad) in result.stderr and "accel" in result.stderr  # the job read the log: a/b/c had been created
+    assert not (tmp_path / "a").exists()

@@ -25,6 +25,7 @@ from kalcal.io.outputs import (
     write_manifest,
     writes_outputs,
 )
+from tests._helpers import tree as _tree
 
 
 def _write(folder: Path, files: dict[str, str]) -> None:
@@ -32,11 +33,6 @@ def _write(folder: Path, files: dict[str, str]) -> None:
         path = folder / name
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(text)
-
-
-def _tree(folder: Path) -> dict[str, bytes]:
-    """Every file under ``folder`` (dot files included) and its bytes."""
-    return {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
 
 
 def _run(out: Path, files: dict[str, str], command: str = "test", **options) -> None:
@@ -171,13 +167,17 @@ def test_a_commit_cut_short_is_marked_incomplete_and_the_next_run_cleans_both_se
 
     def die_after_one(source, target):
         if not str(target).endswith(MANIFEST) and moved:
-            raise OSError(28, "No space left on device")
+            raise OSError(28, "No space left on device", str(source), None, str(target))
         moved.append(target)
         real_replace(source, target)
 
     monkeypatch.setattr(outputs.os, "replace", die_after_one)
-    with pytest.raises(OSError):
+    # one line naming the folder, the file and the cause, and saying what state the folder is in
+    with pytest.raises(OutputError) as caught:
         _run(out, {"both.json": "new", "new.png": "new", "z.csv": "new"})
+    message = str(caught.value)
+    assert message.startswith(f"--out {out}: putting the new files in place failed (No space left on device: ")
+    assert f"{out / 'both.json'}" in message and "marked incomplete" in message and "run again" in message
     monkeypatch.setattr(outputs.os, "replace", real_replace)
     manifest = read_manifest(out)
     assert not manifest.complete
@@ -188,6 +188,21 @@ def test_a_commit_cut_short_is_marked_incomplete_and_the_next_run_cleans_both_se
         _run(out, {"report.html": "x"}, replaces=("report.html",))
     _run(out, {"summary.json": "third"})
     assert _tree(out).keys() == {"summary.json", MANIFEST} and read_manifest(out).complete
+
+
+def test_a_commit_whose_first_manifest_cannot_be_written_leaves_the_folder_unchanged(tmp_path, monkeypatch):
+    out = tmp_path / "out"
+    _run(out, {"old.png": "old"})
+    before = _tree(out)
+
+    def full(source, target):
+        raise OSError(28, "No space left on device", str(source), None, str(target))
+
+    monkeypatch.setattr(outputs.os, "replace", full)
+    unchanged = rf"--out {out}: cannot write {MANIFEST} \(No space left on device: .*; the folder is unchanged$"
+    with pytest.raises(OutputError, match=unchanged):
+        _run(out, {"new.png": "new"})
+    assert _tree(out) == before
 
 
 def test_a_redraw_replaces_only_its_own_files(tmp_path):
@@ -219,7 +234,7 @@ def test_a_job_writing_into_the_staged_folder_joins_the_set_and_a_subfolder_comm
     # a page later drawn in the subfolder is listed there, and the next outer set removes it too
     _run(out / "key=1", {"report.html": "p"}, replaces=("report.html",))
     assert "key=1/report.html" in listed_files(out)
-    _run(out, {"sweep.csv": "2"})
+    _run(out, {"sweep.csv": "2"}, command="sweep")
     assert _tree(out).keys() == {"sweep.csv", MANIFEST}
 
 
@@ -319,3 +334,102 @@ def test_a_signal_in_the_commit_still_leaves_a_whole_set(tmp_path, monkeypatch):
     with raise_on_signals(), pytest.raises(Interrupted):
         _run(out, {"a.txt": "new", "c.txt": "new"})
     assert _tree(out).keys() == {"a.txt", "c.txt", MANIFEST} and read_manifest(out).complete
+
+
+def test_a_folder_holding_another_commands_outputs_is_refused_before_the_job_runs(tmp_path):
+    out = tmp_path / "sim"
+    _run(out, {"imu.csv": "i", "truth.csv": "t"}, command="simulate accel-gps")
+    before = _tree(out)
+    ran = []
+    with pytest.raises(OutputError) as caught:
+        with run_outputs(out, "calibrate accel-gps"):
+            ran.append(True)
+    assert str(caught.value) == f"--out {out}: holds the outputs of `kalcal simulate accel-gps`; choose another folder"
+    assert not ran and _tree(out) == before
+    # the same command replaces its own set, and a redraw (replaces=) adds to another command's set
+    _run(out, {"imu.csv": "i2"}, command="simulate accel-gps")
+    _run(out, {"report.html": "p"}, command="report", replaces=("report.html",))
+    assert read_manifest(out).command == "simulate accel-gps"
+    assert set(read_manifest(out).files) == {"imu.csv", "report.html"}
+
+
+def test_a_file_where_the_outputs_need_a_folder_stops_the_run_before_it_starts(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "figures").write_text("the user's own")
+    ran = []
+    with pytest.raises(OutputError, match=rf"^--out {out}: figures is a file where kalcal writes a folder$"):
+        with run_outputs(out, "test", names=("summary.json", "figures/*.png", "*=*/summary.json")):
+            ran.append(True)
+    assert not ran and _tree(out) == {"figures": b"the user's own"}
+    # and at the commit, for a folder the names did not announce
+    with pytest.raises(OutputError, match=r"figures is a file where kalcal writes a folder"):
+        _run(out, {"figures/a.png": "x"})
+    assert _tree(out) == {"figures": b"the user's own"}
+
+
+def test_a_glob_match_no_manifest_lists_is_named_as_in_kalcals_place_not_as_replaced(tmp_path):
+    out = tmp_path / "out"
+    (out / "figures").mkdir(parents=True)
+    (out / "figures" / "mine.png").write_text("the user's own")
+    with pytest.raises(OutputError) as caught:
+        _run(out, {"figures/a.png": "x"}, names=("figures/*.png",))
+    message = str(caught.value)
+    assert "figures/mine.png was not written by kalcal here" in message
+    assert "is in a place kalcal writes into (figures/*.png)" in message and "replaced" not in message
+
+
+def test_messages_name_a_folder_argument_without_out_and_say_the_remedy(tmp_path):
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "report.html").write_text("an old page")
+    with pytest.raises(OutputError) as caught:
+        _run(out, {"report.html": "p"}, names=("report.html",), option=None, remedy="move report.html away")
+    assert str(caught.value).startswith(f"{out}: report.html was not written by kalcal here")
+    assert str(caught.value).endswith("; move report.html away") and "--out" not in str(caught.value)
+
+
+def test_a_failed_first_run_removes_every_folder_it_created(tmp_path):
+    (tmp_path / "a").mkdir()
+    out = tmp_path / "a" / "b" / "c" / "d"
+    with pytest.raises(RuntimeError):
+        with run_outputs(out, "test") as staging:
+            _write(staging, {"summary.json": "x"})
+            raise RuntimeError("boom")
+    assert not (tmp_path / "a" / "b").exists() and (tmp_path / "a").is_dir()
+    # a folder that something else wrote into meanwhile stays, with the folders above it
+    with pytest.raises(RuntimeError):
+        with run_outputs(out, "test") as staging:
+            (tmp_path / "a" / "b" / "theirs.txt").write_text("not the run's")
+            raise RuntimeError("boom")
+    assert not (tmp_path / "a" / "b" / "c").exists() and (tmp_path / "a" / "b" / "theirs.txt").is_file()
+
+
+@dataclass(frozen=True)
+class _Scenario:
+    duration: float = 1.0
+
+
+def test_the_file_a_scenario_was_read_from_is_an_input_of_every_job_given_it(tmp_path):
+    """A job called from Python (no command line) keeps the config its scenario was built from."""
+    out = tmp_path / "out"
+    _run(out, {"cfg.toml": "[scenario]\nduration = 2\n", "old.csv": "o"}, command="job")
+    scenario = outputs.mark_inputs(_Scenario(), out / "cfg.toml")
+    assert scenario == _Scenario() and repr(scenario) == repr(_Scenario())  # the settings are unchanged
+    assert outputs.inputs_of(scenario) == (os.path.realpath(out / "cfg.toml"),)
+
+    @writes_outputs("job")
+    def job(scenario, out):
+        (Path(out) / "new.csv").write_text("n")
+
+    job(scenario, out)
+    assert _tree(out).keys() == {"cfg.toml", "new.csv", MANIFEST}
+
+
+def test_build_scenario_records_its_config(tmp_path):
+    from kalcal.models.registry import build_scenario
+
+    config = tmp_path / "cfg.toml"
+    config.write_text("[scenario]\nduration = 2\n")
+    assert outputs.inputs_of(build_scenario("accel-gps", config)) == (os.path.realpath(config),)
+    assert outputs.inputs_of(build_scenario("accel-gps")) == ()

@@ -3,6 +3,11 @@
 Every job that writes an ``--out`` folder writes it through :func:`run_outputs` (or the
 :func:`writes_outputs` decorator around the job):
 
+0. Before the job runs: a folder whose manifest was written by another command is refused (its files
+   are another job's outputs, not a previous run of this one; ``kalcal report`` redrawing the page of
+   a verification run, ``replaces=``, is the one job that adds to another command's set), and so is a
+   file in the place of a folder the outputs go into, or a file named like an output that no manifest
+   lists.
 1. The job writes into a staging folder inside the target, ``OUT/.kalcal-partial-<pid>-<random>/``
    (the same file system, so that the final step is a rename).
 2. If the job raises, or is interrupted (:class:`kalcal.interrupts.Interrupted`, ``KeyboardInterrupt``),
@@ -17,9 +22,10 @@ Every job that writes an ``--out`` folder writes it through :func:`run_outputs` 
 
 What is never touched: any file that no manifest lists (a user's own files: ``--out .`` is safe),
 the run's inputs (log files, ``--config``, a model file, ``--checkpoint``: whatever is named on the
-command line), and the checkpoint file. A file in ``OUT`` that has the name of one of the command's
-outputs but that no manifest lists (a user's ``summary.json``, or the outputs of a kalcal version
-without manifests) is not replaced: the run stops before it starts, naming the file.
+command line; for a job called from Python, the input files among its arguments and the config or
+model file its scenario was built from, :func:`mark_inputs`), and the checkpoint file. A file in
+``OUT`` that has the name of one of the command's outputs but that no manifest lists (a user's
+``summary.json``, or the outputs of a kalcal version without manifests) is not replaced: the run stops before it starts, naming the file.
 
 A job that writes into the folder another job is staging (``kalcal verify`` drawing its report) joins
 that job's set; a job that writes into a new folder inside it (each run of a sweep) commits its own set
@@ -80,6 +86,9 @@ _ACTIVE: contextvars.ContextVar[tuple[tuple[Path, Path], ...]] = contextvars.Con
 _PROTECTED: contextvars.ContextVar[frozenset[str]] = contextvars.ContextVar("kalcal_protected", default=frozenset())
 
 
+_INPUTS_ATTRIBUTE = "_kalcal_input_files"
+
+
 def _resolved(path: str | Path) -> str:
     return os.path.realpath(os.fspath(path))
 
@@ -92,6 +101,24 @@ def protected(*paths: str | Path | None) -> Iterator[None]:
         yield
     finally:
         _PROTECTED.reset(token)
+
+
+def mark_inputs(value: Any, *paths: str | Path | None) -> Any:
+    """Record on ``value`` (a scenario) the files it was read from: a job given it never removes them.
+
+    Returns ``value``. The record is an attribute outside the dataclass fields, so it does not change
+    the scenario's settings, equality or repr; a scenario derived with ``dataclasses.replace`` does
+    not carry it.
+    """
+    files = tuple(getattr(value, _INPUTS_ATTRIBUTE, ())) + tuple(_resolved(p) for p in paths if p is not None)
+    with contextlib.suppress(AttributeError, TypeError):
+        object.__setattr__(value, _INPUTS_ATTRIBUTE, files)
+    return value
+
+
+def inputs_of(value: Any) -> tuple[str, ...]:
+    """The files :func:`mark_inputs` recorded on ``value`` (resolved paths; empty when none)."""
+    return tuple(getattr(value, _INPUTS_ATTRIBUTE, ()))
 
 
 def read_manifest(folder: str | Path) -> Manifest | None:
@@ -112,7 +139,7 @@ def read_manifest(folder: str | Path) -> Manifest | None:
             raise TypeError("files is not a list of names")
         return Manifest(str(document["command"]), bool(document["complete"]), tuple(files))
     except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError) as exc:
-        raise OutputError(f"{path}: not a kalcal manifest ({exc}); remove it or choose another --out") from None
+        raise OutputError(f"{path}: not a kalcal manifest ({exc}); remove it or choose another folder") from None
 
 
 def listed_files(folder: str | Path) -> set[str]:
@@ -228,22 +255,67 @@ def _remove_stale_partials(out: Path) -> None:
                 shutil.rmtree(entry, ignore_errors=True)
 
 
-def _not_ours(out: Path, relative: str) -> OutputError:
+def _where(out: Path, option: str | None) -> str:
+    """How messages name the folder: ``--out DIR`` for the option, ``DIR`` for an argument."""
+    return f"{option} {out}" if option else str(out)
+
+
+def _remedy(option: str | None, remedy: str | None) -> str:
+    return remedy or ("move it away or " + (f"choose another {option}" if option else "choose another folder"))
+
+
+def _not_ours(out: Path, relative: str, option: str | None, remedy: str | None, how: str) -> OutputError:
     return OutputError(
-        f"--out {out}: {relative} was not written by kalcal here (no {MANIFEST} lists it) and would be replaced; "
-        "move it away or choose another --out"
+        f"{_where(out, option)}: {relative} was not written by kalcal here (no {MANIFEST} lists it) and {how}; "
+        + _remedy(option, remedy)
     )
 
 
-def _refuse_strays(out: Path, names: Iterable[str], listed: set[str], protected_paths: frozenset[str]) -> None:
-    """Before the job runs: a file named like one of its outputs that no manifest lists, or an input, stops it."""
+def _own_input(out: Path, path: Path, option: str | None) -> OutputError:
+    return OutputError(
+        f"{_where(out, option)}: the run would replace its own input {path}; "
+        + (f"choose another {option}" if option else "choose another folder")
+    )
+
+
+def _refuse_file_parents(out: Path, relatives: Iterable[str], option: str | None) -> None:
+    """A file (not a folder) where one of ``relatives`` needs a folder (``figures`` for ``figures/a.png``)."""
+    for relative in relatives:
+        for parent in reversed(Path(relative).parents):
+            if str(parent) != "." and os.path.lexists(out / parent) and not (out / parent).is_dir():
+                raise OutputError(f"{_where(out, option)}: {parent.as_posix()} is a file where kalcal writes a folder")
+
+
+def _literal_folders(pattern: str) -> str:
+    """The leading folders of a glob pattern that have no wildcard (``figures`` for ``figures/*.png``), + a name."""
+    parts = pattern.split("/")
+    literal = []
+    for part in parts[:-1]:
+        if any(c in part for c in "*?["):
+            break
+        literal.append(part)
+    return "/".join([*literal, "x"])
+
+
+def _refuse_strays(
+    out: Path,
+    names: Iterable[str],
+    listed: set[str],
+    protected_paths: frozenset[str],
+    option: str | None,
+    remedy: str | None,
+) -> None:
+    """Before the job runs: a file named like one of its outputs that no manifest lists, an input, or a file
+    where the outputs need a folder stops it."""
+    names = tuple(names)
+    _refuse_file_parents(out, [_literal_folders(pattern) for pattern in names], option)
     for pattern in names:
         for path in sorted(out.glob(pattern)):
             relative = path.relative_to(out).as_posix()
             if _resolved(path) in protected_paths:
-                raise OutputError(f"--out {out}: the run would replace its own input {path}; choose another --out")
+                raise _own_input(out, path, option)
             if relative not in listed and (path.is_file() or path.is_symlink()):
-                raise _not_ours(out, relative)
+                raise _not_ours(out, relative, option, remedy, f"is in a place kalcal writes into ({pattern})")
 
 
 def _staged_files(staging: Path) -> list[str]:
@@ -254,19 +326,24 @@ def _staged_files(staging: Path) -> list[str]:
     return sorted(files)
 
 
-def _check_targets(out: Path, new: list[str], listed: set[str], protected_paths: frozenset[str]) -> None:
+def _check_targets(
+    out: Path,
+    new: list[str],
+    listed: set[str],
+    protected_paths: frozenset[str],
+    option: str | None,
+    remedy: str | None,
+) -> None:
     """Every new file can be renamed into place without replacing a directory, an input or a file not kalcal's."""
+    _refuse_file_parents(out, new, option)
     for relative in new:
         target = out / relative
-        for parent in target.relative_to(out).parents:
-            if str(parent) != "." and (out / parent).exists() and not (out / parent).is_dir():
-                raise OutputError(f"--out {out}: {parent.as_posix()} is a file where kalcal writes a folder")
         if _resolved(target) in protected_paths:
-            raise OutputError(f"--out {out}: the run would replace its own input {target}; choose another --out")
+            raise _own_input(out, target, option)
         if target.is_dir() and not target.is_symlink():
-            raise OutputError(f"--out {out}: {relative} is a folder where kalcal writes a file")
+            raise OutputError(f"{_where(out, option)}: {relative} is a folder where kalcal writes a file")
         if os.path.lexists(target) and relative not in listed:
-            raise _not_ours(out, relative)
+            raise _not_ours(out, relative, option, remedy, "would be replaced")
 
 
 def _remove(out: Path, relative: str) -> None:
@@ -290,10 +367,12 @@ def _commit(
     listed: set[str],
     replaces: tuple[str, ...] | None,
     protected_paths: frozenset[str],
+    option: str | None = "--out",
+    remedy: str | None = None,
 ) -> None:
     new = _staged_files(staging)
     new_set = set(new)
-    _check_targets(out, new, listed, protected_paths)
+    _check_targets(out, new, listed, protected_paths, option, remedy)
     if replaces is None:
         replaced = set(listed)
     else:
@@ -307,15 +386,31 @@ def _commit(
             removed.add(relative)
     if replaces is not None and old is not None:
         command = old.command  # a redraw adds to the run that is there
-    with deferred_signals():
-        write_manifest(out, command, listed | new_set, complete=False)
-        for relative in sorted(removed):
-            _remove(out, relative)
-        for relative in new:
-            target = out / relative
-            target.parent.mkdir(parents=True, exist_ok=True)
-            os.replace(staging / relative, target)
-        write_manifest(out, command, kept | new_set, complete=True)
+    marked = False
+    try:
+        with deferred_signals():
+            write_manifest(out, command, listed | new_set, complete=False)
+            marked = True
+            for relative in sorted(removed):
+                _remove(out, relative)
+            for relative in new:
+                target = out / relative
+                target.parent.mkdir(parents=True, exist_ok=True)
+                os.replace(staging / relative, target)
+            write_manifest(out, command, kept | new_set, complete=True)
+    except OSError as exc:
+        names = " -> ".join(str(f) for f in (exc.filename, exc.filename2) if f is not None)
+        cause = f"{_reason(exc)}: {names}" if names else _reason(exc)
+        if not marked:
+            with contextlib.suppress(OSError):
+                (out / (MANIFEST + ".tmp")).unlink()
+            raise OutputError(
+                f"{_where(out, option)}: cannot write {MANIFEST} ({cause}); the folder is unchanged"
+            ) from None
+        raise OutputError(
+            f"{_where(out, option)}: putting the new files in place failed ({cause}); the folder is marked "
+            f"incomplete ({MANIFEST}): free the space or fix the cause and run again"
+        ) from None
     shutil.rmtree(staging, ignore_errors=True)
 
 
@@ -327,6 +422,8 @@ def run_outputs(
     names: Iterable[str] = (),
     protect: Iterable[str | Path | None] = (),
     replaces: Iterable[str] | None = None,
+    option: str | None = "--out",
+    remedy: str | None = None,
 ) -> Iterator[Path]:
     """Stage a job's outputs and put them in ``out`` as one set when the block ends without an exception.
 
@@ -344,7 +441,14 @@ def run_outputs(
     replaces : iterable of str, optional
         None (the default): the new set replaces the whole previous one. Otherwise glob patterns: only the
         previous files that match are replaced, the others stay in the set (``kalcal report`` redrawing
-        the page of a verification run); the folder must then not be incomplete.
+        the page of a verification run); the folder must then not be incomplete. Without it, a folder
+        whose manifest names another command is refused.
+    option : str or None
+        How messages name the folder: ``"--out"`` gives ``--out DIR: ...``; None (an argument, like
+        ``kalcal report DIR``) gives ``DIR: ...``.
+    remedy : str, optional
+        What a message about a file no manifest lists tells the user to do (default: move it away or
+        choose another folder).
 
     Yields
     ------
@@ -355,8 +459,10 @@ def run_outputs(
     Raises
     ------
     OutputError
-        ``out`` is a file, cannot be created or written, or holds a file named like an output that no
-        manifest lists.
+        ``out`` is a file, cannot be created or written, holds the outputs of another command, holds a
+        file named like an output that no manifest lists or a file where an output needs a folder; or
+        putting the files in place failed (then the message says whether the folder is unchanged or
+        marked incomplete).
     """
     out = Path(out)
     active = _ACTIVE.get()
@@ -364,23 +470,34 @@ def run_outputs(
         yield out
         return
     protected_paths = _PROTECTED.get() | {_resolved(p) for p in protect if p is not None}
+    where = _where(out, option)
     if out.exists() and not out.is_dir():
-        raise OutputError(f"--out {out}: is an existing file, not a folder")
-    created = not out.exists()
+        raise OutputError(f"{where}: is an existing file, not a folder")
+    created = []  # the folders this run creates, deepest first: a failed run removes them again
+    missing = Path(os.path.abspath(out))
+    while not missing.exists() and missing != missing.parent:
+        created.append(missing)
+        missing = missing.parent
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise OutputError(f"--out {out}: cannot create the folder ({_reason(exc)})") from None
-    old = read_manifest(out)
-    if replaces is not None:
-        require_complete(out)
-    listed = listed_files(out)
-    _refuse_strays(out, names, listed, protected_paths)
-    _remove_stale_partials(out)
+        raise OutputError(f"{where}: cannot create the folder ({_reason(exc)})") from None
     try:
-        staging = Path(tempfile.mkdtemp(prefix=f"{PARTIAL_PREFIX}{os.getpid()}-", dir=out))
-    except OSError as exc:
-        raise OutputError(f"--out {out}: cannot write in the folder ({_reason(exc)})") from None
+        old = read_manifest(out)
+        listed = listed_files(out)
+        if replaces is not None:
+            require_complete(out)
+        elif old is not None and old.command != command:
+            raise OutputError(f"{where}: holds the outputs of `kalcal {old.command}`; choose another folder")
+        _refuse_strays(out, names, listed, protected_paths, option, remedy)
+        _remove_stale_partials(out)
+        try:
+            staging = Path(tempfile.mkdtemp(prefix=f"{PARTIAL_PREFIX}{os.getpid()}-", dir=out))
+        except OSError as exc:
+            raise OutputError(f"{where}: cannot write in the folder ({_reason(exc)})") from None
+    except BaseException:
+        _remove_created(created)
+        raise
     staging = Path(_resolved(staging))
     token = _ACTIVE.set((*active, (staging, out)))
     try:
@@ -388,13 +505,30 @@ def run_outputs(
             yield staging
         finally:
             _ACTIVE.reset(token)
-        _commit(out, staging, command, old, listed, None if replaces is None else tuple(replaces), protected_paths)
+        _commit(
+            out,
+            staging,
+            command,
+            old,
+            listed,
+            None if replaces is None else tuple(replaces),
+            protected_paths,
+            option,
+            remedy,
+        )
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
-        if created:
-            with contextlib.suppress(OSError):
-                out.rmdir()  # a first run that failed leaves no empty folder (unless something else is in it)
+        _remove_created(created)
         raise
+
+
+def _remove_created(created: list[Path]) -> None:
+    """A first run that failed leaves none of the folders it created (those still empty: deepest first)."""
+    for folder in created:
+        try:
+            folder.rmdir()
+        except OSError:
+            break
 
 
 def writes_outputs(
@@ -409,7 +543,8 @@ def writes_outputs(
 
     The job is called with the staging folder in place of ``out``; Paths under it in its return value
     (also inside dicts, lists, tuples and dataclasses) are moved to ``out``. ``inputs`` names the job's
-    arguments that are input files (protected).
+    arguments that are input files (protected), and so are the files :func:`mark_inputs` recorded on
+    any argument (the config or model file a scenario was built from).
     """
     names, inputs = tuple(names), tuple(inputs)
     replaces = None if replaces is None else tuple(replaces)
@@ -423,6 +558,7 @@ def writes_outputs(
             bound.apply_defaults()
             out = Path(bound.arguments[out_arg])
             protect = [bound.arguments.get(name) for name in inputs]
+            protect += [path for value in bound.arguments.values() for path in inputs_of(value)]
             with run_outputs(out, command, names=names, protect=protect, replaces=replaces) as staging:
                 bound.arguments[out_arg] = staging
                 result = job(*bound.args, **bound.kwargs)

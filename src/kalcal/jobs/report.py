@@ -167,7 +167,15 @@ def render_report(out: str | Path, *, realization: int = 0, progress: JobProgres
         state_labels=getattr(scenario, "state_labels", None),  # accel-gps: its error states δp, δv
     )
     steady = steady_state_view(problem)
-    with run_outputs(out, "report", names=(PAGE, f"{FIGURE_DIR}/*.png"), replaces=REPORT_OUTPUTS) as staging:
+    with run_outputs(
+        out,
+        "report",
+        names=(PAGE, f"{FIGURE_DIR}/*.png"),
+        replaces=REPORT_OUTPUTS,
+        option=None,  # the folder is the DIR argument: there is no --out to choose
+        remedy=f"to draw a page here (a folder from a kalcal version without manifests), move {PAGE} and "
+        f"{FIGURE_DIR}/ out of it first",
+    ) as staging:
         figures, skipped = render_figures(
             dataset,
             data,

@@ -197,7 +197,9 @@ def load_model_file(
         raise ConfigError(f"{path}: no such model file") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{path}: cannot read the model file ({exc})") from None
-    return parse_model(text, str(path), assignments)
+    from kalcal.io.outputs import mark_inputs
+
+    return mark_inputs(parse_model(text, str(path), assignments), path)  # a job given it never removes the file
 
 
 def parse_model(text: str, source: str, assignments: Iterable[str] = ()) -> CustomModelScenario:

@@ -2,16 +2,22 @@
 
 The engine submits blocks of realizations as Dask tasks (:func:`kalcal.montecarlo.engine.block_task`)
 and folds their sums in block order, so the numbers do not depend on the cluster. A worker that dies
-mid-task has its task rerun by the scheduler on another worker. Dask (``dask[distributed]``) is a
+mid-task has its task rerun by the scheduler on another worker. The local cluster's worker processes
+ignore SIGINT: a Ctrl-C stops the run (one line, ``kalcal: interrupted``) and this process closes them.
+Dask (``dask[distributed]``) is a
 default dependency of kalcal.
 """
 
 from __future__ import annotations
 
 import contextlib
+import logging
+import signal
+import threading
 from collections.abc import Iterator
 
 from kalcal.errors import ConfigError
+from kalcal.interrupts import Interrupted
 
 
 @contextlib.contextmanager
@@ -37,8 +43,48 @@ def dask_client(workers: int | None = None, scheduler: str | None = None) -> Ite
         with client:
             yield client
         return
-    with (
-        LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None) as cluster,
-        Client(cluster) as client,
-    ):
-        yield client
+    # the worker processes start with SIGINT ignored: Ctrl-C (sent to the whole process group) stops this
+    # process, which then closes the cluster, instead of every worker printing its own traceback
+    with _sigint_ignored():
+        cluster = LocalCluster(
+            n_workers=workers,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            # no dashboard, and the scheduler's HTTP server on a free port: on its default, 8787, a second
+            # run at the same time printed a warning that the port was in use
+            scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
+        )
+    with cluster, Client(cluster) as client:
+        try:
+            yield client
+        except (Interrupted, KeyboardInterrupt):
+            # the cluster closing under a stopped run: its warnings (here and in the workers, whose
+            # cancelled tasks complain) are not the user's business
+            _quiet_dask()
+            with contextlib.suppress(Exception):
+                client.run(_quiet_dask)
+            raise
+
+
+@contextlib.contextmanager
+def _sigint_ignored() -> Iterator[None]:
+    """SIGINT ignored within the block (in the main thread; elsewhere the block runs unchanged).
+
+    Processes started in the block inherit the ignored disposition (it survives ``exec``). A Ctrl-C
+    in the block (the second or two a local cluster takes to start) is lost.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _quiet_dask() -> None:
+    """Silence the ``distributed`` loggers of this process (for the rest of it)."""
+    for name in ["distributed", *[n for n in logging.root.manager.loggerDict if n.startswith("distributed.")]]:
+        logging.getLogger(name).setLevel(logging.CRITICAL + 1)

@@ -247,25 +247,6 @@ def _consistency_specs(dataset: xr.Dataset) -> list[_Spec]:
     return specs
 
 
-def figure_files(state_names) -> list[str]:
-    """Every PNG name the report may write for a scenario with these states (for removing stale ones)."""
-    keys = [f"state_{name}" for name in state_names] + [f"error_{name}" for name in state_names]
-    keys += [
-        "mean_error",
-        "mean_error_long",
-        "variance_diagonal",
-        "variance_offdiagonal",
-        "orthogonality_diagonal",
-        "orthogonality_offdiagonal",
-        "nees",
-        "nis",
-        "residual_correlation",
-        "model_error",
-        "steady_state",
-    ]
-    return [f"{key}.png" for key in keys]
-
-
 def _steady_state_spec(steady: SteadyStateView) -> _Spec:
     def draw(path: Path) -> Path:
         return plot_steady_state(
@@ -309,8 +290,8 @@ def render_figures(
     data : RealizationData
         The realization shown in the single-run figures.
     figure_dir : path
-        Folder for the PNGs (created; PNGs of the report that this run does not produce are removed so
-        that the folder matches the page).
+        Folder for the PNGs (created). The jobs draw into a fresh staging folder (:mod:`kalcal.io.outputs`),
+        so it holds only this page's figures; a PNG already in a folder given here is left as it is.
     long_dataset : xarray.Dataset, optional
         ``stats_long.nc`` of the same run, for figure 5.8.
     scenario : str
@@ -362,9 +343,4 @@ def render_figures(
     if steady is not None and not steady.has_matrices:
         why = f"{'steady state does not apply' if not steady.applies else 'no stabilizing solution'}: {steady.reason}"
         skipped.append(SkippedFigure("steady_state", "steady_state", "Filter variance P_k against the steady state", why))
-    drawn = {entry.path.name for entry in figures}
-    for name in figure_files(data.state_names):
-        stale = figure_dir / name
-        if name not in drawn and stale.is_file():
-            stale.unlink()
     return sorted(figures, key=_sort_key), sorted(skipped, key=_sort_key)
