@@ -159,8 +159,10 @@ def test_as_dict_holds_pvalue_cause_and_parts():
     document = json.loads(json.dumps(to_jsonable(check.as_dict())))
     assert set(document) == {
         "name", "statistic", "pvalue", "lower", "upper", "confidence", "comparisons", "passed", "detail", "cause",
-        "parts",
+        "parts", "measured",
     }
+    assert document["detail"] == f"{document['measured']}. {document['cause']['reason']}"
+    assert document["cause"]["reason"] not in document["measured"]
     assert document["cause"] == {
         "explained_by": None,
         "direction": "overconfident",
@@ -231,3 +233,14 @@ def test_covariance_variance_outside_the_bound_gives_the_direction_by_its_sign()
     c = np.array([[[0.95, 0.3], [0.3, 1.0]]])
     check = check_covariance(_stats(n, c, np.eye(2)), _info(1, 2), 0.99)
     assert check.cause.direction == "underconfident"
+
+
+def test_a_result_keeps_its_measured_text_apart_from_the_reason():
+    cause = Cause(direction="overconfident", reason="Too small.")
+    good = CheckResult("x", 5.0, 0.001, None, 4.0, 0.99, 10, False, "5 sd. Too small.", cause, measured="5 sd")
+    assert good.as_dict()["measured"] == "5 sd"
+    assert CheckResult("x", 1.0, 0.5, None, 4.0, 0.99, 10, True, "1 sd").measured == "1 sd"
+    with pytest.raises(ValueError, match="measured text apart"):
+        CheckResult("x", 5.0, 0.001, None, 4.0, 0.99, 10, False, "5 sd. Too small.", cause)
+    with pytest.raises(ValueError, match="is not the measured text"):
+        CheckResult("x", 5.0, 0.001, None, 4.0, 0.99, 10, False, "6 sd. Too small.", cause, measured="5 sd")

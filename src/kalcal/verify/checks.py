@@ -49,6 +49,7 @@ from kalcal.verify.results import (
     combined_pvalue,
     family_pvalue,
     normal_family_pvalue,
+    with_reason,
 )
 
 __all__ = [
@@ -161,8 +162,6 @@ def _failed(reason: str, explained_by: str | None = None, direction: str | None 
     return Cause(explained_by=explained_by, direction=direction, reason=reason)
 
 
-def _with_reason(detail: str, cause: Cause) -> str:
-    return f"{detail}. {cause.reason}" if cause.reason else detail
 
 
 def check_mean_error(
@@ -223,7 +222,8 @@ def check_mean_error(
         confidence=confidence,
         comparisons=m,
         passed=passed,
-        detail=_with_reason(detail, diagnosis),
+        detail=with_reason(detail, diagnosis),
+        measured=detail,
         cause=diagnosis,
     )
 
@@ -327,7 +327,8 @@ def check_covariance(s: EnsembleStatistics, info: ProblemInfo, confidence: float
         confidence=confidence,
         comparisons=m + n_updates,
         passed=passed,
-        detail=_with_reason(detail, diagnosis),
+        detail=with_reason(detail, diagnosis),
+        measured=detail,
         cause=diagnosis,
         parts=parts,
     )
@@ -420,7 +421,8 @@ def check_orthogonality(s: EnsembleStatistics, info: ProblemInfo, confidence: fl
         confidence=confidence,
         comparisons=m,
         passed=passed,
-        detail=_with_reason(detail, diagnosis),
+        detail=with_reason(detail, diagnosis),
+        measured=detail,
         cause=diagnosis,
     )
 
@@ -483,7 +485,8 @@ def check_residual_whiteness(s: EnsembleStatistics, info: ProblemInfo, confidenc
         confidence=confidence,
         comparisons=m,
         passed=passed,
-        detail=_with_reason(detail, diagnosis),
+        detail=with_reason(detail, diagnosis),
+        measured=detail,
         cause=diagnosis,
     )
 
@@ -538,7 +541,8 @@ def check_nis(s: EnsembleStatistics, info: ProblemInfo, confidence: float) -> Ch
         confidence=confidence,
         comparisons=n_updates,
         passed=passed,
-        detail=_with_reason(detail, diagnosis),
+        detail=with_reason(detail, diagnosis),
+        measured=detail,
         cause=diagnosis,
     )
 
