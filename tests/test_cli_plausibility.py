@@ -142,3 +142,26 @@ def test_scale_bias_constant_sensor_is_flagged_unobservable(sim, tmp_path):
     assert "theta1" in summary["observability"]["unobservable"]
     assert summary["observability"]["std_ratio"]["theta1"] > 0.9
     assert [w["code"] for w in summary["warnings"]] == ["unobservable"]
+
+
+@pytest.mark.parametrize("extra", [(), ("--set", "filter.gps_position_std=0.05")], ids=["consistent", "inconsistent"])
+def test_summary_diagnostics_hold_the_pvalue_and_each_parts_bounds(sim, tmp_path, extra):
+    """summary.json's diagnostics: consistent == (pvalue >= 1 - confidence), the p-value is the parts'
+    Bonferroni combination, and each part (NIS, Ljung-Box) carries its statistic, bounds, share and verdict."""
+    assert _calibrate(sim, tmp_path, None, None, *extra).exit_code == 0
+    diagnostics = json.loads((tmp_path / "cal" / "summary.json").read_text())["diagnostics"]
+    confidence, pvalue = diagnostics["confidence"], diagnostics["pvalue"]
+    assert confidence == 0.99 and 0.0 <= pvalue <= 1.0
+    assert diagnostics["consistent"] == (pvalue >= 1 - confidence)
+    assert diagnostics["consistent"] == (extra == ())
+    nis, ljung_box = diagnostics["parts"]
+    assert (nis["name"], ljung_box["name"]) == ("nis", "ljung_box")
+    for part in (nis, ljung_box):
+        assert set(part) == {"name", "statistic", "pvalue", "lower", "upper", "confidence", "alpha", "comparisons", "passed"}
+        assert part["alpha"] == pytest.approx((1 - confidence) / 2) and part["passed"] == (part["pvalue"] >= part["alpha"])
+    assert pvalue == pytest.approx(min(1.0, 2 * min(nis["pvalue"], ljung_box["pvalue"])))
+    assert (nis["lower"], nis["upper"]) == (diagnostics["nis_lower"], diagnostics["nis_upper"])
+    assert nis["statistic"] == diagnostics["mean_nis"] and nis["lower"] < nis["upper"]
+    assert ljung_box["lower"] is None and ljung_box["upper"] == diagnostics["ljung_box_upper"]
+    assert ljung_box["statistic"] == max(diagnostics["ljung_box_statistic"])
+    assert ljung_box["comparisons"] == len(diagnostics["ljung_box_pvalue"]) == 2

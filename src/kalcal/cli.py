@@ -303,11 +303,18 @@ def _print_checks(summary: dict) -> None:
     table.add_column("bounds", justify="right")
     table.add_column("p-value", justify="right")
     table.add_column("result")
+    from kalcal.verify.text import CHECK_PVALUE_FIELD, check_bounds_text, fmt, pvalue_text, written_nan
+
+    nan = written_nan(summary, CHECK_PVALUE_FIELD)
     for test in summary["tests"]:
-        lower = "" if test["lower"] is None else f"{test['lower']:.4g} .. "
         result = "[green]pass[/green]" if test["passed"] else "[bold red]FAIL[/bold red]"
+        # every part's bounds (the covariance check: element-wise and centered NEES), as on the page
         table.add_row(
-            test["name"], f"{test['statistic']:.4g}", f"{lower}{test['upper']:.4g}", f"{test['pvalue']:.3g}", result
+            escape(test["name"]),
+            fmt(test["statistic"]),
+            escape(check_bounds_text(test)),
+            pvalue_text(test["pvalue"], nan).removeprefix("p = "),
+            result,
         )
     console.print(table)
     for test in summary["tests"]:

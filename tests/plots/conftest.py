@@ -14,11 +14,19 @@ SETTINGS = ["scenario.duration=6"]
 
 
 @pytest.fixture(scope="session")
-def plots_run(tmp_path_factory):
-    """(stats Dataset, long-run stats Dataset, RealizationData of realization 4321) of a 6 s run."""
+def plots_dir(tmp_path_factory):
+    """The folder of a saved 6 s run (summary.json, stats.nc, stats_long.nc)."""
     out = tmp_path_factory.mktemp("plots-run")
     scenario = build_scenario("accel-gps", None, SETTINGS)
     verify(scenario, N, 3, out, long_run=12.0, command="kalcal verify -n 5000 --set scenario.duration=6")
+    return out
+
+
+@pytest.fixture(scope="session")
+def plots_run(plots_dir):
+    """(stats Dataset, long-run stats Dataset, RealizationData of realization 4321) of a 6 s run."""
+    out = plots_dir
+    scenario = build_scenario("accel-gps", None, SETTINGS)
     problem, _ = build_problem(scenario)
     one, filter_cov = draw_realization(problem, 3, 4321, N, "exact")
     data = RealizationData(

@@ -2,6 +2,7 @@
 statistic the covariance check tests, with the check's own bounds."""
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
@@ -10,7 +11,7 @@ from kalcal.models.registry import build_scenario
 from kalcal.montecarlo.accumulators import ensemble_statistics
 from kalcal.montecarlo.engine import run_monte_carlo
 from kalcal.montecarlo.scenarios import build_problem
-from kalcal.plots import consistency
+from kalcal.plots import consistency, ensemble
 from kalcal.plots import realization as single
 from kalcal.verify.checks import centered_nees, centered_nees_bounds, check_covariance
 
@@ -31,6 +32,7 @@ def captured(monkeypatch):
 
     keep(single)
     keep(consistency)
+    keep(ensemble)
     return figures
 
 
@@ -86,3 +88,31 @@ def test_the_figures_nees_is_the_one_the_check_holds_against_its_bounds():
     (part,) = [part for part in result.parts if part.name == "centered_nees"]
     assert (part.lower, part.upper) == pytest.approx((low, high))
     assert np.any(values == part.statistic)
+
+
+def _band(ax) -> tuple[float, float]:
+    """(lowest, highest) y of the shaded band (fill_between) of an axes."""
+    (collection,) = [c for c in ax.collections if c.get_label().startswith(("1 ±", "±"))]
+    y = np.concatenate([path.vertices[:, 1] for path in collection.get_paths()])
+    return float(y.min()), float(y.max())
+
+
+def test_variance_figures_draw_the_covariance_checks_element_bound(plots_dir, plots_run, captured, tmp_path):
+    """Both covariance figures band the deviation at the bound the check holds it to: the element-wise
+    part's (at alpha / 2), not the full-alpha quantile."""
+    stats, _, _ = plots_run
+    summary = json.loads((plots_dir / "summary.json").read_text())
+    (covariance,) = [test for test in summary["tests"] if test["name"] == "covariance"]
+    elements = covariance["parts"][0]
+    assert elements["name"] == "elements"
+    z, count = elements["upper"], int(stats.attrs["realizations"])
+    ensemble.plot_variance_diagonal(stats, tmp_path / "diag.png")
+    ratios = captured[-1].axes[1::2]  # the right column: C_ii / P_ii with 1 +- z sqrt(2 / N)
+    assert len(ratios) == stats.sizes["state"]
+    for ax in ratios:
+        assert _band(ax) == pytest.approx((1 - z * np.sqrt(2 / count), 1 + z * np.sqrt(2 / count)), rel=1e-9)
+    ensemble.plot_variance_offdiagonal(stats, tmp_path / "off.png")
+    deviations = captured[-1].axes[1::2]  # the right column: (C_il - P_il) / sd with +- z
+    assert len(deviations) == 3
+    for ax in deviations:
+        assert _band(ax) == pytest.approx((-z, z), rel=1e-9)

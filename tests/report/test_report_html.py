@@ -94,7 +94,7 @@ def _summary(tests, **extra):
 def _test(name, passed, statistic, upper, detail, lower=None, reason=None, parts=(), **cause):
     return {"name": name, "passed": passed, "statistic": statistic, "lower": lower, "upper": upper,
             "pvalue": 0.5 if passed else 0.001, "confidence": 0.99, "comparisons": 10,
-            "detail": detail if reason is None else f"{detail}. {reason}",
+            "detail": detail if reason is None else f"{detail}. {reason}", "measured": detail,
             "cause": {"explained_by": cause.get("explained_by"), "direction": cause.get("direction"), "reason": reason},
             "parts": list(parts)}
 
@@ -151,12 +151,47 @@ def test_verdicts_table_shows_every_bound_and_pvalue():
             "centered NEES at 99.5%, 10 comparisons, p = 0.001") in page
 
 
-def test_measured_text_drops_only_the_reason():
-    assert measured_text(_test("x", False, 1.0, 0.5, "measured 3.2 sd (t = 1 s)", reason="Cause: x. More")) == (
-        "measured 3.2 sd (t = 1 s)"
-    )
-    # a detail with sentences of its own and no reason stays whole
+def test_measured_text_is_the_measured_field_never_cut_from_the_detail():
+    test = _test("x", False, 1.0, 0.5, "measured 3.2 sd (t = 1 s)", reason="Cause: x. More")
+    assert measured_text(test) == "measured 3.2 sd (t = 1 s)"
+    # the field decides, not the detail's ending: a reason that ends the detail by chance stays in it
+    assert measured_text(test | {"measured": test["detail"]}) == test["detail"].rstrip(".")
+    # a summary written before the field: the whole detail, unparsed
+    old = {k: v for k, v in test.items() if k != "measured"}
+    assert measured_text(old) == "measured 3.2 sd (t = 1 s). Cause: x. More"
     assert measured_text(_test("x", False, 1.0, 0.5, "only 2.5 units. Then more.")) == "only 2.5 units. Then more"
+
+
+def test_nan_pvalue_reads_not_computable_where_the_summary_counts_it():
+    parts = [_part("elements", True, 3.0, 4.0) | {"pvalue": None}, _part("centered_nees", True, 3.0, 3.1, 2.9)]
+    tests = [_test("covariance", False, None, 4.0, "no spread", parts=parts) | {"pvalue": None}]
+    nonfinite = {"count": 3, "fields": {"tests.statistic": 1, "tests.pvalue": 1, "tests.parts.pvalue": 1}}
+    page = html.unescape(build_page(_summary(tests, nonfinite=nonfinite), [], []))
+    assert "p not recorded" not in page
+    assert "10 comparisons, p = NaN (not computable); element-wise at 99.5%, 10 comparisons, p = NaN (not computable)" in page
+    assert "(p = NaN (not computable) against 0.01)" in page
+    # without the count (an older summary, or the key absent) the page does not claim a NaN
+    assert "p not recorded" in html.unescape(build_page(_summary(tests), [], []))
+
+
+@pytest.mark.parametrize("field", ["explained_by", "direction"])
+def test_unknown_cause_value_is_an_error_not_dropped(field):
+    from kalcal.errors import KalcalError
+
+    test = _test("nis", False, 1.5, 2.1, "mean NIS 1.5", lower=1.9, reason="r", **{field: "sideways"})
+    with pytest.raises(KalcalError, match=f"cause.{field}: unknown value 'sideways'"):
+        build_page(_summary([test]), [], [])
+
+
+def test_cause_words_cover_exactly_the_values_a_cause_takes():
+    from kalcal.verify.results import DIRECTIONS, EXPLAINED_BY, Cause
+    from kalcal.verify.text import direction_text, explained_by_text
+
+    for value in EXPLAINED_BY:
+        assert explained_by_text(Cause(explained_by=value).__dict__)
+    for value in DIRECTIONS:
+        assert direction_text(Cause(direction=value).__dict__)
+    assert explained_by_text({}) is None and direction_text({"direction": None}) is None
 
 
 def test_figure_entry_embeds_png(tmp_path, report_run):

@@ -159,8 +159,10 @@ def test_as_dict_holds_pvalue_cause_and_parts():
     document = json.loads(json.dumps(to_jsonable(check.as_dict())))
     assert set(document) == {
         "name", "statistic", "pvalue", "lower", "upper", "confidence", "comparisons", "passed", "detail", "cause",
-        "parts",
+        "parts", "measured",
     }
+    assert document["detail"] == f"{document['measured']}. {document['cause']['reason']}"
+    assert document["cause"]["reason"] not in document["measured"]
     assert document["cause"] == {
         "explained_by": None,
         "direction": "overconfident",
@@ -184,3 +186,61 @@ def test_pvalue_formulas():
 def test_verdict_false_alarm_bound():
     assert verdict_false_alarm_bound(0.99, 5) == pytest.approx(0.05)
     assert verdict_false_alarm_bound(0.5, 5) == 1.0
+
+
+@pytest.mark.parametrize("eps", [0.0, 0.001, -0.001])
+def test_covariance_failing_off_the_diagonal_alone_states_no_direction(eps):
+    """P = I2, C = [[1 + eps, 0.1], [0.1, 1]], N = 20000: (x0, x1) is 14.1 sd off, every variance agrees.
+
+    The old rule took the sign of the largest diagonal z, which here is noise: ``underconfident`` for
+    eps = 0 (argmax of zeros) and flipping with the sign of eps."""
+    n = 20000
+    c = np.array([[[1.0 + eps, 0.1], [0.1, 1.0]]])
+    check = check_covariance(_stats(n, c, np.eye(2)), _info(1, 2), 0.99)
+    elements, nees = check.parts
+    assert not check.passed and not elements.passed and nees.passed
+    assert elements.statistic == pytest.approx(0.1 / np.sqrt(1 / n))  # 14.1 sd in (x0, x1)
+    assert check.cause.direction is None and check.cause.explained_by is None
+    assert check.cause.reason.startswith("The correlation of x0 and x1 differs from P's (the variances agree")
+    assert check.detail.endswith(check.cause.reason)
+
+
+@pytest.mark.parametrize("scale, direction", [(1.025, "overconfident"), (0.975, "underconfident")])
+def test_covariance_failing_by_the_centered_nees_alone_takes_its_side(scale, direction):
+    """C = scale I3 against P = I3, N = 20000: each variance is 2.5 sd off (inside the element-wise bound
+    3.34 for 6 comparisons at alpha / 2), the centered NEES sqrt(3) times that (beyond its 2.81)."""
+    n = 20000
+    check = check_covariance(_stats(n, scale * np.eye(3)[None], np.eye(3)), _info(1, 3), 0.99)
+    elements, nees = check.parts
+    assert elements.passed and not nees.passed and not check.passed
+    assert elements.statistic == pytest.approx(0.025 / np.sqrt(2 / n)) and elements.statistic < elements.upper
+    assert (nees.statistic > nees.upper) == (direction == "overconfident")
+    assert (nees.statistic < nees.lower) == (direction == "underconfident")
+    assert check.cause.direction == direction
+
+
+def test_covariance_variances_failing_both_ways_state_no_direction():
+    n = 20000
+    c = np.diag([1.1, 0.9])[None]
+    check = check_covariance(_stats(n, c, np.eye(2)), _info(1, 2), 0.99)
+    assert not check.passed and check.cause.direction is None
+    assert "variance of x0 exceeds P's and that of x1 falls short" in check.cause.reason
+
+
+def test_covariance_variance_outside_the_bound_gives_the_direction_by_its_sign():
+    """A failing diagonal decides, even where a larger off-diagonal deviation is what the headline shows."""
+    n = 20000
+    c = np.array([[[0.95, 0.3], [0.3, 1.0]]])
+    check = check_covariance(_stats(n, c, np.eye(2)), _info(1, 2), 0.99)
+    assert check.cause.direction == "underconfident"
+
+
+def test_a_result_keeps_its_measured_text_apart_from_the_reason():
+    cause = Cause(direction="overconfident", reason="Too small.")
+    good = CheckResult("x", 5.0, 0.001, None, 4.0, 0.99, 10, False, "5 sd. Too small.", cause, measured="5 sd")
+    assert good.as_dict()["measured"] == "5 sd"
+    assert CheckResult("x", 1.0, 0.5, None, 4.0, 0.99, 10, True, "1 sd").measured == "1 sd"
+    with pytest.raises(ValueError, match="measured text apart"):
+        CheckResult("x", 5.0, 0.001, None, 4.0, 0.99, 10, False, "5 sd. Too small.", cause)
+    with pytest.raises(ValueError, match="is not the measured text"):
+        CheckResult("x", 5.0, 0.001, None, 4.0, 0.99, 10, False, "6 sd. Too small.", cause, measured="5 sd")

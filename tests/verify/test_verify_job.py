@@ -87,7 +87,7 @@ def test_a_state_without_spread_and_with_a_mean_error_fails_mean_error(tmp_path)
     assert mean_error["cause"]["explained_by"] == "model_error"
     # x3's ensemble variance is 0 against P = 1: underconfident (a variance ratio of 0 used to be passed over)
     assert summary["tests"][1]["cause"]["direction"] == "underconfident"
-    assert re.search(r"mean_error\s*│\s*inf\s*│\s*\S+\s*│\s*0\s*│\s*FAIL", result.output), result.output
+    assert re.search(r"mean_error\s*│\s*inf\s*│\s*≤ [0-9.]+\s*│\s*0\s*│\s*FAIL", result.output), result.output
 
 
 def test_strict_exit_status_follows_the_verdict(tmp_path):

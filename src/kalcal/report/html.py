@@ -20,6 +20,33 @@ import numpy as np
 from kalcal.report.figures import GROUPS, FigureEntry, SkippedFigure
 from kalcal.report.steady_state import SteadyStateView
 from kalcal.verify.checks import verdict_false_alarm_bound
+from kalcal.verify.text import (
+    CHECK_PVALUE_FIELD,
+    PART_LABELS,
+    PART_PVALUE_FIELD,
+    bounds_text,
+    check_bounds_text,
+    direction_text,
+    explained_by_text,
+    fmt,
+    part_label,
+    pvalue_text,
+    written_nan,
+)
+
+__all__ = [
+    "PART_LABELS",
+    "bounds_text",
+    "build_page",
+    "check_bounds_text",
+    "esc",
+    "fmt",
+    "levels_text",
+    "measured_text",
+    "png_size",
+    "shortfall",
+    "write_page",
+]
 
 CSS = """
 :root { --ok: #1a7f37; --bad: #c62828; --ink: #1f2328; --muted: #59636e; --line: #d0d7de; --soft: #f6f8fa; }
@@ -60,19 +87,6 @@ def esc(value: Any) -> str:
     return html.escape(str(value), quote=True)
 
 
-def fmt(value: Any, digits: int = 4) -> str:
-    """A number with ``digits`` significant digits; ``None`` as an em dash; anything else as text."""
-    if value is None:
-        return "—"
-    if isinstance(value, bool):
-        return "yes" if value else "no"
-    if isinstance(value, int):
-        return f"{value:,}"
-    if isinstance(value, float):
-        return f"{value:.{digits}g}"
-    return str(value)
-
-
 def png_size(data: bytes) -> tuple[int, int]:
     """(width, height) in pixels from a PNG's IHDR chunk."""
     if data[:8] != b"\x89PNG\r\n\x1a\n" or data[12:16] != b"IHDR":
@@ -80,58 +94,20 @@ def png_size(data: bytes) -> tuple[int, int]:
     return struct.unpack(">II", data[16:24])
 
 
-def bounds_text(test: Mapping[str, Any]) -> str:
-    """``<= upper`` for a one-sided test, ``[lower, upper]`` for a two-sided one."""
-    if test.get("lower") is None:
-        return f"≤ {fmt(test['upper'])}"
-    return f"[{fmt(test['lower'])}, {fmt(test['upper'])}]"
+def levels_text(test: Mapping[str, Any], summary: Mapping[str, Any] | None = None) -> str:
+    """Confidence, comparisons and family-wise p-value of a check and of each of its parts.
 
-
-#: how the page names a check's parts
-PART_LABELS = {"elements": "element-wise", "centered_nees": "centered NEES", "nis": "NIS", "ljung_box": "Ljung-Box"}
-#: what a failure's ``cause.explained_by`` means, in words
-EXPLAINED_BY = {
-    "model_error": "the mean error the filter's model predicts against the truth (the deterministic model error)",
-    "mean_error": "the nonzero mean error (centered on the ensemble means this check passes; see mean_error)",
-}
-#: what a failure's ``cause.direction`` means, in words
-DIRECTION = {
-    "overconfident": "overconfident: the actual spread is larger than the filter's P (noise settings too small)",
-    "underconfident": "underconfident: the actual spread is smaller than the filter's P (noise settings too large)",
-}
-
-
-def _tests_of(test: Mapping[str, Any]) -> list[Mapping[str, Any]]:
-    """The parts of a check made of several tests, else the check itself."""
-    return list(test.get("parts") or []) or [test]
-
-
-def _part_label(part: Mapping[str, Any]) -> str:
-    return PART_LABELS.get(part["name"], part["name"])
-
-
-def check_bounds_text(test: Mapping[str, Any]) -> str:
-    """Every bound a check was held against: its own, or each part's, labelled."""
-    parts = test.get("parts") or []
-    if not parts:
-        return bounds_text(test)
-    return "; ".join(f"{_part_label(part)} {bounds_text(part)}" for part in parts)
-
-
-def _pvalue_text(pvalue: Any) -> str:
-    return "p not recorded" if pvalue is None else f"p = {fmt(pvalue, 3)}"
-
-
-def levels_text(test: Mapping[str, Any]) -> str:
-    """Confidence, comparisons and family-wise p-value of a check and of each of its parts."""
+    A ``null`` p-value reads ``p = NaN (not computable)`` where ``summary``'s ``nonfinite.fields``
+    counts NaN p-values under its key, else ``p not recorded``."""
+    summary = summary or {}
     text = (
         f"{fmt(100 * test['confidence'])}% confidence, {fmt(test['comparisons'])} comparisons, "
-        f"{_pvalue_text(test.get('pvalue'))}"
+        f"{pvalue_text(test.get('pvalue'), written_nan(summary, CHECK_PVALUE_FIELD))}"
     )
     for part in test.get("parts") or []:
         text += (
-            f"; {_part_label(part)} at {fmt(100 * part['confidence'])}%, {fmt(part['comparisons'])} comparisons, "
-            f"{_pvalue_text(part.get('pvalue'))}"
+            f"; {part_label(part)} at {fmt(100 * part['confidence'])}%, {fmt(part['comparisons'])} comparisons, "
+            f"{pvalue_text(part.get('pvalue'), written_nan(summary, PART_PVALUE_FIELD))}"
         )
     return text
 
@@ -141,11 +117,10 @@ def _cause(test: Mapping[str, Any]) -> Mapping[str, Any]:
 
 
 def measured_text(test: Mapping[str, Any]) -> str:
-    """The detail without its last sentence, the cause's ``reason`` (which the page shows on its own)."""
-    detail, reason = test["detail"], _cause(test).get("reason")
-    if reason and detail.endswith(reason):
-        detail = detail[: -len(reason)].rstrip().removesuffix(".")
-    return detail.rstrip(".")
+    """What was measured, without the reason (which the page shows on its own): the check's ``measured``
+    field; the whole ``detail`` for a summary written before that field (the detail is never parsed)."""
+    measured = test.get("measured")
+    return (test["detail"] if measured is None else measured).rstrip(".")
 
 
 def _one_shortfall(test: Mapping[str, Any]) -> str:
@@ -168,7 +143,7 @@ def shortfall(test: Mapping[str, Any]) -> str:
     if not parts:
         return _one_shortfall(test)
     failed = [part for part in parts if not part["passed"]]
-    return "; ".join(f"{_part_label(part)}: {_one_shortfall(part)}" for part in failed or parts)
+    return "; ".join(f"{part_label(part)}: {_one_shortfall(part)}" for part in failed or parts)
 
 
 def _table(header: Iterable[str], rows: Iterable[str]) -> str:
@@ -203,13 +178,15 @@ def _failures(summary: Mapping[str, Any]) -> str:
             if reason
             else '<p class="cause">Likely cause: not identified by the check; see the figures below.</p>'
         )
-        if cause.get("explained_by") in EXPLAINED_BY:
-            lead += f"<p><strong>Accounted for by:</strong> {esc(EXPLAINED_BY[cause['explained_by']])}.</p>"
-        if cause.get("direction") in DIRECTION:
-            lead += f"<p><strong>Direction:</strong> {esc(DIRECTION[cause['direction']])}.</p>"
+        explained, direction = explained_by_text(cause), direction_text(cause)
+        if explained:
+            lead += f"<p><strong>Accounted for by:</strong> {esc(explained)}.</p>"
+        if direction:
+            lead += f"<p><strong>Direction:</strong> {esc(direction)}.</p>"
+        pvalue = pvalue_text(test.get("pvalue"), written_nan(summary, CHECK_PVALUE_FIELD))
         items.append(
             f'<h3 id="fail-{esc(test["name"])}">{esc(test["name"])}</h3>{lead}'
-            f"<p><strong>By how much:</strong> {esc(shortfall(test))} ({esc(_pvalue_text(test.get('pvalue')))} "
+            f"<p><strong>By how much:</strong> {esc(shortfall(test))} ({esc(pvalue)} "
             f"against {esc(fmt(1 - test['confidence'], 3))}).</p>"
             f"<p><strong>Measured:</strong> {esc(measured_text(test))}.</p>"
         )
@@ -229,7 +206,7 @@ def _verdicts(summary: Mapping[str, Any]) -> str:
             f'<td class="num">{esc(fmt(test["statistic"]))}</td>'
             f'<td class="num">{esc(check_bounds_text(test))}</td>'
             f'<td class="{state}">{"passed" if test["passed"] else "FAILED"}</td>'
-            f"<td>{esc(test['detail'])}<br><small>{esc(levels_text(test))}</small></td></tr>"
+            f"<td>{esc(test['detail'])}<br><small>{esc(levels_text(test, summary))}</small></td></tr>"
         )
     return (
         '<h2 id="verdicts">Verdicts</h2>'

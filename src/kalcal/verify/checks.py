@@ -49,6 +49,7 @@ from kalcal.verify.results import (
     combined_pvalue,
     family_pvalue,
     normal_family_pvalue,
+    with_reason,
 )
 
 __all__ = [
@@ -161,8 +162,6 @@ def _failed(reason: str, explained_by: str | None = None, direction: str | None 
     return Cause(explained_by=explained_by, direction=direction, reason=reason)
 
 
-def _with_reason(detail: str, cause: Cause) -> str:
-    return f"{detail}. {cause.reason}" if cause.reason else detail
 
 
 def check_mean_error(
@@ -223,7 +222,8 @@ def check_mean_error(
         confidence=confidence,
         comparisons=m,
         passed=passed,
-        detail=_with_reason(detail, diagnosis),
+        detail=with_reason(detail, diagnosis),
+        measured=detail,
         cause=diagnosis,
     )
 
@@ -255,9 +255,11 @@ def check_covariance(s: EnsembleStatistics, info: ProblemInfo, confidence: float
     * ``centered_nees``: tr(P_k^{-1} C_k), whose (N - 1) multiple is chi-square(d (N - 1)) for a correct
       filter (Wishart), two-sided for K comparisons.
 
-    The headline statistic and bounds are the element-wise part's. The direction of a failure is the
-    sign of the largest diagonal deviation (C_ii > P_ii: overconfident), or the side the centered NEES
-    left its bounds on when only that part failed.
+    The headline statistic and bounds are the element-wise part's. The direction of a failure is stated
+    only where the data say it: the sign of the diagonal deviations outside the element-wise bound
+    (C_ii > P_ii: overconfident; none if they disagree), else the side the centered NEES left its bounds
+    on when that part failed; a failure of off-diagonal elements alone has no direction (the
+    correlations differ, the variances agree).
     """
     alpha = 1.0 - confidence
     share = alpha / len(COVARIANCE_PARTS)
@@ -315,23 +317,7 @@ def check_covariance(s: EnsembleStatistics, info: ProblemInfo, confidence: float
     )
     diagnosis = Cause()
     if not passed:
-        if elements.passed:
-            overconfident = nees.statistic > high
-        else:
-            z_diag = np.diagonal(z_full, axis1=1, axis2=2)
-            kd, idx = np.unravel_index(int(np.argmax(np.abs(z_diag))), z_diag.shape)
-            overconfident = bool(z_diag[kd, idx] > 0)
-        diagnosis = (
-            _failed(
-                "The filter is overconfident: its P is smaller than the actual spread (noise settings too small)",
-                direction="overconfident",
-            )
-            if overconfident
-            else _failed(
-                "The filter is underconfident: its P is larger than the actual spread (noise settings too large)",
-                direction="underconfident",
-            )
-        )
+        diagnosis = _covariance_cause(z_full, _element_pvalues(z_full, m) < share, nees, info, (k, i, l))
     return CheckResult(
         name="covariance",
         statistic=worst,
@@ -341,9 +327,59 @@ def check_covariance(s: EnsembleStatistics, info: ProblemInfo, confidence: float
         confidence=confidence,
         comparisons=m + n_updates,
         passed=passed,
-        detail=_with_reason(detail, diagnosis),
+        detail=with_reason(detail, diagnosis),
+        measured=detail,
         cause=diagnosis,
         parts=parts,
+    )
+
+
+def _element_pvalues(z: np.ndarray, comparisons: int) -> np.ndarray:
+    """Bonferroni p-value of each element's |z| in a family of ``comparisons`` (as the elements part's)."""
+    return np.minimum(1.0, comparisons * 2.0 * sps.norm.sf(np.abs(z)))
+
+
+def _covariance_cause(
+    z: np.ndarray, failing: np.ndarray, nees: CheckPart, info: ProblemInfo, worst: tuple[int, int, int]
+) -> Cause:
+    """The direction of a failed covariance check, stated only where the data say it.
+
+    ``z`` (K, d, d) are the element-wise deviations in sd and ``failing`` marks those outside the
+    element-wise bound. A diagonal element outside the bound gives the direction by its sign (C_ii > P_ii:
+    overconfident); failing diagonals of both signs give none. With no diagonal outside the bound, the
+    centered NEES gives it when that part failed (above its bounds: overconfident); otherwise the failure
+    is in an off-diagonal element alone (``worst`` = (k, i, l)): the correlation differs, the variances
+    agree, and the direction is None.
+    """
+    z_diag = np.diagonal(z, axis1=1, axis2=2)
+    out = np.diagonal(failing, axis1=1, axis2=2)
+    if out.any():
+        signs = set(np.sign(z_diag[out]).tolist())
+        if len(signs) > 1:
+            over = sorted({info.state_names[i] for i in np.nonzero(out & (z_diag > 0))[1]})
+            under = sorted({info.state_names[i] for i in np.nonzero(out & (z_diag < 0))[1]})
+            return _failed(
+                f"The ensemble variance of {', '.join(over)} exceeds P's and that of {', '.join(under)} falls short "
+                "of it: no single direction (the noise settings are wrong in opposite ways)"
+            )
+        overconfident = signs == {1.0}
+    elif not nees.passed:
+        overconfident = nees.statistic > nees.upper
+    else:
+        k, i, l = worst
+        return _failed(
+            f"The correlation of {info.state_names[i]} and {info.state_names[l]} differs from P's (the variances "
+            f"agree; largest at t = {info.update_times[k]:g} s): the filter's model couples the states differently "
+            "from the truth"
+        )
+    if overconfident:
+        return _failed(
+            "The filter is overconfident: its P is smaller than the actual spread (noise settings too small)",
+            direction="overconfident",
+        )
+    return _failed(
+        "The filter is underconfident: its P is larger than the actual spread (noise settings too large)",
+        direction="underconfident",
     )
 
 
@@ -385,7 +421,8 @@ def check_orthogonality(s: EnsembleStatistics, info: ProblemInfo, confidence: fl
         confidence=confidence,
         comparisons=m,
         passed=passed,
-        detail=_with_reason(detail, diagnosis),
+        detail=with_reason(detail, diagnosis),
+        measured=detail,
         cause=diagnosis,
     )
 
@@ -448,7 +485,8 @@ def check_residual_whiteness(s: EnsembleStatistics, info: ProblemInfo, confidenc
         confidence=confidence,
         comparisons=m,
         passed=passed,
-        detail=_with_reason(detail, diagnosis),
+        detail=with_reason(detail, diagnosis),
+        measured=detail,
         cause=diagnosis,
     )
 
@@ -503,7 +541,8 @@ def check_nis(s: EnsembleStatistics, info: ProblemInfo, confidence: float) -> Ch
         confidence=confidence,
         comparisons=n_updates,
         passed=passed,
-        detail=_with_reason(detail, diagnosis),
+        detail=with_reason(detail, diagnosis),
+        measured=detail,
         cause=diagnosis,
     )
 

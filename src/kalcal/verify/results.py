@@ -22,10 +22,18 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 from scipy import stats as sps
 
-#: what a failure is accounted for by
-EXPLAINED_BY = ("model_error", "mean_error")
-#: which way a filter's covariance is wrong
-DIRECTIONS = ("overconfident", "underconfident")
+#: what a failure is accounted for by (each value of ``Cause.explained_by``), in words
+EXPLAINED_BY_TEXT = {
+    "model_error": "the mean error the filter's model predicts against the truth (the deterministic model error)",
+    "mean_error": "the nonzero mean error (centered on the ensemble means this check passes; see mean_error)",
+}
+#: which way a filter's covariance is wrong (each value of ``Cause.direction``), in words
+DIRECTION_TEXT = {
+    "overconfident": "overconfident: the actual spread is larger than the filter's P (noise settings too small)",
+    "underconfident": "underconfident: the actual spread is smaller than the filter's P (noise settings too large)",
+}
+EXPLAINED_BY = tuple(EXPLAINED_BY_TEXT)
+DIRECTIONS = tuple(DIRECTION_TEXT)
 
 
 @dataclass(frozen=True)
@@ -58,6 +66,11 @@ class Cause:
 
 
 NO_CAUSE = Cause()
+
+
+def with_reason(measured: str, cause: Cause) -> str:
+    """A check's ``detail``: the measured text, then the cause's reason as its last sentence."""
+    return f"{measured}. {cause.reason}" if cause.reason else measured
 
 
 def _check_invariant(kind: str, name: str, pvalue: float, alpha: float, passed: bool) -> None:
@@ -129,11 +142,16 @@ class CheckResult:
         Comparisons the check's verdict rests on (over all its parts).
     passed : bool
     detail : str
-        What was measured, where, and (on failure) why, in words.
+        What was measured, where, and (on failure) why, in words: ``measured``, then the cause's
+        ``reason`` as its last sentence (:func:`with_reason`).
     cause : Cause
         The diagnosis as data (all None when the check passed).
     parts : tuple of CheckPart
         The tests of a check made of several (empty for a check of one family).
+    measured : str or None
+        What was measured and where, without the reason (the report shows the two apart, so that nothing
+        parses ``detail``). None is taken as ``detail`` when the cause has no reason; with a reason it
+        must be given.
     """
 
     name: str
@@ -147,9 +165,18 @@ class CheckResult:
     detail: str
     cause: Cause = NO_CAUSE
     parts: tuple[CheckPart, ...] = field(default_factory=tuple)
+    measured: str | None = None
 
     def __post_init__(self):
         _check_invariant("check", self.name, self.pvalue, 1.0 - self.confidence, self.passed)
+        if self.measured is None:
+            if self.cause.reason:
+                raise ValueError(f"check {self.name!r}: a cause with a reason needs the measured text apart")
+            object.__setattr__(self, "measured", self.detail)
+        if self.detail != with_reason(self.measured, self.cause):
+            raise ValueError(
+                f"check {self.name!r}: detail {self.detail!r} is not the measured text {self.measured!r} and the reason"
+            )
 
     def as_dict(self) -> dict:
         """The entry of ``summary.json``'s ``tests`` list (``parts`` as a list of dicts)."""
