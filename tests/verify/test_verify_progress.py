@@ -4,7 +4,7 @@ import json
 
 import pytest
 
-from kalcal.jobs.progress import STAGES, stage
+from kalcal.jobs.progress import STAGES, VERIFY_ORDER, stage
 from kalcal.jobs.report import render_report
 from kalcal.jobs.verify import verify
 from kalcal.models.registry import build_scenario
@@ -43,6 +43,14 @@ def test_verify_reports_every_stage_and_ends_each_complete(tmp_path):
     assert [done for _, done, _ in figures] == list(range(1, drawn + 1))
     assert all(total == drawn for _, _, total in figures)
     assert calls[-1] == ("report", 1, 1)
+
+
+def test_a_whole_verify_goes_through_the_stages_in_the_documented_order(tmp_path):
+    calls, progress = _record()
+    scenario = build_scenario("accel-gps", None, ["scenario.duration=2"])
+    verify(scenario, 300, 1, tmp_path, long_run=4.0, progress=progress, report=True)
+    assert tuple(_stages(calls)) == VERIFY_ORDER
+    assert set(VERIFY_ORDER) == set(STAGES)
 
 
 def test_without_a_long_run_the_statistics_count_two_files(tmp_path):
