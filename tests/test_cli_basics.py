@@ -142,6 +142,58 @@ def test_too_few_realizations_or_a_bad_long_run_is_refused(tmp_path, args, messa
     assert not (tmp_path / "summary.json").exists()
 
 
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--long-run", "1e9"], "--long-run: 5,000,000,000 filter updates per realization, more than the 2,000"),
+        (["--set", "scenario.duration=1e9"], "scenario.duration: 5,000,000,000 filter updates per realization"),
+        (["--set", "scenario.duration=400.2"], "scenario.duration: 2,001 filter updates per realization"),
+    ],
+)
+def test_a_run_whose_arrays_would_not_fit_is_refused_before_it_runs(tmp_path, monkeypatch, args, message):
+    def no_run(*args, **kwargs):
+        raise AssertionError("the Monte Carlo ran")
+
+    monkeypatch.setattr("kalcal.jobs.verify.run_monte_carlo", no_run)
+    base = ["verify", "-n", "1000", "--out", str(tmp_path), "--no-report", "--set", "scenario.duration=2"]
+    result = runner.invoke(app, [*base, *args])
+    assert result.exit_code == 2, result.output
+    lines = [line for line in result.output.splitlines() if line.strip()]
+    assert len(lines) == 1 and message in lines[0], result.output
+
+
+def test_the_default_runs_fit():
+    from kalcal.jobs.verify import MAX_UPDATES, check_arguments, run_length
+    from kalcal.models.registry import build_scenario
+
+    scenario = build_scenario("accel-gps")
+    check_arguments(scenario, 300_000)  # the default run with its 120 s long run
+    check_arguments(scenario, 300_000, engine="sampled", long_run=120.0)
+    check_arguments(build_scenario("scale-bias"), 300_000)
+    check_arguments(build_scenario("accel-gps", None, ["scenario.duration=400"]), 300_000, long_run=0)
+    assert run_length(build_scenario("accel-gps", None, ["scenario.duration=400"]))[0] == MAX_UPDATES
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["-n", "50"], "-n: need at least 100 realizations"),
+        (["--long-run", "1"], "--long-run: 1 s is not longer than the run itself (2 s)"),
+        (["--confidence", "2"], "--confidence: expected a number in (0, 1)"),
+    ],
+)
+def test_arguments_are_checked_before_a_cluster_starts(tmp_path, monkeypatch, args, message):
+    def no_cluster(*args, **kwargs):
+        raise AssertionError("a Dask cluster was started")
+
+    monkeypatch.setattr("kalcal.montecarlo.distributed.dask_client", no_cluster)
+    base = ["verify", "--workers", "1", "--out", str(tmp_path), "--no-report", "--set", "scenario.duration=2"]
+    result = runner.invoke(app, [*base, *args])
+    assert result.exit_code == 2, result.output
+    lines = [line for line in result.output.splitlines() if line.strip()]
+    assert len(lines) == 1 and message in lines[0], result.output
+
+
 def test_the_progress_bar_shows_each_stage_with_its_units(monkeypatch):
     monkeypatch.setattr(cli, "error_console", Console(file=io.StringIO(), force_terminal=True, width=120))
     bar, update = cli._progress_bar("accel-gps x 300")

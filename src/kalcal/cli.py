@@ -333,7 +333,7 @@ def verify(
     scenario: Annotated[
         str, typer.Argument(help=f"Scenario: {', '.join(SCENARIOS)}, or a model file (.toml, docs/custom-models.md).")
     ] = "accel-gps",
-    n: Annotated[int, typer.Option("-n", "--realizations", help="Monte Carlo realizations.")] = 300_000,
+    n: Annotated[int, typer.Option("-n", "--realizations", help="Monte Carlo realizations (at least 100).")] = 300_000,
     seed: Annotated[int, typer.Option("--seed", help="Root seed; the same seed gives the same numbers.")] = 0,
     out: Annotated[Path, typer.Option("--out", help="Directory for summary.json, stats.nc and the report.")] = Path(
         "kalcal-out"
@@ -369,6 +369,7 @@ def verify(
     """Verify the filter with a Monte Carlo: mean error, covariance, orthogonality, whiteness, NIS."""
     import shlex
 
+    from kalcal.jobs.verify import check_arguments
     from kalcal.jobs.verify import verify as run_verify
     from kalcal.montecarlo.distributed import dask_client
 
@@ -376,6 +377,10 @@ def verify(
         model = _verify_scenario(scenario, config, set_ or (), engine, long_run)
         if threads is not None and threads < 1:
             raise KalcalError(f"--threads: expected a positive number, got {threads}")
+        # before any cluster starts: a bad argument costs nothing
+        check_arguments(
+            model, n, engine=engine, confidence=confidence, long_run=long_run, batch_size=batch_size, form=form
+        )
         bar, update = _progress_bar(f"{scenario} x {n:,}")
         with dask_client(workers, scheduler) as client, bar:
             outcome = run_verify(

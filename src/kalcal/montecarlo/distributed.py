@@ -9,9 +9,19 @@ default dependency of kalcal.
 from __future__ import annotations
 
 import contextlib
+import warnings
 from collections.abc import Iterator
 
 from kalcal.errors import ConfigError
+
+
+@contextlib.contextmanager
+def _quiet_distributed() -> Iterator[None]:
+    """distributed's own UserWarnings (the dashboard's port 8787 taken by another cluster, so it moves to
+    a free one) say nothing about the run: kept off the user's stderr while the cluster lives."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", category=UserWarning, module=r"distributed(\.|$)")
+        yield
 
 
 @contextlib.contextmanager
@@ -38,6 +48,7 @@ def dask_client(workers: int | None = None, scheduler: str | None = None) -> Ite
             yield client
         return
     with (
+        _quiet_distributed(),
         LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None) as cluster,
         Client(cluster) as client,
     ):
