@@ -105,6 +105,45 @@ def test_report_closes_with_one_line_naming_what_it_wrote(tmp_path):
     assert result.output.strip().splitlines()[-1] == f"wrote {out}/: report.html, figures/"
 
 
+def test_simulate_and_calibrate_close_with_one_line_naming_what_they_wrote(tmp_path):
+    logs, cal = tmp_path / "logs", tmp_path / "cal"
+    result = runner.invoke(app, ["simulate", "accel-gps", "--out", str(logs), "--set", "scenario.duration=10"])
+    assert result.exit_code == 0, result.output
+    assert result.output.strip().splitlines()[-1] == f"wrote {logs}/: imu.csv, gps.csv, truth.csv"
+    result = runner.invoke(app, ["calibrate", "accel-gps", "--imu", str(logs / "imu.csv"), "--gps", str(logs / "gps.csv"), "--out", str(cal)])
+    assert result.exit_code == 0, result.output
+    assert result.output.strip().splitlines()[-1] == f"wrote {cal}/: estimates.csv, summary.json, calibration.png"
+    data, fit = tmp_path / "data", tmp_path / "fit"
+    result = runner.invoke(app, ["simulate", "scale-bias", "--out", str(data)])
+    assert result.output.strip().splitlines()[-1] == f"wrote {data}/: data.csv, truth.json"
+    result = runner.invoke(app, ["calibrate", "scale-bias", "--data", str(data / "data.csv"), "--out", str(fit)])
+    assert result.exit_code == 0, result.output
+    assert result.output.strip().splitlines()[-1] == f"wrote {fit}/: estimates.csv, summary.json"
+    assert not any(line.startswith("note:") for line in result.output.splitlines())  # nothing written as null
+
+
+def test_values_written_as_null_are_named_in_one_line(tmp_path, monkeypatch):
+    import kalcal.jobs.verify as job
+
+    real = job.write_json
+
+    def with_nan(path, document):
+        document["model_error"]["max_expected_mean_error_sigma"] = float("nan")
+        document["final"]["ensemble_mean_error"][:2] = float("inf")
+        return real(path, document)
+
+    monkeypatch.setattr(job, "write_json", with_nan)
+    out = tmp_path / "out"
+    result = runner.invoke(app, ["verify", "-n", "300", "--out", str(out), *SHORT])
+    assert result.exit_code == 0, result.output
+    (note,) = [line for line in result.output.splitlines() if line.startswith("note:")]
+    assert note == (
+        f"note: 3 values in {out / 'summary.json'} are not finite and written as null: "
+        "final.ensemble_mean_error (2), model_error.max_expected_mean_error_sigma (1)"
+    )
+    assert json.loads((out / "summary.json").read_text())["nonfinite"]["count"] == 3
+
+
 def test_no_pair_line_where_the_run_has_not_the_reports_pair(tmp_path):
     result = runner.invoke(app, ["verify", "-n", "300", "--out", str(tmp_path), *SHORT])
     assert result.exit_code == 0, result.output
