@@ -27,8 +27,12 @@ def _flat(text: str) -> str:
 
 
 def test_version_prints_the_package_version():
+    import tomllib
+    from pathlib import Path
+
+    declared = tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text())["project"]["version"]
     result = runner.invoke(app, ["--version"])
-    assert result.exit_code == 0 and result.output.strip() == f"kalcal {__version__}"
+    assert result.exit_code == 0 and result.output.strip() == f"kalcal {declared}"
 
 
 def test_python_dash_m_kalcal_is_the_command():
@@ -253,3 +257,11 @@ def test_no_progress_bar_off_a_terminal(monkeypatch):
     monkeypatch.setattr(cli, "error_console", Console(file=io.StringIO(), force_terminal=False))
     _, update = cli._progress_bar("x")
     assert update is None
+
+
+def test_importing_kalcal_main_runs_nothing():
+    """``import kalcal.__main__`` (a tool walking the package) does not start the command."""
+    result = subprocess.run(
+        [sys.executable, "-c", "import kalcal.__main__; print('imported')"], capture_output=True, text=True, timeout=120
+    )
+    assert result.returncode == 0 and result.stdout.strip() == "imported", result.stdout + result.stderr
