@@ -265,3 +265,11 @@ def test_importing_kalcal_main_runs_nothing():
         [sys.executable, "-c", "import kalcal.__main__; print('imported')"], capture_output=True, text=True, timeout=120
     )
     assert result.returncode == 0 and result.stdout.strip() == "imported", result.stdout + result.stderr
+
+
+def test_verify_help_names_the_fewest_realizations():
+    from kalcal.jobs.verify import MIN_REALIZATIONS
+
+    result = runner.invoke(app, ["verify", "-h"])
+    assert result.exit_code == 0
+    assert f"Monte Carlo realizations (at least {MIN_REALIZATIONS})." in _flat(result.output)
