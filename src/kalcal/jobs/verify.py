@@ -94,7 +94,7 @@ def check_arguments(
         raise ConfigError(f"--batch-size: expected a positive number of realizations, got {batch_size}")
     check_form(form, "--form")
     count, horizon = run_length(scenario)
-    _require_fits(count, "scenario.duration")
+    _require_fits(count, "model.updates" if hasattr(scenario, "model") else "scenario.duration")
     if long_run and long_run <= horizon:
         raise ConfigError(
             f"--long-run: {long_run:g} s is not longer than the run itself ({horizon:g} s); give more, or 0 for none"
