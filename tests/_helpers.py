@@ -5,6 +5,11 @@ from __future__ import annotations
 import numpy as np
 
 
+def ci_requested(value: str | None) -> bool:
+    """Whether the environment's ``CI`` value turns CI on: ``true`` in any case, as ``.ci/run`` reads it."""
+    return (value or "").lower() == "true"
+
+
 def assert_close(actual, desired, *, rtol: float = 0.0, atol=0.0, what: str = "") -> None:
     """|actual - desired| <= atol + rtol |desired| entry by entry, where ``atol`` may be an array.
 

@@ -27,8 +27,12 @@ def _flat(text: str) -> str:
 
 
 def test_version_prints_the_package_version():
+    import tomllib
+    from pathlib import Path
+
+    declared = tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text())["project"]["version"]
     result = runner.invoke(app, ["--version"])
-    assert result.exit_code == 0 and result.output.strip() == f"kalcal {__version__}"
+    assert result.exit_code == 0 and result.output.strip() == f"kalcal {declared}"
 
 
 def test_python_dash_m_kalcal_is_the_command():
@@ -105,6 +109,45 @@ def test_report_closes_with_one_line_naming_what_it_wrote(tmp_path):
     assert result.output.strip().splitlines()[-1] == f"wrote {out}/: report.html, figures/"
 
 
+def test_simulate_and_calibrate_close_with_one_line_naming_what_they_wrote(tmp_path):
+    logs, cal = tmp_path / "logs", tmp_path / "cal"
+    result = runner.invoke(app, ["simulate", "accel-gps", "--out", str(logs), "--set", "scenario.duration=10"])
+    assert result.exit_code == 0, result.output
+    assert result.output.strip().splitlines()[-1] == f"wrote {logs}/: imu.csv, gps.csv, truth.csv"
+    result = runner.invoke(app, ["calibrate", "accel-gps", "--imu", str(logs / "imu.csv"), "--gps", str(logs / "gps.csv"), "--out", str(cal)])
+    assert result.exit_code == 0, result.output
+    assert result.output.strip().splitlines()[-1] == f"wrote {cal}/: estimates.csv, summary.json, calibration.png"
+    data, fit = tmp_path / "data", tmp_path / "fit"
+    result = runner.invoke(app, ["simulate", "scale-bias", "--out", str(data)])
+    assert result.output.strip().splitlines()[-1] == f"wrote {data}/: data.csv, truth.json"
+    result = runner.invoke(app, ["calibrate", "scale-bias", "--data", str(data / "data.csv"), "--out", str(fit)])
+    assert result.exit_code == 0, result.output
+    assert result.output.strip().splitlines()[-1] == f"wrote {fit}/: estimates.csv, summary.json"
+    assert not any(line.startswith("note:") for line in result.output.splitlines())  # nothing written as null
+
+
+def test_values_written_as_null_are_named_in_one_line(tmp_path, monkeypatch):
+    import kalcal.jobs.verify as job
+
+    real = job.write_json
+
+    def with_nan(path, document):
+        document["model_error"]["max_expected_mean_error_sigma"] = float("nan")
+        document["final"]["ensemble_mean_error"][:2] = float("inf")
+        return real(path, document)
+
+    monkeypatch.setattr(job, "write_json", with_nan)
+    out = tmp_path / "out"
+    result = runner.invoke(app, ["verify", "-n", "300", "--out", str(out), *SHORT])
+    assert result.exit_code == 0, result.output
+    (note,) = [line for line in result.output.splitlines() if line.startswith("note:")]
+    assert note == (
+        f"note: 3 values in {out / 'summary.json'} are not finite and written as null: "
+        "final.ensemble_mean_error (2), model_error.max_expected_mean_error_sigma (1)"
+    )
+    assert json.loads((out / "summary.json").read_text())["nonfinite"]["count"] == 3
+
+
 def test_no_pair_line_where_the_run_has_not_the_reports_pair(tmp_path):
     result = runner.invoke(app, ["verify", "-n", "300", "--out", str(tmp_path), *SHORT])
     assert result.exit_code == 0, result.output
@@ -142,6 +185,58 @@ def test_too_few_realizations_or_a_bad_long_run_is_refused(tmp_path, args, messa
     assert not (tmp_path / "summary.json").exists()
 
 
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--long-run", "1e9"], "--long-run: 5,000,000,000 filter updates per realization, more than the 2,000"),
+        (["--set", "scenario.duration=1e9"], "scenario.duration: 5,000,000,000 filter updates per realization"),
+        (["--set", "scenario.duration=400.2"], "scenario.duration: 2,001 filter updates per realization"),
+    ],
+)
+def test_a_run_whose_arrays_would_not_fit_is_refused_before_it_runs(tmp_path, monkeypatch, args, message):
+    def no_run(*args, **kwargs):
+        raise AssertionError("the Monte Carlo ran")
+
+    monkeypatch.setattr("kalcal.jobs.verify.run_monte_carlo", no_run)
+    base = ["verify", "-n", "1000", "--out", str(tmp_path), "--no-report", "--set", "scenario.duration=2"]
+    result = runner.invoke(app, [*base, *args])
+    assert result.exit_code == 2, result.output
+    lines = [line for line in result.output.splitlines() if line.strip()]
+    assert len(lines) == 1 and message in lines[0], result.output
+
+
+def test_the_default_runs_fit():
+    from kalcal.jobs.verify import MAX_UPDATES, check_arguments, run_length
+    from kalcal.models.registry import build_scenario
+
+    scenario = build_scenario("accel-gps")
+    check_arguments(scenario, 300_000)  # the default run with its 120 s long run
+    check_arguments(scenario, 300_000, engine="sampled", long_run=120.0)
+    check_arguments(build_scenario("scale-bias"), 300_000)
+    check_arguments(build_scenario("accel-gps", None, ["scenario.duration=400"]), 300_000, long_run=0)
+    assert run_length(build_scenario("accel-gps", None, ["scenario.duration=400"]))[0] == MAX_UPDATES
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["-n", "50"], "-n: need at least 100 realizations"),
+        (["--long-run", "1"], "--long-run: 1 s is not longer than the run itself (2 s)"),
+        (["--confidence", "2"], "--confidence: expected a number in (0, 1)"),
+    ],
+)
+def test_arguments_are_checked_before_a_cluster_starts(tmp_path, monkeypatch, args, message):
+    def no_cluster(*args, **kwargs):
+        raise AssertionError("a Dask cluster was started")
+
+    monkeypatch.setattr("kalcal.montecarlo.distributed.dask_client", no_cluster)
+    base = ["verify", "--workers", "1", "--out", str(tmp_path), "--no-report", "--set", "scenario.duration=2"]
+    result = runner.invoke(app, [*base, *args])
+    assert result.exit_code == 2, result.output
+    lines = [line for line in result.output.splitlines() if line.strip()]
+    assert len(lines) == 1 and message in lines[0], result.output
+
+
 def test_the_progress_bar_shows_each_stage_with_its_units(monkeypatch):
     monkeypatch.setattr(cli, "error_console", Console(file=io.StringIO(), force_terminal=True, width=120))
     bar, update = cli._progress_bar("accel-gps x 300")
@@ -162,3 +257,19 @@ def test_no_progress_bar_off_a_terminal(monkeypatch):
     monkeypatch.setattr(cli, "error_console", Console(file=io.StringIO(), force_terminal=False))
     _, update = cli._progress_bar("x")
     assert update is None
+
+
+def test_importing_kalcal_main_runs_nothing():
+    """``import kalcal.__main__`` (a tool walking the package) does not start the command."""
+    result = subprocess.run(
+        [sys.executable, "-c", "import kalcal.__main__; print('imported')"], capture_output=True, text=True, timeout=120
+    )
+    assert result.returncode == 0 and result.stdout.strip() == "imported", result.stdout + result.stderr
+
+
+def test_verify_help_names_the_fewest_realizations():
+    from kalcal.jobs.verify import MIN_REALIZATIONS
+
+    result = runner.invoke(app, ["verify", "-h"])
+    assert result.exit_code == 0
+    assert f"Monte Carlo realizations (at least {MIN_REALIZATIONS})." in _flat(result.output)

@@ -104,3 +104,14 @@ def test_bad_input_is_one_line_and_status_2(tmp_path, args, message):
 def test_other_commands_point_model_files_to_verify(tmp_path):
     result = _invoke("simulate", EXAMPLE, "--out", tmp_path)
     assert result.exit_code == 2 and "a model file (.toml) works with kalcal verify" in result.stderr
+
+
+def test_a_model_file_with_too_many_updates_is_refused_by_name(tmp_path):
+    from typer.testing import CliRunner
+
+    from kalcal.cli import app
+
+    result = CliRunner().invoke(app, ["verify", str(EXAMPLE), "-n", "300", "--out", str(tmp_path), "--set", "model.updates=3000"])
+    assert result.exit_code == 2
+    lines = [line for line in result.output.splitlines() if line.strip()]
+    assert len(lines) == 1 and "model.updates: 3,000 filter updates per realization" in lines[0], result.output

@@ -95,7 +95,9 @@ def test_writes_summary_curve_plot_and_filter_settings(drifting):
     # the table, the regions and where the files are
     for name in PARAMETERS:
         assert name in result.stdout
-    assert "read off the curve:" in result.stdout and str(out / "filter.toml") in result.stdout
+    # the closing line names the folder once and the files in it (the form every command closes with)
+    assert "read off the curve:" in result.stdout and f"wrote {out}/: " in result.stdout
+    assert "filter.toml" in result.stdout.strip().splitlines()[-1]
 
 
 def test_filter_toml_holds_the_settings_calibrate_accepts(drifting, tmp_path):
@@ -207,3 +209,8 @@ def _assert_refused(tmp_path, pattern, *args):
     assert re.search(pattern, message), message
     assert "Traceback" not in result.stdout + result.stderr
     assert not out.exists()
+
+
+def test_noise_closes_with_one_line_naming_what_it_wrote(white):
+    out, result = white
+    assert result.stdout.strip().splitlines()[-1] == f"wrote {out}/: summary.json, allan.csv, allan.png, filter.toml"

@@ -24,6 +24,11 @@ def test_sweep_draws_the_tuning_curve(tmp_path):
     assert list(table["covariance_passed"]) == [False, True]
     assert (tmp_path / "sweep.png").stat().st_size > 0
     assert (tmp_path / "filter.accel_noise_std=0.02" / "summary.json").exists()
+    # one closing line, like verify's: the summary, table, curve and each value's run folder
+    assert result.output.strip().splitlines()[-1] == (
+        f"wrote {tmp_path}/: sweep.json, sweep.csv, sweep.png, "
+        "filter.accel_noise_std=0.002/, filter.accel_noise_std=0.02/"
+    )
 
 
 def test_sweep_needs_exactly_one_list(tmp_path):

@@ -96,8 +96,8 @@ def simulate(
     with user_errors():
         model = build_scenario(scenario, config, set_ or ())
         paths = (simulate_scale_bias if scenario == "scale-bias" else simulate_accel_gps)(model, seed, out)
-    for name, path in paths.items():
-        console.print(f"wrote {name:5s} {path}")
+    _note_nonfinite(*(path for path in paths.values() if Path(path).suffix == ".json"))
+    console.print(_wrote(Path(out), paths.values()), markup=False, soft_wrap=True)
 
 
 @app.command()
@@ -206,7 +206,9 @@ def calibrate(
     diagnostics = summary["diagnostics"]
     style = "green" if diagnostics["consistent"] else "bold red"
     console.print(f"diagnostics: [{style}]{escape(diagnostics['verdict'])}[/{style}]")
-    console.print(f"wrote {Path(out) / 'estimates.csv'}, {Path(out) / 'summary.json'} and {Path(out) / 'calibration.png'}")
+    _note_nonfinite(Path(out) / "summary.json")
+    written = [Path(out) / name for name in ("estimates.csv", "summary.json", "calibration.png")]
+    console.print(_wrote(Path(out), written), markup=False, soft_wrap=True)
     if strict and (summary["warnings"] or not diagnostics["consistent"]):
         raise typer.Exit(1)
 
@@ -243,7 +245,8 @@ def _calibrate_scale_bias(data, reference, sensor, out, set_, config, imu_or_gps
         table.add_row(name, f"{value:.6g}", f"{std:.3g}", unit_)
     console.print(table)
     _print_warnings(summary)
-    console.print(f"wrote {Path(out) / 'estimates.csv'} and {Path(out) / 'summary.json'}")
+    _note_nonfinite(Path(out) / "summary.json")
+    console.print(_wrote(Path(out), [Path(out) / "estimates.csv", Path(out) / "summary.json"]), markup=False, soft_wrap=True)
     if strict and summary["warnings"]:
         raise typer.Exit(1)
 
@@ -289,6 +292,27 @@ def _wrote(out: Path, paths) -> str:
             name = str(path)
         names.append(name + ("/" if path.is_dir() else ""))
     return f"wrote {out}/: {', '.join(names)}"
+
+
+def _note_nonfinite(*paths) -> None:
+    """For each JSON file written whose ``nonfinite.count`` is not 0 (:func:`kalcal.io.results.write_json`),
+    one line: ``note: 3 values in summary.json are not finite and written as null: tests.statistic (2), ...``."""
+    import json
+
+    for path in paths:
+        try:
+            nonfinite = json.loads(Path(path).read_text(encoding="utf-8")).get("nonfinite") or {}
+        except (OSError, ValueError):
+            continue
+        count = nonfinite.get("count", 0)
+        if count:
+            fields = ", ".join(f"{name} ({n})" for name, n in nonfinite.get("fields", {}).items())
+            value, verb = ("value", "is") if count == 1 else ("values", "are")
+            console.print(
+                f"note: {count} {value} in {path} {verb} not finite and written as null: {fields}",
+                markup=False,
+                soft_wrap=True,
+            )
 
 
 def _print_checks(summary: dict) -> None:
@@ -340,7 +364,7 @@ def verify(
     scenario: Annotated[
         str, typer.Argument(help=f"Scenario: {', '.join(SCENARIOS)}, or a model file (.toml, docs/custom-models.md).")
     ] = "accel-gps",
-    n: Annotated[int, typer.Option("-n", "--realizations", help="Monte Carlo realizations.")] = 300_000,
+    n: Annotated[int, typer.Option("-n", "--realizations", help="Monte Carlo realizations (at least 100).")] = 300_000,
     seed: Annotated[int, typer.Option("--seed", help="Root seed; the same seed gives the same numbers.")] = 0,
     out: Annotated[Path, typer.Option("--out", help="Directory for summary.json, stats.nc and the report.")] = Path(
         "kalcal-out"
@@ -376,6 +400,7 @@ def verify(
     """Verify the filter with a Monte Carlo: mean error, covariance, orthogonality, whiteness, NIS."""
     import shlex
 
+    from kalcal.jobs.verify import check_arguments
     from kalcal.jobs.verify import verify as run_verify
     from kalcal.montecarlo.distributed import dask_client
 
@@ -383,6 +408,10 @@ def verify(
         model = _verify_scenario(scenario, config, set_ or (), engine, long_run)
         if threads is not None and threads < 1:
             raise KalcalError(f"--threads: expected a positive number, got {threads}")
+        # before any cluster starts: a bad argument costs nothing
+        check_arguments(
+            model, n, engine=engine, confidence=confidence, long_run=long_run, batch_size=batch_size, form=form
+        )
         bar, update = _progress_bar(f"{scenario} x {n:,}")
         with dask_client(workers, scheduler) as client, bar:
             outcome = run_verify(
@@ -415,6 +444,7 @@ def verify(
             markup=False,
             soft_wrap=True,
         )
+    _note_nonfinite(outcome.paths["summary"])
     order = ("summary", "stats", "stats_long", "report", "figures")
     written = [outcome.paths[key] for key in order if key in outcome.paths]
     written += [path for key, path in outcome.paths.items() if key not in order]
@@ -460,7 +490,10 @@ def sweep(
         cells = [f"{row[f'{c}_statistic']:.4g}" + ("" if row[f"{c}_passed"] else " [red]x[/red]") for c in checks]
         table.add_row(str(row[key]), *cells)
     console.print(table)
-    console.print(f"wrote {result.paths['table']} and {result.paths['figure']}")
+    runs = sorted(path.parent for path in Path(out).glob("*=*/summary.json"))
+    _note_nonfinite(result.paths["summary"], *(run / "summary.json" for run in runs))
+    written = [result.paths[key] for key in ("summary", "table", "figure")] + runs
+    console.print(_wrote(Path(out), written), markup=False, soft_wrap=True)
 
 
 @app.command()
@@ -519,7 +552,9 @@ def noise(
         console.print(f"note: {escape(note)}")
     _print_warnings(summary)
     files = summary["files"]
-    console.print(f"wrote {files['summary']}, {files['allan']}, {files['plot']} and {files['filter']}")
+    _note_nonfinite(files["summary"])
+    written = [files[key] for key in ("summary", "allan", "plot", "filter")]
+    console.print(_wrote(Path(out), written), markup=False, soft_wrap=True)
 
 
 @app.command()

@@ -59,3 +59,27 @@ def test_a_killed_worker_has_its_blocks_rerun(client):
     run = run_monte_carlo(problem, 60_000, seed=3, block_size=1000, client=client, progress=kill_one_worker)
     assert killed, "the run ended before a worker could be killed"
     assert _equal(plain.sums, run.sums)
+
+
+def test_a_local_cluster_keeps_distributeds_warnings_off_stderr():
+    """Another cluster on the dashboard's port 8787: distributed warns and moves; kalcal's user sees nothing."""
+    import socket
+    import warnings
+
+    from kalcal.montecarlo.distributed import dask_client
+
+    holder = socket.socket()
+    try:
+        holder.bind(("", 8787))
+        holder.listen()
+    except OSError:
+        pass  # already taken by another process: the same situation
+    try:
+        with warnings.catch_warnings(record=True) as seen:
+            warnings.simplefilter("always")
+            with dask_client(1) as client:
+                assert client.submit(sum, [1, 2]).result() == 3
+    finally:
+        holder.close()
+    raw = [str(w.message) for w in seen if issubclass(w.category, UserWarning) and "distributed" in w.filename]
+    assert raw == []

@@ -13,7 +13,7 @@ from kalcal.montecarlo.engine import run_monte_carlo
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.plots import consistency, ensemble
 from kalcal.plots import realization as single
-from kalcal.verify.checks import centered_nees, centered_nees_bounds, check_covariance
+from kalcal.verify.checks import COVARIANCE_PARTS, centered_nees, centered_nees_bounds, check_covariance
 
 
 @pytest.fixture
@@ -73,6 +73,10 @@ def test_nees_figure_shows_the_covariance_checks_statistic_and_bounds(plots_run,
     band = tested.patches[0]  # axhspan: a rectangle spanning the axes in x, in data units in y
     assert band.get_y() == pytest.approx(low) and band.get_y() + band.get_height() == pytest.approx(high)
     assert "covariance check" in tested.get_title()
+    # the band is drawn at the NEES part's share of alpha, and its legend says so (not the check's own level)
+    part_level = 1.0 - (1.0 - confidence) / len(COVARIANCE_PARTS)
+    assert f"{100 * part_level:g}% (alpha / {len(COVARIANCE_PARTS)})" in band.get_label()
+    assert f"{100 * confidence:g}% over" not in band.get_label()
     (raw_line,) = [l for l in raw.get_lines() if "mean NEES" in l.get_label()]
     np.testing.assert_allclose(raw_line.get_ydata(), stats["mean_nees"].values)
     assert "not a check" in raw.get_title()
@@ -116,3 +120,8 @@ def test_variance_figures_draw_the_covariance_checks_element_bound(plots_dir, pl
     assert len(deviations) == 3
     for ax in deviations:
         assert _band(ax) == pytest.approx((-z, z), rel=1e-9)
+
+
+def test_nees_band_label_names_the_parts_share_of_alpha():
+    assert "99.5% (alpha / 2) over 150 updates" in consistency.nees_band_label(0.99, 150, 3)
+    assert "97.5% (alpha / 2)" in consistency.nees_band_label(0.95, 10, 3)

@@ -14,8 +14,10 @@ import sys
 
 import pytest
 
+from tests._helpers import ci_requested
+
 CHROMIUM = shutil.which("chromium")
-IN_CI = os.environ.get("CI", "").strip().lower() == "true"
+IN_CI = ci_requested(os.environ.get("CI"))
 
 
 @pytest.fixture(scope="session")
@@ -52,6 +54,7 @@ def test_page_renders_in_headless_chromium_with_no_broken_image(chromium, report
         chromium,
         "--headless",
         "--no-sandbox",
+        "--disable-dev-shm-usage",
         "--disable-gpu",
         "--disable-background-networking",
         "--disable-component-update",

@@ -101,3 +101,33 @@ def test_settings_that_do_not_match_the_statistics(copy_run):
     (run / "summary.json").write_text(json.dumps(summary))
     with pytest.raises(ConfigError, match="scenario.duration"):
         render_report(run)
+
+
+def test_a_summary_of_a_newer_layout_is_refused_in_one_line(copy_run):
+    from typer.testing import CliRunner
+
+    from kalcal.cli import app
+    from kalcal.io.results import SCHEMA_VERSION
+
+    run = copy_run()
+    summary = json.loads((run / "summary.json").read_text())
+    summary["schema_version"] = SCHEMA_VERSION + 1
+    (run / "summary.json").write_text(json.dumps(summary))
+    result = CliRunner().invoke(app, ["report", str(run)])
+    assert result.exit_code == 2
+    lines = [line for line in result.output.splitlines() if line.strip()]
+    assert len(lines) == 1 and f"schema_version {SCHEMA_VERSION + 1} is newer than this kalcal reads" in lines[0]
+    assert not (run / "report.html").exists()
+    summary["schema_version"] = "1"
+    (run / "summary.json").write_text(json.dumps(summary))
+    with pytest.raises(DataError, match="schema_version must be a whole number"):
+        render_report(run)
+
+
+def test_a_summary_from_before_schema_version_still_renders(copy_run):
+    run = copy_run()
+    summary = json.loads((run / "summary.json").read_text())
+    del summary["schema_version"], summary["nonfinite"]
+    (run / "summary.json").write_text(json.dumps(summary))
+    page = render_report(run).read_text(encoding="utf-8")
+    assert "Figure 5.7." in page

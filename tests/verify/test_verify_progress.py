@@ -4,7 +4,7 @@ import json
 
 import pytest
 
-from kalcal.jobs.progress import STAGES, stage
+from kalcal.jobs.progress import STAGES, VERIFY_ORDER, stage
 from kalcal.jobs.report import render_report
 from kalcal.jobs.verify import verify
 from kalcal.models.registry import build_scenario
@@ -45,6 +45,14 @@ def test_verify_reports_every_stage_and_ends_each_complete(tmp_path):
     assert calls[-1] == ("report", 1, 1)
 
 
+def test_a_whole_verify_goes_through_the_stages_in_the_documented_order(tmp_path):
+    calls, progress = _record()
+    scenario = build_scenario("accel-gps", None, ["scenario.duration=2"])
+    verify(scenario, 300, 1, tmp_path, long_run=4.0, progress=progress, report=True)
+    assert tuple(_stages(calls)) == VERIFY_ORDER
+    assert set(VERIFY_ORDER) == set(STAGES)
+
+
 def test_without_a_long_run_the_statistics_count_two_files(tmp_path):
     calls, progress = _record()
     verify(build_scenario("accel-gps", None, ["scenario.duration=2"]), 300, 1, tmp_path, long_run=0, progress=progress)
@@ -66,3 +74,23 @@ def test_summary_json_carries_its_schema_version_and_its_nulls(tmp_path):
     # the report's pair is not in a 2 s run: a None, not a NaN, so nothing is counted
     assert summary["residual_correlation"] is None
     assert summary["nonfinite"]["count"] == sum(summary["nonfinite"]["fields"].values())
+
+
+def test_an_infinite_statistic_is_written_as_null_and_counted_under_its_field(tmp_path, monkeypatch):
+    import dataclasses
+    import math
+
+    import kalcal.jobs.verify as job
+
+    real = job.run_checks
+
+    def one_infinite(*args, **kwargs):
+        checks = real(*args, **kwargs)
+        return [dataclasses.replace(checks[0], statistic=math.inf), *checks[1:]]
+
+    monkeypatch.setattr(job, "run_checks", one_infinite)
+    verify(build_scenario("accel-gps", None, ["scenario.duration=2"]), 300, 1, tmp_path, long_run=0)
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["tests"][0]["statistic"] is None
+    assert all(test["statistic"] is not None for test in summary["tests"][1:])
+    assert summary["nonfinite"] == {"count": 1, "fields": {"tests.statistic": 1}}

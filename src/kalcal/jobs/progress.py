@@ -13,7 +13,7 @@ from collections.abc import Callable
 #: ``progress(stage, done, total)``
 JobProgress = Callable[[str, int, int], None]
 
-#: The stages of ``kalcal verify`` in the order they run, and their units.
+#: The stages a job may report, and their units (each named once; :data:`VERIFY_ORDER` is their order).
 STAGES = {
     "monte carlo": "realizations",
     "long run": "realizations",
@@ -21,6 +21,10 @@ STAGES = {
     "figures": "figures",
     "report": "pages",
 }
+
+#: The order ``kalcal verify`` (with its long run and report) goes through the stages: the statistics
+#: stage comes twice, ``stats.nc`` before the long run, ``stats_long.nc`` and ``summary.json`` after it.
+VERIFY_ORDER = ("monte carlo", "statistics", "long run", "statistics", "figures", "report")
 
 
 def stage(progress: JobProgress | None, name: str) -> Callable[[int, int], None] | None:

@@ -24,6 +24,7 @@ import numpy as np
 from kalcal.errors import ConfigError, DataError
 from kalcal.filters.kalman import check_form
 from kalcal.io.outputs import require_complete, run_outputs
+from kalcal.io.results import SCHEMA_VERSION
 from kalcal.io.statistics import read_statistics
 from kalcal.jobs.progress import JobProgress, stage
 from kalcal.models.custom import CustomModelScenario, is_custom_settings
@@ -44,7 +45,12 @@ _REQUIRED = ("scenario", "settings", "realizations", "seed", "engine", "confiden
 
 
 def read_summary(path: Path) -> dict[str, Any]:
-    """``summary.json`` of a verification run, with the keys the report needs checked."""
+    """``summary.json`` of a verification run, with the keys the report needs checked.
+
+    A ``schema_version`` above :data:`~kalcal.io.results.SCHEMA_VERSION` is refused (a DataError: its keys
+    may mean something this code does not know); a summary without one is read as the layout before
+    versioning, whose keys are those of version 1.
+    """
     if not path.is_file():
         raise DataError(f"{path}: no such file (not a kalcal verify output directory?)")
     try:
@@ -53,6 +59,16 @@ def read_summary(path: Path) -> dict[str, Any]:
         raise DataError(f"{path}: not valid JSON ({exc})") from None
     if not isinstance(summary, dict):
         raise DataError(f"{path}: expected a JSON object, got {type(summary).__name__}")
+    # schema_version: a newer layout than this code knows is refused; none at all is the layout before
+    # versioning (kalcal 0.x before schema_version 1), the same keys, and is read as it is
+    version = summary.get("schema_version", 0)
+    if not isinstance(version, int) or isinstance(version, bool) or version < 0:
+        raise DataError(f"{path}: schema_version must be a whole number >= 0, got {version!r}")
+    if version > SCHEMA_VERSION:
+        raise DataError(
+            f"{path}: schema_version {version} is newer than this kalcal reads ({SCHEMA_VERSION}); "
+            f"upgrade kalcal to redraw it"
+        )
     missing = [key for key in _REQUIRED if key not in summary]
     if missing:
         raise DataError(f"{path}: missing {', '.join(missing)} (not a kalcal verify summary)")

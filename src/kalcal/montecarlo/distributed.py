@@ -14,10 +14,20 @@ import contextlib
 import logging
 import signal
 import threading
+import warnings
 from collections.abc import Iterator
 
 from kalcal.errors import ConfigError
 from kalcal.interrupts import Interrupted
+
+
+@contextlib.contextmanager
+def _quiet_distributed() -> Iterator[None]:
+    """distributed's own UserWarnings (the dashboard's port 8787 taken by another cluster, so it moves to
+    a free one) say nothing about the run: kept off the user's stderr while the cluster lives."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", category=UserWarning, module=r"distributed(\.|$)")
+        yield
 
 
 @contextlib.contextmanager
@@ -45,7 +55,7 @@ def dask_client(workers: int | None = None, scheduler: str | None = None) -> Ite
         return
     # the worker processes start with SIGINT ignored: Ctrl-C (sent to the whole process group) stops this
     # process, which then closes the cluster, instead of every worker printing its own traceback
-    with _sigint_ignored():
+    with _sigint_ignored(), _quiet_distributed():
         cluster = LocalCluster(
             n_workers=workers,
             threads_per_worker=1,
@@ -55,7 +65,7 @@ def dask_client(workers: int | None = None, scheduler: str | None = None) -> Ite
             # run at the same time printed a warning that the port was in use
             scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
         )
-    with cluster, Client(cluster) as client:
+    with _quiet_distributed(), cluster, Client(cluster) as client:
         try:
             yield client
         except (Interrupted, KeyboardInterrupt):

@@ -24,7 +24,13 @@ from kalcal.plots._common import (
     styled,
     time_label,
 )
-from kalcal.verify.checks import centered_nees, centered_nees_bounds, chi2_mean_bounds, normal_bound
+from kalcal.verify.checks import (
+    COVARIANCE_PARTS,
+    centered_nees,
+    centered_nees_bounds,
+    chi2_mean_bounds,
+    normal_bound,
+)
 
 #: pixel height of the residual correlation map (its width is the common 900 px)
 CORRELATION_HEIGHT_PX = 800
@@ -57,6 +63,17 @@ def _mean_chi2(dataset: xr.Dataset, variable: str, dof: int, what: str, path) ->
     return save(figure, path)
 
 
+def nees_band_label(confidence: float, n_updates: int, d: int) -> str:
+    """The legend of the centered NEES band: the covariance check's NEES part, at its share of the
+    check's alpha (:func:`~kalcal.verify.checks.centered_nees_bounds`), e.g. 99.5% (alpha / 2) at 99%."""
+    parts = len(COVARIANCE_PARTS)
+    share = 1.0 - (1.0 - confidence) / parts
+    return (
+        f"covariance check's NEES part, χ²({d}(N−1))/(N−1), {percent(share)} (alpha / {parts}) "
+        f"over {n_updates} updates"
+    )
+
+
 @styled
 def plot_nees(dataset: xr.Dataset, path: str | Path) -> Path:
     """(a) The centered mean NEES, tr(P_k^-1 C_k) with C_k the ensemble covariance of e_k (divisor N - 1),
@@ -85,7 +102,7 @@ def plot_nees(dataset: xr.Dataset, path: str | Path) -> Path:
         d,
         low,
         high,
-        f"covariance check bounds, χ²({d}(N−1))/(N−1), {percent(confidence)} over {times.size} updates",
+        nees_band_label(confidence, times.size, d),
         "centered mean NEES tr(P⁻¹ Cov e)",
     )
     axes[0, 0].set_title(
