@@ -4,12 +4,17 @@ stderr and in summary.json, and ``--strict`` (exit 1 for calibrate; a refusal fo
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
+import kalcal
 from kalcal.cli import app
 
 
@@ -131,7 +136,7 @@ def test_scale_bias_constant_sensor_is_flagged_unobservable(sim, tmp_path):
     good = _invoke("calibrate", "scale-bias", "--data", sim / "sb" / "data.csv", "--out", tmp_path / "g", "--strict")
     assert good.exit_code == 0, good.output + good.stderr
     summary = json.loads((tmp_path / "g" / "summary.json").read_text())
-    assert summary["warnings"] == [] and summary["observability"]["unobservable"] == []
+    assert summary["warnings"] == [] and summary["observability"]["unobservable"] == [] and summary["consistent"]
     data["sensor"] = 1.0
     data.to_csv(tmp_path / "constant.csv", index=False)
     for strict, status in (((), 0), (("--strict",), 1)):
@@ -141,7 +146,9 @@ def test_scale_bias_constant_sensor_is_flagged_unobservable(sim, tmp_path):
     summary = json.loads((tmp_path / "c" / "summary.json").read_text())
     assert "theta1" in summary["observability"]["unobservable"]
     assert summary["observability"]["std_ratio"]["theta1"] > 0.9
-    assert [w["code"] for w in summary["warnings"]] == ["unobservable"]
+    # a constant sensor cannot follow the varying reference: its NIS is inconsistent too
+    assert [w["code"] for w in summary["warnings"]] == ["unobservable", "noise-inconsistent"]
+    assert not summary["consistent"] and summary["mean_nis"] > summary["nis_bounds"][1]
 
 
 @pytest.mark.parametrize("extra", [(), ("--set", "filter.gps_position_std=0.05")], ids=["consistent", "inconsistent"])
@@ -165,3 +172,65 @@ def test_summary_diagnostics_hold_the_pvalue_and_each_parts_bounds(sim, tmp_path
     assert ljung_box["lower"] is None and ljung_box["upper"] == diagnostics["ljung_box_upper"]
     assert ljung_box["statistic"] == max(diagnostics["ljung_box_statistic"])
     assert ljung_box["comparisons"] == len(diagnostics["ljung_box_pvalue"]) == 2
+
+
+def test_scale_bias_cell_beyond_the_limit_is_exit_status_2(sim, tmp_path):
+    data = pd.read_csv(sim / "sb" / "data.csv")
+    data.loc[41, "sensor"] = 1e300
+    data.to_csv(tmp_path / "huge.csv", index=False)
+    result = _invoke("calibrate", "scale-bias", "--data", tmp_path / "huge.csv", "--out", tmp_path / "h", "--strict")
+    _one_line_error(result, "row 42, column 'sensor'", "beyond the physical limit of 1e+12")
+    assert not (tmp_path / "h" / "summary.json").exists()
+
+
+def test_scale_bias_strict_exits_1_when_the_nis_is_inconsistent(sim, tmp_path):
+    args = ("calibrate", "scale-bias", "--data", sim / "sb" / "data.csv", "--set", "filter.reference_noise_std=0.02")
+    for strict, status in (((), 0), (("--strict",), 1)):
+        result = _invoke(*args, "--out", tmp_path / "n", *strict)
+        assert result.exit_code == status, result.output + result.stderr
+        summary = json.loads((tmp_path / "n" / "summary.json").read_text())
+        assert not summary["consistent"] and summary["mean_nis"] > 50
+        assert [w["code"] for w in summary["warnings"]] == ["noise-inconsistent"]
+        assert "kalcal: warning: " in result.stderr and "mean NIS" in result.stderr
+
+
+def _run(*args):
+    """The CLI as a user runs it, a process of its own: what reaches stderr is what the user sees (in
+    process, pytest would record a raw library warning instead of printing it)."""
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(Path(kalcal.__file__).parents[1]), env.get("PYTHONPATH", "")])
+    return subprocess.run(
+        [sys.executable, "-m", "kalcal.cli", *map(str, args)], capture_output=True, text=True, env=env, timeout=300
+    )
+
+
+def _only_kalcal_lines(process, kind):
+    lines = process.stderr.strip().splitlines()
+    assert lines and all(line.startswith(f"kalcal: {kind}: ") for line in lines), process.stderr
+
+
+def test_a_process_prints_no_raw_library_warning(sim, tmp_path):
+    imu = pd.read_csv(sim / "imu.csv")
+    imu.loc[1000, "accel"] = 1e300
+    imu.to_csv(tmp_path / "imu.csv", index=False)
+    refused = _run("calibrate", "accel-gps", "--imu", tmp_path / "imu.csv", "--gps", sim / "gps.csv", "--out", tmp_path / "a")
+    assert refused.returncode == 2, refused.stderr
+    _only_kalcal_lines(refused, "error")
+    data = pd.read_csv(sim / "sb" / "data.csv")
+    data.loc[41, "sensor"] = 1e300  # before the limit check: exit 0 and numpy overflow warnings
+    data.to_csv(tmp_path / "huge.csv", index=False)
+    refused = _run("calibrate", "scale-bias", "--data", tmp_path / "huge.csv", "--out", tmp_path / "b", "--strict")
+    assert refused.returncode == 2, refused.stderr
+    _only_kalcal_lines(refused, "error")
+    flagged = _run("noise", "--imu", sim / "imu.csv", "--out", tmp_path / "n")
+    assert flagged.returncode == 0, flagged.stderr
+    _only_kalcal_lines(flagged, "warning")
+
+
+def test_noise_names_the_row_then_the_column_of_a_huge_sample(tmp_path):
+    rng = np.random.default_rng(2)
+    frame = pd.DataFrame({"time": np.arange(4096) / 200.0, "accel": 9.81 + 0.02 * rng.standard_normal(4096)})
+    frame.loc[100, "accel"] = 1e300
+    frame.to_csv(tmp_path / "static.csv", index=False)
+    result = _invoke("noise", "--imu", tmp_path / "static.csv", "--out", tmp_path / "n")
+    _one_line_error(result, "static.csv: row 101, column 'accel': 1e+300 m/s^2 is beyond the physical limit")

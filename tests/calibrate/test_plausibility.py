@@ -102,8 +102,53 @@ def test_gnss_times_in_milliseconds_are_refused():
         _calibrate(scenario, imu_time, accel, fix_time * 1000, position, velocity)
 
 
+@pytest.mark.parametrize(("sensor", "low", "high"), [("accelerometer", 1.0, 1e5), ("gnss", 0.01, 100.0)])
+def test_both_bounds_of_each_rate_range_are_plausible(sensor, low, high):
+    """A log at a bound, its times k / rate rounded in floating point, passes; 1% beyond a bound is refused
+    with no unit hint (no unit slip moves a rate by 1%)."""
+    k = np.arange(1, 201)
+    for bound in (low, high):
+        assert plausibility.check_rate(k / bound, sensor, "log.csv") == pytest.approx(bound, rel=1e-9)
+    for rate in (low / 1.01, high * 1.01):
+        with pytest.raises(DataError, match="implausible") as raised:
+            plausibility.check_rate(k / rate, sensor, "log.csv")
+        assert "are the times in" not in str(raised.value), str(raised.value)
+        assert f"(median step {1 / rate:.6g} s)" in str(raised.value)
+
+
+def test_a_100_hz_gnss_log_calibrates():
+    scenario = _scenario("scenario.gps_rate=100", "scenario.duration=10")
+    logs = _logs(scenario)
+    assert plausibility.median_rate(logs[2]) != 100.0  # the rounding of k / 100 the bound must allow for
+    assert _calibrate(scenario, *logs, **stated_rates(scenario)).warnings == []
+
+
+def test_times_in_milliseconds_in_both_logs_of_a_fast_imu_are_refused():
+    """A 1 kHz accelerometer and 10 Hz fixes with all times in ms read 1 Hz and 0.01 Hz, both in range and
+    in order; the velocity fixes then look 1000 times faster than the positions move."""
+    scenario = _scenario("scenario.imu_rate=1000", "scenario.gps_rate=10", "scenario.duration=20")
+    imu_time, accel, fix_time, position, velocity = _logs(scenario)
+    with pytest.raises(DataError, match=r"gps.csv: column 'time': .*= 0.001\): are the times of both logs in milliseconds"):
+        _calibrate(scenario, imu_time * 1e3, accel, fix_time * 1e3, position, velocity)
+    with pytest.raises(DataError, match=r"are the times of both logs in minutes"):
+        plausibility.velocity_consistency(
+            fix_time / 60, position, velocity, np.ones(fix_time.size), np.full(fix_time.size, 0.04), "gps.csv"
+        )
+
+
+def test_velocity_twice_too_large_is_a_warning_not_knots():
+    scenario = _scenario()
+    imu_time, accel, fix_time, position, velocity = _logs(scenario)
+    result = _calibrate(scenario, imu_time, accel, fix_time, position, velocity * 2)
+    assert [w.code for w in result.warnings] == ["velocity-position-mismatch"]
+    with pytest.raises(DataError, match=r"in knots instead of m/s"):
+        _calibrate(scenario, imu_time, accel, fix_time, position, velocity * 3600 / 1852)
+
+
 def test_accelerometer_slower_than_the_fixes_is_refused():
-    """A 1 kHz accelerometer with times in ms reads 1 Hz, inside its own range but below the 5 Hz fixes."""
+    """A 1 kHz accelerometer with times in ms (and fixes with times in s) reads 1 Hz, inside its own range
+    but below the 5 Hz fixes (times in ms in both logs: the velocity check,
+    test_times_in_milliseconds_in_both_logs_of_a_fast_imu_are_refused)."""
     scenario = _scenario()
     imu_time, accel, fix_time, position, velocity = _logs(scenario)
     with pytest.raises(DataError, match=r"accelerometer sample rate 0.2 Hz is below the GPS fix rate 5 Hz"):
@@ -259,10 +304,56 @@ def test_constant_sensor_is_reported_unobservable():
     time, reference, sensor = samples.time, samples.reference[0], samples.sensor[0]
     excited = calibrate_scale_bias(scenario, time, reference, sensor)
     assert excited.unobservable() == [] and excited.warnings() == []
-    assert np.all(excited.std_ratio < UNOBSERVABLE_RATIO)
+    assert np.all(excited.std_ratio < 0.5)
     np.testing.assert_allclose(excited.std_ratio, [0.36, 0.11], atol=0.01)  # the values docs/scale-bias.md quotes
     constant = calibrate_scale_bias(scenario, time, reference, np.full(sensor.size, 1.0), source="d.csv")
     assert "theta1" in constant.unobservable()
-    assert constant.std_ratio[0] > 0.9  # theta1 keeps the prior's sigma: nothing was learned about it
-    (warning,) = constant.warnings("d.csv")
+    assert constant.std_ratio[0] > UNOBSERVABLE_RATIO  # theta1 keeps the prior's sigma: nothing was learned about it
+    # the reference varies and the sensor does not: its innovations are far beyond the noise as well
+    assert [w.code for w in constant.warnings("d.csv")] == ["unobservable", "noise-inconsistent"]
+    assert constant.mean_nis > constant.nis_bounds()[1]
+    warning = constant.warnings("d.csv")[0]
     assert warning.code == "unobservable" and "theta1" in warning.message and "(no excitation)" in warning.message
+
+
+@pytest.mark.parametrize(
+    "assignments",
+    [["scenario.duration=10"], ["scenario.duration=5"], ["truth.reference_noise_std=0.5"], ["truth.signal_amplitude=0.5"]],
+)
+def test_genuine_short_or_noisy_scale_bias_logs_warn_of_nothing(assignments):
+    """Excited logs that learned less than the default one (theta1's ratio 0.56 .. 0.75) are not unobservable."""
+    scenario = build_scenario("scale-bias", assignments=assignments)
+    for seed in range(3, 6):
+        samples = sample_scale_bias(scenario, np.random.default_rng(seed), 1)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            result = calibrate_scale_bias(scenario, samples.time, samples.reference[0], samples.sensor[0])
+        assert 0.5 < result.std_ratio[0] < UNOBSERVABLE_RATIO, result.std_ratio
+        assert result.unobservable() == [] and result.warnings() == [] and result.consistent, (seed, result.mean_nis)
+
+
+@pytest.mark.parametrize("column", ["reference", "sensor"])
+def test_scale_bias_cell_beyond_the_limit_is_refused_naming_the_row(column):
+    scenario = build_scenario("scale-bias")
+    samples = sample_scale_bias(scenario, np.random.default_rng(3), 1)
+    signals = {"reference": samples.reference[0].copy(), "sensor": samples.sensor[0].copy()}
+    signals[column][41] = 1e300
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(DataError, match=rf"d.csv: row 42, column '{column}': 1e\+300 m/s\^2 is beyond the physical limit of 1e\+12"):
+            calibrate_scale_bias(scenario, samples.time, signals["reference"], signals["sensor"], source="d.csv")
+    signals[column][41] = -0.99e12  # within the limit: runs
+    calibrate_scale_bias(scenario, samples.time, signals["reference"], signals["sensor"], source="d.csv")
+
+
+def test_scale_bias_noise_settings_far_off_are_flagged():
+    """filter.reference_noise_std = 0.02 against a true 0.2: the mean NIS is about 100, far above its bounds."""
+    scenario = build_scenario("scale-bias", assignments=["filter.reference_noise_std=0.02"])
+    samples = sample_scale_bias(scenario, np.random.default_rng(3), 1)
+    result = calibrate_scale_bias(scenario, samples.time, samples.reference[0], samples.sensor[0], source="d.csv")
+    lower, upper = result.nis_bounds()
+    # chi-square(300) / 300 at 0.5% either side: 1 -+ 2.576 sqrt(2 / 300) to first order
+    assert lower == pytest.approx(1 - 2.576 * np.sqrt(2 / 300), abs=0.02) and upper == pytest.approx(1 + 2.576 * np.sqrt(2 / 300), abs=0.03)
+    assert result.mean_nis > 50 and not result.consistent
+    (warning,) = result.warnings("d.csv")
+    assert warning.code == "noise-inconsistent" and "d.csv: mean NIS" in warning.message

@@ -486,6 +486,6 @@ def _fix_warnings(
             )
     mismatch = plausibility.velocity_consistency(
         gps_time[usable], position[usable], velocity[usable], std_p[usable], std_v[usable], source,
-        (columns.get("position", "position"), columns.get("velocity", "velocity")),
+        (columns.get("position", "position"), columns.get("velocity", "velocity"), columns.get("time", "time")),
     )
     return warnings + ([mismatch] if mismatch is not None else [])

@@ -23,9 +23,13 @@ abs(velocity), velocity_std     <= 1e5 m/s               ten times the escape ve
 abs(time) of the accelerometer  <= 1e11 s                about 3000 years (epoch seconds are 2e9)
 ==============================  =======================  ==========================================
 
-Rates are median intervals, checked for logs of at least four samples. A rate outside its range names the unit that would bring it inside (times in ms, us or ns, or in
-minutes or hours). The velocity fixes are compared with the positions' finite differences, see
-:func:`velocity_consistency`.
+Rates are median intervals, checked for logs of at least four samples; a bound itself is plausible (to a
+relative :data:`RATE_MARGIN`, for the rounding of times such as k / 100). A rate outside its range names
+the time unit that would bring it well inside (times in ms, us or ns, or in minutes or hours): only a rate
+more than a factor :data:`HINT_BEYOND` beyond its range, and only a unit that puts it more than a factor
+:data:`HINT_MARGIN` inside (a unit slip moves a rate by 60 or more; a rate just beyond a bound is not one). The
+velocity fixes are compared with the positions' finite differences, see :func:`velocity_consistency`;
+a ratio of 1e-3, 1e-6, 1e-9, 60 or 3600 there names times in ms, us, ns, minutes or hours in both logs.
 """
 
 from __future__ import annotations
@@ -41,6 +45,12 @@ from kalcal.errors import DataError
 IMU_RATE_RANGE = (1.0, 1e5)
 #: plausible GNSS fix rates, Hz (median fix interval)
 GNSS_RATE_RANGE = (0.01, 100.0)
+#: a rate within this relative distance of a bound is at the bound (times rounded in the log)
+RATE_MARGIN = 1e-6
+#: a unit hint needs the rate this factor beyond its range (5 Hz fixes in ms read 0.005 Hz, a factor 2)
+HINT_BEYOND = 1.5
+#: ... and the unit to put it this factor inside the range
+HINT_MARGIN = 2.0
 #: fewest samples whose median interval is checked as a rate (three intervals)
 MIN_RATE_SAMPLES = 4
 #: a rate the user set (scenario.imu_rate / gps_rate) and the log's may differ by at most this factor
@@ -53,7 +63,7 @@ TIME_UNITS = (("milliseconds", 1e3), ("microseconds", 1e6), ("nanoseconds", 1e9)
 #: velocity units whose factor to m/s the fitted ratio is tested against: v [m/s] = factor * v [unit]
 VELOCITY_UNITS = (("km/h", 1 / 3.6), ("mph", 0.44704), ("knots", 1852 / 3600))
 #: a fitted ratio within this relative distance of a unit's factor names that unit
-UNIT_TOLERANCE = 0.05
+UNIT_TOLERANCE = 0.02
 #: median |z| of velocity minus finite difference above which the fixes disagree grossly (0.67 expected)
 VELOCITY_Z = 5.0
 #: pairs of fixes farther apart than this many median fix intervals are not compared (an outage)
@@ -78,10 +88,23 @@ def median_rate(time: np.ndarray) -> float:
     return float(1.0 / np.median(np.diff(time))) if time.size >= MIN_RATE_SAMPLES else float("nan")
 
 
-def _unit_hint(rate: float, low: float, high: float, typical: float) -> str:
-    """': are the times in X?' for the time unit that brings ``rate`` into [low, high] nearest ``typical``."""
-    fits = [(abs(np.log(rate * factor / typical)), unit) for unit, factor in TIME_UNITS if low <= rate * factor <= high]
-    return f": are the times in {min(fits)[1]}?" if fits else ": are the times in seconds?"
+def _within(rate: float, low: float, high: float) -> bool:
+    """``low <= rate <= high`` to a relative :data:`RATE_MARGIN` at either bound."""
+    return low * (1 - RATE_MARGIN) <= rate <= high * (1 + RATE_MARGIN)
+
+
+def _unit_hint(rate: float, low: float, high: float, typical: float, inside: float = HINT_MARGIN) -> str:
+    """': are the times in X?' for the time unit that brings ``rate`` well into [low, high] nearest ``typical``;
+    empty unless ``rate`` is more than :data:`HINT_BEYOND` beyond the range and a unit puts it into
+    [low * inside, high / inside]."""
+    if low / HINT_BEYOND <= rate <= high * HINT_BEYOND:
+        return ""
+    fits = [
+        (abs(np.log(rate * factor / typical)), unit)
+        for unit, factor in TIME_UNITS
+        if low * inside <= rate * factor <= high / inside
+    ]
+    return f": are the times in {min(fits)[1]}?" if fits else ""
 
 
 def check_rate(
@@ -119,23 +142,23 @@ def check_rate(
     low, high = IMU_RATE_RANGE if sensor == "accelerometer" else GNSS_RATE_RANGE
     name = "accelerometer sample rate" if sensor == "accelerometer" else "GPS fix rate"
     typical = 200.0 if sensor == "accelerometer" else 5.0
-    if not low <= rate <= high:
+    if not _within(rate, low, high):
         raise DataError(
-            f"{source}: column {column!r}: {name} {rate:.6g} Hz (median step {1 / rate:.6g}) is implausible "
+            f"{source}: column {column!r}: {name} {rate:.6g} Hz (median step {1 / rate:.6g} s) is implausible "
             f"(expected {low:g} Hz to {high:g} Hz){_unit_hint(rate, low, high, typical)}"
         )
-    if expected is not None and not expected / RATE_FACTOR <= rate <= expected * RATE_FACTOR:
+    if expected is not None and not _within(rate, expected / RATE_FACTOR, expected * RATE_FACTOR):
         raise DataError(
             f"{source}: column {column!r}: {name} {rate:.6g} Hz differs from {setting or 'the set rate'} = "
             f"{expected:g} Hz by more than a factor {RATE_FACTOR:g}"
-            f"{_unit_hint(rate, expected / RATE_FACTOR, expected * RATE_FACTOR, expected)}"
+            f"{_unit_hint(rate, expected / RATE_FACTOR, expected * RATE_FACTOR, expected, inside=1.0)}"
         )
     return rate
 
 
 def check_imu_faster(imu_rate: float, gps_rate: float, imu_source: str) -> None:
     """Refuse an accelerometer that samples less often than the GPS fixes (its times likely in ms)."""
-    if np.isfinite(gps_rate) and imu_rate < gps_rate:
+    if np.isfinite(gps_rate) and imu_rate < gps_rate * (1 - RATE_MARGIN):
         low, high = max(IMU_RATE_RANGE[0], gps_rate), IMU_RATE_RANGE[1]
         raise DataError(
             f"{imu_source}: accelerometer sample rate {imu_rate:.6g} Hz is below the GPS fix rate {gps_rate:.6g} Hz "
@@ -143,7 +166,15 @@ def check_imu_faster(imu_rate: float, gps_rate: float, imu_source: str) -> None:
         )
 
 
-def check_limit(values: np.ndarray, quantity: str, source: str = "", column: str = "") -> None:
+def check_limit(
+    values: np.ndarray,
+    quantity: str,
+    source: str = "",
+    column: str = "",
+    *,
+    limit: float | None = None,
+    unit: str | None = None,
+) -> None:
     """Refuse any value whose magnitude exceeds the physical limit of ``quantity``.
 
     Parameters
@@ -154,8 +185,11 @@ def check_limit(values: np.ndarray, quantity: str, source: str = "", column: str
         Which of :data:`LIMITS` applies.
     source, column : str
         Quoted in the error with the 1-based data row, where given.
+    limit, unit : float, str, optional
+        For a quantity not in :data:`LIMITS` (e.g. a scale-bias signal in its own unit).
     """
-    limit, unit = LIMITS[quantity], UNITS[quantity]
+    limit = LIMITS[quantity] if limit is None else limit
+    unit = UNITS[quantity] if unit is None else unit
     values = np.asarray(values, dtype=float)
     with np.errstate(invalid="ignore"):
         beyond = np.abs(values) > limit
@@ -187,8 +221,9 @@ def velocity_consistency(
     z_i = d_i / s_i has a median |z| of about 0.67 (less when the position noise is correlated in time).
     When the median |z| exceeds :data:`VELOCITY_Z` the fixes disagree grossly: the ratio
     c = sum(f_i vbar_i) / sum(vbar_i^2) of the finite differences f_i to the mean velocities vbar_i is
-    fitted, and a c within :data:`UNIT_TOLERANCE` of a unit's factor (1/3.6 for km/h, 0.447 for mph,
-    0.514 for knots, or their inverses) is an error naming the unit; any other gross disagreement is a
+    fitted, and a c within :data:`UNIT_TOLERANCE` of a time unit's ratio (1e-3, 1e-6, 1e-9 for times in
+    ms, us, ns in both logs; 60, 3600 for minutes, hours) or of a velocity unit's factor (1/3.6 for km/h,
+    0.447 for mph, 0.514 for knots, or their inverses) is an error naming the unit; any other gross disagreement is a
     warning (the noise settings far too small, or the two not of the same antenna).
 
     Parameters
@@ -197,6 +232,8 @@ def velocity_consistency(
         The usable fixes (finite), s, m, m/s, m, m/s.
     source : str
         The GPS log, quoted in the error or warning.
+    columns : (str, str) or (str, str, str)
+        The log's position, velocity (and time) columns, quoted.
 
     Returns
     -------
@@ -205,7 +242,7 @@ def velocity_consistency(
     Raises
     ------
     DataError
-        When the ratio points to a unit.
+        When the ratio points to a unit (of time or of velocity).
     """
     time, position, velocity = (np.asarray(a, dtype=float) for a in (time, position, velocity))
     if time.size < 4:
@@ -228,7 +265,7 @@ def velocity_consistency(
     median_z = float(np.median(np.abs(z)))
     if not median_z > VELOCITY_Z:
         return None
-    p_column, v_column = columns
+    p_column, v_column = columns[:2]
     energy = float(np.sum(mean_velocity**2))
     ratio = float(np.sum(finite_difference * mean_velocity) / energy) if energy > 0 else float("nan")
     detail = (
@@ -236,6 +273,13 @@ def velocity_consistency(
         f"{median_z:.3g} times its standard deviation from the stated noise, about 0.67 expected; "
         f"finite difference / velocity = {ratio:.4g})"
     )
+    for unit, factor in TIME_UNITS:
+        # times in ``unit`` in both logs: dt reads ``factor`` times too long, the finite differences as much too small
+        if abs(ratio * factor - 1) <= UNIT_TOLERANCE:
+            t_column = columns[2] if len(columns) > 2 else "time"
+            raise DataError(
+                f"{source}: column {t_column!r}: {detail}: are the times of both logs in {unit} instead of seconds?"
+            )
     for unit, factor in VELOCITY_UNITS:
         if abs(ratio / factor - 1) <= UNIT_TOLERANCE:
             raise DataError(f"{source}: column {v_column!r}: {detail}: is the velocity in {unit} instead of m/s?")

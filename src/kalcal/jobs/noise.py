@@ -82,6 +82,7 @@ def identify_noise_file(
     rate = regular_rate(time, str(imu_path), imu_map["time"])
     check_rate(time, "accelerometer", str(imu_path), imu_map["time"])
     check_limit(time, "time", str(imu_path), imu_map["time"])
+    check_limit(accel, "accel", str(imu_path), imu_map["accel"])  # "row N, column 'accel'" as in calibrate
     try:
         result = identify_noise(accel, rate, confidence, duration=float(time[-1] - time[0]))
     except DataError as exc:

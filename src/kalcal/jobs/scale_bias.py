@@ -65,8 +65,10 @@ def calibrate_scale_bias_file(
     put at k / ``scenario.rate``. Empty cells in the two signal columns are skipped samples. Writes
     ``out/estimates.csv`` (time, theta1, theta2, theta1_std, theta2_std after each sample) and
     ``out/summary.json``; returns the summary. ``summary["observability"]`` holds each theta's final sigma
-    over its no-data sigma and the parameters above ``UNOBSERVABLE_RATIO`` (0.5), which ``warnings`` (a
-    list of ``{"code", "message"}``, empty when none) then names.
+    over its no-data sigma and the parameters above ``UNOBSERVABLE_RATIO`` (0.9), which ``warnings`` (a
+    list of ``{"code", "message"}``, empty when none) then names; ``nis_bounds`` holds the mean NIS's 99%
+    bounds and ``consistent`` whether it lies within them (a ``noise-inconsistent`` warning when not). A
+    reference or sensor value beyond ``SIGNAL_LIMIT`` (1e12 in the log's unit) is refused (DataError).
     """
     frame = read_table(data_path)
     if reference == sensor:
@@ -79,7 +81,9 @@ def calibrate_scale_bias_file(
     else:
         time = np.arange(1, len(frame) + 1) / scenario.scenario.rate
         time_source = f"row number / scenario.rate ({scenario.scenario.rate:g} Hz)"
-    result = calibrate_scale_bias(scenario, time, columns["reference"], columns["sensor"], source=str(data_path))
+    result = calibrate_scale_bias(
+        scenario, time, columns["reference"], columns["sensor"], source=str(data_path), columns=(reference, sensor)
+    )
     std = result.std
     out = Path(out)
     write_csv(
@@ -112,6 +116,8 @@ def calibrate_scale_bias_file(
         "bias_std": float(np.sqrt(ab_cov[1, 1])),
         "scale_bias_correlation": float(ab_cov[0, 1] / np.sqrt(ab_cov[0, 0] * ab_cov[1, 1])),
         "mean_nis": result.mean_nis,
+        "nis_bounds": list(result.nis_bounds()),
+        "consistent": result.consistent,
         "observability": {
             "std_ratio": dict(zip(STATE_NAMES, result.std_ratio.tolist())),
             "threshold": UNOBSERVABLE_RATIO,
