@@ -14,7 +14,8 @@ RTOL = 1e-9
 
 @pytest.mark.parametrize("name", sorted(RUNS))
 def test_statistics_equal_the_reference(name, tmp_path):
-    reference = xr.open_dataset(REFERENCE / f"{name}.nc").load()
+    with xr.open_dataset(REFERENCE / f"{name}.nc") as stored:
+        reference = stored.load()
     actual = run(name, tmp_path / "run")
     assert sorted(actual.data_vars) == sorted(reference.data_vars)
     for key in reference.data_vars:
