@@ -92,3 +92,20 @@ def test_untestable_whiteness_is_not_a_pass():
 def test_confidence_outside_the_unit_interval_is_refused():
     with pytest.raises(ValueError, match="confidence"):
         innovation_diagnostics(np.zeros((10, 2)), confidence=1.0)
+
+
+def test_the_whiteness_parts_statistic_does_not_depend_on_the_order_of_a_constant_component():
+    """A constant component has no Ljung-Box statistic (NaN): the part's statistic is the other
+    component's, whichever column comes first."""
+    rng = np.random.default_rng(4)
+    correlated = np.empty(300)
+    correlated[0] = rng.standard_normal()
+    for k in range(1, 300):
+        correlated[k] = 0.6 * correlated[k - 1] + rng.standard_normal()
+    constant = np.ones(300)
+    first = innovation_diagnostics(np.column_stack([constant, correlated]), ("a", "b"), 0.99)
+    second = innovation_diagnostics(np.column_stack([correlated, constant]), ("b", "a"), 0.99)
+    (lb_first,) = [part for part in first.parts if part.name == "ljung_box"]
+    (lb_second,) = [part for part in second.parts if part.name == "ljung_box"]
+    assert np.isfinite(lb_first.statistic) and lb_first.statistic == lb_second.statistic
+    assert "p = nan" not in first.verdict and "p = nan" not in second.verdict
