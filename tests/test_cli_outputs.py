@@ -201,6 +201,16 @@ def test_a_sweep_rerun_with_other_values_leaves_no_run_of_the_first(tmp_path):
     assert read_manifest(tmp_path / runs[0]).command == "verify"
 
 
+def test_a_run_folder_of_a_sweep_is_refused_as_part_of_the_sweeps_set(tmp_path):
+    """A verify into one of a sweep's run folders would leave sweep.csv describing a run that is gone."""
+    _ok("sweep", "-n", "200", "--set", "scenario.duration=2", "--set", "filter.accel_noise_std=0.01,0.02", "--out", tmp_path)
+    run = tmp_path / "filter.accel_noise_std=0.01"
+    before = _tree(tmp_path)
+    result = _invoke("verify", "-n", "200", "--long-run", "0", "--no-report", "--set", "scenario.duration=2", "--out", run)
+    _one_line_error(result, "is part of the outputs of `kalcal sweep`", str(tmp_path))
+    assert _tree(tmp_path) == before
+
+
 def test_report_redraws_into_its_own_run_consistently(previous):
     out, before = previous
     _ok("report", out, "--realization", "17")

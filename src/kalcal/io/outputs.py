@@ -489,6 +489,8 @@ def run_outputs(
             require_complete(out)
         elif old is not None and old.command != command:
             raise OutputError(f"{where}: holds the outputs of `kalcal {old.command}`; choose another folder")
+        else:
+            _refuse_enclosing_set(out, where)
         _refuse_strays(out, names, listed, protected_paths, option, remedy)
         _remove_stale_partials(out)
         try:
@@ -520,6 +522,21 @@ def run_outputs(
         shutil.rmtree(staging, ignore_errors=True)
         _remove_created(created)
         raise
+
+
+def _refuse_enclosing_set(out: Path, where: str) -> None:
+    """Refuse ``out`` when a folder above it lists files inside it: ``out`` is part of another run's set
+    (a sweep's run folder), which a run of its own would leave describing files that are gone."""
+    target = Path(os.path.abspath(out))
+    for parent in target.parents:
+        manifest = read_manifest(parent)
+        if manifest is None:
+            continue
+        inside = target.relative_to(parent).as_posix() + "/"
+        if any(name.startswith(inside) for name in listed_files(parent)):
+            raise OutputError(
+                f"{where}: is part of the outputs of `kalcal {manifest.command}` in {parent}; choose another folder"
+            )
 
 
 def _remove_created(created: list[Path]) -> None:
