@@ -469,7 +469,7 @@ def sweep(
     config: ConfigOpt = None,
 ) -> None:
     """Verify once per value of one setting (--set key=v1,v2,...) and draw the tuning curve."""
-    from kalcal.jobs.sweep import split_sweep
+    from kalcal.jobs.sweep import split_sweep, sweep_cells
     from kalcal.jobs.sweep import sweep as run_sweep
     from kalcal.models.config import parse_assignments
     from kalcal.montecarlo.distributed import dask_client
@@ -477,6 +477,7 @@ def sweep(
     with user_errors():
         key, values, fixed = split_sweep(parse_assignments(set_ or ()))
         model = build_scenario(scenario, config, [f"{k}={v}" for k, v in fixed.items()])
+        sweep_cells(model, key, values, n, engine=engine, long_run=0)  # every value checked before any cluster
         with dask_client(workers, scheduler) as client:
             result = run_sweep(
                 model, key, values, n, seed, out, engine=engine, workers=threads, client=client, long_run=0

@@ -11,7 +11,7 @@ import pandas as pd
 from kalcal.errors import ConfigError
 from kalcal.io.outputs import writes_outputs
 from kalcal.io.results import write_json
-from kalcal.jobs.verify import verify
+from kalcal.jobs.verify import check_arguments, verify
 from kalcal.models.config import apply_settings
 from kalcal.plots.sweep import plot_sweep
 
@@ -49,6 +49,20 @@ OUTPUT_NAMES = (
 )
 
 
+#: the options of :func:`~kalcal.jobs.verify.verify` that :func:`~kalcal.jobs.verify.check_arguments` checks
+_CHECKED = ("engine", "confidence", "long_run", "batch_size", "form")
+
+
+def sweep_cells(scenario, key: str, values: list[str], n: int, **verify_options: Any) -> list:
+    """The scenario of every value, each checked as :func:`~kalcal.jobs.verify.verify` would check it,
+    so that a bad value is refused before the first run (and, from the CLI, before any cluster starts)."""
+    cells = [apply_settings(scenario, {key: value}) for value in values]
+    options = {name: verify_options[name] for name in _CHECKED if name in verify_options}
+    for cell in cells:
+        check_arguments(cell, n, **options)
+    return cells
+
+
 @writes_outputs("sweep", names=OUTPUT_NAMES)
 def sweep(scenario, key: str, values: list[str], n: int, seed: int, out: str | Path, **verify_options: Any) -> SweepResult:
     """Verify ``scenario`` with ``key`` set to each value; write ``sweep.csv``, ``sweep.json``, the tuning
@@ -57,10 +71,11 @@ def sweep(scenario, key: str, values: list[str], n: int, seed: int, out: str | P
     Every value uses the same seed, so the curves compare filters on the same realizations.
     """
     out = Path(out)
+    cells = sweep_cells(scenario, key, values, n, **verify_options)
     rows = []
-    for value in values:
+    for value, cell in zip(values, cells):
         run_dir = out / f"{key}={value}"
-        outcome = verify(apply_settings(scenario, {key: value}), n, seed, run_dir, **verify_options)
+        outcome = verify(cell, n, seed, run_dir, **verify_options)
         row: dict[str, Any] = {key: float(value) if _is_number(value) else value, "verdict": outcome.summary["verdict"]}
         for check in outcome.checks:
             row[f"{check.name}_statistic"] = check.statistic
