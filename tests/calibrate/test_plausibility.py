@@ -116,6 +116,31 @@ def test_both_bounds_of_each_rate_range_are_plausible(sensor, low, high):
         assert f"(median step {1 / rate:.6g} s)" in str(raised.value)
 
 
+@pytest.mark.parametrize(
+    ("sensor", "rate", "hint"),
+    [
+        ("accelerometer", 1 / 1.4, None),
+        ("accelerometer", 1 / 1.6, "milliseconds"),
+        ("accelerometer", 1e5 * 1.4, None),
+        ("accelerometer", 1e5 * 1.6, "hours"),
+        ("GPS", 0.01 / 1.4, None),
+        ("GPS", 0.01 / 1.6, "milliseconds"),
+        ("GPS", 100 * 1.4, None),
+        ("GPS", 100 * 1.6, "minutes"),
+    ],
+)
+def test_a_unit_is_named_only_beyond_the_hint_factor(sensor, rate, hint):
+    """A rate at most HINT_BEYOND (1.5) times beyond its range is refused without a unit; past it, the unit
+    that brings it well inside is named (both ends of both sensors' ranges)."""
+    with pytest.raises(DataError, match="implausible") as raised:
+        plausibility.check_rate(np.arange(1, 201) / rate, sensor, "log.csv")
+    message = str(raised.value)
+    if hint is None:
+        assert "are the times in" not in message, message
+    else:
+        assert message.endswith(f": are the times in {hint}?"), message
+
+
 def test_a_100_hz_gnss_log_calibrates():
     scenario = _scenario("scenario.gps_rate=100", "scenario.duration=10")
     logs = _logs(scenario)
