@@ -162,6 +162,46 @@ def _failed(reason: str, explained_by: str | None = None, direction: str | None 
     return Cause(explained_by=explained_by, direction=direction, reason=reason)
 
 
+def _centered_cause(rest_z: np.ndarray, m: int, alpha: float, on: str, explained: str, otherwise: str) -> Cause:
+    """The cause of a failed raw-moment check, from its z-statistics ``rest_z`` recentred on ``on``: the
+    mean error when the recentred family of ``m`` comparisons passes at ``alpha``, else ``otherwise``."""
+    rest, _ = _max_abs(rest_z)
+    lead = f"Centered on {on} the largest is {_sd_text(rest)}: "
+    if normal_family_pvalue(rest, m) >= alpha:
+        return _failed(lead + explained, explained_by="mean_error")
+    return _failed(lead + otherwise)
+
+
+def _result(
+    name: str,
+    statistic: float,
+    pvalue: float,
+    lower: float | None,
+    upper: float | None,
+    confidence: float,
+    comparisons: int,
+    passed: bool,
+    measured: str,
+    cause: Cause,
+    parts: tuple = (),
+) -> CheckResult:
+    """A check's result, its ``detail`` the measured text followed by the cause's reason."""
+    return CheckResult(
+        name=name,
+        statistic=statistic,
+        pvalue=pvalue,
+        lower=lower,
+        upper=upper,
+        confidence=confidence,
+        comparisons=comparisons,
+        passed=passed,
+        detail=with_reason(measured, cause),
+        measured=measured,
+        cause=cause,
+        parts=parts,
+    )
+
+
 
 
 def check_mean_error(
@@ -213,19 +253,7 @@ def check_mean_error(
             )
     elif not passed:
         diagnosis = _failed("The filter model predicts no mean error: its model or prior mean differs from the truth")
-    return CheckResult(
-        name="mean_error",
-        statistic=worst,
-        pvalue=pvalue,
-        lower=None,
-        upper=bound,
-        confidence=confidence,
-        comparisons=m,
-        passed=passed,
-        detail=with_reason(detail, diagnosis),
-        measured=detail,
-        cause=diagnosis,
-    )
+    return _result("mean_error", worst, pvalue, None, bound, confidence, m, passed, detail, diagnosis)
 
 
 def centered_nees(error_cov: np.ndarray, filter_cov: np.ndarray) -> np.ndarray:
@@ -318,19 +346,8 @@ def check_covariance(s: EnsembleStatistics, info: ProblemInfo, confidence: float
     diagnosis = Cause()
     if not passed:
         diagnosis = _covariance_cause(z_full, _element_pvalues(z_full, m) < share, nees, info, (k, i, l))
-    return CheckResult(
-        name="covariance",
-        statistic=worst,
-        pvalue=pvalue,
-        lower=None,
-        upper=bound,
-        confidence=confidence,
-        comparisons=m + n_updates,
-        passed=passed,
-        detail=with_reason(detail, diagnosis),
-        measured=detail,
-        cause=diagnosis,
-        parts=parts,
+    return _result(
+        "covariance", worst, pvalue, None, bound, confidence, m + n_updates, passed, detail, diagnosis, parts=parts
     )
 
 
@@ -405,26 +422,15 @@ def check_orthogonality(s: EnsembleStatistics, info: ProblemInfo, confidence: fl
         var_e = np.maximum(np.diagonal(s.error_cov, axis1=1, axis2=2), 0.0)
         var_x = np.maximum(x2 - s.mean_estimate**2, 0.0)
         rest_z, _, _ = _standardized(centered, np.sqrt(var_e[:, :, None] * var_x[:, None, :] / s.count))
-        rest, _ = _max_abs(rest_z)
-        lead = f"Centered on the means the largest is {_sd_text(rest)}: "
-        diagnosis = (
-            _failed(lead + "the mean error accounts for it (see mean_error)", explained_by="mean_error")
-            if normal_family_pvalue(rest, m) >= alpha
-            else _failed(lead + "error and estimate are correlated: the gains are not optimal for the truth")
+        diagnosis = _centered_cause(
+            rest_z,
+            m,
+            alpha,
+            "the means",
+            "the mean error accounts for it (see mean_error)",
+            "error and estimate are correlated: the gains are not optimal for the truth",
         )
-    return CheckResult(
-        name="orthogonality",
-        statistic=worst,
-        pvalue=pvalue,
-        lower=None,
-        upper=bound,
-        confidence=confidence,
-        comparisons=m,
-        passed=passed,
-        detail=with_reason(detail, diagnosis),
-        measured=detail,
-        cause=diagnosis,
-    )
+    return _result("orthogonality", worst, pvalue, None, bound, confidence, m, passed, detail, diagnosis)
 
 
 def residual_pair(s: EnsembleStatistics, info: ProblemInfo, t_k: float, t_j: float) -> dict:
@@ -469,26 +475,15 @@ def check_residual_whiteness(s: EnsembleStatistics, info: ProblemInfo, confidenc
         centered = moment - np.einsum("ka,jb->kajb", mean, mean)
         var = np.maximum(power - mean**2, 0.0)
         rest_z, _, _ = _standardized(centered, np.sqrt(np.einsum("ka,jb->kajb", var, var) / s.count), lower)
-        rest, _ = _max_abs(rest_z)
-        lead = f"Centered on the residual means the largest is {_sd_text(rest)}: "
-        diagnosis = (
-            _failed(lead + "nonzero mean residuals account for it (see mean_error)", explained_by="mean_error")
-            if normal_family_pvalue(rest, m) >= alpha
-            else _failed(lead + "the innovations are correlated in time: the model's dynamics or noise are wrong")
+        diagnosis = _centered_cause(
+            rest_z,
+            m,
+            alpha,
+            "the residual means",
+            "nonzero mean residuals account for it (see mean_error)",
+            "the innovations are correlated in time: the model's dynamics or noise are wrong",
         )
-    return CheckResult(
-        name="residual_whiteness",
-        statistic=worst,
-        pvalue=pvalue,
-        lower=None,
-        upper=bound,
-        confidence=confidence,
-        comparisons=m,
-        passed=passed,
-        detail=with_reason(detail, diagnosis),
-        measured=detail,
-        cause=diagnosis,
-    )
+    return _result("residual_whiteness", worst, pvalue, None, bound, confidence, m, passed, detail, diagnosis)
 
 
 def check_nis(s: EnsembleStatistics, info: ProblemInfo, confidence: float) -> CheckResult:
@@ -532,19 +527,7 @@ def check_nis(s: EnsembleStatistics, info: ProblemInfo, confidence: float) -> Ch
             diagnosis = _failed(
                 "Innovations smaller than the filter's S: the noise settings are too large", direction="underconfident"
             )
-    return CheckResult(
-        name="nis",
-        statistic=worst,
-        pvalue=pvalue,
-        lower=low,
-        upper=high,
-        confidence=confidence,
-        comparisons=n_updates,
-        passed=passed,
-        detail=with_reason(detail, diagnosis),
-        measured=detail,
-        cause=diagnosis,
-    )
+    return _result("nis", worst, pvalue, low, high, confidence, n_updates, passed, detail, diagnosis)
 
 
 def run_checks(
