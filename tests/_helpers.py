@@ -98,3 +98,11 @@ def tree(folder) -> dict[str, bytes]:
 
     folder = Path(folder)
     return {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def sums_equal(a, b) -> bool:
+    """Two dataclasses of arrays (e.g. MomentSums) equal field by field, bit for bit (None equals None)."""
+    return all(
+        (x is None and y is None) or np.array_equal(x, y)
+        for x, y in ((getattr(a, f), getattr(b, f)) for f in a.__dataclass_fields__)
+    )

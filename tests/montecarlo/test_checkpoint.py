@@ -15,17 +15,11 @@ from kalcal.models.config import apply_settings
 from kalcal.montecarlo import checkpoint
 from kalcal.montecarlo.engine import run_monte_carlo
 from kalcal.montecarlo.scenarios import accel_gps_problem
+from tests._helpers import sums_equal
 
 
 def _problem():
     return accel_gps_problem(apply_settings(AccelGpsScenario(), {"scenario.duration": 4.0}))
-
-
-def _equal(a, b):
-    return all(
-        (x is None and y is None) or np.array_equal(x, y)
-        for x, y in ((getattr(a, f), getattr(b, f)) for f in a.__dataclass_fields__)
-    )
 
 
 def test_checkpoint_from_other_settings_is_refused(tmp_path):
@@ -45,12 +39,12 @@ def test_resume_skips_finished_blocks_and_gives_the_same_sums(tmp_path):
     whole = run_monte_carlo(problem, 5000, seed=4, block_size=1000)
     first = run_monte_carlo(problem, 5000, seed=4, block_size=1000, checkpoint=path)
     sums, next_block = checkpoint.load(path, checkpoint.fingerprint({"n": 5000, "seed": 4, "engine": "exact", "block_size": 1000}))
-    assert next_block == 5 and _equal(sums, whole.sums)
+    assert next_block == 5 and sums_equal(sums, whole.sums)
     # pretend the run died after two blocks: keep the fold of blocks 0 and 1 only
     partial = run_monte_carlo(problem, 2000, seed=4, block_size=1000).sums
     checkpoint.save(path, partial, 2, checkpoint.fingerprint({"n": 5000, "seed": 4, "engine": "exact", "block_size": 1000}))
     resumed = run_monte_carlo(problem, 5000, seed=4, block_size=1000, checkpoint=path)
-    assert resumed.resumed_blocks == 2 and _equal(resumed.sums, whole.sums) and _equal(first.sums, whole.sums)
+    assert resumed.resumed_blocks == 2 and sums_equal(resumed.sums, whole.sums) and sums_equal(first.sums, whole.sums)
 
 
 def test_sigkill_mid_run_then_resume_equals_uninterrupted(tmp_path):

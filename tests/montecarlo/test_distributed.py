@@ -7,24 +7,17 @@ import os
 import signal
 
 import distributed
-import numpy as np
 import pytest
 
 from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.models.config import apply_settings
 from kalcal.montecarlo.engine import run_monte_carlo
 from kalcal.montecarlo.scenarios import accel_gps_problem
+from tests._helpers import sums_equal
 
 
 def _problem():
     return accel_gps_problem(apply_settings(AccelGpsScenario(), {"scenario.duration": 4.0}))
-
-
-def _equal(a, b):
-    return all(
-        (x is None and y is None) or np.array_equal(x, y)
-        for x, y in ((getattr(a, f), getattr(b, f)) for f in a.__dataclass_fields__)
-    )
 
 
 @pytest.fixture(scope="module")
@@ -41,7 +34,7 @@ def test_dask_cluster_gives_the_numbers_of_a_plain_run(client):
     plain = run_monte_carlo(problem, 10_000, seed=8, block_size=1000, workers=1)
     on_dask = run_monte_carlo(problem, 10_000, seed=8, block_size=1000, client=client)
     batched = run_monte_carlo(problem, 10_000, seed=8, block_size=1000, client=client, blocks_per_task=3)
-    assert _equal(plain.sums, on_dask.sums) and _equal(plain.sums, batched.sums)
+    assert sums_equal(plain.sums, on_dask.sums) and sums_equal(plain.sums, batched.sums)
 
 
 def test_a_killed_worker_has_its_blocks_rerun(client):
@@ -58,7 +51,7 @@ def test_a_killed_worker_has_its_blocks_rerun(client):
 
     run = run_monte_carlo(problem, 60_000, seed=3, block_size=1000, client=client, progress=kill_one_worker)
     assert killed, "the run ended before a worker could be killed"
-    assert _equal(plain.sums, run.sums)
+    assert sums_equal(plain.sums, run.sums)
 
 
 def test_a_local_cluster_keeps_distributeds_warnings_off_stderr():
