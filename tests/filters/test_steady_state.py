@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from kalcal.filters.kalman import covariance_pass, interval_transition
+from kalcal.filters.gains import covariance_pass, interval_transition
 from kalcal.filters.steady_state import convergence, steady_state
 from kalcal.models.linear import LinearGaussianModel
 from kalcal.models.registry import build_scenario
