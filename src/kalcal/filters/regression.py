@@ -17,7 +17,7 @@ forms give the same estimates in exact arithmetic:
 * ``"standard"``: P^+ = P^- - K H P^-;
 * ``"note"``: the calibration note's eqs. (14)-(18) for a scalar measurement,
   r = y - h x^-,  S = h P^- h^T + R,  K = P^- h^T / S,  P^+ = P^- - K (h P^-),  x^+ = x^- + K r,
-  which are the standard form with p = 1: it runs as ``"standard"`` (K by a solve with the 1 x 1 S).
+  which are the standard form with p = 1: it runs as ``"standard"`` (K by a division by the scalar S).
 
 A measurement that is NaN (or whose regressor row holds a NaN) is missing: as in every filter of the
 package (:mod:`kalcal.filters.steps`), that step is a prediction only, with r_k and S_k NaN.
