@@ -15,19 +15,14 @@ import pytest
 from filterpy.kalman import SquareRootKalmanFilter
 
 from kalcal.errors import ConfigError
-from kalcal.filters.kalman import (
-    cholesky_factor,
-    covariance_pass,
+from kalcal.filters.gains import covariance_pass, interval_noise_factor, interval_transition, run_with_gains
+from kalcal.filters.sqrt_form import cholesky_factor, gram, triangularize
+from kalcal.filters.steps import (
     gain_and_covariance,
-    gram,
-    interval_noise_factor,
-    interval_transition,
     predict,
-    run_with_gains,
     sqrt_gain_and_factor,
     sqrt_predict,
     sqrt_update,
-    triangularize,
     update,
 )
 from kalcal.models.linear import LinearGaussianModel

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from kalcal.filters.kalman import covariance_pass, interval_transition
-from kalcal.filters.steady_state import convergence, steady_state
+from kalcal.filters.gains import covariance_pass, interval_transition
+from kalcal.filters.steady_state import convergence, model_steady_state_view, no_steady_state, steady_state
 from kalcal.models.linear import LinearGaussianModel
 from kalcal.models.registry import build_scenario
 from tests._helpers import assert_close, cov_atol
@@ -135,3 +135,30 @@ def test_convergence_not_within_a_short_run():
     progress = convergence(covariance_pass(model, 4).posterior_cov, result.posterior_cov)
     assert progress.update is None and progress.relative_gap.shape == (4,)
     assert progress.state_update == (None, None)
+
+
+def test_model_view_sets_the_steady_state_beside_the_time_varying_filter():
+    model = _tracker()
+    schedule = covariance_pass(model, 200)
+    times = np.arange(1, 201) * 1.0
+    view = model_steady_state_view(model, schedule.posterior_cov, times, ("position", "velocity"), ("m", "m/s"))
+    assert view.applies and view.has_matrices and view.reason == ""
+    assert dataclasses.is_dataclass(view) and view.state_units == ("m", "m/s")
+    # Oracle: the plain Riccati recursion run long past the schedule reaches the same P_inf.
+    phi, q = interval_transition(model.phi, model.gamma, model.w, model.steps_per_update)
+    cov = model.m0
+    for _ in range(5000):
+        cov = phi @ cov @ phi.T + q
+        gain = cov @ model.h.T @ np.linalg.inv(model.h @ cov @ model.h.T + model.v)
+        cov = (np.eye(2) - gain @ model.h) @ cov
+    assert_close(view.result.posterior_cov, cov, atol=cov_atol(cov, 1e-9), what="P_inf")
+    k = view.convergence.update
+    assert k is not None and view.converged_time() == times[k]
+    gap = np.linalg.norm(schedule.posterior_cov - cov, axis=(-2, -1)) / np.linalg.norm(cov)
+    assert np.all(gap[k:] < view.convergence.tolerance) and (k == 0 or gap[k - 1] >= view.convergence.tolerance)
+
+
+def test_no_steady_state_view_says_why():
+    view = no_steady_state("the gains depend on the data", ("a",), ("1",))
+    assert not view.applies and not view.has_matrices and view.converged_time() is None
+    assert view.reason == "the gains depend on the data"

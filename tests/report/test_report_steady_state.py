@@ -16,8 +16,8 @@ import pytest
 
 import kalcal.jobs.report as report_job
 from kalcal.errors import ConfigError
-from kalcal.filters.kalman import covariance_pass
-from kalcal.filters.steady_state import convergence, steady_state
+from kalcal.filters.gains import covariance_pass
+from kalcal.filters.steady_state import SteadyStateView, convergence, steady_state
 from kalcal.jobs.report import render_report
 from kalcal.jobs.verify import verify
 from kalcal.models.linear import LinearGaussianModel
@@ -26,7 +26,7 @@ from kalcal.montecarlo.scenarios import build_problem
 from kalcal.plots.steady_state import plot_steady_state
 from kalcal.report.figures import FigureEntry
 from kalcal.report.html import build_page
-from kalcal.report.steady_state import SteadyStateView, steady_state_view
+from kalcal.report.steady_state import steady_state_view
 from tests._helpers import assert_close, cov_atol
 
 

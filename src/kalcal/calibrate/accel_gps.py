@@ -49,18 +49,10 @@ import numpy as np
 from kalcal.calibrate import plausibility
 from kalcal.calibrate.plausibility import CalibrationWarning
 from kalcal.errors import DataError
-from kalcal.filters.kalman import (
-    UpdateForm,
-    check_form,
-    cholesky_factor,
-    gram,
-    predict,
-    sqrt_predict,
-    sqrt_update,
-    update,
-)
 from kalcal.filters.mechanization import integrate, partial_step
 from kalcal.filters.sequential import SequentialRun, sequential_filter
+from kalcal.filters.sqrt_form import cholesky_factor, gram
+from kalcal.filters.steps import UpdateForm, check_form, predict, sqrt_predict, sqrt_update, update
 from kalcal.linalg import symmetrize
 from kalcal.models.accel_gps import AccelGpsScenario, bias_discretization, error_transition
 

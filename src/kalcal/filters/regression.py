@@ -8,16 +8,19 @@ regressor row h_k is data (it differs per realization and per step)::
 
     x_0 ~ N(x0, P0) is the estimate x_0^+ before the first measurement.
 
-Each step is the time propagation x^- = x^+, P^- = P^+ + Q, then a measurement update. Three update
+Each step is the time propagation x^- = x^+, P^- = P^+ + Q (the reference
+:func:`kalcal.filters.steps.predict` with Phi = I), then a measurement update by the reference
+:func:`kalcal.filters.steps.update` with p = 1: the row h_k as a (1, d) H, R as a (1, 1) V. Three update
 forms give the same estimates in exact arithmetic:
 
-* ``"joseph"``: :func:`kalcal.filters.kalman.update` in Joseph form (the package default);
-* ``"standard"``: the same function's P^+ = P^- - K H P^-;
-* ``"note"``: the calibration note's eqs. (14)-(18) written out for a scalar measurement,
-  r = y - h x^-,  S = h P^- h^T + R,  K = P^- h^T / S,  P^+ = P^- - K (h P^-),  x^+ = x^- + K r
-  (S is a scalar, so K needs a division and no solve).
+* ``"joseph"``: the Joseph form (the package default);
+* ``"standard"``: P^+ = P^- - K H P^-;
+* ``"note"``: the calibration note's eqs. (14)-(18) for a scalar measurement,
+  r = y - h x^-,  S = h P^- h^T + R,  K = P^- h^T / S,  P^+ = P^- - K (h P^-),  x^+ = x^- + K r,
+  which are the standard form with p = 1: it runs as ``"standard"`` (K by a division by the scalar S).
 
-A measurement that is NaN (or whose regressor row holds a NaN) is skipped: that step only propagates.
+A measurement that is NaN (or whose regressor row holds a NaN) is missing: as in every filter of the
+package (:mod:`kalcal.filters.steps`), that step is a prediction only, with r_k and S_k NaN.
 """
 
 from __future__ import annotations
@@ -27,8 +30,7 @@ from typing import Literal, NamedTuple
 import numpy as np
 
 from kalcal.errors import ConfigError
-from kalcal.filters.kalman import update
-from kalcal.linalg import symmetrize
+from kalcal.filters.steps import predict, update
 
 RegressionForm = Literal["joseph", "standard", "note"]
 REGRESSION_FORMS: tuple[str, ...] = ("joseph", "standard", "note")
@@ -48,7 +50,8 @@ def note_update(x: np.ndarray, cov: np.ndarray, y: np.ndarray, h: np.ndarray, r:
     """The note's measurement update, eqs. (14)-(18), for one scalar measurement.
 
     r_k = y_k - h_k x^-;  S_k = h_k P^- h_k^T + R;  K_k = P^- h_k^T / S_k;
-    P^+ = P^- - K_k (h_k P^-);  x^+ = x^- + K_k r_k.
+    P^+ = P^- - K_k (h_k P^-);  x^+ = x^- + K_k r_k: the standard form of the reference update with
+    p = 1, which computes it.
 
     Parameters
     ----------
@@ -57,31 +60,27 @@ def note_update(x: np.ndarray, cov: np.ndarray, y: np.ndarray, h: np.ndarray, r:
     cov : ndarray, shape (..., d, d)
         Prior covariance P^-.
     y : ndarray, shape (...)
-        The measurement.
+        The measurement; NaN marks a missing one (the update keeps the prior).
     h : ndarray, shape (d,) or (..., d)
         The regressor row.
     r : float
         Measurement-noise variance R (the note's sigma_w^2).
     """
-    hp = np.einsum("...i,...ij->...j", h, cov)  # h P^- (P^- is symmetric, so this is also (P^- h^T)^T)
-    s = np.einsum("...j,...j->...", hp, h) + r
-    gain = hp / s[..., None]
-    residual = y - np.einsum("...i,...i->...", h, x)
-    posterior = cov - gain[..., :, None] * hp[..., None, :]
-    return ScalarUpdate(x + gain * residual[..., None], symmetrize(posterior), residual, s, gain)
+    return scalar_update(x, cov, y, h, r, "standard")
 
 
 def scalar_update(
     x: np.ndarray, cov: np.ndarray, y: np.ndarray, h: np.ndarray, r: float, form: RegressionForm = "joseph"
 ) -> ScalarUpdate:
-    """One update in the chosen form; ``"joseph"`` and ``"standard"`` go through :func:`kalman.update`.
+    """One update in the chosen form, by the reference :func:`kalcal.filters.steps.update` with p = 1.
 
-    Shapes as in :func:`note_update`.
+    ``"note"`` is the standard form (:func:`note_update`). Shapes as in :func:`note_update`; where y or
+    h is not finite the prior is kept, with r and S NaN.
     """
-    if form == "note":
-        return note_update(x, cov, y, h, r)
     h_row = np.asarray(h, dtype=float)[..., None, :]  # (..., 1, d)
-    result = update(x, cov, np.asarray(y, dtype=float)[..., None], h_row, np.array([[float(r)]]), form)
+    result = update(
+        x, cov, np.asarray(y, dtype=float)[..., None], h_row, np.array([[float(r)]]), "standard" if form == "note" else form
+    )
     return ScalarUpdate(result.x, result.cov, result.residual[..., 0], result.innovation_cov[..., 0, 0], result.gain[..., 0])
 
 
@@ -139,28 +138,19 @@ def run_regression_filter(
     x = np.broadcast_to(np.asarray(x0, dtype=float), lead + (d,)).copy()
     cov = np.broadcast_to(np.asarray(cov0, dtype=float), lead + (d, d)).copy()
     used = np.isfinite(y) & np.all(np.isfinite(h), axis=-1)
-    all_used = bool(np.all(used))
     prior = np.empty(lead + (n_steps, d))
     posterior = np.empty(lead + (n_steps, d))
     covs = np.empty(lead + (n_steps, d, d))
     residual = np.empty(lead + (n_steps,))
     innovation = np.empty(lead + (n_steps,))
     for k in range(n_steps):
-        # (9), (12): x^- = x^+, P^- = P^+ + Q. Phi = I, so kalman.predict's Phi P Phi^T would only cost
-        # two stacked matrix products per step.
-        cov = cov + q
+        # (9), (12): x^- = x^+, P^- = P^+ + Q (Phi = I).
+        x, cov = predict(x, cov, None, q)
         prior[..., k, :] = x
-        if all_used:
-            step = scalar_update(x, cov, y[..., k], h[..., k, :], r, form)
-            x, cov = step.x, step.cov
-            residual[..., k], innovation[..., k] = step.residual, step.innovation_var
-        else:
-            ok = used[..., k]
-            step = scalar_update(x, cov, np.where(ok, y[..., k], 0.0), np.where(ok[..., None], h[..., k, :], 0.0), r, form)
-            x = np.where(ok[..., None], step.x, x)
-            cov = np.where(ok[..., None, None], step.cov, cov)
-            residual[..., k] = np.where(ok, step.residual, np.nan)
-            innovation[..., k] = np.where(ok, step.innovation_var, np.nan)
+        # (14)-(18); a missing y_k or h_k keeps the prior, with r_k and S_k NaN.
+        step = scalar_update(x, cov, y[..., k], h[..., k, :], r, form)
+        x, cov = step.x, step.cov
+        residual[..., k], innovation[..., k] = step.residual, step.innovation_var
         posterior[..., k, :] = x
         covs[..., k, :, :] = cov
     return RegressionRun(prior, posterior, covs, residual, innovation, used)

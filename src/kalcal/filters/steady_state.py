@@ -1,7 +1,7 @@
 """The steady state of a time-invariant filter: the discrete algebraic Riccati equation (DARE).
 
 Over one update interval the model is x_k = Phi x_{k-1} + w_k, w_k ~ N(0, Q), z_k = H x_k + v_k,
-v_k ~ N(0, V) (Phi = Phi_m and Q = Q_m of :func:`~kalcal.filters.kalman.interval_transition`). The prior
+v_k ~ N(0, V) (Phi = Phi_m and Q = Q_m of :func:`~kalcal.filters.gains.interval_transition`). The prior
 covariance M_k of the time-varying filter follows the Riccati recursion; its fixed point M_inf solves
 
     M = Phi M Phi^T - Phi M H^T (H M H^T + V)^{-1} H M Phi^T + Q
@@ -16,7 +16,9 @@ Phi (I - K_inf H) has every eigenvalue inside the unit circle. That holds when (
 (Phi, Q^{1/2}) stabilizable. A mode on or outside the unit circle that no process noise reaches (a constant
 bias: eigenvalue 1, Q zero on it) breaks the second condition: the variance of such a mode goes to zero
 like 1/k and never settles, and the DARE has no stabilizing solution (scipy may still return the
-non-stabilizing limit, or fail). :func:`steady_state` says which, and why.
+non-stabilizing limit, or fail). :func:`steady_state` says which, and why; :func:`model_steady_state_view`
+sets it beside the time-varying filter's P_k (:func:`convergence`), and :func:`no_steady_state` records why
+a filter that is not time-invariant has none.
 """
 
 from __future__ import annotations
@@ -26,7 +28,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from kalcal.filters.kalman import gain_and_covariance, interval_transition
+from kalcal.filters.gains import interval_transition
+from kalcal.filters.steps import gain_and_covariance
 from kalcal.linalg import psd_factor
 from kalcal.models.linear import LinearGaussianModel
 
@@ -171,7 +174,7 @@ def convergence(posterior_cov: np.ndarray, steady: np.ndarray, tolerance: float 
     Parameters
     ----------
     posterior_cov : ndarray, shape (K, d, d)
-        P_k of the time-varying filter (a :class:`~kalcal.filters.kalman.GainSchedule`'s posterior_cov).
+        P_k of the time-varying filter (a :class:`~kalcal.filters.gains.GainSchedule`'s posterior_cov).
     steady : ndarray, shape (d, d)
         P_inf.
     tolerance : float
@@ -198,3 +201,63 @@ def convergence(posterior_cov: np.ndarray, steady: np.ndarray, tolerance: float 
         update=_first_settled(gap < tolerance),
         state_update=tuple(_first_settled(state_gap[:, i] < tolerance) for i in range(steady.shape[0])),
     )
+
+
+@dataclass(frozen=True)
+class SteadyStateView:
+    """The steady state of a run's filter beside its time-varying P_k, or why it has none. d states, K updates."""
+
+    applies: bool  #: the filter is time-invariant
+    reason: str  #: why it does not apply, or why there is no stabilizing solution ("" otherwise)
+    state_names: tuple[str, ...]
+    state_units: tuple[str, ...]
+    times: np.ndarray | None = None  #: update times, s, (K,)
+    posterior_cov: np.ndarray | None = None  #: P_k of the time-varying filter, (K, d, d)
+    result: SteadyState | None = None
+    convergence: Convergence | None = None  #: only for a stabilizing solution
+
+    @property
+    def has_matrices(self) -> bool:
+        """scipy returned a solution (stabilizing or not) that can be shown."""
+        return self.result is not None and self.result.posterior_cov is not None
+
+    def converged_time(self) -> float | None:
+        """Time (s) of the update after which P_k stays within the tolerance of P_inf, if any."""
+        if self.convergence is None or self.convergence.update is None or self.times is None:
+            return None
+        return float(self.times[self.convergence.update])
+
+
+def model_steady_state_view(
+    model: LinearGaussianModel,
+    posterior_cov: np.ndarray,
+    times: np.ndarray,
+    state_names: tuple[str, ...],
+    state_units: tuple[str, ...],
+) -> SteadyStateView:
+    """The steady state of a time-invariant filter, with its time-varying P_k and how fast they meet.
+
+    Parameters
+    ----------
+    model : LinearGaussianModel
+        The filter's model (time-invariant: no per-interval transitions).
+    posterior_cov : ndarray, shape (K, d, d)
+        P_k of the time-varying filter (its :class:`~kalcal.filters.gains.GainSchedule`'s posterior_cov).
+    times : ndarray, shape (K,)
+        Update times, s.
+    state_names, state_units : tuple of str, length d
+
+    Returns
+    -------
+    SteadyStateView
+        ``applies`` True; ``convergence`` only where the DARE has a stabilizing solution.
+    """
+    names, units = tuple(state_names), tuple(state_units)
+    result = steady_state(model, names)
+    progress = convergence(posterior_cov, result.posterior_cov) if result.exists else None
+    return SteadyStateView(True, result.reason, names, units, np.asarray(times), posterior_cov, result, progress)
+
+
+def no_steady_state(reason: str, state_names: tuple[str, ...], state_units: tuple[str, ...]) -> SteadyStateView:
+    """The view of a filter that is not time-invariant: ``applies`` False and ``reason`` why."""
+    return SteadyStateView(False, reason, tuple(state_names), tuple(state_units))

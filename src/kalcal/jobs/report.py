@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from kalcal.errors import ConfigError, DataError
-from kalcal.filters.kalman import check_form
+from kalcal.filters.steps import check_form
 from kalcal.io.outputs import require_complete, run_outputs
 from kalcal.io.results import SCHEMA_VERSION
 from kalcal.io.statistics import read_statistics

@@ -13,7 +13,7 @@ import xarray as xr
 
 from kalcal import __version__
 from kalcal.errors import ConfigError
-from kalcal.filters.kalman import check_form
+from kalcal.filters.steps import check_form
 from kalcal.io.outputs import writes_outputs
 from kalcal.io.results import write_json
 from kalcal.io.statistics import statistics_dataset, write_statistics
@@ -164,7 +164,7 @@ def verify(
     is refused (the scenario's default is skipped when the run is already that long).
     ``client`` runs the blocks on a Dask cluster, ``batch_size`` realizations per task (rounded up to
     whole blocks); ``checkpoint`` resumes from and saves to a file. None of them changes the numbers.
-    ``form`` is the filter's update form (joseph, standard or sqrt; see :mod:`kalcal.filters.kalman`).
+    ``form`` is the filter's update form (joseph, standard or sqrt; see :mod:`kalcal.filters.steps`).
     ``progress(stage, done, total)`` hears of every stage: ``"monte carlo"`` and ``"long run"`` in
     realizations, ``"statistics"`` in files written (see :mod:`kalcal.jobs.progress`).
     ``report`` also draws ``out/figures/`` and ``out/report.html`` (showing realization ``realization``).

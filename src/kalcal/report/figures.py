@@ -14,11 +14,11 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
+from kalcal.filters.steady_state import SteadyStateView
 from kalcal.plots import consistency, ensemble
 from kalcal.plots import realization as single
 from kalcal.plots.realization import RealizationData
 from kalcal.plots.steady_state import plot_steady_state
-from kalcal.report.steady_state import SteadyStateView
 
 #: the scenario of the source report, whose figure numbers the page quotes
 REPORT_SCENARIO = "accel-gps"

@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
+from kalcal.filters.steady_state import SteadyStateView
 from kalcal.report.figures import GROUPS, FigureEntry, SkippedFigure
-from kalcal.report.steady_state import SteadyStateView
 from kalcal.verify.checks import verdict_false_alarm_bound
 from kalcal.verify.text import (
     CHECK_PVALUE_FIELD,

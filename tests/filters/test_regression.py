@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from kalcal.errors import ConfigError
-from kalcal.filters.kalman import update
+from kalcal.filters.steps import update
 from kalcal.filters.regression import note_update, run_regression_filter, scalar_update
 from kalcal.filters.scale_bias import filter_scale_bias, regressors
 from kalcal.models.registry import build_scenario
@@ -147,3 +147,23 @@ def test_bad_form_and_shapes_are_refused():
         run_regression_filter(y, h, x0, cov0, r, np.zeros((2, 2)), "square-root")  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="h: expected shape"):
         run_regression_filter(y, h[:, :4], x0, cov0, r, np.zeros((2, 2)))
+
+
+@pytest.mark.parametrize("form", ["joseph", "standard", "note"])
+def test_scalar_update_matches_filterpy(form):
+    """A scalar measurement is the reference update with p = 1 (its gain a division): FilterPy agrees."""
+    from filterpy.kalman import KalmanFilter
+
+    rng = np.random.default_rng(9)
+    a = rng.standard_normal((4, 2, 2))
+    cov = a @ np.swapaxes(a, 1, 2) + np.eye(2)
+    x, h, y = rng.standard_normal((4, 2)), rng.standard_normal((4, 2)), rng.standard_normal(4)
+    step = scalar_update(x, cov, y, h, 0.3, form)
+    for i in range(4):
+        kf = KalmanFilter(dim_x=2, dim_z=1)
+        kf.x, kf.P, kf.H, kf.R = x[i].reshape(2, 1).copy(), cov[i].copy(), h[i][None, :].copy(), np.array([[0.3]])
+        kf.update(np.array([[y[i]]]))
+        np.testing.assert_allclose(step.x[i], kf.x[:, 0], rtol=1e-12, atol=1e-14)
+        np.testing.assert_allclose(step.cov[i], kf.P, rtol=1e-11, atol=1e-14)
+        np.testing.assert_allclose(step.innovation_var[i], kf.S[0, 0], rtol=1e-14)
+        np.testing.assert_allclose(step.gain[i], kf.K[:, 0], rtol=1e-12, atol=1e-14)

@@ -1,29 +1,21 @@
-"""Kalman steps and the covariance pass against independent oracles.
+"""The gain schedule (interval matrices, covariance pass, run with gains) against independent oracles.
 
-Oracles: a plain per-sample Riccati recursion written here, FilterPy's ``KalmanFilter`` on the same
-measurements, Python loops over single realizations, and the degenerate filter with H = 0.
+Oracles: a plain per-sample Riccati recursion written here, the reference steps run one update at a
+time, and the degenerate filter with H = 0.
 """
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from filterpy.kalman import KalmanFilter
 
-from kalcal.errors import ConfigError
-from kalcal.filters.kalman import (
-    covariance_pass,
-    gain_and_covariance,
-    interval_transition,
-    predict,
-    run_with_gains,
-    update,
-)
+from kalcal.filters.gains import covariance_pass, interval_transition, run_with_gains
+from kalcal.filters.steps import predict, update
 from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.models.linear import LinearGaussianModel
 from kalcal.models.registry import build_scenario
-from kalcal.simulate.sampled import sample_accel_gps_errors
 from tests._helpers import assert_close, cov_atol
+from tests.filters._models import blind_model
 
 
 def _reference_riccati(model: LinearGaussianModel, n_updates: int):
@@ -116,53 +108,6 @@ def test_joseph_and_standard_forms_agree_on_well_conditioned_problem():
     np.testing.assert_allclose(standard.gain, joseph.gain, rtol=1e-9, atol=0)
 
 
-def test_unknown_update_form_is_config_error():
-    with pytest.raises(ConfigError, match="form"):
-        gain_and_covariance(np.eye(2), np.eye(2), np.eye(2), form="sqrt")  # type: ignore[arg-type]
-
-
-# --------------------------------------------------------------------------------------------------
-# the filter against FilterPy
-
-
-def test_filter_matches_filterpy_on_accel_gps_data(scenario):
-    model = scenario.filter_model()
-    _, measurements = sample_accel_gps_errors(scenario, np.random.default_rng(2024), 2)
-    z_all = measurements[1]  # one realization, (K, 2)
-    n_updates, m = z_all.shape[0], model.steps_per_update
-    q = model.gamma @ model.w @ model.gamma.T
-
-    kf = KalmanFilter(dim_x=3, dim_z=2)
-    kf.F, kf.Q, kf.H, kf.R = model.phi.copy(), q.copy(), model.h.copy(), model.v.copy()
-    kf.x = model.x0.reshape(3, 1).copy()
-    kf.P = model.m0.copy()
-
-    x, cov = model.x0, model.m0
-    ours_x, ours_p, ref_x, ref_p = [], [], [], []
-    for k in range(n_updates):
-        for _ in range(m):
-            kf.predict()
-            x, cov = predict(x, cov, model.phi, q)
-        kf.update(z_all[k])
-        result = update(x, cov, z_all[k], model.h, model.v)
-        x, cov = result.x, result.cov
-        ours_x.append(x)
-        ours_p.append(cov)
-        ref_x.append(kf.x[:, 0].copy())
-        ref_p.append(kf.P.copy())
-    ours_x, ours_p, ref_x, ref_p = map(np.array, (ours_x, ours_p, ref_x, ref_p))
-    assert_close(ours_p, ref_p, atol=cov_atol(ref_p, 1e-10), what="P vs FilterPy")
-    # States: compare in units of the filter's own standard deviation (the bias is ~1e-3 m/s^2).
-    sigma = np.sqrt(np.diagonal(ref_p, axis1=1, axis2=2))
-    assert_close(ours_x, ref_x, rtol=1e-10, atol=1e-10 * sigma, what="x vs FilterPy")
-
-    # The interval-rate pass gives the same covariances and the same estimates.
-    schedule = covariance_pass(model, n_updates)
-    assert_close(schedule.posterior_cov, ref_p, atol=cov_atol(ref_p, 1e-10), what="pass P vs FilterPy")
-    run = run_with_gains(schedule, model.h, z_all[None], model.x0)
-    assert_close(run.posterior[0], ref_x, rtol=1e-10, atol=1e-10 * sigma, what="run_with_gains vs FilterPy")
-
-
 # --------------------------------------------------------------------------------------------------
 # run_with_gains
 
@@ -199,89 +144,11 @@ def test_run_with_gains_shared_prior_mean_broadcasts():
 
 
 # --------------------------------------------------------------------------------------------------
-# batches equal loops over single realizations
-
-
-def test_predict_batch_equals_loop():
-    rng = np.random.default_rng(7)
-    n, d = 5, 3
-    x = rng.standard_normal((n, d))
-    a = rng.standard_normal((n, d, d))
-    cov = a @ np.swapaxes(a, 1, 2)
-    phi = rng.standard_normal((d, d))
-    q = np.eye(d) * 0.3
-    xb, mb = predict(x, cov, phi, q)
-    for i in range(n):
-        xi, mi = predict(x[i], cov[i], phi, q)
-        np.testing.assert_allclose(xb[i], xi, rtol=1e-14, atol=1e-14)
-        np.testing.assert_allclose(mb[i], mi, rtol=1e-14, atol=1e-14)
-        np.testing.assert_allclose(mi, phi @ cov[i] @ phi.T + q, rtol=1e-13)
-    # Per-realization transitions (n, d, d) too.
-    phis = rng.standard_normal((n, d, d))
-    xb, mb = predict(x, cov, phis, q)
-    for i in range(n):
-        xi, mi = predict(x[i], cov[i], phis[i], q)
-        np.testing.assert_allclose(xb[i], xi, rtol=1e-14, atol=1e-14)
-        np.testing.assert_allclose(mb[i], mi, rtol=1e-14, atol=1e-14)
-
-
-@pytest.mark.parametrize("per_realization_h", [False, True])
-@pytest.mark.parametrize("form", ["joseph", "standard"])
-def test_update_batch_equals_loop(per_realization_h, form):
-    rng = np.random.default_rng(8)
-    n, d, p = 6, 3, 2
-    x = rng.standard_normal((n, d))
-    a = rng.standard_normal((n, d, d))
-    cov = a @ np.swapaxes(a, 1, 2) + np.eye(d)
-    z = rng.standard_normal((n, p))
-    h = rng.standard_normal((n, p, d)) if per_realization_h else rng.standard_normal((p, d))
-    v = np.diag([0.5, 2.0])
-    batch = update(x, cov, z, h, v, form)
-    assert batch.gain.shape == (n, d, p)
-    for i in range(n):
-        hi = h[i] if per_realization_h else h
-        single = update(x[i], cov[i], z[i], hi, v, form)
-        for got, want in zip(batch, single):
-            np.testing.assert_allclose(got[i], want, rtol=1e-12, atol=1e-12)
-        # And the textbook formulas, written out.
-        s = hi @ cov[i] @ hi.T + v
-        gain = cov[i] @ hi.T @ np.linalg.inv(s)
-        np.testing.assert_allclose(single.gain, gain, rtol=1e-10)
-        np.testing.assert_allclose(single.x, x[i] + gain @ (z[i] - hi @ x[i]), rtol=1e-10)
-        np.testing.assert_allclose(single.cov, (np.eye(d) - gain @ hi) @ cov[i], rtol=1e-9, atol=1e-12)
-
-
-# --------------------------------------------------------------------------------------------------
 # degenerate oracle: H = 0 only propagates
 
 
-def _blind_model() -> LinearGaussianModel:
-    return LinearGaussianModel(
-        phi=[[1.0, 0.5], [0.0, 1.0]],
-        gamma=[[0.125], [0.5]],
-        h=np.zeros((1, 2)),
-        w=[[0.2]],
-        v=[[1.0]],
-        x0=[1.0, -2.0],
-        m0=[[2.0, 0.3], [0.3, 1.0]],
-        steps_per_update=4,
-        sample_period=0.5,
-    )
-
-
-def test_update_with_zero_h_changes_nothing():
-    model = _blind_model()
-    x = np.array([1.5, -0.25])
-    result = update(x, model.m0, np.array([123.0]), model.h, model.v)
-    np.testing.assert_array_equal(result.gain, np.zeros((2, 1)))
-    np.testing.assert_array_equal(result.x, x)
-    np.testing.assert_allclose(result.cov, model.m0, rtol=1e-15)
-    np.testing.assert_array_equal(result.residual, [123.0])
-    np.testing.assert_allclose(result.innovation_cov, model.v, rtol=1e-15)
-
-
 def test_covariance_pass_with_zero_h_only_propagates():
-    model = _blind_model()
+    model = blind_model()
     schedule = covariance_pass(model, 6)
     np.testing.assert_array_equal(schedule.gain, 0.0)
     np.testing.assert_allclose(schedule.posterior_cov, schedule.prior_cov, rtol=1e-15)
