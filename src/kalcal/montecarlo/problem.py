@@ -55,6 +55,12 @@ class Problem(Protocol):
         """E[e_k] implied by the truth's means and deterministic model error, (K, d)."""
 
 
+def check_engine(problem: Problem, engine: str) -> None:
+    """Raise ValueError, naming the problem's engines, unless ``engine`` is one of ``problem.engines``."""
+    if engine not in problem.engines:
+        raise ValueError(f"engine {engine!r} is not available for {problem.info.scenario} (have {', '.join(problem.engines)})")
+
+
 def _inverse_spd(cov: np.ndarray) -> np.ndarray:
     """W^T W for the Cholesky whitener W: the inverse of each symmetric positive definite matrix."""
     w = whitener(cov)
@@ -111,11 +117,8 @@ class FixedGainProblem:
 
     def sample(self, rng: np.random.Generator, n: int, engine: str) -> tuple[np.ndarray, np.ndarray]:
         """States (n, K, d) and measurements (n, K, p) from the chosen engine."""
-        if engine == "exact":
-            return sample_exact(self.truth, rng, n)
-        if engine == "sampled" and self.sampled is not None:
-            return self.sampled(rng, n)
-        raise ValueError(f"engine {engine!r} is not available for {self.info.scenario} (have {', '.join(self.engines)})")
+        check_engine(self, engine)
+        return sample_exact(self.truth, rng, n) if engine == "exact" else self.sampled(rng, n)
 
     def filter(self, measurements: np.ndarray):
         """The filter's run over measurements (n, K, p)."""

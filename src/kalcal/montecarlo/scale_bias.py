@@ -21,7 +21,7 @@ import numpy as np
 from kalcal.filters.scale_bias import filter_scale_bias, regressors
 from kalcal.models.scale_bias import MEASUREMENT_NAMES, STATE_NAMES, ScaleBiasScenario
 from kalcal.montecarlo.accumulators import BlockResult, MomentSums, SumBuffers
-from kalcal.montecarlo.problem import ProblemInfo
+from kalcal.montecarlo.problem import ProblemInfo, check_engine
 from kalcal.montecarlo.regression_kernels import regression_block_moments
 from kalcal.simulate.scale_bias import normals_per_realization, sample_scale_bias
 
@@ -149,8 +149,7 @@ class ScaleBiasProblem:
 
     def run_block(self, rng: np.random.Generator, n: int, engine: str) -> BlockResult:
         """Simulate n realizations and run the filter on each, with its own h_k, P_k and S_k."""
-        if engine not in self.engines:
-            raise ValueError(f"engine {engine!r} is not available for {self.info.scenario} (have {', '.join(self.engines)})")
+        check_engine(self, engine)
         samples = sample_scale_bias(self.scenario, rng, n)
         run = filter_scale_bias(self.scenario, samples.reference, samples.sensor, self.form)
         error = samples.theta - run.posterior
@@ -171,8 +170,7 @@ class ScaleBiasProblem:
 
         ``MomentSums.from_block(self.run_block(rng, n, engine))`` is the numpy oracle of the tests.
         """
-        if engine not in self.engines:
-            raise ValueError(f"engine {engine!r} is not available for {self.info.scenario} (have {', '.join(self.engines)})")
+        check_engine(self, engine)
         samples = sample_scale_bias(self.scenario, rng, n)
         prior = self.scenario.filter_prior()
         sums = SumBuffers.zeros(samples.time.size, 2, 1, n, self.residual_pairs)
