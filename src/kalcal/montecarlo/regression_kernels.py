@@ -2,14 +2,15 @@
 
 numpy spends a block of the scale/bias Monte Carlo on stacked 2 x 2 products and 1 x 1 solves, a few
 floating-point operations each behind a dispatch: about 0.2 ms per step for 4096 realizations. This
-kernel runs the same recursion as :func:`kalcal.filters.regression.run_regression_filter` update by
-update, each realization's state, covariance and gain in small scratch arrays, and hands each update's
-errors, estimates, innovations, NEES, NIS and P of all realizations to
-:func:`kalcal.montecarlo.sum_kernels.accumulate`. The numpy path stays as the oracle of the tests
-(``ScaleBiasProblem.run_block`` + ``MomentSums.from_block``); both agree to rounding.
+kernel runs the same recursion as :func:`kalcal.filters.regression.run_regression_filter` for a tile of
+realizations at a time, update by update, each line of it one pass over the tile (structure of arrays:
+realizations innermost, so that the passes vectorize), and hands each update's errors, estimates,
+innovations, NEES, NIS and P of the tile to :func:`kalcal.montecarlo.sum_kernels.accumulate`. The numpy
+path stays as the oracle of the tests (``ScaleBiasProblem.run_block`` + ``MomentSums.from_block``); both
+agree to rounding.
 
-The filter step itself is compiled without fast-math (a realization's numbers are those of the numpy
-recursion, operation for operation); only the sums over realizations are reassociated.
+The filter step itself is compiled without fast-math (each realization's numbers are the same on every
+machine and in any tile); only the sums over realizations are reassociated.
 """
 
 from __future__ import annotations
@@ -26,94 +27,124 @@ TILE = 256
 
 @numba.njit(nogil=True, cache=True)
 def _filter_tile(y, h, truth, x0, cov0, r, q, joseph, sums, first, m):
-    """Realizations first ... first + m - 1 of :func:`regression_block_moments`, every update."""
+    """Realizations first ... first + m - 1 of :func:`regression_block_moments`, every update.
+
+    Each line of the recursion is a pass over the tile's m realizations (the innermost, contiguous
+    axis), so that it vectorizes.
+    """
     n_steps = y.shape[1]
     d = x0.shape[0]
-    # one update's quantities of the tile's realizations, structure of arrays (realizations innermost)
-    x = np.empty((d, m))
+    x = np.empty((d, m))  # x^+, P^+ of each realization, carried from update to update
     cov = np.empty((d, d, m))
+    for u in range(d):
+        x[u, :] = x0[u]
+        for v in range(d):
+            cov[u, v, :] = cov0[u, v]
+    hk = np.empty((d, m))  # this update's regressors and true states, gathered from the (n, K) layout
     err = np.empty((d, m))
     residual = np.empty((1, m))
+    res = residual[0]
+    s = np.empty(m)
     nees = np.empty(m)
     nis = np.empty(m)
-    for j in range(m):
-        for u in range(d):
-            x[u, j] = x0[u]
-            for v in range(d):
-                cov[u, v, j] = cov0[u, v]
-    ph = np.empty(d)
-    gain = np.empty(d)
-    a = np.empty((d, d))
-    ap = np.empty((d, d))
-    chol = np.empty((d, d))
-    white = np.empty(d)
+    acc = np.empty(m)
+    ph = np.empty((d, m))
+    gain = np.empty((d, m))
+    a = np.empty((d, d, m))
+    ap = np.empty((d, d, m))
+    chol = np.empty((d, d, m))
+    white = np.empty((d, m))
     for k in range(n_steps):
         for j in range(m):
             i = first + j
+            res[j] = y[i, k]
             for u in range(d):
-                for v in range(d):
+                hk[u, j] = h[i, k, u]
+                err[u, j] = truth[i, k, u]
+        for u in range(d):  # P^- = P^+ + Q
+            for v in range(d):
+                for j in range(m):
                     cov[u, v, j] += q[u, v]
-            s = r
-            res = y[i, k]
-            for u in range(d):
-                acc = 0.0
+        for u in range(d):  # P^- h^T
+            for j in range(m):
+                acc[j] = 0.0
+            for v in range(d):
+                for j in range(m):
+                    acc[j] += cov[u, v, j] * hk[v, j]
+            ph[u, :] = acc
+        for j in range(m):
+            s[j] = r
+        for u in range(d):  # S = h P^- h^T + R, r = y - h x^-
+            for j in range(m):
+                s[j] += hk[u, j] * ph[u, j]
+                res[j] -= hk[u, j] * x[u, j]
+        for u in range(d):  # K = P^- h^T / S, x^+ = x^- + K r
+            for j in range(m):
+                gain[u, j] = ph[u, j] / s[j]
+                x[u, j] += gain[u, j] * res[j]
+        if joseph:
+            for u in range(d):  # A = I - K h
                 for v in range(d):
-                    acc += cov[u, v, j] * h[i, k, v]
-                ph[u] = acc
-            for u in range(d):
-                s += h[i, k, u] * ph[u]
-                res -= h[i, k, u] * x[u, j]
-            for u in range(d):
-                gain[u] = ph[u] / s
-                x[u, j] += gain[u] * res
-            if joseph:
-                for u in range(d):
-                    for v in range(d):
-                        a[u, v] = (1.0 if u == v else 0.0) - gain[u] * h[i, k, v]
-                for u in range(d):
-                    for v in range(d):
-                        acc = 0.0
-                        for w in range(d):
-                            acc += a[u, w] * cov[w, v, j]
-                        ap[u, v] = acc
-                for u in range(d):
-                    for v in range(d):
-                        acc = 0.0
-                        for w in range(d):
-                            acc += ap[u, w] * a[v, w]
-                        cov[u, v, j] = acc + r * gain[u] * gain[v]
-            else:
-                for u in range(d):
-                    for v in range(d):
-                        cov[u, v, j] -= gain[u] * ph[v]
-            for u in range(d):
-                for v in range(u + 1, d):
+                    eye = 1.0 if u == v else 0.0
+                    for j in range(m):
+                        a[u, v, j] = eye - gain[u, j] * hk[v, j]
+            for u in range(d):  # A P^-
+                for v in range(d):
+                    for j in range(m):
+                        acc[j] = 0.0
+                    for w in range(d):
+                        for j in range(m):
+                            acc[j] += a[u, w, j] * cov[w, v, j]
+                    ap[u, v, :] = acc
+            for u in range(d):  # P^+ = A P^- A^T + R K K^T
+                for v in range(d):
+                    for j in range(m):
+                        acc[j] = 0.0
+                    for w in range(d):
+                        for j in range(m):
+                            acc[j] += ap[u, w, j] * a[v, w, j]
+                    for j in range(m):
+                        cov[u, v, j] = acc[j] + r * gain[u, j] * gain[v, j]
+        else:
+            for u in range(d):  # P^+ = P^- - K (h P^-)
+                for v in range(d):
+                    for j in range(m):
+                        cov[u, v, j] -= gain[u, j] * ph[v, j]
+        for u in range(d):
+            for v in range(u + 1, d):
+                for j in range(m):
                     mid = 0.5 * (cov[u, v, j] + cov[v, u, j])
                     cov[u, v, j] = mid
                     cov[v, u, j] = mid
-            # e^T P^{-1} e through the Cholesky factor: |L^{-1} e|^2
-            for u in range(d):
-                err[u, j] = truth[i, k, u] - x[u, j]
-            for u in range(d):
-                acc = cov[u, u, j]
+        for u in range(d):  # e = x - x^+
+            for j in range(m):
+                err[u, j] -= x[u, j]
+        # e^T P^{-1} e through the Cholesky factor: |L^{-1} e|^2
+        for u in range(d):
+            acc[:] = cov[u, u]
+            for w in range(u):
+                for j in range(m):
+                    acc[j] -= chol[u, w, j] * chol[u, w, j]
+            for j in range(m):
+                chol[u, u, j] = np.sqrt(acc[j])
+            for v in range(u + 1, d):
+                acc[:] = cov[v, u]
                 for w in range(u):
-                    acc -= chol[u, w] * chol[u, w]
-                chol[u, u] = np.sqrt(acc)
-                for v in range(u + 1, d):
-                    acc = cov[v, u, j]
-                    for w in range(u):
-                        acc -= chol[v, w] * chol[u, w]
-                    chol[v, u] = acc / chol[u, u]
-            squares = 0.0
-            for u in range(d):
-                acc = err[u, j]
-                for w in range(u):
-                    acc -= chol[u, w] * white[w]
-                white[u] = acc / chol[u, u]
-                squares += white[u] * white[u]
-            nees[j] = squares
-            nis[j] = res * res / s
-            residual[0, j] = res
+                    for j in range(m):
+                        acc[j] -= chol[v, w, j] * chol[u, w, j]
+                for j in range(m):
+                    chol[v, u, j] = acc[j] / chol[u, u, j]
+        nees[:] = 0.0
+        for u in range(d):
+            acc[:] = err[u]
+            for w in range(u):
+                for j in range(m):
+                    acc[j] -= chol[u, w, j] * white[w, j]
+            for j in range(m):
+                white[u, j] = acc[j] / chol[u, u, j]
+                nees[j] += white[u, j] * white[u, j]
+        for j in range(m):
+            nis[j] = res[j] * res[j] / s[j]
         accumulate(k, first, err, x, residual, nees, nis, cov, sums)
 
 
