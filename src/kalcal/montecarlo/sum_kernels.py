@@ -1,10 +1,10 @@
 """The compiled accumulation of a block's moment sums and the small compiled helpers the block kernels share.
 
 Both block kernels (:mod:`kalcal.montecarlo.kernels` for fixed gains, :mod:`kalcal.montecarlo.regression_kernels`
-for data-dependent ones) keep one update's quantities for all n realizations as structure of arrays (a
-state is (d, n), realizations innermost and contiguous) and hand them to :func:`accumulate`, the compiled
-mirror of :meth:`kalcal.montecarlo.accumulators.MomentSums.from_block`: the same sums, into the fields of
-a :class:`~kalcal.montecarlo.accumulators.SumBuffers`.
+for data-dependent ones) keep one update's quantities of n realizations (the block, or a tile of it) as
+structure of arrays (a state is (d, n), realizations innermost and contiguous) and hand them to
+:func:`accumulate`, the compiled mirror of :meth:`kalcal.montecarlo.accumulators.MomentSums.from_block`:
+the same sums, into the fields of a :class:`~kalcal.montecarlo.accumulators.SumBuffers`.
 
 The reductions over realizations are compiled with reassociation allowed (so that they vectorize): a
 given block on a given machine always gives the same bits, but a different CPU may round differently.
