@@ -7,8 +7,10 @@ import pytest
 
 from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.models.config import apply_settings
+from kalcal.models.registry import build_scenario
 from kalcal.montecarlo.accumulators import BlockResult, MomentSums, ensemble_statistics
 from kalcal.montecarlo.engine import block_generator, block_sizes, realization, run_monte_carlo
+from kalcal.montecarlo.scale_bias import ScaleBiasProblem
 from kalcal.montecarlo.scenarios import accel_gps_problem
 
 SHORT = {"scenario.duration": 4.0}
@@ -181,3 +183,24 @@ def test_blas_limit_is_set_once_per_run_held_throughout_and_restored(monkeypatch
         merged = merged.merge(part)
     for name, value in _fields(run.sums).items():
         assert np.array_equal(value, _fields(merged)[name]), name
+
+
+def test_an_unknown_engine_is_refused_in_the_same_words_everywhere():
+    fixed = _problem()
+    scale_bias = ScaleBiasProblem(build_scenario("scale-bias", assignments=["scenario.duration=2"]))
+    rng = np.random.default_rng(0)
+    message = r"engine 'sampled' is not available for scale-bias \(have exact\)"
+    for call in (
+        lambda: run_monte_carlo(scale_bias, 10, seed=0, engine="sampled"),
+        lambda: scale_bias.run_block(rng, 10, "sampled"),
+        lambda: scale_bias.block_sums(rng, 10, "sampled"),
+    ):
+        with pytest.raises(ValueError, match=message):
+            call()
+    for call in (
+        lambda: run_monte_carlo(fixed, 10, seed=0, engine="bogus"),
+        lambda: fixed.sample(rng, 10, "bogus"),
+        lambda: fixed.block_sums(rng, 10, "bogus"),
+    ):
+        with pytest.raises(ValueError, match=r"engine 'bogus' is not available for accel-gps \(have exact, sampled\)"):
+            call()

@@ -2,6 +2,8 @@
 
 Each block of realizations becomes a :class:`MomentSums`; sums merge by addition, so memory is flat in
 the number of realizations and any grouping of blocks, merged in block order, gives the same bits.
+:meth:`MomentSums.from_block` is the numpy definition of a block's sums; the compiled kernels add into
+the same fields, allocated once by :meth:`SumBuffers.zeros` (:mod:`kalcal.montecarlo.sum_kernels`).
 Second moments are raw sums; central moments are derived at the end in float64 (the errors' means are
 small against their spread, so the subtraction loses no meaningful precision).
 """
@@ -13,7 +15,6 @@ from typing import NamedTuple
 
 import numpy as np
 from scipy.linalg.blas import dsyrk
-
 
 
 class BlockResult(NamedTuple):
@@ -48,6 +49,45 @@ class ResidualProducts:
             return np.zeros((width, width))
         # The C-ordered (Kp, n) array is an F-ordered (n, Kp) one: syrk with trans=1 forms A^T A without a copy.
         return np.triu(dsyrk(1.0, stacked.T, trans=1, lower=0))
+
+
+class SumBuffers(NamedTuple):
+    """The arrays a compiled kernel adds one block into: the fields of :class:`MomentSums` it fills.
+
+    A kernel sees them as one argument with named fields (numba types a NamedTuple); K updates, d
+    states, p measurements, n realizations.
+    """
+
+    error: np.ndarray  #: sum e_k, (K, d)
+    error_outer: np.ndarray  #: sum e_k e_k^T, (K, d, d)
+    estimate: np.ndarray  #: sum xhat_k, (K, d)
+    estimate_outer: np.ndarray  #: sum xhat_k xhat_k^T, (K, d, d)
+    error_estimate: np.ndarray  #: sum e_k xhat_k^T, (K, d, d)
+    nees: np.ndarray  #: sum e^T P^{-1} e, (K,)
+    nis: np.ndarray  #: sum r^T S^{-1} r, (K,)
+    residual: np.ndarray  #: sum r_k, (K, p)
+    residual_own: np.ndarray  #: sum r_k r_k^T, (K, p, p)
+    filter_cov: np.ndarray  #: sum of the filter's P_k, (K, d, d)
+    #: each realization's stacked innovations [r_0; ...; r_{K-1}] as a column, (K p, n), for the pair
+    #: sums after the kernel; (0, n) when the pairs are not kept
+    residuals: np.ndarray
+
+    @classmethod
+    def zeros(cls, n_updates: int, d: int, p: int, n: int, residual_pairs: bool) -> SumBuffers:
+        """Zero sums for K = ``n_updates``, and room for the innovations of n realizations if the pairs are kept."""
+        return cls(
+            error=np.zeros((n_updates, d)),
+            error_outer=np.zeros((n_updates, d, d)),
+            estimate=np.zeros((n_updates, d)),
+            estimate_outer=np.zeros((n_updates, d, d)),
+            error_estimate=np.zeros((n_updates, d, d)),
+            nees=np.zeros(n_updates),
+            nis=np.zeros(n_updates),
+            residual=np.zeros((n_updates, p)),
+            residual_own=np.zeros((n_updates, p, p)),
+            filter_cov=np.zeros((n_updates, d, d)),
+            residuals=np.empty((n_updates * p if residual_pairs else 0, n)),
+        )
 
 
 @dataclass
@@ -97,6 +137,14 @@ class MomentSums:
             normalized_residual=None if block.normalized_residual is None else block.normalized_residual.sum(axis=0),
         )
 
+    @classmethod
+    def from_buffers(cls, count: int, buffers: SumBuffers, normalized_residual: np.ndarray | None = None) -> MomentSums:
+        """The sums of ``count`` realizations that a kernel added into ``buffers`` (the pairs by syrk)."""
+        sums = buffers._asdict()
+        residuals = sums.pop("residuals")
+        outer = ResidualProducts.upper(residuals) if residuals.shape[0] else None
+        return cls(count=count, **sums, residual_outer=outer, normalized_residual=normalized_residual)
+
     def merge(self, other: MomentSums) -> MomentSums:
         """The sums of both ensembles (self first, then other: the order fixes the rounding)."""
         def add(a, b):
@@ -106,7 +154,6 @@ class MomentSums:
             count=self.count + other.count,
             **{f.name: add(getattr(self, f.name), getattr(other, f.name)) for f in fields(self) if f.name != "count"},
         )
-
 
 
 def residual_second_moment(sums: MomentSums) -> np.ndarray | None:

@@ -29,7 +29,7 @@ from kalcal.montecarlo.accumulators import MomentSums
 from kalcal.montecarlo.checkpoint import fingerprint
 from kalcal.montecarlo.checkpoint import load as load_checkpoint
 from kalcal.montecarlo.checkpoint import save as save_checkpoint
-from kalcal.montecarlo.problem import BlockResult, Problem
+from kalcal.montecarlo.problem import BlockResult, Problem, check_engine
 
 BLOCK_SIZE = 4096
 Progress = Callable[[int, int], None]
@@ -194,8 +194,7 @@ def run_monte_carlo(
         Whatever runs the blocks and however they are grouped, the sums are folded in block order, so
         a given seed and N give identical numbers.
     """
-    if engine not in problem.engines:
-        raise ValueError(f"engine {engine!r} is not available (have {', '.join(problem.engines)})")
+    check_engine(problem, engine)
     sizes = block_sizes(n, block_size)
     digest = fingerprint({"n": n, "seed": seed, "engine": engine, "block_size": block_size, **(checkpoint_key or {})})
     start = time.perf_counter()

@@ -1,15 +1,13 @@
-"""Fused loops of the Monte Carlo hot path, compiled with numba.
+"""The fixed-gain filter's block kernels: sample (or take) the truth, filter it and sum, in one compiled pass.
 
 numpy spends its time here on many passes over small arrays: one realization-step costs about seventy
 multiply-adds spread over some thirty array operations, each with its own temporary. These kernels make
 the same passes inside one compiled function, with the realizations as the innermost, contiguous axis
 (structure of arrays: a state is (d, n), a draw (q, n)), so that every inner loop vectorizes and nothing
-leaves the cache. ``benchmarks/bench_montecarlo.py`` measures the factor against the numpy reference
-path (``sample_exact`` + ``run_with_gains`` + ``MomentSums.from_block``), which stays as the tests'
-oracle: both consume the same draws and agree to rounding.
-
-The reductions over realizations are compiled with reassociation allowed (so that they vectorize):
-a given block on a given machine always gives the same bits, but a different CPU may round differently.
+leaves the cache; each update's sums go through :func:`kalcal.montecarlo.sum_kernels.accumulate`.
+``benchmarks/bench_montecarlo.py`` measures the factor against the numpy reference path
+(``sample_exact`` + ``run_with_gains`` + ``MomentSums.from_block``), which stays as the tests' oracle:
+both consume the same draws and agree to rounding.
 """
 
 from __future__ import annotations
@@ -17,74 +15,33 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-_FAST = {"reassoc", "contract"}
+from kalcal.montecarlo.sum_kernels import FAST, accumulate, affine
 
 
-@numba.njit(nogil=True, cache=True, fastmath=_FAST)
-def _affine(out, matrix, vectors, add):
-    """out[a, :] = (add ? out[a, :] : 0) + sum_b matrix[a, b] vectors[b, :]  for (d, n) arrays."""
-    rows, cols = matrix.shape
-    n = vectors.shape[1]
-    for a in range(rows):
-        if not add:
-            for i in range(n):
-                out[a, i] = 0.0
-        for b in range(cols):
-            coef = matrix[a, b]
-            if coef != 0.0:
-                for i in range(n):
-                    out[a, i] += coef * vectors[b, i]
-
-
-@numba.njit(nogil=True, cache=True, fastmath=_FAST)
-def _dot(u, v):
-    acc = 0.0
-    for i in range(u.shape[0]):
-        acc += u[i] * v[i]
-    return acc
-
-
-@numba.njit(nogil=True, cache=True, fastmath=_FAST)
-def _filter_and_accumulate(
-    k, truth, z, x, xbar, residual, phi, h, gains, sums_e, sums_ee, sums_x, sums_xx, sums_ex, sums_r, sums_rr, residuals
-):
+@numba.njit(nogil=True, cache=True, fastmath=FAST)
+def _filter_and_accumulate(k, truth, z, x, xbar, residual, phi, h, gains, sums):
     """One update of the fixed-gain filter for every realization, then the moment sums at update k.
 
-    truth (d, n): states; z (p, n): measurements; x (d, n): posterior, updated in place; residuals
-    (K p, n) receives the innovations, update-major (zero rows: do not keep them).
+    truth (d, n): states, overwritten with the errors; z (p, n): measurements; x (d, n): posterior,
+    updated in place; sums: the block's :class:`~kalcal.montecarlo.accumulators.SumBuffers` (its NEES,
+    NIS and P sums are left to the caller: every realization shares P_k and S_k).
     """
     d, n = x.shape
     p = z.shape[0]
-    _affine(xbar, phi, x, False)  # xbar = Phi x
+    affine(xbar, phi, x, False)  # xbar = Phi x
     for a in range(p):  # r = z - H xbar
         for i in range(n):
             residual[a, i] = z[a, i]
-    _affine(residual, -h, xbar, True)
+    affine(residual, -h, xbar, True)
     for a in range(d):  # x = xbar + K r
         for i in range(n):
             x[a, i] = xbar[a, i]
-    _affine(x, gains[k], residual, True)
+    affine(x, gains[k], residual, True)
     for a in range(d):  # truth becomes the error e = x_true - xhat
         for i in range(n):
             truth[a, i] -= x[a, i]
-    for a in range(d):
-        sums_e[k, a] += truth[a].sum()
-        sums_x[k, a] += x[a].sum()
-        for b in range(d):
-            sums_ex[k, a, b] += _dot(truth[a], x[b])
-            if b >= a:
-                sums_ee[k, a, b] += _dot(truth[a], truth[b])
-                sums_xx[k, a, b] += _dot(x[a], x[b])
-    for a in range(d):
-        for b in range(a):
-            sums_ee[k, a, b] = sums_ee[k, b, a]
-            sums_xx[k, a, b] = sums_xx[k, b, a]
-    for a in range(p):
-        sums_r[k, a] += residual[a].sum()
-        for b in range(p):
-            sums_rr[k, a, b] += _dot(residual[a], residual[b])
-        if residuals.shape[0]:
-            residuals[k * p + a, :] = residual[a, :]
+    shared = np.empty(0)
+    accumulate(k, 0, truth, x, residual, shared, shared, np.empty((0, 0, 0)), sums)
 
 
 @numba.njit(nogil=True, cache=True)
@@ -98,17 +55,18 @@ def _filter_buffers(x0, p, n):
     return x, np.empty((d, n)), np.empty((p, n))
 
 
-@numba.njit(nogil=True, cache=True, fastmath=_FAST)
+@numba.njit(nogil=True, cache=True, fastmath=FAST)
 def exact_block_moments(
     y0, u0, draws, transitions, noise, boundary_in, model_error, h_truth, measure,
-    phis, h, gains, x0, sums_e, sums_ee, sums_x, sums_xx, sums_ex, sums_r, sums_rr, residuals,
+    phis, h, gains, x0, sums,
 ):
     """Sample the exact update-rate truth (:mod:`kalcal.simulate.exact`) and filter it, in one pass.
 
     y0 (d, n) truth at sample 0; u0 (c, n) its opening boundary sample; draws (K, r + c + p, n);
     transitions (K, d, d) of the truth over each interval; noise (d, r + c) = [L | b_out]; boundary_in
     (d, c); model_error (K, d); h_truth (p, d); measure (p, p) = G. Filter: phis (K, d, d) over each
-    interval, h (p, d), gains (K, d, p), x0 (d,). Sums are added to; residuals (K p, n) receives every innovation (or (0, n): none kept).
+    interval, h (p, d), gains (K, d, p), x0 (d,). sums: the block's
+    :class:`~kalcal.montecarlo.accumulators.SumBuffers`, added to.
     """
     d, n = y0.shape
     n_updates = draws.shape[0]
@@ -123,26 +81,22 @@ def exact_block_moments(
     x, xbar, residual = _filter_buffers(x0, p, n)
     for k in range(n_updates):
         step = draws[k]
-        _affine(y_next, transitions[k], y, False)
-        _affine(y_next, noise, step[:rc], True)
+        affine(y_next, transitions[k], y, False)
+        affine(y_next, noise, step[:rc], True)
         if c:
-            _affine(y_next, boundary_in, u0 if k == 0 else draws[k - 1, r:rc], True)
+            affine(y_next, boundary_in, u0 if k == 0 else draws[k - 1, r:rc], True)
         y, y_next = y_next, y
         for a in range(d):
             shift = model_error[k, a]
             for i in range(n):
                 state[a, i] = y[a, i] + shift
-        _affine(z, h_truth, state, False)
-        _affine(z, measure, step[rc:], True)
-        _filter_and_accumulate(
-            k, state, z, x, xbar, residual, phis[k], h, gains, sums_e, sums_ee, sums_x, sums_xx, sums_ex, sums_r, sums_rr, residuals
-        )
+        affine(z, h_truth, state, False)
+        affine(z, measure, step[rc:], True)
+        _filter_and_accumulate(k, state, z, x, xbar, residual, phis[k], h, gains, sums)
 
 
-@numba.njit(nogil=True, cache=True, fastmath=_FAST)
-def filter_block_moments(
-    states, measurements, phis, h, gains, x0, sums_e, sums_ee, sums_x, sums_xx, sums_ex, sums_r, sums_rr, residuals
-):
+@numba.njit(nogil=True, cache=True, fastmath=FAST)
+def filter_block_moments(states, measurements, phis, h, gains, x0, sums):
     """Filter given truths and accumulate, for samplers other than the exact one.
 
     states (K, d, n) (overwritten with the errors), measurements (K, p, n); the rest as in
@@ -151,7 +105,4 @@ def filter_block_moments(
     n_updates, d, n = states.shape
     x, xbar, residual = _filter_buffers(x0, h.shape[0], n)
     for k in range(n_updates):
-        _filter_and_accumulate(
-            k, states[k], measurements[k], x, xbar, residual, phis[k], h, gains,
-            sums_e, sums_ee, sums_x, sums_xx, sums_ex, sums_r, sums_rr, residuals,
-        )
+        _filter_and_accumulate(k, states[k], measurements[k], x, xbar, residual, phis[k], h, gains, sums)

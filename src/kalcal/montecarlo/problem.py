@@ -18,7 +18,7 @@ from kalcal.filters.kalman import GainSchedule, UpdateForm, covariance_pass, run
 from kalcal.linalg import whitener
 from kalcal.models.linear import LinearGaussianModel
 from kalcal.montecarlo import kernels
-from kalcal.montecarlo.accumulators import BlockResult, MomentSums, ResidualProducts
+from kalcal.montecarlo.accumulators import BlockResult, MomentSums, SumBuffers
 from kalcal.simulate.exact import UpdateRateTruth, sample_exact
 
 Sampler = Callable[[np.random.Generator, int], tuple[np.ndarray, np.ndarray]]
@@ -53,6 +53,12 @@ class Problem(Protocol):
 
     def expected_mean_error(self) -> np.ndarray:
         """E[e_k] implied by the truth's means and deterministic model error, (K, d)."""
+
+
+def check_engine(problem: Problem, engine: str) -> None:
+    """Raise ValueError, naming the problem's engines, unless ``engine`` is one of ``problem.engines``."""
+    if engine not in problem.engines:
+        raise ValueError(f"engine {engine!r} is not available for {problem.info.scenario} (have {', '.join(problem.engines)})")
 
 
 def _inverse_spd(cov: np.ndarray) -> np.ndarray:
@@ -111,11 +117,8 @@ class FixedGainProblem:
 
     def sample(self, rng: np.random.Generator, n: int, engine: str) -> tuple[np.ndarray, np.ndarray]:
         """States (n, K, d) and measurements (n, K, p) from the chosen engine."""
-        if engine == "exact":
-            return sample_exact(self.truth, rng, n)
-        if engine == "sampled" and self.sampled is not None:
-            return self.sampled(rng, n)
-        raise ValueError(f"engine {engine!r} is not available for {self.info.scenario} (have {', '.join(self.engines)})")
+        check_engine(self, engine)
+        return sample_exact(self.truth, rng, n) if engine == "exact" else self.sampled(rng, n)
 
     def filter(self, measurements: np.ndarray):
         """The filter's run over measurements (n, K, p)."""
@@ -141,19 +144,9 @@ class FixedGainProblem:
     def block_sums(self, rng: np.random.Generator, n: int, engine: str) -> MomentSums:
         """The moment sums of n realizations through the compiled kernels (same draws as ``run_block``)."""
         n_updates, d, p = self.truth.n_updates, self.filter_model.state_dim, self.filter_model.measurement_dim
-        sums = {
-            "error": np.zeros((n_updates, d)),
-            "error_outer": np.zeros((n_updates, d, d)),
-            "estimate": np.zeros((n_updates, d)),
-            "estimate_outer": np.zeros((n_updates, d, d)),
-            "error_estimate": np.zeros((n_updates, d, d)),
-            "residual": np.zeros((n_updates, p)),
-            "residual_own": np.zeros((n_updates, p, p)),
-        }
-        residuals = np.empty((n_updates * p if self.residual_pairs else 0, n))
+        sums = SumBuffers.zeros(n_updates, d, p, n, self.residual_pairs)
         phis = np.ascontiguousarray(self.schedule.transitions)
         gains = (phis, self.filter_model.h, self.schedule.gain, self.filter_model.x0)
-        order = ("error", "error_outer", "estimate", "estimate_outer", "error_estimate", "residual", "residual_own")
         if engine == "exact":
             truth = self.truth
             c = int(truth.shares_boundary)
@@ -172,8 +165,7 @@ class FixedGainProblem:
                 truth.h,
                 truth.measurement_factor,
                 *gains,
-                *(sums[name] for name in order),
-                residuals,
+                sums,
             )
         else:
             states, measurements = self.sample(rng, n, engine)
@@ -181,19 +173,16 @@ class FixedGainProblem:
                 np.ascontiguousarray(states.transpose(1, 2, 0)),
                 np.ascontiguousarray(measurements.transpose(1, 2, 0)),
                 *gains,
-                *(sums[name] for name in order),
-                residuals,
+                sums,
             )
-        return MomentSums(
-            count=n,
-            **sums,
-            nees=np.einsum("kij,kij->k", self._state_inverse, sums["error_outer"]),
-            nis=np.einsum("kij,kij->k", self._innovation_inverse, sums["residual_own"]),
-            residual_outer=ResidualProducts.upper(residuals) if self.residual_pairs else None,
+        # Every realization shares P_k and S_k: sum_i e_i^T P^{-1} e_i = tr(P^{-1} sum_i e_i e_i^T), and
+        # the whitening is linear, so the sum of L^{-1} r is L^{-1} times the sum of r.
+        shared = sums._replace(
+            nees=np.einsum("kij,kij->k", self._state_inverse, sums.error_outer),
+            nis=np.einsum("kij,kij->k", self._innovation_inverse, sums.residual_own),
             filter_cov=n * self.schedule.posterior_cov,
-            # the whitening is linear, so the sum of L^{-1} r is L^{-1} times the sum of r
-            normalized_residual=np.einsum("kij,kj->ki", self._innovation_whitener, sums["residual"]),
         )
+        return MomentSums.from_buffers(n, shared, np.einsum("kij,kj->ki", self._innovation_whitener, sums.residual))
 
     def expected_mean_error(self) -> np.ndarray:
         """The filter's response to the truth's mean trajectory: E[x_k] - E[xhat_k], (K, d).

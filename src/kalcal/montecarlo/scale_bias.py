@@ -20,8 +20,8 @@ import numpy as np
 
 from kalcal.filters.scale_bias import filter_scale_bias, regressors
 from kalcal.models.scale_bias import MEASUREMENT_NAMES, STATE_NAMES, ScaleBiasScenario
-from kalcal.montecarlo.accumulators import BlockResult, MomentSums, ResidualProducts
-from kalcal.montecarlo.problem import ProblemInfo
+from kalcal.montecarlo.accumulators import BlockResult, MomentSums, SumBuffers
+from kalcal.montecarlo.problem import ProblemInfo, check_engine
 from kalcal.montecarlo.regression_kernels import regression_block_moments
 from kalcal.simulate.scale_bias import normals_per_realization, sample_scale_bias
 
@@ -149,8 +149,7 @@ class ScaleBiasProblem:
 
     def run_block(self, rng: np.random.Generator, n: int, engine: str) -> BlockResult:
         """Simulate n realizations and run the filter on each, with its own h_k, P_k and S_k."""
-        if engine not in self.engines:
-            raise ValueError(f"engine {engine!r} is not available for {self.info.scenario} (have {', '.join(self.engines)})")
+        check_engine(self, engine)
         samples = sample_scale_bias(self.scenario, rng, n)
         run = filter_scale_bias(self.scenario, samples.reference, samples.sensor, self.form)
         error = samples.theta - run.posterior
@@ -171,24 +170,10 @@ class ScaleBiasProblem:
 
         ``MomentSums.from_block(self.run_block(rng, n, engine))`` is the numpy oracle of the tests.
         """
-        if engine not in self.engines:
-            raise ValueError(f"engine {engine!r} is not available for {self.info.scenario} (have {', '.join(self.engines)})")
+        check_engine(self, engine)
         samples = sample_scale_bias(self.scenario, rng, n)
         prior = self.scenario.filter_prior()
-        n_steps, d = samples.time.size, 2
-        sums = {
-            "error": np.zeros((n_steps, d)),
-            "error_outer": np.zeros((n_steps, d, d)),
-            "estimate": np.zeros((n_steps, d)),
-            "estimate_outer": np.zeros((n_steps, d, d)),
-            "error_estimate": np.zeros((n_steps, d, d)),
-            "residual": np.zeros((n_steps, 1)),
-            "residual_own": np.zeros((n_steps, 1, 1)),
-            "nees": np.zeros(n_steps),
-            "nis": np.zeros(n_steps),
-            "filter_cov": np.zeros((n_steps, d, d)),
-        }
-        residuals = np.empty((n, n_steps if self.residual_pairs else 0))
+        sums = SumBuffers.zeros(samples.time.size, 2, 1, n, self.residual_pairs)
         regression_block_moments(
             np.ascontiguousarray(samples.reference),
             np.ascontiguousarray(regressors(samples.sensor)),
@@ -198,21 +183,9 @@ class ScaleBiasProblem:
             float(self.scenario.filter_noise_variance()),
             self.scenario.filter_process_noise(),
             (self.form or self.scenario.filter_settings.form) == "joseph",
-            sums["error"],
-            sums["error_outer"],
-            sums["estimate"],
-            sums["estimate_outer"],
-            sums["error_estimate"],
-            sums["residual"],
-            sums["residual_own"],
-            sums["nees"],
-            sums["nis"],
-            sums["filter_cov"],
-            residuals,
+            sums,
         )
-        # The kernel walks one realization at a time, so it writes (n, K); syrk wants (K, n).
-        outer = ResidualProducts.upper(np.ascontiguousarray(residuals.T)) if self.residual_pairs else None
-        return MomentSums(count=n, residual_outer=outer, **sums)
+        return MomentSums.from_buffers(n, sums)
 
     def expected_mean_error(self) -> np.ndarray:
         """The mean error predicted by errors in variables and any prior-mean offset, (K, 2)."""

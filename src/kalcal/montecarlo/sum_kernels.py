@@ -1,0 +1,94 @@
+"""The compiled accumulation of a block's moment sums and the small compiled helpers the block kernels share.
+
+Both block kernels (:mod:`kalcal.montecarlo.kernels` for fixed gains, :mod:`kalcal.montecarlo.regression_kernels`
+for data-dependent ones) keep one update's quantities of n realizations (the block, or a tile of it) as
+structure of arrays (a state is (d, n), realizations innermost and contiguous) and hand them to
+:func:`accumulate`, the compiled mirror of :meth:`kalcal.montecarlo.accumulators.MomentSums.from_block`:
+the same sums, into the fields of a :class:`~kalcal.montecarlo.accumulators.SumBuffers`.
+
+The reductions over realizations are compiled with reassociation allowed (so that they vectorize): a
+given block on a given machine always gives the same bits, but a different CPU may round differently.
+"""
+
+from __future__ import annotations
+
+import numba
+
+FAST = {"reassoc", "contract"}  #: the fast-math flags of the reductions over realizations
+
+
+@numba.njit(nogil=True, cache=True, fastmath=FAST)
+def affine(out, matrix, vectors, add):
+    """out[a, :] = (add ? out[a, :] : 0) + sum_b matrix[a, b] vectors[b, :]  for (d, n) arrays."""
+    rows, cols = matrix.shape
+    n = vectors.shape[1]
+    for a in range(rows):
+        if not add:
+            for i in range(n):
+                out[a, i] = 0.0
+        for b in range(cols):
+            coef = matrix[a, b]
+            if coef != 0.0:
+                for i in range(n):
+                    out[a, i] += coef * vectors[b, i]
+
+
+@numba.njit(nogil=True, cache=True, fastmath=FAST)
+def dot(u, v):
+    """sum_i u_i v_i of two (n,) arrays."""
+    acc = 0.0
+    for i in range(u.shape[0]):
+        acc += u[i] * v[i]
+    return acc
+
+
+@numba.njit(nogil=True, cache=True, fastmath=FAST)
+def accumulate(k, first, error, estimate, residual, nees, nis, cov, sums):
+    """Add update k of n realizations into the sums (in place), as ``MomentSums.from_block`` sums them.
+
+    Parameters
+    ----------
+    k : int
+        The update, 0 <= k < K.
+    first : int
+        The block's index of the first of these n realizations (kernels that take the block in tiles
+        call this once per tile and update).
+    error, estimate : ndarray, shape (d, n)
+        e_k = x_k - xhat_k and xhat_k of each realization.
+    residual : ndarray, shape (p, n)
+        r_k = z_k - H xbar_k; also copied into rows k p ... k p + p - 1, columns first ... first + n - 1
+        of ``sums.residuals`` when that keeps the pairs.
+    nees, nis : ndarray, shape (n,) or (0,)
+        Each realization's e^T P^{-1} e and r^T S^{-1} r, with ``cov`` (d, d, n) its P_k; all three empty
+        (n = 0) where every realization shares P_k and S_k: the caller then forms the NEES and NIS sums
+        from the second moments and the P sum as n P_k, and this adds nothing to them.
+    sums : SumBuffers
+    """
+    d, n = error.shape
+    p = residual.shape[0]
+    own = nees.shape[0] > 0
+    for a in range(d):
+        sums.error[k, a] += error[a].sum()
+        sums.estimate[k, a] += estimate[a].sum()
+        for b in range(d):
+            sums.error_estimate[k, a, b] += dot(error[a], estimate[b])
+            if b >= a:
+                sums.error_outer[k, a, b] += dot(error[a], error[b])
+                sums.estimate_outer[k, a, b] += dot(estimate[a], estimate[b])
+                if own:
+                    sums.filter_cov[k, a, b] += cov[a, b].sum()
+    for a in range(d):  # the symmetric sums: the lower triangle is the upper one
+        for b in range(a):
+            sums.error_outer[k, a, b] = sums.error_outer[k, b, a]
+            sums.estimate_outer[k, a, b] = sums.estimate_outer[k, b, a]
+            if own:
+                sums.filter_cov[k, a, b] = sums.filter_cov[k, b, a]
+    for a in range(p):
+        sums.residual[k, a] += residual[a].sum()
+        for b in range(p):
+            sums.residual_own[k, a, b] += dot(residual[a], residual[b])
+        if sums.residuals.shape[0]:
+            sums.residuals[k * p + a, first:first + n] = residual[a, :]
+    if own:
+        sums.nees[k] += nees.sum()
+        sums.nis[k] += nis.sum()

@@ -1,0 +1,99 @@
+"""The one compiled accumulation of the moment sums against their numpy definition, ``MomentSums.from_block``."""
+
+from __future__ import annotations
+
+from dataclasses import fields
+
+import numpy as np
+import pytest
+
+from kalcal.montecarlo.accumulators import BlockResult, MomentSums, SumBuffers
+from kalcal.montecarlo.sum_kernels import accumulate
+
+
+def _block(rng, n, n_updates, d, p) -> BlockResult:
+    """Random errors, estimates and innovations with each realization's own SPD P_k."""
+    factor = rng.standard_normal((n, n_updates, d, d))
+    cov = factor @ np.swapaxes(factor, -1, -2) + np.eye(d)
+    return BlockResult(
+        error=rng.standard_normal((n, n_updates, d)),
+        estimate=3.0 + rng.standard_normal((n, n_updates, d)),
+        residual=rng.standard_normal((n, n_updates, p)),
+        nees=rng.chisquare(d, (n, n_updates)),
+        nis=rng.chisquare(p, (n, n_updates)),
+        filter_cov_sum=cov.sum(axis=0),
+        filter_cov=cov,
+    )
+
+
+def _compiled(block: BlockResult, tiles: list[int], own: bool, pairs: bool) -> MomentSums:
+    """The sums of ``block`` by ``accumulate``, update by update, over the realizations in ``tiles``."""
+    n, n_updates, d = block.error.shape
+    p = block.residual.shape[2]
+    sums = SumBuffers.zeros(n_updates, d, p, n, pairs)
+
+    def soa(a, first, m):  # (n, ...) of one update -> (..., m), realizations last and contiguous
+        return np.ascontiguousarray(np.moveaxis(a[first:first + m], 0, -1))
+
+    for k in range(n_updates):
+        first = 0
+        for m in tiles:
+            empty = np.empty(0)
+            accumulate(
+                k,
+                first,
+                soa(block.error[:, k], first, m),
+                soa(block.estimate[:, k], first, m),
+                soa(block.residual[:, k], first, m),
+                soa(block.nees[:, k], first, m) if own else empty,
+                soa(block.nis[:, k], first, m) if own else empty,
+                soa(block.filter_cov[:, k], first, m) if own else np.empty((0, 0, 0)),
+                sums,
+            )
+            first += m
+    assert first == n
+    return MomentSums.from_buffers(n, sums)
+
+
+@pytest.mark.parametrize("d, p", [(2, 1), (3, 2)])
+@pytest.mark.parametrize("tiles", [[37], [16, 16, 5]])
+def test_accumulate_equals_from_block(d, p, tiles):
+    block = _block(np.random.default_rng(4), sum(tiles), 6, d, p)
+    reference = MomentSums.from_block(block)
+    compiled = _compiled(block, tiles, own=True, pairs=True)
+    assert compiled.count == reference.count
+    for f in fields(MomentSums):
+        if f.name == "count":
+            continue
+        expected, got = getattr(reference, f.name), getattr(compiled, f.name)
+        if expected is None:
+            assert got is None, f.name
+            continue
+        np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12 * np.abs(expected).max(), err_msg=f.name)
+    # the symmetric sums are symmetric bit for bit (the lower triangle is a copy)
+    for name in ("error_outer", "estimate_outer", "filter_cov"):
+        value = getattr(compiled, name)
+        assert np.array_equal(value, np.swapaxes(value, 1, 2)), name
+
+
+def test_shared_covariance_leaves_nees_nis_and_p_to_the_caller():
+    """With empty per-realization arrays (fixed gains) the NEES, NIS and P sums stay zero; the rest is the same."""
+    block = _block(np.random.default_rng(5), 40, 4, 3, 2)
+    own = _compiled(block, [40], own=True, pairs=False)
+    shared = _compiled(block, [40], own=False, pairs=False)
+    assert own.residual_outer is None and shared.residual_outer is None
+    for name in ("nees", "nis", "filter_cov"):
+        assert not np.any(getattr(shared, name)), name
+    for name in ("error", "error_outer", "estimate", "estimate_outer", "error_estimate", "residual", "residual_own"):
+        assert np.array_equal(getattr(own, name), getattr(shared, name)), name
+
+
+def test_zero_buffers_and_the_pairs():
+    sums = SumBuffers.zeros(5, 3, 2, 7, residual_pairs=True)
+    assert sums.residuals.shape == (10, 7)
+    assert sums.error_outer.shape == (5, 3, 3) and sums.residual_own.shape == (5, 2, 2) and sums.nees.shape == (5,)
+    assert all(not np.any(a) for name, a in sums._asdict().items() if name != "residuals")
+    assert SumBuffers.zeros(5, 3, 2, 7, residual_pairs=False).residuals.shape == (0, 7)
+    # every sum a kernel adds into is a field of MomentSums; the pair sums come from ``residuals`` by syrk
+    kernel_sums = {f.name for f in fields(MomentSums)} - {"count", "residual_outer", "normalized_residual"}
+    assert set(SumBuffers._fields) == kernel_sums | {"residuals"}
