@@ -14,7 +14,8 @@ from typing import Protocol
 
 import numpy as np
 
-from kalcal.filters.kalman import GainSchedule, UpdateForm, covariance_pass, run_with_gains
+from kalcal.filters.gains import GainSchedule, covariance_pass, run_with_gains
+from kalcal.filters.steps import UpdateForm
 from kalcal.linalg import whitener
 from kalcal.models.linear import LinearGaussianModel
 from kalcal.montecarlo import kernels
@@ -82,7 +83,7 @@ class FixedGainProblem:
         ``sampled(rng, n) -> (states (n, K, d), measurements (n, K, p))`` simulating every sample
         (engine "sampled").
     form : {"joseph", "standard", "sqrt"}
-        The covariance update of the gain schedule (:func:`~kalcal.filters.kalman.covariance_pass`).
+        The covariance update of the gain schedule (:func:`~kalcal.filters.gains.covariance_pass`).
     """
 
     info: ProblemInfo
