@@ -62,7 +62,8 @@ from kalcal.filters.kalman import (
 from kalcal.filters.mechanization import integrate, partial_step
 from kalcal.filters.sequential import SequentialRun, sequential_filter
 from kalcal.linalg import symmetrize
-from kalcal.models.accel_gps import AccelGpsScenario, bias_discretization, error_transition
+from kalcal.models.accel_gps import AccelGpsScenario
+from kalcal.models.accel_gps_discretization import bias_discretization, error_transition
 
 Init = Literal["prior", "first-fix"]
 INITS: tuple[str, ...] = ("prior", "first-fix")

@@ -49,8 +49,14 @@ from typing import ClassVar, Literal, NamedTuple
 
 import numpy as np
 
-from kalcal.errors import ConfigError
-from kalcal.models.config import require_nonnegative, require_positive
+from kalcal.models.settings import (
+    SettingError,
+    require_below,
+    require_nonnegative,
+    require_positive,
+    require_whole,
+    show,
+)
 
 Drift = Literal["none", "random-walk"]
 Excitation = Literal["sensor", "reference"]
@@ -79,14 +85,14 @@ class ScaleBiasSettings:
 
     def __post_init__(self) -> None:
         require_positive("scenario", rate=self.rate, duration=self.duration)
-        samples = self.duration * self.rate
-        if abs(samples - round(samples)) > 1e-9 * max(samples, 1.0) or round(samples) < 1:
-            raise ConfigError(
-                f"scenario.duration: must hold a whole number (>= 1) of samples, got {self.duration:g} s "
-                f"at {self.rate:g} Hz"
-            )
+        require_whole(
+            "scenario.duration",
+            self.duration * self.rate,
+            "a whole number (>= 1) of samples",
+            f"{self.duration!r} s at {self.rate:g} Hz",
+        )
         if not self.unit.strip():
-            raise ConfigError(f"scenario.unit: expected a unit label, got {self.unit!r}")
+            raise SettingError("scenario.unit", "a unit label", show(self.unit))
 
     @property
     def sample_period(self) -> float:
@@ -148,8 +154,7 @@ class ScaleBiasTruth:
 
 def _require_scale_error(section: str, value: float | None) -> None:
     # theta1 = 1 / (1 - a) must be finite and positive: a sensor that reads psi with a positive gain.
-    if value is not None and not value < 1.0:
-        raise ConfigError(f"{section}.scale_error: must be less than 1 (the sensor's gain 1 - a must be positive), got {value!r}")
+    require_below(f"{section}.scale_error", value, 1.0, "the sensor's gain 1 - a must be positive")
 
 
 @dataclass(frozen=True)
@@ -263,9 +268,10 @@ class ScaleBiasScenario:
         # leave the filter a singular prior: say which key to set.
         for name in ("scale_error_std", "bias_std"):
             if getattr(self.filter, name) is None and getattr(self.truth, name) == 0:
-                raise ConfigError(
-                    f"filter.{name}: the filter needs a positive prior std, and truth.{name} = 0 is the one it "
-                    f"would take; set filter.{name}"
+                raise SettingError(
+                    f"filter.{name}",
+                    f"a positive prior std for the filter (set filter.{name}: unset, it takes the truth's)",
+                    f"truth.{name} = 0",
                 )
 
     @property
