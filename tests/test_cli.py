@@ -211,11 +211,11 @@ CASES = {
     ),
     "unknown set key": (
         lambda imu, gps, d: (_csv(imu, d / "imu.csv"), _csv(gps, d / "gps.csv"), ["--set", "truth.nope=1"]),
-        r"unknown setting 'truth\.nope'",
+        r"truth\.nope: expected a setting of \[truth\] .*, got an unknown key",
     ),
     "unknown set section": (
         lambda imu, gps, d: (_csv(imu, d / "imu.csv"), _csv(gps, d / "gps.csv"), ["--set", "nope.x=1"]),
-        r"unknown setting 'nope\.x'",
+        r"nope\.x: expected a setting of .*, got an unknown section",
     ),
     "bad set value": (
         lambda imu, gps, d: (_csv(imu, d / "imu.csv"), _csv(gps, d / "gps.csv"), ["--set", "filter.bias_std=big"]),
@@ -227,11 +227,11 @@ CASES = {
     ),
     "negative noise setting": (
         lambda imu, gps, d: (_csv(imu, d / "imu.csv"), _csv(gps, d / "gps.csv"), ["--set", "filter.gps_position_std=-1"]),
-        r"filter\.gps_position_std: must be positive, got -1",
+        r"filter\.gps_position_std: expected a positive number, got -1",
     ),
     "missing config": (
         lambda imu, gps, d: (_csv(imu, d / "imu.csv"), _csv(gps, d / "gps.csv"), ["--config", str(d / "no.toml")]),
-        r"no\.toml: no such config file",
+        r"no\.toml: expected a readable config file, got no such file",
     ),
     "no overlap between the logs": (
         lambda imu, gps, d: (_csv(imu, d / "imu.csv"), _csv(gps.assign(time=gps["time"] + 100.0), d / "gps.csv"), []),
@@ -284,7 +284,7 @@ def test_simulate_bad_setting_is_exit_status_2(tmp_path):
 def test_unknown_scenario_is_exit_status_2(tmp_path):
     result = _invoke("simulate", "nope", "--out", tmp_path)
     assert result.exit_code == 2
-    assert "unknown scenario 'nope'" in result.stderr
+    assert "SCENARIO: expected one of accel-gps, scale-bias, got 'nope'" in result.stderr
 
 
 # --------------------------------------------------------------------------------------------------

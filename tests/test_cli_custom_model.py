@@ -84,12 +84,12 @@ def _bad_shape(tmp_path):
     "args, message",
     [
         (lambda tmp: [_bad_shape(tmp)], "my-model.toml: h: expected 2 columns to match phi, got shape (2, 3)"),
-        (lambda tmp: [tmp / "none.toml"], "none.toml: no such model file"),
-        (lambda tmp: [EXAMPLE, "--set", "truth.v=[[-1.0]]"], "(with --set truth.v): truth.v: covariance is not positive semi-definite"),
-        (lambda tmp: [EXAMPLE, "--set", "scenario.duration=3"], "unknown setting 'scenario.duration' for a model file"),
+        (lambda tmp: [tmp / "none.toml"], "none.toml: expected a readable model file, got no such file"),
+        (lambda tmp: [EXAMPLE, "--set", "truth.v=[[-1.0]]"], "kalcal: error: truth.v: expected a positive semi-definite covariance, got [[-1.0]] (eigenvalue -1)"),
+        (lambda tmp: [EXAMPLE, "--set", "scenario.duration=3"], "scenario.duration: expected a model file's setting (model.{name,"),
         (lambda tmp: [EXAMPLE, "--engine", "sampled"], "--engine: 'sampled' is not available for a model file"),
         (lambda tmp: [EXAMPLE, "--long-run", "60"], "--long-run: not available for a model file"),
-        (lambda tmp: [EXAMPLE, "--config", EXAMPLE], "--config: not used with a model file"),
+        (lambda tmp: [EXAMPLE, "--config", EXAMPLE], "--config: expected no config file with a model file"),
     ],
     ids=["shape", "missing-file", "set-not-psd", "set-unknown", "sampled", "long-run", "config"],
 )

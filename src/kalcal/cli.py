@@ -471,7 +471,7 @@ def sweep(
     """Verify once per value of one setting (--set key=v1,v2,...) and draw the tuning curve."""
     from kalcal.jobs.sweep import split_sweep, sweep_cells
     from kalcal.jobs.sweep import sweep as run_sweep
-    from kalcal.models.config import parse_assignments
+    from kalcal.models.settings import parse_assignments
     from kalcal.montecarlo.distributed import dask_client
 
     with user_errors():

@@ -10,7 +10,11 @@ class KalcalError(ValueError):
 
 
 class ConfigError(KalcalError):
-    """A setting is unknown, malformed or out of range."""
+    """A setting or an option is unknown, malformed or out of range.
+
+    A scenario's or a model file's setting raises the subclass
+    :class:`kalcal.models.settings.SettingError`, worded ``FILE: KEY: expected ..., got ...``.
+    """
 
 
 class DataError(KalcalError):

@@ -24,7 +24,7 @@ from kalcal.errors import ConfigError, DataError
 from kalcal.filters.gains import interval_transition
 from kalcal.filters.mechanization import integrate
 from kalcal.filters.sequential import sequential_filter
-from kalcal.models.accel_gps import error_transition
+from kalcal.models.accel_gps_discretization import error_transition
 from kalcal.models.registry import build_scenario
 from kalcal.simulate.sampled import sample_accel_gps_logs
 from tests._helpers import assert_close, cov_atol

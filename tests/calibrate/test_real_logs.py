@@ -9,7 +9,7 @@ import pytest
 from scipy import stats
 
 from kalcal.calibrate.accel_gps import calibrate_accel_gps
-from kalcal.models.accel_gps import error_transition
+from kalcal.models.accel_gps_discretization import error_transition
 from kalcal.models.registry import build_scenario
 
 AMPLITUDES = np.array([1.5, 0.8, 0.4])

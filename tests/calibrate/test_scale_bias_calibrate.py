@@ -15,7 +15,7 @@ from scipy import stats
 from kalcal.calibrate.scale_bias import calibrate_scale_bias
 from kalcal.errors import DataError
 from kalcal.models.registry import build_scenario
-from kalcal.models.scale_bias import scale_bias_from_theta
+from kalcal.models.scale_bias_theta import scale_bias_from_theta
 from kalcal.simulate.scale_bias import sample_scale_bias
 from tests._helpers import bonferroni_k
 

@@ -120,20 +120,31 @@ def test_set_overrides_the_filter_the_truth_and_the_model():
 @pytest.mark.parametrize(
     "assignment, fragment",
     [
-        ("filter.q=1", "unknown setting 'filter.q' for a model file"),
-        ("truth.steps_per_update=2", "unknown setting 'truth.steps_per_update'"),
-        ("scenario.duration=4", "unknown setting 'scenario.duration'"),
-        ("filter.w=[[0.1", "--set filter.w: expected a TOML value"),
-        ("filter.w", "--set 'filter.w': expected section.key=value"),
+        ("filter.q=1", "filter.q: expected a model file's setting (model.{name,"),
+        ("truth.steps_per_update=2", "truth.steps_per_update: expected a model file's setting"),
+        ("scenario.duration=4", "scenario.duration: expected a model file's setting"),
+        ("filter.w=[[0.1", "filter.w: expected a TOML value (e.g. [[0.01]], 60, 0.1), got '[[0.1'"),
+        ("filter.w", "--set: expected section.key=value, got 'filter.w'"),
     ],
 )
 def test_bad_set_is_one_line(assignment, fragment):
     assert fragment in _error(_text(), [assignment])
 
 
-def test_set_errors_name_the_file_and_the_override():
+def test_an_unknown_set_key_lists_the_known_ones():
+    known = "model.{name, updates, state_names, state_units, measurement_names, measurement_units}; filter.{phi, gamma, h, w, v, x0, m0, steps_per_update, sample_period}; truth.{phi, gamma, h, w, v, x0, m0}"
+    assert _error(_text(), ["filter.q=1"]) == f"filter.q: expected a model file's setting ({known}), got an unknown setting"
+
+
+def test_set_errors_name_the_override_and_file_errors_the_file():
     message = _error(_text(), ["filter.w=[[0.1, 0.0]]"])
-    assert message == f"{SOURCE} (with --set filter.w): w: expected shape (1, 1), got (1, 2)"
+    assert message == "filter.w: expected shape (1, 1), got (1, 2)"
+    assert _error(_text(), ["truth.v=[[-1.0]]"]) == "truth.v: expected shape (2, 2), got (1, 1)"
+    assert _error(_text(), ["model.updates=0"]) == "model.updates: expected a positive integer, got 0"
+    # an override that leaves a value of the file unfit: the file's value is named, with the file
+    assert _error(_text(), ["filter.gamma=[[0.0, 0.0], [0.0, 0.0], [0.1, 0.0]]"]) == (
+        f"{SOURCE}: w: expected shape (2, 2), got (1, 1)"
+    )
 
 
 SHAPES = [
@@ -184,16 +195,20 @@ def test_an_asymmetric_covariance_is_named(key, section):
     changes = ASYMMETRIC[key]
     text = _text(**changes) if section == "filter" else _text(table=changes)
     prefix = "" if section == "filter" else "truth."
-    assert _error(text) == f"{SOURCE}: {prefix}{key}: covariance is not symmetric"
+    matrix = list(changes.values())[-1].replace('"', "")
+    assert _error(text) == f"{SOURCE}: {prefix}{key}: expected a symmetric covariance, got {matrix}"
 
 
 @pytest.mark.parametrize(
     "changes, expected",
     [
-        ({"w": "[[-0.5]]"}, "w: covariance is not positive semi-definite (eigenvalue -0.5)"),
-        ({"m0": "[[1.0, 2.0, 0.0], [2.0, 1.0, 0.0], [0.0, 0.0, 1.0]]"}, "m0: covariance is not positive semi-definite (eigenvalue -1)"),
-        ({"v": "[[1.0, 0.0], [0.0, -1.0]]"}, "v: covariance is not positive semi-definite (eigenvalue -1)"),
-        ({"v": "[[1.0, 0.0], [0.0, 0.0]]"}, "v: measurement-noise covariance must be positive definite"),
+        ({"w": "[[-0.5]]"}, "w: expected a positive semi-definite covariance, got [[-0.5]] (eigenvalue -0.5)"),
+        (
+            {"m0": "[[1.0, 2.0, 0.0], [2.0, 1.0, 0.0], [0.0, 0.0, 1.0]]"},
+            "m0: expected a positive semi-definite covariance, got [[1.0, 2.0, 0.0], [2.0, 1.0, 0.0], [0.0, 0.0, 1.0]] (eigenvalue -1)",
+        ),
+        ({"v": "[[1.0, 0.0], [0.0, -1.0]]"}, "v: expected a positive semi-definite covariance, got [[1.0, 0.0], [0.0, -1.0]] (eigenvalue -1)"),
+        ({"v": "[[1.0, 0.0], [0.0, 0.0]]"}, "v: expected a positive definite measurement-noise covariance, got [[1.0, 0.0], [0.0, 0.0]]"),
     ],
 )
 def test_a_covariance_that_is_not_psd_is_named(changes, expected):
@@ -203,13 +218,15 @@ def test_a_covariance_that_is_not_psd_is_named(changes, expected):
 
 @pytest.mark.parametrize("key", list(BASE))
 def test_a_missing_key_is_named(key):
-    assert _error(_text(**{key: None})) == f"{SOURCE}: missing {key}"
+    what = {"steps_per_update": "a positive integer", "updates": "a positive integer", "x0": "an array of numbers"}
+    assert _error(_text(**{key: None})) == f"{SOURCE}: {key}: expected {what.get(key, 'a matrix')}, got nothing (a required key)"
 
 
 def test_unknown_keys_are_named():
-    assert _error(_text(q="[[1.0]]")).startswith(f"{SOURCE}: unknown key 'q' (known: name, sample_period,")
+    assert _error(_text(q="[[1.0]]")).startswith(f"{SOURCE}: q: expected a model file's key (name, sample_period,")
+    assert _error(_text(q="[[1.0]]")).endswith("or a [truth] table), got an unknown key")
     assert _error(_text(table={"updates": "3"})) == (
-        f"{SOURCE}: unknown key 'truth.updates' ([truth] takes phi, gamma, h, w, v, x0, m0)"
+        f"{SOURCE}: truth.updates: expected a matrix of [truth] (phi, gamma, h, w, v, x0, m0), got an unknown key"
     )
 
 
@@ -222,8 +239,8 @@ def test_unknown_keys_are_named():
         ({"w": "[[]]"}, "w: expected a non-empty matrix such as [[1.0, 0.0], [0.0, 1.0]], got [[]]"),
         ({"v": '[[1.0, "a"], [0.0, 1.0]]'}, "v: expected numbers, got 'a' (a string) in row 1"),
         ({"phi": "[[1.0, 0.1, 0.0], [0.0, true, 0.1], [0.0, 0.0, 1.0]]"}, "phi: expected numbers, got True (a boolean) in row 2"),
-        ({"m0": "[[1.0, 0.0, 0.0], [0.0, 1.0], [0.0, 0.0, 1.0]]"}, "m0: rows of different lengths (2, 3)"),
-        ({"gamma": "[[0.0], [0.0], [nan]]"}, "gamma: contains a non-finite value"),
+        ({"m0": "[[1.0, 0.0, 0.0], [0.0, 1.0], [0.0, 0.0, 1.0]]"}, "m0: expected rows of one length, got rows of lengths 2, 3"),
+        ({"gamma": "[[0.0], [0.0], [nan]]"}, "gamma: expected finite numbers, got [[0.0], [0.0], [nan]]"),
         ({"x0": "[0.0, 1.0, 'a']"}, "x0: expected numbers, got 'a' (a string)"),
         ({"x0": "0.0"}, "x0: expected an array of numbers such as [0.0, 1.0], got 0.0"),
         ({"steps_per_update": "2.5"}, "steps_per_update: expected a positive integer, got 2.5"),
@@ -233,8 +250,8 @@ def test_unknown_keys_are_named():
         ({"sample_period": "-0.1"}, "sample_period: expected a positive number of seconds, got -0.1"),
         ({"sample_period": '"fast"'}, "sample_period: expected a positive number of seconds, got 'fast'"),
         ({"name": "3"}, "name: expected a string, got 3"),
-        ({"name": '"accel-gps"'}, "name: 'accel-gps' is a built-in scenario's name; choose another"),
-        ({"state_names": '["a", "b"]'}, "state_names: expected 3 entries, got 2"),
+        ({"name": '"accel-gps"'}, "name: expected a name other than a built-in scenario's (accel-gps, scale-bias), got 'accel-gps'"),
+        ({"state_names": '["a", "b"]'}, "state_names: expected 3 entries (one per state), got 2: ['a', 'b']"),
         ({"measurement_units": "[1, 2]"}, "measurement_units: expected an array of strings, got [1, 2]"),
         ({"truth": "3"}, "truth: expected a [truth] table of matrices, got int"),
     ],
@@ -248,8 +265,8 @@ def test_a_non_numeric_truth_matrix_is_named():
 
 
 def test_invalid_toml_and_missing_files_are_one_line(tmp_path):
-    assert _error("phi = [[1.0, ").startswith(f"{SOURCE}: not valid TOML (")
-    with pytest.raises(ConfigError, match=r"nothing\.toml: no such model file"):
+    assert _error("phi = [[1.0, ").startswith(f"{SOURCE}: expected valid TOML, got a syntax error (")
+    with pytest.raises(ConfigError, match=r"nothing\.toml: expected a readable model file, got no such file$"):
         load_model_file(tmp_path / "nothing.toml")
-    with pytest.raises(ConfigError, match="--config: not used with a model file"):
+    with pytest.raises(ConfigError, match=r"^--config: expected no config file with a model file .*, got '.*x\.toml'$"):
         load_model_file(EXAMPLES / "constant_velocity.toml", config=tmp_path / "x.toml")

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from kalcal.models.registry import build_scenario
-from kalcal.models.scale_bias import scale_bias_from_theta
+from kalcal.models.scale_bias_theta import scale_bias_from_theta
 from kalcal.simulate.scale_bias import normals_per_realization, sample_scale_bias
 from tests._helpers import assert_gaussian_moments
 

@@ -5,7 +5,7 @@ import pytest
 from scipy.linalg import expm
 
 from kalcal.calibrate.accel_gps import calibrate_accel_gps
-from kalcal.models.accel_gps import bias_discretization, error_transition
+from kalcal.models.accel_gps_discretization import bias_discretization, error_transition
 from kalcal.models.registry import build_scenario
 from kalcal.montecarlo.accumulators import ensemble_statistics
 from kalcal.montecarlo.engine import run_monte_carlo

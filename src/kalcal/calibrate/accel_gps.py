@@ -54,7 +54,8 @@ from kalcal.filters.sequential import SequentialRun, sequential_filter
 from kalcal.filters.sqrt_form import cholesky_factor, gram
 from kalcal.filters.steps import UpdateForm, check_form, predict, sqrt_predict, sqrt_update, update
 from kalcal.linalg import symmetrize
-from kalcal.models.accel_gps import AccelGpsScenario, bias_discretization, error_transition
+from kalcal.models.accel_gps import AccelGpsScenario
+from kalcal.models.accel_gps_discretization import bias_discretization, error_transition
 
 Init = Literal["prior", "first-fix"]
 INITS: tuple[str, ...] = ("prior", "first-fix")

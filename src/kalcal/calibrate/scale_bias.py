@@ -32,7 +32,8 @@ from scipy import stats
 from kalcal.calibrate.plausibility import CalibrationWarning, check_limit
 from kalcal.errors import DataError
 from kalcal.filters.scale_bias import filter_scale_bias
-from kalcal.models.scale_bias import STATE_NAMES, ScaleBiasScenario, scale_bias_from_theta, scale_bias_jacobian
+from kalcal.models.scale_bias import STATE_NAMES, ScaleBiasScenario
+from kalcal.models.scale_bias_theta import scale_bias_from_theta, scale_bias_jacobian
 
 #: a final sigma above this share of the no-data sigma (near it) means the log did not excite the parameter
 UNOBSERVABLE_RATIO = 0.9

@@ -13,7 +13,8 @@ from kalcal.io.logs import numeric_columns, read_table, require_increasing
 from kalcal.io.outputs import writes_outputs
 from kalcal.io.results import write_csv, write_json
 from kalcal.models.config import section_values
-from kalcal.models.scale_bias import STATE_NAMES, ScaleBiasScenario, scale_bias_from_theta
+from kalcal.models.scale_bias import STATE_NAMES, ScaleBiasScenario
+from kalcal.models.scale_bias_theta import scale_bias_from_theta
 from kalcal.simulate.scale_bias import sample_scale_bias
 
 

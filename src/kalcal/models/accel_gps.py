@@ -28,7 +28,7 @@ Beyond the report, the bias may drift (``bias_walk_std``: a random walk, the inc
 or be first-order Gauss-Markov (``bias_correlation_time`` tau > 0: b_{j+1} = exp(-dt/tau) b_j + noise,
 stationary with std ``bias_std``): Phi[2, 2] = exp(-dt/tau) and the bias gets a noise input of its own.
 The bias is discretized at the samples, where the accelerometer reads it, and enters dp, dv as the
-scheme integrates it (:func:`bias_discretization`, :func:`error_transition`: with the trapezoid rule and
+scheme integrates it (:mod:`kalcal.models.accel_gps_discretization`: with the trapezoid rule and
 a drifting bias, Phi[:2, 2] and the bias noise's input differ from the Euler ones above). The exact
 engine's truth, the filter of ``verify`` and that of ``calibrate`` use both functions; the sampled
 engine uses only :func:`bias_discretization` (through :meth:`AccelGpsTruth.bias_decay` and
@@ -48,9 +48,9 @@ from typing import ClassVar, Literal
 
 import numpy as np
 
-from kalcal.errors import ConfigError
-from kalcal.models.config import require_nonnegative, require_positive
+from kalcal.models.accel_gps_discretization import bias_discretization, error_transition
 from kalcal.models.linear import LinearGaussianModel
+from kalcal.models.settings import SettingError, require_nonnegative, require_positive, require_whole
 
 TruthKind = Literal["analytic", "discrete"]
 IntegrationScheme = Literal["euler", "trapezoid"]
@@ -74,17 +74,18 @@ class AccelGpsSettings:
     def __post_init__(self) -> None:
         require_positive("scenario", duration=self.duration, imu_rate=self.imu_rate, gps_rate=self.gps_rate)
         ratio = self.imu_rate / self.gps_rate
-        if abs(ratio - round(ratio)) > 1e-9 * ratio or round(ratio) < 1:
-            raise ConfigError(
-                f"scenario.gps_rate: imu_rate / gps_rate must be a whole number of samples, "
-                f"got {self.imu_rate:g} / {self.gps_rate:g} = {ratio:g}"
-            )
-        updates = self.duration * self.gps_rate
-        if abs(updates - round(updates)) > 1e-9 * max(updates, 1.0) or round(updates) < 1:
-            raise ConfigError(
-                f"scenario.duration: must hold a whole number (>= 1) of GPS intervals, "
-                f"got {self.duration:g} s at {self.gps_rate:g} Hz"
-            )
+        require_whole(
+            "scenario.gps_rate",
+            ratio,
+            "a rate that makes imu_rate / gps_rate a whole number of samples",
+            f"{self.gps_rate!r} (imu_rate / gps_rate = {self.imu_rate:g} / {self.gps_rate:g} = {ratio:g})",
+        )
+        require_whole(
+            "scenario.duration",
+            self.duration * self.gps_rate,
+            "a whole number (>= 1) of GPS intervals",
+            f"{self.duration!r} s at {self.gps_rate:g} Hz",
+        )
 
     @property
     def sample_period(self) -> float:
@@ -163,92 +164,6 @@ class AccelGpsTruth:
         return float(bias_discretization(self, dt, dt)[1])
 
 
-def bias_discretization(values: AccelGpsTruth, step, period: float) -> tuple[np.ndarray, np.ndarray]:
-    """The bias over accelerometer sample steps: b_{j+1} = phi_j b_j + n_j, n_j ~ N(0, q_j).
-
-    The one discretization of the bias that the Monte Carlo's truth and filter and ``calibrate`` use. It
-    is exact at the sample times, which are all the accelerometer (and so the nominal) ever sees of the
-    bias: Gauss-Markov (tau > 0), phi_j = exp(-step_j / tau) and q_j = bias_std^2 (1 - exp(-2 step_j / tau)),
-    which keeps the bias stationary with std ``bias_std`` over steps of any length; random walk,
-    bias_walk_std^2 step_j / period (bias_walk_std is per sample of ``period`` s). Both may be set; their
-    variances add. A constant bias: phi = 1, q = 0.
-
-    Parameters
-    ----------
-    values : AccelGpsTruth
-        The truth's or the filter's settings.
-    step : float or ndarray, shape (...)
-        Step lengths, s.
-    period : float
-        The nominal sample period, s, that ``bias_walk_std`` refers to.
-
-    Returns
-    -------
-    decay, variance : ndarray, shape (...)
-        phi_j (1) and q_j, (m/s^2)^2.
-    """
-    step = np.asarray(step, dtype=float)
-    tau = values.bias_correlation_time
-    variance = values.bias_walk_std**2 * (step / period)
-    if tau > 0:
-        return np.exp(-step / tau), variance - values.bias_std**2 * np.expm1(-2.0 * step / tau)
-    return np.ones_like(step), variance
-
-
-def error_transition(start, end, step, decay, scheme: str, closes=True) -> tuple[np.ndarray, np.ndarray]:
-    """Transition of the error state [dp, dv, b] over a piece [start, end] of one sample step, and the
-    weights of the bias's own noise n_j (:func:`bias_discretization`), which the step's closing sample draws.
-
-    The nominal integrates the bias it reads at the samples as the scheme does: Euler holds b_j over the
-    step, the trapezoid rule the line from b_j to b_{j+1} = phi b_j + n_j (so n_j also enters dp and dv of
-    that step). Over the whole step (start 0, end = step) this is exact for the sampled truth::
-
-        euler:      [[1, dt, -dt^2/2], [0, 1, -dt], [0, 0, phi]],                   n_j weights [0, 0, 1]
-        trapezoid:  [[1, dt, -dt^2 (2 + phi)/6], [0, 1, -dt (1 + phi)/2], [0, 0, phi]],   [-dt^2/6, -dt/2, 1]
-
-    (with a constant bias, phi = 1, both are the report's Phi). A piece cut by a GPS fix (``calibrate``)
-    integrates the same line over its part of the step; b steps to phi b only in the piece that
-    ``closes`` the step, and the other pieces take their share of n_j as noise of their own.
-
-    Parameters
-    ----------
-    start, end : float or ndarray, shape (...)
-        Offsets of the piece from the step's first sample, s (0 <= start < end <= step).
-    step : float or ndarray, shape (...)
-        The whole step's length, s.
-    decay : float or ndarray, shape (...)
-        phi of the step.
-    scheme : {"euler", "trapezoid"}
-    closes : bool or ndarray, shape (...)
-        Whether the piece ends at the step's closing sample.
-
-    Returns
-    -------
-    phi : ndarray, shape (..., 3, 3)
-    bias_noise : ndarray, shape (..., 3)
-        The piece's change of [dp, dv, b] per unit n_j.
-    """
-    u0, u1, step, decay = np.broadcast_arrays(*(np.asarray(a, dtype=float) for a in (start, end, step, decay)))
-    closes = np.broadcast_to(np.asarray(closes, dtype=bool), u0.shape)
-    h = u1 - u0
-    if scheme == "trapezoid":
-        mean_slope, noise_slope = (decay - 1.0) / step, 1.0 / step  # b(u) = b_j (1 + mean_slope u) + n_j u / step
-    elif scheme == "euler":
-        mean_slope = noise_slope = np.zeros_like(h)
-    else:
-        raise ConfigError(f"scenario.integration: expected euler or trapezoid, got {scheme!r}")
-    first = 0.5 * (u1 * u1 - u0 * u0)  # integral of u over the piece
-    second = h * h * (3.0 * u0 + h) / 6.0  # integral of (end - u) u over the piece
-    phi = np.zeros(h.shape + (3, 3))
-    phi[..., 0, 0] = phi[..., 1, 1] = 1.0
-    phi[..., 0, 1] = h
-    phi[..., 0, 2] = -(0.5 * h * h + mean_slope * second)
-    phi[..., 1, 2] = -(h + mean_slope * first)
-    phi[..., 2, 2] = np.where(closes, decay, 1.0)
-    noise = np.stack([-noise_slope * second, -noise_slope * first, closes.astype(float)], axis=-1) + 0.0  # no -0.0
-    return phi, noise
-
-
 @dataclass(frozen=True)
 class AccelGpsFilter:
     """The filter's noise and prior settings (section ``filter``); unset (None) means the truth's value."""
@@ -319,9 +234,11 @@ class AccelGpsScenario:
 
     def __post_init__(self) -> None:
         if self.truth.scale_std > 0 and self.filter_settings.scale_std == 0:
-            raise ConfigError(
-                "filter.scale_std: 0 against a truth with a scale-factor error; to see a filter that "
-                "ignores it, give it a tiny filter.scale_std (say 1e-9)"
+            raise SettingError(
+                "filter.scale_std",
+                "a positive std against a truth with a scale-factor error (to see a filter that ignores it, "
+                "give it a tiny filter.scale_std, say 1e-9)",
+                "0",
             )
 
     @property

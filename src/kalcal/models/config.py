@@ -1,53 +1,46 @@
-"""Scenario settings from TOML files and ``section.key=value`` overrides, validated.
+"""A built-in scenario's settings: ``section.key`` addressing, conversion by annotation, sources in errors.
 
 A scenario is a frozen dataclass whose fields are *sections* (frozen dataclasses of scalar settings).
 Settings are addressed as ``section.key``; values from TOML keep their type, values from the command
-line are strings and are converted by the field's annotation. Every problem is a
-:class:`~kalcal.errors.ConfigError` naming the key and the value.
+line are strings and are converted by the field's annotation (:mod:`kalcal.models.settings` converts and
+words every error). A value read from a ``--config`` file is reported with the file's name,
+``FILE: section.key: expected ..., got ...``; one from ``--set`` (or a default) as
+``section.key: expected ..., got ...``.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import math
-import tomllib
 import types
 import typing
-from collections.abc import Iterable, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal, TypeVar
 
-from kalcal.errors import ConfigError
+from kalcal.models.settings import (
+    SettingError,
+    read_toml,
+    show,
+    to_bool,
+    to_choice,
+    to_float,
+    to_int,
+    unknown,
+)
 
 S = TypeVar("S")
 
-
-def parse_assignments(assignments: Iterable[str]) -> dict[str, str]:
-    """``["truth.bias_std=0.2", ...]`` -> ``{"truth.bias_std": "0.2", ...}``."""
-    result: dict[str, str] = {}
-    for item in assignments:
-        key, sep, value = item.partition("=")
-        key = key.strip()
-        if not sep or not key:
-            raise ConfigError(f"--set {item!r}: expected section.key=value")
-        result[key] = value.strip()
-    return result
+#: text that unsets an optional setting (the filter's "same as the truth")
+_UNSET = ("", "none", "same")
 
 
 def load_toml(path: str | Path) -> dict[str, Any]:
     """Read a TOML file of ``[section]`` tables into flat ``{"section.key": value}``."""
-    path = Path(path)
-    try:
-        with path.open("rb") as handle:
-            document = tomllib.load(handle)
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: no such config file") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML ({exc})") from None
+    document = read_toml(path, "config file")
     flat: dict[str, Any] = {}
     for section, table in document.items():
         if not isinstance(table, dict):
-            raise ConfigError(f"{path}: '{section}' must be a [section] table of settings")
+            raise SettingError(section, "a [section] table of settings", show(table), str(path))
         for key, value in table.items():
             flat[f"{section}.{key}"] = value
     return flat
@@ -66,74 +59,54 @@ def _convert(key: str, value: Any, annotation: Any) -> Any:
     origin = typing.get_origin(annotation)
     if origin in (typing.Union, types.UnionType):
         options = [a for a in typing.get_args(annotation) if a is not type(None)]
-        if value is None or (isinstance(value, str) and value.strip().lower() in ("", "none", "same")):
+        if value is None or (isinstance(value, str) and value.strip().lower() in _UNSET):
             return None
         return _convert(key, value, options[0])
     if origin is Literal:
-        choices = typing.get_args(annotation)
-        if value not in choices:
-            raise ConfigError(f"{key}: expected one of {', '.join(map(str, choices))}, got {value!r}")
-        return value
+        return to_choice(key, value, typing.get_args(annotation))
     if annotation is bool:
-        if isinstance(value, bool):
-            return value
-        text = str(value).strip().lower()
-        if text in ("true", "1", "yes"):
-            return True
-        if text in ("false", "0", "no"):
-            return False
-        raise ConfigError(f"{key}: expected true or false, got {value!r}")
-    if annotation in (float, int):
-        if isinstance(value, bool):
-            raise ConfigError(f"{key}: expected a number, got {value!r}")
-        try:
-            number = float(value)
-        except (TypeError, ValueError):
-            raise ConfigError(f"{key}: expected a number, got {value!r}") from None
-        if not math.isfinite(number):
-            raise ConfigError(f"{key}: expected a finite number, got {value!r}")
-        if annotation is int:
-            if number != int(number):
-                raise ConfigError(f"{key}: expected a whole number, got {value!r}")
-            return int(number)
-        return number
+        return to_bool(key, value)
+    if annotation is float:
+        return to_float(key, value)
+    if annotation is int:
+        return to_int(key, value)
     if annotation is str:
         return str(value)
     raise TypeError(f"unsupported setting type {annotation!r} for {key}")  # a programming error
 
 
-def apply_settings(scenario: S, settings: Mapping[str, Any]) -> S:
-    """Return a copy of ``scenario`` with ``settings`` (``{"section.key": value}``) applied and validated."""
+def _changes(scenario: Any, settings: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
     sections = {f.name for f in dataclasses.fields(scenario)}
     changes: dict[str, dict[str, Any]] = {}
     for key, value in settings.items():
         section, _, name = key.partition(".")
-        if section not in sections or not name:
-            raise ConfigError(f"unknown setting {key!r} (sections: {', '.join(sorted(sections))})")
+        if section not in sections:
+            raise unknown(key, f"a setting of {', '.join(f'[{s}]' for s in sorted(sections))}", "section")
         current = getattr(scenario, section)
         hints = typing.get_type_hints(type(current))
-        if name not in hints or name not in {f.name for f in dataclasses.fields(current)}:
-            options = ", ".join(f.name for f in dataclasses.fields(current))
-            raise ConfigError(f"unknown setting {key!r} (known in [{section}]: {options})")
+        names = [f.name for f in dataclasses.fields(current)]
+        if not name or name not in hints or name not in names:
+            raise unknown(key, f"a setting of [{section}] ({', '.join(names)})")
         changes.setdefault(section, {})[name] = _convert(key, value, hints[name])
-    replaced = {section: dataclasses.replace(getattr(scenario, section), **values) for section, values in changes.items()}
-    return dataclasses.replace(scenario, **replaced)
+    return changes
+
+
+def apply_settings(scenario: S, settings: Mapping[str, Any], sources: Mapping[str, str] | None = None) -> S:
+    """Return a copy of ``scenario`` with ``settings`` (``{"section.key": value}``) applied and validated.
+
+    ``sources`` maps a key to the file its value was read from; an error about that key names the file.
+    """
+    sources = sources or {}
+    try:
+        changes = _changes(scenario, settings)
+        replaced = {s: dataclasses.replace(getattr(scenario, s), **values) for s, values in changes.items()}
+        return dataclasses.replace(scenario, **replaced)
+    except SettingError as exc:
+        if exc.source is None and exc.key in sources:
+            raise exc.located(source=sources[exc.key]) from None
+        raise
 
 
 def section_values(scenario: Any) -> dict[str, dict[str, Any]]:
     """The scenario as ``{section: {key: value}}``, for summaries and reports."""
     return {f.name: dataclasses.asdict(getattr(scenario, f.name)) for f in dataclasses.fields(scenario)}
-
-
-def require_positive(section: str, **values: float | None) -> None:
-    """Raise ConfigError for any given value that is not > 0 (None means 'unset' and passes)."""
-    for name, value in values.items():
-        if value is not None and not value > 0:
-            raise ConfigError(f"{section}.{name}: must be positive, got {value!r}")
-
-
-def require_nonnegative(section: str, **values: float | None) -> None:
-    """Raise ConfigError for any given value that is < 0 (None passes)."""
-    for name, value in values.items():
-        if value is not None and not value >= 0:
-            raise ConfigError(f"{section}.{name}: must be zero or positive, got {value!r}")

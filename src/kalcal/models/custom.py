@@ -27,9 +27,10 @@ taken after ``steps_per_update`` steps, update k (k = 1..updates) at t_k = k * s
 sample_period. The truth shares the filter's timing and dimensions (d states, p measurements; its
 noise input may have another q).
 
-Every problem is a :class:`~kalcal.errors.ConfigError` of one line that starts with the file's name and
-names the key: unknown and missing keys, wrong types, a matrix whose shape does not fit (through
-LinearGaussianModel's own validation), a covariance that is not symmetric positive semi-definite.
+Every problem is a :class:`~kalcal.models.settings.SettingError` of one line,
+``FILE: KEY: expected ..., got ...`` (``KEY: expected ..., got ...`` for a value given by ``--set KEY=...``):
+unknown and missing keys, wrong types, a matrix whose shape does not fit (through LinearGaussianModel's
+own validation), a covariance that is not symmetric positive semi-definite.
 
 In a run's ``summary.json`` the scenario's settings are the sections ``model`` (name, file, updates,
 names, units), ``filter`` and ``truth`` (each model's matrices, steps_per_update, sample_period): enough
@@ -39,8 +40,6 @@ to rebuild the scenario without the file (:meth:`CustomModelScenario.from_settin
 
 from __future__ import annotations
 
-import math
-import tomllib
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -48,11 +47,26 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from kalcal.errors import ConfigError
 from kalcal.models.accel_gps import AccelGpsScenario
-from kalcal.models.config import parse_assignments
 from kalcal.models.linear import LinearGaussianModel
 from kalcal.models.scale_bias import ScaleBiasScenario
+from kalcal.models.settings import (
+    SettingError,
+    missing,
+    parse_assignments,
+    parse_toml,
+    read_toml,
+    show,
+    to_labels,
+    to_matrix,
+    to_positive_integer,
+    to_positive_number,
+    to_string,
+    to_vector,
+    toml_value,
+    type_name,
+    unknown,
+)
 
 #: The model's arrays, in the order of LinearGaussianModel; all but x0 are matrices.
 MODEL_KEYS = ("phi", "gamma", "h", "w", "v", "x0", "m0")
@@ -119,22 +133,25 @@ class CustomModelScenario:
     def __post_init__(self) -> None:
         f, t, info = self.filter, self.truth, self.model
         d, p = f.state_dim, f.measurement_dim
-        if t.phi.shape != f.phi.shape:
-            raise ConfigError(f"truth.phi: expected shape {f.phi.shape} like the filter's phi, got {t.phi.shape}")
-        if t.h.shape != f.h.shape:
-            raise ConfigError(f"truth.h: expected shape {f.h.shape} like the filter's h, got {t.h.shape}")
-        if (t.steps_per_update, t.sample_period) != (f.steps_per_update, f.sample_period):
-            raise ConfigError("truth: steps_per_update and sample_period must be the filter's")
-        if not (isinstance(info.updates, int) and not isinstance(info.updates, bool) and info.updates >= 1):
-            raise ConfigError(f"updates: expected a positive integer, got {info.updates!r}")
+        for key in ("phi", "h"):
+            if getattr(t, key).shape != getattr(f, key).shape:
+                expected = f"shape {getattr(f, key).shape} like the filter's {key}"
+                raise SettingError(f"truth.{key}", expected, str(getattr(t, key).shape))
+        timing = (f.steps_per_update, f.sample_period)
+        if (t.steps_per_update, t.sample_period) != timing:
+            expected = f"the filter's steps_per_update and sample_period {timing}"
+            raise SettingError("truth.steps_per_update", expected, str((t.steps_per_update, t.sample_period)))
+        to_positive_integer("updates", info.updates)
         if not info.name.strip():
-            raise ConfigError(f"name: expected a non-empty name, got {info.name!r}")
+            raise SettingError("name", "a non-empty name", show(info.name))
         if info.name in _RESERVED_NAMES:
-            raise ConfigError(f"name: {info.name!r} is a built-in scenario's name; choose another")
-        for key, count in (("state_names", d), ("state_units", d), ("measurement_names", p), ("measurement_units", p)):
-            values = getattr(info, key)
-            if len(values) != count:
-                raise ConfigError(f"{key}: expected {count} entries, got {len(values)}")
+            expected = f"a name other than a built-in scenario's ({', '.join(_RESERVED_NAMES)})"
+            raise SettingError("name", expected, show(info.name))
+        for key, count, of in (
+            ("state_names", d, "state"), ("state_units", d, "state"),
+            ("measurement_names", p, "measurement"), ("measurement_units", p, "measurement"),
+        ):  # fmt: skip
+            to_labels(key, list(getattr(info, key)), count, of)
 
     @property
     def update_times(self) -> np.ndarray:
@@ -158,10 +175,14 @@ class CustomModelScenario:
                 LinearGaussianModel(**settings["truth"]),
             )
         except (KeyError, TypeError) as exc:
-            raise ConfigError(f"custom model settings are incomplete or malformed ({exc})") from None
+            expected = "complete custom model settings (model, filter, truth)"
+            raise SettingError("settings", expected, f"{type(exc).__name__} {exc}") from None
 
 
 # --- reading model files -------------------------------------------------------------------------
+
+#: what each required key holds, for the error of a missing one
+_EXPECTED = {"steps_per_update": "a positive integer", "updates": "a positive integer", "x0": "an array of numbers"}
 
 
 def load_model_file(
@@ -185,151 +206,97 @@ def load_model_file(
 
     Raises
     ------
-    ConfigError
-        One line naming the file (or the --set key) and the key at fault.
+    SettingError
+        One line: ``FILE: KEY: expected ..., got ...``, or ``KEY: ...`` naming the --set key at fault.
     """
     path = Path(path)
     if config is not None:
-        raise ConfigError(f"--config: not used with a model file ({path}); put the settings in the file or use --set")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: no such model file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{path}: cannot read the model file ({exc})") from None
+        expected = f"no config file with a model file ({path}; put the settings in the file or use --set)"
+        raise SettingError("--config", expected, show(str(config)))
+    document = read_toml(path, "model file")
     from kalcal.io.outputs import mark_inputs
 
-    return mark_inputs(parse_model(text, str(path), assignments), path)  # a job given it never removes the file
+    return mark_inputs(build_model(document, str(path), assignments), path)  # a job given it never removes the file
 
 
 def parse_model(text: str, source: str, assignments: Iterable[str] = ()) -> CustomModelScenario:
     """A model file's text -> the validated scenario; ``source`` names the file in errors and outputs."""
-    try:
-        document = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{source}: not valid TOML ({exc})") from None
-    overrides = parse_assignments(assignments)
-    _apply_overrides(document, overrides)
-    label = f"{source} (with --set {', '.join(overrides)})" if overrides else source
+    return build_model(parse_toml(text, source), source, assignments)
+
+
+def build_model(document: dict[str, Any], source: str, assignments: Iterable[str] = ()) -> CustomModelScenario:
+    """A model file's TOML tables and ``--set`` overrides -> the validated scenario.
+
+    An error about a value the file holds names ``source``; one about an overridden value names the
+    ``--set`` key alone.
+    """
+    origins = _apply_overrides(document, parse_assignments(assignments), source)
     try:
         return _build(document, source)
-    except ConfigError as exc:
-        raise ConfigError(f"{label}: {exc}") from None
+    except SettingError as exc:
+        if exc.key in origins:
+            raise exc.from_assignment(origins[exc.key]) from None
+        raise exc.located(source=source) from None
 
 
-def _toml_value(key: str, text: str) -> Any:
-    try:
-        return tomllib.loads(f"value = {text}")["value"]
-    except tomllib.TOMLDecodeError:
-        if key == "model.name":
-            return text  # a bare name needs no quotes
-        raise ConfigError(f"--set {key}: expected a TOML value (e.g. [[0.01]], 60, 0.1), got {text!r}") from None
-
-
-def _apply_overrides(document: dict[str, Any], overrides: Mapping[str, str]) -> None:
+def _apply_overrides(document: dict[str, Any], overrides: Mapping[str, str], source: str) -> dict[str, str]:
+    """Write the overrides into the document; return each overridden document key's ``--set`` key."""
+    origins: dict[str, str] = {}
     for key, text in overrides.items():
         section, _, name = key.partition(".")
         if name not in _SET_KEYS.get(section, ()):
             known = "; ".join(f"{s}.{{{', '.join(keys)}}}" for s, keys in _SET_KEYS.items())
-            raise ConfigError(f"unknown setting {key!r} for a model file (known: {known})")
-        value = _toml_value(key, text)
+            raise unknown(key, f"a model file's setting ({known})", "setting")
+        value = toml_value(key, text, bare_string=key == "model.name")  # a bare name needs no quotes
         if section in ("truth", "filter") and name in MODEL_KEYS:
             table = document.setdefault("truth", {})
             if not isinstance(table, dict):
-                raise ConfigError(f"--set {key}: the file's 'truth' is not a [truth] table")
+                raise SettingError("truth", "a [truth] table of matrices", type_name(table), source)
             if section == "truth":
                 table[name] = value
+                origins[key] = key
                 continue
             # filter.KEY retunes the filter only: the truth keeps the file's value (as for built-in scenarios)
             if name in document and name not in table:
                 table[name] = document[name]
         document[name] = value
-
-
-def _type_name(value: Any) -> str:
-    names = {bool: "a boolean", str: "a string", dict: "a table", list: "an array"}
-    return names.get(type(value), type(value).__name__)
-
-
-def _is_number(value: Any) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool)
-
-
-def _matrix(key: str, value: Any) -> np.ndarray:
-    example = "[[1.0, 0.0], [0.0, 1.0]]"
-    if not isinstance(value, list) or not all(isinstance(row, list) for row in value):
-        raise ConfigError(f"{key}: expected a matrix, an array of rows such as {example}, got {value!r}")
-    for i, row in enumerate(value):
-        for item in row:
-            if not _is_number(item):
-                raise ConfigError(f"{key}: expected numbers, got {item!r} ({_type_name(item)}) in row {i + 1}")
-    lengths = sorted({len(row) for row in value})
-    if not lengths or lengths == [0]:
-        raise ConfigError(f"{key}: expected a non-empty matrix such as {example}, got {value!r}")
-    if len(lengths) > 1:
-        raise ConfigError(f"{key}: rows of different lengths ({', '.join(map(str, lengths))})")
-    return np.array(value, dtype=float)
-
-
-def _vector(key: str, value: Any) -> np.ndarray:
-    if not isinstance(value, list):
-        raise ConfigError(f"{key}: expected an array of numbers such as [0.0, 1.0], got {value!r}")
-    for item in value:
-        if not _is_number(item):
-            raise ConfigError(f"{key}: expected numbers, got {item!r} ({_type_name(item)})")
-    return np.array(value, dtype=float)
+        origins[name] = key
+    return origins
 
 
 def _array(key: str, value: Any) -> np.ndarray:
-    return _vector(key, value) if key.endswith("x0") else _matrix(key, value)
-
-
-def _integer(key: str, value: Any) -> int:
-    if not isinstance(value, int) or isinstance(value, bool) or value < 1:
-        raise ConfigError(f"{key}: expected a positive integer, got {value!r}")
-    return value
-
-
-def _labels(key: str, value: Any) -> tuple[str, ...]:
-    if not isinstance(value, list) or not all(isinstance(item, str) for item in value):
-        raise ConfigError(f"{key}: expected an array of strings, got {value!r}")
-    return tuple(value)
+    return to_vector(key, value) if key.endswith("x0") else to_matrix(key, value)
 
 
 def _build(document: dict[str, Any], source: str) -> CustomModelScenario:
-    unknown = [key for key in document if key not in _TOP_KEYS and key != "truth"]
-    if unknown:
-        raise ConfigError(f"unknown key {unknown[0]!r} (known: {', '.join(_TOP_KEYS)} and a [truth] table)")
+    for key in document:
+        if key not in _TOP_KEYS and key != "truth":
+            raise unknown(key, f"a model file's key ({', '.join(_TOP_KEYS)} or a [truth] table)")
     truth = document.get("truth", {})
     if not isinstance(truth, dict):
-        raise ConfigError(f"truth: expected a [truth] table of matrices, got {_type_name(truth)}")
-    unknown = [key for key in truth if key not in MODEL_KEYS]
-    if unknown:
-        raise ConfigError(f"unknown key 'truth.{unknown[0]}' ([truth] takes {', '.join(MODEL_KEYS)})")
-    missing = [key for key in _REQUIRED if key not in document]
-    if missing:
-        raise ConfigError(f"missing {', '.join(missing)}")
+        raise SettingError("truth", "a [truth] table of matrices", type_name(truth))
+    for key in truth:
+        if key not in MODEL_KEYS:
+            raise unknown(f"truth.{key}", f"a matrix of [truth] ({', '.join(MODEL_KEYS)})")
+    for key in _REQUIRED:
+        if key not in document:
+            raise missing(key, _EXPECTED.get(key, "a matrix"))
 
-    steps = _integer("steps_per_update", document["steps_per_update"])
-    updates = _integer("updates", document["updates"])
-    period = document.get("sample_period", 1.0)
-    if not _is_number(period) or not (math.isfinite(period) and period > 0):
-        raise ConfigError(f"sample_period: expected a positive number of seconds, got {period!r}")
-    name = document.get("name", Path(source).stem)
-    if not isinstance(name, str):
-        raise ConfigError(f"name: expected a string, got {name!r}")
+    steps = to_positive_integer("steps_per_update", document["steps_per_update"])
+    updates = to_positive_integer("updates", document["updates"])
+    period = to_positive_number("sample_period", document.get("sample_period", 1.0), "a positive number of seconds")
+    name = to_string("name", document.get("name", Path(source).stem))
 
     arrays = {key: _array(key, document[key]) for key in MODEL_KEYS}
-    filter_model = LinearGaussianModel(**arrays, steps_per_update=steps, sample_period=float(period))
+    filter_model = LinearGaussianModel(**arrays, steps_per_update=steps, sample_period=period)
     truth_arrays = {key: _array(f"truth.{key}", truth[key]) if key in truth else arrays[key] for key in MODEL_KEYS}
     try:
-        truth_model = LinearGaussianModel(**truth_arrays, steps_per_update=steps, sample_period=float(period))
-    except ConfigError as exc:
-        key = str(exc).partition(":")[0]
-        inherited = ""
-        if key in MODEL_KEYS and key not in truth:
-            inherited = f" ([truth] does not set {key}, so it is the filter's)"
-        raise ConfigError(f"truth.{exc}{inherited}") from None
+        truth_model = LinearGaussianModel(**truth_arrays, steps_per_update=steps, sample_period=period)
+    except SettingError as exc:
+        got = exc.got
+        if exc.key in MODEL_KEYS and exc.key not in truth:
+            got += f" ([truth] does not set {exc.key}, so it is the filter's)"
+        raise exc.located(key=f"truth.{exc.key}", got=got) from None
 
     d, p = filter_model.state_dim, filter_model.measurement_dim
     labels = {
@@ -340,7 +307,6 @@ def _build(document: dict[str, Any], source: str) -> CustomModelScenario:
     }
     for key in _NAME_KEYS:
         if key in document:
-            labels[key] = _labels(key, document[key])
+            labels[key] = to_labels(key, document[key])
     info = CustomModelInfo(name=name, file=source, updates=updates, **labels)
     return CustomModelScenario(info, filter_model, truth_model)
-

@@ -15,23 +15,23 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kalcal.errors import ConfigError
+from kalcal.models.settings import SettingError, require_shape, show
 
 
 def _as_matrix(name: str, value, shape: tuple[int, int] | None = None) -> np.ndarray:
     array = np.array(value, dtype=float)
     if array.ndim != 2:
-        raise ConfigError(f"{name}: expected a matrix, got an array of shape {array.shape}")
-    if shape is not None and array.shape != shape:
-        raise ConfigError(f"{name}: expected shape {shape}, got {array.shape}")
+        raise SettingError(name, "a matrix", f"an array of shape {array.shape}")
+    if shape is not None:
+        require_shape(name, array, shape)
     if not np.all(np.isfinite(array)):
-        raise ConfigError(f"{name}: contains a non-finite value")
+        raise SettingError(name, "finite numbers", show(array))
     array.setflags(write=False)
     return array
 
 
 def check_covariance(name: str, matrix: np.ndarray, *, rtol: float = 1e-9) -> None:
-    """Raise :class:`ConfigError` unless ``matrix`` is symmetric positive semi-definite.
+    """Raise a :class:`~kalcal.models.settings.SettingError` unless ``matrix`` is symmetric positive semi-definite.
 
     Parameters
     ----------
@@ -43,10 +43,10 @@ def check_covariance(name: str, matrix: np.ndarray, *, rtol: float = 1e-9) -> No
     """
     scale = max(float(np.max(np.abs(matrix), initial=0.0)), np.finfo(float).tiny)
     if not np.allclose(matrix, matrix.T, rtol=0.0, atol=rtol * scale):
-        raise ConfigError(f"{name}: covariance is not symmetric")
+        raise SettingError(name, "a symmetric covariance", show(matrix))
     smallest = float(np.linalg.eigvalsh(matrix).min(initial=0.0))
     if smallest < -rtol * scale:
-        raise ConfigError(f"{name}: covariance is not positive semi-definite (eigenvalue {smallest:.3g})")
+        raise SettingError(name, "a positive semi-definite covariance", f"{show(matrix)} (eigenvalue {smallest:.3g})")
 
 
 @dataclass(frozen=True)
@@ -89,31 +89,31 @@ class LinearGaussianModel:
         phi = _as_matrix("phi", self.phi)
         d = phi.shape[0]
         if phi.shape != (d, d):
-            raise ConfigError(f"phi: expected a square matrix, got shape {phi.shape}")
+            raise SettingError("phi", "a square matrix", f"shape {phi.shape}")
         gamma = _as_matrix("gamma", self.gamma)
         if gamma.shape[0] != d:
-            raise ConfigError(f"gamma: expected {d} rows to match phi, got shape {gamma.shape}")
+            raise SettingError("gamma", f"{d} rows to match phi", f"shape {gamma.shape}")
         q = gamma.shape[1]
         h = _as_matrix("h", self.h)
         if h.shape[1] != d:
-            raise ConfigError(f"h: expected {d} columns to match phi, got shape {h.shape}")
+            raise SettingError("h", f"{d} columns to match phi", f"shape {h.shape}")
         p = h.shape[0]
         w = _as_matrix("w", self.w, (q, q))
         v = _as_matrix("v", self.v, (p, p))
         m0 = _as_matrix("m0", self.m0, (d, d))
         x0 = np.array(self.x0, dtype=float).reshape(-1)
         if x0.shape != (d,):
-            raise ConfigError(f"x0: expected {d} entries to match phi, got {x0.size}")
+            raise SettingError("x0", f"{d} entries to match phi", str(x0.size))
         x0.setflags(write=False)
         for name, cov in (("w", w), ("v", v), ("m0", m0)):
             check_covariance(name, cov)
         if np.linalg.eigvalsh(v).min() <= 0:
-            raise ConfigError("v: measurement-noise covariance must be positive definite")
+            raise SettingError("v", "a positive definite measurement-noise covariance", show(v))
         steps = int(self.steps_per_update)
         if steps != self.steps_per_update or steps < 1:
-            raise ConfigError(f"steps_per_update: expected a positive integer, got {self.steps_per_update!r}")
+            raise SettingError("steps_per_update", "a positive integer", show(self.steps_per_update))
         if not (np.isfinite(self.sample_period) and self.sample_period > 0):
-            raise ConfigError(f"sample_period: expected a positive number, got {self.sample_period!r}")
+            raise SettingError("sample_period", "a positive number", show(self.sample_period))
         for name, value in (("phi", phi), ("gamma", gamma), ("h", h), ("w", w), ("v", v), ("x0", x0), ("m0", m0)):
             object.__setattr__(self, name, value)
         object.__setattr__(self, "steps_per_update", steps)

@@ -6,10 +6,10 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
-from kalcal.errors import ConfigError
 from kalcal.io.outputs import mark_inputs
 from kalcal.models.accel_gps import AccelGpsScenario
-from kalcal.models.config import apply_settings, load_toml, parse_assignments
+from kalcal.models.config import apply_settings, load_toml
+from kalcal.models.settings import SettingError, parse_assignments, show
 from kalcal.models.scale_bias import ScaleBiasScenario
 
 SCENARIOS: dict[str, type] = {AccelGpsScenario.NAME: AccelGpsScenario, ScaleBiasScenario.NAME: ScaleBiasScenario}
@@ -23,16 +23,20 @@ def build_scenario(
 ):
     """The named scenario with ``defaults``, then the TOML file, then ``section.key=value`` applied.
 
+    An error about a value the file set names the file; one about a ``--set`` value names its key alone.
+
     The config file is recorded on the scenario (:func:`kalcal.io.outputs.mark_inputs`): a job writing
     outputs with it never removes or replaces that file.
     """
     if name not in SCENARIOS:
-        hint = "; a model file (.toml) works with kalcal verify" if str(name).lower().endswith(".toml") else ""
-        raise ConfigError(f"unknown scenario {name!r} (known: {', '.join(SCENARIOS)}{hint})")
+        hint = " (a model file (.toml) works with kalcal verify)" if str(name).lower().endswith(".toml") else ""
+        raise SettingError("SCENARIO", f"one of {', '.join(SCENARIOS)}", f"{show(name)}{hint}")
     scenario = SCENARIOS[name]()
     settings: dict[str, Any] = dict(defaults or {})
-    if config is not None:
-        settings.update(load_toml(config))
-    settings.update(parse_assignments(assignments))
+    from_file = load_toml(config) if config is not None else {}
+    settings.update(from_file)
+    assigned = parse_assignments(assignments)
+    settings.update(assigned)
+    sources = {key: str(config) for key in from_file if key not in assigned}
     # a job given the scenario never removes or replaces the config it was read from
-    return mark_inputs(apply_settings(scenario, settings), config)
+    return mark_inputs(apply_settings(scenario, settings, sources), config)

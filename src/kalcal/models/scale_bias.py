@@ -49,8 +49,15 @@ from typing import ClassVar, Literal, NamedTuple
 
 import numpy as np
 
-from kalcal.errors import ConfigError
-from kalcal.models.config import require_nonnegative, require_positive
+from kalcal.models.scale_bias_theta import ThetaPrior, theta_prior
+from kalcal.models.settings import (
+    SettingError,
+    require_below,
+    require_nonnegative,
+    require_positive,
+    require_whole,
+    show,
+)
 
 Drift = Literal["none", "random-walk"]
 Excitation = Literal["sensor", "reference"]
@@ -79,14 +86,14 @@ class ScaleBiasSettings:
 
     def __post_init__(self) -> None:
         require_positive("scenario", rate=self.rate, duration=self.duration)
-        samples = self.duration * self.rate
-        if abs(samples - round(samples)) > 1e-9 * max(samples, 1.0) or round(samples) < 1:
-            raise ConfigError(
-                f"scenario.duration: must hold a whole number (>= 1) of samples, got {self.duration:g} s "
-                f"at {self.rate:g} Hz"
-            )
+        require_whole(
+            "scenario.duration",
+            self.duration * self.rate,
+            "a whole number (>= 1) of samples",
+            f"{self.duration!r} s at {self.rate:g} Hz",
+        )
         if not self.unit.strip():
-            raise ConfigError(f"scenario.unit: expected a unit label, got {self.unit!r}")
+            raise SettingError("scenario.unit", "a unit label", show(self.unit))
 
     @property
     def sample_period(self) -> float:
@@ -148,8 +155,7 @@ class ScaleBiasTruth:
 
 def _require_scale_error(section: str, value: float | None) -> None:
     # theta1 = 1 / (1 - a) must be finite and positive: a sensor that reads psi with a positive gain.
-    if value is not None and not value < 1.0:
-        raise ConfigError(f"{section}.scale_error: must be less than 1 (the sensor's gain 1 - a must be positive), got {value!r}")
+    require_below(f"{section}.scale_error", value, 1.0, "the sensor's gain 1 - a must be positive")
 
 
 @dataclass(frozen=True)
@@ -205,49 +211,6 @@ class FilterValues(NamedTuple):
     form: str
 
 
-class ThetaPrior(NamedTuple):
-    """A Gaussian prior of theta = [theta1, theta2]."""
-
-    mean: np.ndarray  #: (2,), [1, signal unit]
-    cov: np.ndarray  #: (2, 2)
-
-
-def theta_from_scale_bias(a, b) -> np.ndarray:
-    """theta = [1 / (1 - a), b / (1 - a)], shape (..., 2) for a, b of shape (...)."""
-    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
-    gain = 1.0 - a
-    return np.stack(np.broadcast_arrays(1.0 / gain, b / gain), axis=-1)
-
-
-def scale_bias_from_theta(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """a = 1 - 1 / theta1 and b = theta2 / theta1 for theta of shape (..., 2)."""
-    theta = np.asarray(theta, dtype=float)
-    return 1.0 - 1.0 / theta[..., 0], theta[..., 1] / theta[..., 0]
-
-
-def scale_bias_jacobian(theta: np.ndarray) -> np.ndarray:
-    """d(a, b) / d(theta1, theta2) = [[1 / theta1^2, 0], [-theta2 / theta1^2, 1 / theta1]], shape (..., 2, 2)."""
-    theta = np.asarray(theta, dtype=float)
-    t1, t2 = theta[..., 0], theta[..., 1]
-    jac = np.zeros(theta.shape[:-1] + (2, 2))
-    jac[..., 0, 0] = 1.0 / t1**2
-    jac[..., 1, 0] = -t2 / t1**2
-    jac[..., 1, 1] = 1.0 / t1
-    return jac
-
-
-def theta_prior(a: float, a_std: float, b: float, b_std: float) -> ThetaPrior:
-    """The Gaussian prior of theta from the moments of a and b, to first order.
-
-    mean = theta(a, b); cov = J diag(a_std^2, b_std^2) J^T with J = d theta / d(a, b) at the mean:
-    J = [[1 / (1 - a)^2, 0], [b / (1 - a)^2, 1 / (1 - a)]].
-    """
-    gain = 1.0 - a
-    jac = np.array([[1.0 / gain**2, 0.0], [b / gain**2, 1.0 / gain]])
-    cov = jac @ np.diag([a_std**2, b_std**2]) @ jac.T
-    return ThetaPrior(theta_from_scale_bias(a, b), 0.5 * (cov + cov.T))
-
-
 @dataclass(frozen=True)
 class ScaleBiasScenario:
     """The whole two-sensor study: timing, truth and filter settings."""
@@ -263,9 +226,10 @@ class ScaleBiasScenario:
         # leave the filter a singular prior: say which key to set.
         for name in ("scale_error_std", "bias_std"):
             if getattr(self.filter, name) is None and getattr(self.truth, name) == 0:
-                raise ConfigError(
-                    f"filter.{name}: the filter needs a positive prior std, and truth.{name} = 0 is the one it "
-                    f"would take; set filter.{name}"
+                raise SettingError(
+                    f"filter.{name}",
+                    f"a positive prior std for the filter (set filter.{name}: unset, it takes the truth's)",
+                    f"truth.{name} = 0",
                 )
 
     @property
