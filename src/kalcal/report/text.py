@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from kalcal.verify.checks import verdict_false_alarm_bound
+from kalcal.verify.bounds import verdict_false_alarm_bound
 from kalcal.verify.text import (
     CHECK_PVALUE_FIELD,
     PART_PVALUE_FIELD,
