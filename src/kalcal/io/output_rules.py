@@ -1,5 +1,4 @@
-"""What stops a run from writing into a folder: a file not kalcal's, an input, a file where a folder goes,
-another run's set."""
+"""What stops a run from writing into a folder: a file not kalcal's, an input, a file where a folder goes."""
 
 from __future__ import annotations
 
