@@ -1,4 +1,4 @@
-"""Putting a staged set of outputs in place: marked incomplete, the old set's files removed, the new renamed, marked complete."""
+"""Putting a staged set of outputs in place: marked incomplete, old files removed, new ones renamed, marked complete."""
 
 from __future__ import annotations
 
