@@ -8,7 +8,8 @@ import numpy as np
 from rich.console import Console
 
 from kalcal import cli
-from kalcal.verify.checks import check_covariance, check_nis
+from kalcal.verify.checks import check_nis
+from kalcal.verify.covariance import check_covariance
 from kalcal.verify.text import check_bounds_text
 from tests.verify.test_check_results import _info, _stats
 

@@ -23,7 +23,7 @@ import pytest
 from typer.testing import CliRunner
 
 from kalcal.cli import app
-from kalcal.io.outputs import MANIFEST, read_manifest
+from kalcal.io.manifest import MANIFEST, read_manifest
 from tests._helpers import tree as _tree
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "constant_velocity.toml"

@@ -15,14 +15,8 @@ import allantools
 import numpy as np
 import pytest
 
-from kalcal.calibrate.noise import (
-    BIAS_INSTABILITY_FACTOR,
-    MIN_NOISE_ID_AVERAGES,
-    MIN_SAMPLES,
-    allan_curve,
-    identify_noise,
-    regular_rate,
-)
+from kalcal.calibrate.allan import MIN_NOISE_ID_AVERAGES, MIN_SAMPLES, allan_curve, regular_rate
+from kalcal.calibrate.noise import BIAS_INSTABILITY_FACTOR, identify_noise
 from kalcal.errors import DataError
 
 CONFIDENCE = 0.999

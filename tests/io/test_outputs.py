@@ -12,19 +12,9 @@ from pathlib import Path
 import pytest
 
 from kalcal.interrupts import Interrupted, deferred_signals, raise_on_signals
-from kalcal.io import outputs
-from kalcal.io.outputs import (
-    MANIFEST,
-    OutputError,
-    final_path,
-    listed_files,
-    protected,
-    read_manifest,
-    require_complete,
-    run_outputs,
-    write_manifest,
-    writes_outputs,
-)
+from kalcal.io import commit, outputs
+from kalcal.io.manifest import MANIFEST, Manifest, listed_files, read_manifest, require_complete, write_manifest
+from kalcal.io.outputs import OutputError, final_path, protected, run_outputs, writes_outputs
 from tests._helpers import tree as _tree
 
 
@@ -299,7 +289,7 @@ def test_a_manifest_kalcal_did_not_write_is_refused(tmp_path):
 def test_write_manifest_lists_sorted_unique_files(tmp_path):
     write_manifest(tmp_path, "verify", ["b", "a", "b"], complete=False)
     manifest = read_manifest(tmp_path)
-    assert manifest == outputs.Manifest("verify", False, ("a", "b"))
+    assert manifest == Manifest("verify", False, ("a", "b"))
 
 
 def test_signals_raise_interrupted_with_the_shell_status():
@@ -324,13 +314,13 @@ def test_a_signal_during_the_commit_waits_for_it_to_end():
 def test_a_signal_in_the_commit_still_leaves_a_whole_set(tmp_path, monkeypatch):
     out = tmp_path / "out"
     _run(out, {"a.txt": "old", "b.txt": "old"})
-    real_remove = outputs._remove
+    real_remove = commit._remove
 
     def remove_and_signal(folder, relative):
         signal.raise_signal(signal.SIGTERM)
         real_remove(folder, relative)
 
-    monkeypatch.setattr(outputs, "_remove", remove_and_signal)
+    monkeypatch.setattr(commit, "_remove", remove_and_signal)
     with raise_on_signals(), pytest.raises(Interrupted):
         _run(out, {"a.txt": "new", "c.txt": "new"})
     assert _tree(out).keys() == {"a.txt", "c.txt", MANIFEST} and read_manifest(out).complete

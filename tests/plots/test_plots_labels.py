@@ -13,7 +13,8 @@ from kalcal.montecarlo.engine import run_monte_carlo
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.plots import consistency, ensemble
 from kalcal.plots import realization as single
-from kalcal.verify.checks import COVARIANCE_PARTS, centered_nees, centered_nees_bounds, check_covariance
+from kalcal.verify.bounds import COVARIANCE_PARTS, centered_nees_bounds
+from kalcal.verify.covariance import centered_nees, check_covariance
 
 
 @pytest.fixture

@@ -8,7 +8,9 @@ import re
 import pytest
 
 from kalcal.report.figures import REPORT_NUMBERS, FigureEntry, SkippedFigure
-from kalcal.report.html import build_page, measured_text, png_size, shortfall
+from kalcal.report.figure_html import png_size
+from kalcal.report.html import build_page
+from kalcal.report.text import measured_text, shortfall
 
 
 def _failures_section(page: str) -> str:

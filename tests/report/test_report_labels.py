@@ -3,7 +3,7 @@ what it covers, and the report's E[r_k r_j^T] pair only where the run has it."""
 
 import json
 
-from kalcal.report.html import _residual_pair
+from kalcal.report.figure_html import residual_pair_table
 
 
 def test_realization_figures_name_the_error_states(report_run):
@@ -37,6 +37,6 @@ def test_the_residual_pair_section_only_where_the_run_has_the_pair(report_run):
         "correlation": [[0.01, -0.02], [0.003, 0.04]],
         "standard_error": [[2e-6, 3e-7], [3e-7, 5e-8]],
     }
-    assert _residual_pair({"residual_correlation": None}) == ""
-    page = _residual_pair(summary)
+    assert residual_pair_table({"residual_correlation": None}) == ""
+    page = residual_pair_table(summary)
     assert "E[r_k r_jᵀ] at t_k = 23.8 s, t_j = 5.8 s" in page and "1.5e-06 ± 2e-06" in page

@@ -13,16 +13,16 @@ from scipy import stats
 from kalcal.io.results import to_jsonable
 from kalcal.montecarlo.accumulators import EnsembleStatistics
 from kalcal.montecarlo.problem import ProblemInfo
+from kalcal.verify.bounds import verdict_false_alarm_bound
 from kalcal.verify.checks import (
     Cause,
     CheckPart,
     CheckResult,
-    check_covariance,
     check_mean_error,
     check_orthogonality,
     check_residual_whiteness,
-    verdict_false_alarm_bound,
 )
+from kalcal.verify.covariance import check_covariance
 from kalcal.verify.results import family_pvalue, normal_family_pvalue
 
 

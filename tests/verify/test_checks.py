@@ -11,7 +11,8 @@ from kalcal.models.config import apply_settings
 from kalcal.montecarlo.accumulators import ensemble_statistics
 from kalcal.montecarlo.engine import run_monte_carlo
 from kalcal.montecarlo.scenarios import build_problem
-from kalcal.verify.checks import chi2_mean_bounds, covariance_element_bound, normal_bound, run_checks, verdict
+from kalcal.verify.bounds import chi2_mean_bounds, covariance_element_bound, normal_bound
+from kalcal.verify.checks import run_checks, verdict
 
 
 def _checks(n, seed=0, **settings):

@@ -20,21 +20,10 @@ Real logs, as they are:
   outside its sensor's range, a value beyond its physical limit, velocity fixes in another unit than
   the positions' finite differences; a gross velocity/position disagreement of no known unit is flagged.
 
-Between two fixes the filter propagates with the model of the Monte Carlo, piece by piece: the steps
-between samples, cut at the fixes. Each piece's transition is
-:func:`~kalcal.models.accel_gps.error_transition` (the bias as the scheme integrates its samples, with
-the decay and noise of :func:`~kalcal.models.accel_gps.bias_discretization`: a Gauss-Markov bias decays
-by exp(-dt_j / tau) at each sample, with the exact discrete noise, over each step's own dt_j), and a piece
-of length h adds the accelerometer noise g = [h^2/2, h, 0] sigma_a. The products over each interval's
-pieces are composed in one compiled pass, and only the 3x3 update runs in a loop over fixes. This is
-exactly the filter that ``verify`` runs (the same per-sample Phi, Gamma and W, the same prior and
-updates) on a log that is evenly spaced at the scenario's rates, with a fix on every
-``steps_per_update``-th sample from the first and none skipped or given its own accuracy, without a
-scale state (``scale_std`` = 0: here the scale column uses the measured acceleration, in ``verify`` the
-true profile) and with ``init="prior"`` (``"first-fix"`` starts later, from the first fix and the GPS
-noise). A step cut by a fix is treated as two pieces with independent noise (the same sample's
-noise, and with the trapezoid rule the same bias noise, really enters both; the difference is one
-sample's share of a whole interval).
+Between two fixes the filter propagates with the model of the Monte Carlo, piece by piece
+(:mod:`kalcal.calibrate.interval_model`): this is exactly the filter that ``verify`` runs on an evenly
+spaced log with a fix on every ``steps_per_update``-th sample; the logs are checked first
+(:mod:`kalcal.calibrate.accel_gps_checks`).
 """
 
 from __future__ import annotations
@@ -43,10 +32,10 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Literal
 
-import numba
 import numpy as np
 
-from kalcal.calibrate import plausibility
+from kalcal.calibrate.accel_gps_checks import check_plausible, fix_warnings
+from kalcal.calibrate.interval_model import compose_intervals, interval_pieces, scale_parameters
 from kalcal.calibrate.plausibility import CalibrationWarning
 from kalcal.errors import DataError
 from kalcal.filters.mechanization import integrate, partial_step
@@ -55,7 +44,6 @@ from kalcal.filters.sqrt_form import cholesky_factor, gram
 from kalcal.filters.steps import UpdateForm, check_form, predict, sqrt_predict, sqrt_update, update
 from kalcal.linalg import symmetrize
 from kalcal.models.accel_gps import AccelGpsScenario
-from kalcal.models.accel_gps_discretization import bias_discretization, error_transition
 
 Init = Literal["prior", "first-fix"]
 INITS: tuple[str, ...] = ("prior", "first-fix")
@@ -93,7 +81,7 @@ class AccelGpsCalibration:
     start_time: float = 0.0  #: s, where the nominal starts
     form: str = "joseph"  #: the filter's update form
     # What the RTS smoother needs (kalcal.calibrate.smoothing), in the filter's own state (which differs
-    # from error_state when a scale factor is estimated: [dp, dv, b', s'], see _scale_parameters):
+    # from error_state when a scale factor is estimated: [dp, dv, b', s'], see kalcal.calibrate.interval_model.scale_parameters):
     filter_state: np.ndarray | None = None  #: posterior x_k of the filter, (K, d)
     filter_covariance: np.ndarray | None = None  #: its P_k, (K, d, d)
     prior_state: np.ndarray | None = None  #: xbar_k before fix k, (K, d)
@@ -115,87 +103,6 @@ class AccelGpsCalibration:
     def nis(self) -> np.ndarray:
         """r_k^T S_k^{-1} r_k, (K,)."""
         return np.sum(self.normalized_innovations**2, axis=-1)
-
-
-def _pieces(imu_time, steps, cuts, settings, period, scheme) -> tuple[np.ndarray, np.ndarray]:
-    """Every piece between two cuts (samples and fixes): its transition and noise inputs.
-
-    A piece [c_i, c_{i+1}] lies in the sample step [t_j, t_{j+1}]; its transition is
-    :func:`~kalcal.models.accel_gps.error_transition` over its part of that step, with the step's bias
-    decay and noise (:func:`~kalcal.models.accel_gps.bias_discretization`). Its noise inputs are the
-    accelerometer sample held over it, g = [h^2/2, h, 0] sigma_a, and, when the bias has noise of its own,
-    that noise's weights times sqrt(q_j).
-
-    Returns
-    -------
-    phis : ndarray, shape (N, 3, 3)
-    inputs : ndarray, shape (N, 3, r), r = 1 or 2
-    """
-    starts, ends = cuts[:-1], cuts[1:]
-    j = np.clip(np.searchsorted(imu_time, starts, side="right") - 1, 0, imu_time.size - 2)
-    step = steps[j]
-    closes = ends == imu_time[j + 1]
-    decay, bias_variance = bias_discretization(settings, step, period)
-    into_end = np.where(closes, step, ends - imu_time[j])
-    phis, bias_input = error_transition(starts - imu_time[j], into_end, step, decay, scheme, closes)
-    h = ends - starts
-    inputs = [np.stack([0.5 * h * h, h, np.zeros_like(h)], axis=1) * settings.accel_noise_std]
-    if np.any(bias_variance > 0):
-        inputs.append(bias_input * np.sqrt(bias_variance)[:, None])
-    return phis, np.stack(inputs, axis=-1)
-
-
-@numba.njit(cache=True, nogil=True)
-def _compose(phis, inputs, owner, n_intervals):
-    """Phi_k = T_last ... T_first and Q_k = sum_i (T_last ... T_{i+1}) G_i G_i^T (...)^T over the pieces
-    of each interval (``owner``, nondecreasing, names each piece's interval; one with none is I, 0)."""
-    out_phi = np.zeros((n_intervals, 3, 3))
-    out_q = np.zeros((n_intervals, 3, 3))
-    for k in range(n_intervals):
-        for a in range(3):
-            out_phi[k, a, a] = 1.0
-    tmp = np.empty((3, 3))
-    for i in range(phis.shape[0]):
-        k = owner[i]
-        t = phis[i]
-        for a in range(3):
-            for b in range(3):
-                tmp[a, b] = t[a, 0] * out_phi[k, 0, b] + t[a, 1] * out_phi[k, 1, b] + t[a, 2] * out_phi[k, 2, b]
-        out_phi[k] = tmp
-        for a in range(3):
-            for b in range(3):
-                tmp[a, b] = t[a, 0] * out_q[k, 0, b] + t[a, 1] * out_q[k, 1, b] + t[a, 2] * out_q[k, 2, b]
-        for a in range(3):
-            for b in range(3):
-                value = tmp[a, 0] * t[b, 0] + tmp[a, 1] * t[b, 1] + tmp[a, 2] * t[b, 2]
-                for r in range(inputs.shape[2]):
-                    value += inputs[i, a, r] * inputs[i, b, r]
-                out_q[k, a, b] = value
-    for k in range(n_intervals):
-        for a in range(3):
-            for b in range(a + 1, 3):
-                mean = 0.5 * (out_q[k, a, b] + out_q[k, b, a])
-                out_q[k, a, b] = out_q[k, b, a] = mean
-    return out_phi, out_q
-
-
-def _scale_parameters(states: np.ndarray, covariances: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """From the filter's [dp, dv, b', s'] to [dp, dv, b, s], b = b' / (1 - s'), s = s' / (1 - s').
-
-    With a scale-factor error the measured acceleration is a_c = (1 + s) a + b + w, so the true one is
-    a = (1 - s') a_c - b' - w / (1 + s) with s' = s / (1 + s), b' = b / (1 + s): the error dynamics are
-    exactly linear in (b', s') with the measured a_c in the transition, which is what a filter of a log
-    has. The covariance follows by the delta method, J P J^T.
-    """
-    b_prime, s_prime = states[:, 2], states[:, 3]
-    one_minus = 1.0 - s_prime
-    converted = states.copy()
-    converted[:, 2], converted[:, 3] = b_prime / one_minus, s_prime / one_minus
-    jacobian = np.broadcast_to(np.eye(4), covariances.shape).copy()
-    jacobian[:, 2, 2] = 1.0 / one_minus
-    jacobian[:, 2, 3] = b_prime / one_minus**2
-    jacobian[:, 3, 3] = 1.0 / one_minus**2
-    return converted, symmetrize(jacobian @ covariances @ np.swapaxes(jacobian, 1, 2))
 
 
 def _python_filter(phis, noise, h, v, dz, x0, m0, form: UpdateForm) -> SequentialRun:
@@ -298,7 +205,7 @@ def calibrate_accel_gps(
     if gps_time.size > 1 and not np.all(np.diff(gps_time) > 0):
         row = int(np.argmax(~(np.diff(gps_time) > 0))) + 2
         raise DataError(f"{source}: row {row}: time {gps_time[row - 1]:.9g} s does not increase")
-    _check_plausible(
+    check_plausible(
         imu_time, accel, gps_time, gps_position, gps_velocity, position_std, velocity_std,
         source, imu_source, imu_rate, gps_rate, dict(columns or {}),
     )
@@ -339,7 +246,7 @@ def calibrate_accel_gps(
             f"{source}: needs at least two usable fixes within the accelerometer log, got {usable.size} "
             f"({np.count_nonzero(~finite)} with a NaN field, {np.count_nonzero(finite & ~inside)} outside the log)"
         )
-    warnings = _fix_warnings(
+    warnings = fix_warnings(
         usable, gps_time, gps_position, gps_velocity, fix_std_p, fix_std_v, nan_std_p, nan_std_v,
         settings, source, dict(columns or {}),
     )
@@ -381,7 +288,7 @@ def calibrate_accel_gps(
     samples = imu_time[(imu_time > start_time) & (imu_time < last)]
     cuts = np.union1d(np.concatenate([[start_time], samples]), fix_times)
     owner = np.searchsorted(fix_times, cuts[1:], side="left")
-    phis, noise = _compose(*_pieces(imu_time, steps, cuts, settings, period, scheme), owner, fix_times.size)
+    phis, noise = compose_intervals(*interval_pieces(imu_time, steps, cuts, settings, period, scheme), owner, fix_times.size)
     h = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
     if scenario.has_scale:
         # s multiplies the measured acceleration: its column over an interval is minus the position and
@@ -403,7 +310,7 @@ def calibrate_accel_gps(
         run = _python_filter(phis, noise, h, v, dz, x0, m0, form)
     states, covariances, residuals, innovations = run.state, run.cov, run.residual, run.innovation_cov
     if scenario.has_scale:
-        states, covariances = _scale_parameters(states, covariances)
+        states, covariances = scale_parameters(states, covariances)
     return AccelGpsCalibration(
         time=fix_times,
         position=nominal_p + states[:, 0],
@@ -428,57 +335,3 @@ def calibrate_accel_gps(
         prior_covariance=symmetrize(run.prior_cov),
         transitions=phis,
     )
-
-
-def _check_plausible(
-    imu_time, accel, gps_time, position, velocity, position_std, velocity_std,
-    source: str, imu_source: str, imu_rate: float | None, gps_rate: float | None, columns: dict[str, str],
-) -> None:
-    """Refuse implausible logs (DataError): rates, then every value against its physical limit (fix times
-    excepted: a fix outside the accelerometer log is skipped and counted)."""
-
-    def name(role: str, default: str | None = None) -> str:
-        return columns.get(role, default or role)
-
-    rate = plausibility.check_rate(
-        imu_time, "accelerometer", imu_source, name("imu_time", "time"), expected=imu_rate, setting="scenario.imu_rate"
-    )
-    fix_rate = plausibility.check_rate(gps_time, "gnss", source, name("time"), expected=gps_rate, setting="scenario.gps_rate")
-    plausibility.check_imu_faster(rate, fix_rate, imu_source)
-    checks = [
-        (imu_time, "time", imu_source, name("imu_time", "time")),
-        (accel, "accel", imu_source, name("accel")),
-        (position, "position", source, name("position")),
-        (velocity, "velocity", source, name("velocity")),
-        (position_std, "position", source, name("position_std")),
-        (velocity_std, "velocity", source, name("velocity_std")),
-    ]
-    for values, quantity, log, column in checks:
-        if values is not None:
-            plausibility.check_limit(values, quantity, log, column)
-
-
-def _fix_warnings(
-    usable, gps_time, position, velocity, std_p, std_v, nan_std_p, nan_std_v, settings, source: str,
-    columns: dict[str, str],
-) -> list[CalibrationWarning]:
-    """What the fixes used need said: per-fix stds that were NaN, velocities that disagree with positions."""
-    warnings = []
-    for role, nan, default in (
-        ("position_std", nan_std_p, settings.gps_position_std),
-        ("velocity_std", nan_std_v, settings.gps_velocity_std),
-    ):
-        count = int(np.count_nonzero(nan[usable]))
-        if count:
-            warnings.append(
-                CalibrationWarning(
-                    "default-fix-std",
-                    f"{source}: column {columns.get(role, role)!r}: {count} fix(es) used have no value (NaN) and "
-                    f"took the filter's setting {default:g}",
-                )
-            )
-    mismatch = plausibility.velocity_consistency(
-        gps_time[usable], position[usable], velocity[usable], std_p[usable], std_v[usable], source,
-        (columns.get("position", "position"), columns.get("velocity", "velocity"), columns.get("time", "time")),
-    )
-    return warnings + ([mismatch] if mismatch is not None else [])

@@ -14,7 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kalcal.calibrate.accel_gps import AccelGpsCalibration, _scale_parameters
+from kalcal.calibrate.accel_gps import AccelGpsCalibration
+from kalcal.calibrate.interval_model import scale_parameters
 from kalcal.errors import DataError
 from kalcal.filters.smoother import rts_smooth
 
@@ -65,7 +66,7 @@ def smooth_calibration(result: AccelGpsCalibration) -> SmoothedCalibration:
     smoothed = rts_smooth(*needed)
     state, covariance = smoothed.state, smoothed.cov
     if state.shape[1] == 4:  # the filter's [dp, dv, b', s'] -> [dp, dv, b, s]
-        state, covariance = _scale_parameters(state, covariance)
+        state, covariance = scale_parameters(state, covariance)
     nominal_p = result.position - result.error_state[:, 0]
     nominal_v = result.velocity - result.error_state[:, 1]
     return SmoothedCalibration(

@@ -30,6 +30,9 @@ model file its scenario was built from, :func:`mark_inputs`), and the checkpoint
 A job that writes into the folder another job is staging (``kalcal verify`` drawing its report) joins
 that job's set; a job that writes into a new folder inside it (each run of a sweep) commits its own set
 there, with its own manifest, which then moves with the outer set.
+
+The manifest is :mod:`kalcal.io.manifest`; the rules that refuse a folder (step 0 and the checks before
+any rename) :mod:`kalcal.io.output_rules`; step 3 :mod:`kalcal.io.commit`.
 """
 
 from __future__ import annotations
@@ -37,47 +40,31 @@ from __future__ import annotations
 import contextlib
 import contextvars
 import dataclasses
-import fnmatch
 import functools
 import inspect
-import json
 import os
 import shutil
 import tempfile
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from kalcal.errors import KalcalError
-from kalcal.interrupts import deferred_signals
+from kalcal.io.commit import commit, reason
+from kalcal.io.manifest import OutputError, listed_files, read_manifest, require_complete
+from kalcal.io.output_rules import folder_name, refuse_enclosing_set, refuse_strays, resolved
 
-MANIFEST = ".kalcal-manifest.json"
+__all__ = [
+    "PARTIAL_PREFIX",
+    "OutputError",
+    "final_path",
+    "inputs_of",
+    "mark_inputs",
+    "protected",
+    "run_outputs",
+    "writes_outputs",
+]
+
 PARTIAL_PREFIX = ".kalcal-partial-"
-MANIFEST_VERSION = 1
-
-
-class OutputError(KalcalError):
-    """An output folder cannot be used: a file in its place, not writable, or holding files kalcal did not write."""
-
-
-@dataclass(frozen=True)
-class Manifest:
-    """What ``OUT/.kalcal-manifest.json`` says.
-
-    Attributes
-    ----------
-    command : str
-        The command that wrote the set (``"verify"``, ``"calibrate accel-gps"``, ...).
-    complete : bool
-        False while a commit is under way (or was cut short).
-    files : tuple of str
-        The files of the set, relative to the folder, with ``/`` separators.
-    """
-
-    command: str
-    complete: bool
-    files: tuple[str, ...]
 
 
 # (staging folder, target folder) of every set being written, innermost last
@@ -89,14 +76,10 @@ _PROTECTED: contextvars.ContextVar[frozenset[str]] = contextvars.ContextVar("kal
 _INPUTS_ATTRIBUTE = "_kalcal_input_files"
 
 
-def _resolved(path: str | Path) -> str:
-    return os.path.realpath(os.fspath(path))
-
-
 @contextlib.contextmanager
 def protected(*paths: str | Path | None) -> Iterator[None]:
     """Within the block, no output set removes or replaces any of ``paths`` (None entries are ignored)."""
-    token = _PROTECTED.set(_PROTECTED.get() | {_resolved(p) for p in paths if p is not None})
+    token = _PROTECTED.set(_PROTECTED.get() | {resolved(p) for p in paths if p is not None})
     try:
         yield
     finally:
@@ -110,7 +93,7 @@ def mark_inputs(value: Any, *paths: str | Path | None) -> Any:
     the scenario's settings, equality or repr; a scenario derived with ``dataclasses.replace`` does
     not carry it.
     """
-    files = tuple(getattr(value, _INPUTS_ATTRIBUTE, ())) + tuple(_resolved(p) for p in paths if p is not None)
+    files = tuple(getattr(value, _INPUTS_ATTRIBUTE, ())) + tuple(resolved(p) for p in paths if p is not None)
     with contextlib.suppress(AttributeError, TypeError):
         object.__setattr__(value, _INPUTS_ATTRIBUTE, files)
     return value
@@ -121,85 +104,12 @@ def inputs_of(value: Any) -> tuple[str, ...]:
     return tuple(getattr(value, _INPUTS_ATTRIBUTE, ()))
 
 
-def read_manifest(folder: str | Path) -> Manifest | None:
-    """The manifest of ``folder``, None when it has none.
-
-    Raises
-    ------
-    OutputError
-        The manifest exists but is not one kalcal wrote (then which files are kalcal's is unknown).
-    """
-    path = Path(folder) / MANIFEST
-    if not path.exists():
-        return None
-    try:
-        document = json.loads(path.read_text(encoding="utf-8"))
-        files = document["files"]
-        if not isinstance(files, list) or not all(isinstance(f, str) for f in files):
-            raise TypeError("files is not a list of names")
-        return Manifest(str(document["command"]), bool(document["complete"]), tuple(files))
-    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError) as exc:
-        raise OutputError(f"{path}: not a kalcal manifest ({exc}); remove it or choose another folder") from None
-
-
-def listed_files(folder: str | Path) -> set[str]:
-    """Every file the manifests of ``folder`` list: its own, and those of the manifests it lists in subfolders."""
-    folder = Path(folder)
-    manifest = read_manifest(folder)
-    if manifest is None:
-        return set()
-    files = {_safe_relative(name, folder) for name in manifest.files}
-    for name in list(files):
-        parts = name.split("/")
-        if len(parts) > 1 and parts[-1] == MANIFEST:
-            sub = "/".join(parts[:-1])
-            files |= {f"{sub}/{inner}" for inner in listed_files(folder / sub)}
-    return files
-
-
-def require_complete(folder: str | Path) -> None:
-    """Raise :class:`OutputError` when the last kalcal run into ``folder`` did not finish its commit."""
-    manifest = read_manifest(folder)
-    if manifest is not None and not manifest.complete:
-        raise OutputError(
-            f"{folder}: incomplete (the last kalcal run here, {manifest.command}, was stopped while putting its "
-            f"files in place; {MANIFEST} says so); run it again"
-        )
-
-
-def _safe_relative(name: str, folder: Path) -> str:
-    """A manifest entry as a normalized relative path inside the folder (a tampered '../x' is refused)."""
-    normal = os.path.normpath(name).replace(os.sep, "/")
-    if os.path.isabs(normal) or normal == ".." or normal.startswith("../") or normal in (".", ""):
-        raise OutputError(f"{folder / MANIFEST}: entry {name!r} is not a file inside the folder")
-    return normal
-
-
-def write_manifest(folder: str | Path, command: str, files: Iterable[str], *, complete: bool = True) -> Path:
-    """Write ``folder/.kalcal-manifest.json`` atomically (a temporary file, then a rename)."""
-    from kalcal import __version__
-
-    path = Path(folder) / MANIFEST
-    document = {
-        "manifest_version": MANIFEST_VERSION,
-        "note": "the files the last kalcal command wrote here; the next one into this folder replaces exactly these",
-        "command": command,
-        "complete": complete,
-        "kalcal_version": __version__,
-        "files": sorted(set(files)),
-    }
-    temporary = path.with_name(path.name + ".tmp")
-    temporary.write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
-    os.replace(temporary, path)
-    return path
-
-
 def final_path(path: str | Path) -> Path:
     """Where a file written into a staging folder will be once its set is committed (others unchanged)."""
     path = Path(path)
     for staging, target in reversed(_ACTIVE.get()):
         try:
-            relative = Path(_resolved(path)).relative_to(staging)
+            relative = Path(resolved(path)).relative_to(staging)
         except ValueError:
             continue
         path = target / relative
@@ -210,7 +120,7 @@ def _relocate(value: Any, staging: Path, target: Path) -> Any:
     """``value`` with every Path under ``staging`` moved to ``target`` (through dicts, lists, tuples, dataclasses)."""
     if isinstance(value, Path):
         try:
-            return target / Path(_resolved(value)).relative_to(staging)
+            return target / Path(resolved(value)).relative_to(staging)
         except ValueError:
             return value
     if isinstance(value, dict):
@@ -231,10 +141,6 @@ def _relocate(value: Any, staging: Path, target: Path) -> Any:
     return value
 
 
-def _reason(exc: OSError) -> str:
-    return exc.strerror or type(exc).__name__
-
-
 def _pid_alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)
@@ -253,165 +159,6 @@ def _remove_stale_partials(out: Path) -> None:
             pid = int(pid_text)
             if pid != os.getpid() and not _pid_alive(pid):
                 shutil.rmtree(entry, ignore_errors=True)
-
-
-def _where(out: Path, option: str | None) -> str:
-    """How messages name the folder: ``--out DIR`` for the option, ``DIR`` for an argument."""
-    return f"{option} {out}" if option else str(out)
-
-
-def _remedy(option: str | None, remedy: str | None) -> str:
-    return remedy or ("move it away or " + (f"choose another {option}" if option else "choose another folder"))
-
-
-def _not_ours(out: Path, relative: str, option: str | None, remedy: str | None, how: str) -> OutputError:
-    return OutputError(
-        f"{_where(out, option)}: {relative} was not written by kalcal here (no {MANIFEST} lists it) and {how}; "
-        + _remedy(option, remedy)
-    )
-
-
-def _own_input(out: Path, path: Path, option: str | None) -> OutputError:
-    return OutputError(
-        f"{_where(out, option)}: the run would replace its own input {path}; "
-        + (f"choose another {option}" if option else "choose another folder")
-    )
-
-
-def _refuse_file_parents(out: Path, relatives: Iterable[str], option: str | None) -> None:
-    """A file (not a folder) where one of ``relatives`` needs a folder (``figures`` for ``figures/a.png``)."""
-    for relative in relatives:
-        for parent in reversed(Path(relative).parents):
-            if str(parent) != "." and os.path.lexists(out / parent) and not (out / parent).is_dir():
-                raise OutputError(f"{_where(out, option)}: {parent.as_posix()} is a file where kalcal writes a folder")
-
-
-def _literal_folders(pattern: str) -> str:
-    """The leading folders of a glob pattern that have no wildcard (``figures`` for ``figures/*.png``), + a name."""
-    parts = pattern.split("/")
-    literal = []
-    for part in parts[:-1]:
-        if any(c in part for c in "*?["):
-            break
-        literal.append(part)
-    return "/".join([*literal, "x"])
-
-
-def _refuse_strays(
-    out: Path,
-    names: Iterable[str],
-    listed: set[str],
-    protected_paths: frozenset[str],
-    option: str | None,
-    remedy: str | None,
-) -> None:
-    """Before the job runs: a file named like one of its outputs that no manifest lists, an input, or a file
-    where the outputs need a folder stops it."""
-    names = tuple(names)
-    _refuse_file_parents(out, [_literal_folders(pattern) for pattern in names], option)
-    for pattern in names:
-        for path in sorted(out.glob(pattern)):
-            relative = path.relative_to(out).as_posix()
-            if _resolved(path) in protected_paths:
-                raise _own_input(out, path, option)
-            if relative not in listed and (path.is_file() or path.is_symlink()):
-                raise _not_ours(out, relative, option, remedy, f"is in a place kalcal writes into ({pattern})")
-
-
-def _staged_files(staging: Path) -> list[str]:
-    files = []
-    for root, directories, names in os.walk(staging):
-        for name in names + [d for d in directories if os.path.islink(os.path.join(root, d))]:
-            files.append(Path(root, name).relative_to(staging).as_posix())
-    return sorted(files)
-
-
-def _check_targets(
-    out: Path,
-    new: list[str],
-    listed: set[str],
-    protected_paths: frozenset[str],
-    option: str | None,
-    remedy: str | None,
-) -> None:
-    """Every new file can be renamed into place without replacing a directory, an input or a file not kalcal's."""
-    _refuse_file_parents(out, new, option)
-    for relative in new:
-        target = out / relative
-        if _resolved(target) in protected_paths:
-            raise _own_input(out, target, option)
-        if target.is_dir() and not target.is_symlink():
-            raise OutputError(f"{_where(out, option)}: {relative} is a folder where kalcal writes a file")
-        if os.path.lexists(target) and relative not in listed:
-            raise _not_ours(out, relative, option, remedy, "would be replaced")
-
-
-def _remove(out: Path, relative: str) -> None:
-    path = out / relative
-    if path.is_symlink() or path.is_file():
-        path.unlink()
-    parent = path.parent
-    while parent != out and out in parent.parents:
-        try:
-            parent.rmdir()  # only when empty: a user's file in a kalcal subfolder keeps it
-        except OSError:
-            break
-        parent = parent.parent
-
-
-def _commit(
-    out: Path,
-    staging: Path,
-    command: str,
-    old: Manifest | None,
-    listed: set[str],
-    replaces: tuple[str, ...] | None,
-    protected_paths: frozenset[str],
-    option: str | None = "--out",
-    remedy: str | None = None,
-) -> None:
-    new = _staged_files(staging)
-    new_set = set(new)
-    _check_targets(out, new, listed, protected_paths, option, remedy)
-    if replaces is None:
-        replaced = set(listed)
-    else:
-        replaced = {f for f in listed if any(fnmatch.fnmatchcase(f, pattern) for pattern in replaces)}
-    kept = listed - replaced
-    removed = set()
-    for relative in sorted(replaced - new_set):
-        if _resolved(out / relative) in protected_paths:
-            kept.add(relative)  # an input of this run: it stays, and stays kalcal's
-        else:
-            removed.add(relative)
-    if replaces is not None and old is not None:
-        command = old.command  # a redraw adds to the run that is there
-    marked = False
-    try:
-        with deferred_signals():
-            write_manifest(out, command, listed | new_set, complete=False)
-            marked = True
-            for relative in sorted(removed):
-                _remove(out, relative)
-            for relative in new:
-                target = out / relative
-                target.parent.mkdir(parents=True, exist_ok=True)
-                os.replace(staging / relative, target)
-            write_manifest(out, command, kept | new_set, complete=True)
-    except OSError as exc:
-        names = " -> ".join(str(f) for f in (exc.filename, exc.filename2) if f is not None)
-        cause = f"{_reason(exc)}: {names}" if names else _reason(exc)
-        if not marked:
-            with contextlib.suppress(OSError):
-                (out / (MANIFEST + ".tmp")).unlink()
-            raise OutputError(
-                f"{_where(out, option)}: cannot write {MANIFEST} ({cause}); the folder is unchanged"
-            ) from None
-        raise OutputError(
-            f"{_where(out, option)}: putting the new files in place failed ({cause}); the folder is marked "
-            f"incomplete ({MANIFEST}): free the space or fix the cause and run again"
-        ) from None
-    shutil.rmtree(staging, ignore_errors=True)
 
 
 @contextlib.contextmanager
@@ -466,11 +213,11 @@ def run_outputs(
     """
     out = Path(out)
     active = _ACTIVE.get()
-    if any(Path(_resolved(out)) == staging for staging, _ in active):
+    if any(Path(resolved(out)) == staging for staging, _ in active):
         yield out
         return
-    protected_paths = _PROTECTED.get() | {_resolved(p) for p in protect if p is not None}
-    where = _where(out, option)
+    protected_paths = _PROTECTED.get() | {resolved(p) for p in protect if p is not None}
+    where = folder_name(out, option)
     if out.exists() and not out.is_dir():
         raise OutputError(f"{where}: is an existing file, not a folder")
     created = []  # the folders this run creates, deepest first: a failed run removes them again
@@ -481,7 +228,7 @@ def run_outputs(
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise OutputError(f"{where}: cannot create the folder ({_reason(exc)})") from None
+        raise OutputError(f"{where}: cannot create the folder ({reason(exc)})") from None
     try:
         old = read_manifest(out)
         listed = listed_files(out)
@@ -490,24 +237,24 @@ def run_outputs(
         elif old is not None and old.command != command:
             raise OutputError(f"{where}: holds the outputs of `kalcal {old.command}`; choose another folder")
         else:
-            _refuse_enclosing_set(out, where)
-        _refuse_strays(out, names, listed, protected_paths, option, remedy)
+            refuse_enclosing_set(out, where)
+        refuse_strays(out, names, listed, protected_paths, option, remedy)
         _remove_stale_partials(out)
         try:
             staging = Path(tempfile.mkdtemp(prefix=f"{PARTIAL_PREFIX}{os.getpid()}-", dir=out))
         except OSError as exc:
-            raise OutputError(f"{where}: cannot write in the folder ({_reason(exc)})") from None
+            raise OutputError(f"{where}: cannot write in the folder ({reason(exc)})") from None
     except BaseException:
         _remove_created(created)
         raise
-    staging = Path(_resolved(staging))
+    staging = Path(resolved(staging))
     token = _ACTIVE.set((*active, (staging, out)))
     try:
         try:
             yield staging
         finally:
             _ACTIVE.reset(token)
-        _commit(
+        commit(
             out,
             staging,
             command,
@@ -522,21 +269,6 @@ def run_outputs(
         shutil.rmtree(staging, ignore_errors=True)
         _remove_created(created)
         raise
-
-
-def _refuse_enclosing_set(out: Path, where: str) -> None:
-    """Refuse ``out`` when a folder above it lists files inside it: ``out`` is part of another run's set
-    (a sweep's run folder), which a run of its own would leave describing files that are gone."""
-    target = Path(os.path.abspath(out))
-    for parent in target.parents:
-        manifest = read_manifest(parent)
-        if manifest is None:
-            continue
-        inside = target.relative_to(parent).as_posix() + "/"
-        if any(name.startswith(inside) for name in listed_files(parent)):
-            raise OutputError(
-                f"{where}: is part of the outputs of `kalcal {manifest.command}` in {parent}; choose another folder"
-            )
 
 
 def _remove_created(created: list[Path]) -> None:

@@ -7,7 +7,8 @@ import dataclasses
 from pathlib import Path
 from typing import Any
 
-from kalcal.calibrate.noise import NoiseIdentification, identify_noise, regular_rate
+from kalcal.calibrate.allan import regular_rate
+from kalcal.calibrate.noise import NoiseIdentification, identify_noise
 from kalcal.calibrate.plausibility import CalibrationWarning, check_limit, check_rate
 from kalcal.errors import DataError
 from kalcal.io.logs import numeric_columns, parse_column_map, read_table, require_increasing
@@ -70,7 +71,7 @@ def identify_noise_file(
     ``out/allan.png`` and ``out/filter.toml``; returns the summary. The log must be evenly sampled (steps
     within 1% of the median step), at a plausible accelerometer rate, with every sample within the physical
     limit (:mod:`kalcal.calibrate.plausibility`). Columns are mapped with ``"time=t,accel=ax"``. A log that
-    does not look static (:func:`~kalcal.calibrate.noise.motion_warnings`) is flagged in the summary's
+    does not look static (:func:`~kalcal.calibrate.motion.motion_warnings`) is flagged in the summary's
     ``warnings`` (``{"code", "message"}`` each, empty when none) and at the top of ``filter.toml``; with
     ``strict`` it is refused (DataError) before anything is written.
     """

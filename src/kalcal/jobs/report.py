@@ -23,7 +23,8 @@ import numpy as np
 
 from kalcal.errors import ConfigError, DataError
 from kalcal.filters.steps import check_form
-from kalcal.io.outputs import require_complete, run_outputs
+from kalcal.io.manifest import require_complete
+from kalcal.io.outputs import run_outputs
 from kalcal.io.results import SCHEMA_VERSION
 from kalcal.io.statistics import read_statistics
 from kalcal.jobs.progress import JobProgress, stage

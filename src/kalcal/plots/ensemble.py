@@ -28,7 +28,7 @@ from kalcal.plots._common import (
     unit_product,
     unit_square,
 )
-from kalcal.verify.checks import covariance_element_bound, normal_bound
+from kalcal.verify.bounds import covariance_element_bound, normal_bound
 
 
 def _names(dataset: xr.Dataset) -> tuple[list[str], list[str]]:

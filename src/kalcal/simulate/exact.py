@@ -120,7 +120,7 @@ def accel_gps_truth(scenario: AccelGpsScenario) -> UpdateRateTruth:
     """The accelerometer/GPS error state at the fixes, exactly in distribution for either scheme.
 
     The truth model's per-sample Phi and bias-noise input are the scheme's own
-    (:func:`~kalcal.models.accel_gps.error_transition`), so a drifting bias composes exactly over an
+    (:func:`~kalcal.models.accel_gps_discretization.error_transition`), so a drifting bias composes exactly over an
     interval; the accelerometer noise, which the trapezoid rule shares between steps, by its weights.
     """
     s = scenario.scenario

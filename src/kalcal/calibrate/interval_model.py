@@ -1,0 +1,109 @@
+"""The error model over each interval between fixes: its pieces, their composition, the scale-factor change.
+
+Between two fixes the filter propagates with the model of the Monte Carlo, piece by piece: the steps
+between samples, cut at the fixes. Each piece's transition is
+:func:`~kalcal.models.accel_gps_discretization.error_transition` (the bias as the scheme integrates its samples, with
+the decay and noise of :func:`~kalcal.models.accel_gps_discretization.bias_discretization`: a Gauss-Markov bias decays
+by exp(-dt_j / tau) at each sample, with the exact discrete noise, over each step's own dt_j), and a piece
+of length h adds the accelerometer noise g = [h^2/2, h, 0] sigma_a. The products over each interval's
+pieces are composed in one compiled pass, and only the 3x3 update runs in a loop over fixes. This is
+exactly the filter that ``verify`` runs (the same per-sample Phi, Gamma and W, the same prior and
+updates) on a log that is evenly spaced at the scenario's rates, with a fix on every
+``steps_per_update``-th sample from the first and none skipped or given its own accuracy, without a
+scale state (``scale_std`` = 0: here the scale column uses the measured acceleration, in ``verify`` the
+true profile) and with ``init="prior"`` (``"first-fix"`` starts later, from the first fix and the GPS
+noise). A step cut by a fix is treated as two pieces with independent noise (the same sample's
+noise, and with the trapezoid rule the same bias noise, really enters both; the difference is one
+sample's share of a whole interval).
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from kalcal.linalg import symmetrize
+from kalcal.models.accel_gps_discretization import bias_discretization, error_transition
+
+__all__ = ["compose_intervals", "interval_pieces", "scale_parameters"]
+
+
+def interval_pieces(imu_time, steps, cuts, settings, period, scheme) -> tuple[np.ndarray, np.ndarray]:
+    """Every piece between two cuts (samples and fixes): its transition and noise inputs.
+
+    A piece [c_i, c_{i+1}] lies in the sample step [t_j, t_{j+1}]; its transition is
+    :func:`~kalcal.models.accel_gps_discretization.error_transition` over its part of that step, with the step's bias
+    decay and noise (:func:`~kalcal.models.accel_gps_discretization.bias_discretization`). Its noise inputs are the
+    accelerometer sample held over it, g = [h^2/2, h, 0] sigma_a, and, when the bias has noise of its own,
+    that noise's weights times sqrt(q_j).
+
+    Returns
+    -------
+    phis : ndarray, shape (N, 3, 3)
+    inputs : ndarray, shape (N, 3, r), r = 1 or 2
+    """
+    starts, ends = cuts[:-1], cuts[1:]
+    j = np.clip(np.searchsorted(imu_time, starts, side="right") - 1, 0, imu_time.size - 2)
+    step = steps[j]
+    closes = ends == imu_time[j + 1]
+    decay, bias_variance = bias_discretization(settings, step, period)
+    into_end = np.where(closes, step, ends - imu_time[j])
+    phis, bias_input = error_transition(starts - imu_time[j], into_end, step, decay, scheme, closes)
+    h = ends - starts
+    inputs = [np.stack([0.5 * h * h, h, np.zeros_like(h)], axis=1) * settings.accel_noise_std]
+    if np.any(bias_variance > 0):
+        inputs.append(bias_input * np.sqrt(bias_variance)[:, None])
+    return phis, np.stack(inputs, axis=-1)
+
+
+@numba.njit(cache=True, nogil=True)
+def compose_intervals(phis, inputs, owner, n_intervals):
+    """Phi_k = T_last ... T_first and Q_k = sum_i (T_last ... T_{i+1}) G_i G_i^T (...)^T over the pieces
+    of each interval (``owner``, nondecreasing, names each piece's interval; one with none is I, 0)."""
+    out_phi = np.zeros((n_intervals, 3, 3))
+    out_q = np.zeros((n_intervals, 3, 3))
+    for k in range(n_intervals):
+        for a in range(3):
+            out_phi[k, a, a] = 1.0
+    tmp = np.empty((3, 3))
+    for i in range(phis.shape[0]):
+        k = owner[i]
+        t = phis[i]
+        for a in range(3):
+            for b in range(3):
+                tmp[a, b] = t[a, 0] * out_phi[k, 0, b] + t[a, 1] * out_phi[k, 1, b] + t[a, 2] * out_phi[k, 2, b]
+        out_phi[k] = tmp
+        for a in range(3):
+            for b in range(3):
+                tmp[a, b] = t[a, 0] * out_q[k, 0, b] + t[a, 1] * out_q[k, 1, b] + t[a, 2] * out_q[k, 2, b]
+        for a in range(3):
+            for b in range(3):
+                value = tmp[a, 0] * t[b, 0] + tmp[a, 1] * t[b, 1] + tmp[a, 2] * t[b, 2]
+                for r in range(inputs.shape[2]):
+                    value += inputs[i, a, r] * inputs[i, b, r]
+                out_q[k, a, b] = value
+    for k in range(n_intervals):
+        for a in range(3):
+            for b in range(a + 1, 3):
+                mean = 0.5 * (out_q[k, a, b] + out_q[k, b, a])
+                out_q[k, a, b] = out_q[k, b, a] = mean
+    return out_phi, out_q
+
+
+def scale_parameters(states: np.ndarray, covariances: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """From the filter's [dp, dv, b', s'] to [dp, dv, b, s], b = b' / (1 - s'), s = s' / (1 - s').
+
+    With a scale-factor error the measured acceleration is a_c = (1 + s) a + b + w, so the true one is
+    a = (1 - s') a_c - b' - w / (1 + s) with s' = s / (1 + s), b' = b / (1 + s): the error dynamics are
+    exactly linear in (b', s') with the measured a_c in the transition, which is what a filter of a log
+    has. The covariance follows by the delta method, J P J^T.
+    """
+    b_prime, s_prime = states[:, 2], states[:, 3]
+    one_minus = 1.0 - s_prime
+    converted = states.copy()
+    converted[:, 2], converted[:, 3] = b_prime / one_minus, s_prime / one_minus
+    jacobian = np.broadcast_to(np.eye(4), covariances.shape).copy()
+    jacobian[:, 2, 2] = 1.0 / one_minus
+    jacobian[:, 2, 3] = b_prime / one_minus**2
+    jacobian[:, 3, 3] = 1.0 / one_minus**2
+    return converted, symmetrize(jacobian @ covariances @ np.swapaxes(jacobian, 1, 2))

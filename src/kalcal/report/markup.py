@@ -1,0 +1,20 @@
+"""HTML building blocks of the page: escaping text and writing a table."""
+
+from __future__ import annotations
+
+import html
+from collections.abc import Iterable
+from typing import Any
+
+__all__ = ["esc", "table"]
+
+
+def esc(value: Any) -> str:
+    """HTML-escape ``str(value)`` (quotes too, so it is safe inside attributes)."""
+    return html.escape(str(value), quote=True)
+
+
+def table(header: Iterable[str], rows: Iterable[str]) -> str:
+    """A table with the (escaped) ``header`` cells over ``rows``, already written as ``<tr>`` HTML."""
+    head = "".join(f"<th>{esc(h)}</th>" for h in header)
+    return f"<table><thead><tr>{head}</tr></thead><tbody>{''.join(rows)}</tbody></table>"
