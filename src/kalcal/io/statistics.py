@@ -9,19 +9,23 @@ NetCDF3 through scipy, so no extra library is needed to read it: ``xarray.open_d
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
 import xarray as xr
 
 from kalcal.errors import DataError
-from kalcal.montecarlo.accumulators import EnsembleStatistics
-from kalcal.montecarlo.problem import ProblemInfo
+
+if TYPE_CHECKING:  # io does not import the engine: the statistics only need their attributes
+    import numpy as np
+
+    from kalcal.montecarlo.accumulators import EnsembleStatistics
+    from kalcal.montecarlo.problem import ProblemInfo
 
 _MATRIX = ("time", "state", "state2")
 
 
 def statistics_dataset(
-    s: EnsembleStatistics, info: ProblemInfo, expected_mean_error: np.ndarray, attrs: dict
+    s: EnsembleStatistics, info: ProblemInfo, expected_mean_error: "np.ndarray", attrs: dict
 ) -> xr.Dataset:
     """Every per-update statistic of a run as a Dataset."""
     data = {
@@ -52,8 +56,9 @@ def statistics_dataset(
             "E[r_k r_j^T] over pairs of updates",
         ),
     }
+    units = _units(info)
     variables = {
-        name: xr.Variable(dims, values, {"long_name": text})
+        name: xr.Variable(dims, values, {"long_name": text, **({"units": units[name]} if units.get(name) else {})})
         for name, (dims, values, text) in data.items()
         if values is not None
     }
@@ -68,6 +73,35 @@ def statistics_dataset(
         "measurement_unit": ("measurement", list(info.measurement_units)),
     }
     return xr.Dataset(variables, coords=coords, attrs={"realizations": s.count, **attrs})
+
+
+def _single(units) -> str | None:
+    """The one unit of a list of units, None when they differ (then the state_unit coordinates tell)."""
+    units = set(units)
+    return units.pop() if len(units) == 1 else None
+
+
+def _units(info: ProblemInfo) -> dict[str, str | None]:
+    """CF ``units`` of each variable where one unit applies to all its elements (products of a state and a
+    state have the square of that unit; NEES and NIS are dimensionless, "1")."""
+    state, measurement = _single(info.state_units), _single(info.measurement_units)
+    square = lambda unit: None if not unit else (unit if unit == "1" else f"({unit})^2")  # noqa: E731
+    return {
+        "mean_error": state,
+        "expected_mean_error": state,
+        "mean_estimate": state,
+        "error_cov": square(state),
+        "filter_cov": square(state),
+        "error_second_moment": square(state),
+        "error_estimate": square(state),
+        "estimate_second_moment": square(state),
+        "mean_nees": "1",
+        "mean_nis": "1",
+        "mean_residual": measurement,
+        "residual_own_moment": square(measurement),
+        "mean_normalized_residual": "1",
+        "residual_second_moment": square(measurement),
+    }
 
 
 def write_statistics(path: str | Path, dataset: xr.Dataset) -> Path:

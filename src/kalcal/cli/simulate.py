@@ -1,0 +1,33 @@
+"""``kalcal simulate``: one realization written as recorded logs."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from kalcal.cli import _common
+from kalcal.cli._common import ConfigOpt, ScenarioArg, SetOpt, user_errors
+
+
+def simulate(
+    scenario: ScenarioArg,
+    out: Annotated[Path, typer.Option("--out", help="Directory for the logs.")] = Path("kalcal-sim"),
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the random generator.")] = 0,
+    set_: SetOpt = None,
+    config: ConfigOpt = None,
+) -> None:
+    """Simulate one realization and write it as recorded logs.
+
+    accel-gps: imu.csv, gps.csv, truth.csv; scale-bias: data.csv (time, reference, sensor), truth.json.
+    """
+    from kalcal.jobs.scale_bias import simulate_scale_bias
+    from kalcal.jobs.simulate import simulate_accel_gps
+    from kalcal.models.registry import build_scenario
+
+    with user_errors():
+        model = build_scenario(scenario, config, set_ or ())
+        paths = (simulate_scale_bias if scenario == "scale-bias" else simulate_accel_gps)(model, seed, out)
+    _common._note_nonfinite(*(path for path in paths.values() if Path(path).suffix == ".json"))
+    _common.print_wrote(Path(out), paths.values())
