@@ -23,11 +23,14 @@ _EXPORTS = {
     "verify": "kalcal.api.verify",
     "calibrate": "kalcal.api.calibrate",
     "noise": "kalcal.api.noise",
+    "simulate": "kalcal.api.simulate",
+    "sweep": "kalcal.api.sweep",
     "Model": "kalcal.api.model",
     "load_model": "kalcal.api.model",
     "VerificationResult": "kalcal.api.results",
     "CalibrationResult": "kalcal.api.results",
     "NoiseResult": "kalcal.api.results",
+    "SimulationResult": "kalcal.api.results",
     "KalcalError": "kalcal.errors",
 }
 

@@ -72,7 +72,9 @@ class VerificationResult:
         docs/outputs.md); returns the files by key."""
         from kalcal.jobs.verify import save_verification
 
-        saved = save_verification(self.run, out, report=report, realization=realization, checkpoint=self.run.checkpoint)
+        saved = save_verification(
+            self.run, out, report=report, realization=realization, checkpoint=self.run.checkpoint, scenario=self.run.scenario
+        )
         return saved.paths
 
     def report(self, path: str | Path = "report.html", *, realization: int = 0) -> Path:
@@ -274,3 +276,30 @@ class NoiseResult:
             f"NoiseResult(N={show(self.velocity_random_walk)}, B={show(self.bias_instability)}, "
             f"K={show(self.rate_random_walk)}, rate={self.rate:.6g} Hz)"
         )
+
+
+@dataclass(frozen=True, repr=False)
+class SimulationResult:
+    """What :func:`kalcal.simulate` drew: the logs as DataFrames (``imu``, ``gps``, ``truth`` for accel-gps;
+    ``data`` for scale-bias) and, for scale-bias, ``truth`` (``truth.json``: the drawn scale error and bias)."""
+
+    scenario: str
+    logs: dict
+    truth: dict | None
+    simulation: Any = field(repr=False, compare=False)
+    paths: dict = field(default_factory=dict)
+
+    @classmethod
+    def from_simulation(cls, simulation, paths: dict | None = None) -> SimulationResult:
+        """The result of a :class:`kalcal.jobs.simulate.Simulation`."""
+        truth = simulation.documents.get("truth")
+        return cls(simulation.command.removeprefix("simulate "), dict(simulation.logs), truth, simulation, dict(paths or {}))
+
+    def save(self, out: str | Path) -> dict[str, Path]:
+        """Write the logs (CSV) and ``truth.json`` into ``out``, as ``kalcal simulate --out`` does (one set)."""
+        from kalcal.jobs.simulate import save_simulation
+
+        return save_simulation(self.simulation, out)
+
+    def __repr__(self) -> str:
+        return f"SimulationResult({self.scenario}: {', '.join(f'{k} ({len(v)} rows)' for k, v in self.logs.items())})"

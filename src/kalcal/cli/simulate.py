@@ -1,4 +1,4 @@
-"""``kalcal simulate``: one realization written as recorded logs."""
+"""``kalcal simulate``: one realization written as recorded logs, through :func:`kalcal.simulate`."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from kalcal.cli import _common
-from kalcal.cli._common import ConfigOpt, ScenarioArg, SetOpt, user_errors
+from kalcal.cli._common import ConfigOpt, ScenarioArg, SetOpt, settings_of, user_errors
 
 
 def simulate(
@@ -22,12 +22,9 @@ def simulate(
 
     accel-gps: imu.csv, gps.csv, truth.csv; scale-bias: data.csv (time, reference, sensor), truth.json.
     """
-    from kalcal.jobs.scale_bias import simulate_scale_bias
-    from kalcal.jobs.simulate import simulate_accel_gps
-    from kalcal.models.registry import build_scenario
+    from kalcal.api.simulate import simulate as run_simulate
 
     with user_errors():
-        model = build_scenario(scenario, config, set_ or ())
-        paths = (simulate_scale_bias if scenario == "scale-bias" else simulate_accel_gps)(model, seed, out)
+        paths = run_simulate(scenario, seed, settings_of(set_), config=config, out=out).paths
     _common._note_nonfinite(*(path for path in paths.values() if Path(path).suffix == ".json"))
     _common.print_wrote(Path(out), paths.values())

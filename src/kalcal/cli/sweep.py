@@ -1,4 +1,4 @@
-"""``kalcal sweep``: a verification per value of one setting, and the tuning curve (drawn by the job)."""
+"""``kalcal sweep``: a verification per value of one setting and the tuning curve, through :func:`kalcal.api.sweep.sweep`."""
 
 from __future__ import annotations
 
@@ -26,21 +26,16 @@ def sweep(
     config: ConfigOpt = None,
 ) -> None:
     """Verify once per value of one setting (--set key=v1,v2,...) and draw the tuning curve."""
-    from kalcal.jobs.sweep import split_sweep, sweep_cells
-    from kalcal.jobs.sweep import sweep as run_sweep
+    from kalcal.api.sweep import sweep as run_sweep
+    from kalcal.jobs.sweep import split_sweep
     from kalcal.models.config import parse_assignments
-    from kalcal.montecarlo.distributed import dask_client
 
     with user_errors():
         key, values, fixed = split_sweep(parse_assignments(set_ or ()))
-        from kalcal.models.registry import build_scenario
-
-        model = build_scenario(scenario, config, [f"{k}={v}" for k, v in fixed.items()])
-        sweep_cells(model, key, values, n, engine=engine, long_run=0)  # every value checked before any cluster
-        with dask_client(workers, scheduler) as client:
-            result = run_sweep(
-                model, key, values, n, seed, out, engine=engine, workers=threads, client=client, long_run=0
-            )
+        result = run_sweep(
+            scenario, key, values, n, seed, out, fixed, config=config, engine=engine, threads=threads,
+            workers=workers, scheduler=scheduler,
+        )
     table = _common._table(f"kalcal sweep {scenario}: {key}", f"{n:,} realizations per value")
     table.add_column(key, justify="right")
     checks = [c[: -len("_passed")] for c in result.table.columns if c.endswith("_passed")]

@@ -12,26 +12,32 @@ from kalcal.calibrate.scale_bias import UNOBSERVABLE_RATIO, calibrate_scale_bias
 from kalcal.errors import DataError
 from kalcal.io.logs import numeric_columns, read_table, require_increasing, source_name
 from kalcal.io.outputs import mark_inputs, writes_outputs
-from kalcal.io.results import write_csv, write_json
 from kalcal.jobs.calibrate import OUTPUT_NAMES, Calibration, save_calibration
+from kalcal.jobs.simulate import OUTPUT_NAMES as SIMULATION_NAMES
+from kalcal.jobs.simulate import Simulation, save_simulation
 from kalcal.models.config import section_values
 from kalcal.models.scale_bias import STATE_NAMES, ScaleBiasScenario, scale_bias_from_theta
 from kalcal.simulate.scale_bias import sample_scale_bias
 
 
-@writes_outputs("simulate scale-bias", names=("data.csv", "truth.json"))
+@writes_outputs("simulate scale-bias", names=SIMULATION_NAMES["simulate scale-bias"])
 def simulate_scale_bias(scenario: ScaleBiasScenario, seed: int, out: str | Path) -> dict[str, Path]:
-    """Write ``data.csv`` and ``truth.json`` for one realization drawn with ``seed``.
+    """Write ``data.csv`` and ``truth.json`` for one realization drawn with ``seed``
+    (:func:`compute_scale_bias_simulation`)."""
+    return save_simulation(compute_scale_bias_simulation(scenario, seed), out)
 
-    data.csv: time [s], reference [signal unit], sensor [signal unit], one row per sample.
-    truth.json: the drawn scale_error a, bias b and theta at the last sample (all samples unless the
+
+def compute_scale_bias_simulation(scenario: ScaleBiasScenario, seed: int) -> Simulation:
+    """One realization drawn with ``seed``, in memory.
+
+    data: time [s], reference [signal unit], sensor [signal unit], one row per sample.
+    truth (truth.json): the drawn scale_error a, bias b and theta at the last sample (all samples unless the
     truth drifts; then also the paths theta1, theta2 per sample), the noise and the settings.
     """
     samples = sample_scale_bias(scenario, np.random.default_rng(seed), 1)
     theta = samples.theta[0]
     a, b = scale_bias_from_theta(theta)
-    out = Path(out)
-    data = write_csv(out / "data.csv", {"time": samples.time, "reference": samples.reference[0], "sensor": samples.sensor[0]})
+    data = pd.DataFrame({"time": samples.time, "reference": samples.reference[0], "sensor": samples.sensor[0]})
     truth: dict[str, Any] = {
         "scenario": scenario.NAME,
         "seed": seed,
@@ -49,7 +55,7 @@ def simulate_scale_bias(scenario: ScaleBiasScenario, seed: int, out: str | Path)
             {"scale_error_path": a, "bias_path": b, "theta1_path": theta[:, 0], "theta2_path": theta[:, 1]}
         )
     truth["settings"] = section_values(scenario)
-    return {"data": data, "truth": write_json(out / "truth.json", truth)}
+    return Simulation("simulate scale-bias", {"data": data}, {"truth": truth})
 
 
 @writes_outputs("calibrate scale-bias", names=OUTPUT_NAMES["calibrate scale-bias"], inputs=("data_path",))

@@ -14,7 +14,7 @@ from kalcal import __version__
 from kalcal.errors import ConfigError
 from kalcal.io.outputs import writes_outputs
 from kalcal.io.results import write_json
-from kalcal.io.statistics import statistics_dataset, write_statistics
+from kalcal.io.statistics import write_statistics
 from kalcal.jobs.progress import JobProgress, stage
 from kalcal.jobs.verify_arguments import (  # noqa: F401 (MAX_UPDATES, MIN_REALIZATIONS, run_length: the job's limits)
     LONG_RUN_REALIZATIONS,
@@ -30,6 +30,7 @@ from kalcal.montecarlo.accumulators import EnsembleStatistics, ensemble_statisti
 from kalcal.montecarlo.engine import BLOCK_SIZE, run_monte_carlo
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.verify.checks import REPORT_RESIDUAL_PAIR, CheckResult, residual_pair, run_checks, verdict
+from kalcal.verify.dataset import statistics_dataset
 
 
 def report_residual_pair(statistics: EnsembleStatistics, info) -> dict[str, Any] | None:
@@ -227,7 +228,7 @@ def compute_verification(
     )
 
 
-@writes_outputs("verify", names=OUTPUT_NAMES, inputs=("checkpoint", "scenario"))
+@writes_outputs("verify", names=OUTPUT_NAMES, inputs=("checkpoint",))
 def save_verification(
     run: Verification,
     out: str | Path,
@@ -240,7 +241,7 @@ def save_verification(
 ) -> SavedVerification:
     """Write a computed verification into ``out`` as one set: ``stats.nc``, ``stats_long.nc`` (with a long
     run), ``summary.json`` and, with ``report``, ``figures/`` and ``report.html`` (realization
-    ``realization``). ``checkpoint`` and ``scenario`` (default: the run's) are only kept from removal.
+    ``realization``). ``checkpoint`` and the files ``scenario`` was read from are never removed.
 
     ``summary.json``'s ``timing``: ``total_s`` is the computation plus writing the statistics files and
     the summary (s), ``report_s`` drawing the figures and page (None without a report), ``wall_s`` both.
