@@ -18,15 +18,18 @@ def resolve(
     engine: str = "exact",
     long_run: float | None = None,
     defaults: Mapping[str, Any] | None = None,
+    models: bool = False,
 ):
     """The scenario object of ``scenario`` with ``settings`` (``{"section.key": value}``, ``--set``'s keys)
     and the TOML ``config`` applied; a model (file or :class:`Model`) refuses the sampled engine and a
-    long run as ``kalcal verify`` does."""
+    long run as ``kalcal verify`` does. Only with ``models`` (verify) is a model file or Model taken; elsewhere
+    a name goes to the registry, which says that model files work with verify."""
     from kalcal.models.custom import is_model_file, load_model_file
     from kalcal.models.registry import build_scenario
 
     assignments = assignments_of(settings)
-    if isinstance(scenario, Model) or (isinstance(scenario, (str, Path)) and is_model_file(str(scenario))):
+    is_model = isinstance(scenario, Model) or (isinstance(scenario, (str, Path)) and is_model_file(str(scenario)))
+    if models and is_model:
         where = scenario.source if isinstance(scenario, Model) else str(scenario)
         if engine == "sampled":
             raise KalcalError(f"--engine: 'sampled' is not available for a model file ({where}); use the exact engine")
