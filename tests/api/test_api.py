@@ -52,7 +52,7 @@ def test_kalcal_error_is_a_value_error_and_bad_input_raises_it():
     assert issubclass(kalcal.KalcalError, ValueError)
     with pytest.raises(kalcal.KalcalError, match="-n: need at least 100"):
         kalcal.verify("accel-gps", n=10)
-    with pytest.raises(kalcal.KalcalError, match="unknown setting"):
+    with pytest.raises(kalcal.KalcalError, match=r"truth.nope: expected a setting of \[truth\] .*, got an unknown key"):
         kalcal.verify("accel-gps", n=N, settings={"truth.nope": 1})
 
 
