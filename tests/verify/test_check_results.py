@@ -20,9 +20,9 @@ from kalcal.verify.checks import (
     CheckResult,
     check_mean_error,
     check_orthogonality,
-    check_residual_whiteness,
 )
 from kalcal.verify.covariance import check_covariance
+from kalcal.verify.whiteness import check_residual_whiteness
 from kalcal.verify.results import family_pvalue, normal_family_pvalue
 
 

@@ -38,7 +38,14 @@ def test_verify_writes_summary_and_statistics(tmp_path):
     covariance = summary["tests"][1]
     assert [part["name"] for part in covariance["parts"]] == ["elements", "centered_nees"]
     assert all(part["alpha"] == pytest.approx(0.005) for part in covariance["parts"])
-    assert all(test["parts"] == [] for test in summary["tests"] if test["name"] != "covariance")
+    assert all(test["parts"] == [] for test in summary["tests"] if test["name"] not in ("covariance", "residual_whiteness"))
+    whiteness = summary["tests"][3]
+    assert [part["name"] for part in whiteness["parts"]] == ["pairs", "portmanteau"]
+    assert all(part["alpha"] == pytest.approx(0.005) for part in whiteness["parts"])
+    assert whiteness["pvalue"] == pytest.approx(min(1.0, 2 * min(part["pvalue"] for part in whiteness["parts"])))
+    assert whiteness["passed"] == all(part["passed"] for part in whiteness["parts"])
+    assert (whiteness["statistic"], whiteness["upper"]) == (whiteness["parts"][0]["statistic"], whiteness["parts"][0]["upper"])
+    assert whiteness["comparisons"] == sum(part["comparisons"] for part in whiteness["parts"])
     mean_error = summary["tests"][0]
     assert not mean_error["passed"] and mean_error["cause"]["explained_by"] == "model_error"
     assert np.array(summary["final"]["filter_covariance"]).shape == (3, 3)

@@ -24,7 +24,7 @@ from kalcal.plots._common import (
     styled,
     time_label,
 )
-from kalcal.verify.bounds import COVARIANCE_PARTS, centered_nees_bounds, chi2_mean_bounds, normal_bound
+from kalcal.verify.bounds import COVARIANCE_PARTS, centered_nees_bounds, chi2_mean_bounds, whiteness_pairs_bound
 from kalcal.verify.covariance import centered_nees
 
 #: pixel height of the residual correlation map (its width is the common 900 px)
@@ -140,7 +140,9 @@ def plot_residual_correlation(dataset: xr.Dataset, path: str | Path) -> Path:
     One panel per measurement pair (a, b), time t_k up and t_j across; the diagonal k = j (where the
     correlation is not required to vanish) is masked grey. White innovations give noise of standard
     error 1 / sqrt(N); the colour scale is symmetric and reaches at least the whiteness check's bound
-    z / sqrt(N) (z for p^2 K (K - 1) / 2 comparisons), so a pale map passes and saturated structure fails.
+    z / sqrt(N) (its pairs part's: z for p^2 K (K - 1) / 2 comparisons at alpha / 2), so a pale map passes
+    the pairs part and saturated structure fails it (a faint pattern over many pairs is the portmanteau's to
+    find).
 
     900 x 800 px.
 
@@ -161,8 +163,7 @@ def plot_residual_correlation(dataset: xr.Dataset, path: str | Path) -> Path:
     with np.errstate(divide="ignore", invalid="ignore"):
         rho = np.where(scale > 0, moment / np.where(scale > 0, scale, 1.0), 0.0)
     rho[np.arange(n_updates), :, np.arange(n_updates), :] = np.nan
-    pairs = max(1, p * p * n_updates * (n_updates - 1) // 2)
-    bound = normal_bound(confidence, pairs) / np.sqrt(count)
+    bound = whiteness_pairs_bound(confidence, n_updates, p) / np.sqrt(count)
     finite = np.abs(rho[np.isfinite(rho)])
     vmax = max(bound, float(finite.max()) if finite.size else bound)
     norm = TwoSlopeNorm(vcenter=0.0, vmin=-vmax, vmax=vmax)

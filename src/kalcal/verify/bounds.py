@@ -1,7 +1,8 @@
 """The bounds of the checks' families and of the verdict: normal and chi-square quantiles under Bonferroni.
 
 A family of m comparisons held to a family-wise alpha tests each at alpha / m (two-sided: alpha / (2 m)
-in each tail). The covariance check splits its alpha equally among its ``COVARIANCE_PARTS``.
+in each tail). The covariance check splits its alpha equally among its ``COVARIANCE_PARTS``, the
+whiteness check among its ``WHITENESS_PARTS``.
 """
 
 from __future__ import annotations
@@ -10,17 +11,22 @@ from scipy import stats as sps
 
 __all__ = [
     "COVARIANCE_PARTS",
+    "WHITENESS_PARTS",
     "centered_nees_bounds",
     "chi2_bounds_at",
     "chi2_mean_bounds",
     "covariance_element_bound",
     "normal_bound",
     "normal_bound_at",
+    "portmanteau_bound",
     "verdict_false_alarm_bound",
+    "whiteness_pairs_bound",
 ]
 
 #: the tests of the covariance check, each held to an equal share of its alpha
 COVARIANCE_PARTS = ("elements", "centered_nees")
+#: the tests of the residual whiteness check, each held to an equal share of its alpha
+WHITENESS_PARTS = ("pairs", "portmanteau")
 
 
 def normal_bound(confidence: float, comparisons: int) -> float:
@@ -45,6 +51,17 @@ def chi2_bounds_at(alpha: float, comparisons: int, dof: float, count: float) -> 
 def covariance_element_bound(confidence: float, n_updates: int, d: int) -> float:
     """The bound of the covariance check's element-wise part: K d (d + 1) / 2 comparisons at alpha / 2."""
     return normal_bound_at((1.0 - confidence) / len(COVARIANCE_PARTS), n_updates * d * (d + 1) // 2)
+
+
+def whiteness_pairs_bound(confidence: float, n_updates: int, p: int) -> float:
+    """The bound on |z| of the whiteness check's pairs part: max(1, p^2 K (K - 1) / 2) comparisons at alpha / 2."""
+    comparisons = max(1, p * p * n_updates * (n_updates - 1) // 2)
+    return normal_bound_at((1.0 - confidence) / len(WHITENESS_PARTS), comparisons)
+
+
+def portmanteau_bound(alpha: float, dof: int) -> float:
+    """The upper alpha quantile of chi-square(dof), the whiteness portmanteau's bound (0 for dof = 0)."""
+    return float(sps.chi2.isf(alpha, dof)) if dof else 0.0
 
 
 def verdict_false_alarm_bound(confidence: float, checks: int) -> float:

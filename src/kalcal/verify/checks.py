@@ -3,8 +3,8 @@
 Every check tests one property the theory promises for a correct filter, over all update times (and all
 elements) at once: the family of comparisons is held to alpha = 1 - confidence by a Bonferroni
 correction (alpha / m for m comparisons), so a correct filter fails a check with probability at most
-alpha. The covariance check is made of two tests, each at alpha / 2. N realizations, K updates,
-d states, p measurements.
+alpha. The covariance and residual whiteness checks are each made of two tests, each at alpha / 2.
+N realizations, K updates, d states, p measurements.
 
 ==================== ===================================================== =====================================
 check                statistic                                             bound
@@ -14,8 +14,9 @@ covariance           max |ensemble cov - P| / sd, sd^2 = (P_il^2 +          at a
                      P_ii P_ll) / N; and mean centered NEES                 m = K d (d + 1) / 2; and at alpha / 2:
                                                                            chi-square(d (N - 1)) / (N - 1), m = K
 orthogonality        max |mean(e x^T)| / sqrt(E[e^2] E[x^2] / N)            normal quantile, m = K d^2
-residual_whiteness   max over j < k of |mean(r_k r_j^T)| /                  normal quantile, m = p^2 K (K - 1) / 2
-                     sqrt(E[r_k^2] E[r_j^2] / N)
+residual_whiteness   max over j < k of |mean(r_k r_j^T)| /                  at alpha / 2: normal quantile,
+                     sqrt(E[r_k^2] E[r_j^2] / N); and the portmanteau      m = p^2 K (K - 1) / 2; and at alpha / 2:
+                     N sum_{j<k} ||S_k^-1/2 mean(r_k r_j^T) S_j^-T/2||^2  chi-square(p^2 K (K - 1) / 2), m = 1
 nis                  mean NIS at the update farthest from p                 chi-square(N p) / N, m = K
 ==================== ===================================================== =====================================
 
@@ -26,7 +27,8 @@ A comparison whose standard error is zero (no spread over the ensemble) passes w
 exactly zero and fails otherwise (its z is infinite: no spread cannot hide a nonzero mean); the detail
 counts both kinds.
 
-The covariance check (:mod:`kalcal.verify.covariance`) compares the *centered* ensemble covariance, so that a mean error is reported once,
+The residual whiteness check (:mod:`kalcal.verify.whiteness`) whitens each update's innovations with
+their ensemble second moment S_k. The covariance check (:mod:`kalcal.verify.covariance`) compares the *centered* ensemble covariance, so that a mean error is reported once,
 by ``mean_error``; orthogonality, whiteness and NIS use raw moments, as the source report does, and
 when they fail their cause says whether the mean error accounts for it (the centered statistic passes).
 
@@ -53,6 +55,7 @@ from kalcal.verify.check_steps import (
     zero_se_text,
 )
 from kalcal.verify.covariance import check_covariance
+from kalcal.verify.whiteness import check_residual_whiteness
 from kalcal.verify.results import (
     Cause,
     CheckPart,
@@ -71,7 +74,6 @@ __all__ = [
     "check_mean_error",
     "check_nis",
     "check_orthogonality",
-    "check_residual_whiteness",
     "residual_pair",
     "run_checks",
     "verdict",
@@ -181,43 +183,6 @@ def residual_pair(s: EnsembleStatistics, info: ProblemInfo, t_k: float, t_j: flo
         "correlation": safe_ratio(moment[k, :, j, :], scale),
         "standard_error": scale / np.sqrt(s.count),
     }
-
-
-def check_residual_whiteness(s: EnsembleStatistics, info: ProblemInfo, confidence: float) -> CheckResult:
-    """E[r_k r_j^T] = 0 for every j < k: the innovations are white."""
-    alpha = 1.0 - confidence
-    moment = s.residual_second_moment  # (K, p, K, p)
-    n_updates, p = moment.shape[:2]
-    pairs = n_updates * (n_updates - 1) // 2
-    m = max(1, p * p * pairs)
-    bound = normal_bound(confidence, m)
-    power = np.diagonal(moment.reshape(n_updates * p, n_updates * p)).reshape(n_updates, p)
-    scale = np.sqrt(np.einsum("ka,jb->kajb", power, power) / s.count)
-    lower = np.tril(np.ones((n_updates, n_updates), dtype=bool), -1)[:, None, :, None]  # j < k
-    z, zero_pass, zero_fail = standardized(moment, scale, lower)
-    worst, (k, a, j, b) = max_abs(z)
-    pvalue = normal_family_pvalue(worst, m)
-    passed = pvalue >= alpha
-    detail = (
-        f"largest |E[r_k r_j^T]| {sd_text(worst)} standard errors ({info.measurement_names[a]} at "
-        f"t = {info.update_times[k]:g} s with {info.measurement_names[b]} at t = {info.update_times[j]:g} s) over "
-        f"{pairs} pairs of updates" + zero_se_text(zero_pass, zero_fail, "moment")
-    )
-    diagnosis = Cause()
-    if not passed:
-        mean = s.mean_residual
-        centered = moment - np.einsum("ka,jb->kajb", mean, mean)
-        var = np.maximum(power - mean**2, 0.0)
-        rest_z, _, _ = standardized(centered, np.sqrt(np.einsum("ka,jb->kajb", var, var) / s.count), lower)
-        diagnosis = centered_cause(
-            rest_z,
-            m,
-            alpha,
-            "the residual means",
-            "nonzero mean residuals account for it (see mean_error)",
-            "the innovations are correlated in time: the model's dynamics or noise are wrong",
-        )
-    return check_result("residual_whiteness", worst, pvalue, None, bound, confidence, m, passed, detail, diagnosis)
 
 
 def check_nis(s: EnsembleStatistics, info: ProblemInfo, confidence: float) -> CheckResult:

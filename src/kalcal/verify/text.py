@@ -16,7 +16,14 @@ from kalcal.errors import KalcalError
 from kalcal.verify.results import DIRECTION_TEXT, EXPLAINED_BY_TEXT
 
 #: how a check's parts are named in words
-PART_LABELS = {"elements": "element-wise", "centered_nees": "centered NEES", "nis": "NIS", "ljung_box": "Ljung-Box"}
+PART_LABELS = {
+    "elements": "element-wise",
+    "centered_nees": "centered NEES",
+    "pairs": "pairs",
+    "portmanteau": "portmanteau",
+    "nis": "NIS",
+    "ljung_box": "Ljung-Box",
+}
 #: the keys of summary.json's ``nonfinite.fields`` that count NaN p-values: of the checks, of their parts
 CHECK_PVALUE_FIELD, PART_PVALUE_FIELD = "tests.pvalue", "tests.parts.pvalue"
 
