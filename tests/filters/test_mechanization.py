@@ -154,3 +154,10 @@ def test_partial_step_cut_anywhere_matches_the_whole_step(scheme):
         slope = (a1 - a0) / dt
         assert v_cut == pytest.approx(v0 + a0 * tau + slope * tau**2 / 2, rel=1e-14)
         assert p_cut == pytest.approx(p0 + v0 * tau + a0 * tau**2 / 2 + slope * tau**3 / 6, rel=1e-14)
+
+
+def test_an_unknown_scheme_is_refused_by_the_settings_layer():
+    from kalcal.models.settings import SettingError
+
+    with pytest.raises(SettingError, match=r"^scenario.integration: expected one of euler, trapezoid, got 'rk4'$"):
+        integrate(np.zeros(5), 0.01, 0.0, 0.0, "rk4")

@@ -19,7 +19,7 @@ from typing import Literal
 
 import numpy as np
 
-from kalcal.errors import ConfigError
+from kalcal.models.settings import SettingError, show
 
 Scheme = Literal["euler", "trapezoid"]
 SCHEMES: tuple[str, ...] = ("euler", "trapezoid")
@@ -33,7 +33,7 @@ def _step_accel(accel: np.ndarray, scheme: str) -> tuple[np.ndarray, np.ndarray]
     if scheme == "trapezoid":
         start, end = accel[..., :-1], accel[..., 1:]
         return 0.5 * (start + end), (2.0 * start + end) / 6.0
-    raise ConfigError(f"scenario.integration: expected one of {', '.join(SCHEMES)}, got {scheme!r}")
+    raise SettingError("scenario.integration", f"one of {', '.join(SCHEMES)}", show(scheme))
 
 
 def integrate(
@@ -116,7 +116,7 @@ def partial_step(
     elif scheme == "trapezoid":
         slope = (np.asarray(accel_end) - np.asarray(accel_start)) / np.asarray(step, dtype=float)
     else:
-        raise ConfigError(f"scenario.integration: expected one of {', '.join(SCHEMES)}, got {scheme!r}")
+        raise SettingError("scenario.integration", f"one of {', '.join(SCHEMES)}", show(scheme))
     return (
         position + velocity * tau + accel_start * (0.5 * tau * tau) + slope * (tau**3 / 6.0),
         velocity + accel_start * tau + slope * (0.5 * tau * tau),

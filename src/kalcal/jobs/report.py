@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from kalcal.errors import ConfigError, DataError
+from kalcal.models.settings import SettingError
 from kalcal.filters.steps import check_form
 from kalcal.io.manifest import require_complete
 from kalcal.io.outputs import run_outputs
@@ -157,6 +158,8 @@ def render_report(out: str | Path, *, realization: int = 0, progress: JobProgres
             scenario = CustomModelScenario.from_settings(summary["settings"])
         else:
             scenario = build_scenario(str(summary["scenario"]), None, settings_assignments(summary["settings"]))
+    except SettingError as exc:  # the settings layer's wording, located in the summary
+        raise exc.located(source=str(summary_path)) from None
     except ConfigError as exc:
         raise ConfigError(f"{summary_path}: {exc}") from None
     form = str(summary.get("form", "joseph"))  # runs before --form existed used the Joseph form
