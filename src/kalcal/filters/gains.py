@@ -21,7 +21,6 @@ from kalcal.filters.steps import (
     sqrt_gain_and_factor,
     sqrt_predict,
 )
-from kalcal.linalg import symmetrize
 from kalcal.models.linear import LinearGaussianModel
 
 
@@ -29,7 +28,8 @@ def interval_transition(phi: np.ndarray, gamma: np.ndarray, w: np.ndarray, steps
     """Transition and process-noise covariance over ``steps`` samples.
 
     Phi_m = Phi^m and Q_m = sum_{i=0}^{m-1} Phi^i Gamma W Gamma^T (Phi^i)^T, so that
-    x_{j+m} = Phi_m x_j + (noise ~ N(0, Q_m)) exactly.
+    x_{j+m} = Phi_m x_j + (noise ~ N(0, Q_m)) exactly: Q_m is m predictions of the covariance
+    (:func:`~kalcal.filters.steps.predict_covariance`) from Q_0 = 0.
 
     Parameters
     ----------
@@ -48,9 +48,9 @@ def interval_transition(phi: np.ndarray, gamma: np.ndarray, w: np.ndarray, steps
     q_m = np.zeros((d, d))
     step_noise = gamma @ w @ gamma.T
     for _ in range(int(steps)):
-        q_m = phi @ q_m @ phi.T + step_noise
+        q_m = predict_covariance(q_m, phi, step_noise)
         phi_m = phi @ phi_m
-    return phi_m, symmetrize(q_m)
+    return phi_m, q_m
 
 
 def interval_noise_factor(phi: np.ndarray, gamma: np.ndarray, w: np.ndarray, steps: int) -> np.ndarray:
