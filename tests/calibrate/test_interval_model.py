@@ -1,7 +1,7 @@
 """The compiled composition of an interval's pieces against the numpy reference predict of covariances.
 
 Oracle: :func:`kalcal.filters.steps.predict_covariance` applied piece by piece (Q <- T Q T^T + G G^T from
-Q = 0, Phi <- T Phi from I), and :func:`kalcal.filters.gains.interval_transition` where every piece is the
+Q = 0, Phi <- T Phi from I), and :func:`kalcal.filters.steps.interval_transition` where every piece is the
 same sample step.
 """
 
@@ -11,8 +11,7 @@ import numpy as np
 import pytest
 
 from kalcal.calibrate.interval_model import compose_intervals
-from kalcal.filters.gains import interval_transition
-from kalcal.filters.steps import predict_covariance
+from kalcal.filters.steps import interval_transition, predict_covariance
 
 
 def _reference(phis, inputs, owner, n_intervals):

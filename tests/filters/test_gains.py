@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kalcal.filters.gains import covariance_pass, interval_transition, run_with_gains
-from kalcal.filters.steps import predict, update
+from kalcal.filters.gains import run_with_gains
+from kalcal.filters.steps import covariance_pass, interval_transition, predict, update
 from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.models.linear import LinearGaussianModel
 from kalcal.models.registry import build_scenario
