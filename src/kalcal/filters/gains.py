@@ -37,7 +37,20 @@ def run_with_gains(schedule: GainSchedule, h: np.ndarray, z: np.ndarray, x0: np.
     Every measurement must be present: the gains assume every update is made (a missing measurement
     changes the covariances after it, which :func:`kalcal.filters.steps.update` handles, one step at a
     time).
+
+    Raises
+    ------
+    ValueError
+        If z has a non-finite (missing) value, naming the first one's realization and update. (One sum
+        over z decides; the search for the culprit runs only when it is not finite.)
     """
+    if not np.isfinite(np.sum(z)):
+        i, k, _ = np.argwhere(~np.isfinite(z))[0]
+        raise ValueError(
+            f"z: measurement {z[i, k].tolist()} of realization {i} at update {k} is not finite; "
+            "run_with_gains needs every measurement (its gains assume every update is made): filter data "
+            "with missing values step by step with kalcal.filters.steps.update"
+        )
     n, n_updates, p = z.shape
     d = schedule.phi_interval.shape[0]
     prior = np.empty((n, n_updates, d))

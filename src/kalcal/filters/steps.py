@@ -3,10 +3,12 @@
 Every numpy filter of the package (the gain schedule, the regression filter, the calibration's loops,
 the steady state, the scale/bias mean-error prediction) calls these functions, or the square-root form's
 steps in :mod:`kalcal.filters.sqrt_form` (:func:`~kalcal.filters.sqrt_form.sqrt_predict`,
-:func:`~kalcal.filters.sqrt_form.sqrt_update`). The compiled kernels are tested against them: the
-sequential filter and the interval composition step for step (tests/filters/test_sequential.py,
-tests/calibrate/test_interval_model.py), the Monte Carlo kernels through their block moment sums against
-the numpy path built on these steps (tests/montecarlo/test_engine.py, test_scale_bias_verify.py).
+:func:`~kalcal.filters.sqrt_form.sqrt_update`); :func:`kalcal.filters.gains.run_with_gains` applies the
+covariance pass's gains to the states with products alone, and is tested against :func:`predict` and
+:func:`update` step by step. The compiled kernels are tested against these steps update by update: the
+sequential filter (tests/filters/test_sequential.py), the composition of an interval's pieces
+(tests/calibrate/test_interval_model.py) and the Monte Carlo block kernels
+(tests/montecarlo/test_kernel_steps.py; besides, their block sums against the numpy path).
 
 Shapes: a state is ``(..., d)``, a covariance ``(..., d, d)``, a measurement ``(..., p)`` and a
 measurement matrix ``(p, d)`` (shared) or ``(..., p, d)`` (one per realization): the caller says which
@@ -27,8 +29,9 @@ Missing measurements (:mod:`kalcal.filters.missing`). A realization whose measur
 component, or whose own H holds one, is not updated: xhat = xbar and P = M, with K = 0 and the residual
 r and S NaN. :func:`update` does this realization by realization (and
 :func:`~kalcal.filters.sqrt_form.sqrt_update` the same), so no numpy filter handles a missing value its
-own way; the compiled sequential filter applies the same rule, and the Monte Carlo kernels are never
-given a missing value.
+own way. Elsewhere: the compiled sequential filter applies the same rule (to z; its H is shared and
+finite), :func:`~kalcal.filters.gains.run_with_gains` refuses a missing value (its gains assume every
+update), and the Monte Carlo kernels are never given one (simulated data are finite).
 """
 
 from __future__ import annotations
