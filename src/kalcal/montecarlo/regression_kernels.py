@@ -11,6 +11,10 @@ agree to rounding, and tests/montecarlo/test_kernel_steps.py holds the recursion
 update by update. It has no missing-measurement rule: the Monte Carlo never feeds it a NaN (its
 measurements and regressors are simulated, always finite).
 
+Its Joseph update is written apart from the one of :mod:`kalcal.filters.sequential` (one realization,
+small matrix products there; tiles of realizations in structure of arrays, scalar measurement, here);
+tests/montecarlo/test_kernel_steps.py holds this one to the reference steps through the regression filter.
+
 The filter step itself is compiled without fast-math (each realization's numbers are the same on every
 machine and in any tile); only the sums over realizations are reassociated.
 """
