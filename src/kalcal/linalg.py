@@ -10,6 +10,11 @@ def symmetrize(matrix: np.ndarray) -> np.ndarray:
     return 0.5 * (matrix + np.swapaxes(matrix, -1, -2))
 
 
+def matvec(matrix: np.ndarray, vector: np.ndarray) -> np.ndarray:
+    """A x over the leading (batch) axes: matrix (..., m, n), vector (..., n) -> (..., m)."""
+    return (matrix @ vector[..., None])[..., 0]
+
+
 def psd_factor(cov: np.ndarray, *, rtol: float = 1e-12) -> np.ndarray:
     """A factor L with L L^T = cov for a symmetric positive semi-definite matrix.
 

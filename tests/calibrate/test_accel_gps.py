@@ -10,7 +10,8 @@ from scipy import stats
 
 from kalcal.calibrate.accel_gps import calibrate_accel_gps
 from kalcal.errors import DataError
-from kalcal.filters.gains import covariance_pass, run_with_gains
+from kalcal.filters.gains import run_with_gains
+from kalcal.filters.steps import covariance_pass
 from kalcal.filters.mechanization import integrate
 from kalcal.models.registry import build_scenario
 from kalcal.simulate.sampled import sample_accel_gps_logs

@@ -21,7 +21,7 @@ from kalcal.calibrate.accel_gps import _python_filter, calibrate_accel_gps
 from kalcal.calibrate.smoothing import smooth_calibration
 from kalcal.cli import app
 from kalcal.errors import ConfigError, DataError
-from kalcal.filters.gains import interval_transition
+from kalcal.filters.steps import interval_transition
 from kalcal.filters.mechanization import integrate
 from kalcal.filters.sequential import sequential_filter
 from kalcal.models.accel_gps_discretization import error_transition

@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kalcal.filters.gains import covariance_pass, interval_transition, run_with_gains
-from kalcal.filters.steps import predict, update
+from kalcal.filters.gains import run_with_gains
+from kalcal.filters.steps import covariance_pass, interval_transition, predict, update
 from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.models.linear import LinearGaussianModel
 from kalcal.models.registry import build_scenario
@@ -200,3 +200,13 @@ def test_interval_transition_of_accel_gps_model_closed_form(scenario):
     i = np.arange(m)
     c = np.stack([dt * dt / 2 + (m - 1 - i) * dt * dt, np.full(m, dt), np.zeros(m)], axis=1)
     np.testing.assert_allclose(q_m, model.w[0, 0] * c.T @ c, rtol=1e-12, atol=1e-20)
+
+
+@pytest.mark.parametrize("missing", [np.nan, np.inf])
+def test_run_with_gains_refuses_a_missing_measurement(missing):
+    model = blind_model()
+    schedule = covariance_pass(model, 4)
+    z = np.ones((3, 4, 1))
+    z[2, 1, 0] = missing
+    with pytest.raises(ValueError, match="realization 2 at update 1 is not finite"):
+        run_with_gains(schedule, model.h, z, model.x0)

@@ -15,16 +15,17 @@ import pytest
 from filterpy.kalman import SquareRootKalmanFilter
 
 from kalcal.errors import ConfigError
-from kalcal.filters.gains import covariance_pass, interval_noise_factor, interval_transition, run_with_gains
-from kalcal.filters.sqrt_form import cholesky_factor, gram, triangularize
-from kalcal.filters.steps import (
-    gain_and_covariance,
-    predict,
+from kalcal.filters.gains import run_with_gains
+from kalcal.filters.sqrt_form import (
+    cholesky_factor,
+    gram,
+    interval_noise_factor,
     sqrt_gain_and_factor,
     sqrt_predict,
     sqrt_update,
-    update,
+    triangularize,
 )
+from kalcal.filters.steps import covariance_pass, gain_and_covariance, interval_transition, predict, update
 from kalcal.models.linear import LinearGaussianModel
 from kalcal.models.registry import build_scenario
 from kalcal.montecarlo.scenarios import build_problem

@@ -12,9 +12,10 @@ import pytest
 from filterpy.kalman import KalmanFilter
 
 from kalcal.errors import ConfigError
-from kalcal.filters.gains import covariance_pass, run_with_gains
-from kalcal.filters.sqrt_form import cholesky_factor, gram
-from kalcal.filters.steps import gain_and_covariance, measured, predict, sqrt_update, update
+from kalcal.filters.gains import run_with_gains
+from kalcal.filters.missing import measured
+from kalcal.filters.sqrt_form import cholesky_factor, gram, sqrt_update
+from kalcal.filters.steps import covariance_pass, gain_and_covariance, predict, update
 from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.models.registry import build_scenario
 from kalcal.simulate.sampled import sample_accel_gps_errors

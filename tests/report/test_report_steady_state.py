@@ -16,7 +16,7 @@ import pytest
 
 import kalcal.jobs.report as report_job
 from kalcal.errors import ConfigError
-from kalcal.filters.gains import covariance_pass
+from kalcal.filters.steps import covariance_pass
 from kalcal.filters.steady_state import SteadyStateView, convergence, steady_state
 from kalcal.jobs.report import render_report
 from kalcal.jobs.verify import verify

@@ -12,7 +12,7 @@ from functools import lru_cache
 import numpy as np
 import pytest
 
-from kalcal.filters.gains import interval_transition
+from kalcal.filters.steps import interval_transition
 from kalcal.filters.mechanization import interval_weights
 from kalcal.models.linear import LinearGaussianModel
 from kalcal.models.registry import build_scenario

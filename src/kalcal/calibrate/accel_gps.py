@@ -40,8 +40,8 @@ from kalcal.calibrate.plausibility import CalibrationWarning
 from kalcal.errors import DataError
 from kalcal.filters.mechanization import integrate, partial_step
 from kalcal.filters.sequential import SequentialRun, sequential_filter
-from kalcal.filters.sqrt_form import cholesky_factor, gram
-from kalcal.filters.steps import UpdateForm, check_form, predict, sqrt_predict, sqrt_update, update
+from kalcal.filters.sqrt_form import cholesky_factor, gram, sqrt_predict, sqrt_update
+from kalcal.filters.steps import UpdateForm, check_form, predict, update
 from kalcal.linalg import symmetrize
 from kalcal.models.accel_gps import AccelGpsScenario
 

@@ -1,7 +1,14 @@
-"""The numpy reference of every Kalman filter step: predict, the Joseph / standard / square-root updates.
+"""The numpy reference of the Kalman filter's steps: predict, the Joseph / standard updates, the covariance pass.
 
-Every numpy path of the package (the gain schedule, the regression filter, the calibration's loops, the
-steady state) calls these functions; the compiled kernels are tested against them step for step.
+Every numpy filter of the package (the gain schedule, the regression filter, the calibration's loops,
+the steady state, the scale/bias mean-error prediction) calls these functions, or the square-root form's
+steps in :mod:`kalcal.filters.sqrt_form` (:func:`~kalcal.filters.sqrt_form.sqrt_predict`,
+:func:`~kalcal.filters.sqrt_form.sqrt_update`); :func:`kalcal.filters.gains.run_with_gains` applies the
+covariance pass's gains to the states with products alone, and is tested against :func:`predict` and
+:func:`update` step by step. The compiled kernels are tested against these steps update by update: the
+sequential filter (tests/filters/test_sequential.py), the composition of an interval's pieces
+(tests/calibrate/test_interval_model.py) and the Monte Carlo block kernels
+(tests/montecarlo/test_kernel_steps.py; besides, their block sums against the numpy path).
 
 Shapes: a state is ``(..., d)``, a covariance ``(..., d, d)``, a measurement ``(..., p)`` and a
 measurement matrix ``(p, d)`` (shared) or ``(..., p, d)`` (one per realization): the caller says which
@@ -15,20 +22,16 @@ Equations (prior ``xbar, M``; posterior ``xhat, P``)::
               P = (I - K H) M (I - K H)^T + K V K^T        (form="joseph", the default)
               P = M - K H M                                (form="standard")
 
-Square-root form (form="sqrt"): the filter carries a lower-triangular factor L with P = L L^T
-(:mod:`kalcal.filters.sqrt_form` for tria and the factors)::
+The covariance pass (:func:`covariance_pass`) runs the covariance halves of these steps without data
+over a time-invariant model's update intervals (:func:`interval_transition`), in any of the three forms.
 
-    predict:  L_M = tria([Phi L, G])                                  with G G^T = Q
-    update:   tria([[V^{1/2}, H L_M], [0, L_M]]) = [[S^{1/2}, 0], [Kbar, L_P]],   K = Kbar S^{-1/2}
-
-The update's post-array follows from the pre-array by an orthogonal transformation, so both have the
-same Gram matrix: S^{1/2} S^{T/2} = V + H M H^T = S, Kbar = M H^T S^{-T/2} and
-L_P L_P^T = M - Kbar Kbar^T = M - M H^T S^{-1} H M = P.
-
-Missing measurements. A realization whose measurement has a non-finite component (NaN marks a missing
-value), or whose own H holds one, is not updated: the step is a prediction only, xhat = xbar and P = M
-(L_P = L_M), with K = 0 and the residual r and S (S^{1/2}) NaN. :func:`update` and :func:`sqrt_update`
-do this for every caller, realization by realization, so no filter handles a missing value its own way.
+Missing measurements (:mod:`kalcal.filters.missing`). A realization whose measurement has a non-finite
+component, or whose own H holds one, is not updated: xhat = xbar and P = M, with K = 0 and the residual
+r and S NaN. :func:`update` does this realization by realization (and
+:func:`~kalcal.filters.sqrt_form.sqrt_update` the same), so no numpy filter handles a missing value its
+own way. Elsewhere: the compiled sequential filter applies the same rule (to z; its H is shared and
+finite), :func:`~kalcal.filters.gains.run_with_gains` refuses a missing value (its gains assume every
+update), and the Monte Carlo kernels are never given one (simulated data are finite).
 """
 
 from __future__ import annotations
@@ -38,13 +41,16 @@ from typing import Literal, NamedTuple
 import numpy as np
 
 from kalcal.errors import ConfigError
-from kalcal.filters.sqrt_form import broadcast_lead, triangularize
-from kalcal.linalg import symmetrize
+from kalcal.filters.missing import fill_missing, measured
+from kalcal.filters.sqrt_form import cholesky_factor, gram, interval_noise_factor, sqrt_gain_and_factor, sqrt_predict
+from kalcal.linalg import matvec, symmetrize
+from kalcal.models.linear import LinearGaussianModel
 
 UpdateForm = Literal["joseph", "standard", "sqrt"]
 UPDATE_FORMS: tuple[str, ...] = ("joseph", "standard", "sqrt")
 #: forms that map a covariance to a covariance (:func:`gain_and_covariance`, :func:`update`); "sqrt"
-#: carries a factor instead (:func:`sqrt_predict`, :func:`sqrt_update`)
+#: carries a factor instead (:func:`~kalcal.filters.sqrt_form.sqrt_predict`,
+#: :func:`~kalcal.filters.sqrt_form.sqrt_update`)
 COVARIANCE_FORMS: tuple[str, ...] = ("joseph", "standard")
 
 
@@ -52,10 +58,6 @@ def check_form(form: str, name: str = "form") -> None:
     """Raise :class:`ConfigError` naming ``name`` unless ``form`` is one of :data:`UPDATE_FORMS`."""
     if form not in UPDATE_FORMS:
         raise ConfigError(f"{name}: expected one of {', '.join(UPDATE_FORMS)}, got {form!r}")
-
-
-def _matvec(matrix: np.ndarray, vector: np.ndarray) -> np.ndarray:
-    return (matrix @ vector[..., None])[..., 0]
 
 
 def predict_covariance(cov: np.ndarray, phi: np.ndarray | None, q: np.ndarray) -> np.ndarray:
@@ -96,23 +98,37 @@ def predict(
     xbar : ndarray, shape (..., d)
     prior_cov : ndarray, shape (..., d, d)
     """
-    xbar = x if phi is None else _matvec(phi, x)
+    xbar = x if phi is None else matvec(phi, x)
     return xbar, predict_covariance(cov, phi, q)
 
 
-def measured(z: np.ndarray, h: np.ndarray) -> np.ndarray:
-    """Which realizations have a measurement: every component of z and every entry of H finite.
+def interval_transition(phi: np.ndarray, gamma: np.ndarray, w: np.ndarray, steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """Transition and process-noise covariance over ``steps`` samples.
+
+    Phi_m = Phi^m and Q_m = sum_{i=0}^{m-1} Phi^i Gamma W Gamma^T (Phi^i)^T, so that
+    x_{j+m} = Phi_m x_j + (noise ~ N(0, Q_m)) exactly: Q_m is m predictions of the covariance
+    (:func:`~kalcal.filters.steps.predict_covariance`) from Q_0 = 0.
 
     Parameters
     ----------
-    z : ndarray, shape (..., p)
-    h : ndarray, shape (p, d) or (..., p, d)
+    phi : ndarray, shape (d, d)
+    gamma : ndarray, shape (d, q)
+    w : ndarray, shape (q, q)
+    steps : int, m >= 0
 
     Returns
     -------
-    ndarray of bool, shape (...) (the broadcast of z's and H's leading axes)
+    phi_m : ndarray, shape (d, d)
+    q_m : ndarray, shape (d, d), symmetric
     """
-    return np.all(np.isfinite(z), axis=-1) & np.all(np.isfinite(h), axis=(-2, -1))
+    d = phi.shape[0]
+    phi_m = np.eye(d)
+    q_m = np.zeros((d, d))
+    step_noise = gamma @ w @ gamma.T
+    for _ in range(int(steps)):
+        q_m = predict_covariance(q_m, phi, step_noise)
+        phi_m = phi @ phi_m
+    return phi_m, q_m
 
 
 class UpdateResult(NamedTuple):
@@ -140,7 +156,7 @@ def gain_and_covariance(
     h : ndarray, shape (p, d) or (..., p, d)
     v : ndarray, shape (p, p) or (..., p, p)
     form : {"joseph", "standard"}
-        ("sqrt" carries a factor, not a covariance: :func:`sqrt_gain_and_factor`)
+        ("sqrt" carries a factor, not a covariance: :func:`~kalcal.filters.sqrt_form.sqrt_gain_and_factor`)
 
     Returns
     -------
@@ -170,11 +186,6 @@ def gain_and_covariance(
     return gain, symmetrize(posterior), s
 
 
-def _fill_missing(present: np.ndarray, z: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """z and H with the missing realizations' entries set to 0, so that their update stays finite."""
-    return np.where(present[..., None], z, 0.0), np.where(present[..., None, None], h, 0.0)
-
-
 def update(
     x: np.ndarray,
     cov: np.ndarray,
@@ -199,7 +210,7 @@ def update(
     """
     present = measured(z, h)
     if not np.all(present):
-        z_filled, h_filled = _fill_missing(present, z, h)
+        z_filled, h_filled = fill_missing(present, z, h)
         full = update(x, cov, z_filled, h_filled, v, form)
         keep = present[..., None]
         return UpdateResult(
@@ -210,109 +221,63 @@ def update(
             np.where(keep[..., None], full.gain, 0.0),
         )
     gain, posterior, s = gain_and_covariance(cov, h, v, form)
-    residual = z - _matvec(h, x)
-    return UpdateResult(x + _matvec(gain, residual), posterior, residual, s, gain)
+    residual = z - matvec(h, x)
+    return UpdateResult(x + matvec(gain, residual), posterior, residual, s, gain)
 
 
-def sqrt_predict(
-    x: np.ndarray, chol: np.ndarray, phi: np.ndarray, q_chol: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Square-root prediction: xbar = Phi x and L_M = tria([Phi L, G]), so L_M L_M^T = Phi P Phi^T + G G^T.
+class GainSchedule(NamedTuple):
+    """Every gain and covariance of a time-invariant model, computed before any data.
 
-    Parameters
-    ----------
-    x : ndarray, shape (..., d)
-    chol : ndarray, shape (..., d, d)
-        L, a factor of the posterior covariance P = L L^T.
-    phi : ndarray, shape (d, d) or (..., d, d)
-    q_chol : ndarray, shape (d, r) or (..., d, r)
-        G, a factor of the process noise Q = G G^T (e.g. :func:`~kalcal.filters.sqrt_form.cholesky_factor`
-        of Q).
-
-    Returns
-    -------
-    xbar : ndarray, shape (..., d)
-    prior_chol : ndarray, shape (..., d, d), lower triangular
+    Index k = 0..K-1 is the k-th measurement update, at sample (k + 1) * steps_per_update.
     """
-    phi_l, g = broadcast_lead(phi @ chol, np.asarray(q_chol, dtype=float))
-    return _matvec(phi, x), triangularize(np.concatenate([phi_l, g], axis=-1))
+
+    prior_cov: np.ndarray  #: M_k, (K, d, d)
+    posterior_cov: np.ndarray  #: P_k, (K, d, d)
+    gain: np.ndarray  #: K_k, (K, d, p)
+    innovation_cov: np.ndarray  #: S_k, (K, p, p)
+    phi_interval: np.ndarray  #: Phi^m, (d, d), of the model without its time-varying part
+    q_interval: np.ndarray  #: Q_m, (d, d)
+    transitions: np.ndarray  #: the transition over each interval, (K, d, d) (Phi^m repeated if time-invariant)
 
 
-def sqrt_gain_and_factor(
-    chol: np.ndarray, h: np.ndarray, v_chol: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The covariance half of a square-root update, by the array (QR) algorithm.
+def covariance_pass(
+    model: LinearGaussianModel, n_updates: int, form: UpdateForm = "joseph", transitions: np.ndarray | None = None
+) -> GainSchedule:
+    """Riccati recursion alone: M_{k} = Phi_k P_{k-1} Phi_k^T + Q_m, then the update, K times.
 
-    tria([[V^{1/2}, H L_M], [0, L_M]]) = [[S^{1/2}, 0], [Kbar, L_P]] and K = Kbar S^{-1/2} (a solve).
-
-    Parameters
-    ----------
-    chol : ndarray, shape (..., d, d)
-        L_M, a factor of the prior covariance M = L_M L_M^T.
-    h : ndarray, shape (p, d) or (..., p, d)
-    v_chol : ndarray, shape (p, p) or (..., p, p)
-        V^{1/2}, a factor of the measurement noise V (e.g. its Cholesky factor).
-
-    Returns
-    -------
-    gain : ndarray, shape (..., d, p)
-    posterior_chol : ndarray, shape (..., d, d)
-        L_P, lower triangular with P = L_P L_P^T.
-    innovation_chol : ndarray, shape (..., p, p)
-        S^{1/2}, lower triangular with S = H M H^T + V = S^{1/2} S^{T/2}.
+    P_{-1} is the prior covariance M0 at sample 0. Phi_k is Phi^m for a time-invariant model, or
+    ``transitions[k]`` (K, d, d) when the caller gives the transition of each interval explicitly (a
+    transition that depends on a known input, such as an accelerometer scale factor's column; the
+    process noise Q_m must not depend on it). ``form="sqrt"`` carries L with P = L L^T instead
+    (:func:`~kalcal.filters.sqrt_form.sqrt_predict`, :func:`~kalcal.filters.sqrt_form.sqrt_gain_and_factor`,
+    the interval noise by :func:`~kalcal.filters.sqrt_form.interval_noise_factor`); the schedule holds the
+    covariances L L^T all the same.
     """
-    hl, chol, v_chol = broadcast_lead(h @ chol, chol, np.asarray(v_chol, dtype=float))
-    p, d = hl.shape[-2:]
-    pre = np.zeros(hl.shape[:-2] + (p + d, p + d))
-    pre[..., :p, :p] = v_chol
-    pre[..., :p, p:] = hl
-    pre[..., p:, p:] = chol
-    post = triangularize(pre)
-    s_chol, kbar = post[..., :p, :p], post[..., p:, :p]
-    # K^T = S^{-T/2} Kbar^T
-    gain = np.swapaxes(np.linalg.solve(np.swapaxes(s_chol, -1, -2), np.swapaxes(kbar, -1, -2)), -1, -2)
-    return gain, post[..., p:, p:], s_chol
-
-
-class SqrtUpdateResult(NamedTuple):
-    """One square-root measurement update. Shapes follow the inputs' leading axes."""
-
-    x: np.ndarray  #: posterior state, (..., d)
-    chol: np.ndarray  #: L_P, lower-triangular factor of the posterior covariance, (..., d, d)
-    residual: np.ndarray  #: innovation r = z - H xbar, (..., p); NaN where the measurement is missing
-    innovation_chol: np.ndarray  #: S^{1/2}, lower-triangular factor of S, (..., p, p); NaN where missing
-    gain: np.ndarray  #: K, (..., d, p); 0 where the measurement is missing
-
-
-def sqrt_update(
-    x: np.ndarray, chol: np.ndarray, z: np.ndarray, h: np.ndarray, v_chol: np.ndarray
-) -> SqrtUpdateResult:
-    """Square-root measurement update of a prior (xbar, L_M) with measurement z.
-
-    A missing measurement (non-finite z or own H) keeps the prior, L_P = L_M, as in :func:`update`.
-
-    Parameters
-    ----------
-    x : ndarray, shape (..., d)
-    chol : ndarray, shape (..., d, d)
-        L_M with M = L_M L_M^T.
-    z : ndarray, shape (..., p)
-    h : ndarray, shape (p, d) or (..., p, d)
-    v_chol : ndarray, shape (p, p) or (..., p, p)
-        A factor of V.
-    """
-    present = measured(z, h)
-    if not np.all(present):
-        z_filled, h_filled = _fill_missing(present, z, h)
-        full = sqrt_update(x, chol, z_filled, h_filled, v_chol)
-        keep = present[..., None]
-        return SqrtUpdateResult(
-            np.where(keep, full.x, x),
-            np.where(keep[..., None], full.chol, chol),
-            np.where(keep, full.residual, np.nan),
-            np.where(keep[..., None], full.innovation_chol, np.nan),
-            np.where(keep[..., None], full.gain, 0.0),
-        )
-    gain, posterior, s_chol = sqrt_gain_and_factor(chol, h, v_chol)
-    residual = z - _matvec(h, x)
-    return SqrtUpdateResult(x + _matvec(gain, residual), posterior, residual, s_chol, gain)
+    check_form(form)
+    phi_m, q_m = interval_transition(model.phi, model.gamma, model.w, model.steps_per_update)
+    d, p = model.state_dim, model.measurement_dim
+    if transitions is None:
+        transitions = np.broadcast_to(phi_m, (n_updates, d, d))
+    elif transitions.shape != (n_updates, d, d):
+        raise ValueError(f"transitions: expected shape {(n_updates, d, d)}, got {transitions.shape}")
+    prior = np.empty((n_updates, d, d))
+    posterior = np.empty((n_updates, d, d))
+    gains = np.empty((n_updates, d, p))
+    innovation = np.empty((n_updates, p, p))
+    if form == "sqrt":
+        q_chol = interval_noise_factor(model.phi, model.gamma, model.w, model.steps_per_update)
+        v_chol = cholesky_factor(model.v)
+        chol = cholesky_factor(model.m0)
+        for k in range(n_updates):
+            _, chol = sqrt_predict(np.zeros(d), chol, transitions[k], q_chol)
+            prior[k] = gram(chol)
+            gains[k], chol, s_chol = sqrt_gain_and_factor(chol, model.h, v_chol)
+            posterior[k], innovation[k] = gram(chol), gram(s_chol)
+        return GainSchedule(prior, posterior, gains, innovation, phi_m, q_m, transitions)
+    cov = model.m0
+    for k in range(n_updates):
+        cov = predict_covariance(cov, transitions[k], q_m)
+        prior[k] = cov
+        gains[k], cov, innovation[k] = gain_and_covariance(cov, model.h, model.v, form)
+        posterior[k] = cov
+    return GainSchedule(prior, posterior, gains, innovation, phi_m, q_m, transitions)

@@ -14,8 +14,8 @@ from typing import Protocol
 
 import numpy as np
 
-from kalcal.filters.gains import GainSchedule, covariance_pass, run_with_gains
-from kalcal.filters.steps import UpdateForm
+from kalcal.filters.gains import run_with_gains
+from kalcal.filters.steps import GainSchedule, UpdateForm, covariance_pass
 from kalcal.linalg import whitener
 from kalcal.models.linear import LinearGaussianModel
 from kalcal.montecarlo import kernels

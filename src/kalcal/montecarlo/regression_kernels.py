@@ -7,7 +7,13 @@ realizations at a time, update by update, each line of it one pass over the tile
 realizations innermost, so that the passes vectorize), and hands each update's errors, estimates,
 innovations, NEES, NIS and P of the tile to :func:`kalcal.montecarlo.sum_kernels.accumulate`. The numpy
 path stays as the oracle of the tests (``ScaleBiasProblem.run_block`` + ``MomentSums.from_block``); both
-agree to rounding.
+agree to rounding, and tests/montecarlo/test_kernel_steps.py holds the recursion to the regression filter
+update by update. It has no missing-measurement rule: the Monte Carlo never feeds it a NaN (its
+measurements and regressors are simulated, always finite).
+
+Its Joseph update is written apart from the one of :mod:`kalcal.filters.sequential` (one realization,
+small matrix products there; tiles of realizations in structure of arrays, scalar measurement, here);
+tests/montecarlo/test_kernel_steps.py holds this one to the reference steps through the regression filter.
 
 The filter step itself is compiled without fast-math (each realization's numbers are the same on every
 machine and in any tile); only the sums over realizations are reassociated.

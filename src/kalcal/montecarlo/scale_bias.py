@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from kalcal.filters.scale_bias import filter_scale_bias, regressors
+from kalcal.filters.steps import gain_and_covariance, predict_covariance
 from kalcal.models.scale_bias import MEASUREMENT_NAMES, STATE_NAMES, ScaleBiasScenario
 from kalcal.montecarlo.accumulators import BlockResult, MomentSums, SumBuffers
 from kalcal.montecarlo.problem import ProblemInfo, check_engine
@@ -83,19 +84,21 @@ def eiv_mean_error(scenario: ScaleBiasScenario) -> np.ndarray:
     cross = np.zeros((2, 2, 2))  # C[a, b, c] = E[pi_ab eps_c]
     cov = f_prior.cov
     out = np.empty((zeta.size, 2))
+    v = np.array([[r]])
     for k, z in enumerate(zeta):
-        cov = cov + q
+        cov = predict_covariance(cov, None, q)
         h = np.array([z, 1.0])
         ph = cov @ h
-        s = float(h @ ph) + r
-        gain = ph / s
+        # K_k, S_k and the Joseph-form P_k^+ of the reference step, on the noise-free regressor
+        gain_col, posterior, s_mat = gain_and_covariance(cov, h[None, :], v, "joseph")
+        gain, s = gain_col[:, 0], float(s_mat[0, 0])
         lk = eye - np.outer(gain, h)
         u = np.einsum("abc,b,c->a", cross, h, h)
         pe1 = cov @ e1
         mean = lk @ mean - lk @ u / s + (c / s) * (pe1 - 2.0 * ph * (ph @ e1) / s)
         d = (np.outer(pe1, ph) + np.outer(ph, pe1)) / s - 2.0 * np.outer(ph, ph) * (ph @ e1) / s**2
         cross = np.einsum("ai,bj,ck,ijk->abc", lk, lk, lk, cross) - c * d[:, :, None] * gain[None, None, :]
-        cov = lk @ cov @ lk.T + r * np.outer(gain, gain)
+        cov = posterior
         out[k] = mean
     return out
 

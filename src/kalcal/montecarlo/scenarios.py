@@ -7,8 +7,7 @@ from functools import partial
 import numpy as np
 
 from kalcal.errors import ConfigError
-from kalcal.filters.gains import interval_transition
-from kalcal.filters.steps import UpdateForm
+from kalcal.filters.steps import UpdateForm, interval_transition
 from kalcal.models.accel_gps import MEASUREMENT_NAMES, MEASUREMENT_UNITS, AccelGpsScenario
 from kalcal.models.custom import CustomModelScenario
 from kalcal.models.linear import LinearGaussianModel

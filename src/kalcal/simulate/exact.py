@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kalcal.filters.gains import interval_transition
+from kalcal.filters.steps import interval_transition
 from kalcal.filters.mechanization import integrate, interval_weights
 from kalcal.linalg import psd_factor
 from kalcal.models.accel_gps import AccelGpsScenario
