@@ -83,7 +83,7 @@ class FixedGainProblem:
         ``sampled(rng, n) -> (states (n, K, d), measurements (n, K, p))`` simulating every sample
         (engine "sampled").
     form : {"joseph", "standard", "sqrt"}
-        The covariance update of the gain schedule (:func:`~kalcal.filters.gains.covariance_pass`).
+        The covariance update of the gain schedule (:func:`~kalcal.filters.steps.covariance_pass`).
     """
 
     info: ProblemInfo
