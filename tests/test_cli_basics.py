@@ -13,7 +13,8 @@ import pytest
 from rich.console import Console
 from typer.testing import CliRunner
 
-from kalcal import __version__, cli
+from kalcal import __version__
+from kalcal.cli import _common as cli
 from kalcal.cli import app
 
 runner = CliRunner()

@@ -7,7 +7,7 @@ import io
 import numpy as np
 from rich.console import Console
 
-from kalcal import cli
+from kalcal.cli import _common as cli
 from kalcal.verify.checks import check_nis
 from kalcal.verify.covariance import check_covariance
 from kalcal.verify.text import check_bounds_text

@@ -1,4 +1,4 @@
-"""Read sensor logs (CSV or Parquet, chosen by extension) into validated float columns.
+"""Read sensor logs (CSV or Parquet, chosen by extension, or a pandas DataFrame) into validated float columns.
 
 Every problem raises :class:`~kalcal.errors.DataError` naming the file, the column and, where there is
 one, the row (1-based, counting data rows after the header) and the value.
@@ -17,8 +17,23 @@ from kalcal.errors import DataError
 READERS = {".csv": "csv", ".parquet": "parquet", ".pq": "parquet"}
 
 
-def read_table(path: str | Path) -> pd.DataFrame:
-    """Read a CSV or Parquet file into a DataFrame; refuse missing, unreadable or empty files."""
+def source_name(source: str | Path | pd.DataFrame, role: str) -> str:
+    """How messages name a log: its path, or ``<ROLE DataFrame>`` for a DataFrame (``<imu DataFrame>``)."""
+    return f"<{role} DataFrame>" if isinstance(source, pd.DataFrame) else str(source)
+
+
+def read_table(path: str | Path | pd.DataFrame, role: str = "log") -> pd.DataFrame:
+    """Read a CSV or Parquet file into a DataFrame; refuse missing, unreadable or empty files.
+
+    A DataFrame is taken as the file's content (a copy, with the same checks): empty is refused under
+    the name ``<ROLE DataFrame>`` (:func:`source_name`).
+    """
+    if isinstance(path, pd.DataFrame):
+        if path.shape[0] == 0:
+            raise DataError(f"{source_name(path, role)}: has columns but no data rows")
+        frame = path.copy()
+        frame.columns = [str(c).strip() for c in frame.columns]
+        return frame.reset_index(drop=True)
     path = Path(path)
     kind = READERS.get(path.suffix.lower())
     if kind is None:

@@ -51,6 +51,18 @@ def to_jsonable(value: Any, nonfinite: dict[str, int] | None = None, _path: str 
     return value
 
 
+def json_document(document: dict[str, Any]) -> dict[str, Any]:
+    """``document`` as :func:`write_json` writes it (and ``json.load`` reads it back): plain numbers and
+    lists, NaN and infinities as None, ``schema_version`` first and ``nonfinite`` last (see there)."""
+    nonfinite: dict[str, int] = {}
+    body = to_jsonable({k: v for k, v in document.items() if k not in ("schema_version", "nonfinite")}, nonfinite)
+    return {
+        "schema_version": SCHEMA_VERSION,
+        **body,
+        "nonfinite": {"count": sum(nonfinite.values()), "fields": nonfinite},
+    }
+
+
 def write_json(path: str | Path, document: dict[str, Any]) -> Path:
     """Write ``document`` as indented JSON, atomically (write to a temporary file, then rename).
 
@@ -60,15 +72,8 @@ def write_json(path: str | Path, document: dict[str, Any]) -> Path:
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    nonfinite: dict[str, int] = {}
-    body = to_jsonable({k: v for k, v in document.items() if k not in ("schema_version", "nonfinite")}, nonfinite)
-    full = {
-        "schema_version": SCHEMA_VERSION,
-        **body,
-        "nonfinite": {"count": sum(nonfinite.values()), "fields": nonfinite},
-    }
     temporary = path.with_name(path.name + ".tmp")
-    temporary.write_text(json.dumps(full, indent=2) + "\n")
+    temporary.write_text(json.dumps(json_document(document), indent=2) + "\n")
     os.replace(temporary, path)
     return path
 

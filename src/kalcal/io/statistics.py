@@ -1,4 +1,4 @@
-"""Ensemble statistics to and from NetCDF (``stats.nc``), as an xarray Dataset with named dimensions.
+"""Ensemble statistics to and from NetCDF (``stats.nc``): the Dataset of :mod:`kalcal.verify.dataset`.
 
 Dimensions: ``time`` (K update times, s), ``state``/``state2`` (d), ``measurement``/``measurement2`` (p),
 and ``time2`` (a second copy of ``time`` for the residual correlation over pairs of updates, present
@@ -10,64 +10,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import xarray as xr
 
 from kalcal.errors import DataError
-from kalcal.montecarlo.accumulators import EnsembleStatistics
-from kalcal.montecarlo.problem import ProblemInfo
-
-_MATRIX = ("time", "state", "state2")
-
-
-def statistics_dataset(
-    s: EnsembleStatistics, info: ProblemInfo, expected_mean_error: np.ndarray, attrs: dict
-) -> xr.Dataset:
-    """Every per-update statistic of a run as a Dataset."""
-    data = {
-        "mean_error": (("time", "state"), s.mean_error, "ensemble mean of e = x - xhat"),
-        "expected_mean_error": (
-            ("time", "state"),
-            expected_mean_error,
-            "mean error implied by deterministic model error and prior-mean offsets",
-        ),
-        "error_cov": (_MATRIX, s.error_cov, "ensemble covariance of e (divisor N - 1)"),
-        "filter_cov": (_MATRIX, s.filter_cov, "filter covariance P (mean over realizations)"),
-        "error_second_moment": (_MATRIX, s.error_second_moment, "E[e e^T]"),
-        "error_estimate": (_MATRIX, s.error_estimate, "E[e xhat^T] (orthogonality)"),
-        "estimate_second_moment": (_MATRIX, s.estimate_second_moment, "E[xhat xhat^T]"),
-        "mean_estimate": (("time", "state"), s.mean_estimate, "ensemble mean of xhat"),
-        "mean_nees": (("time",), s.mean_nees, "mean of e^T P^-1 e"),
-        "mean_nis": (("time",), s.mean_nis, "mean of r^T S^-1 r"),
-        "mean_residual": (("time", "measurement"), s.mean_residual, "ensemble mean of the innovation r"),
-        "residual_own_moment": (("time", "measurement", "measurement2"), s.residual_own_moment, "E[r_k r_k^T]"),
-        "mean_normalized_residual": (
-            ("time", "measurement"),
-            s.mean_normalized_residual,
-            "E[L_k^-1 r_k], S_k = L_k L_k^T (where the filter's S is known)",
-        ),
-        "residual_second_moment": (
-            ("time", "measurement", "time2", "measurement2"),
-            s.residual_second_moment,
-            "E[r_k r_j^T] over pairs of updates",
-        ),
-    }
-    variables = {
-        name: xr.Variable(dims, values, {"long_name": text})
-        for name, (dims, values, text) in data.items()
-        if values is not None
-    }
-    coords = {
-        "time": ("time", info.update_times, {"units": "s"}),
-        "time2": ("time2", info.update_times, {"units": "s"}),
-        "state": ("state", list(info.state_names)),
-        "state2": ("state2", list(info.state_names)),
-        "measurement": ("measurement", list(info.measurement_names)),
-        "measurement2": ("measurement2", list(info.measurement_names)),
-        "state_unit": ("state", list(info.state_units)),
-        "measurement_unit": ("measurement", list(info.measurement_units)),
-    }
-    return xr.Dataset(variables, coords=coords, attrs={"realizations": s.count, **attrs})
 
 
 def write_statistics(path: str | Path, dataset: xr.Dataset) -> Path:

@@ -1,19 +1,21 @@
-"""``kalcal calibrate``: read logs, run the filter, write estimates and a summary."""
+"""``kalcal calibrate accel-gps``: read logs, run the filter (in memory), write estimates and a summary."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pandas as pd
 
 from kalcal.calibrate.accel_gps import calibrate_accel_gps
 from kalcal.calibrate.diagnostics import innovation_diagnostics
 from kalcal.calibrate.plausibility import CalibrationWarning
 from kalcal.calibrate.smoothing import smooth_calibration
-from kalcal.io.logs import numeric_columns, parse_column_map, read_table, require_increasing
-from kalcal.io.outputs import writes_outputs
-from kalcal.io.results import write_csv, write_json
+from kalcal.io.logs import numeric_columns, parse_column_map, read_table, require_increasing, source_name
+from kalcal.io.outputs import mark_inputs, writes_outputs
+from kalcal.io.results import write_json
 from kalcal.models.accel_gps import AccelGpsScenario, AccelGpsSettings
 from kalcal.models.config import section_values
 from kalcal.plots.calibration import plot_calibration
@@ -34,14 +36,77 @@ def stated_rates(scenario: AccelGpsScenario) -> dict[str, float]:
     }
 
 
+@dataclass(frozen=True)
+class Calibration:
+    """A calibration computed in memory, nothing written yet.
+
+    Attributes
+    ----------
+    command : str
+        The command whose outputs these are (``"calibrate accel-gps"``, ``"calibrate scale-bias"``).
+    estimates : pandas.DataFrame
+        ``estimates.csv``: one row per fix (accel-gps) or sample (scale-bias), SI units.
+    summary : dict
+        ``summary.json``'s content.
+    """
+
+    command: str
+    estimates: pd.DataFrame
+    summary: dict[str, Any]
+
+
+#: the files of a calibration of each scenario
+OUTPUT_NAMES = {
+    "calibrate accel-gps": ("estimates.csv", "summary.json", "calibration.png"),
+    "calibrate scale-bias": ("estimates.csv", "summary.json"),
+}
+
+
+def save_calibration(calibration: Calibration, out: str | Path) -> dict[str, Path]:
+    """Write ``estimates.csv``, ``summary.json`` and (accel-gps) ``calibration.png`` into ``out`` as one set
+    (:mod:`kalcal.io.outputs`); returns the files by name. The logs it was read from are never removed."""
+    names = OUTPUT_NAMES[calibration.command]
+
+    @writes_outputs(calibration.command, names=names)
+    def write(calibration: Calibration, out: Path) -> dict[str, Path]:
+        out = Path(out)
+        paths = {"estimates.csv": out / "estimates.csv"}
+        paths["estimates.csv"].parent.mkdir(parents=True, exist_ok=True)
+        calibration.estimates.to_csv(paths["estimates.csv"], index=False)
+        paths["summary.json"] = write_json(out / "summary.json", calibration.summary)
+        if "calibration.png" in names:
+            frame = calibration.estimates
+            normalized = frame[["innovation_position", "innovation_velocity"]].to_numpy()
+            paths["calibration.png"] = plot_calibration(
+                frame["time"].to_numpy(), frame["bias"].to_numpy(), frame["bias_std"].to_numpy(), normalized,
+                out / "calibration.png",
+            )
+        return paths
+
+    return write(calibration, out)
+
+
 @writes_outputs(
-    "calibrate accel-gps", names=("estimates.csv", "summary.json", "calibration.png"), inputs=("imu_path", "gps_path")
+    "calibrate accel-gps", names=OUTPUT_NAMES["calibrate accel-gps"], inputs=("imu_path", "gps_path")
 )
 def calibrate_accel_gps_files(
     scenario: AccelGpsScenario,
     imu_path: str | Path,
     gps_path: str | Path,
     out: str | Path,
+    **options: Any,
+) -> dict[str, Any]:
+    """:func:`compute_accel_gps_calibration` of two log files, written into ``out`` by
+    :func:`save_calibration` (the folder checked first); returns the summary."""
+    calibration = compute_accel_gps_calibration(scenario, imu_path, gps_path, **options)
+    save_calibration(calibration, out)
+    return calibration.summary
+
+
+def compute_accel_gps_calibration(
+    scenario: AccelGpsScenario,
+    imu_path: str | Path | pd.DataFrame,
+    gps_path: str | Path | pd.DataFrame,
     *,
     imu_columns: str | None = None,
     gps_columns: str | None = None,
@@ -50,12 +115,12 @@ def calibrate_accel_gps_files(
     stop_on_gap: bool = False,
     form: str = "joseph",
     smooth: bool = False,
-) -> dict[str, Any]:
+) -> Calibration:
     """Calibrate from an accelerometer log (time [s], accel [m/s^2]) and a GPS log (time [s], position [m],
-    velocity [m/s], optionally position_std [m] and velocity_std [m/s] per fix).
+    velocity [m/s], optionally position_std [m] and velocity_std [m/s] per fix): files or DataFrames.
 
-    Writes ``out/estimates.csv`` (one row per fix used), ``out/summary.json`` and ``out/calibration.png``;
-    returns the summary. Column names are mapped with ``"role=column,..."``. ``form`` is the filter's
+    Nothing is written: :func:`save_calibration` writes ``estimates.csv`` (one row per fix used),
+    ``summary.json`` and ``calibration.png``. Column names are mapped with ``"role=column,..."``. ``form`` is the filter's
     update form (joseph, standard or sqrt); ``smooth`` adds the RTS-smoothed states and their 1-sigma
     (``smoothed_position``, ..., ``smoothed_bias_std``) to ``estimates.csv`` and a ``smoothed`` object to
     ``summary.json``.
@@ -66,7 +131,9 @@ def calibrate_accel_gps_files(
     """
     imu_map = parse_column_map(imu_columns, IMU_ROLES, "--imu-columns")
     gps_map = parse_column_map(gps_columns, GPS_ROLES, "--gps-columns")
-    imu_frame, gps_frame = read_table(imu_path), read_table(gps_path)
+    imu_source, gps_source = imu_path, gps_path
+    imu_frame, gps_frame = read_table(imu_path, "imu"), read_table(gps_path, "gps")
+    imu_path, gps_path = source_name(imu_path, "imu"), source_name(gps_path, "gps")
     imu = numeric_columns(imu_frame, imu_path, imu_map)
     optional = [role for role in ("position_std", "velocity_std") if gps_map[role] in gps_frame.columns]
     gps = numeric_columns(
@@ -97,7 +164,6 @@ def calibrate_accel_gps_files(
     )
     std = result.std
     normalized = result.normalized_innovations
-    out = Path(out)
     smoothed = smooth_calibration(result) if smooth else None
     smoothed_columns = {}
     if smoothed is not None:
@@ -107,8 +173,7 @@ def calibrate_accel_gps_files(
             **{f"smoothed_{name}": getattr(smoothed, name) for name in names},
             **{f"smoothed_{name}_std": smoothed_std[:, i] for i, name in enumerate(names)},
         }
-    write_csv(
-        out / "estimates.csv",
+    estimates = pd.DataFrame(
         {
             "time": result.time,
             "position": result.position,
@@ -120,7 +185,7 @@ def calibrate_accel_gps_files(
             "innovation_position": normalized[:, 0],
             "innovation_velocity": normalized[:, 1],
             **smoothed_columns,
-        },
+        }
     )
     diagnostics = innovation_diagnostics(normalized)
     warnings = list(result.warnings)
@@ -171,9 +236,9 @@ def calibrate_accel_gps_files(
         summary["scale"], summary["scale_std"] = float(result.error_state[-1, 3]), float(std[-1, 3])
     if smoothed is not None:
         summary["smoothed"] = _smoothed_summary(smoothed, std, scenario.state_names)
-    write_json(out / "summary.json", summary)
-    plot_calibration(result.time, result.bias, std[:, 2], normalized, out / "calibration.png")
-    return summary
+    # the log files (not DataFrames) are the run's inputs: a folder's set never removes them
+    files = [p for p in (imu_source, gps_source) if not isinstance(p, pd.DataFrame)]
+    return mark_inputs(Calibration("calibrate accel-gps", estimates, summary), *files)
 
 
 def _smoothed_summary(smoothed, filter_std, names: tuple[str, ...]) -> dict[str, Any]:

@@ -4,16 +4,19 @@ the matching ``[filter]`` settings."""
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+import pandas as pd
 
 from kalcal.calibrate.allan import regular_rate
 from kalcal.calibrate.noise import NoiseIdentification, identify_noise
 from kalcal.calibrate.plausibility import CalibrationWarning, check_limit, check_rate
 from kalcal.errors import DataError
-from kalcal.io.logs import numeric_columns, parse_column_map, read_table, require_increasing
-from kalcal.io.outputs import final_path, writes_outputs
-from kalcal.io.results import write_csv, write_json
+from kalcal.io.logs import numeric_columns, parse_column_map, read_table, require_increasing, source_name
+from kalcal.io.outputs import final_path, mark_inputs, writes_outputs
+from kalcal.io.results import write_json
 from kalcal.models.accel_gps import AccelGpsFilter
 from kalcal.plots.allan import plot_allan
 
@@ -56,7 +59,36 @@ def filter_toml(result: NoiseIdentification, settings: dict[str, float], source:
     return "\n".join(lines) + "\n"
 
 
-@writes_outputs("noise", names=("summary.json", "allan.csv", "allan.png", "filter.toml"), inputs=("imu_path",))
+#: the files of ``kalcal noise``
+OUTPUT_NAMES = ("summary.json", "allan.csv", "allan.png", "filter.toml")
+
+
+@dataclass(frozen=True)
+class NoiseRun:
+    """A noise identification computed in memory, nothing written yet (:func:`compute_noise`).
+
+    Attributes
+    ----------
+    identification : NoiseIdentification
+        N, B, K and the per-sample values with their intervals, and the Allan curve.
+    summary : dict
+        ``summary.json``'s content but its ``files`` (where :func:`save_noise` writes them).
+    filter_text : str
+        ``filter.toml``: the ``[filter]`` settings for ``kalcal calibrate accel-gps --config``.
+    allan : pandas.DataFrame
+        ``allan.csv``: tau [s], adev and its bounds [m/s^2], edf, noise type.
+    title : str
+        The Allan plot's title.
+    """
+
+    identification: NoiseIdentification
+    summary: dict[str, Any]
+    filter_text: str
+    allan: pd.DataFrame
+    title: str
+
+
+@writes_outputs("noise", names=OUTPUT_NAMES, inputs=("imu_path",))
 def identify_noise_file(
     imu_path: str | Path,
     out: str | Path,
@@ -65,10 +97,53 @@ def identify_noise_file(
     confidence: float = 0.95,
     strict: bool = False,
 ) -> dict[str, Any]:
-    """Identify the noise of a static accelerometer log (time [s], accel [m/s^2]; CSV or Parquet).
+    """:func:`compute_noise` of a log file, written into ``out`` by :func:`save_noise` (the folder checked
+    first); returns the summary as written."""
+    run = compute_noise(imu_path, imu_columns=imu_columns, confidence=confidence, strict=strict)
+    return save_noise(run, out)
 
-    Writes ``out/summary.json``, ``out/allan.csv`` (tau [s], adev and its bounds [m/s^2], edf, noise type),
-    ``out/allan.png`` and ``out/filter.toml``; returns the summary. The log must be evenly sampled (steps
+
+@writes_outputs("noise", names=OUTPUT_NAMES)
+def save_noise(run: NoiseRun, out: str | Path, *, kalibr: bool = False) -> dict[str, Any]:
+    """Write ``summary.json``, ``allan.csv``, ``allan.png``, ``filter.toml`` and, with ``kalibr``, the
+    Kalibr ``imu.yaml`` (:mod:`kalcal.calibrate.kalibr`) into ``out`` as one set; returns the summary as written
+    (its ``files`` name where the files are once the set is in place)."""
+    out = Path(out)
+    paths = {
+        "summary": out / "summary.json",
+        "allan": out / "allan.csv",
+        "plot": out / "allan.png",
+        "filter": out / "filter.toml",
+    }
+    out.mkdir(parents=True, exist_ok=True)
+    run.allan.to_csv(paths["allan"], index=False)
+    plot_allan(run.identification, paths["plot"], title=run.title)
+    paths["filter"].write_text(run.filter_text)
+    if kalibr:
+        from kalcal.calibrate.kalibr import kalibr_yaml
+
+        paths["kalibr"] = out / "imu.yaml"
+        paths["kalibr"].write_text(kalibr_yaml(run.identification))
+    summary = dict(run.summary)
+    warnings = summary.pop("warnings")
+    summary["files"] = {name: str(final_path(path)) for name, path in paths.items()}
+    summary["warnings"] = warnings
+    write_json(paths["summary"], summary)
+    return summary
+
+
+def compute_noise(
+    imu_path: str | Path | pd.DataFrame,
+    *,
+    imu_columns: str | None = None,
+    confidence: float = 0.95,
+    strict: bool = False,
+) -> NoiseRun:
+    """Identify the noise of a static accelerometer log (time [s], accel [m/s^2]; CSV, Parquet or a
+    DataFrame), in memory.
+
+    :func:`save_noise` writes ``summary.json``, ``allan.csv`` (tau [s], adev and its bounds [m/s^2], edf,
+    noise type), ``allan.png`` and ``filter.toml``. The log must be evenly sampled (steps
     within 1% of the median step), at a plausible accelerometer rate, with every sample within the physical
     limit (:mod:`kalcal.calibrate.plausibility`). Columns are mapped with ``"time=t,accel=ax"``. A log that
     does not look static (:func:`~kalcal.calibrate.motion.motion_warnings`) is flagged in the summary's
@@ -76,7 +151,8 @@ def identify_noise_file(
     ``strict`` it is refused (DataError) before anything is written.
     """
     imu_map = parse_column_map(imu_columns, IMU_ROLES, "--imu-columns")
-    frame = read_table(imu_path)
+    frame = read_table(imu_path, "imu")
+    source, imu_path = imu_path, source_name(imu_path, "imu")
     imu = numeric_columns(frame, imu_path, imu_map)
     time, accel = imu["time"], imu["accel"]
     require_increasing(time, imu_path, imu_map["time"])
@@ -92,17 +168,9 @@ def identify_noise_file(
     if strict and warnings:
         raise DataError(f"{warnings[0].message} (--strict: refused, nothing written)")
 
-    out = Path(out)
     settings = filter_settings(result)
     curve = result.curve
-    paths = {
-        "summary": out / "summary.json",
-        "allan": out / "allan.csv",
-        "plot": out / "allan.png",
-        "filter": out / "filter.toml",
-    }
-    write_csv(
-        paths["allan"],
+    allan = pd.DataFrame(
         {
             "tau": curve.tau,
             "adev": curve.adev,
@@ -112,11 +180,10 @@ def identify_noise_file(
             "alpha": curve.alpha,
             "alpha_identified": curve.alpha_identified,
             "terms": curve.terms,
-        },
+        }
     )
-    plot_allan(result, paths["plot"], title=f"kalcal noise: {Path(imu_path).name}")
     flagged = "".join(f"# WARNING: {w.message}\n" for w in warnings)
-    paths["filter"].write_text(flagged + filter_toml(result, settings, str(imu_path)))
+    filter_text = flagged + filter_toml(result, settings, str(imu_path))
     summary = {
         "imu": str(imu_path),
         "columns": imu_map,
@@ -145,8 +212,7 @@ def identify_noise_file(
             "terms": curve.terms,
             "units": {"tau": "s", "adev": "m/s^2"},
         },
-        "files": {name: str(final_path(path)) for name, path in paths.items()},
         "warnings": [warning.as_dict() for warning in warnings],
     }
-    write_json(paths["summary"], summary)
-    return summary
+    run = NoiseRun(result, summary, filter_text, allan, f"kalcal noise: {Path(imu_path).name}")
+    return run if isinstance(source, pd.DataFrame) else mark_inputs(run, source)  # a save never removes the log

@@ -1,4 +1,4 @@
-"""``kalcal simulate scale-bias`` and ``kalcal calibrate scale-bias``: files in, files out."""
+"""``kalcal simulate scale-bias`` and ``kalcal calibrate scale-bias``: logs in, estimates computed in memory, files out."""
 
 from __future__ import annotations
 
@@ -6,31 +6,39 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pandas as pd
 
 from kalcal.calibrate.scale_bias import UNOBSERVABLE_RATIO, calibrate_scale_bias
 from kalcal.errors import DataError
-from kalcal.io.logs import numeric_columns, read_table, require_increasing
-from kalcal.io.outputs import writes_outputs
-from kalcal.io.results import write_csv, write_json
+from kalcal.io.logs import numeric_columns, read_table, require_increasing, source_name
+from kalcal.io.outputs import mark_inputs, writes_outputs
+from kalcal.jobs.calibrate import OUTPUT_NAMES, Calibration, save_calibration
+from kalcal.jobs.simulate import OUTPUT_NAMES as SIMULATION_NAMES
+from kalcal.jobs.simulate import Simulation, save_simulation
 from kalcal.models.config import section_values
 from kalcal.models.scale_bias import STATE_NAMES, ScaleBiasScenario
 from kalcal.models.scale_bias_theta import scale_bias_from_theta
 from kalcal.simulate.scale_bias import sample_scale_bias
 
 
-@writes_outputs("simulate scale-bias", names=("data.csv", "truth.json"))
+@writes_outputs("simulate scale-bias", names=SIMULATION_NAMES["simulate scale-bias"])
 def simulate_scale_bias(scenario: ScaleBiasScenario, seed: int, out: str | Path) -> dict[str, Path]:
-    """Write ``data.csv`` and ``truth.json`` for one realization drawn with ``seed``.
+    """Write ``data.csv`` and ``truth.json`` for one realization drawn with ``seed``
+    (:func:`compute_scale_bias_simulation`)."""
+    return save_simulation(compute_scale_bias_simulation(scenario, seed), out)
 
-    data.csv: time [s], reference [signal unit], sensor [signal unit], one row per sample.
-    truth.json: the drawn scale_error a, bias b and theta at the last sample (all samples unless the
+
+def compute_scale_bias_simulation(scenario: ScaleBiasScenario, seed: int) -> Simulation:
+    """One realization drawn with ``seed``, in memory.
+
+    data: time [s], reference [signal unit], sensor [signal unit], one row per sample.
+    truth (truth.json): the drawn scale_error a, bias b and theta at the last sample (all samples unless the
     truth drifts; then also the paths theta1, theta2 per sample), the noise and the settings.
     """
     samples = sample_scale_bias(scenario, np.random.default_rng(seed), 1)
     theta = samples.theta[0]
     a, b = scale_bias_from_theta(theta)
-    out = Path(out)
-    data = write_csv(out / "data.csv", {"time": samples.time, "reference": samples.reference[0], "sensor": samples.sensor[0]})
+    data = pd.DataFrame({"time": samples.time, "reference": samples.reference[0], "sensor": samples.sensor[0]})
     truth: dict[str, Any] = {
         "scenario": scenario.NAME,
         "seed": seed,
@@ -48,10 +56,10 @@ def simulate_scale_bias(scenario: ScaleBiasScenario, seed: int, out: str | Path)
             {"scale_error_path": a, "bias_path": b, "theta1_path": theta[:, 0], "theta2_path": theta[:, 1]}
         )
     truth["settings"] = section_values(scenario)
-    return {"data": data, "truth": write_json(out / "truth.json", truth)}
+    return Simulation("simulate scale-bias", {"data": data}, {"truth": truth})
 
 
-@writes_outputs("calibrate scale-bias", names=("estimates.csv", "summary.json"), inputs=("data_path",))
+@writes_outputs("calibrate scale-bias", names=OUTPUT_NAMES["calibrate scale-bias"], inputs=("data_path",))
 def calibrate_scale_bias_file(
     scenario: ScaleBiasScenario,
     data_path: str | Path,
@@ -60,18 +68,34 @@ def calibrate_scale_bias_file(
     reference: str = "reference",
     sensor: str = "sensor",
 ) -> dict[str, Any]:
-    """Calibrate from a log (CSV or Parquet) with a reference and a sensor column.
+    """:func:`compute_scale_bias_calibration` of a log file, written into ``out`` by
+    :func:`~kalcal.jobs.calibrate.save_calibration` (the folder checked first); returns the summary."""
+    calibration = compute_scale_bias_calibration(scenario, data_path, reference=reference, sensor=sensor)
+    save_calibration(calibration, out)
+    return calibration.summary
+
+
+def compute_scale_bias_calibration(
+    scenario: ScaleBiasScenario,
+    data_path: str | Path | pd.DataFrame,
+    *,
+    reference: str = "reference",
+    sensor: str = "sensor",
+) -> Calibration:
+    """Calibrate from a log (CSV or Parquet, or a DataFrame) with a reference and a sensor column; nothing is written.
 
     A ``time`` column [s] is used when the log has one (it must increase); otherwise sample k = 1..K is
     put at k / ``scenario.rate``. Empty cells in the two signal columns are skipped samples. Writes
-    ``out/estimates.csv`` (time, theta1, theta2, theta1_std, theta2_std after each sample) and
-    ``out/summary.json``; returns the summary. ``summary["observability"]`` holds each theta's final sigma
+    ``estimates.csv`` (time, theta1, theta2, theta1_std, theta2_std after each sample) and
+    ``summary.json``. ``summary["observability"]`` holds each theta's final sigma
     over its no-data sigma and the parameters above ``UNOBSERVABLE_RATIO`` (0.9), which ``warnings`` (a
     list of ``{"code", "message"}``, empty when none) then names; ``nis_bounds`` holds the mean NIS's 99%
     bounds and ``consistent`` whether it lies within them (a ``noise-inconsistent`` warning when not). A
     reference or sensor value beyond ``SIGNAL_LIMIT`` (1e12 in the log's unit) is refused (DataError).
     """
-    frame = read_table(data_path)
+    frame = read_table(data_path, "data")
+    source = data_path
+    data_path = source_name(data_path, "data")
     if reference == sensor:
         raise DataError(f"{data_path}: --reference and --sensor name the same column {reference!r}")
     columns = numeric_columns(frame, data_path, {"reference": reference, "sensor": sensor}, allow_nan=("reference", "sensor"))
@@ -86,16 +110,14 @@ def calibrate_scale_bias_file(
         scenario, time, columns["reference"], columns["sensor"], source=str(data_path), columns=(reference, sensor)
     )
     std = result.std
-    out = Path(out)
-    write_csv(
-        out / "estimates.csv",
+    estimates = pd.DataFrame(
         {
             "time": result.time,
             "theta1": result.theta[:, 0],
             "theta2": result.theta[:, 1],
             "theta1_std": std[:, 0],
             "theta2_std": std[:, 1],
-        },
+        }
     )
     a, b, ab_cov = result.scale_bias()
     unit = scenario.scenario.unit
@@ -128,5 +150,5 @@ def calibrate_scale_bias_file(
         "warnings": [warning.as_dict() for warning in result.warnings(str(data_path))],
         "units": {"time": "s", "theta1": "1", "theta2": unit, "scale_error": "1", "bias": unit},
     }
-    write_json(out / "summary.json", summary)
-    return summary
+    calibration = Calibration("calibrate scale-bias", estimates, summary)
+    return calibration if isinstance(source, pd.DataFrame) else mark_inputs(calibration, source)

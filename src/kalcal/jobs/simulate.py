@@ -1,41 +1,90 @@
-"""``kalcal simulate``: write one simulated realization as a user would record it."""
+"""``kalcal simulate``: one simulated realization as a user would record it, drawn in memory, then written."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+import pandas as pd
 
 from kalcal.io.outputs import writes_outputs
-from kalcal.io.results import write_csv
+from kalcal.io.results import write_json
 from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.simulate.sampled import sample_accel_gps_logs
 
+#: the files of a simulation of each scenario
+OUTPUT_NAMES = {
+    "simulate accel-gps": ("imu.csv", "gps.csv", "truth.csv"),
+    "simulate scale-bias": ("data.csv", "truth.json"),
+}
 
-@writes_outputs("simulate accel-gps", names=("imu.csv", "gps.csv", "truth.csv"))
-def simulate_accel_gps(scenario: AccelGpsScenario, seed: int, out: str | Path) -> dict[str, Path]:
-    """Write ``imu.csv``, ``gps.csv`` and ``truth.csv`` for one realization drawn with ``seed``.
 
-    imu.csv: time [s], accel [m/s^2], one row per accelerometer sample from t = 0.
-    gps.csv: time [s], position [m], velocity [m/s], one row per fix.
-    truth.csv: time [s], position [m], velocity [m/s], accel [m/s^2] (true), bias [m/s^2] at the samples.
-    """
+@dataclass(frozen=True)
+class Simulation:
+    """A simulated realization in memory: ``logs`` (name -> DataFrame, each written as ``NAME.csv``) and
+    ``documents`` (name -> dict, each written as ``NAME.json``), for the command ``command``."""
+
+    command: str
+    logs: dict[str, pd.DataFrame]
+    documents: dict[str, dict[str, Any]] = field(default_factory=dict)
+
+
+def compute_simulation(scenario, seed: int) -> Simulation:
+    """The realization of ``scenario`` drawn with ``seed`` (accel-gps or scale-bias)."""
+    if scenario.NAME == "scale-bias":
+        from kalcal.jobs.scale_bias import compute_scale_bias_simulation
+
+        return compute_scale_bias_simulation(scenario, seed)
+    return compute_accel_gps_simulation(scenario, seed)
+
+
+def compute_accel_gps_simulation(scenario: AccelGpsScenario, seed: int) -> Simulation:
+    """imu: time [s], accel [m/s^2], one row per accelerometer sample from t = 0.
+    gps: time [s], position [m], velocity [m/s], one row per fix.
+    truth: time [s], position [m], velocity [m/s], accel [m/s^2] (true), bias [m/s^2] at the samples."""
     logs = sample_accel_gps_logs(scenario, np.random.default_rng(seed), 1)
-    out = Path(out)
-    return {
-        "imu": write_csv(out / "imu.csv", {"time": logs.sample_time, "accel": logs.accel[0]}),
-        "gps": write_csv(
-            out / "gps.csv",
-            {"time": logs.fix_time, "position": logs.gps_position[0], "velocity": logs.gps_velocity[0]},
-        ),
-        "truth": write_csv(
-            out / "truth.csv",
-            {
-                "time": logs.sample_time,
-                "position": logs.position[0],
-                "velocity": logs.velocity[0],
-                "accel": logs.true_accel,
-                "bias": logs.bias[0],
-            },
-        ),
-    }
+    return Simulation(
+        "simulate accel-gps",
+        {
+            "imu": pd.DataFrame({"time": logs.sample_time, "accel": logs.accel[0]}),
+            "gps": pd.DataFrame(
+                {"time": logs.fix_time, "position": logs.gps_position[0], "velocity": logs.gps_velocity[0]}
+            ),
+            "truth": pd.DataFrame(
+                {
+                    "time": logs.sample_time,
+                    "position": logs.position[0],
+                    "velocity": logs.velocity[0],
+                    "accel": logs.true_accel,
+                    "bias": logs.bias[0],
+                }
+            ),
+        },
+    )
+
+
+def save_simulation(simulation: Simulation, out: str | Path) -> dict[str, Path]:
+    """Write the logs as CSV and the documents as JSON into ``out`` as one set; returns the files by name."""
+
+    @writes_outputs(simulation.command, names=OUTPUT_NAMES[simulation.command])
+    def write(simulation: Simulation, out: Path) -> dict[str, Path]:
+        out = Path(out)
+        out.mkdir(parents=True, exist_ok=True)
+        paths: dict[str, Path] = {}
+        for name, frame in simulation.logs.items():
+            paths[name] = out / f"{name}.csv"
+            frame.to_csv(paths[name], index=False)
+        for name, document in simulation.documents.items():
+            paths[name] = write_json(out / f"{name}.json", document)
+        return paths
+
+    return write(simulation, out)
+
+
+@writes_outputs("simulate accel-gps", names=OUTPUT_NAMES["simulate accel-gps"])
+def simulate_accel_gps(scenario: AccelGpsScenario, seed: int, out: str | Path) -> dict[str, Path]:
+    """Write ``imu.csv``, ``gps.csv`` and ``truth.csv`` for one realization drawn with ``seed``
+    (:func:`compute_accel_gps_simulation`)."""
+    return save_simulation(compute_accel_gps_simulation(scenario, seed), out)

@@ -1,0 +1,50 @@
+"""The scenario of an API call: a built-in name, a model file, a :class:`~kalcal.api.model.Model` or a built scenario."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from kalcal.api.model import Model, assignments_of
+from kalcal.errors import KalcalError
+
+
+def resolve(
+    scenario: Any,
+    settings: Mapping[str, Any] | None,
+    config: str | Path | None,
+    *,
+    engine: str = "exact",
+    long_run: float | None = None,
+    defaults: Mapping[str, Any] | None = None,
+    models: bool = False,
+):
+    """The scenario object of ``scenario`` with ``settings`` (``{"section.key": value}``, ``--set``'s keys)
+    and the TOML ``config`` applied; a model (file or :class:`Model`) refuses the sampled engine and a
+    long run as ``kalcal verify`` does. Only with ``models`` (verify) is a model file or Model taken; elsewhere
+    a name goes to the registry, which says that model files work with verify."""
+    from kalcal.models.custom import is_model_file, load_model_file
+    from kalcal.models.registry import build_scenario
+
+    assignments = assignments_of(settings)
+    is_model = isinstance(scenario, Model) or (isinstance(scenario, (str, Path)) and is_model_file(str(scenario)))
+    if models and is_model:
+        where = scenario.source if isinstance(scenario, Model) else str(scenario)
+        if engine == "sampled":
+            raise KalcalError(f"--engine: 'sampled' is not available for a model file ({where}); use the exact engine")
+        if long_run:
+            raise KalcalError(f"--long-run: not available for a model file ({where}); set updates in the file instead")
+        if isinstance(scenario, Model):
+            if config is not None:
+                raise KalcalError("config: not used with a Model; give its settings to Model or settings=")
+            return scenario.scenario(settings)
+        return load_model_file(scenario, assignments, config=config)
+    if isinstance(scenario, (str, Path)):
+        return build_scenario(str(scenario), config, assignments, defaults=defaults)
+    if settings or config is not None:
+        from kalcal.models.config import apply_settings, load_toml
+
+        merged = {**(load_toml(config) if config is not None else {}), **dict(settings or {})}
+        return apply_settings(scenario, merged)
+    return scenario  # a scenario built already (kalcal.load_model, build_scenario)

@@ -1,0 +1,100 @@
+"""``kalcal.calibrate``: the sensor's bias (and scale) from logged data, returned as a CalibrationResult."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from kalcal.api.results import CalibrationResult
+
+
+def calibrate(
+    scenario: str = "accel-gps",
+    imu=None,
+    gps=None,
+    settings: Mapping[str, Any] | None = None,
+    *,
+    data=None,
+    config: str | Path | None = None,
+    reference: str = "reference",
+    sensor: str = "sensor",
+    imu_columns: str | None = None,
+    gps_columns: str | None = None,
+    init: str = "first-fix",
+    max_imu_gap: float = 5.0,
+    on_gap: str = "continue",
+    form: str = "joseph",
+    smooth: bool = False,
+    out: str | Path | None = None,
+) -> CalibrationResult:
+    """Calibrate from logged data: accel-gps (``imu``, ``gps``) or scale-bias (``data``).
+
+    Parameters
+    ----------
+    scenario : {"accel-gps", "scale-bias"}
+    imu, gps : DataFrame or path
+        accel-gps: the accelerometer log (time [s], accel [m/s^2]) and the GPS log (time [s], position
+        [m], velocity [m/s], optionally position_std [m], velocity_std [m/s]); CSV, Parquet or DataFrames
+        (named ``<imu DataFrame>``, ``<gps DataFrame>`` in errors), checked as the files are.
+    data : DataFrame or path
+        scale-bias: a log with a ``reference`` and a ``sensor`` column (and optionally ``time`` [s]).
+    settings : dict, optional
+        ``{"section.key": value}``, the keys of ``--set``; ``config`` a TOML file of them.
+    imu_columns, gps_columns, init, max_imu_gap, on_gap, form, smooth, reference, sensor
+        As ``kalcal calibrate``'s options of those names.
+    out : path, optional
+        Also write the files there, as ``kalcal calibrate --out`` (the folder is checked first).
+
+    Returns
+    -------
+    CalibrationResult
+    """
+    from kalcal.api._scenario import resolve
+    from kalcal.errors import KalcalError
+
+    if scenario == "scale-bias":
+        if form != "joseph" or smooth:
+            option = "--form" if form != "joseph" else "--smooth"
+            raise KalcalError(f"{option}: not available for scale-bias (accel-gps only)")
+        model = resolve("scale-bias", settings, config)
+        if data is None:
+            raise KalcalError("--data: required for scale-bias (a log with a reference and a sensor column)")
+        if imu is not None or gps is not None:
+            raise KalcalError("--imu/--gps: not used by scale-bias (it reads --data)")
+        from kalcal.jobs.scale_bias import compute_scale_bias_calibration
+
+        def compute():
+            return compute_scale_bias_calibration(model, data, reference=reference, sensor=sensor)
+
+        command = "calibrate scale-bias"
+    else:
+        model = resolve(scenario, settings, config, defaults={"scenario.integration": "trapezoid"})
+        missing = [name for name, value in (("--imu", imu), ("--gps", gps)) if value is None]
+        if missing:
+            raise KalcalError(f"{' and '.join(missing)}: required for {scenario}")
+        if data is not None:
+            raise KalcalError(f"--data: not used by {scenario} (it reads --imu and --gps)")
+        if on_gap not in ("continue", "stop"):
+            raise KalcalError(f"--on-gap: expected continue or stop, got {on_gap!r}")
+        from kalcal.jobs.calibrate import compute_accel_gps_calibration
+
+        def compute():
+            return compute_accel_gps_calibration(
+                model, imu, gps, imu_columns=imu_columns, gps_columns=gps_columns, init=init,
+                max_imu_gap=max_imu_gap, stop_on_gap=on_gap == "stop", form=form, smooth=smooth,
+            )
+
+        command = "calibrate accel-gps"
+    if out is None:
+        return CalibrationResult.from_calibration(compute())
+    from kalcal.io.outputs import inputs_of, run_outputs
+    from kalcal.jobs.calibrate import OUTPUT_NAMES, save_calibration
+
+    files = [value for value in (imu, gps, data) if isinstance(value, (str, Path))]
+    with run_outputs(out, command, names=OUTPUT_NAMES[command], protect=[*files, *inputs_of(model)]) as staging:
+        calibration = compute()
+        paths = save_calibration(calibration, staging)
+    return CalibrationResult.from_calibration(
+        calibration, {name: Path(out) / Path(path).relative_to(staging) for name, path in paths.items()}
+    )

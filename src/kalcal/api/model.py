@@ -1,0 +1,120 @@
+"""``kalcal.Model``: a model file's content built in Python, validated exactly as a model file is."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+#: the model file's keys that hold arrays, in the order of LinearGaussianModel
+ARRAY_KEYS = ("phi", "gamma", "h", "w", "v", "x0", "m0")
+
+
+def _toml(value: Any) -> str:
+    """A TOML literal of a number, string, boolean or (nested) sequence of them (NaN and infinities too)."""
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    if isinstance(value, (bool, np.bool_)):
+        return "true" if value else "false"
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    if isinstance(value, (float, np.floating)):
+        number = float(value)
+        if math.isnan(number):
+            return "nan"
+        if math.isinf(number):
+            return "inf" if number > 0 else "-inf"
+        return repr(number)
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml(v) for v in value) + "]"
+    return _toml(str(value))  # anything else is validated as the text a file would hold
+
+
+@dataclass(frozen=True)
+class Model:
+    """A linear Gaussian model to verify, as a model file (docs/custom-models.md) would hold it.
+
+    Parameters
+    ----------
+    phi, gamma, h, w, v, m0 : array_like
+        (d, d) transition per step, (d, q) process-noise input, (p, d) measurement matrix, (q, q)
+        process-noise covariance per step, (p, p) measurement-noise covariance, (d, d) prior covariance.
+    x0 : array_like
+        (d,) prior mean at step 0.
+    steps_per_update : int
+        Model steps between two measurement updates.
+    updates : int
+        Measurement updates to verify.
+    sample_period : float
+        Seconds per model step (default 1).
+    truth : mapping, optional
+        Where the world departs from the filter: any of phi, gamma, h, w, v, x0, m0 (the ``[truth]`` table).
+    name, state_names, state_units, measurement_names, measurement_units : optional
+        The labels (defaults as in a model file: the name ``"model"``, x1..xd, z1..zp, no units).
+
+    Nothing is checked here; :meth:`scenario` (and :func:`kalcal.verify`) validates the model as a model
+    file is validated, with the same one-line :class:`~kalcal.errors.ConfigError` naming the key, the
+    source being ``<Model>``.
+    """
+
+    phi: Any
+    gamma: Any
+    h: Any
+    w: Any
+    v: Any
+    x0: Any
+    m0: Any
+    steps_per_update: int
+    updates: int
+    sample_period: float = 1.0
+    truth: Mapping[str, Any] | None = None
+    name: str | None = None
+    state_names: Sequence[str] | None = None
+    state_units: Sequence[str] | None = None
+    measurement_names: Sequence[str] | None = None
+    measurement_units: Sequence[str] | None = None
+    source: str = field(default="<Model>", repr=False)
+
+    def document(self) -> str:
+        """The model as the text of a model file (TOML)."""
+        lines = [f"name = {_toml(self.name or 'model')}"]
+        for key in ("sample_period", "steps_per_update", "updates", *ARRAY_KEYS):
+            lines.append(f"{key} = {_toml(getattr(self, key))}")
+        for key in ("state_names", "state_units", "measurement_names", "measurement_units"):
+            if getattr(self, key) is not None:
+                lines.append(f"{key} = {_toml(list(getattr(self, key)))}")
+        if self.truth is not None:
+            lines.append("[truth]")
+            lines += [f"{key} = {_toml(value)}" for key, value in dict(self.truth).items()]
+        return "\n".join(lines) + "\n"
+
+    def scenario(self, settings: Mapping[str, Any] | None = None):
+        """The validated scenario (a :class:`~kalcal.models.custom.CustomModelScenario`), with ``settings``
+        (``{"filter.w": [[0.01]], ...}``, the keys ``--set`` takes for a model file) applied."""
+        from kalcal.models.custom import parse_model
+
+        return parse_model(self.document(), self.source, assignments_of(settings))
+
+    def save(self, path: str | Path) -> Path:
+        """Write the model file (TOML) that :func:`load_model` reads back."""
+        path = Path(path)
+        path.write_text(self.document(), encoding="utf-8")
+        return path
+
+
+def assignments_of(settings: Mapping[str, Any] | None) -> list[str]:
+    """``{"section.key": value}`` as the ``--set`` assignments ``section.key=value`` (values as TOML)."""
+    return [f"{key}={value if isinstance(value, str) else _toml(value)}" for key, value in (settings or {}).items()]
+
+
+def load_model(path: str | Path, settings: Mapping[str, Any] | None = None):
+    """Read and validate a model file (``kalcal verify MODEL.toml``): the scenario :func:`kalcal.verify` takes."""
+    from kalcal.models.custom import load_model_file
+
+    return load_model_file(path, assignments_of(settings))

@@ -1,0 +1,305 @@
+"""The result objects of ``kalcal.verify``, ``kalcal.calibrate`` and ``kalcal.noise``: frozen, in memory, savable."""
+
+from __future__ import annotations
+
+import html
+import shutil
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+
+def _fmt(value: Any) -> str:
+    if value is None:
+        return "—"
+    if isinstance(value, (float, np.floating)):
+        return f"{float(value):.4g}"
+    return str(value)
+
+
+@dataclass(frozen=True, repr=False)
+class VerificationResult:
+    """What :func:`kalcal.verify` found.
+
+    Attributes
+    ----------
+    verdict : {"pass", "fail"}
+        Whether every check passed.
+    checks : list of CheckResult
+        Each check: ``name``, ``statistic``, ``pvalue`` (family-wise), ``lower``, ``upper``,
+        ``confidence``, ``comparisons``, ``passed``, ``detail``, ``cause`` (``explained_by``,
+        ``direction``) and ``parts`` (:class:`kalcal.verify.results.CheckResult`).
+    statistics : xarray.Dataset
+        The per-update ensemble statistics (``stats.nc``): dimensions ``time`` (s), ``state``,
+        ``measurement``; a ``long_name`` on every variable, ``units`` where one unit applies.
+    long_statistics : xarray.Dataset or None
+        The long-run study's statistics (``stats_long.nc``), None without one.
+    paths : dict
+        The files written (by key: summary, stats, ...) when the call was given ``out``; empty otherwise.
+    """
+
+    verdict: str
+    checks: list
+    statistics: Any
+    long_statistics: Any
+    run: Any = field(repr=False, compare=False)
+    paths: dict = field(default_factory=dict)
+
+    @classmethod
+    def from_run(cls, run, paths: dict | None = None) -> VerificationResult:
+        """The result of a :class:`kalcal.jobs.verify.Verification`."""
+        return cls(run.summary["verdict"], list(run.checks), run.dataset, run.long_dataset, run, dict(paths or {}))
+
+    @property
+    def summary(self) -> dict[str, Any]:
+        """:meth:`to_dict`."""
+        return self.to_dict()
+
+    def to_dict(self) -> dict[str, Any]:
+        """``summary.json`` as ``json.load`` reads it (NaN as None, ``schema_version``, ``nonfinite``); its
+        ``timing`` is the computation's until the result is saved (then the file adds the writing)."""
+        from kalcal.io.results import json_document
+
+        return json_document(self.run.summary)
+
+    def save(self, out: str | Path, *, report: bool = False, realization: int = 0) -> dict[str, Path]:
+        """Write ``summary.json``, ``stats.nc`` (``stats_long.nc``) and, with ``report``, ``report.html``
+        and ``figures/`` into ``out``, as ``kalcal verify --out`` does (one set: whole or not at all,
+        docs/outputs.md); returns the files by key."""
+        from kalcal.jobs.verify import save_verification
+
+        saved = save_verification(
+            self.run, out, report=report, realization=realization, checkpoint=self.run.checkpoint, scenario=self.run.scenario
+        )
+        return saved.paths
+
+    def report(self, path: str | Path = "report.html", *, realization: int = 0) -> Path:
+        """Draw the self-contained HTML page (realization ``realization`` in the single-run figures) at ``path``."""
+        path = Path(path)
+        with tempfile.TemporaryDirectory(prefix="kalcal-report-") as folder:
+            paths = self.save(Path(folder) / "run", report=True, realization=realization)
+            path.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(paths["report"], path)
+        return path
+
+    def __repr__(self) -> str:
+        s = self.run.summary
+        failed = [c.name for c in self.checks if not c.passed]
+        return (
+            f"VerificationResult(verdict={self.verdict!r}, scenario={s['scenario']!r}, realizations={s['realizations']}, "
+            f"checks={len(self.checks)}" + (f", failed={failed}" if failed else "") + ")"
+        )
+
+    def _repr_html_(self) -> str:
+        s = self.run.summary
+        rows = "".join(
+            "<tr>"
+            f"<td>{html.escape(c.name)}</td><td>{_fmt(c.statistic)}</td><td>{_fmt(c.lower)}</td><td>{_fmt(c.upper)}</td>"
+            f"<td>{_fmt(c.pvalue)}</td><td style='color:{'green' if c.passed else 'red'}'>{'pass' if c.passed else 'FAIL'}</td>"
+            "</tr>"
+            for c in self.checks
+        )
+        return (
+            f"<div><b>kalcal verify {html.escape(str(s['scenario']))}</b>: {s['realizations']:,} realizations "
+            f"({html.escape(s['engine'])}), confidence {s['confidence']:g}, verdict <b>{html.escape(self.verdict.upper())}</b>"
+            "<table><thead><tr><th>check</th><th>statistic</th><th>lower</th><th>upper</th><th>p-value</th><th>result</th>"
+            f"</tr></thead><tbody>{rows}</tbody></table></div>"
+        )
+
+
+@dataclass(frozen=True, repr=False)
+class CalibrationResult:
+    """What :func:`kalcal.calibrate` estimated, at the last fix (accel-gps) or sample (scale-bias).
+
+    Attributes
+    ----------
+    scenario : str
+        ``"accel-gps"`` or ``"scale-bias"``.
+    bias, bias_std : float
+        The sensor bias and its 1-sigma (m/s^2 for accel-gps; the log's unit for scale-bias).
+    scale, scale_std : float or None
+        The scale error and its 1-sigma (dimensionless): scale-bias, and accel-gps with a scale state.
+    covariance : ndarray
+        The final state covariance, over ``covariance_states`` (accel-gps: position, velocity, bias[,
+        scale]; scale-bias: theta1, theta2).
+    estimates : pandas.DataFrame
+        ``estimates.csv``: one row per fix or sample, states, their 1-sigma and (accel-gps) the NIS and
+        normalized innovations.
+    diagnostics : dict
+        accel-gps: the innovation diagnostics (``consistent``, ``verdict``, ...); scale-bias: the mean
+        NIS, its bounds, ``consistent`` and the observability ratios.
+    warnings : list of dict
+        ``{"code", "message"}`` each, empty when none.
+    """
+
+    scenario: str
+    bias: float
+    bias_std: float
+    scale: float | None
+    scale_std: float | None
+    covariance: np.ndarray
+    covariance_states: tuple
+    estimates: pd.DataFrame
+    diagnostics: dict
+    warnings: list
+    calibration: Any = field(repr=False, compare=False)
+    paths: dict = field(default_factory=dict)
+
+    @classmethod
+    def from_calibration(cls, calibration, paths: dict | None = None) -> CalibrationResult:
+        """The result of a :class:`kalcal.jobs.calibrate.Calibration`."""
+        s = calibration.summary
+        if s["scenario"] == "scale-bias":
+            scale, scale_std = s["scale_error"], s["scale_error_std"]
+            covariance, states = s["theta_covariance"], s["theta_states"]
+            diagnostics = {key: s[key] for key in ("mean_nis", "nis_bounds", "consistent", "observability")}
+        else:
+            scale, scale_std = s.get("scale"), s.get("scale_std")
+            covariance, states, diagnostics = s["covariance"], s["covariance_states"], s["diagnostics"]
+        return cls(
+            s["scenario"],
+            float(s["bias"]),
+            float(s["bias_std"]),
+            None if scale is None else float(scale),
+            None if scale_std is None else float(scale_std),
+            np.asarray(covariance, dtype=float),
+            tuple(states),
+            calibration.estimates,
+            diagnostics,
+            list(s["warnings"]),
+            calibration,
+            dict(paths or {}),
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """``summary.json`` as ``json.load`` reads it."""
+        from kalcal.io.results import json_document
+
+        return json_document(self.calibration.summary)
+
+    def save(self, out: str | Path) -> dict[str, Path]:
+        """Write ``estimates.csv``, ``summary.json`` and (accel-gps) ``calibration.png`` into ``out``, as
+        ``kalcal calibrate --out`` does (one set); returns the files by name."""
+        from kalcal.jobs.calibrate import save_calibration
+
+        return save_calibration(self.calibration, out)
+
+    def __repr__(self) -> str:
+        scale = "" if self.scale is None else f", scale={self.scale:.6g} ± {self.scale_std:.3g}"
+        return f"CalibrationResult({self.scenario}: bias={self.bias:.6g} ± {self.bias_std:.3g}{scale}, warnings={len(self.warnings)})"
+
+
+@dataclass(frozen=True, repr=False)
+class NoiseResult:
+    """What :func:`kalcal.noise` identified from a static accelerometer log.
+
+    Attributes
+    ----------
+    velocity_random_walk, bias_instability, rate_random_walk, accel_noise_std, bias_walk_std : NoiseParameter
+        N (m/s/sqrt(s)), B (m/s^2), K (m/s^2/sqrt(s)) and the per-sample values N sqrt(rate) and
+        K sqrt(dt) (m/s^2), each with ``value`` (None where not identified), ``ci_low``, ``ci_high``,
+        ``upper_bound`` and ``note`` (:class:`kalcal.calibrate.noise.NoiseParameter`).
+    rate : float
+        The log's median sample rate (Hz).
+    filter : dict
+        The ``[filter]`` settings of ``filter.toml`` (accel_noise_std, bias_walk_std where identified).
+    kalibr : dict
+        The Kalibr ``imu.yaml`` values (continuous-time densities; see :mod:`kalcal.calibrate.kalibr`).
+    allan : pandas.DataFrame
+        ``allan.csv``: tau [s], adev and its bounds [m/s^2], edf, noise type.
+    warnings : list of dict
+        ``{"code", "message"}`` each (a log that does not look static), empty when none.
+    """
+
+    velocity_random_walk: Any
+    bias_instability: Any
+    rate_random_walk: Any
+    accel_noise_std: Any
+    bias_walk_std: Any
+    rate: float
+    filter: dict
+    kalibr: dict
+    allan: pd.DataFrame
+    warnings: list
+    run: Any = field(repr=False, compare=False)
+    paths: dict = field(default_factory=dict)
+
+    @classmethod
+    def from_run(cls, run, paths: dict | None = None) -> NoiseResult:
+        """The result of a :class:`kalcal.jobs.noise.NoiseRun`."""
+        from kalcal.calibrate.kalibr import kalibr_values
+
+        r = run.identification
+        return cls(
+            r.velocity_random_walk,
+            r.bias_instability,
+            r.rate_random_walk,
+            r.accel_noise_std,
+            r.bias_walk_std,
+            float(r.rate),
+            dict(run.summary["filter"]),
+            kalibr_values(r),
+            run.allan,
+            list(run.summary["warnings"]),
+            run,
+            dict(paths or {}),
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """``summary.json`` as ``json.load`` reads it, but for ``files`` (which only a save knows)."""
+        from kalcal.io.results import json_document
+
+        return json_document(self.run.summary)
+
+    def save(self, out: str | Path) -> dict[str, str]:
+        """Write ``summary.json``, ``allan.csv``, ``allan.png`` and ``filter.toml`` into ``out``, as
+        ``kalcal noise --out`` does (one set); returns the files by key (summary, allan, plot, filter)."""
+        from kalcal.jobs.noise import save_noise
+
+        return save_noise(self.run, out)["files"]
+
+    def kalibr_yaml(self, rostopic: str = "/imu0") -> str:
+        """The Kalibr ``imu.yaml`` text (see :mod:`kalcal.calibrate.kalibr`)."""
+        from kalcal.calibrate.kalibr import kalibr_yaml
+
+        return kalibr_yaml(self.run.identification, rostopic=rostopic)
+
+    def __repr__(self) -> str:
+        def show(p) -> str:
+            return "not identified" if p.value is None else f"{p.value:.4g} {p.unit}"
+
+        return (
+            f"NoiseResult(N={show(self.velocity_random_walk)}, B={show(self.bias_instability)}, "
+            f"K={show(self.rate_random_walk)}, rate={self.rate:.6g} Hz)"
+        )
+
+
+@dataclass(frozen=True, repr=False)
+class SimulationResult:
+    """What :func:`kalcal.simulate` drew: the logs as DataFrames (``imu``, ``gps``, ``truth`` for accel-gps;
+    ``data`` for scale-bias) and, for scale-bias, ``truth`` (``truth.json``: the drawn scale error and bias)."""
+
+    scenario: str
+    logs: dict
+    truth: dict | None
+    simulation: Any = field(repr=False, compare=False)
+    paths: dict = field(default_factory=dict)
+
+    @classmethod
+    def from_simulation(cls, simulation, paths: dict | None = None) -> SimulationResult:
+        """The result of a :class:`kalcal.jobs.simulate.Simulation`."""
+        truth = simulation.documents.get("truth")
+        return cls(simulation.command.removeprefix("simulate "), dict(simulation.logs), truth, simulation, dict(paths or {}))
+
+    def save(self, out: str | Path) -> dict[str, Path]:
+        """Write the logs (CSV) and ``truth.json`` into ``out``, as ``kalcal simulate --out`` does (one set)."""
+        from kalcal.jobs.simulate import save_simulation
+
+        return save_simulation(self.simulation, out)
+
+    def __repr__(self) -> str:
+        return f"SimulationResult({self.scenario}: {', '.join(f'{k} ({len(v)} rows)' for k, v in self.logs.items())})"

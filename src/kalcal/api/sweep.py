@@ -1,0 +1,45 @@
+"""``kalcal.sweep``: a verification per value of one setting, written with the tuning curve."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+
+def sweep(
+    scenario: str = "accel-gps",
+    key: str = "",
+    values: Sequence[Any] = (),
+    n: int = 100_000,
+    seed: int = 0,
+    out: str | Path = "kalcal-sweep",
+    settings: Mapping[str, Any] | None = None,
+    *,
+    config: str | Path | None = None,
+    engine: str = "exact",
+    threads: int | None = None,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    client=None,
+):
+    """Verify ``scenario`` with ``key`` (``"filter.accel_noise_std"``) set to each of ``values``, all with
+    the same seed; writes ``out/sweep.csv``, ``sweep.json``, ``sweep.png`` and one run folder per value
+    (as ``kalcal sweep``). Returns :class:`kalcal.jobs.sweep.SweepResult` (``key``, ``table``: one row per
+    value with every check's statistic, bounds and verdict, ``paths``)."""
+    from kalcal.api._scenario import resolve
+    from kalcal.errors import KalcalError
+    from kalcal.jobs.sweep import sweep as run_sweep
+    from kalcal.jobs.sweep import sweep_cells
+    from kalcal.montecarlo.distributed import dask_client
+
+    values = [str(value) for value in values]
+    if not key or len(values) < 2:
+        raise KalcalError(f"sweep: give a setting and at least two values (got {key!r} with {len(values)})")
+    model = resolve(scenario, settings, config)
+    sweep_cells(model, key, values, n, engine=engine, long_run=0)  # every value checked before any cluster
+    options = dict(engine=engine, workers=threads, long_run=0)
+    if client is None and (workers is not None or scheduler is not None):
+        with dask_client(workers, scheduler) as client:
+            return run_sweep(model, key, values, n, seed, out, client=client, **options)
+    return run_sweep(model, key, values, n, seed, out, client=client, **options)

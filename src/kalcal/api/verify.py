@@ -1,0 +1,110 @@
+"""``kalcal.verify``: the Monte Carlo verification of a filter, returned as a VerificationResult."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+from kalcal.api.progress import progress_callback
+from kalcal.api.results import VerificationResult
+
+
+def verify(
+    scenario: Any = "accel-gps",
+    n: int = 300_000,
+    seed: int = 0,
+    settings: Mapping[str, Any] | None = None,
+    *,
+    config: str | Path | None = None,
+    engine: str = "exact",
+    confidence: float = 0.99,
+    threads: int | None = None,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    client=None,
+    batch_size: int | None = None,
+    checkpoint: str | Path | None = None,
+    long_run: float | None = None,
+    form: str = "joseph",
+    progress: bool | Callable[[str, int, int], None] = False,
+    out: str | Path | None = None,
+    report: bool = False,
+    realization: int = 0,
+    command: str = "",
+) -> VerificationResult:
+    """Verify a filter with a Monte Carlo: mean error, covariance, orthogonality, whiteness, NIS.
+
+    Parameters
+    ----------
+    scenario : str, path, Model or scenario
+        ``"accel-gps"``, ``"scale-bias"``, a model file (``.toml``), a :class:`kalcal.Model`, or a scenario
+        from :func:`kalcal.load_model`.
+    n : int
+        Realizations (at least 100).
+    seed : int
+        Root seed: the same seed gives the same numbers, whatever ``threads``, ``workers``, ``batch_size``.
+    settings : dict, optional
+        ``{"section.key": value}``, the keys of ``--set`` (``{"truth.bias_std": 0.2}``).
+    config : path, optional
+        A TOML file of settings (``--config``).
+    engine, confidence, batch_size, checkpoint, long_run, form
+        As ``kalcal verify``'s options of those names (long_run in s; None: the scenario's default).
+    threads : int, optional
+        Local threads (default: all cores).
+    workers, scheduler, client
+        A local Dask cluster of ``workers`` processes, an existing cluster's address, or a Dask client.
+    progress : bool or callable
+        True: a progress bar on stderr; a callable: ``progress(stage, done, total)``
+        (:mod:`kalcal.jobs.progress`); False: silence.
+    out : path, optional
+        Also write the run's files there, as ``kalcal verify --out`` (the folder is checked before the
+        run starts); ``report`` draws the page and figures, showing realization ``realization``.
+    command : str
+        What ``summary.json`` records as the command.
+
+    Returns
+    -------
+    VerificationResult
+
+    Raises
+    ------
+    KalcalError
+        Any bad input (a ValueError), with one line naming the setting and the value.
+    """
+    from kalcal.api._scenario import resolve
+    from kalcal.errors import KalcalError
+    from kalcal.jobs.verify import check_arguments
+    from kalcal.montecarlo.distributed import dask_client
+
+    model = resolve(scenario, settings, config, engine=engine, long_run=long_run, models=True)
+    if threads is not None and threads < 1:
+        raise KalcalError(f"--threads: expected a positive number, got {threads}")
+    check_arguments(model, n, engine=engine, confidence=confidence, long_run=long_run, batch_size=batch_size, form=form)
+    options = dict(
+        engine=engine, confidence=confidence, workers=threads, command=command, long_run=long_run,
+        batch_size=batch_size, checkpoint=checkpoint, form=form,
+    )
+    with progress_callback(progress, f"{scenario if isinstance(scenario, str) else 'model'} x {n:,}") as update:
+        if client is None and (workers is not None or scheduler is not None):
+            with dask_client(workers, scheduler) as client:
+                return _run(model, n, seed, options, client, update, out, report, realization)
+        return _run(model, n, seed, options, client, update, out, report, realization)
+
+
+def _run(model, n, seed, options, client, update, out, report, realization) -> VerificationResult:
+    import dataclasses
+
+    from kalcal.io.outputs import inputs_of, run_outputs
+    from kalcal.jobs.verify import OUTPUT_NAMES, compute_verification, save_verification
+
+    if out is None:
+        return VerificationResult.from_run(compute_verification(model, n, seed, client=client, progress=update, **options))
+    # the folder is checked before the run starts, and the run's files are put in place as one set
+    protect = [options["checkpoint"], *inputs_of(model)]
+    with run_outputs(out, "verify", names=OUTPUT_NAMES, protect=protect) as staging:
+        run = compute_verification(model, n, seed, client=client, progress=update, **options)
+        saved = save_verification(run, staging, report=report, realization=realization, progress=update)
+    final = {key: Path(out) / Path(path).relative_to(staging) for key, path in saved.paths.items()}
+    # the summary as written: its timing covers the writing too
+    return VerificationResult.from_run(dataclasses.replace(run, summary=saved.summary), final)

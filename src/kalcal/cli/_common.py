@@ -1,0 +1,144 @@
+"""What the commands share: the consoles, one-line errors, tables, the progress bar and the closing line."""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+from rich.console import Console
+from rich.markup import escape
+from rich.table import Table
+from rich.text import Text
+
+from kalcal.errors import KalcalError
+
+console = Console()
+error_console = Console(stderr=True, highlight=False, soft_wrap=True)
+
+SCENARIO_NAMES = ("accel-gps", "scale-bias")  # kalcal.models.registry.SCENARIOS, without importing numpy for --help
+ScenarioArg = Annotated[str, typer.Argument(help=f"Scenario: {', '.join(SCENARIO_NAMES)}.")]
+SetOpt = Annotated[
+    Optional[list[str]],
+    typer.Option("--set", help="Override a setting, section.key=value (repeatable), e.g. truth.bias_std=0.2."),
+]
+ConfigOpt = Annotated[Optional[Path], typer.Option("--config", help="TOML file of [scenario], [truth], [filter] settings.")]
+
+
+def settings_of(assignments: list[str] | None) -> dict[str, str]:
+    """``--set`` assignments as the API's ``settings`` (``{"section.key": "value"}``)."""
+    from kalcal.models.settings import parse_assignments
+
+    return parse_assignments(assignments or ())
+
+
+def _table(*phrases: str, **options) -> Table:
+    """A table titled by ``phrases`` joined with commas, never broken inside a phrase: the table is at
+    least as wide as its title, and where the console is narrower each phrase gets a line of its own."""
+    title = ", ".join(phrases)
+    if len(title) > console.width:
+        title = ",\n".join(phrases)
+    width = max(len(line) for line in title.splitlines())
+    return Table(title=Text(title), min_width=min(width, console.width), **options)
+
+
+@contextlib.contextmanager
+def user_errors() -> Iterator[None]:
+    """Turn a KalcalError into one line on stderr and exit status 2."""
+    try:
+        yield
+    except (KalcalError, OSError) as exc:
+        # OSError: an output path that cannot be written (a file where a directory should be, no permission)
+        error_console.print(f"kalcal: error: {exc}", markup=False)
+        raise typer.Exit(2) from None
+
+
+def _progress_bar(title: str):
+    """A rich progress bar on a terminal, nothing otherwise: returns (context manager, callback or None).
+
+    The callback is a job's ``progress(stage, done, total)`` (:mod:`kalcal.jobs.progress`): the bar shows
+    the stage, its count of units and its time.
+    """
+    if not error_console.is_terminal:
+        return contextlib.nullcontext(), None
+    from kalcal.api.progress import progress_bar
+
+    return progress_bar(title, error_console)
+
+
+def _wrote(out: Path, paths) -> str:
+    """One line naming what a job wrote: ``wrote OUT/: summary.json, stats.nc, report.html, figures/``."""
+    names = []
+    for path in paths:
+        path = Path(path)
+        try:
+            name = str(path.relative_to(out))
+        except ValueError:  # not inside the output folder: its full path
+            name = str(path)
+        names.append(name + ("/" if path.is_dir() else ""))
+    return f"wrote {out}/: {', '.join(names)}"
+
+
+def print_wrote(out: Path, paths) -> None:
+    """Print :func:`_wrote`'s line."""
+    console.print(_wrote(Path(out), paths), markup=False, soft_wrap=True)
+
+
+def _note_nonfinite(*paths) -> None:
+    """For each JSON file written whose ``nonfinite.count`` is not 0 (:func:`kalcal.io.results.write_json`),
+    one line: ``note: 3 values in summary.json are not finite and written as null: tests.statistic (2), ...``."""
+    import json
+
+    for path in paths:
+        try:
+            nonfinite = json.loads(Path(path).read_text(encoding="utf-8")).get("nonfinite") or {}
+        except (OSError, ValueError):
+            continue
+        count = nonfinite.get("count", 0)
+        if count:
+            fields = ", ".join(f"{name} ({n})" for name, n in nonfinite.get("fields", {}).items())
+            value, verb = ("value", "is") if count == 1 else ("values", "are")
+            console.print(
+                f"note: {count} {value} in {path} {verb} not finite and written as null: {fields}",
+                markup=False,
+                soft_wrap=True,
+            )
+
+
+def _print_warnings(summary: dict) -> None:
+    """Each of the summary's warnings as one line on stderr."""
+    for warning in summary["warnings"]:
+        error_console.print(f"kalcal: warning: {warning['message']}", markup=False)
+
+
+def _print_checks(summary: dict) -> None:
+    """The checks as one table, then one paragraph per failed check saying why."""
+    table = _table(
+        f"kalcal verify {summary['scenario']}: {summary['realizations']:,} realizations ({summary['engine']}) "
+        f"in {summary['timing']['monte_carlo_s']:.2f} s",
+        f"verdict: {summary['verdict'].upper()}",
+    )
+    table.add_column("check")
+    table.add_column("statistic", justify="right")
+    table.add_column("bounds", justify="right")
+    table.add_column("p-value", justify="right")
+    table.add_column("result")
+    from kalcal.verify.text import CHECK_PVALUE_FIELD, check_bounds_text, fmt, pvalue_text, written_nan
+
+    nan = written_nan(summary, CHECK_PVALUE_FIELD)
+    for test in summary["tests"]:
+        result = "[green]pass[/green]" if test["passed"] else "[bold red]FAIL[/bold red]"
+        # every part's bounds (the covariance check: element-wise and centered NEES), as on the page
+        table.add_row(
+            escape(test["name"]),
+            fmt(test["statistic"]),
+            escape(check_bounds_text(test)),
+            pvalue_text(test["pvalue"], nan).removeprefix("p = "),
+            result,
+        )
+    console.print(table)
+    for test in summary["tests"]:
+        if not test["passed"]:
+            console.print(f"[bold]{test['name']}[/bold]: {escape(test['detail'])}")

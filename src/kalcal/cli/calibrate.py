@@ -1,0 +1,141 @@
+"""``kalcal calibrate``: a sensor's bias (and scale) from logged data, through :func:`kalcal.calibrate`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+from rich.markup import escape
+
+from kalcal.cli import _common
+from kalcal.cli._common import ConfigOpt, ScenarioArg, SetOpt, settings_of, user_errors
+
+
+def calibrate(
+    scenario: ScenarioArg,
+    imu: Annotated[
+        Optional[Path], typer.Option("--imu", help="accel-gps: accelerometer log (CSV or Parquet): time [s], accel [m/s^2].")
+    ] = None,
+    gps: Annotated[
+        Optional[Path],
+        typer.Option("--gps", help="accel-gps: GPS log (CSV or Parquet): time [s], position [m], velocity [m/s]."),
+    ] = None,
+    data: Annotated[
+        Optional[Path],
+        typer.Option("--data", help="scale-bias: log (CSV or Parquet) of a reference and a sensor column (time [s] optional)."),
+    ] = None,
+    reference: Annotated[str, typer.Option("--reference", help="scale-bias: the reference's column.")] = "reference",
+    sensor: Annotated[str, typer.Option("--sensor", help="scale-bias: the sensor's column.")] = "sensor",
+    imu_columns: Annotated[
+        Optional[str], typer.Option("--imu-columns", help="accel-gps: map roles to columns, e.g. time=t,accel=ax.")
+    ] = None,
+    gps_columns: Annotated[
+        Optional[str],
+        typer.Option(
+            "--gps-columns",
+            help="accel-gps: map roles (time, position, velocity, position_std, velocity_std) to columns.",
+        ),
+    ] = None,
+    init: Annotated[
+        str, typer.Option("--init", help="accel-gps: first-fix (start at the first fix) or prior (the report).")
+    ] = "first-fix",
+    max_imu_gap: Annotated[
+        float, typer.Option("--max-imu-gap", help="accel-gps: a step longer than this many sample periods is a gap.")
+    ] = 5.0,
+    on_gap: Annotated[str, typer.Option("--on-gap", help="accel-gps: continue (report gaps) or stop.")] = "continue",
+    form: Annotated[
+        str, typer.Option("--form", help="accel-gps: the filter's update form, joseph (default), standard or sqrt.")
+    ] = "joseph",
+    smooth: Annotated[
+        bool, typer.Option("--smooth", help="accel-gps: add RTS-smoothed states and their 1-sigma to the outputs.")
+    ] = False,
+    out: Annotated[Path, typer.Option("--out", help="Directory for estimates.csv and summary.json.")] = Path(
+        "kalcal-cal"
+    ),
+    strict: Annotated[
+        bool, typer.Option("--strict", help="Exit with status 1 when a warning is raised or the diagnostics say inconsistent.")
+    ] = False,
+    set_: SetOpt = None,
+    config: ConfigOpt = None,
+) -> None:
+    """Calibrate from logged data: accel-gps (--imu, --gps) or scale-bias (--data).
+
+    Units are SI: time in s, position in m, velocity in m/s, acceleration and bias in m/s^2. accel-gps
+    accepts irregular accelerometer samples, fixes between samples, outages and NaN fields in fixes
+    (skipped and counted); the GPS log may carry position_std [m] and velocity_std [m/s] per fix.
+    """
+    from kalcal.api.calibrate import calibrate as run_calibrate
+
+    with user_errors():
+        result = run_calibrate(
+            scenario,
+            imu=imu,
+            gps=gps,
+            data=data,
+            settings=settings_of(set_),
+            config=config,
+            reference=reference,
+            sensor=sensor,
+            imu_columns=imu_columns,
+            gps_columns=gps_columns,
+            init=init,
+            max_imu_gap=max_imu_gap,
+            on_gap=on_gap,
+            form=form,
+            smooth=smooth,
+            out=out,
+        )
+    summary = result.calibration.summary
+    if scenario == "scale-bias":
+        _print_scale_bias(summary, out, strict)
+        return
+    table = _common._table(f"kalcal calibrate {scenario}: {summary['fixes_used']} fixes", f"t = {summary['time']:g} s")
+    table.add_column("quantity")
+    table.add_column("estimate", justify="right")
+    table.add_column("1-sigma", justify="right")
+    table.add_column("unit")
+    for name in ("bias", "scale", "position", "velocity"):
+        if name in summary:
+            table.add_row(name, f"{summary[name]:.6g}", f"{summary[name + '_std']:.3g}", summary["units"][name])
+    console = _common.console
+    console.print(table)
+    if "smoothed" in summary:
+        smoothed = summary["smoothed"]
+        console.print(
+            f"smoothed (RTS) at the first fix, t = {smoothed['time']:g} s: bias {smoothed['bias']:.6g} ± "
+            f"{smoothed['bias_std']:.3g} m/s^2, position {smoothed['position']:.6g} ± {smoothed['position_std']:.3g} m",
+            markup=False,
+        )
+    _common._print_warnings(summary)
+    diagnostics = summary["diagnostics"]
+    style = "green" if diagnostics["consistent"] else "bold red"
+    console.print(f"diagnostics: [{style}]{escape(diagnostics['verdict'])}[/{style}]")
+    _common._note_nonfinite(Path(out) / "summary.json")
+    written = [Path(out) / name for name in ("estimates.csv", "summary.json", "calibration.png")]
+    _common.print_wrote(Path(out), written)
+    if strict and (summary["warnings"] or not diagnostics["consistent"]):
+        raise typer.Exit(1)
+
+
+def _print_scale_bias(summary: dict, out: Path, strict: bool) -> None:
+    """``kalcal calibrate scale-bias``'s table: the scale error and bias of a sensor against a reference."""
+    unit = summary["units"]["bias"]
+    table = _common._table(f"kalcal calibrate scale-bias: {summary['samples_used']} samples", f"t = {summary['time']:g} s")
+    table.add_column("quantity")
+    table.add_column("estimate", justify="right")
+    table.add_column("1-sigma", justify="right")
+    table.add_column("unit")
+    for name, value, std, unit_ in (
+        ("scale_error", summary["scale_error"], summary["scale_error_std"], "1"),
+        ("bias", summary["bias"], summary["bias_std"], unit),
+        ("theta1", summary["theta"][0], summary["theta_std"][0], "1"),
+        ("theta2", summary["theta"][1], summary["theta_std"][1], unit),
+    ):
+        table.add_row(name, f"{value:.6g}", f"{std:.3g}", unit_)
+    _common.console.print(table)
+    _common._print_warnings(summary)
+    _common._note_nonfinite(Path(out) / "summary.json")
+    _common.print_wrote(Path(out), [Path(out) / "estimates.csv", Path(out) / "summary.json"])
+    if strict and summary["warnings"]:
+        raise typer.Exit(1)

@@ -1,0 +1,30 @@
+"""``kalcal simulate``: one realization written as recorded logs, through :func:`kalcal.simulate`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from kalcal.cli import _common
+from kalcal.cli._common import ConfigOpt, ScenarioArg, SetOpt, settings_of, user_errors
+
+
+def simulate(
+    scenario: ScenarioArg,
+    out: Annotated[Path, typer.Option("--out", help="Directory for the logs.")] = Path("kalcal-sim"),
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the random generator.")] = 0,
+    set_: SetOpt = None,
+    config: ConfigOpt = None,
+) -> None:
+    """Simulate one realization and write it as recorded logs.
+
+    accel-gps: imu.csv, gps.csv, truth.csv; scale-bias: data.csv (time, reference, sensor), truth.json.
+    """
+    from kalcal.api.simulate import simulate as run_simulate
+
+    with user_errors():
+        paths = run_simulate(scenario, seed, settings_of(set_), config=config, out=out).paths
+    _common._note_nonfinite(*(path for path in paths.values() if Path(path).suffix == ".json"))
+    _common.print_wrote(Path(out), paths.values())

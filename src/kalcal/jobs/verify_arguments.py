@@ -1,0 +1,94 @@
+"""What a verification accepts: its arguments and run lengths, checked before anything runs."""
+
+from __future__ import annotations
+
+import math
+
+from kalcal.errors import ConfigError
+from kalcal.filters.steps import check_form
+from kalcal.models.config import apply_settings
+
+ENGINES = ("exact", "sampled")
+#: Horizon (s) of the extra mean-error study per scenario: the source report's figure 5.8 used 120 s.
+LONG_RUN_SECONDS = {"accel-gps": 120.0}
+#: Realizations of that study at most (the report used 5 x 10^4).
+LONG_RUN_REALIZATIONS = 50_000
+#: Fewest realizations a verification accepts: below it the normal approximations behind the checks'
+#: bounds (mean within z se, covariance within its asymptotic spread) are too coarse to mean much.
+MIN_REALIZATIONS = 100
+
+
+#: Most filter updates one realization may have, in the run and in its long run (2000: 400 s at the
+#: accel-gps default 5 Hz GPS; the default run has 150, the 120 s long run 600). A block of 4096
+#: realizations holds its draws and residuals per update (about 0.2 MB per update and thread) and the
+#: run keeps E[r_k r_j^T] over every pair of updates, (K p)^2 numbers: 128 MB per copy at K = 2000, p = 2.
+#: Beyond it the arrays would not fit a usual machine, so the run is refused before it starts.
+MAX_UPDATES = 2000
+
+
+def run_length(scenario) -> tuple[int, float]:
+    """(K, t_K): the filter updates of one realization and the last update's time (s), from the settings
+    alone (no arrays are built)."""
+    settings = scenario.scenario if hasattr(scenario, "scenario") else None
+    if hasattr(settings, "n_updates"):  # accel-gps
+        return settings.n_updates, settings.n_updates * settings.steps_per_update * settings.sample_period
+    if hasattr(settings, "n_samples"):  # scale-bias: one update per sample
+        return settings.n_samples, settings.n_samples / settings.rate
+    count = int(scenario.model.updates)  # a model file: t_k = k * update_period
+    return count, count * float(scenario.filter.update_period)
+
+
+def _require_fits(count: int, what: str) -> None:
+    if count > MAX_UPDATES:
+        raise ConfigError(
+            f"{what}: {count:,} filter updates per realization, more than the {MAX_UPDATES:,} whose per-update "
+            f"arrays fit in memory; shorten it"
+        )
+
+
+def check_arguments(
+    scenario,
+    n: int,
+    *,
+    engine: str = "exact",
+    confidence: float = 0.99,
+    long_run: float | None = None,
+    batch_size: int | None = None,
+    form: str = "joseph",
+) -> None:
+    """Refuse, with a :class:`~kalcal.errors.ConfigError`, a verification that cannot run, before anything
+    runs (the CLI calls it before it starts a Dask cluster; :func:`verify` calls it too).
+
+    ``n`` below :data:`MIN_REALIZATIONS`, an unknown engine or form, a confidence outside (0, 1), a
+    batch size below 1, a negative or non-finite ``long_run`` or one not longer than the run, and a run or
+    long run of more than :data:`MAX_UPDATES` updates per realization (``scenario.duration`` too long).
+    """
+    if n < MIN_REALIZATIONS:
+        raise ConfigError(
+            f"-n: need at least {MIN_REALIZATIONS} realizations for meaningful bounds (the checks use the "
+            f"normal approximation of ensemble means and covariances), got {n}"
+        )
+    if long_run is not None and not (math.isfinite(long_run) and long_run >= 0):
+        raise ConfigError(f"--long-run: expected 0 (no long-run study) or a positive number of seconds, got {long_run:g}")
+    if engine not in ENGINES:
+        raise ConfigError(f"--engine: expected one of {', '.join(ENGINES)}, got {engine!r}")
+    if not 0.0 < confidence < 1.0:
+        raise ConfigError(f"--confidence: expected a number in (0, 1), got {confidence!r}")
+    if batch_size is not None and batch_size < 1:
+        raise ConfigError(f"--batch-size: expected a positive number of realizations, got {batch_size}")
+    check_form(form, "--form")
+    count, horizon = run_length(scenario)
+    _require_fits(count, "model.updates" if hasattr(scenario, "model") else "scenario.duration")
+    if long_run and long_run <= horizon:
+        raise ConfigError(
+            f"--long-run: {long_run:g} s is not longer than the run itself ({horizon:g} s); give more, or 0 for none"
+        )
+    long_seconds = LONG_RUN_SECONDS.get(info_name(scenario), 0.0) if long_run is None else long_run
+    if long_seconds and long_seconds > horizon:
+        long_count, _ = run_length(apply_settings(scenario, {"scenario.duration": long_seconds}))
+        _require_fits(long_count, "--long-run")
+
+
+def info_name(scenario) -> str:
+    """The registry name of a scenario object."""
+    return type(scenario).NAME
