@@ -87,6 +87,15 @@ class _Recursion:
 
 
 def _recursion(truth: TruthArrays, filt: FilterArrays, error_map: np.ndarray | None) -> _Recursion:
+    """The matrices of the joint recursion over J = [s; e~], with Z_k = I - K_k H_f and P_M = M E_y::
+
+        s_{k+1} = F_k s_k + N w_k                      (w_k = [q_k; u_{k+1}])
+        e~_k    = (P_M - K_k H_t E_y) s_{k+1} - Z_k Phi_k P_M s_k + Z_k Phi_k e~_{k-1} - K_k eta_k - K_k H_t D_k
+        r_k     = (H_t E_y F_k - H_f Phi_k P_M) s_k + H_f Phi_k e~_{k-1} + H_t E_y N w_k + eta_k + H_t D_k
+
+    from xhat_{k-1} = P_M s_k - e~_{k-1}. For a correct filter (M = I, H_t = H_f, A_k = Phi_k) the
+    weight of s_k in e~_k and r_k vanishes, so the error does not pass through the truth's own spread.
+    """
     a = np.asarray(truth.transitions, dtype=float)
     n_updates, d_t, _ = a.shape
     d_f = filt.h.shape[1]
