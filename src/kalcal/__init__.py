@@ -25,6 +25,8 @@ _EXPORTS = {
     "noise": "kalcal.api.noise",
     "simulate": "kalcal.api.simulate",
     "sweep": "kalcal.api.sweep",
+    "analyze": "kalcal.api.analyze",
+    "AnalysisResult": "kalcal.api.analyze",
     "Model": "kalcal.api.model",
     "load_model": "kalcal.api.model",
     "VerificationResult": "kalcal.api.results",

@@ -15,7 +15,7 @@ from typing import Annotated
 import typer
 
 from kalcal import __version__
-from kalcal.cli import calibrate, noise, report, simulate, sweep, verify
+from kalcal.cli import analyze, calibrate, noise, report, simulate, sweep, verify
 from kalcal.cli._common import console, error_console
 
 app = typer.Typer(
@@ -44,7 +44,7 @@ def _options(
     """Kalman-filter sensor calibration with Monte Carlo verification (SI units throughout)."""
 
 
-for _module in (simulate, calibrate, verify, sweep, noise, report):
+for _module in (simulate, calibrate, verify, sweep, noise, report, analyze):
     app.command()(getattr(_module, _module.__name__.rpartition(".")[2]))
 
 

@@ -1,0 +1,1 @@
+"""Exact covariance analysis of fixed-gain filters: every moment the Monte Carlo estimates, without sampling."""

@@ -1,0 +1,117 @@
+"""The exact analysis of a Monte Carlo problem (:class:`~kalcal.montecarlo.problem.FixedGainProblem`) and of
+a built-in scenario or model file: its filter's gains against its truth, with the error budget."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from kalcal.analysis.budget import BudgetTerm, error_budget
+from kalcal.analysis.covariance import FilterArrays, Moments, TruthArrays, mean_normalized_square, propagate
+from kalcal.analysis.sources import Source, accel_gps_sources, factor_sources, model_sources
+from kalcal.errors import KalcalError
+from kalcal.filters.steps import UpdateForm
+from kalcal.linalg import whitener
+from kalcal.models.accel_gps import AccelGpsScenario
+from kalcal.models.custom import CustomModelScenario
+from kalcal.models.scale_bias import ScaleBiasScenario
+from kalcal.montecarlo.problem import FixedGainProblem, ProblemInfo
+from kalcal.montecarlo.scenarios import accel_gps_problem, custom_problem
+from kalcal.simulate.exact import UpdateRateTruth
+
+
+@dataclass(frozen=True)
+class CovarianceAnalysis:
+    """Exact moments of a fixed-gain filter against its truth. K updates, d states, p measurements."""
+
+    info: ProblemInfo
+    moments: Moments
+    filter_cov: np.ndarray  #: the filter's P_k, (K, d, d)
+    innovation_cov: np.ndarray  #: the filter's S_k, (K, p, p)
+    mean_nees: np.ndarray  #: E[e^T P^-1 e] under the truth, (K,)
+    mean_nis: np.ndarray  #: E[r^T S^-1 r] under the truth, (K,)
+    budget: tuple[BudgetTerm, ...]  #: one term of Cov(e_k) per source; they sum to moments.error_cov
+
+
+def truth_arrays(truth: UpdateRateTruth) -> TruthArrays:
+    """The exact engine's truth with covariances in place of factors (M0 = F0 F0^T, Q = L L^T, R = G G^T)."""
+    return TruthArrays(
+        transitions=np.asarray(truth.transitions, dtype=float),
+        process_cov=truth.noise_factor @ truth.noise_factor.T,
+        boundary_in=truth.boundary_in,
+        boundary_out=truth.boundary_out,
+        boundary_var=1.0,
+        model_error=truth.model_error,
+        x0_mean=truth.x0_mean,
+        prior_cov=truth.x0_factor @ truth.x0_factor.T,
+        h=truth.h,
+        measurement_cov=truth.measurement_factor @ truth.measurement_factor.T,
+    )
+
+
+def _inverse(cov: np.ndarray) -> np.ndarray:
+    w = whitener(cov)
+    return np.swapaxes(w, -1, -2) @ w
+
+
+def analyze_problem(problem: FixedGainProblem, sources: Sequence[Source] | None = None, *, pairs: bool = True) -> CovarianceAnalysis:
+    """Every moment of ``problem``'s filter against its truth, exactly, and the error budget.
+
+    Parameters
+    ----------
+    problem : FixedGainProblem
+        Its truth may carry more states than the filter, with ``error_map`` M (d, d_t), e = M x - xhat.
+    sources : sequence of Source, optional
+        The truth's independent sources; by default the blocks of M0, Q and R (process sources named by
+        the states they drive, the boundary sample apart).
+    pairs : bool
+        Also E[r_k r_j^T] over every pair of updates.
+    """
+    if not isinstance(problem, FixedGainProblem):
+        raise KalcalError(f"{problem.info.scenario}: no exact covariance analysis (its gains depend on the data)")
+    truth = truth_arrays(problem.truth)
+    schedule = problem.schedule
+    filt = FilterArrays(schedule.transitions, problem.filter_model.h, schedule.gain, problem.filter_model.x0)
+    error_map = getattr(problem.truth, "error_map", None)
+    if sources is None:
+        d_t = truth.transitions.shape[-1]
+        names = problem.info.state_names if error_map is None else tuple(f"x{i + 1}" for i in range(d_t))
+        sources = factor_sources(
+            truth.prior_cov, truth.process_cov, truth.shares_boundary, truth.measurement_cov, names, problem.info.measurement_names
+        )
+    moments = propagate(truth, filt, error_map, pairs=pairs)
+    return CovarianceAnalysis(
+        info=problem.info,
+        moments=moments,
+        filter_cov=schedule.posterior_cov,
+        innovation_cov=schedule.innovation_cov,
+        mean_nees=mean_normalized_square(_inverse(schedule.posterior_cov), moments.mean_error, moments.error_cov),
+        mean_nis=mean_normalized_square(_inverse(schedule.innovation_cov), moments.mean_residual, moments.residual_cov),
+        budget=error_budget(truth, filt, sources, error_map),
+    )
+
+
+def analyze_scenario(scenario, form: UpdateForm = "joseph", *, pairs: bool = True) -> CovarianceAnalysis:
+    """The exact analysis of an accel-gps scenario or a model file (:class:`CustomModelScenario`).
+
+    Raises
+    ------
+    KalcalError
+        For scale-bias, whose gains hold the noisy readings (no exact analysis exists).
+    """
+    if isinstance(scenario, ScaleBiasScenario):
+        raise KalcalError(
+            "scale-bias: no exact covariance analysis (its filter's gains depend on the noisy readings); use kalcal verify"
+        )
+    if isinstance(scenario, AccelGpsScenario):
+        return analyze_problem(accel_gps_problem(scenario, form, residual_pairs=False), accel_gps_sources(scenario), pairs=pairs)
+    if isinstance(scenario, CustomModelScenario):
+        problem = custom_problem(scenario, form, residual_pairs=False)
+        truth = scenario.truth
+        names = scenario.model.state_names
+        if truth.state_dim != len(names):
+            names = tuple(f"x{i + 1}" for i in range(truth.state_dim))
+        return analyze_problem(problem, model_sources(truth, names, scenario.model.measurement_names), pairs=pairs)
+    raise TypeError(f"no exact covariance analysis for {type(scenario).__name__}")

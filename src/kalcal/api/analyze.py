@@ -1,0 +1,191 @@
+"""``kalcal.analyze``: the exact covariance analysis of a fixed-gain filter, returned as an AnalysisResult."""
+
+from __future__ import annotations
+
+import html
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from kalcal.io.outputs import writes_outputs
+
+#: the files ``kalcal analyze`` writes (glob patterns relative to --out)
+OUTPUT_NAMES = ("analysis.json", "analysis.nc", "figures/sigma.png", "figures/budget.png")
+
+
+@dataclass(frozen=True, repr=False)
+class AnalysisResult:
+    """What :func:`kalcal.analyze` computed, exactly, for the filter's gains against the truth.
+
+    Attributes
+    ----------
+    final : dict
+        After the last update: ``time`` (s), ``states``, ``units``, ``filter_covariance`` (the filter's
+        P), ``error_covariance`` (P_true, centered) and ``mean_error``; matrices as row-major lists.
+    budget : list of dict
+        One term of P_true per independent source: ``source`` ("prior:position", "process:accel",
+        "measurement:velocity", ...), ``kind``, ``final`` (d x d; the terms sum to
+        ``final["error_covariance"]``) and ``variance_fraction`` (each state's share).
+    power : None
+        The checks' power at ``n`` realizations (not computed yet).
+    dataset : xarray.Dataset
+        Every per-update quantity (``analysis.nc``): dimensions ``update`` (coordinate ``time``, s),
+        ``state``, ``state_col``, ``measurement``, ``measurement_col``, ``update_col``, ``source``.
+    paths : dict
+        The files written (by key) when the call was given ``out``; empty otherwise.
+    """
+
+    final: dict
+    budget: list
+    power: Any
+    dataset: Any
+    document: dict = field(repr=False, compare=False)
+    analysis: Any = field(repr=False, compare=False)
+    paths: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """``analysis.json`` as ``json.load`` reads it (``schema_version`` first, ``nonfinite`` last)."""
+        from kalcal.io.results import json_document
+
+        return json_document(self.document)
+
+    def save(self, out: str | Path) -> dict[str, Path]:
+        """Write ``analysis.json``, ``analysis.nc`` and ``figures/`` into ``out``, as ``kalcal analyze --out``
+        does (one set: whole or not at all, docs/outputs.md); returns the files by key."""
+        return save_analysis(self, out)
+
+    def __repr__(self) -> str:
+        f = self.final
+        return f"AnalysisResult(scenario={self.document['scenario']!r}, time={f['time']:g} s, states={f['states']}, sources={len(self.budget)})"
+
+    def _repr_html_(self) -> str:
+        rows = "".join(
+            f"<tr><td>{html.escape(row['state'])}</td><td>{row['filter_sigma']:.4g}</td><td>{row['true_sigma']:.4g}</td>"
+            f"<td>{row['mean_error']:.4g}</td><td>{html.escape(row['top_source'])}</td></tr>"
+            for row in state_rows(self)
+        )
+        return (
+            f"<div><b>kalcal analyze {html.escape(str(self.document['scenario']))}</b> at {self.final['time']:g} s"
+            "<table><thead><tr><th>state</th><th>filter σ</th><th>true σ</th><th>mean error</th><th>top source</th>"
+            f"</tr></thead><tbody>{rows}</tbody></table></div>"
+        )
+
+
+def state_rows(result: AnalysisResult) -> list[dict[str, Any]]:
+    """Per state after the last update: filter sigma, true sigma, mean error, unit and the source with the
+    largest share of the true variance (and that share)."""
+    f = result.final
+    rows = []
+    for i, (name, unit) in enumerate(zip(f["states"], f["units"])):
+        shares = [b["variance_fraction"][i] for b in result.budget]
+        top = max(range(len(shares)), key=shares.__getitem__) if shares else None
+        rows.append({
+            "state": name, "unit": unit,
+            "filter_sigma": max(f["filter_covariance"][i][i], 0.0) ** 0.5,
+            "true_sigma": max(f["error_covariance"][i][i], 0.0) ** 0.5,
+            "mean_error": f["mean_error"][i],
+            "top_source": "" if top is None else result.budget[top]["source"],
+            "top_share": 0.0 if top is None else shares[top],
+        })  # fmt: skip
+    return rows
+
+
+def analyze(
+    scenario: Any = "accel-gps",
+    settings: Mapping[str, Any] | None = None,
+    n: int = 300_000,
+    *,
+    config: str | Path | None = None,
+    form: str = "joseph",
+    out: str | Path | None = None,
+    command: str = "",
+) -> AnalysisResult:
+    """The exact covariance analysis of the filter's gains against the truth: no sampling.
+
+    At every update: the mean error, the centered true error covariance P_true, E[e xhat^T],
+    E[r_k r_j^T] for every pair, the mean NEES and NIS under the truth, and the error budget (P_true
+    split into one term per independent source of the truth). Fixed-gain filters only: accel-gps and
+    model files.
+
+    Parameters
+    ----------
+    scenario : str, path, Model or scenario
+        ``"accel-gps"``, a model file (``.toml``), a :class:`kalcal.Model`, or a built scenario.
+    settings : dict, optional
+        ``{"section.key": value}``, the keys of ``--set`` (``{"truth.accel_noise_std": 0.04}``).
+    n : int
+        The realizations the checks' power is computed for (power is not computed yet).
+    config : path, optional
+        A TOML file of settings (``--config``).
+    form : {"joseph", "standard", "sqrt"}
+        The filter's covariance update (the gains follow from it).
+    out : path, optional
+        Also write ``analysis.json``, ``analysis.nc`` and ``figures/`` there, as ``kalcal analyze --out``.
+    command : str
+        What ``analysis.json`` records as the command.
+
+    Raises
+    ------
+    KalcalError
+        Bad input, or scale-bias (its gains depend on the noisy readings: no exact analysis exists).
+    """
+    from kalcal.api._scenario import resolve
+    from kalcal.errors import KalcalError
+    from kalcal.filters.steps import check_form
+
+    if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+        raise KalcalError(f"-n: expected a positive number of realizations, got {n!r}")
+    check_form(form, "--form")
+    model = resolve(scenario, settings, config, models=True)
+    if out is None:
+        return _compute(model, n, form, command)
+    from dataclasses import replace
+
+    from kalcal.io.outputs import inputs_of, run_outputs
+
+    # the folder is checked before the analysis runs, and its files are put in place as one set
+    with run_outputs(out, "analyze", names=OUTPUT_NAMES, protect=inputs_of(model)) as staging:
+        result = _compute(model, n, form, command)
+        saved = save_analysis(result, staging)
+    return replace(result, paths={key: Path(out) / Path(path).relative_to(staging) for key, path in saved.items()})
+
+
+def _compute(model, n: int, form: str, command: str) -> AnalysisResult:
+    from kalcal.analysis.dataset import analysis_dataset, budget_summary, final_summary
+    from kalcal.analysis.fixed_gain import analyze_scenario
+    from kalcal.models.config import section_values
+
+    start = time.perf_counter()
+    analysis = analyze_scenario(model, form)
+    elapsed = time.perf_counter() - start
+    final, budget = final_summary(analysis), budget_summary(analysis)
+    document = {
+        "scenario": analysis.info.scenario,
+        "settings": section_values(model),
+        "form": form,
+        "realizations": n,
+        "final": final,
+        "budget": budget,
+        "power": None,
+        "timing": {"analysis_s": elapsed},
+        "command": command,
+    }
+    return AnalysisResult(final, budget, None, analysis_dataset(analysis, {"form": form}), document, analysis)
+
+
+@writes_outputs("analyze", names=OUTPUT_NAMES)
+def save_analysis(result: AnalysisResult, out: str | Path) -> dict[str, Path]:
+    """``analysis.json``, ``analysis.nc`` and the two figures, written into ``out`` as one set."""
+    from kalcal.io.results import write_json
+    from kalcal.io.statistics import write_statistics
+    from kalcal.plots.analysis import plot_budget, plot_sigma
+
+    out = Path(out)
+    return {
+        "summary": write_json(out / "analysis.json", result.document),
+        "dataset": write_statistics(out / "analysis.nc", result.dataset),
+        "sigma": plot_sigma(result.dataset, out / "figures" / "sigma.png"),
+        "budget": plot_budget(result.dataset, out / "figures" / "budget.png"),
+    }

@@ -1,0 +1,76 @@
+"""``kalcal.analyze`` and ``kalcal analyze``: the result object, its files as one set, and bad input in one line."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+from typer.testing import CliRunner
+
+import kalcal
+from kalcal.cli import app
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+SHORT = {"scenario.duration": 6, "truth.accel_noise_std": 0.04, "filter.accel_noise_std": 0.02}
+
+
+def test_analyze_returns_the_final_budget_and_dataset():
+    result = kalcal.analyze("accel-gps", settings=SHORT)
+    assert isinstance(result, kalcal.AnalysisResult)
+    assert result.power is None and result.paths == {}
+    final = result.final
+    assert final["time"] == 6.0 and final["units"] == ["m", "m/s", "m/s^2"]
+    np.testing.assert_allclose(np.sum([b["final"] for b in result.budget], axis=0), final["error_covariance"], rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(final["error_covariance"], result.dataset["error_covariance"].values[-1])
+    document = result.to_dict()
+    assert list(document)[0] == "schema_version" and list(document)[-1] == "nonfinite"
+    assert document["power"] is None and document["realizations"] == 300_000
+    json.dumps(document, allow_nan=False)
+    assert "AnalysisResult" in repr(result) and "top source" in result._repr_html_()
+
+
+def test_analyze_writes_one_set_and_save_writes_the_same(tmp_path):
+    result = kalcal.analyze("accel-gps", settings=SHORT, n=50_000, out=tmp_path / "run")
+    assert set(result.paths) == {"summary", "dataset", "sigma", "budget"}
+    assert all(path.is_file() and path.parent.name in ("run", "figures") for path in result.paths.values())
+    written = json.loads((tmp_path / "run" / "analysis.json").read_text())
+    assert written["realizations"] == 50_000 and written["final"] == result.final
+    manifest = json.loads((tmp_path / "run" / ".kalcal-manifest.json").read_text())
+    assert manifest["command"] == "analyze"
+    with xr.open_dataset(result.paths["dataset"], engine="scipy") as ds:
+        assert ds["budget"].dims == ("source", "update", "state", "state_col")
+    again = result.save(tmp_path / "again")
+    assert json.loads(again["summary"].read_text())["budget"] == written["budget"]
+
+
+def test_model_file_is_analyzed():
+    result = kalcal.analyze(EXAMPLES / "constant_velocity_mistuned.toml")
+    assert [b["kind"] for b in result.budget].count("process") >= 1
+    assert result.final["states"] == list(result.dataset["state"].values)
+
+
+def test_scale_bias_and_bad_n_are_refused_in_one_line():
+    with pytest.raises(kalcal.KalcalError, match="scale-bias: no exact covariance analysis"):
+        kalcal.analyze("scale-bias")
+    with pytest.raises(kalcal.KalcalError, match="-n: expected a positive number"):
+        kalcal.analyze("accel-gps", n=0)
+
+
+def test_command_prints_the_table_and_writes_the_set(tmp_path):
+    out = tmp_path / "cli"
+    run = CliRunner().invoke(
+        app, ["analyze", "--set", "scenario.duration=6", "--set", "truth.bias_walk_std=2e-4", "--out", str(out)], catch_exceptions=False
+    )
+    assert run.exit_code == 0, run.output
+    assert "top source" in run.output and "measurement:velocity" in run.output and "bias (m/s^2)" in run.output
+    assert (out / "analysis.json").is_file() and (out / "figures" / "budget.png").is_file()
+
+
+def test_command_refuses_scale_bias_with_status_2(tmp_path):
+    run = CliRunner().invoke(app, ["analyze", "scale-bias", "--out", str(tmp_path / "x")], catch_exceptions=False)
+    assert run.exit_code == 2
+    assert "scale-bias: no exact covariance analysis" in run.output
+    assert not (tmp_path / "x").exists()
