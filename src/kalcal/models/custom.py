@@ -25,7 +25,7 @@ The file describes the filter's model (top-level keys) and, optionally, a truth 
 The model is the one of :class:`~kalcal.models.linear.LinearGaussianModel`: the first measurement is
 taken after ``steps_per_update`` steps, update k (k = 1..updates) at t_k = k * steps_per_update *
 sample_period. The truth shares the filter's timing and dimensions (d states, p measurements; its
-noise input may have another q).
+noise input may have another q), or, with a ``map``, has n states of its own (:mod:`.custom_truth`).
 
 Every problem is a :class:`~kalcal.models.settings.SettingError` of one line,
 ``FILE: KEY: expected ..., got ...`` (``KEY: expected ..., got ...`` for a value given by ``--set KEY=...``):
@@ -48,6 +48,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from kalcal.models.accel_gps import AccelGpsScenario
+from kalcal.models.custom_truth import MAP_KEYS, MODEL_KEYS, MappedTruthModel, mapped_truth, truth_from_settings
 from kalcal.models.linear import LinearGaussianModel
 from kalcal.models.scale_bias import ScaleBiasScenario
 from kalcal.models.settings import (
@@ -68,8 +69,6 @@ from kalcal.models.settings import (
     unknown,
 )
 
-#: The model's arrays, in the order of LinearGaussianModel; all but x0 are matrices.
-MODEL_KEYS = ("phi", "gamma", "h", "w", "v", "x0", "m0")
 _REQUIRED = ("steps_per_update", "updates", *MODEL_KEYS)
 _NAME_KEYS = ("state_names", "state_units", "measurement_names", "measurement_units")
 _TOP_KEYS = ("name", "sample_period", *_REQUIRED, *_NAME_KEYS)
@@ -79,6 +78,8 @@ _SET_KEYS = {
     "filter": (*MODEL_KEYS, "steps_per_update", "sample_period"),
     "truth": MODEL_KEYS,
 }
+#: ``--set`` keys of a truth with its own states, beside those its section lists (truth.map, truth.state_names)
+_TRUTH_MAP_SET_KEYS = tuple(f"truth.{key}" for key in MAP_KEYS)
 _RESERVED_NAMES = (AccelGpsScenario.NAME, ScaleBiasScenario.NAME)
 
 
@@ -119,9 +120,10 @@ class CustomModelScenario:
     model : CustomModelInfo
     filter : LinearGaussianModel
         What the filter believes (the file's top-level matrices).
-    truth : LinearGaussianModel
-        What the world does (the ``[truth]`` table over the filter's matrices); same d, p,
-        steps_per_update and sample_period as the filter.
+    truth : LinearGaussianModel or MappedTruthModel
+        What the world does: the ``[truth]`` table over the filter's matrices (same d, p,
+        steps_per_update and sample_period as the filter), or, with a ``map``, a model of its own n
+        states (:mod:`kalcal.models.custom_truth`; same p and timing, map of shape (d, n)).
     """
 
     NAME: ClassVar[str] = "custom"
@@ -133,10 +135,10 @@ class CustomModelScenario:
     def __post_init__(self) -> None:
         f, t, info = self.filter, self.truth, self.model
         d, p = f.state_dim, f.measurement_dim
-        for key in ("phi", "h"):
-            if getattr(t, key).shape != getattr(f, key).shape:
-                expected = f"shape {getattr(f, key).shape} like the filter's {key}"
-                raise SettingError(f"truth.{key}", expected, str(getattr(t, key).shape))
+        if isinstance(t, MappedTruthModel):
+            t.check_fits(d, p)
+        else:
+            _check_same_shapes(f, t)
         timing = (f.steps_per_update, f.sample_period)
         if (t.steps_per_update, t.sample_period) != timing:
             expected = f"the filter's steps_per_update and sample_period {timing}"
@@ -158,6 +160,11 @@ class CustomModelScenario:
         """t_k = k * steps_per_update * sample_period for k = 1..K, s, shape (K,)."""
         return np.arange(1, self.model.updates + 1) * self.filter.update_period
 
+    @property
+    def truth_map(self) -> np.ndarray | None:
+        """The (d, n) map of a truth with its own states (the filter's are map @ x_truth), or None."""
+        return self.truth.map if isinstance(self.truth, MappedTruthModel) else None
+
     def differing(self) -> tuple[str, ...]:
         """The matrices in which the truth departs from the filter, in MODEL_KEYS order."""
         return tuple(k for k in MODEL_KEYS if not np.array_equal(getattr(self.filter, k), getattr(self.truth, k)))
@@ -172,11 +179,19 @@ class CustomModelScenario:
             return cls(
                 CustomModelInfo(**info),
                 LinearGaussianModel(**settings["filter"]),
-                LinearGaussianModel(**settings["truth"]),
+                truth_from_settings(settings["truth"]),
             )
         except (KeyError, TypeError) as exc:
             expected = "complete custom model settings (model, filter, truth)"
             raise SettingError("settings", expected, f"{type(exc).__name__} {exc}") from None
+
+
+def _check_same_shapes(f: LinearGaussianModel, t: LinearGaussianModel) -> None:
+    """A truth over the filter's states: its phi and h have the filter's shapes."""
+    for key in ("phi", "h"):
+        if getattr(t, key).shape != getattr(f, key).shape:
+            expected = f"shape {getattr(f, key).shape} like the filter's {key}"
+            raise SettingError(f"truth.{key}", expected, str(getattr(t, key).shape))
 
 
 # --- reading model files -------------------------------------------------------------------------
@@ -197,10 +212,11 @@ def load_model_file(
     assignments : iterable of str
         ``--set`` overrides ``section.key=value`` with a TOML value, addressed as the run's summary
         lists the settings: ``filter.KEY`` (phi, gamma, h, w, v, x0, m0, steps_per_update,
-        sample_period: the file's top-level keys), ``truth.KEY`` (the matrices of ``[truth]``) and
-        ``model.KEY`` (name, updates, the names and units). E.g. ``filter.w=[[0.01]]``, ``model.updates=60``.
-        ``filter.KEY`` retunes the filter alone: where ``[truth]`` does not set KEY, the truth keeps the
-        file's value (so that a sweep of a filter setting holds the world fixed).
+        sample_period: the file's top-level keys), ``truth.KEY`` (the matrices of ``[truth]``, and its
+        ``map`` and ``state_names``) and ``model.KEY`` (name, updates, the names and units). E.g.
+        ``filter.w=[[0.01]]``, ``model.updates=60``. ``filter.KEY`` retunes the filter alone: where
+        ``[truth]`` does not set KEY, the truth keeps the file's value (so that a sweep of a filter
+        setting holds the world fixed); a truth with a ``map`` takes nothing from the filter.
     config : path, optional
         Must be None: a model file holds all its settings (``--config`` is for built-in scenarios).
 
@@ -242,30 +258,55 @@ def build_model(document: dict[str, Any], source: str, assignments: Iterable[str
 def _apply_overrides(document: dict[str, Any], overrides: Mapping[str, str], source: str) -> dict[str, str]:
     """Write the overrides into the document; return each overridden document key's ``--set`` key."""
     origins: dict[str, str] = {}
+    file_values: dict[str, Any] = {}  # the file's values of the filter's retuned matrices
     for key, text in overrides.items():
         section, _, name = key.partition(".")
-        if name not in _SET_KEYS.get(section, ()):
+        if name not in _SET_KEYS.get(section, ()) and key not in _TRUTH_MAP_SET_KEYS:
             known = "; ".join(f"{s}.{{{', '.join(keys)}}}" for s, keys in _SET_KEYS.items())
             raise unknown(key, f"a model file's setting ({known})", "setting")
         value = toml_value(key, text, bare_string=key == "model.name")  # a bare name needs no quotes
-        if section in ("truth", "filter") and name in MODEL_KEYS:
-            table = document.setdefault("truth", {})
-            if not isinstance(table, dict):
-                raise SettingError("truth", "a [truth] table of matrices", type_name(table), source)
-            if section == "truth":
-                table[name] = value
-                origins[key] = key
-                continue
-            # filter.KEY retunes the filter only: the truth keeps the file's value (as for built-in scenarios)
-            if name in document and name not in table:
-                table[name] = document[name]
+        if section == "truth":
+            _truth_table(document, source)[name] = value
+            origins[key] = key
+            continue
+        if section == "filter" and name in MODEL_KEYS and name in document:
+            file_values.setdefault(name, document[name])
         document[name] = value
         origins[name] = key
+    if file_values:
+        # filter.KEY retunes the filter only: where [truth] does not set KEY the truth keeps the file's value
+        # (as for built-in scenarios); a truth with a map has matrices of its own and takes none
+        table = _truth_table(document, source)
+        if "map" not in table:
+            for name, value in file_values.items():
+                table.setdefault(name, value)
     return origins
+
+
+def _truth_table(document: dict[str, Any], source: str) -> dict[str, Any]:
+    """The document's ``[truth]`` table, created empty where the file has none."""
+    table = document.setdefault("truth", {})
+    if not isinstance(table, dict):
+        raise SettingError("truth", "a [truth] table of matrices", type_name(table), source)
+    return table
 
 
 def _array(key: str, value: Any) -> np.ndarray:
     return to_vector(key, value) if key.endswith("x0") else to_matrix(key, value)
+
+
+def _truth_over_filter(
+    truth: Mapping[str, Any], arrays: Mapping[str, np.ndarray], steps: int, period: float
+) -> LinearGaussianModel:
+    """A ``[truth]`` table without a map: its matrices over the filter's (``arrays``)."""
+    truth_arrays = {key: _array(f"truth.{key}", truth[key]) if key in truth else arrays[key] for key in MODEL_KEYS}
+    try:
+        return LinearGaussianModel(**truth_arrays, steps_per_update=steps, sample_period=period)
+    except SettingError as exc:
+        got = exc.got
+        if exc.key in MODEL_KEYS and exc.key not in truth:
+            got += f" ([truth] does not set {exc.key}, so it is the filter's)"
+        raise exc.located(key=f"truth.{exc.key}", got=got) from None
 
 
 def _build(document: dict[str, Any], source: str) -> CustomModelScenario:
@@ -276,8 +317,15 @@ def _build(document: dict[str, Any], source: str) -> CustomModelScenario:
     if not isinstance(truth, dict):
         raise SettingError("truth", "a [truth] table of matrices", type_name(truth))
     for key in truth:
-        if key not in MODEL_KEYS:
+        if key in MODEL_KEYS or (key in MAP_KEYS and "map" in truth):
+            continue
+        if "map" in truth:
+            raise unknown(f"truth.{key}", f"a key of a [truth] with a map ({', '.join((*MAP_KEYS, *MODEL_KEYS))})")
+        if key != "state_names":
             raise unknown(f"truth.{key}", f"a matrix of [truth] ({', '.join(MODEL_KEYS)})")
+    if "state_names" in truth and "map" not in truth:
+        expected = "a map beside it (state_names names the states of a truth with its own dimension)"
+        raise SettingError("truth.state_names", expected, "no truth.map")
     for key in _REQUIRED:
         if key not in document:
             raise missing(key, _EXPECTED.get(key, "a matrix"))
@@ -289,14 +337,10 @@ def _build(document: dict[str, Any], source: str) -> CustomModelScenario:
 
     arrays = {key: _array(key, document[key]) for key in MODEL_KEYS}
     filter_model = LinearGaussianModel(**arrays, steps_per_update=steps, sample_period=period)
-    truth_arrays = {key: _array(f"truth.{key}", truth[key]) if key in truth else arrays[key] for key in MODEL_KEYS}
-    try:
-        truth_model = LinearGaussianModel(**truth_arrays, steps_per_update=steps, sample_period=period)
-    except SettingError as exc:
-        got = exc.got
-        if exc.key in MODEL_KEYS and exc.key not in truth:
-            got += f" ([truth] does not set {exc.key}, so it is the filter's)"
-        raise exc.located(key=f"truth.{exc.key}", got=got) from None
+    if "map" in truth:
+        truth_model = mapped_truth(truth, steps, period)
+    else:
+        truth_model = _truth_over_filter(truth, arrays, steps, period)
 
     d, p = filter_model.state_dim, filter_model.measurement_dim
     labels = {

@@ -58,17 +58,21 @@ def _filter_buffers(x0, p, n):
 @numba.njit(nogil=True, cache=True, fastmath=FAST)
 def exact_block_moments(
     y0, u0, draws, transitions, noise, boundary_in, model_error, h_truth, measure,
-    phis, h, gains, x0, sums,
+    phis, h, gains, x0, sums, error_map,
 ):
     """Sample the exact update-rate truth (:mod:`kalcal.simulate.exact`) and filter it, in one pass.
 
     y0 (d, n) truth at sample 0; u0 (c, n) its opening boundary sample; draws (K, r + c + p, n);
     transitions (K, d, d) of the truth over each interval; noise (d, r + c) = [L | b_out]; boundary_in
-    (d, c); model_error (K, d); h_truth (p, d); measure (p, p) = G. Filter: phis (K, d, d) over each
-    interval, h (p, d), gains (K, d, p), x0 (d,). sums: the block's
-    :class:`~kalcal.montecarlo.accumulators.SumBuffers`, added to.
+    (d, c); model_error (K, d); h_truth (p, d); measure (p, p) = G. Filter: phis (K, d_f, d_f) over each
+    interval, h (p, d_f), gains (K, d_f, p), x0 (d_f,). sums: the block's
+    :class:`~kalcal.montecarlo.accumulators.SumBuffers` (in the filter's d_f), added to. error_map
+    (d_f, d): M of a truth with states of its own, whose error is e = M x - xhat; (0, 0) for a truth
+    over the filter's states (d_f = d, e = x - xhat, with no product: that path is the one without a map).
     """
     d, n = y0.shape
+    mapped = error_map.shape[0] > 0
+    mapped_state = np.empty((error_map.shape[0], n))
     n_updates = draws.shape[0]
     rc = noise.shape[1]
     c = boundary_in.shape[1]
@@ -92,7 +96,11 @@ def exact_block_moments(
                 state[a, i] = y[a, i] + shift
         affine(z, h_truth, state, False)
         affine(z, measure, step[rc:], True)
-        _filter_and_accumulate(k, state, z, x, xbar, residual, phis[k], h, gains, sums)
+        if mapped:
+            affine(mapped_state, error_map, state, False)  # the filter's states of the truth: M x
+            _filter_and_accumulate(k, mapped_state, z, x, xbar, residual, phis[k], h, gains, sums)
+        else:
+            _filter_and_accumulate(k, state, z, x, xbar, residual, phis[k], h, gains, sums)
 
 
 @numba.njit(nogil=True, cache=True, fastmath=FAST)

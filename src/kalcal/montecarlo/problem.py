@@ -22,6 +22,9 @@ from kalcal.montecarlo import kernels
 from kalcal.montecarlo.accumulators import BlockResult, MomentSums, SumBuffers
 from kalcal.simulate.exact import UpdateRateTruth, sample_exact
 
+#: the kernel's error map for a truth over the filter's own states (no map: e = x - xhat, no product)
+_EMPTY_MAP = np.empty((0, 0))
+
 Sampler = Callable[[np.random.Generator, int], tuple[np.ndarray, np.ndarray]]
 
 
@@ -78,7 +81,8 @@ class FixedGainProblem:
     filter_model : LinearGaussianModel
         What the filter believes.
     truth : UpdateRateTruth
-        What the world does, sampled exactly at the update rate (engine "exact").
+        What the world does, sampled exactly at the update rate (engine "exact"). Its states may be
+        more than the filter's d: with an ``error_map`` M (d, n) the filter's error is M x - xhat.
     sampled : callable, optional
         ``sampled(rng, n) -> (states (n, K, d), measurements (n, K, p))`` simulating every sample
         (engine "sampled").
@@ -101,6 +105,11 @@ class FixedGainProblem:
     _innovation_inverse: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
+        d, p = self.filter_model.state_dim, self.filter_model.measurement_dim
+        if (self.truth.error_dim, self.truth.h.shape[0]) != (d, p):
+            raise ValueError(
+                f"truth: expected {d} filter states and {p} measurements, got {self.truth.error_dim} and {self.truth.h.shape[0]}"
+            )
         schedule = covariance_pass(self.filter_model, self.truth.n_updates, self.form, self.filter_transitions)
         object.__setattr__(self, "schedule", schedule)
         object.__setattr__(self, "_state_whitener", whitener(schedule.posterior_cov))
@@ -128,6 +137,8 @@ class FixedGainProblem:
     def run_block(self, rng: np.random.Generator, n: int, engine: str) -> BlockResult:
         states, measurements = self.sample(rng, n, engine)
         run = self.filter(measurements)
+        if engine == "exact" and self.truth.error_map is not None:
+            states = states @ self.truth.error_map.T  # the filter's states of a truth with its own: M x
         error = states - run.posterior
         whitened_error = np.einsum("kij,nkj->nki", self._state_whitener, error)
         whitened_residual = np.einsum("kij,nkj->nki", self._innovation_whitener, run.residual)
@@ -167,6 +178,7 @@ class FixedGainProblem:
                 truth.measurement_factor,
                 *gains,
                 sums,
+                _EMPTY_MAP if truth.error_map is None else np.ascontiguousarray(truth.error_map),
             )
         else:
             states, measurements = self.sample(rng, n, engine)
@@ -186,11 +198,12 @@ class FixedGainProblem:
         return MomentSums.from_buffers(n, shared, np.einsum("kij,kj->ki", self._innovation_whitener, sums.residual))
 
     def expected_mean_error(self) -> np.ndarray:
-        """The filter's response to the truth's mean trajectory: E[x_k] - E[xhat_k], (K, d).
+        """The filter's response to the truth's mean trajectory: M E[x_k] - E[xhat_k], (K, d).
 
-        E[x_k] = A^{k+1} x0_mean + D_k; the filter is linear, so its mean estimate is its run on
-        H E[x_k]. Nonzero only when the truth's prior mean differs from the filter's or the truth carries
-        deterministic model error.
+        E[x_k] = A^{k+1} x0_mean + D_k (the truth's n states); the filter is linear, so its mean estimate
+        is its run on H E[x_k]. M is the truth's ``error_map`` (the identity without one). Nonzero only
+        when the truth's prior mean differs from the filter's, the truth carries deterministic model
+        error, or (with a map) the truth's mean dynamics differ from the filter's.
         """
         truth = self.truth
         mean = np.empty((truth.n_updates, truth.state_dim))
@@ -199,4 +212,6 @@ class FixedGainProblem:
             y = truth.transitions[k] @ y
             mean[k] = y + truth.model_error[k]
         run = self.filter((mean @ truth.h.T)[None])
+        if truth.error_map is not None:
+            mean = mean @ truth.error_map.T
         return mean - run.posterior[0]

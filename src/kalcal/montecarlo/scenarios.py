@@ -109,7 +109,13 @@ def custom_problem(
 
 
 def custom_model_error_cause(scenario: CustomModelScenario) -> str:
-    """The matrices of a model file's truth that can move the filter's mean error (x0, phi, h)."""
+    """The matrices of a model file's truth that can move the filter's mean error (x0, phi, h), or, for a
+    truth with states of its own, that model (when a prior mean is nonzero: else both means stay zero)."""
+    if scenario.truth_map is not None:
+        if not (np.any(scenario.truth.x0) or np.any(scenario.filter.x0)):
+            return ""
+        n, d = scenario.truth.state_dim, scenario.filter.state_dim
+        return f"the truth's own {n}-state model (its x0, phi and h, mapped to the filter's {d} state{'s' if d != 1 else ''})"
     keys = [k for k in scenario.differing() if k in ("x0", "phi", "h")]
     return f"the truth's {' and '.join(keys)} differing from the filter's" if keys else ""
 

@@ -12,6 +12,9 @@ The truth at update k (k = 0..K-1, after k + 1 intervals)::
     y_{k+1} = A_k y_k + L xi_k + b_in u_k + b_out u_{k+1},   xi_k ~ N(0, I_r),  u_k ~ N(0, 1)
     x_k = y_{k+1} + D_k,    z_k = H x_k + G eta_k,           eta_k ~ N(0, I_p)
 
+A truth may have more states than the filter (reduced-order design): then ``error_map`` M (d_f, d) says
+which combination of the truth's states the filter estimates, and the filter's error is M x_k - xhat_k.
+
 Draw order for n realizations: ``(d0 + c, n)`` for x_0 and u_0, then ``(K, r + c + p, n)``, where c is 1
 when a boundary sample is shared and 0 when it is not (the intervals are then independent). The
 realization index is the last, contiguous axis, as the compiled engine reads it.
@@ -27,12 +30,17 @@ from kalcal.filters.steps import interval_transition
 from kalcal.filters.mechanization import integrate, interval_weights
 from kalcal.linalg import psd_factor
 from kalcal.models.accel_gps import AccelGpsScenario
+from kalcal.models.custom_truth import MappedTruthModel
 from kalcal.models.linear import LinearGaussianModel
 
 
 @dataclass(frozen=True)
 class UpdateRateTruth:
-    """The truth at the update rate. d states, p measurements, K updates, r independent noise directions."""
+    """The truth at the update rate. d states, p measurements, K updates, r independent noise directions.
+
+    The filter estimates d_f states: the truth's own (``error_map`` None, d_f = d), or M x for a truth
+    with states of its own (``error_map`` M, (d_f, d)).
+    """
 
     transitions: np.ndarray  #: A_k over interval k, (K, d, d) (time-invariant models repeat one)
     noise_factor: np.ndarray  #: L, (d, r)
@@ -43,6 +51,12 @@ class UpdateRateTruth:
     x0_factor: np.ndarray  #: F0, (d, d0)
     h: np.ndarray  #: (p, d)
     measurement_factor: np.ndarray  #: G, (p, p)
+    error_map: np.ndarray | None = None  #: M, (d_f, d): the filter's states are M x; None: M = I
+
+    @property
+    def error_dim(self) -> int:
+        """d_f, the states the filter estimates (the rows of M; d when there is no map)."""
+        return self.state_dim if self.error_map is None else self.error_map.shape[0]
 
     @property
     def n_updates(self) -> int:
@@ -65,7 +79,11 @@ class UpdateRateTruth:
 
 
 def truth_from_model(model: LinearGaussianModel, n_updates: int, model_error: np.ndarray | None = None) -> UpdateRateTruth:
-    """A linear Gaussian model sampled exactly at its update rate (independent intervals)."""
+    """A linear Gaussian model sampled exactly at its update rate (independent intervals).
+
+    A :class:`~kalcal.models.custom_truth.MappedTruthModel` brings its map to the filter's states
+    (``error_map``); any other model is over the filter's own states.
+    """
     phi_m, q_m = interval_transition(model.phi, model.gamma, model.w, model.steps_per_update)
     d = model.state_dim
     return UpdateRateTruth(
@@ -78,6 +96,7 @@ def truth_from_model(model: LinearGaussianModel, n_updates: int, model_error: np
         x0_factor=psd_factor(model.m0),
         h=model.h,
         measurement_factor=np.linalg.cholesky(model.v),
+        error_map=model.map if isinstance(model, MappedTruthModel) else None,
     )
 
 
@@ -156,6 +175,7 @@ def sample_exact(truth: UpdateRateTruth, rng: np.random.Generator, n: int) -> tu
     Returns
     -------
     states : ndarray, shape (n, K, d)
+        The truth's own states (before any ``error_map``).
     measurements : ndarray, shape (n, K, p)
     """
     d, r = truth.noise_factor.shape
