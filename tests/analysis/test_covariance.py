@@ -20,7 +20,8 @@ import pytest
 from kalcal.analysis.covariance import FilterArrays, mean_normalized_square, propagate
 from kalcal.analysis.fixed_gain import analyze_problem, analyze_scenario, truth_arrays
 from kalcal.errors import KalcalError
-from kalcal.filters.gains import covariance_pass, run_with_gains
+from kalcal.filters.gains import run_with_gains
+from kalcal.filters.steps import covariance_pass
 from kalcal.models.custom import parse_model
 from kalcal.models.linear import LinearGaussianModel
 from kalcal.models.registry import build_scenario
@@ -62,7 +63,7 @@ def _dense(truth: UpdateRateTruth, filt: FilterArrays, error_map=None):
 
 def covariance_pass_like(filt: FilterArrays):
     """A gain schedule holding the filter's own gains and transitions (for run_with_gains)."""
-    from kalcal.filters.gains import GainSchedule
+    from kalcal.filters.steps import GainSchedule
 
     k, d, _ = filt.transitions.shape
     empty = np.zeros((k, d, d))

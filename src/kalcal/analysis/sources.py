@@ -15,7 +15,7 @@ from typing import Literal
 
 import numpy as np
 
-from kalcal.filters.gains import interval_transition
+from kalcal.filters.steps import interval_transition
 from kalcal.filters.mechanization import interval_weights
 from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.models.linear import LinearGaussianModel
