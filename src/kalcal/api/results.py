@@ -21,7 +21,7 @@ def _fmt(value: Any) -> str:
     return str(value)
 
 
-@dataclass(frozen=True, repr=False)
+@dataclass(frozen=True, repr=False, eq=False)
 class VerificationResult:
     """What :func:`kalcal.verify` found.
 
@@ -111,7 +111,7 @@ class VerificationResult:
         )
 
 
-@dataclass(frozen=True, repr=False)
+@dataclass(frozen=True, repr=False, eq=False)
 class CalibrationResult:
     """What :func:`kalcal.calibrate` estimated, at the last fix (accel-gps) or sample (scale-bias).
 
@@ -193,7 +193,7 @@ class CalibrationResult:
         return f"CalibrationResult({self.scenario}: bias={self.bias:.6g} ± {self.bias_std:.3g}{scale}, warnings={len(self.warnings)})"
 
 
-@dataclass(frozen=True, repr=False)
+@dataclass(frozen=True, repr=False, eq=False)
 class NoiseResult:
     """What :func:`kalcal.noise` identified from a static accelerometer log.
 
@@ -278,7 +278,7 @@ class NoiseResult:
         )
 
 
-@dataclass(frozen=True, repr=False)
+@dataclass(frozen=True, repr=False, eq=False)
 class SimulationResult:
     """What :func:`kalcal.simulate` drew: the logs as DataFrames (``imu``, ``gps``, ``truth`` for accel-gps;
     ``data`` for scale-bias) and, for scale-bias, ``truth`` (``truth.json``: the drawn scale error and bias)."""
