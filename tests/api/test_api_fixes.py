@@ -21,3 +21,15 @@ def test_results_and_models_compare_by_identity_and_hash():
     assert sim == sim and hash(sim) == hash(sim)
     calibration = kalcal.calibrate("accel-gps", imu=sim.logs["imu"], gps=sim.logs["gps"])
     assert calibration == calibration and hash(calibration) == hash(calibration)
+
+
+def test_import_kalcal_reads_the_version_only_when_asked():
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, kalcal; print('importlib.metadata' in sys.modules); v = kalcal.__version__; "
+        "from kalcal import __version__; print(v == __version__ and bool(v))"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0 and done.stdout.split() == ["False", "True"], done.stdout + done.stderr
