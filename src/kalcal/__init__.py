@@ -25,6 +25,9 @@ _EXPORTS = {
     "CalibrationResult": "kalcal.api.results",
     "NoiseResult": "kalcal.api.results",
     "SimulationResult": "kalcal.api.results",
+    "CheckResult": "kalcal.verify.results",
+    "CheckPart": "kalcal.verify.results",
+    "Cause": "kalcal.verify.results",
     "KalcalError": "kalcal.errors",
 }
 
@@ -53,7 +56,7 @@ def __getattr__(name: str):
 
 
 def __dir__() -> list[str]:
-    return sorted({*globals(), *_EXPORTS})
+    return sorted({*__all__, *(name for name in globals() if name.startswith("__") and name.endswith("__"))})
 
 
 class _Package(_types.ModuleType):

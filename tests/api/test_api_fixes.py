@@ -33,3 +33,25 @@ def test_import_kalcal_reads_the_version_only_when_asked():
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0 and done.stdout.split() == ["False", "True"], done.stdout + done.stderr
+
+
+def test_dir_lists_the_exports_and_dunders_only():
+    names = dir(kalcal)
+    assert set(names) - set(kalcal.__all__) == {n for n in names if n.startswith("__") and n.endswith("__")} - set(kalcal.__all__)
+    for helper in ("version", "sys", "types", "import_module"):
+        assert helper not in names
+    from kalcal.verify.results import Cause, CheckPart, CheckResult
+
+    assert (kalcal.CheckResult, kalcal.CheckPart, kalcal.Cause) == (CheckResult, CheckPart, Cause)
+
+
+def test_sweep_refuses_zero_threads_as_verify_does(tmp_path):
+    import pytest
+
+    for call in (
+        lambda: kalcal.verify("accel-gps", n=300, threads=0),
+        lambda: kalcal.sweep("accel-gps", "filter.accel_noise_std", [0.01, 0.02], n=300, out=tmp_path / "s", threads=0),
+    ):
+        with pytest.raises(kalcal.KalcalError, match="--threads: expected a positive number, got 0"):
+            call()
+    assert not (tmp_path / "s").exists()

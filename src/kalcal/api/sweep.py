@@ -36,6 +36,8 @@ def sweep(
     values = [str(value) for value in values]
     if not key or len(values) < 2:
         raise KalcalError(f"sweep: give a setting and at least two values (got {key!r} with {len(values)})")
+    if threads is not None and threads < 1:
+        raise KalcalError(f"--threads: expected a positive number, got {threads}")
     model = resolve(scenario, settings, config)
     sweep_cells(model, key, values, n, engine=engine, long_run=0)  # every value checked before any cluster
     options = dict(engine=engine, workers=threads, long_run=0)
