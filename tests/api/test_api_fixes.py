@@ -55,3 +55,20 @@ def test_sweep_refuses_zero_threads_as_verify_does(tmp_path):
         with pytest.raises(kalcal.KalcalError, match="--threads: expected a positive number, got 0"):
             call()
     assert not (tmp_path / "s").exists()
+
+
+def test_a_loaded_model_takes_settings_and_refusals_as_its_file_does():
+    from pathlib import Path
+
+    import pytest
+
+    path = Path(__file__).parents[2] / "examples" / "constant_velocity.toml"
+    model = kalcal.load_model(path)
+    result = kalcal.verify(model, n=300, settings={"filter.w": [[0.01]]})
+    assert result.run.scenario.filter.w.tolist() == [[0.01]]
+    assert result.run.scenario.truth.w.tolist() == kalcal.verify(path, n=300).run.scenario.truth.w.tolist()
+    assert result.to_dict()["final"] == kalcal.verify(path, n=300, settings={"filter.w": [[0.01]]}).to_dict()["final"]
+    with pytest.raises(kalcal.KalcalError, match=r"^--long-run: not available for a model file \(.*constant_velocity.toml\)"):
+        kalcal.verify(model, n=300, long_run=100)
+    with pytest.raises(kalcal.KalcalError, match=r"^filter.w: expected a positive semi-definite"):
+        kalcal.verify(model, n=300, settings={"filter.w": [[-1.0]]})
