@@ -72,3 +72,68 @@ def test_a_loaded_model_takes_settings_and_refusals_as_its_file_does():
         kalcal.verify(model, n=300, long_run=100)
     with pytest.raises(kalcal.KalcalError, match=r"^filter.w: expected a positive semi-definite"):
         kalcal.verify(model, n=300, settings={"filter.w": [[-1.0]]})
+
+
+def _static_log(tmp_path):
+    import numpy as np
+    import pandas as pd
+
+    rate, n = 100.0, 2**15
+    frame = pd.DataFrame({"time": np.arange(n) / rate, "accel": np.random.default_rng(0).normal(0, 0.02, n)})
+    frame.to_csv(tmp_path / "static.csv", index=False)
+    return frame
+
+
+def test_noise_writes_imu_yaml_by_default_and_names_it_only_when_written(tmp_path):
+    import json
+
+    import pytest
+    import yaml
+
+    frame = _static_log(tmp_path)
+    result = kalcal.noise(frame, out=tmp_path / "api")
+    assert result.paths["kalibr"] == str(tmp_path / "api" / "imu.yaml")
+    assert (tmp_path / "api" / "imu.yaml").read_text() == result.kalibr_yaml()
+    assert sorted(result.save(tmp_path / "saved")) == ["allan", "filter", "kalibr", "plot", "summary"]
+    text = (tmp_path / "saved" / "imu.yaml").read_text()
+    assert "Kalibr cannot load" in text.split("accelerometer_noise_density")[0]
+    assert yaml.safe_load(text)["gyroscope_noise_density"] is None
+    # without it, a file of that name is the user's: neither refused nor touched, and not in the manifest
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "imu.yaml").write_text("mine\n")
+    paths = kalcal.noise(frame, out=tmp_path / "mine", kalibr=False).paths
+    assert "kalibr" not in paths and (tmp_path / "mine" / "imu.yaml").read_text() == "mine\n"
+    manifest = json.loads((tmp_path / "mine" / ".kalcal-manifest.json").read_text())
+    assert "imu.yaml" not in json.dumps(manifest)
+    # with it, a stray imu.yaml that no manifest lists is refused, as any other output's name
+    (tmp_path / "stray").mkdir()
+    (tmp_path / "stray" / "imu.yaml").write_text("mine\n")
+    with pytest.raises(kalcal.KalcalError, match="imu.yaml"):
+        kalcal.noise(frame, out=tmp_path / "stray")
+
+
+def test_cli_noise_can_leave_imu_yaml_out(tmp_path):
+    from typer.testing import CliRunner
+
+    from kalcal.cli import app
+
+    _static_log(tmp_path)
+    out = tmp_path / "n"
+    done = CliRunner().invoke(app, ["noise", "--imu", str(tmp_path / "static.csv"), "--out", str(out), "--no-kalibr"])
+    assert done.exit_code == 0, done.output
+    assert done.output.strip().splitlines()[-1] == f"wrote {out}/: summary.json, allan.csv, allan.png, filter.toml"
+    assert not (out / "imu.yaml").exists()
+
+
+def test_an_unidentified_accelerometer_value_is_null_with_its_bound():
+    import numpy as np
+    import yaml
+
+    from kalcal.calibrate.kalibr import kalibr_yaml
+    from kalcal.calibrate.noise import identify_noise
+
+    result = identify_noise(np.random.default_rng(2).normal(0, 0.02, 2**14), 100.0)
+    assert result.rate_random_walk.value is None  # white noise alone: no walk to see
+    text = kalibr_yaml(result)
+    line = next(line for line in text.splitlines() if line.startswith("accelerometer_random_walk"))
+    assert yaml.safe_load(text)["accelerometer_random_walk"] is None and "not identified (<" in line

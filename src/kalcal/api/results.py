@@ -255,12 +255,13 @@ class NoiseResult:
 
         return json_document(self.run.summary)
 
-    def save(self, out: str | Path) -> dict[str, str]:
-        """Write ``summary.json``, ``allan.csv``, ``allan.png`` and ``filter.toml`` into ``out``, as
-        ``kalcal noise --out`` does (one set); returns the files by key (summary, allan, plot, filter)."""
+    def save(self, out: str | Path, *, kalibr: bool = True) -> dict[str, str]:
+        """Write ``summary.json``, ``allan.csv``, ``allan.png``, ``filter.toml`` and (unless ``kalibr`` is
+        False) the Kalibr ``imu.yaml`` into ``out``, as ``kalcal noise --out`` does (one set); returns the
+        files by key (summary, allan, plot, filter, kalibr)."""
         from kalcal.jobs.noise import save_noise
 
-        return save_noise(self.run, out)["files"]
+        return save_noise(self.run, out, kalibr=kalibr)["files"]
 
     def kalibr_yaml(self, rostopic: str = "/imu0") -> str:
         """The Kalibr ``imu.yaml`` text (see :mod:`kalcal.calibrate.kalibr`)."""
