@@ -15,7 +15,7 @@ from kalcal.calibrate.noise import NoiseIdentification, identify_noise
 from kalcal.calibrate.plausibility import CalibrationWarning, check_limit, check_rate
 from kalcal.errors import DataError
 from kalcal.io.logs import numeric_columns, parse_column_map, read_table, require_increasing, source_name
-from kalcal.io.outputs import final_path, inputs_of, mark_inputs, run_outputs, writes_outputs
+from kalcal.io.outputs import final_path, inputs_of, mark_inputs, run_outputs
 from kalcal.io.results import write_json
 from kalcal.models.accel_gps import AccelGpsFilter
 from kalcal.plots.allan import plot_allan
@@ -93,21 +93,6 @@ class NoiseRun:
     filter_text: str
     allan: pd.DataFrame
     title: str
-
-
-@writes_outputs("noise", names=OUTPUT_NAMES, inputs=("imu_path",))
-def identify_noise_file(
-    imu_path: str | Path,
-    out: str | Path,
-    *,
-    imu_columns: str | None = None,
-    confidence: float = 0.95,
-    strict: bool = False,
-) -> dict[str, Any]:
-    """:func:`compute_noise` of a log file, written into ``out`` by :func:`save_noise` (the folder checked
-    first); returns the summary as written."""
-    run = compute_noise(imu_path, imu_columns=imu_columns, confidence=confidence, strict=strict)
-    return save_noise(run, out)
 
 
 def save_noise(run: NoiseRun, out: str | Path, *, kalibr: bool = True) -> dict[str, Any]:
