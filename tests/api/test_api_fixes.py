@@ -137,3 +137,64 @@ def test_an_unidentified_accelerometer_value_is_null_with_its_bound():
     text = kalibr_yaml(result)
     line = next(line for line in text.splitlines() if line.startswith("accelerometer_random_walk"))
     assert yaml.safe_load(text)["accelerometer_random_walk"] is None and "not identified (<" in line
+
+
+def test_sweep_returns_a_frozen_result_with_its_runs_summaries_and_paths(tmp_path):
+    import dataclasses
+    import json
+
+    import pytest
+
+    out = tmp_path / "sw"
+    result = kalcal.sweep("accel-gps", "filter.accel_noise_std", [0.01, 0.02], n=300, out=out, settings={"scenario.duration": 2})
+    assert isinstance(result, kalcal.SweepResult) and result.values == ["0.01", "0.02"]
+    assert result.runs == [out / "filter.accel_noise_std=0.01", out / "filter.accel_noise_std=0.02"]
+    for run, summary in zip(result.runs, result.summaries):
+        assert json.loads((run / "summary.json").read_text()) == summary
+    assert result.paths == {"table": out / "sweep.csv", "summary": out / "sweep.json", "figure": out / "sweep.png"}
+    assert list(result.table["verdict"]) == [s["verdict"] for s in result.summaries]
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        result.key = "other"  # type: ignore[misc]
+
+
+def test_report_redraws_a_saved_verification_and_the_cli_calls_it(tmp_path, monkeypatch):
+    from typer.testing import CliRunner
+
+    import kalcal.api.report
+    from kalcal.cli import app
+
+    run = tmp_path / "run"
+    kalcal.verify("accel-gps", n=300, settings={"scenario.duration": 2}, long_run=0, out=run)
+    assert not (run / "report.html").exists()
+    paths = kalcal.report(run, realization=1)
+    assert paths == {"report": run / "report.html", "figures": run / "figures"}
+    assert paths["report"].is_file() and any(paths["figures"].iterdir())
+    with __import__("pytest").raises(kalcal.KalcalError, match="realization"):
+        kalcal.report(run, realization=300)
+    calls = []
+    original = kalcal.api.report.report
+    monkeypatch.setattr(kalcal.api.report, "report", lambda *a, **k: calls.append(a) or original(*a, **k))
+    done = CliRunner().invoke(app, ["report", str(run)])
+    assert done.exit_code == 0, done.output
+    assert calls and done.output.strip().splitlines()[-1] == f"wrote {run}/: report.html, figures/"
+
+
+def test_calibrate_cli_names_the_files_the_call_wrote(tmp_path, monkeypatch):
+    from typer.testing import CliRunner
+
+    from kalcal.api.results import CalibrationResult
+    from kalcal.cli import app
+
+    sim = tmp_path / "sim"
+    kalcal.simulate("accel-gps", seed=0, settings={"scenario.duration": 10}, out=sim)
+    original = CalibrationResult.from_calibration.__func__
+
+    def fewer(cls, calibration, paths=None):
+        return original(cls, calibration, {k: v for k, v in (paths or {}).items() if k != "calibration.png"})
+
+    monkeypatch.setattr(CalibrationResult, "from_calibration", classmethod(fewer))
+    out = tmp_path / "cal"
+    done = CliRunner().invoke(app, ["calibrate", "accel-gps", "--imu", str(sim / "imu.csv"), "--gps", str(sim / "gps.csv"),
+                                    "--out", str(out)])
+    assert done.exit_code == 0, done.output
+    assert done.output.strip().splitlines()[-1] == f"wrote {out}/: estimates.csv, summary.json"
