@@ -198,3 +198,12 @@ def test_calibrate_cli_names_the_files_the_call_wrote(tmp_path, monkeypatch):
                                     "--out", str(out)])
     assert done.exit_code == 0, done.output
     assert done.output.strip().splitlines()[-1] == f"wrote {out}/: estimates.csv, summary.json"
+
+
+def test_sweep_requires_out_and_writes_nothing_unasked(tmp_path, monkeypatch):
+    import pytest
+
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(kalcal.KalcalError, match="^out: required"):
+        kalcal.sweep("accel-gps", "filter.accel_noise_std", [0.01, 0.02], n=300)
+    assert list(tmp_path.iterdir()) == []

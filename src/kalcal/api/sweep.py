@@ -15,7 +15,7 @@ def sweep(
     values: Sequence[Any] = (),
     n: int = 100_000,
     seed: int = 0,
-    out: str | Path = "kalcal-sweep",
+    out: str | Path | None = None,
     settings: Mapping[str, Any] | None = None,
     *,
     config: str | Path | None = None,
@@ -26,7 +26,7 @@ def sweep(
     client=None,
 ):
     """Verify ``scenario`` with ``key`` (``"filter.accel_noise_std"``) set to each of ``values``, all with
-    the same seed; writes ``out/sweep.csv``, ``sweep.json``, ``sweep.png`` and one run folder per value
+    the same seed; writes (``out`` is required) ``out/sweep.csv``, ``sweep.json``, ``sweep.png`` and one run folder per value
     (as ``kalcal sweep``). Returns a :class:`kalcal.SweepResult` (``key``, ``values``, ``table``: one row
     per value with every check's statistic, bounds and verdict, ``summaries`` and ``runs``: each value's
     summary.json and folder, ``paths``: the sweep's own files)."""
@@ -36,6 +36,8 @@ def sweep(
     from kalcal.jobs.sweep import sweep_cells
     from kalcal.montecarlo.distributed import dask_client
 
+    if out is None:
+        raise KalcalError("out: required (the folder for sweep.csv, sweep.png and one run per value; a sweep always writes)")
     values = [str(value) for value in values]
     if not key or len(values) < 2:
         raise KalcalError(f"sweep: give a setting and at least two values (got {key!r} with {len(values)})")
