@@ -20,7 +20,7 @@ import pandas as pd
 
 from kalcal.calibrate.accel_gps import calibrate_accel_gps
 from kalcal.io.logs import numeric_columns, read_table
-from kalcal.jobs.calibrate import calibrate_accel_gps_files
+import kalcal
 from kalcal.models.registry import build_scenario
 
 HOURS = 1.0
@@ -60,10 +60,8 @@ def make_logs(directory: Path) -> dict[str, Path]:
 
 def peak_memory_mib(imu: Path, gps: Path, out: Path) -> float:
     code = (
-        "from kalcal.jobs.calibrate import calibrate_accel_gps_files\n"
-        "from kalcal.models.registry import build_scenario\n"
-        f"calibrate_accel_gps_files(build_scenario('accel-gps', None, [], defaults={{'scenario.integration': 'trapezoid'}}), "
-        f"{str(imu)!r}, {str(gps)!r}, {str(out)!r})\n"
+        "import kalcal\n"
+        f"kalcal.calibrate('accel-gps', imu={str(imu)!r}, gps={str(gps)!r}, out={str(out)!r})\n"
         "print(open('/proc/self/status').read().split('VmHWM:')[1].split()[0])\n"
     )
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
@@ -94,7 +92,7 @@ def main() -> None:
         print(f"  filter alone                       {time.perf_counter() - start:6.2f} s   bias {result.bias[-1]:.5f} ± {result.std[-1, 2]:.1g} (true 0.05)")
         for kind in ("parquet", "csv"):
             start = time.perf_counter()
-            calibrate_accel_gps_files(scenario, paths[f"imu.{kind}"], paths[f"gps.{kind}"], tmp / f"out-{kind}")
+            kalcal.calibrate(scenario, imu=paths[f"imu.{kind}"], gps=paths[f"gps.{kind}"], out=tmp / f"out-{kind}")
             print(f"  whole job from {kind:8s}           {time.perf_counter() - start:6.2f} s")
         peak = peak_memory_mib(paths["imu.parquet"], paths["gps.parquet"], tmp / "out-peak")
         print(f"  peak memory of the job (Parquet):  {peak:6.0f} MiB (with the interpreter and libraries)")

@@ -213,4 +213,4 @@ def _assert_refused(tmp_path, pattern, *args):
 
 def test_noise_closes_with_one_line_naming_what_it_wrote(white):
     out, result = white
-    assert result.stdout.strip().splitlines()[-1] == f"wrote {out}/: summary.json, allan.csv, allan.png, filter.toml"
+    assert result.stdout.strip().splitlines()[-1] == f"wrote {out}/: summary.json, allan.csv, allan.png, filter.toml, imu.yaml"

@@ -270,16 +270,16 @@ def test_the_command_lines_files_are_never_removed(tmp_path):
 
 def test_a_python_job_keeps_the_config_its_scenario_was_read_from(tmp_path):
     """No command line names the config here: the scenario carries it (docs/outputs.md)."""
-    from kalcal.jobs.simulate import simulate_accel_gps
+    import kalcal
     from kalcal.models.registry import build_scenario
 
     out = tmp_path / "sim"
-    simulate_accel_gps(build_scenario("accel-gps", None, ["scenario.duration=2"]), 0, out)
+    kalcal.simulate(build_scenario("accel-gps", None, ["scenario.duration=2"]), 0, out=out)
     config = out / "settings.toml"
     config.write_text("[scenario]\nduration = 3\n")
     manifest = json.loads((out / MANIFEST).read_text())  # the config is a file of the folder's set
     (out / MANIFEST).write_text(json.dumps({**manifest, "files": [*manifest["files"], "settings.toml"]}))
-    simulate_accel_gps(build_scenario("accel-gps", config), 1, out)
+    kalcal.simulate(build_scenario("accel-gps", config), 1, out=out)
     assert config.read_text() == "[scenario]\nduration = 3\n"
     assert sorted(_tree(out)) == sorted([MANIFEST, "gps.csv", "imu.csv", "settings.toml", "truth.csv"])
 
@@ -299,7 +299,7 @@ def test_a_checkpoint_in_the_folder_is_never_part_of_a_set(tmp_path):
 
 def test_the_jobs_return_the_final_paths(tmp_path):
     """The Python jobs write through the same staging: what they return is where the files now are."""
-    from kalcal.jobs.simulate import simulate_accel_gps
+    import kalcal
     from kalcal.jobs.verify import verify
     from kalcal.models.registry import build_scenario
 
@@ -307,7 +307,7 @@ def test_the_jobs_return_the_final_paths(tmp_path):
     outcome = verify(scenario, 200, 0, tmp_path / "v", long_run=0)
     assert set(outcome.paths) == {"stats", "summary"}
     assert all(path.parent == tmp_path / "v" and path.is_file() for path in outcome.paths.values())
-    paths = simulate_accel_gps(scenario, 0, tmp_path / "s")
+    paths = kalcal.simulate(scenario, 0, out=tmp_path / "s").paths
     assert paths == {name: tmp_path / "s" / f"{name}.csv" for name in ("imu", "gps", "truth")}
     assert all(path.is_file() for path in paths.values())
 

@@ -8,15 +8,9 @@ The Python API (each loaded on first use, so that ``import kalcal`` stays cheap)
     kalcal.noise(imu=df)                               # NoiseResult
 """
 
-import sys
-import types
-from importlib import import_module
-from importlib.metadata import PackageNotFoundError, version
-
-try:
-    __version__ = version("kalcal")
-except PackageNotFoundError:  # running from a source tree without installation
-    __version__ = "0.0.0"
+import sys as _sys
+import types as _types
+from importlib import import_module as _import_module
 
 #: every export, by the module it comes from (PEP 562: loaded when first asked for)
 _EXPORTS = {
@@ -27,39 +21,56 @@ _EXPORTS = {
     "sweep": "kalcal.api.sweep",
     "analyze": "kalcal.api.analyze",
     "AnalysisResult": "kalcal.api.analyze",
+    "report": "kalcal.api.report",
     "Model": "kalcal.api.model",
     "load_model": "kalcal.api.model",
     "VerificationResult": "kalcal.api.results",
     "CalibrationResult": "kalcal.api.results",
     "NoiseResult": "kalcal.api.results",
     "SimulationResult": "kalcal.api.results",
+    "SweepResult": "kalcal.api.sweep_result",
+    "CheckResult": "kalcal.verify.results",
+    "CheckPart": "kalcal.verify.results",
+    "Cause": "kalcal.verify.results",
     "KalcalError": "kalcal.errors",
 }
 
 __all__ = ["__version__", *_EXPORTS]
 
 
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("kalcal")
+    except PackageNotFoundError:  # running from a source tree without installation
+        return "0.0.0"
+
+
 def __getattr__(name: str):
+    if name == "__version__":  # importlib.metadata is most of an import's time: read on first use
+        value = globals()["__version__"] = _version()
+        return value
     module = _EXPORTS.get(name)
     if module is None:
         raise AttributeError(f"module 'kalcal' has no attribute {name!r}")
-    value = getattr(import_module(module), name)
+    value = getattr(_import_module(module), name)
     globals()[name] = value
     return value
 
 
 def __dir__() -> list[str]:
-    return sorted({*globals(), *_EXPORTS})
+    return sorted({*__all__, *(name for name in globals() if name.startswith("__") and name.endswith("__"))})
 
 
-class _Package(types.ModuleType):
+class _Package(_types.ModuleType):
     """The package module: ``kalcal.verify`` and ``kalcal.calibrate`` are the calls, though subpackages of
     those names exist (``kalcal.verify.checks``): importing a subpackage does not rebind the call's name."""
 
     def __setattr__(self, name: str, value) -> None:
-        if name in _EXPORTS and isinstance(value, types.ModuleType):
+        if name in _EXPORTS and isinstance(value, _types.ModuleType):
             return  # the subpackage stays importable (sys.modules); the attribute stays the call
         super().__setattr__(name, value)
 
 
-sys.modules[__name__].__class__ = _Package
+_sys.modules[__name__].__class__ = _Package

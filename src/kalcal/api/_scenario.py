@@ -27,7 +27,15 @@ def resolve(
     from kalcal.models.custom import is_model_file, load_model_file
     from kalcal.models.registry import build_scenario
 
+    from kalcal.models.custom import CustomModelScenario
+
     assignments = assignments_of(settings)
+    inputs: tuple[str, ...] = ()
+    if isinstance(scenario, CustomModelScenario) and models:
+        # a built model (kalcal.load_model) goes the way of its file: --set's assignments, the same refusals
+        from kalcal.io.outputs import inputs_of
+
+        inputs, scenario = inputs_of(scenario), model_of(scenario)
     is_model = isinstance(scenario, Model) or (isinstance(scenario, (str, Path)) and is_model_file(str(scenario)))
     if models and is_model:
         where = scenario.source if isinstance(scenario, Model) else str(scenario)
@@ -38,7 +46,12 @@ def resolve(
         if isinstance(scenario, Model):
             if config is not None:
                 raise KalcalError("config: not used with a Model; give its settings to Model or settings=")
-            return scenario.scenario(settings)
+            built = scenario.scenario(settings)
+            if inputs:
+                from kalcal.io.outputs import mark_inputs
+
+                mark_inputs(built, *inputs)  # the file it was read from stays protected
+            return built
         return load_model_file(scenario, assignments, config=config)
     if isinstance(scenario, (str, Path)):
         return build_scenario(str(scenario), config, assignments, defaults=defaults)
@@ -48,3 +61,17 @@ def resolve(
         merged = {**(load_toml(config) if config is not None else {}), **dict(settings or {})}
         return apply_settings(scenario, merged)
     return scenario  # a scenario built already (kalcal.load_model, build_scenario)
+
+
+def model_of(scenario) -> Model:
+    """The :class:`Model` of a built custom scenario, its source the file it was read from."""
+    f, t, info = scenario.filter, scenario.truth, scenario.model
+    keys = ("phi", "gamma", "h", "w", "v", "x0", "m0")
+    truth = {key: getattr(t, key).tolist() for key in scenario.differing()}
+    return Model(
+        **{key: getattr(f, key).tolist() for key in keys},
+        steps_per_update=int(f.steps_per_update), updates=int(info.updates), sample_period=float(f.sample_period),
+        truth=truth or None, name=info.name, state_names=list(info.state_names), state_units=list(info.state_units),
+        measurement_names=list(info.measurement_names), measurement_units=list(info.measurement_units),
+        source=info.file,
+    )

@@ -36,7 +36,7 @@ def _toml(value: Any) -> str:
     return _toml(str(value))  # anything else is validated as the text a file would hold
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Model:
     """A linear Gaussian model to verify, as a model file (docs/custom-models.md) would hold it.
 

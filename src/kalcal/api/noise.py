@@ -14,7 +14,7 @@ def noise(
     confidence: float = 0.95,
     strict: bool = False,
     out: str | Path | None = None,
-    kalibr: bool = False,
+    kalibr: bool = True,
 ) -> NoiseResult:
     """Identify accelerometer noise from a static log: Allan deviation, N, B, K and the [filter] settings.
 
@@ -29,15 +29,15 @@ def noise(
     strict : bool
         Refuse (DataError) a log that does not look static.
     out : path, optional
-        Also write the files there, as ``kalcal noise --out`` (the folder is checked first); ``kalibr``
-        adds the Kalibr ``imu.yaml``.
+        Also write the files there, as ``kalcal noise --out`` (the folder is checked first), the Kalibr
+        ``imu.yaml`` among them unless ``kalibr`` is False.
 
     Returns
     -------
     NoiseResult
     """
     from kalcal.errors import KalcalError
-    from kalcal.jobs.noise import OUTPUT_NAMES, compute_noise, save_noise
+    from kalcal.jobs.noise import compute_noise, output_names, save_noise
 
     if imu is None:
         raise KalcalError("--imu: required (a static accelerometer log: time [s], accel [m/s^2])")
@@ -46,8 +46,7 @@ def noise(
     from kalcal.io.outputs import run_outputs
 
     protect = [imu] if isinstance(imu, (str, Path)) else []
-    names = (*OUTPUT_NAMES, "imu.yaml")
-    with run_outputs(out, "noise", names=names, protect=protect) as staging:
+    with run_outputs(out, "noise", names=output_names(kalibr), protect=protect) as staging:
         run = compute_noise(imu, imu_columns=imu_columns, confidence=confidence, strict=strict)
         summary = save_noise(run, staging, kalibr=kalibr)
     return NoiseResult.from_run(run, summary["files"])

@@ -21,7 +21,7 @@ def _fmt(value: Any) -> str:
     return str(value)
 
 
-@dataclass(frozen=True, repr=False)
+@dataclass(frozen=True, repr=False, eq=False)
 class VerificationResult:
     """What :func:`kalcal.verify` found.
 
@@ -111,7 +111,7 @@ class VerificationResult:
         )
 
 
-@dataclass(frozen=True, repr=False)
+@dataclass(frozen=True, repr=False, eq=False)
 class CalibrationResult:
     """What :func:`kalcal.calibrate` estimated, at the last fix (accel-gps) or sample (scale-bias).
 
@@ -193,7 +193,7 @@ class CalibrationResult:
         return f"CalibrationResult({self.scenario}: bias={self.bias:.6g} ± {self.bias_std:.3g}{scale}, warnings={len(self.warnings)})"
 
 
-@dataclass(frozen=True, repr=False)
+@dataclass(frozen=True, repr=False, eq=False)
 class NoiseResult:
     """What :func:`kalcal.noise` identified from a static accelerometer log.
 
@@ -255,12 +255,13 @@ class NoiseResult:
 
         return json_document(self.run.summary)
 
-    def save(self, out: str | Path) -> dict[str, str]:
-        """Write ``summary.json``, ``allan.csv``, ``allan.png`` and ``filter.toml`` into ``out``, as
-        ``kalcal noise --out`` does (one set); returns the files by key (summary, allan, plot, filter)."""
+    def save(self, out: str | Path, *, kalibr: bool = True) -> dict[str, str]:
+        """Write ``summary.json``, ``allan.csv``, ``allan.png``, ``filter.toml`` and (unless ``kalibr`` is
+        False) the Kalibr ``imu.yaml`` into ``out``, as ``kalcal noise --out`` does (one set); returns the
+        files by key (summary, allan, plot, filter, kalibr)."""
         from kalcal.jobs.noise import save_noise
 
-        return save_noise(self.run, out)["files"]
+        return save_noise(self.run, out, kalibr=kalibr)["files"]
 
     def kalibr_yaml(self, rostopic: str = "/imu0") -> str:
         """The Kalibr ``imu.yaml`` text (see :mod:`kalcal.calibrate.kalibr`)."""
@@ -278,7 +279,7 @@ class NoiseResult:
         )
 
 
-@dataclass(frozen=True, repr=False)
+@dataclass(frozen=True, repr=False, eq=False)
 class SimulationResult:
     """What :func:`kalcal.simulate` drew: the logs as DataFrames (``imu``, ``gps``, ``truth`` for accel-gps;
     ``data`` for scale-bias) and, for scale-bias, ``truth`` (``truth.json``: the drawn scale error and bias)."""

@@ -13,12 +13,12 @@ Kalibr (and VINS-Mono, OpenVINS) take continuous-time noise densities. From kalc
   (m/s^2/sqrt(s) is m/s^3/sqrt(Hz)). VINS: ``acc_w``.
 
 A value kalcal did not identify is written as ``null`` with its upper bound in a comment. The gyroscope
-keys are present (Kalibr reads them) but null: kalcal identifies accelerometer noise only.
+keys are present but always null: kalcal identifies accelerometer noise only. Kalibr cannot load a
+``null``: fill in those values (the gyroscope's from its datasheet or its own static log) before use.
 """
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 
@@ -28,10 +28,6 @@ def kalibr_values(identification, rostopic: str = "/imu0") -> dict[str, Any]:
     r = identification
     density = r.velocity_random_walk.value  # N: m/s^2/sqrt(Hz)
     walk = r.rate_random_walk.value  # K: m/s^3/sqrt(Hz)
-    # the same numbers through the per-sample values and their definitions (a check of the algebra)
-    dt = 1.0 / r.rate
-    if density is not None and r.accel_noise_std.value is not None:
-        assert math.isclose(r.accel_noise_std.value * math.sqrt(dt), density, rel_tol=1e-9)
     return {
         "accelerometer_noise_density": density,
         "accelerometer_random_walk": walk,
@@ -57,6 +53,8 @@ def kalibr_yaml(identification, rostopic: str = "/imu0") -> str:
 
     lines = [
         f"# kalcal noise: Kalibr IMU noise model, accelerometer identified from a static log at {r.rate:.6g} Hz",
+        "# null: not identified (always the gyroscope's: kalcal sees the accelerometer only). Kalibr cannot load",
+        "# a null value: replace each with a number (e.g. the datasheet's, or an upper bound noted beside it) first.",
         "# white noise density sigma_c = sigma_d * sqrt(dt) (sigma_d: per-sample std, m/s^2) = N (velocity random walk)",
         f"accelerometer_noise_density: {_number(n)}  # m/s^2/sqrt(Hz)" + missing(r.velocity_random_walk),
         "# bias random walk density sigma_b = sigma_bd / sqrt(dt) (sigma_bd: per-sample increment std, m/s^2) = K",

@@ -88,7 +88,7 @@ def calibrate(
         )
     summary = result.calibration.summary
     if scenario == "scale-bias":
-        _print_scale_bias(summary, out, strict)
+        _print_scale_bias(summary, out, result.paths, strict)
         return
     table = _common._table(f"kalcal calibrate {scenario}: {summary['fixes_used']} fixes", f"t = {summary['time']:g} s")
     table.add_column("quantity")
@@ -111,14 +111,13 @@ def calibrate(
     diagnostics = summary["diagnostics"]
     style = "green" if diagnostics["consistent"] else "bold red"
     console.print(f"diagnostics: [{style}]{escape(diagnostics['verdict'])}[/{style}]")
-    _common._note_nonfinite(Path(out) / "summary.json")
-    written = [Path(out) / name for name in ("estimates.csv", "summary.json", "calibration.png")]
-    _common.print_wrote(Path(out), written)
+    _common._note_nonfinite(result.paths["summary.json"])
+    _common.print_wrote(Path(out), list(result.paths.values()))
     if strict and (summary["warnings"] or not diagnostics["consistent"]):
         raise typer.Exit(1)
 
 
-def _print_scale_bias(summary: dict, out: Path, strict: bool) -> None:
+def _print_scale_bias(summary: dict, out: Path, paths: dict[str, Path], strict: bool) -> None:
     """``kalcal calibrate scale-bias``'s table: the scale error and bias of a sensor against a reference."""
     unit = summary["units"]["bias"]
     table = _common._table(f"kalcal calibrate scale-bias: {summary['samples_used']} samples", f"t = {summary['time']:g} s")
@@ -135,7 +134,7 @@ def _print_scale_bias(summary: dict, out: Path, strict: bool) -> None:
         table.add_row(name, f"{value:.6g}", f"{std:.3g}", unit_)
     _common.console.print(table)
     _common._print_warnings(summary)
-    _common._note_nonfinite(Path(out) / "summary.json")
-    _common.print_wrote(Path(out), [Path(out) / "estimates.csv", Path(out) / "summary.json"])
+    _common._note_nonfinite(paths["summary.json"])
+    _common.print_wrote(Path(out), list(paths.values()))
     if strict and summary["warnings"]:
         raise typer.Exit(1)

@@ -16,15 +16,21 @@ def noise(
     imu: Annotated[
         Optional[Path], typer.Option("--imu", help="Static accelerometer log (CSV or Parquet): time [s], accel [m/s^2].")
     ] = None,
-    out: Annotated[Path, typer.Option("--out", help="Directory for summary.json, allan.csv, allan.png, filter.toml.")] = Path(
+    out: Annotated[
+        Path, typer.Option("--out", help="Directory for summary.json, allan.csv, allan.png, filter.toml, imu.yaml.")
+    ] = Path(
         "kalcal-noise"
     ),
     imu_columns: Annotated[
         Optional[str], typer.Option("--imu-columns", help="Map roles to columns, e.g. time=t,accel=ax.")
     ] = None,
     kalibr: Annotated[
-        bool, typer.Option("--kalibr", help="Also write imu.yaml, the noise as Kalibr's densities (m/s^2/sqrt(Hz), m/s^3/sqrt(Hz)).")
-    ] = False,
+        bool,
+        typer.Option(
+            "--kalibr/--no-kalibr",
+            help="Write imu.yaml, the noise as Kalibr's densities (m/s^2/sqrt(Hz), m/s^3/sqrt(Hz)); null where not identified.",
+        ),
+    ] = True,
     strict: Annotated[
         bool, typer.Option("--strict", help="Refuse (exit status 2, nothing written) a log that does not look static.")
     ] = False,

@@ -1,4 +1,4 @@
-"""``kalcal report``: redraw the figures and report.html of a saved verification run."""
+"""``kalcal report``: redraw the figures and report.html of a saved verification run, through :func:`kalcal.report`."""
 
 from __future__ import annotations
 
@@ -16,10 +16,10 @@ def report(
     realization: Annotated[int, typer.Option("--realization", help="Realization shown in the single-run figures.")] = 0,
 ) -> None:
     """Redraw the figures and report.html of a verification run from its summary.json and stats.nc."""
-    from kalcal.jobs.report import FIGURE_DIR, render_report
+    from kalcal.api.report import report as redraw
 
     with user_errors():
         bar, update = _common._progress_bar(str(directory))
         with bar:
-            page = render_report(directory, realization=realization, progress=update)
-    _common.print_wrote(Path(directory), [page, Path(directory) / FIGURE_DIR])
+            paths = redraw(directory, realization, progress=update)
+    _common.print_wrote(Path(directory), [paths["report"], paths["figures"]])

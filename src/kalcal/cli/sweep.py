@@ -27,11 +27,10 @@ def sweep(
 ) -> None:
     """Verify once per value of one setting (--set key=v1,v2,...) and draw the tuning curve."""
     from kalcal.api.sweep import sweep as run_sweep
-    from kalcal.jobs.sweep import split_sweep
-    from kalcal.models.settings import parse_assignments
+    from kalcal.api.sweep import sweep_settings
 
     with user_errors():
-        key, values, fixed = split_sweep(parse_assignments(set_ or ()))
+        key, values, fixed = sweep_settings(set_ or ())
         result = run_sweep(
             scenario, key, values, n, seed, out, fixed, config=config, engine=engine, threads=threads,
             workers=workers, scheduler=scheduler,
@@ -45,7 +44,6 @@ def sweep(
         cells = [f"{row[f'{c}_statistic']:.4g}" + ("" if row[f"{c}_passed"] else " [red]x[/red]") for c in checks]
         table.add_row(str(row[key]), *cells)
     _common.console.print(table)
-    runs = sorted(path.parent for path in Path(out).glob("*=*/summary.json"))
-    _common._note_nonfinite(result.paths["summary"], *(run / "summary.json" for run in runs))
-    written = [result.paths[key] for key in ("summary", "table", "figure")] + runs
+    _common._note_nonfinite(result.paths["summary"], *(run / "summary.json" for run in result.runs))
+    written = [result.paths[key] for key in ("summary", "table", "figure")] + sorted(result.runs)
     _common.print_wrote(Path(out), written)

@@ -86,23 +86,6 @@ def save_calibration(calibration: Calibration, out: str | Path) -> dict[str, Pat
     return write(calibration, out)
 
 
-@writes_outputs(
-    "calibrate accel-gps", names=OUTPUT_NAMES["calibrate accel-gps"], inputs=("imu_path", "gps_path")
-)
-def calibrate_accel_gps_files(
-    scenario: AccelGpsScenario,
-    imu_path: str | Path,
-    gps_path: str | Path,
-    out: str | Path,
-    **options: Any,
-) -> dict[str, Any]:
-    """:func:`compute_accel_gps_calibration` of two log files, written into ``out`` by
-    :func:`save_calibration` (the folder checked first); returns the summary."""
-    calibration = compute_accel_gps_calibration(scenario, imu_path, gps_path, **options)
-    save_calibration(calibration, out)
-    return calibration.summary
-
-
 def compute_accel_gps_calibration(
     scenario: AccelGpsScenario,
     imu_path: str | Path | pd.DataFrame,

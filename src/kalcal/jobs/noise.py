@@ -15,7 +15,7 @@ from kalcal.calibrate.noise import NoiseIdentification, identify_noise
 from kalcal.calibrate.plausibility import CalibrationWarning, check_limit, check_rate
 from kalcal.errors import DataError
 from kalcal.io.logs import numeric_columns, parse_column_map, read_table, require_increasing, source_name
-from kalcal.io.outputs import final_path, mark_inputs, writes_outputs
+from kalcal.io.outputs import final_path, inputs_of, mark_inputs, run_outputs
 from kalcal.io.results import write_json
 from kalcal.models.accel_gps import AccelGpsFilter
 from kalcal.plots.allan import plot_allan
@@ -59,8 +59,15 @@ def filter_toml(result: NoiseIdentification, settings: dict[str, float], source:
     return "\n".join(lines) + "\n"
 
 
-#: the files of ``kalcal noise``
+#: the files of ``kalcal noise`` (and :data:`KALIBR_NAME` unless it is left out)
 OUTPUT_NAMES = ("summary.json", "allan.csv", "allan.png", "filter.toml")
+#: the Kalibr noise file, written beside filter.toml by default
+KALIBR_NAME = "imu.yaml"
+
+
+def output_names(kalibr: bool = True) -> tuple[str, ...]:
+    """The files of one ``kalcal noise`` run: :data:`OUTPUT_NAMES`, with ``kalibr`` :data:`KALIBR_NAME` too."""
+    return (*OUTPUT_NAMES, KALIBR_NAME) if kalibr else OUTPUT_NAMES
 
 
 @dataclass(frozen=True)
@@ -88,26 +95,15 @@ class NoiseRun:
     title: str
 
 
-@writes_outputs("noise", names=OUTPUT_NAMES, inputs=("imu_path",))
-def identify_noise_file(
-    imu_path: str | Path,
-    out: str | Path,
-    *,
-    imu_columns: str | None = None,
-    confidence: float = 0.95,
-    strict: bool = False,
-) -> dict[str, Any]:
-    """:func:`compute_noise` of a log file, written into ``out`` by :func:`save_noise` (the folder checked
-    first); returns the summary as written."""
-    run = compute_noise(imu_path, imu_columns=imu_columns, confidence=confidence, strict=strict)
-    return save_noise(run, out)
+def save_noise(run: NoiseRun, out: str | Path, *, kalibr: bool = True) -> dict[str, Any]:
+    """Write ``summary.json``, ``allan.csv``, ``allan.png``, ``filter.toml`` and, unless ``kalibr`` is
+    False, the Kalibr ``imu.yaml`` (:mod:`kalcal.calibrate.kalibr`) into ``out`` as one set; returns the
+    summary as written (its ``files`` name where the files are once the set is in place)."""
+    with run_outputs(out, "noise", names=output_names(kalibr), protect=inputs_of(run)) as staging:
+        return _write_noise(run, staging, kalibr)
 
 
-@writes_outputs("noise", names=OUTPUT_NAMES)
-def save_noise(run: NoiseRun, out: str | Path, *, kalibr: bool = False) -> dict[str, Any]:
-    """Write ``summary.json``, ``allan.csv``, ``allan.png``, ``filter.toml`` and, with ``kalibr``, the
-    Kalibr ``imu.yaml`` (:mod:`kalcal.calibrate.kalibr`) into ``out`` as one set; returns the summary as written
-    (its ``files`` name where the files are once the set is in place)."""
+def _write_noise(run: NoiseRun, out: Path, kalibr: bool) -> dict[str, Any]:
     out = Path(out)
     paths = {
         "summary": out / "summary.json",
@@ -122,7 +118,7 @@ def save_noise(run: NoiseRun, out: str | Path, *, kalibr: bool = False) -> dict[
     if kalibr:
         from kalcal.calibrate.kalibr import kalibr_yaml
 
-        paths["kalibr"] = out / "imu.yaml"
+        paths["kalibr"] = out / KALIBR_NAME
         paths["kalibr"].write_text(kalibr_yaml(run.identification))
     summary = dict(run.summary)
     warnings = summary.pop("warnings")

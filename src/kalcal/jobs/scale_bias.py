@@ -12,7 +12,7 @@ from kalcal.calibrate.scale_bias import UNOBSERVABLE_RATIO, calibrate_scale_bias
 from kalcal.errors import DataError
 from kalcal.io.logs import numeric_columns, read_table, require_increasing, source_name
 from kalcal.io.outputs import mark_inputs, writes_outputs
-from kalcal.jobs.calibrate import OUTPUT_NAMES, Calibration, save_calibration
+from kalcal.jobs.calibrate import Calibration
 from kalcal.jobs.simulate import OUTPUT_NAMES as SIMULATION_NAMES
 from kalcal.jobs.simulate import Simulation, save_simulation
 from kalcal.models.config import section_values
@@ -57,22 +57,6 @@ def compute_scale_bias_simulation(scenario: ScaleBiasScenario, seed: int) -> Sim
         )
     truth["settings"] = section_values(scenario)
     return Simulation("simulate scale-bias", {"data": data}, {"truth": truth})
-
-
-@writes_outputs("calibrate scale-bias", names=OUTPUT_NAMES["calibrate scale-bias"], inputs=("data_path",))
-def calibrate_scale_bias_file(
-    scenario: ScaleBiasScenario,
-    data_path: str | Path,
-    out: str | Path,
-    *,
-    reference: str = "reference",
-    sensor: str = "sensor",
-) -> dict[str, Any]:
-    """:func:`compute_scale_bias_calibration` of a log file, written into ``out`` by
-    :func:`~kalcal.jobs.calibrate.save_calibration` (the folder checked first); returns the summary."""
-    calibration = compute_scale_bias_calibration(scenario, data_path, reference=reference, sensor=sensor)
-    save_calibration(calibration, out)
-    return calibration.summary
 
 
 def compute_scale_bias_calibration(

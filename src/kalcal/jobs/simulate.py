@@ -82,9 +82,3 @@ def save_simulation(simulation: Simulation, out: str | Path) -> dict[str, Path]:
 
     return write(simulation, out)
 
-
-@writes_outputs("simulate accel-gps", names=OUTPUT_NAMES["simulate accel-gps"])
-def simulate_accel_gps(scenario: AccelGpsScenario, seed: int, out: str | Path) -> dict[str, Path]:
-    """Write ``imu.csv``, ``gps.csv`` and ``truth.csv`` for one realization drawn with ``seed``
-    (:func:`compute_accel_gps_simulation`)."""
-    return save_simulation(compute_accel_gps_simulation(scenario, seed), out)

@@ -18,11 +18,14 @@ from kalcal.plots.sweep import plot_sweep
 
 @dataclass(frozen=True)
 class SweepResult:
-    """One row per swept value: every check's statistic, bounds and verdict."""
+    """One row per swept value (every check's statistic, bounds and verdict), each value's run folder and
+    summary as written, and the sweep's own files (``table``, ``summary``, ``figure``)."""
 
     key: str
     table: pd.DataFrame
     paths: dict[str, Path]
+    runs: tuple[Path, ...] = ()
+    summaries: tuple[dict[str, Any], ...] = ()
 
 
 def split_sweep(assignments: dict[str, str]) -> tuple[str, list[str], dict[str, str]]:
@@ -72,10 +75,12 @@ def sweep(scenario, key: str, values: list[str], n: int, seed: int, out: str | P
     """
     out = Path(out)
     cells = sweep_cells(scenario, key, values, n, **verify_options)
-    rows = []
+    rows, runs, summaries = [], [], []
     for value, cell in zip(values, cells):
         run_dir = out / f"{key}={value}"
         outcome = verify(cell, n, seed, run_dir, **verify_options)
+        runs.append(run_dir)
+        summaries.append(outcome.summary)
         row: dict[str, Any] = {key: float(value) if _is_number(value) else value, "verdict": outcome.summary["verdict"]}
         for check in outcome.checks:
             row[f"{check.name}_statistic"] = check.statistic
@@ -91,7 +96,7 @@ def sweep(scenario, key: str, values: list[str], n: int, seed: int, out: str | P
         out / "sweep.json", {"key": key, "values": values, "realizations": n, "seed": seed, "rows": rows}
     )
     paths["figure"] = plot_sweep(table, key, out / "sweep.png")
-    return SweepResult(key, table, paths)
+    return SweepResult(key, table, paths, tuple(runs), tuple(summaries))
 
 
 def _is_number(text: str) -> bool:
