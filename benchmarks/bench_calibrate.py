@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from kalcal.calibrate.accel_gps import calibrate_accel_gps
+from kalcal.calibration.accel_gps import calibrate_accel_gps
 from kalcal.io.logs import numeric_columns, read_table
 import kalcal
 from kalcal.models.registry import build_scenario

@@ -8,8 +8,6 @@ The Python API (each loaded on first use, so that ``import kalcal`` stays cheap)
     kalcal.noise(imu=df)                               # NoiseResult
 """
 
-import sys as _sys
-import types as _types
 from importlib import import_module as _import_module
 
 #: every export, by the module it comes from (PEP 562: loaded when first asked for)
@@ -29,9 +27,9 @@ _EXPORTS = {
     "NoiseResult": "kalcal.api.results",
     "SimulationResult": "kalcal.api.results",
     "SweepResult": "kalcal.api.sweep_result",
-    "CheckResult": "kalcal.verify.results",
-    "CheckPart": "kalcal.verify.results",
-    "Cause": "kalcal.verify.results",
+    "CheckResult": "kalcal.verification.results",
+    "CheckPart": "kalcal.verification.results",
+    "Cause": "kalcal.verification.results",
     "KalcalError": "kalcal.errors",
 }
 
@@ -61,16 +59,3 @@ def __getattr__(name: str):
 
 def __dir__() -> list[str]:
     return sorted({*__all__, *(name for name in globals() if name.startswith("__") and name.endswith("__"))})
-
-
-class _Package(_types.ModuleType):
-    """The package module: ``kalcal.verify`` and ``kalcal.calibrate`` are the calls, though subpackages of
-    those names exist (``kalcal.verify.checks``): importing a subpackage does not rebind the call's name."""
-
-    def __setattr__(self, name: str, value) -> None:
-        if name in _EXPORTS and isinstance(value, _types.ModuleType):
-            return  # the subpackage stays importable (sys.modules); the attribute stays the call
-        super().__setattr__(name, value)
-
-
-_sys.modules[__name__].__class__ = _Package

@@ -9,7 +9,7 @@ from kalcal.analysis.fixed_gain import analyze_scenario
 from kalcal.analysis.sources import accel_gps_process, blocks, model_sources
 from kalcal.models.custom import parse_model
 from kalcal.models.registry import build_scenario
-from kalcal.simulate.exact import accel_gps_truth
+from kalcal.simulation.exact import accel_gps_truth
 from tests._helpers import assert_close, cov_atol
 
 SETTINGS = [

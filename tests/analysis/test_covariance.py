@@ -26,7 +26,7 @@ from kalcal.models.custom import parse_model
 from kalcal.models.linear import LinearGaussianModel
 from kalcal.models.registry import build_scenario
 from kalcal.montecarlo.scenarios import build_problem
-from kalcal.simulate.exact import UpdateRateTruth, sample_exact, truth_from_model
+from kalcal.simulation.exact import UpdateRateTruth, sample_exact, truth_from_model
 from tests._helpers import assert_close, cov_atol
 
 

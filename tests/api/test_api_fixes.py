@@ -40,7 +40,7 @@ def test_dir_lists_the_exports_and_dunders_only():
     assert set(names) - set(kalcal.__all__) == {n for n in names if n.startswith("__") and n.endswith("__")} - set(kalcal.__all__)
     for helper in ("version", "sys", "types", "import_module"):
         assert helper not in names
-    from kalcal.verify.results import Cause, CheckPart, CheckResult
+    from kalcal.verification.results import Cause, CheckPart, CheckResult
 
     assert (kalcal.CheckResult, kalcal.CheckPart, kalcal.Cause) == (CheckResult, CheckPart, Cause)
 
@@ -129,8 +129,8 @@ def test_an_unidentified_accelerometer_value_is_null_with_its_bound():
     import numpy as np
     import yaml
 
-    from kalcal.calibrate.kalibr import kalibr_yaml
-    from kalcal.calibrate.noise import identify_noise
+    from kalcal.calibration.kalibr import kalibr_yaml
+    from kalcal.calibration.noise import identify_noise
 
     result = identify_noise(np.random.default_rng(2).normal(0, 0.02, 2**14), 100.0)
     assert result.rate_random_walk.value is None  # white noise alone: no walk to see

@@ -15,7 +15,7 @@ from kalcal.filters.steps import update
 from kalcal.filters.regression import note_update, run_regression_filter, scalar_update
 from kalcal.filters.scale_bias import filter_scale_bias, regressors
 from kalcal.models.registry import build_scenario
-from kalcal.simulate.scale_bias import sample_scale_bias
+from kalcal.simulation.scale_bias import sample_scale_bias
 from tests._helpers import assert_close, cov_atol
 
 

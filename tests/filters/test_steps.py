@@ -18,7 +18,7 @@ from kalcal.filters.sqrt_form import cholesky_factor, gram, sqrt_update
 from kalcal.filters.steps import covariance_pass, gain_and_covariance, predict, update
 from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.models.registry import build_scenario
-from kalcal.simulate.sampled import sample_accel_gps_errors
+from kalcal.simulation.sampled import sample_accel_gps_errors
 from tests._helpers import assert_close, cov_atol
 from tests.filters._models import blind_model
 

@@ -110,7 +110,7 @@ SCALE_BIAS_FILTER = [
 def test_scale_bias_filter_ignores_every_truth_setting(drift, name):
     """The scale/bias filter's gains depend on the data, so it is run on the same data: same output."""
     from kalcal.filters.scale_bias import filter_scale_bias
-    from kalcal.simulate.scale_bias import sample_scale_bias
+    from kalcal.simulation.scale_bias import sample_scale_bias
 
     assignments = [f"scenario.drift={drift}", "scenario.duration=5", *SCALE_BIAS_FILTER]
     scenario = build_scenario("scale-bias", None, assignments)

@@ -21,7 +21,7 @@ from kalcal.models.linear import LinearGaussianModel
 from kalcal.montecarlo.accumulators import MomentSums
 from kalcal.montecarlo.problem import FixedGainProblem
 from kalcal.montecarlo.scenarios import build_problem
-from kalcal.simulate.exact import truth_from_model
+from kalcal.simulation.exact import truth_from_model
 from tests._helpers import assert_close, bonferroni_k, sums_equal
 
 N = 20_000

@@ -138,7 +138,7 @@ def test_a_realization_carries_its_own_filter_covariance(index):
     """The scale/bias filter's P depends on the data: realization K's P is its own filter run's, not the
     mean over its block (which the report's +-1 sigma bands once showed)."""
     from kalcal.montecarlo.engine import block_generator, block_sizes, realization
-    from kalcal.simulate.scale_bias import sample_scale_bias
+    from kalcal.simulation.scale_bias import sample_scale_bias
 
     scenario = build_scenario("scale-bias", assignments=SHORT)
     problem = ScaleBiasProblem(scenario)

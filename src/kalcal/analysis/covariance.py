@@ -2,7 +2,7 @@
 
 No sampling: the truth and the filter's estimate are jointly Gaussian, and their mean and covariance
 follow a linear recursion (covariance analysis, Gelb ch. 7; Maybeck vol. 1 ch. 6). The truth is that
-of :mod:`kalcal.simulate.exact`, written with explicit covariances (d_t truth states, p measurements,
+of :mod:`kalcal.simulation.exact`, written with explicit covariances (d_t truth states, p measurements,
 K updates)::
 
     y_0 ~ N(x0_mean, M0),   u_0 ~ N(0, s_u)

@@ -19,7 +19,7 @@ from kalcal.models.custom import CustomModelScenario
 from kalcal.models.scale_bias import ScaleBiasScenario
 from kalcal.montecarlo.problem import FixedGainProblem, ProblemInfo
 from kalcal.montecarlo.scenarios import accel_gps_problem, custom_problem
-from kalcal.simulate.exact import UpdateRateTruth
+from kalcal.simulation.exact import UpdateRateTruth
 
 
 @dataclass(frozen=True)

@@ -118,7 +118,7 @@ def accel_gps_process(scenario: AccelGpsScenario) -> list[tuple[str, np.ndarray,
     """The accelerometer/GPS truth's process sources: ``accel`` (the accelerometer's white noise over the
     interval, with the boundary sample the trapezoid rule shares) and, when the bias drifts, ``bias``.
 
-    The same split as :func:`kalcal.simulate.exact.accel_gps_truth`, whose noise factor L has
+    The same split as :func:`kalcal.simulation.exact.accel_gps_truth`, whose noise factor L has
     L L^T = the sum of the two (to rounding).
     """
     s = scenario.scenario

@@ -32,7 +32,7 @@ class VerificationResult:
     checks : list of CheckResult
         Each check: ``name``, ``statistic``, ``pvalue`` (family-wise), ``lower``, ``upper``,
         ``confidence``, ``comparisons``, ``passed``, ``detail``, ``cause`` (``explained_by``,
-        ``direction``) and ``parts`` (:class:`kalcal.verify.results.CheckResult`).
+        ``direction``) and ``parts`` (:class:`kalcal.verification.results.CheckResult`).
     statistics : xarray.Dataset
         The per-update ensemble statistics (``stats.nc``): dimensions ``time`` (s), ``state``,
         ``measurement``; a ``long_name`` on every variable, ``units`` where one unit applies.
@@ -202,13 +202,13 @@ class NoiseResult:
     velocity_random_walk, bias_instability, rate_random_walk, accel_noise_std, bias_walk_std : NoiseParameter
         N (m/s/sqrt(s)), B (m/s^2), K (m/s^2/sqrt(s)) and the per-sample values N sqrt(rate) and
         K sqrt(dt) (m/s^2), each with ``value`` (None where not identified), ``ci_low``, ``ci_high``,
-        ``upper_bound`` and ``note`` (:class:`kalcal.calibrate.noise.NoiseParameter`).
+        ``upper_bound`` and ``note`` (:class:`kalcal.calibration.noise.NoiseParameter`).
     rate : float
         The log's median sample rate (Hz).
     filter : dict
         The ``[filter]`` settings of ``filter.toml`` (accel_noise_std, bias_walk_std where identified).
     kalibr : dict
-        The Kalibr ``imu.yaml`` values (continuous-time densities; see :mod:`kalcal.calibrate.kalibr`).
+        The Kalibr ``imu.yaml`` values (continuous-time densities; see :mod:`kalcal.calibration.kalibr`).
     allan : pandas.DataFrame
         ``allan.csv``: tau [s], adev and its bounds [m/s^2], edf, noise type.
     warnings : list of dict
@@ -231,7 +231,7 @@ class NoiseResult:
     @classmethod
     def from_run(cls, run, paths: dict | None = None) -> NoiseResult:
         """The result of a :class:`kalcal.jobs.noise.NoiseRun`."""
-        from kalcal.calibrate.kalibr import kalibr_values
+        from kalcal.calibration.kalibr import kalibr_values
 
         r = run.identification
         return cls(
@@ -264,8 +264,8 @@ class NoiseResult:
         return save_noise(self.run, out, kalibr=kalibr)["files"]
 
     def kalibr_yaml(self, rostopic: str = "/imu0") -> str:
-        """The Kalibr ``imu.yaml`` text (see :mod:`kalcal.calibrate.kalibr`)."""
-        from kalcal.calibrate.kalibr import kalibr_yaml
+        """The Kalibr ``imu.yaml`` text (see :mod:`kalcal.calibration.kalibr`)."""
+        from kalcal.calibration.kalibr import kalibr_yaml
 
         return kalibr_yaml(self.run.identification, rostopic=rostopic)
 

@@ -7,7 +7,7 @@ steps in :mod:`kalcal.filters.sqrt_form` (:func:`~kalcal.filters.sqrt_form.sqrt_
 covariance pass's gains to the states with products alone, and is tested against :func:`predict` and
 :func:`update` step by step. The compiled kernels are tested against these steps update by update: the
 sequential filter (tests/filters/test_sequential.py), the composition of an interval's pieces
-(tests/calibrate/test_interval_model.py) and the Monte Carlo block kernels
+(tests/calibration/test_interval_model.py) and the Monte Carlo block kernels
 (tests/montecarlo/test_kernel_steps.py; besides, their block sums against the numpy path).
 
 Shapes: a state is ``(..., d)``, a covariance ``(..., d, d)``, a measurement ``(..., p)`` and a

@@ -9,10 +9,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from kalcal.calibrate.accel_gps import calibrate_accel_gps
-from kalcal.calibrate.diagnostics import innovation_diagnostics
-from kalcal.calibrate.plausibility import CalibrationWarning
-from kalcal.calibrate.smoothing import smooth_calibration
+from kalcal.calibration.accel_gps import calibrate_accel_gps
+from kalcal.calibration.diagnostics import innovation_diagnostics
+from kalcal.calibration.plausibility import CalibrationWarning
+from kalcal.calibration.smoothing import smooth_calibration
 from kalcal.io.logs import numeric_columns, parse_column_map, read_table, require_increasing, source_name
 from kalcal.io.outputs import mark_inputs, writes_outputs
 from kalcal.io.results import write_json
@@ -108,7 +108,7 @@ def compute_accel_gps_calibration(
     (``smoothed_position``, ..., ``smoothed_bias_std``) to ``estimates.csv`` and a ``smoothed`` object to
     ``summary.json``.
 
-    Implausible logs are refused (:mod:`kalcal.calibrate.plausibility`); the summary's ``warnings`` is a
+    Implausible logs are refused (:mod:`kalcal.calibration.plausibility`); the summary's ``warnings`` is a
     list of ``{"code", "message"}`` (empty when none), and ``fixes_default_std`` counts the fixes used whose
     ``position_std`` / ``velocity_std`` was NaN and took the filter's setting.
     """

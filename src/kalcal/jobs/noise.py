@@ -10,9 +10,9 @@ from typing import Any
 
 import pandas as pd
 
-from kalcal.calibrate.allan import regular_rate
-from kalcal.calibrate.noise import NoiseIdentification, identify_noise
-from kalcal.calibrate.plausibility import CalibrationWarning, check_limit, check_rate
+from kalcal.calibration.allan import regular_rate
+from kalcal.calibration.noise import NoiseIdentification, identify_noise
+from kalcal.calibration.plausibility import CalibrationWarning, check_limit, check_rate
 from kalcal.errors import DataError
 from kalcal.io.logs import numeric_columns, parse_column_map, read_table, require_increasing, source_name
 from kalcal.io.outputs import final_path, inputs_of, mark_inputs, run_outputs
@@ -97,7 +97,7 @@ class NoiseRun:
 
 def save_noise(run: NoiseRun, out: str | Path, *, kalibr: bool = True) -> dict[str, Any]:
     """Write ``summary.json``, ``allan.csv``, ``allan.png``, ``filter.toml`` and, unless ``kalibr`` is
-    False, the Kalibr ``imu.yaml`` (:mod:`kalcal.calibrate.kalibr`) into ``out`` as one set; returns the
+    False, the Kalibr ``imu.yaml`` (:mod:`kalcal.calibration.kalibr`) into ``out`` as one set; returns the
     summary as written (its ``files`` name where the files are once the set is in place)."""
     with run_outputs(out, "noise", names=output_names(kalibr), protect=inputs_of(run)) as staging:
         return _write_noise(run, staging, kalibr)
@@ -116,7 +116,7 @@ def _write_noise(run: NoiseRun, out: Path, kalibr: bool) -> dict[str, Any]:
     plot_allan(run.identification, paths["plot"], title=run.title)
     paths["filter"].write_text(run.filter_text)
     if kalibr:
-        from kalcal.calibrate.kalibr import kalibr_yaml
+        from kalcal.calibration.kalibr import kalibr_yaml
 
         paths["kalibr"] = out / KALIBR_NAME
         paths["kalibr"].write_text(kalibr_yaml(run.identification))
@@ -141,8 +141,8 @@ def compute_noise(
     :func:`save_noise` writes ``summary.json``, ``allan.csv`` (tau [s], adev and its bounds [m/s^2], edf,
     noise type), ``allan.png`` and ``filter.toml``. The log must be evenly sampled (steps
     within 1% of the median step), at a plausible accelerometer rate, with every sample within the physical
-    limit (:mod:`kalcal.calibrate.plausibility`). Columns are mapped with ``"time=t,accel=ax"``. A log that
-    does not look static (:func:`~kalcal.calibrate.motion.motion_warnings`) is flagged in the summary's
+    limit (:mod:`kalcal.calibration.plausibility`). Columns are mapped with ``"time=t,accel=ax"``. A log that
+    does not look static (:func:`~kalcal.calibration.motion.motion_warnings`) is flagged in the summary's
     ``warnings`` (``{"code", "message"}`` each, empty when none) and at the top of ``filter.toml``; with
     ``strict`` it is refused (DataError) before anything is written.
     """

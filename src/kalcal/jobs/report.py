@@ -35,9 +35,9 @@ from kalcal.montecarlo.accumulators import BlockResult
 from kalcal.montecarlo.engine import realization
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.plots.realization import RealizationData
-from kalcal.report.figures import render_figures
-from kalcal.report.html import build_page, write_page
-from kalcal.report.steady_state import steady_state_view
+from kalcal.reporting.figures import render_figures
+from kalcal.reporting.html import build_page, write_page
+from kalcal.reporting.steady_state import steady_state_view
 
 FIGURE_DIR = "figures"
 PAGE = "report.html"

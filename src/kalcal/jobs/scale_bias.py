@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from kalcal.calibrate.scale_bias import UNOBSERVABLE_RATIO, calibrate_scale_bias
+from kalcal.calibration.scale_bias import UNOBSERVABLE_RATIO, calibrate_scale_bias
 from kalcal.errors import DataError
 from kalcal.io.logs import numeric_columns, read_table, require_increasing, source_name
 from kalcal.io.outputs import mark_inputs, writes_outputs
@@ -18,7 +18,7 @@ from kalcal.jobs.simulate import Simulation, save_simulation
 from kalcal.models.config import section_values
 from kalcal.models.scale_bias import STATE_NAMES, ScaleBiasScenario
 from kalcal.models.scale_bias_theta import scale_bias_from_theta
-from kalcal.simulate.scale_bias import sample_scale_bias
+from kalcal.simulation.scale_bias import sample_scale_bias
 
 
 @writes_outputs("simulate scale-bias", names=SIMULATION_NAMES["simulate scale-bias"])

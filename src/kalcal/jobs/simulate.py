@@ -12,7 +12,7 @@ import pandas as pd
 from kalcal.io.outputs import writes_outputs
 from kalcal.io.results import write_json
 from kalcal.models.accel_gps import AccelGpsScenario
-from kalcal.simulate.sampled import sample_accel_gps_logs
+from kalcal.simulation.sampled import sample_accel_gps_logs
 
 #: the files of a simulation of each scenario
 OUTPUT_NAMES = {

@@ -29,8 +29,8 @@ from kalcal.models.config import apply_settings, section_values
 from kalcal.montecarlo.accumulators import EnsembleStatistics, ensemble_statistics
 from kalcal.montecarlo.engine import BLOCK_SIZE, run_monte_carlo
 from kalcal.montecarlo.scenarios import build_problem
-from kalcal.verify.checks import REPORT_RESIDUAL_PAIR, CheckResult, residual_pair, run_checks, verdict
-from kalcal.verify.dataset import statistics_dataset
+from kalcal.verification.checks import REPORT_RESIDUAL_PAIR, CheckResult, residual_pair, run_checks, verdict
+from kalcal.verification.dataset import statistics_dataset
 
 
 def report_residual_pair(statistics: EnsembleStatistics, info) -> dict[str, Any] | None:

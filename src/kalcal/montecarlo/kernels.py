@@ -60,7 +60,7 @@ def exact_block_moments(
     y0, u0, draws, transitions, noise, boundary_in, model_error, h_truth, measure,
     phis, h, gains, x0, sums, error_map,
 ):
-    """Sample the exact update-rate truth (:mod:`kalcal.simulate.exact`) and filter it, in one pass.
+    """Sample the exact update-rate truth (:mod:`kalcal.simulation.exact`) and filter it, in one pass.
 
     y0 (d, n) truth at sample 0; u0 (c, n) its opening boundary sample; draws (K, r + c + p, n);
     transitions (K, d, d) of the truth over each interval; noise (d, r + c) = [L | b_out]; boundary_in

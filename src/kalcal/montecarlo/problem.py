@@ -20,7 +20,7 @@ from kalcal.linalg import whitener
 from kalcal.models.linear import LinearGaussianModel
 from kalcal.montecarlo import kernels
 from kalcal.montecarlo.accumulators import BlockResult, MomentSums, SumBuffers
-from kalcal.simulate.exact import UpdateRateTruth, sample_exact
+from kalcal.simulation.exact import UpdateRateTruth, sample_exact
 
 #: the kernel's error map for a truth over the filter's own states (no map: e = x - xhat, no product)
 _EMPTY_MAP = np.empty((0, 0))

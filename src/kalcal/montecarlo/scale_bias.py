@@ -24,7 +24,7 @@ from kalcal.models.scale_bias import MEASUREMENT_NAMES, STATE_NAMES, ScaleBiasSc
 from kalcal.montecarlo.accumulators import BlockResult, MomentSums, SumBuffers
 from kalcal.montecarlo.problem import ProblemInfo, check_engine
 from kalcal.montecarlo.regression_kernels import regression_block_moments
-from kalcal.simulate.scale_bias import normals_per_realization, sample_scale_bias
+from kalcal.simulation.scale_bias import normals_per_realization, sample_scale_bias
 
 
 def problem_info(scenario: ScaleBiasScenario) -> ProblemInfo:

@@ -14,13 +14,13 @@ from kalcal.models.linear import LinearGaussianModel
 from kalcal.models.scale_bias import ScaleBiasScenario
 from kalcal.montecarlo.problem import FixedGainProblem, Problem, ProblemInfo
 from kalcal.montecarlo.scale_bias import ScaleBiasProblem, model_error_cause
-from kalcal.simulate.exact import accel_gps_transitions, accel_gps_truth, truth_from_model
-from kalcal.simulate.sampled import sample_accel_gps_errors
+from kalcal.simulation.exact import accel_gps_transitions, accel_gps_truth, truth_from_model
+from kalcal.simulation.sampled import sample_accel_gps_errors
 
 
 def sampled_normals_per_realization(scenario: AccelGpsScenario) -> int:
     """Normals the per-sample engine draws: p0, v0, b, sample 0 (and s); per interval m samples and 2 fix
-    noises (and m bias-noise draws when the bias drifts). See :mod:`kalcal.simulate.sampled`."""
+    noises (and m bias-noise draws when the bias drifts). See :mod:`kalcal.simulation.sampled`."""
     s = scenario.scenario
     m = s.steps_per_update
     drifts = scenario.truth.bias_step_variance(s.sample_period) > 0

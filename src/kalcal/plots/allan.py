@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from kalcal.calibrate.noise import BIAS_INSTABILITY_FACTOR, NoiseIdentification
+from kalcal.calibration.noise import BIAS_INSTABILITY_FACTOR, NoiseIdentification
 from kalcal.plots._common import height_px, label, new_figure, percent, save, shade_band, styled
 
 #: colours of the three read-off lines

@@ -1,7 +1,7 @@
 """Figures of the ensemble statistics in ``stats.nc``: mean error, covariance and orthogonality against
 time, each with the band a correct filter stays in (source report, figures 5.7-5.12).
 
-Every band is the one the matching check in :mod:`kalcal.verify.checks` holds the statistic to: the
+Every band is the one the matching check in :mod:`kalcal.verification.checks` holds the statistic to: the
 standard error of the statistic times the Bonferroni-corrected normal quantile for the family of all
 updates and elements, at the run's confidence (``dataset.attrs["confidence"]``). N realizations, K
 updates, d states.
@@ -28,7 +28,7 @@ from kalcal.plots._common import (
     unit_product,
     unit_square,
 )
-from kalcal.verify.bounds import covariance_element_bound, normal_bound
+from kalcal.verification.bounds import covariance_element_bound, normal_bound
 
 
 def _names(dataset: xr.Dataset) -> tuple[list[str], list[str]]:

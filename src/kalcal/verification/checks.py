@@ -1,0 +1,253 @@
+"""Statistical checks of a filter against its Monte Carlo ensemble, each with computed bounds and a p-value.
+
+Every check tests one property the theory promises for a correct filter, over all update times (and all
+elements) at once: the family of comparisons is held to alpha = 1 - confidence by a Bonferroni
+correction (alpha / m for m comparisons), so a correct filter fails a check with probability at most
+alpha. The covariance and residual whiteness checks are each made of two tests, each at alpha / 2.
+N realizations, K updates, d states, p measurements.
+
+==================== ===================================================== =====================================
+check                statistic                                             bound
+==================== ===================================================== =====================================
+mean_error           max |mean(e) / se|, se = sqrt(ensemble var / N)       normal quantile, m = K d
+covariance           max |ensemble cov - P| / sd, sd^2 = (P_il^2 +          at alpha / 2: normal quantile,
+                     P_ii P_ll) / N; and mean centered NEES                 m = K d (d + 1) / 2; and at alpha / 2:
+                                                                           chi-square(d (N - 1)) / (N - 1), m = K
+orthogonality        max |mean(e x^T)| / sqrt(E[e^2] E[x^2] / N)            normal quantile, m = K d^2
+residual_whiteness   max over j < k of |mean(r_k r_j^T)| /                  at alpha / 2: normal quantile,
+                     sqrt(E[r_k^2] E[r_j^2] / N); and the portmanteau      m = p^2 K (K - 1) / 2; and at alpha / 2:
+                     N sum_{j<k} ||S_k^-1/2 mean(r_k r_j^T) S_j^-T/2||^2  chi-square(p^2 K (K - 1) / 2), m = 1
+nis                  mean NIS at the update farthest from p                 chi-square(N p) / N, m = K
+==================== ===================================================== =====================================
+
+Each result carries its family-wise p-value (:mod:`kalcal.verification.results`; the bounds: :mod:`kalcal.verification.bounds`), with
+``passed == (pvalue >= 1 - confidence)``, and the cause of a failure as data (:class:`Cause`).
+
+A comparison whose standard error is zero (no spread over the ensemble) passes when its value is
+exactly zero and fails otherwise (its z is infinite: no spread cannot hide a nonzero mean); the detail
+counts both kinds.
+
+The residual whiteness check (:mod:`kalcal.verification.whiteness`) whitens each update's innovations with
+their ensemble second moment S_k. The covariance check (:mod:`kalcal.verification.covariance`) compares the *centered* ensemble covariance, so that a mean error is reported once,
+by ``mean_error``; orthogonality, whiteness and NIS use raw moments, as the source report does, and
+when they fail their cause says whether the mean error accounts for it (the centered statistic passes).
+
+The verdict is over the five checks: a correct filter passes every one with probability at least
+1 - 5 alpha (Bonferroni over the checks; :func:`verdict_false_alarm_bound`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from kalcal.montecarlo.accumulators import EnsembleStatistics
+from kalcal.montecarlo.problem import ProblemInfo
+from kalcal.verification.bounds import chi2_mean_bounds, normal_bound
+from kalcal.verification.check_steps import (
+    centered_cause,
+    check_result,
+    failed_cause,
+    max_abs,
+    safe_ratio,
+    sd_text,
+    standardized,
+    where_text,
+    zero_se_text,
+)
+from kalcal.verification.covariance import check_covariance
+from kalcal.verification.whiteness import check_residual_whiteness
+from kalcal.verification.results import (
+    Cause,
+    CheckPart,
+    CheckResult,
+    chi2_two_sided_pvalues,
+    family_pvalue,
+    normal_family_pvalue,
+)
+
+__all__ = [
+    "DEFAULT_CONFIDENCE",
+    "REPORT_RESIDUAL_PAIR",
+    "Cause",
+    "CheckPart",
+    "CheckResult",
+    "check_mean_error",
+    "check_nis",
+    "check_orthogonality",
+    "residual_pair",
+    "run_checks",
+    "verdict",
+]
+
+DEFAULT_CONFIDENCE = 0.99
+#: where the source report quotes E[r_k r_j^T]
+REPORT_RESIDUAL_PAIR = (23.8, 5.8)
+
+
+def check_mean_error(
+    s: EnsembleStatistics,
+    info: ProblemInfo,
+    confidence: float,
+    expected: np.ndarray | None = None,
+    cause: str = "",
+) -> CheckResult:
+    """E[e_k] = 0 for every update and state.
+
+    When it fails and ``expected`` (K, d) is the mean error the filter's model predicts against the truth,
+    the failure is ``explained_by="model_error"`` if removing it leaves every deviation inside the bound.
+    ``cause`` names what makes the truth depart from the filter's model, for the detail.
+    """
+    alpha = 1.0 - confidence
+    n_updates, d = s.mean_error.shape
+    m = n_updates * d
+    bound = normal_bound(confidence, m)
+    se = np.sqrt(np.maximum(np.diagonal(s.error_cov, axis1=1, axis2=2), 0.0) / s.count)
+    z, zero_pass, zero_fail = standardized(s.mean_error, se)
+    worst, (k, i) = max_abs(z)
+    pvalue = normal_family_pvalue(worst, m)
+    passed = pvalue >= alpha
+    sigma = np.sqrt(np.diagonal(s.filter_cov, axis1=1, axis2=2))
+    big, (kb, ib) = max_abs(safe_ratio(s.mean_error, sigma))
+    detail = (
+        f"largest |mean error| {sd_text(worst)} standard errors ({where_text(info, k, info.state_names[i])}"
+        + (f": mean error {s.mean_error[k, i]:.6g} with zero standard error" if np.isinf(worst) else "")
+        + f"); largest in filter sigma {big:.2f} sigma ({where_text(info, kb, info.state_names[ib])})"
+        + zero_se_text(zero_pass, zero_fail, "mean error")
+    )
+    diagnosis = Cause()
+    if not passed and expected is not None and np.any(expected != 0):
+        predicted, (kp, ip) = max_abs(safe_ratio(expected, sigma))
+        rest_z, _, _ = standardized(s.mean_error - expected, se)
+        rest, _ = max_abs(rest_z)
+        if normal_family_pvalue(rest, m) >= alpha:
+            diagnosis = failed_cause(
+                f"Explained by the predicted systematic error: {cause or 'the truth departs from the filter model'} "
+                f"predicts a mean error of up to {predicted:.2f} sigma ({where_text(info, kp, info.state_names[ip])}); "
+                f"after removing it the largest deviation is {rest:.2f} standard errors, within {bound:.2f}",
+                explained_by="model_error",
+            )
+        else:
+            diagnosis = failed_cause(
+                f"The predicted systematic error ({cause or 'truth against filter model'}) reaches "
+                f"{predicted:.2f} sigma but does not explain all of it ({sd_text(rest)} standard errors remain)"
+            )
+    elif not passed:
+        diagnosis = failed_cause("The filter model predicts no mean error: its model or prior mean differs from the truth")
+    return check_result("mean_error", worst, pvalue, None, bound, confidence, m, passed, detail, diagnosis)
+
+
+def check_orthogonality(s: EnsembleStatistics, info: ProblemInfo, confidence: float) -> CheckResult:
+    """E[e_k xhat_k^T] = 0: the error is orthogonal to the estimate."""
+    alpha = 1.0 - confidence
+    n_updates, d, _ = s.error_estimate.shape
+    m = n_updates * d * d
+    bound = normal_bound(confidence, m)
+    e2 = np.diagonal(s.error_second_moment, axis1=1, axis2=2)
+    x2 = np.diagonal(s.estimate_second_moment, axis1=1, axis2=2)
+    z, zero_pass, zero_fail = standardized(s.error_estimate, np.sqrt(e2[:, :, None] * x2[:, None, :] / s.count))
+    worst, (k, i, l) = max_abs(z)
+    pvalue = normal_family_pvalue(worst, m)
+    passed = pvalue >= alpha
+    detail = (
+        f"largest |E[e xhat^T]| {sd_text(worst)} standard errors (e_{info.state_names[i]} x "
+        f"xhat_{info.state_names[l]} at t = {info.update_times[k]:g} s)" + zero_se_text(zero_pass, zero_fail, "moment")
+    )
+    diagnosis = Cause()
+    if not passed:
+        centered = s.error_estimate - s.mean_error[:, :, None] * s.mean_estimate[:, None, :]
+        var_e = np.maximum(np.diagonal(s.error_cov, axis1=1, axis2=2), 0.0)
+        var_x = np.maximum(x2 - s.mean_estimate**2, 0.0)
+        rest_z, _, _ = standardized(centered, np.sqrt(var_e[:, :, None] * var_x[:, None, :] / s.count))
+        diagnosis = centered_cause(
+            rest_z,
+            m,
+            alpha,
+            "the means",
+            "the mean error accounts for it (see mean_error)",
+            "error and estimate are correlated: the gains are not optimal for the truth",
+        )
+    return check_result("orthogonality", worst, pvalue, None, bound, confidence, m, passed, detail, diagnosis)
+
+
+def residual_pair(s: EnsembleStatistics, info: ProblemInfo, t_k: float, t_j: float) -> dict:
+    """E[r_k r_j^T] at the updates nearest to t_k and t_j (the report quotes k = 23.8 s, j = 5.8 s)."""
+    times = info.update_times
+    k = int(np.argmin(np.abs(times - t_k)))
+    j = int(np.argmin(np.abs(times - t_j)))
+    moment = s.residual_second_moment
+    scale = np.sqrt(np.outer(np.diagonal(moment[k, :, k, :]), np.diagonal(moment[j, :, j, :])))
+    return {
+        "k_time": float(times[k]),
+        "j_time": float(times[j]),
+        "matrix": moment[k, :, j, :],
+        "correlation": safe_ratio(moment[k, :, j, :], scale),
+        "standard_error": scale / np.sqrt(s.count),
+    }
+
+
+def check_nis(s: EnsembleStatistics, info: ProblemInfo, confidence: float) -> CheckResult:
+    """Mean NIS at each update within its chi-square(N p) / N bounds.
+
+    The statistic is the mean NIS at the update with the smallest two-sided p-value. A failure is
+    ``explained_by="mean_error"`` when the mean NIS centered on the mean normalized innovations lies
+    within the bounds; otherwise its direction is ``"overconfident"`` (innovations larger than the
+    filter's S) or ``"underconfident"``.
+    """
+    alpha = 1.0 - confidence
+    n_updates, p = s.mean_residual.shape
+    low, high = chi2_mean_bounds(confidence, n_updates, p * s.count, s.count)
+    per_update = chi2_two_sided_pvalues(s.mean_nis, p * s.count, s.count)
+    k = int(np.nanargmin(per_update)) if not np.all(np.isnan(per_update)) else 0
+    worst = float(s.mean_nis[k])
+    pvalue = family_pvalue(per_update)
+    passed = pvalue >= alpha
+    detail = (
+        f"mean NIS from {s.mean_nis.min():.4f} to {s.mean_nis.max():.4f} (expected {p}); farthest at "
+        f"t = {info.update_times[k]:g} s"
+    )
+    diagnosis = Cause()
+    if not passed:
+        centered = None
+        if s.mean_normalized_residual is not None:
+            # E|nu - E nu|^2 = E|nu|^2 - |E nu|^2 for the normalized innovations nu = L^{-1} r
+            centered = s.mean_nis - np.sum(s.mean_normalized_residual**2, axis=1)
+        if centered is not None and np.all((centered >= low) & (centered <= high)):
+            diagnosis = failed_cause(
+                f"Centered on the mean innovations the mean NIS lies within the bounds "
+                f"({centered.min():.4f} to {centered.max():.4f}): the nonzero mean residuals account for it "
+                "(see mean_error)",
+                explained_by="mean_error",
+            )
+        elif worst > p:
+            diagnosis = failed_cause(
+                "Innovations larger than the filter's S: the noise settings are too small", direction="overconfident"
+            )
+        else:
+            diagnosis = failed_cause(
+                "Innovations smaller than the filter's S: the noise settings are too large", direction="underconfident"
+            )
+    return check_result("nis", worst, pvalue, low, high, confidence, n_updates, passed, detail, diagnosis)
+
+
+def run_checks(
+    s: EnsembleStatistics,
+    info: ProblemInfo,
+    confidence: float = DEFAULT_CONFIDENCE,
+    expected_mean_error: np.ndarray | None = None,
+    model_error_cause: str = "",
+) -> list[CheckResult]:
+    """Every check, in a fixed order."""
+    if not 0.0 < confidence < 1.0:
+        raise ValueError(f"confidence must lie in (0, 1), got {confidence!r}")
+    return [
+        check_mean_error(s, info, confidence, expected_mean_error, model_error_cause),
+        check_covariance(s, info, confidence),
+        check_orthogonality(s, info, confidence),
+        check_residual_whiteness(s, info, confidence),
+        check_nis(s, info, confidence),
+    ]
+
+
+def verdict(checks: list[CheckResult]) -> str:
+    """``"pass"`` when every check passed, else ``"fail"``."""
+    return "pass" if all(c.passed for c in checks) else "fail"

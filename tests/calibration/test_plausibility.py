@@ -1,0 +1,384 @@
+"""Implausible logs are refused or flagged, never calibrated in silence; genuine logs pass untouched.
+
+Each corrupt log is a genuine simulated one with one thing a new user gets wrong: times in ms, a velocity
+in km/h, one sample of 1e300, a NaN per-fix std, a moving log for noise identification, a constant
+sensor for scale-bias. Genuine logs (default, noisy, 100 Hz IMU, 20 Hz GNSS; several seeds) must raise
+nothing and warn of nothing.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+from kalcal.calibration import plausibility
+from kalcal.calibration.accel_gps import calibrate_accel_gps
+from kalcal.calibration.diagnostics import innovation_diagnostics
+from kalcal.calibration.noise import identify_noise
+from kalcal.calibration.scale_bias import UNOBSERVABLE_RATIO, calibrate_scale_bias
+from kalcal.errors import DataError
+from kalcal.jobs.calibrate import stated_rates
+from kalcal.models.registry import build_scenario
+from kalcal.simulation.sampled import sample_accel_gps_logs
+from kalcal.simulation.scale_bias import sample_scale_bias
+
+GENUINE = {
+    "default": [],
+    "noisy": ["truth.gps_position_std=5", "truth.gps_velocity_std=0.5", "truth.accel_noise_std=0.2"],
+    "gnss-20hz": ["scenario.gps_rate=20"],
+    "imu-100hz": ["scenario.imu_rate=100"],
+    "fast-motion-1hz-gnss": ["truth.accel_frequency=1", "scenario.gps_rate=1", "truth.gps_position_std=0.1"],
+}
+
+
+def _scenario(*assignments):
+    return build_scenario("accel-gps", assignments=["scenario.integration=trapezoid", *assignments])
+
+
+def _logs(scenario, seed=3):
+    logs = sample_accel_gps_logs(scenario, np.random.default_rng(seed), 1)
+    return logs.sample_time, logs.accel[0].copy(), logs.fix_time, logs.gps_position[0].copy(), logs.gps_velocity[0].copy()
+
+
+def _calibrate(scenario, imu_time, accel, fix_time, position, velocity, **kwargs):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no raw library warning, whatever the log
+        return calibrate_accel_gps(
+            scenario, imu_time, accel, fix_time, position, velocity, source="gps.csv", imu_source="imu.csv",
+            init="first-fix", **kwargs,
+        )
+
+
+@pytest.mark.parametrize("name", list(GENUINE))
+def test_genuine_logs_raise_and_warn_of_nothing(name):
+    scenario = _scenario(*GENUINE[name])
+    for seed in range(3):
+        result = _calibrate(scenario, *_logs(scenario, seed), **stated_rates(scenario))
+        assert result.warnings == [], f"{name}, seed {seed}: {result.warnings}"
+
+
+@pytest.mark.parametrize("name", ["gnss-20hz", "imu-100hz"])
+def test_other_rates_are_welcome_without_being_stated(name):
+    """A 20 Hz GNSS or 100 Hz IMU log calibrated with the default scenario (rates not set)."""
+    logs = _logs(_scenario(*GENUINE[name]))
+    assert stated_rates(_scenario()) == {}
+    assert _calibrate(_scenario(), *logs, **stated_rates(_scenario())).warnings == []
+
+
+@pytest.mark.parametrize("name", list(GENUINE))
+def test_velocity_check_statistic_of_genuine_logs_is_near_its_expectation(name):
+    """The median |z| of consistent fixes is about 0.67 (that of a standard normal), far below the
+    threshold of 5: eight seeds per setting, none above 1.2."""
+    scenario = _scenario(*GENUINE[name])
+    for seed in range(8):
+        _, _, time, position, velocity = _logs(scenario, seed)
+        ones = np.ones(time.size)
+        original = plausibility.VELOCITY_Z
+        try:
+            plausibility.VELOCITY_Z = 0.0  # report the statistic whatever its value
+            warning = plausibility.velocity_consistency(
+                time, position, velocity, scenario.truth.gps_position_std * ones, scenario.truth.gps_velocity_std * ones, "g"
+            )
+        finally:
+            plausibility.VELOCITY_Z = original
+        z = float(warning.message.split("median |difference| ")[1].split(" ")[0])
+        assert 0.3 < z < 1.2, f"{name}, seed {seed}: median |z| = {z}"
+
+
+@pytest.mark.parametrize(("factor", "unit", "rate"), [(1e3, "milliseconds", "0.2 Hz"), (1e6, "microseconds", "0.0002 Hz")])
+def test_times_not_in_seconds_are_refused_naming_the_rate_and_the_unit(factor, unit, rate):
+    scenario = _scenario()
+    imu_time, accel, fix_time, position, velocity = _logs(scenario)
+    with pytest.raises(DataError, match=rf"imu.csv: column 'time': accelerometer sample rate {rate} .*implausible.*{unit}\?"):
+        _calibrate(scenario, imu_time * factor, accel, fix_time * factor, position, velocity)
+
+
+def test_gnss_times_in_milliseconds_are_refused():
+    scenario = _scenario()
+    imu_time, accel, fix_time, position, velocity = _logs(scenario)
+    with pytest.raises(DataError, match=r"gps.csv: column 'time': GPS fix rate 0.005 Hz .*milliseconds\?"):
+        _calibrate(scenario, imu_time, accel, fix_time * 1000, position, velocity)
+
+
+@pytest.mark.parametrize(("sensor", "low", "high"), [("accelerometer", 1.0, 1e5), ("gnss", 0.01, 100.0)])
+def test_both_bounds_of_each_rate_range_are_plausible(sensor, low, high):
+    """A log at a bound, its times k / rate rounded in floating point, passes; 1% beyond a bound is refused
+    with no unit hint (no unit slip moves a rate by 1%)."""
+    k = np.arange(1, 201)
+    for bound in (low, high):
+        assert plausibility.check_rate(k / bound, sensor, "log.csv") == pytest.approx(bound, rel=1e-9)
+    for rate in (low / 1.01, high * 1.01):
+        with pytest.raises(DataError, match="implausible") as raised:
+            plausibility.check_rate(k / rate, sensor, "log.csv")
+        assert "are the times in" not in str(raised.value), str(raised.value)
+        assert f"(median step {1 / rate:.6g} s)" in str(raised.value)
+
+
+@pytest.mark.parametrize(
+    ("sensor", "rate", "hint"),
+    [
+        ("accelerometer", 1 / 1.4, None),
+        ("accelerometer", 1 / 1.6, "milliseconds"),
+        ("accelerometer", 1e5 * 1.4, None),
+        ("accelerometer", 1e5 * 1.6, "hours"),
+        ("GPS", 0.01 / 1.4, None),
+        ("GPS", 0.01 / 1.6, "milliseconds"),
+        ("GPS", 100 * 1.4, None),
+        ("GPS", 100 * 1.6, "minutes"),
+    ],
+)
+def test_a_unit_is_named_only_beyond_the_hint_factor(sensor, rate, hint):
+    """A rate at most HINT_BEYOND (1.5) times beyond its range is refused without a unit; past it, the unit
+    that brings it well inside is named (both ends of both sensors' ranges)."""
+    with pytest.raises(DataError, match="implausible") as raised:
+        plausibility.check_rate(np.arange(1, 201) / rate, sensor, "log.csv")
+    message = str(raised.value)
+    if hint is None:
+        assert "are the times in" not in message, message
+    else:
+        assert message.endswith(f": are the times in {hint}?"), message
+
+
+def test_a_100_hz_gnss_log_calibrates():
+    scenario = _scenario("scenario.gps_rate=100", "scenario.duration=10")
+    logs = _logs(scenario)
+    assert plausibility.median_rate(logs[2]) != 100.0  # the rounding of k / 100 the bound must allow for
+    assert _calibrate(scenario, *logs, **stated_rates(scenario)).warnings == []
+
+
+def test_times_in_milliseconds_in_both_logs_of_a_fast_imu_are_refused():
+    """A 1 kHz accelerometer and 10 Hz fixes with all times in ms read 1 Hz and 0.01 Hz, both in range and
+    in order; the velocity fixes then look 1000 times faster than the positions move."""
+    scenario = _scenario("scenario.imu_rate=1000", "scenario.gps_rate=10", "scenario.duration=20")
+    imu_time, accel, fix_time, position, velocity = _logs(scenario)
+    with pytest.raises(DataError, match=r"gps.csv: column 'time': .*= 0.001\): are the times of both logs in milliseconds"):
+        _calibrate(scenario, imu_time * 1e3, accel, fix_time * 1e3, position, velocity)
+    with pytest.raises(DataError, match=r"are the times of both logs in minutes"):
+        plausibility.velocity_consistency(
+            fix_time / 60, position, velocity, np.ones(fix_time.size), np.full(fix_time.size, 0.04), "gps.csv"
+        )
+
+
+def test_velocity_twice_too_large_is_a_warning_not_knots():
+    scenario = _scenario()
+    imu_time, accel, fix_time, position, velocity = _logs(scenario)
+    result = _calibrate(scenario, imu_time, accel, fix_time, position, velocity * 2)
+    assert [w.code for w in result.warnings] == ["velocity-position-mismatch"]
+    with pytest.raises(DataError, match=r"in knots instead of m/s"):
+        _calibrate(scenario, imu_time, accel, fix_time, position, velocity * 3600 / 1852)
+
+
+def test_accelerometer_slower_than_the_fixes_is_refused():
+    """A 1 kHz accelerometer with times in ms (and fixes with times in s) reads 1 Hz, inside its own range
+    but below the 5 Hz fixes (times in ms in both logs: the velocity check,
+    test_times_in_milliseconds_in_both_logs_of_a_fast_imu_are_refused)."""
+    scenario = _scenario()
+    imu_time, accel, fix_time, position, velocity = _logs(scenario)
+    with pytest.raises(DataError, match=r"accelerometer sample rate 0.2 Hz is below the GPS fix rate 5 Hz"):
+        plausibility.check_imu_faster(0.2, 5.0, "imu.csv")
+    slow = imu_time[::200] * 1.0  # 1 Hz samples, rows of a 200 Hz log
+    with pytest.raises(DataError, match=r"accelerometer sample rate 1 Hz is below the GPS fix rate 5 Hz"):
+        _calibrate(scenario, slow, accel[::200], fix_time, position, velocity)
+
+
+def test_a_rate_the_user_set_holds_the_log_to_it():
+    scenario = _scenario("scenario.imu_rate=50", "scenario.gps_rate=5")
+    assert stated_rates(scenario) == {"imu_rate": 50.0}  # gps_rate at its default is not a statement
+    logs = _logs(_scenario())  # 200 Hz
+    with pytest.raises(DataError, match=r"accelerometer sample rate 200 Hz differs from scenario.imu_rate = 50 Hz"):
+        _calibrate(scenario, *logs, **stated_rates(scenario))
+    assert _calibrate(_scenario(), *logs, imu_rate=150.0).warnings == []  # within a factor 2
+
+
+def test_velocity_in_kmh_is_refused_naming_the_unit():
+    scenario = _scenario()
+    imu_time, accel, fix_time, position, velocity = _logs(scenario)
+    with pytest.raises(DataError, match=r"gps.csv: column 'velocity': .*= 0.2778\): is the velocity in km/h instead of m/s\?"):
+        _calibrate(scenario, imu_time, accel, fix_time, position, velocity * 3.6)
+    with pytest.raises(DataError, match=r"3.6 times too small \(converted from km/h to m/s twice\?\)"):
+        _calibrate(scenario, imu_time, accel, fix_time, position, velocity / 3.6)
+    with pytest.raises(DataError, match=r"in mph instead of m/s"):
+        _calibrate(scenario, imu_time, accel, fix_time, position, velocity / 0.44704)
+
+
+def test_velocity_far_from_the_positions_of_no_known_unit_is_a_warning():
+    scenario = _scenario()
+    imu_time, accel, fix_time, position, velocity = _logs(scenario)
+    result = _calibrate(scenario, imu_time, accel, fix_time, position, velocity + 60.0)
+    assert [w.code for w in result.warnings] == ["velocity-position-mismatch"]
+    assert "columns 'position' and 'velocity'" in result.warnings[0].message
+
+
+@pytest.mark.parametrize(
+    ("log", "index", "value", "match"),
+    [
+        ("accel", 1000, 1e300, r"imu.csv: row 1001, column 'accel': 1e\+300 m/s\^2 is beyond the physical limit of 10000"),
+        ("accel", 5, -2e4, r"imu.csv: row 6, column 'accel': -20000 m/s\^2"),
+        ("position", 7, 1e300, r"gps.csv: row 8, column 'position': 1e\+300 m is beyond"),
+        ("velocity", 9, 1e300, r"gps.csv: row 10, column 'velocity': 1e\+300 m/s is beyond"),
+    ],
+)
+def test_values_beyond_the_physical_limit_are_refused_naming_the_row(log, index, value, match):
+    scenario = _scenario()
+    imu_time, accel, fix_time, position, velocity = _logs(scenario)
+    {"accel": accel, "position": position, "velocity": velocity}[log][index] = value
+    with pytest.raises(DataError, match=match):
+        _calibrate(scenario, imu_time, accel, fix_time, position, velocity)
+
+
+def test_accelerometer_time_beyond_the_limit_is_refused():
+    scenario = _scenario()
+    imu_time, accel, fix_time, position, velocity = _logs(scenario)
+    imu_time = imu_time.copy()
+    imu_time[-1] = 1e300
+    with pytest.raises(DataError, match=r"imu.csv: row 6001, column 'time': 1e\+300 s is beyond"):
+        _calibrate(scenario, imu_time, accel, fix_time, position, velocity)
+
+
+def test_nan_per_fix_std_is_counted_and_flagged():
+    scenario = _scenario()
+    imu_time, accel, fix_time, position, velocity = _logs(scenario)
+    position_std = np.full(fix_time.size, 1.0)
+    velocity_std = np.full(fix_time.size, 0.04)
+    position_std[[4, 9, 20]] = np.nan
+    velocity_std[30] = np.nan
+    result = _calibrate(
+        scenario, imu_time, accel, fix_time, position, velocity, position_std=position_std, velocity_std=velocity_std
+    )
+    assert result.default_std == {"position_std": 3, "velocity_std": 1}
+    assert [w.code for w in result.warnings] == ["default-fix-std", "default-fix-std"]
+    assert "column 'position_std': 3 fix(es) used have no value (NaN) and took the filter's setting 1" in result.warnings[0].message
+    clean = _calibrate(
+        scenario, imu_time, accel, fix_time, position, velocity,
+        position_std=np.full(fix_time.size, 1.0), velocity_std=np.full(fix_time.size, 0.04),
+    )
+    assert clean.default_std == {"position_std": 0, "velocity_std": 0} and clean.warnings == []
+
+
+def test_diagnostics_of_degenerate_innovations_emit_no_library_warning():
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        result = innovation_diagnostics(np.zeros((40, 2)))
+    assert not result.consistent  # a zero NIS is far below its bounds
+
+
+# --- noise identification: a log that is not static ---------------------------------------------------
+
+
+def _static(seed, n=200 * 1200, rate=200.0, walk=0.0, flicker=0.0):
+    rng = np.random.default_rng(seed)
+    accel = 9.81 + 0.02 * rng.standard_normal(n)
+    if walk:
+        accel += np.cumsum(walk / np.sqrt(rate) * rng.standard_normal(n))
+    if flicker:
+        frequency = np.fft.rfftfreq(n, 1.0 / rate)
+        shape = np.sqrt(np.divide(flicker * rate / 2.0, frequency, out=np.zeros_like(frequency), where=frequency > 0))
+        accel += np.fft.irfft(np.fft.rfft(rng.standard_normal(n)) * shape, n)
+    return accel
+
+
+@pytest.mark.parametrize("kind", ["white", "walk", "flicker"])
+def test_static_logs_are_not_flagged(kind):
+    for seed in range(4):
+        accel = _static(seed, walk=2e-3 if kind == "walk" else 0.0, flicker=1e-6 if kind == "flicker" else 0.0)
+        assert identify_noise(accel, 200.0).warnings == (), f"{kind}, seed {seed}"
+
+
+def test_moving_log_is_flagged():
+    """The accel-gps scenario's own accelerometer log (a = 10 sin(0.1 t)): the curve rises at about +1."""
+    scenario = _scenario()
+    _, accel, *_ = _logs(scenario)
+    result = identify_noise(accel, 200.0)
+    assert {w.code for w in result.warnings} == {"not-static"}
+    message = result.warnings[0].message
+    assert "rises with slope" in message and "faster than any noise" in message
+
+
+def test_trend_and_step_are_flagged():
+    n = 200 * 1200
+    for seed in range(3):
+        trend = _static(7 + seed) + 3e-5 * np.arange(n) / 200.0  # 3e-5 m/s^2 per s: 0.036 m/s^2 over the log
+        messages = [w.message for w in identify_noise(trend, 200.0).warnings]
+        assert any("drifts steadily by 3" in m for m in messages), messages
+    step = _static(8)
+    step[n // 2 :] += 0.01  # the sensor tilted by 1 mrad
+    messages = [w.message for w in identify_noise(step, 200.0).warnings]
+    (message,) = [m for m in messages if "steps by" in m]
+    # the jump of two block means of 3750 samples each: 0.01 plus noise of std 0.02 sqrt(2 / 3750) = 4.6e-4
+    assert abs(float(message.split("steps by ")[1].split(" ")[0]) - 0.01) < 5 * 4.6e-4
+    assert "and 120001-123750" in message and "moved or tilted" in message
+
+
+def test_noise_refuses_a_sample_beyond_the_limit():
+    accel = _static(1, n=4096)
+    accel[100] = 1e300
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(DataError, match=r"row 101: 1e\+300 m/s\^2 is beyond the physical limit"):
+            identify_noise(accel, 200.0)
+
+
+# --- scale-bias: a parameter the log does not excite ---------------------------------------------------
+
+
+def test_constant_sensor_is_reported_unobservable():
+    scenario = build_scenario("scale-bias")
+    samples = sample_scale_bias(scenario, np.random.default_rng(3), 1)
+    time, reference, sensor = samples.time, samples.reference[0], samples.sensor[0]
+    excited = calibrate_scale_bias(scenario, time, reference, sensor)
+    assert excited.unobservable() == [] and excited.warnings() == []
+    assert np.all(excited.std_ratio < 0.5)
+    np.testing.assert_allclose(excited.std_ratio, [0.36, 0.11], atol=0.01)  # the values docs/scale-bias.md quotes
+    constant = calibrate_scale_bias(scenario, time, reference, np.full(sensor.size, 1.0), source="d.csv")
+    assert "theta1" in constant.unobservable()
+    assert constant.std_ratio[0] > UNOBSERVABLE_RATIO  # theta1 keeps the prior's sigma: nothing was learned about it
+    # the reference varies and the sensor does not: its innovations are far beyond the noise as well
+    assert [w.code for w in constant.warnings("d.csv")] == ["unobservable", "noise-inconsistent"]
+    assert constant.mean_nis > constant.nis_bounds()[1]
+    warning = constant.warnings("d.csv")[0]
+    assert warning.code == "unobservable" and "theta1" in warning.message and "(no excitation)" in warning.message
+
+
+@pytest.mark.parametrize(
+    "assignments",
+    [["scenario.duration=10"], ["scenario.duration=5"], ["truth.reference_noise_std=0.5"], ["truth.signal_amplitude=0.5"]],
+)
+def test_genuine_short_or_noisy_scale_bias_logs_warn_of_nothing(assignments):
+    """Excited logs that learned less than the default one (theta1's ratio 0.56 .. 0.75) are not unobservable."""
+    scenario = build_scenario("scale-bias", assignments=assignments)
+    for seed in range(3, 6):
+        samples = sample_scale_bias(scenario, np.random.default_rng(seed), 1)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            result = calibrate_scale_bias(scenario, samples.time, samples.reference[0], samples.sensor[0])
+        assert 0.5 < result.std_ratio[0] < UNOBSERVABLE_RATIO, result.std_ratio
+        assert result.unobservable() == [] and result.warnings() == [] and result.consistent, (seed, result.mean_nis)
+
+
+@pytest.mark.parametrize("column", ["reference", "sensor"])
+def test_scale_bias_cell_beyond_the_limit_is_refused_naming_the_row(column):
+    scenario = build_scenario("scale-bias")
+    samples = sample_scale_bias(scenario, np.random.default_rng(3), 1)
+    signals = {"reference": samples.reference[0].copy(), "sensor": samples.sensor[0].copy()}
+    signals[column][41] = 1e300
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(DataError, match=rf"d.csv: row 42, column '{column}': 1e\+300 m/s\^2 is beyond the physical limit of 1e\+12"):
+            calibrate_scale_bias(scenario, samples.time, signals["reference"], signals["sensor"], source="d.csv")
+    signals[column][41] = -0.99e12  # within the limit: runs
+    calibrate_scale_bias(scenario, samples.time, signals["reference"], signals["sensor"], source="d.csv")
+
+
+def test_scale_bias_noise_settings_far_off_are_flagged():
+    """filter.reference_noise_std = 0.02 against a true 0.2: the mean NIS is about 100, far above its bounds."""
+    scenario = build_scenario("scale-bias", assignments=["filter.reference_noise_std=0.02"])
+    samples = sample_scale_bias(scenario, np.random.default_rng(3), 1)
+    result = calibrate_scale_bias(scenario, samples.time, samples.reference[0], samples.sensor[0], source="d.csv")
+    lower, upper = result.nis_bounds()
+    # chi-square(300) / 300 at 0.5% either side: 1 -+ 2.576 sqrt(2 / 300) to first order
+    assert lower == pytest.approx(1 - 2.576 * np.sqrt(2 / 300), abs=0.02) and upper == pytest.approx(1 + 2.576 * np.sqrt(2 / 300), abs=0.03)
+    assert result.mean_nis > 50 and not result.consistent
+    (warning,) = result.warnings("d.csv")
+    assert warning.code == "noise-inconsistent" and "d.csv: mean NIS" in warning.message
