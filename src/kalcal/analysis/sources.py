@@ -16,9 +16,9 @@ from typing import Literal
 import numpy as np
 
 from kalcal.filters.steps import interval_transition
-from kalcal.filters.mechanization import interval_weights
 from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.models.linear import LinearGaussianModel
+from kalcal.simulation.exact import accel_noise_weights
 
 Kind = Literal["prior", "process", "measurement"]
 
@@ -121,12 +121,9 @@ def accel_gps_process(scenario: AccelGpsScenario) -> list[tuple[str, np.ndarray,
     The same split as :func:`kalcal.simulation.exact.accel_gps_truth`, whose noise factor L has
     L L^T = the sum of the two (to rounding).
     """
-    s = scenario.scenario
     model = scenario.truth_model()
-    m = s.steps_per_update
-    weights = np.zeros((m + 1, model.state_dim))
-    weights[:, :2] = -scenario.truth.accel_noise_std * interval_weights(s.integration, s.sample_period, m)
-    shared = bool(np.any(weights[m] != 0.0))
+    m = scenario.scenario.steps_per_update
+    weights, shared = accel_noise_weights(scenario)
     interior = weights[1:m] if shared else weights[:m]
     out = [("accel", interior.T @ interior, 1.0 if shared else 0.0)]
     if model.gamma.shape[1] > 1:

@@ -135,6 +135,19 @@ def accel_gps_transitions(scenario: AccelGpsScenario, transitions: np.ndarray) -
     return result
 
 
+def accel_noise_weights(scenario: AccelGpsScenario) -> tuple[np.ndarray, bool]:
+    """The weight of each accelerometer noise sample of an interval in the error state, (m + 1, d), and
+    whether the first and last are shared with the neighbouring intervals (the trapezoid rule).
+
+    The error state gains -C_i sigma_a w_{s+i} from each sample i = 0..m of the interval.
+    """
+    s = scenario.scenario
+    m = s.steps_per_update
+    weights = np.zeros((m + 1, scenario.truth_model().state_dim))
+    weights[:, :2] = -scenario.truth.accel_noise_std * interval_weights(s.integration, s.sample_period, m)
+    return weights, bool(np.any(weights[m] != 0.0))
+
+
 def accel_gps_truth(scenario: AccelGpsScenario) -> UpdateRateTruth:
     """The accelerometer/GPS error state at the fixes, exactly in distribution for either scheme.
 
@@ -145,10 +158,7 @@ def accel_gps_truth(scenario: AccelGpsScenario) -> UpdateRateTruth:
     s = scenario.scenario
     model = scenario.truth_model()
     m = s.steps_per_update
-    # The error state gains -C_i sigma_a w_{s+i} from each accelerometer sample of the interval.
-    weights = np.zeros((m + 1, model.state_dim))
-    weights[:, :2] = -scenario.truth.accel_noise_std * interval_weights(s.integration, s.sample_period, m)
-    shared = bool(np.any(weights[m] != 0.0))
+    weights, shared = accel_noise_weights(scenario)
     interior = weights[1:m] if shared else weights[:m]
     noise = interior.T @ interior
     if model.gamma.shape[1] > 1:
