@@ -204,3 +204,13 @@ def test_an_unknown_engine_is_refused_in_the_same_words_everywhere():
     ):
         with pytest.raises(ValueError, match=r"engine 'bogus' is not available for accel-gps \(have exact, sampled\)"):
             call()
+
+
+def test_the_engine_check_is_a_kalcal_error_and_names_the_option_when_given():
+    from kalcal.errors import KalcalError
+    from kalcal.montecarlo.problem import check_engine
+
+    scale_bias = ScaleBiasProblem(build_scenario("scale-bias", assignments=["scenario.duration=2"]))
+    with pytest.raises(KalcalError, match=r"^--engine: 'sampled' is not available for scale-bias \(have exact\)$"):
+        check_engine(scale_bias, "sampled", "--engine")
+    check_engine(scale_bias, "exact", "--engine")  # an available engine passes

@@ -11,7 +11,6 @@ import numpy as np
 import xarray as xr
 
 from kalcal import __version__
-from kalcal.errors import ConfigError
 from kalcal.io.outputs import writes_outputs
 from kalcal.io.results import write_json
 from kalcal.io.statistics import write_statistics
@@ -28,6 +27,7 @@ from kalcal.jobs.verify_arguments import (  # noqa: F401 (MAX_UPDATES, MIN_REALI
 from kalcal.models.config import apply_settings, section_values
 from kalcal.montecarlo.accumulators import EnsembleStatistics, ensemble_statistics
 from kalcal.montecarlo.engine import BLOCK_SIZE, run_monte_carlo
+from kalcal.montecarlo.problem import check_engine
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.verification.checks import REPORT_RESIDUAL_PAIR, CheckResult, residual_pair, run_checks, verdict
 from kalcal.verification.dataset import statistics_dataset
@@ -130,8 +130,7 @@ def compute_verification(
     )
     started = time.perf_counter()
     problem, cause = build_problem(scenario, form)
-    if engine not in problem.engines:
-        raise ConfigError(f"--engine: {engine!r} is not available for {problem.info.scenario} (have {', '.join(problem.engines)})")
+    check_engine(problem, engine, "--engine")
     settings = section_values(scenario)
     run = run_monte_carlo(
         problem,

@@ -14,6 +14,7 @@ from typing import Protocol
 
 import numpy as np
 
+from kalcal.errors import ConfigError
 from kalcal.filters.gains import run_with_gains
 from kalcal.filters.steps import GainSchedule, UpdateForm, covariance_pass
 from kalcal.linalg import whitener
@@ -59,10 +60,12 @@ class Problem(Protocol):
         """E[e_k] implied by the truth's means and deterministic model error, (K, d)."""
 
 
-def check_engine(problem: Problem, engine: str) -> None:
-    """Raise ValueError, naming the problem's engines, unless ``engine`` is one of ``problem.engines``."""
+def check_engine(problem: Problem, engine: str, option: str = "") -> None:
+    """Raise ConfigError (a ValueError), naming the problem's engines, unless ``engine`` is one of
+    ``problem.engines``; ``option`` (e.g. ``"--engine"``) leads the message when the value came from one."""
     if engine not in problem.engines:
-        raise ValueError(f"engine {engine!r} is not available for {problem.info.scenario} (have {', '.join(problem.engines)})")
+        lead = f"{option}: " if option else "engine "
+        raise ConfigError(f"{lead}{engine!r} is not available for {problem.info.scenario} (have {', '.join(problem.engines)})")
 
 
 def _inverse_spd(cov: np.ndarray) -> np.ndarray:
