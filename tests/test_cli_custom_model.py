@@ -115,3 +115,31 @@ def test_a_model_file_with_too_many_updates_is_refused_by_name(tmp_path):
     assert result.exit_code == 2
     lines = [line for line in result.output.splitlines() if line.strip()]
     assert len(lines) == 1 and "model.updates: 3,000 filter updates per realization" in lines[0], result.output
+
+
+ONE_STATE = """
+name = "random-walk"
+sample_period = 0.1
+steps_per_update = 10
+updates = 20
+phi = [[1.0]]
+gamma = [[1.0]]
+w = [[0.01]]
+h = [[1.0]]
+v = [[1.0]]
+x0 = [0.0]
+m0 = [[4.0]]
+"""
+
+
+def test_a_one_state_filter_gets_its_report_with_the_off_diagonal_figures_skipped(tmp_path):
+    model = tmp_path / "random_walk.toml"
+    model.write_text(ONE_STATE)
+    out = tmp_path / "out"
+    result = _invoke("verify", str(model), "-n", "500", "--out", str(out))
+    assert result.exit_code == 0, result.output
+    drawn = {path.stem for path in (out / "figures").glob("*.png")}
+    assert "variance_diagonal" in drawn and "orthogonality_diagonal" in drawn
+    assert not drawn & {"variance_offdiagonal", "orthogonality_offdiagonal"}
+    page = (out / "report.html").read_text()
+    assert page.count("a filter of one state has no off-diagonal elements") == 2

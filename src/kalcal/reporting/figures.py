@@ -138,6 +138,13 @@ def _realization_specs(data: RealizationData) -> list[_Spec]:
     return specs
 
 
+#: the figures of off-diagonal elements, which a one-state filter does not have
+OFFDIAGONAL = {
+    "variance_offdiagonal": "Ensemble covariance against the filter's covariance (off-diagonal terms of P)",
+    "orthogonality_offdiagonal": "Orthogonality of error and estimate: off-diagonal elements of E[e x̂ᵀ]",
+}
+
+
 def _ensemble_specs(dataset: xr.Dataset, long_dataset: xr.Dataset | None) -> list[_Spec]:
     specs = [
         _Spec(
@@ -165,6 +172,7 @@ def _ensemble_specs(dataset: xr.Dataset, long_dataset: xr.Dataset | None) -> lis
                 ),
             )
         )
+    one_state = dataset.sizes["state"] == 1  # no off-diagonal elements to draw
     specs += [
         _Spec(
             "variance_diagonal",
@@ -177,7 +185,7 @@ def _ensemble_specs(dataset: xr.Dataset, long_dataset: xr.Dataset | None) -> lis
         _Spec(
             "variance_offdiagonal",
             "ensemble",
-            "Ensemble covariance against the filter's covariance (off-diagonal terms of P)",
+            OFFDIAGONAL["variance_offdiagonal"],
             "Left, the ensemble and filter correlations should overlap; right, the deviation of the ensemble "
             "covariance from P, in standard deviations, should stay inside ±z.",
             lambda path: ensemble.plot_variance_offdiagonal(dataset, path),
@@ -193,12 +201,14 @@ def _ensemble_specs(dataset: xr.Dataset, long_dataset: xr.Dataset | None) -> lis
         _Spec(
             "orthogonality_offdiagonal",
             "ensemble",
-            "Orthogonality of error and estimate: off-diagonal elements of E[e x̂ᵀ]",
+            OFFDIAGONAL["orthogonality_offdiagonal"],
             "As for the diagonal elements: every curve should stay inside its band (row i is the error of "
             "state i against the estimate of each other state).",
             lambda path: ensemble.plot_orthogonality_offdiagonal(dataset, path),
         ),
     ]
+    if one_state:
+        specs = [spec for spec in specs if spec.key not in OFFDIAGONAL]
     return specs
 
 
@@ -331,6 +341,11 @@ def render_figures(
                 numbers.get("mean_error_long"),
             )
         )
+    if dataset.sizes["state"] == 1:
+        skipped += [
+            SkippedFigure(key, "ensemble", title, "a filter of one state has no off-diagonal elements", numbers.get(key))
+            for key, title in OFFDIAGONAL.items()
+        ]
     if "residual_second_moment" not in dataset:
         skipped.append(
             SkippedFigure(
