@@ -74,3 +74,16 @@ def test_command_refuses_scale_bias_with_status_2(tmp_path):
     assert run.exit_code == 2
     assert "scale-bias: no exact covariance analysis" in run.output
     assert not (tmp_path / "x").exists()
+
+
+def test_a_larger_truth_names_its_sources_by_its_own_states_and_its_budget_sums_to_p_true():
+    result = kalcal.analyze(str(EXAMPLES / "accel_gps_colored_gps.toml"))
+    sources = [term["source"] for term in result.budget]
+    assert max(result.budget, key=lambda term: term["final"][0][0])["source"] == "process:w2"  # docs/custom-models.md
+    assert "prior:gps_position_error" in sources and not any(name.startswith("prior:x") for name in sources)
+    total = sum(np.asarray(term["final"]) for term in result.budget)
+    true = np.asarray(result.final["error_covariance"])
+    np.testing.assert_allclose(total, true, rtol=1e-9, atol=1e-12 * np.abs(true).max())
+    # the filter believes far less position error than the coloured GPS error gives it (docs/custom-models.md)
+    ratio = true[0, 0] / np.asarray(result.final["filter_covariance"])[0, 0]
+    assert round(ratio, 1) == 68.5, ratio  # docs/custom-models.md

@@ -110,7 +110,7 @@ def analyze_scenario(scenario, form: UpdateForm = "joseph", *, pairs: bool = Tru
     if isinstance(scenario, CustomModelScenario):
         problem = custom_problem(scenario, form, residual_pairs=False)
         truth = scenario.truth
-        names = scenario.model.state_names
+        names = getattr(truth, "state_names", None) or scenario.model.state_names  # a larger truth's own names
         if truth.state_dim != len(names):
             names = tuple(f"x{i + 1}" for i in range(truth.state_dim))
         return analyze_problem(problem, model_sources(truth, names, scenario.model.measurement_names), pairs=pairs)

@@ -17,7 +17,7 @@ onto the span of the N realizations' r_k (an N-vector per component): for Gaussi
 independent across updates (a correct filter), the span of each update's is a uniformly random p-plane
 in R^N whatever S_k is, so E[tr(P_k P_j)] = tr(E P_k E P_j) = p^2 / N exactly, and Q's mean is the
 degrees of freedom at every N; tr(P_k P_j) is Pillai's trace of two independent p-sets, of variance
-2 p^4 (N - p)^2 / (N^2 (N - 1) (N + 2)), so each term's variance is (N - p)^2 / ((N - 1)(N + 2)) < 1
+2 p^2 (N - p)^2 / (N^2 (N - 1) (N + 2)), so each term's variance is (N - p)^2 / ((N - 1)(N + 2)) < 1
 times chi-square(p^2)'s; and two terms are uncorrelated (given the update they share, the other's
 conditional mean is the constant p^2 / N). The chi-square reference is therefore exact in mean and
 slightly conservative in spread. The filter's S (the true covariance under the hypothesis) would give the
