@@ -45,3 +45,16 @@ def test_dask_is_a_default_dependency():
     """Dask is the scale-out engine (--workers, --scheduler): every install has it."""
     project = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]
     assert any(req.replace(" ", "").startswith("dask[distributed]") for req in project["dependencies"])
+
+
+def test_every_module_opens_with_one_line_saying_its_job_and_stays_short():
+    """docs/architecture.md: one job per module, said in its first docstring line, about 350 lines at most."""
+    package = ROOT / "src" / "kalcal"
+    modules = sorted(package.rglob("*.py"))
+    assert len(modules) > 50
+    for module in modules:
+        text = module.read_text()
+        docstring = ast.get_docstring(ast.parse(text))
+        assert docstring, f"{module}: no docstring"
+        assert "\n" not in docstring.split("\n\n")[0], f"{module}: its opening line runs on"
+        assert text.count("\n") <= 380, f"{module}: {text.count(chr(10))} lines"

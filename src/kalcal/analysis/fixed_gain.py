@@ -1,5 +1,8 @@
-"""The exact analysis of a Monte Carlo problem (:class:`~kalcal.montecarlo.problem.FixedGainProblem`) and of
-a built-in scenario or model file: its filter's gains against its truth, with the error budget."""
+"""The exact analysis of a fixed-gain problem, scenario or model file: its gains against its truth.
+
+A Monte Carlo problem (:class:`~kalcal.montecarlo.problem.FixedGainProblem`), a built-in scenario or a
+model file, with the error budget.
+"""
 
 from __future__ import annotations
 

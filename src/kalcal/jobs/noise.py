@@ -1,5 +1,7 @@
-"""``kalcal noise``: read a static accelerometer log, identify its noise, write the summary, curve, plot and
-the matching ``[filter]`` settings."""
+"""``kalcal noise``: a static accelerometer log's noise identified in memory, then written as one set.
+
+It writes the summary, the Allan curve and plot, the matching ``[filter]`` settings and Kalibr's imu.yaml.
+"""
 
 from __future__ import annotations
 

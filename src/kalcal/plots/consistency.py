@@ -1,5 +1,7 @@
-"""Figures beyond the source report: mean NEES and NIS with chi-square bounds, the residual correlation
-map over pairs of updates, and the deterministic model-error response in units of the filter's sigma.
+"""Figures beyond the source report: mean NEES and NIS, the residual correlation map, the model error.
+
+Mean NEES and NIS with chi-square bounds, the residual correlation map over pairs of updates, and the
+deterministic model-error response in units of the filter's sigma.
 
 N realizations, K updates, d states, p measurements.
 """

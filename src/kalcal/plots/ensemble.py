@@ -1,5 +1,6 @@
-"""Figures of the ensemble statistics in ``stats.nc``: mean error, covariance and orthogonality against
-time, each with the band a correct filter stays in (source report, figures 5.7-5.12).
+"""Figures of the ensemble statistics in ``stats.nc``: mean error, covariance and orthogonality in time.
+
+Each has the band a correct filter stays in (source report, figures 5.7-5.12).
 
 Every band is the one the matching check in :mod:`kalcal.verification.checks` holds the statistic to: the
 standard error of the statistic times the Bonferroni-corrected normal quantile for the family of all

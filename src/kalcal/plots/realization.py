@@ -1,5 +1,7 @@
-"""Figures of one realization: the true error state against the filter's estimate, and the estimation
-error against the filter's own +-1 sigma (source report, figures 5.1-5.6)."""
+"""Figures of one realization: the true error state against the estimate, the error against +-1 sigma.
+
+The estimation error is drawn against the filter's own +-1 sigma (source report, figures 5.1-5.6).
+"""
 
 from __future__ import annotations
 
