@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from kalcal.analysis.fixed_gain import analyze_scenario
-from kalcal.analysis.sources import accel_gps_process, blocks, model_sources
+from kalcal.analysis.sources import blocks, model_sources
 from kalcal.models.custom import parse_model
 from kalcal.models.registry import build_scenario
-from kalcal.simulation.exact import accel_gps_truth
+from kalcal.simulation.exact import accel_gps_process_noise, accel_gps_truth
 from tests._helpers import assert_close, cov_atol
 
 SETTINGS = [
@@ -34,7 +34,7 @@ def test_terms_sum_to_the_true_error_covariance(assignments):
 def test_accel_gps_process_sources_sum_to_the_sampled_noise(assignments):
     scenario = build_scenario("accel-gps", assignments=assignments)
     truth = accel_gps_truth(scenario)
-    process = accel_gps_process(scenario)
+    process = accel_gps_process_noise(scenario)
     q = sum(share for _, share, _ in process)
     l_lt = truth.noise_factor @ truth.noise_factor.T
     assert_close(q, l_lt, atol=1e-12 * np.abs(l_lt).max(), what="Q")

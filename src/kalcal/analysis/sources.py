@@ -18,7 +18,7 @@ import numpy as np
 from kalcal.filters.steps import interval_transition
 from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.models.linear import LinearGaussianModel
-from kalcal.simulation.exact import accel_noise_weights
+from kalcal.simulation.exact import accel_gps_process_noise
 
 Kind = Literal["prior", "process", "measurement"]
 
@@ -114,29 +114,12 @@ def model_sources(model: LinearGaussianModel, state_names: Sequence[str], measur
     return covariance_sources(model.m0, model.v, model_process(model), state_names, measurement_names)
 
 
-def accel_gps_process(scenario: AccelGpsScenario) -> list[tuple[str, np.ndarray, float]]:
-    """The accelerometer/GPS truth's process sources: ``accel`` (the accelerometer's white noise over the
-    interval, with the boundary sample the trapezoid rule shares) and, when the bias drifts, ``bias``.
-
-    The same split as :func:`kalcal.simulation.exact.accel_gps_truth`, whose noise factor L has
-    L L^T = the sum of the two (to rounding).
-    """
-    model = scenario.truth_model()
-    m = scenario.scenario.steps_per_update
-    weights, shared = accel_noise_weights(scenario)
-    interior = weights[1:m] if shared else weights[:m]
-    out = [("accel", interior.T @ interior, 1.0 if shared else 0.0)]
-    if model.gamma.shape[1] > 1:
-        out.append(("bias", interval_transition(model.phi, model.gamma[:, 1:], model.w[1:, 1:], m)[1], 0.0))
-    return out
-
-
 def accel_gps_sources(scenario: AccelGpsScenario) -> list[Source]:
     """prior:position, prior:velocity, prior:bias (, prior:scale), process:accel (, process:bias),
     measurement:position, measurement:velocity."""
     model = scenario.truth_model()
     measurement_names = ("position", "velocity")
-    return covariance_sources(model.m0, model.v, accel_gps_process(scenario), scenario.state_names, measurement_names)
+    return covariance_sources(model.m0, model.v, accel_gps_process_noise(scenario), scenario.state_names, measurement_names)
 
 
 def factor_sources(

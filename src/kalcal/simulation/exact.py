@@ -148,6 +148,22 @@ def accel_noise_weights(scenario: AccelGpsScenario) -> tuple[np.ndarray, bool]:
     return weights, bool(np.any(weights[m] != 0.0))
 
 
+def accel_gps_process_noise(scenario: AccelGpsScenario) -> list[tuple[str, np.ndarray, float]]:
+    """The interval's process noise by independent source: ``accel`` (the accelerometer's white noise
+    inside the interval; its shared boundary sample has variance 1 in the last entry when the scheme shares
+    one, 0 otherwise) and, when the bias drifts, ``bias``; each ``(name, Q share (d, d), boundary variance)``.
+    """
+    model = scenario.truth_model()
+    m = scenario.scenario.steps_per_update
+    weights, shared = accel_noise_weights(scenario)
+    interior = weights[1:m] if shared else weights[:m]
+    out = [("accel", interior.T @ interior, 1.0 if shared else 0.0)]
+    if model.gamma.shape[1] > 1:
+        # The bias's own noise (random walk or Gauss-Markov), independent of the accelerometer's.
+        out.append(("bias", interval_transition(model.phi, model.gamma[:, 1:], model.w[1:, 1:], m)[1], 0.0))
+    return out
+
+
 def accel_gps_truth(scenario: AccelGpsScenario) -> UpdateRateTruth:
     """The accelerometer/GPS error state at the fixes, exactly in distribution for either scheme.
 
@@ -159,11 +175,7 @@ def accel_gps_truth(scenario: AccelGpsScenario) -> UpdateRateTruth:
     model = scenario.truth_model()
     m = s.steps_per_update
     weights, shared = accel_noise_weights(scenario)
-    interior = weights[1:m] if shared else weights[:m]
-    noise = interior.T @ interior
-    if model.gamma.shape[1] > 1:
-        # The bias's own noise (random walk or Gauss-Markov), independent of the accelerometer's.
-        noise = noise + interval_transition(model.phi, model.gamma[:, 1:], model.w[1:, 1:], m)[1]
+    noise = sum(q for _, q, _ in accel_gps_process_noise(scenario))
     base = truth_from_model(model, s.n_updates, accel_gps_model_error(scenario))
     transitions = accel_gps_transitions(scenario, base.transitions) if scenario.has_scale else base.transitions
     return UpdateRateTruth(
