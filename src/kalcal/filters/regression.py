@@ -30,6 +30,7 @@ from typing import Literal, NamedTuple
 import numpy as np
 
 from kalcal.errors import ConfigError
+from kalcal.filters.missing import measured
 from kalcal.filters.steps import predict, update
 
 RegressionForm = Literal["joseph", "standard", "note"]
@@ -137,7 +138,7 @@ def run_regression_filter(
     q = np.asarray(q, dtype=float)
     x = np.broadcast_to(np.asarray(x0, dtype=float), lead + (d,)).copy()
     cov = np.broadcast_to(np.asarray(cov0, dtype=float), lead + (d, d)).copy()
-    used = np.isfinite(y) & np.all(np.isfinite(h), axis=-1)
+    used = measured(y[..., None], h[..., None, :])  # the one missing-measurement rule
     prior = np.empty(lead + (n_steps, d))
     posterior = np.empty(lead + (n_steps, d))
     covs = np.empty(lead + (n_steps, d, d))
