@@ -202,7 +202,7 @@ def compute_verification(
             "monte_carlo_s": run.wall_s,
             # up to summary.json (Monte Carlo, long run, checks, statistics files), kept for older readers;
             # wall_s is the whole job, report_s the report's part of it
-            "total_s": None,
+            "total_s": None,  # set when computed; here for its place in summary.json
             "realizations_per_s": n / run.wall_s if run.wall_s > 0 else None,
             "workers": run.workers,
             "backend": "dask" if client is not None else "threads",
@@ -257,9 +257,8 @@ def _save(run: Verification, out: Path, *, report: bool, realization: int, progr
         paths["stats_long"] = write_statistics(out / "stats_long.nc", run.long_dataset)
     summary = {**run.summary, "timing": dict(run.summary["timing"])}
     timing = summary["timing"]
-    timing["total_s"] = run.compute_s + (time.perf_counter() - writing)
-    timing["report_s"] = None  # no report drawn
-    timing["wall_s"] = run.compute_s + (time.perf_counter() - writing)
+    elapsed = run.compute_s + (time.perf_counter() - writing)
+    timing.update(total_s=elapsed, report_s=None, wall_s=elapsed)  # no report drawn (yet)
     paths["summary"] = write_json(out / "summary.json", summary)
     done = stage(progress, "statistics")
     if done is not None:
