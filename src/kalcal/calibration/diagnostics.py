@@ -41,6 +41,7 @@ from kalcal.calibration.ljung_box import (
     monte_carlo_pvalues,
     simulated_null,
 )
+from kalcal.verification.bounds import chi2_bounds_at
 from kalcal.verification.results import Cause, CheckPart, chi2_two_sided_pvalues, combined_pvalue, family_pvalue
 
 CONSISTENT = "noise settings consistent with the data"
@@ -114,8 +115,7 @@ def innovation_diagnostics(
     share = alpha / len(PARTS)
     nis = np.sum(normalized**2, axis=1)
     mean_nis = float(nis.mean())
-    lower = float(stats.chi2.ppf(share / 2, n_fixes * p) / n_fixes)
-    upper = float(stats.chi2.isf(share / 2, n_fixes * p) / n_fixes)
+    lower, upper = chi2_bounds_at(share, 1, n_fixes * p, n_fixes)  # two-sided, at the NIS part's share
     nis_p = float(chi2_two_sided_pvalues(np.array([mean_nis]), n_fixes * p, n_fixes)[0])
     size = CheckPart("nis", mean_nis, nis_p, lower, upper, 1.0 - share, share, 1, nis_p >= share)
     above = float(np.mean(nis > stats.chi2.isf(0.05, p)))
