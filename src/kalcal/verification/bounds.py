@@ -7,7 +7,7 @@ whiteness check among its ``WHITENESS_PARTS``.
 
 from __future__ import annotations
 
-from scipy import stats as sps
+from kalcal.verification.distributions import chi2_isf, chi2_ppf, normal_isf
 
 __all__ = [
     "COVARIANCE_PARTS",
@@ -40,12 +40,12 @@ def chi2_mean_bounds(confidence: float, comparisons: int, dof: float, count: flo
 
 
 def normal_bound_at(alpha: float, comparisons: int) -> float:
-    return float(sps.norm.isf(alpha / (2.0 * comparisons)))
+    return float(normal_isf(alpha / (2.0 * comparisons)))
 
 
 def chi2_bounds_at(alpha: float, comparisons: int, dof: float, count: float) -> tuple[float, float]:
     tail = alpha / (2.0 * comparisons)
-    return float(sps.chi2.ppf(tail, dof) / count), float(sps.chi2.isf(tail, dof) / count)
+    return float(chi2_ppf(tail, dof) / count), float(chi2_isf(tail, dof) / count)
 
 
 def covariance_element_bound(confidence: float, n_updates: int, d: int) -> float:
@@ -61,7 +61,7 @@ def whiteness_pairs_bound(confidence: float, n_updates: int, p: int) -> float:
 
 def portmanteau_bound(alpha: float, dof: int) -> float:
     """The upper alpha quantile of chi-square(dof), the whiteness portmanteau's bound (0 for dof = 0)."""
-    return float(sps.chi2.isf(alpha, dof)) if dof else 0.0
+    return float(chi2_isf(alpha, dof)) if dof else 0.0
 
 
 def verdict_false_alarm_bound(confidence: float, checks: int) -> float:

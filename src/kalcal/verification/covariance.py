@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy import stats as sps
 
 from kalcal.montecarlo.accumulators import EnsembleStatistics
 from kalcal.montecarlo.problem import ProblemInfo
 from kalcal.verification.bounds import COVARIANCE_PARTS, centered_nees_bounds, covariance_element_bound
 from kalcal.verification.check_steps import check_result, failed_cause, max_abs, safe_ratio, sd_text, standardized, zero_se_text
+from kalcal.verification.distributions import normal_sf
 from kalcal.verification.results import (
     Cause,
     CheckPart,
@@ -110,7 +110,7 @@ def check_covariance(s: EnsembleStatistics, info: ProblemInfo, confidence: float
 
 def _element_pvalues(z: np.ndarray, comparisons: int) -> np.ndarray:
     """Bonferroni p-value of each element's |z| in a family of ``comparisons`` (as the elements part's)."""
-    return np.minimum(1.0, comparisons * 2.0 * sps.norm.sf(np.abs(z)))
+    return np.minimum(1.0, comparisons * 2.0 * normal_sf(np.abs(z)))
 
 
 def _covariance_cause(

@@ -20,7 +20,8 @@ from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
-from scipy import stats as sps
+
+from kalcal.verification.distributions import chi2_cdf, chi2_sf, normal_sf
 
 #: what a failure is accounted for by (each value of ``Cause.explained_by``), in words
 EXPLAINED_BY_TEXT = {
@@ -193,7 +194,7 @@ def normal_family_pvalue(worst: float, comparisons: int) -> float:
     """
     if math.isnan(worst):
         return math.nan
-    return float(min(1.0, comparisons * 2.0 * sps.norm.sf(abs(worst))))
+    return float(min(1.0, comparisons * 2.0 * normal_sf(abs(worst))))
 
 
 def chi2_two_sided_pvalues(values: np.ndarray, dof: float, count: float) -> np.ndarray:
@@ -202,7 +203,7 @@ def chi2_two_sided_pvalues(values: np.ndarray, dof: float, count: float) -> np.n
     p_k = min(1, 2 * min(F(count * x_k), 1 - F(count * x_k))), F the chi-square(dof) distribution.
     """
     total = np.asarray(values, dtype=float) * count
-    return np.minimum(1.0, 2.0 * np.minimum(sps.chi2.cdf(total, dof), sps.chi2.sf(total, dof)))
+    return np.minimum(1.0, 2.0 * np.minimum(chi2_cdf(total, dof), chi2_sf(total, dof)))
 
 
 def family_pvalue(pvalues: np.ndarray | Sequence[float], comparisons: int | None = None) -> float:

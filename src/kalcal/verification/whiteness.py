@@ -53,12 +53,12 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from scipy import stats as sps
 
 from kalcal.montecarlo.accumulators import EnsembleStatistics
 from kalcal.montecarlo.problem import ProblemInfo
 from kalcal.verification.bounds import WHITENESS_PARTS, portmanteau_bound, whiteness_pairs_bound
 from kalcal.verification.check_steps import check_result, failed_cause, max_abs, sd_text, standardized, zero_se_text
+from kalcal.verification.distributions import chi2_sf
 from kalcal.verification.results import Cause, CheckPart, CheckResult, combined_pvalue, normal_family_pvalue
 
 __all__ = ["RANK_RTOL", "Portmanteau", "check_residual_whiteness", "portmanteau"]
@@ -90,7 +90,7 @@ def _whitened_sum(moment: np.ndarray, count: float) -> Portmanteau:
     rank = keep.sum(axis=1)
     dof = int((rank.sum() ** 2 - (rank**2).sum()) // 2)
     statistic = float(count * np.sum(np.where(lower, c, 0.0) ** 2))
-    return Portmanteau(statistic, dof, float(sps.chi2.sf(statistic, dof)) if dof else 1.0)
+    return Portmanteau(statistic, dof, float(chi2_sf(statistic, dof)) if dof else 1.0)
 
 
 def portmanteau(moment: np.ndarray, mean: np.ndarray | None, count: int) -> Portmanteau:

@@ -1,0 +1,114 @@
+"""The default job as the user pays it: ``kalcal verify`` (what ``make run`` runs), end to end.
+
+    python benchmarks/bench_job.py [--n 300000] [--repeats 2]
+
+Runs the command in a child process, as a user does, and prints from one run on this machine:
+
+* start-up: ``kalcal --help`` against a bare ``python -c pass``;
+* the job's wall time, and its parts from ``summary.json``'s ``timing``: the Monte Carlo
+  (``monte_carlo_s``), the long-run study's own Monte Carlo (``long_run.monte_carlo_s``) and the report
+  (``report_s``);
+* the raw cost of the run's random draws: its standard normals drawn with the engine's generator, blocks
+  and threads, in this process;
+* the ratios of issue 15's goals: the Monte Carlo against its draws (goal 1.5x) and everything but the
+  two Monte Carlo runs against the draws (goal 2x).
+
+The first run on a machine compiles the kernels (numba caches them): it is run once and reported apart,
+as "first run"; the timed runs follow with the cache warm.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+from kalcal.montecarlo.engine import block_generator, block_sizes
+
+WORKERS = len(os.sched_getaffinity(0))
+KALCAL = [sys.executable, "-m", "kalcal"]
+
+
+def elapsed(command: list[str]) -> float:
+    """Wall time of one child process, s (it must succeed)."""
+    start = time.perf_counter()
+    subprocess.run(command, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    return time.perf_counter() - start
+
+
+def raw_draws(n: int, normals_per_realization: int, seed: int = 0) -> float:
+    """Time to draw exactly the normals of n realizations, block by block, on the engine's threads, s."""
+    sizes = block_sizes(n)
+
+    def draw(block: int) -> None:
+        block_generator(seed, block).standard_normal(sizes[block] * normals_per_realization)
+
+    start = time.perf_counter()
+    with ThreadPoolExecutor(WORKERS) as pool:
+        list(pool.map(draw, range(len(sizes))))
+    return time.perf_counter() - start
+
+
+def run_job(n: int) -> tuple[float, dict]:
+    """``kalcal verify -n n --out DIR``: its wall time (s) and its summary.json."""
+    with tempfile.TemporaryDirectory() as out:
+        wall = elapsed([*KALCAL, "verify", "-n", str(n), "--out", out])
+        return wall, json.loads((Path(out) / "summary.json").read_text())
+
+
+def parts(wall: float, summary: dict) -> dict[str, float]:
+    """The job's parts, s: wall, Monte Carlo, long run, report, and the rest."""
+    timing = summary["timing"]
+    long_run = (summary.get("long_run") or {}).get("monte_carlo_s") or 0.0
+    report = timing.get("report_s") or 0.0
+    monte_carlo = timing["monte_carlo_s"]
+    return {
+        "wall": wall,
+        "monte_carlo": monte_carlo,
+        "long_run": long_run,
+        "report": report,
+        "rest": wall - monte_carlo - long_run,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--n", type=int, default=300_000, help="realizations (default: the job's default)")
+    parser.add_argument("--repeats", type=int, default=2, help="warm runs; the fastest is shown")
+    args = parser.parse_args()
+
+    bare = min(elapsed([sys.executable, "-c", "pass"]) for _ in range(5))
+    help_s = min(elapsed([*KALCAL, "--help"]) for _ in range(5))
+    print(f"start-up ({WORKERS} threads)")
+    print(f"  python -c pass:  {bare:7.3f} s")
+    print(f"  kalcal --help:   {help_s:7.3f} s   ({help_s - bare:+.3f} s over bare python; goal +0.300 s)")
+
+    first_wall, first = run_job(args.n)
+    runs = [run_job(args.n) for _ in range(args.repeats)]
+    wall, summary = min(runs, key=lambda run: run[0])
+    normals = summary["timing"]["normals_per_realization"]
+    draws = min(raw_draws(args.n, normals) for _ in range(3))
+    job = parts(wall, summary)
+    first_parts = parts(first_wall, first)
+
+    print(f"\nkalcal verify -n {args.n} (defaults, report included), fastest of {args.repeats} warm runs")
+    print(f"  wall time:              {job['wall']:7.3f} s")
+    print(f"  Monte Carlo:            {job['monte_carlo']:7.3f} s")
+    print(f"  long-run Monte Carlo:   {job['long_run']:7.3f} s")
+    print(f"  report:                 {job['report']:7.3f} s")
+    print(f"  everything else:        {job['rest'] - job['report']:7.3f} s   (start-up, checks, files)")
+    print(f"  raw draws ({normals} normals/realization): {draws:7.3f} s")
+    print(f"  first run (kernels compiled): wall {first_parts['wall']:.3f} s, Monte Carlo {first_parts['monte_carlo']:.3f} s")
+    print("\nratios to the raw draws")
+    print(f"  Monte Carlo:                       {job['monte_carlo'] / draws:5.2f}x   (goal 1.5x)")
+    print(f"  all but the two Monte Carlo runs:  {job['rest'] / draws:5.2f}x   (goal 2x)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,56 @@
+"""Normal and chi-square tail probabilities and quantiles, from scipy.special without scipy.stats.
+
+``scipy.stats`` takes over a second to import (it builds the docstrings of every distribution), more
+than a default run's Monte Carlo spends on its random draws; the checks need six functions of two
+distributions. Each is the scipy.special function that ``scipy.stats.norm`` / ``scipy.stats.chi2`` call
+for valid arguments, so the values are the same to the bit (tests/verification/test_distributions.py
+holds them to scipy.stats), with scipy.stats's answers at the edges: a probability outside [0, 1] or a
+non-positive dof gives NaN.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import special
+
+__all__ = ["chi2_cdf", "chi2_isf", "chi2_ppf", "chi2_sf", "normal_isf", "normal_sf"]
+
+
+def normal_sf(x):
+    """1 - Phi(x), the standard normal's upper tail."""
+    return special.ndtr(-np.asarray(x, dtype=float))
+
+
+def normal_isf(q):
+    """The x with 1 - Phi(x) = q, q in [0, 1]."""
+    q = np.asarray(q, dtype=float)
+    return np.where((q >= 0) & (q <= 1), -special.ndtri(q), np.nan)
+
+
+def _dof(dof) -> np.ndarray:
+    dof = np.asarray(dof, dtype=float)
+    return np.where(dof > 0, dof, np.nan)
+
+
+def chi2_cdf(x, dof):
+    """P(X <= x) for X ~ chi-square(dof); 0 below 0."""
+    x = np.asarray(x, dtype=float)
+    return special.chdtr(_dof(dof), np.maximum(x, 0.0))
+
+
+def chi2_sf(x, dof):
+    """P(X > x) for X ~ chi-square(dof); 1 below 0."""
+    x = np.asarray(x, dtype=float)
+    return special.chdtrc(_dof(dof), np.maximum(x, 0.0))
+
+
+def chi2_ppf(p, dof):
+    """The x with P(X <= x) = p, p in [0, 1]."""
+    p = np.asarray(p, dtype=float)
+    return np.where((p >= 0) & (p <= 1), 2.0 * special.gammaincinv(_dof(dof) / 2.0, p), np.nan)
+
+
+def chi2_isf(q, dof):
+    """The x with P(X > x) = q, q in [0, 1]."""
+    q = np.asarray(q, dtype=float)
+    return np.where((q >= 0) & (q <= 1), special.chdtri(_dof(dof), q), np.nan)

@@ -1,0 +1,40 @@
+"""The checks' normal and chi-square functions equal scipy.stats's to the bit, edges included."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from kalcal.verification import distributions
+
+X = np.array([-3.0, -1e-300, 0.0, 1e-12, 0.3, 1.0, 2.5, 7.0, 40.0, 300.0, 1e4, np.inf, -np.inf, np.nan])
+P = np.array([-0.1, 0.0, 1e-300, 1e-20, 1e-9, 0.025, 0.5, 0.975, 1 - 1e-12, 1.0, 1.1, np.nan])
+DOFS = [0.5, 1, 2, 3, 10, 44_700, 1e6, 0, -1]
+
+
+def test_normal_tails_equal_scipy_stats():
+    assert np.array_equal(distributions.normal_sf(X), stats.norm.sf(X), equal_nan=True)
+    assert np.array_equal(distributions.normal_isf(P), stats.norm.isf(P), equal_nan=True)
+
+
+@pytest.mark.parametrize("dof", DOFS)
+@pytest.mark.parametrize(
+    ("ours", "theirs", "values"),
+    [
+        (distributions.chi2_cdf, stats.chi2.cdf, X),
+        (distributions.chi2_sf, stats.chi2.sf, X),
+        (distributions.chi2_ppf, stats.chi2.ppf, P),
+        (distributions.chi2_isf, stats.chi2.isf, P),
+    ],
+)
+def test_chi2_equals_scipy_stats(ours, theirs, values, dof):
+    assert np.array_equal(ours(values, dof), theirs(values, dof), equal_nan=True)
+
+
+def test_the_checks_do_not_import_scipy_stats():
+    """The verify job's imports leave scipy.stats out (it costs over a second to import)."""
+    code = "import sys, kalcal.jobs.verify; print('scipy.stats' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "False"
