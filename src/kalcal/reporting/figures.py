@@ -19,6 +19,7 @@ from kalcal.plots import consistency, ensemble
 from kalcal.plots import realization as single
 from kalcal.plots.realization import RealizationData
 from kalcal.plots.steady_state import plot_steady_state
+from kalcal.reporting.drawing import draw_all
 
 #: the scenario of the source report, whose figure numbers the page quotes
 REPORT_SCENARIO = "accel-gps"
@@ -323,12 +324,11 @@ def render_figures(
     specs = _realization_specs(data) + _ensemble_specs(dataset, long_dataset) + _consistency_specs(dataset)
     if steady is not None and steady.has_matrices:
         specs.append(_steady_state_spec(steady))
-    figures = []
-    for done, spec in enumerate(specs, start=1):
-        path = spec.draw(figure_dir / f"{spec.key}.png")
-        figures.append(FigureEntry(spec.key, spec.group, spec.title, spec.caption, path, numbers.get(spec.key)))
-        if progress is not None:
-            progress(done, len(specs))
+    paths = draw_all([spec.draw for spec in specs], [figure_dir / f"{spec.key}.png" for spec in specs], progress=progress)
+    figures = [
+        FigureEntry(spec.key, spec.group, spec.title, spec.caption, path, numbers.get(spec.key))
+        for spec, path in zip(specs, paths, strict=True)
+    ]
     skipped = []
     if long_dataset is None:
         skipped.append(
