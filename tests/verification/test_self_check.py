@@ -66,6 +66,8 @@ def test_the_ensemble_agrees_with_the_exact_analysis(name):
     assert abs(result.statistic) <= result.bound and result.pvalue >= 0.01
     assert [part.name for part in result.parts] == list(SELF_CHECK_PARTS)
     assert result.reason is None and result.detail.startswith("The ensemble agrees")
+    if name == "colored gps":  # the report's 150 updates and 3 states: the bound docs/verification.md quotes
+        assert (k, d) == (150, 3) and round(result.bound, 2) == 4.39
 
 
 def test_the_per_sample_engine_agrees_with_the_same_analysis():
