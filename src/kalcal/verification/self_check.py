@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats as sps
 
+from kalcal.analysis.fixed_gain import analyze_problem
 from kalcal.montecarlo.accumulators import EnsembleStatistics
 from kalcal.montecarlo.problem import FixedGainProblem, ProblemInfo
 from kalcal.verification.bounds import chi2_bounds_at, normal_bound_at
@@ -74,8 +75,6 @@ def exact_prediction(problem) -> ExactPrediction:
             f"{problem.info.scenario}: no exact analysis exists (its filter's gains depend on the noisy readings), "
             "so the ensemble is not checked against theory",
         )
-    from kalcal.analysis.fixed_gain import analyze_problem
-
     analysis = analyze_problem(problem, pairs=False)
     return ExactPrediction(analysis.moments.mean_error, analysis.moments.error_cov)
 
