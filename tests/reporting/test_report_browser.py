@@ -71,7 +71,7 @@ def test_page_renders_in_headless_chromium_with_no_broken_image(chromium, report
     assert match, f"the check script did not run; stderr: {result.stderr[-2000:]}"
     report = json.loads(html.unescape(match.group(1)))
     expected = len(list((out / "figures").glob("*.png")))
-    assert report["count"] == expected == 17
+    assert report["count"] == expected == 18
     assert report["broken"] == []
     assert all(width == 900 for width in report["widths"])
 

@@ -24,7 +24,7 @@ def test_page_references_every_figure_and_check(report_run):
     page = page_path.read_text(encoding="utf-8")
     summary = json.loads((out / "summary.json").read_text())
     files = sorted(p.name for p in (out / "figures").glob("*.png"))
-    assert len(files) == 17  # 12 of the source report (5.6 as one two-panel file) + NEES, NIS, map, model error, steady state
+    assert len(files) == 18  # 12 of the source report (5.6 as one two-panel file) + NEES, NIS, map, model error, steady state, exact sigma
     for name in files:
         assert f'data-file="figures/{name}"' in page
     for number in REPORT_NUMBERS.values():

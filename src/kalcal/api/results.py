@@ -40,6 +40,11 @@ class VerificationResult:
         The long-run study's statistics (``stats_long.nc``), None without one.
     paths : dict
         The files written (by key: summary, stats, ...) when the call was given ``out``; empty otherwise.
+    self_check : SelfCheck or None
+        The bench's self-check, apart from the verdict: the ensemble's mean error and variances against
+        the exact analysis of the same filter and truth (``statistic``, ``bound``, ``pvalue``, ``agrees``,
+        ``confidence``, ``parts``, ``detail``; ``agrees`` None and a ``reason`` where no exact analysis
+        exists) (:class:`kalcal.verification.self_check.SelfCheck`).
     """
 
     verdict: str
@@ -48,11 +53,14 @@ class VerificationResult:
     long_statistics: Any
     run: Any = field(repr=False, compare=False)
     paths: dict = field(default_factory=dict)
+    self_check: Any = None
 
     @classmethod
     def from_run(cls, run, paths: dict | None = None) -> VerificationResult:
         """The result of a :class:`kalcal.jobs.verify.Verification`."""
-        return cls(run.summary["verdict"], list(run.checks), run.dataset, run.long_dataset, run, dict(paths or {}))
+        return cls(
+            run.summary["verdict"], list(run.checks), run.dataset, run.long_dataset, run, dict(paths or {}), run.self_check
+        )
 
     @property
     def summary(self) -> dict[str, Any]:

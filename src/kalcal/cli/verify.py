@@ -79,6 +79,9 @@ def verify(
             )
     summary = result.run.summary
     _common._print_checks(summary)
+    from kalcal.verification.self_check import self_check_line
+
+    _common.console.print(self_check_line(summary.get("self_check")), markup=False, soft_wrap=True)
     pair = summary["residual_correlation"]
     if pair is not None:  # only runs that have the source report's pair of updates
         rows = ", ".join(

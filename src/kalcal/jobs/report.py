@@ -38,6 +38,7 @@ from kalcal.plots.realization import RealizationData
 from kalcal.reporting.figures import render_figures
 from kalcal.reporting.html import build_page, write_page
 from kalcal.reporting.steady_state import steady_state_view
+from kalcal.verification.self_check import exact_prediction
 
 FIGURE_DIR = "figures"
 PAGE = "report.html"
@@ -187,6 +188,7 @@ def render_report(out: str | Path, *, realization: int = 0, progress: JobProgres
         state_labels=getattr(scenario, "state_labels", None),  # accel-gps: its error states δp, δv
     )
     steady = steady_state_view(problem)
+    exact = exact_prediction(problem)  # the exact P_true, rebuilt from the settings as the problem is
     with run_outputs(
         out,
         "report",
@@ -204,6 +206,8 @@ def render_report(out: str | Path, *, realization: int = 0, progress: JobProgres
             scenario=str(summary["scenario"]),
             steady=steady,
             progress=stage(progress, "figures"),
+            exact_cov=exact.error_cov,
+            exact_reason=exact.reason,
         )
         page = build_page(summary, figures, skipped, realization=index, figure_dir_name=FIGURE_DIR, steady_state=steady)
         write_page(staging / PAGE, page)

@@ -31,6 +31,7 @@ from kalcal.montecarlo.problem import check_engine
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.verification.checks import REPORT_RESIDUAL_PAIR, CheckResult, residual_pair, run_checks, verdict
 from kalcal.verification.dataset import statistics_dataset
+from kalcal.verification.self_check import SelfCheck, exact_prediction, self_check
 
 
 def report_residual_pair(statistics: EnsembleStatistics, info) -> dict[str, Any] | None:
@@ -79,6 +80,8 @@ class Verification:
         The run's checkpoint file (an input: never removed by the outputs).
     compute_s : float
         Seconds the computation took (s).
+    self_check : SelfCheck or None
+        The ensemble against the exact analysis (``summary.json``'s ``self_check``), apart from the verdict.
     """
 
     scenario: Any
@@ -89,6 +92,7 @@ class Verification:
     long_dataset: xr.Dataset | None
     checkpoint: Path | None
     compute_s: float
+    self_check: SelfCheck | None = None
 
 
 @dataclass(frozen=True)
@@ -153,6 +157,8 @@ def compute_verification(
     expected = problem.expected_mean_error()
     checks = run_checks(statistics, problem.info, confidence, expected, cause)
     info = problem.info
+    exact = exact_prediction(problem)  # the same filter against the same truth, without sampling
+    bench = self_check(statistics, exact, confidence, info)
     attrs = {"scenario": info.scenario, "seed": seed, "engine": engine, "confidence": confidence}
     dataset = statistics_dataset(statistics, info, expected, attrs)
     long_seconds = LONG_RUN_SECONDS.get(info.scenario, 0.0) if long_run is None else long_run
@@ -183,6 +189,7 @@ def compute_verification(
         "confidence": confidence,
         "verdict": verdict(checks),
         "tests": [c.as_dict() for c in checks],
+        "self_check": bench.as_dict(),
         "final": {
             "time": float(info.update_times[-1]),
             "states": list(info.state_names),
@@ -190,6 +197,8 @@ def compute_verification(
             "filter_covariance": statistics.filter_cov[-1],
             "ensemble_covariance": statistics.error_cov[-1],
             "ensemble_mean_error": statistics.mean_error[-1],
+            "exact_error_covariance": exact.error_cov[-1] if exact.available else None,
+            "exact_mean_error": exact.mean_error[-1] if exact.available else None,
         },
         "residual_correlation": report_residual_pair(statistics, info),
         "model_error": {
@@ -224,6 +233,7 @@ def compute_verification(
         long_dataset,
         None if checkpoint is None else Path(checkpoint),
         compute_s,
+        bench,
     )
 
 

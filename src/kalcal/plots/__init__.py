@@ -6,7 +6,8 @@ Each function takes data that is already computed (a ``stats.nc`` Dataset, or on
 
 - :mod:`kalcal.plots.realization`: one realization, true and estimated states, errors with +-1 sigma
   (source report figures 5.1-5.6).
-- :mod:`kalcal.plots.ensemble`: ensemble mean error, covariance and orthogonality with their bands (5.7-5.12).
+- :mod:`kalcal.plots.ensemble`: ensemble mean error, covariance and orthogonality with their bands (5.7-5.12),
+  and the filter, exact and ensemble sigma per state.
 - :mod:`kalcal.plots.consistency`: mean NEES and NIS, the residual-correlation map, the model-error response.
 - :mod:`kalcal.plots.calibration`: a calibrated log's bias and normalized innovations.
 - :mod:`kalcal.plots.sweep`: each check's statistic against a swept setting (the tuning curve).

@@ -16,6 +16,7 @@ import numpy as np
 import xarray as xr
 
 from kalcal.plots._common import (
+    BAND,
     ENSEMBLE,
     EXPECTED,
     FILTER,
@@ -30,6 +31,7 @@ from kalcal.plots._common import (
     unit_square,
 )
 from kalcal.verification.bounds import covariance_element_bound, normal_bound
+from kalcal.verification.self_check import variance_ratio_band
 
 
 def _names(dataset: xr.Dataset) -> tuple[list[str], list[str]]:
@@ -240,3 +242,45 @@ def plot_orthogonality_offdiagonal(dataset: xr.Dataset, path: str | Path) -> Pat
     d = dataset.sizes["state"]
     cells = [(i, l) for i in range(d) for l in range(d) if l != i]
     return _orthogonality(dataset, cells, max(1, d - 1), path, "Orthogonality of error and estimate, E[e x̂ᵀ] off-diagonal")
+
+
+@styled
+def plot_sigma_exact(dataset: xr.Dataset, exact_cov: np.ndarray, path: str | Path) -> Path:
+    """Three 1-sigma curves per state in time: the filter's sqrt(P_ii), the exact sqrt(P_true,ii) of the
+    covariance analysis and the ensemble's s_i, one panel per state.
+
+    The band about the exact curve is the self-check's (:mod:`kalcal.verification.self_check`): the
+    ensemble variance s^2 lies in P_true,ii [q_lo, q_hi], the chi-square(N - 1) / (N - 1) quantiles for
+    K d comparisons at half the run's alpha, so a correct engine keeps s inside it everywhere (at the
+    run's confidence). The filter's curve apart from the exact one is the mistuning, seen without
+    sampling noise. 900 x (150 + 250 d) px.
+
+    Parameters
+    ----------
+    dataset : xarray.Dataset
+        A ``stats.nc`` Dataset: ``error_cov``, ``filter_cov`` (K, d, d), attributes ``realizations`` and
+        ``confidence``.
+    exact_cov : ndarray, shape (K, d, d)
+        P_true at every update, in the states' units squared.
+    path : path of the PNG to write
+    """
+    times, count, confidence = _run(dataset)
+    names, units = _names(dataset)
+    ensemble = np.sqrt(np.diagonal(dataset["error_cov"].values, axis1=1, axis2=2))
+    filt = np.sqrt(np.diagonal(dataset["filter_cov"].values, axis1=1, axis2=2))
+    exact = np.sqrt(np.clip(np.diagonal(np.asarray(exact_cov), axis1=1, axis2=2), 0.0, None))
+    low, high = variance_ratio_band(confidence, times.size * len(names), count)
+    figure, axes = new_figure(len(names))
+    for i, (name, unit) in enumerate(zip(names, units)):
+        ax = axes[i, 0]
+        shade_band(ax, times, exact[:, i] * np.sqrt(low), exact[:, i] * np.sqrt(high), f"self-check band ({percent(confidence)})")
+        ax.plot(times, exact[:, i], color=BAND, linewidth=1.4, label="exact σ (√P_true, covariance analysis)")
+        ax.plot(times, filt[:, i], color=FILTER, linestyle="--", linewidth=1.2, label="filter σ (√P)")
+        ax.plot(times, ensemble[:, i], color=ENSEMBLE, linewidth=0.9, label=f"ensemble σ (N = {count:,})")
+        if np.all(exact[:, i] > 0) and np.all(filt[:, i] > 0):
+            ax.set_yscale("log")
+        ax.set_ylabel(label(f"σ of {name}", unit))
+        ax.legend(loc="upper right")
+    axes[-1, 0].set_xlabel(time_label())
+    axes[0, 0].set_title("Error σ: the filter's belief, the exact value and the ensemble")
+    return save(figure, path)

@@ -20,6 +20,7 @@ from kalcal.plots import realization as single
 from kalcal.plots.realization import RealizationData
 from kalcal.plots.steady_state import plot_steady_state
 from kalcal.reporting.drawing import draw_all
+from kalcal.reporting.theory import SIGMA_EXACT, SIGMA_EXACT_TITLE, sigma_exact_spec
 
 #: the scenario of the source report, whose figure numbers the page quotes
 REPORT_SCENARIO = "accel-gps"
@@ -146,7 +147,7 @@ OFFDIAGONAL = {
 }
 
 
-def _ensemble_specs(dataset: xr.Dataset, long_dataset: xr.Dataset | None) -> list[_Spec]:
+def _ensemble_specs(dataset: xr.Dataset, long_dataset: xr.Dataset | None, exact_cov=None) -> list[_Spec]:
     specs = [
         _Spec(
             "mean_error",
@@ -183,6 +184,7 @@ def _ensemble_specs(dataset: xr.Dataset, long_dataset: xr.Dataset | None) -> lis
             "the band: above it the filter is overconfident, below it underconfident.",
             lambda path: ensemble.plot_variance_diagonal(dataset, path),
         ),
+        *([] if exact_cov is None else [_Spec(*sigma_exact_spec(dataset, exact_cov))]),
         _Spec(
             "variance_offdiagonal",
             "ensemble",
@@ -291,6 +293,8 @@ def render_figures(
     scenario: str = REPORT_SCENARIO,
     steady: SteadyStateView | None = None,
     progress: Callable[[int, int], None] | None = None,
+    exact_cov: np.ndarray | None = None,
+    exact_reason: str | None = None,
 ) -> tuple[list[FigureEntry], list[SkippedFigure]]:
     """Draw every figure of the report into ``figure_dir``.
 
@@ -311,6 +315,9 @@ def render_figures(
         The filter's steady state, drawn against P_k (or a note saying why there is none).
     progress : callable, optional
         ``progress(done, total)`` after each figure is drawn (``total`` figures in all).
+    exact_cov : ndarray, shape (K, d, d), optional
+        The exact P_true of the run's problem, drawn against P and the ensemble; without it the figure
+        is skipped with ``exact_reason``.
 
     Returns
     -------
@@ -321,7 +328,7 @@ def render_figures(
     figure_dir = Path(figure_dir)
     figure_dir.mkdir(parents=True, exist_ok=True)
     numbers = REPORT_NUMBERS if scenario == REPORT_SCENARIO else {}
-    specs = _realization_specs(data) + _ensemble_specs(dataset, long_dataset) + _consistency_specs(dataset)
+    specs = _realization_specs(data) + _ensemble_specs(dataset, long_dataset, exact_cov) + _consistency_specs(dataset)
     if steady is not None and steady.has_matrices:
         specs.append(_steady_state_spec(steady))
     paths = draw_all([spec.draw for spec in specs], [figure_dir / f"{spec.key}.png" for spec in specs], progress=progress)
@@ -341,6 +348,8 @@ def render_figures(
                 numbers.get("mean_error_long"),
             )
         )
+    if exact_cov is None:
+        skipped.append(SkippedFigure(SIGMA_EXACT, "ensemble", SIGMA_EXACT_TITLE, exact_reason or "no exact analysis was given"))
     if dataset.sizes["state"] == 1:
         skipped += [
             SkippedFigure(key, "ensemble", title, "a filter of one state has no off-diagonal elements", numbers.get(key))

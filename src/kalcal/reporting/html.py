@@ -26,6 +26,7 @@ from kalcal.reporting.markup import esc
 from kalcal.reporting.run_tables import final_table, reproduce_section, settings_section, timing_section
 from kalcal.filters.steady_state import SteadyStateView
 from kalcal.reporting.text import confidence_statement
+from kalcal.reporting.theory import self_check_section
 from kalcal.reporting.verdicts import failures_section, verdicts_section
 from kalcal.verification.text import fmt
 
@@ -90,6 +91,7 @@ def build_page(
         verdicts_section(summary),
         settings_section(summary),
         final_table(summary),
+        self_check_section(summary),
         figures_section(summary, list(figures), list(skipped), realization, figure_dir_name, steady_state),
         timing_section(summary),
         reproduce_section(summary, realization),

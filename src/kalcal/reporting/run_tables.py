@@ -45,21 +45,27 @@ def settings_section(summary: Mapping[str, Any]) -> str:
 
 
 def final_table(summary: Mapping[str, Any]) -> str:
-    """Ensemble mean error, filter and ensemble standard deviations per state at the last update (empty without them)."""
+    """Ensemble mean error, filter and ensemble standard deviations per state at the last update, and the exact
+    one where the run has an exact analysis (empty without them)."""
     final = summary.get("final")
     if not final:
         return ""
     rows = []
+    exact = final.get("exact_error_covariance")  # the exact analysis's P_true: none for scale-bias or older runs
     for i, (name, unit) in enumerate(zip(final["states"], final["units"])):
         filt = final["filter_covariance"][i][i]
         ens = final["ensemble_covariance"][i][i]
+        true = None if exact is None else exact[i][i]
         rows.append(
             f"<tr><td>{esc(name)}</td><td>{esc(unit)}</td><td class='num'>{esc(fmt(final['ensemble_mean_error'][i]))}</td>"
             f"<td class='num'>{esc(fmt(None if filt is None else filt**0.5))}</td>"
-            f"<td class='num'>{esc(fmt(None if ens is None else ens**0.5))}</td></tr>"
+            f"<td class='num'>{esc(fmt(None if ens is None else ens**0.5))}</td>"
+            + ("" if exact is None else f"<td class='num'>{esc(fmt(None if true is None else max(true, 0.0) ** 0.5))}</td>")
+            + "</tr>"
         )
+    header = ("state", "unit", "ensemble mean error", "filter σ = √P_ii", "ensemble σ")
     return f"<h3>At the last update, t = {esc(fmt(final['time']))} s</h3>" + table(
-        ("state", "unit", "ensemble mean error", "filter σ = √P_ii", "ensemble σ"), rows
+        header + (() if exact is None else ("exact σ = √P_true,ii",)), rows
     )
 
 

@@ -1,0 +1,196 @@
+"""The bench's self-check: the ensemble against the exact analysis, agreeing for correct engines, failing
+for a wrong one, at most alpha false alarms, recorded in summary.json apart from the verdict.
+
+Fixed seeds throughout; every bound is the self-check's own (Bonferroni over its comparisons) or a
+binomial quantile, none tuned.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import stats as sps
+
+from kalcal.analysis.fixed_gain import analyze_problem
+from kalcal.models.accel_gps import AccelGpsScenario
+from kalcal.models.config import apply_settings
+from kalcal.models.custom import load_model_file
+from kalcal.montecarlo.accumulators import ensemble_statistics
+from kalcal.montecarlo.engine import run_monte_carlo
+from kalcal.montecarlo.scenarios import build_problem
+from kalcal.verification.bounds import normal_bound
+from kalcal.verification.self_check import (
+    SELF_CHECK_PARTS,
+    exact_prediction,
+    self_check,
+    self_check_line,
+    variance_ratio_band,
+    variance_scores,
+)
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+N = 2000
+SHORT = {"scenario.duration": 6}
+TRUTHS = {
+    "correct": SHORT,
+    "mistuned": {**SHORT, "truth.accel_noise_std": 0.05, "filter.accel_noise_std": 0.02, "truth.gps_position_std": 2.0},
+    "drifting bias": {**SHORT, "truth.bias_walk_std": 5e-3, "filter.bias_walk_std": 0.0},
+}
+
+
+def _problem(name):
+    if name == "colored gps":
+        scenario = load_model_file(EXAMPLES / "accel_gps_colored_gps.toml")
+    else:
+        scenario = apply_settings(AccelGpsScenario(), TRUTHS[name])
+    return build_problem(scenario, residual_pairs=False)[0]
+
+
+def _run(problem, n=N, seed=7, engine="exact"):
+    return ensemble_statistics(run_monte_carlo(problem, n, seed=seed, engine=engine, workers=1).sums)
+
+
+@pytest.mark.parametrize("name", [*TRUTHS, "colored gps"])
+def test_the_ensemble_agrees_with_the_exact_analysis(name):
+    problem = _problem(name)
+    exact = exact_prediction(problem)
+    result = self_check(_run(problem), exact, 0.99, problem.info)
+    k, d = exact.error_cov.shape[:2]
+    assert result.agrees is True, result.detail
+    assert result.comparisons == 2 * k * d
+    assert result.bound == pytest.approx(normal_bound(0.99, 2 * k * d), rel=1e-12)
+    assert abs(result.statistic) <= result.bound and result.pvalue >= 0.01
+    assert [part.name for part in result.parts] == list(SELF_CHECK_PARTS)
+    assert result.reason is None and result.detail.startswith("The ensemble agrees")
+    if name == "colored gps":  # the report's 150 updates and 3 states: the bound docs/verification.md quotes
+        assert (k, d) == (150, 3) and round(result.bound, 2) == 4.39
+
+
+def test_the_per_sample_engine_agrees_with_the_same_analysis():
+    """The sampled engine simulates the truth whose law the exact engine samples: one analysis predicts both."""
+    problem = _problem("drifting bias")
+    result = self_check(_run(problem, engine="sampled"), exact_prediction(problem), 0.99, problem.info)
+    assert result.agrees is True, result.detail
+
+
+def test_the_mistuned_filter_fails_its_checks_while_the_bench_agrees():
+    """The self-check is apart from the verdict: theory says the filter is wrong, and the engine agrees with theory."""
+    problem = _problem("colored gps")
+    exact = analyze_problem(problem, pairs=False)
+    var, filt = np.diagonal(exact.moments.error_cov, axis1=1, axis2=2), np.diagonal(exact.filter_cov, axis1=1, axis2=2)
+    assert np.max(var / filt) > 2  # the truth's colored GPS error: far worse than the filter believes
+    assert self_check(_run(problem), exact_prediction(problem), 0.99, problem.info).agrees
+
+
+def test_a_wrong_engine_is_detected():
+    """An ensemble whose covariance is 1.2 times the truth's, or whose mean is off by 6 standard errors."""
+    problem = _problem("correct")
+    exact = exact_prediction(problem)
+    n = 5000
+    stats = _run(problem, n)
+    good = self_check(stats, exact, 0.99, problem.info)
+    assert good.agrees
+    # computed, not hoped: at this N a 20 % variance excess sits beyond the bound by more than 4 sd of z
+    assert variance_scores(np.array([1.2]), n)[0] > good.bound + 4.0
+    wide = self_check(dataclasses.replace(stats, error_cov=1.2 * stats.error_cov), exact, 0.99, problem.info)
+    assert wide.agrees is False and wide.pvalue < 0.01
+    assert {part.name: part.passed for part in wide.parts} == {"mean_error": True, "error_variance": False}
+    assert wide.detail.startswith("The ensemble departs") and "variance of" in wide.detail
+    sd = np.sqrt(np.diagonal(exact.error_cov, axis1=1, axis2=2) / n)
+    shifted = self_check(dataclasses.replace(stats, mean_error=stats.mean_error + 6.0 * sd), exact, 0.99, problem.info)
+    assert shifted.agrees is False
+    assert {part.name: part.passed for part in shifted.parts} == {"mean_error": False, "error_variance": True}
+
+
+def test_a_correct_engine_disagrees_at_most_at_the_rate_alpha():
+    """400 seeded ensembles of N = 100 (the smallest verify allows), confidence 0.9: the disagreements are
+    at most alpha's binomial upper quantile (1e-4), so the chi-square scores hold at small N."""
+    problem = build_problem(load_model_file(EXAMPLES / "constant_velocity.toml", ["model.updates=3"]), residual_pairs=False)[0]
+    exact = exact_prediction(problem)
+    runs = 400
+    failures = sum(not self_check(_run(problem, 100, seed), exact, 0.9, problem.info).agrees for seed in range(runs))
+    assert failures <= sps.binom.isf(1e-4, runs, 0.1)
+
+
+def test_variance_scores_are_the_chi_square_tails_and_the_figure_band_is_the_bound():
+    count, comparisons, confidence = 150, 40, 0.99
+    low, high = variance_ratio_band(confidence, comparisons, count)
+    bound = normal_bound(confidence, 2 * comparisons)
+    np.testing.assert_allclose(np.abs(variance_scores(np.array([low, high]), count)), bound, rtol=1e-8)
+    assert variance_scores(np.array([1.0]), count)[0] == 0.0
+    # one sided tail: P(chi2 > (N - 1) r) = Phi(-z)
+    z = variance_scores(np.array([1.3]), count)[0]
+    assert sps.norm.sf(z) == pytest.approx(sps.chi2.sf(1.3 * (count - 1), count - 1), rel=1e-9)
+
+
+def test_the_exact_mean_error_is_the_expected_mean_error():
+    """stats.nc's expected_mean_error is the exact mean error that the self-check uses (to rounding)."""
+    problem = build_problem(apply_settings(AccelGpsScenario(), {**SHORT, "filter.position0_mean": 2.0}))[0]
+    expected = problem.expected_mean_error()
+    np.testing.assert_allclose(exact_prediction(problem).mean_error, expected, rtol=0, atol=1e-12 * np.max(np.abs(expected)))
+
+
+def test_summary_records_the_self_check_and_the_exact_final_covariance(tmp_path):
+    import kalcal
+
+    result = kalcal.verify("accel-gps", 1000, seed=3, settings=SHORT, long_run=0, out=tmp_path / "run")
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    check = summary["self_check"]
+    assert set(check) == {"statistic", "bound", "p_value", "agrees", "confidence", "comparisons", "parts", "detail", "reason"}
+    assert check["agrees"] is True and check["confidence"] == 0.99 and check["reason"] is None
+    assert check == json.loads(json.dumps(result.self_check.as_dict()))
+    assert [part["name"] for part in check["parts"]] == list(SELF_CHECK_PARTS)
+    problem = build_problem(apply_settings(AccelGpsScenario(), SHORT))[0]
+    exact = exact_prediction(problem)
+    np.testing.assert_allclose(summary["final"]["exact_error_covariance"], exact.error_cov[-1], rtol=1e-12)
+    np.testing.assert_allclose(summary["final"]["exact_mean_error"], exact.mean_error[-1], rtol=1e-12, atol=1e-15)
+    # apart from the verdict: a self-check that disagrees would not change it either
+    assert summary["verdict"] == ("pass" if all(t["passed"] for t in summary["tests"]) else "fail")
+    assert "self_check" not in [t["name"] for t in summary["tests"]]
+    assert self_check_line(check).startswith("self-check of the bench (ensemble against the exact analysis; not in the verdict): agrees")
+
+
+def _cli(*args):
+    from typer.testing import CliRunner
+
+    from kalcal.cli import app
+
+    result = CliRunner().invoke(app, [str(a) for a in args], catch_exceptions=False)
+    assert result.exit_code == 0, result.output + result.stderr
+    return result.stdout
+
+
+def test_verify_prints_the_self_check_line(tmp_path):
+    out = tmp_path / "run"
+    stdout = _cli("verify", "-n", 300, "--no-report", "--long-run", 0, "--set", "scenario.duration=2", "--out", out)
+    summary = json.loads((out / "summary.json").read_text())
+    assert self_check_line(summary["self_check"]) in stdout.splitlines()
+
+
+def test_scale_bias_says_why_there_is_no_self_check(tmp_path):
+    out = tmp_path / "run"
+    stdout = _cli("verify", "scale-bias", "-n", 100, "--set", "scenario.duration=10", "--out", out)
+    summary = json.loads((out / "summary.json").read_text())
+    check = summary["self_check"]
+    assert check["agrees"] is None and check["statistic"] is None and check["bound"] is None and check["parts"] == []
+    assert "gains depend on the noisy readings" in check["reason"]
+    assert check["detail"] == f"No self-check: {check['reason']}."
+    assert summary["final"]["exact_error_covariance"] is None and summary["final"]["exact_mean_error"] is None
+    assert self_check_line(check).endswith(f": none ({check['reason']})")
+    assert self_check_line(check) in stdout.splitlines()
+    page = (out / "report.html").read_text(encoding="utf-8")
+    assert 'data-file="figures/sigma_exact.png"' not in page
+    assert "gains depend on the noisy readings" in page and "Self-check of the bench" in page
+    assert "exact σ = √P_true,ii" not in page
+
+
+def test_the_cli_line_for_each_outcome():
+    lead = "self-check of the bench (ensemble against the exact analysis; not in the verdict)"
+    base = {"statistic": -5.123, "bound": 4.4, "p_value": 1e-4, "reason": None}
+    assert self_check_line({**base, "agrees": False}) == f"{lead}: DISAGREES, largest |z| 5.12 against ±4.4, p = 0.0001"
+    assert self_check_line({**base, "agrees": False, "statistic": None, "p_value": None}).endswith("|z| nan against ±4.4, p = nan")
+    assert self_check_line(None) == f"{lead}: not recorded"
