@@ -25,12 +25,12 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import stats as sps
 
 from kalcal.analysis.fixed_gain import analyze_problem
 from kalcal.montecarlo.accumulators import EnsembleStatistics
 from kalcal.montecarlo.problem import FixedGainProblem, ProblemInfo
 from kalcal.verification.bounds import chi2_bounds_at, normal_bound_at
+from kalcal.verification.distributions import normal_isf
 from kalcal.verification.results import CheckPart, chi2_two_sided_pvalues, combined_pvalue, normal_family_pvalue
 
 #: the self-check's parts, each held to an equal share of its alpha
@@ -141,7 +141,7 @@ def variance_scores(ratio: np.ndarray, count: int) -> np.ndarray:
     (N - 1) ratio ~ chi-square(N - 1); z = sign(ratio - 1) Phi^-1(1 - p / 2) with p its two-sided p-value.
     """
     p = chi2_two_sided_pvalues(ratio, count - 1, count - 1)
-    return np.sign(ratio - 1.0) * sps.norm.isf(p / 2.0)
+    return np.sign(ratio - 1.0) * normal_isf(p / 2.0)
 
 
 def variance_ratio_band(confidence: float, comparisons: int, count: int) -> tuple[float, float]:
