@@ -20,14 +20,19 @@ SHORT = {"scenario.duration": 6, "truth.accel_noise_std": 0.04, "filter.accel_no
 def test_analyze_returns_the_final_budget_and_dataset():
     result = kalcal.analyze("accel-gps", settings=SHORT)
     assert isinstance(result, kalcal.AnalysisResult)
-    assert result.power is None and result.paths == {}
+    assert result.paths == {} and result.document["power"] is result.power
+    assert [(row["name"], row["part"]) for row in result.power][:4] == [
+        ("mean_error", None), ("covariance", None), ("covariance", "elements"), ("covariance", "centered_nees")
+    ]
+    assert result.sensitivity is None  # the filter is mistuned: the power table applies, not a sensitivity
     final = result.final
     assert final["time"] == 6.0 and final["units"] == ["m", "m/s", "m/s^2"]
     np.testing.assert_allclose(np.sum([b["final"] for b in result.budget], axis=0), final["error_covariance"], rtol=1e-9, atol=1e-15)
     np.testing.assert_allclose(final["error_covariance"], result.dataset["error_covariance"].values[-1])
     document = result.to_dict()
     assert list(document)[0] == "schema_version" and list(document)[-1] == "nonfinite"
-    assert document["power"] is None and document["realizations"] == 300_000
+    assert document["power"] == result.power and document["realizations"] == 300_000
+    assert document["sensitivity"] is None
     json.dumps(document, allow_nan=False)
     assert "AnalysisResult" in repr(result) and "top source" in result._repr_html_()
 

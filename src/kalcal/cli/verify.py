@@ -79,6 +79,9 @@ def verify(
             )
     summary = result.run.summary
     _common._print_checks(summary)
+    from kalcal.analysis.power import power_line
+
+    _common.console.print(power_line(summary["power"], n, summary["power_reason"]), markup=False, soft_wrap=True)
     pair = summary["residual_correlation"]
     if pair is not None:  # only runs that have the source report's pair of updates
         rows = ", ".join(

@@ -45,6 +45,15 @@ def report_residual_pair(statistics: EnsembleStatistics, info) -> dict[str, Any]
     return residual_pair(statistics, info, *REPORT_RESIDUAL_PAIR)
 
 
+def power_summary(problem, n: int, confidence: float) -> dict[str, Any]:
+    """``summary.json``'s ``power`` (each check's and part's power at n, from the exact analysis of the same
+    problem: :func:`kalcal.analysis.power.problem_power`) and ``power_reason`` (why it is None, where it is)."""
+    from kalcal.analysis.power import problem_power
+
+    rows, reason = problem_power(problem, n, confidence)
+    return {"power": rows, "power_reason": reason}
+
+
 @dataclass(frozen=True)
 class VerifyOutcome:
     """What a verification run produced (and wrote: ``paths``)."""
@@ -183,6 +192,7 @@ def compute_verification(
         "confidence": confidence,
         "verdict": verdict(checks),
         "tests": [c.as_dict() for c in checks],
+        **power_summary(problem, n, confidence),
         "final": {
             "time": float(info.update_times[-1]),
             "states": list(info.state_names),
