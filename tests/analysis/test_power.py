@@ -125,10 +125,21 @@ def test_portmanteau_detects_the_colored_gps_error_the_pairs_miss():
     pairs, port = parts["pairs"].bracket(100), parts["portmanteau"].bracket(100)
     assert port[0] > 0.9 and pairs[1] < 0.1
     rows = {(r["name"], r["part"]): r for r in power_rows(analyze_problem(problem, budget=False), 100)}
-    assert 3 * rows[("residual_whiteness", "portmanteau")]["detection_n"] <= rows[("residual_whiteness", "pairs")]["detection_n"]
+    n_port, n_pairs = (rows[("residual_whiteness", part)]["detection_n"] for part in ("portmanteau", "pairs"))
+    assert 130 <= n_port <= 150 and 1200 <= n_pairs <= 1350  # about a ninth
+    problem_30s, _ = build_problem(load_model_file(EXAMPLES / "accel_gps_colored_gps.toml"))
+    rows_30s = power_rows(analyze_problem(problem_30s, budget=False), 20_000)
+    assert power_line(rows_30s, 20_000).startswith(
+        "power at N = 20,000: verdict 1.00 (detected from N = 100); mean_error 0.00–0.01, covariance 1.00, "
+    )
+    whole = {(r["name"], r["part"]): r for r in rows_30s}
+    assert whole[("residual_whiteness", "portmanteau")]["detection_n"] == MIN_N  # power_low >= 0.99 at N = 100
+    assert 500 < whole[("residual_whiteness", "pairs")]["detection_n"] < 600
+    counts = {}
     for part, (low, high) in (("pairs", pairs), ("portmanteau", port)):
-        failures = _failures(problem, cause, 100, range(20), "residual_whiteness", part)
-        assert _overlaps(failures, 20, low, high), (part, failures, low, high)
+        counts[part] = _failures(problem, cause, 100, range(20), "residual_whiteness", part)
+        assert _overlaps(counts[part], 20, low, high), (part, counts[part], low, high)
+    assert counts == {"pairs": 0, "portmanteau": 18}  # as docs/verification.md quotes them
 
 
 def test_verification_power_is_null_with_its_reason_for_scale_bias():
@@ -151,6 +162,7 @@ def test_sensitivity_finds_the_smallest_detected_error():
         assert up is not None and 0 < up < 0.2
         assert module._detects(scaled[row["setting"]](1 + up), 20_000, 0.99, "joseph")
         assert not module._detects(scaled[row["setting"]](1 + up / module.RESOLUTION), 20_000, 0.99, "joseph")
+    assert ", ".join(sensitivity_text(row) for row in rows) == "w ±4.4%, v ±2.8%, m0 ±3.4%"  # as docs/analysis.md
     assert sensitivity_text({"setting": "truth.accel_noise_std", "increase": 0.03, "decrease": 0.031}) == "accel_noise_std ±3.1%"
     assert detected_error(lambda eps: eps > 0.3, 0.9) == pytest.approx(0.3, rel=module.RESOLUTION - 1)
     assert detected_error(lambda eps: False, 0.9) is None
