@@ -147,6 +147,9 @@ def test_verification_power_is_null_with_its_reason_for_scale_bias():
     rows, reason = problem_power(problem, 1000, 0.99)
     assert rows is None and "gains depend on the data" in reason
     assert power_line(rows, 1000, reason).startswith("power: not computed (no exact analysis")
+    from kalcal.jobs.verify import power_summary
+
+    assert power_summary(problem, 1000, 0.99) == {"power": None, "power_reason": reason}  # summary.json's keys
 
 
 def test_sensitivity_finds_the_smallest_detected_error():
