@@ -31,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import stats as sps
+from scipy.special import ndtr
 
 __all__ = ["ChiSquareFamily", "NormalFamily", "PortmanteauPower", "bracket", "portmanteau_power", "product_variance"]
 
@@ -76,7 +77,7 @@ class NormalFamily:
         shift, edge = a * root_n, c * np.sqrt(np.maximum(d, 0.0))
         spread = np.sqrt(np.maximum(v, 0.0))
         with np.errstate(divide="ignore", invalid="ignore"):
-            normal = sps.norm.cdf((shift - edge) / spread) + sps.norm.cdf((-shift - edge) / spread)
+            normal = ndtr((shift - edge) / spread) + ndtr((-shift - edge) / spread)
         # no spread: the comparison is its mean, outside the bound or not (zero D with a nonzero value fails)
         fixed = np.where(np.abs(shift) > edge, 1.0, 0.0)
         fixed = np.where((d <= 0) & (a == 0), 0.0, fixed)
@@ -196,21 +197,33 @@ def portmanteau_power(raw: np.ndarray, bound_of: Callable[[int], float], rank_rt
     values, vectors = np.linalg.eigh(0.5 * (own + np.swapaxes(own, 1, 2)))
     keep = values > rank_rtol * np.maximum(values.max(axis=1, keepdims=True), 0.0)
     w = vectors * np.where(keep, 1.0 / np.sqrt(np.where(keep, values, 1.0)), 0.0)[:, None, :]
-    sigma = np.einsum("kac,kajb,jbd->kcjd", w, raw, w, optimize=True).reshape(n_updates * p, n_updates * p)
+    size = n_updates * p
+    # Sigma = W^T E[r r^T] W, W block-diagonal; the directions left out have zero rows and columns
+    sigma = np.einsum("kcjb,jbd->kcjd", np.einsum("kac,kajb->kcjb", w, raw), w).reshape(size, size)
     sigma = 0.5 * (sigma + sigma.T)
-    block = np.repeat(np.arange(n_updates), p)
-    live = keep.ravel()
-    lower = ((block[:, None] > block[None, :]) & live[:, None] & live[None, :]).astype(float)
+    lower = np.repeat(np.repeat(np.tril(np.ones((n_updates, n_updates)), -1), p, axis=0), p, axis=1)
     rank = keep.sum(axis=1)
     dof = int((rank.sum() ** 2 - (rank**2).sum()) // 2)
     a = sigma * sigma
+
+    def below(x: np.ndarray) -> np.ndarray:
+        """L @ x for the mask L_xy = [update of x > update of y], by prefix sums over the updates."""
+        blocks = x.reshape(n_updates, p, -1).sum(axis=1)
+        return np.repeat(np.cumsum(blocks, axis=0) - blocks, p, axis=0)
+
+    def above(x: np.ndarray) -> np.ndarray:
+        """L^T @ x."""
+        blocks = x.reshape(n_updates, p, -1).sum(axis=1)
+        return np.repeat(blocks.sum(axis=0) - np.cumsum(blocks, axis=0), p, axis=0)
+
     m = lower * sigma
+    m_sigma = m @ sigma
     return PortmanteauPower(
         rate=float(np.sum(lower * a)),
         dof=dof,
         bound=bound_of(dof),
-        t1=float(np.sum(a * (lower @ a @ lower.T))),
-        t3=float(np.sum(a * (lower @ a @ lower))),
-        m1=float(np.sum(sigma * (m @ sigma @ m.T))),
-        m2=float(np.sum(sigma * (m @ sigma @ m))),
+        t1=float(np.sum(a * below(below(a).T).T)),  # sum A o (L A L^T)
+        t3=float(np.sum(a * below(above(a.T).T))),  # sum A o (L A L)
+        m1=float(np.sum(sigma * (m_sigma @ m.T))),
+        m2=float(np.sum(sigma * (m_sigma @ m))),
     )
