@@ -20,14 +20,19 @@ SHORT = {"scenario.duration": 6, "truth.accel_noise_std": 0.04, "filter.accel_no
 def test_analyze_returns_the_final_budget_and_dataset():
     result = kalcal.analyze("accel-gps", settings=SHORT)
     assert isinstance(result, kalcal.AnalysisResult)
-    assert result.power is None and result.paths == {}
+    assert result.paths == {} and result.document["power"] is result.power
+    assert [(row["name"], row["part"]) for row in result.power][:4] == [
+        ("mean_error", None), ("covariance", None), ("covariance", "elements"), ("covariance", "centered_nees")
+    ]
+    assert result.sensitivity is None  # the filter is mistuned: the power table applies, not a sensitivity
     final = result.final
     assert final["time"] == 6.0 and final["units"] == ["m", "m/s", "m/s^2"]
     np.testing.assert_allclose(np.sum([b["final"] for b in result.budget], axis=0), final["error_covariance"], rtol=1e-9, atol=1e-15)
     np.testing.assert_allclose(final["error_covariance"], result.dataset["error_covariance"].values[-1])
     document = result.to_dict()
     assert list(document)[0] == "schema_version" and list(document)[-1] == "nonfinite"
-    assert document["power"] is None and document["realizations"] == 300_000
+    assert document["power"] == result.power and document["realizations"] == 300_000
+    assert document["sensitivity"] is None
     json.dumps(document, allow_nan=False)
     assert "AnalysisResult" in repr(result) and "top source" in result._repr_html_()
 
@@ -87,3 +92,29 @@ def test_a_larger_truth_names_its_sources_by_its_own_states_and_its_budget_sums_
     # the filter believes far less position error than the coloured GPS error gives it (docs/custom-models.md)
     ratio = true[0, 0] / np.asarray(result.final["filter_covariance"])[0, 0]
     assert round(ratio, 1) == 68.5, ratio  # docs/custom-models.md
+
+
+def test_command_prints_the_power_and_for_a_correct_filter_the_sensitivity(tmp_path):
+    run = CliRunner().invoke(
+        app, ["analyze", str(EXAMPLES / "constant_velocity.toml"), "-n", "20000", "--out", str(tmp_path / "a")], catch_exceptions=False
+    )
+    assert run.exit_code == 0, run.output
+    assert "power at N = 20,000: verdict" in run.output and "not detected up to N = 1,000,000,000" in run.output
+    assert "detected at N = 20,000 with power 0.99 (a correct filter): w ±4.4%, v ±2.8%, m0 ±3.4%" in run.output
+    written = json.loads((tmp_path / "a" / "analysis.json").read_text())
+    assert [row["setting"] for row in written["sensitivity"]] == ["truth.w", "truth.v", "truth.m0"]
+    assert all(set(row) == {"name", "part", "power_low", "power_high", "detectable", "detection_n"} for row in written["power"])
+
+
+def test_verify_writes_and_prints_the_power_it_had(tmp_path):
+    out = tmp_path / "v"
+    run = CliRunner().invoke(
+        app, ["verify", str(EXAMPLES / "constant_velocity_mistuned.toml"), "-n", "200", "--no-report", "--out", str(out)],
+        catch_exceptions=False,
+    )
+    assert run.exit_code == 0, run.output
+    assert "power at N = 200: verdict" in run.output
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["power_reason"] is None
+    rows = {(row["name"], row["part"]): row for row in summary["power"]}
+    assert rows[("covariance", None)]["detectable"] and rows[("mean_error", None)]["detectable"] is False

@@ -80,6 +80,8 @@ def _assert_equals_dense(truth, filt, error_map, rtol):
     scale = np.sqrt(np.einsum("nka,nka->ka", e, e)[:, :, None] * np.einsum("nka,nka->ka", x, x)[:, None, :] + 1.0)
     assert_close(moments.mean_estimate, x0, rtol=rtol, atol=rtol, what="mean estimate")
     assert_close(moments.error_estimate, cross, atol=rtol * (scale + np.abs(cross)), what="E[e xhat^T]")
+    cov_x = np.einsum("nka,nkb->kab", x, x)
+    assert_close(moments.estimate_cov, cov_x, rtol=rtol, atol=cov_atol(cov_x, rtol), what="Cov(xhat)")
     pairs = np.einsum("nka,njb->kajb", r, r) + np.einsum("ka,jb->kajb", r0, r0)
     own = np.sqrt(np.einsum("kaka->ka", pairs))
     assert_close(moments.mean_residual, r0, atol=rtol * own, what="mean residual")

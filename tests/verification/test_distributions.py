@@ -38,3 +38,11 @@ def test_the_checks_do_not_import_scipy_stats():
     code = "import sys, kalcal.jobs.verify; print('scipy.stats' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "False"
+
+
+@pytest.mark.parametrize("dof", [1, 3, 10, 1e3])
+@pytest.mark.parametrize("nc", [0.1, 1.0, 30.0, 500.0])
+def test_noncentral_chi2_agrees_with_scipy_stats(dof, nc):
+    x = np.array([-1.0, 0.0, 0.5, 3.0, 12.0, 60.0, 800.0, 3000.0])
+    np.testing.assert_allclose(distributions.ncx2_cdf(x, dof, nc), stats.ncx2.cdf(x, dof, nc), rtol=1e-9, atol=1e-13)
+    np.testing.assert_allclose(distributions.ncx2_sf(x, dof, nc), stats.ncx2.sf(x, dof, nc), rtol=1e-9, atol=1e-13)

@@ -72,6 +72,7 @@ class Moments:
     mean_residual: np.ndarray  #: E[r_k], (K, p)
     residual_cov: np.ndarray  #: Cov(r_k), (K, p, p)
     residual_second_moment: np.ndarray | None  #: E[r_k r_j^T] for every pair, (K, p, K, p), or None
+    estimate_cov: np.ndarray | None = None  #: Cov(xhat_k), centered, (K, d_f, d_f)
 
 
 @dataclass(frozen=True)
@@ -230,6 +231,7 @@ def propagate(
     error_cov = np.empty((n_updates, d_f, d_f))
     mean_estimate = np.empty((n_updates, d_f))
     error_estimate = np.empty((n_updates, d_f, d_f))
+    estimate_cov = np.empty((n_updates, d_f, d_f))
     mean_residual = np.empty((n_updates, p))
     residual_cov = np.empty((n_updates, p, p))
     cross = np.zeros((n, n_updates * p))  # Cov(J_k, r_j) for j <= k, column block j
@@ -253,12 +255,15 @@ def propagate(
         mean_estimate[k] = rec.project @ mean[:d_s] + m_d[k] - mean_error[k]
         # xhat = P_M s - e~, so Cov(e, xhat) = Cov(e~, s) P_M^T - Cov(e~)
         error_estimate[k] = cov[d_s:, :d_s] @ rec.project.T - error_cov[k] + np.outer(mean_error[k], mean_estimate[k])
+        # Cov(xhat) = P_M Cov(s) P_M^T - P_M Cov(s, e~) - Cov(e~, s) P_M^T + Cov(e~)
+        spread = rec.project @ cov[:d_s, d_s:]
+        estimate_cov[k] = symmetrize(rec.project @ cov[:d_s, :d_s] @ rec.project.T - spread - spread.T + error_cov[k])
     second = None
     if pairs:
         lower = pair_cov.reshape(n_updates * p, n_updates * p)
         full = np.tril(lower) + np.tril(lower, -1).T
         second = full.reshape(n_updates, p, n_updates, p) + np.einsum("ka,jb->kajb", mean_residual, mean_residual)
-    return Moments(mean_error, error_cov, mean_estimate, error_estimate, mean_residual, residual_cov, second)
+    return Moments(mean_error, error_cov, mean_estimate, error_estimate, mean_residual, residual_cov, second, estimate_cov)
 
 
 def mean_normalized_square(inverse: np.ndarray, mean: np.ndarray, cov: np.ndarray) -> np.ndarray:

@@ -59,7 +59,9 @@ def _inverse(cov: np.ndarray) -> np.ndarray:
     return np.swapaxes(w, -1, -2) @ w
 
 
-def analyze_problem(problem: FixedGainProblem, sources: Sequence[Source] | None = None, *, pairs: bool = True) -> CovarianceAnalysis:
+def analyze_problem(
+    problem: FixedGainProblem, sources: Sequence[Source] | None = None, *, pairs: bool = True, budget: bool = True
+) -> CovarianceAnalysis:
     """Every moment of ``problem``'s filter against its truth, exactly, and the error budget.
 
     Parameters
@@ -71,6 +73,8 @@ def analyze_problem(problem: FixedGainProblem, sources: Sequence[Source] | None 
         the states they drive, the boundary sample apart).
     pairs : bool
         Also E[r_k r_j^T] over every pair of updates.
+    budget : bool
+        Also the error budget (False: an empty one, for callers that need only the moments).
     """
     if not isinstance(problem, FixedGainProblem):
         raise KalcalError(f"{problem.info.scenario}: no exact covariance analysis (its gains depend on the data)")
@@ -92,12 +96,13 @@ def analyze_problem(problem: FixedGainProblem, sources: Sequence[Source] | None 
         innovation_cov=schedule.innovation_cov,
         mean_nees=mean_normalized_square(_inverse(schedule.posterior_cov), moments.mean_error, moments.error_cov),
         mean_nis=mean_normalized_square(_inverse(schedule.innovation_cov), moments.mean_residual, moments.residual_cov),
-        budget=error_budget(truth, filt, sources, error_map),
+        budget=error_budget(truth, filt, sources, error_map) if budget else (),
     )
 
 
-def analyze_scenario(scenario, form: UpdateForm = "joseph", *, pairs: bool = True) -> CovarianceAnalysis:
-    """The exact analysis of an accel-gps scenario or a model file (:class:`CustomModelScenario`).
+def analyze_scenario(scenario, form: UpdateForm = "joseph", *, pairs: bool = True, budget: bool = True) -> CovarianceAnalysis:
+    """The exact analysis of an accel-gps scenario or a model file (:class:`CustomModelScenario`); ``pairs``
+    and ``budget`` as :func:`analyze_problem`'s.
 
     Raises
     ------
@@ -109,12 +114,12 @@ def analyze_scenario(scenario, form: UpdateForm = "joseph", *, pairs: bool = Tru
             "scale-bias: no exact covariance analysis (its filter's gains depend on the noisy readings); use kalcal verify"
         )
     if isinstance(scenario, AccelGpsScenario):
-        return analyze_problem(accel_gps_problem(scenario, form, residual_pairs=False), accel_gps_sources(scenario), pairs=pairs)
+        return analyze_problem(accel_gps_problem(scenario, form, residual_pairs=False), accel_gps_sources(scenario), pairs=pairs, budget=budget)
     if isinstance(scenario, CustomModelScenario):
         problem = custom_problem(scenario, form, residual_pairs=False)
         truth = scenario.truth
         names = getattr(truth, "state_names", None) or scenario.model.state_names  # a larger truth's own names
         if truth.state_dim != len(names):
             names = tuple(f"x{i + 1}" for i in range(truth.state_dim))
-        return analyze_problem(problem, model_sources(truth, names, scenario.model.measurement_names), pairs=pairs)
+        return analyze_problem(problem, model_sources(truth, names, scenario.model.measurement_names), pairs=pairs, budget=budget)
     raise TypeError(f"no exact covariance analysis for {type(scenario).__name__}")

@@ -28,13 +28,19 @@ class AnalysisResult:
         One term of P_true per independent source: ``source`` ("prior:position", "process:accel",
         "measurement:velocity", ...), ``kind``, ``final`` (d x d; the terms sum to
         ``final["error_covariance"]``) and ``variance_fraction`` (each state's share).
-    power : None
-        The checks' power at ``n`` realizations (not computed yet).
+    power : list of dict
+        The power each check (``part`` None) and each of its parts had at ``n`` realizations under the
+        truth, at 99% confidence: ``{"name", "part", "power_low", "power_high", "detectable",
+        "detection_n"}`` (docs/analysis.md, :mod:`kalcal.analysis.power`).
     dataset : xarray.Dataset
         Every per-update quantity (``analysis.nc``): dimensions ``update`` (coordinate ``time``, s),
         ``state``, ``state_col``, ``measurement``, ``measurement_col``, ``update_col``, ``source``.
     paths : dict
         The files written (by key) when the call was given ``out``; empty otherwise.
+    sensitivity : list of dict or None
+        For a correct filter (no check detects the truth at any N), per noise setting of the truth:
+        ``{"setting", "increase", "decrease"}``, the smallest relative error (a fraction) that ``n``
+        realizations detect with power 0.99 (:mod:`kalcal.analysis.sensitivity`); None otherwise.
     """
 
     final: dict
@@ -44,6 +50,7 @@ class AnalysisResult:
     document: dict = field(repr=False, compare=False)
     analysis: Any = field(repr=False, compare=False)
     paths: dict = field(default_factory=dict)
+    sensitivity: Any = None
 
     def to_dict(self) -> dict[str, Any]:
         """``analysis.json`` as ``json.load`` reads it (``schema_version`` first, ``nonfinite`` last)."""
@@ -116,7 +123,7 @@ def analyze(
     settings : dict, optional
         ``{"section.key": value}``, the keys of ``--set`` (``{"truth.accel_noise_std": 0.04}``).
     n : int
-        The realizations the checks' power is computed for (power is not computed yet).
+        The realizations the checks' power (and, for a correct filter, the sensitivity) is computed for.
     config : path, optional
         A TOML file of settings (``--config``).
     form : {"joseph", "standard", "sqrt"}
@@ -161,6 +168,7 @@ def _compute(model, n: int, form: str, command: str) -> AnalysisResult:
     analysis = analyze_scenario(model, form)
     elapsed = time.perf_counter() - start
     final, budget = final_summary(analysis), budget_summary(analysis)
+    power, sensitivity, power_s = _power(model, analysis, n, form)
     document = {
         "scenario": analysis.info.scenario,
         "settings": section_values(model),
@@ -168,11 +176,25 @@ def _compute(model, n: int, form: str, command: str) -> AnalysisResult:
         "realizations": n,
         "final": final,
         "budget": budget,
-        "power": None,
-        "timing": {"analysis_s": elapsed},
+        "power": power,
+        "sensitivity": sensitivity,
+        "timing": {"analysis_s": elapsed, "power_s": power_s},
         "command": command,
     }
-    return AnalysisResult(final, budget, None, analysis_dataset(analysis, {"form": form}), document, analysis)
+    dataset = analysis_dataset(analysis, {"form": form})
+    return AnalysisResult(final, budget, power, dataset, document, analysis, sensitivity=sensitivity)
+
+
+def _power(model, analysis, n: int, form: str) -> tuple[list, list | None, float]:
+    """The checks' power at ``n``, the sensitivity where no check detects the truth, and the seconds both took."""
+    from kalcal.analysis.power import power_rows
+    from kalcal.analysis.sensitivity import sensitivity
+
+    start = time.perf_counter()
+    power = power_rows(analysis, n)
+    correct = not any(row["detectable"] for row in power)
+    found = sensitivity(model, n, form=form) if correct else None
+    return power, found, time.perf_counter() - start
 
 
 @writes_outputs("analyze", names=OUTPUT_NAMES)

@@ -46,6 +46,24 @@ def report_residual_pair(statistics: EnsembleStatistics, info) -> dict[str, Any]
     return residual_pair(statistics, info, *REPORT_RESIDUAL_PAIR)
 
 
+def exact_analysis(problem):
+    """The exact analysis of a fixed-gain problem (the pairs kept, no budget), which both the self-check
+    and the power use; None for any other problem (each of them then says why)."""
+    from kalcal.analysis.fixed_gain import analyze_problem
+    from kalcal.montecarlo.problem import FixedGainProblem
+
+    return analyze_problem(problem, budget=False) if isinstance(problem, FixedGainProblem) else None
+
+
+def power_summary(problem, n: int, confidence: float, analysis=None) -> dict[str, Any]:
+    """``summary.json``'s ``power`` (each check's and part's power at n, from the exact analysis of the same
+    problem: :func:`kalcal.analysis.power.problem_power`) and ``power_reason`` (why it is None, where it is)."""
+    from kalcal.analysis.power import problem_power
+
+    rows, reason = problem_power(problem, n, confidence, analysis)
+    return {"power": rows, "power_reason": reason}
+
+
 @dataclass(frozen=True)
 class VerifyOutcome:
     """What a verification run produced (and wrote: ``paths``)."""
@@ -157,7 +175,8 @@ def compute_verification(
     expected = problem.expected_mean_error()
     checks = run_checks(statistics, problem.info, confidence, expected, cause)
     info = problem.info
-    exact = exact_prediction(problem)  # the same filter against the same truth, without sampling
+    analysis = exact_analysis(problem)  # the same filter against the same truth, without sampling
+    exact = exact_prediction(problem, analysis)
     bench = self_check(statistics, exact, confidence, info)
     attrs = {"scenario": info.scenario, "seed": seed, "engine": engine, "confidence": confidence}
     dataset = statistics_dataset(statistics, info, expected, attrs)
@@ -190,6 +209,7 @@ def compute_verification(
         "verdict": verdict(checks),
         "tests": [c.as_dict() for c in checks],
         "self_check": bench.as_dict(),
+        **power_summary(problem, n, confidence, analysis),
         "final": {
             "time": float(info.update_times[-1]),
             "states": list(info.state_names),

@@ -60,8 +60,11 @@ class ExactPrediction:
         return self.error_cov is not None
 
 
-def exact_prediction(problem) -> ExactPrediction:
+def exact_prediction(problem, analysis=None) -> ExactPrediction:
     """The exact mean error and P_true of ``problem``'s filter against its truth (milliseconds).
+
+    ``analysis``, the problem's :class:`~kalcal.analysis.fixed_gain.CovarianceAnalysis` where the caller
+    already has it (verify computes one for the check's power too), is used instead of a new one.
 
     Every :class:`FixedGainProblem` has one, for both of its engines: the per-sample engine ("sampled")
     simulates the truth whose law the update-rate engine ("exact") samples (tests/simulation/test_exact.py),
@@ -75,7 +78,7 @@ def exact_prediction(problem) -> ExactPrediction:
             f"{problem.info.scenario}: no exact analysis exists (its filter's gains depend on the noisy readings), "
             "so the ensemble is not checked against theory",
         )
-    analysis = analyze_problem(problem, pairs=False)
+    analysis = analyze_problem(problem, pairs=False) if analysis is None else analysis
     return ExactPrediction(analysis.moments.mean_error, analysis.moments.error_cov)
 
 

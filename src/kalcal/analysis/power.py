@@ -1,0 +1,255 @@
+"""The power of every check at N realizations under the truth, and the smallest N that detects the truth.
+
+From a :class:`~kalcal.analysis.fixed_gain.CovarianceAnalysis` (the exact means and covariances of the
+errors, estimates and innovations), each part of each check of :mod:`kalcal.verification.checks` is
+held to the statistic and bound the check uses (:mod:`kalcal.analysis.power_parts` for the
+approximations). A check made of parts fails when any part does, so its bracket is
+[max over parts of power_low, min(1, sum of power_high)]; the verdict's likewise over the checks.
+
+``detection_n`` is the smallest N in [``MIN_N``, ``N_CAP``] at which ``power_low`` (the conservative end)
+reaches ``DETECTION_POWER``, found by doubling then bisection (power taken as increasing in N); None
+(``detectable`` false) when even ``N_CAP`` does not reach it, as for a correct filter.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from kalcal.analysis.fixed_gain import CovarianceAnalysis
+from kalcal.analysis.power_parts import ChiSquareFamily, NormalFamily, PortmanteauPower, portmanteau_power, product_variance
+from kalcal.linalg import whitener
+from kalcal.verification.bounds import (
+    COVARIANCE_PARTS,
+    WHITENESS_PARTS,
+    centered_nees_bounds,
+    chi2_mean_bounds,
+    covariance_element_bound,
+    normal_bound,
+    portmanteau_bound,
+    whiteness_pairs_bound,
+)
+from kalcal.verification.whiteness import RANK_RTOL
+
+__all__ = [
+    "DETECTION_POWER",
+    "MIN_N",
+    "N_CAP",
+    "CheckPower",
+    "check_families",
+    "detection_n",
+    "power_line",
+    "power_rows",
+    "problem_power",
+    "verdict_power",
+]
+
+#: the power at which a check is said to detect the truth
+DETECTION_POWER = 0.99
+#: the smallest N searched (verify's minimum number of realizations)
+MIN_N = 100
+#: the largest N searched: a truth no check detects with this many realizations is not detectable
+N_CAP = 10**9
+
+Family = NormalFamily | ChiSquareFamily | PortmanteauPower
+
+
+@dataclass(frozen=True)
+class CheckPower:
+    """The families of one check: ``parts`` maps a part's name (None for a check of one part) to its family."""
+
+    name: str
+    parts: dict[str | None, Family]
+
+    def bracket(self, n: int) -> tuple[float, float]:
+        """The check's [power_low, power_high] at N = ``n``: any part failing fails the check."""
+        brackets = [family.bracket(n) for family in self.parts.values()]
+        return max(b[0] for b in brackets), min(1.0, sum(b[1] for b in brackets))
+
+
+def _mean_error(a: CovarianceAnalysis, confidence: float) -> NormalFamily:
+    m = a.moments
+    var = np.diagonal(m.error_cov, axis1=1, axis2=2)
+    return NormalFamily(m.mean_error.ravel(), var.ravel(), var.ravel(), normal_bound(confidence, var.size))
+
+
+def _covariance(a: CovarianceAnalysis, confidence: float) -> dict[str, Family]:
+    s, p = a.moments.error_cov, a.filter_cov
+    n_updates, d, _ = p.shape
+    i, l = np.triu_indices(d)
+    sd, pd = np.diagonal(s, axis1=1, axis2=2), np.diagonal(p, axis1=1, axis2=2)
+    elements = NormalFamily(
+        (s - p)[:, i, l].ravel(),
+        (s[:, i, l] ** 2 + sd[:, i] * sd[:, l]).ravel(),  # a centered Wishart element's spread
+        (p[:, i, l] ** 2 + pd[:, i] * pd[:, l]).ravel(),
+        covariance_element_bound(confidence, n_updates, d),
+    )
+    # A = P^-1/2 S P^-T/2: tr A = tr(P^-1 S), tr A^2 = tr((P^-1 S)^2)
+    w = whitener(p)
+    ratio = w @ s @ np.swapaxes(w, 1, 2)
+    zero = np.zeros(n_updates)
+
+    def bounds(n: int) -> tuple[float, float]:
+        low, high = centered_nees_bounds(confidence, n_updates, d, n)
+        return low * (n - 1), high * (n - 1)
+
+    nees = ChiSquareFamily(
+        np.trace(ratio, axis1=1, axis2=2), np.einsum("kij,kji->k", ratio, ratio), zero, zero, -1, bounds
+    )
+    return dict(zip(COVARIANCE_PARTS, (elements, nees)))
+
+
+def _orthogonality(a: CovarianceAnalysis, confidence: float) -> NormalFamily:
+    m = a.moments
+    if m.estimate_cov is None:
+        raise ValueError("the analysis has no Cov(xhat): run it with kalcal.analysis.covariance.propagate")
+    mu_e, mu_x = m.mean_error[:, :, None], m.mean_estimate[:, None, :]
+    var_e = np.diagonal(m.error_cov, axis1=1, axis2=2)[:, :, None]
+    var_x = np.diagonal(m.estimate_cov, axis1=1, axis2=2)[:, None, :]
+    cov = m.error_estimate - mu_e * mu_x
+    variance = product_variance(mu_e, mu_x, var_e, var_x, cov)
+    scale = (var_e + mu_e**2) * (var_x + mu_x**2)
+    return NormalFamily(m.error_estimate.ravel(), variance.ravel(), scale.ravel(), normal_bound(confidence, cov.size))
+
+
+def _whiteness(a: CovarianceAnalysis, confidence: float) -> dict[str, Family]:
+    m = a.moments
+    raw = m.residual_second_moment  # (K, p, K, p)
+    n_updates, p = raw.shape[:2]
+    mean = m.mean_residual
+    var = np.diagonal(m.residual_cov, axis1=1, axis2=2)  # (K, p)
+    mu_x, mu_y = mean[:, :, None, None], mean[None, None, :, :]
+    var_x, var_y = var[:, :, None, None], var[None, None, :, :]
+    cov = raw - mu_x * mu_y
+    lower = np.broadcast_to(np.tril(np.ones((n_updates, n_updates), dtype=bool), -1)[:, None, :, None], raw.shape)
+    variance = product_variance(mu_x, mu_y, var_x, var_y, cov)
+    scale = np.broadcast_to((var_x + mu_x**2) * (var_y + mu_y**2), raw.shape)
+    pairs = NormalFamily(raw[lower], variance[lower], scale[lower], whiteness_pairs_bound(confidence, n_updates, p))
+    share = (1.0 - confidence) / len(WHITENESS_PARTS)
+    q = portmanteau_power(raw, lambda dof: portmanteau_bound(share, dof), RANK_RTOL)
+    return dict(zip(WHITENESS_PARTS, (pairs, q)))
+
+
+def _nis(a: CovarianceAnalysis, confidence: float) -> ChiSquareFamily:
+    m = a.moments
+    n_updates, p = m.mean_residual.shape
+    w = whitener(a.innovation_cov)
+    ratio = w @ m.residual_cov @ np.swapaxes(w, 1, 2)  # A = S^-1/2 C S^-T/2
+    mu = np.einsum("kab,kb->ka", w, m.mean_residual)
+
+    def bounds(n: int) -> tuple[float, float]:
+        low, high = chi2_mean_bounds(confidence, n_updates, p * n, n)
+        return low * n, high * n
+
+    return ChiSquareFamily(
+        np.trace(ratio, axis1=1, axis2=2),
+        np.einsum("kij,kji->k", ratio, ratio),
+        np.sum(mu**2, axis=1),
+        np.einsum("ka,kab,kb->k", mu, ratio, mu),
+        0,
+        bounds,
+    )
+
+
+def check_families(a: CovarianceAnalysis, confidence: float = 0.99) -> list[CheckPower]:
+    """The five checks' families, in :func:`~kalcal.verification.checks.run_checks`' order (the
+    whiteness check only where the analysis has the pair moments E[r_k r_j^T])."""
+    checks = [
+        CheckPower("mean_error", {None: _mean_error(a, confidence)}),
+        CheckPower("covariance", _covariance(a, confidence)),
+        CheckPower("orthogonality", {None: _orthogonality(a, confidence)}),
+    ]
+    if a.moments.residual_second_moment is not None:
+        checks.append(CheckPower("residual_whiteness", _whiteness(a, confidence)))
+    checks.append(CheckPower("nis", {None: _nis(a, confidence)}))
+    return checks
+
+
+def detection_n(low_at: Callable[[int], float], target: float = DETECTION_POWER) -> int | None:
+    """The smallest N in [MIN_N, N_CAP] with ``low_at(N) >= target``, ``low_at`` taken as increasing; None if
+    N_CAP falls short."""
+    if low_at(N_CAP) < target:
+        return None
+    if low_at(MIN_N) >= target:
+        return MIN_N
+    low, high = MIN_N, 2 * MIN_N
+    while high < N_CAP and low_at(high) < target:
+        low, high = high, min(2 * high, N_CAP)
+    while high - low > 1:
+        mid = (low + high) // 2
+        low, high = (low, mid) if low_at(mid) >= target else (mid, high)
+    return high
+
+
+def _row(name: str, part: str | None, bracket: tuple[float, float], n_detect: int | None) -> dict:
+    return {
+        "name": name,
+        "part": part,
+        "power_low": bracket[0],
+        "power_high": bracket[1],
+        "detectable": n_detect is not None,
+        "detection_n": n_detect,
+    }
+
+
+def power_rows(a: CovarianceAnalysis, n: int, confidence: float = 0.99) -> list[dict]:
+    """``power``: per check a row for the whole check (``part`` None) and, for a check of two parts, one per
+    part: ``power_low``, ``power_high`` at N = ``n``, ``detectable`` and ``detection_n``."""
+    rows = []
+    for check in check_families(a, confidence):
+        named = {part: family for part, family in check.parts.items() if part is not None}
+        found = {part: detection_n(lambda k, f=family: f.bracket(k)[0]) for part, family in check.parts.items()}
+        reached = [k for k in found.values() if k is not None]
+        rows.append(_row(check.name, None, check.bracket(n), min(reached) if reached else None))
+        rows.extend(_row(check.name, part, family.bracket(n), found[part]) for part, family in named.items())
+    return rows
+
+
+def verdict_power(rows: list[dict]) -> dict:
+    """The verdict's power from the whole-check rows: any check failing fails it, so [max low, min(1, sum high)]."""
+    whole = [row for row in rows if row["part"] is None]
+    reached = [row["detection_n"] for row in whole if row["detection_n"] is not None]
+    return {
+        "power_low": max(row["power_low"] for row in whole),
+        "power_high": min(1.0, sum(row["power_high"] for row in whole)),
+        "detectable": bool(reached),
+        "detection_n": min(reached) if reached else None,
+    }
+
+
+def problem_power(problem, n: int, confidence: float, analysis=None) -> tuple[list[dict] | None, str | None]:
+    """``summary.json``'s ``power`` for a verification problem, and why it is None where it is.
+
+    A fixed-gain problem gets :func:`power_rows` of its exact analysis (its budget left out; ``analysis``
+    where the caller already has it, with the pairs); any other (scale-bias: gains that depend on the
+    data) gets None and the reason."""
+    from kalcal.analysis.fixed_gain import analyze_problem
+    from kalcal.montecarlo.problem import FixedGainProblem
+
+    if not isinstance(problem, FixedGainProblem):
+        return None, "no exact analysis: the filter's gains depend on the data"
+    if analysis is None:
+        analysis = analyze_problem(problem, budget=False)
+    return power_rows(analysis, n, confidence), None
+
+
+def _bracket_text(low: float, high: float) -> str:
+    a, b = f"{low:.2f}", f"{high:.2f}"
+    return a if a == b else f"{a}–{b}"
+
+
+def power_line(rows: list[dict] | None, n: int, reason: str | None = None) -> str:
+    """One line: the verdict's power and each check's bracket at N = ``n``, and the smallest N that detects.
+
+    ``"power at N = 20,000: verdict 1.00 (detected from N = 100); mean_error 0.00–0.01, covariance 1.00, ..."``
+    """
+    if rows is None:
+        return f"power: not computed ({reason or 'no exact analysis'})"
+    whole = verdict_power(rows)
+    found = f"detected from N = {whole['detection_n']:,}" if whole["detectable"] else f"not detected up to N = {N_CAP:,}"
+    checks = ", ".join(
+        f"{row['name']} {_bracket_text(row['power_low'], row['power_high'])}" for row in rows if row["part"] is None
+    )
+    return f"power at N = {n:,}: verdict {_bracket_text(whole['power_low'], whole['power_high'])} ({found}); {checks}"

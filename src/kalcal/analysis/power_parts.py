@@ -1,0 +1,230 @@
+"""The probability that each part of each check fails at N realizations under the truth, from the exact moments.
+
+Every part is a family of comparisons (a max-|z| over many elements, or one chi-square test per update),
+so its rejection probability is bracketed by Bonferroni's two ends: [max_i P_i, min(1, sum_i P_i)], P_i
+the probability that comparison i alone leaves its bound (the part's per-comparison critical value, as
+:mod:`kalcal.verification.bounds` gives it). The P_i are approximations, stated with each family:
+
+* :class:`NormalFamily` (mean_error, covariance ``elements``, orthogonality, whiteness ``pairs``): the
+  comparison's z = xbar / sqrt(D / N) is taken as normal with mean a sqrt(N / D) and variance v / D, a
+  the mean and v the variance of one realization's term, D the standard error's square times N (under
+  the truth, its limit for the ensemble's own estimate): P_i = Phi((a sqrt(N) - c sqrt(D)) / sqrt(v)) +
+  Phi((-a sqrt(N) - c sqrt(D)) / sqrt(v)). For a product of jointly Gaussian x, y with means mu, spreads
+  s^2 and covariance g: v = s_x^2 s_y^2 + g^2 + mu_x^2 s_y^2 + mu_y^2 s_x^2 + 2 mu_x mu_y g; for an
+  element of a centered Wishart covariance: v = S_il^2 + S_ii S_ll.
+* :class:`ChiSquareFamily` (covariance ``centered_nees``, nis): the statistic times its count of terms
+  is a sum of weighted noncentral chi-squares, X = sum_i lambda_i chi'^2_n(n delta_i^2); it is taken as
+  g ncx2(h, nu) with the first two moments matched at g = sum lambda^2 (1 + 2 delta^2) /
+  sum lambda (1 + 2 delta^2) (exact when the weights are equal: a correct filter, or a mean error with
+  the right spread).
+* :class:`PortmanteauPower`: Q as a scaled chi-square with Q's mean and variance under the truth, its
+  elements normal with their Gaussian (Isserlis) covariance; the variance is known up to a cross term
+  bounded by Cauchy-Schwarz, and the bracket spans both ends.
+
+A comparison with zero spread follows the checks' rule: it fails where its value is nonzero.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.special import ndtr
+
+from kalcal.verification.distributions import chi2_cdf, chi2_sf, ncx2_cdf, ncx2_sf
+
+__all__ = ["ChiSquareFamily", "NormalFamily", "PortmanteauPower", "bracket", "portmanteau_power", "product_variance"]
+
+
+def bracket(probabilities: np.ndarray) -> tuple[float, float]:
+    """[max_i P_i, min(1, sum_i P_i)]: the two Bonferroni ends of a family's rejection probability."""
+    p = np.asarray(probabilities, dtype=float).ravel()
+    if p.size == 0:
+        return 0.0, 0.0
+    return float(p.max()), float(min(1.0, p.sum()))
+
+
+def product_variance(mean_x, mean_y, var_x, var_y, cov_xy) -> np.ndarray:
+    """Var(x y) for jointly Gaussian x, y: s_x^2 s_y^2 + g^2 + mu_x^2 s_y^2 + mu_y^2 s_x^2 + 2 mu_x mu_y g."""
+    return var_x * var_y + cov_xy**2 + mean_x**2 * var_y + mean_y**2 * var_x + 2.0 * mean_x * mean_y * cov_xy
+
+
+@dataclass(frozen=True)
+class NormalFamily:
+    """A max-|z| family: comparison i's z = xbar_i / sqrt(D_i / N) against the critical value c.
+
+    Attributes
+    ----------
+    mean : ndarray, shape (m,)
+        a_i, the mean of one realization's term (0 for a correct filter).
+    variance : ndarray, shape (m,)
+        v_i, the variance of one realization's term under the truth.
+    scale : ndarray, shape (m,)
+        D_i, N times the square of the comparison's standard error.
+    critical : float
+        c, the per-comparison two-sided bound of the family.
+    """
+
+    mean: np.ndarray
+    variance: np.ndarray
+    scale: np.ndarray
+    critical: float
+
+    def probabilities(self, n: int) -> np.ndarray:
+        """P_i at N = ``n`` realizations, (m,)."""
+        a, v, d, c = self.mean, self.variance, self.scale, self.critical
+        root_n = np.sqrt(float(n))
+        shift, edge = a * root_n, c * np.sqrt(np.maximum(d, 0.0))
+        spread = np.sqrt(np.maximum(v, 0.0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            normal = ndtr((shift - edge) / spread) + ndtr((-shift - edge) / spread)
+        # no spread: the comparison is its mean, outside the bound or not (zero D with a nonzero value fails)
+        fixed = np.where(np.abs(shift) > edge, 1.0, 0.0)
+        fixed = np.where((d <= 0) & (a == 0), 0.0, fixed)
+        random_zero_se = (d <= 0) & (v > 0)
+        out = np.where(spread > 0, normal, fixed)
+        return np.minimum(1.0, np.where(random_zero_se, 1.0, out))
+
+    def bracket(self, n: int) -> tuple[float, float]:
+        return bracket(self.probabilities(n))
+
+
+@dataclass(frozen=True)
+class ChiSquareFamily:
+    """One two-sided test per update of X_k = sum over n_eff realizations, bounds from ``bounds(N)``.
+
+    One realization's term is v^T v with v ~ N(mu, A) in the hypothesis's whitened coordinates; over
+    the updates (K,): ``t1`` = tr A, ``t2`` = tr A^2, ``m2`` = |mu|^2, ``mam`` = mu^T A mu. The mean of X is
+    n_eff (t1 + m2), its variance 2 n_eff (t2 + 2 mam).
+
+    Attributes
+    ----------
+    t1, t2, m2, mam : ndarray, shape (K,)
+    offset : int
+        n_eff = N + offset (0 for the NIS, -1 for the centered NEES).
+    bounds : callable
+        N -> (low, high), the per-update bounds of X (in X's units).
+    """
+
+    t1: np.ndarray
+    t2: np.ndarray
+    m2: np.ndarray
+    mam: np.ndarray
+    offset: int
+    bounds: Callable[[int], tuple[float, float]]
+
+    def probabilities(self, n: int) -> np.ndarray:
+        """P(X_k < low) + P(X_k > high) at N = ``n``, by the matched g ncx2(h, nu), (K,)."""
+        n_eff = float(n + self.offset)
+        low, high = self.bounds(n)
+        weight, spread = self.t1 + 2.0 * self.m2, self.t2 + 2.0 * self.mam
+        with np.errstate(divide="ignore", invalid="ignore"):
+            g = spread / weight
+            h = n_eff * self.t1 * weight / spread
+            nu = n_eff * self.m2 * weight / spread
+        ok = (spread > 0) & (weight > 0)
+        g, h, nu = np.where(ok, g, 1.0), np.where(ok, h, 1.0), np.where(ok, nu, 0.0)
+        cdf, sf = chi2_cdf(low / g, h), chi2_sf(high / g, h)
+        shifted = nu > 0  # the noncentral law only where it is needed (it is the slow one)
+        if np.any(shifted):
+            gs, hs, ns = g[shifted], h[shifted], nu[shifted]
+            cdf[shifted], sf[shifted] = ncx2_cdf(low / gs, hs, ns), ncx2_sf(high / gs, hs, ns)
+        # no spread: X is 0 (nothing varies), outside the bounds when the lower one is positive
+        return np.minimum(1.0, np.where(ok, cdf + sf, float(low > 0)))
+
+    def bracket(self, n: int) -> tuple[float, float]:
+        return bracket(self.probabilities(n))
+
+
+@dataclass(frozen=True)
+class PortmanteauPower:
+    """The whiteness portmanteau Q = N sum_{j<k} ||C_kj||_F^2 against its upper bound (one comparison).
+
+    The whitened innovations u = (u_1, ..., u_K) (each S_k^-1/2 r_k) are taken as Gaussian with second
+    moment Sigma (Kp x Kp, identity blocks on the diagonal), and the elements Z = sqrt(N) C_kj as jointly
+    normal (central limit theorem) with mean sqrt(N) Sigma_kj and covariance Omega, Omega_(xy)(x'y') =
+    Sigma_xx' Sigma_yy' + Sigma_xy' Sigma_yx' (Isserlis). Then E[Q] = dof + (N + 1) rho, rho =
+    sum_{j<k} ||Sigma_kj||_F^2, and Var(Q) = 2 tr(Omega^2) + 4 N (m1 + m2), with tr(Omega^2) = t1 + 2 t2 +
+    t3 known up to |t2| <= sqrt(t1 t3) (Cauchy-Schwarz). Q is taken as a scaled chi-square g chi2(h) of
+    that mean and variance (exact under whiteness: t1 = dof, t3 = 0), and the bracket spans the two ends
+    of the variance.
+
+    Attributes
+    ----------
+    rate : float
+        rho, one realization's share of the noncentrality.
+    dof : int
+    bound : float
+        The chi-square(dof) upper quantile at the part's alpha.
+    t1, t3 : float
+        sum over pairs of pairs of (Sigma_xx' Sigma_yy')^2 and of (Sigma_xy' Sigma_x'y)^2.
+    m1, m2 : float
+        mu^T Omega mu / N, its two terms (sum Sigma o (M Sigma M^T) and tr(M Sigma M Sigma), M = Sigma on j < k).
+    """
+
+    rate: float
+    dof: int
+    bound: float
+    t1: float
+    t3: float
+    m1: float
+    m2: float
+
+    def _tail(self, n: int, omega2: float) -> float:
+        mean = self.dof + (n + 1.0) * self.rate
+        var = 2.0 * omega2 + 4.0 * n * (self.m1 + self.m2)
+        if var <= 0:
+            return float(mean > self.bound)
+        g, h = var / (2.0 * mean), 2.0 * mean * mean / var
+        return float(chi2_sf(self.bound / g, h))
+
+    def bracket(self, n: int) -> tuple[float, float]:
+        if self.dof == 0 or not np.isfinite(self.rate):
+            return 0.0, 0.0
+        ends = [self._tail(n, (np.sqrt(self.t1) + sign * np.sqrt(self.t3)) ** 2) for sign in (-1.0, 1.0)]
+        return min(ends), max(ends)
+
+    def probabilities(self, n: int) -> np.ndarray:
+        return np.array(self.bracket(n))
+
+
+def portmanteau_power(raw: np.ndarray, bound_of: Callable[[int], float], rank_rtol: float) -> PortmanteauPower:
+    """:class:`PortmanteauPower` from the exact E[r_k r_j^T] (K, p, K, p), whitened as the check whitens (each
+    update's S_k = E[r_k r_k^T] by its eigenvectors, directions at most ``rank_rtol`` times the largest left
+    out); ``bound_of(dof)`` gives the part's bound."""
+    n_updates, p = raw.shape[:2]
+    own = raw[np.arange(n_updates), :, np.arange(n_updates), :]
+    values, vectors = np.linalg.eigh(0.5 * (own + np.swapaxes(own, 1, 2)))
+    keep = values > rank_rtol * np.maximum(values.max(axis=1, keepdims=True), 0.0)
+    w = vectors * np.where(keep, 1.0 / np.sqrt(np.where(keep, values, 1.0)), 0.0)[:, None, :]
+    size = n_updates * p
+    # Sigma = W^T E[r r^T] W, W block-diagonal; the directions left out have zero rows and columns
+    sigma = np.einsum("kcjb,jbd->kcjd", np.einsum("kac,kajb->kcjb", w, raw), w).reshape(size, size)
+    sigma = 0.5 * (sigma + sigma.T)
+    lower = np.repeat(np.repeat(np.tril(np.ones((n_updates, n_updates)), -1), p, axis=0), p, axis=1)
+    rank = keep.sum(axis=1)
+    dof = int((rank.sum() ** 2 - (rank**2).sum()) // 2)
+    a = sigma * sigma
+
+    def below(x: np.ndarray) -> np.ndarray:
+        """L @ x for the mask L_xy = [update of x > update of y], by prefix sums over the updates."""
+        blocks = x.reshape(n_updates, p, -1).sum(axis=1)
+        return np.repeat(np.cumsum(blocks, axis=0) - blocks, p, axis=0)
+
+    def above(x: np.ndarray) -> np.ndarray:
+        """L^T @ x."""
+        blocks = x.reshape(n_updates, p, -1).sum(axis=1)
+        return np.repeat(blocks.sum(axis=0) - np.cumsum(blocks, axis=0), p, axis=0)
+
+    m = lower * sigma
+    m_sigma = m @ sigma
+    return PortmanteauPower(
+        rate=float(np.sum(lower * a)),
+        dof=dof,
+        bound=bound_of(dof),
+        t1=float(np.sum(a * below(below(a).T).T)),  # sum A o (L A L^T)
+        t3=float(np.sum(a * below(above(a.T).T))),  # sum A o (L A L)
+        m1=float(np.sum(sigma * (m_sigma @ m.T))),
+        m2=float(np.sum(sigma * (m_sigma @ m))),
+    )

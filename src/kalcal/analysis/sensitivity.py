@@ -1,0 +1,118 @@
+"""The smallest relative error in each of the truth's noise settings that N realizations detect, for a correct filter.
+
+For each noise setting the truth's value is scaled by 1 + eps (an increase) or 1 - eps (a decrease)
+with the filter's held, the exact analysis rerun, and the verdict's conservative power (the largest
+``power_low`` of the checks, :mod:`kalcal.analysis.power`) compared with ``DETECTION_POWER``; eps is found by
+doubling from ``START`` then bisection in log eps to a ratio of ``RESOLUTION`` (power taken as increasing
+in eps), and the detected end is reported. Settings: for accel-gps every positive ``truth.*_std``; for a
+model file the truth's ``w``, ``v`` and ``m0`` as wholes (a matrix scaled by (1 + eps)^2, so that eps is
+the relative error of its standard deviations).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+
+import numpy as np
+
+from kalcal.analysis.fixed_gain import analyze_scenario
+from kalcal.analysis.power import DETECTION_POWER, check_families
+from kalcal.models.accel_gps import AccelGpsScenario
+from kalcal.models.custom import CustomModelScenario
+
+__all__ = ["RESOLUTION", "START", "detected_error", "noise_settings", "sensitivity"]
+
+#: the first relative error tried
+START = 0.005
+#: the search stops when the detected and undetected errors are within this ratio
+RESOLUTION = 1.1
+#: the largest relative increase and decrease searched (a std times 10, and times 0.1)
+MAX_INCREASE, MAX_DECREASE = 9.0, 0.9
+
+
+def _accel_gps_settings(scenario: AccelGpsScenario) -> dict[str, Callable[[float], AccelGpsScenario]]:
+    truth, pinned = scenario.truth, scenario.filter_settings
+    out = {}
+    for field in dataclasses.fields(truth):
+        name = field.name
+        value = getattr(truth, name)
+        if not name.endswith("_std") or not isinstance(value, float) or value <= 0:
+            continue
+
+        def scaled(factor: float, name: str = name, value: float = value) -> AccelGpsScenario:
+            return dataclasses.replace(
+                scenario,
+                truth=dataclasses.replace(truth, **{name: value * factor}),
+                filter=dataclasses.replace(scenario.filter, **{name: getattr(pinned, name)}),
+            )
+
+        out[f"truth.{name}"] = scaled
+    return out
+
+
+def _model_settings(scenario: CustomModelScenario) -> dict[str, Callable[[float], CustomModelScenario]]:
+    out = {}
+    for key in ("w", "v", "m0"):
+        value = np.asarray(getattr(scenario.truth, key), dtype=float)
+        if not np.any(value):
+            continue
+
+        def scaled(factor: float, key: str = key, value: np.ndarray = value) -> CustomModelScenario:
+            return dataclasses.replace(scenario, truth=dataclasses.replace(scenario.truth, **{key: value * factor**2}))
+
+        out[f"truth.{key}"] = scaled
+    return out
+
+
+def noise_settings(scenario) -> dict[str, Callable[[float], object]]:
+    """The truth's noise settings, each as factor -> the scenario with that setting's std times ``factor``
+    (the filter's settings held)."""
+    if isinstance(scenario, AccelGpsScenario):
+        return _accel_gps_settings(scenario)
+    if isinstance(scenario, CustomModelScenario):
+        return _model_settings(scenario)
+    raise TypeError(f"no noise settings to scale for {type(scenario).__name__}")
+
+
+def _detects(scenario, n: int, confidence: float, form: str) -> bool:
+    analysis = analyze_scenario(scenario, form, budget=False)
+    return any(check.bracket(n)[0] >= DETECTION_POWER for check in check_families(analysis, confidence))
+
+
+def detected_error(detects: Callable[[float], bool], limit: float) -> float | None:
+    """The smallest eps in [START, limit] (to RESOLUTION) with ``detects(eps)``, ``detects`` taken as
+    increasing; None when ``limit`` is not detected."""
+    low, high = 0.0, START
+    while not detects(high):
+        if high >= limit:
+            return None
+        low, high = high, min(2.0 * high, limit)
+    while low > 0 and high / low > RESOLUTION:
+        mid = float(np.sqrt(low * high))
+        low, high = (low, mid) if detects(mid) else (mid, high)
+    return high
+
+
+def sensitivity(scenario, n: int, confidence: float = 0.99, form: str = "joseph") -> list[dict]:
+    """Per noise setting of the truth: ``{"setting", "increase", "decrease"}``, the smallest relative error
+    (a fraction: 0.03 is 3%) up and down that ``n`` realizations detect with power DETECTION_POWER, or None
+    where none up to a std times 10 (down to 0.1) is detected."""
+    rows = []
+    for key, scaled in noise_settings(scenario).items():
+        up = detected_error(lambda eps: _detects(scaled(1.0 + eps), n, confidence, form), MAX_INCREASE)
+        down = detected_error(lambda eps: _detects(scaled(1.0 - eps), n, confidence, form), MAX_DECREASE)
+        rows.append({"setting": key, "increase": up, "decrease": down})
+    return rows
+
+
+def sensitivity_text(row: dict) -> str:
+    """``"accel_noise_std ±3.1%"``: the larger of the two errors (detected either way), or what is not detected."""
+    name = row["setting"].split(".", 1)[-1]
+    up, down = row["increase"], row["decrease"]
+    if up is None and down is None:
+        return f"{name} not detected"
+    if up is None or down is None:
+        sign, value = ("+", up) if down is None else ("−", down)
+        return f"{name} {sign}{100 * value:.2g}%"
+    return f"{name} ±{100 * max(up, down):.2g}%"
