@@ -141,3 +141,11 @@ class FitResult:
         if self.rejected_fixes is not None:
             document["rejected_fixes"] = {"count": len(self.rejected_fixes), "rows": list(self.rejected_fixes)}
         return document
+
+
+def interval_text(p: FitParameter) -> str:
+    """``95% interval [a, b] unit`` or ``consistent with 0, upper limit b unit`` in words."""
+    high = "none" if p.ci_high is None else f"{p.ci_high:.4g}"
+    if p.at_bound:
+        return f"consistent with 0, upper limit {high} {p.unit}"
+    return f"interval [{p.ci_low:.4g}, {high}] {p.unit}"

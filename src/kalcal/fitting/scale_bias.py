@@ -16,7 +16,7 @@ import numpy as np
 from kalcal.calibration.diagnostics import innovation_diagnostics
 from kalcal.errors import KalcalError
 from kalcal.fitting.mle import Free, maximize
-from kalcal.fitting.result import FitResult
+from kalcal.fitting.result import FitResult, interval_text
 from kalcal.fitting.scale_bias_likelihood import diffuse_loglik
 from kalcal.models.scale_bias import ScaleBiasScenario
 
@@ -128,13 +128,5 @@ def _comments(fit) -> dict[str, str]:
         if not p.identified:
             comments[short] = f"{short}: {p.note}"
         else:
-            comments[short] = f"{short}: fitted, {fit_interval(p)}"
+            comments[short] = f"{short}: fitted, {interval_text(p)}"
     return comments
-
-
-def fit_interval(p) -> str:
-    """``95% interval [a, b] unit`` or ``consistent with 0, upper limit b unit`` in words."""
-    high = "none" if p.ci_high is None else f"{p.ci_high:.4g}"
-    if p.at_bound:
-        return f"consistent with 0, upper limit {high} {p.unit}"
-    return f"interval [{p.ci_low:.4g}, {high}] {p.unit}"
