@@ -92,6 +92,10 @@ class FitResult:
     settings : dict
         ``{section: {key: value}}`` for filter.toml; ``comments`` holds a line per key to explain.
     confidence : float
+    extra : dict
+        More of fit.json (accel-gps: the fitted filter's final ``bias`` and ``bias_std``, m/s^2).
+    paths : dict
+        The files written, by name, when the fit wrote a folder.
     """
 
     scenario: str
@@ -111,6 +115,8 @@ class FitResult:
     comments: dict[str, str] = field(default_factory=dict)
     confidence: float = 0.95
     extra: dict[str, Any] = field(default_factory=dict)
+    #: the files written, by name, when the fit was given a folder (``kalcal.fit(..., out=...)``)
+    paths: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.interval_method not in INTERVAL_METHODS:
