@@ -25,7 +25,7 @@ from kalcal.models.accel_gps import AccelGpsFilter, AccelGpsScenario, AccelGpsTr
 DEFAULT_FREE = ("filter.accel_noise_std", "filter.bias_walk_std", "filter.gps_position_std", "filter.gps_velocity_std")
 #: what a free setting that is 0 starts from (bias_walk_std per sample in m/s^2, times in s)
 FLOORS = {
-    "filter.bias_walk_std": 1e-6,
+    "filter.bias_walk_std": 1e-5,
     "filter.bias_correlation_time": 30.0,
     "filter.gps_latency": 1e-3,
     "filter.scale_std": 1e-4,

@@ -28,6 +28,8 @@ from kalcal.fitting.result import FitParameter
 #: step of the central differences in u = log(value) for the gradient and the Hessian
 GRADIENT_STEP = 1e-4
 HESSIAN_STEP = 1e-2
+#: a projected gradient of log L in u below this counts as the optimum (log L changes by < 1e-7 over 1e-3)
+STATIONARY = 1e-4
 #: what an evaluation that fails (a setting the model refuses, a singular S_k) counts as: far below any fit
 FAILED = -1e300
 
@@ -99,6 +101,17 @@ def _minimize(f, u0: np.ndarray, low: np.ndarray, high: np.ndarray):
     )
 
 
+def _stationary(f, u: np.ndarray, low: np.ndarray, high: np.ndarray) -> bool:
+    """Whether the projected gradient of f at u is below :data:`STATIONARY` (a line search that stops on
+    rounding at the optimum is a converged search)."""
+    if u.size == 0:
+        return True
+    grad = _gradient(f, u, low, high)
+    grad[(u <= low + 1e-9) & (grad > 0)] = 0.0
+    grad[(u >= high - 1e-9) & (grad < 0)] = 0.0
+    return bool(np.max(np.abs(grad)) < STATIONARY)
+
+
 def _hessian(f: Callable[[np.ndarray], float], u: np.ndarray, index: Sequence[int]) -> np.ndarray:
     """The Hessian of f over the coordinates ``index`` at u, central differences of step HESSIAN_STEP."""
     n, h = len(index), HESSIAN_STEP
@@ -153,6 +166,7 @@ def maximize(
     f = lambda u: -objective.loglik_at(u)  # noqa: E731
     result = _minimize(f, u0, low, high)
     u_hat, best = np.asarray(result.x, dtype=float), -float(result.fun)
+    converged = bool(result.success) or _stationary(f, u_hat, low, high)
     drop = float(stats.chi2.ppf(confidence, 1)) / 2.0
     z = float(stats.norm.isf((1.0 - confidence) / 2.0))
 
@@ -218,7 +232,7 @@ def maximize(
         curves[p.name] = _curve(along, i, u_hat, low, high, ci_low, ci_high, curve_points)
     method = "profile" if profile else "observed-information"
     values = dict(zip(names, np.exp(u_hat).tolist()))
-    return MleFit(values, best, bool(result.success), parameters, curves, method, objective.count, str(result.message))
+    return MleFit(values, best, converged, parameters, curves, method, objective.count, str(result.message))
 
 
 def _curve(along, i, u_hat, low, high, ci_low, ci_high, points) -> dict[str, list[float]]:
