@@ -64,3 +64,18 @@ def test_a_log_whose_bias_drifts_is_not_adequate_for_a_constant_bias_and_the_sen
     freed = kalcal.fit("accel-gps", imu=imu, gps=gps, free="filter.bias_walk_std")
     assert freed.adequate, freed.adequacy
     assert freed.parameters["filter.bias_walk_std"].ci_low <= 2e-3 <= freed.parameters["filter.bias_walk_std"].ci_high
+
+
+def test_per_fix_std_columns_get_one_multiplier_each_instead_of_the_constant():
+    from kalcal.fitting.accel_gps import default_free
+
+    assert default_free(True, True) == [
+        "filter.accel_noise_std", "filter.bias_walk_std", "log.position_std_multiplier", "log.velocity_std_multiplier",
+    ]
+    imu, gps = logs(3, 10, gps_position_std=2.0)
+    gps = gps.assign(position_std=1.0)  # the receiver's stated accuracy, half the truth
+    result = kalcal.fit("accel-gps", imu=imu, gps=gps, free="log.position_std_multiplier")
+    multiplier = result.parameters["log.position_std_multiplier"]
+    assert multiplier.ci_low <= 2.0 <= multiplier.ci_high
+    assert any("position_std column times one fitted multiplier" in note for note in result.notes)
+    assert result.settings["truth"]["gps_position_std"] == pytest.approx(multiplier.value, rel=1e-5)
