@@ -64,17 +64,16 @@ def fit(
         f"log L = {result.loglik:.6g}",
         f"{result.interval_method} intervals",
     )
-    for column in ("setting", "estimate", f"{result.confidence:.0%} interval", "unit", "note"):
-        table.add_column(column, justify="right" if column in ("estimate",) else "left")
+    for column in ("setting", "estimate", f"{result.confidence:.0%} interval", "unit"):
+        table.add_column(column, justify="right" if column == "estimate" else "left")
     for name, p in result.parameters.items():
         if not p.identified:
-            estimate, interval = "unidentified", "—"
+            estimate, interval = "unidentified", "input kept"
         else:
             estimate = f"{p.value:.4g}"
             high = "—" if p.ci_high is None else f"{p.ci_high:.4g}"
-            interval = f"[0, {high}]" if p.at_bound else f"[{p.ci_low:.4g}, {high}]"
-        note = "consistent with 0" if p.at_bound else ("" if p.identified else "input kept")
-        table.add_row(escape(name), estimate, interval, escape(p.unit), note)
+            interval = f"[0, {high}], consistent with 0" if p.at_bound else f"[{p.ci_low:.4g}, {high}]"
+        table.add_row(escape(name), estimate, interval, escape(p.unit))
     console.print(table)
     if not result.converged:
         _common.error_console.print("kalcal: warning: the optimizer did not report convergence", markup=False)
