@@ -133,14 +133,18 @@ def test_noise_refuses_times_in_milliseconds(tmp_path):
 
 def test_scale_bias_constant_sensor_is_flagged_unobservable(sim, tmp_path):
     data = pd.read_csv(sim / "sb" / "data.csv")
-    good = _invoke("calibrate", "scale-bias", "--data", sim / "sb" / "data.csv", "--out", tmp_path / "g", "--strict")
+    good = _invoke(
+        "calibrate", "scale-bias", "--data", sim / "sb" / "data.csv", "--out", tmp_path / "g", "--strict", "--prior", "settings"
+    )
     assert good.exit_code == 0, good.output + good.stderr
     summary = json.loads((tmp_path / "g" / "summary.json").read_text())
     assert summary["warnings"] == [] and summary["observability"]["unobservable"] == [] and summary["consistent"]
     data["sensor"] = 1.0
     data.to_csv(tmp_path / "constant.csv", index=False)
     for strict, status in (((), 0), (("--strict",), 1)):
-        result = _invoke("calibrate", "scale-bias", "--data", tmp_path / "constant.csv", "--out", tmp_path / "c", *strict)
+        result = _invoke(
+            "calibrate", "scale-bias", "--data", tmp_path / "constant.csv", "--out", tmp_path / "c", "--prior", "settings", *strict
+        )
         assert result.exit_code == status, result.output + result.stderr
         assert "kalcal: warning: " in result.stderr and "unobservable (no excitation)" in result.stderr
     summary = json.loads((tmp_path / "c" / "summary.json").read_text())

@@ -46,7 +46,8 @@ def test_simulate_writes_data_and_truth(simulated):
 
 
 def test_round_trip_recovers_the_truth(simulated, tmp_path):
-    result = _invoke("calibrate", "scale-bias", "--data", simulated / "data.csv", "--out", tmp_path)
+    # the study's own prior, as the simulation drew the truth from it (a log's default is diffuse)
+    result = _invoke("calibrate", "scale-bias", "--data", simulated / "data.csv", "--out", tmp_path, "--prior", "settings")
     assert result.exit_code == 0, result.output + result.stderr
     assert "scale_error" in result.output
     estimates = pd.read_csv(tmp_path / "estimates.csv")

@@ -6,6 +6,7 @@ The Python API (each loaded on first use, so that ``import kalcal`` stays cheap)
     result = kalcal.verify("accel-gps", n=2000)      # VerificationResult
     kalcal.calibrate("accel-gps", imu=df, gps=df2)     # CalibrationResult
     kalcal.noise(imu=df)                               # NoiseResult
+    kalcal.fit("accel-gps", imu=df, gps=df2)           # FitResult
 """
 
 from importlib import import_module as _import_module
@@ -14,6 +15,7 @@ from importlib import import_module as _import_module
 _EXPORTS = {
     "verify": "kalcal.api.verify",
     "calibrate": "kalcal.api.calibrate",
+    "fit": "kalcal.api.fit",
     "noise": "kalcal.api.noise",
     "simulate": "kalcal.api.simulate",
     "sweep": "kalcal.api.sweep",
@@ -27,6 +29,7 @@ _EXPORTS = {
     "NoiseResult": "kalcal.api.results",
     "SimulationResult": "kalcal.api.results",
     "SweepResult": "kalcal.api.sweep_result",
+    "FitResult": "kalcal.fitting.result",
     "CheckResult": "kalcal.verification.results",
     "CheckPart": "kalcal.verification.results",
     "Cause": "kalcal.verification.results",

@@ -26,6 +26,7 @@ def calibrate(
     on_gap: str = "continue",
     form: str = "joseph",
     smooth: bool = False,
+    prior: str | None = None,
     out: str | Path | None = None,
 ) -> CalibrationResult:
     """Calibrate from logged data: accel-gps (``imu``, ``gps``) or scale-bias (``data``).
@@ -43,6 +44,9 @@ def calibrate(
         ``{"section.key": value}``, the keys of ``--set``; ``config`` a TOML file of them.
     imu_columns, gps_columns, init, max_imu_gap, on_gap, form, smooth, reference, sensor
         As ``kalcal calibrate``'s options of those names.
+    prior : {"diffuse", "settings"}, optional
+        scale-bias: start from no information on theta, or from the filter's prior of a and b; by default
+        the settings' prior only where a ``filter.`` prior key is given (:func:`kalcal.jobs.scale_bias.resolve_prior`).
     out : path, optional
         Also write the files there, as ``kalcal calibrate --out`` (the folder is checked first).
 
@@ -65,7 +69,7 @@ def calibrate(
         from kalcal.jobs.scale_bias import compute_scale_bias_calibration
 
         def compute():
-            return compute_scale_bias_calibration(model, data, reference=reference, sensor=sensor)
+            return compute_scale_bias_calibration(model, data, reference=reference, sensor=sensor, prior=prior)
 
         command = "calibrate scale-bias"
     else:
@@ -75,6 +79,8 @@ def calibrate(
             raise KalcalError(f"{' and '.join(missing)}: required for {scenario}")
         if data is not None:
             raise KalcalError(f"--data: not used by {scenario} (it reads --imu and --gps)")
+        if prior is not None:
+            raise KalcalError("--prior: not available for accel-gps (scale-bias only)")
         if on_gap not in ("continue", "stop"):
             raise KalcalError(f"--on-gap: expected continue or stop, got {on_gap!r}")
         from kalcal.jobs.calibrate import compute_accel_gps_calibration

@@ -17,6 +17,15 @@ Consistency. The mean NIS of K model-matched innovations is chi-square(K) / K; o
 bounds at ``NIS_CONFIDENCE`` (:meth:`ScaleBiasCalibration.nis_bounds`) the noise settings do not fit the
 log and a ``noise-inconsistent`` warning says so (a consistent log is flagged with probability 1%).
 
+Prior. ``prior="settings"`` starts from the filter's prior of a and b (the simulated study's, or a
+datasheet's). ``prior="diffuse"`` starts with no information on theta at all (P_0^{-1} = 0, the limit of
+N(m, kappa I) as kappa -> infinity): the filter runs in information form until the first samples with two
+different sensor readings determine theta (:func:`diffuse_start`), then as before; those samples have no
+innovation. A log is calibrated with the diffuse prior unless the user gives one (kalcal.jobs.scale_bias).
+With a prior, the data-only (diffuse) estimate is tested against it: with Q = 0 the difference d =
+theta_data - m_0 is N(0, P_data + P_0) under the model, so d^T (P_data + P_0 + K Q)^-1 d is chi-square(2);
+above its ``CONFLICT_CONFIDENCE`` quantile a ``prior-conflict`` warning says that data and prior disagree.
+
 Limits. The reference and the sensor must lie within ``SIGNAL_LIMIT`` (1e12) of zero in the log's unit:
 no physical signal kalcal calibrates comes near it in any unit, while one corrupt cell of 1e300 would
 overflow the filter (:func:`calibrate_scale_bias` refuses it, naming the row and column).
@@ -31,7 +40,8 @@ from scipy import stats
 
 from kalcal.calibration.plausibility import CalibrationWarning, check_limit
 from kalcal.errors import DataError
-from kalcal.filters.scale_bias import filter_scale_bias
+from kalcal.filters.regression import run_regression_filter
+from kalcal.filters.scale_bias import filter_scale_bias, regressors
 from kalcal.models.scale_bias import STATE_NAMES, ScaleBiasScenario
 from kalcal.models.scale_bias_theta import scale_bias_from_theta, scale_bias_jacobian
 
@@ -41,6 +51,12 @@ UNOBSERVABLE_RATIO = 0.9
 NIS_CONFIDENCE = 0.99
 #: largest plausible abs(reference), abs(sensor), in the log's own unit
 SIGNAL_LIMIT = 1e12
+#: the priors a calibration can start from
+PRIORS = ("diffuse", "settings")
+#: data and a given prior conflict when their chi-square(2) difference exceeds this quantile
+CONFLICT_CONFIDENCE = 0.99
+#: the information matrix counts as nonsingular once det(Y) exceeds this share of trace(Y)^2
+DIFFUSE_RCOND = 1e-12
 
 
 @dataclass(frozen=True)
@@ -55,6 +71,11 @@ class ScaleBiasCalibration:
     used: np.ndarray  #: whether sample k updated the filter, bool (K,)
     #: sigma of theta1, theta2 with no data after the K samples, sqrt(P_0,ii + K Q_ii), (2,)
     prior_std: np.ndarray | None = None
+    prior: str = "settings"  #: "settings" or "diffuse"
+    #: samples the diffuse start took to determine theta (0 with the settings' prior)
+    start_samples: int = 0
+    #: the data-and-prior test with the settings' prior: statistic, pvalue, bound, conflict (None without)
+    conflict: dict | None = None
 
     @property
     def std_ratio(self) -> np.ndarray:
@@ -80,6 +101,16 @@ class ScaleBiasCalibration:
         """An ``unobservable`` warning naming the parameters the log did not excite, and a
         ``noise-inconsistent`` one when the mean NIS is outside its bounds; empty when neither."""
         found = []
+        if self.conflict is not None and self.conflict["conflict"]:
+            c = self.conflict
+            found.append(
+                CalibrationWarning(
+                    "prior-conflict",
+                    f"{source}: data and prior disagree: the data-only theta differs from the prior's mean by "
+                    f"chi-square {c['statistic']:.4g} (2 degrees of freedom, bound {c['bound']:.4g} at "
+                    f"{CONFLICT_CONFIDENCE:.0%}, p = {c['pvalue']:.2g}): check filter.scale_error, filter.bias and their stds",
+                )
+            )
         names = self.unobservable()
         if names:
             ratios = ", ".join(f"{name} {ratio:.2f}" for name, ratio in zip(STATE_NAMES, self.std_ratio) if name in names)
@@ -127,6 +158,65 @@ class ScaleBiasCalibration:
         return float(np.mean(self.residual[used] ** 2 / self.innovation_var[used]))
 
 
+def diffuse_start(scenario: ScaleBiasScenario, reference: np.ndarray, sensor: np.ndarray):
+    """The filter from a diffuse prior, in information form, until theta is determined.
+
+    Y = P^{-1} and y = P^{-1} x start at 0; each sample is predicted, Y^- = (I + Q Y)^{-1} Y, y^- = (I + Q Y)^{-1} y,
+    and updated, Y += h h^T / R, y += h v / R (h = [z, 1]), until det(Y) > DIFFUSE_RCOND trace(Y)^2.
+
+    Returns
+    -------
+    (m, x, P) : the number of samples taken, x_m^+ and P_m^+ = Y^{-1}; None when the log never determines
+    theta (a sensor that reads one value).
+    """
+    q, r = scenario.filter_process_noise(), scenario.filter_noise_variance()
+    info, vector = np.zeros((2, 2)), np.zeros(2)
+    for k, (v, z) in enumerate(zip(reference, sensor)):
+        if np.any(q):
+            gain = np.linalg.inv(np.eye(2) + q @ info)
+            info, vector = gain @ info, gain @ vector
+        if np.isfinite(v) and np.isfinite(z):
+            h = np.array([z, 1.0])
+            info, vector = info + np.outer(h, h) / r, vector + h * v / r
+            if np.linalg.det(info) > DIFFUSE_RCOND * np.trace(info) ** 2:
+                cov = np.linalg.inv(info)
+                return k + 1, cov @ vector, 0.5 * (cov + cov.T)
+    return None
+
+
+def _diffuse_run(scenario: ScaleBiasScenario, reference: np.ndarray, sensor: np.ndarray, source: str):
+    """The filter over the log from a diffuse prior (NaN estimates while theta is not yet determined)."""
+    start = diffuse_start(scenario, reference, sensor)
+    if start is None:
+        raise DataError(
+            f"{source}: the log never determines theta from a diffuse prior: the sensor must take two different "
+            "values (or give a prior: --prior settings with filter.scale_error, filter.bias and their stds)"
+        )
+    m, x, cov = start
+    k = reference.size
+    rest = run_regression_filter(
+        reference[m:], regressors(sensor[m:]), x, cov, scenario.filter_noise_variance(), scenario.filter_process_noise(),
+        scenario.filter_settings.form,
+    )
+    posterior, covs = np.full((k, 2), np.nan), np.full((k, 2, 2), np.nan)
+    residual, innovation, used = np.full(k, np.nan), np.full(k, np.nan), np.zeros(k, dtype=bool)
+    posterior[m - 1], covs[m - 1] = x, cov
+    posterior[m:], covs[m:], residual[m:], innovation[m:], used[m:] = (
+        rest.posterior, rest.cov, rest.residual, rest.innovation_var, rest.used,
+    )
+    return m, posterior, covs, residual, innovation, used
+
+
+def _conflict(scenario: ScaleBiasScenario, data_theta: np.ndarray, data_cov: np.ndarray, samples: int) -> dict:
+    """d^T (P_data + P_0 + K Q)^-1 d with d = theta_data - m_0: chi-square(2) when data and prior agree."""
+    prior = scenario.filter_prior()
+    d = data_theta - prior.mean
+    statistic = float(d @ np.linalg.solve(data_cov + prior.cov + samples * scenario.filter_process_noise(), d))
+    bound = float(stats.chi2.ppf(CONFLICT_CONFIDENCE, 2))
+    return {"statistic": statistic, "pvalue": float(stats.chi2.sf(statistic, 2)), "bound": bound,
+            "confidence": CONFLICT_CONFIDENCE, "conflict": statistic > bound}
+
+
 def calibrate_scale_bias(
     scenario: ScaleBiasScenario,
     time: np.ndarray,
@@ -135,6 +225,8 @@ def calibrate_scale_bias(
     *,
     source: str = "data",
     columns: tuple[str, str] = ("reference", "sensor"),
+    prior: str = "settings",
+    conflict: bool = False,
 ) -> ScaleBiasCalibration:
     """Run the filter (``filter`` settings of ``scenario``) over one log.
 
@@ -150,6 +242,11 @@ def calibrate_scale_bias(
         The log's name, quoted in errors.
     columns : (str, str)
         The log's reference and sensor columns, quoted in errors.
+    prior : {"settings", "diffuse"}
+        Start from the filter's prior of a and b, or from no information on theta (module docstring);
+    conflict : bool
+        With "settings", test the data-only estimate against the prior (``conflict`` of the result, and a
+        ``prior-conflict`` warning when they disagree).
 
     Raises
     ------
@@ -163,16 +260,30 @@ def calibrate_scale_bias(
         check_limit(values, "signal", source, column, limit=SIGNAL_LIMIT, unit=scenario.scenario.unit)
     if not np.any(np.isfinite(reference) & np.isfinite(sensor)):
         raise DataError(f"{source}: no sample has both a reference and a sensor value")
-    run = filter_scale_bias(scenario, reference, sensor)
-    result = ScaleBiasCalibration(
-        time=np.asarray(time, dtype=float),
-        theta=run.posterior,
-        covariance=run.cov,
-        residual=run.residual,
-        innovation_var=run.innovation_var,
-        used=run.used,
-        prior_std=np.sqrt(np.diag(scenario.filter_prior().cov + reference.size * scenario.filter_process_noise())),
-    )
+    if prior not in PRIORS:
+        raise DataError(f"--prior: expected one of {', '.join(PRIORS)}, got {prior!r}")
+    if prior == "diffuse":
+        m, posterior, covs, residual, innovation, used = _diffuse_run(scenario, reference, sensor, source)
+        result = ScaleBiasCalibration(
+            time=np.asarray(time, dtype=float), theta=posterior, covariance=covs, residual=residual,
+            innovation_var=innovation, used=used, prior_std=np.full(2, np.inf), prior="diffuse", start_samples=m,
+        )
+    else:
+        run = filter_scale_bias(scenario, reference, sensor)
+        found = None
+        if conflict and diffuse_start(scenario, reference, sensor) is not None:
+            data = _diffuse_run(scenario, reference, sensor, source)
+            found = _conflict(scenario, data[1][-1], data[2][-1], reference.size)
+        result = ScaleBiasCalibration(
+            time=np.asarray(time, dtype=float),
+            theta=run.posterior,
+            covariance=run.cov,
+            residual=run.residual,
+            innovation_var=run.innovation_var,
+            used=run.used,
+            prior_std=np.sqrt(np.diag(scenario.filter_prior().cov + reference.size * scenario.filter_process_noise())),
+            conflict=found,
+        )
     theta1 = float(result.theta[-1, 0])
     if not theta1 > 0:
         raise DataError(

@@ -1,6 +1,6 @@
 """The ``kalcal`` command line: parse, call the Python API, print. No numerics here.
 
-One module per command (simulate, calibrate, verify, sweep, noise, report); heavy imports happen inside
+One module per command (simulate, calibrate, fit, verify, sweep, noise, report); heavy imports happen inside
 the commands, so that ``kalcal --help`` stays fast. Units everywhere are SI: time in s, position in m,
 velocity in m/s, acceleration and bias in m/s^2. Bad input of any kind is one line on stderr and exit
 status 2.
@@ -15,7 +15,7 @@ from typing import Annotated
 import typer
 
 from kalcal import __version__
-from kalcal.cli import analyze, calibrate, noise, report, simulate, sweep, verify
+from kalcal.cli import analyze, calibrate, fit, noise, report, simulate, sweep, verify
 from kalcal.cli._common import console, error_console
 
 app = typer.Typer(
@@ -44,7 +44,7 @@ def _options(
     """Kalman-filter sensor calibration with Monte Carlo verification (SI units throughout)."""
 
 
-for _module in (simulate, calibrate, verify, sweep, noise, report, analyze):
+for _module in (simulate, calibrate, fit, verify, sweep, noise, report, analyze):
     app.command()(getattr(_module, _module.__name__.rpartition(".")[2]))
 
 

@@ -27,6 +27,10 @@ def calibrate(
     ] = None,
     reference: Annotated[str, typer.Option("--reference", help="scale-bias: the reference's column.")] = "reference",
     sensor: Annotated[str, typer.Option("--sensor", help="scale-bias: the sensor's column.")] = "sensor",
+    prior: Annotated[
+        Optional[str],
+        typer.Option("--prior", help="scale-bias: diffuse (theta from the log alone) or settings (the filter's prior of a, b)."),
+    ] = None,
     imu_columns: Annotated[
         Optional[str], typer.Option("--imu-columns", help="accel-gps: map roles to columns, e.g. time=t,accel=ax.")
     ] = None,
@@ -84,6 +88,7 @@ def calibrate(
             on_gap=on_gap,
             form=form,
             smooth=smooth,
+            prior=prior,
             out=out,
         )
     summary = result.calibration.summary

@@ -59,12 +59,28 @@ def compute_scale_bias_simulation(scenario: ScaleBiasScenario, seed: int) -> Sim
     return Simulation("simulate scale-bias", {"data": data}, {"truth": truth})
 
 
+#: the filter settings that give a prior of a and b
+PRIOR_KEYS = ("scale_error", "scale_error_std", "bias", "bias_std")
+
+
+def resolve_prior(scenario: ScaleBiasScenario, prior: str | None) -> tuple[str, str]:
+    """The prior of a log's calibration and why: the one asked for, else "settings" where the user set a
+    filter prior key, else "diffuse"."""
+    if prior is not None:
+        return prior, "as asked (--prior)"
+    given = [f"filter.{key}" for key in PRIOR_KEYS if getattr(scenario.filter, key) is not None]
+    if given:
+        return "settings", f"the prior given by {', '.join(given)}"
+    return "diffuse", "no prior given (filter.scale_error, filter.bias and their stds unset): theta from the log alone"
+
+
 def compute_scale_bias_calibration(
     scenario: ScaleBiasScenario,
     data_path: str | Path | pd.DataFrame,
     *,
     reference: str = "reference",
     sensor: str = "sensor",
+    prior: str | None = None,
 ) -> Calibration:
     """Calibrate from a log (CSV or Parquet, or a DataFrame) with a reference and a sensor column; nothing is written.
 
@@ -76,6 +92,12 @@ def compute_scale_bias_calibration(
     list of ``{"code", "message"}``, empty when none) then names; ``nis_bounds`` holds the mean NIS's 99%
     bounds and ``consistent`` whether it lies within them (a ``noise-inconsistent`` warning when not). A
     reference or sensor value beyond ``SIGNAL_LIMIT`` (1e12 in the log's unit) is refused (DataError).
+
+    ``prior`` is "diffuse" (no information on theta: the log's own estimate) or "settings" (the filter's
+    prior of a and b, tested against the data: a ``prior-conflict`` warning when they disagree); None
+    takes "settings" when the user set any of ``filter.scale_error``, ``filter.scale_error_std``,
+    ``filter.bias``, ``filter.bias_std``, else "diffuse": a log's prior is never silently the simulated
+    study's. ``summary["prior"]`` says which, and why.
     """
     frame = read_table(data_path, "data")
     source = data_path
@@ -90,8 +112,10 @@ def compute_scale_bias_calibration(
     else:
         time = np.arange(1, len(frame) + 1) / scenario.scenario.rate
         time_source = f"row number / scenario.rate ({scenario.scenario.rate:g} Hz)"
+    prior, why = resolve_prior(scenario, prior)
     result = calibrate_scale_bias(
-        scenario, time, columns["reference"], columns["sensor"], source=str(data_path), columns=(reference, sensor)
+        scenario, time, columns["reference"], columns["sensor"], source=str(data_path), columns=(reference, sensor),
+        prior=prior, conflict=prior == "settings",
     )
     std = result.std
     estimates = pd.DataFrame(
@@ -131,6 +155,7 @@ def compute_scale_bias_calibration(
             "unobservable": result.unobservable(),
             "note": "final sigma / sigma with no data; above the threshold the log did not excite the parameter",
         },
+        "prior": {"kind": prior, "note": why, "start_samples": result.start_samples, "conflict": result.conflict},
         "warnings": [warning.as_dict() for warning in result.warnings(str(data_path))],
         "units": {"time": "s", "theta1": "1", "theta2": unit, "scale_error": "1", "bias": unit},
     }

@@ -10,6 +10,7 @@ Each function takes data that is already computed (a ``stats.nc`` Dataset, or on
   and the filter, exact and ensemble sigma per state.
 - :mod:`kalcal.plots.consistency`: mean NEES and NIS, the residual-correlation map, the model-error response.
 - :mod:`kalcal.plots.calibration`: a calibrated log's bias and normalized innovations.
+- :mod:`kalcal.plots.fit`: log-likelihood along each fitted noise setting, its interval marked.
 - :mod:`kalcal.plots.sweep`: each check's statistic against a swept setting (the tuning curve).
 
 Only this package imports matplotlib; it uses the Agg canvas directly and never pyplot.

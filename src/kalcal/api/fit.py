@@ -1,0 +1,105 @@
+"""``kalcal.fit``: a filter's noise settings fitted to one log by maximum likelihood, returned as a FitResult."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from kalcal.fitting.result import FitResult
+
+
+def _free(free: str | Sequence[str] | None) -> list[str] | None:
+    """``--free``'s ``KEY,KEY`` or a list of keys."""
+    if free is None:
+        return None
+    items = free.split(",") if isinstance(free, str) else list(free)
+    return [item.strip() for item in items if item.strip()] or None
+
+
+def fit(
+    scenario: str = "accel-gps",
+    imu=None,
+    gps=None,
+    settings: Mapping[str, Any] | None = None,
+    *,
+    data=None,
+    config: str | Path | None = None,
+    free: str | Sequence[str] | None = None,
+    profile: bool = False,
+    gate: float | None = None,
+    confidence: float = 0.95,
+    init: str = "first-fix",
+    imu_columns: str | None = None,
+    gps_columns: str | None = None,
+    reference: str = "reference",
+    sensor: str = "sensor",
+    out: str | Path | None = None,
+) -> FitResult:
+    """Fit the noise settings of a filter to one log: accel-gps (``imu``, ``gps``) or scale-bias (``data``).
+
+    Parameters
+    ----------
+    scenario : {"accel-gps", "scale-bias"}
+    imu, gps, data, settings, config, init, imu_columns, gps_columns, reference, sensor
+        As :func:`kalcal.calibrate`.
+    free : str or list of str, optional
+        The settings to fit (``"filter.accel_noise_std,filter.bias_walk_std"``); default: accel-gps the
+        accelerometer noise, bias walk and GPS noise (a multiplier on each per-fix std column the GPS log
+        has), scale-bias the combined measurement noise and the drift.
+    profile : bool
+        Intervals from the profile likelihood instead of the observed information.
+    gate : float, optional
+        accel-gps: the chi-square innovation gate's confidence (refused where the calibration has none).
+    confidence : float
+        Of the intervals (0.95).
+    out : path, optional
+        Also write fit.json, filter.toml and fit.png there, as ``kalcal fit --out`` (one set).
+
+    Returns
+    -------
+    FitResult
+    """
+    from kalcal.api._scenario import resolve
+    from kalcal.errors import KalcalError
+
+    if not 0.0 < confidence < 1.0:
+        raise KalcalError(f"--confidence: expected a number in (0, 1), got {confidence!r}")
+    keys = _free(free)
+    if scenario == "scale-bias":
+        if gate is not None:
+            raise KalcalError("--gate: not available for scale-bias (accel-gps only)")
+        if data is None:
+            raise KalcalError("--data: required for scale-bias (a log with a reference and a sensor column)")
+        if imu is not None or gps is not None:
+            raise KalcalError("--imu/--gps: not used by scale-bias (it reads --data)")
+        model = resolve("scale-bias", settings, config)
+        from kalcal.jobs.fit import compute_scale_bias_fit
+
+        def compute():
+            return compute_scale_bias_fit(model, data, free=keys, reference=reference, sensor=sensor,
+                                          profile=profile, confidence=confidence)
+    else:
+        model = resolve(scenario, settings, config, defaults={"scenario.integration": "trapezoid"})
+        missing = [name for name, value in (("--imu", imu), ("--gps", gps)) if value is None]
+        if missing:
+            raise KalcalError(f"{' and '.join(missing)}: required for {scenario}")
+        if data is not None:
+            raise KalcalError(f"--data: not used by {scenario} (it reads --imu and --gps)")
+        from kalcal.jobs.fit import compute_accel_gps_fit
+
+        def compute():
+            return compute_accel_gps_fit(model, imu, gps, free=keys, imu_columns=imu_columns, gps_columns=gps_columns,
+                                         init=init, profile=profile, gate=gate, confidence=confidence)
+    if out is None:
+        return compute().result
+    from kalcal.io.outputs import inputs_of, run_outputs
+    from kalcal.jobs.fit import OUTPUT_NAMES, save_fit
+
+    command = "fit scale-bias" if scenario == "scale-bias" else "fit accel-gps"
+    files = [value for value in (imu, gps, data) if isinstance(value, (str, Path))]
+    with run_outputs(out, command, names=OUTPUT_NAMES, protect=[*files, *inputs_of(model)]) as staging:
+        run = compute()
+        save_fit(run, staging)
+    return dataclasses.replace(run.result, paths={name: Path(out) / name for name in OUTPUT_NAMES})

@@ -1,0 +1,85 @@
+"""``kalcal fit``: a filter's noise settings fitted to one log by maximum likelihood, through :func:`kalcal.fit`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+from rich.markup import escape
+
+from kalcal.cli import _common
+from kalcal.cli._common import ConfigOpt, ScenarioArg, SetOpt, settings_of, user_errors
+
+
+def fit(
+    scenario: ScenarioArg,
+    imu: Annotated[
+        Optional[Path], typer.Option("--imu", help="accel-gps: accelerometer log (CSV or Parquet): time [s], accel [m/s^2].")
+    ] = None,
+    gps: Annotated[
+        Optional[Path],
+        typer.Option("--gps", help="accel-gps: GPS log: time [s], position [m], velocity [m/s] (position_std, velocity_std)."),
+    ] = None,
+    data: Annotated[
+        Optional[Path], typer.Option("--data", help="scale-bias: log of a reference and a sensor column (time [s] optional).")
+    ] = None,
+    free: Annotated[
+        Optional[str],
+        typer.Option("--free", help="Settings to fit, KEY,KEY... (e.g. filter.accel_noise_std,filter.bias_walk_std)."),
+    ] = None,
+    profile: Annotated[
+        bool, typer.Option("--profile", help="Intervals from the profile likelihood instead of the observed information.")
+    ] = False,
+    gate: Annotated[
+        Optional[float], typer.Option("--gate", help="accel-gps: chi-square innovation gate at this confidence (off by default).")
+    ] = None,
+    init: Annotated[
+        str, typer.Option("--init", help="accel-gps: first-fix (start at the first fix) or prior.")
+    ] = "first-fix",
+    reference: Annotated[str, typer.Option("--reference", help="scale-bias: the reference's column.")] = "reference",
+    sensor: Annotated[str, typer.Option("--sensor", help="scale-bias: the sensor's column.")] = "sensor",
+    imu_columns: Annotated[Optional[str], typer.Option("--imu-columns", help="accel-gps: map roles to columns.")] = None,
+    gps_columns: Annotated[Optional[str], typer.Option("--gps-columns", help="accel-gps: map roles to columns.")] = None,
+    out: Annotated[Path, typer.Option("--out", help="Directory for fit.json, filter.toml and fit.png.")] = Path("kalcal-fit"),
+    set_: SetOpt = None,
+    config: ConfigOpt = None,
+) -> None:
+    """Fit noise settings to a log by maximum likelihood: accel-gps (--imu, --gps) or scale-bias (--data).
+
+    Writes fit.json (estimates, 95% intervals, log L, AIC, adequacy), filter.toml (for --config of
+    calibrate and verify) and fit.png. `kalcal verify --config DIR/filter.toml` checks the fitted filter.
+    """
+    from kalcal.api.fit import fit as run_fit
+
+    with user_errors():
+        result = run_fit(
+            scenario, imu=imu, gps=gps, data=data, settings=settings_of(set_), config=config, free=free,
+            profile=profile, gate=gate, init=init, reference=reference, sensor=sensor, imu_columns=imu_columns,
+            gps_columns=gps_columns, out=out,
+        )
+    console = _common.console
+    table = _common._table(
+        f"kalcal fit {scenario}: {result.fixes} {'samples' if scenario == 'scale-bias' else 'fixes'}",
+        f"log L = {result.loglik:.6g}",
+        f"{result.interval_method} intervals",
+    )
+    for column in ("setting", "estimate", f"{result.confidence:.0%} interval", "unit"):
+        table.add_column(column, justify="right" if column == "estimate" else "left")
+    for name, p in result.parameters.items():
+        if not p.identified:
+            estimate, interval = "unidentified", "input kept"
+        else:
+            estimate = f"{p.value:.4g}"
+            high = "—" if p.ci_high is None else f"{p.ci_high:.4g}"
+            interval = f"[0, {high}], consistent with 0" if p.at_bound else f"[{p.ci_low:.4g}, {high}]"
+        table.add_row(escape(name), estimate, interval, escape(p.unit))
+    console.print(table)
+    if not result.converged:
+        _common.error_console.print("kalcal: warning: the optimizer did not report convergence", markup=False)
+    style = "green" if result.adequate else "bold red"
+    console.print(f"adequate: [{style}]{'yes' if result.adequate else 'no'}[/{style}]: {escape(result.adequacy)}")
+    for note in result.notes:
+        console.print(f"note: {note}", markup=False, soft_wrap=True)
+    _common._note_nonfinite(result.paths["fit.json"])
+    _common.print_wrote(Path(out), list(result.paths.values()))

@@ -1,0 +1,1 @@
+"""Fit a filter's noise settings to one log by maximum likelihood, with intervals and an adequacy verdict."""

@@ -1,0 +1,221 @@
+"""Fit the accel-gps filter's noise and prior settings to one log by maximum likelihood.
+
+The fit takes any log-likelihood of the log (:class:`AccelGpsLikelihood`: ``loglik(values)`` and
+``calibrate(values)``), the reference one of :mod:`kalcal.fitting.accel_gps_reference` or a faster one
+over the same log, and searches the free settings on a log scale (:mod:`kalcal.fitting.mle`) within a
+factor :data:`RANGE` of their starts (a setting that is 0 starts from its :data:`FLOORS` value). The
+fitted filter's innovation diagnostics (NIS and whiteness, :mod:`kalcal.calibration.diagnostics`) then
+decide whether the model family is adequate for the log.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping, Sequence
+from typing import Any, Protocol
+
+import numpy as np
+
+from kalcal.calibration.diagnostics import innovation_diagnostics
+from kalcal.errors import KalcalError
+from kalcal.fitting.mle import Free, maximize
+from kalcal.fitting.result import FitResult, interval_text
+from kalcal.models.accel_gps import AccelGpsFilter, AccelGpsScenario, AccelGpsTruth
+
+DEFAULT_FREE = ("filter.accel_noise_std", "filter.bias_walk_std", "filter.gps_position_std", "filter.gps_velocity_std")
+#: what a free setting that is 0 starts from (bias_walk_std per sample in m/s^2, times in s)
+FLOORS = {
+    "filter.bias_walk_std": 1e-5,
+    "filter.bias_correlation_time": 30.0,
+    "filter.gps_latency": 1e-3,
+    "filter.scale_std": 1e-4,
+}
+#: each search range spans this factor either side of the start
+RANGE = 1e3
+#: what a model that does not fit may lack, and the setting that would add it
+CANDIDATES = (
+    ("time-correlated GNSS errors", None),
+    ("a Gauss-Markov bias (filter.bias_correlation_time with filter.bias_std)", "filter.bias_correlation_time"),
+    ("a scale factor (filter.scale_std)", "filter.scale_std"),
+    ("GPS latency (filter.gps_latency)", "filter.gps_latency"),
+    ("a drifting bias (filter.bias_walk_std)", "filter.bias_walk_std"),
+)
+
+
+class AccelGpsLikelihood(Protocol):
+    """What the fit needs of a log: its log-likelihood and its calibration under given settings."""
+
+    fixes: int
+
+    def loglik(self, values: Mapping[str, float], *, gate: float | None = None) -> float: ...
+
+    def calibrate(self, values: Mapping[str, float], *, gate: float | None = None) -> Any: ...
+
+    def settings_value(self, key: str) -> float: ...
+
+    def unit(self, key: str) -> str: ...
+
+
+def default_free(position_std: bool = False, velocity_std: bool = False) -> list[str]:
+    """:data:`DEFAULT_FREE`, with a multiplier on each per-fix std column the GPS log has instead of its constant."""
+    free = list(DEFAULT_FREE)
+    if position_std:
+        free[free.index("filter.gps_position_std")] = "log.position_std_multiplier"
+    if velocity_std:
+        free[free.index("filter.gps_velocity_std")] = "log.velocity_std_multiplier"
+    return free
+
+
+def inadequacy(verdict: str, free: Sequence[str]) -> str:
+    """The sentence for a fit whose best settings still fail the diagnostics: the verdict and what may be missing."""
+    missing = [text for text, key in CANDIDATES if key is None or key not in free]
+    return (
+        f"{verdict}. Even the best settings of this model leave the innovations inconsistent, so the model lacks "
+        f"something; candidates: {', '.join(missing)}"
+    )
+
+
+def fit_accel_gps(
+    log: AccelGpsLikelihood,
+    scenario: AccelGpsScenario,
+    free: Sequence[str] | None = None,
+    *,
+    profile: bool = False,
+    gate: float | None = None,
+    confidence: float = 0.95,
+    rates: tuple[float, float] | None = None,
+    std_medians: Mapping[str, float] | None = None,
+) -> FitResult:
+    """Maximum-likelihood estimates of the ``free`` settings, their intervals and the fitted filter's adequacy.
+
+    Parameters
+    ----------
+    log : AccelGpsLikelihood
+    scenario : AccelGpsScenario
+        The input settings (starts, and everything not free); filter.toml starts from them.
+    free : sequence of str, optional
+        ``filter.*`` settings and ``log.*_multiplier`` keys (default :data:`DEFAULT_FREE`).
+    profile, confidence
+        As :func:`kalcal.fitting.mle.maximize`.
+    gate : float, optional
+        The innovation gate's confidence, passed to the log's evaluations.
+    rates : (float, float), optional
+        The log's accelerometer and GPS rates, Hz, for filter.toml's [scenario].
+    std_medians : mapping, optional
+        The median of each per-fix std column (``{"position_std": m, "velocity_std": m/s}``), for the truth
+        of a multiplier.
+    """
+    free = list(DEFAULT_FREE if free is None else free)
+    parameters = []
+    for key in free:
+        value = log.settings_value(key)
+        start = value if value > 0 else FLOORS.get(key, 1e-6)
+        parameters.append(Free(key, start, start / RANGE, start * RANGE, log.unit(key)))
+    fit = maximize(lambda values: log.loglik(values, gate=gate), parameters, profile=profile, confidence=confidence)
+    chosen = {key: value for key, value in fit.values.items() if fit.parameters[key].identified}
+    calibration = log.calibrate(chosen, gate=gate)
+    diagnostics = innovation_diagnostics(calibration.normalized_innovations)
+    adequate = bool(diagnostics.consistent)
+    adequacy = diagnostics.verdict if adequate else inadequacy(diagnostics.verdict, free)
+    notes = []
+    for key in free:
+        if key.startswith("log."):
+            column = key.split(".")[1].removesuffix("_multiplier")
+            notes.append(f"{key}: the log's {column} column times one fitted multiplier, instead of a constant std")
+    rejected = getattr(calibration, "rejected_rows", None)
+    settings, comments = _settings(scenario, chosen, fit, rates, std_medians or {})
+    return FitResult(
+        scenario=scenario.NAME,
+        parameters=fit.parameters,
+        loglik=fit.loglik,
+        aic=fit.aic,
+        fixes=int(calibration.time.size),
+        converged=fit.converged,
+        interval_method=fit.interval_method,
+        adequate=adequate,
+        adequacy=adequacy,
+        diagnostics=diagnostics.as_dict(),
+        curves=fit.curves,
+        notes=notes,
+        rejected_fixes=None if gate is None else [int(row) for row in (rejected if rejected is not None else [])],
+        settings=settings,
+        comments=comments,
+        confidence=confidence,
+        extra={"bias": float(calibration.bias[-1]), "bias_std": float(calibration.std[-1, 2])},
+    )
+
+
+def _short(value: float) -> float:
+    """A TOML number of 6 significant digits that reads back as the same float."""
+    return float(f"{value:.6g}")
+
+
+def _settings(scenario, chosen, fit, rates, std_medians) -> tuple[dict[str, dict], dict[str, str]]:
+    """filter.toml's sections and comments: the fitted filter in [filter] and [truth], the log's rates in [scenario]."""
+    resolved = scenario.filter_settings
+    filter_values = {}
+    for f in dataclasses.fields(AccelGpsFilter):
+        key = f"filter.{f.name}"
+        value = chosen.get(key, getattr(resolved, f.name, getattr(scenario.filter, f.name)))
+        if value is not None:
+            filter_values[f.name] = _short(value) if key in chosen else value
+    truth_names = [f.name for f in dataclasses.fields(AccelGpsTruth)]
+    truth = {name: getattr(scenario.truth, name) for name in truth_names}
+    truth.update({name: value for name, value in filter_values.items() if name in truth_names})
+    comments = {}
+    for key, p in fit.parameters.items():
+        name = key.partition(".")[2]
+        comments[name] = f"{name}: {p.note}" if not p.identified else f"{name}: fitted, {interval_text(p)}"
+    for key, column, setting in (
+        ("log.position_std_multiplier", "position_std", "gps_position_std"),
+        ("log.velocity_std_multiplier", "velocity_std", "gps_velocity_std"),
+    ):
+        if key in chosen:
+            factor = _short(chosen[key])
+            comments[name_of(key)] = (
+                f"{name_of(key)} = {factor!r}: scale the log's {column} column by it before calibrating "
+                "(calibrate reads the column as it is)"
+            )
+            if column in std_medians:
+                truth[setting] = _short(factor * std_medians[column])
+    sections = {"scenario": _rates(scenario, rates), "filter": filter_values, "truth": truth}
+    return sections, comments
+
+
+def name_of(key: str) -> str:
+    """``log.position_std_multiplier`` -> ``position_std_multiplier``."""
+    return key.partition(".")[2]
+
+
+def _rates(scenario, rates) -> dict[str, Any]:
+    """[scenario]: the log's rates (the GPS rate made a whole divisor of the accelerometer's), the
+    scenario's duration made a whole number of GPS intervals, its integration and truth kind."""
+    s = scenario.scenario
+    imu_rate, gps_rate = rates if rates is not None else (s.imu_rate, s.gps_rate)
+    imu_rate = _short(imu_rate)
+    gps_rate = imu_rate / max(1, round(imu_rate / gps_rate))
+    intervals = max(1, round(s.duration * gps_rate))
+    return {
+        "imu_rate": imu_rate,
+        "gps_rate": gps_rate,
+        "duration": intervals / gps_rate,
+        "integration": s.integration,
+        "truth": s.truth,
+    }
+
+
+def log_rates(imu_time: np.ndarray, gps_time: np.ndarray) -> tuple[float, float]:
+    """The logs' median rates, Hz."""
+    return float(1.0 / np.median(np.diff(imu_time))), float(1.0 / np.median(np.diff(gps_time)))
+
+
+def check_free(free: Sequence[str], *, position_std: bool, velocity_std: bool) -> None:
+    """Refuse a key that the accel-gps filter has no setting for, or a multiplier of a column the log lacks."""
+    accepted = {f"filter.{f.name}" for f in dataclasses.fields(AccelGpsFilter)} - {"filter.position0_mean", "filter.velocity0_mean"}
+    for key in free:
+        if key == "log.position_std_multiplier" and not position_std or key == "log.velocity_std_multiplier" and not velocity_std:
+            raise KalcalError(f"--free: {key} needs the GPS log's {key.split('.')[1].removesuffix('_multiplier')} column")
+        if key not in accepted and not key.startswith("log.") or key.startswith("log.") and not key.endswith("_std_multiplier"):
+            raise KalcalError(
+                f"--free: expected noise or prior settings of the accel-gps filter ({', '.join(sorted(accepted))}), got {key!r}"
+            )

@@ -1,0 +1,116 @@
+"""The reference accel-gps log-likelihood: one whole calibration per evaluation (O(samples), slow, exact).
+
+Each evaluation runs :func:`~kalcal.calibration.accel_gps.calibrate_accel_gps` with the scenario's
+filter settings replaced by the given values and sums the prediction-error decomposition of its
+innovations, log L = -1/2 sum_k (log det S_k + r_k^T S_k^-1 r_k + p log 2 pi). It is the likelihood's
+definition, which a faster evaluation over the same log is held to; the fit
+(:mod:`kalcal.fitting.accel_gps`) takes either. With ``init="first-fix"`` the first fix starts the filter
+and is not in the sum: the conditional likelihood of the other fixes given it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from kalcal.calibration.accel_gps import AccelGpsCalibration, calibrate_accel_gps
+from kalcal.errors import KalcalError
+from kalcal.models.accel_gps import AccelGpsFilter, AccelGpsScenario
+
+#: the unit of each setting a fit may free
+UNITS = {
+    "filter.accel_noise_std": "m/s^2",
+    "filter.bias_walk_std": "m/s^2",
+    "filter.gps_position_std": "m",
+    "filter.gps_velocity_std": "m/s",
+    "filter.bias_std": "m/s^2",
+    "filter.bias_correlation_time": "s",
+    "filter.position0_std": "m",
+    "filter.velocity0_std": "m/s",
+    "filter.scale_std": "1",
+    "filter.gps_latency": "s",
+    "log.position_std_multiplier": "1",
+    "log.velocity_std_multiplier": "1",
+}
+MULTIPLIERS = {"log.position_std_multiplier": "position_std", "log.velocity_std_multiplier": "velocity_std"}
+
+
+def gate_supported() -> bool:
+    """Whether this build's calibration has the chi-square innovation gate (``gate=``)."""
+    return "gate" in inspect.signature(calibrate_accel_gps).parameters
+
+
+def loglik_of(calibration: AccelGpsCalibration) -> float:
+    """-1/2 sum_k (log det S_k + r_k^T S_k^-1 r_k + p log 2 pi) over a calibration's fixes."""
+    lower = np.linalg.cholesky(calibration.innovation_cov)
+    normalized = np.linalg.solve(lower, calibration.residual[..., None])[..., 0]
+    log_det = 2.0 * np.sum(np.log(np.diagonal(lower, axis1=1, axis2=2)))
+    return float(-0.5 * (log_det + np.sum(normalized**2) + calibration.residual.size * np.log(2 * np.pi)))
+
+
+class ReferenceAccelGpsLog:
+    """One accel-gps log and the filter to fit to it; every evaluation is a whole calibration.
+
+    Parameters
+    ----------
+    scenario : AccelGpsScenario
+        The settings that are not free, and the starts of those that are.
+    imu_time, accel, gps_time, gps_position, gps_velocity, position_std, velocity_std
+        As :func:`~kalcal.calibration.accel_gps.calibrate_accel_gps` (s, m/s^2, m, m/s).
+    **options
+        The rest of calibrate_accel_gps's keywords (``init``, ``source``, ``columns``, rates, ...).
+    """
+
+    def __init__(self, scenario: AccelGpsScenario, imu_time, accel, gps_time, gps_position, gps_velocity, *,
+                 position_std=None, velocity_std=None, **options: Any):
+        self.scenario = scenario
+        self.arrays = (imu_time, accel, gps_time, gps_position, gps_velocity)
+        self.columns = {"position_std": position_std, "velocity_std": velocity_std}
+        self.options = options
+        self.fixes = int(self.calibrate({}).time.size)  # the log's checks run here, once
+
+    def settings_value(self, key: str) -> float:
+        """The input value of ``key`` (a multiplier's is 1)."""
+        if key in MULTIPLIERS:
+            return 1.0
+        section, _, name = key.partition(".")
+        if section != "filter" or not hasattr(self.scenario.filter_settings, name):
+            raise KalcalError(f"--free: {key} is not a setting of the accel-gps filter")
+        return float(getattr(self.scenario.filter_settings, name))
+
+    def unit(self, key: str) -> str:
+        return UNITS.get(key, "")
+
+    def _scenario(self, values: Mapping[str, float]) -> AccelGpsScenario:
+        changes = {key.partition(".")[2]: float(v) for key, v in values.items() if key.startswith("filter.")}
+        accepted = {f.name for f in dataclasses.fields(AccelGpsFilter)}
+        refused = sorted(set(changes) - accepted)
+        if refused:
+            raise KalcalError(f"--free: filter.{refused[0]} is not a setting of this build's accel-gps filter")
+        return dataclasses.replace(self.scenario, filter=dataclasses.replace(self.scenario.filter, **changes))
+
+    def calibrate(self, values: Mapping[str, float], *, gate: float | None = None) -> AccelGpsCalibration:
+        """The calibration with ``values`` (``{"filter.key": value, "log.*_multiplier": m}``) in place."""
+        columns = dict(self.columns)
+        for key, column in MULTIPLIERS.items():
+            if key in values and columns[column] is not None:
+                columns[column] = np.asarray(columns[column], dtype=float) * float(values[key])
+        options = dict(self.options)
+        if gate is not None:
+            if not gate_supported():
+                raise KalcalError("--gate: this build's calibration has no innovation gate")
+            options["gate"] = gate
+        return calibrate_accel_gps(self._scenario(values), *self.arrays, **columns, **options)
+
+    def loglik(self, values: Mapping[str, float], *, gate: float | None = None) -> float:
+        """log L of the log's innovations with ``values`` in place."""
+        return loglik_of(self.calibrate(values, gate=gate))
+
+
+def prepare_reference_accel_gps_log(scenario, imu_time, accel, gps_time, gps_position, gps_velocity, **options) -> ReferenceAccelGpsLog:
+    """:class:`ReferenceAccelGpsLog` of one log (the log is checked as calibrate checks it)."""
+    return ReferenceAccelGpsLog(scenario, imu_time, accel, gps_time, gps_position, gps_velocity, **options)

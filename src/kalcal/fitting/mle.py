@@ -1,0 +1,248 @@
+"""Maximize a log-likelihood over positive settings on a log scale, with 95% intervals and flatness flags.
+
+The search runs over u = log(value) within bounds (L-BFGS-B, central-difference gradients), from the
+given starts. Then, with ``drop`` = chi2.ppf(confidence, 1) / 2 (1.92 at 95%), each parameter is judged
+along its own direction: the slice of log L through the optimum (the others held there) by default, or
+its profile (the others re-maximized) with ``profile=True``:
+
+* **unidentified** (flat): log L at both ends of the search range is within ``drop`` of the maximum,
+  so the log cannot tell any value in the range from the estimate;
+* **at the lower bound** ("consistent with 0"): only the lower end is within ``drop``; the interval is
+  [0, upper limit], the upper limit where log L has fallen by ``drop``;
+* otherwise the interval is exp(u_hat +- z se), se from the observed information (the inverse of the
+  negated Hessian of log L in u over the interior, identified parameters, by central differences), or
+  the two points where the profile has fallen by ``drop`` (Wilks). A side where log L never falls by
+  ``drop`` within the range has no limit (None).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import optimize, stats
+
+from kalcal.fitting.result import FitParameter
+
+#: step of the central differences in u = log(value) for the gradient and the Hessian
+GRADIENT_STEP = 1e-4
+HESSIAN_STEP = 1e-2
+#: a projected gradient of log L in u below this counts as the optimum (log L changes by < 1e-7 over 1e-3)
+STATIONARY = 1e-4
+#: what an evaluation that fails (a setting the model refuses, a singular S_k) counts as: far below any fit
+FAILED = -1e300
+
+
+@dataclass(frozen=True)
+class Free:
+    """A free parameter: its name, unit, start (> 0) and search range [lower, upper] (0 < lower < upper)."""
+
+    name: str
+    start: float
+    lower: float
+    upper: float
+    unit: str = ""
+
+    def __post_init__(self) -> None:
+        if not 0 < self.lower <= self.start <= self.upper:
+            raise ValueError(f"{self.name}: expected 0 < lower <= start <= upper, got {self.lower!r}, {self.start!r}, {self.upper!r}")
+
+
+@dataclass(frozen=True)
+class MleFit:
+    """The maximum and what each parameter's direction says about it."""
+
+    values: dict[str, float]  #: the estimate of every free parameter, even the flat ones
+    loglik: float
+    converged: bool
+    parameters: dict[str, FitParameter]
+    curves: dict[str, dict[str, list[float]]]
+    interval_method: str
+    evaluations: int
+    message: str = ""
+
+    @property
+    def aic(self) -> float:
+        """2 k - 2 log L."""
+        return 2.0 * len(self.values) - 2.0 * self.loglik
+
+
+class _Objective:
+    """-log L in u, counting evaluations; a failing evaluation is :data:`FAILED`."""
+
+    def __init__(self, loglik: Callable[[Mapping[str, float]], float], names: Sequence[str]):
+        self.loglik, self.names, self.count = loglik, list(names), 0
+
+    def loglik_at(self, u: np.ndarray) -> float:
+        self.count += 1
+        try:
+            value = float(self.loglik(dict(zip(self.names, np.exp(u).tolist()))))
+        except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+            return FAILED
+        return value if np.isfinite(value) else FAILED
+
+
+def _gradient(f: Callable[[np.ndarray], float], u: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+    grad = np.empty_like(u)
+    for i in range(u.size):
+        up, down = u.copy(), u.copy()
+        up[i], down[i] = min(u[i] + GRADIENT_STEP, high[i]), max(u[i] - GRADIENT_STEP, low[i])
+        grad[i] = (f(up) - f(down)) / (up[i] - down[i])
+    return grad
+
+
+def _minimize(f, u0: np.ndarray, low: np.ndarray, high: np.ndarray):
+    if u0.size == 0:
+        return optimize.OptimizeResult(x=u0, fun=f(u0), success=True, message="nothing free")
+    return optimize.minimize(
+        f, u0, jac=lambda u: _gradient(f, u, low, high), method="L-BFGS-B", bounds=list(zip(low, high)),
+        options={"maxiter": 500, "ftol": 1e-14, "gtol": 1e-6},
+    )
+
+
+def _stationary(f, u: np.ndarray, low: np.ndarray, high: np.ndarray) -> bool:
+    """Whether the projected gradient of f at u is below :data:`STATIONARY` (a line search that stops on
+    rounding at the optimum is a converged search)."""
+    if u.size == 0:
+        return True
+    grad = _gradient(f, u, low, high)
+    grad[(u <= low + 1e-9) & (grad > 0)] = 0.0
+    grad[(u >= high - 1e-9) & (grad < 0)] = 0.0
+    return bool(np.max(np.abs(grad)) < STATIONARY)
+
+
+def _hessian(f: Callable[[np.ndarray], float], u: np.ndarray, index: Sequence[int]) -> np.ndarray:
+    """The Hessian of f over the coordinates ``index`` at u, central differences of step HESSIAN_STEP."""
+    n, h = len(index), HESSIAN_STEP
+    hess = np.empty((n, n))
+    center = f(u)
+    for a, i in enumerate(index):
+        for b, j in enumerate(index[: a + 1]):
+            if i == j:
+                up, down = u.copy(), u.copy()
+                up[i] += h
+                down[i] -= h
+                value = (f(up) - 2 * center + f(down)) / h**2
+            else:
+                corners = []
+                for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
+                    v = u.copy()
+                    v[i] += si * h
+                    v[j] += sj * h
+                    corners.append(f(v))
+                value = (corners[0] - corners[1] - corners[2] + corners[3]) / (4 * h * h)
+            hess[a, b] = hess[b, a] = value
+    return hess
+
+
+def maximize(
+    loglik: Callable[[Mapping[str, float]], float],
+    free: Sequence[Free],
+    *,
+    profile: bool = False,
+    confidence: float = 0.95,
+    curve_points: int = 15,
+) -> MleFit:
+    """Maximize ``loglik`` over the ``free`` parameters and judge each one (see the module's docstring).
+
+    Parameters
+    ----------
+    loglik : callable
+        ``loglik({name: value})`` -> log L (a float; it may raise ValueError for a refused setting).
+    free : sequence of Free
+    profile : bool
+        Intervals and flatness from the profile likelihood instead of the observed information and slice.
+    confidence : float
+        Of the intervals, in (0, 1).
+    curve_points : int
+        Points of each parameter's curve for the figure.
+    """
+    names = [p.name for p in free]
+    objective = _Objective(loglik, names)
+    low = np.log([p.lower for p in free])
+    high = np.log([p.upper for p in free])
+    u0 = np.clip(np.log([p.start for p in free]), low, high)
+    f = lambda u: -objective.loglik_at(u)  # noqa: E731
+    result = _minimize(f, u0, low, high)
+    u_hat, best = np.asarray(result.x, dtype=float), -float(result.fun)
+    converged = bool(result.success) or _stationary(f, u_hat, low, high)
+    drop = float(stats.chi2.ppf(confidence, 1)) / 2.0
+    z = float(stats.norm.isf((1.0 - confidence) / 2.0))
+
+    def along(i: int, value: float) -> float:
+        """log L with u_i = value: the slice, or with ``profile`` the others re-maximized."""
+        u = u_hat.copy()
+        u[i] = value
+        if not profile or u.size == 1:
+            return objective.loglik_at(u)
+        others = [j for j in range(u.size) if j != i]
+
+        def g(w):
+            v = u.copy()
+            v[others] = w
+            return f(v)
+
+        inner = _minimize(g, u_hat[others], low[others], high[others])
+        return -float(inner.fun)
+
+    def crossing(i: int, end: float) -> float:
+        """The u between u_hat_i and ``end`` where log L has fallen by ``drop``."""
+        return optimize.brentq(lambda v: along(i, v) - (best - drop), u_hat[i], end, xtol=1e-4)
+
+    ends = {}
+    for i in range(len(free)):
+        at_low = along(i, low[i]) if u_hat[i] > low[i] + 1e-9 else best
+        at_high = along(i, high[i]) if u_hat[i] < high[i] - 1e-9 else best
+        ends[i] = (best - at_low >= drop, best - at_high >= drop)
+    interior = [i for i, (falls_low, falls_high) in ends.items() if falls_low and falls_high]
+    se = {}
+    if not profile and interior:
+        hess = _hessian(f, u_hat, interior)
+        eigenvalues = np.linalg.eigvalsh(hess)
+        if np.all(eigenvalues > 0):
+            cov = np.linalg.inv(hess)
+            se = {i: float(np.sqrt(cov[a, a])) for a, i in enumerate(interior)}
+    parameters, curves = {}, {}
+    for i, p in enumerate(free):
+        falls_low, falls_high = ends[i]
+        value = float(np.exp(u_hat[i]))
+        identified, at_bound, note = True, False, ""
+        ci_low = ci_high = None
+        if not falls_low and not falls_high:
+            identified, value = False, None
+            note = (
+                f"unidentified: log L changes by less than {drop:.3g} over [{p.lower:.3g}, {p.upper:.3g}] {p.unit}"
+                "; the input setting is kept"
+            ).replace(" ;", ";")
+        elif not falls_low:
+            at_bound, ci_low = True, 0.0
+            ci_high = float(np.exp(crossing(i, high[i])))
+            note = f"consistent with 0: {confidence:.0%} upper limit {ci_high:.3g} {p.unit}".rstrip()
+        elif not falls_high:
+            ci_low = float(np.exp(crossing(i, low[i])))
+            note = f"no upper limit within the search range (up to {p.upper:.3g} {p.unit})".replace(" )", ")")
+        elif i in se:
+            ci_low, ci_high = float(np.exp(u_hat[i] - z * se[i])), float(np.exp(u_hat[i] + z * se[i]))
+        else:  # the profile's interval, or the slice's where the observed information is not positive definite
+            ci_low, ci_high = float(np.exp(crossing(i, low[i]))), float(np.exp(crossing(i, high[i])))
+            if not profile:
+                note = "interval from the slice of log L: the observed information is not positive definite"
+        parameters[p.name] = FitParameter(p.name, value, ci_low, ci_high, p.unit, p.start, identified, at_bound, note)
+        curves[p.name] = _curve(along, i, u_hat, low, high, ci_low, ci_high, curve_points)
+    method = "profile" if profile else "observed-information"
+    values = dict(zip(names, np.exp(u_hat).tolist()))
+    return MleFit(values, best, converged, parameters, curves, method, objective.count, str(result.message))
+
+
+def _curve(along, i, u_hat, low, high, ci_low, ci_high, points) -> dict[str, list[float]]:
+    """log L along parameter i over its interval widened by half its width each way (the whole search
+    range where it has no interval), in the parameter's unit."""
+    if ci_low is not None and ci_high is not None and ci_low > 0:
+        a, b = np.log(ci_low), np.log(ci_high)
+        width = max(b - a, 1e-3)
+        a, b = max(a - 0.5 * width, low[i]), min(b + 0.5 * width, high[i])
+    else:
+        a, b = low[i], high[i]
+    grid = np.unique(np.append(np.linspace(a, b, points), u_hat[i]))
+    return {"value": np.exp(grid).tolist(), "loglik": [along(i, v) for v in grid]}

@@ -1,0 +1,157 @@
+"""What a maximum-likelihood fit of noise settings found: each parameter, the fit's quality, fit.json's layout."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+#: how the 95% intervals were computed
+INTERVAL_METHODS = ("observed-information", "profile")
+
+
+@dataclass(frozen=True)
+class FitParameter:
+    """One fitted setting.
+
+    Attributes
+    ----------
+    name : str
+        The setting, as ``--set`` spells it (``"filter.accel_noise_std"``).
+    value : float or None
+        The maximum-likelihood estimate in the setting's unit; None when the log cannot identify it.
+    ci_low, ci_high : float or None
+        The interval at ``FitResult.confidence`` (0 as ``ci_low`` for an estimate consistent with 0; None
+        where the likelihood does not fall far enough within the search range).
+    unit : str
+    start : float
+        Where the search started (the input setting, or a small positive floor for a setting that was 0).
+    identified : bool
+        False when the log-likelihood is flat: it falls by less than the interval's drop (1.92 for 95%)
+        over the whole search range on both sides of the estimate.
+    at_bound : bool
+        True when the log-likelihood at the search range's lower end is within the drop of the maximum:
+        the estimate is consistent with 0 and ``ci_high`` is an upper limit.
+    note : str
+        A plain sentence for the user when one is due ("" otherwise).
+    """
+
+    name: str
+    value: float | None
+    ci_low: float | None
+    ci_high: float | None
+    unit: str
+    start: float
+    identified: bool = True
+    at_bound: bool = False
+    note: str = ""
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "value": self.value,
+            "ci_low": self.ci_low,
+            "ci_high": self.ci_high,
+            "unit": self.unit,
+            "start": self.start,
+            "identified": self.identified,
+            "at_bound": self.at_bound,
+            "note": self.note,
+        }
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """A fit of one log's noise settings by maximum likelihood.
+
+    Attributes
+    ----------
+    scenario : str
+        ``"accel-gps"`` or ``"scale-bias"``.
+    parameters : dict of str to FitParameter
+        Keyed by setting name.
+    loglik : float
+        log L at the estimate, from the prediction-error decomposition of the innovations.
+    aic : float
+        2 k - 2 log L, k the number of free parameters.
+    fixes : int
+        The measurements in the likelihood (fixes, or samples for scale-bias).
+    converged : bool
+        Whether the optimizer reported convergence.
+    interval_method : {"observed-information", "profile"}
+    adequate : bool
+        Whether the fitted filter's innovations pass their diagnostics (NIS and whiteness).
+    adequacy : str
+        The diagnostics' verdict in words, and when not adequate what the model may lack.
+    diagnostics : dict
+        The fitted filter's innovation diagnostics.
+    curves : dict
+        For the figure: per parameter ``{"value": [...], "loglik": [...]}`` around the estimate.
+    notes : list of str
+        What the user must know about the fit (multipliers used, parameters that cannot be told apart).
+    rejected_fixes : list of int or None
+        The 1-based GPS rows the innovation gate rejected; None when no gate was used.
+    settings : dict
+        ``{section: {key: value}}`` for filter.toml; ``comments`` holds a line per key to explain.
+    confidence : float
+    extra : dict
+        More of fit.json (accel-gps: the fitted filter's final ``bias`` and ``bias_std``, m/s^2).
+    paths : dict
+        The files written, by name, when the fit wrote a folder.
+    """
+
+    scenario: str
+    parameters: dict[str, FitParameter]
+    loglik: float
+    aic: float
+    fixes: int
+    converged: bool
+    interval_method: str
+    adequate: bool
+    adequacy: str
+    diagnostics: dict[str, Any]
+    curves: dict[str, dict[str, list[float]]] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+    rejected_fixes: list[int] | None = None
+    settings: dict[str, dict[str, Any]] = field(default_factory=dict)
+    comments: dict[str, str] = field(default_factory=dict)
+    confidence: float = 0.95
+    extra: dict[str, Any] = field(default_factory=dict)
+    #: the files written, by name, when the fit was given a folder (``kalcal.fit(..., out=...)``)
+    paths: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.interval_method not in INTERVAL_METHODS:
+            raise ValueError(f"interval_method: expected one of {INTERVAL_METHODS}, got {self.interval_method!r}")
+
+    def value(self, name: str) -> float | None:
+        """The estimate of ``name`` (None when unidentified)."""
+        return self.parameters[name].value
+
+    def to_dict(self) -> dict[str, Any]:
+        """fit.json's content (``schema_version`` is added by the writer, :func:`kalcal.io.results.write_json`)."""
+        document = {
+            "scenario": self.scenario,
+            "parameters": {name: parameter.as_dict() for name, parameter in self.parameters.items()},
+            "loglik": self.loglik,
+            "aic": self.aic,
+            "fixes": self.fixes,
+            "converged": self.converged,
+            "interval_method": self.interval_method,
+            "confidence": self.confidence,
+            "adequate": self.adequate,
+            "adequacy": self.adequacy,
+            "diagnostics": self.diagnostics,
+            "notes": list(self.notes),
+            **self.extra,
+            "curves": self.curves,
+        }
+        if self.rejected_fixes is not None:
+            document["rejected_fixes"] = {"count": len(self.rejected_fixes), "rows": list(self.rejected_fixes)}
+        return document
+
+
+def interval_text(p: FitParameter) -> str:
+    """``95% interval [a, b] unit`` or ``consistent with 0, upper limit b unit`` in words."""
+    high = "none" if p.ci_high is None else f"{p.ci_high:.4g}"
+    if p.at_bound:
+        return f"consistent with 0, upper limit {high} {p.unit}"
+    return f"interval [{p.ci_low:.4g}, {high}] {p.unit}"

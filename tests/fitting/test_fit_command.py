@@ -1,0 +1,118 @@
+"""``kalcal fit``: bad input as one line with exit 2, fit.json's fields, filter.toml through --config of
+calibrate and verify (the loop closed), and the set of files."""
+
+from __future__ import annotations
+
+import json
+import struct
+import tomllib
+
+import pytest
+from typer.testing import CliRunner
+
+import kalcal
+from kalcal.cli import app
+
+
+def _invoke(*args):
+    return CliRunner().invoke(app, [str(a) for a in args], catch_exceptions=False)
+
+
+@pytest.fixture(scope="module")
+def accel_logs(tmp_path_factory):
+    base = tmp_path_factory.mktemp("fit-logs")
+    sim = kalcal.simulate("accel-gps", seed=2, settings={"scenario.duration": 10, "truth.gps_position_std": 2.0})
+    sim.save(base)
+    return base / "imu.csv", base / "gps.csv"
+
+
+@pytest.fixture(scope="module")
+def accel_fit(accel_logs, tmp_path_factory):
+    out = tmp_path_factory.mktemp("fit") / "out"
+    imu, gps = accel_logs
+    result = _invoke("fit", "accel-gps", "--imu", imu, "--gps", gps, "--out", out,
+                     "--free", "filter.gps_position_std,filter.gps_velocity_std")
+    assert result.exit_code == 0, result.stdout + result.stderr
+    return out, result
+
+
+@pytest.mark.parametrize(
+    "args, start",
+    [
+        (["--imu", "missing.csv", "--gps", "{gps}"], "kalcal: error: missing.csv"),
+        (["--imu", "{imu}", "--gps", "{gps}", "--free", "filter.accel_amplitude"], "kalcal: error: --free: "),
+        (["--imu", "{imu}", "--gps", "{gps}", "--free", "log.position_std_multiplier"], "kalcal: error: --free: "),
+        (["--imu", "{imu}", "--gps", "{gps}", "--gate", "0.99"], "kalcal: error: --gate: "),
+        (["--imu", "{imu}"], "kalcal: error: --gps: required"),
+        (["--imu", "{imu}", "--gps", "{gps}", "--set", "filter.accel_noise_std=-1"], "kalcal: error: filter.accel_noise_std"),
+    ],
+)
+def test_bad_input_is_one_line_and_exit_status_2_as_in_calibrate(accel_logs, tmp_path, args, start):
+    imu, gps = accel_logs
+    args = [a.format(imu=imu, gps=gps) for a in args]
+    result = _invoke("fit", "accel-gps", *args, "--out", tmp_path / "out")
+    assert result.exit_code == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(start), result.stderr
+    assert not (tmp_path / "out" / "fit.json").exists()
+
+
+def test_scale_bias_refuses_what_it_does_not_use(tmp_path):
+    for args, start in ((["--gate", "0.99", "--data", "x.csv"], "kalcal: error: --gate: "), ([], "kalcal: error: --data: required")):
+        result = _invoke("fit", "scale-bias", *args, "--out", tmp_path / "out")
+        assert result.exit_code == 2 and result.stderr.strip().startswith(start), result.stderr
+
+
+def test_fit_json_holds_the_issue_s_fields(accel_fit):
+    out, result = accel_fit
+    document = json.loads((out / "fit.json").read_text())
+    assert document["schema_version"] >= 1 and document["scenario"] == "accel-gps"
+    for key in ("loglik", "aic", "fixes", "converged", "adequate", "adequacy", "diagnostics", "interval_method"):
+        assert key in document, key
+    assert document["interval_method"] == "observed-information"
+    assert document["aic"] == pytest.approx(2 * 2 - 2 * document["loglik"])
+    position = document["parameters"]["filter.gps_position_std"]
+    assert set(position) >= {"value", "ci_low", "ci_high", "unit", "identified", "at_bound"}
+    assert position["unit"] == "m" and position["ci_low"] <= 2.0 <= position["ci_high"]
+    assert "filter.gps_position_std" in result.stdout and "wrote" in result.stdout
+    manifest = json.loads((out / ".kalcal-manifest.json").read_text())
+    assert manifest["command"] == "fit accel-gps" and manifest["complete"]
+    width, height = struct.unpack(">II", (out / "fit.png").read_bytes()[16:24])
+    assert (width, height) == (900, 400)  # one row of two panels
+
+
+def test_filter_toml_goes_through_config_of_calibrate_and_verify_with_the_fitted_values(accel_fit, accel_logs):
+    out, _ = accel_fit
+    imu, gps = accel_logs
+    text = (out / "filter.toml").read_text()
+    config = tomllib.loads(text)
+    fitted = json.loads((out / "fit.json").read_text())["parameters"]["filter.gps_position_std"]["value"]
+    assert config["filter"]["gps_position_std"] == pytest.approx(fitted, rel=1e-5)
+    assert config["truth"]["gps_position_std"] == config["filter"]["gps_position_std"]
+    assert config["scenario"]["imu_rate"] == 200.0 and config["scenario"]["gps_rate"] == 5.0
+    assert "# gps_position_std: fitted, interval [" in text
+    calibration = kalcal.calibrate("accel-gps", imu=imu, gps=gps, config=out / "filter.toml")
+    settings = calibration.calibration.summary["settings"]
+    assert settings["filter"]["gps_position_std"] == config["filter"]["gps_position_std"]
+    # the loop closed: the fitted filter verified by Monte Carlo against the fitted settings as the truth
+    verification = kalcal.verify("accel-gps", config=out / "filter.toml", n=1000, seed=1, long_run=0,
+                                 settings={"scenario.duration": 10})
+    assert verification.verdict == "pass"
+    assert verification.to_dict()["settings"]["truth"]["gps_position_std"] == config["truth"]["gps_position_std"]
+
+
+def test_scale_bias_end_to_end_fit_calibrate_and_verify(tmp_path):
+    sim = kalcal.simulate("scale-bias", seed=4, settings={"scenario.duration": 60, "truth.reference_noise_std": 0.3})
+    sim.save(tmp_path / "sim")
+    out = tmp_path / "fit"
+    result = _invoke("fit", "scale-bias", "--data", tmp_path / "sim" / "data.csv", "--out", out, "--profile")
+    assert result.exit_code == 0, result.stdout + result.stderr
+    document = json.loads((out / "fit.json").read_text())
+    assert document["interval_method"] == "profile" and document["scenario"] == "scale-bias"
+    noise = document["parameters"]["filter.reference_noise_std"]
+    assert noise["ci_low"] <= 0.3 <= noise["ci_high"]
+    config = tomllib.loads((out / "filter.toml").read_text())
+    assert config["filter"]["sensor_noise_std"] == 0.0 and config["scenario"]["rate"] == 10.0
+    kalcal.calibrate("scale-bias", data=tmp_path / "sim" / "data.csv", config=out / "filter.toml")
+    verification = kalcal.verify("scale-bias", config=out / "filter.toml", n=300, seed=0, long_run=0)
+    assert verification.verdict == "pass"

@@ -1,0 +1,59 @@
+"""The generic maximum-likelihood search: the estimate, both kinds of interval, flat and boundary parameters."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from kalcal.fitting.mle import Free, maximize
+
+
+def gaussian(x):
+    """log L of iid N(0, sigma^2) data, in the mapping form the search calls."""
+    n, ss = x.size, float(np.sum(x**2))
+    return lambda values: -0.5 * (n * np.log(2 * np.pi * values["sigma"] ** 2) + ss / values["sigma"] ** 2)
+
+
+def test_the_estimate_and_the_observed_information_interval_are_the_closed_form_ones():
+    x = np.random.default_rng(0).normal(0.0, 0.3, 400)
+    fit = maximize(gaussian(x), [Free("sigma", 1.0, 1e-3, 1e3, "m")])
+    sigma_hat = float(np.sqrt(np.mean(x**2)))
+    p = fit.parameters["sigma"]
+    assert fit.converged and abs(p.value - sigma_hat) < 1e-6 * sigma_hat
+    # on the log scale the information is 2 n: se(log sigma) = 1 / sqrt(2 n)
+    se = 1.0 / np.sqrt(2 * x.size)
+    z = stats.norm.isf(0.025)
+    assert p.ci_low == pytest.approx(sigma_hat * np.exp(-z * se), rel=1e-4)
+    assert p.ci_high == pytest.approx(sigma_hat * np.exp(z * se), rel=1e-4)
+    assert fit.aic == pytest.approx(2 - 2 * fit.loglik)
+    assert p.identified and not p.at_bound and fit.interval_method == "observed-information"
+
+
+def test_the_profile_interval_is_where_log_l_has_fallen_by_the_chi_square_half_quantile():
+    x = np.random.default_rng(1).normal(0.0, 2.0, 50)
+    loglik = gaussian(x)
+    fit = maximize(loglik, [Free("sigma", 1.0, 1e-3, 1e3)], profile=True)
+    p = fit.parameters["sigma"]
+    drop = stats.chi2.ppf(0.95, 1) / 2
+    for end in (p.ci_low, p.ci_high):
+        assert loglik({"sigma": end}) == pytest.approx(fit.loglik - drop, abs=1e-3)
+    assert fit.interval_method == "profile"
+
+
+def test_a_parameter_without_influence_is_unidentified_and_one_best_at_zero_is_consistent_with_zero():
+    x = np.random.default_rng(2).normal(0.0, 1.0, 300)
+    base = gaussian(x)
+
+    def loglik(values):  # "unused" has no influence; "extra" adds variance that the data do not have
+        return base({"sigma": np.sqrt(values["sigma"] ** 2 + values["extra"] ** 2)})
+
+    free = [Free("sigma", 0.5, 1e-3, 1e3), Free("extra", 1e-3, 1e-6, 1.0), Free("unused", 1.0, 1e-3, 1e3)]
+    fit = maximize(lambda v: loglik(v), free)
+    unused, extra = fit.parameters["unused"], fit.parameters["extra"]
+    assert not unused.identified and unused.value is None and unused.ci_low is None
+    assert extra.identified and extra.at_bound and extra.ci_low == 0.0
+    # the upper limit is where log L along "extra" has fallen by 1.92
+    u = dict(fit.values, extra=extra.ci_high)
+    assert loglik(u) == pytest.approx(fit.loglik - stats.chi2.ppf(0.95, 1) / 2, abs=1e-3)
+    assert fit.parameters["sigma"].identified and not fit.parameters["sigma"].at_bound
