@@ -26,6 +26,7 @@ def calibrate(
     on_gap: str = "continue",
     form: str = "joseph",
     smooth: bool = False,
+    windows: int = 2,
     out: str | Path | None = None,
 ) -> CalibrationResult:
     """Calibrate from logged data: accel-gps (``imu``, ``gps``) or scale-bias (``data``).
@@ -43,6 +44,9 @@ def calibrate(
         ``{"section.key": value}``, the keys of ``--set``; ``config`` a TOML file of them.
     imu_columns, gps_columns, init, max_imu_gap, on_gap, form, smooth, reference, sensor
         As ``kalcal calibrate``'s options of those names.
+    windows : int
+        The log is split into this many windows for the stability test (``summary["stability"]``,
+        :mod:`kalcal.calibration.windows`); 1 turns it off.
     out : path, optional
         Also write the files there, as ``kalcal calibrate --out`` (the folder is checked first).
 
@@ -65,7 +69,7 @@ def calibrate(
         from kalcal.jobs.scale_bias import compute_scale_bias_calibration
 
         def compute():
-            return compute_scale_bias_calibration(model, data, reference=reference, sensor=sensor)
+            return compute_scale_bias_calibration(model, data, reference=reference, sensor=sensor, windows=windows)
 
         command = "calibrate scale-bias"
     else:
@@ -83,6 +87,7 @@ def calibrate(
             return compute_accel_gps_calibration(
                 model, imu, gps, imu_columns=imu_columns, gps_columns=gps_columns, init=init,
                 max_imu_gap=max_imu_gap, stop_on_gap=on_gap == "stop", form=form, smooth=smooth,
+                windows=windows,
             )
 
         command = "calibrate accel-gps"

@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 
 from kalcal.calibration.scale_bias import UNOBSERVABLE_RATIO, calibrate_scale_bias
+from kalcal.calibration.windows import check_windows, scale_bias_stability
 from kalcal.errors import DataError
 from kalcal.io.logs import numeric_columns, read_table, require_increasing, source_name
 from kalcal.io.outputs import mark_inputs, writes_outputs
@@ -65,6 +66,7 @@ def compute_scale_bias_calibration(
     *,
     reference: str = "reference",
     sensor: str = "sensor",
+    windows: int = 2,
 ) -> Calibration:
     """Calibrate from a log (CSV or Parquet, or a DataFrame) with a reference and a sensor column; nothing is written.
 
@@ -76,7 +78,10 @@ def compute_scale_bias_calibration(
     list of ``{"code", "message"}``, empty when none) then names; ``nis_bounds`` holds the mean NIS's 99%
     bounds and ``consistent`` whether it lies within them (a ``noise-inconsistent`` warning when not). A
     reference or sensor value beyond ``SIGNAL_LIMIT`` (1e12 in the log's unit) is refused (DataError).
+    ``windows`` splits the log into that many runs of samples for the stability test
+    (:mod:`kalcal.calibration.windows`; 1: none), ``summary["stability"]``.
     """
+    windows = check_windows(windows)
     frame = read_table(data_path, "data")
     source = data_path
     data_path = source_name(data_path, "data")
@@ -90,9 +95,9 @@ def compute_scale_bias_calibration(
     else:
         time = np.arange(1, len(frame) + 1) / scenario.scenario.rate
         time_source = f"row number / scenario.rate ({scenario.scenario.rate:g} Hz)"
-    result = calibrate_scale_bias(
-        scenario, time, columns["reference"], columns["sensor"], source=str(data_path), columns=(reference, sensor)
-    )
+    options = {"source": str(data_path), "columns": (reference, sensor)}
+    result = calibrate_scale_bias(scenario, time, columns["reference"], columns["sensor"], **options)
+    stability = scale_bias_stability(scenario, result, time, columns["reference"], columns["sensor"], windows, **options)
     std = result.std
     estimates = pd.DataFrame(
         {
@@ -131,6 +136,7 @@ def compute_scale_bias_calibration(
             "unobservable": result.unobservable(),
             "note": "final sigma / sigma with no data; above the threshold the log did not excite the parameter",
         },
+        "stability": stability.as_dict(),
         "warnings": [warning.as_dict() for warning in result.warnings(str(data_path))],
         "units": {"time": "s", "theta1": "1", "theta2": unit, "scale_error": "1", "bias": unit},
     }
