@@ -163,11 +163,6 @@ class AccelGpsTruth:
         if not self.gps_outlier_rate <= 1:
             raise SettingError(f"{self.SECTION}.gps_outlier_rate", "a share of the fixes from 0 to 1", show(self.gps_outlier_rate))
 
-    @property
-    def gps_faults(self) -> bool:
-        """Whether a log-only GNSS fault (latency, outliers) is set."""
-        return self.gps_latency != 0 or (self.gps_outlier_rate > 0 and self.gps_outlier_std > 0)
-
     def bias_decay(self, dt: float) -> float:
         """phi_b = exp(-dt / tau) of the bias over one sample step of dt seconds (1 for a constant or
         random-walk bias); :func:`bias_discretization`."""

@@ -45,10 +45,9 @@ def accel_gps_problem(
 ) -> FixedGainProblem:
     """The report's filter against its truth, with the exact and the per-sample (sampled) engines.
 
-    The GNSS faults of ``kalcal simulate`` (``truth.gps_latency``, ``gps_outlier_*``) are log-only: the
-    exact truth has no time stamps to shift and no heavy-tailed fix noise, so a verification refuses them.
+    The truth's log-only GNSS faults (``truth.gps_latency``, ``gps_outlier_*``) are not in it: a
+    verification and an analysis refuse them first (:func:`refuse_log_faults`).
     """
-    refuse_log_faults(scenario)
     s = scenario.scenario
     info = ProblemInfo(
         scenario=scenario.NAME,
@@ -73,7 +72,11 @@ def accel_gps_problem(
 
 
 def refuse_log_faults(scenario: AccelGpsScenario) -> None:
-    """Raise a one-line SettingError naming the first log-only GNSS fault set in ``scenario.truth``."""
+    """Raise a one-line SettingError naming the first log-only GNSS fault set in ``scenario.truth``.
+
+    ``kalcal simulate`` writes them into logs; the exact truth has no time stamps to shift and no
+    heavy-tailed fix noise, so a verification or analysis of them would verify something else.
+    """
     t = scenario.truth
     for key in ("gps_latency", "gps_outlier_rate"):
         value = getattr(t, key)
