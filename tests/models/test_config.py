@@ -43,6 +43,9 @@ NON_DEFAULT = {
     "filter.velocity0_std": 1.5,
     "filter.gps_position_std": 1.25,
     "filter.gps_velocity_std": 0.045,
+    "truth.gps_latency": 0.02,
+    "truth.gps_outlier_rate": 0.01,
+    "truth.gps_outlier_std": 30.0,
 }
 
 

@@ -21,7 +21,7 @@ from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.models.custom import CustomModelScenario
 from kalcal.models.scale_bias import ScaleBiasScenario
 from kalcal.montecarlo.problem import FixedGainProblem, ProblemInfo
-from kalcal.montecarlo.scenarios import accel_gps_problem, custom_problem
+from kalcal.montecarlo.scenarios import accel_gps_problem, custom_problem, refuse_log_faults
 from kalcal.simulation.exact import UpdateRateTruth
 
 
@@ -114,6 +114,7 @@ def analyze_scenario(scenario, form: UpdateForm = "joseph", *, pairs: bool = Tru
             "scale-bias: no exact covariance analysis (its filter's gains depend on the noisy readings); use kalcal verify"
         )
     if isinstance(scenario, AccelGpsScenario):
+        refuse_log_faults(scenario)
         return analyze_problem(accel_gps_problem(scenario, form, residual_pairs=False), accel_gps_sources(scenario), pairs=pairs, budget=budget)
     if isinstance(scenario, CustomModelScenario):
         problem = custom_problem(scenario, form, residual_pairs=False)

@@ -27,6 +27,7 @@ def calibrate(
     form: str = "joseph",
     smooth: bool = False,
     prior: str | None = None,
+    windows: int = 2,
     out: str | Path | None = None,
 ) -> CalibrationResult:
     """Calibrate from logged data: accel-gps (``imu``, ``gps``) or scale-bias (``data``).
@@ -47,6 +48,9 @@ def calibrate(
     prior : {"diffuse", "settings"}, optional
         scale-bias: start from no information on theta, or from the filter's prior of a and b; by default
         the settings' prior only where a ``filter.`` prior key is given (:func:`kalcal.jobs.scale_bias.resolve_prior`).
+    windows : int
+        The log is split into this many windows for the stability test (``summary["stability"]``,
+        :mod:`kalcal.calibration.windows`); 1 turns it off.
     out : path, optional
         Also write the files there, as ``kalcal calibrate --out`` (the folder is checked first).
 
@@ -69,7 +73,9 @@ def calibrate(
         from kalcal.jobs.scale_bias import compute_scale_bias_calibration
 
         def compute():
-            return compute_scale_bias_calibration(model, data, reference=reference, sensor=sensor, prior=prior)
+            return compute_scale_bias_calibration(
+                model, data, reference=reference, sensor=sensor, prior=prior, windows=windows
+            )
 
         command = "calibrate scale-bias"
     else:
@@ -89,6 +95,7 @@ def calibrate(
             return compute_accel_gps_calibration(
                 model, imu, gps, imu_columns=imu_columns, gps_columns=gps_columns, init=init,
                 max_imu_gap=max_imu_gap, stop_on_gap=on_gap == "stop", form=form, smooth=smooth,
+                windows=windows,
             )
 
         command = "calibrate accel-gps"

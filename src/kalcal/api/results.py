@@ -189,6 +189,11 @@ class CalibrationResult:
 
         return json_document(self.calibration.summary)
 
+    @property
+    def stability(self) -> dict | None:
+        """``summary.json``'s ``stability``: the windows' estimates, the chi-square test and its verdict."""
+        return self.calibration.summary.get("stability")
+
     def save(self, out: str | Path) -> dict[str, Path]:
         """Write ``estimates.csv``, ``summary.json`` and (accel-gps) ``calibration.png`` into ``out``, as
         ``kalcal calibrate --out`` does (one set); returns the files by name."""

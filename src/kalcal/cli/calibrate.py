@@ -54,6 +54,10 @@ def calibrate(
     smooth: Annotated[
         bool, typer.Option("--smooth", help="accel-gps: add RTS-smoothed states and their 1-sigma to the outputs.")
     ] = False,
+    windows: Annotated[
+        int,
+        typer.Option("--windows", help="Split the log into this many windows and test their estimates' agreement (1: off)."),
+    ] = 2,
     out: Annotated[Path, typer.Option("--out", help="Directory for estimates.csv and summary.json.")] = Path(
         "kalcal-cal"
     ),
@@ -89,6 +93,7 @@ def calibrate(
             form=form,
             smooth=smooth,
             prior=prior,
+            windows=windows,
             out=out,
         )
     summary = result.calibration.summary
@@ -116,6 +121,7 @@ def calibrate(
     diagnostics = summary["diagnostics"]
     style = "green" if diagnostics["consistent"] else "bold red"
     console.print(f"diagnostics: [{style}]{escape(diagnostics['verdict'])}[/{style}]")
+    _print_stability(summary)
     _common._note_nonfinite(result.paths["summary.json"])
     _common.print_wrote(Path(out), list(result.paths.values()))
     if strict and (summary["warnings"] or not diagnostics["consistent"]):
@@ -139,7 +145,16 @@ def _print_scale_bias(summary: dict, out: Path, paths: dict[str, Path], strict: 
         table.add_row(name, f"{value:.6g}", f"{std:.3g}", unit_)
     _common.console.print(table)
     _common._print_warnings(summary)
+    _print_stability(summary)
     _common._note_nonfinite(paths["summary.json"])
     _common.print_wrote(Path(out), list(paths.values()))
     if strict and summary["warnings"]:
         raise typer.Exit(1)
+
+
+def _print_stability(summary: dict) -> None:
+    """The stability test's one line: green when stable, red when not, plain when it did not run."""
+    stability = summary["stability"]
+    style = {True: "green", False: "bold red"}.get(stability["stable"])
+    text = escape(stability["sentence"])
+    _common.console.print(f"stability: [{style}]{text}[/{style}]" if style else f"stability: {text}")

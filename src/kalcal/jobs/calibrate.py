@@ -13,6 +13,7 @@ from kalcal.calibration.accel_gps import calibrate_accel_gps
 from kalcal.calibration.diagnostics import innovation_diagnostics
 from kalcal.calibration.plausibility import CalibrationWarning
 from kalcal.calibration.smoothing import smooth_calibration
+from kalcal.calibration.windows import accel_gps_stability, check_windows
 from kalcal.io.logs import numeric_columns, parse_column_map, read_table, require_increasing, source_name
 from kalcal.io.outputs import mark_inputs, writes_outputs
 from kalcal.io.results import write_json
@@ -98,6 +99,7 @@ def compute_accel_gps_calibration(
     stop_on_gap: bool = False,
     form: str = "joseph",
     smooth: bool = False,
+    windows: int = 2,
 ) -> Calibration:
     """Calibrate from an accelerometer log (time [s], accel [m/s^2]) and a GPS log (time [s], position [m],
     velocity [m/s], optionally position_std [m] and velocity_std [m/s] per fix): files or DataFrames.
@@ -106,12 +108,14 @@ def compute_accel_gps_calibration(
     ``summary.json`` and ``calibration.png``. Column names are mapped with ``"role=column,..."``. ``form`` is the filter's
     update form (joseph, standard or sqrt); ``smooth`` adds the RTS-smoothed states and their 1-sigma
     (``smoothed_position``, ..., ``smoothed_bias_std``) to ``estimates.csv`` and a ``smoothed`` object to
-    ``summary.json``.
+    ``summary.json``. ``windows`` splits the log into that many windows for the stability test
+    (:mod:`kalcal.calibration.windows`; 1: none), ``summary["stability"]``.
 
     Implausible logs are refused (:mod:`kalcal.calibration.plausibility`); the summary's ``warnings`` is a
     list of ``{"code", "message"}`` (empty when none), and ``fixes_default_std`` counts the fixes used whose
     ``position_std`` / ``velocity_std`` was NaN and took the filter's setting.
     """
+    windows = check_windows(windows)
     imu_map = parse_column_map(imu_columns, IMU_ROLES, "--imu-columns")
     gps_map = parse_column_map(gps_columns, GPS_ROLES, "--gps-columns")
     imu_source, gps_source = imu_path, gps_path
@@ -127,24 +131,18 @@ def compute_accel_gps_calibration(
     )
     require_increasing(imu["time"], imu_path, imu_map["time"])
     require_increasing(gps["time"], gps_path, gps_map["time"])
-    result = calibrate_accel_gps(
-        scenario,
-        imu["time"],
-        imu["accel"],
-        gps["time"],
-        gps["position"],
-        gps["velocity"],
-        position_std=gps.get("position_std"),
-        velocity_std=gps.get("velocity_std"),
-        init=init,
+    logs = (imu["time"], imu["accel"], gps["time"], gps["position"], gps["velocity"])
+    stds = {"position_std": gps.get("position_std"), "velocity_std": gps.get("velocity_std")}
+    options = dict(
         max_imu_gap=max_imu_gap,
-        stop_on_gap=stop_on_gap,
         form=form,
         source=str(gps_path),
         imu_source=str(imu_path),
         **stated_rates(scenario),
         columns={**{role: gps_map[role] for role in GPS_ROLES}, "imu_time": imu_map["time"], "accel": imu_map["accel"]},
     )
+    result = calibrate_accel_gps(scenario, *logs, **stds, init=init, stop_on_gap=stop_on_gap, **options)
+    stability = accel_gps_stability(scenario, result, *logs, windows, **stds, **options)
     std = result.std
     normalized = result.normalized_innovations
     smoothed = smooth_calibration(result) if smooth else None
@@ -212,6 +210,7 @@ def compute_accel_gps_calibration(
         "covariance": result.covariance[-1],
         "covariance_states": list(scenario.state_names),
         "diagnostics": diagnostics.as_dict(),
+        "stability": stability.as_dict(),
         "warnings": [warning.as_dict() for warning in warnings],
         "units": {"time": "s", **dict(zip(scenario.state_names, scenario.state_units))},
     }

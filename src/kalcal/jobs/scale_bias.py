@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 
 from kalcal.calibration.scale_bias import UNOBSERVABLE_RATIO, calibrate_scale_bias
+from kalcal.calibration.windows import check_windows, scale_bias_stability
 from kalcal.errors import DataError
 from kalcal.io.logs import numeric_columns, read_table, require_increasing, source_name
 from kalcal.io.outputs import mark_inputs, writes_outputs
@@ -81,6 +82,7 @@ def compute_scale_bias_calibration(
     reference: str = "reference",
     sensor: str = "sensor",
     prior: str | None = None,
+    windows: int = 2,
 ) -> Calibration:
     """Calibrate from a log (CSV or Parquet, or a DataFrame) with a reference and a sensor column; nothing is written.
 
@@ -98,7 +100,10 @@ def compute_scale_bias_calibration(
     takes "settings" when the user set any of ``filter.scale_error``, ``filter.scale_error_std``,
     ``filter.bias``, ``filter.bias_std``, else "diffuse": a log's prior is never silently the simulated
     study's. ``summary["prior"]`` says which, and why.
+    ``windows`` splits the log into that many runs of samples for the stability test
+    (:mod:`kalcal.calibration.windows`; 1: none), ``summary["stability"]``.
     """
+    windows = check_windows(windows)
     frame = read_table(data_path, "data")
     source = data_path
     data_path = source_name(data_path, "data")
@@ -113,10 +118,11 @@ def compute_scale_bias_calibration(
         time = np.arange(1, len(frame) + 1) / scenario.scenario.rate
         time_source = f"row number / scenario.rate ({scenario.scenario.rate:g} Hz)"
     prior, why = resolve_prior(scenario, prior)
+    options = {"source": str(data_path), "columns": (reference, sensor)}
     result = calibrate_scale_bias(
-        scenario, time, columns["reference"], columns["sensor"], source=str(data_path), columns=(reference, sensor),
-        prior=prior, conflict=prior == "settings",
+        scenario, time, columns["reference"], columns["sensor"], prior=prior, conflict=prior == "settings", **options
     )
+    stability = scale_bias_stability(scenario, result, time, columns["reference"], columns["sensor"], windows, **options)
     std = result.std
     estimates = pd.DataFrame(
         {
@@ -156,6 +162,7 @@ def compute_scale_bias_calibration(
             "note": "final sigma / sigma with no data; above the threshold the log did not excite the parameter",
         },
         "prior": {"kind": prior, "note": why, "start_samples": result.start_samples, "conflict": result.conflict},
+        "stability": stability.as_dict(),
         "warnings": [warning.as_dict() for warning in result.warnings(str(data_path))],
         "units": {"time": "s", "theta1": "1", "theta2": unit, "scale_error": "1", "bias": unit},
     }

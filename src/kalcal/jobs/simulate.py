@@ -42,7 +42,8 @@ def compute_simulation(scenario, seed: int) -> Simulation:
 
 def compute_accel_gps_simulation(scenario: AccelGpsScenario, seed: int) -> Simulation:
     """imu: time [s], accel [m/s^2], one row per accelerometer sample from t = 0.
-    gps: time [s], position [m], velocity [m/s], one row per fix.
+    gps: time [s], position [m], velocity [m/s], one row per fix; time is the stamp, the time the fix
+    describes plus ``truth.gps_latency``, and ``truth.gps_outlier_rate`` of the positions carry a gross error.
     truth: time [s], position [m], velocity [m/s], accel [m/s^2] (true), bias [m/s^2] at the samples."""
     logs = sample_accel_gps_logs(scenario, np.random.default_rng(seed), 1)
     return Simulation(
@@ -50,7 +51,7 @@ def compute_accel_gps_simulation(scenario: AccelGpsScenario, seed: int) -> Simul
         {
             "imu": pd.DataFrame({"time": logs.sample_time, "accel": logs.accel[0]}),
             "gps": pd.DataFrame(
-                {"time": logs.fix_time, "position": logs.gps_position[0], "velocity": logs.gps_velocity[0]}
+                {"time": logs.fix_stamp, "position": logs.gps_position[0], "velocity": logs.gps_velocity[0]}
             ),
             "truth": pd.DataFrame(
                 {

@@ -6,7 +6,9 @@ import math
 
 from kalcal.errors import ConfigError
 from kalcal.filters.steps import check_form
+from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.models.config import apply_settings
+from kalcal.montecarlo.scenarios import refuse_log_faults
 
 ENGINES = ("exact", "sampled")
 #: Horizon (s) of the extra mean-error study per scenario: the source report's figure 5.8 used 120 s.
@@ -61,7 +63,8 @@ def check_arguments(
 
     ``n`` below :data:`MIN_REALIZATIONS`, an unknown engine or form, a confidence outside (0, 1), a
     batch size below 1, a negative or non-finite ``long_run`` or one not longer than the run, and a run or
-    long run of more than :data:`MAX_UPDATES` updates per realization (``scenario.duration`` too long).
+    long run of more than :data:`MAX_UPDATES` updates per realization (``scenario.duration`` too long),
+    and the log-only GNSS faults of accel-gps (:func:`~kalcal.montecarlo.scenarios.refuse_log_faults`).
     """
     if n < MIN_REALIZATIONS:
         raise ConfigError(
@@ -77,6 +80,8 @@ def check_arguments(
     if batch_size is not None and batch_size < 1:
         raise ConfigError(f"--batch-size: expected a positive number of realizations, got {batch_size}")
     check_form(form, "--form")
+    if isinstance(scenario, AccelGpsScenario):
+        refuse_log_faults(scenario)
     count, horizon = run_length(scenario)
     _require_fits(count, "model.updates" if hasattr(scenario, "model") else "scenario.duration")
     if long_run and long_run <= horizon:

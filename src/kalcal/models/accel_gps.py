@@ -50,7 +50,7 @@ import numpy as np
 
 from kalcal.models.accel_gps_discretization import bias_discretization, error_transition
 from kalcal.models.linear import LinearGaussianModel
-from kalcal.models.settings import SettingError, require_nonnegative, require_positive, require_whole
+from kalcal.models.settings import SettingError, require_nonnegative, require_positive, require_whole, show
 
 TruthKind = Literal["analytic", "discrete"]
 IntegrationScheme = Literal["euler", "trapezoid"]
@@ -133,6 +133,11 @@ class AccelGpsTruth:
     bias_walk_std: float = 0.0  # std of the bias increment per accelerometer sample, m/s^2 (0: no walk)
     bias_correlation_time: float = 0.0  # s; > 0 makes the bias first-order Gauss-Markov (0: constant)
     scale_std: float = 0.0  # std of the scale-factor error s (dimensionless): a_c = (1 + s) a + b + w
+    # Log-only faults of the GNSS (kalcal simulate; verify refuses them): the fix's time stamp minus the
+    # time it describes, s; the share of fixes (0..1) whose position carries a gross error N(0, outlier_std^2), m.
+    gps_latency: float = 0.0
+    gps_outlier_rate: float = 0.0
+    gps_outlier_std: float = 0.0
 
     SECTION: ClassVar[str] = "truth"
 
@@ -152,7 +157,11 @@ class AccelGpsTruth:
             bias_walk_std=self.bias_walk_std,
             bias_correlation_time=self.bias_correlation_time,
             scale_std=self.scale_std,
+            gps_outlier_rate=self.gps_outlier_rate,
+            gps_outlier_std=self.gps_outlier_std,
         )
+        if not self.gps_outlier_rate <= 1:
+            raise SettingError(f"{self.SECTION}.gps_outlier_rate", "a share of the fixes from 0 to 1", show(self.gps_outlier_rate))
 
     def bias_decay(self, dt: float) -> float:
         """phi_b = exp(-dt / tau) of the bias over one sample step of dt seconds (1 for a constant or

@@ -11,6 +11,7 @@ from kalcal.filters.steps import UpdateForm, interval_transition
 from kalcal.models.accel_gps import MEASUREMENT_NAMES, MEASUREMENT_UNITS, AccelGpsScenario
 from kalcal.models.custom import CustomModelScenario
 from kalcal.models.linear import LinearGaussianModel
+from kalcal.models.settings import SettingError, show
 from kalcal.models.scale_bias import ScaleBiasScenario
 from kalcal.montecarlo.problem import FixedGainProblem, Problem, ProblemInfo
 from kalcal.montecarlo.scale_bias import ScaleBiasProblem, model_error_cause
@@ -42,7 +43,11 @@ def accel_gps_filter_transitions(scenario: AccelGpsScenario, filter_model: Linea
 def accel_gps_problem(
     scenario: AccelGpsScenario, form: UpdateForm = "joseph", residual_pairs: bool = True
 ) -> FixedGainProblem:
-    """The report's filter against its truth, with the exact and the per-sample (sampled) engines."""
+    """The report's filter against its truth, with the exact and the per-sample (sampled) engines.
+
+    The truth's log-only GNSS faults (``truth.gps_latency``, ``gps_outlier_*``) are not in it: a
+    verification and an analysis refuse them first (:func:`refuse_log_faults`).
+    """
     s = scenario.scenario
     info = ProblemInfo(
         scenario=scenario.NAME,
@@ -64,6 +69,24 @@ def accel_gps_problem(
         form=form,
         residual_pairs=residual_pairs,
     )
+
+
+def refuse_log_faults(scenario: AccelGpsScenario) -> None:
+    """Raise a one-line SettingError naming the first log-only GNSS fault set in ``scenario.truth``.
+
+    ``kalcal simulate`` writes them into logs; the exact truth has no time stamps to shift and no
+    heavy-tailed fix noise, so a verification or analysis of them would verify something else.
+    """
+    t = scenario.truth
+    for key in ("gps_latency", "gps_outlier_rate"):
+        value = getattr(t, key)
+        if value != 0 and (key == "gps_latency" or t.gps_outlier_std > 0):
+            raise SettingError(
+                f"truth.{key}",
+                "0 in a verification (a log-only setting of kalcal simulate: the Monte Carlo's truth has no "
+                "time stamps or gross fix errors)",
+                show(value),
+            )
 
 
 def accel_gps_model_error_cause(scenario: AccelGpsScenario) -> str:

@@ -7,7 +7,12 @@ same realizations for the same generator state:
    scale-factor error s last);
 2. for each GPS interval k = 0..K-1, ``(n, m + 2)``: the noise of samples k m + 1 .. (k + 1) m, then the
    position and velocity noise of fix k; and, when the bias has noise of its own (a random walk or
-   Gauss-Markov), ``(n, m)`` more: the bias noise of steps k m .. (k + 1) m - 1.
+   Gauss-Markov), ``(n, m)`` more: the bias noise of steps k m .. (k + 1) m - 1;
+3. only in a log with GNSS outliers (``truth.gps_outlier_rate`` and ``gps_outlier_std`` > 0), after all
+   the above: ``(n, K)`` uniforms (fix k is an outlier when its uniform is below the rate), then ``(n, K)``
+   normals, the gross errors in units of ``gps_outlier_std``, added to the outliers' positions.
+
+``truth.gps_latency`` moves no draw: the fixes' stamps are the times they describe plus the latency.
 """
 
 from __future__ import annotations
@@ -34,11 +39,25 @@ class AccelGpsLogs:
     fix_index: np.ndarray  #: sample index of each fix, (K,)
     gps_position: np.ndarray  #: m, (n, K)
     gps_velocity: np.ndarray  #: m/s, (n, K)
+    gps_outlier_error: np.ndarray | None = None  #: gross error in each fix's position, m, 0 if none, (n, K)
+    gps_latency: float = 0.0  #: the fixes' stamp minus the time they describe, s
 
     @property
     def fix_time(self) -> np.ndarray:
-        """Times of the fixes, s, (K,)."""
+        """Times the fixes describe, s, (K,)."""
         return self.sample_time[self.fix_index]
+
+    @property
+    def fix_stamp(self) -> np.ndarray:
+        """The fixes' time stamps as logged, fix_time + gps_latency, s, (K,)."""
+        return self.fix_time + self.gps_latency
+
+    @property
+    def gps_outlier(self) -> np.ndarray:
+        """Which fixes carry a gross error, bool (n, K)."""
+        if self.gps_outlier_error is None:
+            return np.zeros(self.gps_position.shape, dtype=bool)
+        return self.gps_outlier_error != 0
 
 
 def _initial_draws(scenario: AccelGpsScenario, rng: np.random.Generator, n: int):
@@ -111,6 +130,12 @@ def sample_accel_gps_logs(scenario: AccelGpsScenario, rng: np.random.Generator, 
     position = p0[:, None] + v0[:, None] * times + motion[:, 0]
     velocity = v0[:, None] + motion[:, 1] + np.zeros((n, 1))
     fix_index = np.arange(1, n_updates + 1) * m
+    gps_position = position[:, fix_index] + t.gps_position_std * gps_noise[:, :, 0]
+    outlier_error = None
+    if t.gps_outlier_rate > 0 and t.gps_outlier_std > 0:
+        hit = rng.random((n, n_updates)) < t.gps_outlier_rate
+        outlier_error = np.where(hit, t.gps_outlier_std * rng.standard_normal((n, n_updates)), 0.0)
+        gps_position = gps_position + outlier_error
     return AccelGpsLogs(
         sample_time=times,
         accel=(1.0 + scale[:, None]) * true_accel + bias + noise,
@@ -120,8 +145,10 @@ def sample_accel_gps_logs(scenario: AccelGpsScenario, rng: np.random.Generator, 
         bias=bias,
         scale=scale,
         fix_index=fix_index,
-        gps_position=position[:, fix_index] + t.gps_position_std * gps_noise[:, :, 0],
+        gps_position=gps_position,
         gps_velocity=velocity[:, fix_index] + t.gps_velocity_std * gps_noise[:, :, 1],
+        gps_outlier_error=outlier_error,
+        gps_latency=t.gps_latency,
     )
 
 
