@@ -17,7 +17,8 @@ from scipy import stats
 from scipy.linalg import block_diag
 from typer.testing import CliRunner
 
-from kalcal.calibration.accel_gps import _python_filter, calibrate_accel_gps
+from kalcal.calibration.accel_gps import calibrate_accel_gps
+from kalcal.calibration.accel_gps_evaluation import python_filter as _python_filter
 from kalcal.calibration.smoothing import smooth_calibration
 from kalcal.cli import app
 from kalcal.errors import ConfigError, DataError
