@@ -211,6 +211,10 @@ def test_the_gate_rejects_gross_outliers_and_keeps_the_bias():
     args = (scenario, logs.sample_time, logs.accel[0], logs.fix_time, position, logs.gps_velocity[0])
     gated = calibrate_accel_gps(*args, gate=0.999)
     np.testing.assert_array_equal(gated.rejected_rows, bad + 1)
+    for form in ("standard", "sqrt"):  # the numpy loops gate alike
+        other = calibrate_accel_gps(*args, gate=0.999, form=form)
+        np.testing.assert_array_equal(other.rejected_rows, bad + 1)
+        np.testing.assert_allclose(other.bias, gated.bias, rtol=1e-9, atol=1e-9 * gated.std[-1, 2])
     truth = logs.bias[0, -1]
     assert abs(gated.bias[-1] - truth) <= 3 * gated.std[-1, 2]
     # ungated, the outliers pull the bias (the check above has power), and gate off is the old filter
@@ -267,3 +271,12 @@ def test_verify_refuses_a_filter_latency():
     scenario = build_scenario("accel-gps", assignments=["filter.gps_latency=0.02"])
     with pytest.raises(ConfigError, match="filter.gps_latency"):
         scenario.filter_model()
+
+
+def test_innovation_loglik_of_three_components():
+    rng = np.random.default_rng(3)
+    a = rng.standard_normal((4, 3, 3))
+    s = a @ np.swapaxes(a, 1, 2) + np.eye(3)
+    r = rng.standard_normal((4, 3))
+    want = sum(stats.multivariate_normal(np.zeros(3), s[k]).logpdf(r[k]) for k in range(4))
+    assert np.isclose(innovation_loglik(r, s), want, rtol=1e-12)

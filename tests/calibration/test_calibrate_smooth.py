@@ -197,7 +197,7 @@ def simulated(tmp_path_factory):
 
 
 def test_calibrate_smooth_writes_smoothed_columns_and_summary(simulated, tmp_path):
-    args = ("calibrate", "accel-gps", "--imu", simulated / "imu.csv", "--gps", simulated / "gps.csv")
+    args = ("calibrate", "accel-gps", "--imu", simulated / "imu.csv", "--gps", simulated / "gps.csv", "--set", "filter.bias_std=0.1")
     plain = _invoke(*args, "--out", tmp_path / "plain")
     assert plain.exit_code == 0, plain.stderr
     result = _invoke(*args, "--out", tmp_path / "smooth", "--smooth", "--form", "sqrt")

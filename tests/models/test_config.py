@@ -43,6 +43,7 @@ NON_DEFAULT = {
     "filter.velocity0_std": 1.5,
     "filter.gps_position_std": 1.25,
     "filter.gps_velocity_std": 0.045,
+    "filter.gps_latency": 0.015,
 }
 
 

@@ -329,7 +329,7 @@ def prepare_accel_gps_log(
     scale_columns = np.stack([-(np.diff(free_p_all) - free_v_all[:-1] * spans), -np.diff(free_v_all)], axis=1)
     chosen = "scenario" if prior == "scenario" or (prior == "auto" and scenario.filter.bias_std is not None) else "diffuse"
     return AccelGpsLog(
-        scenario=scenario, settings=settings, latency=float(scenario.filter.gps_latency), init=init, prior=chosen,
+        scenario=scenario, settings=settings, latency=float(scenario.filter.gps_latency or 0.0), init=init, prior=chosen,
         skip=1 if chosen == "diffuse" else 0, form=form, imu_time=imu_time, accel=accel, steps=steps,
         free_p=free_p, free_v=free_v, period=period, start_time=start_time, anchor=(float(anchor[0]), float(anchor[1])),
         fix_times=fix_times, z_position=np.asarray(gps_position, float)[usable],

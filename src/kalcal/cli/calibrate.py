@@ -50,6 +50,13 @@ def calibrate(
     smooth: Annotated[
         bool, typer.Option("--smooth", help="accel-gps: add RTS-smoothed states and their 1-sigma to the outputs.")
     ] = False,
+    gate: Annotated[
+        Optional[float],
+        typer.Option(
+            "--gate",
+            help="accel-gps: reject a fix whose NIS exceeds the chi-square quantile at this confidence (e.g. 0.999); off by default.",
+        ),
+    ] = None,
     out: Annotated[Path, typer.Option("--out", help="Directory for estimates.csv and summary.json.")] = Path(
         "kalcal-cal"
     ),
@@ -84,6 +91,7 @@ def calibrate(
             on_gap=on_gap,
             form=form,
             smooth=smooth,
+            gate=gate,
             out=out,
         )
     summary = result.calibration.summary
@@ -107,6 +115,15 @@ def calibrate(
             f"{smoothed['bias_std']:.3g} m/s^2, position {smoothed['position']:.6g} ± {smoothed['position_std']:.3g} m",
             markup=False,
         )
+    if summary.get("gate") is not None:
+        rows = summary["rejected_rows"]
+        shown = ", ".join(map(str, rows[:20])) + (f", ... ({len(rows) - 20} more)" if len(rows) > 20 else "")
+        console.print(
+            f"gate at {summary['gate']:g}: {len(rows)} fix(es) rejected" + (f" (GPS rows {shown})" if rows else ""),
+            markup=False,
+        )
+    prior = summary["prior"]
+    console.print(f"bias prior: {prior['bias']} ({prior['bias_std']:.3g} m/s^2)", markup=False)
     _common._print_warnings(summary)
     diagnostics = summary["diagnostics"]
     style = "green" if diagnostics["consistent"] else "bold red"
