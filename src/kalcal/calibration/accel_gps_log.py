@@ -25,6 +25,8 @@ The prior: ``prior="scenario"`` is the settings' own; ``"diffuse"`` gives the bi
 stationary ``bias_std``) and the likelihood skips the first fix (``skip = 1``), whose innovation a diffuse
 bias leaves uninformative in one direction: the conditional log-likelihood of the fixes given the first
 one. ``"auto"`` is "diffuse" unless ``filter.bias_std`` was given (``scenario.filter.bias_std`` set).
+An evaluation whose values set ``filter.bias_std`` gives the bias that prior instead; ``skip`` is the
+log's, whatever the values, so that every evaluation's likelihood is of the same fixes.
 """
 
 from __future__ import annotations
