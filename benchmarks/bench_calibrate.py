@@ -3,8 +3,9 @@
     python benchmarks/bench_calibrate.py
 
 Prints the time to read the logs (CSV and Parquet), the filter alone, and the whole job (read, filter,
-diagnostics, estimates.csv, summary.json, the figure), after start-up; and the job's peak memory
-against the size of the input, measured in a child process.
+diagnostics, estimates.csv, summary.json, the figure), after start-up; one likelihood evaluation of the
+prepared log (O(fixes); the preparation once, O(samples), timed apart) as a ratio to one filter run; and
+the job's peak memory against the size of the input, measured in a child process.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from kalcal.calibration.accel_gps import calibrate_accel_gps
+from kalcal.calibration.accel_gps import calibrate_accel_gps, prepare_accel_gps_log
 from kalcal.io.logs import numeric_columns, read_table
 import kalcal
 from kalcal.models.registry import build_scenario
@@ -89,7 +90,24 @@ def main() -> None:
         calibrate_accel_gps(scenario, imu["time"][few], imu["accel"][few], gps["time"][:50], gps["position"][:50], gps["velocity"][:50])
         start = time.perf_counter()
         result = calibrate_accel_gps(scenario, imu["time"], imu["accel"], gps["time"], gps["position"], gps["velocity"], init="first-fix")
-        print(f"  filter alone                       {time.perf_counter() - start:6.2f} s   bias {result.bias[-1]:.5f} ± {result.std[-1, 2]:.1g} (true 0.05)")
+        filter_s = time.perf_counter() - start
+        print(f"  filter alone                       {filter_s:6.2f} s   bias {result.bias[-1]:.5f} ± {result.std[-1, 2]:.1g} (true 0.05)")
+        args = (scenario, imu["time"], imu["accel"], gps["time"], gps["position"], gps["velocity"])
+        start = time.perf_counter()
+        log = prepare_accel_gps_log(*args, init="first-fix")
+        prepare_s = time.perf_counter() - start
+        log.loglik()  # warm up
+        settings = [{"filter.accel_noise_std": 0.02 * f, "filter.gps_position_std": 1.0 / f} for f in (0.8, 0.9, 1.1, 1.25)]
+        start = time.perf_counter()
+        for values in settings * 5:
+            log.loglik(values)
+        loglik_s = (time.perf_counter() - start) / (len(settings) * 5)
+        start = time.perf_counter()
+        log.loglik({"filter.bias_correlation_time": 30.0, "filter.gps_latency": 0.02})
+        moved_s = time.perf_counter() - start
+        print(f"  prepare the log once               {prepare_s:6.2f} s   ({prepare_s / filter_s:.2f} x the filter)")
+        print(f"  one loglik evaluation              {loglik_s * 1e3:6.1f} ms  ({loglik_s / filter_s:.3f} x the filter)")
+        print(f"  ... with tau and latency changed   {moved_s * 1e3:6.1f} ms  ({moved_s / filter_s:.3f} x the filter)")
         for kind in ("parquet", "csv"):
             start = time.perf_counter()
             kalcal.calibrate(scenario, imu=paths[f"imu.{kind}"], gps=paths[f"gps.{kind}"], out=tmp / f"out-{kind}")

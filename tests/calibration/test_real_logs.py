@@ -163,7 +163,7 @@ def test_gaps_are_reported_and_can_stop_the_run(scenario):
 
 
 def test_compiled_sequential_filter_equals_predict_update_loop(scenario):
-    from kalcal.calibration.accel_gps import _python_filter
+    from kalcal.calibration.accel_gps_evaluation import python_filter as _python_filter
     from kalcal.filters.sequential import sequential_filter
 
     rng = np.random.default_rng(16)

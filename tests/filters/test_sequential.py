@@ -51,3 +51,29 @@ def test_compiled_kernel_equals_the_reference_steps_fix_by_fix(missing):
         np.testing.assert_array_equal(compiled.state[k], compiled.prior_state[k])
         np.testing.assert_array_equal(compiled.cov[k], compiled.prior_cov[k])
         assert np.all(np.isnan(compiled.residual[k])) and np.all(np.isnan(compiled.innovation_cov[k]))
+
+
+def test_the_gate_rejects_exactly_the_fixes_whose_nis_exceeds_the_threshold():
+    """Against the reference steps with the gate's rule applied by hand: a fix whose NIS under its prior
+    exceeds the threshold leaves the prior as the posterior; with no threshold the numbers are identical."""
+    phis, qs, h, vs, z, x0, m0 = _fixes(40)
+    z = z.copy()
+    z[[5, 17, 30]] += 40.0
+    threshold = 13.8  # chi2.ppf(0.999, 2)
+    rejected = np.zeros(40, dtype=bool)
+    run = sequential_filter(phis, qs, h, vs, z, x0, m0, threshold=threshold, rejected=rejected)
+    x, cov, want = x0, m0, []
+    for k in range(40):
+        x, cov = predict(x, cov, phis[k], qs[k])
+        result = update(x, cov, z[k], h, vs[k], "joseph")
+        nis = result.residual @ np.linalg.solve(result.innovation_cov, result.residual)
+        want.append(nis > threshold)
+        if not want[-1]:
+            x, cov = result.x, result.cov
+        np.testing.assert_allclose(run.state[k], x, rtol=1e-10, atol=1e-12)
+        assert_close(run.cov[k], cov, atol=cov_atol(cov, 1e-10))
+    np.testing.assert_array_equal(rejected, want)
+    assert list(np.flatnonzero(rejected)) == [5, 17, 30]
+    plain, off = sequential_filter(phis, qs, h, vs, z, x0, m0), sequential_filter(phis, qs, h, vs, z, x0, m0, threshold=None)
+    for a, b in zip(plain, off):
+        np.testing.assert_array_equal(a, b)

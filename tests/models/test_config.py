@@ -46,6 +46,7 @@ NON_DEFAULT = {
     "truth.gps_latency": 0.02,
     "truth.gps_outlier_rate": 0.01,
     "truth.gps_outlier_std": 30.0,
+    "filter.gps_latency": 0.015,
 }
 
 

@@ -39,7 +39,7 @@ def _explicit_filter(assignments: list[str]) -> list[str]:
     given = {a.split("=", 1)[0] for a in assignments}
     defaults = AccelGpsTruth()
     extra = [
-        f"filter.{f.name}={getattr(defaults, f.name)!r}"
+        f"filter.{f.name}={getattr(defaults, f.name, 0.0)!r}"  # a filter-only setting (gps_latency): 0
         for f in dataclasses.fields(AccelGpsFilter)
         if f"filter.{f.name}" not in given
     ]

@@ -28,6 +28,7 @@ def calibrate(
     smooth: bool = False,
     prior: str | None = None,
     windows: int = 2,
+    gate: float | None = None,
     out: str | Path | None = None,
 ) -> CalibrationResult:
     """Calibrate from logged data: accel-gps (``imu``, ``gps``) or scale-bias (``data``).
@@ -43,8 +44,8 @@ def calibrate(
         scale-bias: a log with a ``reference`` and a ``sensor`` column (and optionally ``time`` [s]).
     settings : dict, optional
         ``{"section.key": value}``, the keys of ``--set``; ``config`` a TOML file of them.
-    imu_columns, gps_columns, init, max_imu_gap, on_gap, form, smooth, reference, sensor
-        As ``kalcal calibrate``'s options of those names.
+    imu_columns, gps_columns, init, max_imu_gap, on_gap, form, smooth, gate, reference, sensor
+        As ``kalcal calibrate``'s options of those names (``gate``: accel-gps, a confidence or None).
     prior : {"diffuse", "settings"}, optional
         scale-bias: start from no information on theta, or from the filter's prior of a and b; by default
         the settings' prior only where a ``filter.`` prior key is given (:func:`kalcal.jobs.scale_bias.resolve_prior`).
@@ -62,8 +63,8 @@ def calibrate(
     from kalcal.errors import KalcalError
 
     if scenario == "scale-bias":
-        if form != "joseph" or smooth:
-            option = "--form" if form != "joseph" else "--smooth"
+        if form != "joseph" or smooth or gate is not None:
+            option = "--form" if form != "joseph" else "--smooth" if smooth else "--gate"
             raise KalcalError(f"{option}: not available for scale-bias (accel-gps only)")
         model = resolve("scale-bias", settings, config)
         if data is None:
@@ -94,7 +95,7 @@ def calibrate(
         def compute():
             return compute_accel_gps_calibration(
                 model, imu, gps, imu_columns=imu_columns, gps_columns=gps_columns, init=init,
-                max_imu_gap=max_imu_gap, stop_on_gap=on_gap == "stop", form=form, smooth=smooth,
+                max_imu_gap=max_imu_gap, stop_on_gap=on_gap == "stop", form=form, smooth=smooth, gate=gate,
                 windows=windows,
             )
 

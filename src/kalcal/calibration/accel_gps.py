@@ -29,106 +29,20 @@ spaced log with a fix on every ``steps_per_update``-th sample; the logs are chec
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
-from typing import Literal
 
 import numpy as np
 
-from kalcal.calibration.accel_gps_checks import check_plausible, fix_warnings
-from kalcal.calibration.interval_model import compose_intervals, interval_pieces, scale_parameters
+from kalcal.calibration.accel_gps_evaluation import DIFFUSE_BIAS_STD
+from kalcal.calibration.accel_gps_log import INITS, AccelGpsLog, Init, Prior, prepare_accel_gps_log
+from kalcal.calibration.accel_gps_result import AccelGpsCalibration, ImuGap
 from kalcal.calibration.plausibility import CalibrationWarning
-from kalcal.errors import DataError
-from kalcal.filters.mechanization import integrate, partial_step
-from kalcal.filters.sequential import SequentialRun, sequential_filter
-from kalcal.filters.sqrt_form import cholesky_factor, gram, sqrt_predict, sqrt_update
-from kalcal.filters.steps import UpdateForm, check_form, predict, update
-from kalcal.linalg import symmetrize
-from kalcal.models.accel_gps import AccelGpsScenario
+from kalcal.filters.steps import UpdateForm
 
-Init = Literal["prior", "first-fix"]
-INITS: tuple[str, ...] = ("prior", "first-fix")
+__all__ = ["INITS", "AccelGpsCalibration", "AccelGpsLog", "ImuGap", "calibrate_accel_gps", "prepare_accel_gps_log", "prior_conflict"]
 
-
-@dataclass(frozen=True)
-class ImuGap:
-    """A step between two accelerometer samples longer than the allowed gap."""
-
-    row: int  #: 1-based data row of the sample that ends the gap
-    start: float  #: s
-    length: float  #: s
-
-
-@dataclass(frozen=True)
-class AccelGpsCalibration:
-    """The filter's estimates at each of the K fixes used."""
-
-    time: np.ndarray  #: fix times, s, (K,)
-    position: np.ndarray  #: p_c + dp, m, (K,)
-    velocity: np.ndarray  #: v_c + dv, m/s, (K,)
-    bias: np.ndarray  #: b, m/s^2, (K,)
-    error_state: np.ndarray  #: posterior [dp, dv, b], (K, 3)
-    covariance: np.ndarray  #: posterior P of [dp, dv, b], (K, 3, 3)
-    residual: np.ndarray  #: innovations r_k, [m, m/s], (K, 2)
-    innovation_cov: np.ndarray  #: S_k, (K, 2, 2)
-    fix_rows: np.ndarray  #: 1-based rows of the GPS log used, (K,)
-    skipped_nan: int = 0  #: fixes skipped for a NaN field
-    skipped_outside: int = 0  #: fixes skipped outside the accelerometer log
-    gaps: list[ImuGap] = field(default_factory=list)
-    #: fixes used whose position_std / velocity_std was NaN and took the filter's setting
-    default_std: dict[str, int] = field(default_factory=lambda: {"position_std": 0, "velocity_std": 0})
-    warnings: list[CalibrationWarning] = field(default_factory=list)  #: what the log's user must know
-    init: str = "prior"
-    start_time: float = 0.0  #: s, where the nominal starts
-    form: str = "joseph"  #: the filter's update form
-    # What the RTS smoother needs (kalcal.calibration.smoothing), in the filter's own state (which differs
-    # from error_state when a scale factor is estimated: [dp, dv, b', s'], see kalcal.calibration.interval_model.scale_parameters):
-    filter_state: np.ndarray | None = None  #: posterior x_k of the filter, (K, d)
-    filter_covariance: np.ndarray | None = None  #: its P_k, (K, d, d)
-    prior_state: np.ndarray | None = None  #: xbar_k before fix k, (K, d)
-    prior_covariance: np.ndarray | None = None  #: M_k before fix k, (K, d, d)
-    transitions: np.ndarray | None = None  #: Phi_k from the previous fix (or the start) to fix k, (K, 3, 3)
-
-    @property
-    def std(self) -> np.ndarray:
-        """1-sigma of [dp, dv, b] from P, (K, 3)."""
-        return np.sqrt(np.diagonal(self.covariance, axis1=1, axis2=2))
-
-    @property
-    def normalized_innovations(self) -> np.ndarray:
-        """L_k^{-1} r_k with S_k = L_k L_k^T: N(0, I) for a consistent filter, (K, 2)."""
-        lower = np.linalg.cholesky(self.innovation_cov)
-        return np.linalg.solve(lower, self.residual[..., None])[..., 0]
-
-    @property
-    def nis(self) -> np.ndarray:
-        """r_k^T S_k^{-1} r_k, (K,)."""
-        return np.sum(self.normalized_innovations**2, axis=-1)
-
-
-def _python_filter(phis, noise, h, v, dz, x0, m0, form: UpdateForm) -> SequentialRun:
-    """The same filter with :func:`predict` and :func:`update` (or, for form "sqrt", :func:`sqrt_predict`
-    and :func:`sqrt_update` carrying a factor of P), one fix at a time."""
-    (n_fixes, p), d = dz.shape, x0.shape[0]
-    states, covariances = np.empty((n_fixes, d)), np.empty((n_fixes, d, d))
-    residuals, innovations = np.empty((n_fixes, p)), np.empty((n_fixes, p, p))
-    prior_states, prior_covariances = np.empty((n_fixes, d)), np.empty((n_fixes, d, d))
-    x, cov = x0, m0
-    if form == "sqrt":
-        chol, noise_chol, v_chol = cholesky_factor(m0), cholesky_factor(noise), cholesky_factor(v)
-    for k in range(n_fixes):
-        if form == "sqrt":
-            x, chol = sqrt_predict(x, chol, phis[k], noise_chol[k])
-            prior_states[k], prior_covariances[k] = x, gram(chol)
-            result = sqrt_update(x, chol, dz[k], h, v_chol[k])
-            x, chol = result.x, result.chol
-            cov, innovation = gram(chol), gram(result.innovation_chol)
-        else:
-            x, cov = predict(x, cov, phis[k], noise[k])
-            prior_states[k], prior_covariances[k] = x, cov
-            result = update(x, cov, dz[k], h, v[k], form)
-            x, cov, innovation = result.x, result.cov, result.innovation_cov
-        states[k], covariances[k], residuals[k], innovations[k] = x, cov, result.residual, innovation
-    return SequentialRun(states, covariances, residuals, innovations, prior_states, prior_covariances)
+#: how far (in the prior's sigmas of the estimate) the bias may lie from its prior mean before the data
+#: and the prior are said to conflict: two-sided at 0.999
+CONFLICT_CONFIDENCE = 0.999
 
 
 def calibrate_accel_gps(
@@ -145,13 +59,16 @@ def calibrate_accel_gps(
     max_imu_gap: float = 5.0,
     stop_on_gap: bool = False,
     form: UpdateForm = "joseph",
+    gate: float | None = None,
+    prior: Prior = "scenario",
     source: str = "gps",
     imu_source: str = "imu",
     imu_rate: float | None = None,
     gps_rate: float | None = None,
     columns: Mapping[str, str] | None = None,
 ) -> AccelGpsCalibration:
-    """Run the report's filter over one log.
+    """Run the report's filter over one log: :func:`prepare_accel_gps_log`, then
+    :meth:`AccelGpsLog.calibrate` with the scenario's settings.
 
     Parameters
     ----------
@@ -174,6 +91,12 @@ def calibrate_accel_gps(
         Raise DataError at the first gap instead of going on.
     form : {"joseph", "standard", "sqrt"}
         The update form: Joseph (the default, compiled), standard or square-root (numpy loops).
+    gate : float, optional
+        The innovation gate's confidence (e.g. 0.999): a fix whose NIS under its prior exceeds
+        chi2.ppf(gate, 2) is rejected, a prediction only, and listed in ``rejected_rows``. None: no gate.
+    prior : {"scenario", "diffuse", "auto"}
+        The bias's prior: the settings' (the default), diffuse, or diffuse unless ``filter.bias_std`` was
+        given (what a log's calibration uses); :mod:`kalcal.calibration.accel_gps_log`.
     source, imu_source : str
         Names of the GPS and accelerometer logs, quoted in errors.
     imu_rate, gps_rate : float, optional
@@ -189,149 +112,36 @@ def calibrate_accel_gps(
     DataError
         For a log that cannot be used or is implausible, naming the log, the row or rate, and the value.
     """
-    if init not in INITS:
-        raise DataError(f"--init: expected one of {', '.join(INITS)}, got {init!r}")
-    check_form(form, "--form")
-    if not max_imu_gap > 1:
-        raise DataError(f"--max-imu-gap: expected a number of sample periods above 1, got {max_imu_gap!r}")
-    imu_time, accel = np.asarray(imu_time, dtype=float), np.asarray(accel, dtype=float)
-    gps_time = np.asarray(gps_time, dtype=float)
-    if imu_time.size < 2:
-        raise DataError(f"{imu_source}: needs at least two accelerometer samples, got {imu_time.size}")
-    steps = np.diff(imu_time)
-    if not np.all(steps > 0):
-        row = int(np.argmax(~(steps > 0))) + 2
-        raise DataError(f"{imu_source}: row {row}: time {imu_time[row - 1]:.9g} s does not increase")
-    if gps_time.size > 1 and not np.all(np.diff(gps_time) > 0):
-        row = int(np.argmax(~(np.diff(gps_time) > 0))) + 2
-        raise DataError(f"{source}: row {row}: time {gps_time[row - 1]:.9g} s does not increase")
-    check_plausible(
-        imu_time, accel, gps_time, gps_position, gps_velocity, position_std, velocity_std,
-        source, imu_source, imu_rate, gps_rate, dict(columns or {}),
-    )
-    period = float(np.median(steps))
-    gaps = [
-        ImuGap(row=int(j) + 2, start=float(imu_time[j]), length=float(steps[j]))
-        for j in np.flatnonzero(steps > max_imu_gap * period)
-    ]
-    if gaps and stop_on_gap:
-        gap = gaps[0]
-        raise DataError(
-            f"{imu_source}: row {gap.row}: a gap of {gap.length:.6g} s after t = {gap.start:.9g} s exceeds "
-            f"--max-imu-gap {max_imu_gap:g} sample periods ({max_imu_gap * period:.6g} s)"
-        )
+    log = prepare_accel_gps_log(
+        scenario, imu_time, accel, gps_time, gps_position, gps_velocity, position_std=position_std,
+        velocity_std=velocity_std, init=init, max_imu_gap=max_imu_gap, stop_on_gap=stop_on_gap, form=form,
+        prior=prior, source=source, imu_source=imu_source, imu_rate=imu_rate, gps_rate=gps_rate, columns=columns,
+    )  # fmt: skip
+    return log.calibrate(gate=gate)
 
-    settings = scenario.filter_settings
-    scheme = scenario.scenario.integration
-    fix_std_p = np.full(gps_time.size, settings.gps_position_std) if position_std is None else np.asarray(position_std, float)
-    fix_std_v = np.full(gps_time.size, settings.gps_velocity_std) if velocity_std is None else np.asarray(velocity_std, float)
-    nan_std_p, nan_std_v = ~np.isfinite(fix_std_p), ~np.isfinite(fix_std_v)
-    fix_std_p = np.where(nan_std_p, settings.gps_position_std, fix_std_p)
-    fix_std_v = np.where(nan_std_v, settings.gps_velocity_std, fix_std_v)
-    for name, values in (("position_std", fix_std_p), ("velocity_std", fix_std_v)):
-        if np.any(values <= 0):
-            row = int(np.argmax(values <= 0)) + 1
-            raise DataError(f"{source}: row {row}, column {name!r}: must be positive, got {values[row - 1]:.6g}")
 
-    finite = np.isfinite(gps_position) & np.isfinite(gps_velocity) & np.isfinite(gps_time)
-    inside = (gps_time >= imu_time[0]) & (gps_time <= imu_time[-1])
-    usable = np.flatnonzero(finite & inside)
-    if np.count_nonzero(inside) == 0:
-        raise DataError(
-            f"{source}: no fix lies within the accelerometer log [{imu_time[0]:.9g}, {imu_time[-1]:.9g}] s "
-            f"(fixes span [{np.nanmin(gps_time):.9g}, {np.nanmax(gps_time):.9g}] s)"
-        )
-    if usable.size < 2:
-        raise DataError(
-            f"{source}: needs at least two usable fixes within the accelerometer log, got {usable.size} "
-            f"({np.count_nonzero(~finite)} with a NaN field, {np.count_nonzero(finite & ~inside)} outside the log)"
-        )
-    warnings = fix_warnings(
-        usable, gps_time, gps_position, gps_velocity, fix_std_p, fix_std_v, nan_std_p, nan_std_v,
-        settings, source, dict(columns or {}),
-    )
-    default_std = {
-        "position_std": int(np.count_nonzero(nan_std_p[usable])),
-        "velocity_std": int(np.count_nonzero(nan_std_v[usable])),
-    }
-    if init == "first-fix":
-        first, usable = usable[0], usable[1:]
-        start_time = float(gps_time[first])
-    else:
-        start_time = float(imu_time[0])
+def prior_conflict(result: AccelGpsCalibration, confidence: float = CONFLICT_CONFIDENCE) -> CalibrationWarning | None:
+    """A warning when the last bias estimate lies too far from its prior mean 0 for the prior to hold.
 
-    # Nominal from rest at the first sample, then moved to the chosen start (the nominal is linear in
-    # its initial conditions): p_c(t) = p0 + v0 (t - t0) + [P(t) - P(t0) - V(t0) (t - t0)].
-    free_p, free_v = integrate(accel, steps, 0.0, 0.0, scheme)
+    Under the model the estimate b_hat = E[b | data] has mean 0 and variance sigma_0^2 - P_bb (the prior's
+    variance less the posterior's), so z = b_hat / sqrt(sigma_0^2 - P_bb) is N(0, 1): beyond the two-sided
+    ``confidence`` quantile the data and the prior conflict. None for a diffuse prior (nothing to conflict
+    with) or when the data did not move the bias's variance.
+    """
+    from scipy import stats
 
-    def free_at(t: np.ndarray):
-        j = np.clip(np.searchsorted(imu_time, t, side="right") - 1, 0, imu_time.size - 2)
-        return partial_step(accel[j], accel[j + 1], steps[j], t - imu_time[j], free_p[j], free_v[j], scheme)
-
-    fix_times = gps_time[usable]
-    p_fix, v_fix = free_at(fix_times)
-    p_start, v_start = free_at(np.array([start_time]))
-    if init == "first-fix":
-        p0, v0 = float(gps_position[first]), float(gps_velocity[first])
-        x0 = np.zeros(4 if scenario.has_scale else 3)
-        m0 = np.diag([fix_std_p[first] ** 2, fix_std_v[first] ** 2, settings.bias_std**2, settings.scale_std**2][: x0.size])
-    else:
-        p0, v0 = scenario.nominal_start()
-        model = scenario.filter_model()
-        x0, m0 = model.x0, model.m0
-    elapsed = fix_times - start_time
-    nominal_p = p0 + v0 * elapsed + (p_fix - p_start[0] - v_start[0] * elapsed)
-    nominal_v = v0 + (v_fix - v_start[0])
-
-    # Every step between the start and the last fix, cut at the fixes, assigned to the fix that ends it.
-    last = fix_times[-1]
-    samples = imu_time[(imu_time > start_time) & (imu_time < last)]
-    cuts = np.union1d(np.concatenate([[start_time], samples]), fix_times)
-    owner = np.searchsorted(fix_times, cuts[1:], side="left")
-    phis, noise = compose_intervals(*interval_pieces(imu_time, steps, cuts, settings, period, scheme), owner, fix_times.size)
-    h = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
-    if scenario.has_scale:
-        # s multiplies the measured acceleration: its column over an interval is minus the position and
-        # velocity that acceleration alone produces from rest, the free integration's increments.
-        free_p_all = np.concatenate([p_start, p_fix])
-        free_v_all = np.concatenate([v_start, v_fix])
-        spans = np.diff(np.concatenate([[start_time], fix_times]))
-        phis, noise = np.pad(phis, ((0, 0), (0, 1), (0, 1))), np.pad(noise, ((0, 0), (0, 1), (0, 1)))
-        phis[:, 3, 3] = 1.0
-        phis[:, 0, 3] = -(np.diff(free_p_all) - free_v_all[:-1] * spans)
-        phis[:, 1, 3] = -np.diff(free_v_all)
-        h = np.pad(h, ((0, 0), (0, 1)))
-    v = np.zeros((fix_times.size, 2, 2))
-    v[:, 0, 0], v[:, 1, 1] = fix_std_p[usable] ** 2, fix_std_v[usable] ** 2
-    dz = np.stack([gps_position[usable] - nominal_p, gps_velocity[usable] - nominal_v], axis=1)
-    if form == "joseph":
-        run = sequential_filter(phis, noise, h, v, dz, x0, m0)
-    else:  # the standard and square-root forms are kept for comparison; they need no speed
-        run = _python_filter(phis, noise, h, v, dz, x0, m0, form)
-    states, covariances, residuals, innovations = run.state, run.cov, run.residual, run.innovation_cov
-    if scenario.has_scale:
-        states, covariances = scale_parameters(states, covariances)
-    return AccelGpsCalibration(
-        time=fix_times,
-        position=nominal_p + states[:, 0],
-        velocity=nominal_v + states[:, 1],
-        bias=states[:, 2].copy(),
-        error_state=states,
-        covariance=symmetrize(covariances),
-        residual=residuals,
-        innovation_cov=innovations,
-        fix_rows=usable + 1,
-        skipped_nan=int(np.count_nonzero(~finite)),
-        skipped_outside=int(np.count_nonzero(finite & ~inside)),
-        gaps=gaps,
-        default_std=default_std,
-        warnings=warnings,
-        init=init,
-        start_time=start_time,
-        form=form,
-        filter_state=run.state,
-        filter_covariance=symmetrize(run.cov),
-        prior_state=run.prior_state,
-        prior_covariance=symmetrize(run.prior_cov),
-        transitions=phis,
+    if result.bias_prior_std >= DIFFUSE_BIAS_STD:
+        return None
+    spread = result.bias_prior_std**2 - result.covariance[-1, 2, 2]
+    if not spread > 1e-12 * result.bias_prior_std**2:
+        return None
+    z = float(result.bias[-1] / np.sqrt(spread))
+    limit = float(stats.norm.ppf(0.5 + confidence / 2))
+    if abs(z) <= limit:
+        return None
+    return CalibrationWarning(
+        "prior-conflict",
+        f"the bias estimate {result.bias[-1]:.6g} m/s^2 lies {abs(z):.3g} sigma from its prior mean 0 "
+        f"(prior 1-sigma {result.bias_prior_std:.3g} m/s^2; beyond {limit:.3g} at {confidence:g}): the prior "
+        "does not suit this log; give filter.bias_std a value that does, or leave it unset for a diffuse prior",
     )

@@ -25,35 +25,94 @@ import numpy as np
 from kalcal.linalg import symmetrize
 from kalcal.models.accel_gps_discretization import bias_discretization, error_transition
 
-__all__ = ["compose_intervals", "interval_pieces", "scale_parameters"]
+__all__ = ["SOURCES", "compose_by_source", "compose_intervals", "continuous_bias_model", "interval_sources", "scale_parameters"]
 
 
-def interval_pieces(imu_time, steps, cuts, settings, period, scheme) -> tuple[np.ndarray, np.ndarray]:
-    """Every piece between two cuts (samples and fixes): its transition and noise inputs.
+#: the process noise's sources, each composed with unit variance: Q_k = sum_r variance_r Q_k^(r)
+SOURCES = ("accel_noise", "bias_walk", "bias_markov")
+
+
+def interval_sources(imu_time, steps, cuts, settings, period, scheme) -> tuple[np.ndarray, np.ndarray]:
+    """Every piece between two cuts (samples and fixes): its transition and its noise inputs per source.
 
     A piece [c_i, c_{i+1}] lies in the sample step [t_j, t_{j+1}]; its transition is
-    :func:`~kalcal.models.accel_gps_discretization.error_transition` over its part of that step, with the step's bias
-    decay and noise (:func:`~kalcal.models.accel_gps_discretization.bias_discretization`). Its noise inputs are the
-    accelerometer sample held over it, g = [h^2/2, h, 0] sigma_a, and, when the bias has noise of its own,
-    that noise's weights times sqrt(q_j).
+    :func:`~kalcal.models.accel_gps_discretization.error_transition` over its part of that step, with the
+    step's bias decay (:func:`~kalcal.models.accel_gps_discretization.bias_discretization`). Its noise
+    inputs, one column per source of :data:`SOURCES`, each for a unit variance: the accelerometer sample
+    held over it, g = [h^2/2, h, 0] (times sigma_a); the bias noise's weights times sqrt(step_j / period)
+    (times bias_walk_std); and, for a Gauss-Markov bias, times sqrt(1 - exp(-2 step_j / tau)) (times
+    bias_std). The step's bias noise variance q_j of ``bias_discretization`` is the sum of the last two
+    sources' variances, so the noise covariance is linear in (sigma_a^2, bias_walk_std^2, bias_std^2).
 
     Returns
     -------
     phis : ndarray, shape (N, 3, 3)
-    inputs : ndarray, shape (N, 3, r), r = 1 or 2
+    inputs : ndarray, shape (N, 3, 3)
+        [piece, state, source].
     """
     starts, ends = cuts[:-1], cuts[1:]
     j = np.clip(np.searchsorted(imu_time, starts, side="right") - 1, 0, imu_time.size - 2)
     step = steps[j]
     closes = ends == imu_time[j + 1]
-    decay, bias_variance = bias_discretization(settings, step, period)
+    decay, _ = bias_discretization(settings, step, period)
     into_end = np.where(closes, step, ends - imu_time[j])
     phis, bias_input = error_transition(starts - imu_time[j], into_end, step, decay, scheme, closes)
     h = ends - starts
-    inputs = [np.stack([0.5 * h * h, h, np.zeros_like(h)], axis=1) * settings.accel_noise_std]
-    if np.any(bias_variance > 0):
-        inputs.append(bias_input * np.sqrt(bias_variance)[:, None])
-    return phis, np.stack(inputs, axis=-1)
+    tau = settings.bias_correlation_time
+    markov = np.sqrt(-np.expm1(-2.0 * step / tau)) if tau > 0 else np.zeros_like(step)
+    inputs = np.stack(
+        [np.stack([0.5 * h * h, h, np.zeros_like(h)], axis=1), bias_input * np.sqrt(step / period)[:, None], bias_input * markov[:, None]],
+        axis=-1,
+    )
+    return phis, inputs
+
+
+def compose_by_source(phis, inputs, owner, n_intervals) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`compose_intervals` of each source apart: Phi_k (K, 3, 3) and Q_k^(r) (R, K, 3, 3)."""
+    out_q = np.empty((inputs.shape[2], n_intervals, 3, 3))
+    for r in range(inputs.shape[2]):
+        out_phi, out_q[r] = compose_intervals(phis, np.ascontiguousarray(inputs[:, :, r : r + 1]), owner, n_intervals)
+    return out_phi, out_q
+
+
+#: Gauss-Legendre nodes and weights on [0, 1] for :func:`continuous_bias_model`'s integrals
+_NODES, _WEIGHTS = np.polynomial.legendre.leggauss(16)
+_NODES, _WEIGHTS = 0.5 * (_NODES + 1.0), 0.5 * _WEIGHTS
+
+
+def _bias_column(u: np.ndarray, rate: float) -> np.ndarray:
+    """Phi(u)[:, 2] of the continuous error model dp' = dv, dv' = -b, b' = -rate b: [-g2, -g1, exp(-rate u)],
+    g1 = (1 - exp(-rate u)) / rate, g2 = (u - g1) / rate (u, u^2 / 2 at rate 0), shape u.shape + (3,)."""
+    x = rate * u
+    small = x < 1e-2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        g1 = np.where(small, u * (1 - x / 2 + x * x / 6 - x**3 / 24), -np.expm1(-x) / rate)
+        g2 = np.where(small, u * u * (0.5 - x / 6 + x * x / 24 - x**3 / 120), (x + np.expm1(-x)) / rate**2)
+    return np.stack([-g2, -g1, np.exp(-x)], axis=-1)
+
+
+def continuous_bias_model(spans: np.ndarray, tau: float) -> tuple[np.ndarray, np.ndarray]:
+    """The bias's part of the continuous-time error model over intervals of ``spans`` seconds.
+
+    With b' = -b / tau + white noise (tau = 0: a constant or random-walk bias, rate 0), the transition's
+    bias column over T is c(T) = [-g2(T), -g1(T), exp(-T / tau)] and the noise of a unit-PSD bias
+    input is J(T) = int_0^T c(u) c(u)^T du (16-point Gauss-Legendre: the integrand is smooth, the rule
+    exact to rounding for T / tau up to a few). The random walk's unit PSD is 1 / period per unit
+    bias_walk_std^2, the Gauss-Markov bias's 2 / tau per unit bias_std^2.
+
+    Returns
+    -------
+    column : ndarray, shape (K, 3)
+    integral : ndarray, shape (K, 3, 3)
+        J(T_k), s (times the PSD: (m/s^2)^2 / s).
+    """
+    spans = np.asarray(spans, dtype=float)
+    rate = 1.0 / tau if tau > 0 else 0.0
+    column = _bias_column(spans, rate)
+    u = spans[:, None] * _NODES[None, :]
+    c = _bias_column(u, rate)
+    integral = np.einsum("kn,kna,knb->kab", spans[:, None] * _WEIGHTS[None, :], c, c)
+    return column, integral
 
 
 @numba.njit(cache=True, nogil=True)

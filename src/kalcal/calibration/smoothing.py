@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kalcal.calibration.accel_gps import AccelGpsCalibration
+from kalcal.calibration.accel_gps_result import AccelGpsCalibration
 from kalcal.calibration.interval_model import scale_parameters
 from kalcal.errors import DataError
 from kalcal.filters.smoother import rts_smooth

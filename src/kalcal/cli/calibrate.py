@@ -58,6 +58,13 @@ def calibrate(
         int,
         typer.Option("--windows", help="Split the log into this many windows and test their estimates' agreement (1: off)."),
     ] = 2,
+    gate: Annotated[
+        Optional[float],
+        typer.Option(
+            "--gate",
+            help="accel-gps: reject a fix whose NIS exceeds the chi-square quantile at this confidence (e.g. 0.999); off by default.",
+        ),
+    ] = None,
     out: Annotated[Path, typer.Option("--out", help="Directory for estimates.csv and summary.json.")] = Path(
         "kalcal-cal"
     ),
@@ -94,6 +101,7 @@ def calibrate(
             smooth=smooth,
             prior=prior,
             windows=windows,
+            gate=gate,
             out=out,
         )
     summary = result.calibration.summary
@@ -117,6 +125,15 @@ def calibrate(
             f"{smoothed['bias_std']:.3g} m/s^2, position {smoothed['position']:.6g} ± {smoothed['position_std']:.3g} m",
             markup=False,
         )
+    if summary.get("gate") is not None:
+        rows = summary["rejected_rows"]
+        shown = ", ".join(map(str, rows[:20])) + (f", ... ({len(rows) - 20} more)" if len(rows) > 20 else "")
+        console.print(
+            f"gate at {summary['gate']:g}: {len(rows)} fix(es) rejected" + (f" (GPS rows {shown})" if rows else ""),
+            markup=False,
+        )
+    prior = summary["prior"]
+    console.print(f"bias prior: {prior['bias']} ({prior['bias_std']:.3g} m/s^2)", markup=False)
     _common._print_warnings(summary)
     diagnostics = summary["diagnostics"]
     style = "green" if diagnostics["consistent"] else "bold red"

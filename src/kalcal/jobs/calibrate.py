@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from kalcal.calibration.accel_gps import calibrate_accel_gps
+from kalcal.calibration.accel_gps import calibrate_accel_gps, prior_conflict
 from kalcal.calibration.diagnostics import innovation_diagnostics
 from kalcal.calibration.plausibility import CalibrationWarning
 from kalcal.calibration.smoothing import smooth_calibration
@@ -100,6 +100,7 @@ def compute_accel_gps_calibration(
     form: str = "joseph",
     smooth: bool = False,
     windows: int = 2,
+    gate: float | None = None,
 ) -> Calibration:
     """Calibrate from an accelerometer log (time [s], accel [m/s^2]) and a GPS log (time [s], position [m],
     velocity [m/s], optionally position_std [m] and velocity_std [m/s] per fix): files or DataFrames.
@@ -114,6 +115,13 @@ def compute_accel_gps_calibration(
     Implausible logs are refused (:mod:`kalcal.calibration.plausibility`); the summary's ``warnings`` is a
     list of ``{"code", "message"}`` (empty when none), and ``fixes_default_std`` counts the fixes used whose
     ``position_std`` / ``velocity_std`` was NaN and took the filter's setting.
+
+    ``gate`` (a confidence such as 0.999, None for none) rejects the fixes whose NIS under their prior
+    exceeds chi2.ppf(gate, 2): ``fixes_rejected`` counts them and ``rejected_rows`` lists their 1-based
+    GPS rows. The bias's prior is diffuse unless ``filter.bias_std`` is given (a Gauss-Markov bias keeps
+    its stationary std): ``prior`` says which, and a ``prior-conflict`` warning says when the estimate lies
+    too far from a given prior (:func:`~kalcal.calibration.accel_gps.prior_conflict`). The diagnostics
+    leave out the rejected fixes and, with a diffuse prior, the first fix.
     """
     windows = check_windows(windows)
     imu_map = parse_column_map(imu_columns, IMU_ROLES, "--imu-columns")
@@ -136,6 +144,8 @@ def compute_accel_gps_calibration(
     options = dict(
         max_imu_gap=max_imu_gap,
         form=form,
+        gate=gate,
+        prior="auto",
         source=str(gps_path),
         imu_source=str(imu_path),
         **stated_rates(scenario),
@@ -168,8 +178,13 @@ def compute_accel_gps_calibration(
             **smoothed_columns,
         }
     )
-    diagnostics = innovation_diagnostics(normalized)
+    used = ~result.rejected
+    used[: result.skip] = False
+    diagnostics = innovation_diagnostics(normalized[used])
     warnings = list(result.warnings)
+    conflict = prior_conflict(result)
+    if conflict is not None:
+        warnings.append(conflict)
     if result.skipped_nan:
         warnings.append(CalibrationWarning("fixes-skipped-nan", f"{result.skipped_nan} fix(es) with a NaN field skipped"))
     if result.skipped_outside:
@@ -200,6 +215,14 @@ def compute_accel_gps_calibration(
         "fixes_skipped_outside": result.skipped_outside,
         "fixes_default_std": result.default_std,
         "imu_gaps": [gap.__dict__ for gap in result.gaps],
+        "gate": gate,
+        "fixes_rejected": int(result.rejected_rows.size),
+        "rejected_rows": [int(row) for row in result.rejected_rows],
+        "prior": {
+            "bias": _prior_kind(result, scenario),
+            "bias_std": result.bias_prior_std,
+            "likelihood_skip": result.skip,
+        },
         "time": float(result.time[-1]),
         "bias": float(result.bias[-1]),
         "bias_std": float(std[-1, 2]),
@@ -221,6 +244,13 @@ def compute_accel_gps_calibration(
     # the log files (not DataFrames) are the run's inputs: a folder's set never removes them
     files = [p for p in (imu_source, gps_source) if not isinstance(p, pd.DataFrame)]
     return mark_inputs(Calibration("calibrate accel-gps", estimates, summary), *files)
+
+
+def _prior_kind(result, scenario: AccelGpsScenario) -> str:
+    """``"diffuse"``, ``"stationary"`` (a Gauss-Markov bias's std) or ``"filter.bias_std"`` (given)."""
+    if result.prior == "diffuse":
+        return "stationary" if scenario.filter_settings.bias_correlation_time > 0 else "diffuse"
+    return "filter.bias_std"
 
 
 def _smoothed_summary(smoothed, filter_std, names: tuple[str, ...]) -> dict[str, Any]:

@@ -188,6 +188,9 @@ class AccelGpsFilter:
     bias_walk_std: float | None = None
     bias_correlation_time: float | None = None
     scale_std: float | None = None
+    #: s, a fix's time stamp minus the time it describes (calibrate on a log; verify refuses a nonzero
+    #: value): the filter compares the fix with the nominal at t - gps_latency; unset: 0
+    gps_latency: float | None = None
 
     SECTION: ClassVar[str] = "filter"
 
@@ -207,10 +210,13 @@ class AccelGpsFilter:
             bias_correlation_time=self.bias_correlation_time,
             scale_std=self.scale_std,
         )
+        if self.gps_latency is not None and not np.isfinite(self.gps_latency):
+            raise SettingError(f"{self.SECTION}.gps_latency", "a finite number of seconds", show(self.gps_latency))
 
     def resolved(self, truth: AccelGpsTruth) -> AccelGpsTruth:
         """The filter's settings with every unset value taken from ``truth``."""
-        values = {f.name: getattr(self, f.name) for f in fields(self)}
+        known = {f.name for f in fields(AccelGpsTruth)}
+        values = {f.name: getattr(self, f.name) for f in fields(self) if f.name in known}
         return AccelGpsTruth(
             accel_amplitude=truth.accel_amplitude,
             accel_frequency=truth.accel_frequency,
@@ -308,7 +314,17 @@ class AccelGpsScenario:
         )
 
     def filter_model(self) -> LinearGaussianModel:
-        """The error-state model the filter believes: prior N(0, M0) with the filter's settings."""
+        """The error-state model the filter believes: prior N(0, M0) with the filter's settings.
+
+        Refuses a nonzero ``filter.gps_latency``: verify's simulated fixes describe their own time stamps,
+        so a filter that shifts them would be verified against a truth it does not describe.
+        """
+        if self.filter.gps_latency not in (None, 0.0):
+            raise SettingError(
+                "filter.gps_latency",
+                "0 in verify (its simulated fixes have no latency; the setting is for calibrate on a log)",
+                show(self.filter.gps_latency),
+            )
         return self._model(self.filter_settings, np.zeros(3))
 
     def truth_model(self) -> LinearGaussianModel:
