@@ -42,7 +42,7 @@ def accel_fit(accel_logs, tmp_path_factory):
         (["--imu", "missing.csv", "--gps", "{gps}"], "kalcal: error: missing.csv"),
         (["--imu", "{imu}", "--gps", "{gps}", "--free", "filter.accel_amplitude"], "kalcal: error: --free: "),
         (["--imu", "{imu}", "--gps", "{gps}", "--free", "log.position_std_multiplier"], "kalcal: error: --free: "),
-        (["--imu", "{imu}", "--gps", "{gps}", "--gate", "0.99"], "kalcal: error: --gate: "),
+        (["--imu", "{imu}", "--gps", "{gps}", "--gate", "1.5"], "kalcal: error: --gate: expected a confidence"),
         (["--imu", "{imu}"], "kalcal: error: --gps: required"),
         (["--imu", "{imu}", "--gps", "{gps}", "--set", "filter.accel_noise_std=-1"], "kalcal: error: filter.accel_noise_std"),
     ],

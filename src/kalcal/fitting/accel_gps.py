@@ -161,7 +161,8 @@ def _settings(scenario, chosen, fit, rates, std_medians) -> tuple[dict[str, dict
             filter_values[f.name] = _short(value) if key in chosen else value
     truth_names = [f.name for f in dataclasses.fields(AccelGpsTruth)]
     truth = {name: getattr(scenario.truth, name) for name in truth_names}
-    truth.update({name: value for name, value in filter_values.items() if name in truth_names})
+    # the Monte Carlo's truth is the fitted filter's model; the log's faults (latency) stay the log's
+    truth.update({name: value for name, value in filter_values.items() if name in truth_names and name != "gps_latency"})
     comments = {}
     for key, p in fit.parameters.items():
         name = key.partition(".")[2]

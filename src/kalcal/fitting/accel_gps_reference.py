@@ -11,13 +11,13 @@ and is not in the sum: the conditional likelihood of the other fixes given it.
 from __future__ import annotations
 
 import dataclasses
-import inspect
 from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
 from kalcal.calibration.accel_gps import AccelGpsCalibration, calibrate_accel_gps
+from kalcal.calibration.likelihood import innovation_loglik
 from kalcal.errors import KalcalError
 from kalcal.models.accel_gps import AccelGpsFilter, AccelGpsScenario
 
@@ -39,17 +39,12 @@ UNITS = {
 MULTIPLIERS = {"log.position_std_multiplier": "position_std", "log.velocity_std_multiplier": "velocity_std"}
 
 
-def gate_supported() -> bool:
-    """Whether this build's calibration has the chi-square innovation gate (``gate=``)."""
-    return "gate" in inspect.signature(calibrate_accel_gps).parameters
-
-
 def loglik_of(calibration: AccelGpsCalibration) -> float:
-    """-1/2 sum_k (log det S_k + r_k^T S_k^-1 r_k + p log 2 pi) over a calibration's fixes."""
-    lower = np.linalg.cholesky(calibration.innovation_cov)
-    normalized = np.linalg.solve(lower, calibration.residual[..., None])[..., 0]
-    log_det = 2.0 * np.sum(np.log(np.diagonal(lower, axis1=1, axis2=2)))
-    return float(-0.5 * (log_det + np.sum(normalized**2) + calibration.residual.size * np.log(2 * np.pi)))
+    """-1/2 sum_k (log det S_k + r_k^T S_k^-1 r_k + p log 2 pi) over a calibration's fixes used: the gate's
+    rejections and the first ``calibration.skip`` fixes (a diffuse prior's) left out."""
+    rejected = np.zeros(calibration.time.size, dtype=bool) if calibration.rejected is None else calibration.rejected
+    residual = np.where(rejected[:, None], np.nan, calibration.residual)
+    return innovation_loglik(residual, calibration.innovation_cov, skip=calibration.skip)
 
 
 class ReferenceAccelGpsLog:
@@ -99,12 +94,7 @@ class ReferenceAccelGpsLog:
         for key, column in MULTIPLIERS.items():
             if key in values and columns[column] is not None:
                 columns[column] = np.asarray(columns[column], dtype=float) * float(values[key])
-        options = dict(self.options)
-        if gate is not None:
-            if not gate_supported():
-                raise KalcalError("--gate: this build's calibration has no innovation gate")
-            options["gate"] = gate
-        return calibrate_accel_gps(self._scenario(values), *self.arrays, **columns, **options)
+        return calibrate_accel_gps(self._scenario(values), *self.arrays, **columns, **self.options, gate=gate)
 
     def loglik(self, values: Mapping[str, float], *, gate: float | None = None) -> float:
         """log L of the log's innovations with ``values`` in place."""

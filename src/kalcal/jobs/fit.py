@@ -88,18 +88,17 @@ def compute_accel_gps_fit(
     """Fit an accel-gps log (files or DataFrames, as ``calibrate``); nothing is written (:func:`save_fit`).
 
     ``prepare(scenario, imu_time, accel, gps_time, gps_position, gps_velocity, **options)`` builds the
-    log-likelihood (default: :func:`kalcal.fitting.accel_gps_reference.prepare_reference_accel_gps_log`).
+    log-likelihood (default: :func:`kalcal.calibration.accel_gps_log.prepare_accel_gps_log`, O(fixes) per
+    evaluation; :func:`kalcal.fitting.accel_gps_reference.prepare_reference_accel_gps_log` is its oracle).
+    The log's prior is ``calibrate``'s ("auto": a diffuse bias unless ``filter.bias_std`` is given, with
+    the conditional likelihood).
     """
     from kalcal.fitting.accel_gps import check_free, default_free, fit_accel_gps, log_rates
 
     if gate is not None and not 0.0 < gate < 1.0:
         raise KalcalError(f"--gate: expected a confidence in (0, 1), got {gate!r}")
     if prepare is None:
-        from kalcal.fitting.accel_gps_reference import gate_supported, prepare_reference_accel_gps_log
-
-        if gate is not None and not gate_supported():
-            raise KalcalError("--gate: this build's calibration has no innovation gate")
-        prepare = prepare_reference_accel_gps_log
+        from kalcal.calibration.accel_gps_log import prepare_accel_gps_log as prepare
     imu_map = parse_column_map(imu_columns, IMU_ROLES, "--imu-columns")
     gps_map = parse_column_map(gps_columns, GPS_ROLES, "--gps-columns")
     sources = (imu_path, gps_path)
@@ -118,7 +117,7 @@ def compute_accel_gps_fit(
     check_free(free, position_std=has["position_std"], velocity_std=has["velocity_std"])
     log = prepare(
         scenario, imu["time"], imu["accel"], gps["time"], gps["position"], gps["velocity"],
-        position_std=gps.get("position_std"), velocity_std=gps.get("velocity_std"), init=init,
+        position_std=gps.get("position_std"), velocity_std=gps.get("velocity_std"), init=init, prior="auto",
         source=str(gps_name), imu_source=str(imu_name), **stated_rates(scenario),
         columns={**{role: gps_map[role] for role in GPS_ROLES}, "imu_time": imu_map["time"], "accel": imu_map["accel"]},
     )
