@@ -180,3 +180,31 @@ def test_sensitivity_holds_the_filter_of_accel_gps():
     assert scaled.truth.accel_noise_std == pytest.approx(1.1 * model.truth.accel_noise_std)
     assert scaled.filter_settings.accel_noise_std == model.filter_settings.accel_noise_std
     assert np.isclose(scaled.filter_settings.gps_position_std, model.truth.gps_position_std)
+
+
+def test_chi_square_part_without_spread_is_its_fixed_value():
+    """A = 0 with a nonzero mean: every term is |mu|^2, so X = N m2 exactly, failing only outside the bounds."""
+    from kalcal.analysis.power_parts import ChiSquareFamily
+
+    zero = np.zeros(2)
+
+    def family(m2):
+        return ChiSquareFamily(zero, zero, np.full(2, m2), zero, 0, lambda n: (0.5 * n, 1.5 * n))
+
+    assert family(1.0).bracket(1000) == (0.0, 0.0)  # X = 1000 inside [500, 1500]
+    assert family(2.0).bracket(1000) == (1.0, 1.0)  # X = 2000 above
+    assert family(0.25).bracket(1000) == (1.0, 1.0)  # X = 250 below
+    assert family(0.0).bracket(1000) == (1.0, 1.0)  # X = 0 below a positive lower bound
+
+
+def test_exact_prediction_computes_no_budget(monkeypatch):
+    """The self-check's and the report's exact prediction needs only the moments: no error budget is run."""
+    from kalcal.analysis import fixed_gain
+    from kalcal.verification.self_check import exact_prediction
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the budget was computed")
+
+    monkeypatch.setattr(fixed_gain, "error_budget", refuse)
+    problem, _ = build_problem(parse_model(SMALL + "w = [[0.01]]\n", "small.toml"))
+    assert exact_prediction(problem).available

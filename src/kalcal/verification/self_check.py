@@ -78,7 +78,7 @@ def exact_prediction(problem, analysis=None) -> ExactPrediction:
             f"{problem.info.scenario}: no exact analysis exists (its filter's gains depend on the noisy readings), "
             "so the ensemble is not checked against theory",
         )
-    analysis = analyze_problem(problem, pairs=False) if analysis is None else analysis
+    analysis = analyze_problem(problem, pairs=False, budget=False) if analysis is None else analysis
     return ExactPrediction(analysis.moments.mean_error, analysis.moments.error_cov)
 
 
