@@ -194,3 +194,50 @@ def test_the_cli_line_for_each_outcome():
     assert self_check_line({**base, "agrees": False}) == f"{lead}: DISAGREES, largest |z| 5.12 against ±4.4, p = 0.0001"
     assert self_check_line({**base, "agrees": False, "statistic": None, "p_value": None}).endswith("|z| nan against ±4.4, p = nan")
     assert self_check_line(None) == f"{lead}: not recorded"
+
+
+def test_a_rounding_level_variance_is_left_out_not_a_disagreement():
+    """A state whose exact variance is rounding-level (1e-14 of the largest) and whose ensemble variance is 0
+    is no comparison: the self-check agrees over the other states' 2 K (d - 1) comparisons."""
+    from kalcal.verification.self_check import VARIANCE_RTOL, ExactPrediction, compared_states
+
+    problem = _problem("correct")
+    exact = exact_prediction(problem)
+    stats = _run(problem, 500)
+    k, d = exact.mean_error.shape
+    cov = exact.error_cov.copy()
+    largest = np.max(np.diagonal(cov, axis1=1, axis2=2), axis=1)
+    cov[:, -1, :] = cov[:, :, -1] = 0.0
+    cov[:, -1, -1] = 1e-14 * largest
+    ens_cov, ens_mean = stats.error_cov.copy(), stats.mean_error.copy()
+    ens_cov[:, -1, :] = ens_cov[:, :, -1] = 0.0
+    ens_mean[:, -1] = exact.mean_error[:, -1] + 1e-9
+    assert 1e-14 < VARIANCE_RTOL
+    assert not compared_states(cov)[:, -1].any() and compared_states(cov)[:, :-1].all()
+    result = self_check(
+        dataclasses.replace(stats, error_cov=ens_cov, mean_error=ens_mean), ExactPrediction(exact.mean_error, cov), 0.99, problem.info
+    )
+    assert result.agrees is True and result.comparisons == 2 * k * (d - 1)
+    wide = self_check(dataclasses.replace(stats, error_cov=2.0 * stats.error_cov), exact, 0.99, problem.info)
+    assert wide.agrees is False and "the checks built on them (mean_error, covariance) cannot be trusted" in wide.detail
+
+
+def test_the_figure_band_uses_the_self_checks_comparisons(monkeypatch, tmp_path):
+    """plot_sigma_exact's band is variance_ratio_band at the self-check's count (states of zero variance out)."""
+    from kalcal.plots import ensemble
+    from kalcal.verification.dataset import statistics_dataset
+
+    problem = _problem("correct")
+    stats = _run(problem, 200)
+    exact = exact_prediction(problem)
+    cov = exact.error_cov.copy()
+    cov[:, -1, :] = cov[:, :, -1] = 0.0
+    seen = []
+    monkeypatch.setattr(ensemble, "variance_ratio_band", lambda c, m, n: seen.append(m) or variance_ratio_band(c, m, n))
+    attrs = {"scenario": problem.info.scenario, "seed": 1, "engine": "exact", "confidence": 0.99}
+    dataset = statistics_dataset(stats, problem.info, problem.expected_mean_error(), attrs)
+    ensemble.plot_sigma_exact(dataset, cov, tmp_path / "sigma.png")
+    from kalcal.verification.self_check import ExactPrediction
+
+    result = self_check(stats, ExactPrediction(exact.mean_error, cov), 0.99, problem.info)
+    assert seen == [result.comparisons // 2] and seen[0] == exact.mean_error.size - exact.mean_error.shape[0]
