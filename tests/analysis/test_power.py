@@ -208,3 +208,22 @@ def test_exact_prediction_computes_no_budget(monkeypatch):
     monkeypatch.setattr(fixed_gain, "error_budget", refuse)
     problem, _ = build_problem(parse_model(SMALL + "w = [[0.01]]\n", "small.toml"))
     assert exact_prediction(problem).available
+
+
+def test_truth_equals_filter_only_where_it_does():
+    """Equal for the correct examples; not for a mistuned one, a larger truth, nor a truth 1e-7 off in v, which
+    no check detects up to N_CAP either: its line then says only that, not that no check can."""
+    from kalcal.analysis.power import truth_equals_filter
+
+    assert truth_equals_filter(analyze_scenario(load_model_file(EXAMPLES / "constant_velocity.toml"), budget=False))
+    assert truth_equals_filter(analyze_scenario(build_scenario("accel-gps", assignments=["scenario.truth=discrete"]), budget=False))
+    for name in ("constant_velocity_mistuned.toml", "accel_gps_colored_gps.toml"):
+        assert not truth_equals_filter(analyze_scenario(load_model_file(EXAMPLES / name), budget=False))
+    near = analyze_scenario(load_model_file(EXAMPLES / "constant_velocity.toml", ["truth.v=[[4.0000004]]"]), budget=False)
+    rows = power_rows(near, 300_000)
+    assert not truth_equals_filter(near) and not verdict_power(rows)["detectable"]
+    line = power_line(rows, 300_000, equal=False)
+    assert "(not detected up to N = 1,000,000,000)" in line and "no check can detect" not in line
+    assert "(not detected up to N = 1,000,000,000: no check can detect it (the truth equals the filter))" in power_line(
+        rows, 300_000, equal=True
+    )
