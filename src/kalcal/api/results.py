@@ -41,8 +41,8 @@ class VerificationResult:
     paths : dict
         The files written (by key: summary, stats, ...) when the call was given ``out``; empty otherwise.
     self_check : SelfCheck or None
-        The bench's self-check, apart from the verdict: the ensemble's mean error and variances against
-        the exact analysis of the same filter and truth (``statistic``, ``bound``, ``pvalue``, ``agrees``,
+        The bench's self-check, apart from the verdict: the ensemble's mean error, variances, E[e xhat^T]
+        and mean innovations against the exact analysis of the same filter and truth (``statistic``, ``bound``, ``pvalue``, ``agrees``,
         ``confidence``, ``parts``, ``detail``; ``agrees`` None and a ``reason`` where no exact analysis
         exists) (:class:`kalcal.verification.self_check.SelfCheck`).
     power : list of dict or None

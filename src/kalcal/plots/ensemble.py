@@ -251,8 +251,8 @@ def plot_sigma_exact(dataset: xr.Dataset, exact_cov: np.ndarray, path: str | Pat
 
     The band about the exact curve is the self-check's (:mod:`kalcal.verification.self_check`): the
     ensemble variance s^2 lies in P_true,ii [q_lo, q_hi], the chi-square(N - 1) / (N - 1) quantiles for
-    the self-check's comparisons (K d less those of zero exact variance) at half the run's alpha, so a
-    correct engine keeps s inside it everywhere (at the run's confidence). The filter's curve apart from the exact one is the mistuning, seen without
+    the self-check's ``error_variance`` comparisons (K d less those of zero exact variance) at its share of
+    the run's alpha, so a correct engine keeps s inside it everywhere (at the run's confidence). The filter's curve apart from the exact one is the mistuning, seen without
     sampling noise. 900 x (150 + 250 d) px.
 
     Parameters
