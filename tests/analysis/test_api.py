@@ -118,3 +118,29 @@ def test_verify_writes_and_prints_the_power_it_had(tmp_path):
     assert summary["power_reason"] is None
     rows = {(row["name"], row["part"]): row for row in summary["power"]}
     assert rows[("covariance", None)]["detectable"] and rows[("mean_error", None)]["detectable"] is False
+
+
+def test_undetectable_but_not_equal_is_not_called_a_correct_filter(tmp_path):
+    """A truth 1e-7 off in v is detected by no check up to N_CAP, but it is not the filter: the command says so."""
+    run = CliRunner().invoke(
+        app,
+        ["analyze", str(EXAMPLES / "constant_velocity.toml"), "--set", "truth.v=[[4.0000004]]", "-n", "20000", "--out", str(tmp_path / "a")],
+        catch_exceptions=False,
+    )
+    assert run.exit_code == 0, run.output
+    assert "with power 0.99 (no check detects the truth up to N = 1,000,000,000):" in run.output
+    assert "(a correct filter)" not in run.output and "no check can detect it" not in run.output
+
+
+def test_verify_of_a_correct_filter_says_no_check_can_detect_it(tmp_path):
+    out = tmp_path / "v"
+    run = CliRunner().invoke(
+        app, ["verify", str(EXAMPLES / "constant_velocity.toml"), "-n", "200", "--no-report", "--out", str(out)], catch_exceptions=False
+    )
+    assert run.exit_code == 0, run.output
+    assert "(not detected up to N = 1,000,000,000: no check can detect it (the truth equals the filter))" in run.output
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["power_truth_equals_filter"] is True
+    result = kalcal.verify(EXAMPLES / "constant_velocity_mistuned.toml", 200)
+    assert result.power == result.summary["power"] and result.summary["power_truth_equals_filter"] is False
+    assert any(row["detectable"] for row in result.power)

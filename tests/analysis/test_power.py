@@ -115,10 +115,41 @@ def test_checks_fail_at_a_rate_inside_the_bracket(truth, name):
         assert _overlaps(failures, 40, low, high), (target, n, failures, low, high)
 
 
+#: truths and parts where the bracket at the N of power 0.5 is narrow (its ends within NARROW), so that a
+#: failure rate off the bracket on either side is caught
+NARROW_CASES = [
+    ("x0 = [0.5, 10.0]\nm0 = [[1.0, 0.0], [0.0, 0.01]]", "mean_error", None),
+    ("w = [[0.01]]", "covariance", "elements"),
+    ("w = [[0.01]]", "covariance", "centered_nees"),
+    ("m0 = [[100.0, 0.0], [0.0, 1.0]]", "orthogonality", None),
+    ("x0 = [3.0, 10.0]", "nis", None),
+]
+NARROW = 0.2
+
+
+@pytest.mark.parametrize(("truth", "name", "part"), NARROW_CASES)
+def test_failure_rates_meet_a_narrow_bracket_from_both_sides(truth, name, part):
+    """Where the bracket is at most NARROW wide (checked), the 99.9% Clopper-Pearson interval of 40 seeded
+    ensembles' failure rate must meet it at the N of power 0.5 and 0.99: a rate too low or too high fails."""
+    problem, cause = build_problem(parse_model(SMALL + truth + "\n", "small.toml"))
+    check = {c.name: c for c in check_families(analyze_problem(problem, budget=False))}[name]
+    family = check.parts[part]
+    for target in (0.5, DETECTION_POWER):
+        n = detection_n(lambda k: family.bracket(k)[0], target)
+        low, high = family.bracket(n)
+        assert low == pytest.approx(target, abs=0.01) and high - low <= NARROW, (target, n, low, high)
+        failures = _failures(problem, cause, n, range(40), name, part)
+        assert _overlaps(failures, 40, low, high), (target, n, failures, low, high)
+
+
 def test_portmanteau_detects_the_colored_gps_error_the_pairs_miss():
     """The colored GPS error correlates every pair of position innovations a little: at N = 100 (10 s run)
     the portmanteau's power is above 0.9 and the pairs' at most 0.10, and 20 seeded ensembles agree; the
-    portmanteau reaches 0.99 at a third of the pairs' N or less."""
+    portmanteau reaches 0.99 at about a ninth of the pairs' N. Every number docs/verification.md quotes is
+    this test's computed value."""
+    import math
+
+    doc = " ".join((Path(__file__).resolve().parents[2] / "docs" / "verification.md").read_text(encoding="utf-8").split())
     model = load_model_file(EXAMPLES / "accel_gps_colored_gps.toml", ["model.updates=50"])
     problem, cause = build_problem(model)
     parts = {c.name: c for c in check_families(analyze_problem(problem, budget=False))}["residual_whiteness"].parts
@@ -126,7 +157,13 @@ def test_portmanteau_detects_the_colored_gps_error_the_pairs_miss():
     assert port[0] > 0.9 and pairs[1] < 0.1
     rows = {(r["name"], r["part"]): r for r in power_rows(analyze_problem(problem, budget=False), 100)}
     n_port, n_pairs = (rows[("residual_whiteness", part)]["detection_n"] for part in ("portmanteau", "pairs"))
-    assert 130 <= n_port <= 150 and 1200 <= n_pairs <= 1350  # about a ninth
+    # each is where its conservative end first reaches 0.99 (power increasing in N)
+    for family, k in ((parts["portmanteau"], n_port), (parts["pairs"], n_pairs)):
+        assert family.bracket(k)[0] >= DETECTION_POWER > family.bracket(k - 1)[0]
+    assert round(n_pairs / n_port) == 9 and "about a ninth of the pairs' N" in doc
+    assert f"({n_port} against {n_pairs:,};" in doc
+    port_text = f"{port[0]:.2f}–{port[1]:.2f}" if f"{port[0]:.2f}" != f"{port[1]:.2f}" else f"{port[0]:.2f}"
+    assert f"at N = 100 the portmanteau's power is {port_text} and the pairs' at most {math.ceil(100 * pairs[1]) / 100:.2f};" in doc
     problem_30s, _ = build_problem(load_model_file(EXAMPLES / "accel_gps_colored_gps.toml"))
     rows_30s = power_rows(analyze_problem(problem_30s, budget=False), 20_000)
     assert power_line(rows_30s, 20_000).startswith(
@@ -134,12 +171,15 @@ def test_portmanteau_detects_the_colored_gps_error_the_pairs_miss():
     )
     whole = {(r["name"], r["part"]): r for r in rows_30s}
     assert whole[("residual_whiteness", "portmanteau")]["detection_n"] == MIN_N  # power_low >= 0.99 at N = 100
-    assert 500 < whole[("residual_whiteness", "pairs")]["detection_n"] < 600
+    n_pairs_30s = whole[("residual_whiteness", "pairs")]["detection_n"]
+    assert 500 < n_pairs_30s < 600
+    assert f"reaches 0.99 only at N = {n_pairs_30s} (between 500 and 600)" in doc
     counts = {}
     for part, (low, high) in (("pairs", pairs), ("portmanteau", port)):
         counts[part] = _failures(problem, cause, 100, range(20), "residual_whiteness", part)
         assert _overlaps(counts[part], 20, low, high), (part, counts[part], low, high)
     assert counts == {"pairs": 0, "portmanteau": 18}  # as docs/verification.md quotes them
+    assert f"20 seeded ensembles fail them {counts['portmanteau']} and {counts['pairs']} times" in doc
 
 
 def test_verification_power_is_null_with_its_reason_for_scale_bias():
@@ -180,3 +220,50 @@ def test_sensitivity_holds_the_filter_of_accel_gps():
     assert scaled.truth.accel_noise_std == pytest.approx(1.1 * model.truth.accel_noise_std)
     assert scaled.filter_settings.accel_noise_std == model.filter_settings.accel_noise_std
     assert np.isclose(scaled.filter_settings.gps_position_std, model.truth.gps_position_std)
+
+
+def test_chi_square_part_without_spread_is_its_fixed_value():
+    """A = 0 with a nonzero mean: every term is |mu|^2, so X = N m2 exactly, failing only outside the bounds."""
+    from kalcal.analysis.power_parts import ChiSquareFamily
+
+    zero = np.zeros(2)
+
+    def family(m2):
+        return ChiSquareFamily(zero, zero, np.full(2, m2), zero, 0, lambda n: (0.5 * n, 1.5 * n))
+
+    assert family(1.0).bracket(1000) == (0.0, 0.0)  # X = 1000 inside [500, 1500]
+    assert family(2.0).bracket(1000) == (1.0, 1.0)  # X = 2000 above
+    assert family(0.25).bracket(1000) == (1.0, 1.0)  # X = 250 below
+    assert family(0.0).bracket(1000) == (1.0, 1.0)  # X = 0 below a positive lower bound
+
+
+def test_exact_prediction_computes_no_budget(monkeypatch):
+    """The self-check's and the report's exact prediction needs only the moments: no error budget is run."""
+    from kalcal.analysis import fixed_gain
+    from kalcal.verification.self_check import exact_prediction
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the budget was computed")
+
+    monkeypatch.setattr(fixed_gain, "error_budget", refuse)
+    problem, _ = build_problem(parse_model(SMALL + "w = [[0.01]]\n", "small.toml"))
+    assert exact_prediction(problem).available
+
+
+def test_truth_equals_filter_only_where_it_does():
+    """Equal for the correct examples; not for a mistuned one, a larger truth, nor a truth 1e-7 off in v, which
+    no check detects up to N_CAP either: its line then says only that, not that no check can."""
+    from kalcal.analysis.power import truth_equals_filter
+
+    assert truth_equals_filter(analyze_scenario(load_model_file(EXAMPLES / "constant_velocity.toml"), budget=False))
+    assert truth_equals_filter(analyze_scenario(build_scenario("accel-gps", assignments=["scenario.truth=discrete"]), budget=False))
+    for name in ("constant_velocity_mistuned.toml", "accel_gps_colored_gps.toml"):
+        assert not truth_equals_filter(analyze_scenario(load_model_file(EXAMPLES / name), budget=False))
+    near = analyze_scenario(load_model_file(EXAMPLES / "constant_velocity.toml", ["truth.v=[[4.0000004]]"]), budget=False)
+    rows = power_rows(near, 300_000)
+    assert not truth_equals_filter(near) and not verdict_power(rows)["detectable"]
+    line = power_line(rows, 300_000, equal=False)
+    assert "(not detected up to N = 1,000,000,000)" in line and "no check can detect" not in line
+    assert "(not detected up to N = 1,000,000,000: no check can detect it (the truth equals the filter))" in power_line(
+        rows, 300_000, equal=True
+    )

@@ -15,7 +15,7 @@ from kalcal.models.registry import build_scenario
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.reporting.figure_html import png_size
 from kalcal.reporting.theory import SIGMA_EXACT_TITLE, self_check_section
-from kalcal.verification.self_check import exact_prediction
+from kalcal.verification.self_check import SELF_CHECK_PARTS, exact_prediction
 
 
 def test_the_page_shows_filter_exact_and_ensemble_sigma(report_run):
@@ -33,7 +33,7 @@ def test_the_page_shows_filter_exact_and_ensemble_sigma(report_run):
     check = summary["self_check"]
     assert check["agrees"] is True
     section = page[page.index('<h2 id="self-check">') : page.index('<h2 id="figures">')]
-    assert check["detail"] in section.replace("&#x27;", "'") and section.count("<td>agrees</td>") == 2
+    assert check["detail"] in section.replace("&#x27;", "'") and section.count("<td>agrees</td>") == len(SELF_CHECK_PARTS)
 
 
 def test_report_redraws_the_figure_from_the_settings_alone(copy_run):
@@ -51,3 +51,33 @@ def test_a_disagreeing_self_check_and_one_from_before_it():
     section = self_check_section({"self_check": check})
     assert "<td>DISAGREES</td>" in section and "The ensemble departs from the exact analysis." in section
     assert self_check_section({}) == ""
+
+
+def test_the_page_shows_each_checks_power(report_run):
+    """The power section: verify's power line and one row per check and part, its bracket and detection_n."""
+    from kalcal.analysis.power import power_line
+
+    out, page_path = report_run
+    page = page_path.read_text(encoding="utf-8")
+    summary = json.loads((out / "summary.json").read_text())
+    section = page[page.index('<h2 id="power">') : page.index('<h2 id="scenario">')]
+    line = power_line(summary["power"], summary["realizations"], summary["power_reason"], summary["power_truth_equals_filter"])
+    assert line.replace("'", "&#x27;") in section
+    assert section.count("<tr><td>") == len(summary["power"])
+
+
+def test_the_power_section_for_each_kind_of_summary():
+    from kalcal.reporting.theory import power_section
+
+    rows = [
+        {"name": "mean_error", "part": None, "power_low": 0.001, "power_high": 0.004, "detectable": False, "detection_n": None},
+        {"name": "covariance", "part": None, "power_low": 0.995, "power_high": 1.0, "detectable": True, "detection_n": 1234},
+        {"name": "covariance", "part": "elements", "power_low": 0.5, "power_high": 0.5, "detectable": True, "detection_n": 1234},
+    ]
+    section = power_section({"realizations": 2000, "power": rows, "power_reason": None})
+    assert "<td>mean_error</td><td>(whole check)</td><td class='num'>0.00</td><td class='num'>not detected</td>" in section
+    assert "<td>covariance</td><td>(whole check)</td><td class='num'>0.99–1.00</td><td class='num'>1,234</td>" in section
+    assert "<td>elements</td><td class='num'>0.50</td>" in section and "power at N = 2,000: verdict" in section
+    none = power_section({"realizations": 2000, "power": None, "power_reason": "no exact analysis: the filter's gains depend on the data"})
+    assert "power: not computed (no exact analysis: the filter&#x27;s gains depend on the data)" in none and "<table>" not in none
+    assert power_section({"realizations": 2000}) == ""  # a summary from before the power

@@ -16,6 +16,7 @@ import pytest
 from scipy import stats as sps
 
 from kalcal.analysis.fixed_gain import analyze_problem
+from kalcal.analysis.power_parts import product_variance
 from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.models.config import apply_settings
 from kalcal.models.custom import load_model_file
@@ -61,13 +62,20 @@ def test_the_ensemble_agrees_with_the_exact_analysis(name):
     result = self_check(_run(problem), exact, 0.99, problem.info)
     k, d = exact.error_cov.shape[:2]
     assert result.agrees is True, result.detail
-    assert result.comparisons == 2 * k * d
-    assert result.bound == pytest.approx(normal_bound(0.99, 2 * k * d), rel=1e-12)
+    p = exact.mean_residual.shape[1]
+    assert result.comparisons == 2 * k * d + k * d * d + k * p  # mean, variance, E[e xhat^T], mean innovation
+    parts = {part.name: part for part in result.parts}
+    assert [parts[name].comparisons for name in SELF_CHECK_PARTS] == [k * d, k * d, k * d * d, k * p]
+    for part in result.parts:  # each part at alpha / 4 over its own comparisons
+        assert part.upper == pytest.approx(normal_bound(0.99, len(SELF_CHECK_PARTS) * part.comparisons), rel=1e-12)
+    decisive = min(result.parts, key=lambda part: part.pvalue)
+    assert result.bound == decisive.upper and result.statistic == decisive.statistic
     assert abs(result.statistic) <= result.bound and result.pvalue >= 0.01
     assert [part.name for part in result.parts] == list(SELF_CHECK_PARTS)
     assert result.reason is None and result.detail.startswith("The ensemble agrees")
     if name == "colored gps":  # the report's 150 updates and 3 states: the bound docs/verification.md quotes
-        assert (k, d) == (150, 3) and round(result.bound, 2) == 4.39
+        assert (k, d, p) == (150, 3, 2)
+        assert [round(parts[name].upper, 2) for name in SELF_CHECK_PARTS] == [4.54, 4.54, 4.77, 4.46]
 
 
 def test_the_per_sample_engine_agrees_with_the_same_analysis():
@@ -98,12 +106,28 @@ def test_a_wrong_engine_is_detected():
     assert variance_scores(np.array([1.2]), n)[0] > good.bound + 4.0
     wide = self_check(dataclasses.replace(stats, error_cov=1.2 * stats.error_cov), exact, 0.99, problem.info)
     assert wide.agrees is False and wide.pvalue < 0.01
-    assert {part.name: part.passed for part in wide.parts} == {"mean_error": True, "error_variance": False}
+    assert {part.name: part.passed for part in wide.parts} == {
+        "mean_error": True, "error_variance": False, "error_estimate": True, "residual_mean": True
+    }
     assert wide.detail.startswith("The ensemble departs") and "variance of" in wide.detail
     sd = np.sqrt(np.diagonal(exact.error_cov, axis1=1, axis2=2) / n)
     shifted = self_check(dataclasses.replace(stats, mean_error=stats.mean_error + 6.0 * sd), exact, 0.99, problem.info)
     assert shifted.agrees is False
-    assert {part.name: part.passed for part in shifted.parts} == {"mean_error": False, "error_variance": True}
+    assert {part.name: part.passed for part in shifted.parts} == {
+        "mean_error": False, "error_variance": True, "error_estimate": True, "residual_mean": True
+    }
+    # the other sums: E[e xhat^T] off by 6 of its standard errors, the mean innovation likewise
+    mu_e, mu_x = exact.mean_error[:, :, None], exact.mean_estimate[:, None, :]
+    var_x = np.diagonal(exact.estimate_cov, axis1=1, axis2=2)[:, None, :]
+    var_e = np.diagonal(exact.error_cov, axis1=1, axis2=2)[:, :, None]
+    se = np.sqrt(product_variance(mu_e, mu_x, var_e, var_x, exact.error_estimate - mu_e * mu_x) / n)
+    moved = self_check(dataclasses.replace(stats, error_estimate=stats.error_estimate + 6.0 * se), exact, 0.99, problem.info)
+    assert [part.name for part in moved.parts if not part.passed] == ["error_estimate"] and not moved.agrees
+    assert "E[e x̂ᵀ] of" in moved.detail
+    se_r = np.sqrt(np.diagonal(exact.residual_cov, axis1=1, axis2=2) / n)
+    moved = self_check(dataclasses.replace(stats, mean_residual=stats.mean_residual + 6.0 * se_r), exact, 0.99, problem.info)
+    assert [part.name for part in moved.parts if not part.passed] == ["residual_mean"] and not moved.agrees
+    assert "mean innovation of" in moved.detail
 
 
 def test_a_correct_engine_disagrees_at_most_at_the_rate_alpha():
@@ -119,7 +143,7 @@ def test_a_correct_engine_disagrees_at_most_at_the_rate_alpha():
 def test_variance_scores_are_the_chi_square_tails_and_the_figure_band_is_the_bound():
     count, comparisons, confidence = 150, 40, 0.99
     low, high = variance_ratio_band(confidence, comparisons, count)
-    bound = normal_bound(confidence, 2 * comparisons)
+    bound = normal_bound(confidence, len(SELF_CHECK_PARTS) * comparisons)
     np.testing.assert_allclose(np.abs(variance_scores(np.array([low, high]), count)), bound, rtol=1e-8)
     assert variance_scores(np.array([1.0]), count)[0] == 0.0
     # one sided tail: P(chi2 > (N - 1) r) = Phi(-z)
@@ -194,3 +218,59 @@ def test_the_cli_line_for_each_outcome():
     assert self_check_line({**base, "agrees": False}) == f"{lead}: DISAGREES, largest |z| 5.12 against ±4.4, p = 0.0001"
     assert self_check_line({**base, "agrees": False, "statistic": None, "p_value": None}).endswith("|z| nan against ±4.4, p = nan")
     assert self_check_line(None) == f"{lead}: not recorded"
+
+
+def test_a_rounding_level_variance_is_left_out_not_a_disagreement():
+    """A state whose exact variance is rounding-level (1e-14 of the largest) and whose ensemble variance is 0
+    is no comparison: the self-check agrees over the other states' 2 K (d - 1) comparisons."""
+    from kalcal.verification.self_check import VARIANCE_RTOL, compared_states
+
+    problem = _problem("correct")
+    exact = exact_prediction(problem)
+    stats = _run(problem, 500)
+    k, d = exact.mean_error.shape
+    cov = exact.error_cov.copy()
+    largest = np.max(np.diagonal(cov, axis1=1, axis2=2), axis=1)
+    cov[:, -1, :] = cov[:, :, -1] = 0.0
+    cov[:, -1, -1] = 1e-14 * largest
+    ens_cov, ens_mean = stats.error_cov.copy(), stats.mean_error.copy()
+    ens_cov[:, -1, :] = ens_cov[:, :, -1] = 0.0
+    ens_mean[:, -1] = exact.mean_error[:, -1] + 1e-9
+    # a certain e_last is its mean, so E[e_last xhat^T] = m_last E[xhat]^T, and the ensemble's m_last xbar^T
+    exact_ex, ens_ex = exact.error_estimate.copy(), stats.error_estimate.copy()
+    exact_ex[:, -1, :] = exact.mean_error[:, -1, None] * exact.mean_estimate
+    ens_ex[:, -1, :] = ens_mean[:, -1, None] * stats.mean_estimate
+    assert 1e-14 < VARIANCE_RTOL
+    assert not compared_states(cov)[:, -1].any() and compared_states(cov)[:, :-1].all()
+    result = self_check(
+        dataclasses.replace(stats, error_cov=ens_cov, mean_error=ens_mean, error_estimate=ens_ex),
+        dataclasses.replace(exact, error_cov=cov, error_estimate=exact_ex),
+        0.99,
+        problem.info,
+    )
+    parts = {part.name: part.comparisons for part in result.parts}
+    assert result.agrees is True and parts["mean_error"] == parts["error_variance"] == k * (d - 1)
+    # the certain state's row of E[e xhat^T] stays where its mean makes the product random (m_last^2 Var(xhat))
+    assert k * (d - 1) * d <= parts["error_estimate"] <= k * d * d
+    wide = self_check(dataclasses.replace(stats, error_cov=2.0 * stats.error_cov), exact, 0.99, problem.info)
+    assert wide.agrees is False and "so the checks built on them cannot be trusted" in wide.detail
+
+
+def test_the_figure_band_uses_the_self_checks_comparisons(monkeypatch, tmp_path):
+    """plot_sigma_exact's band is variance_ratio_band at the self-check's count (states of zero variance out)."""
+    from kalcal.plots import ensemble
+    from kalcal.verification.dataset import statistics_dataset
+
+    problem = _problem("correct")
+    stats = _run(problem, 200)
+    exact = exact_prediction(problem)
+    cov = exact.error_cov.copy()
+    cov[:, -1, :] = cov[:, :, -1] = 0.0
+    seen = []
+    monkeypatch.setattr(ensemble, "variance_ratio_band", lambda c, m, n: seen.append(m) or variance_ratio_band(c, m, n))
+    attrs = {"scenario": problem.info.scenario, "seed": 1, "engine": "exact", "confidence": 0.99}
+    dataset = statistics_dataset(stats, problem.info, problem.expected_mean_error(), attrs)
+    ensemble.plot_sigma_exact(dataset, cov, tmp_path / "sigma.png")
+    result = self_check(stats, dataclasses.replace(exact, error_cov=cov), 0.99, problem.info)
+    variance_part = next(part for part in result.parts if part.name == "error_variance")
+    assert seen == [variance_part.comparisons] and seen[0] == exact.mean_error.size - exact.mean_error.shape[0]

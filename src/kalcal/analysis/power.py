@@ -43,6 +43,7 @@ __all__ = [
     "power_line",
     "power_rows",
     "problem_power",
+    "truth_equals_filter",
     "verdict_power",
 ]
 
@@ -52,6 +53,8 @@ DETECTION_POWER = 0.99
 MIN_N = 100
 #: the largest N searched: a truth no check detects with this many realizations is not detectable
 N_CAP = 10**9
+#: the truth equals the filter when the moments the checks see agree with the filter's to this fraction
+EQUAL_RTOL = 1e-9
 
 Family = NormalFamily | ChiSquareFamily | PortmanteauPower
 
@@ -167,6 +170,38 @@ def check_families(a: CovarianceAnalysis, confidence: float = 0.99) -> list[Chec
     return checks
 
 
+def truth_equals_filter(a: CovarianceAnalysis) -> bool:
+    """Whether the truth equals the filter in everything the checks see, to ``EQUAL_RTOL`` (rounding):
+    E[e_k] = 0, Cov(e_k) = P_k, E[r_k] = 0, Cov(r_k) = S_k and (where the analysis has the pairs)
+    E[r_k r_j^T] = 0 for j != k, each measured against the filter's own spread at that update. Then every
+    check is at its alpha at every N: no check can detect the truth."""
+    m = a.moments
+
+    def small(value: np.ndarray, cov: np.ndarray) -> bool:
+        scale = np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1))  # (K, d)
+        return bool(np.all(np.abs(value) <= EQUAL_RTOL * scale))
+
+    def same(cov: np.ndarray, belief: np.ndarray) -> bool:
+        scale = np.diagonal(belief, axis1=1, axis2=2)
+        outer = np.sqrt(scale[:, :, None] * scale[:, None, :])
+        return bool(np.all(np.abs(cov - belief) <= EQUAL_RTOL * outer))
+
+    equal = (
+        small(m.mean_error, a.filter_cov)
+        and same(m.error_cov, a.filter_cov)
+        and small(m.mean_residual, a.innovation_cov)
+        and same(m.residual_cov, a.innovation_cov)
+    )
+    if equal and m.residual_second_moment is not None:
+        raw = m.residual_second_moment
+        k, p = raw.shape[:2]
+        s = np.sqrt(np.diagonal(a.innovation_cov, axis1=1, axis2=2))  # (K, p)
+        outer = s[:, :, None, None] * s[None, None, :, :]
+        off = ~np.eye(k, dtype=bool)[:, None, :, None].repeat(p, 1).repeat(p, 3)
+        equal = bool(np.all(np.abs(raw[off]) <= EQUAL_RTOL * outer[off]))
+    return equal
+
+
 def detection_n(low_at: Callable[[int], float], target: float = DETECTION_POWER) -> int | None:
     """The smallest N in [MIN_N, N_CAP] with ``low_at(N) >= target``, ``low_at`` taken as increasing; None if
     N_CAP falls short."""
@@ -240,15 +275,23 @@ def _bracket_text(low: float, high: float) -> str:
     return a if a == b else f"{a}–{b}"
 
 
-def power_line(rows: list[dict] | None, n: int, reason: str | None = None) -> str:
-    """One line: the verdict's power and each check's bracket at N = ``n``, and the smallest N that detects.
+def undetected_text(equal: bool) -> str:
+    """What an undetectable truth's line says: that no check can detect it where the truth equals the filter
+    (:func:`truth_equals_filter`), otherwise only that no check detects it up to N_CAP."""
+    found = f"not detected up to N = {N_CAP:,}"
+    return f"{found}: no check can detect it (the truth equals the filter)" if equal else found
+
+
+def power_line(rows: list[dict] | None, n: int, reason: str | None = None, equal: bool = False) -> str:
+    """One line: the verdict's power and each check's bracket at N = ``n``, and the smallest N that detects
+    (``equal``: the truth equals the filter, :func:`undetected_text`).
 
     ``"power at N = 20,000: verdict 1.00 (detected from N = 100); mean_error 0.00–0.01, covariance 1.00, ..."``
     """
     if rows is None:
         return f"power: not computed ({reason or 'no exact analysis'})"
     whole = verdict_power(rows)
-    found = f"detected from N = {whole['detection_n']:,}" if whole["detectable"] else f"not detected up to N = {N_CAP:,}"
+    found = f"detected from N = {whole['detection_n']:,}" if whole["detectable"] else undetected_text(equal)
     checks = ", ".join(
         f"{row['name']} {_bracket_text(row['power_low'], row['power_high'])}" for row in rows if row["part"] is None
     )

@@ -130,8 +130,9 @@ class ChiSquareFamily:
         if np.any(shifted):
             gs, hs, ns = g[shifted], h[shifted], nu[shifted]
             cdf[shifted], sf[shifted] = ncx2_cdf(low / gs, hs, ns), ncx2_sf(high / gs, hs, ns)
-        # no spread: X is 0 (nothing varies), outside the bounds when the lower one is positive
-        return np.minimum(1.0, np.where(ok, cdf + sf, float(low > 0)))
+        # no spread (A = 0): every term is |mu|^2, so X = n_eff m2 exactly, failing where it leaves the bounds
+        fixed = n_eff * self.m2
+        return np.minimum(1.0, np.where(ok, cdf + sf, ((fixed < low) | (fixed > high)).astype(float)))
 
     def bracket(self, n: int) -> tuple[float, float]:
         return bracket(self.probabilities(n))

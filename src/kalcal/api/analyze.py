@@ -52,6 +52,14 @@ class AnalysisResult:
     paths: dict = field(default_factory=dict)
     sensitivity: Any = None
 
+    @property
+    def truth_equals_filter(self) -> bool:
+        """Whether the truth equals the filter in everything the checks see (then no check can detect it at
+        any N; :func:`kalcal.analysis.power.truth_equals_filter`)."""
+        from kalcal.analysis.power import truth_equals_filter
+
+        return truth_equals_filter(self.analysis)
+
     def to_dict(self) -> dict[str, Any]:
         """``analysis.json`` as ``json.load`` reads it (``schema_version`` first, ``nonfinite`` last)."""
         from kalcal.io.results import json_document

@@ -41,10 +41,14 @@ class VerificationResult:
     paths : dict
         The files written (by key: summary, stats, ...) when the call was given ``out``; empty otherwise.
     self_check : SelfCheck or None
-        The bench's self-check, apart from the verdict: the ensemble's mean error and variances against
-        the exact analysis of the same filter and truth (``statistic``, ``bound``, ``pvalue``, ``agrees``,
+        The bench's self-check, apart from the verdict: the ensemble's mean error, variances, E[e xhat^T]
+        and mean innovations against the exact analysis of the same filter and truth (``statistic``, ``bound``, ``pvalue``, ``agrees``,
         ``confidence``, ``parts``, ``detail``; ``agrees`` None and a ``reason`` where no exact analysis
         exists) (:class:`kalcal.verification.self_check.SelfCheck`).
+    power : list of dict or None
+        The power each check and part had at the run's N under the truth (``summary.json``'s ``power``:
+        ``{"name", "part", "power_low", "power_high", "detectable", "detection_n"}``), from the exact
+        analysis of the same problem; None where none exists (``summary["power_reason"]`` says why).
     """
 
     verdict: str
@@ -54,12 +58,20 @@ class VerificationResult:
     run: Any = field(repr=False, compare=False)
     paths: dict = field(default_factory=dict)
     self_check: Any = None
+    power: Any = None
 
     @classmethod
     def from_run(cls, run, paths: dict | None = None) -> VerificationResult:
         """The result of a :class:`kalcal.jobs.verify.Verification`."""
         return cls(
-            run.summary["verdict"], list(run.checks), run.dataset, run.long_dataset, run, dict(paths or {}), run.self_check
+            run.summary["verdict"],
+            list(run.checks),
+            run.dataset,
+            run.long_dataset,
+            run,
+            dict(paths or {}),
+            run.self_check,
+            run.summary.get("power"),
         )
 
     @property

@@ -54,12 +54,14 @@ def analyze(
             row["top_source"], f"{100 * row['top_share']:.0f}%",
         )  # fmt: skip
     _common.console.print(table)
-    from kalcal.analysis.power import power_line
+    from kalcal.analysis.power import N_CAP, power_line
     from kalcal.analysis.sensitivity import sensitivity_text
 
-    _common.console.print(power_line(result.power, n), markup=False, soft_wrap=True)
+    equal = result.truth_equals_filter
+    _common.console.print(power_line(result.power, n, equal=equal), markup=False, soft_wrap=True)
     if result.sensitivity is not None:
         found = ", ".join(sensitivity_text(row) for row in result.sensitivity)
-        _common.console.print(f"detected at N = {n:,} with power 0.99 (a correct filter): {found}", markup=False, soft_wrap=True)
+        why = "a correct filter" if equal else f"no check detects the truth up to N = {N_CAP:,}"
+        _common.console.print(f"detected at N = {n:,} with power 0.99 ({why}): {found}", markup=False, soft_wrap=True)
     _common._note_nonfinite(result.paths["summary"])
     _common.print_wrote(Path(out), [result.paths[key] for key in ("summary", "dataset")] + [Path(out) / "figures"])

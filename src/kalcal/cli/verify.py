@@ -82,7 +82,8 @@ def verify(
     from kalcal.analysis.power import power_line
     from kalcal.verification.self_check import self_check_line
 
-    _common.console.print(power_line(summary["power"], n, summary["power_reason"]), markup=False, soft_wrap=True)
+    equal = bool(summary.get("power_truth_equals_filter"))
+    _common.console.print(power_line(summary["power"], n, summary["power_reason"], equal), markup=False, soft_wrap=True)
     _common.console.print(self_check_line(summary.get("self_check")), markup=False, soft_wrap=True)
     pair = summary["residual_correlation"]
     if pair is not None:  # only runs that have the source report's pair of updates

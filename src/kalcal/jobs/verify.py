@@ -64,6 +64,14 @@ def power_summary(problem, n: int, confidence: float, analysis=None) -> dict[str
     return {"power": rows, "power_reason": reason}
 
 
+def truth_equals(analysis) -> bool | None:
+    """``summary.json``'s ``power_truth_equals_filter``: whether the truth equals the filter in everything
+    the checks see (:func:`kalcal.analysis.power.truth_equals_filter`); None without an exact analysis."""
+    from kalcal.analysis.power import truth_equals_filter
+
+    return None if analysis is None else truth_equals_filter(analysis)
+
+
 @dataclass(frozen=True)
 class VerifyOutcome:
     """What a verification run produced (and wrote: ``paths``)."""
@@ -210,6 +218,7 @@ def compute_verification(
         "tests": [c.as_dict() for c in checks],
         "self_check": bench.as_dict(),
         **power_summary(problem, n, confidence, analysis),
+        "power_truth_equals_filter": truth_equals(analysis),
         "final": {
             "time": float(info.update_times[-1]),
             "states": list(info.state_names),

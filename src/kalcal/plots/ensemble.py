@@ -31,7 +31,7 @@ from kalcal.plots._common import (
     unit_square,
 )
 from kalcal.verification.bounds import covariance_element_bound, normal_bound
-from kalcal.verification.self_check import variance_ratio_band
+from kalcal.verification.self_check import compared_states, variance_ratio_band
 
 
 def _names(dataset: xr.Dataset) -> tuple[list[str], list[str]]:
@@ -251,8 +251,8 @@ def plot_sigma_exact(dataset: xr.Dataset, exact_cov: np.ndarray, path: str | Pat
 
     The band about the exact curve is the self-check's (:mod:`kalcal.verification.self_check`): the
     ensemble variance s^2 lies in P_true,ii [q_lo, q_hi], the chi-square(N - 1) / (N - 1) quantiles for
-    K d comparisons at half the run's alpha, so a correct engine keeps s inside it everywhere (at the
-    run's confidence). The filter's curve apart from the exact one is the mistuning, seen without
+    the self-check's ``error_variance`` comparisons (K d less those of zero exact variance) at its share of
+    the run's alpha, so a correct engine keeps s inside it everywhere (at the run's confidence). The filter's curve apart from the exact one is the mistuning, seen without
     sampling noise. 900 x (150 + 250 d) px.
 
     Parameters
@@ -269,7 +269,7 @@ def plot_sigma_exact(dataset: xr.Dataset, exact_cov: np.ndarray, path: str | Pat
     ensemble = np.sqrt(np.diagonal(dataset["error_cov"].values, axis1=1, axis2=2))
     filt = np.sqrt(np.diagonal(dataset["filter_cov"].values, axis1=1, axis2=2))
     exact = np.sqrt(np.clip(np.diagonal(np.asarray(exact_cov), axis1=1, axis2=2), 0.0, None))
-    low, high = variance_ratio_band(confidence, times.size * len(names), count)
+    low, high = variance_ratio_band(confidence, int(compared_states(exact_cov).sum()), count)  # the self-check's count
     figure, axes = new_figure(len(names))
     for i, (name, unit) in enumerate(zip(names, units)):
         ax = axes[i, 0]

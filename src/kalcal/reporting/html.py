@@ -26,7 +26,7 @@ from kalcal.reporting.markup import esc
 from kalcal.reporting.run_tables import final_table, reproduce_section, settings_section, timing_section
 from kalcal.filters.steady_state import SteadyStateView
 from kalcal.reporting.text import confidence_statement
-from kalcal.reporting.theory import self_check_section
+from kalcal.reporting.theory import power_section, self_check_section
 from kalcal.reporting.verdicts import failures_section, verdicts_section
 from kalcal.verification.text import fmt
 
@@ -89,6 +89,7 @@ def build_page(
     sections = (
         failures_section(summary),
         verdicts_section(summary),
+        power_section(summary),
         settings_section(summary),
         final_table(summary),
         self_check_section(summary),

@@ -1,15 +1,16 @@
-"""The page's view of the exact analysis: the filter/exact/ensemble sigma figure's words and the self-check."""
+"""The page's view of the exact analysis: the filter/exact/ensemble sigma figure's words, the self-check and the power."""
 
 from __future__ import annotations
 
 from collections.abc import Mapping
 from typing import Any
 
+from kalcal.analysis.power import power_line
 from kalcal.plots.ensemble import plot_sigma_exact
 from kalcal.reporting.markup import esc, table
 from kalcal.verification.text import fmt
 
-__all__ = ["SIGMA_EXACT", "SIGMA_EXACT_CAPTION", "SIGMA_EXACT_TITLE", "self_check_section", "sigma_exact_spec"]
+__all__ = ["SIGMA_EXACT", "SIGMA_EXACT_CAPTION", "SIGMA_EXACT_TITLE", "power_section", "self_check_section", "sigma_exact_spec"]
 
 #: the figure's file stem
 SIGMA_EXACT = "sigma_exact"
@@ -51,4 +52,39 @@ def self_check_section(summary: Mapping[str, Any]) -> str:
         + note
         + f"<p>{esc(check['detail'])}</p>"
         + table(("part", "largest z", "bound", "comparisons", "p-value", "result"), rows)
+    )
+
+
+def _bracket(row: Mapping[str, Any]) -> str:
+    low, high = f"{row['power_low']:.2f}", f"{row['power_high']:.2f}"
+    return low if low == high else f"{low}–{high}"
+
+
+def power_section(summary: Mapping[str, Any]) -> str:
+    """The checks' power at the run's N (summary.json's ``power``): verify's power line and, per check and
+    part, the bracket [power_low, power_high] and ``detection_n``; the reason where there is none; empty for
+    a summary from before it."""
+    if "power" not in summary:
+        return ""
+    head = '<h2 id="power">Power of the checks</h2>'
+    note = (
+        "<p class='sub'>The probability that each check fails at this N under the truth, from the exact "
+        "analysis of the same filter and truth (Bonferroni's bracket [max, sum] over its comparisons), and the "
+        "smallest N at which its conservative end reaches 0.99 (docs/analysis.md).</p>"
+    )
+    n = summary["realizations"]
+    line = power_line(summary["power"], n, summary.get("power_reason"), bool(summary.get("power_truth_equals_filter")))
+    if summary["power"] is None:
+        return head + note + f"<p>{esc(line)}</p>"
+    rows = [
+        f"<tr><td>{esc(row['name'])}</td><td>{esc(row['part'] or '(whole check)')}</td>"
+        f"<td class='num'>{esc(_bracket(row))}</td>"
+        f"<td class='num'>{esc(fmt(row['detection_n']) if row['detectable'] else 'not detected')}</td></tr>"
+        for row in summary["power"]
+    ]
+    return (
+        head
+        + note
+        + f"<p>{esc(line)}</p>"
+        + table(("check", "part", f"power at N = {n:,}", "detected from N"), rows)
     )

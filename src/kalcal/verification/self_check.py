@@ -1,22 +1,31 @@
 """The bench's self-check: the Monte Carlo ensemble against the exact analysis of the same problem.
 
-For a fixed-gain filter the error e_k = M x_k - xhat_k is exactly Gaussian with a mean m_k and
-covariance P_true,k that the covariance analysis computes without sampling
+For a fixed-gain filter the error e_k = M x_k - xhat_k, the estimate xhat_k and the innovation r_k are
+jointly Gaussian with means and covariances that the covariance analysis computes without sampling
 (:func:`kalcal.analysis.fixed_gain.analyze_problem`). An engine that simulates that truth, and sums that
-add its realizations up, must reproduce both within sampling error. Over every update k and state i,
-with N realizations (K updates, d states, m = K d comparisons in each part):
+add its realizations up, must reproduce them within sampling error. With N realizations, four parts:
 
-* ``mean_error``: z = (ebar_ki - m_ki) / sqrt(P_true,k,ii / N), exactly standard normal;
+* ``mean_error``: z = (ebar_ki - m_ki) / sqrt(P_true,k,ii / N) over every update k and state i,
+  exactly standard normal;
 * ``error_variance``: (N - 1) s_ki^2 / P_true,k,ii is exactly chi-square(N - 1) for the ensemble
   variance s^2 (divisor N - 1); its two-sided p-value p gives the normal score z = +-Phi^-1(1 - p / 2)
   (signed as s^2 - P_true), exact at every N, where the normal approximation
-  Var(s^2) = 2 sigma^4 / (N - 1) errs in the far tails that a large family reaches.
+  Var(s^2) = 2 sigma^4 / (N - 1) errs in the far tails that a large family reaches;
+* ``error_estimate``: the mean of e_ki xhat_kl (orthogonality's sum E[e xhat^T], every i, l) against its
+  exact value, z = difference / sqrt(V / N) with V the Gaussian product variance
+  (:func:`kalcal.analysis.power_parts.product_variance`), normal by the central limit theorem;
+* ``residual_mean``: z = (rbar_ka - E[r_ka]) / sqrt(Cov(r_k)_aa / N), exactly standard normal.
 
-Each part is a max-|z| family held to alpha / 2 under Bonferroni (alpha = 1 - confidence, the run's),
-so both share one bound ``normal_bound(confidence, 2 K d)``; the p-value is family-wise, and a correct
-engine disagrees with probability at most alpha. Comparisons whose exact variance is zero (a state the
-truth leaves certain) are left out. The self-check never enters the verdict: it checks the bench, not
-the filter. Problems whose gains depend on the data (scale-bias) have no exact analysis, and say so.
+Each part is a max-|z| family held to alpha / 4 (Bonferroni, alpha = 1 - confidence, the run's), each at
+the bound ``normal_bound_at(alpha / 4, m)`` of its own m comparisons; the p-value is family-wise, and a
+correct engine disagrees with probability at most alpha. Comparisons whose exact variance is zero to
+rounding (at most ``VARIANCE_RTOL`` times the largest of that part's at that update: a state the truth
+leaves certain) are left out. The self-check never enters the verdict: it checks the bench, not the
+filter. Problems whose gains depend on the data (scale-bias) have no exact analysis, and say so.
+
+Scope: the sums compared are those of the mean_error check, the covariance check's diagonal, the
+orthogonality check and the innovations' means; the off-diagonal error covariance, the innovations'
+second moments (whiteness, NIS) are not compared with theory here.
 """
 
 from __future__ import annotations
@@ -27,14 +36,31 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from kalcal.analysis.fixed_gain import analyze_problem
+from kalcal.analysis.power_parts import product_variance
 from kalcal.montecarlo.accumulators import EnsembleStatistics
 from kalcal.montecarlo.problem import FixedGainProblem, ProblemInfo
 from kalcal.verification.bounds import chi2_bounds_at, normal_bound_at
 from kalcal.verification.distributions import normal_isf
-from kalcal.verification.results import CheckPart, chi2_two_sided_pvalues, combined_pvalue, normal_family_pvalue
+from kalcal.verification.results import CheckPart, chi2_two_sided_pvalues, family_pvalue, normal_family_pvalue
 
 #: the self-check's parts, each held to an equal share of its alpha
-SELF_CHECK_PARTS = ("mean_error", "error_variance")
+SELF_CHECK_PARTS = ("mean_error", "error_variance", "error_estimate", "residual_mean")
+#: an exact variance at most this fraction of the largest at its update is zero to rounding (double
+#: precision's 2.2e-16 times the propagation's accumulated operations), and its state is left out
+VARIANCE_RTOL = 1e-12
+
+
+def _nonzero(var: np.ndarray) -> np.ndarray:
+    """var (K, ...) above VARIANCE_RTOL times the largest at the same update."""
+    flat = var.reshape(var.shape[0], -1)
+    largest = np.max(flat, axis=1, initial=0.0).reshape((-1,) + (1,) * (var.ndim - 1))
+    return var > VARIANCE_RTOL * largest
+
+
+def compared_states(error_cov: np.ndarray) -> np.ndarray:
+    """The (update, state) pairs the self-check compares, (K, d) bool: exact variance above
+    ``VARIANCE_RTOL`` times the largest exact variance at the same update (``error_cov`` (K, d, d))."""
+    return _nonzero(np.diagonal(np.asarray(error_cov, dtype=float), axis1=1, axis2=2))
 
 
 @dataclass(frozen=True)
@@ -49,11 +75,20 @@ class ExactPrediction:
         P_true,k = Cov(e_k), centered.
     reason : str or None
         Why there is no prediction (None when there is one).
+    mean_estimate, error_estimate, estimate_cov : ndarray or None
+        E[xhat_k] (K, d), E[e_k xhat_k^T] (K, d, d, raw) and Cov(xhat_k) (K, d, d, centered).
+    mean_residual, residual_cov : ndarray or None
+        E[r_k] (K, p) and Cov(r_k) (K, p, p).
     """
 
     mean_error: np.ndarray | None
     error_cov: np.ndarray | None
     reason: str | None = None
+    mean_estimate: np.ndarray | None = None
+    error_estimate: np.ndarray | None = None
+    estimate_cov: np.ndarray | None = None
+    mean_residual: np.ndarray | None = None
+    residual_cov: np.ndarray | None = None
 
     @property
     def available(self) -> bool:
@@ -78,8 +113,11 @@ def exact_prediction(problem, analysis=None) -> ExactPrediction:
             f"{problem.info.scenario}: no exact analysis exists (its filter's gains depend on the noisy readings), "
             "so the ensemble is not checked against theory",
         )
-    analysis = analyze_problem(problem, pairs=False) if analysis is None else analysis
-    return ExactPrediction(analysis.moments.mean_error, analysis.moments.error_cov)
+    analysis = analyze_problem(problem, pairs=False, budget=False) if analysis is None else analysis
+    m = analysis.moments
+    return ExactPrediction(
+        m.mean_error, m.error_cov, None, m.mean_estimate, m.error_estimate, m.estimate_cov, m.mean_residual, m.residual_cov
+    )
 
 
 @dataclass(frozen=True)
@@ -89,19 +127,19 @@ class SelfCheck:
     Attributes
     ----------
     statistic : float or None
-        The signed z of the comparison with the largest |z| over both parts (None without a prediction).
+        The signed largest z of the part with the smallest p-value (None without a prediction).
     bound : float or None
-        The bound on every |z| (both parts: m comparisons at alpha / 2 each).
+        That part's bound (its m comparisons at alpha / 4).
     pvalue : float or None
-        Family-wise over both parts, min(1, 2 min(part p-values)); ``agrees == (pvalue >= 1 - confidence)``.
+        Family-wise over the parts, min(1, 4 min(part p-values)); ``agrees == (pvalue >= 1 - confidence)``.
     agrees : bool or None
-        Whether every comparison lies inside the bound; None without a prediction.
+        Whether every comparison lies inside its part's bound; None without a prediction.
     confidence : float
         A correct engine agrees with probability at least ``confidence``.
     comparisons : int
-        Comparisons over both parts (2 K d less those of zero exact variance).
+        Comparisons over the parts (2 K d + K d^2 + K p less those of zero exact variance).
     parts : tuple of CheckPart
-        ``mean_error`` and ``error_variance`` (``passed``: that part agrees).
+        ``SELF_CHECK_PARTS`` (``passed``: that part agrees).
     detail : str
         The outcome in one sentence, or the reason there is none.
     reason : str or None
@@ -163,15 +201,51 @@ def _worst(z: np.ndarray) -> tuple[float, int]:
     return float(z[index]), index
 
 
+def _z(difference: np.ndarray, var: np.ndarray, keep: np.ndarray, n: int) -> np.ndarray:
+    return difference[keep] / np.sqrt(var[keep] / n)
+
+
+def _families(statistics: EnsembleStatistics, exact: ExactPrediction, info: ProblemInfo) -> list[tuple]:
+    """(part, z, where(index) -> text) for each part the prediction holds values for."""
+    n, names, times = statistics.count, info.state_names, info.update_times
+    var = np.diagonal(exact.error_cov, axis1=1, axis2=2)
+    compared = compared_states(exact.error_cov)
+    at = np.argwhere(compared)
+    out = [
+        ("mean_error", _z(statistics.mean_error - exact.mean_error, var, compared, n),
+         lambda j: f"mean error of {names[at[j][1]]} at t = {times[at[j][0]]:.4g} s"),
+        ("error_variance", variance_scores(np.diagonal(statistics.error_cov, axis1=1, axis2=2)[compared] / var[compared], n),
+         lambda j: f"variance of {names[at[j][1]]} at t = {times[at[j][0]]:.4g} s"),
+    ]  # fmt: skip
+    if exact.error_estimate is not None:
+        mu_e, mu_x = exact.mean_error[:, :, None], exact.mean_estimate[:, None, :]
+        var_x = np.diagonal(exact.estimate_cov, axis1=1, axis2=2)[:, None, :]
+        product = product_variance(mu_e, mu_x, var[:, :, None], var_x, exact.error_estimate - mu_e * mu_x)
+        keep = _nonzero(product)
+        cells = np.argwhere(keep)
+        out.append(("error_estimate", _z(statistics.error_estimate - exact.error_estimate, product, keep, n),
+                    lambda j: f"E[e x̂ᵀ] of {names[cells[j][1]]} and {names[cells[j][2]]} at t = {times[cells[j][0]]:.4g} s"))  # fmt: skip
+    if exact.mean_residual is not None:
+        var_r = np.diagonal(exact.residual_cov, axis1=1, axis2=2)
+        keep_r = _nonzero(var_r)
+        rows = np.argwhere(keep_r)
+        measured = info.measurement_names
+        out.append(("residual_mean", _z(statistics.mean_residual - exact.mean_residual, var_r, keep_r, n),
+                    lambda j: f"mean innovation of {measured[rows[j][1]]} at t = {times[rows[j][0]]:.4g} s"))  # fmt: skip
+    return out
+
+
 def self_check(statistics: EnsembleStatistics, exact: ExactPrediction, confidence: float, info: ProblemInfo) -> SelfCheck:
-    """The ensemble's mean error and variances against the exact values (module docstring).
+    """The ensemble's sums against the exact values (module docstring).
 
     Parameters
     ----------
     statistics : EnsembleStatistics
-        N realizations' ``mean_error`` (K, d) and ``error_cov`` (K, d, d, divisor N - 1).
+        N realizations' ``mean_error`` (K, d), ``error_cov`` (K, d, d, divisor N - 1), ``error_estimate``
+        (K, d, d) and ``mean_residual`` (K, p).
     exact : ExactPrediction
-        The same problem's exact values (or the reason there are none).
+        The same problem's exact values (or the reason there are none); a part whose values it lacks is
+        left out.
     confidence : float
         Family-wise level, 1 - alpha.
     info : ProblemInfo
@@ -179,40 +253,36 @@ def self_check(statistics: EnsembleStatistics, exact: ExactPrediction, confidenc
     """
     if not exact.available:
         return unavailable(exact.reason, confidence)
-    n = statistics.count
-    var = np.diagonal(exact.error_cov, axis1=1, axis2=2)
-    compared = var > 0.0
-    m = int(compared.sum())
-    if m == 0:
+    if not compared_states(exact.error_cov).any():
         return unavailable("the exact analysis leaves every state certain (zero variance): nothing to compare", confidence)
-    z_mean = (statistics.mean_error - exact.mean_error)[compared] / np.sqrt(var[compared] / n)
-    ratio = np.diagonal(statistics.error_cov, axis1=1, axis2=2)[compared] / var[compared]
-    z_var = variance_scores(ratio, n)
+    families = _families(statistics, exact, info)
     share = (1.0 - confidence) / len(SELF_CHECK_PARTS)
-    bound = normal_bound_at(share, m)
     parts, worst = [], []
-    for name, z in zip(SELF_CHECK_PARTS, (z_mean, z_var)):
+    for name, z, where in families:
+        m = int(z.size)
+        bound = normal_bound_at(share, max(m, 1))
         value, index = _worst(z)
-        pvalue = normal_family_pvalue(value, m)
+        pvalue = normal_family_pvalue(value, m) if m else 1.0
         parts.append(CheckPart(name, value, pvalue, -bound, bound, 1.0 - share, share, m, bool(pvalue >= share)))
-        worst.append((value, index, name))
-    pvalue = combined_pvalue(parts)
+        worst.append((value, index, where, bound, m))
+    pvalue = family_pvalue([part.pvalue for part in parts], len(SELF_CHECK_PARTS))
     agrees = bool(pvalue >= 1.0 - confidence)
-    value, index, name = max(worst, key=lambda w: math.inf if math.isnan(w[0]) else abs(w[0]))
-    k, i = np.argwhere(compared)[index]
-    where = f"{'mean error' if name == 'mean_error' else 'variance'} of {info.state_names[i]} at t = {info.update_times[k]:.4g} s"
+    first = min(range(len(parts)), key=lambda j: -math.inf if math.isnan(parts[j].pvalue) else parts[j].pvalue)
+    value, index, where, bound, m = worst[first]
+    total = sum(part.comparisons for part in parts)
     measured = (
-        f"largest |z| = {abs(value):.3g} ({where}) {'within' if agrees else 'beyond'} ±{bound:.3g} over {2 * m} "
-        f"comparisons (the mean error and variance of every state at every update), p = {pvalue:.3g}"
+        f"largest |z| = {abs(value):.3g} ({where(index) if index >= 0 else 'none'}) "
+        f"{'within' if agrees else 'beyond'} ±{bound:.3g} (its part's {m} comparisons) over {total} comparisons (the "
+        f"mean error and variance of every state, E[e x̂ᵀ] and the mean innovations at every update), p = {pvalue:.3g}"
     )
     detail = (
         f"The ensemble agrees with the exact analysis of the same filter and truth: {measured}."
         if agrees
         else f"The ensemble departs from the exact analysis of the same filter and truth: {measured}; the bench "
-        "(the engine or its sums) does not reproduce theory, so its checks cannot be trusted."
+        "(the engine or its sums) does not reproduce the exact error, estimate and innovation moments it compares, "
+        "so the checks built on them cannot be trusted."
     )
-    return SelfCheck(value, bound, pvalue, agrees, confidence, 2 * m, detail, tuple(parts))
-
+    return SelfCheck(value, bound, pvalue, agrees, confidence, total, detail, tuple(parts))
 
 
 def self_check_line(document: dict | None) -> str:
