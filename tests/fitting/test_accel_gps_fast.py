@@ -143,6 +143,12 @@ def test_a_latency_is_recovered_within_its_interval_and_calibrate_with_the_fitte
     result = kalcal.fit("accel-gps", imu=imu, gps=gps, free=free, out=tmp_path)
     latency = result.parameters["filter.gps_latency"]
     assert latency.identified and not latency.at_bound and latency.ci_low <= 0.02 <= latency.ci_high
+    assert result.to_dict()["parameters"]["filter.gps_latency"]["start"] == 1e-3  # the floor of a setting at 0
+    import tomllib
+
+    written = tomllib.loads((tmp_path / "filter.toml").read_text())
+    assert written["filter"]["gps_latency"] == pytest.approx(latency.value, rel=1e-5)
+    assert written["truth"]["gps_latency"] == 0.0 and "bias_std" not in written["filter"]
     calibration = kalcal.calibrate("accel-gps", imu=imu, gps=gps, config=tmp_path / "filter.toml")
     summary = calibration.calibration.summary
     assert summary["settings"]["filter"]["gps_latency"] == pytest.approx(latency.value, rel=1e-5)
