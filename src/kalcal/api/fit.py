@@ -51,7 +51,7 @@ def fit(
     profile : bool
         Intervals from the profile likelihood instead of the observed information.
     gate : float, optional
-        accel-gps: the chi-square innovation gate's confidence (refused where the calibration has none).
+        accel-gps: the chi-square innovation gate's confidence, as ``calibrate``'s (off by default).
     confidence : float
         Of the intervals (0.95).
     out : path, optional

@@ -114,7 +114,10 @@ def fit_accel_gps(
     fit = maximize(lambda values: log.loglik(values, gate=gate), parameters, profile=profile, confidence=confidence)
     chosen = {key: value for key, value in fit.values.items() if fit.parameters[key].identified}
     calibration = log.calibrate(chosen, gate=gate)
-    diagnostics = innovation_diagnostics(calibration.normalized_innovations)
+    # as calibrate: the diagnostics and the count leave out the gate's rejections and a diffuse prior's first fix
+    used = np.ones(calibration.time.size, dtype=bool) if calibration.rejected is None else ~calibration.rejected
+    used[: calibration.skip] = False
+    diagnostics = innovation_diagnostics(calibration.normalized_innovations[used])
     adequate = bool(diagnostics.consistent)
     adequacy = diagnostics.verdict if adequate else inadequacy(diagnostics.verdict, free)
     notes = []
@@ -129,7 +132,7 @@ def fit_accel_gps(
         parameters=fit.parameters,
         loglik=fit.loglik,
         aic=fit.aic,
-        fixes=int(calibration.time.size),
+        fixes=int(np.count_nonzero(used)),
         converged=fit.converged,
         interval_method=fit.interval_method,
         adequate=adequate,
@@ -157,6 +160,8 @@ def _settings(scenario, chosen, fit, rates, std_medians) -> tuple[dict[str, dict
     for f in dataclasses.fields(AccelGpsFilter):
         key = f"filter.{f.name}"
         value = chosen.get(key, getattr(resolved, f.name, getattr(scenario.filter, f.name)))
+        if key == "filter.bias_std" and key not in chosen and scenario.filter.bias_std is None:
+            continue  # unset, as in the fit: calibrate --config keeps the log's prior rule (diffuse), verify the truth's
         if value is not None:
             filter_values[f.name] = _short(value) if key in chosen else value
     truth_names = [f.name for f in dataclasses.fields(AccelGpsTruth)]

@@ -322,7 +322,8 @@ class AccelGpsScenario:
         if self.filter.gps_latency not in (None, 0.0):
             raise SettingError(
                 "filter.gps_latency",
-                "0 in verify (its simulated fixes have no latency; the setting is for calibrate on a log)",
+                "0 in verify (its simulated fixes have no latency; the setting is for calibrate on a log: "
+                "verify a fitted filter.toml with --set filter.gps_latency=0)",
                 show(self.filter.gps_latency),
             )
         return self._model(self.filter_settings, np.zeros(3))
