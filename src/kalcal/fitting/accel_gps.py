@@ -17,6 +17,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from kalcal.calibration.diagnostics import innovation_diagnostics
+from kalcal.calibration.likelihood import gate_excess
 from kalcal.errors import KalcalError
 from kalcal.fitting.mle import Free, maximize
 from kalcal.fitting.result import FitResult, interval_text
@@ -47,7 +48,7 @@ class AccelGpsLikelihood(Protocol):
 
     fixes: int
 
-    def loglik(self, values: Mapping[str, float], *, gate: float | None = None) -> float: ...
+    def loglik(self, values: Mapping[str, float], *, gate: float | None = None, rejected: np.ndarray | None = None) -> float: ...
 
     def calibrate(self, values: Mapping[str, float], *, gate: float | None = None) -> Any: ...
 
@@ -106,18 +107,30 @@ def fit_accel_gps(
         of a multiplier.
     """
     free = list(DEFAULT_FREE if free is None else free)
+    notes = []
+    if "filter.bias_correlation_time" in free and "filter.bias_std" not in free:
+        free.append("filter.bias_std")
+        notes.append(
+            "filter.bias_std freed with filter.bias_correlation_time: a Gauss-Markov bias's stationary std is its "
+            "prior, which the log's prior rule does not make diffuse"
+        )
     parameters = []
     for key in free:
         value = log.settings_value(key)
         start = value if value > 0 else FLOORS.get(key, 1e-6)
         parameters.append(Free(key, start, start / RANGE, start * RANGE, log.unit(key)))
-    fit = maximize(lambda values: log.loglik(values, gate=gate), parameters, profile=profile, confidence=confidence)
+    fit, calibration, mask, rounds = _search(log, parameters, gate, profile, confidence)
     chosen = {key: value for key, value in fit.values.items() if fit.parameters[key].identified}
-    calibration = log.calibrate(chosen, gate=gate)
-    diagnostics = innovation_diagnostics(calibration.normalized_innovations)
+    used = _used(calibration)
+    diagnostics = innovation_diagnostics(calibration.normalized_innovations[used])
     adequate = bool(diagnostics.consistent)
     adequacy = diagnostics.verdict if adequate else inadequacy(diagnostics.verdict, free)
-    notes = []
+    if gate is not None:
+        if rounds is None:
+            notes.append(f"the gate's rejected set still changed after {MAX_GATE_ROUNDS} refits; the last set is used")
+        excess = gate_excess(int(np.count_nonzero(mask)), int(np.count_nonzero(used) + np.count_nonzero(mask)), gate)
+        if excess:
+            adequate, adequacy = False, f"{excess}: no fit over the rest is trusted"
     for key in free:
         if key.startswith("log."):
             column = key.split(".")[1].removesuffix("_multiplier")
@@ -129,7 +142,7 @@ def fit_accel_gps(
         parameters=fit.parameters,
         loglik=fit.loglik,
         aic=fit.aic,
-        fixes=int(calibration.time.size),
+        fixes=int(np.count_nonzero(used)),
         converged=fit.converged,
         interval_method=fit.interval_method,
         adequate=adequate,
@@ -143,6 +156,41 @@ def fit_accel_gps(
         confidence=confidence,
         extra={"bias": float(calibration.bias[-1]), "bias_std": float(calibration.std[-1, 2])},
     )
+
+
+#: refits with the gate's rejected set held fixed before the fit gives up on a stable set
+MAX_GATE_ROUNDS = 5
+
+
+def _used(calibration) -> np.ndarray:
+    """The fixes in the likelihood: not rejected, after the diffuse prior's ``skip``, (K,) bool."""
+    used = np.ones(calibration.time.size, dtype=bool)
+    if getattr(calibration, "rejected", None) is not None:
+        used &= ~np.asarray(calibration.rejected, dtype=bool)
+    used[: int(getattr(calibration, "skip", 0) or 0)] = False
+    return used
+
+
+def _search(log, parameters, gate, profile, confidence):
+    """The fit over a fixed set of fixes: with a gate, gate with the start settings, fit with that
+    rejected set held fixed, re-gate with the fitted settings and refit until the set stops changing
+    (at most :data:`MAX_GATE_ROUNDS` fits). Returns the fit, the fitted calibration, the rejected set
+    and the rounds taken (None where the set never settled)."""
+    if gate is None:
+        fit = maximize(log.loglik, parameters, profile=profile, confidence=confidence)
+        chosen = {key: value for key, value in fit.values.items() if fit.parameters[key].identified}
+        return fit, log.calibrate(chosen), None, 0
+    mask = np.asarray(log.calibrate({}, gate=gate).rejected, dtype=bool)
+    for rounds in range(1, MAX_GATE_ROUNDS + 1):
+        held = mask.copy()
+        fit = maximize(lambda values: log.loglik(values, rejected=held), parameters, profile=profile, confidence=confidence)
+        chosen = {key: value for key, value in fit.values.items() if fit.parameters[key].identified}
+        calibration = log.calibrate(chosen, gate=gate)
+        new = np.asarray(calibration.rejected, dtype=bool)
+        if np.array_equal(new, mask):
+            return fit, calibration, mask, rounds
+        mask = new
+    return fit, calibration, mask, None
 
 
 def _short(value: float) -> float:

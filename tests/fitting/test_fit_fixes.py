@@ -1,0 +1,74 @@
+"""Fixes of the accel-gps fit: the gate's rejected set held fixed during a search, the likelihood's fix
+count, the adequacy over the fixes used, a Gauss-Markov bias's prior freed with its time, and a latency
+searched on a linear scale."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import kalcal
+from kalcal.fitting.accel_gps import _used, gate_excess
+
+ROVER = Path(__file__).resolve().parents[2] / "examples" / "rover-like.toml"
+
+
+def rover(seed, duration, **truth):
+    settings = {"scenario.duration": duration, **{f"truth.{key}": value for key, value in truth.items()}}
+    sim = kalcal.simulate("accel-gps", seed=seed, config=ROVER, settings=settings)
+    return sim.logs["imu"], sim.logs["gps"]
+
+
+def test_the_gated_fit_scores_one_fixed_set_of_fixes_and_does_not_reject_everything():
+    imu, gps = rover(1, 120)
+    result = kalcal.fit("accel-gps", imu=imu, gps=gps, gate=0.999)
+    rejected = len(result.rejected_fixes)
+    assert rejected < 0.01 * gps.shape[0]  # without the fixed set the search rejected 2398 of 2399 fixes
+    assert result.loglik < -100.0  # not the empty sum
+    assert result.fixes == gps.shape[0] - 1 - 1 - rejected  # the first fix starts the filter, the diffuse skip, the rejected
+
+
+def test_a_fixed_rejected_set_is_left_out_like_missing_fixes_in_the_fast_and_the_reference_likelihood():
+    from kalcal.calibration.accel_gps_log import prepare_accel_gps_log
+    from kalcal.fitting.accel_gps_reference import prepare_reference_accel_gps_log
+    from kalcal.models.registry import build_scenario
+
+    imu, gps = rover(3, 10)
+    scenario = build_scenario("accel-gps", ROVER, [])
+    arrays = (imu.time.values, imu.accel.values, gps.time.values, gps.position.values, gps.velocity.values)
+    fast = prepare_accel_gps_log(scenario, *arrays, init="first-fix", prior="auto")
+    reference = prepare_reference_accel_gps_log(scenario, *arrays, init="first-fix", prior="auto")
+    mask = np.zeros(fast.fixes, dtype=bool)
+    mask[[5, 17, 40]] = True
+    values = {"filter.accel_noise_std": 0.3, "filter.gps_position_std": 1.5}
+    held = fast.loglik(values, rejected=mask)
+    assert held == pytest.approx(reference.loglik(values, rejected=mask), rel=1e-9)
+    assert held > fast.loglik(values)  # three fewer terms, each a log-density below 0 here
+    gated = fast.calibrate(values, gate=0.99)  # the gate's own set, held fixed, gives the gate's likelihood
+    assert fast.loglik(values, rejected=gated.rejected) == pytest.approx(fast.loglik(values, gate=0.99), rel=1e-12)
+
+
+def test_a_gate_that_rejects_far_more_than_its_share_makes_the_fit_inadequate_and_calibrate_warns(tmp_path):
+    assert gate_excess(3, 1000, 0.999) == "" and gate_excess(20, 1000, 0.999) != ""
+    imu, gps = rover(2, 20)
+    tight = {"filter.gps_position_std": 0.3}  # the log has 2 m
+    result = kalcal.fit("accel-gps", imu=imu, gps=gps, gate=0.999, settings=tight, free="filter.bias_std")
+    assert not result.adequate and "far more than its 0.001 share" in result.adequacy
+    calibration = kalcal.calibrate("accel-gps", imu=imu, gps=gps, gate=0.999, settings=tight)
+    assert "gate-rejects-too-many" in [w["code"] if isinstance(w, dict) else w.code for w in calibration.warnings]
+
+
+def test_fixes_counts_the_likelihoods_fixes_and_adequacy_leaves_out_the_rejected_and_the_skipped():
+    sim = kalcal.simulate("accel-gps", seed=4, settings={"scenario.duration": 40, "truth.gps_outlier_rate": 0.01,
+                                                         "truth.gps_outlier_std": 40.0})
+    imu, gps = sim.logs["imu"], sim.logs["gps"]
+    result = kalcal.fit("accel-gps", imu=imu, gps=gps, gate=0.999, free="filter.gps_position_std")
+    rejected = len(result.rejected_fixes)
+    assert rejected >= 1
+    assert result.fixes == gps.shape[0] - 2 - rejected  # the first fix starts the filter, the diffuse skip
+    # mean NIS over the fixes used: 2 +- 2 / sqrt(n) for a consistent filter (4 sigma allowed); one 40 m
+    # outlier against 1 m of noise alone would add about 1600 / n
+    n = result.fixes
+    assert result.diagnostics["mean_nis"] < 2 + 4 * 2 / np.sqrt(n)
