@@ -72,3 +72,41 @@ def test_fixes_counts_the_likelihoods_fixes_and_adequacy_leaves_out_the_rejected
     # outlier against 1 m of noise alone would add about 1600 / n
     n = result.fixes
     assert result.diagnostics["mean_nis"] < 2 + 4 * 2 / np.sqrt(n)
+
+#: the rover-like log's own model as the filter's settings
+ROVER_FILTER = {"filter.accel_noise_std": 0.4, "filter.bias_std": 0.1, "filter.bias_correlation_time": 30.0,
+                "filter.gps_position_std": 2.0, "filter.gps_velocity_std": 0.05}
+
+
+def test_a_20_ms_latency_is_recovered_within_its_interval_on_a_linear_scale():
+    sim = kalcal.simulate("accel-gps", seed=1, settings={"scenario.duration": 60, "truth.gps_latency": 0.02})
+    imu, gps = sim.logs["imu"], sim.logs["gps"]
+    result = kalcal.fit("accel-gps", imu=imu, gps=gps, free="filter.gps_latency")
+    latency = result.parameters["filter.gps_latency"]
+    assert result.converged and latency.identified and not latency.at_bound
+    assert latency.ci_low <= 0.02 <= latency.ci_high
+    assert latency.ci_low < 0.0 or latency.value > 0.005  # a linear scale: not stuck near a log-scale floor
+    assert all(v >= -0.5 and v <= 0.5 for v in result.curves["filter.gps_latency"]["value"])
+
+
+def test_a_curve_point_beating_the_maximum_marks_the_search_not_converged():
+    from kalcal.fitting.mle import Free, maximize
+
+    # two maxima: the search from 0.1 climbs to the local one at 0.1; the curve around it reaches up the one at 0.3
+    def loglik(values):
+        x = values["x"]
+        return float(np.log(np.exp(-((x - 0.1) ** 2) / 0.005) + 3 * np.exp(-((x - 0.3) ** 2) / 0.005) + 1e-12))
+
+    free = [Free("x", 0.1, -1.0, 1.0, scale="linear")]
+    fit = maximize(loglik, free, curve_points=41, restarts=0)
+    assert not fit.converged and "local maximum" in fit.message
+    assert fit.values["x"] == pytest.approx(0.1, abs=1e-3)
+    again = maximize(loglik, free, curve_points=41)  # restarted from the curve's better point
+    assert again.converged and again.values["x"] == pytest.approx(0.3, abs=1e-3)
+
+
+def test_freeing_the_correlation_time_alone_frees_the_gauss_markov_prior_too():
+    imu, gps = rover(5, 20)
+    result = kalcal.fit("accel-gps", imu=imu, gps=gps, free="filter.bias_correlation_time")
+    assert "filter.bias_std" in result.parameters
+    assert any("filter.bias_std freed with filter.bias_correlation_time" in note for note in result.notes)

@@ -3,7 +3,8 @@
 The fit takes any log-likelihood of the log (:class:`AccelGpsLikelihood`: ``loglik(values)`` and
 ``calibrate(values)``), the reference one of :mod:`kalcal.fitting.accel_gps_reference` or a faster one
 over the same log, and searches the free settings on a log scale (:mod:`kalcal.fitting.mle`) within a
-factor :data:`RANGE` of their starts (a setting that is 0 starts from its :data:`FLOORS` value). The
+factor :data:`RANGE` of their starts (a setting that is 0 starts from its :data:`FLOORS` value); the
+latency on a linear scale within :data:`LINEAR`'s bounds (+-0.5 s), from its setting. The
 fitted filter's innovation diagnostics (NIS and whiteness, :mod:`kalcal.calibration.diagnostics`) then
 decide whether the model family is adequate for the log.
 """
@@ -28,11 +29,12 @@ DEFAULT_FREE = ("filter.accel_noise_std", "filter.bias_walk_std", "filter.gps_po
 FLOORS = {
     "filter.bias_walk_std": 1e-5,
     "filter.bias_correlation_time": 30.0,
-    "filter.gps_latency": 1e-3,
     "filter.scale_std": 1e-4,
 }
-#: each search range spans this factor either side of the start
+#: each search range spans this factor either side of the start (log scale)
 RANGE = 1e3
+#: settings searched on a linear scale, within these bounds either side of 0: a latency may be negative
+LINEAR = {"filter.gps_latency": 0.5}
 #: what a model that does not fit may lack, and the setting that would add it
 CANDIDATES = (
     ("time-correlated GNSS errors", None),
@@ -117,6 +119,10 @@ def fit_accel_gps(
     parameters = []
     for key in free:
         value = log.settings_value(key)
+        if key in LINEAR:
+            bound = max(LINEAR[key], abs(value))
+            parameters.append(Free(key, value, -bound, bound, log.unit(key), scale="linear"))
+            continue
         start = value if value > 0 else FLOORS.get(key, 1e-6)
         parameters.append(Free(key, start, start / RANGE, start * RANGE, log.unit(key)))
     fit, calibration, mask, rounds = _search(log, parameters, gate, profile, confidence)
