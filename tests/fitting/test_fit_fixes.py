@@ -110,3 +110,25 @@ def test_freeing_the_correlation_time_alone_frees_the_gauss_markov_prior_too():
     result = kalcal.fit("accel-gps", imu=imu, gps=gps, free="filter.bias_correlation_time")
     assert "filter.bias_std" in result.parameters
     assert any("filter.bias_std freed with filter.bias_correlation_time" in note for note in result.notes)
+
+
+def test_without_a_positive_definite_observed_information_the_interval_is_the_profiles(monkeypatch):
+    from kalcal.fitting import mle
+
+    # log L = -1/2 u^T A u in u = log(value), correlation 0.9: the profile's 95% half-width is
+    # 1.96 sqrt(Sigma_11) = 1.96, the slice's only 1.96 sqrt(1 - 0.81) = 0.85
+    cov = np.array([[1.0, 0.9], [0.9, 1.0]])
+    precision = np.linalg.inv(cov)
+
+    def loglik(values):
+        u = np.log([values["a"], values["b"]])
+        return float(-0.5 * u @ precision @ u)
+
+    monkeypatch.setattr(mle, "_hessian", lambda f, u, index: -np.eye(len(index)))  # not positive definite
+    free = [mle.Free("a", 1.0, 1e-3, 1e3), mle.Free("b", 1.0, 1e-3, 1e3)]
+    fit = mle.maximize(loglik, free)
+    a = fit.parameters["a"]
+    assert "profile likelihood" in a.note
+    z = 1.959963984540054
+    assert np.log(a.ci_high) == pytest.approx(z * np.sqrt(cov[0, 0]), abs=2e-3)
+    assert np.log(a.ci_low) == pytest.approx(-z * np.sqrt(cov[0, 0]), abs=2e-3)
