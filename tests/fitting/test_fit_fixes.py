@@ -87,6 +87,9 @@ def test_a_20_ms_latency_is_recovered_within_its_interval_on_a_linear_scale():
     assert latency.ci_low <= 0.02 <= latency.ci_high
     assert latency.ci_low < 0.0 or latency.value > 0.005  # a linear scale: not stuck near a log-scale floor
     assert all(v >= -0.5 and v <= 0.5 for v in result.curves["filter.gps_latency"]["value"])
+    # filter.toml: [filter] holds the fitted latency, [truth] never takes it (the log's fault)
+    assert result.settings["filter"]["gps_latency"] == pytest.approx(latency.value, rel=1e-5)
+    assert result.settings["truth"]["gps_latency"] == 0.0
 
 
 def test_a_curve_point_beating_the_maximum_marks_the_search_not_converged():
@@ -132,3 +135,33 @@ def test_without_a_positive_definite_observed_information_the_interval_is_the_pr
     z = 1.959963984540054
     assert np.log(a.ci_high) == pytest.approx(z * np.sqrt(cov[0, 0]), abs=2e-3)
     assert np.log(a.ci_low) == pytest.approx(-z * np.sqrt(cov[0, 0]), abs=2e-3)
+
+
+def test_the_terminal_names_the_gates_rejected_fixes(tmp_path):
+    from typer.testing import CliRunner
+
+    from kalcal.cli import app
+
+    sim = kalcal.simulate("accel-gps", seed=4, settings={"scenario.duration": 20, "truth.gps_outlier_rate": 0.02,
+                                                         "truth.gps_outlier_std": 40.0})
+    paths = sim.save(tmp_path / "sim")
+    imu, gps = paths["imu"], paths["gps"]
+    result = CliRunner().invoke(app, ["fit", "accel-gps", "--imu", str(imu), "--gps", str(gps), "--out",
+                                      str(tmp_path / "fit"), "--free", "filter.gps_position_std", "--gate", "0.999"],
+                                catch_exceptions=False)
+    assert result.exit_code == 0, result.stdout
+    import json
+
+    document = json.loads((tmp_path / "fit" / "fit.json").read_text())
+    rejected = document["rejected_fixes"]["rows"]
+    assert rejected and f"gate 0.999: {len(rejected)} fix(es) rejected (GPS rows {rejected[0]}" in result.stdout
+
+
+def test_a_fitted_multipliers_truth_is_the_multiplier_times_the_columns_median():
+    sim = kalcal.simulate("accel-gps", seed=6, settings={"scenario.duration": 10})
+    imu, gps = sim.logs["imu"], sim.logs["gps"].copy()
+    gps["position_std"] = np.where(np.arange(len(gps)) % 2 == 0, 0.5, 0.8)  # median 0.65 (an even count: 0.65)
+    result = kalcal.fit("accel-gps", imu=imu, gps=gps, free="log.position_std_multiplier")
+    factor = result.parameters["log.position_std_multiplier"].value
+    median = float(np.median(gps["position_std"]))
+    assert result.settings["truth"]["gps_position_std"] == pytest.approx(factor * median, rel=1e-5)
