@@ -165,3 +165,4 @@ def test_a_fitted_multipliers_truth_is_the_multiplier_times_the_columns_median()
     factor = result.parameters["log.position_std_multiplier"].value
     median = float(np.median(gps["position_std"]))
     assert result.settings["truth"]["gps_position_std"] == pytest.approx(factor * median, rel=1e-5)
+    assert result.settings["filter"]["gps_position_std"] == result.settings["truth"]["gps_position_std"]

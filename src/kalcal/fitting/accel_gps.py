@@ -231,8 +231,12 @@ def _settings(scenario, chosen, fit, rates, std_medians) -> tuple[dict[str, dict
                 f"{name_of(key)} = {factor!r}: scale the log's {column} column by it before calibrating "
                 "(calibrate reads the column as it is)"
             )
-            if column in std_medians:
-                truth[setting] = _short(factor * std_medians[column])
+            if column in std_medians:  # [filter] and [truth] alike, so that verify --config runs one model
+                truth[setting] = filter_values[setting] = _short(factor * std_medians[column])
+                comments[setting] = (
+                    f"{setting}: the fitted multiplier times the {column} column's median (calibrate reads the "
+                    "column itself; this value is for fixes without one, and for verify)"
+                )
     sections = {"scenario": _rates(scenario, rates), "filter": filter_values, "truth": truth}
     return sections, comments
 
