@@ -164,25 +164,38 @@ class AccelGpsLog:
         column_p, column_v = self.first_column_std
         return (mult_p * column_p if np.isfinite(column_p) else setting_p, mult_v * column_v if np.isfinite(column_v) else setting_v)
 
-    def _run(self, values: Mapping[str, Any], gate: float | None, form: str):
+    def _run(self, values: Mapping[str, Any], gate: float | None, form: str, rejected: np.ndarray | None = None):
         resolved = evaluation.resolve(self, values)
         inputs = evaluation.build_inputs(self, resolved, set(values))
+        if rejected is not None:  # a fixed set: those fixes are prediction-only, like missing ones
+            if gate is not None:
+                raise ValueError("give either gate or rejected, not both")
+            mask = np.asarray(rejected, dtype=bool)
+            run, _ = evaluation.run_filter(inputs._replace(dz=np.where(mask[:, None], np.nan, inputs.dz)), form, None)
+            residual = np.where(mask[:, None], inputs.dz - run.prior_state @ inputs.h.T, run.residual)
+            return resolved, inputs, run._replace(residual=residual), mask.copy()
         run, rejected = evaluation.run_filter(inputs, form, evaluation.gate_threshold(gate))
         return resolved, inputs, run, rejected
 
-    def loglik(self, values: Mapping[str, Any] = {}, *, gate: float | None = None) -> float:  # noqa: B006 (read only)
+    def loglik(self, values: Mapping[str, Any] = {}, *, gate: float | None = None, rejected: np.ndarray | None = None) -> float:  # noqa: B006 (read only)
         """log L of the fixes used (the prediction-error decomposition,
         :func:`~kalcal.calibration.likelihood.innovation_loglik`), for the filter with ``values`` over the
-        log's settings; the gate's rejections and the first ``skip`` fixes contribute nothing."""
-        _, _, run, rejected = self._run(values, gate, "joseph")
+        log's settings; the gate's rejections and the first ``skip`` fixes contribute nothing.
+
+        ``rejected`` (bool, (K,)) holds the left-out fixes fixed instead of gating (they are then only
+        predicted, like missing fixes), so that every evaluation of a search scores the same fixes; a
+        gate's own set changes with the settings, and rejecting every fix (log L = 0) would win."""
+        _, _, run, rejected = self._run(values, gate, "joseph", rejected)
         residual = np.where(rejected[:, None], np.nan, run.residual)
         return innovation_loglik(residual, run.innovation_cov, skip=self.skip)
 
-    def calibrate(self, values: Mapping[str, Any] = {}, *, gate: float | None = None, form: UpdateForm | None = None) -> AccelGpsCalibration:  # noqa: B006
-        """The filter with ``values`` over the log's settings, as an :class:`AccelGpsCalibration`."""
+    def calibrate(self, values: Mapping[str, Any] = {}, *, gate: float | None = None, form: UpdateForm | None = None,  # noqa: B006
+                  rejected: np.ndarray | None = None) -> AccelGpsCalibration:
+        """The filter with ``values`` over the log's settings, as an :class:`AccelGpsCalibration`
+        (``rejected``: a fixed set of left-out fixes instead of the gate, as :meth:`loglik`)."""
         form = self.form if form is None else form
         check_form(form, "--form")
-        resolved, inputs, run, rejected = self._run(values, gate, form)
+        resolved, inputs, run, rejected = self._run(values, gate, form, rejected)
         states, covariances = run.state, run.cov
         if states.shape[1] == 4:
             states, covariances = scale_parameters(states, covariances)

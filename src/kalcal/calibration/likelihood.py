@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["innovation_loglik"]
+__all__ = ["gate_excess", "innovation_loglik"]
 
 
 def innovation_loglik(residual: np.ndarray, innovation_cov: np.ndarray, *, skip: int = 0) -> float:
@@ -50,3 +50,24 @@ def innovation_loglik(residual: np.ndarray, innovation_cov: np.ndarray, *, skip:
     white = np.linalg.solve(lower, r[..., None])[..., 0]
     log_det = 2.0 * np.sum(np.log(np.diagonal(lower, axis1=1, axis2=2)))
     return float(-0.5 * (log_det + np.sum(white * white) + r.size * np.log(2.0 * np.pi)))
+
+
+def gate_excess(rejected: int, gated: int, gate: float) -> str:
+    """A sentence when an innovation gate rejected far more of ``gated`` fixes than its (1 - gate) share:
+    more than the share's mean plus 3 binomial standard deviations plus 3 fixes; "" otherwise.
+
+    Parameters
+    ----------
+    rejected, gated : int
+        The fixes rejected, and the fixes the gate judged (rejected ones included).
+    gate : float
+        The gate's confidence, in (0, 1).
+    """
+    share = 1.0 - gate
+    limit = gated * share + 3.0 * np.sqrt(gated * share * gate) + 3.0
+    if rejected <= limit:
+        return ""
+    return (
+        f"the gate rejected {rejected} of {gated} fixes, far more than its {share:.3g} share ({limit:.0f} at most "
+        "for settings that describe the fixes)"
+    )

@@ -72,9 +72,14 @@ def fit(
         else:
             estimate = f"{p.value:.4g}"
             high = "—" if p.ci_high is None else f"{p.ci_high:.4g}"
-            interval = f"[0, {high}], consistent with 0" if p.at_bound else f"[{p.ci_low:.4g}, {high}]"
+            low = "—" if p.ci_low is None else f"{p.ci_low:.4g}"
+            interval = f"[0, {high}], consistent with 0" if p.at_bound else f"[{low}, {high}]"
         table.add_row(escape(name), estimate, interval, escape(p.unit))
     console.print(table)
+    if result.rejected_fixes is not None:
+        rows = ", ".join(str(row) for row in result.rejected_fixes[:10]) + (", ..." if len(result.rejected_fixes) > 10 else "")
+        console.print(f"gate {gate:g}: {len(result.rejected_fixes)} fix(es) rejected" + (f" (GPS rows {rows})" if rows else ""),
+                      markup=False)
     if not result.converged:
         _common.error_console.print("kalcal: warning: the optimizer did not report convergence", markup=False)
     style = "green" if result.adequate else "bold red"

@@ -3,7 +3,8 @@
 The fit takes any log-likelihood of the log (:class:`AccelGpsLikelihood`: ``loglik(values)`` and
 ``calibrate(values)``), the reference one of :mod:`kalcal.fitting.accel_gps_reference` or a faster one
 over the same log, and searches the free settings on a log scale (:mod:`kalcal.fitting.mle`) within a
-factor :data:`RANGE` of their starts (a setting that is 0 starts from its :data:`FLOORS` value). The
+factor :data:`RANGE` of their starts (a setting that is 0 starts from its :data:`FLOORS` value); the
+latency on a linear scale within :data:`LINEAR`'s bounds (+-0.5 s), from its setting. The
 fitted filter's innovation diagnostics (NIS and whiteness, :mod:`kalcal.calibration.diagnostics`) then
 decide whether the model family is adequate for the log.
 """
@@ -17,6 +18,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from kalcal.calibration.diagnostics import innovation_diagnostics
+from kalcal.calibration.likelihood import gate_excess
 from kalcal.errors import KalcalError
 from kalcal.fitting.mle import Free, maximize
 from kalcal.fitting.result import FitResult, interval_text
@@ -27,11 +29,12 @@ DEFAULT_FREE = ("filter.accel_noise_std", "filter.bias_walk_std", "filter.gps_po
 FLOORS = {
     "filter.bias_walk_std": 1e-5,
     "filter.bias_correlation_time": 30.0,
-    "filter.gps_latency": 1e-3,
     "filter.scale_std": 1e-4,
 }
-#: each search range spans this factor either side of the start
+#: each search range spans this factor either side of the start (log scale)
 RANGE = 1e3
+#: settings searched on a linear scale, within these bounds either side of 0: a latency may be negative
+LINEAR = {"filter.gps_latency": 0.5}
 #: what a model that does not fit may lack, and the setting that would add it
 CANDIDATES = (
     ("time-correlated GNSS errors", None),
@@ -47,7 +50,7 @@ class AccelGpsLikelihood(Protocol):
 
     fixes: int
 
-    def loglik(self, values: Mapping[str, float], *, gate: float | None = None) -> float: ...
+    def loglik(self, values: Mapping[str, float], *, gate: float | None = None, rejected: np.ndarray | None = None) -> float: ...
 
     def calibrate(self, values: Mapping[str, float], *, gate: float | None = None) -> Any: ...
 
@@ -106,21 +109,34 @@ def fit_accel_gps(
         of a multiplier.
     """
     free = list(DEFAULT_FREE if free is None else free)
+    notes = []
+    if "filter.bias_correlation_time" in free and "filter.bias_std" not in free:
+        free.append("filter.bias_std")
+        notes.append(
+            "filter.bias_std freed with filter.bias_correlation_time: a Gauss-Markov bias's stationary std is its "
+            "prior, which the log's prior rule does not make diffuse"
+        )
     parameters = []
     for key in free:
         value = log.settings_value(key)
+        if key in LINEAR:
+            bound = max(LINEAR[key], abs(value))
+            parameters.append(Free(key, value, -bound, bound, log.unit(key), scale="linear"))
+            continue
         start = value if value > 0 else FLOORS.get(key, 1e-6)
         parameters.append(Free(key, start, start / RANGE, start * RANGE, log.unit(key)))
-    fit = maximize(lambda values: log.loglik(values, gate=gate), parameters, profile=profile, confidence=confidence)
+    fit, calibration, mask, rounds = _search(log, parameters, gate, profile, confidence)
     chosen = {key: value for key, value in fit.values.items() if fit.parameters[key].identified}
-    calibration = log.calibrate(chosen, gate=gate)
-    # as calibrate: the diagnostics and the count leave out the gate's rejections and a diffuse prior's first fix
-    used = np.ones(calibration.time.size, dtype=bool) if calibration.rejected is None else ~calibration.rejected
-    used[: calibration.skip] = False
+    used = _used(calibration)
     diagnostics = innovation_diagnostics(calibration.normalized_innovations[used])
     adequate = bool(diagnostics.consistent)
     adequacy = diagnostics.verdict if adequate else inadequacy(diagnostics.verdict, free)
-    notes = []
+    if gate is not None:
+        if rounds is None:
+            notes.append(f"the gate's rejected set still changed after {MAX_GATE_ROUNDS} refits; the last set is used")
+        excess = gate_excess(int(np.count_nonzero(mask)), int(np.count_nonzero(used) + np.count_nonzero(mask)), gate)
+        if excess:
+            adequate, adequacy = False, f"{excess}: no fit over the rest is trusted"
     for key in free:
         if key.startswith("log."):
             column = key.split(".")[1].removesuffix("_multiplier")
@@ -146,6 +162,41 @@ def fit_accel_gps(
         confidence=confidence,
         extra={"bias": float(calibration.bias[-1]), "bias_std": float(calibration.std[-1, 2])},
     )
+
+
+#: refits with the gate's rejected set held fixed before the fit gives up on a stable set
+MAX_GATE_ROUNDS = 5
+
+
+def _used(calibration) -> np.ndarray:
+    """The fixes in the likelihood: not rejected, after the diffuse prior's ``skip``, (K,) bool."""
+    used = np.ones(calibration.time.size, dtype=bool)
+    if getattr(calibration, "rejected", None) is not None:
+        used &= ~np.asarray(calibration.rejected, dtype=bool)
+    used[: int(getattr(calibration, "skip", 0) or 0)] = False
+    return used
+
+
+def _search(log, parameters, gate, profile, confidence):
+    """The fit over a fixed set of fixes: with a gate, gate with the start settings, fit with that
+    rejected set held fixed, re-gate with the fitted settings and refit until the set stops changing
+    (at most :data:`MAX_GATE_ROUNDS` fits). Returns the fit, the fitted calibration, the rejected set
+    and the rounds taken (None where the set never settled)."""
+    if gate is None:
+        fit = maximize(log.loglik, parameters, profile=profile, confidence=confidence)
+        chosen = {key: value for key, value in fit.values.items() if fit.parameters[key].identified}
+        return fit, log.calibrate(chosen), None, 0
+    mask = np.asarray(log.calibrate({}, gate=gate).rejected, dtype=bool)
+    for rounds in range(1, MAX_GATE_ROUNDS + 1):
+        held = mask.copy()
+        fit = maximize(lambda values: log.loglik(values, rejected=held), parameters, profile=profile, confidence=confidence)
+        chosen = {key: value for key, value in fit.values.items() if fit.parameters[key].identified}
+        calibration = log.calibrate(chosen, gate=gate)
+        new = np.asarray(calibration.rejected, dtype=bool)
+        if np.array_equal(new, mask):
+            return fit, calibration, mask, rounds
+        mask = new
+    return fit, calibration, mask, None
 
 
 def _short(value: float) -> float:
@@ -182,8 +233,12 @@ def _settings(scenario, chosen, fit, rates, std_medians) -> tuple[dict[str, dict
                 f"{name_of(key)} = {factor!r}: scale the log's {column} column by it before calibrating "
                 "(calibrate reads the column as it is)"
             )
-            if column in std_medians:
-                truth[setting] = _short(factor * std_medians[column])
+            if column in std_medians:  # [filter] and [truth] alike, so that verify --config runs one model
+                truth[setting] = filter_values[setting] = _short(factor * std_medians[column])
+                comments[setting] = (
+                    f"{setting}: the fitted multiplier times the {column} column's median (calibrate reads the "
+                    "column itself; this value is for fixes without one, and for verify)"
+                )
     sections = {"scenario": _rates(scenario, rates), "filter": filter_values, "truth": truth}
     return sections, comments
 

@@ -96,9 +96,19 @@ class ReferenceAccelGpsLog:
                 columns[column] = np.asarray(columns[column], dtype=float) * float(values[key])
         return calibrate_accel_gps(self._scenario(values), *self.arrays, **columns, **self.options, gate=gate)
 
-    def loglik(self, values: Mapping[str, float], *, gate: float | None = None) -> float:
-        """log L of the log's innovations with ``values`` in place."""
-        return loglik_of(self.calibrate(values, gate=gate))
+    def loglik(self, values: Mapping[str, float], *, gate: float | None = None, rejected: np.ndarray | None = None) -> float:
+        """log L of the log's innovations with ``values`` in place; ``rejected`` (bool over the fixes used)
+        holds a fixed set of fixes out instead of a gate: they enter as missing (prediction only)."""
+        if rejected is None:
+            return loglik_of(self.calibrate(values, gate=gate))
+        rows = self.calibrate({}).fix_rows[np.asarray(rejected, dtype=bool)] - 1
+        imu_time, accel, gps_time, gps_position, gps_velocity = self.arrays
+        position = np.array(gps_position, dtype=float)
+        position[rows] = np.nan
+        held = ReferenceAccelGpsLog.__new__(ReferenceAccelGpsLog)
+        held.scenario, held.columns, held.options = self.scenario, self.columns, self.options
+        held.arrays = (imu_time, accel, gps_time, position, gps_velocity)
+        return loglik_of(held.calibrate(values))
 
 
 def prepare_reference_accel_gps_log(scenario, imu_time, accel, gps_time, gps_position, gps_velocity, **options) -> ReferenceAccelGpsLog:

@@ -1,24 +1,32 @@
-"""Maximize a log-likelihood over positive settings on a log scale, with 95% intervals and flatness flags.
+"""Maximize a log-likelihood over settings on a log or linear scale, with 95% intervals and flatness flags.
 
-The search runs over u = log(value) within bounds (L-BFGS-B, central-difference gradients), from the
-given starts. Then, with ``drop`` = chi2.ppf(confidence, 1) / 2 (1.92 at 95%), each parameter is judged
+The search runs over u = log(value) within bounds (a parameter with ``scale="linear"``, such as a time
+offset that may be negative: u = value) (L-BFGS-B, central-difference gradients), from the given
+starts. Then, with ``drop`` = chi2.ppf(confidence, 1) / 2 (1.92 at 95%), each parameter is judged
 along its own direction: the slice of log L through the optimum (the others held there) by default, or
 its profile (the others re-maximized) with ``profile=True``:
 
 * **unidentified** (flat): log L at both ends of the search range is within ``drop`` of the maximum,
   so the log cannot tell any value in the range from the estimate;
-* **at the lower bound** ("consistent with 0"): only the lower end is within ``drop``; the interval is
-  [0, upper limit], the upper limit where log L has fallen by ``drop``;
-* otherwise the interval is exp(u_hat +- z se), se from the observed information (the inverse of the
-  negated Hessian of log L in u over the interior, identified parameters, by central differences), or
-  the two points where the profile has fallen by ``drop`` (Wilks). A side where log L never falls by
-  ``drop`` within the range has no limit (None).
+* **at the lower bound** ("consistent with 0", log scale): only the lower end is within ``drop``; the
+  interval is [0, upper limit], the upper limit where log L has fallen by ``drop`` (linear scale: no
+  lower limit within the range, None);
+* otherwise the interval is u_hat +- z se mapped back (exp on the log scale), se from the observed
+  information (the inverse of the negated Hessian of log L in u over the interior, identified
+  parameters, by central differences), or the two points where the profile has fallen by ``drop``
+  (Wilks); where that Hessian is not positive definite, the profile's points too (the parameter's note
+  says so). A side where log L never falls
+  by ``drop`` within the range has no limit (None).
+
+When a point evaluated for the curves beats the maximum found (the search stopped at a local maximum),
+the search restarts from it (``restarts`` times at most); if a point still beats the reported maximum,
+``converged`` is False whatever the optimizer said, and the message names the point.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import optimize, stats
@@ -30,22 +38,30 @@ GRADIENT_STEP = 1e-4
 HESSIAN_STEP = 1e-2
 #: a projected gradient of log L in u below this counts as the optimum (log L changes by < 1e-7 over 1e-3)
 STATIONARY = 1e-4
+#: a linear parameter's u counts its value in this many parts of its range
+LINEAR_STEPS = 1000.0
+#: a curve point whose log L exceeds the maximum found by more than this marks the search not converged
+BEATEN = 1e-4
 #: what an evaluation that fails (a setting the model refuses, a singular S_k) counts as: far below any fit
 FAILED = -1e300
 
 
 @dataclass(frozen=True)
 class Free:
-    """A free parameter: its name, unit, start (> 0) and search range [lower, upper] (0 < lower < upper)."""
+    """A free parameter: its name, unit, start and search range [lower, upper] (0 < lower < upper on the
+    log scale; any lower <= start <= upper with ``scale="linear"``)."""
 
     name: str
     start: float
     lower: float
     upper: float
     unit: str = ""
+    scale: str = "log"
 
     def __post_init__(self) -> None:
-        if not 0 < self.lower <= self.start <= self.upper:
+        if self.scale not in ("log", "linear"):
+            raise ValueError(f"{self.name}: scale must be 'log' or 'linear', got {self.scale!r}")
+        if not (0 < self.lower or self.scale == "linear") or not self.lower <= self.start <= self.upper:
             raise ValueError(f"{self.name}: expected 0 < lower <= start <= upper, got {self.lower!r}, {self.start!r}, {self.upper!r}")
 
 
@@ -71,13 +87,22 @@ class MleFit:
 class _Objective:
     """-log L in u, counting evaluations; a failing evaluation is :data:`FAILED`."""
 
-    def __init__(self, loglik: Callable[[Mapping[str, float]], float], names: Sequence[str]):
-        self.loglik, self.names, self.count = loglik, list(names), 0
+    def __init__(self, loglik: Callable[[Mapping[str, float]], float], names: Sequence[str], linear: np.ndarray,
+                 units: np.ndarray):
+        self.loglik, self.names, self.count, self.linear, self.units = loglik, list(names), 0, linear, units
+
+    def values(self, u: np.ndarray) -> np.ndarray:
+        """The parameters' values at u."""
+        return np.where(self.linear, u * self.units, np.exp(np.where(self.linear, 0.0, u)))
+
+    def u_of(self, x: np.ndarray) -> np.ndarray:
+        """u at the values x."""
+        return np.where(self.linear, x / self.units, np.log(np.where(self.linear, 1.0, x)))
 
     def loglik_at(self, u: np.ndarray) -> float:
         self.count += 1
         try:
-            value = float(self.loglik(dict(zip(self.names, np.exp(u).tolist()))))
+            value = float(self.loglik(dict(zip(self.names, self.values(u).tolist()))))
         except (ValueError, ArithmeticError, np.linalg.LinAlgError):
             return FAILED
         return value if np.isfinite(value) else FAILED
@@ -143,6 +168,7 @@ def maximize(
     profile: bool = False,
     confidence: float = 0.95,
     curve_points: int = 15,
+    restarts: int = 2,
 ) -> MleFit:
     """Maximize ``loglik`` over the ``free`` parameters and judge each one (see the module's docstring).
 
@@ -157,12 +183,20 @@ def maximize(
         Of the intervals, in (0, 1).
     curve_points : int
         Points of each parameter's curve for the figure.
+    restarts : int
+        Searches restarted from a curve point that beats the maximum found, before the fit is reported
+        not converged.
     """
     names = [p.name for p in free]
-    objective = _Objective(loglik, names)
-    low = np.log([p.lower for p in free])
-    high = np.log([p.upper for p in free])
-    u0 = np.clip(np.log([p.start for p in free]), low, high)
+    linear = np.array([p.scale == "linear" for p in free], dtype=bool)
+    # a linear parameter's u is in units of 1/1000 of its range, so that the steps and tolerances in u
+    # mean for it about what they mean for log(value)
+    units = np.array([(p.upper - p.lower) / LINEAR_STEPS if p.scale == "linear" else 1.0 for p in free], dtype=float)
+    objective = _Objective(loglik, names, linear, units)
+    to_u = objective.u_of
+    low = to_u(np.array([p.lower for p in free], dtype=float))
+    high = to_u(np.array([p.upper for p in free], dtype=float))
+    u0 = np.clip(to_u(np.array([p.start for p in free], dtype=float)), low, high)
     f = lambda u: -objective.loglik_at(u)  # noqa: E731
     result = _minimize(f, u0, low, high)
     u_hat, best = np.asarray(result.x, dtype=float), -float(result.fun)
@@ -204,9 +238,10 @@ def maximize(
             cov = np.linalg.inv(hess)
             se = {i: float(np.sqrt(cov[a, a])) for a, i in enumerate(interior)}
     parameters, curves = {}, {}
+    back = lambda i, u: float(u * units[i] if linear[i] else np.exp(u))  # noqa: E731
     for i, p in enumerate(free):
         falls_low, falls_high = ends[i]
-        value = float(np.exp(u_hat[i]))
+        value = back(i, u_hat[i])
         identified, at_bound, note = True, False, ""
         ci_low = ci_high = None
         if not falls_low and not falls_high:
@@ -215,34 +250,74 @@ def maximize(
                 f"unidentified: log L changes by less than {drop:.3g} over [{p.lower:.3g}, {p.upper:.3g}] {p.unit}"
                 "; the input setting is kept"
             ).replace(" ;", ";")
+        elif not falls_low and linear[i]:
+            ci_high = back(i, crossing(i, high[i]))
+            note = f"no lower limit within the search range (down to {p.lower:.3g} {p.unit})".replace(" )", ")")
         elif not falls_low:
             at_bound, ci_low = True, 0.0
-            ci_high = float(np.exp(crossing(i, high[i])))
+            ci_high = back(i, crossing(i, high[i]))
             note = f"consistent with 0: {confidence:.0%} upper limit {ci_high:.3g} {p.unit}".rstrip()
         elif not falls_high:
-            ci_low = float(np.exp(crossing(i, low[i])))
+            ci_low = back(i, crossing(i, low[i]))
             note = f"no upper limit within the search range (up to {p.upper:.3g} {p.unit})".replace(" )", ")")
         elif i in se:
-            ci_low, ci_high = float(np.exp(u_hat[i] - z * se[i])), float(np.exp(u_hat[i] + z * se[i]))
-        else:  # the profile's interval, or the slice's where the observed information is not positive definite
-            ci_low, ci_high = float(np.exp(crossing(i, low[i]))), float(np.exp(crossing(i, high[i])))
-            if not profile:
-                note = "interval from the slice of log L: the observed information is not positive definite"
+            ci_low, ci_high = back(i, u_hat[i] - z * se[i]), back(i, u_hat[i] + z * se[i])
+        elif profile:
+            ci_low, ci_high = back(i, crossing(i, low[i])), back(i, crossing(i, high[i]))
+        else:  # the observed information is not positive definite: the profile's interval, not the slice's
+            ci_low, ci_high = (back(i, v) for v in _profile_crossings(f, i, u_hat, low, high, best - drop))
+            note = "interval from the profile likelihood: the observed information is not positive definite"
         parameters[p.name] = FitParameter(p.name, value, ci_low, ci_high, p.unit, p.start, identified, at_bound, note)
-        curves[p.name] = _curve(along, i, u_hat, low, high, ci_low, ci_high, curve_points)
+        curves[p.name] = _curve(along, i, u_hat, low, high, ci_low, ci_high, curve_points, float(units[i]) if linear[i] else None)
     method = "profile" if profile else "observed-information"
-    values = dict(zip(names, np.exp(u_hat).tolist()))
-    return MleFit(values, best, converged, parameters, curves, method, objective.count, str(result.message))
+    message = str(result.message)
+    for index, (name, curve) in enumerate(curves.items()):
+        top = int(np.argmax(curve["loglik"]))
+        if curve["loglik"][top] > best + BEATEN:
+            if restarts > 0:
+                starts = objective.values(u_hat)
+                starts[index] = curve["value"][top]
+                again = [replace(p, start=float(np.clip(x, p.lower, p.upper))) for p, x in zip(free, starts)]
+                return maximize(loglik, again, profile=profile, confidence=confidence, curve_points=curve_points,
+                                restarts=restarts - 1)
+            converged = False
+            message = (
+                f"not converged: log L at {name} = {curve['value'][top]:.6g} ({curve['loglik'][top]:.10g}) beats the "
+                f"reported maximum ({best:.10g}); the search stopped at a local maximum"
+            )
+    values = dict(zip(names, objective.values(u_hat).tolist()))
+    return MleFit(values, best, converged, parameters, curves, method, objective.count, message)
 
 
-def _curve(along, i, u_hat, low, high, ci_low, ci_high, points) -> dict[str, list[float]]:
+def _profile_crossings(f, i, u_hat, low, high, level) -> tuple[float, float]:
+    """The two u_i where the profile of log L (the others re-maximized) falls to ``level``."""
+    others = [j for j in range(u_hat.size) if j != i]
+
+    def profile(value: float) -> float:
+        u = u_hat.copy()
+        u[i] = value
+        if not others:
+            return -f(u)
+
+        def g(w):
+            v = u.copy()
+            v[others] = w
+            return f(v)
+
+        return -float(_minimize(g, u_hat[others], low[others], high[others]).fun)
+
+    return tuple(optimize.brentq(lambda v: profile(v) - level, u_hat[i], end, xtol=1e-4) for end in (low[i], high[i]))
+
+
+def _curve(along, i, u_hat, low, high, ci_low, ci_high, points, unit=None) -> dict[str, list[float]]:
     """log L along parameter i over its interval widened by half its width each way (the whole search
-    range where it has no interval), in the parameter's unit."""
-    if ci_low is not None and ci_high is not None and ci_low > 0:
-        a, b = np.log(ci_low), np.log(ci_high)
+    range where it has no interval), in the parameter's unit (``unit``: a linear parameter's u unit)."""
+    linear = unit is not None
+    if ci_low is not None and ci_high is not None and (linear or ci_low > 0):
+        a, b = (ci_low / unit, ci_high / unit) if linear else (np.log(ci_low), np.log(ci_high))
         width = max(b - a, 1e-3)
         a, b = max(a - 0.5 * width, low[i]), min(b + 0.5 * width, high[i])
     else:
         a, b = low[i], high[i]
     grid = np.unique(np.append(np.linspace(a, b, points), u_hat[i]))
-    return {"value": np.exp(grid).tolist(), "loglik": [along(i, v) for v in grid]}
+    return {"value": (grid * unit if linear else np.exp(grid)).tolist(), "loglik": [along(i, v) for v in grid]}

@@ -75,7 +75,8 @@ class FitResult:
     fixes : int
         The measurements in the likelihood (fixes, or samples for scale-bias).
     converged : bool
-        Whether the optimizer reported convergence.
+        Whether the search converged: the optimizer's verdict or a projected gradient below
+        :data:`~kalcal.fitting.mle.STATIONARY`, and no point evaluated for the curves beating the maximum.
     interval_method : {"observed-information", "profile"}
     adequate : bool
         Whether the fitted filter's innovations pass their diagnostics (NIS and whiteness).

@@ -11,6 +11,7 @@ import pandas as pd
 
 from kalcal.calibration.accel_gps import calibrate_accel_gps, prior_conflict
 from kalcal.calibration.diagnostics import innovation_diagnostics
+from kalcal.calibration.likelihood import gate_excess
 from kalcal.calibration.plausibility import CalibrationWarning
 from kalcal.calibration.smoothing import smooth_calibration
 from kalcal.calibration.windows import accel_gps_stability, check_windows
@@ -185,6 +186,9 @@ def compute_accel_gps_calibration(
     conflict = prior_conflict(result)
     if conflict is not None:
         warnings.append(conflict)
+    excess = "" if gate is None else gate_excess(int(np.count_nonzero(result.rejected)), int(result.rejected[result.skip:].size), gate)
+    if excess:
+        warnings.append(CalibrationWarning("gate-rejects-too-many", f"{excess}: the noise settings may be too small"))
     if result.skipped_nan:
         warnings.append(CalibrationWarning("fixes-skipped-nan", f"{result.skipped_nan} fix(es) with a NaN field skipped"))
     if result.skipped_outside:
