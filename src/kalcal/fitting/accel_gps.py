@@ -31,6 +31,10 @@ FLOORS = {
     "filter.bias_correlation_time": 30.0,
     "filter.scale_std": 1e-4,
 }
+#: a gate that rejects more than this share of the fixes is taken to hide a model that does not fit, not
+#: to remove gross outliers: the fit is then not adequate (below it, an excess over the gate's own share
+#: is reported in ``notes`` as outliers)
+OUTLIER_SHARE = 0.1
 #: each search range spans this factor either side of the start (log scale)
 RANGE = 1e3
 #: settings searched on a linear scale, within these bounds either side of 0: a latency may be negative
@@ -134,9 +138,12 @@ def fit_accel_gps(
     if gate is not None:
         if rounds is None:
             notes.append(f"the gate's rejected set still changed after {MAX_GATE_ROUNDS} refits; the last set is used")
-        excess = gate_excess(int(np.count_nonzero(mask)), int(np.count_nonzero(used) + np.count_nonzero(mask)), gate)
-        if excess:
+        rejected_count, gated = int(np.count_nonzero(mask)), int(np.count_nonzero(used) + np.count_nonzero(mask))
+        excess = gate_excess(rejected_count, gated, gate)
+        if excess and rejected_count > OUTLIER_SHARE * gated:
             adequate, adequacy = False, f"{excess}: no fit over the rest is trusted"
+        elif excess:  # what a gate is for: a few gross outliers, counted and listed in rejected_fixes
+            notes.append(f"{excess}: read as gross outliers (at most {OUTLIER_SHARE:.0%} of the fixes)")
     for key in free:
         if key.startswith("log."):
             column = key.split(".")[1].removesuffix("_multiplier")
