@@ -17,25 +17,11 @@ from typing import Any
 import numpy as np
 
 from kalcal.calibration.accel_gps import AccelGpsCalibration, calibrate_accel_gps
+from kalcal.calibration.accel_gps_evaluation import UNITS
 from kalcal.calibration.likelihood import innovation_loglik
 from kalcal.errors import KalcalError
 from kalcal.models.accel_gps import AccelGpsFilter, AccelGpsScenario
 
-#: the unit of each setting a fit may free
-UNITS = {
-    "filter.accel_noise_std": "m/s^2",
-    "filter.bias_walk_std": "m/s^2",
-    "filter.gps_position_std": "m",
-    "filter.gps_velocity_std": "m/s",
-    "filter.bias_std": "m/s^2",
-    "filter.bias_correlation_time": "s",
-    "filter.position0_std": "m",
-    "filter.velocity0_std": "m/s",
-    "filter.scale_std": "1",
-    "filter.gps_latency": "s",
-    "log.position_std_multiplier": "1",
-    "log.velocity_std_multiplier": "1",
-}
 MULTIPLIERS = {"log.position_std_multiplier": "position_std", "log.velocity_std_multiplier": "velocity_std"}
 
 
