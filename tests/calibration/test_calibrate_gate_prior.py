@@ -85,3 +85,24 @@ def test_a_prior_the_data_contradict_is_reported():
     assert warning is not None and warning.code == "prior-conflict"
     assert prior_conflict(calibrate_accel_gps(truth, *args)) is None
     assert prior_conflict(calibrate_accel_gps(truth, *args, prior="diffuse")) is None
+
+
+def test_a_walking_bias_that_follows_its_prior_rarely_raises_a_conflict():
+    """Truth = filter with a random-walk bias: z = b_hat / sqrt(sigma_0^2 + walk variance - P_bb) is N(0, 1),
+    so at 0.999 the warning fires at rate 0.001 (without the walk's variance it fired at about 5%)."""
+    from scipy import stats
+
+    from kalcal.calibration.accel_gps import bias_walk_variance
+
+    settings = ["truth.bias_walk_std=2e-3", "filter.bias_walk_std=2e-3", "filter.bias_std=0.1"]
+    scenario = build_scenario("accel-gps", assignments=settings)
+    count = 120
+    logs = sample_accel_gps_logs(scenario, np.random.default_rng(2024), count)
+    raised = 0
+    for i in range(count):
+        args = (logs.sample_time, logs.accel[i], logs.fix_time, logs.gps_position[i], logs.gps_velocity[i])
+        result = calibrate_accel_gps(scenario, *args)
+        walk = bias_walk_variance(scenario, result, logs.sample_time)
+        assert walk == pytest.approx(2e-3**2 * (result.time[-1] - result.start_time) * 200.0, rel=1e-9)
+        raised += prior_conflict(result, walk_variance=walk) is not None
+    assert raised <= stats.binom.ppf(0.999, count, 0.001)

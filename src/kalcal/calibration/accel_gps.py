@@ -37,6 +37,7 @@ from kalcal.calibration.accel_gps_log import INITS, AccelGpsLog, Init, Prior, pr
 from kalcal.calibration.accel_gps_result import AccelGpsCalibration, ImuGap
 from kalcal.calibration.plausibility import CalibrationWarning
 from kalcal.filters.steps import UpdateForm
+from kalcal.models.accel_gps import AccelGpsScenario
 
 __all__ = ["INITS", "AccelGpsCalibration", "AccelGpsLog", "ImuGap", "calibrate_accel_gps", "prepare_accel_gps_log", "prior_conflict"]
 
@@ -120,20 +121,36 @@ def calibrate_accel_gps(
     return log.calibrate(gate=gate)
 
 
-def prior_conflict(result: AccelGpsCalibration, confidence: float = CONFLICT_CONFIDENCE) -> CalibrationWarning | None:
+def bias_walk_variance(scenario: AccelGpsScenario, result: AccelGpsCalibration, imu_time: np.ndarray) -> float:
+    """The variance a random-walk bias accumulates from the calibration's start to its last fix, m^2/s^4:
+    bias_walk_std^2 per accelerometer sample over the span, in median sample periods (0 for a constant or
+    a Gauss-Markov bias, whose prior is its stationary spread at any time)."""
+    settings = scenario.filter_settings
+    if settings.bias_correlation_time > 0 or settings.bias_walk_std == 0:
+        return 0.0
+    period = float(np.median(np.diff(np.asarray(imu_time, dtype=float))))
+    return float(settings.bias_walk_std**2 * (result.time[-1] - result.start_time) / period)
+
+
+def prior_conflict(
+    result: AccelGpsCalibration, confidence: float = CONFLICT_CONFIDENCE, *, walk_variance: float = 0.0
+) -> CalibrationWarning | None:
     """A warning when the last bias estimate lies too far from its prior mean 0 for the prior to hold.
 
-    Under the model the estimate b_hat = E[b | data] has mean 0 and variance sigma_0^2 - P_bb (the prior's
-    variance less the posterior's), so z = b_hat / sqrt(sigma_0^2 - P_bb) is N(0, 1): beyond the two-sided
-    ``confidence`` quantile the data and the prior conflict. None for a diffuse prior (nothing to conflict
-    with) or when the data did not move the bias's variance.
+    Under the model the estimate b_hat = E[b_K | data] has mean 0 and variance Var(b_K) - P_bb (the
+    bias's variance at the last fix with no data, less the posterior's), so z = b_hat / sqrt(Var(b_K) -
+    P_bb) is N(0, 1): beyond the two-sided ``confidence`` quantile the data and the prior conflict.
+    Var(b_K) = sigma_0^2 + ``walk_variance`` (m^2/s^4: a random walk's variance accumulated from the start
+    to the last fix, :func:`bias_walk_variance`; a Gauss-Markov bias stays at its stationary sigma_0^2).
+    None for a diffuse prior (nothing to conflict with) or when the data did not move the bias's variance.
     """
     from scipy import stats
 
     if result.bias_prior_std >= DIFFUSE_BIAS_STD:
         return None
-    spread = result.bias_prior_std**2 - result.covariance[-1, 2, 2]
-    if not spread > 1e-12 * result.bias_prior_std**2:
+    unconditional = result.bias_prior_std**2 + walk_variance
+    spread = unconditional - result.covariance[-1, 2, 2]
+    if not spread > 1e-12 * unconditional:
         return None
     z = float(result.bias[-1] / np.sqrt(spread))
     limit = float(stats.norm.ppf(0.5 + confidence / 2))

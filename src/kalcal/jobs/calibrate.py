@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from kalcal.calibration.accel_gps import calibrate_accel_gps, prior_conflict
+from kalcal.calibration.accel_gps import bias_walk_variance, calibrate_accel_gps, prior_conflict
 from kalcal.calibration.diagnostics import innovation_diagnostics
 from kalcal.calibration.likelihood import gate_excess
 from kalcal.calibration.plausibility import CalibrationWarning
@@ -183,7 +183,7 @@ def compute_accel_gps_calibration(
     used[: result.skip] = False
     diagnostics = innovation_diagnostics(normalized[used])
     warnings = list(result.warnings)
-    conflict = prior_conflict(result)
+    conflict = prior_conflict(result, walk_variance=bias_walk_variance(scenario, result, imu["time"]))
     if conflict is not None:
         warnings.append(conflict)
     excess = "" if gate is None else gate_excess(int(np.count_nonzero(result.rejected)), int(result.rejected[result.skip:].size), gate)
