@@ -150,18 +150,13 @@ def fit_accel_gps(
             notes.append(f"{key}: the log's {column} column times one fitted multiplier, instead of a constant std")
     rejected = getattr(calibration, "rejected_rows", None)
     settings, comments = _settings(scenario, chosen, fit, rates, std_medians or {})
-    return FitResult(
-        scenario=scenario.NAME,
-        parameters=fit.parameters,
-        loglik=fit.loglik,
-        aic=fit.aic,
+    return FitResult.from_search(
+        scenario.NAME,
+        fit,
         fixes=int(np.count_nonzero(used)),
-        converged=fit.converged,
-        interval_method=fit.interval_method,
         adequate=adequate,
         adequacy=adequacy,
         diagnostics=diagnostics.as_dict(),
-        curves=fit.curves,
         notes=notes,
         rejected_fixes=None if gate is None else [int(row) for row in (rejected if rejected is not None else [])],
         settings=settings,

@@ -123,6 +123,16 @@ class FitResult:
         if self.interval_method not in INTERVAL_METHODS:
             raise ValueError(f"interval_method: expected one of {INTERVAL_METHODS}, got {self.interval_method!r}")
 
+    @classmethod
+    def from_search(cls, scenario: str, fit, **rest: Any) -> FitResult:
+        """The result of ``scenario``'s fit from its search (a :class:`kalcal.fitting.mle.MleFit`: the
+        parameters, log L, AIC, convergence, interval method and curves) and the fields only the
+        scenario knows (``rest``)."""
+        return cls(
+            scenario=scenario, parameters=fit.parameters, loglik=fit.loglik, aic=fit.aic, converged=fit.converged,
+            interval_method=fit.interval_method, curves=fit.curves, **rest,
+        )
+
     def value(self, name: str) -> float | None:
         """The estimate of ``name`` (None when unidentified)."""
         return self.parameters[name].value

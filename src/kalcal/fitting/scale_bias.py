@@ -87,18 +87,13 @@ def fit_scale_bias(
         "something, e.g. time-correlated reference noise, a nonlinear sensor response, or drift that is not a random walk"
     )
     notes = [IDENTIFIABILITY, "theta has a diffuse prior: the likelihood is the conditional one, after the first samples that determine theta"]
-    return FitResult(
-        scenario=scenario.NAME,
-        parameters=fit.parameters,
-        loglik=fit.loglik,
-        aic=fit.aic,
+    return FitResult.from_search(
+        scenario.NAME,
+        fit,
         fixes=samples,
-        converged=fit.converged,
-        interval_method=fit.interval_method,
         adequate=adequate,
         adequacy=adequacy,
         diagnostics=diagnostics.as_dict(),
-        curves=fit.curves,
         notes=notes,
         settings=_settings(scenario, chosen, rate),
         comments=_comments(fit),
