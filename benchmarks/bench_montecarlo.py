@@ -8,7 +8,11 @@ accelerometer samples between them):
 * the exact engine with every statistic against the raw cost of drawing its standard normals with the
   same generator, blocks and threads;
 * the sampled engine (every 200 Hz sample) against the raw cost of its own draws;
-* the compiled block path against the numpy reference path on the same block;
+* the compiled block path against the numpy reference path on the same block, and the pair sums of
+  one block in float32 runs (what the engine does) against one float64 syrk;
+* the Monte Carlo in a fresh process, as the CLI pays it: numba's one-time setup, the first blocks and
+  the later ones (from the progress callback's times), against the same run warm in this process;
+* the exact engine with BLAS free to use every core inside the blocks, against the engine's limit of one;
 * realizations per second of kalcal against FilterPy (and simdkalman, and dynamax when installed) run
   in this process on the same workload;
 * peak memory of a whole verify run at N = 3 x 10^5 and 3 x 10^6 (in a child process).
@@ -17,6 +21,8 @@ accelerometer samples between them):
 from __future__ import annotations
 
 import argparse
+import contextlib
+import json
 import os
 import resource
 import subprocess
@@ -25,9 +31,11 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
+from scipy.linalg.blas import dsyrk
 
 from kalcal.models.accel_gps import AccelGpsScenario
-from kalcal.montecarlo.accumulators import MomentSums
+from kalcal.montecarlo.accumulators import PAIR_RUN, MomentSums, ResidualProducts
+from kalcal.montecarlo import blas
 from kalcal.montecarlo.engine import BLOCK_SIZE, block_generator, block_sizes, run_monte_carlo
 from kalcal.montecarlo.scenarios import accel_gps_problem
 
@@ -44,6 +52,18 @@ def best_of(repeats, function, *args, **kwargs) -> float:
     return min(times)
 
 
+def alternating(repeats, *functions) -> list[float]:
+    """The fastest thread-CPU time (s) of each function over ``repeats`` rounds that run them in turn, so that
+    a change in the machine's load falls on all of them alike."""
+    best = [float("inf")] * len(functions)
+    for _ in range(repeats):
+        for i, function in enumerate(functions):
+            start = time.thread_time()
+            function()
+            best[i] = min(best[i], time.thread_time() - start)
+    return best
+
+
 def raw_draws(n: int, normals_per_realization: int, seed: int = 0) -> None:
     """Draw exactly the normals of n realizations, block by block, on the engine's threads."""
     sizes = block_sizes(n)
@@ -53,6 +73,19 @@ def raw_draws(n: int, normals_per_realization: int, seed: int = 0) -> None:
 
     with ThreadPoolExecutor(WORKERS) as pool:
         list(pool.map(draw, range(len(sizes))))
+
+
+def blas_free_run(problem, n: int) -> float:
+    """The fastest of two exact runs with the BLAS limit lifted (every core to BLAS inside each block), s.
+
+    Only for timing: the pair sums' bits then depend on the thread count (:mod:`kalcal.montecarlo.blas`).
+    """
+    limit = blas.single_threaded_blas
+    blas.single_threaded_blas = contextlib.nullcontext
+    try:
+        return best_of(2, lambda: run_monte_carlo(problem, n, seed=0))
+    finally:
+        blas.single_threaded_blas = limit
 
 
 def filterpy_rate(problem, realizations: int, per_sample: bool) -> float:
@@ -125,6 +158,41 @@ def dynamax_rate(problem, realizations: int) -> float | None:
     return realizations / (time.perf_counter() - start)
 
 
+FRESH = """
+import json, sys, time
+start = time.perf_counter()
+from kalcal.models.accel_gps import AccelGpsScenario
+from kalcal.montecarlo.engine import run_monte_carlo
+from kalcal.montecarlo.scenarios import accel_gps_problem
+imported = time.perf_counter() - start
+setup = 0.0
+if sys.argv[2] == "setup-first":  # numba's type registries, timed apart (the CLI pays them in the first block)
+    from numba.core.registry import cpu_target
+    start = time.perf_counter()
+    cpu_target.target_context.refresh()
+    setup = time.perf_counter() - start
+problem = accel_gps_problem(AccelGpsScenario())
+marks = []
+run = run_monte_carlo(problem, int(sys.argv[1]), 0, progress=lambda done, total: marks.append((done, time.perf_counter())))
+print(json.dumps({"imported": imported, "setup": setup, "wall": run.wall_s, "marks": marks}))
+"""
+
+
+def fresh_process(n: int, mode: str) -> dict:
+    """One Monte Carlo of n realizations in a new interpreter (numba's cache warm), with its progress times."""
+    result = subprocess.run([sys.executable, "-c", FRESH, str(n), mode], capture_output=True, text=True, check=True)
+    return json.loads(result.stdout.strip().splitlines()[-1])
+
+
+def block_times(marks: list) -> tuple[float, float]:
+    """(time to the first finished block, median time per block per thread after it), s, from progress marks."""
+    start = marks[0][1]
+    finished = [t for done, t in marks[1:]]
+    first = finished[0] - start
+    later = np.diff(finished[WORKERS:]) * WORKERS  # a block finishes every (block time / threads)
+    return first, float(np.median(later)) if later.size else float("nan")
+
+
 def peak_memory_mib(n: int) -> float:
     """Peak resident memory (MiB) of a child process running ``kalcal verify -n n --no-report``."""
     # ru_maxrss survives exec on Linux (the child would report this process's peak); VmHWM belongs
@@ -174,6 +242,26 @@ def main() -> None:
     print(f"  raw draws ({sampled_normals} normals/realization): {t_draw_s:7.3f} s")
     print(f"  kalcal sampled engine:                    {t_sampled:7.3f} s   ratio {t_sampled / t_draw_s:5.2f}x the draws")
     print(f"  normals per realization, sampled / exact: {sampled_normals / exact_normals:.1f}")
+
+    print(f"\nin a fresh process, as the CLI pays it (N = {n:,}; numba's cache warm):")
+    for mode in ("plain", "setup-first"):
+        fresh = min((fresh_process(n, mode) for _ in range(2)), key=lambda run: run["wall"])
+        first, later = block_times(fresh["marks"])
+        setup = f"numba setup timed apart {fresh['setup']:.3f} s, " if mode == "setup-first" else ""
+        print(f"  {mode:12s} {setup}Monte Carlo {fresh['wall']:.3f} s = {fresh['wall'] / t_draw:.2f}x the draws; "
+              f"first blocks done at {first:.3f} s, later blocks {later * 1e3:.0f} ms each per thread")
+
+    with blas.single_threaded_blas():
+        stacked = np.ascontiguousarray(problem.run_block(block_generator(0, 0), BLOCK_SIZE, "exact").residual
+                                       .reshape(BLOCK_SIZE, -1).T)
+        t_float32, t_float64 = alternating(
+            15, lambda: ResidualProducts.upper(stacked), lambda: np.triu(dsyrk(1.0, stacked.T, trans=1, lower=0))
+        )
+    print(f"\npair sums of one block, one thread: float32 runs of {PAIR_RUN} {t_float32 * 1e3:.1f} ms, "
+          f"float64 dsyrk {t_float64 * 1e3:.1f} ms, factor {t_float64 / t_float32:.2f}x")
+
+    unlimited = blas_free_run(problem, n)
+    print(f"exact engine with BLAS free inside the blocks: {unlimited:.3f} s = {unlimited / t_exact:.2f}x the engine's (BLAS limited to one thread)")
 
     t_numpy = best_of(3, lambda: MomentSums.from_block(problem.run_block(block_generator(0, 0), BLOCK_SIZE, "exact")))
     t_fused = best_of(3, lambda: problem.block_sums(block_generator(0, 0), BLOCK_SIZE, "exact"))
