@@ -146,9 +146,9 @@ def test_blas_limit_is_set_once_per_run_held_throughout_and_restored(monkeypatch
     thread inside every block, the original count back afterwards, and the same numbers."""
     from threadpoolctl import threadpool_info, threadpool_limits
 
-    from kalcal.montecarlo import blas
+    from kalcal.montecarlo import engine
 
-    controller = blas._thread_pools()
+    controller = engine._thread_pools()
     entries = []
 
     class Counting:
@@ -169,7 +169,7 @@ def test_blas_limit_is_set_once_per_run_held_throughout_and_restored(monkeypatch
             seen.append(blas_threads())
             return problem.block_sums(rng, n, engine_name)
 
-    monkeypatch.setattr(blas, "_thread_pools", lambda: Counting())
+    monkeypatch.setattr(engine, "_thread_pools", lambda: Counting())
     with threadpool_limits(limits=2, user_api="blas"):
         before = blas_threads()
         run = run_monte_carlo(Recording(), 6000, seed=5, workers=2, block_size=1000)

@@ -3,9 +3,7 @@
 The reference files in ``tests/regression/reference/`` are written by ``python -m tests.regression.runs``
 (from the repository root) and compared by ``test_seeded_statistics.py``: a change that is meant to keep
 the numbers (a refactor of the filter core, the moment sums, the engine) must keep them to rounding.
-Rewrite the references only for a change that is meant to move the numbers, and name it in the commit;
-``python -m tests.regression.runs VARIABLE ...`` rewrites only those variables of each file (where a
-run has them), leaving every other variable's stored bits as they are.
+Rewrite the references only for a change that is meant to move the numbers, and name it in the commit.
 """
 
 from __future__ import annotations
@@ -55,25 +53,15 @@ def run(name: str, out: Path) -> xr.Dataset:
         return dataset.load()
 
 
-def write_references(variables: list[str] | None = None) -> None:
-    """Write every run's ``stats.nc`` into ``REFERENCE`` as ``NAME.nc``; with ``variables``, replace only
-    those variables in the stored files (the rest stay as stored)."""
+def write_references() -> None:
+    """Write every run's ``stats.nc`` into ``REFERENCE`` as ``NAME.nc``."""
     REFERENCE.mkdir(exist_ok=True)
     for name in RUNS:
         with tempfile.TemporaryDirectory() as folder:
             dataset = run(name, Path(folder) / "run")
-        target = REFERENCE / f"{name}.nc"
-        if variables:
-            with xr.open_dataset(target) as stored:
-                kept = stored.load()
-            present = [key for key in variables if key in kept.data_vars]
-            for key in present:
-                kept[key] = dataset[key]
-            dataset = kept
-            print(f"{target}: rewrote {', '.join(present) or 'nothing'}", file=sys.stderr)
-        dataset.to_netcdf(target)
-        print(f"wrote {target}", file=sys.stderr)
+        dataset.to_netcdf(REFERENCE / f"{name}.nc")
+        print(f"wrote {REFERENCE / f'{name}.nc'}", file=sys.stderr)
 
 
 if __name__ == "__main__":
-    write_references(sys.argv[1:])
+    write_references()

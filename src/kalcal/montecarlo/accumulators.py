@@ -5,8 +5,7 @@ the number of realizations and any grouping of blocks, merged in block order, gi
 :meth:`MomentSums.from_block` is the numpy definition of a block's sums; the compiled kernels add into
 the same fields, allocated once by :meth:`SumBuffers.zeros` (:mod:`kalcal.montecarlo.sum_kernels`).
 Second moments are raw sums; central moments are derived at the end in float64 (the errors' means are
-small against their spread, so the subtraction loses no meaningful precision). Every sum is float64
-but the pairs of updates' products, summed in float32 runs (:class:`ResidualProducts`).
+small against their spread, so the subtraction loses no meaningful precision).
 """
 
 from __future__ import annotations
@@ -15,9 +14,7 @@ from dataclasses import dataclass, fields
 from typing import NamedTuple
 
 import numpy as np
-from scipy.linalg.blas import ssyrk
-
-from kalcal.montecarlo import blas
+from scipy.linalg.blas import dsyrk
 
 
 class BlockResult(NamedTuple):
@@ -35,64 +32,23 @@ class BlockResult(NamedTuple):
     normalized_residual: np.ndarray | None = None  #: L_k^{-1} r_k with S_k = L_k L_k^T, (n, K, p), if known
 
 
-#: realizations per float32 run of the pair sums (:class:`ResidualProducts`)
-PAIR_RUN = 1024
-#: unit roundoff of float32 and of float64
-FLOAT32_ROUNDOFF = 2.0**-24
-FLOAT64_ROUNDOFF = 2.0**-53
-
-
-def _gamma(terms: int, roundoff: float) -> float:
-    """gamma_m = m u / (1 - m u): the relative bound of a sum of m rounded terms (Higham, eq. 3.8)."""
-    return terms * roundoff / (1.0 - terms * roundoff)
-
-
-def pair_sum_error(count: int, run: int = PAIR_RUN) -> float:
-    """c such that every pair sum of ``count`` realizations is within c sqrt(S_aa S_bb) of its exact value.
-
-    Each run of ``run`` realizations is rounded to float32 and its products summed in float32
-    (|error| <= gamma_{run + 2} sum |r_a r_b|, the 2 for rounding both factors); the runs' sums, and
-    the blocks', are added in float64 (gamma_{count}); and sum_i |r_a r_b| <= sqrt(S_aa S_bb)
-    (Cauchy-Schwarz), with S the exact sums.
-    """
-    return _gamma(min(run, count) + 2, FLOAT32_ROUNDOFF) + _gamma(count, FLOAT64_ROUNDOFF)
-
-
-def pair_z_error(count: int, z: np.ndarray | float = 0.0, run: int = PAIR_RUN) -> np.ndarray | float:
-    """The bound on |z_computed - z_exact| of a pair z = sqrt(N) S_ab / sqrt(S_aa S_bb) (the whiteness
-    check's pairs part): with c = :func:`pair_sum_error`, c (sqrt(N) + |z|) / (1 - c)."""
-    c = pair_sum_error(count, run)
-    return c * (np.sqrt(count) + np.abs(z)) / (1.0 - c)
-
-
 class ResidualProducts:
-    """The sum of r r^T over the stacked residual vector, kept as its upper triangle.
-
-    The products are the one O(K^2 p^2) part of the sums: they are summed in float32 over runs of
-    ``PAIR_RUN`` realizations (BLAS ssyrk, which ``benchmarks/bench_montecarlo.py`` times against dsyrk) and
-    the runs in float64, within the
-    bound of :func:`pair_sum_error` (docs/verification.md, "Speed").
-    """
+    """The sum of r r^T over the stacked residual vector, kept as its upper triangle."""
 
     @staticmethod
-    def upper(stacked: np.ndarray, run: int = PAIR_RUN) -> np.ndarray:
-        """Upper triangle of sum_i r_i r_i^T for the innovations of n realizations, float64 (K p, K p).
+    def upper(stacked: np.ndarray) -> np.ndarray:
+        """Upper triangle of sum_i r_i r_i^T for the innovations of n realizations, by BLAS syrk.
 
         Parameters
         ----------
         stacked : ndarray, shape (K p, n), C-ordered
             One column per realization, its K stacked innovations (update-major).
-        run : int
-            Realizations per float32 run.
         """
         width, n = stacked.shape
-        total = np.zeros((width, width))
-        with blas.single_threaded_blas():  # the same bits whatever the caller's BLAS threads
-            for start in range(0, n, run):
-                # A C-ordered (Kp, m) array is an F-ordered (m, Kp) one: syrk with trans=1 forms A^T A.
-                part = stacked[:, start:start + run].astype(np.float32)
-                total += ssyrk(1.0, part.T, trans=1, lower=0)
-        return np.triu(total)
+        if n == 0:
+            return np.zeros((width, width))
+        # The C-ordered (Kp, n) array is an F-ordered (n, Kp) one: syrk with trans=1 forms A^T A without a copy.
+        return np.triu(dsyrk(1.0, stacked.T, trans=1, lower=0))
 
 
 class SumBuffers(NamedTuple):

@@ -10,8 +10,10 @@ A checkpoint holds the fold of the blocks finished so far; a killed run resumes 
 from __future__ import annotations
 
 import contextlib
+import functools
 import itertools
 import os
+import threading
 import time
 from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor
@@ -21,8 +23,8 @@ from functools import partial
 from pathlib import Path
 
 import numpy as np
+from threadpoolctl import ThreadpoolController
 
-from kalcal.montecarlo import blas
 from kalcal.montecarlo.accumulators import MomentSums
 from kalcal.montecarlo.checkpoint import fingerprint
 from kalcal.montecarlo.checkpoint import load as load_checkpoint
@@ -86,13 +88,48 @@ class MonteCarloRun:
     resumed_blocks: int = 0  #: blocks taken from a checkpoint instead of computed
 
 
+@functools.lru_cache(maxsize=None)
+def _thread_pools() -> ThreadpoolController:
+    """This process's thread pools (BLAS, OpenMP), found once: looking them up costs ~2 ms, a block ~20."""
+    return ThreadpoolController()
+
+
+_blas_lock = threading.Lock()
+_blas_users = 0
+_blas_limiter = None
+
+
+@contextlib.contextmanager
+def single_threaded_blas():
+    """Hold this process's BLAS to one thread while any caller is inside (the engine's parallelism is
+    over blocks).
+
+    The limit is process-global, so it is counted, not nested: the first caller to enter sets it, the
+    last to leave restores the original, and callers in between (a run's worker threads, the tasks of a
+    multi-threaded Dask worker) change nothing. A local run enters once, around its whole pool.
+    """
+    global _blas_users, _blas_limiter
+    with _blas_lock:
+        if _blas_users == 0:
+            _blas_limiter = _thread_pools().limit(limits=1, user_api="blas")
+        _blas_users += 1
+    try:
+        yield
+    finally:
+        with _blas_lock:
+            _blas_users -= 1
+            if _blas_users == 0:
+                _blas_limiter.restore_original_limits()
+                _blas_limiter = None
+
+
 def block_task(problem: Problem, seed: int, blocks: list[tuple[int, int]], engine: str) -> list[tuple[int, MomentSums]]:
     """The sums of consecutive blocks ``[(index, size), ...]``, each on its own (a thread or a Dask task).
 
-    BLAS is held to one thread (:func:`kalcal.montecarlo.blas.single_threaded_blas`; inside a local run
-    that limit is already in force and this only counts).
+    BLAS is held to one thread (:func:`single_threaded_blas`; inside a local run that limit is already
+    in force and this only counts).
     """
-    with blas.single_threaded_blas():
+    with single_threaded_blas():
         return [(b, problem.block_sums(block_generator(seed, b), size, engine)) for b, size in blocks]
 
 
@@ -176,7 +213,7 @@ def run_monte_carlo(
         workers = max(1, workers or len(os.sched_getaffinity(0)))
         executor = ThreadPoolExecutor(max_workers=workers)
         # the BLAS limit is process-global: set once for the whole run (entered first, left last)
-        contexts = [blas.single_threaded_blas(), executor]
+        contexts = [single_threaded_blas(), executor]
         submit, first_done = executor.submit, partial(futures_wait, return_when=FIRST_COMPLETED)
         in_flight_limit = 2 * workers
     else:
