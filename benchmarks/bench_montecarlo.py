@@ -9,7 +9,7 @@ accelerometer samples between them):
   same generator, blocks and threads;
 * the sampled engine (every 200 Hz sample) against the raw cost of its own draws;
 * the compiled block path against the numpy reference path on the same block, and the pair sums of
-  one block in float32 runs (what the engine does) against one float64 syrk;
+  one block as the engine sums them (float64 syrk) against a float32 ssyrk of the same innovations;
 * the Monte Carlo in a fresh process, as the CLI pays it: numba's one-time setup, the first blocks and
   the later ones (from the progress callback's times), against the same run warm in this process;
 * the exact engine with BLAS free to use every core inside the blocks, against the engine's limit of one;
@@ -31,11 +31,11 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
-from scipy.linalg.blas import dsyrk
+from scipy.linalg.blas import dsyrk, ssyrk
 
 from kalcal.models.accel_gps import AccelGpsScenario
-from kalcal.montecarlo.accumulators import PAIR_RUN, MomentSums, ResidualProducts
-from kalcal.montecarlo import blas
+from kalcal.montecarlo import engine
+from kalcal.montecarlo.accumulators import MomentSums
 from kalcal.montecarlo.engine import BLOCK_SIZE, block_generator, block_sizes, run_monte_carlo
 from kalcal.montecarlo.scenarios import accel_gps_problem
 
@@ -78,14 +78,14 @@ def raw_draws(n: int, normals_per_realization: int, seed: int = 0) -> None:
 def blas_free_run(problem, n: int) -> float:
     """The fastest of two exact runs with the BLAS limit lifted (every core to BLAS inside each block), s.
 
-    Only for timing: the pair sums' bits then depend on the thread count (:mod:`kalcal.montecarlo.blas`).
+    Only for timing: with BLAS threads inside the blocks the pair sums' bits may depend on their count.
     """
-    limit = blas.single_threaded_blas
-    blas.single_threaded_blas = contextlib.nullcontext
+    limit = engine.single_threaded_blas
+    engine.single_threaded_blas = contextlib.nullcontext
     try:
         return best_of(2, lambda: run_monte_carlo(problem, n, seed=0))
     finally:
-        blas.single_threaded_blas = limit
+        engine.single_threaded_blas = limit
 
 
 def filterpy_rate(problem, realizations: int, per_sample: bool) -> float:
@@ -251,14 +251,16 @@ def main() -> None:
         print(f"  {mode:12s} {setup}Monte Carlo {fresh['wall']:.3f} s = {fresh['wall'] / t_draw:.2f}x the draws; "
               f"first blocks done at {first:.3f} s, later blocks {later * 1e3:.0f} ms each per thread")
 
-    with blas.single_threaded_blas():
+    with engine.single_threaded_blas():
         stacked = np.ascontiguousarray(problem.run_block(block_generator(0, 0), BLOCK_SIZE, "exact").residual
                                        .reshape(BLOCK_SIZE, -1).T)
-        t_float32, t_float64 = alternating(
-            15, lambda: ResidualProducts.upper(stacked), lambda: np.triu(dsyrk(1.0, stacked.T, trans=1, lower=0))
+        t_float64, t_float32 = alternating(
+            15,
+            lambda: np.triu(dsyrk(1.0, stacked.T, trans=1, lower=0)),
+            lambda: np.triu(ssyrk(1.0, stacked.T.astype(np.float32), trans=1, lower=0)),
         )
-    print(f"\npair sums of one block, one thread: float32 runs of {PAIR_RUN} {t_float32 * 1e3:.1f} ms, "
-          f"float64 dsyrk {t_float64 * 1e3:.1f} ms, factor {t_float64 / t_float32:.2f}x")
+    print(f"\npair sums of one block, one thread: float64 dsyrk (the engine's) {t_float64 * 1e3:.1f} ms, "
+          f"float32 ssyrk with its conversion {t_float32 * 1e3:.1f} ms, factor {t_float64 / t_float32:.2f}x")
 
     unlimited = blas_free_run(problem, n)
     print(f"exact engine with BLAS free inside the blocks: {unlimited:.3f} s = {unlimited / t_exact:.2f}x the engine's (BLAS limited to one thread)")
