@@ -92,6 +92,7 @@ def fit_accel_gps(
     confidence: float = 0.95,
     rates: tuple[float, float] | None = None,
     std_medians: Mapping[str, float] | None = None,
+    max_updates: int | None = None,
 ) -> FitResult:
     """Maximum-likelihood estimates of the ``free`` settings, their intervals and the fitted filter's adequacy.
 
@@ -111,6 +112,8 @@ def fit_accel_gps(
     std_medians : mapping, optional
         The median of each per-fix std column (``{"position_std": m, "velocity_std": m/s}``), for the truth
         of a multiplier.
+    max_updates : int, optional
+        The most GPS intervals filter.toml's [scenario] duration may hold (verify's limit per realization).
     """
     free = list(DEFAULT_FREE if free is None else free)
     notes = []
@@ -149,7 +152,7 @@ def fit_accel_gps(
             column = key.split(".")[1].removesuffix("_multiplier")
             notes.append(f"{key}: the log's {column} column times one fitted multiplier, instead of a constant std")
     rejected = getattr(calibration, "rejected_rows", None)
-    settings, comments = _settings(scenario, chosen, fit, rates, std_medians or {})
+    settings, comments = _settings(scenario, chosen, fit, rates, std_medians or {}, max_updates)
     return FitResult.from_search(
         scenario.NAME,
         fit,
@@ -206,21 +209,26 @@ def _short(value: float) -> float:
     return float(f"{value:.6g}")
 
 
-def _settings(scenario, chosen, fit, rates, std_medians) -> tuple[dict[str, dict], dict[str, str]]:
+def _settings(scenario, chosen, fit, rates, std_medians, max_updates=None) -> tuple[dict[str, dict], dict[str, str]]:
     """filter.toml's sections and comments: the fitted filter in [filter] and [truth], the log's rates in [scenario]."""
     resolved = scenario.filter_settings
     filter_values = {}
     for f in dataclasses.fields(AccelGpsFilter):
         key = f"filter.{f.name}"
-        value = chosen.get(key, getattr(resolved, f.name, getattr(scenario.filter, f.name)))
+        if key == "filter.gps_latency":  # the likelihood's: an unset latency is 0, never the truth's
+            value = chosen.get(key, scenario.filter.gps_latency or 0.0)
+        else:
+            value = chosen.get(key, getattr(resolved, f.name, getattr(scenario.filter, f.name)))
         if key == "filter.bias_std" and key not in chosen and scenario.filter.bias_std is None:
             continue  # unset, as in the fit: calibrate --config keeps the log's prior rule (diffuse), verify the truth's
         if value is not None:
             filter_values[f.name] = _short(value) if key in chosen else value
     truth_names = [f.name for f in dataclasses.fields(AccelGpsTruth)]
     truth = {name: getattr(scenario.truth, name) for name in truth_names}
-    # the Monte Carlo's truth is the fitted filter's model; the log's faults (latency) stay the log's
+    # the Monte Carlo's truth is the fitted filter's model; the log's faults (latency, outliers) are the
+    # log's, which verify's truth has not (it refuses them): 0
     truth.update({name: value for name, value in filter_values.items() if name in truth_names and name != "gps_latency"})
+    truth.update(gps_latency=0.0, gps_outlier_rate=0.0, gps_outlier_std=0.0)
     comments = {}
     for key, p in fit.parameters.items():
         name = key.partition(".")[2]
@@ -241,7 +249,10 @@ def _settings(scenario, chosen, fit, rates, std_medians) -> tuple[dict[str, dict
                     f"{setting}: the fitted multiplier times the {column} column's median (calibrate reads the "
                     "column itself; this value is for fixes without one, and for verify)"
                 )
-    sections = {"scenario": _rates(scenario, rates), "filter": filter_values, "truth": truth}
+    section, shortened = _rates(scenario, rates, max_updates)
+    if shortened:
+        comments["scenario.duration"] = shortened
+    sections = {"scenario": section, "filter": filter_values, "truth": truth}
     return sections, comments
 
 
@@ -250,21 +261,32 @@ def name_of(key: str) -> str:
     return key.partition(".")[2]
 
 
-def _rates(scenario, rates) -> dict[str, Any]:
+def _rates(scenario, rates, max_updates=None) -> tuple[dict[str, Any], str]:
     """[scenario]: the log's rates (the GPS rate made a whole divisor of the accelerometer's), the
-    scenario's duration made a whole number of GPS intervals, its integration and truth kind."""
+    scenario's duration made a whole number of GPS intervals, at most ``max_updates`` of them (the most a
+    verification's realization holds), its integration and truth kind; and the comment on a shortened
+    duration ("" when it was not shortened)."""
     s = scenario.scenario
     imu_rate, gps_rate = rates if rates is not None else (s.imu_rate, s.gps_rate)
     imu_rate = _short(imu_rate)
     gps_rate = imu_rate / max(1, round(imu_rate / gps_rate))
     intervals = max(1, round(s.duration * gps_rate))
-    return {
+    comment = ""
+    if max_updates is not None and intervals > max_updates:
+        comment = (
+            f"duration: the scenario's {s.duration:g} s shortened to {max_updates / gps_rate:g} s, the {max_updates} "
+            f"GPS intervals at {gps_rate:g} Hz that kalcal verify allows a realization (its per-update arrays must fit "
+            "in memory); the log's rates are kept, since the per-sample and per-fix noise values hold at them"
+        )
+        intervals = max_updates
+    section = {
         "imu_rate": imu_rate,
         "gps_rate": gps_rate,
         "duration": intervals / gps_rate,
         "integration": s.integration,
         "truth": s.truth,
     }
+    return section, comment
 
 
 def log_rates(imu_time: np.ndarray, gps_time: np.ndarray) -> tuple[float, float]:

@@ -15,6 +15,7 @@ from kalcal.io.logs import numeric_columns, parse_column_map, read_table, requir
 from kalcal.io.outputs import inputs_of, mark_inputs, run_outputs
 from kalcal.io.results import write_json
 from kalcal.jobs.calibrate import GPS_ROLES, IMU_ROLES, stated_rates
+from kalcal.jobs.verify_arguments import MAX_UPDATES
 from kalcal.plots.fit import plot_fit
 
 #: the files of one fit
@@ -55,13 +56,17 @@ def filter_toml(result: FitResult, header: list[str]) -> str:
     comment above it, an unidentified one says that the input value is kept."""
     lines = [f"# {line}" for line in header]
     lines += [f"# {note}" for note in result.notes]
+    used = set()
     for section, values in result.settings.items():
         lines += ["", f"[{section}]"]
         for key, value in values.items():
-            if section == "filter" and key in result.comments:
-                lines.append(f"# {result.comments[key]}")
+            # a comment keyed "section.key" belongs to that key, a bare key to [filter]'s
+            for name in (f"{section}.{key}", key if section == "filter" else None):
+                if name in result.comments:
+                    lines.append(f"# {result.comments[name]}")
+                    used.add(name)
             lines.append(f"{key} = {_toml_value(value)}")
-    extra = [text for key, text in result.comments.items() if key not in result.settings.get("filter", {})]
+    extra = [text for key, text in result.comments.items() if key not in used]
     if extra:
         lines += [""] + [f"# {text}" for text in extra]
     return "\n".join(lines) + "\n"
@@ -124,7 +129,7 @@ def compute_accel_gps_fit(
     medians = {role: float(np.nanmedian(gps[role])) for role in ("position_std", "velocity_std") if role in gps}
     result = fit_accel_gps(
         log, scenario, free, profile=profile, gate=gate, confidence=confidence,
-        rates=log_rates(imu["time"], gps["time"]), std_medians=medians,
+        rates=log_rates(imu["time"], gps["time"]), std_medians=medians, max_updates=MAX_UPDATES,
     )
     header = [
         f"kalcal fit accel-gps: noise settings fitted by maximum likelihood to {imu_name} and {gps_name}",
