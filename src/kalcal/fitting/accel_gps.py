@@ -12,6 +12,7 @@ decide whether the model family is adequate for the log.
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import replace
 from collections.abc import Mapping, Sequence
 from typing import Any, Protocol
 
@@ -20,6 +21,7 @@ import numpy as np
 from kalcal.calibration.diagnostics import innovation_diagnostics
 from kalcal.calibration.likelihood import gate_excess
 from kalcal.errors import KalcalError
+from kalcal.fitting import latency_scan
 from kalcal.fitting.mle import Free, maximize
 from kalcal.fitting.result import FitResult, interval_text
 from kalcal.models.accel_gps import AccelGpsFilter, AccelGpsScenario, AccelGpsTruth
@@ -132,7 +134,9 @@ def fit_accel_gps(
             continue
         start = value if value > 0 else FLOORS.get(key, 1e-6)
         parameters.append(Free(key, start, start / RANGE, start * RANGE, log.unit(key)))
-    fit, calibration, mask, rounds = _search(log, parameters, gate, profile, confidence)
+    imu_rate = rates[0] if rates is not None else scenario.scenario.imu_rate
+    step = latency_scan.scan_step(imu_rate)
+    fit, calibration, mask, rounds = _search(log, parameters, gate, profile, confidence, step, notes)
     chosen = {key: value for key, value in fit.values.items() if fit.parameters[key].identified}
     used = _used(calibration)
     diagnostics = innovation_diagnostics(calibration.normalized_innovations[used])
@@ -182,26 +186,57 @@ def _used(calibration) -> np.ndarray:
     return used
 
 
-def _search(log, parameters, gate, profile, confidence):
+def _search(log, parameters, gate, profile, confidence, step=None, notes=None):
     """The fit over a fixed set of fixes: with a gate, gate with the start settings, fit with that
     rejected set held fixed, re-gate with the fitted settings and refit until the set stops changing
-    (at most :data:`MAX_GATE_ROUNDS` fits). Returns the fit, the fitted calibration, the rejected set
-    and the rounds taken (None where the set never settled)."""
+    (at most :data:`MAX_GATE_ROUNDS` fits). With a free latency and a grid ``step`` (s), the latency's
+    range is scanned before the first fit and at the last one (:mod:`kalcal.fitting.latency_scan`; a
+    multimodal latency is said in ``notes``).
+    Returns the fit, the fitted calibration, the rejected set and the rounds taken (None where the set
+    never settled)."""
+    scanned = step is not None and any(p.name == latency_scan.KEY for p in parameters)
+    setting = next((p.start for p in parameters if p.name == latency_scan.KEY), None)
+
+    def search(fn, params):
+        return maximize(fn, params, profile=profile, confidence=confidence)
+
+    def judged(fn, fit, params):
+        if not scanned:
+            return fit
+        refit = lambda start: search(fn, [replace(p, start=start) if p.name == latency_scan.KEY else p for p in params])  # noqa: E731
+        fit, said = latency_scan.judge(fn, fit, params, step, confidence, refit, setting)
+        if said and notes is not None:
+            notes.append(said)
+        return fit
+
+    def chosen_of(fit):
+        return {key: value for key, value in fit.values.items() if fit.parameters[key].identified}
+
     if gate is None:
-        fit = maximize(log.loglik, parameters, profile=profile, confidence=confidence)
-        chosen = {key: value for key, value in fit.values.items() if fit.parameters[key].identified}
-        return fit, log.calibrate(chosen), None, 0
+        params = latency_scan.start_from_scan(log.loglik, parameters, step) if scanned else parameters
+        fit = judged(log.loglik, search(log.loglik, params), params)
+        return fit, log.calibrate(chosen_of(fit)), None, 0
     mask = np.asarray(log.calibrate({}, gate=gate).rejected, dtype=bool)
     for rounds in range(1, MAX_GATE_ROUNDS + 1):
         held = mask.copy()
-        fit = maximize(lambda values: log.loglik(values, rejected=held), parameters, profile=profile, confidence=confidence)
-        chosen = {key: value for key, value in fit.values.items() if fit.parameters[key].identified}
-        calibration = log.calibrate(chosen, gate=gate)
+        fn = lambda values, held=held: log.loglik(values, rejected=held)  # noqa: E731
+        if rounds == 1 and scanned:
+            parameters = latency_scan.start_from_scan(fn, parameters, step)
+        fit = search(fn, parameters)
+        calibration = log.calibrate(chosen_of(fit), gate=gate)
         new = np.asarray(calibration.rejected, dtype=bool)
         if np.array_equal(new, mask):
-            return fit, calibration, mask, rounds
+            break
         mask = new
-    return fit, calibration, mask, None
+    else:
+        rounds = None
+    if scanned:  # judged over the last held set; a restart's calibration re-gates with its settings
+        before = fit
+        fit = judged(fn, fit, parameters)
+        if fit.values != before.values:
+            calibration = log.calibrate(chosen_of(fit), gate=gate)
+            mask = np.asarray(calibration.rejected, dtype=bool)
+    return fit, calibration, mask, rounds
 
 
 def _short(value: float) -> float:
