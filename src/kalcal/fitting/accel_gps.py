@@ -23,6 +23,7 @@ from kalcal.calibration.likelihood import gate_excess
 from kalcal.errors import KalcalError
 from kalcal.fitting import latency_scan
 from kalcal.fitting.mle import Free, maximize
+from kalcal.fitting.nis_tail import nis_tail
 from kalcal.fitting.result import FitResult, interval_text
 from kalcal.models.accel_gps import AccelGpsFilter, AccelGpsScenario, AccelGpsTruth
 
@@ -44,6 +45,7 @@ LINEAR = {"filter.gps_latency": 0.5}
 #: what a model that does not fit may lack, and the setting that would add it
 CANDIDATES = (
     ("time-correlated GNSS errors", None),
+    ("heavy-tailed GNSS errors (gross outliers: --gate)", None),
     ("a Gauss-Markov bias (filter.bias_correlation_time with filter.bias_std)", "filter.bias_correlation_time"),
     ("a scale factor (filter.scale_std)", "filter.scale_std"),
     ("GPS latency (filter.gps_latency)", "filter.gps_latency"),
@@ -140,8 +142,14 @@ def fit_accel_gps(
     chosen = {key: value for key, value in fit.values.items() if fit.parameters[key].identified}
     used = _used(calibration)
     diagnostics = innovation_diagnostics(calibration.normalized_innovations[used])
-    adequate = bool(diagnostics.consistent)
-    adequacy = diagnostics.verdict if adequate else inadequacy(diagnostics.verdict, free)
+    # the fit forces the mean NIS to p; the NIS tail's share it does not
+    tail = nis_tail(calibration.normalized_innovations[used])
+    adequate = bool(diagnostics.consistent) and tail.passed
+    if adequate:
+        adequacy = diagnostics.verdict
+    else:
+        verdict = "; ".join(text for text in (None if diagnostics.consistent else diagnostics.verdict, tail.sentence()) if text)
+        adequacy = inadequacy(verdict, free)
     if gate is not None:
         if rounds is None:
             notes.append(f"the gate's rejected set still changed after {MAX_GATE_ROUNDS} refits; the last set is used")
@@ -163,7 +171,7 @@ def fit_accel_gps(
         fixes=int(np.count_nonzero(used)),
         adequate=adequate,
         adequacy=adequacy,
-        diagnostics=diagnostics.as_dict(),
+        diagnostics={**diagnostics.as_dict(), "nis_tail": tail.as_dict()},
         notes=notes,
         rejected_fixes=None if gate is None else [int(row) for row in (rejected if rejected is not None else [])],
         settings=settings,
