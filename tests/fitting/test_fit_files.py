@@ -74,3 +74,71 @@ def test_filter_toml_writes_the_latency_the_fit_used_and_a_truth_without_the_log
     assert {key: written["truth"][key] for key in ("gps_latency", "gps_outlier_rate", "gps_outlier_std")} == {
         "gps_latency": 0.0, "gps_outlier_rate": 0.0, "gps_outlier_std": 0.0}
     assert result.settings == written
+
+
+def test_a_gated_fits_filter_toml_says_to_calibrate_with_the_same_gate(tmp_path):
+    sim = kalcal.simulate("accel-gps", seed=4, settings={"scenario.duration": 20, "truth.gps_outlier_rate": 0.02,
+                                                         "truth.gps_outlier_std": 40.0})
+    result = kalcal.fit("accel-gps", imu=sim.logs["imu"], gps=sim.logs["gps"], gate=0.999,
+                        free="filter.gps_position_std", out=tmp_path / "fit")
+    text = (tmp_path / "fit" / "filter.toml").read_text()
+    rejected = len(result.rejected_fixes)
+    assert rejected >= 1
+    assert f"# fitted with --gate 0.999 ({rejected} fixes rejected): calibrate with the same --gate 0.999" in text
+    ungated = kalcal.fit("accel-gps", imu=sim.logs["imu"], gps=sim.logs["gps"], free="filter.gps_position_std",
+                         out=tmp_path / "plain")
+    assert ungated.rejected_fixes is None and "--gate" not in (tmp_path / "plain" / "filter.toml").read_text()
+
+
+@pytest.fixture(scope="module")
+def short_logs(tmp_path_factory):
+    paths = kalcal.simulate("accel-gps", seed=2, settings={"scenario.duration": 5}).save(tmp_path_factory.mktemp("short"))
+    return paths["imu"], paths["gps"]
+
+
+@pytest.mark.parametrize(
+    "free, start",
+    [
+        ("filter.gps_position_std,filter.gps_position_std", "kalcal: error: --free: filter.gps_position_std given more than once"),
+        (",", "kalcal: error: --free: expected KEY,KEY... with no empty key, got ','"),
+        ("filter.gps_position_std,,filter.gps_velocity_std", "kalcal: error: --free: expected KEY,KEY... with no empty key"),
+    ],
+    ids=["twice", "comma", "empty-key"],
+)
+def test_a_free_set_with_a_key_twice_or_an_empty_key_is_one_line_and_exit_2(short_logs, tmp_path, free, start):
+    imu, gps = short_logs
+    result = _invoke("fit", "accel-gps", "--imu", imu, "--gps", gps, "--free", free, "--out", tmp_path / "out")
+    lines = result.stderr.strip().splitlines()
+    assert result.exit_code == 2 and len(lines) == 1 and lines[0].startswith(start), result.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_bad_confidence_names_the_apis_argument_not_an_option_the_command_lacks(short_logs):
+    imu, gps = short_logs
+    with pytest.raises(kalcal.KalcalError, match=r"^confidence=: expected a number in \(0, 1\), got 1\.5"):
+        kalcal.fit("accel-gps", imu=imu, gps=gps, confidence=1.5)
+    with pytest.raises(kalcal.KalcalError, match=r"^--free: filter\.bias_std given more than once"):
+        kalcal.fit("accel-gps", imu=imu, gps=gps, free=["filter.bias_std", "filter.bias_std"])
+
+
+def test_the_figure_draws_a_negative_latency_on_a_linear_axis_and_a_noise_std_on_a_log_one():
+    from kalcal.plots.fit import fit_figure
+
+    curves = {
+        "filter.gps_latency": {"value": [-0.05, -0.02, 0.0, 0.01, 0.04], "loglik": [-5.0, -1.0, 0.0, -0.5, -4.0]},
+        "filter.gps_position_std": {"value": [0.5, 1.0, 2.0], "loglik": [-3.0, 0.0, -3.0]},
+    }
+    parameters = {
+        "filter.gps_latency": {"value": 0.0, "ci_low": -0.03, "ci_high": 0.02, "unit": "s", "identified": True, "at_bound": False},
+        "filter.gps_position_std": {"value": 1.0, "ci_low": 0.7, "ci_high": 1.5, "unit": "m", "identified": True, "at_bound": False},
+    }
+    figure = fit_figure(curves, parameters)
+    latency, position = figure.axes[0], figure.axes[1]
+    assert latency.get_xscale() == "linear" and position.get_xscale() == "log"
+    line = latency.get_lines()[0]
+    assert list(line.get_xdata()) == curves["filter.gps_latency"]["value"]  # every point, the negative ones too
+    low, high = latency.get_xlim()
+    assert low <= -0.05 and high >= 0.04
+    band = latency.patches[0]  # axvspan: a Rectangle (matplotlib >= 3.9) or a Polygon
+    left = band.get_x() if hasattr(band, "get_x") else float(min(band.get_xy()[:, 0]))
+    assert left == pytest.approx(-0.03)  # the interval's own negative end, not the curve's

@@ -138,6 +138,9 @@ def compute_accel_gps_fit(
         "runs the fitted filter against these settings as the truth, over [scenario] duration and the scenario's",
         "motion, not the log's.",
     ]
+    if gate is not None:  # the fit's settings hold for the fixes the gate left; a calibration must leave the same
+        header.append(f"fitted with --gate {gate:g} ({len(result.rejected_fixes or [])} fixes rejected): calibrate with "
+                      f"the same --gate {gate:g}")
     if not result.adequate:
         header.append(f"NOT ADEQUATE: {result.adequacy}")
     document = _document(result, "fit accel-gps", {"imu": imu_name, "gps": gps_name, "init": init}, free)
