@@ -1,5 +1,4 @@
-"""The GPS latency's log-likelihood scanned over its whole search range: the search's start, and its interval
-where log L has several maxima.
+"""The GPS latency's log-likelihood scanned over its whole range: the search's start and a multimodal interval.
 
 log L in ``filter.gps_latency`` is not one smooth hill: the fix is compared with the nominal at t - L,
 and the nominal's shift over L sums the measured acceleration, vibration noise included, sample by
