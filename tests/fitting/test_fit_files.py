@@ -142,3 +142,15 @@ def test_the_figure_draws_a_negative_latency_on_a_linear_axis_and_a_noise_std_on
     band = latency.patches[0]  # axvspan: a Rectangle (matplotlib >= 3.9) or a Polygon
     left = band.get_x() if hasattr(band, "get_x") else float(min(band.get_xy()[:, 0]))
     assert left == pytest.approx(-0.03)  # the interval's own negative end, not the curve's
+
+
+def test_a_100_hz_scale_bias_fit_writes_a_duration_within_verifys_limit(tmp_path):
+    sim = kalcal.simulate("scale-bias", seed=5, settings={"scenario.duration": 10, "scenario.rate": 100})
+    data = sim.logs["data"]
+    result = kalcal.fit("scale-bias", data=data, settings={"scenario.rate": 100}, out=tmp_path / "fit")
+    text = (tmp_path / "fit" / "filter.toml").read_text()
+    scenario = tomllib.loads(text)["scenario"]
+    # the scenario's default 30 s at the log's 100 Hz are 3000 samples, more than verify allows
+    assert scenario["rate"] == 100.0 and round(scenario["duration"] * scenario["rate"]) == MAX_UPDATES
+    assert "# duration: the scenario's 30 s shortened to 20 s" in text and result.settings["scenario"] == scenario
+    check_arguments(build_scenario("scale-bias", tmp_path / "fit" / "filter.toml", []), 300)

@@ -176,7 +176,7 @@ def compute_scale_bias_fit(
     if np.count_nonzero(np.isfinite(columns["reference"]) & np.isfinite(columns["sensor"])) < 3:
         raise DataError(f"{name}: needs at least three samples with both a reference and a sensor value")
     result = fit_scale_bias(scenario, time, columns["reference"], columns["sensor"], free=free, profile=profile,
-                            confidence=confidence, rate=rate)
+                            confidence=confidence, rate=rate, max_updates=MAX_UPDATES)
     header = [
         f"kalcal fit scale-bias: noise settings fitted by maximum likelihood to {name}",
         f"({result.fixes} samples in the likelihood, log L = {result.loglik:.6g}, {result.interval_method} intervals).",
