@@ -51,7 +51,7 @@ def test_a_20_hz_rover_like_fit_writes_a_scenario_within_verifys_limits(rover_fi
 
 @pytest.mark.slow
 def test_verify_runs_a_20_hz_rover_like_fits_filter_toml_without_overrides(rover_fit, tmp_path):
-    """The loop closed as docs/fit.md gives it: about 3 minutes (2000 realizations of 2000 fixes)."""
+    """The loop closed as docs/fit.md gives it: 2000 realizations of 2000 fixes, one to three minutes."""
     verified = _invoke("verify", "--config", rover_fit / "filter.toml", "-n", 2000, "--no-report", "--out", tmp_path / "ver")
     assert verified.exit_code == 0, verified.stdout + verified.stderr
 
