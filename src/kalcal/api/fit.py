@@ -11,11 +11,20 @@ from kalcal.fitting.result import FitResult
 
 
 def _free(free: str | Sequence[str] | None) -> list[str] | None:
-    """``--free``'s ``KEY,KEY`` or a list of keys."""
+    """``--free``'s ``KEY,KEY`` or a list of keys; refuses an empty key (``--free ,`` is no set, not the
+    default one) and a key given twice."""
+    from kalcal.errors import KalcalError
+
     if free is None:
         return None
-    items = free.split(",") if isinstance(free, str) else list(free)
-    return [item.strip() for item in items if item.strip()] or None
+    items = [item.strip() for item in (free.split(",") if isinstance(free, str) else list(free))]
+    given = free if isinstance(free, str) else ",".join(items)
+    if not items or not all(items):
+        raise KalcalError(f"--free: expected KEY,KEY... with no empty key, got {given!r}")
+    twice = sorted({item for item in items if items.count(item) > 1})
+    if twice:
+        raise KalcalError(f"--free: {', '.join(twice)} given more than once in {given!r}")
+    return items
 
 
 def fit(
@@ -65,7 +74,7 @@ def fit(
     from kalcal.errors import KalcalError
 
     if not 0.0 < confidence < 1.0:
-        raise KalcalError(f"--confidence: expected a number in (0, 1), got {confidence!r}")
+        raise KalcalError(f"confidence=: expected a number in (0, 1), got {confidence!r}")  # kalcal fit has no --confidence
     keys = _free(free)
     if scenario == "scale-bias":
         if gate is not None:

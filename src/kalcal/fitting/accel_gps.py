@@ -12,6 +12,7 @@ decide whether the model family is adequate for the log.
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import replace
 from collections.abc import Mapping, Sequence
 from typing import Any, Protocol
 
@@ -20,7 +21,9 @@ import numpy as np
 from kalcal.calibration.diagnostics import innovation_diagnostics
 from kalcal.calibration.likelihood import gate_excess
 from kalcal.errors import KalcalError
+from kalcal.fitting import latency_scan
 from kalcal.fitting.mle import Free, maximize
+from kalcal.fitting.nis_tail import nis_tail
 from kalcal.fitting.result import FitResult, interval_text
 from kalcal.models.accel_gps import AccelGpsFilter, AccelGpsScenario, AccelGpsTruth
 
@@ -42,6 +45,7 @@ LINEAR = {"filter.gps_latency": 0.5}
 #: what a model that does not fit may lack, and the setting that would add it
 CANDIDATES = (
     ("time-correlated GNSS errors", None),
+    ("heavy-tailed GNSS errors (gross outliers: --gate)", None),
     ("a Gauss-Markov bias (filter.bias_correlation_time with filter.bias_std)", "filter.bias_correlation_time"),
     ("a scale factor (filter.scale_std)", "filter.scale_std"),
     ("GPS latency (filter.gps_latency)", "filter.gps_latency"),
@@ -92,6 +96,7 @@ def fit_accel_gps(
     confidence: float = 0.95,
     rates: tuple[float, float] | None = None,
     std_medians: Mapping[str, float] | None = None,
+    max_updates: int | None = None,
 ) -> FitResult:
     """Maximum-likelihood estimates of the ``free`` settings, their intervals and the fitted filter's adequacy.
 
@@ -111,6 +116,8 @@ def fit_accel_gps(
     std_medians : mapping, optional
         The median of each per-fix std column (``{"position_std": m, "velocity_std": m/s}``), for the truth
         of a multiplier.
+    max_updates : int, optional
+        The most GPS intervals filter.toml's [scenario] duration may hold (verify's limit per realization).
     """
     free = list(DEFAULT_FREE if free is None else free)
     notes = []
@@ -129,12 +136,20 @@ def fit_accel_gps(
             continue
         start = value if value > 0 else FLOORS.get(key, 1e-6)
         parameters.append(Free(key, start, start / RANGE, start * RANGE, log.unit(key)))
-    fit, calibration, mask, rounds = _search(log, parameters, gate, profile, confidence)
+    imu_rate = rates[0] if rates is not None else scenario.scenario.imu_rate
+    step = latency_scan.scan_step(imu_rate)
+    fit, calibration, mask, rounds = _search(log, parameters, gate, profile, confidence, step, notes)
     chosen = {key: value for key, value in fit.values.items() if fit.parameters[key].identified}
     used = _used(calibration)
     diagnostics = innovation_diagnostics(calibration.normalized_innovations[used])
-    adequate = bool(diagnostics.consistent)
-    adequacy = diagnostics.verdict if adequate else inadequacy(diagnostics.verdict, free)
+    # the fit forces the mean NIS to p; the NIS tail's share it does not
+    tail = nis_tail(calibration.normalized_innovations[used])
+    adequate = bool(diagnostics.consistent) and tail.passed
+    if adequate:
+        adequacy = diagnostics.verdict
+    else:
+        verdict = "; ".join(text for text in (None if diagnostics.consistent else diagnostics.verdict, tail.sentence()) if text)
+        adequacy = inadequacy(verdict, free)
     if gate is not None:
         if rounds is None:
             notes.append(f"the gate's rejected set still changed after {MAX_GATE_ROUNDS} refits; the last set is used")
@@ -149,14 +164,14 @@ def fit_accel_gps(
             column = key.split(".")[1].removesuffix("_multiplier")
             notes.append(f"{key}: the log's {column} column times one fitted multiplier, instead of a constant std")
     rejected = getattr(calibration, "rejected_rows", None)
-    settings, comments = _settings(scenario, chosen, fit, rates, std_medians or {})
+    settings, comments = _settings(scenario, chosen, fit, rates, std_medians or {}, max_updates)
     return FitResult.from_search(
         scenario.NAME,
         fit,
         fixes=int(np.count_nonzero(used)),
         adequate=adequate,
         adequacy=adequacy,
-        diagnostics=diagnostics.as_dict(),
+        diagnostics={**diagnostics.as_dict(), "nis_tail": tail.as_dict()},
         notes=notes,
         rejected_fixes=None if gate is None else [int(row) for row in (rejected if rejected is not None else [])],
         settings=settings,
@@ -179,26 +194,57 @@ def _used(calibration) -> np.ndarray:
     return used
 
 
-def _search(log, parameters, gate, profile, confidence):
+def _search(log, parameters, gate, profile, confidence, step=None, notes=None):
     """The fit over a fixed set of fixes: with a gate, gate with the start settings, fit with that
     rejected set held fixed, re-gate with the fitted settings and refit until the set stops changing
-    (at most :data:`MAX_GATE_ROUNDS` fits). Returns the fit, the fitted calibration, the rejected set
-    and the rounds taken (None where the set never settled)."""
+    (at most :data:`MAX_GATE_ROUNDS` fits). With a free latency and a grid ``step`` (s), the latency's
+    range is scanned before the first fit and at the last one (:mod:`kalcal.fitting.latency_scan`; a
+    multimodal latency is said in ``notes``).
+    Returns the fit, the fitted calibration, the rejected set and the rounds taken (None where the set
+    never settled)."""
+    scanned = step is not None and any(p.name == latency_scan.KEY for p in parameters)
+    setting = next((p.start for p in parameters if p.name == latency_scan.KEY), None)
+
+    def search(fn, params):
+        return maximize(fn, params, profile=profile, confidence=confidence)
+
+    def judged(fn, fit, params):
+        if not scanned:
+            return fit
+        refit = lambda start: search(fn, [replace(p, start=start) if p.name == latency_scan.KEY else p for p in params])  # noqa: E731
+        fit, said = latency_scan.judge(fn, fit, params, step, confidence, refit, setting)
+        if said and notes is not None:
+            notes.append(said)
+        return fit
+
+    def chosen_of(fit):
+        return {key: value for key, value in fit.values.items() if fit.parameters[key].identified}
+
     if gate is None:
-        fit = maximize(log.loglik, parameters, profile=profile, confidence=confidence)
-        chosen = {key: value for key, value in fit.values.items() if fit.parameters[key].identified}
-        return fit, log.calibrate(chosen), None, 0
+        params = latency_scan.start_from_scan(log.loglik, parameters, step) if scanned else parameters
+        fit = judged(log.loglik, search(log.loglik, params), params)
+        return fit, log.calibrate(chosen_of(fit)), None, 0
     mask = np.asarray(log.calibrate({}, gate=gate).rejected, dtype=bool)
     for rounds in range(1, MAX_GATE_ROUNDS + 1):
         held = mask.copy()
-        fit = maximize(lambda values: log.loglik(values, rejected=held), parameters, profile=profile, confidence=confidence)
-        chosen = {key: value for key, value in fit.values.items() if fit.parameters[key].identified}
-        calibration = log.calibrate(chosen, gate=gate)
+        fn = lambda values, held=held: log.loglik(values, rejected=held)  # noqa: E731
+        if rounds == 1 and scanned:
+            parameters = latency_scan.start_from_scan(fn, parameters, step)
+        fit = search(fn, parameters)
+        calibration = log.calibrate(chosen_of(fit), gate=gate)
         new = np.asarray(calibration.rejected, dtype=bool)
         if np.array_equal(new, mask):
-            return fit, calibration, mask, rounds
+            break
         mask = new
-    return fit, calibration, mask, None
+    else:
+        rounds = None
+    if scanned:  # judged over the last held set; a restart's calibration re-gates with its settings
+        before = fit
+        fit = judged(fn, fit, parameters)
+        if fit.values != before.values:
+            calibration = log.calibrate(chosen_of(fit), gate=gate)
+            mask = np.asarray(calibration.rejected, dtype=bool)
+    return fit, calibration, mask, rounds
 
 
 def _short(value: float) -> float:
@@ -206,21 +252,26 @@ def _short(value: float) -> float:
     return float(f"{value:.6g}")
 
 
-def _settings(scenario, chosen, fit, rates, std_medians) -> tuple[dict[str, dict], dict[str, str]]:
+def _settings(scenario, chosen, fit, rates, std_medians, max_updates=None) -> tuple[dict[str, dict], dict[str, str]]:
     """filter.toml's sections and comments: the fitted filter in [filter] and [truth], the log's rates in [scenario]."""
     resolved = scenario.filter_settings
     filter_values = {}
     for f in dataclasses.fields(AccelGpsFilter):
         key = f"filter.{f.name}"
-        value = chosen.get(key, getattr(resolved, f.name, getattr(scenario.filter, f.name)))
+        if key == "filter.gps_latency":  # the likelihood's: an unset latency is 0, never the truth's
+            value = chosen.get(key, scenario.filter.gps_latency or 0.0)
+        else:
+            value = chosen.get(key, getattr(resolved, f.name, getattr(scenario.filter, f.name)))
         if key == "filter.bias_std" and key not in chosen and scenario.filter.bias_std is None:
             continue  # unset, as in the fit: calibrate --config keeps the log's prior rule (diffuse), verify the truth's
         if value is not None:
             filter_values[f.name] = _short(value) if key in chosen else value
     truth_names = [f.name for f in dataclasses.fields(AccelGpsTruth)]
     truth = {name: getattr(scenario.truth, name) for name in truth_names}
-    # the Monte Carlo's truth is the fitted filter's model; the log's faults (latency) stay the log's
+    # the Monte Carlo's truth is the fitted filter's model; the log's faults (latency, outliers) are the
+    # log's, which verify's truth has not (it refuses them): 0
     truth.update({name: value for name, value in filter_values.items() if name in truth_names and name != "gps_latency"})
+    truth.update(gps_latency=0.0, gps_outlier_rate=0.0, gps_outlier_std=0.0)
     comments = {}
     for key, p in fit.parameters.items():
         name = key.partition(".")[2]
@@ -241,7 +292,10 @@ def _settings(scenario, chosen, fit, rates, std_medians) -> tuple[dict[str, dict
                     f"{setting}: the fitted multiplier times the {column} column's median (calibrate reads the "
                     "column itself; this value is for fixes without one, and for verify)"
                 )
-    sections = {"scenario": _rates(scenario, rates), "filter": filter_values, "truth": truth}
+    section, shortened = _rates(scenario, rates, max_updates)
+    if shortened:
+        comments["scenario.duration"] = shortened
+    sections = {"scenario": section, "filter": filter_values, "truth": truth}
     return sections, comments
 
 
@@ -250,21 +304,32 @@ def name_of(key: str) -> str:
     return key.partition(".")[2]
 
 
-def _rates(scenario, rates) -> dict[str, Any]:
+def _rates(scenario, rates, max_updates=None) -> tuple[dict[str, Any], str]:
     """[scenario]: the log's rates (the GPS rate made a whole divisor of the accelerometer's), the
-    scenario's duration made a whole number of GPS intervals, its integration and truth kind."""
+    scenario's duration made a whole number of GPS intervals, at most ``max_updates`` of them (the most a
+    verification's realization holds), its integration and truth kind; and the comment on a shortened
+    duration ("" when it was not shortened)."""
     s = scenario.scenario
     imu_rate, gps_rate = rates if rates is not None else (s.imu_rate, s.gps_rate)
     imu_rate = _short(imu_rate)
     gps_rate = imu_rate / max(1, round(imu_rate / gps_rate))
     intervals = max(1, round(s.duration * gps_rate))
-    return {
+    comment = ""
+    if max_updates is not None and intervals > max_updates:
+        comment = (
+            f"duration: the scenario's {s.duration:g} s shortened to {max_updates / gps_rate:g} s, the {max_updates} "
+            f"GPS intervals at {gps_rate:g} Hz that kalcal verify allows a realization (its per-update arrays must fit "
+            "in memory); the log's rates are kept, since the per-sample and per-fix noise values hold at them"
+        )
+        intervals = max_updates
+    section = {
         "imu_rate": imu_rate,
         "gps_rate": gps_rate,
         "duration": intervals / gps_rate,
         "integration": s.integration,
         "truth": s.truth,
     }
+    return section, comment
 
 
 def log_rates(imu_time: np.ndarray, gps_time: np.ndarray) -> tuple[float, float]:

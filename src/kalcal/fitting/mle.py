@@ -15,7 +15,9 @@ its profile (the others re-maximized) with ``profile=True``:
   information (the inverse of the negated Hessian of log L in u over the interior, identified
   parameters, by central differences), or the two points where the profile has fallen by ``drop``
   (Wilks); where that Hessian is not positive definite, the profile's points too (the parameter's note
-  says so). A side where log L never falls
+  says so), judged anew at the range's ends: along a ridge the profile may stay within ``drop`` where
+  the slice fell (no limit on that side; "consistent with 0" on a log scale's lower side; unidentified
+  where it falls at neither end). A side where log L never falls
   by ``drop`` within the range has no limit (None).
 
 When a point evaluated for the curves beats the maximum found (the search stopped at a local maximum),
@@ -265,8 +267,24 @@ def maximize(
         elif profile:
             ci_low, ci_high = back(i, crossing(i, low[i])), back(i, crossing(i, high[i]))
         else:  # the observed information is not positive definite: the profile's interval, not the slice's
-            ci_low, ci_high = (back(i, v) for v in _profile_crossings(f, i, u_hat, low, high, best - drop))
+            # (the slice fell at both ends; the profile, the others re-maximized, may not: a ridge)
+            below, above = _profile_crossings(f, i, u_hat, low, high, best - drop)
             note = "interval from the profile likelihood: the observed information is not positive definite"
+            if below is None and above is None:
+                identified, value = False, None
+                note = (
+                    f"unidentified along the profile: with the others re-maximized log L changes by less than "
+                    f"{drop:.3g} over [{p.lower:.3g}, {p.upper:.3g}] {p.unit}; the input setting is kept"
+                ).replace(" ;", ";")
+            else:
+                ci_high = None if above is None else back(i, above)
+                if below is not None:
+                    ci_low = back(i, below)
+                elif not linear[i]:
+                    at_bound, ci_low = True, 0.0
+                    note += "; consistent with 0 along the profile"
+                if below is None and linear[i] or above is None:
+                    note += "; no limit within the search range on the side where the profile does not fall"
         parameters[p.name] = FitParameter(p.name, value, ci_low, ci_high, p.unit, p.start, identified, at_bound, note)
         curves[p.name] = _curve(along, i, u_hat, low, high, ci_low, ci_high, curve_points, float(units[i]) if linear[i] else None)
     method = "profile" if profile else "observed-information"
@@ -278,8 +296,9 @@ def maximize(
                 starts = objective.values(u_hat)
                 starts[index] = curve["value"][top]
                 again = [replace(p, start=float(np.clip(x, p.lower, p.upper))) for p, x in zip(free, starts)]
-                return maximize(loglik, again, profile=profile, confidence=confidence, curve_points=curve_points,
-                                restarts=restarts - 1)
+                restarted = maximize(loglik, again, profile=profile, confidence=confidence, curve_points=curve_points,
+                                     restarts=restarts - 1)
+                return replace(restarted, evaluations=restarted.evaluations + objective.count)  # every search's
             converged = False
             message = (
                 f"not converged: log L at {name} = {curve['value'][top]:.6g} ({curve['loglik'][top]:.10g}) beats the "
@@ -289,8 +308,10 @@ def maximize(
     return MleFit(values, best, converged, parameters, curves, method, objective.count, message)
 
 
-def _profile_crossings(f, i, u_hat, low, high, level) -> tuple[float, float]:
-    """The two u_i where the profile of log L (the others re-maximized) falls to ``level``."""
+def _profile_crossings(f, i, u_hat, low, high, level) -> tuple[float | None, float | None]:
+    """The two u_i where the profile of log L (the others re-maximized) falls to ``level``: below and
+    above u_hat_i, None on a side where the profile at the range's end has not fallen to ``level`` (no
+    limit within the range: along a ridge the profile may stay flat where the slice fell)."""
     others = [j for j in range(u_hat.size) if j != i]
 
     def profile(value: float) -> float:
@@ -306,7 +327,13 @@ def _profile_crossings(f, i, u_hat, low, high, level) -> tuple[float, float]:
 
         return -float(_minimize(g, u_hat[others], low[others], high[others]).fun)
 
-    return tuple(optimize.brentq(lambda v: profile(v) - level, u_hat[i], end, xtol=1e-4) for end in (low[i], high[i]))
+    crossings = []
+    for end in (low[i], high[i]):
+        if abs(end - u_hat[i]) < 1e-9 or profile(end) > level:
+            crossings.append(None)
+        else:
+            crossings.append(optimize.brentq(lambda v: profile(v) - level, u_hat[i], end, xtol=1e-4))
+    return crossings[0], crossings[1]
 
 
 def _curve(along, i, u_hat, low, high, ci_low, ci_high, points, unit=None) -> dict[str, list[float]]:

@@ -42,6 +42,7 @@ def fit_scale_bias(
     profile: bool = False,
     confidence: float = 0.95,
     rate: float | None = None,
+    max_updates: int | None = None,
 ) -> FitResult:
     """Maximum-likelihood sigma_w and q of a scale-bias log, with intervals and the fitted filter's diagnostics.
 
@@ -60,6 +61,8 @@ def fit_scale_bias(
         As :func:`kalcal.fitting.mle.maximize`.
     rate : float, optional
         The log's sample rate, Hz, for filter.toml's [scenario] (default ``scenario.rate``).
+    max_updates : int, optional
+        The most samples filter.toml's [scenario] duration may hold (verify's limit per realization).
     """
     free = list(FREE_KEYS if free is None else free)
     unknown = [key for key in free if key not in FREE_KEYS]
@@ -95,17 +98,25 @@ def fit_scale_bias(
         adequacy=adequacy,
         diagnostics=diagnostics.as_dict(),
         notes=notes,
-        settings=_settings(scenario, chosen, rate),
-        comments=_comments(fit),
+        settings=_settings(scenario, chosen, rate, max_updates),
+        comments=_comments(fit, scenario, rate, max_updates),
         confidence=confidence,
     )
 
 
-def _settings(scenario: ScaleBiasScenario, chosen: dict[str, float], rate: float | None) -> dict[str, dict]:
-    """filter.toml's sections: the log's rate, the fitted noise in [filter] and [truth] (drift a random
-    walk when q > 0), over the scenario's duration made a whole number of samples."""
+def _samples(scenario: ScaleBiasScenario, rate: float | None, max_updates: int | None) -> tuple[float, int, int]:
+    """(the log's rate, Hz; the scenario's duration in whole samples at it; those held to ``max_updates``)."""
     rate = float(f"{(rate or scenario.scenario.rate):.6g}")
     samples = max(1, round(scenario.scenario.duration * rate))
+    return rate, samples, samples if max_updates is None else min(samples, max_updates)
+
+
+def _settings(scenario: ScaleBiasScenario, chosen: dict[str, float], rate: float | None,
+              max_updates: int | None = None) -> dict[str, dict]:
+    """filter.toml's sections: the log's rate, the fitted noise in [filter] and [truth] (drift a random
+    walk when q > 0), over the scenario's duration made a whole number of samples, at most
+    ``max_updates`` (the most a verification's realization holds)."""
+    rate, _, samples = _samples(scenario, rate, max_updates)
     noise, drift = (float(f"{chosen[key]:.6g}") for key in (NOISE, DRIFT))
     section = {"reference_noise_std": noise, "sensor_noise_std": 0.0, "parameter_drift_std": drift}
     return {
@@ -115,9 +126,17 @@ def _settings(scenario: ScaleBiasScenario, chosen: dict[str, float], rate: float
     }
 
 
-def _comments(fit) -> dict[str, str]:
-    """A comment per fitted key for filter.toml: the interval, or why the input is kept."""
+def _comments(fit, scenario=None, rate=None, max_updates=None) -> dict[str, str]:
+    """A comment per fitted key for filter.toml: the interval, or why the input is kept; and one on a
+    duration shortened to ``max_updates`` samples."""
     comments = {}
+    if scenario is not None:
+        rate, samples, kept = _samples(scenario, rate, max_updates)
+        if kept < samples:
+            comments["scenario.duration"] = (
+                f"duration: the scenario's {scenario.scenario.duration:g} s shortened to {kept / rate:g} s, the {kept} "
+                f"samples at {rate:g} Hz that kalcal verify allows a realization (its per-update arrays must fit in memory)"
+            )
     for key, p in fit.parameters.items():
         short = key.partition(".")[2]
         if not p.identified:

@@ -15,6 +15,7 @@ from kalcal.io.logs import numeric_columns, parse_column_map, read_table, requir
 from kalcal.io.outputs import inputs_of, mark_inputs, run_outputs
 from kalcal.io.results import write_json
 from kalcal.jobs.calibrate import GPS_ROLES, IMU_ROLES, stated_rates
+from kalcal.jobs.verify_arguments import MAX_UPDATES
 from kalcal.plots.fit import plot_fit
 
 #: the files of one fit
@@ -55,13 +56,17 @@ def filter_toml(result: FitResult, header: list[str]) -> str:
     comment above it, an unidentified one says that the input value is kept."""
     lines = [f"# {line}" for line in header]
     lines += [f"# {note}" for note in result.notes]
+    used = set()
     for section, values in result.settings.items():
         lines += ["", f"[{section}]"]
         for key, value in values.items():
-            if section == "filter" and key in result.comments:
-                lines.append(f"# {result.comments[key]}")
+            # a comment keyed "section.key" belongs to that key, a bare key to [filter]'s
+            for name in (f"{section}.{key}", key if section == "filter" else None):
+                if name in result.comments:
+                    lines.append(f"# {result.comments[name]}")
+                    used.add(name)
             lines.append(f"{key} = {_toml_value(value)}")
-    extra = [text for key, text in result.comments.items() if key not in result.settings.get("filter", {})]
+    extra = [text for key, text in result.comments.items() if key not in used]
     if extra:
         lines += [""] + [f"# {text}" for text in extra]
     return "\n".join(lines) + "\n"
@@ -124,7 +129,7 @@ def compute_accel_gps_fit(
     medians = {role: float(np.nanmedian(gps[role])) for role in ("position_std", "velocity_std") if role in gps}
     result = fit_accel_gps(
         log, scenario, free, profile=profile, gate=gate, confidence=confidence,
-        rates=log_rates(imu["time"], gps["time"]), std_medians=medians,
+        rates=log_rates(imu["time"], gps["time"]), std_medians=medians, max_updates=MAX_UPDATES,
     )
     header = [
         f"kalcal fit accel-gps: noise settings fitted by maximum likelihood to {imu_name} and {gps_name}",
@@ -133,6 +138,9 @@ def compute_accel_gps_fit(
         "runs the fitted filter against these settings as the truth, over [scenario] duration and the scenario's",
         "motion, not the log's.",
     ]
+    if gate is not None:  # the fit's settings hold for the fixes the gate left; a calibration must leave the same
+        header.append(f"fitted with --gate {gate:g} ({len(result.rejected_fixes or [])} fixes rejected): calibrate with "
+                      f"the same --gate {gate:g}")
     if not result.adequate:
         header.append(f"NOT ADEQUATE: {result.adequacy}")
     document = _document(result, "fit accel-gps", {"imu": imu_name, "gps": gps_name, "init": init}, free)
@@ -168,7 +176,7 @@ def compute_scale_bias_fit(
     if np.count_nonzero(np.isfinite(columns["reference"]) & np.isfinite(columns["sensor"])) < 3:
         raise DataError(f"{name}: needs at least three samples with both a reference and a sensor value")
     result = fit_scale_bias(scenario, time, columns["reference"], columns["sensor"], free=free, profile=profile,
-                            confidence=confidence, rate=rate)
+                            confidence=confidence, rate=rate, max_updates=MAX_UPDATES)
     header = [
         f"kalcal fit scale-bias: noise settings fitted by maximum likelihood to {name}",
         f"({result.fixes} samples in the likelihood, log L = {result.loglik:.6g}, {result.interval_method} intervals).",

@@ -21,6 +21,7 @@ from kalcal.jobs.verify_arguments import (  # noqa: F401 (MAX_UPDATES, MIN_REALI
     MAX_UPDATES,
     MIN_REALIZATIONS,
     check_arguments,
+    default_long_run,
     info_name,
     run_length,
 )
@@ -188,7 +189,7 @@ def compute_verification(
     bench = self_check(statistics, exact, confidence, info)
     attrs = {"scenario": info.scenario, "seed": seed, "engine": engine, "confidence": confidence}
     dataset = statistics_dataset(statistics, info, expected, attrs)
-    long_seconds = LONG_RUN_SECONDS.get(info.scenario, 0.0) if long_run is None else long_run
+    long_seconds = default_long_run(scenario) if long_run is None else long_run
     has_long = bool(long_seconds and long_seconds > info.update_times[-1])
     files = 3 if has_long else 2  # stats.nc, stats_long.nc, summary.json
     built = stage(progress, "statistics") or (lambda done, total: None)

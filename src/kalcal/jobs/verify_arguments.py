@@ -28,6 +28,16 @@ MIN_REALIZATIONS = 100
 MAX_UPDATES = 2000
 
 
+def default_long_run(scenario) -> float:
+    """The long run's horizon (s) when none is given: :data:`LONG_RUN_SECONDS`, shortened for accel-gps to
+    the :data:`MAX_UPDATES` GPS intervals that a realization may hold (100 s at 20 Hz), so that a faster
+    GPS is not refused by a study the user did not ask for."""
+    seconds = LONG_RUN_SECONDS.get(info_name(scenario), 0.0)
+    if seconds and isinstance(scenario, AccelGpsScenario):
+        seconds = min(seconds, MAX_UPDATES / scenario.scenario.gps_rate)
+    return seconds
+
+
 def run_length(scenario) -> tuple[int, float]:
     """(K, t_K): the filter updates of one realization and the last update's time (s), from the settings
     alone (no arrays are built)."""
@@ -88,7 +98,7 @@ def check_arguments(
         raise ConfigError(
             f"--long-run: {long_run:g} s is not longer than the run itself ({horizon:g} s); give more, or 0 for none"
         )
-    long_seconds = LONG_RUN_SECONDS.get(info_name(scenario), 0.0) if long_run is None else long_run
+    long_seconds = default_long_run(scenario) if long_run is None else long_run
     if long_seconds and long_seconds > horizon:
         long_count, _ = run_length(apply_settings(scenario, {"scenario.duration": long_seconds}))
         _require_fits(long_count, "--long-run")

@@ -6,15 +6,25 @@ from pathlib import Path
 
 import numpy as np
 
+from kalcal.fitting.accel_gps import LINEAR
 from kalcal.plots._common import BAND, ESTIMATE, label, new_figure, save, styled
 
 
 @styled
 def plot_fit(curves: dict, parameters: dict, path: str | Path, *, method: str = "observed-information", drop: float = 1.92) -> Path:
-    """One panel per parameter: log L minus its maximum against the value (log axis), the estimate, the
-    interval shaded and the level ``-drop`` where the interval's ends lie.
+    """One panel per parameter: log L minus its maximum against the value, the estimate, the interval
+    shaded and the level ``-drop`` where the interval's ends lie (:func:`fit_figure`), saved to ``path``.
 
     900 x (150 + 250 rows) px, two panels a row.
+    """
+    return save(fit_figure(curves, parameters, method=method, drop=drop), path)
+
+
+@styled
+def fit_figure(curves: dict, parameters: dict, *, method: str = "observed-information", drop: float = 1.92):
+    """The figure of :func:`plot_fit`: a log x axis for a setting searched on a log scale, a linear one for
+    one searched on a linear scale (the latency, :data:`kalcal.fitting.accel_gps.LINEAR`) or with a value
+    at or below 0, which a log axis would drop.
 
     Parameters
     ----------
@@ -38,17 +48,18 @@ def plot_fit(curves: dict, parameters: dict, path: str | Path, *, method: str = 
         ax.axhline(-drop, color="black", linestyle="--", linewidth=0.8, label=f"−{drop:.3g}")
         low = p.get("ci_low")
         high = p.get("ci_high")
+        linear = name in LINEAR or (values.size and values.min() <= 0)
         if p.get("identified"):
-            left = values.min() if low is None or low <= 0 else low
+            left = values.min() if low is None or (low <= 0 and not linear) else low
             right = values.max() if high is None else high
             ax.axvspan(left, right, color=BAND, alpha=0.22, label="interval")
             ax.axvline(p["value"], color=ESTIMATE, linestyle=":", linewidth=1.0)
         state = "unidentified" if not p.get("identified") else "consistent with 0" if p.get("at_bound") else f"{p['value']:.4g}"
         ax.set_title(f"{name}: {state}")
-        ax.set_xscale("log")
+        ax.set_xscale("linear" if linear else "log")
         ax.set_xlabel(label(name.partition(".")[2], p.get("unit", "")))
         ax.set_ylabel("log L − max")
         ax.legend(loc="lower center", fontsize=7.5)
     for ax in list(axes.flat)[len(names):]:
         ax.set_visible(False)
-    return save(figure, path)
+    return figure

@@ -1,0 +1,116 @@
+"""The GPS latency's log-likelihood scanned over its whole range: the search's start and a multimodal interval.
+
+log L in ``filter.gps_latency`` is not one smooth hill: the fix is compared with the nominal at t - L,
+and the nominal's shift over L sums the measured acceleration, vibration noise included, sample by
+sample. Between two accelerometer samples the shift is smooth (the integration rule's polynomial), but
+from sample to sample it jumps with the noise, so log L has a bump every sample period or so and, on a
+noisy log, separate maxima tens of milliseconds apart (a rover-like log: within 1.92 of the maximum over
+[-0.105, +0.083] s in pieces). A local search from the setting finds the nearest one and the observed
+information gives it a narrow interval. So the fit scans the range on a grid of half a sample period
+(:func:`scan_step`) before the search and starts from the best point, scans again at the estimate
+(the others held there) and restarts once from a grid point that beats it, and takes as the interval at
+least the grid's set within ``drop`` of the maximum: when that set is in separate pieces the latency is
+multimodal, the interval spans them and the parameter's note says so.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import replace
+
+import numpy as np
+from scipy import stats
+
+from kalcal.fitting.mle import BEATEN, FAILED, Free, MleFit
+
+KEY = "filter.gps_latency"
+
+
+def scan_step(imu_rate: float) -> float:
+    """The grid's step, s: half the accelerometer's sample period (2.5 ms at 200 Hz)."""
+    return 0.5 / float(imu_rate)
+
+
+def scan(loglik: Callable[[Mapping[str, float]], float], values: Mapping[str, float], lower: float, upper: float,
+         step: float) -> tuple[np.ndarray, np.ndarray]:
+    """log L at ``values`` with the latency on an even grid from ``lower`` to ``upper`` (s) in steps of at
+    most ``step``: (grid (G,),
+    log L (G,)); an evaluation that fails is :data:`~kalcal.fitting.mle.FAILED`."""
+    grid = np.linspace(lower, upper, int(np.ceil((upper - lower) / step - 1e-9)) + 1)  # steps of at most ``step``
+    out = np.empty(grid.size)
+    for n, x in enumerate(grid):
+        try:
+            out[n] = float(loglik({**values, KEY: float(x)}))
+        except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+            out[n] = FAILED
+        if not np.isfinite(out[n]):
+            out[n] = FAILED
+    return grid, out
+
+
+def start_from_scan(loglik, parameters: Sequence[Free], step: float) -> list[Free]:
+    """``parameters`` with the latency's start moved to the grid's best point, the others at their starts."""
+    p = next(q for q in parameters if q.name == KEY)
+    grid, values = scan(loglik, {q.name: q.start for q in parameters if q.name != KEY}, p.lower, p.upper, step)
+    best = float(grid[int(np.argmax(values))])
+    return [replace(q, start=best) if q.name == KEY else q for q in parameters]
+
+
+def judge(loglik, fit: MleFit, parameters: Sequence[Free], step: float, confidence: float,
+          refit: Callable[[float], MleFit], setting: float) -> tuple[MleFit, str]:
+    """The fit with the latency's interval from the scan at the estimate: restarted once (``refit(start)``)
+    from a grid point that beats the maximum, the interval widened to the grid's set within the drop
+    (its ends: the first grid points outside it, none at a range end inside it), multimodal when that set
+    is in pieces; ``start`` reported as the ``setting`` the scan started from. Returns the fit and, when
+    multimodal, a sentence for the fit's notes ("" otherwise)."""
+    p = next(q for q in parameters if q.name == KEY)
+    drop = float(stats.chi2.ppf(confidence, 1)) / 2.0
+    for attempt in range(2):
+        others = {name: value for name, value in fit.values.items() if name != KEY}
+        grid, values = scan(loglik, others, p.lower, p.upper, step)
+        top = int(np.argmax(values))
+        if values[top] <= fit.loglik + BEATEN:
+            break
+        if attempt == 0:
+            fit = refit(float(grid[top]))
+            continue
+        fit = replace(fit, converged=False, message=(
+            f"not converged: log L at {KEY} = {grid[top]:.6g} ({values[top]:.10g}) beats the reported maximum "
+            f"({fit.loglik:.10g}) in the scan of the latency's range"))
+    parameter = replace(fit.parameters[KEY], start=setting)
+    curve = fit.curves.get(KEY, {"value": [], "loglik": []})
+    merged = sorted(set(zip(curve["value"], curve["loglik"])) | set(zip(grid.tolist(), values.tolist())))
+    curves = {**fit.curves, KEY: {"value": [v for v, _ in merged], "loglik": [ll for _, ll in merged]}}
+    said = ""
+    if parameter.identified:
+        parameter, pieces, span = _widened(parameter, grid, values, fit.loglik - drop, fit.values[KEY], drop, step)
+        if pieces > 1:
+            said = (f"{KEY}: multimodal, log L within {drop:.3g} of its maximum in {pieces} separate pieces over "
+                    f"[{span[0]:.4g}, {span[1]:.4g}] s: the log does not tell the latency better than that span")
+    return replace(fit, parameters={**fit.parameters, KEY: parameter}, curves=curves), said
+
+
+def _widened(parameter, grid, values, level, estimate, drop, step):
+    """The parameter with its interval at least the grid's set within ``drop``, the set's pieces (more than
+    one: multimodal) and the span of the set (s)."""
+    within = values >= level
+    within[int(np.argmin(np.abs(grid - estimate)))] = True  # the estimate is in the set, whatever the grid
+    index = np.flatnonzero(within)
+    pieces = 1 + int(np.count_nonzero(np.diff(index) > 1))
+    low = None if index[0] == 0 else float(grid[index[0] - 1])
+    high = None if index[-1] == grid.size - 1 else float(grid[index[-1] + 1])
+    ci_low = None if low is None or parameter.ci_low is None else min(parameter.ci_low, low)
+    ci_high = None if high is None or parameter.ci_high is None else max(parameter.ci_high, high)
+    notes = [parameter.note] if parameter.note else []
+    if pieces > 1:
+        notes.append(
+            f"multimodal: log L in the latency (the others at the estimate) is within {drop:.3g} of its maximum in "
+            f"{pieces} separate pieces of [{grid[index[0]]:.4g}, {grid[index[-1]]:.4g}] s (a {step * 1e3:.3g} ms grid over "
+            "the range); the interval spans them and the value is only the highest of them"
+        )
+    elif (ci_low, ci_high) != (parameter.ci_low, parameter.ci_high):
+        notes.append(f"interval widened to where log L along the latency stays within {drop:.3g} of its maximum "
+                     f"(a {step * 1e3:.3g} ms grid over the range)")
+    span = (float(grid[index[0]]), float(grid[index[-1]]))
+    return replace(parameter, ci_low=ci_low, ci_high=ci_high, note="; ".join(notes)), pieces, span
+

@@ -1,0 +1,76 @@
+"""The fitted filter's NIS tail against chi-square(p): a check of the innovations' shape that the fit cannot force.
+
+The fit's noise settings scale every S_k, and at the maximum of log L the mean NIS is p whatever the
+innovations' distribution (with the four default stds free, d log L / d log sigma = 0 gives it exactly):
+the mean-NIS half of the diagnostics then passes by construction. Its shape is not fitted: for a filter
+whose innovations are Gaussian the NIS of each fix is chi-square(p), and the count of fixes above its
+``1 - TAIL`` quantile is Binomial(K, TAIL) (the fixes' normalized innovations are independent). A log
+with heavy-tailed errors (gross GNSS errors, a fault the model lacks) has at the same mean NIS more
+fixes far out in the tail. The check is two-sided, at ``alpha`` (binomial quantiles alpha / 2 each way).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from scipy import stats
+
+#: the tail whose share is tested: above the chi-square(p) 99.9% quantile
+TAIL = 0.001
+#: the check's false-alarm rate for Gaussian innovations (added to the diagnostics' 1%)
+ALPHA = 0.001
+
+
+@dataclass(frozen=True)
+class NisTail:
+    """The count of fixes with NIS above chi2.ppf(1 - tail, p), with its binomial bounds.
+
+    ``lower``/``upper`` are the Binomial(fixes, tail) quantiles at alpha / 2 and 1 - alpha / 2; ``passed``
+    when ``lower <= count <= upper``; ``pvalue`` the two-sided exact binomial test's.
+    """
+
+    fixes: int
+    threshold: float  #: chi2.ppf(1 - tail, p)
+    tail: float
+    count: int
+    expected: float
+    lower: int
+    upper: int
+    alpha: float
+    pvalue: float
+    passed: bool
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+    def sentence(self) -> str:
+        """The failure in words ("" when passed)."""
+        if self.passed:
+            return ""
+        side = "heavier" if self.count > self.upper else "lighter"
+        bound = self.upper if self.count > self.upper else self.lower
+        return (
+            f"{self.count} of {self.fixes} fixes have NIS above the chi-square {self.tail:.0%} tail ({self.threshold:.3g}); "
+            f"a Gaussian filter has {self.expected:.3g}, {'at most' if side == 'heavier' else 'at least'} {bound} at "
+            f"{1 - self.alpha:.1%}: the innovations are {side}-tailed than Gaussian"
+            + (" (gross GNSS errors: try --gate)" if side == "heavier" else "")
+        )
+
+
+def nis_tail(normalized: np.ndarray, *, tail: float = TAIL, alpha: float = ALPHA) -> NisTail:
+    """Test the share of NIS above the chi-square(p) ``1 - tail`` quantile against Binomial(K, tail).
+
+    Parameters
+    ----------
+    normalized : ndarray, shape (K, p)
+        The fixes' normalized innovations L_k^{-1} r_k (dimensionless).
+    """
+    fixes, p = normalized.shape
+    nis = np.sum(normalized**2, axis=1)
+    threshold = float(stats.chi2.isf(tail, p))
+    count = int(np.count_nonzero(nis > threshold))
+    lower = int(stats.binom.ppf(alpha / 2, fixes, tail))
+    upper = int(stats.binom.isf(alpha / 2, fixes, tail))
+    pvalue = float(stats.binomtest(count, fixes, tail).pvalue) if fixes else 1.0
+    return NisTail(fixes, threshold, tail, count, fixes * tail, lower, upper, alpha, pvalue, lower <= count <= upper)
