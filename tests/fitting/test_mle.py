@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
+from kalcal.fitting import mle
 from kalcal.fitting.mle import Free, maximize
 
 
@@ -57,3 +58,45 @@ def test_a_parameter_without_influence_is_unidentified_and_one_best_at_zero_is_c
     u = dict(fit.values, extra=extra.ci_high)
     assert loglik(u) == pytest.approx(fit.loglik - stats.chi2.ppf(0.95, 1) / 2, abs=1e-3)
     assert fit.parameters["sigma"].identified and not fit.parameters["sigma"].at_bound
+
+
+def noisy_gaussian(x, eps):
+    """:func:`gaussian` plus a deterministic rounding-like noise of amplitude ``eps`` in log L, uncorrelated
+    between points 1e-6 apart in log sigma (the diffuse bias prior leaves about 1e-8 on an accel-gps log)."""
+    exact = gaussian(x)
+
+    def loglik(values):
+        u = np.log(values["sigma"])
+        return exact(values) + eps * ((np.sin(u * 12.9898e6) * 43758.5453) % 1.0 - 0.5)
+
+    return loglik
+
+
+@pytest.mark.parametrize("seed", [2, 3])
+def test_a_search_stopped_by_rounding_noise_at_the_maximum_is_converged(seed):
+    """300 samples: the curvature of log L in log sigma is 2 n = 600, so a gradient of 1e-4 is 2e-7 from
+    the maximum, where log L differs from it by 1e-11, below the noise: L-BFGS-B's line search stops with
+    the gradient above STATIONARY. The Newton step's gain, g^2 / (2 * 600), says the search is done."""
+    x = np.random.default_rng(seed).normal(0.0, 0.3, 300)
+    loglik = noisy_gaussian(x, 1e-8)
+    fit = maximize(loglik, [Free("sigma", 1.0, 1e-3, 1e3)])
+    u = np.log(fit.values["sigma"])
+    f = lambda v: -loglik({"sigma": float(np.exp(v[0]))})  # noqa: E731
+    gradient = mle._gradient(f, np.array([u]), np.array([-10.0]), np.array([10.0]))
+    assert abs(gradient[0]) >= mle.STATIONARY  # the gradient rule alone would say not converged
+    se = 1.0 / np.sqrt(2 * x.size)
+    assert abs(u - np.log(np.sqrt(np.mean(x**2)))) < 1e-3 * se
+    assert fit.converged, fit.message
+
+
+def test_a_point_a_tenth_of_a_standard_error_from_the_maximum_is_not_stationary():
+    """There a Newton step gains (0.1)^2 / 2 = 0.005 in log L, more than GAIN."""
+    x = np.random.default_rng(0).normal(0.0, 0.3, 300)
+    loglik = gaussian(x)
+    f = lambda v: -loglik({"sigma": float(np.exp(v[0]))})  # noqa: E731
+    se = 1.0 / np.sqrt(2 * x.size)
+    u = np.array([np.log(np.sqrt(np.mean(x**2))) + 0.1 * se])
+    low, high = np.array([-10.0]), np.array([10.0])
+    hess = mle._hessian(f, u, [0])
+    assert not mle._stationary(f, u, low, high, [0], hess)
+    assert mle._stationary(f, u - 0.1 * se, low, high, [0], hess)
