@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from kalcal.fitting import mle
+from kalcal.fitting import local_search, mle
 from kalcal.fitting.mle import Free, maximize
 
 
@@ -82,7 +82,7 @@ def test_a_search_stopped_by_rounding_noise_at_the_maximum_is_converged(seed):
     fit = maximize(loglik, [Free("sigma", 1.0, 1e-3, 1e3)])
     u = np.log(fit.values["sigma"])
     f = lambda v: -loglik({"sigma": float(np.exp(v[0]))})  # noqa: E731
-    gradient = mle._gradient(f, np.array([u]), np.array([-10.0]), np.array([10.0]))
+    gradient = local_search.gradient(f, np.array([u]), np.array([-10.0]), np.array([10.0]))
     assert abs(gradient[0]) >= mle.STATIONARY  # the gradient rule alone would say not converged
     se = 1.0 / np.sqrt(2 * x.size)
     assert abs(u - np.log(np.sqrt(np.mean(x**2)))) < 1e-3 * se
@@ -100,3 +100,30 @@ def test_a_point_a_tenth_of_a_standard_error_from_the_maximum_is_not_stationary(
     hess = mle._hessian(f, u, [0])
     assert not mle._stationary(f, u, low, high, [0], hess)
     assert mle._stationary(f, u - 0.1 * se, low, high, [0], hess)
+
+
+def test_the_profile_intervals_of_correlated_parameters_are_where_the_re_maximized_log_l_has_fallen():
+    """x ~ N(0, a^2), y ~ N(0, a^2 + b^2): b's estimate depends on a's, so the profile differs from the
+    slice. Each end of the profile interval (warm-started searches, bracketed crossings) is where log L
+    maximized over the other parameter from scratch is 1.92 below the maximum."""
+    rng = np.random.default_rng(4)
+    x, y = rng.normal(0.0, 1.0, 200), rng.normal(0.0, np.sqrt(1.0 + 0.7**2), 200)
+    lx, ly = gaussian(x), gaussian(y)
+
+    def loglik(values):
+        return lx({"sigma": values["a"]}) + ly({"sigma": np.hypot(values["a"], values["b"])})
+
+    fit = maximize(loglik, [Free("a", 0.5, 1e-3, 1e3), Free("b", 0.5, 1e-3, 1e3)], profile=True)
+    drop = stats.chi2.ppf(0.95, 1) / 2
+    from scipy import optimize
+
+    for name, other in (("a", "b"), ("b", "a")):
+        p = fit.parameters[name]
+        assert p.identified and not p.at_bound
+        for end in (p.ci_low, p.ci_high):
+            inner = optimize.minimize_scalar(lambda w: -loglik({name: end, other: np.exp(w)}), bounds=(-7, 7), method="bounded",
+                                             options={"xatol": 1e-10})
+            assert -inner.fun == pytest.approx(fit.loglik - drop, abs=1e-3), (name, end)
+    # the re-maximization matters here: with b held at its estimate, log L at a's ends is well below the level
+    for end in (fit.parameters["a"].ci_low, fit.parameters["a"].ci_high):
+        assert loglik({"a": end, "b": fit.values["b"]}) < fit.loglik - drop - 0.5

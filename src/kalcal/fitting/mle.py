@@ -4,7 +4,7 @@ The search runs over u = log(value) within bounds (a parameter with ``scale="lin
 offset that may be negative: u = value) (L-BFGS-B, central-difference gradients), from the given
 starts. Then, with ``drop`` = chi2.ppf(confidence, 1) / 2 (1.92 at 95%), each parameter is judged
 along its own direction: the slice of log L through the optimum (the others held there) by default, or
-its profile (the others re-maximized) with ``profile=True``:
+its profile (the others re-maximized, :class:`kalcal.fitting.local_search.Profile`) with ``profile=True``:
 
 * **unidentified** (flat): log L at both ends of the search range is within ``drop`` of the maximum,
   so the log cannot tell any value in the range from the estimate;
@@ -36,10 +36,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy import optimize, stats
 
+from kalcal.fitting.local_search import Profile, gradient, minimize
 from kalcal.fitting.result import FitParameter
 
-#: step of the central differences in u = log(value) for the gradient and the Hessian
-GRADIENT_STEP = 1e-4
+#: step of the central differences in u = log(value) for the Hessian
 HESSIAN_STEP = 1e-2
 #: a projected gradient of log L in u below this counts as the optimum (log L changes by < 1e-7 over 1e-3)
 STATIONARY = 1e-4
@@ -118,24 +118,6 @@ class _Objective:
         return value if np.isfinite(value) else FAILED
 
 
-def _gradient(f: Callable[[np.ndarray], float], u: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
-    grad = np.empty_like(u)
-    for i in range(u.size):
-        up, down = u.copy(), u.copy()
-        up[i], down[i] = min(u[i] + GRADIENT_STEP, high[i]), max(u[i] - GRADIENT_STEP, low[i])
-        grad[i] = (f(up) - f(down)) / (up[i] - down[i])
-    return grad
-
-
-def _minimize(f, u0: np.ndarray, low: np.ndarray, high: np.ndarray):
-    if u0.size == 0:
-        return optimize.OptimizeResult(x=u0, fun=f(u0), success=True, message="nothing free")
-    return optimize.minimize(
-        f, u0, jac=lambda u: _gradient(f, u, low, high), method="L-BFGS-B", bounds=list(zip(low, high)),
-        options={"maxiter": 500, "ftol": 1e-14, "gtol": 1e-6},
-    )
-
-
 def _stationary(f, u: np.ndarray, low: np.ndarray, high: np.ndarray, interior: Sequence[int],
                 hess: np.ndarray | None) -> bool:
     """Whether f is at its minimum within the bounds at u, to what matters (a line search that stops on
@@ -145,7 +127,7 @@ def _stationary(f, u: np.ndarray, low: np.ndarray, high: np.ndarray, interior: S
     1/2 g^T H^-1 g is below :data:`GAIN` (or their gradient below :data:`STATIONARY`)."""
     if u.size == 0:
         return True
-    grad = _gradient(f, u, low, high)
+    grad = gradient(f, u, low, high)
     grad[(u <= low + 1e-9) & (grad > 0)] = 0.0
     grad[(u >= high - 1e-9) & (grad < 0)] = 0.0
     inner = list(interior) if hess is not None else []
@@ -218,29 +200,25 @@ def maximize(
     high = to_u(np.array([p.upper for p in free], dtype=float))
     u0 = np.clip(to_u(np.array([p.start for p in free], dtype=float)), low, high)
     f = lambda u: -objective.loglik_at(u)  # noqa: E731
-    result = _minimize(f, u0, low, high)
+    result = minimize(f, u0, low, high)
     u_hat, best = np.asarray(result.x, dtype=float), -float(result.fun)
     drop = float(stats.chi2.ppf(confidence, 1)) / 2.0
     z = float(stats.norm.isf((1.0 - confidence) / 2.0))
 
+    profiled = Profile(f, u_hat, low, high, best)
+
     def along(i: int, value: float) -> float:
         """log L with u_i = value: the slice, or with ``profile`` the others re-maximized."""
+        if profile:
+            return profiled(i, value)
         u = u_hat.copy()
         u[i] = value
-        if not profile or u.size == 1:
-            return objective.loglik_at(u)
-        others = [j for j in range(u.size) if j != i]
-
-        def g(w):
-            v = u.copy()
-            v[others] = w
-            return f(v)
-
-        inner = _minimize(g, u_hat[others], low[others], high[others])
-        return -float(inner.fun)
+        return objective.loglik_at(u)
 
     def crossing(i: int, end: float) -> float:
         """The u between u_hat_i and ``end`` where log L has fallen by ``drop``."""
+        if profile:
+            return profiled.crossing(i, end, best - drop)
         return optimize.brentq(lambda v: along(i, v) - (best - drop), u_hat[i], end, xtol=1e-4)
 
     ends = {}
@@ -286,7 +264,7 @@ def maximize(
         elif profile:
             ci_low, ci_high = back(i, crossing(i, low[i])), back(i, crossing(i, high[i]))
         else:  # the observed information is not positive definite: the profile's interval, not the slice's
-            ci_low, ci_high = (back(i, v) for v in _profile_crossings(f, i, u_hat, low, high, best - drop))
+            ci_low, ci_high = (back(i, profiled.crossing(i, end, best - drop)) for end in (low[i], high[i]))
             note = "interval from the profile likelihood: the observed information is not positive definite"
         parameters[p.name] = FitParameter(p.name, value, ci_low, ci_high, p.unit, p.start, identified, at_bound, note)
         curves[p.name] = _curve(along, i, u_hat, low, high, ci_low, ci_high, curve_points, float(units[i]) if linear[i] else None)
@@ -310,26 +288,6 @@ def maximize(
     return MleFit(values, best, converged, parameters, curves, method, objective.count, message)
 
 
-def _profile_crossings(f, i, u_hat, low, high, level) -> tuple[float, float]:
-    """The two u_i where the profile of log L (the others re-maximized) falls to ``level``."""
-    others = [j for j in range(u_hat.size) if j != i]
-
-    def profile(value: float) -> float:
-        u = u_hat.copy()
-        u[i] = value
-        if not others:
-            return -f(u)
-
-        def g(w):
-            v = u.copy()
-            v[others] = w
-            return f(v)
-
-        return -float(_minimize(g, u_hat[others], low[others], high[others]).fun)
-
-    return tuple(optimize.brentq(lambda v: profile(v) - level, u_hat[i], end, xtol=1e-4) for end in (low[i], high[i]))
-
-
 def _curve(along, i, u_hat, low, high, ci_low, ci_high, points, unit=None) -> dict[str, list[float]]:
     """log L along parameter i over its interval widened by half its width each way (the whole search
     range where it has no interval), in the parameter's unit (``unit``: a linear parameter's u unit)."""
@@ -341,4 +299,7 @@ def _curve(along, i, u_hat, low, high, ci_low, ci_high, points, unit=None) -> di
     else:
         a, b = low[i], high[i]
     grid = np.unique(np.append(np.linspace(a, b, points), u_hat[i]))
-    return {"value": (grid * unit if linear else np.exp(grid)).tolist(), "loglik": [along(i, v) for v in grid]}
+    loglik = np.empty(grid.size)
+    for k in np.argsort(np.abs(grid - u_hat[i]), kind="stable"):  # outward from the maximum: a profile's warm starts
+        loglik[k] = along(i, grid[k])
+    return {"value": (grid * unit if linear else np.exp(grid)).tolist(), "loglik": loglik.tolist()}
