@@ -127,3 +127,37 @@ def test_the_profile_intervals_of_correlated_parameters_are_where_the_re_maximiz
     # the re-maximization matters here: with b held at its estimate, log L at a's ends is well below the level
     for end in (fit.parameters["a"].ci_low, fit.parameters["a"].ci_high):
         assert loglik({"a": end, "b": fit.values["b"]}) < fit.loglik - drop - 0.5
+
+
+def test_two_parameters_that_enter_only_as_a_sum_are_unidentified_and_the_others_interval_is_unaffected():
+    """log L depends on a and b only through a + b: each one's slice falls (the other held), but along
+    the direction trading one for the other log L is flat: a ridge, seen by the observed information's
+    eigenvectors. c, independent of them, keeps its closed-form interval."""
+    x, y = np.random.default_rng(5).normal(0.0, 1.0, 300), np.random.default_rng(6).normal(0.0, 0.3, 400)
+    lx, ly = gaussian(x), gaussian(y)
+
+    def loglik(values):
+        return lx({"sigma": values["a"] + values["b"]}) + ly({"sigma": values["c"]})
+
+    fit = maximize(loglik, [Free("a", 0.3, 1e-3, 1e3), Free("b", 0.4, 1e-3, 1e3), Free("c", 1.0, 1e-3, 1e3)])
+    a, b, c = (fit.parameters[k] for k in "abc")
+    assert not a.identified and a.value is None and "trades off with b" in a.note
+    assert not b.identified and "trades off with a" in b.note
+    sigma_hat, se = float(np.sqrt(np.mean(y**2))), 1.0 / np.sqrt(2 * y.size)
+    assert c.identified and c.value == pytest.approx(sigma_hat, rel=1e-6)
+    z = stats.norm.isf(0.025)
+    assert c.ci_low == pytest.approx(sigma_hat * np.exp(-z * se), rel=1e-4)
+    assert c.ci_high == pytest.approx(sigma_hat * np.exp(z * se), rel=1e-4)
+    assert fit.converged
+    assert fit.notes == ("the observed-information intervals hold a, b at the estimate (log L does not fall by 1.92 on "
+                         "both sides of it, or it trades off with another: no information to share)",)
+
+
+def test_the_notes_say_which_parameters_the_observed_information_holds_at_the_estimate():
+    x = np.random.default_rng(2).normal(0.0, 1.0, 300)
+    base = gaussian(x)
+    free = [Free("sigma", 0.5, 1e-3, 1e3), Free("extra", 1e-3, 1e-6, 1.0), Free("unused", 1.0, 1e-3, 1e3)]
+    fit = maximize(lambda v: base({"sigma": np.hypot(v["sigma"], v["extra"])}), free)
+    assert fit.parameters["extra"].at_bound and not fit.parameters["unused"].identified
+    assert len(fit.notes) == 1 and "hold extra, unused at the estimate" in fit.notes[0]
+    assert maximize(base, [Free("sigma", 0.5, 1e-3, 1e3)]).notes == ()

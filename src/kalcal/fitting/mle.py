@@ -87,6 +87,7 @@ class MleFit:
     interval_method: str
     evaluations: int
     message: str = ""
+    notes: tuple[str, ...] = ()  #: what the user must know about the intervals
 
     @property
     def aic(self) -> float:
@@ -227,10 +228,15 @@ def maximize(
         at_high = along(i, high[i]) if u_hat[i] < high[i] - 1e-9 else best
         ends[i] = (best - at_low >= drop, best - at_high >= drop)
     interior = [i for i, (falls_low, falls_high) in ends.items() if falls_low and falls_high]
-    se, hess = {}, None
+    se, hess, ridge = {}, None, {}
     if interior and (not profile or not result.success):
-        hess = _hessian(f, u_hat, interior)
-        if not np.all(np.linalg.eigvalsh(hess) > 0):
+        full = _hessian(f, u_hat, interior)
+        if not profile:  # a profile's ends already see a ridge: the others re-maximized follow it
+            ridge = _ridges(f, u_hat, low, high, interior, full, drop)
+        keep = [a for a, i in enumerate(interior) if i not in ridge]
+        interior = [interior[a] for a in keep]
+        hess = full[np.ix_(keep, keep)] if keep else None
+        if hess is not None and not np.all(np.linalg.eigvalsh(hess) > 0):
             hess = None
     if not profile and hess is not None:
         cov = np.linalg.inv(hess)
@@ -243,7 +249,15 @@ def maximize(
         value = back(i, u_hat[i])
         identified, at_bound, note = True, False, ""
         ci_low = ci_high = None
-        if not falls_low and not falls_high:
+        if i in ridge:
+            identified, value = False, None
+            partners = ", ".join(free[j].name for j in ridge[i])
+            note = (
+                f"unidentified: trades off with {partners}; the observed information along the direction that trades "
+                f"them is near zero (log L changes by less than {drop:.3g} over the search range by its curvature)"
+                "; the input setting is kept"
+            )
+        elif not falls_low and not falls_high:
             identified, value = False, None
             note = (
                 f"unidentified: log L changes by less than {drop:.3g} over [{p.lower:.3g}, {p.upper:.3g}] {p.unit}"
@@ -285,7 +299,39 @@ def maximize(
                 f"reported maximum ({best:.10g}); the search stopped at a local maximum"
             )
     values = dict(zip(names, objective.values(u_hat).tolist()))
-    return MleFit(values, best, converged, parameters, curves, method, objective.count, message)
+    held = [p.name for i, p in enumerate(free) if i not in interior]
+    notes = ()
+    if se and held:  # the observed information of the others is the conditional one: these do not share it
+        notes = (
+            f"the observed-information intervals hold {', '.join(held)} at the estimate (log L does not fall by "
+            f"{drop:.3g} on both sides of it, or it trades off with another: no information to share)",
+        )
+    return MleFit(values, best, converged, parameters, curves, method, objective.count, message, notes)
+
+
+#: a parameter whose component in a flat direction's unit vector is at least this in size takes part in it
+RIDGE_SHARE = 0.1
+
+
+def _ridges(f, u_hat, low, high, interior, hess, drop) -> dict[int, list[int]]:
+    """The ``interior`` parameters on a flat direction of log L = -f (two or more trading off, a ridge not
+    along an axis): an eigenvector v of ``hess`` (the Hessian of f over ``interior``) whose eigenvalue
+    lambda is near zero, |lambda| t^2 / 2 < ``drop`` with t the reach of the search box from u_hat along
+    +-v (the farther one): by the quadratic model log L changes by less than ``drop`` along it over the
+    range. Returns each such parameter with the others of its direction."""
+    flagged: dict[int, list[int]] = {}
+    eigenvalues, vectors = np.linalg.eigh(hess)
+    for lam, v in zip(eigenvalues, vectors.T):
+        d = np.zeros(u_hat.size)
+        d[interior] = v
+        with np.errstate(divide="ignore", invalid="ignore"):
+            reach = [float(np.min(np.where(s * d > 0, (high - u_hat) / (s * d), np.where(s * d < 0, (low - u_hat) / (s * d), np.inf))))
+                     for s in (1.0, -1.0)]
+        if abs(lam) * max(reach) ** 2 / 2.0 < drop:
+            members = [i for i, x in zip(interior, v) if abs(x) >= RIDGE_SHARE]
+            for i in members:
+                flagged[i] = sorted(set(flagged.get(i, [])) | {j for j in members if j != i})
+    return flagged
 
 
 def _curve(along, i, u_hat, low, high, ci_low, ci_high, points, unit=None) -> dict[str, list[float]]:

@@ -128,11 +128,12 @@ class FitResult:
     @classmethod
     def from_search(cls, scenario: str, fit, **rest: Any) -> FitResult:
         """The result of ``scenario``'s fit from its search (a :class:`kalcal.fitting.mle.MleFit`: the
-        parameters, log L, AIC, convergence, interval method and curves) and the fields only the
-        scenario knows (``rest``)."""
+        parameters, log L, AIC, convergence, interval method, curves and notes, after ``rest``'s) and the
+        fields only the scenario knows (``rest``)."""
+        notes = [*rest.pop("notes", []), *getattr(fit, "notes", ())]
         return cls(
             scenario=scenario, parameters=fit.parameters, loglik=fit.loglik, aic=fit.aic, converged=fit.converged,
-            interval_method=fit.interval_method, curves=fit.curves, **rest,
+            interval_method=fit.interval_method, curves=fit.curves, notes=notes, **rest,
         )
 
     def value(self, name: str) -> float | None:
