@@ -281,7 +281,10 @@ def maximize(
             ci_low, ci_high = (back(i, profiled.crossing(i, end, best - drop)) for end in (low[i], high[i]))
             note = "interval from the profile likelihood: the observed information is not positive definite"
         parameters[p.name] = FitParameter(p.name, value, ci_low, ci_high, p.unit, p.start, identified, at_bound, note)
-        curves[p.name] = _curve(along, i, u_hat, low, high, ci_low, ci_high, curve_points, float(units[i]) if linear[i] else None)
+        # a profile's curve: half the grid, with the points its ends and crossings already profiled
+        known = [v for (j, v) in profiled.known if j == i] if profile else []
+        curves[p.name] = _curve(along, i, u_hat, low, high, ci_low, ci_high, curve_points // 2 + 1 if profile else curve_points,
+                                float(units[i]) if linear[i] else None, known)
     method = "profile" if profile else "observed-information"
     message = str(result.message)
     for index, (name, curve) in enumerate(curves.items()):
@@ -334,9 +337,10 @@ def _ridges(f, u_hat, low, high, interior, hess, drop) -> dict[int, list[int]]:
     return flagged
 
 
-def _curve(along, i, u_hat, low, high, ci_low, ci_high, points, unit=None) -> dict[str, list[float]]:
+def _curve(along, i, u_hat, low, high, ci_low, ci_high, points, unit=None, known=()) -> dict[str, list[float]]:
     """log L along parameter i over its interval widened by half its width each way (the whole search
-    range where it has no interval), in the parameter's unit (``unit``: a linear parameter's u unit)."""
+    range where it has no interval), in the parameter's unit (``unit``: a linear parameter's u unit):
+    ``points`` evenly spaced, the estimate and the ``known`` u within that span."""
     linear = unit is not None
     if ci_low is not None and ci_high is not None and (linear or ci_low > 0):
         a, b = (ci_low / unit, ci_high / unit) if linear else (np.log(ci_low), np.log(ci_high))
@@ -344,7 +348,8 @@ def _curve(along, i, u_hat, low, high, ci_low, ci_high, points, unit=None) -> di
         a, b = max(a - 0.5 * width, low[i]), min(b + 0.5 * width, high[i])
     else:
         a, b = low[i], high[i]
-    grid = np.unique(np.append(np.linspace(a, b, points), u_hat[i]))
+    inside = [v for v in known if a <= v <= b]
+    grid = np.unique(np.concatenate([np.linspace(a, b, points), [u_hat[i]], inside]))
     loglik = np.empty(grid.size)
     for k in np.argsort(np.abs(grid - u_hat[i]), kind="stable"):  # outward from the maximum: a profile's warm starts
         loglik[k] = along(i, grid[k])
