@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from kalcal.fitting import local_search, mle
+from kalcal.fitting import information, local_search
 from kalcal.fitting.mle import Free, maximize
 
 
@@ -83,7 +83,7 @@ def test_a_search_stopped_by_rounding_noise_at_the_maximum_is_converged(seed):
     u = np.log(fit.values["sigma"])
     f = lambda v: -loglik({"sigma": float(np.exp(v[0]))})  # noqa: E731
     gradient = local_search.gradient(f, np.array([u]), np.array([-10.0]), np.array([10.0]))
-    assert abs(gradient[0]) >= mle.STATIONARY  # the gradient rule alone would say not converged
+    assert abs(gradient[0]) >= information.STATIONARY  # the gradient rule alone would say not converged
     se = 1.0 / np.sqrt(2 * x.size)
     assert abs(u - np.log(np.sqrt(np.mean(x**2)))) < 1e-3 * se
     assert fit.converged, fit.message
@@ -97,9 +97,9 @@ def test_a_point_a_tenth_of_a_standard_error_from_the_maximum_is_not_stationary(
     se = 1.0 / np.sqrt(2 * x.size)
     u = np.array([np.log(np.sqrt(np.mean(x**2))) + 0.1 * se])
     low, high = np.array([-10.0]), np.array([10.0])
-    hess = mle._hessian(f, u, [0])
-    assert not mle._stationary(f, u, low, high, [0], hess)
-    assert mle._stationary(f, u - 0.1 * se, low, high, [0], hess)
+    hess = information.hessian(f, u, [0])
+    assert not information.stationary(f, u, low, high, [0], hess)
+    assert information.stationary(f, u - 0.1 * se, low, high, [0], hess)
 
 
 def test_the_profile_intervals_of_correlated_parameters_are_where_the_re_maximized_log_l_has_fallen():

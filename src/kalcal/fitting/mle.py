@@ -19,13 +19,12 @@ its profile (the others re-maximized, :class:`kalcal.fitting.local_search.Profil
   by ``drop`` within the range has no limit (None).
 
 ``converged`` is L-BFGS-B's own verdict, or, where it stopped otherwise (its line search stops on the
-rounding noise of log L near the maximum), that the estimate is the maximum to what matters: the projected
-gradient of log L below :data:`STATIONARY` along each parameter not in the observed information's set,
-and along those in it (where the information is positive definite) a Newton step's predicted gain
-1/2 g^T I^-1 g below :data:`GAIN`. When a point evaluated for the curves beats the maximum found (the
-search stopped at a local maximum), the search restarts from it (``restarts`` times at most); if a point
-still beats the reported maximum, ``converged`` is False whatever the optimizer said, and the message
-names the point.
+rounding noise of log L near the maximum), that the estimate is the maximum to what matters
+(:func:`kalcal.fitting.information.stationary`: a Newton step's predicted gain of log L over the
+observed information's parameters, and the projected gradient along the others). When a point evaluated
+for the curves beats the maximum found (the search stopped at a local maximum), the search restarts
+from it (``restarts`` times at most); if a point still beats the reported maximum, ``converged`` is
+False whatever the optimizer said, and the message names the point.
 """
 
 from __future__ import annotations
@@ -36,18 +35,11 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy import optimize, stats
 
-from kalcal.fitting.local_search import Profile, gradient, minimize
+from kalcal.fitting.information import ridges, stationary
+from kalcal.fitting.information import hessian as _hessian
+from kalcal.fitting.local_search import Profile, minimize
 from kalcal.fitting.result import FitParameter
 
-#: step of the central differences in u = log(value) for the Hessian
-HESSIAN_STEP = 1e-2
-#: a projected gradient of log L in u below this counts as the optimum (log L changes by < 1e-7 over 1e-3)
-STATIONARY = 1e-4
-#: a search also counts as converged where a Newton step over the interior parameters would raise log L by
-#: less than this: far below the 0.5 per parameter that is statistically anything, far above the rounding
-#: noise of log L (about 1e-8 on a log with the diffuse bias prior), which stops L-BFGS-B's line search
-#: before the gradient falls below :data:`STATIONARY` where the curvature is large (hundreds per unit of u)
-GAIN = 1e-3
 #: a linear parameter's u counts its value in this many parts of its range
 LINEAR_STEPS = 1000.0
 #: a curve point whose log L exceeds the maximum found by more than this marks the search not converged
@@ -119,51 +111,6 @@ class _Objective:
         return value if np.isfinite(value) else FAILED
 
 
-def _stationary(f, u: np.ndarray, low: np.ndarray, high: np.ndarray, interior: Sequence[int],
-                hess: np.ndarray | None) -> bool:
-    """Whether f is at its minimum within the bounds at u, to what matters (a line search that stops on
-    rounding at the optimum is a converged search): the projected gradient of f is below
-    :data:`STATIONARY` along each parameter outside ``interior``, and along the ``interior`` ones (where
-    ``hess``, their Hessian of f, is positive definite) the Newton step's predicted decrease
-    1/2 g^T H^-1 g is below :data:`GAIN` (or their gradient below :data:`STATIONARY`)."""
-    if u.size == 0:
-        return True
-    grad = gradient(f, u, low, high)
-    grad[(u <= low + 1e-9) & (grad > 0)] = 0.0
-    grad[(u >= high - 1e-9) & (grad < 0)] = 0.0
-    inner = list(interior) if hess is not None else []
-    outer = np.ones(u.size, dtype=bool)
-    outer[inner] = False
-    if np.any(np.abs(grad[outer]) >= STATIONARY):
-        return False
-    g = grad[inner]
-    return bool(np.max(np.abs(g), initial=0.0) < STATIONARY or 0.5 * g @ np.linalg.solve(hess, g) < GAIN)
-
-
-def _hessian(f: Callable[[np.ndarray], float], u: np.ndarray, index: Sequence[int]) -> np.ndarray:
-    """The Hessian of f over the coordinates ``index`` at u, central differences of step HESSIAN_STEP."""
-    n, h = len(index), HESSIAN_STEP
-    hess = np.empty((n, n))
-    center = f(u)
-    for a, i in enumerate(index):
-        for b, j in enumerate(index[: a + 1]):
-            if i == j:
-                up, down = u.copy(), u.copy()
-                up[i] += h
-                down[i] -= h
-                value = (f(up) - 2 * center + f(down)) / h**2
-            else:
-                corners = []
-                for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
-                    v = u.copy()
-                    v[i] += si * h
-                    v[j] += sj * h
-                    corners.append(f(v))
-                value = (corners[0] - corners[1] - corners[2] + corners[3]) / (4 * h * h)
-            hess[a, b] = hess[b, a] = value
-    return hess
-
-
 def maximize(
     loglik: Callable[[Mapping[str, float]], float],
     free: Sequence[Free],
@@ -232,7 +179,7 @@ def maximize(
     if interior and (not profile or not result.success):
         full = _hessian(f, u_hat, interior)
         if not profile:  # a profile's ends already see a ridge: the others re-maximized follow it
-            ridge = _ridges(f, u_hat, low, high, interior, full, drop)
+            ridge = ridges(f, u_hat, low, high, interior, full, drop)
         keep = [a for a, i in enumerate(interior) if i not in ridge]
         interior = [interior[a] for a in keep]
         hess = full[np.ix_(keep, keep)] if keep else None
@@ -241,7 +188,7 @@ def maximize(
     if not profile and hess is not None:
         cov = np.linalg.inv(hess)
         se = {i: float(np.sqrt(cov[a, a])) for a, i in enumerate(interior)}
-    converged = bool(result.success) or _stationary(f, u_hat, low, high, interior, hess)
+    converged = bool(result.success) or stationary(f, u_hat, low, high, interior, hess)
     parameters, curves = {}, {}
     back = lambda i, u: float(u * units[i] if linear[i] else np.exp(u))  # noqa: E731
     for i, p in enumerate(free):
@@ -310,31 +257,6 @@ def maximize(
             f"{drop:.3g} on both sides of it, or it trades off with another: no information to share)",
         )
     return MleFit(values, best, converged, parameters, curves, method, objective.count, message, notes)
-
-
-#: a parameter whose component in a flat direction's unit vector is at least this in size takes part in it
-RIDGE_SHARE = 0.1
-
-
-def _ridges(f, u_hat, low, high, interior, hess, drop) -> dict[int, list[int]]:
-    """The ``interior`` parameters on a flat direction of log L = -f (two or more trading off, a ridge not
-    along an axis): an eigenvector v of ``hess`` (the Hessian of f over ``interior``) whose eigenvalue
-    lambda is near zero, |lambda| t^2 / 2 < ``drop`` with t the reach of the search box from u_hat along
-    +-v (the farther one): by the quadratic model log L changes by less than ``drop`` along it over the
-    range. Returns each such parameter with the others of its direction."""
-    flagged: dict[int, list[int]] = {}
-    eigenvalues, vectors = np.linalg.eigh(hess)
-    for lam, v in zip(eigenvalues, vectors.T):
-        d = np.zeros(u_hat.size)
-        d[interior] = v
-        with np.errstate(divide="ignore", invalid="ignore"):
-            reach = [float(np.min(np.where(s * d > 0, (high - u_hat) / (s * d), np.where(s * d < 0, (low - u_hat) / (s * d), np.inf))))
-                     for s in (1.0, -1.0)]
-        if abs(lam) * max(reach) ** 2 / 2.0 < drop:
-            members = [i for i, x in zip(interior, v) if abs(x) >= RIDGE_SHARE]
-            for i in members:
-                flagged[i] = sorted(set(flagged.get(i, [])) | {j for j in members if j != i})
-    return flagged
 
 
 def _curve(along, i, u_hat, low, high, ci_low, ci_high, points, unit=None, known=()) -> dict[str, list[float]]:

@@ -76,8 +76,8 @@ class FitResult:
         The measurements in the likelihood (fixes, or samples for scale-bias).
     converged : bool
         Whether the search converged: the optimizer's verdict, or a Newton step's predicted gain of log L
-        over the parameters of the observed information below :data:`~kalcal.fitting.mle.GAIN` and the
-        projected gradient along the others below :data:`~kalcal.fitting.mle.STATIONARY`; and no point
+        over the parameters of the observed information below :data:`~kalcal.fitting.information.GAIN` and the
+        projected gradient along the others below :data:`~kalcal.fitting.information.STATIONARY`; and no point
         evaluated for the curves beating the maximum.
     interval_method : {"observed-information", "profile"}
     adequate : bool
