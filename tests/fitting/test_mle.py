@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
+from kalcal.fitting import information, local_search
 from kalcal.fitting.mle import Free, maximize
 
 
@@ -57,3 +58,106 @@ def test_a_parameter_without_influence_is_unidentified_and_one_best_at_zero_is_c
     u = dict(fit.values, extra=extra.ci_high)
     assert loglik(u) == pytest.approx(fit.loglik - stats.chi2.ppf(0.95, 1) / 2, abs=1e-3)
     assert fit.parameters["sigma"].identified and not fit.parameters["sigma"].at_bound
+
+
+def noisy_gaussian(x, eps):
+    """:func:`gaussian` plus a deterministic rounding-like noise of amplitude ``eps`` in log L, uncorrelated
+    between points 1e-6 apart in log sigma (the diffuse bias prior leaves about 1e-8 on an accel-gps log)."""
+    exact = gaussian(x)
+
+    def loglik(values):
+        u = np.log(values["sigma"])
+        return exact(values) + eps * ((np.sin(u * 12.9898e6) * 43758.5453) % 1.0 - 0.5)
+
+    return loglik
+
+
+@pytest.mark.parametrize("seed", [2, 3])
+def test_a_search_stopped_by_rounding_noise_at_the_maximum_is_converged(seed):
+    """300 samples: the curvature of log L in log sigma is 2 n = 600, so a gradient of 1e-4 is 2e-7 from
+    the maximum, where log L differs from it by 1e-11, below the noise: L-BFGS-B's line search stops with
+    the gradient above STATIONARY. The Newton step's gain, g^2 / (2 * 600), says the search is done."""
+    x = np.random.default_rng(seed).normal(0.0, 0.3, 300)
+    loglik = noisy_gaussian(x, 1e-8)
+    fit = maximize(loglik, [Free("sigma", 1.0, 1e-3, 1e3)])
+    u = np.log(fit.values["sigma"])
+    f = lambda v: -loglik({"sigma": float(np.exp(v[0]))})  # noqa: E731
+    gradient = local_search.gradient(f, np.array([u]), np.array([-10.0]), np.array([10.0]))
+    assert abs(gradient[0]) >= information.STATIONARY  # the gradient rule alone would say not converged
+    se = 1.0 / np.sqrt(2 * x.size)
+    assert abs(u - np.log(np.sqrt(np.mean(x**2)))) < 1e-3 * se
+    assert fit.converged, fit.message
+
+
+def test_a_point_a_tenth_of_a_standard_error_from_the_maximum_is_not_stationary():
+    """There a Newton step gains (0.1)^2 / 2 = 0.005 in log L, more than GAIN."""
+    x = np.random.default_rng(0).normal(0.0, 0.3, 300)
+    loglik = gaussian(x)
+    f = lambda v: -loglik({"sigma": float(np.exp(v[0]))})  # noqa: E731
+    se = 1.0 / np.sqrt(2 * x.size)
+    u = np.array([np.log(np.sqrt(np.mean(x**2))) + 0.1 * se])
+    low, high = np.array([-10.0]), np.array([10.0])
+    hess = information.hessian(f, u, [0])
+    assert not information.stationary(f, u, low, high, [0], hess)
+    assert information.stationary(f, u - 0.1 * se, low, high, [0], hess)
+
+
+def test_the_profile_intervals_of_correlated_parameters_are_where_the_re_maximized_log_l_has_fallen():
+    """x ~ N(0, a^2), y ~ N(0, a^2 + b^2): b's estimate depends on a's, so the profile differs from the
+    slice. Each end of the profile interval (warm-started searches, bracketed crossings) is where log L
+    maximized over the other parameter from scratch is 1.92 below the maximum."""
+    rng = np.random.default_rng(4)
+    x, y = rng.normal(0.0, 1.0, 200), rng.normal(0.0, np.sqrt(1.0 + 0.7**2), 200)
+    lx, ly = gaussian(x), gaussian(y)
+
+    def loglik(values):
+        return lx({"sigma": values["a"]}) + ly({"sigma": np.hypot(values["a"], values["b"])})
+
+    fit = maximize(loglik, [Free("a", 0.5, 1e-3, 1e3), Free("b", 0.5, 1e-3, 1e3)], profile=True)
+    drop = stats.chi2.ppf(0.95, 1) / 2
+    from scipy import optimize
+
+    for name, other in (("a", "b"), ("b", "a")):
+        p = fit.parameters[name]
+        assert p.identified and not p.at_bound
+        for end in (p.ci_low, p.ci_high):
+            inner = optimize.minimize_scalar(lambda w: -loglik({name: end, other: np.exp(w)}), bounds=(-7, 7), method="bounded",
+                                             options={"xatol": 1e-10})
+            assert -inner.fun == pytest.approx(fit.loglik - drop, abs=1e-3), (name, end)
+    # the re-maximization matters here: with b held at its estimate, log L at a's ends is well below the level
+    for end in (fit.parameters["a"].ci_low, fit.parameters["a"].ci_high):
+        assert loglik({"a": end, "b": fit.values["b"]}) < fit.loglik - drop - 0.5
+
+
+def test_two_parameters_that_enter_only_as_a_sum_are_unidentified_and_the_others_interval_is_unaffected():
+    """log L depends on a and b only through a + b: each one's slice falls (the other held), but along
+    the direction trading one for the other log L is flat: a ridge, seen by the observed information's
+    eigenvectors. c, independent of them, keeps its closed-form interval."""
+    x, y = np.random.default_rng(5).normal(0.0, 1.0, 300), np.random.default_rng(6).normal(0.0, 0.3, 400)
+    lx, ly = gaussian(x), gaussian(y)
+
+    def loglik(values):
+        return lx({"sigma": values["a"] + values["b"]}) + ly({"sigma": values["c"]})
+
+    fit = maximize(loglik, [Free("a", 0.3, 1e-3, 1e3), Free("b", 0.4, 1e-3, 1e3), Free("c", 1.0, 1e-3, 1e3)])
+    a, b, c = (fit.parameters[k] for k in "abc")
+    assert not a.identified and a.value is None and "trades off with b" in a.note
+    assert not b.identified and "trades off with a" in b.note
+    sigma_hat, se = float(np.sqrt(np.mean(y**2))), 1.0 / np.sqrt(2 * y.size)
+    assert c.identified and c.value == pytest.approx(sigma_hat, rel=1e-6)
+    z = stats.norm.isf(0.025)
+    assert c.ci_low == pytest.approx(sigma_hat * np.exp(-z * se), rel=1e-4)
+    assert c.ci_high == pytest.approx(sigma_hat * np.exp(z * se), rel=1e-4)
+    assert fit.converged
+    assert fit.notes == ("the observed-information intervals hold a, b at the estimate (log L does not fall by 1.92 on "
+                         "both sides of it, or it trades off with another: no information to share)",)
+
+
+def test_the_notes_say_which_parameters_the_observed_information_holds_at_the_estimate():
+    x = np.random.default_rng(2).normal(0.0, 1.0, 300)
+    base = gaussian(x)
+    free = [Free("sigma", 0.5, 1e-3, 1e3), Free("extra", 1e-3, 1e-6, 1.0), Free("unused", 1.0, 1e-3, 1e3)]
+    fit = maximize(lambda v: base({"sigma": np.hypot(v["sigma"], v["extra"])}), free)
+    assert fit.parameters["extra"].at_bound and not fit.parameters["unused"].identified
+    assert len(fit.notes) == 1 and "hold extra, unused at the estimate" in fit.notes[0]
+    assert maximize(base, [Free("sigma", 0.5, 1e-3, 1e3)]).notes == ()

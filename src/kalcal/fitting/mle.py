@@ -4,7 +4,7 @@ The search runs over u = log(value) within bounds (a parameter with ``scale="lin
 offset that may be negative: u = value) (L-BFGS-B, central-difference gradients), from the given
 starts. Then, with ``drop`` = chi2.ppf(confidence, 1) / 2 (1.92 at 95%), each parameter is judged
 along its own direction: the slice of log L through the optimum (the others held there) by default, or
-its profile (the others re-maximized) with ``profile=True``:
+its profile (the others re-maximized, :class:`kalcal.fitting.local_search.Profile`) with ``profile=True``:
 
 * **unidentified** (flat): log L at both ends of the search range is within ``drop`` of the maximum,
   so the log cannot tell any value in the range from the estimate;
@@ -20,9 +20,13 @@ its profile (the others re-maximized) with ``profile=True``:
   where it falls at neither end). A side where log L never falls
   by ``drop`` within the range has no limit (None).
 
-When a point evaluated for the curves beats the maximum found (the search stopped at a local maximum),
-the search restarts from it (``restarts`` times at most); if a point still beats the reported maximum,
-``converged`` is False whatever the optimizer said, and the message names the point.
+``converged`` is L-BFGS-B's own verdict, or, where it stopped otherwise (its line search stops on the
+rounding noise of log L near the maximum), that the estimate is the maximum to what matters
+(:func:`kalcal.fitting.information.stationary`: a Newton step's predicted gain of log L over the
+observed information's parameters, and the projected gradient along the others). When a point evaluated
+for the curves beats the maximum found (the search stopped at a local maximum), the search restarts
+from it (``restarts`` times at most); if a point still beats the reported maximum, ``converged`` is
+False whatever the optimizer said, and the message names the point.
 """
 
 from __future__ import annotations
@@ -33,13 +37,11 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy import optimize, stats
 
+from kalcal.fitting.information import ridges, stationary
+from kalcal.fitting.information import hessian as _hessian
+from kalcal.fitting.local_search import Profile, minimize
 from kalcal.fitting.result import FitParameter
 
-#: step of the central differences in u = log(value) for the gradient and the Hessian
-GRADIENT_STEP = 1e-4
-HESSIAN_STEP = 1e-2
-#: a projected gradient of log L in u below this counts as the optimum (log L changes by < 1e-7 over 1e-3)
-STATIONARY = 1e-4
 #: a linear parameter's u counts its value in this many parts of its range
 LINEAR_STEPS = 1000.0
 #: a curve point whose log L exceeds the maximum found by more than this marks the search not converged
@@ -79,6 +81,7 @@ class MleFit:
     interval_method: str
     evaluations: int
     message: str = ""
+    notes: tuple[str, ...] = ()  #: what the user must know about the intervals
 
     @property
     def aic(self) -> float:
@@ -108,59 +111,6 @@ class _Objective:
         except (ValueError, ArithmeticError, np.linalg.LinAlgError):
             return FAILED
         return value if np.isfinite(value) else FAILED
-
-
-def _gradient(f: Callable[[np.ndarray], float], u: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
-    grad = np.empty_like(u)
-    for i in range(u.size):
-        up, down = u.copy(), u.copy()
-        up[i], down[i] = min(u[i] + GRADIENT_STEP, high[i]), max(u[i] - GRADIENT_STEP, low[i])
-        grad[i] = (f(up) - f(down)) / (up[i] - down[i])
-    return grad
-
-
-def _minimize(f, u0: np.ndarray, low: np.ndarray, high: np.ndarray):
-    if u0.size == 0:
-        return optimize.OptimizeResult(x=u0, fun=f(u0), success=True, message="nothing free")
-    return optimize.minimize(
-        f, u0, jac=lambda u: _gradient(f, u, low, high), method="L-BFGS-B", bounds=list(zip(low, high)),
-        options={"maxiter": 500, "ftol": 1e-14, "gtol": 1e-6},
-    )
-
-
-def _stationary(f, u: np.ndarray, low: np.ndarray, high: np.ndarray) -> bool:
-    """Whether the projected gradient of f at u is below :data:`STATIONARY` (a line search that stops on
-    rounding at the optimum is a converged search)."""
-    if u.size == 0:
-        return True
-    grad = _gradient(f, u, low, high)
-    grad[(u <= low + 1e-9) & (grad > 0)] = 0.0
-    grad[(u >= high - 1e-9) & (grad < 0)] = 0.0
-    return bool(np.max(np.abs(grad)) < STATIONARY)
-
-
-def _hessian(f: Callable[[np.ndarray], float], u: np.ndarray, index: Sequence[int]) -> np.ndarray:
-    """The Hessian of f over the coordinates ``index`` at u, central differences of step HESSIAN_STEP."""
-    n, h = len(index), HESSIAN_STEP
-    hess = np.empty((n, n))
-    center = f(u)
-    for a, i in enumerate(index):
-        for b, j in enumerate(index[: a + 1]):
-            if i == j:
-                up, down = u.copy(), u.copy()
-                up[i] += h
-                down[i] -= h
-                value = (f(up) - 2 * center + f(down)) / h**2
-            else:
-                corners = []
-                for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
-                    v = u.copy()
-                    v[i] += si * h
-                    v[j] += sj * h
-                    corners.append(f(v))
-                value = (corners[0] - corners[1] - corners[2] + corners[3]) / (4 * h * h)
-            hess[a, b] = hess[b, a] = value
-    return hess
 
 
 def maximize(
@@ -200,30 +150,25 @@ def maximize(
     high = to_u(np.array([p.upper for p in free], dtype=float))
     u0 = np.clip(to_u(np.array([p.start for p in free], dtype=float)), low, high)
     f = lambda u: -objective.loglik_at(u)  # noqa: E731
-    result = _minimize(f, u0, low, high)
+    result = minimize(f, u0, low, high)
     u_hat, best = np.asarray(result.x, dtype=float), -float(result.fun)
-    converged = bool(result.success) or _stationary(f, u_hat, low, high)
     drop = float(stats.chi2.ppf(confidence, 1)) / 2.0
     z = float(stats.norm.isf((1.0 - confidence) / 2.0))
 
+    profiled = Profile(f, u_hat, low, high, best)
+
     def along(i: int, value: float) -> float:
         """log L with u_i = value: the slice, or with ``profile`` the others re-maximized."""
+        if profile:
+            return profiled(i, value)
         u = u_hat.copy()
         u[i] = value
-        if not profile or u.size == 1:
-            return objective.loglik_at(u)
-        others = [j for j in range(u.size) if j != i]
-
-        def g(w):
-            v = u.copy()
-            v[others] = w
-            return f(v)
-
-        inner = _minimize(g, u_hat[others], low[others], high[others])
-        return -float(inner.fun)
+        return objective.loglik_at(u)
 
     def crossing(i: int, end: float) -> float:
         """The u between u_hat_i and ``end`` where log L has fallen by ``drop``."""
+        if profile:
+            return profiled.crossing(i, end, best - drop)
         return optimize.brentq(lambda v: along(i, v) - (best - drop), u_hat[i], end, xtol=1e-4)
 
     ends = {}
@@ -232,13 +177,20 @@ def maximize(
         at_high = along(i, high[i]) if u_hat[i] < high[i] - 1e-9 else best
         ends[i] = (best - at_low >= drop, best - at_high >= drop)
     interior = [i for i, (falls_low, falls_high) in ends.items() if falls_low and falls_high]
-    se = {}
-    if not profile and interior:
-        hess = _hessian(f, u_hat, interior)
-        eigenvalues = np.linalg.eigvalsh(hess)
-        if np.all(eigenvalues > 0):
-            cov = np.linalg.inv(hess)
-            se = {i: float(np.sqrt(cov[a, a])) for a, i in enumerate(interior)}
+    se, hess, ridge = {}, None, {}
+    if interior and (not profile or not result.success):
+        full = _hessian(f, u_hat, interior)
+        if not profile:  # a profile's ends already see a ridge: the others re-maximized follow it
+            ridge = ridges(f, u_hat, low, high, interior, full, drop)
+        keep = [a for a, i in enumerate(interior) if i not in ridge]
+        interior = [interior[a] for a in keep]
+        hess = full[np.ix_(keep, keep)] if keep else None
+        if hess is not None and not np.all(np.linalg.eigvalsh(hess) > 0):
+            hess = None
+    if not profile and hess is not None:
+        cov = np.linalg.inv(hess)
+        se = {i: float(np.sqrt(cov[a, a])) for a, i in enumerate(interior)}
+    converged = bool(result.success) or stationary(f, u_hat, low, high, interior, hess)
     parameters, curves = {}, {}
     back = lambda i, u: float(u * units[i] if linear[i] else np.exp(u))  # noqa: E731
     for i, p in enumerate(free):
@@ -246,7 +198,15 @@ def maximize(
         value = back(i, u_hat[i])
         identified, at_bound, note = True, False, ""
         ci_low = ci_high = None
-        if not falls_low and not falls_high:
+        if i in ridge:
+            identified, value = False, None
+            partners = ", ".join(free[j].name for j in ridge[i])
+            note = (
+                f"unidentified: trades off with {partners}; the observed information along the direction that trades "
+                f"them is near zero (log L changes by less than {drop:.3g} over the search range by its curvature)"
+                "; the input setting is kept"
+            )
+        elif not falls_low and not falls_high:
             identified, value = False, None
             note = (
                 f"unidentified: log L changes by less than {drop:.3g} over [{p.lower:.3g}, {p.upper:.3g}] {p.unit}"
@@ -267,8 +227,12 @@ def maximize(
         elif profile:
             ci_low, ci_high = back(i, crossing(i, low[i])), back(i, crossing(i, high[i]))
         else:  # the observed information is not positive definite: the profile's interval, not the slice's
-            # (the slice fell at both ends; the profile, the others re-maximized, may not: a ridge)
-            below, above = _profile_crossings(f, i, u_hat, low, high, best - drop)
+            # (the slice fell at both ends; the profile, the others re-maximized, may not: a ridge), so the
+            # profile is judged at each end first: None where it has not fallen to the level there
+            below, above = (
+                None if abs(end - u_hat[i]) < 1e-9 or profiled(i, end) > best - drop else profiled.crossing(i, end, best - drop)
+                for end in (low[i], high[i])
+            )
             note = "interval from the profile likelihood: the observed information is not positive definite"
             if below is None and above is None:
                 identified, value = False, None
@@ -286,7 +250,10 @@ def maximize(
                 if below is None and linear[i] or above is None:
                     note += "; no limit within the search range on the side where the profile does not fall"
         parameters[p.name] = FitParameter(p.name, value, ci_low, ci_high, p.unit, p.start, identified, at_bound, note)
-        curves[p.name] = _curve(along, i, u_hat, low, high, ci_low, ci_high, curve_points, float(units[i]) if linear[i] else None)
+        # a profile's curve: half the grid, with the points its ends and crossings already profiled
+        known = [v for (j, v) in profiled.known if j == i] if profile else []
+        curves[p.name] = _curve(along, i, u_hat, low, high, ci_low, ci_high, curve_points // 2 + 1 if profile else curve_points,
+                                float(units[i]) if linear[i] else None, known)
     method = "profile" if profile else "observed-information"
     message = str(result.message)
     for index, (name, curve) in enumerate(curves.items()):
@@ -305,40 +272,20 @@ def maximize(
                 f"reported maximum ({best:.10g}); the search stopped at a local maximum"
             )
     values = dict(zip(names, objective.values(u_hat).tolist()))
-    return MleFit(values, best, converged, parameters, curves, method, objective.count, message)
+    held = [p.name for i, p in enumerate(free) if i not in interior]
+    notes = ()
+    if se and held:  # the observed information of the others is the conditional one: these do not share it
+        notes = (
+            f"the observed-information intervals hold {', '.join(held)} at the estimate (log L does not fall by "
+            f"{drop:.3g} on both sides of it, or it trades off with another: no information to share)",
+        )
+    return MleFit(values, best, converged, parameters, curves, method, objective.count, message, notes)
 
 
-def _profile_crossings(f, i, u_hat, low, high, level) -> tuple[float | None, float | None]:
-    """The two u_i where the profile of log L (the others re-maximized) falls to ``level``: below and
-    above u_hat_i, None on a side where the profile at the range's end has not fallen to ``level`` (no
-    limit within the range: along a ridge the profile may stay flat where the slice fell)."""
-    others = [j for j in range(u_hat.size) if j != i]
-
-    def profile(value: float) -> float:
-        u = u_hat.copy()
-        u[i] = value
-        if not others:
-            return -f(u)
-
-        def g(w):
-            v = u.copy()
-            v[others] = w
-            return f(v)
-
-        return -float(_minimize(g, u_hat[others], low[others], high[others]).fun)
-
-    crossings = []
-    for end in (low[i], high[i]):
-        if abs(end - u_hat[i]) < 1e-9 or profile(end) > level:
-            crossings.append(None)
-        else:
-            crossings.append(optimize.brentq(lambda v: profile(v) - level, u_hat[i], end, xtol=1e-4))
-    return crossings[0], crossings[1]
-
-
-def _curve(along, i, u_hat, low, high, ci_low, ci_high, points, unit=None) -> dict[str, list[float]]:
+def _curve(along, i, u_hat, low, high, ci_low, ci_high, points, unit=None, known=()) -> dict[str, list[float]]:
     """log L along parameter i over its interval widened by half its width each way (the whole search
-    range where it has no interval), in the parameter's unit (``unit``: a linear parameter's u unit)."""
+    range where it has no interval), in the parameter's unit (``unit``: a linear parameter's u unit):
+    ``points`` evenly spaced, the estimate and the ``known`` u within that span."""
     linear = unit is not None
     if ci_low is not None and ci_high is not None and (linear or ci_low > 0):
         a, b = (ci_low / unit, ci_high / unit) if linear else (np.log(ci_low), np.log(ci_high))
@@ -346,5 +293,9 @@ def _curve(along, i, u_hat, low, high, ci_low, ci_high, points, unit=None) -> di
         a, b = max(a - 0.5 * width, low[i]), min(b + 0.5 * width, high[i])
     else:
         a, b = low[i], high[i]
-    grid = np.unique(np.append(np.linspace(a, b, points), u_hat[i]))
-    return {"value": (grid * unit if linear else np.exp(grid)).tolist(), "loglik": [along(i, v) for v in grid]}
+    inside = [v for v in known if a <= v <= b]
+    grid = np.unique(np.concatenate([np.linspace(a, b, points), [u_hat[i]], inside]))
+    loglik = np.empty(grid.size)
+    for k in np.argsort(np.abs(grid - u_hat[i]), kind="stable"):  # outward from the maximum: a profile's warm starts
+        loglik[k] = along(i, grid[k])
+    return {"value": (grid * unit if linear else np.exp(grid)).tolist(), "loglik": loglik.tolist()}

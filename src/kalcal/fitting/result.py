@@ -75,8 +75,10 @@ class FitResult:
     fixes : int
         The measurements in the likelihood (fixes, or samples for scale-bias).
     converged : bool
-        Whether the search converged: the optimizer's verdict or a projected gradient below
-        :data:`~kalcal.fitting.mle.STATIONARY`, and no point evaluated for the curves beating the maximum.
+        Whether the search converged: the optimizer's verdict, or a Newton step's predicted gain of log L
+        over the parameters of the observed information below :data:`~kalcal.fitting.information.GAIN` and the
+        projected gradient along the others below :data:`~kalcal.fitting.information.STATIONARY`; and no point
+        evaluated for the curves beating the maximum.
     interval_method : {"observed-information", "profile"}
     adequate : bool
         Whether the fitted filter's innovations pass their diagnostics (NIS and whiteness).
@@ -126,11 +128,12 @@ class FitResult:
     @classmethod
     def from_search(cls, scenario: str, fit, **rest: Any) -> FitResult:
         """The result of ``scenario``'s fit from its search (a :class:`kalcal.fitting.mle.MleFit`: the
-        parameters, log L, AIC, convergence, interval method and curves) and the fields only the
-        scenario knows (``rest``)."""
+        parameters, log L, AIC, convergence, interval method, curves and notes, after ``rest``'s) and the
+        fields only the scenario knows (``rest``)."""
+        notes = [*rest.pop("notes", []), *getattr(fit, "notes", ())]
         return cls(
             scenario=scenario, parameters=fit.parameters, loglik=fit.loglik, aic=fit.aic, converged=fit.converged,
-            interval_method=fit.interval_method, curves=fit.curves, **rest,
+            interval_method=fit.interval_method, curves=fit.curves, notes=notes, **rest,
         )
 
     def value(self, name: str) -> float | None:
