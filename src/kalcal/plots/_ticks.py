@@ -3,8 +3,8 @@
 Matplotlib draws every tick as an object of its own, two tick lines, a grid line and two texts, made
 and laid out again at each draw; on the report's figures that is most of the drawing time. Here the
 ticks are chosen once, when the figure is complete (at most :data:`X_BINS` and :data:`Y_BINS`
-intervals on a linear axis; on a log axis decades, or 1-2-5 steps where it spans under two decades,
-with no minor ticks), from the axis's own locator and formatter, and drawn as one line of tick marks,
+intervals on a linear axis; on a log axis decades, or denser steps (1-2-5, then 1-2-3-4-5-6-8) where
+decades alone would give fewer than three labels, with no minor ticks), from the axis's own locator and formatter, and drawn as one line of tick marks,
 one grid line (segments split by NaN) and one text per tick label. Log tick labels are plain text with
 Unicode superscripts (``10⁻³``, ``2×10⁻⁵``) instead of mathtext.
 """
@@ -52,8 +52,13 @@ def _few(axis, bins: int) -> None:
     if axis.get_scale() == "log":
         low, high = sorted(axis.get_view_interval())
         if isinstance(locator, LogLocator) and low > 0 and np.isfinite(high):
-            subs = (1.0,) if high / low >= 100.0 else (1.0, 2.0, 5.0)
-            axis.set_major_locator(LogLocator(base=10.0, subs=subs, numticks=bins + 3))
+            chosen = None
+            for subs in ((1.0,), (1.0, 2.0, 5.0), (1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0)):  # sparse to dense
+                candidate = LogLocator(base=10.0, subs=subs, numticks=bins + 3)
+                shown = [v for v in candidate.tick_values(low, high) if low <= v <= high]
+                if chosen is None or (len(shown) <= bins + 1 and len(chosen[1]) < 3):
+                    chosen = (candidate, shown)
+            axis.set_major_locator(chosen[0])
             if isinstance(axis.get_major_formatter(), LogFormatter):
                 axis.set_major_formatter(PowerFormatter())
     elif isinstance(locator, MaxNLocator) and not isinstance(locator, FixedLocator):
