@@ -16,8 +16,13 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+from PIL import Image
+
+from kalcal.plots._layout import fit_margins
 
 DPI = 100
+#: zlib level of the PNGs: see docs
+COMPRESS_LEVEL = 1
 #: width of every figure, px
 WIDTH_PX = 900
 #: height of a figure with one row of panels, px; each further row adds ROW_PX
@@ -27,6 +32,9 @@ ROW_PX = 250
 STYLE = {
     "font.size": 10.0,
     "axes.titlesize": 10.5,
+    # a title at a fixed height above its panel: matplotlib does not lay out the tick labels again to
+    # find where the title goes (no panel has tick labels on top)
+    "axes.titley": 1.0,
     "axes.labelsize": 10.0,
     "legend.fontsize": 8.5,
     "xtick.labelsize": 9.0,
@@ -62,7 +70,7 @@ def new_figure(rows: int = 1, cols: int = 1, *, height: int | None = None, share
     axes : ndarray of Axes, shape (rows, cols)
     """
     height = height_px(rows) if height is None else height
-    figure = Figure(figsize=(WIDTH_PX / DPI, height / DPI), dpi=DPI, layout="constrained")
+    figure = Figure(figsize=(WIDTH_PX / DPI, height / DPI), dpi=DPI)
     FigureCanvasAgg(figure)
     axes = figure.subplots(rows, cols, sharex=sharex, squeeze=False)
     return figure, axes
@@ -72,7 +80,11 @@ def save(figure: Figure, path: str | Path) -> Path:
     """Write ``figure`` as a PNG of exactly its pixel size, with no software or time metadata."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    figure.savefig(path, format="png", dpi=DPI, metadata={"Software": None})
+    if not getattr(figure, "_kalcal_fitted", False):
+        fit_margins(figure)
+    figure.canvas.draw()
+    pixels = np.asarray(figure.canvas.buffer_rgba())[..., :3]  # opaque white background: no alpha to keep
+    Image.fromarray(np.ascontiguousarray(pixels)).save(path, format="png", compress_level=COMPRESS_LEVEL, dpi=(DPI, DPI))
     return path
 
 

@@ -26,6 +26,7 @@ from kalcal.plots._common import (
     styled,
     time_label,
 )
+from kalcal.plots._layout import colorbar_beside
 from kalcal.verification.bounds import COVARIANCE_PARTS, centered_nees_bounds, chi2_mean_bounds, whiteness_pairs_bound
 from kalcal.verification.covariance import centered_nees
 
@@ -181,11 +182,10 @@ def plot_residual_correlation(dataset: xr.Dataset, path: str | Path) -> Path:
             ax.set_title(f"r_{names[a]}(t_k) with r_{names[b]}(t_j)")
             ax.set_ylabel(label("t_k", "s"))
             ax.set_xlabel(label("t_j", "s"))
-    colorbar = figure.colorbar(image, ax=axes, shrink=0.9)
-    colorbar.set_label("correlation (dimensionless)")
+    figure.suptitle(f"Residual correlation over pairs of updates, N = {count:,}; whiteness bound ±{bound:.3g} (black ticks)")
+    colorbar = colorbar_beside(figure, image, "correlation (dimensionless)", shrink=0.9)
     colorbar.ax.axhline(bound, color="black", linewidth=1.0)
     colorbar.ax.axhline(-bound, color="black", linewidth=1.0)
-    figure.suptitle(f"Residual correlation over pairs of updates, N = {count:,}; whiteness bound ±{bound:.3g} (black ticks)")
     return save(figure, path)
 
 

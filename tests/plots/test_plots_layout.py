@@ -1,0 +1,124 @@
+"""The figures' margins, measured without a layout pass, hold their texts: nothing is clipped at the
+figure's edge and no panel's labels run into another panel; ticks stay few and log labels plain."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+from matplotlib.text import Text
+
+from kalcal.plots import _common, consistency, ensemble, steady_state
+from kalcal.plots import realization as single
+from kalcal.plots._ticks import X_BINS, Y_BINS, PowerFormatter
+
+from test_plots_figures import FIGURES
+
+
+@pytest.fixture
+def saved(monkeypatch):
+    """The matplotlib Figure each plot function saves, in order."""
+    figures = []
+    for module in (single, consistency, ensemble, steady_state):
+        original = module.save
+
+        def save(figure, path, original=original):
+            written = original(figure, path)
+            figures.append(figure)
+            return written
+
+        monkeypatch.setattr(module, "save", save)
+    return figures
+
+
+def _texts(artist):
+    return [t for t in artist.findobj(Text) if t.get_visible() and t.get_text().strip()]
+
+
+def _panel_texts(ax):
+    """The texts a panel draws outside itself: tick labels, offset text, axis labels, title."""
+    return [t for t in [*ax.texts, ax.xaxis.label, ax.yaxis.label, ax.title] if t.get_visible() and t.get_text().strip()]
+
+
+def assert_laid_out(figure):
+    renderer = figure.canvas.get_renderer()
+    width, height = figure.bbox.width, figure.bbox.height
+    for text in _texts(figure):
+        box = text.get_window_extent(renderer)
+        if not np.all(np.isfinite(box.get_points())):
+            continue  # a label of a spare tick matplotlib keeps but does not draw
+        assert box.x0 >= -0.5 and box.y0 >= -0.5, f"{text.get_text()!r} clipped at the left or bottom: {box}"
+        assert box.x1 <= width + 0.5 and box.y1 <= height + 0.5, f"{text.get_text()!r} clipped at the right or top: {box}"
+    panels = [ax for ax in figure.axes if ax.get_visible()]
+    for ax in panels:
+        for text in _panel_texts(ax):
+            box = text.get_window_extent(renderer)
+            for other in panels:
+                if other is not ax:
+                    assert not box.overlaps(other.bbox), f"{text.get_text()!r} runs into another panel"
+    if figure._suptitle is not None:
+        box = figure._suptitle.get_window_extent(renderer)
+        for ax in panels:
+            assert not box.overlaps(ax.bbox), "the figure's title runs into a panel"
+            for text in _panel_texts(ax):
+                assert not box.overlaps(text.get_window_extent(renderer)), f"the title covers {text.get_text()!r}"
+
+
+@pytest.mark.parametrize(("name", "draw", "size"), FIGURES, ids=[f[0] for f in FIGURES])
+def test_no_text_is_clipped_or_runs_into_another_panel(plots_run, saved, tmp_path, name, draw, size):
+    stats, long_stats, data = plots_run
+    draw(stats, long_stats, data, tmp_path / f"{name}.png")
+    assert_laid_out(saved[-1])
+
+
+def test_wide_tick_labels_and_long_labels_get_their_room(plots_run, saved, tmp_path):
+    """Values in the thousands and long names and units: the margins grow with them."""
+    _, _, data = plots_run
+    scaled = dataclasses.replace(
+        data,
+        truth=data.truth * 12345.6,
+        estimate=data.estimate * 12345.6,
+        error=data.error * 12345.6,
+        filter_cov=data.filter_cov * 12345.6**2,
+        state_names=("along_track_position_of_the_vehicle", "along_track_velocity", "accelerometer_bias"),
+        state_units=("mm", "mm/s", "(mm/s^2)/√Hz"),
+    )
+    single.plot_state_estimate(scaled, 0, tmp_path / "state.png")
+    single.plot_estimation_error_magnified(scaled, 2, tmp_path / "error.png")
+    for figure in saved:
+        assert_laid_out(figure)
+    narrow = single.plot_state_estimate(data, 0, tmp_path / "narrow.png")
+    assert narrow.is_file()
+    assert saved[0].axes[0].get_position().x0 > saved[-1].axes[0].get_position().x0
+
+
+def test_ticks_are_few_and_log_axes_have_no_minor_ticks(plots_run, saved, tmp_path):
+    stats, _, _ = plots_run
+    ensemble.plot_variance_diagonal(stats, tmp_path / "variance.png")
+    ensemble.plot_orthogonality_offdiagonal(stats, tmp_path / "orthogonality.png")
+    for figure in saved:
+        for ax in figure.axes:
+            # the tick labels are the panel's own texts now; matplotlib's tick machinery draws none
+            assert len(ax.xaxis.get_major_locator()()) == 0 and len(ax.yaxis.get_major_locator()()) == 0
+            x_labels = [t for t in ax.texts if t.get_horizontalalignment() == "center" and t.get_verticalalignment() == "top"]
+            y_labels = [t for t in ax.texts if t.get_horizontalalignment() == "right"]
+            assert len(x_labels) <= X_BINS + 1 and 2 <= len(y_labels) <= Y_BINS + 1
+            assert not any("$" in t.get_text() for t in ax.texts), "mathtext in a tick label"
+    log_panel = saved[0].axes[0]
+    assert log_panel.get_yscale() == "log" and len(log_panel.yaxis.get_minor_locator()()) == 0
+
+
+@pytest.mark.parametrize(
+    ("value", "text"),
+    [(1e-3, "10⁻³"), (2e-5, "2×10⁻⁵"), (5e-4, "5×10⁻⁴"), (1.0, "1"), (20.0, "20"), (1000.0, "1000"), (1e5, "10⁵"), (1e-12, "10⁻¹²")],
+)
+def test_log_tick_labels_are_plain_text_powers_of_ten(value, text):
+    assert PowerFormatter()(value) == text
+
+
+def test_the_png_is_rgb_at_the_figures_size(plots_run, tmp_path):
+    from PIL import Image
+
+    path = single.plot_estimation_error(plots_run[2], 0, tmp_path / "e.png")
+    with Image.open(path) as image:
+        assert image.mode == "RGB" and image.size == (_common.WIDTH_PX, _common.height_px(1))
+    assert np.asarray(Image.open(path)).shape == (_common.height_px(1), _common.WIDTH_PX, 3)
