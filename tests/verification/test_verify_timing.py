@@ -1,4 +1,5 @@
-"""summary.json's timing: total_s up to the summary, report_s for the page, wall_s for the whole job."""
+"""summary.json's timing: total_s up to the summary, report_s for the page, wall_s for the whole job, long_run_s
+for the long-run study's own Monte Carlo."""
 
 import json
 import time
@@ -27,6 +28,9 @@ def test_wall_time_covers_the_whole_job_report_included(tmp_path, monkeypatch):
     assert timing["report_s"] >= PAUSE
     assert timing["wall_s"] >= timing["total_s"] + timing["report_s"]
     assert timing["wall_s"] <= elapsed
+    # the long run's own Monte Carlo: inside total_s, apart from the run's, as long_run says
+    assert 0 < timing["long_run_s"] == outcome.summary["long_run"]["monte_carlo_s"]
+    assert timing["monte_carlo_s"] + timing["long_run_s"] < timing["total_s"]
     page = (out / "report.html").read_text(encoding="utf-8")
     assert "timing.wall_s" in page and "timing.report_s" in page
     assert ">wall_s<" not in page and ">report_s<" not in page
@@ -41,3 +45,4 @@ def test_without_a_report_its_time_is_null(tmp_path):
     timing = json.loads((tmp_path / "summary.json").read_text())["timing"]
     assert timing["report_s"] is None
     assert timing["wall_s"] >= timing["total_s"] > 0
+    assert timing["long_run_s"] == 0.0  # no long run

@@ -238,6 +238,8 @@ def compute_verification(
         },
         "timing": {
             "monte_carlo_s": run.wall_s,
+            # the long-run study's own Monte Carlo (0 without one): inside total_s, apart from monte_carlo_s
+            "long_run_s": long_summary["monte_carlo_s"] if long_summary is not None else 0.0,
             # up to summary.json (Monte Carlo, long run, checks, statistics files), kept for older readers;
             # wall_s is the whole job, report_s the report's part of it
             "total_s": None,  # set when computed; here for its place in summary.json
