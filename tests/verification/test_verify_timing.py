@@ -5,6 +5,7 @@ import json
 import time
 
 from kalcal.jobs import report as report_job
+from kalcal.jobs import verify as verify_job
 from kalcal.jobs.verify import verify
 from kalcal.models.registry import build_scenario
 
@@ -46,3 +47,16 @@ def test_without_a_report_its_time_is_null(tmp_path):
     assert timing["report_s"] is None
     assert timing["wall_s"] >= timing["total_s"] > 0
     assert timing["long_run_s"] == 0.0  # no long run
+
+
+def test_the_summary_is_written_once_after_the_page(tmp_path, monkeypatch):
+    written = []
+    real = verify_job.write_json
+
+    def counting(path, document):
+        written.append((path.name, (path.parent / "report.html").is_file()))
+        return real(path, document)
+
+    monkeypatch.setattr(verify_job, "write_json", counting)
+    verify(build_scenario("accel-gps", None, ["scenario.duration=2"]), 300, 1, tmp_path / "out", long_run=0, report=True)
+    assert written == [("summary.json", True)]
