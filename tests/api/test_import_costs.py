@@ -23,6 +23,10 @@ def test_the_command_line_and_the_api_calls_import_nothing_heavy(module):
     assert _loaded(module, HEAVY) == []
 
 
+def test_the_command_line_imports_no_numpy():
+    assert _loaded("kalcal.cli", ("numpy", *HEAVY)) == []
+
+
 def test_the_verify_job_imports_no_plotting_dask_or_unused_scipy():
     watched = ("matplotlib", "dask.array", "distributed", "scipy.stats", "scipy.signal", "scipy.io", "scipy.optimize")
     assert _loaded("kalcal.jobs.verify", watched) == []

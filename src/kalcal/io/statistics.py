@@ -125,15 +125,15 @@ def _encode(dataset) -> tuple[dict[str, int], dict[str, Any], list[tuple]] | Non
             encoded.append((name, dims, data, attrs))
         if set(labels) - placed:  # xarray would write a global "coordinates" attribute
             return None
-        dims: dict[str, int] = {}
+        lengths: dict[str, int] = {}  # in the order of first use, as xarray creates them
         for _, names, data, _ in encoded:
             for dim, length in zip(names, data.shape):
-                if dims.setdefault(dim, length) != length:
+                if lengths.setdefault(dim, length) != length:
                     return None
         attributes = {str(key): _attribute(value) for key, value in dataset.attrs.items()}
     except _Unsupported:
         return None
-    return dims, attributes, encoded
+    return lengths, attributes, encoded
 
 
 def _write(path: Path, dims: dict[str, int], attributes: dict[str, Any], variables: list[tuple]) -> None:
