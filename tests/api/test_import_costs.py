@@ -28,5 +28,5 @@ def test_the_command_line_imports_no_numpy():
 
 
 def test_the_verify_job_imports_no_plotting_dask_or_unused_scipy():
-    watched = ("matplotlib", "dask.array", "distributed", "scipy.stats", "scipy.signal", "scipy.io", "scipy.optimize")
+    watched = ("matplotlib", "dask", "dask.array", "distributed", "scipy.stats", "scipy.signal", "scipy.io", "scipy.optimize")
     assert _loaded("kalcal.jobs.verify", watched) == []
