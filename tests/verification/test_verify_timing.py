@@ -1,9 +1,11 @@
-"""summary.json's timing: total_s up to the summary, report_s for the page, wall_s for the whole job."""
+"""summary.json's timing: total_s up to the summary, report_s for the page, wall_s for the whole job, long_run_s
+for the long-run study's own Monte Carlo."""
 
 import json
 import time
 
 from kalcal.jobs import report as report_job
+from kalcal.jobs import verify as verify_job
 from kalcal.jobs.verify import verify
 from kalcal.models.registry import build_scenario
 
@@ -27,6 +29,9 @@ def test_wall_time_covers_the_whole_job_report_included(tmp_path, monkeypatch):
     assert timing["report_s"] >= PAUSE
     assert timing["wall_s"] >= timing["total_s"] + timing["report_s"]
     assert timing["wall_s"] <= elapsed
+    # the long run's own Monte Carlo: inside total_s, apart from the run's, as long_run says
+    assert 0 < timing["long_run_s"] == outcome.summary["long_run"]["monte_carlo_s"]
+    assert timing["monte_carlo_s"] + timing["long_run_s"] < timing["total_s"]
     page = (out / "report.html").read_text(encoding="utf-8")
     assert "timing.wall_s" in page and "timing.report_s" in page
     assert ">wall_s<" not in page and ">report_s<" not in page
@@ -41,3 +46,17 @@ def test_without_a_report_its_time_is_null(tmp_path):
     timing = json.loads((tmp_path / "summary.json").read_text())["timing"]
     assert timing["report_s"] is None
     assert timing["wall_s"] >= timing["total_s"] > 0
+    assert timing["long_run_s"] == 0.0  # no long run
+
+
+def test_the_summary_is_written_once_after_the_page(tmp_path, monkeypatch):
+    written = []
+    real = verify_job.write_json
+
+    def counting(path, document):
+        written.append((path.name, (path.parent / "report.html").is_file()))
+        return real(path, document)
+
+    monkeypatch.setattr(verify_job, "write_json", counting)
+    verify(build_scenario("accel-gps", None, ["scenario.duration=2"]), 300, 1, tmp_path / "out", long_run=0, report=True)
+    assert written == [("summary.json", True)]

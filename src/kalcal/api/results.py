@@ -7,10 +7,12 @@ import shutil
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
+
+if TYPE_CHECKING:  # annotations only: a verification result needs no pandas
+    import pandas as pd
 
 
 def _fmt(value: Any) -> str:

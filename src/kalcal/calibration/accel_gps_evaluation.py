@@ -13,13 +13,13 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
-from scipy import stats
 
 from kalcal.calibration.interval_model import continuous_bias_model
 from kalcal.filters.sequential import SequentialRun, sequential_filter
 from kalcal.filters.sqrt_form import cholesky_factor, gram, sqrt_predict, sqrt_update
 from kalcal.filters.steps import UpdateForm, predict, update
 from kalcal.models.settings import SettingError, show, to_float
+from kalcal.verification.distributions import chi2_ppf  # scipy.stats's values, without its import
 
 if TYPE_CHECKING:
     from kalcal.calibration.accel_gps_log import AccelGpsLog
@@ -155,7 +155,7 @@ def gate_threshold(gate: float | None, p: int = 2) -> float | None:
         return None
     if not (isinstance(gate, (int, float)) and not isinstance(gate, bool) and 0 < gate < 1):
         raise SettingError("--gate", "a confidence between 0 and 1 (e.g. 0.999)", show(gate))
-    return float(stats.chi2.ppf(gate, p))
+    return float(chi2_ppf(gate, p))
 
 
 def run_filter(inputs: FilterInputs, form: UpdateForm, threshold: float | None) -> tuple[SequentialRun, np.ndarray]:

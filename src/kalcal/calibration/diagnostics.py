@@ -32,7 +32,6 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy import stats
 
 from kalcal.calibration.ljung_box import (
     draws_for,
@@ -42,6 +41,7 @@ from kalcal.calibration.ljung_box import (
     simulated_null,
 )
 from kalcal.verification.bounds import chi2_bounds_at
+from kalcal.verification.distributions import chi2_isf  # scipy.stats's values, without its import
 from kalcal.verification.results import Cause, CheckPart, chi2_two_sided_pvalues, combined_pvalue, family_pvalue
 
 CONSISTENT = "noise settings consistent with the data"
@@ -118,7 +118,7 @@ def innovation_diagnostics(
     lower, upper = chi2_bounds_at(share, 1, n_fixes * p, n_fixes)  # two-sided, at the NIS part's share
     nis_p = float(chi2_two_sided_pvalues(np.array([mean_nis]), n_fixes * p, n_fixes)[0])
     size = CheckPart("nis", mean_nis, nis_p, lower, upper, 1.0 - share, share, 1, nis_p >= share)
-    above = float(np.mean(nis > stats.chi2.isf(0.05, p)))
+    above = float(np.mean(nis > chi2_isf(0.05, p)))
     lags = int(max(1, min(20, n_fixes // 5)))
     # A degenerate series (constant, or too short for the lags) has no statistic: its NaN p-value then
     # fails the whiteness part (untestable is not white).

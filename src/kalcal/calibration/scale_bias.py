@@ -36,7 +36,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
 
 from kalcal.calibration.plausibility import CalibrationWarning, check_limit
 from kalcal.errors import DataError
@@ -44,6 +43,7 @@ from kalcal.filters.regression import run_regression_filter
 from kalcal.filters.scale_bias import filter_scale_bias, regressors
 from kalcal.models.scale_bias import STATE_NAMES, ScaleBiasScenario
 from kalcal.models.scale_bias_theta import scale_bias_from_theta, scale_bias_jacobian
+from kalcal.verification.distributions import chi2_isf, chi2_ppf, chi2_sf  # scipy.stats's values, without its import
 
 #: a final sigma above this share of the no-data sigma (near it) means the log did not excite the parameter
 UNOBSERVABLE_RATIO = 0.9
@@ -89,7 +89,7 @@ class ScaleBiasCalibration:
     def nis_bounds(self, confidence: float = NIS_CONFIDENCE) -> tuple[float, float]:
         """Two-sided bounds of the mean NIS of the samples used, chi-square(K) / K, at ``confidence``."""
         k, tail = self.samples_used, (1.0 - confidence) / 2
-        return float(stats.chi2.ppf(tail, k) / k), float(stats.chi2.isf(tail, k) / k)
+        return float(chi2_ppf(tail, k) / k), float(chi2_isf(tail, k) / k)
 
     @property
     def consistent(self) -> bool:
@@ -212,8 +212,8 @@ def _conflict(scenario: ScaleBiasScenario, data_theta: np.ndarray, data_cov: np.
     prior = scenario.filter_prior()
     d = data_theta - prior.mean
     statistic = float(d @ np.linalg.solve(data_cov + prior.cov + samples * scenario.filter_process_noise(), d))
-    bound = float(stats.chi2.ppf(CONFLICT_CONFIDENCE, 2))
-    return {"statistic": statistic, "pvalue": float(stats.chi2.sf(statistic, 2)), "bound": bound,
+    bound = float(chi2_ppf(CONFLICT_CONFIDENCE, 2))
+    return {"statistic": statistic, "pvalue": float(chi2_sf(statistic, 2)), "bound": bound,
             "confidence": CONFLICT_CONFIDENCE, "conflict": statistic > bound}
 
 

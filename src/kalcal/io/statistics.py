@@ -4,27 +4,46 @@ Dimensions: ``time`` (K update times, s), ``state``/``state2`` (d), ``measuremen
 and ``time2`` (a second copy of ``time`` for the residual correlation over pairs of updates, present
 only when the run kept the pairs). Written as
 NetCDF3 through scipy, so no extra library is needed to read it: ``xarray.open_dataset("stats.nc")``.
+
+The Datasets kalcal builds (float variables, string labels, number and string attributes) are written
+straight through ``scipy.io.netcdf_file``, byte for byte the file ``Dataset.to_netcdf(engine="scipy")``
+writes: that call looks for a Dask scheduler on every write, which imports ``dask.array`` and
+``dask.distributed`` (about a second) into a job that uses neither. Any other Dataset goes through
+``to_netcdf`` itself.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
-import xarray as xr
+import numpy as np
 
 from kalcal.errors import DataError
 
+if TYPE_CHECKING:
+    import xarray as xr
+
+#: NetCDF3 with 64-bit offsets, as ``to_netcdf(engine="scipy")`` writes by default
+_VERSION = 2
+
 
 def write_statistics(path: str | Path, dataset: xr.Dataset) -> Path:
-    """Write the Dataset as NetCDF."""
+    """Write the Dataset as NetCDF3 (the bytes of ``dataset.to_netcdf(path, engine="scipy")``)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    dataset.to_netcdf(path, engine="scipy")
+    encoded = _encode(dataset)
+    if encoded is None:  # not a layout the direct writer knows: xarray's own writer
+        dataset.to_netcdf(path, engine="scipy")
+    else:
+        _write(path, *encoded)
     return path
 
 
 def read_statistics(path: str | Path) -> xr.Dataset:
     """Read a ``stats.nc`` written by :func:`write_statistics` (fully loaded, file closed)."""
+    import xarray as xr
+
     path = Path(path)
     if not path.is_file():
         raise DataError(f"{path}: no such statistics file")
@@ -33,3 +52,100 @@ def read_statistics(path: str | Path) -> xr.Dataset:
             return dataset.load()
     except (OSError, ValueError, TypeError) as exc:
         raise DataError(f"{path}: not a kalcal statistics file ({exc})") from None
+
+
+class _Unsupported(Exception):
+    """Something the direct writer does not encode as xarray would: the Dataset goes through xarray."""
+
+
+def _attribute(value: Any) -> Any:
+    """A global or variable attribute as xarray's NetCDF3 encoding gives it to scipy."""
+    if isinstance(value, str):
+        return value.encode("utf-8")
+    if isinstance(value, bytes):
+        return value
+    array = np.atleast_1d(value)
+    if array.ndim != 1:
+        raise _Unsupported
+    kind = array.dtype.kind
+    if kind == "b":
+        return array.astype(np.int8)
+    if array.dtype == np.int64:
+        cast = array.astype(np.int32)
+        if not (cast == array).all():
+            raise _Unsupported
+        return cast
+    if array.dtype in (np.int32, np.int16, np.int8, np.float64, np.float32):
+        return array
+    raise _Unsupported
+
+
+def _encode(dataset) -> tuple[dict[str, int], dict[str, Any], list[tuple]] | None:
+    """Dimensions, global attributes and variables (name, dims, data, attrs) in the order xarray's scipy
+    backend writes them; None where the Dataset holds anything else than float variables and string
+    labels without encodings."""
+    try:
+        variables = dataset.variables
+        coordinates = set(dataset.coords)
+        dimension_names = set(dataset.dims)
+        labels = [name for name in coordinates if name not in dimension_names]  # non-dimension coordinates
+        if any(not isinstance(name, str) or " " in name for name in variables):
+            return None
+        # CF "coordinates": each variable (not a coordinate, not a dimension's own) names the labels
+        # over a subset of its dimensions, sorted
+        placed: set[str] = set()
+        encoded = []
+        for name, variable in variables.items():
+            if variable.encoding or "coordinates" in variable.attrs or "_FillValue" in variable.attrs:
+                return None
+            attrs = {key: _attribute(value) for key, value in variable.attrs.items()}
+            over = sorted(
+                label
+                for label in labels
+                if name not in coordinates and name not in variable.dims
+                and set(variables[label].dims) <= set(variable.dims)
+            )
+            if over:
+                attrs["coordinates"] = _attribute(" ".join(over))
+                placed.update(over)
+            data = np.asarray(variable.values)
+            dims = tuple(str(d) for d in variable.dims)
+            if data.ndim == 0:
+                return None
+            if data.dtype.kind == "f":
+                attrs["_FillValue"] = _attribute(data.dtype.type(np.nan))
+            elif data.dtype.kind == "U":
+                attrs["_Encoding"] = _attribute("utf-8")
+                data = np.array([x.encode("utf-8") for x in data.ravel()], dtype=bytes).reshape(data.shape)
+                width = data.dtype.itemsize
+                data = data.reshape(data.shape + (1,)).view("S1")
+                dims = dims + (f"string{width}",)
+            else:
+                return None
+            encoded.append((name, dims, data, attrs))
+        if set(labels) - placed:  # xarray would write a global "coordinates" attribute
+            return None
+        lengths: dict[str, int] = {}  # in the order of first use, as xarray creates them
+        for _, names, data, _ in encoded:
+            for dim, length in zip(names, data.shape):
+                if lengths.setdefault(dim, length) != length:
+                    return None
+        attributes = {str(key): _attribute(value) for key, value in dataset.attrs.items()}
+    except _Unsupported:
+        return None
+    return lengths, attributes, encoded
+
+
+def _write(path: Path, dims: dict[str, int], attributes: dict[str, Any], variables: list[tuple]) -> None:
+    from scipy.io import netcdf_file
+
+    with netcdf_file(path, mode="w", mmap=None, version=_VERSION) as file:
+        for key, value in attributes.items():
+            setattr(file, key, value)
+        for dim, length in dims.items():
+            file.createDimension(dim, length)
+        for name, names, data, attrs in variables:
+            variable = file.createVariable(name, data.dtype, list(names))
+            for key, value in attrs.items():
+                setattr(variable, key, value)
+            variable[...] = data

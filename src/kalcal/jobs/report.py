@@ -60,6 +60,11 @@ def read_summary(path: Path) -> dict[str, Any]:
         summary = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise DataError(f"{path}: not valid JSON ({exc})") from None
+    return check_summary(summary, path)
+
+
+def check_summary(summary: Any, path: Path) -> dict[str, Any]:
+    """:func:`read_summary`'s checks of a summary's content (read from ``path``, or about to be written there)."""
     if not isinstance(summary, dict):
         raise DataError(f"{path}: expected a JSON object, got {type(summary).__name__}")
     # schema_version: a newer layout than this code knows is refused; none at all is the layout before
@@ -106,7 +111,9 @@ def draw_realization(problem, seed: int, index: int, n: int, engine: str) -> tup
     return one, one.filter_cov_sum
 
 
-def render_report(out: str | Path, *, realization: int = 0, progress: JobProgress | None = None) -> Path:
+def render_report(
+    out: str | Path, *, realization: int = 0, progress: JobProgress | None = None, summary: Mapping[str, Any] | None = None
+) -> Path:
     """Draw the figures into ``out/figures/`` and write ``out/report.html`` from a saved run.
 
     Parameters
@@ -118,6 +125,9 @@ def render_report(out: str | Path, *, realization: int = 0, progress: JobProgres
     progress : callable, optional
         ``progress(stage, done, total)``: ``"figures"`` after each figure, ``"report"`` once the page is
         written (see :mod:`kalcal.jobs.progress`).
+    summary : dict, optional
+        ``summary.json``'s content as it will be written (:func:`kalcal.io.results.json_document`), for the
+        run that writes it after its page: read from ``out/summary.json`` otherwise.
 
     Returns
     -------
@@ -138,7 +148,7 @@ def render_report(out: str | Path, *, realization: int = 0, progress: JobProgres
         raise DataError(f"{out}: no such run directory")
     require_complete(out)
     summary_path = out / "summary.json"
-    summary = read_summary(summary_path)
+    summary = read_summary(summary_path) if summary is None else check_summary(dict(summary), summary_path)
     try:
         count = int(summary["realizations"])
         seed = int(summary["seed"])

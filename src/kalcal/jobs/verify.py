@@ -12,7 +12,7 @@ import xarray as xr
 
 from kalcal import __version__
 from kalcal.io.outputs import writes_outputs
-from kalcal.io.results import write_json
+from kalcal.io.results import json_document, write_json
 from kalcal.io.statistics import write_statistics
 from kalcal.jobs.progress import JobProgress, stage
 from kalcal.jobs.verify_arguments import (  # noqa: F401 (MAX_UPDATES, MIN_REALIZATIONS, run_length: the job's limits)
@@ -154,7 +154,7 @@ def compute_verification(
 
     ``progress`` hears of ``"monte carlo"``, ``"long run"`` and ``"statistics"``: the statistics stage
     counts the files' contents as they are built (``stats.nc``, then ``stats_long.nc``), and
-    :func:`save_verification` ends it when ``summary.json`` is written.
+    :func:`save_verification` ends it when ``summary.json``'s content is complete.
     """
     check_arguments(
         scenario, n, engine=engine, confidence=confidence, long_run=long_run, batch_size=batch_size, form=form
@@ -239,6 +239,8 @@ def compute_verification(
         },
         "timing": {
             "monte_carlo_s": run.wall_s,
+            # the long-run study's own Monte Carlo (0 without one): inside total_s, apart from monte_carlo_s
+            "long_run_s": long_summary["monte_carlo_s"] if long_summary is not None else 0.0,
             # up to summary.json (Monte Carlo, long run, checks, statistics files), kept for older readers;
             # wall_s is the whole job, report_s the report's part of it
             "total_s": None,  # set when computed; here for its place in summary.json
@@ -282,8 +284,9 @@ def save_verification(
     run), ``summary.json`` and, with ``report``, ``figures/`` and ``report.html`` (realization
     ``realization``). ``checkpoint`` and the files ``scenario`` was read from are never removed.
 
-    ``summary.json``'s ``timing``: ``total_s`` is the computation plus writing the statistics files and
-    the summary (s), ``report_s`` drawing the figures and page (None without a report), ``wall_s`` both.
+    ``summary.json``'s ``timing``: ``total_s`` is the computation plus writing the statistics files (s),
+    ``report_s`` drawing the figures and page (None without a report), ``wall_s`` both. The page is drawn
+    from the summary as it will be written, and ``summary.json`` written once, last.
     """
     del checkpoint, scenario  # protected by the decorator (and the run's own, below)
     return _save(run, Path(out), report=report, realization=realization, progress=progress)
@@ -299,21 +302,24 @@ def _save(run: Verification, out: Path, *, report: bool, realization: int, progr
     timing = summary["timing"]
     elapsed = run.compute_s + (time.perf_counter() - writing)
     timing.update(total_s=elapsed, report_s=None, wall_s=elapsed)  # no report drawn (yet)
-    paths["summary"] = write_json(out / "summary.json", summary)
+    paths["summary"] = out / "summary.json"  # written last, below
     done = stage(progress, "statistics")
-    if done is not None:
+    if done is not None:  # the summary's content is complete: it is written once, after the page
         done(files, files)
     if report:
         from kalcal.jobs import report as report_job  # the page joins this run's set of outputs
 
         drawing = time.perf_counter()
-        paths["report"] = report_job.render_report(out, realization=realization, progress=progress)
+        # the page is drawn from the summary as it will be written (and as a redraw reads it)
+        paths["report"] = report_job.render_report(
+            out, realization=realization, progress=progress, summary=json_document(summary)
+        )
         paths["figures"] = out / report_job.FIGURE_DIR
-        # the whole job's time, the report included, rewritten into the staged summary before the set
-        # is put in place
+        # the whole job's time, the report included, goes into the staged summary before the set is
+        # put in place
         timing["report_s"] = time.perf_counter() - drawing
         timing["wall_s"] = run.compute_s + (time.perf_counter() - writing)
-        write_json(out / "summary.json", summary)
+    write_json(paths["summary"], summary)
     return SavedVerification(paths, summary)
 
 

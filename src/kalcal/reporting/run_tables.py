@@ -74,6 +74,7 @@ def timing_section(summary: Mapping[str, Any]) -> str:
     timing = summary.get("timing", {})
     labels = {
         "monte_carlo_s": "Monte Carlo wall time (s)",
+        "long_run_s": "long-run study's Monte Carlo wall time (s)",
         # verify's time up to summary.json; drawing this page is not in it (the page holds no time of
         # its own drawing, so that redrawing it gives the same bytes)
         "total_s": "wall time of the verification up to summary.json: Monte Carlo, long run, checks, statistics files; not the report (s)",

@@ -50,22 +50,32 @@ def statistics_dataset(
         ),
     }
     units = _units(info)
+    # every variable is built on xarray's fast path from a numpy array of its final dtype: the slow path
+    # asks whether the data is a Dask array, which imports dask.array (most of a second) for nothing
     variables = {
-        name: xr.Variable(dims, values, {"long_name": text, **({"units": units[name]} if units.get(name) else {})})
+        name: _variable(dims, values, {"long_name": text, **({"units": units[name]} if units.get(name) else {})})
         for name, (dims, values, text) in data.items()
         if values is not None
     }
     coords = {
-        "time": ("time", info.update_times, {"units": "s"}),
-        "time2": ("time2", info.update_times, {"units": "s"}),
-        "state": ("state", list(info.state_names)),
-        "state2": ("state2", list(info.state_names)),
-        "measurement": ("measurement", list(info.measurement_names)),
-        "measurement2": ("measurement2", list(info.measurement_names)),
-        "state_unit": ("state", list(info.state_units)),
-        "measurement_unit": ("measurement", list(info.measurement_units)),
+        "time": _variable("time", info.update_times, {"units": "s"}),
+        "time2": _variable("time2", info.update_times, {"units": "s"}),
+        "state": _variable("state", list(info.state_names)),
+        "state2": _variable("state2", list(info.state_names)),
+        "measurement": _variable("measurement", list(info.measurement_names)),
+        "measurement2": _variable("measurement2", list(info.measurement_names)),
+        "state_unit": _variable("state", list(info.state_units)),
+        "measurement_unit": _variable("measurement", list(info.measurement_units)),
     }
     return xr.Dataset(variables, coords=coords, attrs={"realizations": s.count, **attrs})
+
+
+def _variable(dims, values, attrs: dict | None = None) -> xr.Variable:
+    """``xr.Variable(dims, values, attrs)`` for numbers or strings, without its check for Dask arrays."""
+    array = np.asarray(values)
+    if array.dtype.kind not in "fU":  # anything else takes xarray's own conversions
+        return xr.Variable(dims, array, attrs)
+    return xr.Variable(dims, array, attrs, fastpath=True)
 
 
 def _single(units) -> str | None:
