@@ -58,3 +58,15 @@ def test_every_module_opens_with_one_line_saying_its_job_and_stays_short():
         assert docstring, f"{module}: no docstring"
         assert "\n" not in docstring.split("\n\n")[0], f"{module}: its opening line runs on"
         assert text.count("\n") <= 380, f"{module}: {text.count(chr(10))} lines"
+
+
+def test_no_merge_conflict_markers_are_left_in_the_text():
+    """A conflict resolved in haste leaves ``<<<<<<<`` lines that no other test reads (the docs)."""
+    texts = [ROOT / "README.md", *(ROOT / "docs").rglob("*.md"), *(ROOT / "src").rglob("*.py"), *TESTS]
+    markers = ("<<<<<<< ", ">>>>>>> ", "=======\n")
+    offenders = []
+    for path in texts:
+        for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(keepends=True), start=1):
+            if line.startswith(markers) or line == "=======":
+                offenders.append(f"{path.relative_to(ROOT)}:{number}")
+    assert not offenders, offenders
