@@ -29,12 +29,12 @@ def test_a_parabola_of_any_sharpness_and_a_smooth_bimodal_curve_are_smooth_and_s
     assert roughness(grid, bumps, DROP) > ROUGH * DROP
 
 
-def latency_fit(seed, config=None):
+def latency_fit(seed, config=None, full=False):
     settings = {"scenario.duration": 60, "truth.gps_latency": LATENCY}
     sim = kalcal.simulate("accel-gps", seed=seed, config=config, settings=settings)
     extra = {"config": config, "settings": {"truth.gps_latency": 0}} if config else {}
     result = kalcal.fit("accel-gps", imu=sim.logs["imu"], gps=sim.logs["gps"], free="filter.gps_latency", **extra)
-    return result.parameters["filter.gps_latency"]
+    return (result.parameters["filter.gps_latency"], result) if full else result.parameters["filter.gps_latency"]
 
 
 def covers(p):
@@ -57,9 +57,14 @@ def test_on_rover_like_logs_a_resolved_latency_always_covers_and_all_eight_are_u
     assert all(p.value is None and p.ci_low is None for p in fits if not p.identified)
 
 
-def test_a_default_log_resolves_a_20_ms_latency():
-    p = latency_fit(300)
+def test_a_default_log_resolves_a_20_ms_latency_though_its_hill_falls_by_more_than_the_drop_between_grid_points():
+    p, result = latency_fit(300, full=True)
     assert covers(p) and not p.note.startswith(UNRESOLVED)
+    curve = result.curves["filter.gps_latency"]
+    value, loglik = np.array(curve["value"]), np.array(curve["loglik"])
+    step = 0.0025  # the scan's grid at 200 Hz, whose points the curve holds
+    after = loglik[np.argmin(np.abs(value - (p.ci_high - step)))], loglik[np.argmin(np.abs(value - p.ci_high))]
+    assert abs(after[0] - after[1]) > DROP  # a sharp smooth hill: neighbouring grid points differ by more than 1.92
 
 
 @pytest.mark.parametrize("gate", [None, 0.999])
