@@ -24,9 +24,9 @@ from kalcal.calibration.diagnostics import innovation_diagnostics
 from kalcal.calibration.likelihood import gate_excess
 from kalcal.errors import KalcalError
 from kalcal.fitting import latency_scan
+from kalcal.fitting.accel_gps_settings import filter_toml
 from kalcal.fitting.mle import Free, maximize
 from kalcal.fitting.nis_tail import nis_tail, not_applicable
-from kalcal.fitting.accel_gps_settings import filter_toml
 from kalcal.fitting.result import FitResult, fitted_point
 from kalcal.models.accel_gps import AccelGpsFilter, AccelGpsScenario
 

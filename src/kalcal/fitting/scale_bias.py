@@ -16,7 +16,7 @@ import numpy as np
 from kalcal.calibration.diagnostics import innovation_diagnostics
 from kalcal.errors import KalcalError
 from kalcal.fitting.mle import Free, maximize
-from kalcal.fitting.result import FitResult, interval_text, fitted_point
+from kalcal.fitting.result import FitResult, fitted_point, interval_text
 from kalcal.fitting.scale_bias_likelihood import diffuse_loglik
 from kalcal.models.scale_bias import ScaleBiasScenario
 
