@@ -67,7 +67,9 @@ def fit(
     for column in ("setting", "estimate", f"{result.confidence:.0%} interval", "unit"):
         table.add_column(column, justify="right" if column == "estimate" else "left")
     for name, p in result.parameters.items():
-        if not p.identified:
+        if p.trades_off:
+            estimate, interval = "unidentified", f"trades off with {', '.join(p.trades_off)}: fitted point kept"
+        elif not p.identified:
             estimate, interval = "unidentified", "input kept"
         else:
             estimate = f"{p.value:.4g}"

@@ -4,9 +4,11 @@ The fit takes any log-likelihood of the log (:class:`AccelGpsLikelihood`: ``logl
 ``calibrate(values)``), the reference one of :mod:`kalcal.fitting.accel_gps_reference` or a faster one
 over the same log, and searches the free settings on a log scale (:mod:`kalcal.fitting.mle`) within a
 factor :data:`RANGE` of their starts (a setting that is 0 starts from its :data:`FLOORS` value); the
-latency on a linear scale within :data:`LINEAR`'s bounds (+-0.5 s), from its setting. The
+latency on a linear scale within +-max(:data:`LINEAR`'s 0.5 s, |setting|), from its setting. The
 fitted filter's innovation diagnostics (NIS and whiteness, :mod:`kalcal.calibration.diagnostics`) then
-decide whether the model family is adequate for the log.
+decide whether the model family is adequate for the log, with the NIS tail
+(:mod:`kalcal.fitting.nis_tail`) on an ungated fit only; they are judged at the fitted point
+(:func:`kalcal.fitting.result.fitted_point`: a ridge's members at the point the search reached on it).
 """
 
 from __future__ import annotations
@@ -22,10 +24,11 @@ from kalcal.calibration.diagnostics import innovation_diagnostics
 from kalcal.calibration.likelihood import gate_excess
 from kalcal.errors import KalcalError
 from kalcal.fitting import latency_scan
+from kalcal.fitting.accel_gps_settings import filter_toml
 from kalcal.fitting.mle import Free, maximize
-from kalcal.fitting.nis_tail import nis_tail
-from kalcal.fitting.result import FitResult, interval_text
-from kalcal.models.accel_gps import AccelGpsFilter, AccelGpsScenario, AccelGpsTruth
+from kalcal.fitting.nis_tail import nis_tail, not_applicable
+from kalcal.fitting.result import FitResult, fitted_point
+from kalcal.models.accel_gps import AccelGpsFilter, AccelGpsScenario
 
 DEFAULT_FREE = ("filter.accel_noise_std", "filter.bias_walk_std", "filter.gps_position_std", "filter.gps_velocity_std")
 #: what a free setting that is 0 starts from (bias_walk_std per sample in m/s^2, times in s)
@@ -40,7 +43,7 @@ FLOORS = {
 OUTLIER_SHARE = 0.1
 #: each search range spans this factor either side of the start (log scale)
 RANGE = 1e3
-#: settings searched on a linear scale, within these bounds either side of 0: a latency may be negative
+#: settings searched on a linear scale, within +-max(this, |setting|) about 0: a latency may be negative
 LINEAR = {"filter.gps_latency": 0.5}
 #: what a model that does not fit may lack, and the setting that would add it
 CANDIDATES = (
@@ -139,17 +142,23 @@ def fit_accel_gps(
     imu_rate = rates[0] if rates is not None else scenario.scenario.imu_rate
     step = latency_scan.scan_step(imu_rate)
     fit, calibration, mask, rounds = _search(log, parameters, gate, profile, confidence, step, notes)
-    chosen = {key: value for key, value in fit.values.items() if fit.parameters[key].identified}
+    chosen = fitted_point(fit)  # a ridge's members at the fitted point, so that adequacy is judged on the ridge
     used = _used(calibration)
     diagnostics = innovation_diagnostics(calibration.normalized_innovations[used])
-    # the fit forces the mean NIS to p; the NIS tail's share it does not
-    tail = nis_tail(calibration.normalized_innovations[used])
-    adequate = bool(diagnostics.consistent) and tail.passed
+    # the fit forces the mean NIS to p; the NIS tail's share it does not. A gate cuts that tail off
+    tail = nis_tail(calibration.normalized_innovations[used]) if gate is None else None
+    adequate = bool(diagnostics.consistent) and (tail is None or tail.passed)
     if adequate:
         adequacy = diagnostics.verdict
     else:
-        verdict = "; ".join(text for text in (None if diagnostics.consistent else diagnostics.verdict, tail.sentence()) if text)
-        adequacy = inadequacy(verdict, free)
+        failed = (None if diagnostics.consistent else diagnostics.verdict, tail.sentence() if tail is not None else None)
+        adequacy = inadequacy("; ".join(text for text in failed if text), free)
+    latency = fit.parameters.get(latency_scan.KEY)
+    if latency is not None and latency.note.startswith(latency_scan.UNRESOLVED):
+        adequate = False
+        adequacy = (f"{latency_scan.KEY} is {latency_scan.UNRESOLVED} (its log-likelihood is rough at the sample scale: "
+                    "no interval); the other settings are fitted at its best point, the fitted filter runs with the input "
+                    f"latency; diagnostics there: {adequacy}")
     if gate is not None:
         if rounds is None:
             notes.append(f"the gate's rejected set still changed after {MAX_GATE_ROUNDS} refits; the last set is used")
@@ -164,14 +173,14 @@ def fit_accel_gps(
             column = key.split(".")[1].removesuffix("_multiplier")
             notes.append(f"{key}: the log's {column} column times one fitted multiplier, instead of a constant std")
     rejected = getattr(calibration, "rejected_rows", None)
-    settings, comments = _settings(scenario, chosen, fit, rates, std_medians or {}, max_updates)
+    settings, comments = filter_toml(scenario, chosen, fit, rates, std_medians or {}, max_updates)
     return FitResult.from_search(
         scenario.NAME,
         fit,
         fixes=int(np.count_nonzero(used)),
         adequate=adequate,
         adequacy=adequacy,
-        diagnostics={**diagnostics.as_dict(), "nis_tail": tail.as_dict()},
+        diagnostics={**diagnostics.as_dict(), "nis_tail": tail.as_dict() if tail is not None else not_applicable(gate)},
         notes=notes,
         rejected_fixes=None if gate is None else [int(row) for row in (rejected if rejected is not None else [])],
         settings=settings,
@@ -217,8 +226,7 @@ def _search(log, parameters, gate, profile, confidence, step=None, notes=None):
             notes.append(said)
         return fit
 
-    def chosen_of(fit):
-        return {key: value for key, value in fit.values.items() if fit.parameters[key].identified}
+    chosen_of = fitted_point
 
     if gate is None:
         params = latency_scan.start_from_scan(log.loglik, parameters, step) if scanned else parameters
@@ -241,95 +249,10 @@ def _search(log, parameters, gate, profile, confidence, step=None, notes=None):
     if scanned:  # judged over the last held set; a restart's calibration re-gates with its settings
         before = fit
         fit = judged(fn, fit, parameters)
-        if fit.values != before.values:
+        if chosen_of(fit) != chosen_of(before):  # a restart, or a latency found unresolved (the input kept)
             calibration = log.calibrate(chosen_of(fit), gate=gate)
             mask = np.asarray(calibration.rejected, dtype=bool)
     return fit, calibration, mask, rounds
-
-
-def _short(value: float) -> float:
-    """A TOML number of 6 significant digits that reads back as the same float."""
-    return float(f"{value:.6g}")
-
-
-def _settings(scenario, chosen, fit, rates, std_medians, max_updates=None) -> tuple[dict[str, dict], dict[str, str]]:
-    """filter.toml's sections and comments: the fitted filter in [filter] and [truth], the log's rates in [scenario]."""
-    resolved = scenario.filter_settings
-    filter_values = {}
-    for f in dataclasses.fields(AccelGpsFilter):
-        key = f"filter.{f.name}"
-        if key == "filter.gps_latency":  # the likelihood's: an unset latency is 0, never the truth's
-            value = chosen.get(key, scenario.filter.gps_latency or 0.0)
-        else:
-            value = chosen.get(key, getattr(resolved, f.name, getattr(scenario.filter, f.name)))
-        if key == "filter.bias_std" and key not in chosen and scenario.filter.bias_std is None:
-            continue  # unset, as in the fit: calibrate --config keeps the log's prior rule (diffuse), verify the truth's
-        if value is not None:
-            filter_values[f.name] = _short(value) if key in chosen else value
-    truth_names = [f.name for f in dataclasses.fields(AccelGpsTruth)]
-    truth = {name: getattr(scenario.truth, name) for name in truth_names}
-    # the Monte Carlo's truth is the fitted filter's model; the log's faults (latency, outliers) are the
-    # log's, which verify's truth has not (it refuses them): 0
-    truth.update({name: value for name, value in filter_values.items() if name in truth_names and name != "gps_latency"})
-    truth.update(gps_latency=0.0, gps_outlier_rate=0.0, gps_outlier_std=0.0)
-    comments = {}
-    for key, p in fit.parameters.items():
-        name = key.partition(".")[2]
-        comments[name] = f"{name}: {p.note}" if not p.identified else f"{name}: fitted, {interval_text(p)}"
-    for key, column, setting in (
-        ("log.position_std_multiplier", "position_std", "gps_position_std"),
-        ("log.velocity_std_multiplier", "velocity_std", "gps_velocity_std"),
-    ):
-        if key in chosen:
-            factor = _short(chosen[key])
-            comments[name_of(key)] = (
-                f"{name_of(key)} = {factor!r}: scale the log's {column} column by it before calibrating "
-                "(calibrate reads the column as it is)"
-            )
-            if column in std_medians:  # [filter] and [truth] alike, so that verify --config runs one model
-                truth[setting] = filter_values[setting] = _short(factor * std_medians[column])
-                comments[setting] = (
-                    f"{setting}: the fitted multiplier times the {column} column's median (calibrate reads the "
-                    "column itself; this value is for fixes without one, and for verify)"
-                )
-    section, shortened = _rates(scenario, rates, max_updates)
-    if shortened:
-        comments["scenario.duration"] = shortened
-    sections = {"scenario": section, "filter": filter_values, "truth": truth}
-    return sections, comments
-
-
-def name_of(key: str) -> str:
-    """``log.position_std_multiplier`` -> ``position_std_multiplier``."""
-    return key.partition(".")[2]
-
-
-def _rates(scenario, rates, max_updates=None) -> tuple[dict[str, Any], str]:
-    """[scenario]: the log's rates (the GPS rate made a whole divisor of the accelerometer's), the
-    scenario's duration made a whole number of GPS intervals, at most ``max_updates`` of them (the most a
-    verification's realization holds), its integration and truth kind; and the comment on a shortened
-    duration ("" when it was not shortened)."""
-    s = scenario.scenario
-    imu_rate, gps_rate = rates if rates is not None else (s.imu_rate, s.gps_rate)
-    imu_rate = _short(imu_rate)
-    gps_rate = imu_rate / max(1, round(imu_rate / gps_rate))
-    intervals = max(1, round(s.duration * gps_rate))
-    comment = ""
-    if max_updates is not None and intervals > max_updates:
-        comment = (
-            f"duration: the scenario's {s.duration:g} s shortened to {max_updates / gps_rate:g} s, the {max_updates} "
-            f"GPS intervals at {gps_rate:g} Hz that kalcal verify allows a realization (its per-update arrays must fit "
-            "in memory); the log's rates are kept, since the per-sample and per-fix noise values hold at them"
-        )
-        intervals = max_updates
-    section = {
-        "imu_rate": imu_rate,
-        "gps_rate": gps_rate,
-        "duration": intervals / gps_rate,
-        "integration": s.integration,
-        "truth": s.truth,
-    }
-    return section, comment
 
 
 def log_rates(imu_time: np.ndarray, gps_time: np.ndarray) -> tuple[float, float]:

@@ -1,4 +1,4 @@
-"""The GPS latency's log-likelihood scanned over its whole range: the search's start and a multimodal interval.
+"""The GPS latency's log-likelihood scanned over its range: the search's start, a multimodal or an unresolved latency.
 
 log L in ``filter.gps_latency`` is not one smooth hill: the fix is compared with the nominal at t - L,
 and the nominal's shift over L sums the measured acceleration, vibration noise included, sample by
@@ -11,6 +11,18 @@ information gives it a narrow interval. So the fit scans the range on a grid of 
 (the others held there) and restarts once from a grid point that beats it, and takes as the interval at
 least the grid's set within ``drop`` of the maximum: when that set is in separate pieces the latency is
 multimodal, the interval spans them and the parameter's note says so.
+
+That set is a 95% interval only where log L is smooth at the interval's scale. With a noisy
+accelerometer it is not: moving the latency by one sample adds one noisy sample to every fix's
+predicted velocity, so the curve's slope changes at random from one sample to the next (a rover-like
+one-minute log: bumps of 1.5-2 in log L every 5 ms), and the maximum and the 1.92-drop set follow that
+noise, not the latency. The adjacent changes themselves cannot tell: a sharp smooth hill (the default
+scenario) changes by more than the drop between neighbouring grid points. Their irregular part can: a
+quadratic hill, what Wilks' drop assumes, has third differences 0. So the fit measures the roughness,
+the largest |third difference| of the scan over the points within twice the drop of the maximum (at
+least two each side), and where it exceeds :data:`ROUGH` times the drop (a change of curvature between
+neighbouring half-samples a sizeable part of the drop) the latency is **not resolved** at this log's
+noise: unidentified, with no interval (:func:`judge`).
 """
 
 from __future__ import annotations
@@ -24,6 +36,10 @@ from scipy import stats
 from kalcal.fitting.mle import BEATEN, FAILED, Free, MleFit
 
 KEY = "filter.gps_latency"
+#: log L is too rough for an interval where a third difference of the scan near the maximum exceeds this times the drop
+ROUGH = 0.25
+#: how an unresolved latency's note begins
+UNRESOLVED = "not resolved at this log's noise"
 
 
 def scan_step(imu_rate: float) -> float:
@@ -61,8 +77,10 @@ def judge(loglik, fit: MleFit, parameters: Sequence[Free], step: float, confiden
     """The fit with the latency's interval from the scan at the estimate: restarted once (``refit(start)``)
     from a grid point that beats the maximum, the interval widened to the grid's set within the drop
     (its ends: the first grid points outside it, none at a range end inside it), multimodal when that set
-    is in pieces; ``start`` reported as the ``setting`` the scan started from. Returns the fit and, when
-    multimodal, a sentence for the fit's notes ("" otherwise)."""
+    is in pieces; unidentified, with no interval, where the scan is rough near the maximum
+    (:func:`roughness` above :data:`ROUGH` times the drop); ``start`` reported as the ``setting`` the scan
+    started from. Returns the fit and, when multimodal or not resolved, a sentence for the fit's notes
+    ("" otherwise)."""
     p = next(q for q in parameters if q.name == KEY)
     drop = float(stats.chi2.ppf(confidence, 1)) / 2.0
     for attempt in range(2):
@@ -82,12 +100,46 @@ def judge(loglik, fit: MleFit, parameters: Sequence[Free], step: float, confiden
     merged = sorted(set(zip(curve["value"], curve["loglik"])) | set(zip(grid.tolist(), values.tolist())))
     curves = {**fit.curves, KEY: {"value": [v for v, _ in merged], "loglik": [ll for _, ll in merged]}}
     said = ""
-    if parameter.identified:
+    rough = roughness(grid, values, drop)
+    if parameter.identified and rough > ROUGH * drop:
+        parameter = _unresolved(parameter, rough, drop, step)
+        said = f"{KEY}: {parameter.note}"
+    elif parameter.identified:
         parameter, pieces, span = _widened(parameter, grid, values, fit.loglik - drop, fit.values[KEY], drop, step)
         if pieces > 1:
             said = (f"{KEY}: multimodal, log L within {drop:.3g} of its maximum in {pieces} separate pieces over "
                     f"[{span[0]:.4g}, {span[1]:.4g}] s: the log does not tell the latency better than that span")
     return replace(fit, parameters={**fit.parameters, KEY: parameter}, curves=curves), said
+
+
+def roughness(grid: np.ndarray, values: np.ndarray, drop: float) -> float:
+    """The largest |third difference| of log L (``values``, (G,)) over the grid points within ``2 drop`` of
+    its maximum, at least two either side of it (0 where fewer than four points are evaluated there)."""
+    ok = values > FAILED / 2
+    top = int(np.argmax(values))
+    near = np.flatnonzero(values >= values[top] - 2.0 * drop)
+    lo, hi = max(0, min(int(near[0]), top - 2)), min(grid.size - 1, max(int(near[-1]), top + 2))
+    while not ok[lo]:
+        lo += 1
+    while not ok[hi]:
+        hi -= 1
+    failed = np.flatnonzero(~ok[lo:hi + 1])  # keep the run of evaluated points about the maximum
+    if failed.size:
+        below, above = failed[failed + lo < top], failed[failed + lo > top]
+        lo, hi = (lo + int(below[-1]) + 1 if below.size else lo), (lo + int(above[0]) - 1 if above.size else hi)
+    segment = values[lo:hi + 1]
+    return float(np.max(np.abs(np.diff(segment, 3)))) if segment.size >= 4 else 0.0
+
+
+def _unresolved(parameter, rough: float, drop: float, step: float):
+    """The latency unidentified: log L too rough at the sample scale for its drop set to be an interval."""
+    note = (
+        f"{UNRESOLVED}: log L in the latency is rough at the accelerometer's sample scale (its curvature changes by up "
+        f"to {rough:.3g} between neighbouring points of a {step * 1e3:.3g} ms grid near the maximum, more than "
+        f"{ROUGH:g} x {drop:.3g}), so its maximum and {drop:.3g}-drop set follow the vibration noise of single samples, "
+        "not the latency: no interval is given; the input setting is kept"
+    )
+    return replace(parameter, value=None, ci_low=None, ci_high=None, identified=False, at_bound=False, note=note)
 
 
 def _widened(parameter, grid, values, level, estimate, drop, step):

@@ -8,6 +8,9 @@ its profile (the others re-maximized, :class:`kalcal.fitting.local_search.Profil
 
 * **unidentified** (flat): log L at both ends of the search range is within ``drop`` of the maximum,
   so the log cannot tell any value in the range from the estimate;
+* **trading off** (a ridge, :func:`kalcal.fitting.information.ridges`): unidentified too, value None,
+  ``trades_off`` naming the others; only their combination is identified, and the fitted point on the
+  ridge is what a fitted filter runs with (:func:`kalcal.fitting.result.fitted_point`);
 * **at the lower bound** ("consistent with 0", log scale): only the lower end is within ``drop``; the
   interval is [0, upper limit], the upper limit where log L has fallen by ``drop`` (linear scale: no
   lower limit within the range, None);
@@ -204,7 +207,8 @@ def maximize(
             note = (
                 f"unidentified: trades off with {partners}; the observed information along the direction that trades "
                 f"them is near zero (log L changes by less than {drop:.3g} over the search range by its curvature)"
-                "; the input setting is kept"
+                "; only their combination is identified: the fitted filter keeps the point the search reached on the "
+                "ridge"
             )
         elif not falls_low and not falls_high:
             identified, value = False, None
@@ -249,7 +253,8 @@ def maximize(
                     note += "; consistent with 0 along the profile"
                 if below is None and linear[i] or above is None:
                     note += "; no limit within the search range on the side where the profile does not fall"
-        parameters[p.name] = FitParameter(p.name, value, ci_low, ci_high, p.unit, p.start, identified, at_bound, note)
+        partners = tuple(free[j].name for j in ridge[i]) if i in ridge else ()
+        parameters[p.name] = FitParameter(p.name, value, ci_low, ci_high, p.unit, p.start, identified, at_bound, note, partners)
         # a profile's curve: half the grid, with the points its ends and crossings already profiled
         known = [v for (j, v) in profiled.known if j == i] if profile else []
         curves[p.name] = _curve(along, i, u_hat, low, high, ci_low, ci_high, curve_points // 2 + 1 if profile else curve_points,

@@ -27,12 +27,17 @@ class FitParameter:
         Where the search started (the input setting, or a small positive floor for a setting that was 0).
     identified : bool
         False when the log-likelihood is flat: it falls by less than the interval's drop (1.92 for 95%)
-        over the whole search range on both sides of the estimate.
+        over the whole search range on both sides of the estimate; when the parameter trades off with
+        others along a ridge (``trades_off``); and for a latency whose log-likelihood is too rough at the
+        sample scale for an interval (:mod:`kalcal.fitting.latency_scan`).
     at_bound : bool
         True when the log-likelihood at the search range's lower end is within the drop of the maximum:
         the estimate is consistent with 0 and ``ci_high`` is an upper limit.
     note : str
         A plain sentence for the user when one is due ("" otherwise).
+    trades_off : tuple of str
+        The parameters this one trades off with along a ridge of log L (unidentified: only their
+        combination is); () otherwise. Not in fit.json's entry (the ``note`` names them).
     """
 
     name: str
@@ -44,6 +49,7 @@ class FitParameter:
     identified: bool = True
     at_bound: bool = False
     note: str = ""
+    trades_off: tuple[str, ...] = ()
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -81,7 +87,9 @@ class FitResult:
         evaluated for the curves beating the maximum.
     interval_method : {"observed-information", "profile"}
     adequate : bool
-        Whether the fitted filter's innovations pass their diagnostics (NIS and whiteness).
+        Whether the fitted filter's innovations pass their diagnostics: mean NIS and whiteness, and for
+        accel-gps without a gate the NIS tail (:mod:`kalcal.fitting.nis_tail`); false too where a free
+        latency is not resolved (:mod:`kalcal.fitting.latency_scan`).
     adequacy : str
         The diagnostics' verdict in words, and when not adequate what the model may lack.
     diagnostics : dict
@@ -161,6 +169,14 @@ class FitResult:
         if self.rejected_fixes is not None:
             document["rejected_fixes"] = {"count": len(self.rejected_fixes), "rows": list(self.rejected_fixes)}
         return document
+
+
+def fitted_point(fit) -> dict[str, float]:
+    """The settings the fitted filter runs with: each identified parameter's estimate and, for parameters
+    that trade off along a ridge, the point the search reached on it (one point of the ridge: the log
+    identifies their combination only); the others keep their input settings (absent)."""
+    return {key: value for key, value in fit.values.items()
+            if fit.parameters[key].identified or fit.parameters[key].trades_off}
 
 
 def interval_text(p: FitParameter) -> str:

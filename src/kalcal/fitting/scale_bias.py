@@ -16,7 +16,7 @@ import numpy as np
 from kalcal.calibration.diagnostics import innovation_diagnostics
 from kalcal.errors import KalcalError
 from kalcal.fitting.mle import Free, maximize
-from kalcal.fitting.result import FitResult, interval_text
+from kalcal.fitting.result import FitResult, fitted_point, interval_text
 from kalcal.fitting.scale_bias_likelihood import diffuse_loglik
 from kalcal.models.scale_bias import ScaleBiasScenario
 
@@ -81,7 +81,7 @@ def fit_scale_bias(
         return diffuse_loglik(reference, sensor, merged[NOISE], merged[DRIFT])[0]
 
     fit = maximize(loglik, parameters, profile=profile, confidence=confidence)
-    chosen = {**fixed, **{k: v for k, v in fit.values.items() if fit.parameters[k].identified}}
+    chosen = {**fixed, **fitted_point(fit)}
     _, samples, normalized = diffuse_loglik(reference, sensor, chosen[NOISE], chosen[DRIFT])
     diagnostics = innovation_diagnostics(normalized[np.isfinite(normalized)][:, None], ("reference",))
     adequate = diagnostics.consistent

@@ -53,7 +53,7 @@ def _toml_value(value: Any) -> str:
 
 def filter_toml(result: FitResult, header: list[str]) -> str:
     """filter.toml: ``header`` as comments, then each section; a fitted key carries its interval as a
-    comment above it, an unidentified one says that the input value is kept."""
+    comment above it, an unidentified one its note (the input value kept; a ridge's members: the fitted point)."""
     lines = [f"# {line}" for line in header]
     lines += [f"# {note}" for note in result.notes]
     used = set()
