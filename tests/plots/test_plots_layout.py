@@ -77,20 +77,21 @@ def test_no_text_is_clipped_or_runs_into_another_panel(plots_run, saved, tmp_pat
     assert_laid_out(saved[-1])
 
 
-@pytest.mark.parametrize(
-    "plot",
-    [
-        ensemble.plot_variance_diagonal,
-        ensemble.plot_variance_offdiagonal,
-        ensemble.plot_orthogonality_diagonal,
-        ensemble.plot_orthogonality_offdiagonal,
-    ],
-    ids=lambda plot: plot.__name__,
-)
-def test_panels_that_share_a_legend_show_it_once_below_them(plots_run, saved, tmp_path, plot):
+SHARED_LEGEND = {
+    "variance_diagonal": ensemble.plot_variance_diagonal,
+    "variance_offdiagonal": ensemble.plot_variance_offdiagonal,
+    "orthogonality_diagonal": ensemble.plot_orthogonality_diagonal,
+    "orthogonality_offdiagonal": ensemble.plot_orthogonality_offdiagonal,
+    # the filter's P stands in for the exact covariance: the layout is what is tested
+    "sigma_exact": lambda stats, path: ensemble.plot_sigma_exact(stats, stats["filter_cov"].values, path),
+}
+
+
+@pytest.mark.parametrize("name", SHARED_LEGEND)
+def test_panels_that_share_a_legend_show_it_once_below_them(plots_run, saved, tmp_path, name):
     """One legend for the figure, each entry once, instead of the same legend in every panel."""
     stats, _, _ = plots_run
-    plot(stats, tmp_path / "figure.png")
+    SHARED_LEGEND[name](stats, tmp_path / "figure.png")
     figure = saved[-1]
     assert len(figure.axes) >= 3
     assert [ax for ax in figure.axes if ax.get_legend() is not None] == []

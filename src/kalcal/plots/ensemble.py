@@ -279,7 +279,7 @@ def plot_sigma_exact(dataset: xr.Dataset, exact_cov: np.ndarray, path: str | Pat
         if np.all(exact[:, i] > 0) and np.all(filt[:, i] > 0):
             ax.set_yscale("log")
         ax.set_ylabel(label(f"σ of {name}", unit))
-        ax.legend(loc="upper right")
     axes[-1, 0].set_xlabel(time_label())
+    legend_below(figure, axes[0])
     axes[0, 0].set_title("Error σ: the filter's belief, the exact value and the ensemble")
     return save(figure, path)
