@@ -267,3 +267,35 @@ def test_truth_equals_filter_only_where_it_does():
     assert "(not detected up to N = 1,000,000,000: no check can detect it (the truth equals the filter))" in power_line(
         rows, 300_000, equal=True
     )
+
+
+def _probabilities_by_the_rule(family, n):
+    """NormalFamily's P_i written out in full at every call: the normal law where a comparison has spread,
+    the checks' rule where it has none (the reference for the family's precomputed, shortcut form)."""
+    from scipy.special import ndtr
+
+    a, v, d, c = family.mean, family.variance, family.scale, family.critical
+    shift, edge = a * np.sqrt(float(n)), c * np.sqrt(np.maximum(d, 0.0))
+    spread = np.sqrt(np.maximum(v, 0.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        normal = ndtr((shift - edge) / spread) + ndtr((-shift - edge) / spread)
+    fixed = np.where(np.abs(shift) > edge, 1.0, 0.0)
+    fixed = np.where((d <= 0) & (a == 0), 0.0, fixed)
+    out = np.where(spread > 0, normal, fixed)
+    return np.minimum(1.0, np.where((d <= 0) & (v > 0), 1.0, out))
+
+
+@pytest.mark.parametrize("with_degenerate", [False, True])
+def test_normal_family_gives_the_rules_bits_at_every_n(with_degenerate):
+    """Precomputed once and evaluated at many N (as the detection search does), the family's P_i are the
+    bits of the rule evaluated afresh, with and without comparisons that have no spread or no standard error."""
+    from kalcal.analysis.power_parts import NormalFamily
+
+    rng = np.random.default_rng(7)
+    mean, variance, scale = rng.normal(0, 0.05, 500), rng.uniform(0.5, 2.0, 500), rng.uniform(0.5, 2.0, 500)
+    if with_degenerate:
+        variance[:3], mean[:3] = 0.0, (0.0, 0.3, -0.01)
+        scale[3:6], mean[3] = 0.0, 0.0
+    family = NormalFamily(mean, variance, scale, 3.5)
+    for n in (100, 5000, 10**6, 10**9, 5000):
+        np.testing.assert_array_equal(family.probabilities(n), _probabilities_by_the_rule(family, n))

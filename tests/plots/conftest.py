@@ -28,14 +28,14 @@ def plots_run(plots_dir):
     out = plots_dir
     scenario = build_scenario("accel-gps", None, SETTINGS)
     problem, _ = build_problem(scenario)
-    one, filter_cov = draw_realization(problem, 3, 4321, N, "exact")
+    one = draw_realization(problem, 3, 4321, N, "exact")
     data = RealizationData(
         index=4321,
         times=problem.info.update_times,
-        truth=one.error[0] + one.estimate[0],
-        estimate=one.estimate[0],
-        error=one.error[0],
-        filter_cov=filter_cov,
+        truth=one.error + one.estimate,
+        estimate=one.estimate,
+        error=one.error,
+        filter_cov=one.filter_cov,
         state_names=problem.info.state_names,
         state_units=problem.info.state_units,
     )

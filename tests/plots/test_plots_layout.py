@@ -55,6 +55,13 @@ def assert_laid_out(figure):
             for other in panels:
                 if other is not ax:
                     assert not box.overlaps(other.bbox), f"{text.get_text()!r} runs into another panel"
+    for legend in figure.legends:  # a legend of the whole figure sits below the panels and their texts
+        box = legend.get_window_extent(renderer)
+        assert box.x0 >= -0.5 and box.y0 >= -0.5 and box.x1 <= width + 0.5 and box.y1 <= height + 0.5, f"legend clipped: {box}"
+        for ax in panels:
+            assert box.y1 <= ax.bbox.y0 and not box.overlaps(ax.bbox), "the figure's legend runs into a panel"
+            for text in _panel_texts(ax):
+                assert not box.overlaps(text.get_window_extent(renderer)), f"the legend covers {text.get_text()!r}"
     if figure._suptitle is not None:
         box = figure._suptitle.get_window_extent(renderer)
         for ax in panels:
@@ -68,6 +75,32 @@ def test_no_text_is_clipped_or_runs_into_another_panel(plots_run, saved, tmp_pat
     stats, long_stats, data = plots_run
     draw(stats, long_stats, data, tmp_path / f"{name}.png")
     assert_laid_out(saved[-1])
+
+
+SHARED_LEGEND = {
+    "variance_diagonal": ensemble.plot_variance_diagonal,
+    "variance_offdiagonal": ensemble.plot_variance_offdiagonal,
+    "orthogonality_diagonal": ensemble.plot_orthogonality_diagonal,
+    "orthogonality_offdiagonal": ensemble.plot_orthogonality_offdiagonal,
+    # the filter's P stands in for the exact covariance: the layout is what is tested
+    "sigma_exact": lambda stats, path: ensemble.plot_sigma_exact(stats, stats["filter_cov"].values, path),
+}
+
+
+@pytest.mark.parametrize("name", SHARED_LEGEND)
+def test_panels_that_share_a_legend_show_it_once_below_them(plots_run, saved, tmp_path, name):
+    """One legend for the figure, each entry once, instead of the same legend in every panel."""
+    stats, _, _ = plots_run
+    SHARED_LEGEND[name](stats, tmp_path / "figure.png")
+    figure = saved[-1]
+    assert len(figure.axes) >= 3
+    assert [ax for ax in figure.axes if ax.get_legend() is not None] == []
+    (legend,) = figure.legends
+    texts = [text.get_text() for text in legend.get_texts()]
+    assert len(texts) == len(set(texts)) >= 2
+    panel_labels = {text for ax in figure.axes for text in ax.get_legend_handles_labels()[1]}
+    assert set(texts) == panel_labels  # every labelled curve of every panel is named
+    assert_laid_out(figure)
 
 
 def test_wide_tick_labels_and_long_labels_get_their_room(plots_run, saved, tmp_path):

@@ -68,7 +68,12 @@ class CheckPower:
 
     def bracket(self, n: int) -> tuple[float, float]:
         """The check's [power_low, power_high] at N = ``n``: any part failing fails the check."""
-        brackets = [family.bracket(n) for family in self.parts.values()]
+        return self.combine(family.bracket(n) for family in self.parts.values())
+
+    @staticmethod
+    def combine(brackets) -> tuple[float, float]:
+        """[max of the lows, min(1, sum of the highs)] of the parts' brackets."""
+        brackets = list(brackets)
         return max(b[0] for b in brackets), min(1.0, sum(b[1] for b in brackets))
 
 
@@ -123,13 +128,13 @@ def _whiteness(a: CovarianceAnalysis, confidence: float) -> dict[str, Family]:
     n_updates, p = raw.shape[:2]
     mean = m.mean_residual
     var = np.diagonal(m.residual_cov, axis1=1, axis2=2)  # (K, p)
-    mu_x, mu_y = mean[:, :, None, None], mean[None, None, :, :]
-    var_x, var_y = var[:, :, None, None], var[None, None, :, :]
-    cov = raw - mu_x * mu_y
-    lower = np.broadcast_to(np.tril(np.ones((n_updates, n_updates), dtype=bool), -1)[:, None, :, None], raw.shape)
-    variance = product_variance(mu_x, mu_y, var_x, var_y, cov)
-    scale = np.broadcast_to((var_x + mu_x**2) * (var_y + mu_y**2), raw.shape)
-    pairs = NormalFamily(raw[lower], variance[lower], scale[lower], whiteness_pairs_bound(confidence, n_updates, p))
+    # the pairs j < k only, element by element (the same operations as over the whole array, on half of it)
+    k, a, j, b = np.nonzero(np.broadcast_to(np.tril(np.ones((n_updates, n_updates), dtype=bool), -1)[:, None, :, None], raw.shape))
+    mu_x, mu_y, var_x, var_y = mean[k, a], mean[j, b], var[k, a], var[j, b]
+    values = raw[k, a, j, b]
+    variance = product_variance(mu_x, mu_y, var_x, var_y, values - mu_x * mu_y)
+    scale = (var_x + mu_x**2) * (var_y + mu_y**2)
+    pairs = NormalFamily(values, variance, scale, whiteness_pairs_bound(confidence, n_updates, p))
     share = (1.0 - confidence) / len(WHITENESS_PARTS)
     q = portmanteau_power(raw, lambda dof: portmanteau_bound(share, dof), RANK_RTOL)
     return dict(zip(WHITENESS_PARTS, (pairs, q)))
@@ -234,11 +239,11 @@ def power_rows(a: CovarianceAnalysis, n: int, confidence: float = 0.99) -> list[
     part: ``power_low``, ``power_high`` at N = ``n``, ``detectable`` and ``detection_n``."""
     rows = []
     for check in check_families(a, confidence):
-        named = {part: family for part, family in check.parts.items() if part is not None}
+        at_n = {part: family.bracket(n) for part, family in check.parts.items()}  # each family once at n
         found = {part: detection_n(lambda k, f=family: f.bracket(k)[0]) for part, family in check.parts.items()}
         reached = [k for k in found.values() if k is not None]
-        rows.append(_row(check.name, None, check.bracket(n), min(reached) if reached else None))
-        rows.extend(_row(check.name, part, family.bracket(n), found[part]) for part, family in named.items())
+        rows.append(_row(check.name, None, CheckPower.combine(at_n.values()), min(reached) if reached else None))
+        rows.extend(_row(check.name, part, at_n[part], found[part]) for part in check.parts if part is not None)
     return rows
 
 

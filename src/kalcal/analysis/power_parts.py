@@ -26,6 +26,7 @@ A comparison with zero spread follows the checks' rule: it fails where its value
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -71,19 +72,31 @@ class NormalFamily:
     scale: np.ndarray
     critical: float
 
+    @functools.cached_property
+    def _fixed_parts(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]:
+        """What does not depend on N, computed once (a detection search evaluates the family at many N):
+        c sqrt(D), sqrt(v), the masks of the comparisons without spread, and whether there are any."""
+        a, v, d, c = self.mean, self.variance, self.scale, self.critical
+        edge = c * np.sqrt(np.maximum(d, 0.0))
+        spread = np.sqrt(np.maximum(v, 0.0))
+        zero_mean_no_se = (d <= 0) & (a == 0)
+        random_zero_se = (d <= 0) & (v > 0)
+        has_spread = spread > 0
+        return edge, spread, zero_mean_no_se, random_zero_se, has_spread, bool(np.all(has_spread) and not np.any(random_zero_se))
+
     def probabilities(self, n: int) -> np.ndarray:
         """P_i at N = ``n`` realizations, (m,)."""
-        a, v, d, c = self.mean, self.variance, self.scale, self.critical
+        edge, spread, zero_mean_no_se, random_zero_se, has_spread, all_random = self._fixed_parts
         root_n = np.sqrt(float(n))
-        shift, edge = a * root_n, c * np.sqrt(np.maximum(d, 0.0))
-        spread = np.sqrt(np.maximum(v, 0.0))
+        shift = self.mean * root_n
         with np.errstate(divide="ignore", invalid="ignore"):
             normal = ndtr((shift - edge) / spread) + ndtr((-shift - edge) / spread)
+        if all_random:  # every comparison has spread and a standard error: the rules below change nothing
+            return np.minimum(1.0, normal)
         # no spread: the comparison is its mean, outside the bound or not (zero D with a nonzero value fails)
         fixed = np.where(np.abs(shift) > edge, 1.0, 0.0)
-        fixed = np.where((d <= 0) & (a == 0), 0.0, fixed)
-        random_zero_se = (d <= 0) & (v > 0)
-        out = np.where(spread > 0, normal, fixed)
+        fixed = np.where(zero_mean_no_se, 0.0, fixed)
+        out = np.where(has_spread, normal, fixed)
         return np.minimum(1.0, np.where(random_zero_se, 1.0, out))
 
     def bracket(self, n: int) -> tuple[float, float]:

@@ -24,7 +24,7 @@ import dataclasses
 
 import numpy as np
 
-from kalcal.calibration.accel_gps import AccelGpsCalibration, calibrate_accel_gps
+from kalcal.calibration.accel_gps_result import AccelGpsCalibration
 from kalcal.calibration.scale_bias import ScaleBiasCalibration, calibrate_scale_bias
 from kalcal.calibration.stability import Stability, Window, compare_windows, time_windows, untested
 from kalcal.errors import ConfigError, DataError
@@ -71,6 +71,9 @@ def accel_gps_stability(
     :func:`~kalcal.calibration.accel_gps.calibrate_accel_gps` for it; ``init`` is always "first-fix".
     A window the filter cannot run on (too few fixes) leaves the test not run, its sentence saying why.
     """
+    # the accel-gps filter (and numba, under it) only for an accel-gps log: scale-bias runs import this module too
+    from kalcal.calibration.accel_gps import calibrate_accel_gps
+
     count = check_windows(windows)
     names = ("bias", "scale") if scenario.has_scale else ("bias",)
     units = ("m/s^2", "1")[: len(names)]

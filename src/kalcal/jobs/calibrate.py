@@ -9,18 +9,14 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from kalcal.calibration.accel_gps import bias_walk_variance, calibrate_accel_gps, prior_conflict
-from kalcal.calibration.diagnostics import innovation_diagnostics
 from kalcal.calibration.likelihood import gate_excess
 from kalcal.calibration.plausibility import CalibrationWarning
-from kalcal.calibration.smoothing import smooth_calibration
 from kalcal.calibration.windows import accel_gps_stability, check_windows
 from kalcal.io.logs import numeric_columns, parse_column_map, read_table, require_increasing, source_name
 from kalcal.io.outputs import mark_inputs, writes_outputs
 from kalcal.io.results import write_json
 from kalcal.models.accel_gps import AccelGpsScenario, AccelGpsSettings
 from kalcal.models.config import section_values
-from kalcal.plots.calibration import plot_calibration
 
 
 IMU_ROLES = ("time", "accel")
@@ -77,6 +73,8 @@ def save_calibration(calibration: Calibration, out: str | Path) -> dict[str, Pat
         calibration.estimates.to_csv(paths["estimates.csv"], index=False)
         paths["summary.json"] = write_json(out / "summary.json", calibration.summary)
         if "calibration.png" in names:
+            from kalcal.plots.calibration import plot_calibration  # matplotlib: only a run that draws loads it
+
             frame = calibration.estimates
             normalized = frame[["innovation_position", "innovation_velocity"]].to_numpy()
             paths["calibration.png"] = plot_calibration(
@@ -124,6 +122,11 @@ def compute_accel_gps_calibration(
     too far from a given prior (:func:`~kalcal.calibration.accel_gps.prior_conflict`). The diagnostics
     leave out the rejected fixes and, with a diffuse prior, the first fix.
     """
+    # the accel-gps filter (and numba under it) when it runs: a scale-bias calibration imports this module too
+    from kalcal.calibration.accel_gps import bias_walk_variance, calibrate_accel_gps, prior_conflict
+    from kalcal.calibration.diagnostics import innovation_diagnostics
+    from kalcal.calibration.smoothing import smooth_calibration
+
     windows = check_windows(windows)
     imu_map = parse_column_map(imu_columns, IMU_ROLES, "--imu-columns")
     gps_map = parse_column_map(gps_columns, GPS_ROLES, "--gps-columns")

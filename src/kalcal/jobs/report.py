@@ -17,7 +17,7 @@ import json
 import operator
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -31,8 +31,8 @@ from kalcal.io.statistics import read_statistics
 from kalcal.jobs.progress import JobProgress, stage
 from kalcal.models.custom import CustomModelScenario, is_custom_settings
 from kalcal.models.registry import build_scenario
-from kalcal.montecarlo.accumulators import BlockResult
-from kalcal.montecarlo.engine import realization
+from kalcal.montecarlo.engine import BLOCK_SIZE, block_generator, block_sizes, realization
+from kalcal.montecarlo.problem import FixedGainProblem
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.plots.realization import RealizationData
 from kalcal.reporting.figures import render_figures
@@ -105,10 +105,35 @@ def _realization_index(realization: Any, count: int) -> int:
     return index
 
 
-def draw_realization(problem, seed: int, index: int, n: int, engine: str) -> tuple[BlockResult, np.ndarray]:
-    """Realization ``index`` of the n-realization ensemble: its BlockResult (a block of one) and P, (K, d, d)."""
-    one = realization(problem, seed, index, n, engine)
-    return one, one.filter_cov_sum
+class ShownRealization(NamedTuple):
+    """The one realization the single-run figures show. K updates, d states."""
+
+    error: np.ndarray  #: e_k = x_k - xhat_k, (K, d)
+    estimate: np.ndarray  #: xhat_k, (K, d)
+    filter_cov: np.ndarray  #: the filter's own P_k, (K, d, d)
+
+
+def draw_realization(problem, seed: int, index: int, n: int, engine: str) -> ShownRealization:
+    """Realization ``index`` of the n-realization ensemble drawn with ``seed``: its error, estimate and P.
+
+    The same values, bit for bit, as :func:`kalcal.montecarlo.engine.realization`: its block is drawn and
+    filtered whole (the draws of a block are interleaved across its realizations), but for a fixed-gain
+    problem without the statistics the figures do not show (the whitened errors and innovations, NEES
+    and NIS of every realization of the block).
+    """
+    if not isinstance(problem, FixedGainProblem):  # data-dependent gains: each realization's own P
+        one = realization(problem, seed, index, n, engine)
+        return ShownRealization(one.error[0], one.estimate[0], one.filter_cov[0])
+    if not 0 <= index < n:
+        raise ValueError(f"realization index must lie in [0, {n}), got {index}")
+    block, offset = divmod(index, BLOCK_SIZE)
+    states, measurements = problem.sample(block_generator(seed, block), block_sizes(n, BLOCK_SIZE)[block], engine)
+    run = problem.filter(measurements)
+    state = states[offset : offset + 1]
+    if engine == "exact" and problem.truth.error_map is not None:
+        state = state @ problem.truth.error_map.T  # the filter's states of a truth with its own: M x
+    state = state[0]
+    return ShownRealization(state - run.posterior[offset], run.posterior[offset], np.array(problem.schedule.posterior_cov))
 
 
 def render_report(
@@ -185,14 +210,14 @@ def render_report(
     if str(summary["engine"]) not in problem.engines:
         raise DataError(f"{summary_path}: engine {summary['engine']!r} is not one of {', '.join(problem.engines)}")
 
-    one, filter_cov = draw_realization(problem, seed, index, count, str(summary["engine"]))
+    one = draw_realization(problem, seed, index, count, str(summary["engine"]))
     data = RealizationData(
         index=index,
         times=times,
-        truth=one.error[0] + one.estimate[0],
-        estimate=one.estimate[0],
-        error=one.error[0],
-        filter_cov=filter_cov,
+        truth=one.error + one.estimate,
+        estimate=one.estimate,
+        error=one.error,
+        filter_cov=one.filter_cov,
         state_names=tuple(problem.info.state_names),
         state_units=tuple(problem.info.state_units),
         state_labels=getattr(scenario, "state_labels", None),  # accel-gps: its error states δp, δv

@@ -130,6 +130,22 @@ def shade_band(ax: Axes, times: np.ndarray, lower: np.ndarray, upper: np.ndarray
     return ax.fill_between(times, lower, upper, color=color, alpha=0.22, linewidth=0.0, label=text)
 
 
+def legend_below(figure: Figure, axes, *, ncols: int | None = None):
+    """One legend for the whole figure, centred below its panels, of the labelled artists of ``axes``.
+
+    For figures whose panels would each repeat the same legend. Entries come in the order of ``axes``
+    and their artists, each label once; ``ncols`` defaults to one row of all of them. The layout
+    (:func:`kalcal.plots._layout.fit_margins`) reserves its height below the panels.
+    """
+    handles, labels = [], []
+    for ax in axes:
+        for handle, text in zip(*ax.get_legend_handles_labels()):
+            if text not in labels:
+                handles.append(handle)
+                labels.append(text)
+    return figure.legend(handles, labels, loc="outside lower center", ncols=ncols or len(labels))
+
+
 def percent(confidence: float) -> str:
     """``0.99`` -> ``99%`` (as many digits as needed)."""
     return f"{100.0 * confidence:g}%"

@@ -21,6 +21,7 @@ from kalcal.plots._common import (
     EXPECTED,
     FILTER,
     label,
+    legend_below,
     new_figure,
     percent,
     save,
@@ -118,15 +119,14 @@ def plot_variance_diagonal(dataset: xr.Dataset, path: str | Path) -> Path:
         ax.plot(times, ensemble[:, i], color=ENSEMBLE, linewidth=1.0, label="ensemble variance")
         ax.set_yscale("log")
         ax.set_ylabel(label(f"{name} variance", unit_square(unit)))
-        ax.legend(loc="upper right")
         ax = axes[i, 1]
         shade_band(ax, times, np.full(times.shape, 1.0 - half), np.full(times.shape, 1.0 + half), f"1 ± {z:.2f} sd")
         ax.axhline(1.0, color=FILTER, linestyle="--", linewidth=1.0)
         ax.plot(times, ratio[:, i], color=ENSEMBLE, linewidth=1.0, label="ensemble / filter")
         ax.set_ylabel(f"{name} variance ratio")
-        ax.legend(loc="upper right")
     for c in range(2):
         axes[-1, c].set_xlabel(time_label())
+    legend_below(figure, axes[0])
     figure.suptitle(f"Error variance: ensemble (N = {count:,}) against the filter's P, diagonal terms")
     return save(figure, path)
 
@@ -168,7 +168,6 @@ def plot_variance_offdiagonal(dataset: xr.Dataset, path: str | Path) -> Path:
         ax.plot(times, rho_ensemble, color=ENSEMBLE, linewidth=1.0, label="ensemble")
         ax.set_ylim(-1.05, 1.05)
         ax.set_ylabel(f"corr({names[i]}, {names[l]})")
-        ax.legend(loc="lower right")
         ax = axes[row, 1]
         shade_band(ax, times, np.full(times.shape, -z), np.full(times.shape, z), f"±{z:.2f} sd ({percent(confidence)}, Bonferroni)")
         ax.plot(times, deviation, color=ENSEMBLE, linewidth=1.0, label="(ensemble - filter) / sd")
@@ -176,9 +175,9 @@ def plot_variance_offdiagonal(dataset: xr.Dataset, path: str | Path) -> Path:
         reach = max(1.3 * z, float(np.nanmax(np.abs(deviation))) * 1.1 if np.any(np.isfinite(deviation)) else z)
         ax.set_ylim(-reach, reach)
         ax.set_ylabel(f"cov({names[i]}, {names[l]}) deviation (sd)")
-        ax.legend(loc="lower right")
     for c in range(2):
         axes[-1, c].set_xlabel(time_label())
+    legend_below(figure, axes[0])
     figure.suptitle(f"Error covariance: ensemble (N = {count:,}) against the filter's P, off-diagonal terms")
     return save(figure, path)
 
@@ -201,11 +200,11 @@ def _orthogonality(dataset: xr.Dataset, cells: list[tuple[int, int]], cols: int,
         ax.axhline(0.0, color="grey", linewidth=0.6)
         ax.set_title(f"E[e_{names[i]} · x̂_{names[l]}]  (element {i + 1},{l + 1})")
         ax.set_ylabel(label("E[e x̂]", unit_product(units[i], units[l])))
-        ax.legend(loc="upper right")
     for n in range(len(cells), rows * cols):
         axes[n // cols, n % cols].set_visible(False)
     for c in range(cols):
         axes[-1, c].set_xlabel(time_label())
+    legend_below(figure, axes[:1, :1].ravel())
     figure.suptitle(f"{title} (N = {count:,}; zero for an optimal filter)")
     return save(figure, path)
 
@@ -280,7 +279,7 @@ def plot_sigma_exact(dataset: xr.Dataset, exact_cov: np.ndarray, path: str | Pat
         if np.all(exact[:, i] > 0) and np.all(filt[:, i] > 0):
             ax.set_yscale("log")
         ax.set_ylabel(label(f"σ of {name}", unit))
-        ax.legend(loc="upper right")
     axes[-1, 0].set_xlabel(time_label())
+    legend_below(figure, axes[0])
     axes[0, 0].set_title("Error σ: the filter's belief, the exact value and the ensemble")
     return save(figure, path)

@@ -1,0 +1,74 @@
+"""The report's redraw of one realization gives the bits of the engine's ``realization`` (every problem kind)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from kalcal.jobs.report import draw_realization
+from kalcal.models.custom import parse_model
+from kalcal.models.registry import build_scenario
+from kalcal.montecarlo.engine import realization
+from kalcal.montecarlo.scenarios import build_problem
+
+REDUCED = """
+name = "random-walk-coloured"
+steps_per_update = 2
+updates = 12
+sample_period = 0.5
+phi = [[1.0]]
+gamma = [[1.0]]
+w = [[0.01]]
+h = [[1.0]]
+v = [[1.0]]
+x0 = [0.0]
+m0 = [[4.0]]
+
+[truth]
+map = [[1.0, 0.0]]
+state_names = ["x", "g"]
+phi = [[1.0, 0.0], [0.0, 0.9]]
+gamma = [[1.0, 0.0], [0.0, 1.0]]
+w = [[0.01, 0.0], [0.0, 0.19]]
+h = [[1.0, 1.0]]
+v = [[1.0]]
+x0 = [0.5, 0.0]
+m0 = [[4.0, 0.0], [0.0, 1.0]]
+"""
+
+
+def _assert_same(problem, seed, index, n, engine):
+    shown = draw_realization(problem, seed, index, n, engine)
+    one = realization(problem, seed, index, n, engine)
+    np.testing.assert_array_equal(shown.error, one.error[0])
+    np.testing.assert_array_equal(shown.estimate, one.estimate[0])
+    np.testing.assert_array_equal(shown.filter_cov, one.filter_cov[0])
+    assert shown.error.shape == one.error.shape[1:] and shown.filter_cov.shape == one.filter_cov.shape[1:]
+
+
+@pytest.mark.parametrize(
+    ("engine", "index", "n"),
+    [("exact", 0, 5000), ("exact", 4321, 5000), ("exact", 4999, 5000), ("sampled", 17, 300)],
+)
+def test_accel_gps_realization_is_the_engines(engine, index, n):
+    """A full block, the short last block and the per-sample engine: the same bits as the engine's."""
+    problem, _ = build_problem(build_scenario("accel-gps", None, ["scenario.duration=6"]), residual_pairs=True)
+    _assert_same(problem, 3, index, n, engine)
+
+
+def test_truth_of_its_own_states_realization_is_the_engines():
+    """A model file whose truth has more states than the filter (error M x - xhat)."""
+    problem, _ = build_problem(parse_model(REDUCED, "reduced.toml"))
+    _assert_same(problem, 5, 4100, 4500, "exact")
+
+
+def test_data_dependent_gains_realization_is_the_engines():
+    """Scale-bias (its own P per realization) takes the engine's path."""
+    problem, _ = build_problem(build_scenario("scale-bias", None, []))
+    _assert_same(problem, 4, 123, 500, "exact")
+
+
+def test_index_outside_the_ensemble():
+    problem, _ = build_problem(build_scenario("accel-gps", None, ["scenario.duration=6"]))
+    with pytest.raises(ValueError, match=r"\[0, 100\), got 100"):
+        draw_realization(problem, 3, 100, 100, "exact")
