@@ -31,7 +31,7 @@ class FakeLog:
                                bias=np.zeros(k), std=np.ones((k, 3)))
 
     def settings_value(self, key):
-        return self.starts[key]
+        return self.starts[key] if key in self.starts else 0.0  # a setting not given: 0 (no Gauss-Markov bias)
 
     def unit(self, key):
         return "m"

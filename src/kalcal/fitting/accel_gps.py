@@ -9,6 +9,9 @@ fitted filter's innovation diagnostics (NIS and whiteness, :mod:`kalcal.calibrat
 decide whether the model family is adequate for the log, with the NIS tail
 (:mod:`kalcal.fitting.nis_tail`) on an ungated fit only; they are judged at the fitted point
 (:func:`kalcal.fitting.result.fitted_point`: a ridge's members at the point the search reached on it).
+A free latency that is not resolved (:mod:`kalcal.fitting.latency_scan`) is held at its input, what
+filter.toml runs, and the other free settings are refitted there; it does not by itself make the fit
+inadequate (its note and ``notes`` say it is not resolved).
 """
 
 from __future__ import annotations
@@ -141,7 +144,14 @@ def fit_accel_gps(
         parameters.append(Free(key, start, start / RANGE, start * RANGE, log.unit(key)))
     imu_rate = rates[0] if rates is not None else scenario.scenario.imu_rate
     step = latency_scan.scan_step(imu_rate)
-    fit, calibration, mask, rounds = _search(log, parameters, gate, profile, confidence, step, notes)
+    markov = "filter.bias_correlation_time" in free or log.settings_value("filter.bias_correlation_time") > 0
+    fit, calibration, mask, rounds = _search(log, parameters, gate, profile, confidence, step, notes, markov)
+    latency = fit.parameters.get(latency_scan.KEY)
+    if latency is not None and latency.note.startswith(latency_scan.NOT_RESOLVED):
+        # what filter.toml runs: the latency at its input; the others refitted there, so that the values,
+        # intervals, log L, AIC and diagnostics are all of the written point
+        fit, calibration, mask, rounds = _held(log, fit, [p for p in parameters if p.name != latency_scan.KEY], gate,
+                                               profile, confidence, notes)
     chosen = fitted_point(fit)  # a ridge's members at the fitted point, so that adequacy is judged on the ridge
     used = _used(calibration)
     diagnostics = innovation_diagnostics(calibration.normalized_innovations[used])
@@ -153,12 +163,6 @@ def fit_accel_gps(
     else:
         failed = (None if diagnostics.consistent else diagnostics.verdict, tail.sentence() if tail is not None else None)
         adequacy = inadequacy("; ".join(text for text in failed if text), free)
-    latency = fit.parameters.get(latency_scan.KEY)
-    if latency is not None and latency.note.startswith(latency_scan.UNRESOLVED):
-        adequate = False
-        adequacy = (f"{latency_scan.KEY} is {latency_scan.UNRESOLVED} (its log-likelihood is rough at the sample scale: "
-                    "no interval); the other settings are fitted at its best point, the fitted filter runs with the input "
-                    f"latency; diagnostics there: {adequacy}")
     if gate is not None:
         if rounds is None:
             notes.append(f"the gate's rejected set still changed after {MAX_GATE_ROUNDS} refits; the last set is used")
@@ -203,12 +207,28 @@ def _used(calibration) -> np.ndarray:
     return used
 
 
-def _search(log, parameters, gate, profile, confidence, step=None, notes=None):
+def _held(log, fit, others, gate, profile, confidence, notes):
+    """The fit with an unresolved latency held at its input (absent from the values: the log's own
+    setting): the ``others`` refitted there (:func:`_search`), or, none free, log L at the input; the
+    latency's parameter and scan kept from ``fit``. Returns what :func:`_search` returns."""
+    key = latency_scan.KEY
+    if others:
+        held, calibration, mask, rounds = _search(log, others, gate, profile, confidence)
+        notes.append(f"the other free settings are refitted with {key} at its input, what filter.toml runs")
+    else:
+        mask = None if gate is None else np.asarray(log.calibrate({}, gate=gate).rejected, dtype=bool)
+        value = log.loglik({}) if mask is None else log.loglik({}, rejected=mask)
+        held, calibration, rounds = replace(fit, values={}, loglik=float(value), notes=()), log.calibrate({}, gate=gate), 0
+    parameters = {name: fit.parameters[key] if name == key else held.parameters[name] for name in fit.parameters}
+    return replace(held, parameters=parameters, curves={**held.curves, key: fit.curves[key]}), calibration, mask, rounds
+
+
+def _search(log, parameters, gate, profile, confidence, step=None, notes=None, markov=False):
     """The fit over a fixed set of fixes: with a gate, gate with the start settings, fit with that
     rejected set held fixed, re-gate with the fitted settings and refit until the set stops changing
     (at most :data:`MAX_GATE_ROUNDS` fits). With a free latency and a grid ``step`` (s), the latency's
     range is scanned before the first fit and at the last one (:mod:`kalcal.fitting.latency_scan`; a
-    multimodal latency is said in ``notes``).
+    multimodal or unresolved latency is said in ``notes``; ``markov``: the model has a Gauss-Markov bias).
     Returns the fit, the fitted calibration, the rejected set and the rounds taken (None where the set
     never settled)."""
     scanned = step is not None and any(p.name == latency_scan.KEY for p in parameters)
@@ -221,7 +241,7 @@ def _search(log, parameters, gate, profile, confidence, step=None, notes=None):
         if not scanned:
             return fit
         refit = lambda start: search(fn, [replace(p, start=start) if p.name == latency_scan.KEY else p for p in params])  # noqa: E731
-        fit, said = latency_scan.judge(fn, fit, params, step, confidence, refit, setting)
+        fit, said = latency_scan.judge(fn, fit, params, step, confidence, refit, setting, markov)
         if said and notes is not None:
             notes.append(said)
         return fit

@@ -88,8 +88,9 @@ class FitResult:
     interval_method : {"observed-information", "profile"}
     adequate : bool
         Whether the fitted filter's innovations pass their diagnostics: mean NIS and whiteness, and for
-        accel-gps without a gate the NIS tail (:mod:`kalcal.fitting.nis_tail`); false too where a free
-        latency is not resolved (:mod:`kalcal.fitting.latency_scan`).
+        accel-gps without a gate the NIS tail (:mod:`kalcal.fitting.nis_tail`), at the written point (an
+        unresolved latency at its input): an unidentified or unresolved parameter does not by itself make
+        it false.
     adequacy : str
         The diagnostics' verdict in words, and when not adequate what the model may lack.
     diagnostics : dict
