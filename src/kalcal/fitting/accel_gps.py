@@ -216,9 +216,10 @@ def _held(log, fit, others, gate, profile, confidence, notes):
         held, calibration, mask, rounds = _search(log, others, gate, profile, confidence)
         notes.append(f"the other free settings are refitted with {key} at its input, what filter.toml runs")
     else:
-        mask = None if gate is None else np.asarray(log.calibrate({}, gate=gate).rejected, dtype=bool)
+        calibration = log.calibrate({}, gate=gate)
+        mask = None if gate is None else np.asarray(calibration.rejected, dtype=bool)
         value = log.loglik({}) if mask is None else log.loglik({}, rejected=mask)
-        held, calibration, rounds = replace(fit, values={}, loglik=float(value), notes=()), log.calibrate({}, gate=gate), 0
+        held, rounds = replace(fit, values={}, loglik=float(value), notes=()), 0
     parameters = {name: fit.parameters[key] if name == key else held.parameters[name] for name in fit.parameters}
     return replace(held, parameters=parameters, curves={**held.curves, key: fit.curves[key]}), calibration, mask, rounds
 

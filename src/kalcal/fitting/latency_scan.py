@@ -152,7 +152,7 @@ def _unresolved(parameter, rough: float, drop: float, step: float):
         f"{ROUGH:g} x {drop:.3g}), so its maximum and {drop:.3g}-drop set follow the vibration noise of single samples, "
         "not the latency: no interval is given; the input setting is kept"
     )
-    return replace(parameter, value=None, ci_low=None, ci_high=None, identified=False, at_bound=False, note=note)
+    return _unidentified(parameter, note)
 
 
 def _markov(parameter):
@@ -161,6 +161,11 @@ def _markov(parameter):
         f"{MARKOV}: on simulated logs with a Gauss-Markov bias the latency's intervals were found not to cover the "
         "true latency, so none is reported; the input setting is kept"
     )
+    return _unidentified(parameter, note)
+
+
+def _unidentified(parameter, note: str):
+    """``parameter`` with no value and no interval, unidentified, saying ``note``."""
     return replace(parameter, value=None, ci_low=None, ci_high=None, identified=False, at_bound=False, note=note)
 
 

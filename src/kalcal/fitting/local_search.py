@@ -68,6 +68,7 @@ class Profile:
         self.points: dict[int, list[tuple[float, np.ndarray]]] = {}
         self.known: dict[tuple[int, float], float] = {}
         self.searches = 0
+        self.curvatures: dict[int, float] = {}
 
     def __call__(self, i: int, value: float) -> float:
         """log L with u_i = ``value``, the others re-maximized."""
@@ -99,11 +100,7 @@ class Profile:
         """The u_i between the maximum and ``end`` where the profile falls to ``level`` (brentq, 1e-4 in u);
         the profile at ``end`` is below ``level``."""
         start, sign = float(self.u_hat[i]), float(np.sign(end - self.u_hat[i]))
-        h = 1e-2
-        up, down = self.u_hat.copy(), self.u_hat.copy()
-        up[i] += h
-        down[i] -= h
-        curvature = (self.f(up) - 2.0 * (-self.loglik) + self.f(down)) / h**2
+        curvature = self._curvature(i)
         step = np.sqrt(2.0 * (self.loglik - level) / curvature) if curvature > 0 else abs(end - start) / 8.0
         inner = start
         while True:
@@ -115,3 +112,13 @@ class Profile:
                 break
             inner, step = outer, 2.0 * step
         return optimize.brentq(lambda v: self(i, v) - level, inner, outer, xtol=1e-4)
+
+    def _curvature(self, i: int) -> float:
+        """The slice's second difference of -log L along u_i at the maximum (step 1e-2), once per i."""
+        if i not in self.curvatures:
+            h = 1e-2
+            up, down = self.u_hat.copy(), self.u_hat.copy()
+            up[i] += h
+            down[i] -= h
+            self.curvatures[i] = (self.f(up) - 2.0 * (-self.loglik) + self.f(down)) / h**2
+        return self.curvatures[i]

@@ -17,7 +17,6 @@ from kalcal.io.statistics import write_statistics
 from kalcal.jobs.progress import JobProgress, stage
 from kalcal.jobs.verify_arguments import (  # noqa: F401 (MAX_UPDATES, MIN_REALIZATIONS, run_length: the job's limits)
     LONG_RUN_REALIZATIONS,
-    LONG_RUN_SECONDS,
     MAX_UPDATES,
     MIN_REALIZATIONS,
     check_arguments,

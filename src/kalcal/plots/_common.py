@@ -62,7 +62,8 @@ def height_px(rows: int) -> int:
 
 
 def new_figure(rows: int = 1, cols: int = 1, *, height: int | None = None, sharex: bool = True):
-    """A constrained-layout figure of ``WIDTH_PX`` x ``height`` (default ``height_px(rows)``) pixels.
+    """A figure of ``WIDTH_PX`` x ``height`` (default ``height_px(rows)``) pixels, laid out when saved
+    (:func:`kalcal.plots._layout.fit_margins`).
 
     Returns
     -------

@@ -81,7 +81,7 @@ def plot_mean_error(dataset: xr.Dataset, path: str | Path, *, title: str | None 
         ax.set_ylabel(label(f"mean {name} error", unit))
     axes[-1, 0].set_xlabel(time_label())
     figure.suptitle(title or f"Ensemble mean error over [0, {times[-1]:g}] s, N = {count:,}")
-    figure.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside lower center", ncols=3)
+    legend_below(figure, axes[:1, 0], ncols=3)
     return save(figure, path)
 
 
