@@ -39,7 +39,7 @@ from dataclasses import replace
 import numpy as np
 from scipy import stats
 
-from kalcal.fitting.mle import BEATEN, FAILED, Free, MleFit
+from kalcal.fitting.mle import BEATEN, FAILED, Free, MleFit, guarded
 
 KEY = "filter.gps_latency"
 #: log L is too rough for an interval where a third difference of the scan near the maximum exceeds this times the drop
@@ -65,12 +65,7 @@ def scan(loglik: Callable[[Mapping[str, float]], float], values: Mapping[str, fl
     grid = np.linspace(lower, upper, int(np.ceil((upper - lower) / step - 1e-9)) + 1)  # steps of at most ``step``
     out = np.empty(grid.size)
     for n, x in enumerate(grid):
-        try:
-            out[n] = float(loglik({**values, KEY: float(x)}))
-        except (ValueError, ArithmeticError, np.linalg.LinAlgError):
-            out[n] = FAILED
-        if not np.isfinite(out[n]):
-            out[n] = FAILED
+        out[n] = guarded(loglik, {**values, KEY: float(x)})
     return grid, out
 
 

@@ -109,11 +109,16 @@ class _Objective:
 
     def loglik_at(self, u: np.ndarray) -> float:
         self.count += 1
-        try:
-            value = float(self.loglik(dict(zip(self.names, self.values(u).tolist()))))
-        except (ValueError, ArithmeticError, np.linalg.LinAlgError):
-            return FAILED
-        return value if np.isfinite(value) else FAILED
+        return guarded(self.loglik, dict(zip(self.names, self.values(u).tolist())))
+
+
+def guarded(loglik: Callable[[Mapping[str, float]], float], values: Mapping[str, float]) -> float:
+    """``loglik(values)``, or :data:`FAILED` where it raises a numerical error or is not finite."""
+    try:
+        value = float(loglik(values))
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+        return FAILED
+    return value if np.isfinite(value) else FAILED
 
 
 def maximize(
