@@ -31,7 +31,9 @@ class FakeLog:
                                bias=np.zeros(k), std=np.ones((k, 3)))
 
     def settings_value(self, key):
-        return self.starts[key] if key in self.starts else 0.0  # a setting not given: 0 (no Gauss-Markov bias)
+        if key not in self.starts and key == "filter.bias_correlation_time":
+            return 0.0  # not given: a bias without a correlation time (no Gauss-Markov bias)
+        return self.starts[key]
 
     def unit(self, key):
         return "m"

@@ -59,7 +59,7 @@ def test_with_a_gauss_markov_bias_a_latency_the_roughness_rule_passes_is_not_res
     p = result.parameters[KEY]
     assert p.note.startswith(MARKOV), p.note  # not the roughness rule's note: that one passed
     assert not p.identified and p.value is None and p.ci_low is None and p.ci_high is None
-    assert "intervals were found not to cover" in p.note and p.note.startswith(NOT_RESOLVED)
+    assert "coverage of its intervals with such a bias is not established" in p.note and p.note.startswith(NOT_RESOLVED)
     assert any(note.startswith(f"{KEY}: {MARKOV}") for note in result.notes)
     assert result.settings["filter"]["gps_latency"] == 0.0 and MARKOV in result.comments["gps_latency"]
     assert result.to_dict()["parameters"][KEY]["value"] is None
@@ -83,3 +83,15 @@ def test_the_terminal_table_says_not_resolved_and_fit_json_and_filter_toml_agree
     assert document["parameters"][KEY]["identified"] is False and document["parameters"][KEY]["value"] is None
     text = (out / "filter.toml").read_text()
     assert tomllib.loads(text)["filter"]["gps_latency"] == 0.0 and MARKOV in text
+
+
+def test_a_free_correlation_time_from_0_makes_the_model_gauss_markov_and_the_latency_not_resolved():
+    tau = "filter.bias_correlation_time"
+    # smooth in the latency (the roughness rule passes); the correlation time's start is 0 (a constant bias)
+    std = "filter.bias_std"  # freed with the correlation time: a Gauss-Markov bias's stationary std
+    log = FakeLog(lambda v: -1e3 * (v[KEY] - 0.02) ** 2 - (np.log(v[tau]) - np.log(30.0)) ** 2
+                  - (np.log(v[std]) - np.log(0.1)) ** 2,
+                  np.random.default_rng(0).standard_normal((500, 2)), {KEY: 0.0, tau: 0.0, std: 0.1})
+    result = fit_accel_gps(log, build_scenario("accel-gps", None, []), [KEY, tau])
+    assert result.parameters[KEY].note.startswith(MARKOV), result.parameters[KEY].note
+

@@ -147,7 +147,8 @@ def fit_accel_gps(
     markov = "filter.bias_correlation_time" in free or log.settings_value("filter.bias_correlation_time") > 0
     fit, calibration, mask, rounds = _search(log, parameters, gate, profile, confidence, step, notes, markov)
     latency = fit.parameters.get(latency_scan.KEY)
-    if latency is not None and latency.note.startswith(latency_scan.NOT_RESOLVED):
+    held = latency is not None and latency.note.startswith(latency_scan.NOT_RESOLVED)
+    if held:
         # what filter.toml runs: the latency at its input; the others refitted there, so that the values,
         # intervals, log L, AIC and diagnostics are all of the written point
         fit, calibration, mask, rounds = _held(log, fit, [p for p in parameters if p.name != latency_scan.KEY], gate,
@@ -162,7 +163,9 @@ def fit_accel_gps(
         adequacy = diagnostics.verdict
     else:
         failed = (None if diagnostics.consistent else diagnostics.verdict, tail.sentence() if tail is not None else None)
-        adequacy = inadequacy("; ".join(text for text in failed if text), free)
+        # a latency held at its input is not fitted: it stays among the candidates the sentence names
+        fitted_keys = [key for key in free if not (held and key == latency_scan.KEY)]
+        adequacy = inadequacy("; ".join(text for text in failed if text), fitted_keys)
     if gate is not None:
         if rounds is None:
             notes.append(f"the gate's rejected set still changed after {MAX_GATE_ROUNDS} refits; the last set is used")
@@ -219,7 +222,9 @@ def _held(log, fit, others, gate, profile, confidence, notes):
         calibration = log.calibrate({}, gate=gate)
         mask = None if gate is None else np.asarray(calibration.rejected, dtype=bool)
         value = log.loglik({}) if mask is None else log.loglik({}, rejected=mask)
-        held, rounds = replace(fit, values={}, loglik=float(value), notes=()), 0
+        # nothing is searched at the written point: no verdict of the discarded search carries over
+        held, rounds = replace(fit, values={}, loglik=float(value), notes=(), converged=True,
+                               message=f"nothing to search: {key} held at its input"), 0
     parameters = {name: fit.parameters[key] if name == key else held.parameters[name] for name in fit.parameters}
     return replace(held, parameters=parameters, curves={**held.curves, key: fit.curves[key]}), calibration, mask, rounds
 

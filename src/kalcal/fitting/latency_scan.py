@@ -24,11 +24,11 @@ least two each side), and where it exceeds :data:`ROUGH` times the drop (a chang
 neighbouring half-samples a sizeable part of the drop) the latency is **not resolved** at this log's
 noise: unidentified, with no interval (:func:`judge`).
 
-Where the model has a Gauss-Markov bias (``filter.bias_correlation_time`` set or free) the latency is not
-resolved whatever its roughness: on simulated rover-like logs with such a bias (tau 30 s) and less
-vibration, where the roughness rule passes, its intervals were found not to cover the true latency
-while the same logs without the bias covered (simulations outside the test suite); the cause is not known, so such intervals are not
-reported (the note says why).
+Where the model has a Gauss-Markov bias (``filter.bias_correlation_time`` above 0, the filter's or else
+the truth's, or free) the latency is not resolved whatever its roughness: the coverage of its intervals
+with such a bias is not established (in trials on simulated rover-like logs with less vibration, where
+the roughness rule passes, some did not cover the true latency while the same logs without the bias
+did; the cause is not known), so none is given (the note says why).
 """
 
 from __future__ import annotations
@@ -153,8 +153,8 @@ def _unresolved(parameter, rough: float, drop: float, step: float):
 def _markov(parameter):
     """The latency unidentified: the model has a Gauss-Markov bias, with which its intervals did not cover."""
     note = (
-        f"{MARKOV}: on simulated logs with a Gauss-Markov bias the latency's intervals were found not to cover the "
-        "true latency, so none is reported; the input setting is kept"
+        f"{MARKOV}: the coverage of its intervals with such a bias is not established (on simulated logs some did "
+        "not cover the true latency), so none is given; the input setting is kept"
     )
     return _unidentified(parameter, note)
 
