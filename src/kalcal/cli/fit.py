@@ -51,7 +51,7 @@ def fit(
     calibrate and verify) and fit.png. `kalcal verify --config DIR/filter.toml` checks the fitted filter.
     """
     from kalcal.api.fit import fit as run_fit
-    from kalcal.fitting.latency_scan import NOT_RESOLVED
+    from kalcal.fitting.latency_scan import unresolved
 
     with user_errors():
         result = run_fit(
@@ -70,7 +70,7 @@ def fit(
     for name, p in result.parameters.items():
         if p.trades_off:
             estimate, interval = "unidentified", f"trades off with {', '.join(p.trades_off)}: fitted point kept"
-        elif not p.identified and p.note.startswith(NOT_RESOLVED):  # a latency (kalcal.fitting.latency_scan)
+        elif unresolved(p):  # a latency held at its input (kalcal.fitting.latency_scan)
             estimate, interval = "not resolved", "input kept"
         elif not p.identified:
             estimate, interval = "unidentified", "input kept"

@@ -147,7 +147,7 @@ def fit_accel_gps(
     markov = "filter.bias_correlation_time" in free or log.settings_value("filter.bias_correlation_time") > 0
     fit, calibration, mask, rounds = _search(log, parameters, gate, profile, confidence, step, notes, markov)
     latency = fit.parameters.get(latency_scan.KEY)
-    held = latency is not None and latency.note.startswith(latency_scan.NOT_RESOLVED)
+    held = latency is not None and latency_scan.unresolved(latency)
     if held:
         # what filter.toml runs: the latency at its input; the others refitted there, so that the values,
         # intervals, log L, AIC and diagnostics are all of the written point

@@ -37,9 +37,8 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 
 import numpy as np
-from scipy import stats
 
-from kalcal.fitting.mle import BEATEN, FAILED, Free, MleFit, guarded
+from kalcal.fitting.mle import BEATEN, FAILED, Free, MleFit, drop_of, guarded
 
 KEY = "filter.gps_latency"
 #: log L is too rough for an interval where a third difference of the scan near the maximum exceeds this times the drop
@@ -50,6 +49,12 @@ NOT_RESOLVED = "not resolved"
 UNRESOLVED = "not resolved at this log's noise"
 #: how a latency's note begins where the model has a Gauss-Markov bias
 MARKOV = "not resolved with a Gauss-Markov bias"
+
+
+def unresolved(parameter) -> bool:
+    """Whether ``parameter`` (a :class:`~kalcal.fitting.result.FitParameter`) is a latency this module
+    reported not resolved (held at its input)."""
+    return not parameter.identified and parameter.note.startswith(NOT_RESOLVED)
 
 
 def scan_step(imu_rate: float) -> float:
@@ -87,7 +92,7 @@ def judge(loglik, fit: MleFit, parameters: Sequence[Free], step: float, confiden
     Gauss-Markov bias (the module docstring); ``start`` reported as the ``setting`` the scan started from. Returns the fit and, when multimodal or not resolved, a sentence for the fit's notes
     ("" otherwise)."""
     p = next(q for q in parameters if q.name == KEY)
-    drop = float(stats.chi2.ppf(confidence, 1)) / 2.0
+    drop = drop_of(confidence)
     for attempt in range(2):
         others = {name: value for name, value in fit.values.items() if name != KEY}
         grid, values = scan(loglik, others, p.lower, p.upper, step)

@@ -112,6 +112,12 @@ class _Objective:
         return guarded(self.loglik, dict(zip(self.names, self.values(u).tolist())))
 
 
+def drop_of(confidence: float) -> float:
+    """The fall of log L from its maximum that bounds a ``confidence`` interval: chi2.ppf(confidence, 1) / 2
+    (Wilks; 1.92 at 0.95)."""
+    return float(stats.chi2.ppf(confidence, 1)) / 2.0
+
+
 def guarded(loglik: Callable[[Mapping[str, float]], float], values: Mapping[str, float]) -> float:
     """``loglik(values)``, or :data:`FAILED` where it raises a numerical error or is not finite."""
     try:
@@ -160,7 +166,7 @@ def maximize(
     f = lambda u: -objective.loglik_at(u)  # noqa: E731
     result = minimize(f, u0, low, high)
     u_hat, best = np.asarray(result.x, dtype=float), -float(result.fun)
-    drop = float(stats.chi2.ppf(confidence, 1)) / 2.0
+    drop = drop_of(confidence)
     z = float(stats.norm.isf((1.0 - confidence) / 2.0))
 
     profiled = Profile(f, u_hat, low, high, best)

@@ -198,9 +198,8 @@ def save_fit(run: FitRun, out: str | Path) -> dict[str, Path]:
         staging.mkdir(parents=True, exist_ok=True)
         write_json(staging / "fit.json", run.document)
         (staging / "filter.toml").write_text(run.filter_text)
-        drop = run.result.confidence
-        from scipy import stats
+        from kalcal.fitting.mle import drop_of
 
         plot_fit(run.result.curves, run.document["parameters"], staging / "fit.png",
-                 method=run.result.interval_method, drop=float(stats.chi2.ppf(drop, 1)) / 2)
+                 method=run.result.interval_method, drop=drop_of(run.result.confidence))
     return {name: out / name for name in OUTPUT_NAMES}
