@@ -41,6 +41,11 @@ def test_a_rover_like_logs_latency_is_not_resolved_and_never_given_a_narrow_inte
     assert loglik.max() <= max(result.curves["filter.gps_latency"]["loglik"]) + 1e-4
     # fit.json's log L is the written point's: the input latency
     assert result.loglik == pytest.approx(loglik[np.argmin(np.abs(grid))], abs=1e-6)
+    # and so are its diagnostics: those of this independent calibration at the input latency
+    calibration = log.calibrate({})
+    innovations = calibration.normalized_innovations[int(calibration.skip or 0):]
+    assert result.diagnostics["fixes"] == innovations.shape[0]
+    assert result.diagnostics["mean_nis"] == pytest.approx(float(np.mean(np.sum(innovations**2, axis=1))), rel=1e-9)
 
 
 def test_the_scan_steps_half_an_accelerometer_sample():
