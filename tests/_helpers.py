@@ -106,3 +106,33 @@ def sums_equal(a, b) -> bool:
         (x is None and y is None) or np.array_equal(x, y)
         for x, y in ((getattr(a, f), getattr(b, f)) for f in a.__dataclass_fields__)
     )
+
+
+def reduced_model_text(gm_std: float, decay: float = 0.9, filter_w: float = 0.01, x0_truth: float = 0.0) -> str:
+    """A reduced-order model file: the filter a random walk, the truth adding a Gauss-Markov term
+    g_{j+1} = decay g_j + n_j, stationary with std ``gm_std``."""
+    gm_var = gm_std**2
+    return f"""
+name = "random-walk-coloured"
+steps_per_update = 2
+updates = 12
+sample_period = 0.5
+phi = [[1.0]]
+gamma = [[1.0]]
+w = [[{filter_w!r}]]
+h = [[1.0]]
+v = [[1.0]]
+x0 = [0.0]
+m0 = [[4.0]]
+
+[truth]
+map = [[1.0, 0.0]]
+state_names = ["x", "g"]
+phi = [[1.0, 0.0], [0.0, {decay!r}]]
+gamma = [[1.0, 0.0], [0.0, 1.0]]
+w = [[0.01, 0.0], [0.0, {gm_var * (1 - decay**2)!r}]]
+h = [[1.0, 1.0]]
+v = [[1.0]]
+x0 = [{x0_truth!r}, 0.0]
+m0 = [[4.0, 0.0], [0.0, {gm_var!r}]]
+"""

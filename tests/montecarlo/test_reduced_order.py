@@ -22,42 +22,13 @@ from kalcal.montecarlo.accumulators import MomentSums
 from kalcal.montecarlo.problem import FixedGainProblem
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.simulation.exact import truth_from_model
-from tests._helpers import assert_close, bonferroni_k, sums_equal
+from tests._helpers import assert_close, bonferroni_k, reduced_model_text, sums_equal
 
 N = 20_000
 
 
-def _model_text(gm_std: float, decay: float = 0.9, filter_w: float = 0.01, x0_truth: float = 0.0) -> str:
-    """The reduced-order model file: g_{j+1} = decay g_j + n_j, stationary with std ``gm_std``."""
-    gm_var = gm_std**2
-    return f"""
-name = "random-walk-coloured"
-steps_per_update = 2
-updates = 12
-sample_period = 0.5
-phi = [[1.0]]
-gamma = [[1.0]]
-w = [[{filter_w!r}]]
-h = [[1.0]]
-v = [[1.0]]
-x0 = [0.0]
-m0 = [[4.0]]
-
-[truth]
-map = [[1.0, 0.0]]
-state_names = ["x", "g"]
-phi = [[1.0, 0.0], [0.0, {decay!r}]]
-gamma = [[1.0, 0.0], [0.0, 1.0]]
-w = [[0.01, 0.0], [0.0, {gm_var * (1 - decay**2)!r}]]
-h = [[1.0, 1.0]]
-v = [[1.0]]
-x0 = [{x0_truth!r}, 0.0]
-m0 = [[4.0, 0.0], [0.0, {gm_var!r}]]
-"""
-
-
 def _scenario(**kwargs):
-    return parse_model(_model_text(**kwargs), "reduced.toml")
+    return parse_model(reduced_model_text(**kwargs), "reduced.toml")
 
 
 def _gains(f, n_updates):

@@ -11,30 +11,9 @@ from kalcal.models.registry import build_scenario
 from kalcal.montecarlo.engine import realization
 from kalcal.montecarlo.scenarios import build_problem
 
-REDUCED = """
-name = "random-walk-coloured"
-steps_per_update = 2
-updates = 12
-sample_period = 0.5
-phi = [[1.0]]
-gamma = [[1.0]]
-w = [[0.01]]
-h = [[1.0]]
-v = [[1.0]]
-x0 = [0.0]
-m0 = [[4.0]]
+from tests._helpers import reduced_model_text
 
-[truth]
-map = [[1.0, 0.0]]
-state_names = ["x", "g"]
-phi = [[1.0, 0.0], [0.0, 0.9]]
-gamma = [[1.0, 0.0], [0.0, 1.0]]
-w = [[0.01, 0.0], [0.0, 0.19]]
-h = [[1.0, 1.0]]
-v = [[1.0]]
-x0 = [0.5, 0.0]
-m0 = [[4.0, 0.0], [0.0, 1.0]]
-"""
+REDUCED = reduced_model_text(gm_std=1.0, x0_truth=0.5)  # a truth with more states than the filter
 
 
 def _assert_same(problem, seed, index, n, engine):
