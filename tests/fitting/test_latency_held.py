@@ -32,8 +32,8 @@ def test_the_other_settings_are_refitted_at_the_input_latency_and_log_l_is_the_w
                   np.random.default_rng(0).standard_normal((500, 2)), {KEY: 0.0, other: 0.04})
     result = fit_accel_gps(log, build_scenario("accel-gps", None, []), [KEY, other], gate=gate)
     p, q = result.parameters[KEY], result.parameters[other]
-    assert not p.identified and p.note.startswith(UNRESOLVED)
-    assert q.identified and q.value == pytest.approx(0.05, abs=1e-4)  # the best at L = 0, not at L ~ 0.03 (0.065)
+    assert not p.identified and p.held and p.note.startswith(UNRESOLVED)
+    assert q.identified and not q.held and q.value == pytest.approx(0.05, abs=1e-4)  # the best at L = 0, not at L ~ 0.03 (0.065)
     written = {other: result.settings["filter"]["gps_velocity_std"]}
     assert result.settings["filter"]["gps_latency"] == 0.0
     assert result.loglik == pytest.approx(log.loglik(written), abs=1e-6)
@@ -57,7 +57,7 @@ def test_with_a_gauss_markov_bias_a_latency_the_roughness_rule_passes_is_not_res
     result = kalcal.fit("accel-gps", imu=sim.logs["imu"], gps=sim.logs["gps"], config=ROVER,
                         settings={"truth.gps_latency": 0, **NOISE}, free=KEY)
     p = result.parameters[KEY]
-    assert p.note.startswith(MARKOV), p.note  # not the roughness rule's note: that one passed
+    assert p.held and p.note.startswith(MARKOV), p.note  # not the roughness rule's note: that one passed
     assert not p.identified and p.value is None and p.ci_low is None and p.ci_high is None
     assert "coverage of its intervals with such a bias is not established" in p.note and p.note.startswith(NOT_RESOLVED)
     assert any(note.startswith(f"{KEY}: {MARKOV}") for note in result.notes)

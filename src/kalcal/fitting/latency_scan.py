@@ -54,7 +54,7 @@ MARKOV = "not resolved with a Gauss-Markov bias"
 def unresolved(parameter) -> bool:
     """Whether ``parameter`` (a :class:`~kalcal.fitting.result.FitParameter`) is a latency this module
     reported not resolved (held at its input)."""
-    return not parameter.identified and parameter.note.startswith(NOT_RESOLVED)
+    return parameter.held
 
 
 def scan_step(imu_rate: float) -> float:
@@ -165,8 +165,8 @@ def _markov(parameter):
 
 
 def _unidentified(parameter, note: str):
-    """``parameter`` with no value and no interval, unidentified, saying ``note``."""
-    return replace(parameter, value=None, ci_low=None, ci_high=None, identified=False, at_bound=False, note=note)
+    """``parameter`` held at its input: no value and no interval, unidentified, saying ``note``."""
+    return replace(parameter, value=None, ci_low=None, ci_high=None, identified=False, at_bound=False, note=note, held=True)
 
 
 def _widened(parameter, grid, values, level, estimate, drop, step):

@@ -38,6 +38,10 @@ class FitParameter:
     trades_off : tuple of str
         The parameters this one trades off with along a ridge of log L (unidentified: only their
         combination is); () otherwise. Not in fit.json's entry (the ``note`` names them).
+    held : bool
+        True for a latency the fit could not resolve (:mod:`kalcal.fitting.latency_scan`): unidentified,
+        held at its input while the other settings were refitted. Not in fit.json's entry (the ``note``
+        says it).
     """
 
     name: str
@@ -50,6 +54,7 @@ class FitParameter:
     at_bound: bool = False
     note: str = ""
     trades_off: tuple[str, ...] = ()
+    held: bool = False
 
     def as_dict(self) -> dict[str, Any]:
         return {
