@@ -146,8 +146,7 @@ def fit_accel_gps(
     step = latency_scan.scan_step(imu_rate)
     markov = "filter.bias_correlation_time" in free or log.settings_value("filter.bias_correlation_time") > 0
     fit, calibration, mask, rounds = _search(log, parameters, gate, profile, confidence, step, notes, markov)
-    latency = fit.parameters.get(latency_scan.KEY)
-    held = latency is not None and latency_scan.unresolved(latency)
+    held = _holds(fit)
     if held:
         # what filter.toml runs: the latency at its input; the others refitted there, so that the values,
         # intervals, log L, AIC and diagnostics are all of the written point
@@ -236,7 +235,8 @@ def _search(log, parameters, gate, profile, confidence, step=None, notes=None, m
     range is scanned before the first fit and at the last one (:mod:`kalcal.fitting.latency_scan`; a
     multimodal or unresolved latency is said in ``notes``; ``markov``: the model has a Gauss-Markov bias).
     Returns the fit, the fitted calibration, the rejected set and the rounds taken (None where the set
-    never settled)."""
+    never settled); the calibration is None where the latency is unresolved (held at its input:
+    :func:`_held` refits and calibrates there)."""
     scanned = step is not None and any(p.name == latency_scan.KEY for p in parameters)
     setting = next((p.start for p in parameters if p.name == latency_scan.KEY), None)
 
@@ -257,7 +257,7 @@ def _search(log, parameters, gate, profile, confidence, step=None, notes=None, m
     if gate is None:
         params = latency_scan.start_from_scan(log.loglik, parameters, step) if scanned else parameters
         fit = judged(log.loglik, search(log.loglik, params), params)
-        return fit, log.calibrate(chosen_of(fit)), None, 0
+        return fit, None if _holds(fit) else log.calibrate(chosen_of(fit)), None, 0
     mask = np.asarray(log.calibrate({}, gate=gate).rejected, dtype=bool)
     for rounds in range(1, MAX_GATE_ROUNDS + 1):
         held = mask.copy()
@@ -275,10 +275,18 @@ def _search(log, parameters, gate, profile, confidence, step=None, notes=None, m
     if scanned:  # judged over the last held set; a restart's calibration re-gates with its settings
         before = fit
         fit = judged(fn, fit, parameters)
-        if chosen_of(fit) != chosen_of(before):  # a restart, or a latency found unresolved (the input kept)
+        if _holds(fit):  # the caller refits with the latency at its input (_held), and calibrates there
+            return fit, None, mask, rounds
+        if chosen_of(fit) != chosen_of(before):  # a restart
             calibration = log.calibrate(chosen_of(fit), gate=gate)
             mask = np.asarray(calibration.rejected, dtype=bool)
     return fit, calibration, mask, rounds
+
+
+def _holds(fit) -> bool:
+    """Whether ``fit`` holds an unresolved latency at its input (:func:`latency_scan.unresolved`)."""
+    latency = fit.parameters.get(latency_scan.KEY)
+    return latency is not None and latency_scan.unresolved(latency)
 
 
 def log_rates(imu_time: np.ndarray, gps_time: np.ndarray) -> tuple[float, float]:
