@@ -10,6 +10,8 @@ accelerometer samples between them):
 * the sampled engine (every 200 Hz sample) against the raw cost of its own draws;
 * the compiled block path against the numpy reference path on the same block, and the pair sums of
   one block as the engine sums them (float64 syrk) against a float32 ssyrk of the same innovations;
+* one block's parts on one thread: numpy's draws of its normals, the kernel's own draws of the same
+  values, the compiled block with and without the pairs, and the pair sums alone;
 * the Monte Carlo in a fresh process, as the CLI pays it: numba's one-time setup, the first blocks and
   the later ones (from the progress callback's times), against the same run warm in this process;
 * the exact engine with BLAS free to use every core inside the blocks, against the engine's limit of one;
@@ -35,7 +37,7 @@ from scipy.linalg.blas import dsyrk, ssyrk
 
 from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.montecarlo import engine
-from kalcal.montecarlo.accumulators import MomentSums
+from kalcal.montecarlo.accumulators import MomentSums, ResidualProducts
 from kalcal.montecarlo.engine import BLOCK_SIZE, block_generator, block_sizes, run_monte_carlo
 from kalcal.montecarlo.scenarios import accel_gps_problem
 
@@ -50,6 +52,16 @@ def best_of(repeats, function, *args, **kwargs) -> float:
         function(*args, **kwargs)
         times.append(time.perf_counter() - start)
     return min(times)
+
+
+def wall_and_cpu(repeats, function) -> tuple[float, float]:
+    """The fastest wall time and the fastest CPU time of this process (every thread) of ``repeats`` calls, s."""
+    wall = cpu = float("inf")
+    for _ in range(repeats):
+        start, start_cpu = time.perf_counter(), time.process_time()
+        function()
+        wall, cpu = min(wall, time.perf_counter() - start), min(cpu, time.process_time() - start_cpu)
+    return wall, cpu
 
 
 def alternating(repeats, *functions) -> list[float]:
@@ -73,6 +85,30 @@ def raw_draws(n: int, normals_per_realization: int, seed: int = 0) -> None:
 
     with ThreadPoolExecutor(WORKERS) as pool:
         list(pool.map(draw, range(len(sizes))))
+
+
+def block_parts(problem, no_pairs, stacked: np.ndarray, normals: int) -> list[float]:
+    """Thread CPU times (s) of one block's parts: numpy's draws of its normals, the exact kernel's own
+    draws alone, the compiled block with and without the pairs, and the pair sums alone."""
+    from kalcal.montecarlo.kernels import standard_normals
+
+    steps = problem.truth.n_updates
+    step = np.empty(((normals - (problem.truth.x0_factor.shape[1] + problem.truth.shares_boundary)) // steps, BLOCK_SIZE))
+
+    def kernel_draws() -> None:
+        rng = block_generator(0, 0)
+        for _ in range(steps):
+            standard_normals(rng, step)
+
+    kernel_draws()
+    return alternating(
+        9,
+        lambda: block_generator(0, 0).standard_normal(BLOCK_SIZE * normals),
+        kernel_draws,
+        lambda: problem.block_sums(block_generator(0, 0), BLOCK_SIZE, "exact"),
+        lambda: no_pairs.block_sums(block_generator(0, 0), BLOCK_SIZE, "exact"),
+        lambda: ResidualProducts.upper(stacked),
+    )
 
 
 def blas_free_run(problem, n: int) -> float:
@@ -223,14 +259,18 @@ def main() -> None:
     exact_normals = problem.normals_per_realization("exact")
     no_pairs = accel_gps_problem(AccelGpsScenario(), residual_pairs=False)
     run_monte_carlo(no_pairs, BLOCK_SIZE, seed=0)
-    t_draw = best_of(3, raw_draws, n, exact_normals)
-    t_exact = best_of(3, lambda: run_monte_carlo(problem, n, seed=0))
-    t_no_pairs = best_of(3, lambda: run_monte_carlo(no_pairs, n, seed=0))
+    (t_draw, c_draw), (t_exact, c_exact), (t_no_pairs, c_no_pairs) = (
+        wall_and_cpu(3, lambda: raw_draws(n, exact_normals)),
+        wall_and_cpu(3, lambda: run_monte_carlo(problem, n, seed=0)),
+        wall_and_cpu(3, lambda: run_monte_carlo(no_pairs, n, seed=0)),
+    )
     pair_flops = n * (2 * problem.truth.n_updates) * (2 * problem.truth.n_updates + 1)
     print(f"\nexact engine, N = {n:,}:")
     print(f"  raw draws ({exact_normals} normals/realization): {t_draw:7.3f} s")
     print(f"  kalcal, every statistic:                {t_exact:7.3f} s   ratio {t_exact / t_draw:5.2f}x the draws")
     print(f"  kalcal, without E[r_k r_j^T] pairs:      {t_no_pairs:7.3f} s   ratio {t_no_pairs / t_draw:5.2f}x the draws")
+    print(f"  CPU time of the process (less sensitive to other load): draws {c_draw:.3f} s, every statistic "
+          f"{c_exact / c_draw:.2f}x, without the pairs {c_no_pairs / c_draw:.2f}x")
     print(f"  the pairs alone are {pair_flops / 1e9:.0f} GFLOP (BLAS syrk): {(t_exact - t_no_pairs):.3f} s, "
           f"{pair_flops / 1e9 / max(t_exact - t_no_pairs, 1e-9) / WORKERS:.0f} GFLOP/s per thread")
 
@@ -264,6 +304,19 @@ def main() -> None:
 
     unlimited = blas_free_run(problem, n)
     print(f"exact engine with BLAS free inside the blocks: {unlimited:.3f} s = {unlimited / t_exact:.2f}x the engine's (BLAS limited to one thread)")
+
+    with engine.single_threaded_blas():
+        per_block = block_parts(problem, no_pairs, stacked, exact_normals)
+    (t_numpy_draws, t_kernel_draws, t_block, t_block_no_pairs, t_pairs) = per_block
+    print(f"\none block of {BLOCK_SIZE}, one thread (thread CPU time, fastest of 9 rounds in turn):")
+    for label, seconds in (
+        (f"numpy's draws of its {exact_normals} normals/realization", t_numpy_draws),
+        ("the kernel's own draws alone (the same values)", t_kernel_draws),
+        ("compiled block without the pairs", t_block_no_pairs),
+        ("compiled block, every statistic", t_block),
+        ("its pair sums alone (dsyrk on the (Kp, n) buffer)", t_pairs),
+    ):
+        print(f"  {label:52s} {seconds * 1e3:6.1f} ms   {seconds / t_numpy_draws:.2f}x numpy's draws")
 
     t_numpy = best_of(3, lambda: MomentSums.from_block(problem.run_block(block_generator(0, 0), BLOCK_SIZE, "exact")))
     t_fused = best_of(3, lambda: problem.block_sums(block_generator(0, 0), BLOCK_SIZE, "exact"))

@@ -4,7 +4,11 @@ numpy spends its time here on many passes over small arrays: one realization-ste
 multiply-adds spread over some thirty array operations, each with its own temporary. These kernels make
 the same passes inside one compiled function, with the realizations as the innermost, contiguous axis
 (structure of arrays: a state is (d, n), a draw (q, n)), so that every inner loop vectorizes and nothing
-leaves the cache; each update's sums go through :func:`kalcal.montecarlo.sum_kernels.accumulate`.
+leaves the cache; each update's sums go through :func:`kalcal.montecarlo.sum_kernels.accumulate`. The
+exact kernel draws each update's standard normals from the block's generator as it reaches the update
+(:func:`standard_normals`, numpy's values in numpy's order), so that the draws, 600 normals a
+realization, are read from the cache instead of written to memory and read back; with the pairs kept,
+the innovations are formed in their rows of the block's residual buffer, not copied there.
 ``benchmarks/bench_montecarlo.py`` measures the factor against the numpy reference path
 (``sample_exact`` + ``run_with_gains`` + ``MomentSums.from_block``), which stays as the tests' oracle:
 both consume the same draws and agree to rounding.
@@ -18,13 +22,26 @@ import numpy as np
 from kalcal.montecarlo.sum_kernels import FAST, accumulate, affine
 
 
+@numba.njit(nogil=True, cache=True)
+def standard_normals(rng, out):
+    """Fill ``out`` (q, n) with rng's next q n standard normals, in C order: the values and the generator
+    state that ``out[...] = rng.standard_normal((q, n))`` leaves (numba's Generator runs numpy's ziggurat
+    on the same bit generator, and this function is compiled without fast-math, so that no contraction
+    changes an acceptance test)."""
+    for a in range(out.shape[0]):
+        for i in range(out.shape[1]):
+            out[a, i] = rng.standard_normal()
+
+
 @numba.njit(nogil=True, cache=True, fastmath=FAST)
-def _filter_and_accumulate(k, truth, z, x, xbar, residual, phi, h, gains, sums):
+def _filter_and_accumulate(k, truth, z, x, xbar, residual, phi, h, gains, sums, store):
     """One update of the fixed-gain filter for every realization, then the moment sums at update k.
 
     truth (d, n): states, overwritten with the errors; z (p, n): measurements; x (d, n): posterior,
-    updated in place; sums: the block's :class:`~kalcal.montecarlo.accumulators.SumBuffers` (its NEES,
-    NIS and P sums are left to the caller: every realization shares P_k and S_k).
+    updated in place; residual (p, n): the innovations, formed here; sums: the block's
+    :class:`~kalcal.montecarlo.accumulators.SumBuffers` (its NEES, NIS and P sums are left to the caller:
+    every realization shares P_k and S_k); store: copy the innovations into ``sums.residuals`` (False when
+    ``residual`` is already their rows there, or the pairs are not kept).
     """
     d, n = x.shape
     p = z.shape[0]
@@ -41,7 +58,7 @@ def _filter_and_accumulate(k, truth, z, x, xbar, residual, phi, h, gains, sums):
         for i in range(n):
             truth[a, i] -= x[a, i]
     shared = np.empty(0)
-    accumulate(k, 0, truth, x, residual, shared, shared, np.empty((0, 0, 0)), sums)
+    accumulate(k, 0, truth, x, residual, shared, shared, np.empty((0, 0, 0)), sums, store)
 
 
 @numba.njit(nogil=True, cache=True)
@@ -57,12 +74,14 @@ def _filter_buffers(x0, p, n):
 
 @numba.njit(nogil=True, cache=True, fastmath=FAST)
 def exact_block_moments(
-    y0, u0, draws, transitions, noise, boundary_in, model_error, h_truth, measure,
+    y0, u0, rng, transitions, noise, boundary_in, model_error, h_truth, measure,
     phis, h, gains, x0, sums, error_map,
 ):
     """Sample the exact update-rate truth (:mod:`kalcal.simulation.exact`) and filter it, in one pass.
 
-    y0 (d, n) truth at sample 0; u0 (c, n) its opening boundary sample; draws (K, r + c + p, n);
+    y0 (d, n) truth at sample 0; u0 (c, n) its opening boundary sample; rng: the block's generator, past
+    the draws of y0 and u0, from which update k's (r + c + p, n) standard normals are drawn in turn
+    (:func:`standard_normals`: the values and order of ``rng.standard_normal((K, r + c + p, n))``);
     transitions (K, d, d) of the truth over each interval; noise (d, r + c) = [L | b_out]; boundary_in
     (d, c); model_error (K, d); h_truth (p, d); measure (p, p) = G. Filter: phis (K, d_f, d_f) over each
     interval, h (p, d_f), gains (K, d_f, p), x0 (d_f,). sums: the block's
@@ -73,7 +92,7 @@ def exact_block_moments(
     d, n = y0.shape
     mapped = error_map.shape[0] > 0
     mapped_state = np.empty((error_map.shape[0], n))
-    n_updates = draws.shape[0]
+    n_updates = transitions.shape[0]
     rc = noise.shape[1]
     c = boundary_in.shape[1]
     r = rc - c
@@ -82,13 +101,16 @@ def exact_block_moments(
     y_next = np.empty((d, n))
     state = np.empty((d, n))
     z = np.empty((p, n))
+    step = np.empty((rc + p, n))  # this update's draws
+    previous = np.empty((rc + p if c else 0, n))  # the last update's (its closing boundary samples)
     x, xbar, residual = _filter_buffers(x0, p, n)
+    keep = sums.residuals.shape[0] > 0
     for k in range(n_updates):
-        step = draws[k]
+        standard_normals(rng, step)
         affine(y_next, transitions[k], y, False)
         affine(y_next, noise, step[:rc], True)
         if c:
-            affine(y_next, boundary_in, u0 if k == 0 else draws[k - 1, r:rc], True)
+            affine(y_next, boundary_in, u0 if k == 0 else previous[r:rc], True)
         y, y_next = y_next, y
         for a in range(d):
             shift = model_error[k, a]
@@ -96,11 +118,15 @@ def exact_block_moments(
                 state[a, i] = y[a, i] + shift
         affine(z, h_truth, state, False)
         affine(z, measure, step[rc:], True)
+        # with the pairs kept, the innovations are formed in their rows of sums.residuals (no copy)
+        out = sums.residuals[k * p:(k + 1) * p] if keep else residual[:]
         if mapped:
             affine(mapped_state, error_map, state, False)  # the filter's states of the truth: M x
-            _filter_and_accumulate(k, mapped_state, z, x, xbar, residual, phis[k], h, gains, sums)
+            _filter_and_accumulate(k, mapped_state, z, x, xbar, out, phis[k], h, gains, sums, not keep)
         else:
-            _filter_and_accumulate(k, state, z, x, xbar, residual, phis[k], h, gains, sums)
+            _filter_and_accumulate(k, state, z, x, xbar, out, phis[k], h, gains, sums, not keep)
+        if c:
+            step, previous = previous, step
 
 
 @numba.njit(nogil=True, cache=True, fastmath=FAST)
@@ -113,4 +139,4 @@ def filter_block_moments(states, measurements, phis, h, gains, x0, sums):
     n_updates, d, n = states.shape
     x, xbar, residual = _filter_buffers(x0, h.shape[0], n)
     for k in range(n_updates):
-        _filter_and_accumulate(k, states[k], measurements[k], x, xbar, residual, phis[k], h, gains, sums)
+        _filter_and_accumulate(k, states[k], measurements[k], x, xbar, residual, phis[k], h, gains, sums, True)

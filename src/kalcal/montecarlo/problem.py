@@ -167,12 +167,13 @@ class FixedGainProblem:
             c = int(truth.shares_boundary)
             d0 = truth.x0_factor.shape[1]
             first = rng.standard_normal((d0 + c, n))
-            draws = rng.standard_normal((n_updates, truth.noise_factor.shape[1] + c + p, n))
             noise = np.column_stack([truth.noise_factor] + ([truth.boundary_out] if c else []))
+            # the kernel draws each update's normals from rng as it reaches it (sample_exact's next draw,
+            # (K, r + c + p, n), in the same order), so that they are read from the cache, not from memory
             kernels.exact_block_moments(
                 truth.x0_mean[:, None] + truth.x0_factor @ first[:d0],
                 np.ascontiguousarray(first[d0:]),
-                draws,
+                rng,
                 np.ascontiguousarray(truth.transitions),
                 np.ascontiguousarray(noise),
                 np.ascontiguousarray(truth.boundary_in[:, None][:, :c]),

@@ -43,7 +43,7 @@ def dot(u, v):
 
 
 @numba.njit(nogil=True, cache=True, fastmath=FAST)
-def accumulate(k, first, error, estimate, residual, nees, nis, cov, sums):
+def accumulate(k, first, error, estimate, residual, nees, nis, cov, sums, store=True):
     """Add update k of n realizations into the sums (in place), as ``MomentSums.from_block`` sums them.
 
     Parameters
@@ -57,12 +57,15 @@ def accumulate(k, first, error, estimate, residual, nees, nis, cov, sums):
         e_k = x_k - xhat_k and xhat_k of each realization.
     residual : ndarray, shape (p, n)
         r_k = z_k - H xbar_k; also copied into rows k p ... k p + p - 1, columns first ... first + n - 1
-        of ``sums.residuals`` when that keeps the pairs.
+        of ``sums.residuals`` when that keeps the pairs and ``store`` is true (a kernel that forms the
+        innovations in those rows passes False).
     nees, nis : ndarray, shape (n,) or (0,)
         Each realization's e^T P^{-1} e and r^T S^{-1} r, with ``cov`` (d, d, n) its P_k; all three empty
         (n = 0) where every realization shares P_k and S_k: the caller then forms the NEES and NIS sums
         from the second moments and the P sum as n P_k, and this adds nothing to them.
     sums : SumBuffers
+    store : bool
+        Copy the innovations into ``sums.residuals`` (when it keeps the pairs).
     """
     d, n = error.shape
     p = residual.shape[0]
@@ -87,7 +90,7 @@ def accumulate(k, first, error, estimate, residual, nees, nis, cov, sums):
         sums.residual[k, a] += residual[a].sum()
         for b in range(p):
             sums.residual_own[k, a, b] += dot(residual[a], residual[b])
-        if sums.residuals.shape[0]:
+        if store and sums.residuals.shape[0]:
             sums.residuals[k * p + a, first:first + n] = residual[a, :]
     if own:
         sums.nees[k] += nees.sum()
