@@ -175,7 +175,7 @@ def main() -> None:
         workers = drawing.drawing_workers(100)
         walls = processes_against_one(run, args.repeats)
         print(f"render_report (the job's report_s, and reading stats.nc), fastest of {args.repeats}:")
-        print(f"  figures in {workers} processes (now):        {walls['processes']:.3f} s")
+        print(f"  figures in {workers} processes (now):              {walls['processes']:.3f} s")
         print(f"  in one process ({drawing.PROCESSES_ENV}=1): {walls['one process']:.3f} s")
         print(f"  one process / processes: {walls['one process'] / walls['processes']:.2f}x")
         where = import_where(args.repeats)

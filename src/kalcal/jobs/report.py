@@ -3,7 +3,8 @@
 Reads ``DIR/summary.json`` and ``DIR/stats.nc`` (and ``DIR/stats_long.nc`` when present), rebuilds the
 scenario from the saved settings to redraw one realization with the run's seed, and writes
 ``DIR/figures/*.png`` and ``DIR/report.html``. The Monte Carlo is not rerun. The same directory always
-gives the same page, byte for byte.
+gives the same page, byte for byte, and it is the page ``kalcal verify`` drew from its run in memory
+(:func:`draw_report`), without reading back the files it wrote.
 
 The page and figures replace those of the folder's run as one set (:mod:`kalcal.io.outputs`): the
 previous page stays whole until the new one is complete. ``stats_long.nc`` is drawn only when the run's
