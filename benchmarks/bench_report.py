@@ -5,8 +5,9 @@
 DIR is a ``kalcal verify`` output folder (without one, a default run is made with ``--no-report`` into
 a temporary folder). Prints, measured in one run on this machine:
 
-* ``render_report(DIR)`` as the job runs it (figures in parallel processes, then the page), fastest of
-  the repeats: the job's ``timing.report_s``;
+* ``render_report(DIR)`` (figures in parallel processes, then the page), fastest of the repeats: the
+  job's ``timing.report_s``, but for reading the statistics files, which the job does not; against its figures drawn in this process alone;
+* matplotlib imported once before the workers fork (as now) against imported by each worker;
 * each figure drawn in this process (CPU time, fastest of the repeats): as drawn now, and as drawn
   before, with constrained layout, matplotlib's own ticks and mathtext log labels, and an RGBA PNG at
   PIL's default zlib level 6; and the ratio;
@@ -93,6 +94,56 @@ def figure_times(run: Path, repeats: int) -> dict[str, float]:
     return {name: min(values) for name, values in times.items()}
 
 
+def processes_against_one(run: Path, repeats: int) -> dict[str, float]:
+    """Wall time of ``render_report(run)``, s, fastest of ``repeats``: its figures drawn in processes (as
+    the job draws them) and in this process alone; interleaved, so that a change in the machine's load
+    falls on both alike."""
+    import os
+
+    walls: dict[str, list[float]] = {"processes": [], "one process": []}
+    try:
+        for _ in range(repeats):
+            for name in walls:
+                if name == "one process":
+                    os.environ[drawing.PROCESSES_ENV] = "1"
+                start = time.perf_counter()
+                report.render_report(run)
+                walls[name].append(time.perf_counter() - start)
+                os.environ.pop(drawing.PROCESSES_ENV, None)
+    finally:
+        os.environ.pop(drawing.PROCESSES_ENV, None)
+    return {name: min(values) for name, values in walls.items()}
+
+
+#: a fresh process with what the job has loaded before its report, then matplotlib and the figures'
+#: modules imported here before forking two workers (``parent``), or by each worker (``workers``)
+_IMPORT = """
+import multiprocessing, sys, time
+import numpy, xarray, kalcal.jobs.verify
+def child(_):
+    import kalcal.reporting.figures
+with multiprocessing.get_context("fork").Pool(2) as pool:
+    pool.map(child, range(2))  # the workers started
+start = time.perf_counter()
+if sys.argv[1] == "parent":
+    import kalcal.reporting.figures
+with multiprocessing.get_context("fork").Pool(2) as pool:
+    pool.map(child, range(2))
+print(time.perf_counter() - start)
+"""
+
+
+def import_where(repeats: int) -> dict[str, float]:
+    """Wall time, s, fastest of ``repeats``, from importing the figures' modules (matplotlib) to two
+    forked workers holding them: imported once here and inherited, or by each worker."""
+    times: dict[str, list[float]] = {"parent": [], "workers": []}
+    for _ in range(repeats):
+        for name in times:
+            done = subprocess.run([sys.executable, "-c", _IMPORT, name], check=True, capture_output=True, text=True)
+            times[name].append(float(done.stdout))
+    return {name: min(values) for name, values in times.items()}
+
+
 def png_writer(run: Path, repeats: int) -> None:
     images = [np.asarray(Image.open(path).convert("RGBA")) for path in sorted((run / "figures").glob("*.png"))]
     results = {}
@@ -121,13 +172,15 @@ def main() -> None:
         if run is None:
             run = Path(scratch) / "run"
             subprocess.run([sys.executable, "-m", "kalcal", "verify", "--no-report", "--out", str(run)], check=True, stdout=subprocess.DEVNULL)
-        walls = []
-        for _ in range(args.repeats):
-            start = time.perf_counter()
-            report.render_report(run)
-            walls.append(time.perf_counter() - start)
         workers = drawing.drawing_workers(100)
-        print(f"render_report (the job's report_s), {workers} drawing processes: {min(walls):.3f} s (fastest of {args.repeats})")
+        walls = processes_against_one(run, args.repeats)
+        print(f"render_report (the job's report_s, and reading stats.nc), fastest of {args.repeats}:")
+        print(f"  figures in {workers} processes (now):              {walls['processes']:.3f} s")
+        print(f"  in one process ({drawing.PROCESSES_ENV}=1): {walls['one process']:.3f} s")
+        print(f"  one process / processes: {walls['one process'] / walls['processes']:.2f}x")
+        where = import_where(args.repeats)
+        print("\nmatplotlib for two workers: imported here, then forked (now) | by each worker")
+        print(f"  {where['parent']:.3f} s | {where['workers']:.3f} s   (workers / here {where['workers'] / where['parent']:.2f}x)")
         now = figure_times(run, args.repeats)
         with drawn_before():
             before = figure_times(run, args.repeats)

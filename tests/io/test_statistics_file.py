@@ -64,7 +64,8 @@ def test_other_datasets_go_through_xarray(tmp_path):
 def test_building_and_writing_the_statistics_imports_no_dask_array_or_distributed(tmp_path):
     code = (
         "import sys\n"
-        "from kalcal.jobs.verify import compute_verification, save_verification\n"
+        "from kalcal.jobs.verify import compute_verification\n"
+        "from kalcal.jobs.verify_save import save_verification\n"
         "from kalcal.models.registry import build_scenario\n"
         f"run = compute_verification(build_scenario('accel-gps', None, {SHORT!r}), 300, 1, long_run=4.0)\n"
         f"save_verification(run, {str(tmp_path / 'out')!r})\n"

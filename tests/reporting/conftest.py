@@ -12,7 +12,6 @@ import shutil
 
 import pytest
 
-from kalcal.jobs.report import render_report
 from kalcal.jobs.verify import verify
 from kalcal.models.registry import build_scenario
 
@@ -36,7 +35,7 @@ def _locked(path):
 
 @pytest.fixture(scope="session")
 def report_run(tmp_path_factory):
-    """A 6 s run of N = 5000 with a 12 s long run, and its rendered page: (directory, page path)."""
+    """A 6 s run of N = 5000 with a 12 s long run, and the page its job drew: (directory, page path)."""
     base = tmp_path_factory.getbasetemp()
     shared = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
     out = shared / "kalcal-report-run"
@@ -44,8 +43,9 @@ def report_run(tmp_path_factory):
         page = out / "report.html"
         if not page.is_file():
             scenario = build_scenario("accel-gps", None, ["scenario.duration=6"])
-            verify(scenario, N, SEED, out, long_run=12.0, command=COMMAND)
-            render_report(out, realization=REALIZATION)
+            # the page as the job draws it, from the run in memory (a redraw gives the same bytes:
+            # test_report_job.py::test_render_twice_gives_identical_page_and_figures)
+            verify(scenario, N, SEED, out, long_run=12.0, command=COMMAND, report=True, realization=REALIZATION)
     return out, page
 
 

@@ -1,10 +1,13 @@
 """The report's figures drawn in parallel processes are the same files as drawn one by one."""
 
 import multiprocessing
+import os
+import signal
+import time
 
 import pytest
 
-from kalcal.errors import DataError
+from kalcal.errors import ConfigError, DataError
 from kalcal.jobs.report import render_report
 from kalcal.reporting import drawing
 
@@ -46,3 +49,98 @@ def test_results_in_order_progress_counted_and_errors_raised(tmp_path):
 def test_one_worker_per_cpu_at_most_one_per_figure():
     assert drawing.drawing_workers(1) == 1
     assert 1 <= drawing.drawing_workers(100) <= multiprocessing.cpu_count()
+
+
+def _slow(path):
+    time.sleep(0.1)
+    return _write(path)
+
+
+needs_fork = pytest.mark.skipif("fork" not in multiprocessing.get_all_start_methods(), reason="no fork on this platform")
+
+
+def _signal_handler(path):
+    path.write_text(str(signal.getsignal(signal.SIGINT)))
+    return path
+
+
+@needs_fork
+def test_workers_leave_an_interrupt_to_this_process(tmp_path):
+    paths = [tmp_path / f"f{i}.png" for i in range(2)]
+    drawing.draw_all([_signal_handler] * 2, paths, workers=2)
+    assert [p.read_text() for p in paths] == [str(signal.SIG_IGN)] * 2
+    assert signal.getsignal(signal.SIGINT) is not signal.SIG_IGN  # this process still hears it
+
+
+@needs_fork
+def test_an_error_drops_the_figures_not_started_and_leaves_no_process(tmp_path):
+    paths = [tmp_path / f"f{i}.png" for i in range(20)]
+    with pytest.raises(DataError, match="^f0.png: cannot be drawn$"):
+        drawing.draw_all([_fail] + [_slow] * 19, paths, workers=2)
+    assert multiprocessing.active_children() == []
+    assert len(list(tmp_path.glob("*.png"))) < 10  # not every figure was drawn after the error
+
+
+def test_fallback_to_this_process(monkeypatch):
+    monkeypatch.delenv(drawing.PROCESSES_ENV, raising=False)
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1, 2, 3})
+    assert drawing.drawing_workers(18) == (4 if "fork" in multiprocessing.get_all_start_methods() else 1)
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0})  # one CPU
+    assert drawing.drawing_workers(18) == 1
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1, 2, 3})
+    monkeypatch.setenv(drawing.PROCESSES_ENV, "1")  # asked for
+    assert drawing.drawing_workers(18) == 1
+    monkeypatch.setenv(drawing.PROCESSES_ENV, "2")
+    assert drawing.drawing_workers(18) == (2 if "fork" in multiprocessing.get_all_start_methods() else 1)
+    monkeypatch.delenv(drawing.PROCESSES_ENV)
+    monkeypatch.setattr(multiprocessing, "get_all_start_methods", lambda: ["spawn"])  # no fork (not Linux)
+    assert drawing.drawing_workers(18) == 1
+
+
+@pytest.mark.parametrize("value", ["0", "two", "-1"])
+def test_a_bad_process_count_is_refused_in_one_line(monkeypatch, value):
+    monkeypatch.setenv(drawing.PROCESSES_ENV, value)
+    with pytest.raises(ConfigError, match=f"^{drawing.PROCESSES_ENV}: expected a whole number >= 1, got '{value}'$"):
+        drawing.drawing_workers(18)
+
+
+def test_serial_drawing_calls_every_figure_in_order(tmp_path, monkeypatch):
+    monkeypatch.setenv(drawing.PROCESSES_ENV, "1")
+    paths = [tmp_path / f"f{i}.png" for i in range(3)]
+    seen = []
+    assert drawing.draw_all([_write] * 3, paths, progress=lambda d, t: seen.append(d)) == paths
+    assert seen == [1, 2, 3] and multiprocessing.active_children() == []
+
+
+def test_a_bad_process_count_stops_a_verify_before_its_monte_carlo(tmp_path, monkeypatch):
+    from kalcal.jobs import verify as verify_job
+    from kalcal.models.registry import build_scenario
+
+    ran = []
+    monkeypatch.setattr(verify_job, "run_monte_carlo", lambda *args, **kwargs: ran.append(1))
+    monkeypatch.setenv(drawing.PROCESSES_ENV, "0")
+    with pytest.raises(ConfigError, match=f"^{drawing.PROCESSES_ENV}: expected a whole number >= 1, got '0'$"):
+        verify_job.verify(build_scenario("accel-gps", None, ["scenario.duration=2"]), 300, 1, tmp_path / "out", report=True)
+    assert ran == [] and not (tmp_path / "out").exists()
+
+
+def test_a_figures_error_in_a_worker_is_the_one_line_of_serial_drawing(copy_run, monkeypatch):
+    from typer.testing import CliRunner
+
+    from kalcal.cli import app
+    from kalcal.plots import ensemble
+
+    def broken(dataset, path, **kwargs):
+        raise DataError(f"{path.name}: cannot be drawn")
+
+    monkeypatch.setattr(ensemble, "plot_mean_error", broken)  # the forked workers inherit it
+    lines = {}
+    run = copy_run()
+    for processes in ("1", "2"):
+        monkeypatch.setenv(drawing.PROCESSES_ENV, processes)
+        result = CliRunner().invoke(app, ["report", str(run)])
+        assert result.exit_code == 2
+        lines[processes] = result.output.strip().splitlines()
+        assert not (run / "report.html").exists() and not (run / "figures").exists()  # the folder as it was
+        assert multiprocessing.active_children() == []
+    assert lines["1"] == lines["2"] and len(lines["1"]) == 1 and "mean_error.png: cannot be drawn" in lines["1"][0]

@@ -16,7 +16,8 @@ N, SEED, REALIZATION = 5000, 3, 4321  # the saved run of tests/reporting/conftes
 
 
 def test_render_twice_gives_identical_page_and_figures(report_run, copy_run):
-    """Rendering again (here in a copy of the run directory, over the first rendering) gives the same bytes."""
+    """Rendering again from the files (here in a copy of the run directory, over the first rendering) gives
+    the same bytes as the job's page, drawn from the run in memory."""
     out, page = report_run
     run = copy_run(figures=True)
     figures = {p.name: p.read_bytes() for p in (out / "figures").glob("*.png")}

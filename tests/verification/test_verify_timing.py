@@ -5,7 +5,7 @@ import json
 import time
 
 from kalcal.jobs import report as report_job
-from kalcal.jobs import verify as verify_job
+from kalcal.jobs import verify_save as save_job
 from kalcal.jobs.verify import verify
 from kalcal.models.registry import build_scenario
 
@@ -13,13 +13,13 @@ PAUSE = 0.5  # s added to drawing the report
 
 
 def test_wall_time_covers_the_whole_job_report_included(tmp_path, monkeypatch):
-    real = report_job.render_report
+    real = report_job.draw_report  # what the job draws its page with
 
     def slow_report(*args, **kwargs):
         time.sleep(PAUSE)
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(report_job, "render_report", slow_report)
+    monkeypatch.setattr(report_job, "draw_report", slow_report)
     out = tmp_path / "out"
     started = time.perf_counter()
     outcome = verify(build_scenario("accel-gps", None, ["scenario.duration=2"]), 300, 1, out, long_run=4.0, report=True)
@@ -37,7 +37,7 @@ def test_wall_time_covers_the_whole_job_report_included(tmp_path, monkeypatch):
     assert ">wall_s<" not in page and ">report_s<" not in page
     # a redraw reads the rewritten summary and still gives the same page
     before = (out / "report.html").read_bytes()
-    real(out)
+    report_job.render_report(out)
     assert (out / "report.html").read_bytes() == before
 
 
@@ -51,12 +51,12 @@ def test_without_a_report_its_time_is_null(tmp_path):
 
 def test_the_summary_is_written_once_after_the_page(tmp_path, monkeypatch):
     written = []
-    real = verify_job.write_json
+    real = save_job.write_json
 
     def counting(path, document):
         written.append((path.name, (path.parent / "report.html").is_file()))
         return real(path, document)
 
-    monkeypatch.setattr(verify_job, "write_json", counting)
+    monkeypatch.setattr(save_job, "write_json", counting)
     verify(build_scenario("accel-gps", None, ["scenario.duration=2"]), 300, 1, tmp_path / "out", long_run=0, report=True)
     assert written == [("summary.json", True)]

@@ -96,7 +96,8 @@ def _run(model, n, seed, options, client, update, out, report, realization) -> V
     import dataclasses
 
     from kalcal.io.outputs import inputs_of, run_outputs
-    from kalcal.jobs.verify import OUTPUT_NAMES, compute_verification, save_verification
+    from kalcal.jobs.verify import compute_verification
+    from kalcal.jobs.verify_save import OUTPUT_NAMES, save_verification
 
     if out is None:
         return VerificationResult.from_run(compute_verification(model, n, seed, client=client, progress=update, **options))

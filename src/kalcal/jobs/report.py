@@ -3,7 +3,8 @@
 Reads ``DIR/summary.json`` and ``DIR/stats.nc`` (and ``DIR/stats_long.nc`` when present), rebuilds the
 scenario from the saved settings to redraw one realization with the run's seed, and writes
 ``DIR/figures/*.png`` and ``DIR/report.html``. The Monte Carlo is not rerun. The same directory always
-gives the same page, byte for byte.
+gives the same page, byte for byte, and it is the page ``kalcal verify`` drew from its run in memory
+(:func:`draw_report`), without reading back the files it wrote.
 
 The page and figures replace those of the folder's run as one set (:mod:`kalcal.io.outputs`): the
 previous page stays whole until the new one is complete. ``stats_long.nc`` is drawn only when the run's
@@ -174,12 +175,7 @@ def render_report(
     require_complete(out)
     summary_path = out / "summary.json"
     summary = read_summary(summary_path) if summary is None else check_summary(dict(summary), summary_path)
-    try:
-        count = int(summary["realizations"])
-        seed = int(summary["seed"])
-    except (TypeError, ValueError):
-        raise DataError(f"{summary_path}: realizations and seed must be whole numbers") from None
-    index = _realization_index(realization, count)
+    _run_numbers(summary, summary_path, realization)  # a bad --realization is refused before any file is read
     dataset = read_statistics(out / "stats.nc")
     _require_same_run(dataset, summary, out / "stats.nc", summary_path)
     long_path = out / "stats_long.nc"
@@ -188,7 +184,53 @@ def render_report(
     if long_path.is_file() and summary.get("long_run", True) is not None:
         long_dataset = read_statistics(long_path)
         _require_same_run(long_dataset, summary, long_path, summary_path)
+    return _draw_page(out, summary, dataset, long_dataset, realization, progress)
 
+
+def draw_report(
+    out: str | Path,
+    summary: Mapping[str, Any],
+    dataset,
+    long_dataset=None,
+    *,
+    realization: int = 0,
+    progress: JobProgress | None = None,
+) -> Path:
+    """Draw the figures and page of a run still in memory into ``out`` (the run that writes it: ``kalcal
+    verify``), without reading back the statistics files it has just written there.
+
+    ``summary`` is ``summary.json``'s content as it will be written (:func:`kalcal.io.results.json_document`),
+    ``dataset`` and ``long_dataset`` the content of ``stats.nc`` and ``stats_long.nc`` (None without a long
+    run). The figures and page are the same bytes as :func:`render_report` draws from ``out`` once those
+    files are there (tests/reporting/test_report_in_memory.py); the other parameters and the errors are
+    its own.
+    """
+    out = Path(out)
+    if not out.is_dir():
+        raise DataError(f"{out}: no such run directory")
+    require_complete(out)
+    summary_path = out / "summary.json"
+    summary = check_summary(dict(summary), summary_path)
+    _run_numbers(summary, summary_path, realization)
+    if summary.get("long_run", True) is None:
+        long_dataset = None  # as a redraw ignores a stats_long.nc the summary does not own
+    return _draw_page(out, summary, dataset, long_dataset, realization, progress)
+
+
+def _run_numbers(summary: dict[str, Any], summary_path: Path, realization: Any) -> tuple[int, int, int]:
+    """The run's N and seed, and the index of the realization shown (checked against N)."""
+    try:
+        count = int(summary["realizations"])
+        seed = int(summary["seed"])
+    except (TypeError, ValueError):
+        raise DataError(f"{summary_path}: realizations and seed must be whole numbers") from None
+    return count, seed, _realization_index(realization, count)
+
+
+def _draw_page(out: Path, summary: dict[str, Any], dataset, long_dataset, realization: Any, progress) -> Path:
+    """The figures and page of a run from its summary and statistics (read from ``out`` or in memory)."""
+    summary_path = out / "summary.json"
+    count, seed, index = _run_numbers(summary, summary_path, realization)
     try:
         if is_custom_settings(summary["settings"]):  # a model file's run: its matrices are the settings
             scenario = CustomModelScenario.from_settings(summary["settings"])

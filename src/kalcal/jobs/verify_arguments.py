@@ -74,7 +74,8 @@ def check_arguments(
     ``n`` below :data:`MIN_REALIZATIONS`, an unknown engine or form, a confidence outside (0, 1), a
     batch size below 1, a negative or non-finite ``long_run`` or one not longer than the run, and a run or
     long run of more than :data:`MAX_UPDATES` updates per realization (``scenario.duration`` too long),
-    and the log-only GNSS faults of accel-gps (:func:`~kalcal.montecarlo.scenarios.refuse_log_faults`).
+    and the log-only GNSS faults of accel-gps (:func:`~kalcal.montecarlo.scenarios.refuse_log_faults`),
+    and a malformed ``KALCAL_FIGURE_PROCESSES`` (:func:`kalcal.reporting.drawing.drawing_workers`).
     """
     if n < MIN_REALIZATIONS:
         raise ConfigError(
@@ -90,6 +91,9 @@ def check_arguments(
     if batch_size is not None and batch_size < 1:
         raise ConfigError(f"--batch-size: expected a positive number of realizations, got {batch_size}")
     check_form(form, "--form")
+    from kalcal.reporting.drawing import drawing_workers
+
+    drawing_workers(1)  # a malformed KALCAL_FIGURE_PROCESSES is refused now, not after the Monte Carlo
     if isinstance(scenario, AccelGpsScenario):
         refuse_log_faults(scenario)
     count, horizon = run_length(scenario)

@@ -1,32 +1,52 @@
 """Draw a page's figures in parallel worker processes, each figure whole in one process, in page order.
 
-A figure costs a fraction of a second to a second of matplotlib's layout and rasterization, all in
-Python, so threads would not overlap; the report's 17 figures are shared among forked processes (one
-per CPU this process may use), which inherit the data and the imported matplotlib, so nothing is pickled
-but a figure's index and its path. Where fork is not offered, or with one CPU or one figure, they are
-drawn here one after another. The PNGs are the same bytes either way (tests/reporting/test_drawing.py).
+A figure costs a fraction of a second of matplotlib's layout, text rendering and rasterization, all in
+Python or holding the GIL, so threads would not overlap; the report's 18 figures are shared among forked
+processes (one per CPU this process may use), which inherit the data and the imported matplotlib, so
+nothing is pickled but a figure's index and its path. Where fork is not offered, with one CPU or one
+figure, or with :data:`PROCESSES_ENV` set to 1, they are drawn here one after another. The PNGs are the same bytes either way (tests/reporting/test_drawing.py).
+
+The workers ignore SIGINT: an interrupt (Ctrl-C reaches the whole process group) is this process's to
+handle. On an interrupt or a figure's error the figures not yet started are dropped, the running ones
+finish, and the workers are joined before the error goes on, so that nothing is written after the
+caller's outputs are cleaned up and no process is left behind.
 """
 
 from __future__ import annotations
 
 import multiprocessing
 import os
+import signal
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
-__all__ = ["draw_all", "drawing_workers"]
+from kalcal.errors import ConfigError
+
+__all__ = ["PROCESSES_ENV", "draw_all", "drawing_workers"]
+
+#: environment variable capping the drawing processes (a whole number >= 1; 1 draws in this process)
+PROCESSES_ENV = "KALCAL_FIGURE_PROCESSES"
 
 #: the figures being drawn: set before the workers fork, so they inherit them
 _DRAWS: Sequence[Callable[[Path], Path]] = ()
 
 
 def drawing_workers(figures: int) -> int:
-    """Processes to draw ``figures`` figures with: one per usable CPU, at most one per figure; 1 when
-    fork is not offered (the workers must inherit the figures' data)."""
+    """Processes to draw ``figures`` figures with: one per usable CPU, at most one per figure and at most
+    :data:`PROCESSES_ENV` where it is set; 1 when fork is not offered (the workers must inherit the
+    figures' data). A :data:`PROCESSES_ENV` that is not a whole number >= 1 is a ConfigError."""
+    cap = os.environ.get(PROCESSES_ENV, "").strip()
+    if cap and (not cap.isdigit() or int(cap) < 1):
+        raise ConfigError(f"{PROCESSES_ENV}: expected a whole number >= 1, got {cap!r}")
     if "fork" not in multiprocessing.get_all_start_methods():
         return 1
-    return max(1, min(len(os.sched_getaffinity(0)), figures))
+    limit = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    return max(1, min(limit, int(cap) if cap else limit, figures))
+
+
+def _quiet_worker() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _draw(index: int, path: Path) -> Path:
@@ -43,8 +63,8 @@ def draw_all(
     """Run ``draws[i](paths[i])`` for every i, in ``workers`` processes (default :func:`drawing_workers`).
 
     ``progress(done, total)`` is called here, in this process, as each figure is written (in the order
-    they finish). Returns the written paths, in the order of ``draws``. An error in a figure is raised
-    here, as it would be when drawn in this process.
+    they finish). Returns the written paths, in the order of ``draws``. An error in
+    a figure is raised here, as it would be when drawn in this process.
     """
     global _DRAWS
     total = len(draws)
@@ -57,14 +77,18 @@ def draw_all(
                 progress(done, total)
         return written
     _DRAWS = draws
+    pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"), initializer=_quiet_worker)
     try:
-        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork")) as pool:
-            futures = {pool.submit(_draw, index, path): index for index, path in enumerate(paths)}
-            written: list[Path | None] = [None] * total
-            for done, future in enumerate(as_completed(futures), start=1):
-                written[futures[future]] = future.result()
-                if progress is not None:
-                    progress(done, total)
+        futures = {pool.submit(_draw, index, paths[index]): index for index in range(total)}
+        written: list[Path | None] = [None] * total
+        for done, future in enumerate(as_completed(futures), start=1):
+            written[futures[future]] = future.result()
+            if progress is not None:
+                progress(done, total)
+    except BaseException:
+        pool.shutdown(wait=True, cancel_futures=True)  # the running figures finish; the others are dropped
+        raise
     finally:
+        pool.shutdown(wait=True)
         _DRAWS = ()
     return written
