@@ -6,17 +6,13 @@ velocity in m/s, acceleration and bias in m/s^2. Bad input of any kind is one li
 status 2.
 """
 
-from __future__ import annotations
-
 import sys
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from kalcal import __version__
-from kalcal.cli import analyze, calibrate, fit, noise, report, simulate, sweep, verify
-from kalcal.cli._common import console, error_console
+from kalcal.cli import _common, analyze, calibrate, fit, noise, report, simulate, sweep, verify
 
 app = typer.Typer(
     add_completion=False,
@@ -31,7 +27,9 @@ app = typer.Typer(
 
 def _print_version(value: bool) -> None:
     if value:
-        console.print(f"kalcal {__version__}", markup=False, highlight=False)
+        from kalcal import __version__  # importlib.metadata: read only when asked for
+
+        _common._console().print(f"kalcal {__version__}", markup=False, highlight=False)
         raise typer.Exit()
 
 
@@ -72,15 +70,15 @@ def main() -> None:
         with raise_on_signals(), protected(*_named_files(sys.argv[1:])):
             code = app(prog_name="kalcal", standalone_mode=False)
     except Interrupted as exc:
-        error_console.print("kalcal: interrupted", markup=False)
+        _common._error_console().print("kalcal: interrupted", markup=False)
         sys.exit(exc.exit_status)
     except typer.Abort:
-        error_console.print("kalcal: interrupted", markup=False)
+        _common._error_console().print("kalcal: interrupted", markup=False)
         sys.exit(130)
     except TyperException as exc:
         if type(exc).__name__ == "NoArgsIsHelpError":  # bare `kalcal`: the help, as the user asked for nothing
             app(["--help"], prog_name="kalcal")
         message = exc.format_message() if hasattr(exc, "format_message") else str(exc)
-        error_console.print(f"kalcal: error: {message}", markup=False)
+        _common._error_console().print(f"kalcal: error: {message}", markup=False)
         sys.exit(getattr(exc, "exit_code", 2) or 2)
     sys.exit(code or 0)
