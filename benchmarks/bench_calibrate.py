@@ -21,20 +21,15 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from kalcal.calibration.accel_gps import calibrate_accel_gps, prepare_accel_gps_log
-from kalcal.io.logs import numeric_columns, read_table
-import kalcal
-from kalcal.models.registry import build_scenario
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import kalcal  # noqa: E402
+from bench_job import elapsed  # noqa: E402
+from kalcal.calibration.accel_gps import calibrate_accel_gps, prepare_accel_gps_log  # noqa: E402
+from kalcal.io.logs import numeric_columns, read_table  # noqa: E402
+from kalcal.models.registry import build_scenario  # noqa: E402
 
 HOURS = 1.0
 REPEATS = 2
-
-
-def timed(command: list[str]) -> float:
-    """Wall time of one child process, s (it must succeed)."""
-    start = time.perf_counter()
-    subprocess.run(command, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    return time.perf_counter() - start
 
 
 def job_in_process(scenario, paths: dict[str, Path], tmp: Path) -> float:
@@ -136,7 +131,7 @@ def main() -> None:
             "--gps", str(paths["gps.parquet"]), "--set", "scenario.integration=trapezoid", "--out", str(tmp / "out-cli"),
         ]
         job_s = min(jobs["parquet"], *(job_in_process(scenario, paths, tmp) for _ in range(REPEATS - 1)))
-        command_s = min(timed(command) for _ in range(REPEATS))
+        command_s = min(elapsed(command) for _ in range(REPEATS))
         print(f"  kalcal calibrate command (Parquet) {command_s:6.2f} s   ({command_s / job_s:.2f} x the job in this "
               f"process, {job_s:.2f} s; goal 2x; fastest of {REPEATS})")
         peak = peak_memory_mib(paths["imu.parquet"], paths["gps.parquet"], tmp / "out-peak")
