@@ -1,9 +1,11 @@
-"""What each entry point imports: the command line and the API calls load nothing heavy until a job runs,
-a verify job loads no more than it uses (no plotting, no Dask, no scipy.stats, scipy.signal or scipy.io), and a
-calibration loads matplotlib and numba only for the accel-gps figure and filter."""
+"""What each entry point imports: the command line and the API calls load nothing heavy until a job runs
+(``kalcal --help`` not even rich, which only a command that prints loads), a verify job loads no more than it
+uses (no plotting, no Dask, no scipy.stats, scipy.signal or scipy.io), and a calibration loads matplotlib
+and numba only for the accel-gps figure and filter."""
 
 from __future__ import annotations
 
+import inspect
 import subprocess
 import sys
 
@@ -52,3 +54,73 @@ def test_a_scale_bias_calibration_loads_no_plotting_or_numba(tmp_path):
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip().splitlines()[-1] == "[]"
     assert (tmp_path / "out" / "estimates.csv").is_file()
+
+
+def _command_loaded(args: list[str], watched: tuple[str, ...]) -> list[str]:
+    """The modules of ``watched`` loaded once the ``kalcal`` command ``args`` has run (through its console
+    script's ``main``), printed by the child on its last line."""
+    code = (
+        "import sys\n"
+        f"sys.argv = ['kalcal', *{args!r}]\n"
+        "from kalcal.cli import main\n"
+        "try:\n    main()\nexcept SystemExit as exc:\n    assert not exc.code, exc.code\n"
+        f"print([m for m in {watched!r} if m in sys.modules])\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    return eval(done.stdout.strip().splitlines()[-1])  # a list of names printed by the child
+
+
+def test_the_command_line_loads_no_rich_or_package_metadata_until_it_prints():
+    """The consoles are made when a command first prints, the version is read for --version alone."""
+    assert _loaded("kalcal.cli", ("rich", "importlib.metadata")) == []
+
+
+def test_kalcal_help_loads_no_rich_no_package_metadata_and_nothing_heavy():
+    assert _command_loaded(["--help"], ("rich", "importlib.metadata", "numpy", *HEAVY)) == []
+
+
+def test_kalcal_version_still_prints_the_version():
+    done = subprocess.run([sys.executable, "-m", "kalcal", "--version"], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0 and done.stdout.startswith("kalcal "), done.stdout + done.stderr
+
+
+def test_the_commands_annotations_are_objects_typer_need_not_evaluate():
+    """Written as strings (``from __future__ import annotations``), every option's ``Annotated[...]`` is
+    evaluated again when typer builds the commands, at every start of the command line."""
+    from kalcal.cli import app
+
+    for command in app.registered_commands:
+        annotations = inspect.get_annotations(command.callback)
+        strings = [name for name, value in annotations.items() if isinstance(value, str)]
+        assert strings == [], (command.callback.__name__, strings)
+
+
+def test_a_scale_bias_calibrate_command_loads_no_plotting_or_numba(tmp_path):
+    rows = "\n".join(f"{0.1 * i!r},{1.01 * (i % 7) + 0.1 + 0.01 * ((i * 37) % 11 - 5)!r}" for i in range(200))
+    (tmp_path / "log.csv").write_text("reference,sensor\n" + rows + "\n")
+    args = ["calibrate", "scale-bias", "--data", str(tmp_path / "log.csv"), "--out", str(tmp_path / "out")]
+    assert _command_loaded(args, ("matplotlib", "numba")) == []
+    assert (tmp_path / "out" / "estimates.csv").is_file()
+
+
+def test_the_command_line_runs_no_full_collection_while_the_libraries_load():
+    """Loading numpy, pandas, numba, matplotlib and scipy.special runs full collections of the garbage
+    collector at Python's thresholds, none at the command line's; the young generations keep theirs."""
+    code = (
+        "import gc, sys\n"
+        "if sys.argv[1] == 'cli':\n    from kalcal import cli\n    cli._fewer_full_collections()\n"
+        "full = []\n"
+        "gc.callbacks.append(lambda phase, info: full.append(1) if phase == 'start' and info['generation'] == 2 else None)\n"
+        "import numpy, pandas, numba, matplotlib.figure, scipy.special\n"
+        "print(len(full), list(gc.get_threshold()))\n"
+    )
+    counts = {}
+    for mode in ("python", "cli"):
+        done = subprocess.run([sys.executable, "-c", code, mode], capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, done.stderr
+        full, thresholds = done.stdout.split(maxsplit=1)
+        counts[mode] = (int(full), eval(thresholds))
+    (python_full, python_thresholds), (cli_full, cli_thresholds) = counts["python"], counts["cli"]
+    assert python_full >= 1 and cli_full == 0, counts
+    assert cli_thresholds[:2] == python_thresholds[:2], counts

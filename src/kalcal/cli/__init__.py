@@ -6,17 +6,14 @@ velocity in m/s, acceleration and bias in m/s^2. Bad input of any kind is one li
 status 2.
 """
 
-from __future__ import annotations
-
+import gc
 import sys
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from kalcal import __version__
-from kalcal.cli import analyze, calibrate, fit, noise, report, simulate, sweep, verify
-from kalcal.cli._common import console, error_console
+from kalcal.cli import _common, analyze, calibrate, fit, noise, report, simulate, sweep, verify
 
 app = typer.Typer(
     add_completion=False,
@@ -31,7 +28,9 @@ app = typer.Typer(
 
 def _print_version(value: bool) -> None:
     if value:
-        console.print(f"kalcal {__version__}", markup=False, highlight=False)
+        from kalcal import __version__  # importlib.metadata: read only when asked for
+
+        _common._console().print(f"kalcal {__version__}", markup=False, highlight=False)
         raise typer.Exit()
 
 
@@ -54,6 +53,23 @@ def _named_files(args: list[str]) -> list[str]:
     return [c for c in candidates if Path(c).is_file()]
 
 
+#: full collections of the cyclic garbage collector wait for this many collections of its middle generation
+#: (Python's default: 10); see :func:`_fewer_full_collections`
+FULL_COLLECTION_THRESHOLD = 1000
+
+
+def _fewer_full_collections() -> None:
+    """Let the garbage collector's full collections wait 100 times longer than Python's default.
+
+    A command is one job in a short process, and most of what it allocates while it starts is long-lived:
+    the modules, classes and functions of numpy, numba's type registries, pandas and matplotlib. Each full
+    collection traverses all of them and finds them alive. Young garbage is still collected as before: the
+    first two generations keep their thresholds.
+    """
+    young, middle, _ = gc.get_threshold()
+    gc.set_threshold(young, middle, FULL_COLLECTION_THRESHOLD)
+
+
 def main() -> None:
     """The console script: the app, with click's own usage errors (a bad option value, a missing
     argument) as one line on stderr and exit status 2, like every other bad input.
@@ -68,19 +84,20 @@ def main() -> None:
     from kalcal.interrupts import Interrupted, raise_on_signals
     from kalcal.io.outputs import protected
 
+    _fewer_full_collections()
     try:
         with raise_on_signals(), protected(*_named_files(sys.argv[1:])):
             code = app(prog_name="kalcal", standalone_mode=False)
     except Interrupted as exc:
-        error_console.print("kalcal: interrupted", markup=False)
+        _common._error_console().print("kalcal: interrupted", markup=False)
         sys.exit(exc.exit_status)
     except typer.Abort:
-        error_console.print("kalcal: interrupted", markup=False)
+        _common._error_console().print("kalcal: interrupted", markup=False)
         sys.exit(130)
     except TyperException as exc:
         if type(exc).__name__ == "NoArgsIsHelpError":  # bare `kalcal`: the help, as the user asked for nothing
             app(["--help"], prog_name="kalcal")
         message = exc.format_message() if hasattr(exc, "format_message") else str(exc)
-        error_console.print(f"kalcal: error: {message}", markup=False)
+        _common._error_console().print(f"kalcal: error: {message}", markup=False)
         sys.exit(getattr(exc, "exit_code", 2) or 2)
     sys.exit(code or 0)

@@ -5,18 +5,48 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import TYPE_CHECKING, Annotated, Optional
 
 import typer
-from rich.console import Console
-from rich.markup import escape
-from rich.table import Table
-from rich.text import Text
 
 from kalcal.errors import KalcalError
 
-console = Console()
-error_console = Console(stderr=True, highlight=False, soft_wrap=True)
+if TYPE_CHECKING:
+    from rich.table import Table
+
+#: the consoles, made on first use (:func:`__getattr__`): rich is imported by a command that prints, not by ``--help``
+_CONSOLES = {
+    "console": {},
+    "error_console": {"stderr": True, "highlight": False, "soft_wrap": True},
+}
+
+
+def __getattr__(name: str):
+    """``console`` (stdout) and ``error_console`` (stderr, one line per message), made when first asked for."""
+    options = _CONSOLES.get(name)
+    if options is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    from rich.console import Console
+
+    value = globals()[name] = Console(**options)
+    return value
+
+
+def _console():
+    """The stdout console, as the module holds it now (a test may have replaced it)."""
+    return globals()["console"] if "console" in globals() else __getattr__("console")
+
+
+def _error_console():
+    """The stderr console, as the module holds it now (a test may have replaced it)."""
+    return globals()["error_console"] if "error_console" in globals() else __getattr__("error_console")
+
+
+def escape(text: str) -> str:
+    """``text`` with its rich markup escaped (``[s]`` printed as written), rich imported on first use."""
+    from rich.markup import escape as rich_escape
+
+    return rich_escape(text)
 
 SCENARIO_NAMES = ("accel-gps", "scale-bias")  # kalcal.models.registry.SCENARIOS, without importing numpy for --help
 ScenarioArg = Annotated[str, typer.Argument(help=f"Scenario: {', '.join(SCENARIO_NAMES)}.")]
@@ -37,11 +67,15 @@ def settings_of(assignments: list[str] | None) -> dict[str, str]:
 def _table(*phrases: str, **options) -> Table:
     """A table titled by ``phrases`` joined with commas, never broken inside a phrase: the table is at
     least as wide as its title, and where the console is narrower each phrase gets a line of its own."""
+    from rich.table import Table
+    from rich.text import Text
+
+    width_of_console = _console().width
     title = ", ".join(phrases)
-    if len(title) > console.width:
+    if len(title) > width_of_console:
         title = ",\n".join(phrases)
     width = max(len(line) for line in title.splitlines())
-    return Table(title=Text(title), min_width=min(width, console.width), **options)
+    return Table(title=Text(title), min_width=min(width, width_of_console), **options)
 
 
 @contextlib.contextmanager
@@ -51,7 +85,7 @@ def user_errors() -> Iterator[None]:
         yield
     except (KalcalError, OSError) as exc:
         # OSError: an output path that cannot be written (a file where a directory should be, no permission)
-        error_console.print(f"kalcal: error: {exc}", markup=False)
+        _error_console().print(f"kalcal: error: {exc}", markup=False)
         raise typer.Exit(2) from None
 
 
@@ -61,11 +95,11 @@ def _progress_bar(title: str):
     The callback is a job's ``progress(stage, done, total)`` (:mod:`kalcal.jobs.progress`): the bar shows
     the stage, its count of units and its time.
     """
-    if not error_console.is_terminal:
+    if not _error_console().is_terminal:
         return contextlib.nullcontext(), None
     from kalcal.api.progress import progress_bar
 
-    return progress_bar(title, error_console)
+    return progress_bar(title, _error_console())
 
 
 def _wrote(out: Path, paths) -> str:
@@ -83,7 +117,7 @@ def _wrote(out: Path, paths) -> str:
 
 def print_wrote(out: Path, paths) -> None:
     """Print :func:`_wrote`'s line."""
-    console.print(_wrote(Path(out), paths), markup=False, soft_wrap=True)
+    _console().print(_wrote(Path(out), paths), markup=False, soft_wrap=True)
 
 
 def _note_nonfinite(*paths) -> None:
@@ -100,7 +134,7 @@ def _note_nonfinite(*paths) -> None:
         if count:
             fields = ", ".join(f"{name} ({n})" for name, n in nonfinite.get("fields", {}).items())
             value, verb = ("value", "is") if count == 1 else ("values", "are")
-            console.print(
+            _console().print(
                 f"note: {count} {value} in {path} {verb} not finite and written as null: {fields}",
                 markup=False,
                 soft_wrap=True,
@@ -110,7 +144,7 @@ def _note_nonfinite(*paths) -> None:
 def _print_warnings(summary: dict) -> None:
     """Each of the summary's warnings as one line on stderr."""
     for warning in summary["warnings"]:
-        error_console.print(f"kalcal: warning: {warning['message']}", markup=False)
+        _error_console().print(f"kalcal: warning: {warning['message']}", markup=False)
 
 
 def _print_checks(summary: dict) -> None:
@@ -138,7 +172,7 @@ def _print_checks(summary: dict) -> None:
             pvalue_text(test["pvalue"], nan).removeprefix("p = "),
             result,
         )
-    console.print(table)
+    _console().print(table)
     for test in summary["tests"]:
         if not test["passed"]:
-            console.print(f"[bold]{test['name']}[/bold]: {escape(test['detail'])}")
+            _console().print(f"[bold]{test['name']}[/bold]: {escape(test['detail'])}")

@@ -1,7 +1,5 @@
 """``kalcal analyze``: the exact covariance analysis, through :func:`kalcal.analyze`, printed as a table."""
 
-from __future__ import annotations
-
 import sys
 from pathlib import Path
 from typing import Annotated

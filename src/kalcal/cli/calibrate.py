@@ -1,15 +1,12 @@
 """``kalcal calibrate``: a sensor's bias (and scale) from logged data, through :func:`kalcal.calibrate`."""
 
-from __future__ import annotations
-
 from pathlib import Path
 from typing import Annotated, Optional
 
 import typer
-from rich.markup import escape
 
 from kalcal.cli import _common
-from kalcal.cli._common import ConfigOpt, ScenarioArg, SetOpt, settings_of, user_errors
+from kalcal.cli._common import ConfigOpt, ScenarioArg, SetOpt, escape, settings_of, user_errors
 
 
 def calibrate(

@@ -1,15 +1,12 @@
 """``kalcal noise``: accelerometer noise from a static log, through :func:`kalcal.noise`."""
 
-from __future__ import annotations
-
 from pathlib import Path
 from typing import Annotated, Optional
 
 import typer
-from rich.markup import escape
 
 from kalcal.cli import _common
-from kalcal.cli._common import user_errors
+from kalcal.cli._common import escape, user_errors
 
 
 def noise(

@@ -1,7 +1,5 @@
 """``kalcal report``: redraw the figures and report.html of a saved verification run, through :func:`kalcal.report`."""
 
-from __future__ import annotations
-
 from pathlib import Path
 from typing import Annotated
 

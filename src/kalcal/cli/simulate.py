@@ -1,7 +1,5 @@
 """``kalcal simulate``: one realization written as recorded logs, through :func:`kalcal.simulate`."""
 
-from __future__ import annotations
-
 from pathlib import Path
 from typing import Annotated
 

@@ -1,7 +1,5 @@
 """``kalcal sweep``: a verification per value of one setting and the tuning curve, through :func:`kalcal.api.sweep.sweep`."""
 
-from __future__ import annotations
-
 from pathlib import Path
 from typing import Annotated, Optional
 

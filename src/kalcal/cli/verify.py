@@ -1,7 +1,5 @@
 """``kalcal verify``: the Monte Carlo verification, through :func:`kalcal.verify`, printed as a table."""
 
-from __future__ import annotations
-
 import sys
 from pathlib import Path
 from typing import Annotated, Optional

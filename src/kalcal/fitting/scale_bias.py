@@ -89,6 +89,7 @@ def fit_scale_bias(
         f"{diagnostics.verdict}. Even the best settings leave the innovations inconsistent: the model lacks "
         "something, e.g. time-correlated reference noise, a nonlinear sensor response, or drift that is not a random walk"
     )
+    counted = _samples(scenario, rate, max_updates)
     notes = [IDENTIFIABILITY, "theta has a diffuse prior: the likelihood is the conditional one, after the first samples that determine theta"]
     return FitResult.from_search(
         scenario.NAME,
@@ -98,8 +99,8 @@ def fit_scale_bias(
         adequacy=adequacy,
         diagnostics=diagnostics.as_dict(),
         notes=notes,
-        settings=_settings(scenario, chosen, rate, max_updates),
-        comments=_comments(fit, scenario, rate, max_updates),
+        settings=_settings(scenario, chosen, counted),
+        comments=_comments(fit, scenario, counted),
         confidence=confidence,
     )
 
@@ -111,12 +112,11 @@ def _samples(scenario: ScaleBiasScenario, rate: float | None, max_updates: int |
     return rate, samples, samples if max_updates is None else min(samples, max_updates)
 
 
-def _settings(scenario: ScaleBiasScenario, chosen: dict[str, float], rate: float | None,
-              max_updates: int | None = None) -> dict[str, dict]:
+def _settings(scenario: ScaleBiasScenario, chosen: dict[str, float], counted: tuple[float, int, int]) -> dict[str, dict]:
     """filter.toml's sections: the log's rate, the fitted noise in [filter] and [truth] (drift a random
     walk when q > 0), over the scenario's duration made a whole number of samples, at most
-    ``max_updates`` (the most a verification's realization holds)."""
-    rate, _, samples = _samples(scenario, rate, max_updates)
+    ``max_updates`` (the most a verification's realization holds): ``counted`` is :func:`_samples`'s."""
+    rate, _, samples = counted
     noise, drift = (float(f"{chosen[key]:.6g}") for key in (NOISE, DRIFT))
     section = {"reference_noise_std": noise, "sensor_noise_std": 0.0, "parameter_drift_std": drift}
     return {
@@ -126,12 +126,12 @@ def _settings(scenario: ScaleBiasScenario, chosen: dict[str, float], rate: float
     }
 
 
-def _comments(fit, scenario=None, rate=None, max_updates=None) -> dict[str, str]:
+def _comments(fit, scenario=None, counted: tuple[float, int, int] | None = None) -> dict[str, str]:
     """A comment per fitted key for filter.toml: the interval, or why the input is kept; and one on a
-    duration shortened to ``max_updates`` samples."""
+    duration shortened to ``max_updates`` samples (``counted``: :func:`_samples`'s, with ``scenario``)."""
     comments = {}
     if scenario is not None:
-        rate, samples, kept = _samples(scenario, rate, max_updates)
+        rate, samples, kept = counted
         if kept < samples:
             comments["scenario.duration"] = (
                 f"duration: the scenario's {scenario.scenario.duration:g} s shortened to {kept / rate:g} s, the {kept} "
