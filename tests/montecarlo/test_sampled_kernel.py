@@ -61,3 +61,17 @@ def test_the_sums_do_not_depend_on_keeping_the_pairs(name):
     for field in ("error", "error_outer", "estimate_outer", "error_estimate", "nees", "nis", "residual", "residual_own"):
         assert np.array_equal(getattr(kept, field), getattr(dropped, field)), field
     assert kept.residual_outer is not None and dropped.residual_outer is None
+
+
+def test_a_sampler_without_a_compiled_block_is_filtered_by_the_filter_kernel():
+    """Without ``sampled_block`` the numpy sampler's arrays go through ``filter_block_moments``: the same
+    sums to rounding, from the same draws."""
+    problem = _problem(VARIANTS["gauss-markov"])
+    fallback = dataclasses.replace(problem, sampled_block=None)
+    compiled, reference = block_generator(4, 2), block_generator(4, 2)
+    fused = problem.block_sums(compiled, 257, "sampled")
+    filtered = fallback.block_sums(reference, 257, "sampled")
+    assert np.array_equal(compiled.bit_generator.random_raw(16), reference.bit_generator.random_raw(16))
+    for field in ("error", "error_outer", "estimate_outer", "error_estimate", "nees", "nis", "residual", "residual_outer"):
+        value = getattr(filtered, field)
+        assert np.abs(getattr(fused, field) - value).max() <= 1e-11 * np.abs(value).max(), field
