@@ -7,7 +7,8 @@ accelerometer samples between them):
 
 * the exact engine with every statistic against the raw cost of drawing its standard normals with the
   same generator, blocks and threads;
-* the sampled engine (every 200 Hz sample) against the raw cost of its own draws;
+* the sampled engine (every 200 Hz sample, its compiled kernel) against the raw cost of its own draws, and
+  the numpy sampler it replaces (``sample_accel_gps_errors``, then the filter kernel) against the same;
 * the compiled block path against the numpy reference path on the same block, and the pair sums of
   one block as the engine sums them (float64 syrk) against a float32 ssyrk of the same innovations;
 * one block's parts on one thread: numpy's draws of its normals, the kernel's own draws of the same
@@ -24,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import json
 import os
 import resource
@@ -276,11 +278,26 @@ def main() -> None:
 
     n_sampled = max(BLOCK_SIZE, n // 10)
     sampled_normals = problem.normals_per_realization("sampled")
-    t_draw_s = best_of(2, raw_draws, n_sampled, sampled_normals)
-    t_sampled = best_of(2, lambda: run_monte_carlo(problem, n_sampled, seed=0, engine="sampled"))
+    numpy_sampled = dataclasses.replace(problem, sampled_block=None)  # sample_accel_gps_errors, then the filter kernel
+    (t_draw_s, c_draw_s), (t_sampled, c_sampled), (t_numpy_s, c_numpy_s) = (wall_and_cpu(2, f) for f in (
+        lambda: raw_draws(n_sampled, sampled_normals),
+        lambda: run_monte_carlo(problem, n_sampled, seed=0, engine="sampled"),
+        lambda: run_monte_carlo(numpy_sampled, n_sampled, seed=0, engine="sampled")))
     print(f"\nsampled engine (every 200 Hz sample), N = {n_sampled:,}:")
     print(f"  raw draws ({sampled_normals} normals/realization): {t_draw_s:7.3f} s")
     print(f"  kalcal sampled engine:                    {t_sampled:7.3f} s   ratio {t_sampled / t_draw_s:5.2f}x the draws")
+    print(f"  sampled in numpy, then the filter kernel: {t_numpy_s:7.3f} s   ratio {t_numpy_s / t_draw_s:5.2f}x the draws")
+    print(f"  CPU time of the process: draws {c_draw_s:.3f} s, kalcal {c_sampled / c_draw_s:.2f}x, "
+          f"numpy's sampling {c_numpy_s / c_draw_s:.2f}x")
+    with engine.single_threaded_blas():
+        one_block = alternating(
+            5,
+            lambda: block_generator(0, 0).standard_normal(BLOCK_SIZE * sampled_normals),
+            lambda: problem.block_sums(block_generator(0, 0), BLOCK_SIZE, "sampled"),
+            lambda: numpy_sampled.block_sums(block_generator(0, 0), BLOCK_SIZE, "sampled"),
+        )
+    print(f"  one block on one thread (thread CPU time): numpy's draws {one_block[0] * 1e3:.0f} ms, the compiled "
+          f"block {one_block[1] / one_block[0]:.2f}x, numpy's sampling + the filter kernel {one_block[2] / one_block[0]:.2f}x")
     print(f"  normals per realization, sampled / exact: {sampled_normals / exact_normals:.1f}")
 
     print(f"\nin a fresh process, as the CLI pays it (N = {n:,}; numba's cache warm):")

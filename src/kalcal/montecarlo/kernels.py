@@ -131,7 +131,8 @@ def exact_block_moments(
 
 @numba.njit(nogil=True, cache=True, fastmath=FAST)
 def filter_block_moments(states, measurements, phis, h, gains, x0, sums):
-    """Filter given truths and accumulate, for samplers other than the exact one.
+    """Filter given truths and accumulate, for a sampler without a compiled block of its own (the sampled
+    engine has one: :func:`kalcal.montecarlo.sampled_kernels.sampled_block_moments`).
 
     states (K, d, n) (overwritten with the errors), measurements (K, p, n); the rest as in
     :func:`exact_block_moments`.

@@ -27,6 +27,8 @@ from kalcal.simulation.exact import UpdateRateTruth, sample_exact
 _EMPTY_MAP = np.empty((0, 0))
 
 Sampler = Callable[[np.random.Generator, int], tuple[np.ndarray, np.ndarray]]
+#: ``(rng, n, phis, h, gains, x0, sums) -> None``: a compiled sampler fused with the filter and the sums
+BlockSums = Callable[..., None]
 
 
 @dataclass(frozen=True)
@@ -89,6 +91,11 @@ class FixedGainProblem:
     sampled : callable, optional
         ``sampled(rng, n) -> (states (n, K, d), measurements (n, K, p))`` simulating every sample
         (engine "sampled").
+    sampled_block : callable, optional
+        The same realizations (same draws of ``rng``) simulated, filtered and summed by one compiled
+        pass, ``sampled_block(rng, n, phis, h, gains, x0, sums)``, which :meth:`block_sums` then uses
+        for engine "sampled" (:func:`kalcal.montecarlo.sampled_kernels.accel_gps_block_sums`); without
+        it, ``sampled``'s arrays are filtered by :func:`kalcal.montecarlo.kernels.filter_block_moments`.
     form : {"joseph", "standard", "sqrt"}
         The covariance update of the gain schedule (:func:`~kalcal.filters.steps.covariance_pass`).
     """
@@ -98,6 +105,7 @@ class FixedGainProblem:
     truth: UpdateRateTruth
     sampled: Sampler | None = None
     sampled_normals: int = 0
+    sampled_block: BlockSums | None = None
     form: UpdateForm = "joseph"
     residual_pairs: bool = True  #: keep E[r_k r_j^T] over all pairs (O(N K^2 p^2)) for the whiteness check
     filter_transitions: np.ndarray | None = None  #: the filter's transition of each interval, (K, d, d), if time-varying
@@ -184,6 +192,9 @@ class FixedGainProblem:
                 sums,
                 _EMPTY_MAP if truth.error_map is None else np.ascontiguousarray(truth.error_map),
             )
+        elif self.sampled_block is not None:
+            check_engine(self, engine)
+            self.sampled_block(rng, n, *gains, sums)
         else:
             states, measurements = self.sample(rng, n, engine)
             kernels.filter_block_moments(

@@ -14,6 +14,7 @@ from kalcal.models.linear import LinearGaussianModel
 from kalcal.models.settings import SettingError, show
 from kalcal.models.scale_bias import ScaleBiasScenario
 from kalcal.montecarlo.problem import FixedGainProblem, Problem, ProblemInfo
+from kalcal.montecarlo.sampled_kernels import accel_gps_block_sums
 from kalcal.montecarlo.scale_bias import ScaleBiasProblem, model_error_cause
 from kalcal.simulation.exact import accel_gps_transitions, accel_gps_truth, truth_from_model
 from kalcal.simulation.sampled import sample_accel_gps_errors
@@ -66,6 +67,7 @@ def accel_gps_problem(
         filter_transitions=accel_gps_filter_transitions(scenario, filter_model) if scenario.has_scale else None,
         sampled=partial(sample_accel_gps_errors, scenario),
         sampled_normals=sampled_normals_per_realization(scenario),
+        sampled_block=partial(accel_gps_block_sums, scenario),
         form=form,
         residual_pairs=residual_pairs,
     )

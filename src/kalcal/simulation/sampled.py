@@ -60,7 +60,7 @@ class AccelGpsLogs:
         return self.gps_outlier_error != 0
 
 
-def _initial_draws(scenario: AccelGpsScenario, rng: np.random.Generator, n: int):
+def initial_draws(scenario: AccelGpsScenario, rng: np.random.Generator, n: int):
     """p0, v0, b, the noise of sample 0 and the scale-factor error s (drawn only in a scale scenario)."""
     t = scenario.truth
     xi = rng.standard_normal((n, 5 if scenario.has_scale else 4))
@@ -114,7 +114,7 @@ def sample_accel_gps_logs(scenario: AccelGpsScenario, rng: np.random.Generator, 
     s, t = scenario.scenario, scenario.truth
     m, n_updates = s.steps_per_update, s.n_updates
     times = s.sample_times()
-    p0, v0, bias0, noise0, scale = _initial_draws(scenario, rng, n)
+    p0, v0, bias0, noise0, scale = initial_draws(scenario, rng, n)
     noise = np.empty((n, s.n_samples + 1))
     noise[:, 0] = noise0
     bias = np.empty((n, s.n_samples + 1))
@@ -176,7 +176,7 @@ def sample_accel_gps_errors(
     true_accel = scenario.true_accel(times)
     fix_times = s.update_times()
     motion = deterministic_motion(scenario, fix_times, true_accel)
-    p0, v0, bias_now, noise, scale = _initial_draws(scenario, rng, n)
+    p0, v0, bias_now, noise, scale = initial_draws(scenario, rng, n)
     d = 4 if scenario.has_scale else 3
     pc0, vc0 = scenario.nominal_start()
     nominal = np.empty((n, 2))
