@@ -81,7 +81,7 @@ def _bias_path(scenario: AccelGpsScenario, start: np.ndarray, draw: np.ndarray |
         return start[:, None]
     t, dt = scenario.truth, scenario.scenario.sample_period
     decay = t.bias_decay(dt)
-    from scipy.signal import lfilter  # 1.4 s to import: only the sampled engine's bias recursion needs it
+    from scipy.signal import lfilter  # 1.4 s to import: only the numpy sampler's drifting bias needs it
 
     path = lfilter([1.0], [1.0, -decay], np.sqrt(t.bias_step_variance(dt)) * draw, axis=1, zi=decay * start[:, None])[0]
     return np.concatenate([start[:, None], path], axis=1)
