@@ -126,17 +126,16 @@ def _settings(scenario: ScaleBiasScenario, chosen: dict[str, float], counted: tu
     }
 
 
-def _comments(fit, scenario=None, counted: tuple[float, int, int] | None = None) -> dict[str, str]:
+def _comments(fit, scenario: ScaleBiasScenario, counted: tuple[float, int, int]) -> dict[str, str]:
     """A comment per fitted key for filter.toml: the interval, or why the input is kept; and one on a
-    duration shortened to ``max_updates`` samples (``counted``: :func:`_samples`'s, with ``scenario``)."""
+    duration shortened to ``max_updates`` samples (``counted``: :func:`_samples`'s)."""
     comments = {}
-    if scenario is not None:
-        rate, samples, kept = counted
-        if kept < samples:
-            comments["scenario.duration"] = (
-                f"duration: the scenario's {scenario.scenario.duration:g} s shortened to {kept / rate:g} s, the {kept} "
-                f"samples at {rate:g} Hz that kalcal verify allows a realization (its per-update arrays must fit in memory)"
-            )
+    rate, samples, kept = counted
+    if kept < samples:
+        comments["scenario.duration"] = (
+            f"duration: the scenario's {scenario.scenario.duration:g} s shortened to {kept / rate:g} s, the {kept} "
+            f"samples at {rate:g} Hz that kalcal verify allows a realization (its per-update arrays must fit in memory)"
+        )
     for key, p in fit.parameters.items():
         short = key.partition(".")[2]
         if not p.identified:
