@@ -6,6 +6,7 @@ and numba only for the accel-gps figure and filter."""
 from __future__ import annotations
 
 import inspect
+import json
 import subprocess
 import sys
 
@@ -124,3 +125,23 @@ def test_the_command_line_runs_no_full_collection_while_the_libraries_load():
     (python_full, python_thresholds), (cli_full, cli_thresholds) = counts["python"], counts["cli"]
     assert python_full >= 1 and cli_full == 0, counts
     assert cli_thresholds[:2] == python_thresholds[:2], counts
+
+
+def test_the_console_script_sets_the_full_collection_threshold_and_the_api_leaves_python_s():
+    code = (
+        "import gc, json, sys\n"
+        "default = gc.get_threshold()\n"
+        "if sys.argv[1] == 'cli':\n"
+        "    from kalcal.cli import main\n    sys.argv = ['kalcal', '--version']\n"
+        "    try:\n        main()\n    except SystemExit:\n        pass\n"
+        "else:\n    import kalcal, kalcal.api\n"
+        "print(json.dumps([default, gc.get_threshold()]))\n"
+    )
+    from kalcal.cli import FULL_COLLECTION_THRESHOLD
+
+    for mode, third in (("cli", FULL_COLLECTION_THRESHOLD), ("api", None)):
+        done = subprocess.run([sys.executable, "-c", code, mode], capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, done.stderr
+        default, now = json.loads(done.stdout.strip().splitlines()[-1])
+        assert now[:2] == default[:2]
+        assert now[2] == (default[2] if third is None else third), (mode, default, now)
