@@ -2,6 +2,7 @@
 
 import multiprocessing
 import os
+import re
 import signal
 import time
 
@@ -97,11 +98,28 @@ def test_fallback_to_this_process(monkeypatch):
     assert drawing.drawing_workers(18) == 1
 
 
-@pytest.mark.parametrize("value", ["0", "two", "-1"])
+# "²" passes str.isdigit() but not int(); "٣" (Arabic-Indic three) and "１" (fullwidth one) pass int():
+# only ASCII digits are a count; "+2" and "1_0" pass int() too
+@pytest.mark.parametrize("value", ["0", "two", "-1", "²", "٣", "１", "+2", "1_0", "2.0"])
 def test_a_bad_process_count_is_refused_in_one_line(monkeypatch, value):
     monkeypatch.setenv(drawing.PROCESSES_ENV, value)
-    with pytest.raises(ConfigError, match=f"^{drawing.PROCESSES_ENV}: expected a whole number >= 1, got '{value}'$"):
+    with pytest.raises(ConfigError, match=f"^{drawing.PROCESSES_ENV}: expected a whole number >= 1, got {re.escape(repr(value))}$"):
         drawing.drawing_workers(18)
+
+
+@pytest.mark.parametrize("value", ["²", "٣"])
+def test_a_bad_process_count_is_one_line_and_exit_2_on_the_command_line(copy_run, monkeypatch, value):
+    from typer.testing import CliRunner
+
+    from kalcal.cli import app
+
+    run = copy_run()
+    monkeypatch.setenv(drawing.PROCESSES_ENV, value)
+    result = CliRunner().invoke(app, ["report", str(run)])
+    assert result.exit_code == 2
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1 and drawing.PROCESSES_ENV in lines[0] and "Traceback" not in result.output
+    assert not (run / "report.html").exists() and not (run / "figures").exists()
 
 
 def test_serial_drawing_calls_every_figure_in_order(tmp_path, monkeypatch):
