@@ -162,3 +162,68 @@ def test_a_figures_error_in_a_worker_is_the_one_line_of_serial_drawing(copy_run,
         assert not (run / "report.html").exists() and not (run / "figures").exists()  # the folder as it was
         assert multiprocessing.active_children() == []
     assert lines["1"] == lines["2"] and len(lines["1"]) == 1 and "mean_error.png: cannot be drawn" in lines["1"][0]
+
+
+SHORT_RUN = ("-n", "100", "--long-run", "0", "--set", "scenario.duration=2")
+
+
+def test_a_bad_process_count_stops_a_cli_verify_with_its_report_before_the_monte_carlo(tmp_path, monkeypatch):
+    from typer.testing import CliRunner
+
+    from kalcal.cli import app
+    from kalcal.jobs import verify as verify_job
+
+    ran = []
+    monkeypatch.setattr(verify_job, "run_monte_carlo", lambda *args, **kwargs: ran.append(1))
+    monkeypatch.setenv(drawing.PROCESSES_ENV, "0")
+    result = CliRunner().invoke(app, ["verify", *SHORT_RUN, "--out", str(tmp_path / "out")])
+    assert result.exit_code == 2
+    assert result.output.strip().splitlines() == [f"kalcal: error: {drawing.PROCESSES_ENV}: expected a whole number >= 1, got '0'"]
+    assert ran == [] and not (tmp_path / "out").exists()
+
+
+def test_a_bad_process_count_stops_an_api_verify_with_a_report_before_the_monte_carlo(tmp_path, monkeypatch):
+    import kalcal
+    from kalcal.jobs import verify as verify_job
+
+    ran = []
+    monkeypatch.setattr(verify_job, "run_monte_carlo", lambda *args, **kwargs: ran.append(1))
+    monkeypatch.setenv(drawing.PROCESSES_ENV, "²")
+    with pytest.raises(ConfigError, match=f"^{drawing.PROCESSES_ENV}: expected a whole number >= 1, got '²'$"):
+        kalcal.verify("accel-gps", 100, settings={"scenario.duration": 2}, long_run=0, out=tmp_path / "out", report=True)
+    assert ran == [] and not (tmp_path / "out").exists()
+
+
+def test_a_bad_process_count_does_not_refuse_a_run_that_draws_no_figures(tmp_path, monkeypatch):
+    """verify --no-report, a sweep (its runs have no page), a verify in memory: none of them forks a drawing
+    process, so none of them reads KALCAL_FIGURE_PROCESSES."""
+    from typer.testing import CliRunner
+
+    import kalcal
+    from kalcal.cli import app
+
+    monkeypatch.setenv(drawing.PROCESSES_ENV, "0")
+    runner = CliRunner()
+    result = runner.invoke(app, ["verify", *SHORT_RUN, "--no-report", "--out", str(tmp_path / "verify")])
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "verify" / "summary.json").is_file() and not (tmp_path / "verify" / "report.html").exists()
+    sweep = ["sweep", "-n", "100", "--set", "scenario.duration=2,3", "--out", str(tmp_path / "sweep")]
+    result = runner.invoke(app, sweep)
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "sweep" / "sweep.csv").is_file()
+    result = kalcal.verify("accel-gps", 100, settings={"scenario.duration": 2}, long_run=0)
+    assert result.run.summary["realizations"] == 100
+    result = kalcal.verify("accel-gps", 100, settings={"scenario.duration": 2}, long_run=0, out=tmp_path / "api", report=False)
+    assert (tmp_path / "api" / "summary.json").is_file()
+
+
+def test_a_bad_process_count_stops_a_redraw_before_it_reads_the_run(copy_run, monkeypatch):
+    from kalcal.jobs import report as report_job
+
+    read = []
+    monkeypatch.setattr(report_job, "read_statistics", lambda path: read.append(path))
+    monkeypatch.setattr(report_job, "read_summary", lambda path: read.append(path))
+    monkeypatch.setenv(drawing.PROCESSES_ENV, "0")
+    with pytest.raises(ConfigError, match=f"^{drawing.PROCESSES_ENV}: expected a whole number >= 1, got '0'$"):
+        render_report(copy_run())
+    assert read == []

@@ -36,6 +36,7 @@ from kalcal.montecarlo.engine import BLOCK_SIZE, block_generator, block_sizes, r
 from kalcal.montecarlo.problem import FixedGainProblem
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.plots.realization import RealizationData
+from kalcal.reporting.drawing import drawing_workers
 from kalcal.reporting.figures import render_figures
 from kalcal.reporting.html import build_page, write_page
 from kalcal.reporting.steady_state import steady_state_view
@@ -168,10 +169,13 @@ def render_report(
         ``realization`` is not in [0, N), or the saved settings no longer build a scenario.
     OutputError
         The folder's last kalcal run did not finish, or it holds a page or figure kalcal did not write.
+    ConfigError
+        ``KALCAL_FIGURE_PROCESSES`` is set but not a whole number >= 1 (checked before anything is read).
     """
     out = Path(out)
     if not out.is_dir():
         raise DataError(f"{out}: no such run directory")
+    drawing_workers(1)  # a malformed KALCAL_FIGURE_PROCESSES is refused before any file is read
     require_complete(out)
     summary_path = out / "summary.json"
     summary = read_summary(summary_path) if summary is None else check_summary(dict(summary), summary_path)
