@@ -4,6 +4,7 @@ import multiprocessing
 import os
 import re
 import signal
+import threading
 import time
 
 import pytest
@@ -227,3 +228,40 @@ def test_a_bad_process_count_stops_a_redraw_before_it_reads_the_run(copy_run, mo
     with pytest.raises(ConfigError, match=f"^{drawing.PROCESSES_ENV}: expected a whole number >= 1, got '0'$"):
         render_report(copy_run())
     assert read == []
+
+
+def _threads(path):
+    path.write_text(str(len(threading.enumerate())))
+    return path
+
+
+@needs_fork
+def test_a_worker_holds_only_the_thread_that_forked_it(tmp_path):
+    """Another thread alive in this process at the fork (the progress bar's, a Dask client's) is not in
+    the drawing workers."""
+    stop = threading.Event()
+    other = threading.Thread(target=stop.wait, name="another thread")
+    other.start()
+    try:
+        paths = [tmp_path / f"f{i}.png" for i in range(2)]
+        drawing.draw_all([_threads] * 2, paths, workers=2)
+    finally:
+        stop.set()
+        other.join()
+    assert [p.read_text() for p in paths] == ["1", "1"]
+
+
+def test_the_engines_threads_have_ended_when_the_figures_are_drawn(tmp_path):
+    from kalcal.jobs import verify as verify_job
+    from kalcal.models.registry import build_scenario
+
+    alive = []
+
+    def progress(stage, done, total):
+        if stage == "figures" and done == 1:
+            alive.extend(t.name for t in threading.enumerate() if t.name.startswith("ThreadPoolExecutor"))
+            alive.append("checked")
+
+    scenario = build_scenario("accel-gps", None, ["scenario.duration=2"])
+    verify_job.verify(scenario, 300, 1, tmp_path / "out", long_run=0, report=True, workers=2, progress=progress)
+    assert alive == ["checked"]
