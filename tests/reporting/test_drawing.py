@@ -230,6 +230,55 @@ def test_a_bad_process_count_stops_a_redraw_before_it_reads_the_run(copy_run, mo
     assert read == []
 
 
+def _child_pids():
+    """This process's children, as the kernel counts them (zombies included: a child not joined)."""
+    me = os.getpid()
+    pids = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/stat") as handle:
+                    fields = handle.read().rpartition(")")[2].split()
+            except OSError:
+                continue  # it ended while being read
+            if int(fields[1]) == me:
+                pids.append(int(entry))
+    return pids
+
+
+def _folder(path):
+    return {p.relative_to(path).as_posix(): p.read_bytes() for p in sorted(path.rglob("*")) if p.is_file()}
+
+
+@needs_fork
+@pytest.mark.skipif(not os.path.isdir("/proc"), reason="children counted from /proc")
+def test_an_interrupt_while_workers_draw_leaves_the_folder_and_no_process(tmp_path, monkeypatch):
+    from kalcal.interrupts import Interrupted
+    from kalcal.jobs import verify as verify_job
+    from kalcal.models.registry import build_scenario
+
+    scenario = build_scenario("accel-gps", None, ["scenario.duration=2"])
+    out = tmp_path / "out"
+    monkeypatch.setenv(drawing.PROCESSES_ENV, "2")
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})  # two workers on a one-CPU machine too
+    verify_job.verify(scenario, 300, 1, out, long_run=0, report=True)  # the previous run, with its page
+    before = _folder(out)
+    assert "report.html" in before and any(name.startswith("figures/") for name in before)
+    workers = []
+
+    def progress(stage, done, total):
+        if stage == "figures" and done == 2:  # two figures written, others being drawn
+            workers.append(len(multiprocessing.active_children()))
+            raise Interrupted(signal.SIGINT)
+
+    with pytest.raises(Interrupted):
+        verify_job.verify(scenario, 300, 2, out, long_run=0, report=True, progress=progress)
+    assert workers == [2]  # interrupted while two drawing processes were alive
+    assert multiprocessing.active_children() == [] and _child_pids() == []
+    assert _folder(out) == before  # the previous run's files, byte for byte, and nothing else
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]  # no staged set left beside it
+
+
 def _threads(path):
     path.write_text(str(len(threading.enumerate())))
     return path
