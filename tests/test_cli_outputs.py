@@ -398,3 +398,25 @@ def test_a_failing_first_run_removes_every_folder_it_created(tmp_path):
     assert result.exit_code == 2, result.output
     assert str(bad) in result.stderr and "accel" in result.stderr  # the job read the log: a/b/c had been created
     assert not (tmp_path / "a").exists()
+
+
+def test_the_figure_processes_line_of_the_docs_is_what_report_prints(previous, monkeypatch):
+    """docs/outputs.md quotes the refusal of a bad KALCAL_FIGURE_PROCESSES: that line, exit 2, the folder
+    as it was; 1 draws the page in this process, with no child process."""
+    import multiprocessing
+
+    docs = (Path(__file__).resolve().parents[1] / "docs" / "outputs.md").read_text(encoding="utf-8")
+    quoted = [line.strip() for line in docs.splitlines() if "kalcal: error: KALCAL_FIGURE_PROCESSES" in line]
+    assert len(quoted) == 1
+    out, before = previous
+    for value in ("0", "two", "²", "+2"):
+        monkeypatch.setenv("KALCAL_FIGURE_PROCESSES", value)
+        result = _invoke("report", out)
+        _one_line_error(result)
+        assert result.stderr.strip() == quoted[0].replace("'0'", repr(value))
+        assert _tree(out) == before
+    monkeypatch.setenv("KALCAL_FIGURE_PROCESSES", "1")
+    started = []
+    monkeypatch.setattr(multiprocessing.context.ForkContext, "Process", lambda *a, **k: started.append(1))
+    _ok("report", out)
+    assert started == [] and (out / "report.html").read_bytes() != b""

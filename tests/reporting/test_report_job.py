@@ -132,3 +132,39 @@ def test_a_summary_from_before_schema_version_still_renders(copy_run):
     (run / "summary.json").write_text(json.dumps(summary))
     page = render_report(run).read_text(encoding="utf-8")
     assert "Figure 5.7." in page
+
+
+def test_the_page_is_drawn_from_the_folders_summary_alone():
+    """A redraw reads DIR/summary.json: no caller hands it a summary of its own (the verify job draws its
+    page with draw_report)."""
+    import inspect
+
+    assert list(inspect.signature(render_report).parameters) == ["out", "realization", "progress"]
+
+
+class _Stop(Exception):
+    pass
+
+
+@pytest.mark.parametrize("job", ["render_report", "draw_report"])
+def test_the_run_numbers_are_checked_once_per_page(copy_run, monkeypatch, job):
+    """N, the seed and the shown realization are read from the summary and checked once, before the
+    statistics, and handed to the drawing (stopped here before its figures)."""
+    from kalcal.jobs import report as report_job
+
+    calls = []
+    real = report_job._run_numbers
+    monkeypatch.setattr(report_job, "_run_numbers", lambda *args: calls.append(args[2]) or real(*args))
+
+    def stop(*args, **kwargs):
+        raise _Stop
+
+    monkeypatch.setattr(report_job, "render_figures", stop)
+    run = copy_run()
+    with pytest.raises(_Stop):
+        if job == "render_report":
+            render_report(run, realization=REALIZATION)
+        else:
+            summary = json.loads((run / "summary.json").read_text(encoding="utf-8"))
+            report_job.draw_report(run, summary, read_statistics(run / "stats.nc"), realization=REALIZATION)
+    assert calls == [REALIZATION]

@@ -74,13 +74,15 @@ def verify(
     """
     from kalcal.api._scenario import resolve
     from kalcal.errors import KalcalError
-    from kalcal.jobs.verify import check_arguments
+    from kalcal.jobs.verify import check_arguments, check_drawing
     from kalcal.montecarlo.distributed import dask_client
 
     model = resolve(scenario, settings, config, engine=engine, long_run=long_run, models=True)
     if threads is not None and threads < 1:
         raise KalcalError(f"--threads: expected a positive number, got {threads}")
     check_arguments(model, n, engine=engine, confidence=confidence, long_run=long_run, batch_size=batch_size, form=form)
+    if out is not None and report:
+        check_drawing()  # before a Dask cluster or the Monte Carlo starts
     options = dict(
         engine=engine, confidence=confidence, workers=threads, command=command, long_run=long_run,
         batch_size=batch_size, checkpoint=checkpoint, form=form,

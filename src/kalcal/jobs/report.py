@@ -36,6 +36,7 @@ from kalcal.montecarlo.engine import BLOCK_SIZE, block_generator, block_sizes, r
 from kalcal.montecarlo.problem import FixedGainProblem
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.plots.realization import RealizationData
+from kalcal.reporting.drawing import drawing_workers
 from kalcal.reporting.figures import render_figures
 from kalcal.reporting.html import build_page, write_page
 from kalcal.reporting.steady_state import steady_state_view
@@ -137,9 +138,7 @@ def draw_realization(problem, seed: int, index: int, n: int, engine: str) -> Sho
     return ShownRealization(state - run.posterior[offset], run.posterior[offset], np.array(problem.schedule.posterior_cov))
 
 
-def render_report(
-    out: str | Path, *, realization: int = 0, progress: JobProgress | None = None, summary: Mapping[str, Any] | None = None
-) -> Path:
+def render_report(out: str | Path, *, realization: int = 0, progress: JobProgress | None = None) -> Path:
     """Draw the figures into ``out/figures/`` and write ``out/report.html`` from a saved run.
 
     Parameters
@@ -151,9 +150,6 @@ def render_report(
     progress : callable, optional
         ``progress(stage, done, total)``: ``"figures"`` after each figure, ``"report"`` once the page is
         written (see :mod:`kalcal.jobs.progress`).
-    summary : dict, optional
-        ``summary.json``'s content as it will be written (:func:`kalcal.io.results.json_document`), for the
-        run that writes it after its page: read from ``out/summary.json`` otherwise.
 
     Returns
     -------
@@ -168,14 +164,17 @@ def render_report(
         ``realization`` is not in [0, N), or the saved settings no longer build a scenario.
     OutputError
         The folder's last kalcal run did not finish, or it holds a page or figure kalcal did not write.
+    ConfigError
+        ``KALCAL_FIGURE_PROCESSES`` is set but not a whole number >= 1 (checked before anything is read).
     """
     out = Path(out)
     if not out.is_dir():
         raise DataError(f"{out}: no such run directory")
+    drawing_workers(1)  # a malformed KALCAL_FIGURE_PROCESSES is refused before any file is read
     require_complete(out)
     summary_path = out / "summary.json"
-    summary = read_summary(summary_path) if summary is None else check_summary(dict(summary), summary_path)
-    _run_numbers(summary, summary_path, realization)  # a bad --realization is refused before any file is read
+    summary = read_summary(summary_path)
+    numbers = _run_numbers(summary, summary_path, realization)  # a bad --realization: refused before stats.nc is read
     dataset = read_statistics(out / "stats.nc")
     _require_same_run(dataset, summary, out / "stats.nc", summary_path)
     long_path = out / "stats_long.nc"
@@ -184,7 +183,7 @@ def render_report(
     if long_path.is_file() and summary.get("long_run", True) is not None:
         long_dataset = read_statistics(long_path)
         _require_same_run(long_dataset, summary, long_path, summary_path)
-    return _draw_page(out, summary, dataset, long_dataset, realization, progress)
+    return _draw_page(out, summary, dataset, long_dataset, numbers, progress)
 
 
 def draw_report(
@@ -211,10 +210,10 @@ def draw_report(
     require_complete(out)
     summary_path = out / "summary.json"
     summary = check_summary(dict(summary), summary_path)
-    _run_numbers(summary, summary_path, realization)
+    numbers = _run_numbers(summary, summary_path, realization)
     if summary.get("long_run", True) is None:
         long_dataset = None  # as a redraw ignores a stats_long.nc the summary does not own
-    return _draw_page(out, summary, dataset, long_dataset, realization, progress)
+    return _draw_page(out, summary, dataset, long_dataset, numbers, progress)
 
 
 def _run_numbers(summary: dict[str, Any], summary_path: Path, realization: Any) -> tuple[int, int, int]:
@@ -227,10 +226,13 @@ def _run_numbers(summary: dict[str, Any], summary_path: Path, realization: Any) 
     return count, seed, _realization_index(realization, count)
 
 
-def _draw_page(out: Path, summary: dict[str, Any], dataset, long_dataset, realization: Any, progress) -> Path:
-    """The figures and page of a run from its summary and statistics (read from ``out`` or in memory)."""
+def _draw_page(
+    out: Path, summary: dict[str, Any], dataset, long_dataset, numbers: tuple[int, int, int], progress
+) -> Path:
+    """The figures and page of a run from its summary and statistics (read from ``out`` or in memory);
+    ``numbers`` is the run's (N, seed, shown realization) as :func:`_run_numbers` checked them."""
     summary_path = out / "summary.json"
-    count, seed, index = _run_numbers(summary, summary_path, realization)
+    count, seed, index = numbers
     try:
         if is_custom_settings(summary["settings"]):  # a model file's run: its matrices are the settings
             scenario = CustomModelScenario.from_settings(summary["settings"])

@@ -35,9 +35,10 @@ _DRAWS: Sequence[Callable[[Path], Path]] = ()
 def drawing_workers(figures: int) -> int:
     """Processes to draw ``figures`` figures with: one per usable CPU, at most one per figure and at most
     :data:`PROCESSES_ENV` where it is set; 1 when fork is not offered (the workers must inherit the
-    figures' data). A :data:`PROCESSES_ENV` that is not a whole number >= 1 is a ConfigError."""
+    figures' data). A :data:`PROCESSES_ENV` that is not a whole number >= 1 in ASCII digits is a
+    ConfigError (``"²"``, ``"٣"``, ``"+2"`` included: str.isdigit and int accept some of them)."""
     cap = os.environ.get(PROCESSES_ENV, "").strip()
-    if cap and (not cap.isdigit() or int(cap) < 1):
+    if cap and not (cap.isascii() and cap.isdecimal() and int(cap) >= 1):
         raise ConfigError(f"{PROCESSES_ENV}: expected a whole number >= 1, got {cap!r}")
     if "fork" not in multiprocessing.get_all_start_methods():
         return 1
