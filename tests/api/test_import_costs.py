@@ -145,3 +145,46 @@ def test_the_console_script_sets_the_full_collection_threshold_and_the_api_leave
         default, now = json.loads(done.stdout.strip().splitlines()[-1])
         assert now[:2] == default[:2]
         assert now[2] == (default[2] if third is None else third), (mode, default, now)
+
+
+#: what drawing a report loads: the job's figure process imports them, not the job's own process
+PLOTTING = ("matplotlib", "PIL", "kalcal.plots.ensemble", "kalcal.reporting.figures", "kalcal.reporting.html")
+
+
+def _figure_process_forked() -> bool:
+    from kalcal.reporting.drawing_server import wanted
+
+    return wanted()
+
+
+@pytest.mark.skipif(not _figure_process_forked(), reason="no fork or one CPU: the figures are drawn in the job's process")
+def test_a_verify_command_with_its_report_never_imports_matplotlib(tmp_path, monkeypatch):
+    monkeypatch.delenv("KALCAL_FIGURE_PROCESSES", raising=False)
+    out = tmp_path / "out"
+    args = ["verify", "-n", "300", "--set", "scenario.duration=2", "--long-run", "0", "--out", str(out)]
+    assert _command_loaded(args, PLOTTING) == []
+    assert (out / "report.html").is_file() and len(list((out / "figures").glob("*.png"))) >= 15
+
+
+@pytest.mark.skipif(not _figure_process_forked(), reason="no fork or one CPU: the figures are drawn in the job's process")
+def test_an_api_verify_with_its_report_never_imports_matplotlib(tmp_path, monkeypatch):
+    monkeypatch.delenv("KALCAL_FIGURE_PROCESSES", raising=False)
+    out = tmp_path / "out"
+    code = (
+        "import sys, kalcal\n"
+        f"kalcal.verify('accel-gps', 300, 1, {{'scenario.duration': 2}}, long_run=0, out={str(out)!r}, report=True)\n"
+        f"print([m for m in {PLOTTING!r} if m in sys.modules])\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip().splitlines()[-1] == "[]"
+    assert (out / "report.html").is_file() and len(list((out / "figures").glob("*.png"))) >= 15
+
+
+def test_a_verify_drawing_in_its_own_process_imports_matplotlib(tmp_path, monkeypatch):
+    """With one drawing process asked for, the job draws its figures itself (the check above is not vacuous)."""
+    monkeypatch.setenv("KALCAL_FIGURE_PROCESSES", "1")
+    out = tmp_path / "out"
+    args = ["verify", "-n", "300", "--set", "scenario.duration=2", "--long-run", "0", "--out", str(out)]
+    assert "matplotlib" in _command_loaded(args, PLOTTING)
+    assert (out / "report.html").is_file()
