@@ -159,9 +159,7 @@ def test_the_run_numbers_are_checked_once_per_page(copy_run, monkeypatch, job):
     def stop(*args, **kwargs):
         raise _Stop
 
-    import kalcal.reporting.figures
-
-    monkeypatch.setattr(kalcal.reporting.figures, "render_figures", stop)  # imported where the page is drawn
+    monkeypatch.setattr(report_job, "render_figures", stop)
     run = copy_run()
     with pytest.raises(_Stop):
         if job == "render_report":
