@@ -7,7 +7,7 @@ from kalcal.jobs.report import draw_realization
 from kalcal.jobs.verify import verify
 from kalcal.models.registry import build_scenario
 from kalcal.montecarlo.scenarios import build_problem
-from kalcal.plots.realization_data import RealizationData
+from kalcal.plots.realization import RealizationData
 
 N = 5000
 SETTINGS = ["scenario.duration=6"]

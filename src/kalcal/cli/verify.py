@@ -50,35 +50,31 @@ def verify(
     """Verify the filter with a Monte Carlo: mean error, covariance, orthogonality, whiteness, NIS."""
     import shlex
 
-    from kalcal.reporting.drawing_server import serving
-
-    # forked before the job's imports and the progress bar's thread (kalcal.reporting.drawing_server)
-    with serving(not no_report):
-        from kalcal.api.verify import verify as run_verify
-        with user_errors():
-            bar, update = _common._progress_bar(f"{scenario} x {n:,}")
-            with bar:
-                result = run_verify(
-                    scenario,
-                    n,
-                    seed,
-                    settings_of(set_),
-                    config=config,
-                    engine=engine,
-                    confidence=confidence,
-                    threads=threads,
-                    workers=workers,
-                    scheduler=scheduler,
-                    batch_size=batch_size,
-                    checkpoint=checkpoint,
-                    long_run=long_run,
-                    form=form,
-                    progress=update or False,
-                    out=out,
-                    report=not no_report,
-                    realization=realization,
-                    command=shlex.join(["kalcal", *sys.argv[1:]]),
-                )
+    from kalcal.api.verify import verify as run_verify
+    with user_errors():
+        bar, update = _common._progress_bar(f"{scenario} x {n:,}")
+        with bar:
+            result = run_verify(
+                scenario,
+                n,
+                seed,
+                settings_of(set_),
+                config=config,
+                engine=engine,
+                confidence=confidence,
+                threads=threads,
+                workers=workers,
+                scheduler=scheduler,
+                batch_size=batch_size,
+                checkpoint=checkpoint,
+                long_run=long_run,
+                form=form,
+                progress=update or False,
+                out=out,
+                report=not no_report,
+                realization=realization,
+                command=shlex.join(["kalcal", *sys.argv[1:]]),
+            )
     summary = result.run.summary
     _common._print_checks(summary)
     from kalcal.analysis.power import power_line

@@ -35,9 +35,10 @@ from kalcal.models.registry import build_scenario
 from kalcal.montecarlo.engine import BLOCK_SIZE, block_generator, block_sizes, realization
 from kalcal.montecarlo.problem import FixedGainProblem
 from kalcal.montecarlo.scenarios import build_problem
-from kalcal.plots.realization_data import RealizationData
-from kalcal.reporting import drawing_server
+from kalcal.plots.realization import RealizationData
 from kalcal.reporting.drawing import drawing_workers
+from kalcal.reporting.figures import render_figures
+from kalcal.reporting.html import build_page, write_page
 from kalcal.reporting.steady_state import steady_state_view
 from kalcal.verification.self_check import exact_prediction
 
@@ -276,50 +277,22 @@ def _draw_page(
         remedy=f"to draw a page here (a folder from a kalcal version without manifests), move {PAGE} and "
         f"{FIGURE_DIR}/ out of it first",
     ) as staging:
-        # in the figure process of a job that started one (kalcal verify), else here
-        drawing_server.call(
-            _figures_and_page,
-            staging,
-            summary,
+        figures, skipped = render_figures(
             dataset,
             data,
+            staging / FIGURE_DIR,
             long_dataset,
-            steady,
-            exact.error_cov,
-            exact.reason,
-            index,
+            scenario=str(summary["scenario"]),
+            steady=steady,
             progress=stage(progress, "figures"),
+            exact_cov=exact.error_cov,
+            exact_reason=exact.reason,
         )
+        page = build_page(summary, figures, skipped, realization=index, figure_dir_name=FIGURE_DIR, steady_state=steady)
+        write_page(staging / PAGE, page)
     if progress is not None:
         progress("report", 1, 1)
     return out / PAGE
-
-
-def _figures_and_page(
-    staging: Path, summary, dataset, data, long_dataset, steady, exact_cov, exact_reason, index: int, *, progress=None
-) -> Path:
-    """Draw the figures into ``staging/figures/`` and write ``staging/report.html``; returns the page.
-
-    Its arguments pickle (it may run in :mod:`kalcal.reporting.drawing_server`'s figure process), and it
-    imports the plotting modules itself, so that a job drawing there never imports them.
-    """
-    from kalcal.reporting.figures import render_figures
-    from kalcal.reporting.html import build_page, write_page
-
-    figures, skipped = render_figures(
-        dataset,
-        data,
-        staging / FIGURE_DIR,
-        long_dataset,
-        scenario=str(summary["scenario"]),
-        steady=steady,
-        progress=progress,
-        exact_cov=exact_cov,
-        exact_reason=exact_reason,
-    )
-    page = build_page(summary, figures, skipped, realization=index, figure_dir_name=FIGURE_DIR, steady_state=steady)
-    write_page(staging / PAGE, page)
-    return staging / PAGE
 
 
 def _require_same_run(dataset, summary: dict[str, Any], path: Path, summary_path: Path) -> None:

@@ -1,7 +1,7 @@
 """Matplotlib figures: one function per figure, presentation only.
 
 Each function takes data that is already computed (a ``stats.nc`` Dataset, or one realization as
-:class:`~kalcal.plots.realization_data.RealizationData`) and a path, and writes a PNG of a fixed pixel size
+:class:`~kalcal.plots.realization.RealizationData`) and a path, and writes a PNG of a fixed pixel size
 (900 px wide; see each docstring for the height) whose bytes depend only on the data.
 
 - :mod:`kalcal.plots.realization`: one realization, true and estimated states, errors with +-1 sigma

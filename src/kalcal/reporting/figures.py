@@ -17,7 +17,7 @@ import xarray as xr
 from kalcal.filters.steady_state import SteadyStateView
 from kalcal.plots import consistency, ensemble
 from kalcal.plots import realization as single
-from kalcal.plots.realization_data import RealizationData
+from kalcal.plots.realization import RealizationData
 from kalcal.plots.steady_state import plot_steady_state
 from kalcal.reporting.drawing import draw_all
 from kalcal.reporting.theory import SIGMA_EXACT, SIGMA_EXACT_TITLE, sigma_exact_spec
