@@ -97,3 +97,16 @@ def test_zero_buffers_and_the_pairs():
     # every sum a kernel adds into is a field of MomentSums; the pair sums come from ``residuals`` by syrk
     kernel_sums = {f.name for f in fields(MomentSums)} - {"count", "residual_outer", "normalized_residual"}
     assert set(SumBuffers._fields) == kernel_sums | {"residuals"}
+
+
+def test_the_pair_sums_are_the_bits_of_scipy_s_dsyrk_that_they_replaced():
+    """numpy's A A^T (syrk, the GIL released) gives the pair sums scipy's dsyrk (GIL held) gave, bit for bit,
+    on the engine's one BLAS thread."""
+    from scipy.linalg.blas import dsyrk
+    from threadpoolctl import threadpool_limits
+
+    from kalcal.montecarlo.accumulators import ResidualProducts
+
+    stacked = np.random.default_rng(3).standard_normal((300, 4096))
+    with threadpool_limits(1, "blas"):
+        assert np.array_equal(ResidualProducts.upper(stacked), np.triu(dsyrk(1.0, stacked.T, trans=1, lower=0)))

@@ -14,7 +14,6 @@ from dataclasses import dataclass, fields
 from typing import NamedTuple
 
 import numpy as np
-from scipy.linalg.blas import dsyrk
 
 
 class BlockResult(NamedTuple):
@@ -37,7 +36,7 @@ class ResidualProducts:
 
     @staticmethod
     def upper(stacked: np.ndarray) -> np.ndarray:
-        """Upper triangle of sum_i r_i r_i^T for the innovations of n realizations, by BLAS syrk.
+        """Upper triangle of sum_i r_i r_i^T for the innovations of n realizations, by BLAS syrk through numpy.
 
         Parameters
         ----------
@@ -47,8 +46,9 @@ class ResidualProducts:
         width, n = stacked.shape
         if n == 0:
             return np.zeros((width, width))
-        # The C-ordered (Kp, n) array is an F-ordered (n, Kp) one: syrk with trans=1 forms A^T A without a copy.
-        return np.triu(dsyrk(1.0, stacked.T, trans=1, lower=0))
+        # numpy forms A A^T of one array with its own transpose by syrk, and releases the GIL while BLAS
+        # runs, so the engine's threads overlap here; scipy.linalg.blas.dsyrk held the GIL throughout
+        return np.triu(stacked @ stacked.T)
 
 
 class SumBuffers(NamedTuple):
