@@ -99,14 +99,16 @@ def test_zero_buffers_and_the_pairs():
     assert set(SumBuffers._fields) == kernel_sums | {"residuals"}
 
 
-def test_the_pair_sums_are_the_bits_of_scipy_s_dsyrk_that_they_replaced():
-    """numpy's A A^T (syrk, the GIL released) gives the pair sums scipy's dsyrk (GIL held) gave, bit for bit,
-    on the engine's one BLAS thread."""
+
+@pytest.mark.parametrize(("width", "n"), [(300, 4096), (300, 3616), (150, 4096), (30, 17), (2, 1), (301, 4096), (5, 100)])
+def test_the_pair_sums_are_the_bits_of_scipy_s_dsyrk_that_they_replaced(width, n):
+    """The pair sums are the bits of scipy.linalg.blas.dsyrk, which they replaced for even widths K p (numpy's
+    syrk, the GIL released), for odd and even widths and any block size, on the engine's one BLAS thread."""
     from scipy.linalg.blas import dsyrk
     from threadpoolctl import threadpool_limits
 
     from kalcal.montecarlo.accumulators import ResidualProducts
 
-    stacked = np.random.default_rng(3).standard_normal((300, 4096))
+    stacked = np.random.default_rng(width).standard_normal((width, n))
     with threadpool_limits(1, "blas"):
         assert np.array_equal(ResidualProducts.upper(stacked), np.triu(dsyrk(1.0, stacked.T, trans=1, lower=0)))
