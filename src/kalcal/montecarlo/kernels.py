@@ -34,17 +34,19 @@ def standard_normals(rng, out):
 
 
 @numba.njit(nogil=True, cache=True, fastmath=FAST)
-def _filter_and_accumulate(k, truth, z, x, xbar, residual, phi, h, gains, sums, store):
+def _filter_and_accumulate(k, truth, z, x, xbar, residual, phi, h, gains, sums):
     """One update of the fixed-gain filter for every realization, then the moment sums at update k.
 
     truth (d, n): states, overwritten with the errors; z (p, n): measurements; x (d, n): posterior,
-    updated in place; residual (p, n): the innovations, formed here; sums: the block's
+    updated in place; residual (p, n): where the innovations are formed when the pairs are not kept (with
+    them, they are formed in their rows of ``sums.residuals``, not copied there); sums: the block's
     :class:`~kalcal.montecarlo.accumulators.SumBuffers` (its NEES, NIS and P sums are left to the caller:
-    every realization shares P_k and S_k); store: copy the innovations into ``sums.residuals`` (False when
-    ``residual`` is already their rows there, or the pairs are not kept).
+    every realization shares P_k and S_k).
     """
     d, n = x.shape
     p = z.shape[0]
+    keep = sums.residuals.shape[0] > 0
+    residual = sums.residuals[k * p:(k + 1) * p] if keep else residual[:]
     affine(xbar, phi, x, False)  # xbar = Phi x
     for a in range(p):  # r = z - H xbar
         for i in range(n):
@@ -58,7 +60,7 @@ def _filter_and_accumulate(k, truth, z, x, xbar, residual, phi, h, gains, sums, 
         for i in range(n):
             truth[a, i] -= x[a, i]
     shared = np.empty(0)
-    accumulate(k, 0, truth, x, residual, shared, shared, np.empty((0, 0, 0)), sums, store)
+    accumulate(k, 0, truth, x, residual, shared, shared, np.empty((0, 0, 0)), sums, not keep)
 
 
 @numba.njit(nogil=True, cache=True)
@@ -104,7 +106,6 @@ def exact_block_moments(
     step = np.empty((rc + p, n))  # this update's draws
     previous = np.empty((rc + p if c else 0, n))  # the last update's (its closing boundary samples)
     x, xbar, residual = _filter_buffers(x0, p, n)
-    keep = sums.residuals.shape[0] > 0
     for k in range(n_updates):
         standard_normals(rng, step)
         affine(y_next, transitions[k], y, False)
@@ -118,13 +119,11 @@ def exact_block_moments(
                 state[a, i] = y[a, i] + shift
         affine(z, h_truth, state, False)
         affine(z, measure, step[rc:], True)
-        # with the pairs kept, the innovations are formed in their rows of sums.residuals (no copy)
-        out = sums.residuals[k * p:(k + 1) * p] if keep else residual[:]
         if mapped:
             affine(mapped_state, error_map, state, False)  # the filter's states of the truth: M x
-            _filter_and_accumulate(k, mapped_state, z, x, xbar, out, phis[k], h, gains, sums, not keep)
+            _filter_and_accumulate(k, mapped_state, z, x, xbar, residual, phis[k], h, gains, sums)
         else:
-            _filter_and_accumulate(k, state, z, x, xbar, out, phis[k], h, gains, sums, not keep)
+            _filter_and_accumulate(k, state, z, x, xbar, residual, phis[k], h, gains, sums)
         if c:
             step, previous = previous, step
 
@@ -140,4 +139,4 @@ def filter_block_moments(states, measurements, phis, h, gains, x0, sums):
     n_updates, d, n = states.shape
     x, xbar, residual = _filter_buffers(x0, h.shape[0], n)
     for k in range(n_updates):
-        _filter_and_accumulate(k, states[k], measurements[k], x, xbar, residual, phis[k], h, gains, sums, True)
+        _filter_and_accumulate(k, states[k], measurements[k], x, xbar, residual, phis[k], h, gains, sums)

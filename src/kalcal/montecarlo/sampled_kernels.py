@@ -100,7 +100,6 @@ def sampled_block_moments(
     state = np.empty((d, n))
     z = np.empty((p, n))
     x, xbar, residual = _filter_buffers(x0, p, n)
-    keep = sums.residuals.shape[0] > 0
     for k in range(n_updates):
         standard_normals(rng, samples)
         if drifts:
@@ -116,9 +115,7 @@ def sampled_block_moments(
         if d == 4:
             for i in range(n):
                 state[3, i] = scale[i]
-        # with the pairs kept, the innovations are formed in their rows of sums.residuals (no copy)
-        out = sums.residuals[k * p:(k + 1) * p] if keep else residual[:]
-        _filter_and_accumulate(k, state, z, x, xbar, out, phis[k], h, gains, sums, not keep)
+        _filter_and_accumulate(k, state, z, x, xbar, residual, phis[k], h, gains, sums)
 
 
 def accel_gps_block_sums(scenario: AccelGpsScenario, rng: np.random.Generator, n: int, phis: np.ndarray,
