@@ -1,6 +1,6 @@
 """``python -m kalcal.cli``: the ``kalcal`` command."""
 
-from kalcal.cli import main
+from kalcal.cli import run
 
 if __name__ == "__main__":
-    main()
+    run()
