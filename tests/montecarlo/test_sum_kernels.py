@@ -101,14 +101,30 @@ def test_zero_buffers_and_the_pairs():
 
 
 @pytest.mark.parametrize(("width", "n"), [(300, 4096), (300, 3616), (150, 4096), (30, 17), (2, 1), (301, 4096), (5, 100)])
-def test_the_pair_sums_are_the_bits_of_scipy_s_dsyrk_that_they_replaced(width, n):
-    """The pair sums are the bits of scipy.linalg.blas.dsyrk, which they replaced for even widths K p (numpy's
-    syrk, the GIL released), for odd and even widths and any block size, on the engine's one BLAS thread."""
+def test_the_pair_sums_are_within_the_dot_product_bound_of_the_exact_sums_and_of_dsyrk(width, n):
+    """Each pair sum is within gamma_n sum_i |a_i b_i| of the exact one (gamma_n = n u / (1 - n u), u =
+    2^-53: the bound of any order of summation), the exact one computed in extended precision, and so within
+    twice that of scipy's dsyrk (another BLAS build, an independent oracle); for odd and even widths K p and
+    any block size, on the engine's one BLAS thread. The same bits wherever the buffer lies in memory."""
     from scipy.linalg.blas import dsyrk
     from threadpoolctl import threadpool_limits
 
     from kalcal.montecarlo.accumulators import ResidualProducts
 
     stacked = np.random.default_rng(width).standard_normal((width, n))
+    moved = np.empty(width * n + 1)[1:].reshape(width, n)  # the same values, 8 bytes off the allocation
+    moved[...] = stacked
     with threadpool_limits(1, "blas"):
-        assert np.array_equal(ResidualProducts.upper(stacked), np.triu(dsyrk(1.0, stacked.T, trans=1, lower=0)))
+        sums = ResidualProducts.upper(stacked)
+        again = ResidualProducts.upper(moved)
+        oracle = np.triu(dsyrk(1.0, stacked.T, trans=1, lower=0))
+    assert np.array_equal(sums, again)
+    upper = np.triu(np.ones((width, width), dtype=bool))
+    assert np.all(sums[~upper] == 0.0) and np.all(oracle[~upper] == 0.0)
+    extended = stacked.astype(np.longdouble)
+    exact = (extended @ extended.T)[upper]
+    scale = (np.abs(stacked) @ np.abs(stacked).T)[upper]
+    u = 2.0**-53
+    gamma = n * u / (1 - n * u) + n * float(np.finfo(np.longdouble).eps)  # and the reference's own rounding
+    assert np.all(np.abs(sums[upper] - exact) <= gamma * scale)
+    assert np.all(np.abs(sums[upper] - oracle[upper]) <= 2 * gamma * scale)

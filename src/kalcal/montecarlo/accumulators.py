@@ -36,8 +36,12 @@ class ResidualProducts:
 
     @staticmethod
     def upper(stacked: np.ndarray) -> np.ndarray:
-        """Upper triangle of sum_i r_i r_i^T for the innovations of n realizations, by BLAS syrk: numpy's,
-        which releases the GIL, for an even K p, scipy's dsyrk otherwise (the same bits either way).
+        """Upper triangle of sum_i r_i r_i^T for the innovations of n realizations, by numpy's BLAS syrk.
+
+        numpy forms A A^T of one array with its own transpose by syrk and releases the GIL while BLAS runs,
+        so the engine's threads overlap here. Its last bits are those of the BLAS numpy carries on this CPU
+        (scipy's dsyrk, another build, may round an element an ulp apart); each element is within
+        gamma_n sum_i |r_ai r_bi| of the exact sum, gamma_n = n u / (1 - n u), u = 2^-53.
 
         Parameters
         ----------
@@ -47,15 +51,7 @@ class ResidualProducts:
         width, n = stacked.shape
         if n == 0:
             return np.zeros((width, width))
-        if width % 2 == 0:
-            # numpy forms A A^T of one array with its own transpose by syrk and releases the GIL while BLAS
-            # runs, so the engine's threads overlap here; for an even width its bits are dsyrk's
-            return np.triu(stacked @ stacked.T)
-        # an odd width: numpy's syrk (OpenBLAS's lower-triangle kernel) rounds an edge differently, so
-        # scipy's dsyrk, which holds the GIL; the C-ordered (Kp, n) array is an F-ordered (n, Kp) one
-        from scipy.linalg.blas import dsyrk
-
-        return np.triu(dsyrk(1.0, stacked.T, trans=1, lower=0))
+        return np.triu(stacked @ stacked.T)
 
 
 class SumBuffers(NamedTuple):
