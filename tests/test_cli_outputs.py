@@ -320,7 +320,7 @@ def test_an_interrupted_redraw_leaves_the_old_page_and_figures(previous, monkeyp
         (figure_dir / "state_position.png").write_bytes(b"half a figure")
         raise KeyboardInterrupt
 
-    monkeypatch.setattr("kalcal.jobs.report.render_figures", half_drawn)
+    monkeypatch.setattr("kalcal.reporting.figures.render_figures", half_drawn)
     result = _invoke("report", out, "--realization", "3", catch=True)
     assert result.exit_code != 0
     assert _tree(out) == before

@@ -34,9 +34,12 @@ def report(
     KalcalError
         The folder is not a finished verification run, or ``realization`` is out of range.
     """
-    from kalcal.jobs.report import FIGURE_DIR, render_report
+    from kalcal.reporting.figure_process import REPORT_FIGURES, figure_process
 
     directory = Path(directory)
-    with progress_callback(progress, str(directory)) as update:
-        page = render_report(directory, realization=realization, progress=update)
+    with figure_process(REPORT_FIGURES):  # loads the plotting code while the run's files are read
+        from kalcal.jobs.report import FIGURE_DIR, render_report
+
+        with progress_callback(progress, str(directory)) as update:
+            page = render_report(directory, realization=realization, progress=update)
     return {"report": page, "figures": directory / FIGURE_DIR}

@@ -35,9 +35,9 @@ from kalcal.models.registry import build_scenario
 from kalcal.montecarlo.engine import BLOCK_SIZE, block_generator, block_sizes, realization
 from kalcal.montecarlo.problem import FixedGainProblem
 from kalcal.montecarlo.scenarios import build_problem
-from kalcal.plots.realization import RealizationData
+from kalcal.plots.realization_data import RealizationData
 from kalcal.reporting.drawing import drawing_workers
-from kalcal.reporting.figures import render_figures
+from kalcal.reporting.figure_process import REPORT_FIGURES, call
 from kalcal.reporting.html import build_page, write_page
 from kalcal.reporting.steady_state import steady_state_view
 from kalcal.verification.self_check import exact_prediction
@@ -277,7 +277,8 @@ def _draw_page(
         remedy=f"to draw a page here (a folder from a kalcal version without manifests), move {PAGE} and "
         f"{FIGURE_DIR}/ out of it first",
     ) as staging:
-        figures, skipped = render_figures(
+        figures, skipped = call(  # in the job's figure process, where it has one
+            REPORT_FIGURES,
             dataset,
             data,
             staging / FIGURE_DIR,

@@ -19,7 +19,6 @@ from kalcal.filters.gains import run_with_gains
 from kalcal.filters.steps import GainSchedule, UpdateForm, covariance_pass
 from kalcal.linalg import whitener
 from kalcal.models.linear import LinearGaussianModel
-from kalcal.montecarlo import kernels
 from kalcal.montecarlo.accumulators import BlockResult, MomentSums, SumBuffers
 from kalcal.simulation.exact import UpdateRateTruth, sample_exact
 
@@ -166,6 +165,7 @@ class FixedGainProblem:
 
     def block_sums(self, rng: np.random.Generator, n: int, engine: str) -> MomentSums:
         """The moment sums of n realizations through the compiled kernels (same draws as ``run_block``)."""
+        from kalcal.montecarlo import kernels  # numba: loaded by the runs, not by what only describes a problem
         n_updates, d, p = self.truth.n_updates, self.filter_model.state_dim, self.filter_model.measurement_dim
         sums = SumBuffers.zeros(n_updates, d, p, n, self.residual_pairs)
         phis = np.ascontiguousarray(self.schedule.transitions)

@@ -23,7 +23,6 @@ from kalcal.filters.steps import gain_and_covariance, predict_covariance
 from kalcal.models.scale_bias import MEASUREMENT_NAMES, STATE_NAMES, ScaleBiasScenario
 from kalcal.montecarlo.accumulators import BlockResult, MomentSums, SumBuffers
 from kalcal.montecarlo.problem import ProblemInfo, check_engine
-from kalcal.montecarlo.regression_kernels import regression_block_moments
 from kalcal.simulation.scale_bias import normals_per_realization, sample_scale_bias
 
 
@@ -173,6 +172,8 @@ class ScaleBiasProblem:
 
         ``MomentSums.from_block(self.run_block(rng, n, engine))`` is the numpy oracle of the tests.
         """
+        from kalcal.montecarlo.regression_kernels import regression_block_moments  # numba: loaded by the runs
+
         check_engine(self, engine)
         samples = sample_scale_bias(self.scenario, rng, n)
         prior = self.scenario.filter_prior()

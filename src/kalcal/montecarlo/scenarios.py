@@ -14,7 +14,6 @@ from kalcal.models.linear import LinearGaussianModel
 from kalcal.models.settings import SettingError, show
 from kalcal.models.scale_bias import ScaleBiasScenario
 from kalcal.montecarlo.problem import FixedGainProblem, Problem, ProblemInfo
-from kalcal.montecarlo.sampled_kernels import accel_gps_block_sums
 from kalcal.montecarlo.scale_bias import ScaleBiasProblem, model_error_cause
 from kalcal.simulation.exact import accel_gps_transitions, accel_gps_truth, truth_from_model
 from kalcal.simulation.sampled import sample_accel_gps_errors
@@ -67,7 +66,7 @@ def accel_gps_problem(
         filter_transitions=accel_gps_filter_transitions(scenario, filter_model) if scenario.has_scale else None,
         sampled=partial(sample_accel_gps_errors, scenario),
         sampled_normals=sampled_normals_per_realization(scenario),
-        sampled_block=partial(accel_gps_block_sums, scenario),
+        sampled_block=partial(_sampled_block, scenario),
         form=form,
         residual_pairs=residual_pairs,
     )
@@ -161,3 +160,11 @@ def build_problem(scenario, form: UpdateForm = "joseph", residual_pairs: bool = 
     if isinstance(scenario, CustomModelScenario):
         return custom_problem(scenario, form, residual_pairs), custom_model_error_cause(scenario)
     raise TypeError(f"no verification problem for {type(scenario).__name__}")
+
+
+def _sampled_block(scenario, *args):
+    """The sampled engine's compiled block (:func:`kalcal.montecarlo.sampled_kernels.accel_gps_block_sums`),
+    its numba module loaded when a run first calls it, not when a problem is built."""
+    from kalcal.montecarlo.sampled_kernels import accel_gps_block_sums
+
+    return accel_gps_block_sums(scenario, *args)

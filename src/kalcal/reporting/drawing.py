@@ -47,7 +47,10 @@ def drawing_workers(figures: int) -> int:
 
 
 def _quiet_worker() -> None:
+    from kalcal.reporting.figure_process import die_with_parent
+
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    die_with_parent()  # on Linux: gone with the process that drew the page, should it be killed
 
 
 def _draw(index: int, path: Path) -> Path:

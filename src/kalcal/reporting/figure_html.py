@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from kalcal.reporting.figures import GROUPS, FigureEntry, SkippedFigure
+from kalcal.reporting.figure_entries import GROUPS, FigureEntry, SkippedFigure
 from kalcal.reporting.markup import esc, table
 from kalcal.filters.steady_state import SteadyStateView
 from kalcal.verification.text import fmt

@@ -17,9 +17,10 @@ import xarray as xr
 from kalcal.filters.steady_state import SteadyStateView
 from kalcal.plots import consistency, ensemble
 from kalcal.plots import realization as single
-from kalcal.plots.realization import RealizationData
+from kalcal.plots.realization_data import RealizationData
 from kalcal.plots.steady_state import plot_steady_state
 from kalcal.reporting.drawing import draw_all
+from kalcal.reporting.figure_entries import GROUPS, FigureEntry, SkippedFigure  # noqa: F401 (re-exported)
 from kalcal.reporting.theory import SIGMA_EXACT, SIGMA_EXACT_TITLE, sigma_exact_spec
 
 #: the scenario of the source report, whose figure numbers the page quotes
@@ -39,37 +40,6 @@ REPORT_NUMBERS = {
     "orthogonality_diagonal": "5.11",
     "orthogonality_offdiagonal": "5.12",
 }
-
-GROUPS = (
-    ("realization", "One realization"),
-    ("ensemble", "Ensemble statistics"),
-    ("consistency", "Consistency, whiteness and model error"),
-    ("steady_state", "Steady state"),
-)
-
-
-@dataclass(frozen=True)
-class FigureEntry:
-    """One drawn figure: ``path`` is its PNG; ``number`` the source report's figure number, if any."""
-
-    key: str
-    group: str
-    title: str
-    caption: str
-    path: Path
-    number: str | None = None
-
-
-@dataclass(frozen=True)
-class SkippedFigure:
-    """A figure that could not be drawn from this run, and why."""
-
-    key: str
-    group: str
-    title: str
-    reason: str
-    number: str | None = None
-
 
 @dataclass(frozen=True)
 class _Spec:

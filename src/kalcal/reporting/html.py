@@ -21,7 +21,7 @@ import jinja2
 from markupsafe import Markup
 
 from kalcal.reporting.figure_html import figures_section
-from kalcal.reporting.figures import FigureEntry, SkippedFigure
+from kalcal.reporting.figure_entries import FigureEntry, SkippedFigure
 from kalcal.reporting.markup import esc
 from kalcal.reporting.run_tables import final_table, reproduce_section, settings_section, timing_section
 from kalcal.filters.steady_state import SteadyStateView

@@ -6,7 +6,6 @@ from collections.abc import Mapping
 from typing import Any
 
 from kalcal.analysis.power import power_line
-from kalcal.plots.ensemble import plot_sigma_exact
 from kalcal.reporting.markup import esc, table
 from kalcal.verification.text import fmt
 
@@ -25,6 +24,8 @@ SIGMA_EXACT_CAPTION = (
 
 def sigma_exact_spec(dataset, exact_cov) -> tuple:
     """(key, group, title, caption, draw) of the figure, ``draw(path)`` plotting ``stats.nc`` against P_true (K, d, d)."""
+    from kalcal.plots.ensemble import plot_sigma_exact  # matplotlib: where the figures are drawn, not the page
+
     return SIGMA_EXACT, "ensemble", SIGMA_EXACT_TITLE, SIGMA_EXACT_CAPTION, lambda path: plot_sigma_exact(dataset, exact_cov, path)
 
 

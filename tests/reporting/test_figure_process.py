@@ -1,0 +1,219 @@
+"""The figure process (:mod:`kalcal.reporting.figure_process`): calls run there and answer here, errors
+and progress come back, an interrupt stops it before the error goes on, a dead one is drawn around, it
+dies with the job, and the commands that draw never load matplotlib themselves."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from kalcal.errors import DataError
+from kalcal.reporting import figure_process as fp
+
+CALLS = "tests.reporting.figure_calls"
+linux_only = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    with open(f"/proc/{pid}/stat") as handle:  # a zombie (not reaped yet) has ended
+        return handle.read().split(")")[1].split()[0] != "Z"
+
+
+def test_a_call_runs_in_the_figure_process_and_passes_its_progress_back():
+    seen = []
+    with fp.figure_process(f"{CALLS}:pid_and_progress", start=True) as process:
+        assert process is not None
+        pid = fp.call(f"{CALLS}:pid_and_progress", 3, progress=lambda done, total: seen.append((done, total)))
+        assert pid != os.getpid()  # drawn there
+        assert fp.call("os:getpid") == pid  # one process, one call at a time
+    assert seen == [(1, 3), (2, 3), (3, 3)]
+    assert process.ended and not _alive(pid)  # the block's end ends it
+
+
+def test_without_a_figure_process_a_call_runs_here():
+    with fp.figure_process(f"{CALLS}:pid_and_progress", start=False) as process:
+        assert process is None
+        assert fp.call(f"{CALLS}:pid_and_progress", 2) == os.getpid()
+    assert fp.call("os:getpid") == os.getpid()  # outside any block too
+
+
+def test_an_error_there_is_raised_here_as_itself():
+    with fp.figure_process(f"{CALLS}:refuse", start=True):
+        with pytest.raises(DataError, match="^x.png: cannot be drawn$"):
+            fp.call(f"{CALLS}:refuse", "x.png")
+        assert fp.call("os:getpid") != os.getpid()  # still there for the next call
+
+
+def test_a_dead_figure_process_is_drawn_around_here():
+    with fp.figure_process("os:getpid", start=True) as process:
+        process._process.kill()
+        process._process.wait()
+        assert fp.call("os:getpid") == os.getpid()
+        assert process.ended
+        assert fp.call("os:getpid") == os.getpid()  # and so are the later calls
+
+
+def test_modules_that_do_not_load_there_leave_the_calls_to_this_process():
+    with fp.figure_process("kalcal_no_such_module:draw", start=True):
+        assert fp.call("os:getpid") == os.getpid()
+
+
+def test_a_pending_call_gives_its_result_once_and_cancel_stops_the_process(tmp_path):
+    with fp.figure_process(f"{CALLS}:slow_files", start=True) as process:
+        pending = fp.submit(f"{CALLS}:slow_files", str(tmp_path), 2)
+        assert [p.name for p in pending.result()] == ["f0.txt", "f1.txt"]
+        assert pending.result() == pending.result()
+        cancelled = fp.submit(f"{CALLS}:slow_files", str(tmp_path / "second"), 12, progress=lambda d, t: None)
+        cancelled.cancel()
+        assert process.ended and process._process.poll() is not None  # stopped and waited for
+        written = sorted(p.name for p in (tmp_path / "second").glob("*.txt"))
+        time.sleep(0.8)
+        assert sorted(p.name for p in (tmp_path / "second").glob("*.txt")) == written  # nothing after
+        assert len(written) < 12
+
+
+def test_an_interrupt_while_waiting_stops_the_figures_before_it_goes_on(tmp_path):
+    def progress(done, total):
+        if done == 2:
+            raise KeyboardInterrupt
+
+    with fp.figure_process(f"{CALLS}:slow_files", start=True) as process:
+        with pytest.raises(KeyboardInterrupt):
+            fp.call(f"{CALLS}:slow_files", str(tmp_path), 20, progress=progress)
+        assert process.ended and process._process.poll() is not None
+        written = {p.name for p in tmp_path.glob("*.txt")}
+        time.sleep(0.8)  # its workers (forked there) have gone too: nothing more is written
+        assert {p.name for p in tmp_path.glob("*.txt")} == written
+        assert 2 <= len(written) < 20
+        assert fp.call("os:getpid") == os.getpid()  # later calls are drawn here
+
+
+@linux_only
+def test_the_figure_process_dies_with_the_job_even_in_the_middle_of_a_call():
+    code = (
+        "import sys, time\n"
+        "from kalcal.reporting import figure_process as fp\n"
+        "with fp.figure_process('os:getpid', start=True):\n"
+        "    print(fp.call('os:getpid'), flush=True)\n"
+        "    fp.submit('time:sleep', 60)\n"  # busy there: it would not read its connection for a minute
+        "    time.sleep(60)\n"
+    )
+    job = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    try:
+        helper = int(job.stdout.readline())
+        time.sleep(0.3)
+        assert _alive(helper)
+    finally:
+        job.kill()
+        job.wait()
+    deadline = time.monotonic() + 10
+    while _alive(helper) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not _alive(helper)
+
+
+@linux_only
+def test_its_drawing_workers_die_with_it(tmp_path):
+    with fp.figure_process(f"{CALLS}:slow_files", start=True) as process:
+        fp.submit(f"{CALLS}:slow_files", str(tmp_path), 40)
+        deadline = time.monotonic() + 30
+        while len(list(tmp_path.glob("*.txt"))) < 2 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        process._process.kill()
+        process._process.wait()
+        time.sleep(0.1)
+        written = {p.name: p.read_text() for p in tmp_path.glob("*.txt")}
+        workers = {int(pid) for pid in written.values()}
+        assert len(written) >= 2 and workers
+        time.sleep(0.8)  # a worker left running would finish its figure in 0.3 s
+        assert {p.name for p in tmp_path.glob("*.txt")} == set(written)
+        assert not any(_alive(pid) for pid in workers)
+
+
+def test_it_starts_only_where_it_helps(monkeypatch):
+    import matplotlib  # noqa: F401 (this process has it: figures are drawn here, with its rcParams)
+
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
+    assert not fp._helps()
+    monkeypatch.delitem(sys.modules, "matplotlib")
+    assert fp._helps()
+    monkeypatch.setenv("KALCAL_FIGURE_PROCESSES", "1")  # draw in this process
+    assert not fp._helps()
+    monkeypatch.setenv("KALCAL_FIGURE_PROCESSES", "2")
+    assert fp._helps()
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0})  # one CPU: nothing to overlap
+    assert not fp._helps()
+    with fp.figure_process("os:getpid") as process:
+        assert process is None
+
+
+def _loaded_after(args: list[str], env: dict | None = None) -> tuple[list[str], str]:
+    code = (
+        "import sys\n"
+        f"sys.argv = ['kalcal', *{args!r}]\n"
+        "from kalcal.cli import main\n"
+        "try:\n    main()\nexcept SystemExit as exc:\n    assert not exc.code, exc.code\n"
+        "print([m for m in ('matplotlib',) if m in sys.modules])\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=600, env={**os.environ, **(env or {})}
+    )
+    assert done.returncode == 0, done.stderr
+    return eval(done.stdout.strip().splitlines()[-1]), done.stdout
+
+
+SHORT_VERIFY = ["verify", "-n", "200", "--set", "scenario.duration=4", "--long-run", "0"]
+
+
+def test_kalcal_verify_draws_its_page_without_loading_matplotlib_the_same_bytes(tmp_path):
+    loaded, _ = _loaded_after([*SHORT_VERIFY, "--out", str(tmp_path / "there")])
+    assert loaded == []  # every figure was drawn in the figure process
+    here, _ = _loaded_after([*SHORT_VERIFY, "--out", str(tmp_path / "here")], {"KALCAL_FIGURE_PROCESSES": "1"})
+    assert here == ["matplotlib"]
+    there = sorted((tmp_path / "there" / "figures").glob("*.png"))
+    assert len(there) >= 10
+    for path in there:
+        assert path.read_bytes() == (tmp_path / "here" / "figures" / path.name).read_bytes(), path.name
+    drawn = {path.name: path.read_bytes() for path in there}
+    redrawn, _ = _loaded_after(["report", str(tmp_path / "here")])  # kalcal report: the same, there too
+    assert redrawn == []
+    assert {path.name: path.read_bytes() for path in (tmp_path / "here" / "figures").glob("*.png")} == drawn
+
+
+def test_kalcal_calibrate_draws_its_figure_without_loading_matplotlib_the_same_bytes(tmp_path):
+    logs = tmp_path / "logs"
+    simulated = subprocess.run(
+        [sys.executable, "-m", "kalcal", "simulate", "accel-gps", "--seed", "3", "--set", "scenario.duration=60",
+         "--out", str(logs)], capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+    assert simulated.returncode == 0, simulated.stderr
+    args = ["calibrate", "accel-gps", "--imu", str(logs / "imu.csv"), "--gps", str(logs / "gps.csv")]
+    loaded, _ = _loaded_after([*args, "--out", str(tmp_path / "there")])
+    assert loaded == []
+    _loaded_after([*args, "--out", str(tmp_path / "here")], {"KALCAL_FIGURE_PROCESSES": "1"})
+    figure = (tmp_path / "there" / "calibration.png").read_bytes()
+    assert figure == (tmp_path / "here" / "calibration.png").read_bytes()
+
+
+@linux_only
+def test_the_imports_run_at_the_lowest_priority_and_the_drawing_at_the_process_s(monkeypatch):
+    import importlib
+    import threading
+
+    own = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
+    seen = []
+    monkeypatch.setattr(
+        importlib, "import_module", lambda name: seen.append(os.getpriority(os.PRIO_PROCESS, threading.get_native_id()))
+    )
+    assert fp._load(("a", "b"))
+    assert seen == [19, 19]
+    assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) == own  # the thread that forks the workers
