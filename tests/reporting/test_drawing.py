@@ -83,6 +83,22 @@ def test_an_error_drops_the_figures_not_started_and_leaves_no_process(tmp_path):
     assert len(list(tmp_path.glob("*.png"))) < 10  # not every figure was drawn after the error
 
 
+def _fail_late(path):
+    time.sleep(0.5)
+    raise DataError(f"{path.name}: cannot be drawn")
+
+
+@needs_fork
+def test_the_error_raised_is_the_first_failing_figure_s_in_page_order_as_drawn_one_by_one(tmp_path):
+    """The second figure fails at once, the first half a second later: the first one's error, whichever
+    the workers met first."""
+    paths = [tmp_path / f"f{i}.png" for i in range(2)]
+    with pytest.raises(DataError, match="^f0.png: cannot be drawn$"):
+        drawing.draw_all([_fail_late, _fail], paths, workers=2)
+    with pytest.raises(DataError, match="^f0.png: cannot be drawn$"):
+        drawing.draw_all([_fail_late, _fail], paths, workers=1)
+
+
 def test_fallback_to_this_process(monkeypatch):
     monkeypatch.delenv(drawing.PROCESSES_ENV, raising=False)
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1, 2, 3})

@@ -86,6 +86,12 @@ def draw_all(
         futures = {pool.submit(_draw, index, paths[index]): index for index in range(total)}
         written: list[Path | None] = [None] * total
         for done, future in enumerate(as_completed(futures), start=1):
+            if future.exception() is not None:
+                # the figures not started are dropped, the running ones finish; the error raised is that of
+                # the first figure in page order that failed, as drawing them one after another would meet it
+                pool.shutdown(wait=True, cancel_futures=True)
+                failed = [f for f in futures if not f.cancelled() and f.exception() is not None]
+                raise min(failed, key=futures.__getitem__).exception()
             written[futures[future]] = future.result()
             if progress is not None:
                 progress(done, total)
