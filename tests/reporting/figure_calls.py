@@ -32,3 +32,11 @@ def slow_files(directory: str, total: int, progress=None) -> list[Path]:
     """``total`` files of 0.3 s each, written by two forked workers as a page's figures are."""
     paths = [Path(directory) / f"f{i}.txt" for i in range(total)]
     return draw_all([_slow_file] * total, paths, workers=2, progress=progress)
+
+
+def pid_of(_anything) -> int:
+    return os.getpid()
+
+
+def unpicklable_result():
+    return lambda: None

@@ -97,6 +97,36 @@ def test_an_interrupt_while_waiting_stops_the_figures_before_it_goes_on(tmp_path
         assert fp.call("os:getpid") == os.getpid()  # later calls are drawn here
 
 
+def test_a_call_cancelled_before_the_figure_process_took_it_is_never_run(tmp_path):
+    with fp.figure_process("tests.reporting.slow_import:draw", f"{CALLS}:slow_files", start=True) as process:
+        pending = fp.submit(f"{CALLS}:slow_files", str(tmp_path), 4)  # sent while it is still loading
+        pending.cancel()
+        assert process.ended and process._process.poll() is not None
+    assert list(tmp_path.glob("*.txt")) == []
+
+
+def test_the_figure_process_has_a_session_of_its_own():
+    """The terminal's Ctrl-C (sent to the foreground process group) is the job's alone."""
+    with fp.figure_process("os:getpid", start=True):
+        helper = fp.call("os:getpid")
+        assert os.getsid(helper) == helper != os.getsid(0)
+
+
+def test_a_stray_module_in_the_current_folder_does_not_reach_the_figure_process(tmp_path, monkeypatch):
+    (tmp_path / "socket.py").write_text("raise ImportError('the current folder was imported from')\n")
+    monkeypatch.chdir(tmp_path)
+    with fp.figure_process("os:getpid", start=True):
+        assert fp.call("os:getpid") != os.getpid()
+
+
+def test_arguments_or_results_that_do_not_pickle_are_neither_lost_nor_fatal():
+    with fp.figure_process(f"{CALLS}:pid_of", start=True):
+        assert fp.call(f"{CALLS}:pid_of", lambda: None) == os.getpid()  # drawn here
+        with pytest.raises(RuntimeError, match="unpicklable_result: its result could not be sent back"):
+            fp.call(f"{CALLS}:unpicklable_result")
+        assert fp.call("os:getpid") != os.getpid()  # the figure process is still there
+
+
 @linux_only
 def test_the_figure_process_dies_with_the_job_even_in_the_middle_of_a_call():
     code = (

@@ -42,15 +42,22 @@ def drawing_workers(figures: int) -> int:
         raise ConfigError(f"{PROCESSES_ENV}: expected a whole number >= 1, got {cap!r}")
     if "fork" not in multiprocessing.get_all_start_methods():
         return 1
-    limit = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    limit = usable_cpus()
     return max(1, min(limit, int(cap) if cap else limit, figures))
 
 
-def _quiet_worker() -> None:
+def usable_cpus() -> int:
+    """The CPUs this process may run on (its affinity where the system says, else the machine's)."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+def _quiet_worker(parent: int) -> None:
     from kalcal.reporting.figure_process import die_with_parent
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     die_with_parent()  # on Linux: gone with the process that drew the page, should it be killed
+    if os.getppid() != parent:  # it was, before the kernel could be told
+        os._exit(1)
 
 
 def _draw(index: int, path: Path) -> Path:
@@ -81,7 +88,7 @@ def draw_all(
                 progress(done, total)
         return written
     _DRAWS = draws
-    pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"), initializer=_quiet_worker)
+    pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"), initializer=_quiet_worker, initargs=(os.getpid(),))
     try:
         futures = {pool.submit(_draw, index, paths[index]): index for index in range(total)}
         written: list[Path | None] = [None] * total

@@ -14,7 +14,8 @@ when this process has not loaded matplotlib yet (a notebook that has keeps drawi
 rcParams), and unless :data:`~kalcal.reporting.drawing.PROCESSES_ENV` is 1 (draw in this process). Without
 it, :func:`call` imports the function and runs it here.
 
-The process ignores SIGINT (an interrupt is the job's to handle) and, on Linux, is killed when the job's
+The process runs in a session of its own and ignores SIGINT (an interrupt is the job's to handle: the
+terminal's Ctrl-C never reaches it) and, on Linux, is killed when the job's
 process dies (``PR_SET_PDEATHSIG``), as are its drawing workers. When the job stops (an error, Ctrl-C,
 SIGTERM) it asks the process to stop: the figures not yet started are dropped, the running ones finish,
 and the process is waited for before the error goes on, so that nothing is written after the job's
@@ -33,6 +34,7 @@ import sys
 import threading
 from collections.abc import Callable, Iterator
 from multiprocessing.connection import Connection, Pipe
+from multiprocessing.reduction import ForkingPickler
 from typing import Any
 
 __all__ = ["CALIBRATION_FIGURE", "REPORT_FIGURES", "PendingFigure", "call", "figure_process", "submit"]
@@ -50,6 +52,7 @@ _POLL_S = 0.1
 # the child's first lines: its sys.path comes from the job, so it imports the job's kalcal
 _BOOTSTRAP = (
     "import sys\n"
+    "del sys.path[0]\n"  # -c puts the current folder first: a stray socket.py there is not imported
     "from multiprocessing.connection import Connection\n"
     "connection = Connection(int(sys.argv[1]))\n"
     "sys.path[:] = connection.recv()\n"
@@ -60,6 +63,10 @@ _BOOTSTRAP = (
 
 class _Stop(Exception):
     """The job asked the figure process to stop (raised in it, inside the drawing's progress callback)."""
+
+
+class _NotSent(Exception):
+    """The call's arguments do not pickle: it is drawn in the job's process."""
 
 
 class FigureProcessDied(RuntimeError):
@@ -90,6 +97,7 @@ class FigureProcess:
                 pass_fds=(child.fileno(),),
                 stdin=subprocess.DEVNULL,
                 stdout=subprocess.DEVNULL,
+                start_new_session=True,  # the terminal's Ctrl-C is the job's, from the child's first instant
             )
         finally:
             child.close()
@@ -99,15 +107,27 @@ class FigureProcess:
         self.busy = False  # a call sent and not answered yet
         self.ended = False  # stopped or dead: calls are then drawn in the job's process
 
+    def _died(self) -> FigureProcessDied:
+        """It has ended without answering: marked so (later calls are drawn here), and the error to raise."""
+        self._process.wait()
+        self.busy, self.ended = False, True
+        return FigureProcessDied(f"the figure process ended (status {self._process.returncode})")
+
     def request(self, name: str, args: tuple, kwargs: dict[str, Any]) -> None:
-        """Send the call of ``name`` (``"module:function"``) with its arguments; :meth:`answer` waits for it."""
+        """Send the call of ``name`` (``"module:function"``) with its arguments; :meth:`answer` waits for it.
+
+        Busy from before the send: an interrupt during it leaves a call that :meth:`stop` waits for.
+        Arguments that do not pickle leave the call to this process (FigureProcessDied is not raised
+        then: the process stays for later calls)."""
         try:
-            self._connection.send(("call", name, args, kwargs))
-        except OSError:
-            self.ended = True
-            self._process.wait()
-            raise FigureProcessDied(f"the figure process ended (status {self._process.returncode})") from None
+            message = ForkingPickler.dumps(("call", name, args, kwargs))
+        except Exception:
+            raise _NotSent from None
         self.busy = True
+        try:
+            self._connection.send_bytes(message)
+        except OSError:
+            raise self._died() from None
 
     def answer(self, progress: Callable[[int, int], None] | None) -> Any:
         """Wait for the answer to the call sent, passing its progress on; its error is raised here.
@@ -119,12 +139,11 @@ class FigureProcess:
             while True:
                 while not self._connection.poll(_POLL_S):
                     if self._process.poll() is not None:
-                        raise FigureProcessDied(f"the figure process ended (status {self._process.returncode})")
+                        raise self._died()
                 try:
                     kind, *payload = self._connection.recv()
                 except (EOFError, OSError):
-                    self._process.wait()
-                    raise FigureProcessDied(f"the figure process ended (status {self._process.returncode})") from None
+                    raise self._died() from None
                 if kind == "progress":
                     if progress is not None:
                         progress(*payload)
@@ -133,11 +152,8 @@ class FigureProcess:
                 if kind == "error":
                     raise payload[0]
                 return payload[0]
-        except FigureProcessDied:
-            self.busy, self.ended = False, True
-            raise
         except BaseException:
-            if self.busy:
+            if self.busy:  # not after FigureProcessDied: it has ended
                 self.stop()
             raise
 
@@ -153,16 +169,17 @@ class FigureProcess:
                 self._connection.send(("stop",))
             else:
                 self._process.kill()
+            self._connection.close()
         except OSError:
             pass  # it has gone already
-        self.busy = False
-        self._connection.close()
-        try:
-            self._process.wait()
-        except BaseException:
-            self._process.kill()  # a second interrupt while waiting: it goes now
-            self._process.wait()
-            raise
+        finally:
+            self.busy = False
+            try:
+                self._process.wait()
+            except BaseException:
+                self._process.kill()  # a second interrupt while waiting (or sending): it goes now
+                self._process.wait()
+                raise
 
 
 class PendingFigure:
@@ -174,7 +191,7 @@ class PendingFigure:
         if process is not None:
             try:
                 process.request(name, args, {**kwargs, **({"progress": True} if progress is not None else {})})
-            except FigureProcessDied:
+            except (FigureProcessDied, _NotSent):
                 self._done = True
         if self._done:
             self._value = _run_here(name, args, kwargs, progress)
@@ -196,18 +213,14 @@ class PendingFigure:
             self._process.stop()
 
 
-def _usable_cpus() -> int:
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-
-
 def _helps() -> bool:
     """Whether a figure process would save this job time (see the module's docstring)."""
-    from kalcal.reporting.drawing import PROCESSES_ENV
+    from kalcal.reporting.drawing import PROCESSES_ENV, usable_cpus
 
     return (
         os.name == "posix"
         and "matplotlib" not in sys.modules
-        and _usable_cpus() >= 2
+        and usable_cpus() >= 2
         and os.environ.get(PROCESSES_ENV, "").strip() != "1"
     )
 
@@ -275,11 +288,13 @@ def serve(connection: Connection) -> None:
     while True:
         try:
             message = connection.recv()
-        except (EOFError, OSError):
+        except Exception:  # closed, or cut short by an interrupt in the job's send
             return
         if message[0] != "call":  # a stop, even one that came after its call had finished
             return
         _, name, args, kwargs = message
+        if connection.poll():  # the job stopped before this call was taken (while loading, say)
+            return
         if kwargs.pop("progress", None):
             kwargs["progress"] = _progress_sender(connection)
         try:
@@ -292,6 +307,9 @@ def serve(connection: Connection) -> None:
             connection.send(result)
         except (OSError, ValueError):
             return
+        except Exception as exc:  # a result that does not pickle: said as an error, not a dead process
+            with contextlib.suppress(OSError, ValueError):
+                connection.send(("error", RuntimeError(f"{name}: its result could not be sent back ({exc})")))
 
 
 def _load(modules: tuple[str, ...]) -> bool:
