@@ -105,6 +105,15 @@ def test_a_scale_bias_calibrate_command_loads_no_plotting_or_numba(tmp_path):
     assert (tmp_path / "out" / "estimates.csv").is_file()
 
 
+def test_a_command_parses_its_options_without_pydantic(tmp_path):
+    """typer 0.29 validates every option through pydantic (0.17 s a command): the pin below it keeps a
+    command's parse to typer's own conversions (pyproject.toml)."""
+    rows = "\n".join(f"{0.1 * i!r},{1.01 * (i % 7) + 0.1 + 0.01 * ((i * 37) % 11 - 5)!r}" for i in range(200))
+    (tmp_path / "log.csv").write_text("reference,sensor\n" + rows + "\n")
+    args = ["calibrate", "scale-bias", "--data", str(tmp_path / "log.csv"), "--out", str(tmp_path / "out")]
+    assert _command_loaded(args, ("pydantic",)) == []
+
+
 def test_the_command_line_runs_no_full_collection_while_the_libraries_load():
     """Loading numpy, pandas, numba, matplotlib and scipy.special runs full collections of the garbage
     collector at Python's thresholds, none at the command line's; the young generations keep theirs."""
