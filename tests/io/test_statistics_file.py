@@ -11,6 +11,7 @@ import xarray as xr
 
 from kalcal.analysis.dataset import analysis_dataset
 from kalcal.analysis.fixed_gain import analyze_scenario
+from kalcal.io.dataset_parts import DatasetParts, Part
 from kalcal.io.statistics import _encode, read_statistics, write_statistics
 from kalcal.jobs.verify import compute_verification
 from kalcal.models.registry import build_scenario
@@ -25,7 +26,11 @@ def run():
 
 def _datasets(run):
     analysis = analyze_scenario(build_scenario("accel-gps", assignments=["scenario.duration=6"]))
-    return {"stats": run.dataset, "stats_long": run.long_dataset, "analysis": analysis_dataset(analysis, {"form": "joseph"})}
+    return {
+        "stats": run.dataset.to_xarray(),
+        "stats_long": run.long_dataset.to_xarray(),
+        "analysis": analysis_dataset(analysis, {"form": "joseph"}),
+    }
 
 
 @pytest.mark.parametrize("name", ["stats", "stats_long", "analysis"])
@@ -39,8 +44,47 @@ def test_the_file_is_byte_for_byte_xarrays(run, tmp_path, name):
     xr.testing.assert_identical(read_statistics(ours), read_statistics(theirs))
 
 
+@pytest.mark.parametrize("name", ["dataset", "long_dataset"])
+def test_the_jobs_parts_are_written_as_the_bytes_of_their_dataset(run, tmp_path, name):
+    """The verify job writes its statistics from numpy parts: the file of the Dataset they make."""
+    parts = getattr(run, name)
+    assert isinstance(parts, DatasetParts)
+    assert _encode(parts) is not None
+    ours, theirs = tmp_path / "ours.nc", tmp_path / "theirs.nc"
+    write_statistics(ours, parts)
+    parts.to_xarray().to_netcdf(theirs, engine="scipy")
+    assert ours.read_bytes() == theirs.read_bytes()
+
+
+def test_the_parts_answer_as_their_dataset(run):
+    """What the jobs ask of the parts (sizes, dims, variables in order, values, attributes, membership) is
+    what the Dataset they make answers."""
+    for parts in (run.dataset, run.long_dataset):
+        dataset = parts.to_xarray()
+        assert parts.sizes == dict(dataset.sizes) and set(parts.dims) == set(dataset.dims)
+        assert list(parts.variables) == list(dataset.variables)
+        assert list(parts.coords) == list(dataset.coords) and list(parts.data_vars) == list(dataset.data_vars)
+        assert parts.attrs == dataset.attrs
+        for name, part in parts.variables.items():
+            assert part.dims == dataset[name].dims and part.attrs == dataset[name].attrs, name
+            np.testing.assert_array_equal(part.values, dataset[name].values)
+            assert part.dtype == dataset[name].dtype, name
+            assert name in parts
+        assert "no_such_variable" not in parts
+
+
+def test_parts_whose_dimensions_disagree_are_refused():
+    parts = DatasetParts(
+        {"a": Part.of("time", [1.0, 2.0]), "b": Part.of("time", [1.0, 2.0, 3.0])}, {}, {}
+    )
+    with pytest.raises(ValueError, match="b: dimension time has length 3, elsewhere 2"):
+        parts.to_xarray()
+    with pytest.raises(ValueError, match="2 dimension names for 1"):
+        DatasetParts({"a": Part.of(("time", "state"), [1.0])}, {}).sizes
+
+
 def test_the_dataset_is_the_one_xarrays_own_conversions_build(run):
-    for dataset in (run.dataset, run.long_dataset):
+    for dataset in (run.dataset.to_xarray(), run.long_dataset.to_xarray()):
         rebuilt = xr.Dataset(
             {name: xr.Variable(v.dims, v.values, v.attrs) for name, v in dataset.data_vars.items()},
             coords={name: (c.dims, c.values.tolist(), c.attrs) for name, c in dataset.coords.items()},
@@ -61,7 +105,9 @@ def test_other_datasets_go_through_xarray(tmp_path):
     np.testing.assert_array_equal(read_statistics(tmp_path / "other.nc")["count"].values, [1, 2, 3])
 
 
-def test_building_and_writing_the_statistics_imports_no_dask_array_or_distributed(tmp_path):
+def test_building_and_writing_the_statistics_imports_no_xarray_pandas_or_dask(tmp_path):
+    """The job keeps its statistics as numpy parts and writes them through scipy: no xarray (nor the pandas
+    and Dask it brings) in a verify job's process."""
     code = (
         "import sys\n"
         "from kalcal.jobs.verify import compute_verification\n"
@@ -69,7 +115,7 @@ def test_building_and_writing_the_statistics_imports_no_dask_array_or_distribute
         "from kalcal.models.registry import build_scenario\n"
         f"run = compute_verification(build_scenario('accel-gps', None, {SHORT!r}), 300, 1, long_run=4.0)\n"
         f"save_verification(run, {str(tmp_path / 'out')!r})\n"
-        "print(sorted(m for m in ('dask.array', 'distributed', 'matplotlib') if m in sys.modules))\n"
+        "print(sorted(m for m in ('dask', 'distributed', 'matplotlib', 'xarray', 'pandas') if m in sys.modules))\n"
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr

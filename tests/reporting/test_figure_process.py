@@ -192,7 +192,7 @@ def _loaded_after(args: list[str], env: dict | None = None) -> tuple[list[str], 
         f"sys.argv = ['kalcal', *{args!r}]\n"
         "from kalcal.cli import main\n"
         "try:\n    main()\nexcept SystemExit as exc:\n    assert not exc.code, exc.code\n"
-        "print([m for m in ('matplotlib',) if m in sys.modules])\n"
+        "print([m for m in ('matplotlib', 'xarray', 'pandas') if m in sys.modules])\n"
     )
     done = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, timeout=600, env={**os.environ, **(env or {})}
@@ -204,18 +204,19 @@ def _loaded_after(args: list[str], env: dict | None = None) -> tuple[list[str], 
 SHORT_VERIFY = ["verify", "-n", "200", "--set", "scenario.duration=4", "--long-run", "0"]
 
 
-def test_kalcal_verify_draws_its_page_without_loading_matplotlib_the_same_bytes(tmp_path):
+def test_kalcal_verify_draws_its_page_without_loading_matplotlib_or_xarray_the_same_bytes(tmp_path):
+    """The job sends its statistics as numpy parts: the figure process makes them Datasets and draws them."""
     loaded, _ = _loaded_after([*SHORT_VERIFY, "--out", str(tmp_path / "there")])
     assert loaded == []  # every figure was drawn in the figure process
     here, _ = _loaded_after([*SHORT_VERIFY, "--out", str(tmp_path / "here")], {"KALCAL_FIGURE_PROCESSES": "1"})
-    assert here == ["matplotlib"]
+    assert here == ["matplotlib", "xarray", "pandas"]
     there = sorted((tmp_path / "there" / "figures").glob("*.png"))
     assert len(there) >= 10
     for path in there:
         assert path.read_bytes() == (tmp_path / "here" / "figures" / path.name).read_bytes(), path.name
     drawn = {path.name: path.read_bytes() for path in there}
     redrawn, _ = _loaded_after(["report", str(tmp_path / "here")])  # kalcal report: the same, there too
-    assert redrawn == []
+    assert redrawn == ["xarray", "pandas"]  # it reads stats.nc through xarray; it draws in the figure process
     assert {path.name: path.read_bytes() for path in (tmp_path / "here" / "figures").glob("*.png")} == drawn
 
 
@@ -228,7 +229,7 @@ def test_kalcal_calibrate_draws_its_figure_without_loading_matplotlib_the_same_b
     assert simulated.returncode == 0, simulated.stderr
     args = ["calibrate", "accel-gps", "--imu", str(logs / "imu.csv"), "--gps", str(logs / "gps.csv")]
     loaded, _ = _loaded_after([*args, "--out", str(tmp_path / "there")])
-    assert loaded == []
+    assert loaded == ["pandas"]  # the logs are read with pandas; matplotlib stays in the figure process
     _loaded_after([*args, "--out", str(tmp_path / "here")], {"KALCAL_FIGURE_PROCESSES": "1"})
     figure = (tmp_path / "there" / "calibration.png").read_bytes()
     assert figure == (tmp_path / "here" / "calibration.png").read_bytes()

@@ -6,10 +6,13 @@ import html
 import shutil
 import tempfile
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+from kalcal.io.dataset_parts import as_xarray
 
 if TYPE_CHECKING:  # annotations only: a verification result needs no pandas
     import pandas as pd
@@ -55,8 +58,6 @@ class VerificationResult:
 
     verdict: str
     checks: list
-    statistics: Any
-    long_statistics: Any
     run: Any = field(repr=False, compare=False)
     paths: dict = field(default_factory=dict)
     self_check: Any = None
@@ -68,13 +69,22 @@ class VerificationResult:
         return cls(
             run.summary["verdict"],
             list(run.checks),
-            run.dataset,
-            run.long_dataset,
             run,
             dict(paths or {}),
             run.self_check,
             run.summary.get("power"),
         )
+
+    @cached_property
+    def statistics(self):
+        """``stats.nc`` as an ``xarray.Dataset`` (made from the run's numpy parts when first asked: a command
+        that only writes the files never loads xarray)."""
+        return as_xarray(self.run.dataset)
+
+    @cached_property
+    def long_statistics(self):
+        """``stats_long.nc`` as an ``xarray.Dataset``, None without a long run."""
+        return as_xarray(self.run.long_dataset)
 
     @property
     def summary(self) -> dict[str, Any]:

@@ -9,8 +9,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pandas as pd
-
 
 #: Version of the layout of the JSON documents kalcal writes (``summary.json``, ``truth.json``): raised
 #: whenever a key is removed or changes meaning, so that a reader can tell which layout it holds.
@@ -80,6 +78,8 @@ def write_json(path: str | Path, document: dict[str, Any]) -> Path:
 
 def write_csv(path: str | Path, columns: dict[str, np.ndarray]) -> Path:
     """Write equal-length columns as a CSV table; floats in their shortest exact (round-trip) form."""
+    import pandas as pd  # here: the JSON writers' users (the verify job) need no pandas
+
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     pd.DataFrame(columns).to_csv(path, index=False)

@@ -1,15 +1,16 @@
 """Ensemble statistics to and from NetCDF (``stats.nc``): the Dataset of :mod:`kalcal.verification.dataset`.
 
 Dimensions: ``time`` (K update times, s), ``state``/``state2`` (d), ``measurement``/``measurement2`` (p),
-and ``time2`` (a second copy of ``time`` for the residual correlation over pairs of updates, present
-only when the run kept the pairs). Written as
+and ``time2`` (a second copy of ``time``, the second update of the residual correlation over pairs of
+updates, which only runs that kept the pairs hold). Written as
 NetCDF3 through scipy, so no extra library is needed to read it: ``xarray.open_dataset("stats.nc")``.
 
-The Datasets kalcal builds (float variables, string labels, number and string attributes) are written
-straight through ``scipy.io.netcdf_file``, byte for byte the file ``Dataset.to_netcdf(engine="scipy")``
-writes: that call looks for a Dask scheduler on every write, which imports ``dask.array`` and
-``dask.distributed`` (about a second) into a job that uses neither. Any other Dataset goes through
-``to_netcdf`` itself.
+The Datasets kalcal builds (float variables, string labels, number and string attributes), as an
+``xarray.Dataset`` or as the :class:`kalcal.io.dataset_parts.DatasetParts` the verify job keeps, are
+written straight through ``scipy.io.netcdf_file``, byte for byte the file
+``Dataset.to_netcdf(engine="scipy")`` writes: that call looks for a Dask scheduler on every write, which
+imports ``dask.array`` and ``dask.distributed`` (about a second) into a job that uses neither, and parts
+are written without loading xarray at all. Any other Dataset goes through ``to_netcdf`` itself.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from kalcal.errors import DataError
+from kalcal.io.dataset_parts import DatasetParts, as_xarray
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -28,13 +30,14 @@ if TYPE_CHECKING:
 _VERSION = 2
 
 
-def write_statistics(path: str | Path, dataset: xr.Dataset) -> Path:
-    """Write the Dataset as NetCDF3 (the bytes of ``dataset.to_netcdf(path, engine="scipy")``)."""
+def write_statistics(path: str | Path, dataset: xr.Dataset | DatasetParts) -> Path:
+    """Write the Dataset (or its parts) as NetCDF3: the bytes of ``dataset.to_netcdf(path, engine="scipy")``
+    (of ``parts.to_xarray().to_netcdf(...)``)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     encoded = _encode(dataset)
     if encoded is None:  # not a layout the direct writer knows: xarray's own writer
-        dataset.to_netcdf(path, engine="scipy")
+        as_xarray(dataset).to_netcdf(path, engine="scipy")
     else:
         _write(path, *encoded)
     return path

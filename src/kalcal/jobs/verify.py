@@ -8,9 +8,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import xarray as xr
 
 from kalcal import __version__
+from kalcal.io.dataset_parts import DatasetParts
 from kalcal.io.outputs import writes_outputs
 from kalcal.jobs.progress import JobProgress, stage
 from kalcal.jobs.verify_arguments import (  # noqa: F401 (MAX_UPDATES, MIN_REALIZATIONS, run_length: the job's limits)
@@ -30,7 +30,7 @@ from kalcal.montecarlo.engine import BLOCK_SIZE, run_monte_carlo
 from kalcal.montecarlo.problem import check_engine
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.verification.checks import REPORT_RESIDUAL_PAIR, CheckResult, residual_pair, run_checks, verdict
-from kalcal.verification.dataset import statistics_dataset
+from kalcal.verification.dataset import statistics_parts
 from kalcal.verification.self_check import SelfCheck, exact_prediction, self_check
 
 
@@ -79,7 +79,7 @@ class VerifyOutcome:
     summary: dict[str, Any]
     statistics: EnsembleStatistics
     checks: list[CheckResult]
-    dataset: xr.Dataset
+    dataset: DatasetParts
     paths: dict[str, Path]
 
 
@@ -98,9 +98,9 @@ class Verification:
         The per-update ensemble statistics of the run.
     checks : list of CheckResult
         The statistical checks, in the summary's order.
-    dataset : xarray.Dataset
-        ``stats.nc``'s content.
-    long_dataset : xarray.Dataset or None
+    dataset : DatasetParts
+        ``stats.nc``'s content (``dataset.to_xarray()``: the ``xarray.Dataset``).
+    long_dataset : DatasetParts or None
         ``stats_long.nc``'s content, None without a long run.
     checkpoint : Path or None
         The run's checkpoint file (an input: never removed by the outputs).
@@ -114,8 +114,8 @@ class Verification:
     summary: dict[str, Any]
     statistics: EnsembleStatistics
     checks: list[CheckResult]
-    dataset: xr.Dataset
-    long_dataset: xr.Dataset | None
+    dataset: DatasetParts
+    long_dataset: DatasetParts | None
     checkpoint: Path | None
     compute_s: float
     self_check: SelfCheck | None = None
@@ -175,7 +175,7 @@ def compute_verification(
     exact = exact_prediction(problem, analysis)
     bench = self_check(statistics, exact, confidence, info)
     attrs = {"scenario": info.scenario, "seed": seed, "engine": engine, "confidence": confidence}
-    dataset = statistics_dataset(statistics, info, expected, attrs)
+    dataset = statistics_parts(statistics, info, expected, attrs)
     long_seconds = default_long_run(scenario) if long_run is None else long_run
     has_long = bool(long_seconds and long_seconds > info.update_times[-1])
     files = 3 if has_long else 2  # stats.nc, stats_long.nc, summary.json
@@ -189,7 +189,7 @@ def compute_verification(
         long = run_monte_carlo(
             long_problem, long_n, seed, engine=engine, workers=workers, client=client, progress=stage(progress, "long run")
         )
-        long_dataset = statistics_dataset(
+        long_dataset = statistics_parts(
             ensemble_statistics(long.sums), long_problem.info, long_problem.expected_mean_error(), attrs
         )
         built(2, files)

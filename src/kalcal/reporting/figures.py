@@ -15,6 +15,7 @@ import numpy as np
 import xarray as xr
 
 from kalcal.filters.steady_state import SteadyStateView
+from kalcal.io.dataset_parts import DatasetParts, as_xarray
 from kalcal.plots import consistency, ensemble
 from kalcal.plots import realization as single
 from kalcal.plots.realization_data import RealizationData
@@ -255,10 +256,10 @@ def _steady_state_spec(steady: SteadyStateView) -> _Spec:
 
 
 def render_figures(
-    dataset: xr.Dataset,
+    dataset: xr.Dataset | DatasetParts,
     data: RealizationData,
     figure_dir: str | Path,
-    long_dataset: xr.Dataset | None = None,
+    long_dataset: xr.Dataset | DatasetParts | None = None,
     *,
     scenario: str = REPORT_SCENARIO,
     steady: SteadyStateView | None = None,
@@ -270,14 +271,14 @@ def render_figures(
 
     Parameters
     ----------
-    dataset : xarray.Dataset
-        The run's ``stats.nc``.
+    dataset : xarray.Dataset or DatasetParts
+        The run's ``stats.nc`` (parts, as the verify job keeps them, are made a Dataset here).
     data : RealizationData
         The realization shown in the single-run figures.
     figure_dir : path
         Folder for the PNGs (created). The jobs draw into a fresh staging folder (:mod:`kalcal.io.outputs`),
         so it holds only this page's figures; a PNG already in a folder given here is left as it is.
-    long_dataset : xarray.Dataset, optional
+    long_dataset : xarray.Dataset or DatasetParts, optional
         ``stats_long.nc`` of the same run, for figure 5.8.
     scenario : str
         The run's scenario: figures carry the source report's numbers only for ``REPORT_SCENARIO``.
@@ -295,6 +296,7 @@ def render_figures(
         In page order (report figures by number, then the rest).
     skipped : list of SkippedFigure
     """
+    dataset, long_dataset = as_xarray(dataset), as_xarray(long_dataset)
     figure_dir = Path(figure_dir)
     figure_dir.mkdir(parents=True, exist_ok=True)
     numbers = REPORT_NUMBERS if scenario == REPORT_SCENARIO else {}

@@ -1,18 +1,23 @@
-"""A run's per-update ensemble statistics as an xarray Dataset (``stats.nc``): long names and CF units.
+"""A run's per-update ensemble statistics as a Dataset (``stats.nc``): long names and CF units.
 
 Dimensions: ``time`` (K update times, s), ``state``/``state2`` (d), ``measurement``/``measurement2`` (p),
-and ``time2`` (a second copy of ``time`` for the residual correlation over pairs of updates, present
-only when the run kept the pairs). Every variable has a ``long_name``; ``units`` where one unit applies to
+and ``time2`` (a second copy of ``time``, the second update of ``residual_second_moment``, the residual
+correlation over pairs of updates, which only runs that kept the pairs hold). Every variable has a ``long_name``; ``units`` where one unit applies to
 all its elements (matrices over states of mixed units keep theirs in the ``state_unit`` coordinate).
 """
 
 from __future__ import annotations
 
-import numpy as np
-import xarray as xr
+from typing import TYPE_CHECKING
 
+import numpy as np
+
+from kalcal.io.dataset_parts import DatasetParts, Part
 from kalcal.montecarlo.accumulators import EnsembleStatistics
 from kalcal.montecarlo.problem import ProblemInfo
+
+if TYPE_CHECKING:
+    import xarray as xr
 
 _MATRIX = ("time", "state", "state2")
 
@@ -20,7 +25,14 @@ _MATRIX = ("time", "state", "state2")
 def statistics_dataset(
     s: EnsembleStatistics, info: ProblemInfo, expected_mean_error: np.ndarray, attrs: dict
 ) -> xr.Dataset:
-    """Every per-update statistic of a run as a Dataset."""
+    """Every per-update statistic of a run as an ``xarray.Dataset`` (:func:`statistics_parts`, made one)."""
+    return statistics_parts(s, info, expected_mean_error, attrs).to_xarray()
+
+
+def statistics_parts(
+    s: EnsembleStatistics, info: ProblemInfo, expected_mean_error: np.ndarray, attrs: dict
+) -> DatasetParts:
+    """Every per-update statistic of a run, as numpy parts of the Dataset (no xarray loaded)."""
     data = {
         "mean_error": (("time", "state"), s.mean_error, "ensemble mean of e = x - xhat"),
         "expected_mean_error": (
@@ -50,32 +62,22 @@ def statistics_dataset(
         ),
     }
     units = _units(info)
-    # every variable is built on xarray's fast path from a numpy array of its final dtype: the slow path
-    # asks whether the data is a Dask array, which imports dask.array (most of a second) for nothing
     variables = {
-        name: _variable(dims, values, {"long_name": text, **({"units": units[name]} if units.get(name) else {})})
+        name: Part.of(dims, values, {"long_name": text, **({"units": units[name]} if units.get(name) else {})})
         for name, (dims, values, text) in data.items()
         if values is not None
     }
     coords = {
-        "time": _variable("time", info.update_times, {"units": "s"}),
-        "time2": _variable("time2", info.update_times, {"units": "s"}),
-        "state": _variable("state", list(info.state_names)),
-        "state2": _variable("state2", list(info.state_names)),
-        "measurement": _variable("measurement", list(info.measurement_names)),
-        "measurement2": _variable("measurement2", list(info.measurement_names)),
-        "state_unit": _variable("state", list(info.state_units)),
-        "measurement_unit": _variable("measurement", list(info.measurement_units)),
+        "time": Part.of("time", info.update_times, {"units": "s"}),
+        "time2": Part.of("time2", info.update_times, {"units": "s"}),
+        "state": Part.of("state", list(info.state_names)),
+        "state2": Part.of("state2", list(info.state_names)),
+        "measurement": Part.of("measurement", list(info.measurement_names)),
+        "measurement2": Part.of("measurement2", list(info.measurement_names)),
+        "state_unit": Part.of("state", list(info.state_units)),
+        "measurement_unit": Part.of("measurement", list(info.measurement_units)),
     }
-    return xr.Dataset(variables, coords=coords, attrs={"realizations": s.count, **attrs})
-
-
-def _variable(dims, values, attrs: dict | None = None) -> xr.Variable:
-    """``xr.Variable(dims, values, attrs)`` for numbers or strings, without its check for Dask arrays."""
-    array = np.asarray(values)
-    if array.dtype.kind not in "fU":  # anything else takes xarray's own conversions
-        return xr.Variable(dims, array, attrs)
-    return xr.Variable(dims, array, attrs, fastpath=True)
+    return DatasetParts(variables, coords, {"realizations": s.count, **attrs})
 
 
 def _single(units) -> str | None:
