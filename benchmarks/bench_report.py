@@ -32,6 +32,7 @@ from matplotlib.figure import Figure
 from PIL import Image
 
 import kalcal.jobs.report as report
+from kalcal.reporting import figures as report_figures
 from kalcal.plots import _common, consistency, ensemble, realization, steady_state
 from kalcal.reporting import drawing
 
@@ -84,13 +85,13 @@ def figure_times(run: Path, repeats: int) -> dict[str, float]:
             times.setdefault(path.name, []).append(time.process_time() - start)
         return list(paths)
 
-    original = report.render_figures.__globals__["draw_all"]
-    report.render_figures.__globals__["draw_all"] = serial
+    original = report_figures.draw_all  # render_report draws in this process: no figure process here
+    report_figures.draw_all = serial
     try:
         for _ in range(repeats):
             report.render_report(run)
     finally:
-        report.render_figures.__globals__["draw_all"] = original
+        report_figures.draw_all = original
     return {name: min(values) for name, values in times.items()}
 
 

@@ -248,3 +248,22 @@ def test_the_imports_run_at_the_lowest_priority_and_the_drawing_at_the_process_s
     assert fp._load(("a", "b"))
     assert seen == [19, 19]
     assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) == own  # the thread that forks the workers
+
+
+def test_the_figures_module_loads_what_making_the_jobs_datasets_needs():
+    """The figure process imports the figures' module while the job runs: making the job's statistics
+    Datasets in the figure call then imports nothing more (xarray's first index loads dask.base)."""
+    code = (
+        "import sys\n"
+        "import numpy as np\n"
+        "from kalcal.io.dataset_parts import DatasetParts, Part\n"
+        "parts = DatasetParts({'mean_nis': Part.of('time', [1.0, 2.0])}, {'time': Part.of('time', [0.2, 0.4]),"
+        " 'state': Part.of('state', ['dp', 'dv'])}, {'seed': 1})\n"
+        "import kalcal.reporting.figures\n"
+        "before = set(sys.modules)\n"
+        "parts.to_xarray()\n"
+        "print(sorted(set(sys.modules) - before))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip().splitlines()[-1] == "[]"

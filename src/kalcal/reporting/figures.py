@@ -24,6 +24,12 @@ from kalcal.reporting.drawing import draw_all
 from kalcal.reporting.figure_entries import GROUPS, FigureEntry, SkippedFigure  # noqa: F401 (re-exported)
 from kalcal.reporting.theory import SIGMA_EXACT, SIGMA_EXACT_TITLE, sigma_exact_spec
 
+# xarray's first index asks whether its data is a Dask array, which imports dask.base (0.1-0.13 s on the
+# 2-core development machine), and its first index of strings loads pandas' pyarrow support: both here,
+# where the job's figure process imports this module while the job runs, and not when render_figures makes
+# the job's statistics Datasets, on the page's time (tests/reporting/test_figure_process.py)
+xr.Dataset(coords={"time": [0.0], "state": ["x"]})
+
 #: the scenario of the source report, whose figure numbers the page quotes
 REPORT_SCENARIO = "accel-gps"
 #: figures of the source report, by file stem
