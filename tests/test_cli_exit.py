@@ -88,3 +88,23 @@ def test_a_message_status_is_printed_and_exits_one():
     ran = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert ran.returncode == 1 and ran.stdout == "partial line", ran.stdout  # unflushed output still written
     assert ran.stderr.strip() == "kalcal: a message"
+
+
+def test_a_stream_that_cannot_be_flushed_takes_python_s_own_exit():
+    """stdout a pipe whose reader has gone: the flush fails, so the process leaves through Python's own
+    exit, which reports the broken pipe and exits 120, as a plain Python program does."""
+    code = (
+        "import os, sys\nfrom kalcal import cli\n"
+        "read, write = os.pipe()\nos.close(read)\n"  # a pipe with no reader left
+        "sys.stdout = open(write, 'w', buffering=1 << 16)\n"
+        "def main():\n    print('x' * 100)\n"  # buffered: written only by the flush at the end
+        "cli.main = main\ncli.run()\n"
+    )
+    ran = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    plain = subprocess.run(
+        [sys.executable, "-c", code.replace("from kalcal import cli\n", "").replace("cli.main = main\ncli.run()\n", "main()\n")],
+        capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert plain.returncode == 120, plain.stderr  # Python's own exit, for comparison
+    assert ran.returncode == 120, ran.stderr
+    assert "BrokenPipeError" in ran.stderr or "Broken pipe" in ran.stderr, ran.stderr
