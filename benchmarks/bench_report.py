@@ -120,7 +120,7 @@ def processes_against_one(run: Path, repeats: int) -> dict[str, float]:
 #: modules imported here before forking two workers (``parent``), or by each worker (``workers``)
 _IMPORT = """
 import multiprocessing, sys, time
-import numpy, xarray, kalcal.jobs.verify
+import numpy, kalcal.jobs.verify
 def child(_):
     import kalcal.reporting.figures
 with multiprocessing.get_context("fork").Pool(2) as pool:

@@ -22,7 +22,7 @@ if TYPE_CHECKING:
     import xarray as xr
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Part:
     """One variable: its dimension names, values (numbers or strings) and attributes."""
 
@@ -49,7 +49,7 @@ class Part:
         return self.values.shape
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class DatasetParts:
     """A Dataset's data variables and coordinates (name -> :class:`Part`, in order) and global attributes."""
 
@@ -85,7 +85,8 @@ class DatasetParts:
         return name in self.data_vars or name in self.coords
 
     def to_xarray(self) -> xr.Dataset:
-        """The ``xarray.Dataset`` of these parts (a new one at each call: a Dataset can be changed)."""
+        """The ``xarray.Dataset`` of these parts: a new Dataset at each call, over the parts' own arrays (not
+        copied: changing its values in place changes the parts)."""
         import xarray as xr
 
         self.sizes  # noqa: B018 (the dimensions' lengths agree, or a ValueError names the variable)

@@ -1,8 +1,8 @@
 """Ensemble statistics to and from NetCDF (``stats.nc``): the Dataset of :mod:`kalcal.verification.dataset`.
 
 Dimensions: ``time`` (K update times, s), ``state``/``state2`` (d), ``measurement``/``measurement2`` (p),
-and ``time2`` (a second copy of ``time``, the second update of the residual correlation over pairs of
-updates, which only runs that kept the pairs hold). Written as
+and ``time2`` (a second copy of ``time``, always there; ``residual_second_moment``, the
+residual correlation over pairs of updates, runs over it where the run kept the pairs). Written as
 NetCDF3 through scipy, so no extra library is needed to read it: ``xarray.open_dataset("stats.nc")``.
 
 The Datasets kalcal builds (float variables, string labels, number and string attributes), as an

@@ -1,8 +1,8 @@
 """A run's per-update ensemble statistics as a Dataset (``stats.nc``): long names and CF units.
 
 Dimensions: ``time`` (K update times, s), ``state``/``state2`` (d), ``measurement``/``measurement2`` (p),
-and ``time2`` (a second copy of ``time``, the second update of ``residual_second_moment``, the residual
-correlation over pairs of updates, which only runs that kept the pairs hold). Every variable has a ``long_name``; ``units`` where one unit applies to
+and ``time2`` (a second copy of ``time``, always there; ``residual_second_moment``, the
+residual correlation over pairs of updates, runs over it where the run kept the pairs). Every variable has a ``long_name``; ``units`` where one unit applies to
 all its elements (matrices over states of mixed units keep theirs in the ``state_unit`` coordinate).
 """
 
