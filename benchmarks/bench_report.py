@@ -26,6 +26,7 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
+import matplotlib
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
@@ -175,6 +176,7 @@ def main() -> None:
             subprocess.run([sys.executable, "-m", "kalcal", "verify", "--no-report", "--out", str(run)], check=True, stdout=subprocess.DEVNULL)
         workers = drawing.drawing_workers(100)
         walls = processes_against_one(run, args.repeats)
+        print(f"kalcal report benchmark: matplotlib {matplotlib.__version__}\n")
         print(f"render_report (the job's report_s, and reading stats.nc), fastest of {args.repeats}:")
         print(f"  figures in {workers} processes (now):              {walls['processes']:.3f} s")
         print(f"  in one process ({drawing.PROCESSES_ENV}=1): {walls['one process']:.3f} s")

@@ -3,8 +3,8 @@
 The verify job builds its statistics (``stats.nc``, ``stats_long.nc``) as :class:`DatasetParts`: writing
 them (:func:`kalcal.io.statistics.write_statistics`) and sending them to the report's figures need no
 xarray, whose import (pandas with it) and the Dask check of its index variables cost about half a
-second of every ``kalcal verify`` (``benchmarks/bench_job.py``). :meth:`DatasetParts.to_xarray` gives
-the Dataset itself, as :func:`kalcal.verify` returns it and the figures draw it.
+second of every ``kalcal verify`` (``benchmarks/bench_job.py``); the figures draw the parts as they are.
+:meth:`DatasetParts.to_xarray` gives the Dataset itself, as :func:`kalcal.verify` returns it.
 
 The parts answer the few questions the job asks of its statistics as xarray would (``variables`` in
 xarray's order, ``coords``, ``data_vars``, ``sizes``, ``dims``, ``attrs``, ``parts["time"].values``,

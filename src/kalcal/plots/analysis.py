@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import xarray as xr
 
 from kalcal.plots._common import ENSEMBLE, FILTER, STATE_COLORS, label, new_figure, save, styled, time_label
+
+if TYPE_CHECKING:  # type hints only
+    import xarray as xr
 
 #: colours of the budget's sources by kind, light to dark within a kind
 _KIND_COLORS = {

@@ -9,9 +9,9 @@ N realizations, K updates, d states, p measurements.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import xarray as xr
 from matplotlib.colors import TwoSlopeNorm
 
 from kalcal.plots._common import (
@@ -29,6 +29,9 @@ from kalcal.plots._common import (
 from kalcal.plots._layout import colorbar_beside
 from kalcal.verification.bounds import COVARIANCE_PARTS, centered_nees_bounds, chi2_mean_bounds, whiteness_pairs_bound
 from kalcal.verification.covariance import centered_nees
+
+if TYPE_CHECKING:  # the figures take a Dataset or the verify job's DatasetParts: no xarray here
+    import xarray as xr
 
 #: pixel height of the residual correlation map (its width is the common 900 px)
 CORRELATION_HEIGHT_PX = 800
@@ -82,7 +85,7 @@ def plot_nees(dataset: xr.Dataset, path: str | Path) -> Path:
 
     Parameters
     ----------
-    dataset : xarray.Dataset
+    dataset : xarray.Dataset or DatasetParts
         A ``stats.nc`` Dataset (attributes ``realizations`` and ``confidence``).
     path : path of the PNG to write
     """
@@ -129,7 +132,7 @@ def plot_nis(dataset: xr.Dataset, path: str | Path) -> Path:
 
     Parameters
     ----------
-    dataset : xarray.Dataset
+    dataset : xarray.Dataset or DatasetParts
         A ``stats.nc`` Dataset (attributes ``realizations`` and ``confidence``).
     path : path of the PNG to write
     """
@@ -151,7 +154,7 @@ def plot_residual_correlation(dataset: xr.Dataset, path: str | Path) -> Path:
 
     Parameters
     ----------
-    dataset : xarray.Dataset
+    dataset : xarray.Dataset or DatasetParts
         With ``residual_second_moment`` (K, p, K, p), E[r_k r_j^T] over all pairs of updates.
     path : path of the PNG to write
     """
@@ -206,7 +209,7 @@ def plot_model_error(dataset: xr.Dataset, path: str | Path) -> Path:
 
     Parameters
     ----------
-    dataset : xarray.Dataset
+    dataset : xarray.Dataset or DatasetParts
         A ``stats.nc`` Dataset: ``expected_mean_error`` and ``mean_error`` (K, d), ``filter_cov`` (K, d, d).
     path : path of the PNG to write
     """

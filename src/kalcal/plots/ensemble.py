@@ -11,9 +11,9 @@ updates, d states.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import xarray as xr
 
 from kalcal.plots._common import (
     BAND,
@@ -33,6 +33,9 @@ from kalcal.plots._common import (
 )
 from kalcal.verification.bounds import covariance_element_bound, normal_bound
 from kalcal.verification.self_check import compared_states, variance_ratio_band
+
+if TYPE_CHECKING:  # the figures take a Dataset or the verify job's DatasetParts: no xarray here
+    import xarray as xr
 
 
 def _names(dataset: xr.Dataset) -> tuple[list[str], list[str]]:
@@ -57,7 +60,7 @@ def plot_mean_error(dataset: xr.Dataset, path: str | Path, *, title: str | None 
 
     Parameters
     ----------
-    dataset : xarray.Dataset
+    dataset : xarray.Dataset or DatasetParts
         A ``stats.nc`` Dataset: ``mean_error`` (K, d), ``expected_mean_error`` (K, d), ``error_cov``
         (K, d, d), attributes ``realizations`` and ``confidence``.
     path : path of the PNG to write
@@ -98,7 +101,7 @@ def plot_variance_diagonal(dataset: xr.Dataset, path: str | Path) -> Path:
 
     Parameters
     ----------
-    dataset : xarray.Dataset
+    dataset : xarray.Dataset or DatasetParts
         A ``stats.nc`` Dataset: ``error_cov`` and ``filter_cov`` (K, d, d), attributes ``realizations``
         and ``confidence``.
     path : path of the PNG to write
@@ -145,7 +148,7 @@ def plot_variance_offdiagonal(dataset: xr.Dataset, path: str | Path) -> Path:
 
     Parameters
     ----------
-    dataset : xarray.Dataset
+    dataset : xarray.Dataset or DatasetParts
         A ``stats.nc`` Dataset (attributes ``realizations`` and ``confidence``).
     path : path of the PNG to write
     """
@@ -218,7 +221,7 @@ def plot_orthogonality_diagonal(dataset: xr.Dataset, path: str | Path) -> Path:
 
     Parameters
     ----------
-    dataset : xarray.Dataset
+    dataset : xarray.Dataset or DatasetParts
         A ``stats.nc`` Dataset (attributes ``realizations`` and ``confidence``).
     path : path of the PNG to write
     """
@@ -234,7 +237,7 @@ def plot_orthogonality_offdiagonal(dataset: xr.Dataset, path: str | Path) -> Pat
 
     Parameters
     ----------
-    dataset : xarray.Dataset
+    dataset : xarray.Dataset or DatasetParts
         A ``stats.nc`` Dataset (attributes ``realizations`` and ``confidence``).
     path : path of the PNG to write
     """
@@ -256,7 +259,7 @@ def plot_sigma_exact(dataset: xr.Dataset, exact_cov: np.ndarray, path: str | Pat
 
     Parameters
     ----------
-    dataset : xarray.Dataset
+    dataset : xarray.Dataset or DatasetParts
         A ``stats.nc`` Dataset: ``error_cov``, ``filter_cov`` (K, d, d), attributes ``realizations`` and
         ``confidence``.
     exact_cov : ndarray, shape (K, d, d)

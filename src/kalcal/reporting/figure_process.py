@@ -14,8 +14,9 @@ when this process has not loaded matplotlib yet (a notebook that has keeps drawi
 rcParams), and unless :data:`~kalcal.reporting.drawing.PROCESSES_ENV` is 1 (draw in this process). Without
 it, :func:`call` imports the function and runs it here.
 
-The process runs in a session of its own and ignores SIGINT (an interrupt is the job's to handle: the
-terminal's Ctrl-C never reaches it) and, on Linux, is killed when the job's
+The process runs in a process group of its own and ignores SIGINT (an interrupt is the job's to handle:
+the terminal's Ctrl-C never reaches it), in the job's session (on Linux, the job's scheduler autogroup,
+where its nice-19 loading yields to the job's threads) and, on Linux, is killed when the job's
 process dies (``PR_SET_PDEATHSIG``), as are its drawing workers. When the job stops (an error, Ctrl-C,
 SIGTERM) it asks the process to stop: the figures not yet started are dropped, the running ones finish,
 and the process is waited for before the error goes on, so that nothing is written after the job's
@@ -97,7 +98,11 @@ class FigureProcess:
                 pass_fds=(child.fileno(),),
                 stdin=subprocess.DEVNULL,
                 stdout=subprocess.DEVNULL,
-                start_new_session=True,  # the terminal's Ctrl-C is the job's, from the child's first instant
+                # a process group of its own: the terminal's Ctrl-C (sent to the foreground group) is the
+                # job's, from the child's first instant; the job's session, so that on Linux it shares the
+                # job's scheduler autogroup, where its nice-19 loading yields to the job (a session of its
+                # own would be an autogroup of its own, given an equal share of the CPUs against the job)
+                process_group=0,
             )
         finally:
             child.close()

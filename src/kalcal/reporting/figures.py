@@ -11,11 +11,12 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-import xarray as xr
 
 from kalcal.filters.steady_state import SteadyStateView
-from kalcal.io.dataset_parts import DatasetParts, as_xarray
+from kalcal.io.dataset_parts import DatasetParts
 from kalcal.plots import consistency, ensemble
 from kalcal.plots import realization as single
 from kalcal.plots.realization_data import RealizationData
@@ -24,11 +25,8 @@ from kalcal.reporting.drawing import draw_all
 from kalcal.reporting.figure_entries import GROUPS, FigureEntry, SkippedFigure  # noqa: F401 (re-exported)
 from kalcal.reporting.theory import SIGMA_EXACT, SIGMA_EXACT_TITLE, sigma_exact_spec
 
-# xarray's first index asks whether its data is a Dask array, which imports dask.base (0.1-0.13 s on the
-# 2-core development machine), and its first index of strings loads pandas' pyarrow support: both here,
-# where the job's figure process imports this module while the job runs, and not when render_figures makes
-# the job's statistics Datasets, on the page's time (tests/reporting/test_figure_process.py)
-xr.Dataset(coords={"time": [0.0], "state": ["x"]})
+if TYPE_CHECKING:  # the figures read a Dataset's values, which the verify job's DatasetParts give too
+    import xarray as xr
 
 #: the scenario of the source report, whose figure numbers the page quotes
 REPORT_SCENARIO = "accel-gps"
@@ -278,7 +276,9 @@ def render_figures(
     Parameters
     ----------
     dataset : xarray.Dataset or DatasetParts
-        The run's ``stats.nc`` (parts, as the verify job keeps them, are made a Dataset here).
+        The run's ``stats.nc``: read back (``kalcal report``) or the parts the verify job keeps, drawn as
+        they are (the figures read only ``dataset[name].values``, ``sizes`` and ``attrs``, which both
+        give), so that the job's figure process loads neither xarray nor pandas.
     data : RealizationData
         The realization shown in the single-run figures.
     figure_dir : path
@@ -302,7 +302,6 @@ def render_figures(
         In page order (report figures by number, then the rest).
     skipped : list of SkippedFigure
     """
-    dataset, long_dataset = as_xarray(dataset), as_xarray(long_dataset)
     figure_dir = Path(figure_dir)
     figure_dir.mkdir(parents=True, exist_ok=True)
     numbers = REPORT_NUMBERS if scenario == REPORT_SCENARIO else {}
