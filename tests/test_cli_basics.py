@@ -28,12 +28,16 @@ def _flat(text: str) -> str:
 
 
 def test_version_prints_the_package_version():
+    """pyproject.toml takes the version from kalcal/_version.py: the installed metadata's is the one printed."""
     import tomllib
+    from importlib.metadata import version
     from pathlib import Path
 
-    declared = tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text())["project"]["version"]
+    project = tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text())
+    assert "version" in project["project"]["dynamic"]
+    assert project["tool"]["setuptools"]["dynamic"]["version"] == {"attr": "kalcal._version.__version__"}
     result = runner.invoke(app, ["--version"])
-    assert result.exit_code == 0 and result.output.strip() == f"kalcal {declared}"
+    assert result.exit_code == 0 and result.output.strip() == f"kalcal {version('kalcal')}"
 
 
 def test_python_dash_m_kalcal_is_the_command():

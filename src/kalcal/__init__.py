@@ -11,6 +11,8 @@ The Python API (each loaded on first use, so that ``import kalcal`` stays cheap)
 
 from importlib import import_module as _import_module
 
+from kalcal._version import __version__
+
 #: every export, by the module it comes from (PEP 562: loaded when first asked for)
 _EXPORTS = {
     "verify": "kalcal.api.verify",
@@ -39,19 +41,7 @@ _EXPORTS = {
 __all__ = ["__version__", *_EXPORTS]
 
 
-def _version() -> str:
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        return version("kalcal")
-    except PackageNotFoundError:  # running from a source tree without installation
-        return "0.0.0"
-
-
 def __getattr__(name: str):
-    if name == "__version__":  # importlib.metadata is most of an import's time: read on first use
-        value = globals()["__version__"] = _version()
-        return value
     module = _EXPORTS.get(name)
     if module is None:
         raise AttributeError(f"module 'kalcal' has no attribute {name!r}")

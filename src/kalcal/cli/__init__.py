@@ -31,7 +31,7 @@ app = typer.Typer(
 
 def _print_version(value: bool) -> None:
     if value:
-        from kalcal import __version__  # importlib.metadata: read only when asked for
+        from kalcal import __version__
 
         _common._console().print(f"kalcal {__version__}", markup=False, highlight=False)
         raise typer.Exit()
