@@ -119,6 +119,47 @@ def test_the_figure_process_has_a_process_group_of_its_own_in_the_jobs_session()
             assert autogroup.read_text().split()[0] == Path("/proc/self/autogroup").read_text().split()[0]
 
 
+# the job in a terminal, as a shell runs it (the foreground process group), with stty tostop: the figure
+# process, a background group of its session, writes to the terminal (a warning on stderr)
+_TOSTOP = """
+import os, sys, termios
+attrs = termios.tcgetattr(2)
+attrs[3] |= termios.TOSTOP
+termios.tcsetattr(2, termios.TCSANOW, attrs)
+os.tcsetpgrp(2, os.getpgrp())
+from kalcal.reporting import figure_process as fp
+with fp.figure_process("os:getpid", start=True):
+    assert os.getpgid(fp.call("os:getpid")) != os.getpgrp()
+    fp.call("warnings:warn", "written to the terminal by the figure process")
+print("answered", flush=True)
+"""
+
+
+@pytest.mark.skipif(os.name != "posix", reason="a pseudo-terminal and process groups are POSIX's")
+def test_the_figure_process_writes_to_a_tostop_terminal_without_being_stopped():
+    import pty
+    import select
+
+    pid, terminal = pty.fork()
+    if pid == 0:  # the child: a session of its own with the pseudo-terminal as its controlling terminal
+        os.execv(sys.executable, [sys.executable, "-c", _TOSTOP])
+    output, deadline = b"", time.monotonic() + 120  # a stopped figure process leaves the job waiting forever
+    try:
+        while time.monotonic() < deadline and b"answered" not in output:
+            if select.select([terminal], [], [], 0.5)[0]:
+                try:
+                    output += os.read(terminal, 4096)
+                except OSError:  # the child has ended and closed the terminal
+                    break
+    finally:
+        if b"answered" not in output:
+            os.kill(pid, signal.SIGKILL)
+        os.waitpid(pid, 0)
+        os.close(terminal)
+    assert b"answered" in output, output.decode(errors="replace")
+    assert b"written to the terminal by the figure process" in output
+
+
 def test_a_stray_module_in_the_current_folder_does_not_reach_the_figure_process(tmp_path, monkeypatch):
     (tmp_path / "socket.py").write_text("raise ImportError('the current folder was imported from')\n")
     monkeypatch.chdir(tmp_path)

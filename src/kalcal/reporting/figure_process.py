@@ -15,9 +15,10 @@ rcParams), and unless :data:`~kalcal.reporting.drawing.PROCESSES_ENV` is 1 (draw
 it, :func:`call` imports the function and runs it here.
 
 The process runs in a process group of its own and ignores SIGINT (an interrupt is the job's to handle:
-the terminal's Ctrl-C never reaches it), in the job's session (on Linux, the job's scheduler autogroup,
-where its nice-19 loading yields to the job's threads) and, on Linux, is killed when the job's
-process dies (``PR_SET_PDEATHSIG``), as are its drawing workers. When the job stops (an error, Ctrl-C,
+the terminal's Ctrl-C never reaches it) and SIGTTOU (as a background group it may still write to the
+terminal with ``stty tostop``), in the job's session (where Linux's scheduler autogroups are enabled,
+the job's autogroup, where its nice-19 loading yields to the job's threads) and, on Linux, is killed when
+the job's process dies (``PR_SET_PDEATHSIG``), as are its drawing workers. When the job stops (an error, Ctrl-C,
 SIGTERM) it asks the process to stop: the figures not yet started are dropped, the running ones finish,
 and the process is waited for before the error goes on, so that nothing is written after the job's
 outputs are cleaned up. Should the process die (killed from outside), the figure is drawn here instead.
@@ -52,6 +53,10 @@ _POLL_S = 0.1
 
 # the child's first lines: its sys.path comes from the job, so it imports the job's kalcal
 _BOOTSTRAP = (
+    # a background process group of the job's session: with the terminal's tostop set, its first write to
+    # the terminal (stderr: a warning, matplotlib's font-cache message) would stop it, and the job wait on it
+    "import signal\n"
+    "signal.signal(signal.SIGTTOU, signal.SIG_IGN)\n"
     "import sys\n"
     "del sys.path[0]\n"  # -c puts the current folder first: a stray socket.py there is not imported
     "from multiprocessing.connection import Connection\n"

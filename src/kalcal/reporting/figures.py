@@ -277,8 +277,8 @@ def render_figures(
     ----------
     dataset : xarray.Dataset or DatasetParts
         The run's ``stats.nc``: read back (``kalcal report``) or the parts the verify job keeps, drawn as
-        they are (the figures read only ``dataset[name].values``, ``sizes`` and ``attrs``, which both
-        give), so that the job's figure process loads neither xarray nor pandas.
+        they are (the figures read only ``dataset[name].values``, ``sizes``, ``attrs`` and ``name in
+        dataset``, which both give), so that the job's figure process loads neither xarray nor pandas.
     data : RealizationData
         The realization shown in the single-run figures.
     figure_dir : path

@@ -1,0 +1,28 @@
+"""The dependencies kept below a release for a measured cost are installed as pyproject.toml pins them."""
+
+from __future__ import annotations
+
+import tomllib
+from importlib.metadata import version
+from pathlib import Path
+
+import pytest
+from packaging.requirements import Requirement
+
+DEPENDENCIES = {
+    Requirement(line).name: Requirement(line).specifier
+    for line in tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text())["project"]["dependencies"]
+}
+
+
+@pytest.mark.parametrize(
+    ("name", "first_excluded"),
+    [
+        ("matplotlib", "3.11"),  # its libraqm text layout: the report's figures 1.15-1.25x the CPU time
+        ("typer", "0.29"),  # a pydantic validator for every option at every parse
+    ],
+)
+def test_a_pinned_dependency_is_installed_below_the_release_it_excludes(name, first_excluded):
+    specifier = DEPENDENCIES[name]
+    assert first_excluded not in specifier  # the pin is declared
+    assert version(name) in specifier  # and is what runs
