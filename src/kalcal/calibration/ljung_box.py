@@ -34,6 +34,8 @@ from functools import lru_cache
 import numba
 import numpy as np
 
+import kalcal.cached_kernels  # noqa: F401  (cached kernels load without numba's registries)
+
 #: the fixed seed of the simulated null
 SEED = 201112
 #: simulated draws in the smallest tested tail: (B + 1) * tail >= this

@@ -1,0 +1,62 @@
+"""Load numba's cached kernels without first installing numba's whole compiler.
+
+Every module of compiled kernels imports this one before its first kernel runs. numba's cache loader
+(``numba.core.caching.Cache.load_overload``) begins by refreshing the CPU target context, which imports
+and installs every implementation registry of numba's compiler (all its typing templates and lowerings:
+0.25-0.3 s of one thread in each fresh process on the 2-core development machine, paid inside a
+``kalcal verify``'s Monte Carlo and a ``kalcal calibrate``'s first filter), although a kernel loaded from
+the cache is machine code already compiled and linked, which needs only numba's runtime (NRT) to run.
+:func:`install` makes the loader initialize the runtime and load the kernel as saved; a kernel that is not
+in the cache (the first run on a machine, or a changed source) is compiled as before, and numba's compiler
+refreshes the context itself when it compiles. The kernels and their results are the same bits either way
+(tests/test_cached_kernels.py).
+
+This replaces a method of numba's, so it applies only to the numba releases whose loader is the one
+described (:data:`TESTED`); under any other release numba loads its cache its own way.
+"""
+
+from __future__ import annotations
+
+import numba
+from numba.core import caching
+
+__all__ = ["TESTED", "active", "install"]
+
+#: numba releases (major, minor) the suite has run this with, whose ``Cache.load_overload`` refreshes the
+#: context and then loads the overload, as :func:`install` replaces it
+TESTED = ((0, 68),)
+
+#: numba's own loader, kept so that tests can compare the two
+NUMBA_LOAD_OVERLOAD = caching.Cache.load_overload
+
+
+def _load_without_refresh(self, sig, target_context):
+    """``Cache.load_overload`` without the context's refresh: the runtime is initialized (the one part of
+    the refresh a loaded kernel needs, idempotent) and the overload loaded as numba loads it."""
+    from numba.core.runtime import rtsys
+
+    rtsys.initialize(target_context)
+    with self._guard_against_spurious_io_errors():
+        return self._load_overload(sig, target_context)
+
+
+def _release() -> tuple[int, int]:
+    major, minor = numba.__version__.split(".")[:2]
+    return int(major), int(minor)
+
+
+def install() -> bool:
+    """Load cached kernels without numba's registries (see the module's docstring), under a numba release
+    in :data:`TESTED`; whether it is installed."""
+    if _release() not in TESTED:
+        return False
+    caching.Cache.load_overload = _load_without_refresh
+    return True
+
+
+def active() -> bool:
+    """Whether cached kernels are loaded this module's way."""
+    return caching.Cache.load_overload is _load_without_refresh
+
+
+install()
