@@ -11,8 +11,12 @@ in the cache (the first run on a machine, or a changed source) is compiled as be
 refreshes the context itself when it compiles. The kernels and their results are the same bits either way
 (tests/test_cached_kernels.py).
 
-This replaces a method of numba's, so it applies only to the numba releases whose loader is the one
-described (:data:`TESTED`); under any other release numba loads its cache its own way.
+This replaces a method of numba's, so it applies only where numba's loader is the one described: a
+release in :data:`TESTED` whose ``load_overload`` calls what it called there (:data:`NUMBA_LOADER_NAMES`);
+under any other numba loads its cache its own way. A kernel loaded so links only the symbols that the
+modules its environments import have given LLVM (numba's hashing secret, for one, comes with
+``numba.cpython.hashing``): a new kernel belongs in tests/test_cached_kernels.py's comparison with numba's
+own loader, which runs every kernel module's kernels.
 """
 
 from __future__ import annotations
@@ -29,6 +33,9 @@ TESTED = ((0, 68),)
 #: numba's own loader, kept so that tests can compare the two
 NUMBA_LOAD_OVERLOAD = caching.Cache.load_overload
 
+#: the names numba's loader refers to in the releases tested: the refresh, then the guarded load
+NUMBA_LOADER_NAMES = ("refresh", "_guard_against_spurious_io_errors", "_load_overload")
+
 
 def _load_without_refresh(self, sig, target_context):
     """``Cache.load_overload`` without the context's refresh: the runtime is initialized (the one part of
@@ -40,15 +47,19 @@ def _load_without_refresh(self, sig, target_context):
         return self._load_overload(sig, target_context)
 
 
-def _release() -> tuple[int, int]:
-    major, minor = numba.__version__.split(".")[:2]
-    return int(major), int(minor)
+def _release() -> tuple[int, int] | None:
+    """numba's (major, minor), None for a version that does not start so (a build from an untagged checkout)."""
+    try:
+        major, minor = numba.__version__.split(".")[:2]
+        return int(major), int(minor)
+    except ValueError:
+        return None
 
 
 def install() -> bool:
-    """Load cached kernels without numba's registries (see the module's docstring), under a numba release
-    in :data:`TESTED`; whether it is installed."""
-    if _release() not in TESTED:
+    """Load cached kernels without numba's registries (see the module's docstring), where numba's loader is
+    the one tested; whether it is installed."""
+    if _release() not in TESTED or NUMBA_LOAD_OVERLOAD.__code__.co_names != NUMBA_LOADER_NAMES:
         return False
     caching.Cache.load_overload = _load_without_refresh
     return True
