@@ -102,15 +102,16 @@ def test_a_kernel_not_in_the_cache_still_compiles_after_cached_ones_loaded():
 
 
 def test_a_numba_release_or_loader_not_tested_keeps_numbas_loader(monkeypatch):
+    tested_release = ".".join(map(str, cached.TESTED[-1])) + ".1"
     monkeypatch.setattr(caching.Cache, "load_overload", cached.NUMBA_LOAD_OVERLOAD)
     for untested in ("0.99.0", "1.68.0", "0+untagged.5.gabc", "0+unknown"):
         monkeypatch.setattr(numba, "__version__", untested)
         assert not cached.install() and not cached.active(), untested
     assert caching.Cache.load_overload is cached.NUMBA_LOAD_OVERLOAD
-    monkeypatch.setattr(numba, "__version__", ".".join(map(str, cached.TESTED[-1])) + ".1")
+    monkeypatch.setattr(numba, "__version__", tested_release)
     monkeypatch.setattr(cached, "NUMBA_LOADER_NAMES", ("refresh", "load_somehow_else"))  # a loader changed
     assert not cached.install() and not cached.active()
     monkeypatch.undo()
     monkeypatch.setattr(caching.Cache, "load_overload", cached.NUMBA_LOAD_OVERLOAD)
-    monkeypatch.setattr(numba, "__version__", ".".join(map(str, cached.TESTED[-1])) + ".1")
+    monkeypatch.setattr(numba, "__version__", tested_release)
     assert cached.install() and cached.active()

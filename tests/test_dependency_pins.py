@@ -10,8 +10,10 @@ import pytest
 from packaging.requirements import Requirement
 
 DEPENDENCIES = {
-    Requirement(line).name: Requirement(line).specifier
-    for line in tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text())["project"]["dependencies"]
+    requirement.name: requirement.specifier
+    for requirement in map(
+        Requirement, tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text())["project"]["dependencies"]
+    )
 }
 
 

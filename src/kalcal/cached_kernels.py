@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import numba
 from numba.core import caching
+from numba.core.runtime import rtsys
 
 __all__ = ["TESTED", "active", "install", "tested"]
 
@@ -41,8 +42,6 @@ NUMBA_LOADER_NAMES = ("refresh", "_guard_against_spurious_io_errors", "_load_ove
 def _load_without_refresh(self, sig, target_context):
     """``Cache.load_overload`` without the context's refresh: the runtime is initialized (the one part of
     the refresh a loaded kernel needs, idempotent) and the overload loaded as numba loads it."""
-    from numba.core.runtime import rtsys
-
     rtsys.initialize(target_context)
     with self._guard_against_spurious_io_errors():
         return self._load_overload(sig, target_context)

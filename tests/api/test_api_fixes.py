@@ -25,7 +25,7 @@ def test_results_and_models_compare_by_identity_and_hash():
 
 def test_kalcal_gives_its_version_without_reading_package_metadata():
     """The version is written once, in kalcal/_version.py, which pyproject.toml reads: the installed
-    metadata says the same, and no job pays importlib.metadata's scan of the installed packages."""
+    metadata says the same, and reading ``kalcal.__version__`` loads no importlib.metadata."""
     import subprocess
     import sys
     from importlib.metadata import version
