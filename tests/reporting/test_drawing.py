@@ -74,6 +74,26 @@ def test_workers_leave_an_interrupt_to_this_process(tmp_path):
     assert signal.getsignal(signal.SIGINT) is not signal.SIG_IGN  # this process still hears it
 
 
+def _freeze_count(path):
+    import gc
+
+    path.write_text(str(gc.get_freeze_count()))
+    return path
+
+
+@needs_fork
+def test_a_worker_leaves_what_it_inherited_to_the_collector_s_permanent_generation(tmp_path):
+    """A worker freezes the heap it forked with (matplotlib, the figures' data): its collections traverse
+    only its figures' own objects. This process's collector is left as it was."""
+    import gc
+
+    before = gc.get_freeze_count()
+    paths = [tmp_path / f"f{i}.png" for i in range(2)]
+    drawing.draw_all([_freeze_count] * 2, paths, workers=2)
+    assert all(int(p.read_text()) > 1000 for p in paths)
+    assert gc.get_freeze_count() == before
+
+
 @needs_fork
 def test_an_error_drops_the_figures_not_started_and_leaves_no_process(tmp_path):
     paths = [tmp_path / f"f{i}.png" for i in range(20)]
