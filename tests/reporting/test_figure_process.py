@@ -310,13 +310,14 @@ def test_the_imports_run_at_the_lowest_priority_and_the_drawing_at_the_process_s
     assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) == own  # the thread that forks the workers
 
 
-def test_the_figure_process_loads_neither_xarray_nor_pandas():
+def test_the_figure_process_loads_neither_xarray_nor_pandas_nor_scipy_linalg():
     """What the figure process imports for the jobs' figures (the page's and a calibration's): half a second
-    of xarray and pandas less on a core the job's Monte Carlo is using."""
+    of xarray and pandas less on a core the job's Monte Carlo is using, and scipy.linalg (which the steady
+    state it unpickles needs only to be solved, in the job)."""
     code = (
         "import sys\n"
         "import kalcal.reporting.figures, kalcal.plots.calibration\n"
-        "print(sorted(m for m in ('xarray', 'pandas', 'dask') if m in sys.modules))\n"
+        "print(sorted(m for m in ('xarray', 'pandas', 'dask', 'scipy.linalg') if m in sys.modules))\n"
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr

@@ -26,7 +26,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
 
 from kalcal.filters.steps import gain_and_covariance, interval_transition
 from kalcal.linalg import psd_factor
@@ -139,6 +138,8 @@ def steady_state(model: LinearGaussianModel, state_names: tuple[str, ...] = ()) 
     unseen = _uncontrolled_modes(phi.T, h.T)
     if unseen:
         causes.append(f"(Phi, H) is not detectable: the measurements never see the mode at {_describe(unseen, state_names)}")
+    import scipy.linalg  # here: the figure process unpickles steady states without loading scipy.linalg (0.15-0.3 s)
+
     try:
         with np.errstate(all="ignore"):
             prior = scipy.linalg.solve_discrete_are(phi.T, h.T, q, v)
