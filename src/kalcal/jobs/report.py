@@ -37,7 +37,8 @@ from kalcal.montecarlo.problem import FixedGainProblem
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.plots.realization_data import RealizationData
 from kalcal.reporting.drawing import drawing_workers
-from kalcal.reporting.figure_process import REPORT_FIGURES, call
+from kalcal.reporting.figure_entries import REALIZATION_FIGURES_PER_STATE, page_order
+from kalcal.reporting.figure_process import REPORT_REALIZATION_FIGURES, REPORT_STATISTICS_FIGURES, call, submit
 from kalcal.reporting.html import build_page, write_page
 from kalcal.reporting.steady_state import steady_state_view
 from kalcal.verification.self_check import exact_prediction
@@ -230,7 +231,11 @@ def _draw_page(
     out: Path, summary: dict[str, Any], dataset, long_dataset, numbers: tuple[int, int, int], progress
 ) -> Path:
     """The figures and page of a run from its summary and statistics (read from ``out`` or in memory);
-    ``numbers`` is the run's (N, seed, shown realization) as :func:`_run_numbers` checked them."""
+    ``numbers`` is the run's (N, seed, shown realization) as :func:`_run_numbers` checked them.
+
+    The statistics' figures are started first (in the job's figure process, where it has one) and the shown
+    realization redrawn meanwhile; its figures follow. A realization that fails stops the figures being
+    drawn before its error goes on (tests/reporting/test_report_parts.py)."""
     summary_path = out / "summary.json"
     count, seed, index = numbers
     try:
@@ -254,20 +259,9 @@ def _draw_page(
     if str(summary["engine"]) not in problem.engines:
         raise DataError(f"{summary_path}: engine {summary['engine']!r} is not one of {', '.join(problem.engines)}")
 
-    one = draw_realization(problem, seed, index, count, str(summary["engine"]))
-    data = RealizationData(
-        index=index,
-        times=times,
-        truth=one.error + one.estimate,
-        estimate=one.estimate,
-        error=one.error,
-        filter_cov=one.filter_cov,
-        state_names=tuple(problem.info.state_names),
-        state_units=tuple(problem.info.state_units),
-        state_labels=getattr(scenario, "state_labels", None),  # accel-gps: its error states δp, δv
-    )
     steady = steady_state_view(problem)
     exact = exact_prediction(problem)  # the exact P_true, rebuilt from the settings as the problem is
+    scenario_name = str(summary["scenario"])
     with run_outputs(
         out,
         "report",
@@ -277,23 +271,56 @@ def _draw_page(
         remedy=f"to draw a page here (a folder from a kalcal version without manifests), move {PAGE} and "
         f"{FIGURE_DIR}/ out of it first",
     ) as staging:
-        figures, skipped = call(  # in the job's figure process, where it has one
-            REPORT_FIGURES,
+        figure_dir = staging / FIGURE_DIR
+        counted = stage(progress, "figures")
+        later = REALIZATION_FIGURES_PER_STATE * len(problem.info.state_names)  # drawn second
+        pending = submit(
+            REPORT_STATISTICS_FIGURES,
             dataset,
-            data,
-            staging / FIGURE_DIR,
+            figure_dir,
             long_dataset,
-            scenario=str(summary["scenario"]),
+            scenario=scenario_name,
             steady=steady,
-            progress=stage(progress, "figures"),
+            progress=None if counted is None else lambda done, total: counted(done, total + later),
             exact_cov=exact.error_cov,
             exact_reason=exact.reason,
         )
+        try:
+            data = _realization_data(problem, scenario, seed, index, count, str(summary["engine"]))
+            statistics_figures, skipped = pending.result()
+        except BaseException:
+            pending.cancel()  # its running figures finish before the error goes on; the others are dropped
+            raise
+        first = len(statistics_figures)
+        realization_figures = call(
+            REPORT_REALIZATION_FIGURES,
+            data,
+            figure_dir,
+            scenario=scenario_name,
+            progress=None if counted is None else lambda done, total: counted(first + done, first + total),
+        )
+        figures = page_order(realization_figures + statistics_figures)
         page = build_page(summary, figures, skipped, realization=index, figure_dir_name=FIGURE_DIR, steady_state=steady)
         write_page(staging / PAGE, page)
     if progress is not None:
         progress("report", 1, 1)
     return out / PAGE
+
+
+def _realization_data(problem, scenario, seed: int, index: int, count: int, engine: str) -> RealizationData:
+    """What the realization figures show: realization ``index`` of the run (:func:`draw_realization`)."""
+    one = draw_realization(problem, seed, index, count, engine)
+    return RealizationData(
+        index=index,
+        times=problem.info.update_times,
+        truth=one.error + one.estimate,
+        estimate=one.estimate,
+        error=one.error,
+        filter_cov=one.filter_cov,
+        state_names=tuple(problem.info.state_names),
+        state_units=tuple(problem.info.state_units),
+        state_labels=getattr(scenario, "state_labels", None),  # accel-gps: its error states δp, δv
+    )
 
 
 def _require_same_run(dataset, summary: dict[str, Any], path: Path, summary_path: Path) -> None:

@@ -39,10 +39,15 @@ from multiprocessing.connection import Connection, Pipe
 from multiprocessing.reduction import ForkingPickler
 from typing import Any
 
-__all__ = ["CALIBRATION_FIGURE", "REPORT_FIGURES", "PendingFigure", "call", "figure_process", "submit"]
+__all__ = ["CALIBRATION_FIGURE", "REPORT_FIGURES", "REPORT_REALIZATION_FIGURES", "REPORT_STATISTICS_FIGURES",
+           "PendingFigure", "call", "figure_process", "submit"]  # fmt: skip
 
-#: the figure functions the jobs call (``"module:function"``): a verification's page, a calibration's figure
+#: the figure functions the jobs call (``"module:function"``): a verification's page (all of its figures,
+#: or in two parts: the statistics', drawn while the realization shown is simulated, then the
+#: realization's), a calibration's figure
 REPORT_FIGURES = "kalcal.reporting.figures:render_figures"
+REPORT_STATISTICS_FIGURES = "kalcal.reporting.figures:render_statistics_figures"
+REPORT_REALIZATION_FIGURES = "kalcal.reporting.figures:render_realization_figures"
 CALIBRATION_FIGURE = "kalcal.plots.calibration:plot_calibration"
 
 #: the figure process of the job running in this context, None where figures are drawn here

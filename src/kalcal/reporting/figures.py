@@ -22,7 +22,13 @@ from kalcal.plots import realization as single
 from kalcal.plots.realization_data import RealizationData
 from kalcal.plots.steady_state import plot_steady_state
 from kalcal.reporting.drawing import draw_all
-from kalcal.reporting.figure_entries import GROUPS, FigureEntry, SkippedFigure  # noqa: F401 (re-exported)
+from kalcal.reporting.figure_entries import (  # noqa: F401 (GROUPS re-exported)
+    GROUPS,
+    FigureEntry,
+    SkippedFigure,
+    page_order,
+    sort_key,
+)
 from kalcal.reporting.theory import SIGMA_EXACT, SIGMA_EXACT_TITLE, sigma_exact_spec
 
 if TYPE_CHECKING:  # the figures read a Dataset's values, which the verify job's DatasetParts give too
@@ -53,14 +59,6 @@ class _Spec:
     title: str
     caption: str
     draw: Callable[[Path], Path]
-
-
-def _sort_key(item) -> tuple:
-    """Report figures in the report's order, then the rest in catalog order (stable sort keeps it)."""
-    if item.number is None:
-        return (1, 0, 0)
-    major, minor = item.number.split(".")
-    return (0, int(major), int(minor))
 
 
 def _realization_specs(data: RealizationData) -> list[_Spec]:
@@ -302,17 +300,52 @@ def render_figures(
         In page order (report figures by number, then the rest).
     skipped : list of SkippedFigure
     """
+    specs = _realization_specs(data) + _statistics_specs(dataset, long_dataset, steady, exact_cov)
+    return _draw_specs(specs, figure_dir, scenario, progress), _skipped(dataset, long_dataset, scenario, steady, exact_cov, exact_reason)
+
+
+def render_statistics_figures(
+    dataset: xr.Dataset | DatasetParts, figure_dir: str | Path, long_dataset: xr.Dataset | DatasetParts | None = None,
+    *, scenario: str = REPORT_SCENARIO, steady: SteadyStateView | None = None,
+    progress: Callable[[int, int], None] | None = None, exact_cov: np.ndarray | None = None, exact_reason: str | None = None,
+) -> tuple[list[FigureEntry], list[SkippedFigure]]:  # fmt: skip
+    """:func:`render_figures` less the realization's figures (drawn while it is simulated, then by
+    :func:`render_realization_figures`), in page order; ``progress(done, total)`` counts these alone."""
+    figures = _draw_specs(_statistics_specs(dataset, long_dataset, steady, exact_cov), figure_dir, scenario, progress)
+    return figures, _skipped(dataset, long_dataset, scenario, steady, exact_cov, exact_reason)
+
+
+def render_realization_figures(
+    data: RealizationData, figure_dir: str | Path, *, scenario: str = REPORT_SCENARIO, progress: Callable[[int, int], None] | None = None
+) -> list[FigureEntry]:  # fmt: skip
+    """The figures of the realization shown (two per state), in page order: the part of
+    :func:`render_figures` that :func:`render_statistics_figures` leaves out."""
+    return _draw_specs(_realization_specs(data), figure_dir, scenario, progress)
+
+
+def _statistics_specs(dataset, long_dataset, steady: SteadyStateView | None, exact_cov) -> list[_Spec]:
+    specs = _ensemble_specs(dataset, long_dataset, exact_cov) + _consistency_specs(dataset)
+    if steady is not None and steady.has_matrices:
+        specs.append(_steady_state_spec(steady))
+    return specs
+
+
+def _draw_specs(specs: list[_Spec], figure_dir: str | Path, scenario: str, progress) -> list[FigureEntry]:
+    """Draw ``specs`` into ``figure_dir`` (created), in parallel (:func:`draw_all`); their entries in page order."""
     figure_dir = Path(figure_dir)
     figure_dir.mkdir(parents=True, exist_ok=True)
     numbers = REPORT_NUMBERS if scenario == REPORT_SCENARIO else {}
-    specs = _realization_specs(data) + _ensemble_specs(dataset, long_dataset, exact_cov) + _consistency_specs(dataset)
-    if steady is not None and steady.has_matrices:
-        specs.append(_steady_state_spec(steady))
     paths = draw_all([spec.draw for spec in specs], [figure_dir / f"{spec.key}.png" for spec in specs], progress=progress)
     figures = [
         FigureEntry(spec.key, spec.group, spec.title, spec.caption, path, numbers.get(spec.key))
         for spec, path in zip(specs, paths, strict=True)
     ]
+    return page_order(figures)
+
+
+def _skipped(dataset, long_dataset, scenario: str, steady: SteadyStateView | None, exact_cov, exact_reason) -> list[SkippedFigure]:
+    """The figures a page leaves out, and why, in page order."""
+    numbers = REPORT_NUMBERS if scenario == REPORT_SCENARIO else {}
     skipped = []
     if long_dataset is None:
         skipped.append(
@@ -344,4 +377,4 @@ def render_figures(
     if steady is not None and not steady.has_matrices:
         why = f"{'steady state does not apply' if not steady.applies else 'no stabilizing solution'}: {steady.reason}"
         skipped.append(SkippedFigure("steady_state", "steady_state", "Filter variance P_k against the steady state", why))
-    return sorted(figures, key=_sort_key), sorted(skipped, key=_sort_key)
+    return sorted(skipped, key=sort_key)
