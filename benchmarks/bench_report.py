@@ -5,8 +5,10 @@
 DIR is a ``kalcal verify`` output folder (without one, a default run is made with ``--no-report`` into
 a temporary folder). Prints, measured in one run on this machine:
 
-* ``render_report(DIR)`` (figures in parallel processes, then the page), fastest of the repeats: the
-  job's ``timing.report_s``, but for reading the statistics files, which the job does not; against its figures drawn in this process alone;
+* ``render_report(DIR)`` (figures in parallel processes forked from this one, then the page), fastest of
+  the repeats: the report as drawn in the job's own process (the job's ``timing.report_s`` draws in its
+  figure process, with the realization redrawn meanwhile), and reading the statistics files, which the job
+  does not; against its figures drawn in this process alone;
 * matplotlib imported once before the workers fork (as now) against imported by each worker;
 * each figure drawn in this process (CPU time, fastest of the repeats): as drawn now, and as drawn
   before, with constrained layout, matplotlib's own ticks and mathtext log labels, and an RGBA PNG at
@@ -177,7 +179,7 @@ def main() -> None:
         workers = drawing.drawing_workers(100)
         walls = processes_against_one(run, args.repeats)
         print(f"kalcal report benchmark: matplotlib {matplotlib.__version__}\n")
-        print(f"render_report (the job's report_s, and reading stats.nc), fastest of {args.repeats}:")
+        print(f"render_report in this process (reading stats.nc too), fastest of {args.repeats}:")
         print(f"  figures in {workers} processes (now):              {walls['processes']:.3f} s")
         print(f"  in one process ({drawing.PROCESSES_ENV}=1): {walls['one process']:.3f} s")
         print(f"  one process / processes: {walls['one process'] / walls['processes']:.2f}x")

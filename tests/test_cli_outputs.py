@@ -315,12 +315,12 @@ def test_the_jobs_return_the_final_paths(tmp_path):
 def test_an_interrupted_redraw_leaves_the_old_page_and_figures(previous, monkeypatch):
     out, before = previous
 
-    def half_drawn(dataset, figure_dir, *args, **kwargs):  # the page's first figure call
+    def half_drawn(dataset, data, figure_dir, *args, **kwargs):
         figure_dir.mkdir(parents=True, exist_ok=True)
         (figure_dir / "state_position.png").write_bytes(b"half a figure")
         raise KeyboardInterrupt
 
-    monkeypatch.setattr("kalcal.reporting.figures.render_statistics_figures", half_drawn)
+    monkeypatch.setattr("kalcal.reporting.figures.render_figures", half_drawn)
     result = _invoke("report", out, "--realization", "3", catch=True)
     assert result.exit_code != 0
     assert _tree(out) == before

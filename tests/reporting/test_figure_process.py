@@ -121,8 +121,8 @@ def test_the_figure_process_has_a_process_group_of_its_own_in_the_jobs_session()
 
 def _autogroup(pid):
     """The name of the scheduler autogroup process `pid` is in ("/autogroup-17"), or None where the kernel
-    has none to show: no such file (no CONFIG_SCHED_AUTOGROUP), or an empty one (autogroups switched off,
-    as in some containers)."""
+    shows none: no such file (no CONFIG_SCHED_AUTOGROUP), or an empty one (as on the CI machine: autogroups
+    off, or the process in none of its own)."""
     try:
         words = Path(f"/proc/{pid}/autogroup").read_text().split()
     except FileNotFoundError:

@@ -159,7 +159,7 @@ def test_the_run_numbers_are_checked_once_per_page(copy_run, monkeypatch, job):
     def stop(*args, **kwargs):
         raise _Stop
 
-    monkeypatch.setattr("kalcal.reporting.figures.render_statistics_figures", stop)  # the page's first figure call
+    monkeypatch.setattr("kalcal.reporting.figures.render_figures", stop)  # the function the page's call runs
     run = copy_run()
     with pytest.raises(_Stop):
         if job == "render_report":

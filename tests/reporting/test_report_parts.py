@@ -2,6 +2,7 @@
 the realization's; together the figures, order and progress of drawing them all at once."""
 
 import re
+import time
 
 import pytest
 
@@ -37,7 +38,8 @@ def test_the_two_parts_are_the_page_drawn_at_once(copy_run, monkeypatch, tmp_pat
     skipped figures and PNG bytes of render_figures drawing them all from the same inputs."""
     run = copy_run()
     seen = _recorded(monkeypatch)
-    render_report(run, realization=REALIZATION)
+    with fp.figure_process(fp.REPORT_FIGURES, start=True):  # the job's: there the page is drawn in two parts
+        render_report(run, realization=REALIZATION)
     assert [name for name, _, _ in seen] == [fp.REPORT_STATISTICS_FIGURES, fp.REPORT_REALIZATION_FIGURES]
     (_, (dataset, _, long_dataset), options), (_, (data, _), _) = seen
     options = {key: value for key, value in options.items() if key != "progress"}
@@ -63,15 +65,51 @@ def test_the_two_parts_are_the_page_drawn_at_once(copy_run, monkeypatch, tmp_pat
     assert shown_order == [e.path.name for group, _ in GROUPS for e in whole if e.group == group]
 
 
-def test_the_figures_progress_counts_both_parts_as_one(copy_run):
-    """The "figures" stage goes 1, 2, ... up to every figure of the page, against one total."""
+def test_drawn_here_the_page_is_one_call_after_the_realization(copy_run, monkeypatch):
+    """Without a figure process nothing would run meanwhile: the realization is redrawn first, then every
+    figure drawn at once, the "figures" stage going 1, 2, ... up to every figure of the page."""
     run = copy_run()
+    seen = _recorded(monkeypatch)
     events = []
+    real = report_job.draw_realization
+    monkeypatch.setattr(report_job, "draw_realization", lambda *a, **k: events.append("realization") or real(*a, **k))
     render_report(run, realization=REALIZATION, progress=lambda stage, done, total: events.append((stage, done, total)))
+    assert [name for name, _, _ in seen] == [fp.REPORT_FIGURES]
+    assert events[0] == "realization"
+    events = events[1:]
     counted = [(done, total) for stage, done, total in events if stage == "figures"]
     drawn = len(list((run / "figures").glob("*.png")))
     assert drawn >= 15
     assert counted == [(done, drawn) for done in range(1, drawn + 1)]
+
+
+def test_in_the_figure_process_the_statistics_figures_are_drawn_while_the_realization_is_redrawn(
+    report_run, copy_run, monkeypatch
+):
+    """With the job's figure process, the statistics' call is pending there while this process redraws the
+    realization; the "figures" stage counts both calls as one, and the page and PNGs are the bytes drawn at
+    once in this process (the saved run's)."""
+    saved, page = report_run
+    run = copy_run()
+    busy = []
+    real = report_job.draw_realization
+
+    def spied(*args, **kwargs):
+        busy.append(fp._CURRENT.get().busy)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(report_job, "draw_realization", spied)
+    events = []
+    with fp.figure_process(fp.REPORT_FIGURES, start=True) as process:
+        assert fp.call("os:getpid") == process._process.pid  # loaded, and drawing there
+        render_report(run, realization=REALIZATION, progress=lambda stage, done, total: events.append((stage, done, total)))
+    assert busy == [True]
+    drawn = sorted(p.name for p in (saved / "figures").glob("*.png"))
+    assert [(d, t) for s, d, t in events if s == "figures"] == [(done, len(drawn)) for done in range(1, len(drawn) + 1)]
+    assert sorted(p.name for p in (run / "figures").glob("*.png")) == drawn
+    for name in drawn:
+        assert (run / "figures" / name).read_bytes() == (saved / "figures" / name).read_bytes(), name
+    assert (run / "report.html").read_bytes() == page.read_bytes()
 
 
 class _Failed(Exception):
@@ -79,17 +117,25 @@ class _Failed(Exception):
 
 
 def test_a_failed_realization_stops_the_statistics_figures_and_leaves_the_folder(copy_run, monkeypatch):
-    """The realization fails while the figure process draws the statistics' figures: it is stopped before
-    the error goes on (its running figures finish, the others are dropped), and the folder is as it was."""
+    """The realization fails once the figure process has drawn a statistics figure into the staging folder:
+    the process is stopped before the error goes on (its running figures finish, the others are dropped),
+    and the folder is as it was, then and a second later."""
     run = copy_run(figures=True)
     before = {p.relative_to(run): p.read_bytes() for p in run.rglob("*") if p.is_file()}
 
     def fail(*args, **kwargs):
+        deadline = time.monotonic() + 60
+        while not list(run.glob(".kalcal-partial-*/figures/*.png")) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert list(run.glob(".kalcal-partial-*/figures/*.png")), "no statistics figure was drawn"
         raise _Failed
 
     monkeypatch.setattr(report_job, "draw_realization", fail)
     with fp.figure_process(fp.REPORT_FIGURES, start=True) as process:
+        fp.call("os:getpid")  # loaded: the statistics' call is taken at once
         with pytest.raises(_Failed):
             render_report(run, realization=REALIZATION)
         assert process.ended and process._process.poll() is not None
+        assert {p.relative_to(run): p.read_bytes() for p in run.rglob("*") if p.is_file()} == before
+        time.sleep(1.0)
     assert {p.relative_to(run): p.read_bytes() for p in run.rglob("*") if p.is_file()} == before

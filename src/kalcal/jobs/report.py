@@ -38,7 +38,14 @@ from kalcal.montecarlo.scenarios import build_problem
 from kalcal.plots.realization_data import RealizationData
 from kalcal.reporting.drawing import drawing_workers
 from kalcal.reporting.figure_entries import REALIZATION_FIGURES_PER_STATE, page_order
-from kalcal.reporting.figure_process import REPORT_REALIZATION_FIGURES, REPORT_STATISTICS_FIGURES, call, submit
+from kalcal.reporting.figure_process import (
+    REPORT_FIGURES,
+    REPORT_REALIZATION_FIGURES,
+    REPORT_STATISTICS_FIGURES,
+    call,
+    elsewhere,
+    submit,
+)
 from kalcal.reporting.html import build_page, write_page
 from kalcal.reporting.steady_state import steady_state_view
 from kalcal.verification.self_check import exact_prediction
@@ -233,9 +240,10 @@ def _draw_page(
     """The figures and page of a run from its summary and statistics (read from ``out`` or in memory);
     ``numbers`` is the run's (N, seed, shown realization) as :func:`_run_numbers` checked them.
 
-    The statistics' figures are started first (in the job's figure process, where it has one) and the shown
-    realization redrawn meanwhile; its figures follow. A realization that fails stops the figures being
-    drawn before its error goes on (tests/reporting/test_report_parts.py)."""
+    In the job's figure process, where it has one, the statistics' figures are drawn while the shown
+    realization is redrawn here, and its figures follow (:func:`_two_parts`; a realization that fails stops
+    the figures being drawn before its error goes on); drawn here, the realization comes first, then every
+    figure at once. The same figures and page either way (tests/reporting/test_report_parts.py)."""
     summary_path = out / "summary.json"
     count, seed, index = numbers
     try:
@@ -261,7 +269,6 @@ def _draw_page(
 
     steady = steady_state_view(problem)
     exact = exact_prediction(problem)  # the exact P_true, rebuilt from the settings as the problem is
-    scenario_name = str(summary["scenario"])
     with run_outputs(
         out,
         "report",
@@ -271,40 +278,40 @@ def _draw_page(
         remedy=f"to draw a page here (a folder from a kalcal version without manifests), move {PAGE} and "
         f"{FIGURE_DIR}/ out of it first",
     ) as staging:
-        figure_dir = staging / FIGURE_DIR
-        counted = stage(progress, "figures")
-        later = REALIZATION_FIGURES_PER_STATE * len(problem.info.state_names)  # drawn second
-        pending = submit(
-            REPORT_STATISTICS_FIGURES,
-            dataset,
-            figure_dir,
-            long_dataset,
-            scenario=scenario_name,
-            steady=steady,
-            progress=None if counted is None else lambda done, total: counted(done, total + later),
-            exact_cov=exact.error_cov,
-            exact_reason=exact.reason,
-        )
-        try:
-            data = _realization_data(problem, scenario, seed, index, count, str(summary["engine"]))
-            statistics_figures, skipped = pending.result()
-        except BaseException:
-            pending.cancel()  # its running figures finish before the error goes on; the others are dropped
-            raise
-        first = len(statistics_figures)
-        realization_figures = call(
-            REPORT_REALIZATION_FIGURES,
-            data,
-            figure_dir,
-            scenario=scenario_name,
-            progress=None if counted is None else lambda done, total: counted(first + done, first + total),
-        )
-        figures = page_order(realization_figures + statistics_figures)
+        shown = lambda: _realization_data(problem, scenario, seed, index, count, str(summary["engine"]))  # noqa: E731
+        options = dict(scenario=str(summary["scenario"]), steady=steady, exact_cov=exact.error_cov, exact_reason=exact.reason)
+        if elsewhere():  # the job's figure process: the statistics' figures while the realization is redrawn here
+            figures, skipped = _two_parts(dataset, long_dataset, staging / FIGURE_DIR, shown, len(problem.info.state_names),
+                                          stage(progress, "figures"), options)  # fmt: skip
+        else:  # drawn here, where nothing would run meanwhile: the realization, then every figure at once
+            figures, skipped = call(REPORT_FIGURES, dataset, shown(), staging / FIGURE_DIR, long_dataset,
+                                    progress=stage(progress, "figures"), **options)  # fmt: skip
         page = build_page(summary, figures, skipped, realization=index, figure_dir_name=FIGURE_DIR, steady_state=steady)
         write_page(staging / PAGE, page)
     if progress is not None:
         progress("report", 1, 1)
     return out / PAGE
+
+
+def _two_parts(dataset, long_dataset, figure_dir: Path, shown, states: int, counted, options: dict[str, Any]):
+    """The page's figures and those skipped, in two calls to the job's figure process: the statistics'
+    figures, drawn there while ``shown()`` redraws the realization here, then the realization's, once the
+    statistics' are done. ``counted(done, total)`` hears of both as one count."""
+    later = REALIZATION_FIGURES_PER_STATE * states
+    pending = None
+    try:
+        pending = submit(REPORT_STATISTICS_FIGURES, dataset, figure_dir, long_dataset, **options,
+                         progress=None if counted is None else lambda done, total: counted(done, total + later))  # fmt: skip
+        data = shown()
+        statistics_figures, skipped = pending.result()
+    except BaseException:
+        if pending is not None:
+            pending.cancel()  # its running figures finish before the error goes on; the others are dropped
+        raise
+    first = len(statistics_figures)
+    realization_figures = call(REPORT_REALIZATION_FIGURES, data, figure_dir, scenario=options["scenario"],
+                               progress=None if counted is None else lambda done, total: counted(first + done, first + total))  # fmt: skip
+    return page_order(realization_figures + statistics_figures), skipped
 
 
 def _realization_data(problem, scenario, seed: int, index: int, count: int, engine: str) -> RealizationData:

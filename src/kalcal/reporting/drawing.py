@@ -58,7 +58,7 @@ def _quiet_worker(parent: int) -> None:
     from kalcal.reporting.figure_process import die_with_parent
 
     # what the worker inherited (matplotlib, the figures' data) is never garbage: frozen, the collector
-    # traverses only the figures' own objects (docs/verification.md: 0.34-0.44 s of a page's 2.6 s, 0.15 s)
+    # traverses only the figures' own objects (docs/verification.md: 0.34-0.44 s of a page's 2.6 s, 0.14-0.17 s)
     gc.freeze()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     die_with_parent()  # on Linux: gone with the process that drew the page, should it be killed

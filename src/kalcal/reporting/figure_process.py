@@ -40,11 +40,11 @@ from multiprocessing.reduction import ForkingPickler
 from typing import Any
 
 __all__ = ["CALIBRATION_FIGURE", "REPORT_FIGURES", "REPORT_REALIZATION_FIGURES", "REPORT_STATISTICS_FIGURES",
-           "PendingFigure", "call", "figure_process", "submit"]  # fmt: skip
+           "PendingFigure", "call", "elsewhere", "figure_process", "submit"]  # fmt: skip
 
-#: the figure functions the jobs call (``"module:function"``): a verification's page (all of its figures,
-#: or in two parts: the statistics', drawn while the realization shown is simulated, then the
-#: realization's), a calibration's figure
+#: the figure functions the jobs call (``"module:function"``): a verification's page (all of its figures
+#: where they are drawn in the job's process; in the figure process in two parts, the statistics' drawn
+#: while the job simulates the realization shown, then the realization's), a calibration's figure
 REPORT_FIGURES = "kalcal.reporting.figures:render_figures"
 REPORT_STATISTICS_FIGURES = "kalcal.reporting.figures:render_statistics_figures"
 REPORT_REALIZATION_FIGURES = "kalcal.reporting.figures:render_realization_figures"
@@ -281,9 +281,13 @@ def submit(name: str, *args: Any, progress: Callable[[int, int], None] | None = 
 
     Without a figure process (or with one busy or ended) the call runs here, now.
     """
+    return PendingFigure(_CURRENT.get() if elsewhere() else None, name, args, kwargs, progress)
+
+
+def elsewhere() -> bool:
+    """Whether a figure call now would run in the job's figure process (one started, not busy, not ended)."""
     process = _CURRENT.get()
-    usable = process is not None and not process.busy and not process.ended
-    return PendingFigure(process if usable else None, name, args, kwargs, progress)
+    return process is not None and not process.busy and not process.ended
 
 
 def call(name: str, *args: Any, progress: Callable[[int, int], None] | None = None, **kwargs: Any) -> Any:

@@ -22,13 +22,8 @@ from kalcal.plots import realization as single
 from kalcal.plots.realization_data import RealizationData
 from kalcal.plots.steady_state import plot_steady_state
 from kalcal.reporting.drawing import draw_all
-from kalcal.reporting.figure_entries import (  # noqa: F401 (GROUPS re-exported)
-    GROUPS,
-    FigureEntry,
-    SkippedFigure,
-    page_order,
-    sort_key,
-)
+from kalcal.reporting.figure_entries import GROUPS, REALIZATION_FIGURES_PER_STATE, FigureEntry, SkippedFigure  # noqa: F401
+from kalcal.reporting.figure_entries import page_order, sort_key
 from kalcal.reporting.theory import SIGMA_EXACT, SIGMA_EXACT_TITLE, sigma_exact_spec
 
 if TYPE_CHECKING:  # the figures read a Dataset's values, which the verify job's DatasetParts give too
@@ -269,7 +264,9 @@ def render_figures(
     exact_cov: np.ndarray | None = None,
     exact_reason: str | None = None,
 ) -> tuple[list[FigureEntry], list[SkippedFigure]]:
-    """Draw every figure of the report into ``figure_dir``.
+    """Draw every figure of the report into ``figure_dir``: a page drawn in the job's own process (in the
+    job's figure process it is drawn in two parts, :func:`render_statistics_figures` then
+    :func:`render_realization_figures`, the same figures).
 
     Parameters
     ----------
@@ -320,7 +317,9 @@ def render_realization_figures(
 ) -> list[FigureEntry]:  # fmt: skip
     """The figures of the realization shown (two per state), in page order: the part of
     :func:`render_figures` that :func:`render_statistics_figures` leaves out."""
-    return _draw_specs(_realization_specs(data), figure_dir, scenario, progress)
+    specs = _realization_specs(data)
+    assert len(specs) == REALIZATION_FIGURES_PER_STATE * len(data.state_names)  # what the job's progress counts
+    return _draw_specs(specs, figure_dir, scenario, progress)
 
 
 def _statistics_specs(dataset, long_dataset, steady: SteadyStateView | None, exact_cov) -> list[_Spec]:
