@@ -322,3 +322,19 @@ def test_the_figure_process_loads_neither_xarray_nor_pandas_nor_scipy_linalg():
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip().splitlines()[-1] == "[]"
+
+
+class _Process:
+    def __init__(self, busy=False, ended=False):
+        self.busy, self.ended = busy, ended
+
+
+@pytest.mark.parametrize(("process", "expected"), [(None, False), (_Process(), True), (_Process(busy=True), False),
+                                                   (_Process(ended=True), False)])  # fmt: skip
+def test_a_call_goes_to_the_figure_process_only_when_it_is_there_idle_and_alive(process, expected):
+    """A busy process would answer another call's messages; an ended one none: the call is drawn here."""
+    token = fp._CURRENT.set(process)
+    try:
+        assert fp.elsewhere() is expected
+    finally:
+        fp._CURRENT.reset(token)

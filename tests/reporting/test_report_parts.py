@@ -1,11 +1,14 @@
-"""A page's figures in two parts: the statistics' (drawn while the realization shown is simulated), then
-the realization's; together the figures, order and progress of drawing them all at once."""
+"""A page's figures drawn in the job's figure process in two parts, the statistics' (drawn while the
+realization shown is simulated) then the realization's: the figures, order, progress and bytes of drawing
+them all at once, as a page drawn in the job's own process does."""
 
 import re
 import time
+from pathlib import Path
 
 import pytest
 
+from kalcal.io import outputs
 from kalcal.jobs import report as report_job
 from kalcal.jobs.report import render_report
 from kalcal.reporting import figure_process as fp
@@ -117,11 +120,22 @@ class _Failed(Exception):
 
 
 def test_a_failed_realization_stops_the_statistics_figures_and_leaves_the_folder(copy_run, monkeypatch):
-    """The realization fails once the figure process has drawn a statistics figure into the staging folder:
-    the process is stopped before the error goes on (its running figures finish, the others are dropped),
-    and the folder is as it was, then and a second later."""
+    """The realization fails once the figure process has drawn a statistics figure into the staging folder
+    (no progress asked for: the figure process hears of a stop in its progress all the same): the process
+    is stopped before the error goes on, its running figures finish and the others are dropped (fewer than
+    all of them are in the staging folder when it is removed), and the folder is as it was, then and a
+    second later."""
     run = copy_run(figures=True)
     before = {p.relative_to(run): p.read_bytes() for p in run.rglob("*") if p.is_file()}
+    statistics = len(list((run / "figures").glob("*.png"))) - REALIZATION_FIGURES_PER_STATE * 3
+    staged = []
+    real_rmtree = outputs.shutil.rmtree
+
+    def counted_rmtree(path, *args, **kwargs):
+        staged.append(len(list(Path(path).glob("figures/*.png"))))
+        return real_rmtree(path, *args, **kwargs)
+
+    monkeypatch.setattr(outputs.shutil, "rmtree", counted_rmtree)
 
     def fail(*args, **kwargs):
         deadline = time.monotonic() + 60
@@ -137,5 +151,6 @@ def test_a_failed_realization_stops_the_statistics_figures_and_leaves_the_folder
             render_report(run, realization=REALIZATION)
         assert process.ended and process._process.poll() is not None
         assert {p.relative_to(run): p.read_bytes() for p in run.rglob("*") if p.is_file()} == before
+        assert len(staged) == 1 and 1 <= staged[0] < statistics, (staged, statistics)
         time.sleep(1.0)
     assert {p.relative_to(run): p.read_bytes() for p in run.rglob("*") if p.is_file()} == before

@@ -296,12 +296,14 @@ def _draw_page(
 def _two_parts(dataset, long_dataset, figure_dir: Path, shown, states: int, counted, options: dict[str, Any]):
     """The page's figures and those skipped, in two calls to the job's figure process: the statistics'
     figures, drawn there while ``shown()`` redraws the realization here, then the realization's, once the
-    statistics' are done. ``counted(done, total)`` hears of both as one count."""
+    statistics' are done. ``counted(done, total)`` hears of both as one count; the first call reports its
+    progress even without it, since the figure process hears of a stop only there."""
     later = REALIZATION_FIGURES_PER_STATE * states
+    counted = counted or (lambda done, total: None)
     pending = None
     try:
         pending = submit(REPORT_STATISTICS_FIGURES, dataset, figure_dir, long_dataset, **options,
-                         progress=None if counted is None else lambda done, total: counted(done, total + later))  # fmt: skip
+                         progress=lambda done, total: counted(done, total + later))  # fmt: skip
         data = shown()
         statistics_figures, skipped = pending.result()
     except BaseException:
@@ -310,7 +312,7 @@ def _two_parts(dataset, long_dataset, figure_dir: Path, shown, states: int, coun
         raise
     first = len(statistics_figures)
     realization_figures = call(REPORT_REALIZATION_FIGURES, data, figure_dir, scenario=options["scenario"],
-                               progress=None if counted is None else lambda done, total: counted(first + done, first + total))  # fmt: skip
+                               progress=lambda done, total: counted(first + done, first + total))  # fmt: skip
     return page_order(realization_figures + statistics_figures), skipped
 
 

@@ -208,6 +208,9 @@ class PendingFigure:
                 process.request(name, args, {**kwargs, **({"progress": True} if progress is not None else {})})
             except (FigureProcessDied, _NotSent):
                 self._done = True
+            except BaseException:  # interrupted once busy: the call is stopped before the error goes on
+                process.stop()
+                raise
         if self._done:
             self._value = _run_here(name, args, kwargs, progress)
 
