@@ -338,3 +338,18 @@ def test_a_call_goes_to_the_figure_process_only_when_it_is_there_idle_and_alive(
         assert fp.elsewhere() is expected
     finally:
         fp._CURRENT.reset(token)
+
+
+def test_a_send_interrupted_once_busy_stops_the_figure_process_before_the_interrupt_goes_on(monkeypatch):
+    """Ctrl-C in the job while it sends a call: the process, busy from before the send, is stopped and
+    waited for before the interrupt goes on, so that it draws nothing after the job's outputs are cleaned."""
+    with fp.figure_process("os:getpid", start=True) as process:
+        fp.call("os:getpid")  # loaded, idle
+
+        def interrupted(message):
+            raise KeyboardInterrupt
+
+        monkeypatch.setattr(process._connection, "send_bytes", interrupted)
+        with pytest.raises(KeyboardInterrupt):
+            fp.submit("os:getpid")
+        assert process.ended and not process.busy and process._process.poll() is not None
