@@ -353,3 +353,32 @@ def test_a_send_interrupted_once_busy_stops_the_figure_process_before_the_interr
         with pytest.raises(KeyboardInterrupt):
             fp.submit("os:getpid")
         assert process.ended and not process.busy and process._process.poll() is not None
+
+
+def test_a_calibration_whose_files_fail_waits_for_its_figure_and_leaves_no_outputs(tmp_path, monkeypatch):
+    """estimates.csv cannot be written while the figure process draws calibration.png: the figure is
+    stopped and waited for before the outputs are cleaned up, so the folder this first run created is gone
+    and nothing is written into it later."""
+    import pandas as pd
+
+    import kalcal
+    from kalcal.jobs.calibrate import compute_accel_gps_calibration, save_calibration
+    from kalcal.models.registry import build_scenario
+
+    scenario = build_scenario("accel-gps", None, ["scenario.duration=60"])
+    logs = kalcal.simulate(scenario, 3, out=tmp_path / "logs").paths
+    calibration = compute_accel_gps_calibration(scenario, logs["imu"], logs["gps"])
+
+    def full(self, *args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(pd.DataFrame, "to_csv", full)
+    out = tmp_path / "out"
+    with fp.figure_process(fp.CALIBRATION_FIGURE, start=True) as process:
+        fp.call("os:getpid")  # loaded: the figure is taken at once
+        with pytest.raises(Exception, match="No space left on device"):
+            save_calibration(calibration, out)
+        assert process.ended and process._process.poll() is not None
+        assert not out.exists()
+        time.sleep(1.0)
+    assert not out.exists()
