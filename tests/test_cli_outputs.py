@@ -420,3 +420,44 @@ def test_the_figure_processes_line_of_the_docs_is_what_report_prints(previous, m
     monkeypatch.setattr(multiprocessing.context.ForkContext, "Process", lambda *a, **k: started.append(1))
     _ok("report", out)
     assert started == [] and (out / "report.html").read_bytes() != b""
+
+
+def test_ctrl_c_while_the_figures_are_drawn_is_one_line_and_leaves_nothing(tmp_path):
+    """Ctrl-C (SIGINT to the whole process group) once the page's first figure is staged: the figure
+    process and its workers ignore it, the job stops them and waits before its folder is removed, exit
+    status 130 and one line, and nothing appears in the folder afterwards."""
+    out = tmp_path / "out"
+    process = subprocess.Popen(
+        [sys.executable, "-m", "kalcal.cli", "verify", "-n", "3000", "--set", "scenario.duration=20", "--out", str(out)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+    )  # fmt: skip
+    try:
+        deadline = time.monotonic() + 120
+        while not list(out.glob(".kalcal-partial-*/figures/*.png")) and process.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.005)
+        assert process.poll() is None, process.communicate()
+        assert list(out.glob(".kalcal-partial-*/figures/*.png")), "no figure was staged"
+        os.killpg(process.pid, signal.SIGINT)
+        _, stderr = process.communicate(timeout=60)
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.wait()
+    assert process.returncode == 130, stderr
+    assert stderr.splitlines() == ["kalcal: interrupted"]
+    assert not out.exists()
+    time.sleep(1.0)
+    assert not out.exists()
+    if sys.platform.startswith("linux"):  # the figure process and its workers stay in the job's session
+        assert _session(process.pid) == [], "a process of the job's session outlived it"
+
+
+def _session(sid: int) -> list[int]:
+    """The live processes of session ``sid``."""
+    members = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            with contextlib.suppress(OSError):
+                if os.getsid(int(entry)) == sid:
+                    members.append(int(entry))
+    return members
