@@ -334,25 +334,15 @@ def test_ctrl_c_with_workers_is_one_line(tmp_path):
     with contextlib.suppress(OSError):
         busy.bind(("0.0.0.0", 8787))
         busy.listen()
-    process = subprocess.Popen(
-        [sys.executable, "-m", "kalcal.cli", "verify", "-n", "10000000", "--workers", "1", "--no-report",
-         "--long-run", "0", "--out", str(out)],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
-    )  # fmt: skip
     try:
-        deadline = time.monotonic() + 45
-        # the staging folder exists once the cluster is up and the job has started
-        while not list(out.glob(".kalcal-partial-*")) and process.poll() is None and time.monotonic() < deadline:
-            time.sleep(0.05)
-        assert process.poll() is None, process.communicate()
-        time.sleep(1.0)  # into the Monte Carlo, on the worker
-        os.killpg(process.pid, signal.SIGINT)
-        _, stderr = process.communicate(timeout=30)
+        # the staging folder exists once the cluster is up and the job has started; a second later the
+        # Monte Carlo runs on the worker
+        process, stderr = _interrupted(
+            ["verify", "-n", "10000000", "--workers", "1", "--no-report", "--long-run", "0", "--out", str(out)],
+            out, ".kalcal-partial-*", within=45, settle=1.0, poll=0.05,
+        )  # fmt: skip
     finally:
         busy.close()
-        if process.poll() is None:
-            os.killpg(process.pid, signal.SIGKILL)
-            process.wait()
     assert process.returncode == 130, stderr
     assert stderr.splitlines() == ["kalcal: interrupted"]
     assert not out.exists()
@@ -427,22 +417,10 @@ def test_ctrl_c_while_the_figures_are_drawn_is_one_line_and_leaves_nothing(tmp_p
     process and its workers ignore it, the job stops them and waits before its folder is removed, exit
     status 130 and one line, and nothing appears in the folder afterwards."""
     out = tmp_path / "out"
-    process = subprocess.Popen(
-        [sys.executable, "-m", "kalcal.cli", "verify", "-n", "3000", "--set", "scenario.duration=20", "--out", str(out)],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+    process, stderr = _interrupted(
+        ["verify", "-n", "3000", "--set", "scenario.duration=20", "--out", str(out)],
+        out, ".kalcal-partial-*/figures/*.png", within=120, poll=0.005,
     )  # fmt: skip
-    try:
-        deadline = time.monotonic() + 120
-        while not list(out.glob(".kalcal-partial-*/figures/*.png")) and process.poll() is None and time.monotonic() < deadline:
-            time.sleep(0.005)
-        assert process.poll() is None, process.communicate()
-        assert list(out.glob(".kalcal-partial-*/figures/*.png")), "no figure was staged"
-        os.killpg(process.pid, signal.SIGINT)
-        _, stderr = process.communicate(timeout=60)
-    finally:
-        if process.poll() is None:
-            os.killpg(process.pid, signal.SIGKILL)
-            process.wait()
     assert process.returncode == 130, stderr
     assert stderr.splitlines() == ["kalcal: interrupted"]
     assert not out.exists()
@@ -450,6 +428,31 @@ def test_ctrl_c_while_the_figures_are_drawn_is_one_line_and_leaves_nothing(tmp_p
     assert not out.exists()
     if sys.platform.startswith("linux"):  # the figure process and its workers stay in the job's session
         assert _session(process.pid) == [], "a process of the job's session outlived it"
+
+
+def _interrupted(args: list[str], out, staged: str, *, within: float, settle: float = 0.0, poll: float):
+    """``python -m kalcal.cli ARGS`` in a session of its own, sent SIGINT to its whole process group (as the
+    terminal's Ctrl-C) once ``out`` holds a path matching ``staged`` (and ``settle`` s more): the process,
+    ended, and its stderr. It must still be running then, and the path must have appeared within
+    ``within`` s; a process that outlives the interrupt is killed."""
+    process = subprocess.Popen(
+        [sys.executable, "-m", "kalcal.cli", *args],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+    )  # fmt: skip
+    try:
+        deadline = time.monotonic() + within
+        while not list(out.glob(staged)) and process.poll() is None and time.monotonic() < deadline:
+            time.sleep(poll)
+        assert process.poll() is None, process.communicate()
+        assert list(out.glob(staged)), f"nothing matching {staged} appeared in {within} s"
+        time.sleep(settle)
+        os.killpg(process.pid, signal.SIGINT)
+        _, stderr = process.communicate(timeout=60)
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.wait()
+    return process, stderr
 
 
 def _session(sid: int) -> list[int]:
