@@ -115,3 +115,25 @@ def test_a_numba_release_or_loader_not_tested_keeps_numbas_loader(monkeypatch):
     monkeypatch.setattr(caching.Cache, "load_overload", cached.NUMBA_LOAD_OVERLOAD)
     monkeypatch.setattr(numba, "__version__", tested_release)
     assert cached.install() and cached.active()
+
+
+def test_the_monte_carlos_kernels_load_from_the_cache_without_numbas_array_math_or_scipy_linalg():
+    """ndarray.sum in a kernel rebuilds an environment of numba.np.arraymath, whose import loads scipy.linalg:
+    0.3 s of a fresh process's first block (kalcal.montecarlo.sum_kernels.total is the loop instead)."""
+    code = (
+        "import sys\n"
+        "import kalcal.cached_kernels as cached\n"
+        "from kalcal.api._scenario import resolve\n"
+        "from kalcal.montecarlo.engine import run_monte_carlo\n"
+        "from kalcal.montecarlo.scenarios import build_problem\n"
+        "for name, engine in (('accel-gps', 'exact'), ('accel-gps', 'sampled'), ('scale-bias', 'exact')):\n"
+        "    run_monte_carlo(build_problem(resolve(name, None, None))[0], 300, 0, engine=engine, workers=1)\n"
+        "print(cached.active(), 'numba.np.arraymath' in sys.modules, 'scipy.linalg' in sys.modules)\n"
+    )
+    runs = [subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=900) for _ in range(2)]
+    for done in runs:  # the first compiles and caches what the machine's cache lacks
+        assert done.returncode == 0, done.stderr
+    active, arraymath, linalg = runs[1].stdout.split()
+    assert active == str(cached.tested())
+    if cached.tested():  # numba's own loader installs every registry, arraymath's among them
+        assert (arraymath, linalg) == ("False", "False")

@@ -45,6 +45,17 @@ def dot(u, v):
 
 
 @numba.njit(nogil=True, cache=True, fastmath=FAST)
+def total(u):
+    """sum_i u_i of an (n,) array: a loop, not ``ndarray.sum``, whose implementation lives in
+    ``numba.np.arraymath``, a module that loads scipy.linalg when it is imported (0.3 s of a fresh
+    process's first block, its kernels' environments rebuilt from the cache)."""
+    acc = 0.0
+    for i in range(u.shape[0]):
+        acc += u[i]
+    return acc
+
+
+@numba.njit(nogil=True, cache=True, fastmath=FAST)
 def accumulate(k, first, error, estimate, residual, nees, nis, cov, sums, store=True):
     """Add update k of n realizations into the sums (in place), as ``MomentSums.from_block`` sums them.
 
@@ -73,15 +84,15 @@ def accumulate(k, first, error, estimate, residual, nees, nis, cov, sums, store=
     p = residual.shape[0]
     own = nees.shape[0] > 0
     for a in range(d):
-        sums.error[k, a] += error[a].sum()
-        sums.estimate[k, a] += estimate[a].sum()
+        sums.error[k, a] += total(error[a])
+        sums.estimate[k, a] += total(estimate[a])
         for b in range(d):
             sums.error_estimate[k, a, b] += dot(error[a], estimate[b])
             if b >= a:
                 sums.error_outer[k, a, b] += dot(error[a], error[b])
                 sums.estimate_outer[k, a, b] += dot(estimate[a], estimate[b])
                 if own:
-                    sums.filter_cov[k, a, b] += cov[a, b].sum()
+                    sums.filter_cov[k, a, b] += total(cov[a, b])
     for a in range(d):  # the symmetric sums: the lower triangle is the upper one
         for b in range(a):
             sums.error_outer[k, a, b] = sums.error_outer[k, b, a]
@@ -89,11 +100,11 @@ def accumulate(k, first, error, estimate, residual, nees, nis, cov, sums, store=
             if own:
                 sums.filter_cov[k, a, b] = sums.filter_cov[k, b, a]
     for a in range(p):
-        sums.residual[k, a] += residual[a].sum()
+        sums.residual[k, a] += total(residual[a])
         for b in range(p):
             sums.residual_own[k, a, b] += dot(residual[a], residual[b])
         if store and sums.residuals.shape[0]:
             sums.residuals[k * p + a, first:first + n] = residual[a, :]
     if own:
-        sums.nees[k] += nees.sum()
-        sums.nis[k] += nis.sum()
+        sums.nees[k] += total(nees)
+        sums.nis[k] += total(nis)
