@@ -78,7 +78,7 @@ def _filter_buffers(x0, p, n):
 @numba.njit(nogil=True, cache=True, fastmath=FAST)
 def exact_block_moments(
     y0, u0, rng, transitions, noise, boundary_in, model_error, h_truth, measure,
-    phis, h, gains, x0, sums, error_map,
+    phis, h, gains, x0, sums, error_map, traced, trace,
 ):
     """Sample the exact update-rate truth (:mod:`kalcal.simulation.exact`) and filter it, in one pass.
 
@@ -91,6 +91,8 @@ def exact_block_moments(
     :class:`~kalcal.montecarlo.accumulators.SumBuffers` (in the filter's d_f), added to. error_map
     (d_f, d): M of a truth with states of its own, whose error is e = M x - xhat; (0, 0) for a truth
     over the filter's states (d_f = d, e = x - xhat, with no product: that path is the one without a map).
+    traced: a realization of the block (0 <= traced < n) whose error and estimate at every update are
+    copied into trace (2, K, d_f) as they are formed; -1 (and trace (0, 0, 0)) for none.
     """
     d, n = y0.shape
     mapped = error_map.shape[0] > 0
@@ -122,9 +124,12 @@ def exact_block_moments(
         affine(z, measure, step[rc:], True)
         if mapped:
             affine(mapped_state, error_map, state, False)  # the filter's states of the truth: M x
-            _filter_and_accumulate(k, mapped_state, z, x, xbar, residual, phis[k], h, gains, sums)
-        else:
-            _filter_and_accumulate(k, state, z, x, xbar, residual, phis[k], h, gains, sums)
+        errors = mapped_state if mapped else state
+        _filter_and_accumulate(k, errors, z, x, xbar, residual, phis[k], h, gains, sums)
+        if traced >= 0:
+            for a in range(x.shape[0]):
+                trace[0, k, a] = errors[a, traced]
+                trace[1, k, a] = x[a, traced]
         if c:
             step, previous = previous, step
 

@@ -163,35 +163,59 @@ class FixedGainProblem:
             filter_cov=np.broadcast_to(self.schedule.posterior_cov, (n, *self.schedule.posterior_cov.shape)),
         )
 
+    def _gains(self) -> tuple:
+        """The filter's arguments of the compiled kernels: Phi_k (K, d, d), H (p, d), K_k (K, d, p), x0 (d,)."""
+        return np.ascontiguousarray(self.schedule.transitions), self.filter_model.h, self.schedule.gain, self.filter_model.x0
+
+    def _exact_block(self, rng: np.random.Generator, n: int, sums: SumBuffers, traced: int = -1) -> np.ndarray:
+        """The exact engine's compiled block into ``sums``; the error and estimate (2, K, d) of realization
+        ``traced`` of the block ((0, 0, 0) for -1)."""
+        from kalcal.montecarlo import kernels  # numba: loaded by the runs, not by what only describes a problem
+
+        truth = self.truth
+        c = int(truth.shares_boundary)
+        d0 = truth.x0_factor.shape[1]
+        first = rng.standard_normal((d0 + c, n))
+        noise = np.column_stack([truth.noise_factor] + ([truth.boundary_out] if c else []))
+        trace = np.zeros((2, truth.n_updates, self.filter_model.state_dim) if traced >= 0 else (0, 0, 0))
+        # the kernel draws each update's normals from rng as it reaches it (sample_exact's next draw,
+        # (K, r + c + p, n), in the same order), so that they are read from the cache, not from memory
+        kernels.exact_block_moments(
+            truth.x0_mean[:, None] + truth.x0_factor @ first[:d0],
+            np.ascontiguousarray(first[d0:]),
+            rng,
+            np.ascontiguousarray(truth.transitions),
+            np.ascontiguousarray(noise),
+            np.ascontiguousarray(truth.boundary_in[:, None][:, :c]),
+            truth.model_error,
+            truth.h,
+            truth.measurement_factor,
+            *self._gains(),
+            sums,
+            _EMPTY_MAP if truth.error_map is None else np.ascontiguousarray(truth.error_map),
+            traced,
+            trace,
+        )
+        return trace
+
+    def traced_realization(self, rng: np.random.Generator, n: int, index: int) -> tuple[np.ndarray, np.ndarray]:
+        """Error and estimate (K, d) of realization ``index`` of an exact-engine block of n drawn from rng,
+        through the compiled block (its draws and arithmetic, so equal to ``run_block``'s to rounding, and
+        about ten times faster: the block's other realizations are drawn and filtered, not kept)."""
+        if not 0 <= index < n:
+            raise ValueError(f"realization index must lie in [0, {n}), got {index}")
+        sums = SumBuffers.zeros(self.truth.n_updates, self.filter_model.state_dim, self.filter_model.measurement_dim, n, False)
+        error, estimate = self._exact_block(rng, n, sums, index)
+        return error, estimate
+
     def block_sums(self, rng: np.random.Generator, n: int, engine: str) -> MomentSums:
         """The moment sums of n realizations through the compiled kernels (same draws as ``run_block``)."""
         from kalcal.montecarlo import kernels  # numba: loaded by the runs, not by what only describes a problem
         n_updates, d, p = self.truth.n_updates, self.filter_model.state_dim, self.filter_model.measurement_dim
         sums = SumBuffers.zeros(n_updates, d, p, n, self.residual_pairs)
-        phis = np.ascontiguousarray(self.schedule.transitions)
-        gains = (phis, self.filter_model.h, self.schedule.gain, self.filter_model.x0)
+        gains = self._gains()
         if engine == "exact":
-            truth = self.truth
-            c = int(truth.shares_boundary)
-            d0 = truth.x0_factor.shape[1]
-            first = rng.standard_normal((d0 + c, n))
-            noise = np.column_stack([truth.noise_factor] + ([truth.boundary_out] if c else []))
-            # the kernel draws each update's normals from rng as it reaches it (sample_exact's next draw,
-            # (K, r + c + p, n), in the same order), so that they are read from the cache, not from memory
-            kernels.exact_block_moments(
-                truth.x0_mean[:, None] + truth.x0_factor @ first[:d0],
-                np.ascontiguousarray(first[d0:]),
-                rng,
-                np.ascontiguousarray(truth.transitions),
-                np.ascontiguousarray(noise),
-                np.ascontiguousarray(truth.boundary_in[:, None][:, :c]),
-                truth.model_error,
-                truth.h,
-                truth.measurement_factor,
-                *gains,
-                sums,
-                _EMPTY_MAP if truth.error_map is None else np.ascontiguousarray(truth.error_map),
-            )
+            self._exact_block(rng, n, sums)
         elif self.sampled_block is not None:
             check_engine(self, engine)
             self.sampled_block(rng, n, *gains, sums)
