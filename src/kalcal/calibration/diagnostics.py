@@ -49,6 +49,22 @@ CONSISTENT = "noise settings consistent with the data"
 PARTS = ("nis", "ljung_box")
 
 
+def _lags(n_fixes: int) -> int:
+    """The Ljung-Box lags of a log of n_fixes fixes: 20, fewer below 100 fixes."""
+    return int(max(1, min(20, n_fixes // 5)))
+
+
+def whiteness_null(n_fixes: int, p: int, confidence: float = 0.99) -> np.ndarray | None:
+    """The sorted simulated Ljung-Box null, (B,), that :func:`innovation_diagnostics` holds n_fixes fixes of
+    p components to at ``confidence``; None where the series is too short for a statistic. Cached: it
+    depends on min(n_fixes, 500) and the lags (20 from 100 fixes on), so the calibration job draws it on
+    another core from the log's number of fixes while the filter runs."""
+    lags = _lags(n_fixes)
+    if lags >= n_fixes:
+        return None
+    return simulated_null(n_fixes, lags, draws_for((1.0 - confidence) / len(PARTS) / p))
+
+
 @dataclass(frozen=True)
 class InnovationDiagnostics:
     """The innovation tests of one calibration and a plain-language verdict.
@@ -119,13 +135,11 @@ def innovation_diagnostics(
     nis_p = float(chi2_two_sided_pvalues(np.array([mean_nis]), n_fixes * p, n_fixes)[0])
     size = CheckPart("nis", mean_nis, nis_p, lower, upper, 1.0 - share, share, 1, nis_p >= share)
     above = float(np.mean(nis > chi2_isf(0.05, p)))
-    lags = int(max(1, min(20, n_fixes // 5)))
+    lags, null = _lags(n_fixes), whiteness_null(n_fixes, p, confidence)
     # A degenerate series (constant, or too short for the lags) has no statistic: its NaN p-value then
     # fails the whiteness part (untestable is not white).
-    if lags < n_fixes:
+    if null is not None:
         values = ljung_box_statistics(normalized.T, lags)
-        draws = draws_for(share / p)
-        null = simulated_null(n_fixes, lags, draws)
         pvalues = [float(v) for v in monte_carlo_pvalues(null, values)]
         lb_upper = largest_passing(null, p, share)
     else:

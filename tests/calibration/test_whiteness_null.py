@@ -1,0 +1,82 @@
+"""The whiteness test's simulated null: one per capped log length, drawn by the calibration job on another
+thread while its filter runs, and the diagnostics' own."""
+
+from __future__ import annotations
+
+import functools
+import threading
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from kalcal.calibration import ljung_box
+from kalcal.calibration.diagnostics import innovation_diagnostics, whiteness_null
+from kalcal.jobs.calibrate import compute_accel_gps_calibration
+from kalcal.models.registry import build_scenario
+from kalcal.simulation.sampled import sample_accel_gps_logs
+
+
+def _recorded(monkeypatch) -> list[tuple[str, int, int, int]]:
+    """Each null drawn (the thread that drew it, its length, lags and draws), with an empty cache."""
+    calls = []
+    real = ljung_box._simulated.__wrapped__
+
+    @functools.lru_cache(maxsize=16)
+    def simulated(length, lags, draws):
+        calls.append((threading.current_thread().name, length, lags, draws))
+        return real(length, lags, draws)
+
+    monkeypatch.setattr(ljung_box, "_simulated", simulated)
+    return calls
+
+
+def _logs(duration: float):
+    scenario = build_scenario("accel-gps", assignments=["scenario.integration=trapezoid", f"scenario.duration={duration}"])
+    logs = sample_accel_gps_logs(scenario, np.random.default_rng(3), 1)
+    imu = pd.DataFrame({"time": logs.sample_time, "accel": logs.accel[0]})
+    gps = pd.DataFrame({"time": logs.fix_time, "position": logs.gps_position[0], "velocity": logs.gps_velocity[0]})
+    return scenario, imu, gps
+
+
+def test_every_log_of_the_reference_length_or_more_shares_one_null(monkeypatch):
+    calls = _recorded(monkeypatch)
+    first = whiteness_null(ljung_box.REFERENCE_FIXES, 2)
+    assert whiteness_null(ljung_box.REFERENCE_FIXES + 1, 2) is first and whiteness_null(18_000, 2) is first
+    assert len(calls) == 1 and calls[0][1:3] == (ljung_box.REFERENCE_FIXES, 20)
+    assert whiteness_null(400, 2) is not first and whiteness_null(1, 2) is None
+    assert whiteness_null(18_000, 2, confidence=0.95).size < first.size  # fewer draws for a larger tail
+
+
+def test_the_diagnostics_hold_the_innovations_to_that_null(monkeypatch):
+    calls = _recorded(monkeypatch)
+    normalized = np.random.default_rng(0).standard_normal((700, 2))
+    diagnostics = innovation_diagnostics(normalized)
+    null = whiteness_null(700, 2)
+    assert len(calls) == 1  # the diagnostics drew the null that whiteness_null gives
+    assert diagnostics.ljung_box_upper == ljung_box.largest_passing(null, 2, (1.0 - 0.99) / 2)  # its share of alpha
+
+
+@pytest.mark.parametrize("duration", [102.0, 120.0])
+def test_the_job_draws_a_long_logs_null_on_another_thread_before_its_diagnostics(monkeypatch, duration):
+    """510 fixes (508 used: the first starts the filter, the diffuse prior leaves out the next) and 600."""
+    scenario, imu, gps = _logs(duration)
+    assert gps.shape[0] == round(5 * duration)
+    calls = _recorded(monkeypatch)
+    calibration = compute_accel_gps_calibration(scenario, imu, gps)
+    assert [name for name, *_ in calls] == ["kalcal-whiteness-null"], calls  # drawn there once, found cached after
+    assert not any(t.name == "kalcal-whiteness-null" for t in threading.enumerate())
+    monkeypatch.undo()
+    ljung_box._simulated.cache_clear()
+    again = compute_accel_gps_calibration(scenario, imu, gps)
+    assert again.summary["diagnostics"] == calibration.summary["diagnostics"]
+
+
+@pytest.mark.parametrize("duration", [30.0, 101.8])
+def test_the_job_draws_a_short_logs_null_itself(monkeypatch, duration):
+    """150 and 509 fixes (fewer than REFERENCE_FIXES + 10): drawn by the diagnostics."""
+    scenario, imu, gps = _logs(duration)
+    assert gps.shape[0] == round(5 * duration)
+    calls = _recorded(monkeypatch)
+    compute_accel_gps_calibration(scenario, imu, gps)
+    assert [name for name, *_ in calls] == ["MainThread"]
