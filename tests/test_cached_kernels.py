@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+import importlib
 import json
+import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import numba
 from numba.core import caching
 
+import kalcal
 import kalcal.cached_kernels as cached
 
 # a fresh process that runs every kernel module (each kernel but filter_block_moments, which no built-in
@@ -137,3 +141,44 @@ def test_the_monte_carlos_kernels_load_from_the_cache_without_numbas_array_math_
     assert active == str(cached.tested())
     if cached.tested():  # numba's own loader installs every registry, arraymath's among them
         assert (arraymath, linalg) == ("False", "False")
+
+
+def test_the_kernel_modules_are_every_module_of_kalcal_that_compiles_kernels():
+    package = Path(kalcal.__file__).parent
+    compiling = {p.relative_to(package).as_posix() for p in package.rglob("*.py") if "@numba.njit" in p.read_text()}
+    assert set(cached.KERNEL_MODULES) == compiling
+
+
+def test_the_digest_of_the_kernel_modules_changes_with_any_one_of_them(tmp_path, monkeypatch):
+    package = Path(kalcal.__file__).parent
+    for name in cached.KERNEL_MODULES:
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(package / name, tmp_path / name)
+    monkeypatch.setattr(cached, "_PACKAGE", tmp_path)
+    assert cached.kernel_modules_digest() == cached._digest.__wrapped__(tuple((n, 0, 0) for n in cached.KERNEL_MODULES))
+    seen = {cached.kernel_modules_digest()}
+    for name in cached.KERNEL_MODULES:
+        path = tmp_path / name
+        path.write_text(path.read_text() + "\n# changed\n")
+        seen.add(cached.kernel_modules_digest())
+    assert len(seen) == len(cached.KERNEL_MODULES) + 1
+
+
+def test_kalcals_kernels_are_stamped_with_every_kernel_module_and_other_kernels_as_numba_stamps_them(tmp_path, monkeypatch):
+    """numba compares the stamp saved in a kernel's cache index with this one: a kernel module changed
+    anywhere makes every kalcal kernel's cache stale (sum_kernels' accumulate is compiled into the Monte
+    Carlo's kernels, which numba alone would not see)."""
+    from kalcal.montecarlo import kernels
+
+    assert cached.install_stamp()
+    locator = kernels.exact_block_moments._cache._impl.locator
+    stamp = locator.get_source_stamp()
+    assert stamp == (cached.NUMBA_SOURCE_STAMP(locator), cached.kernel_modules_digest())
+    monkeypatch.setattr(cached, "kernel_modules_digest", lambda: b"another sum_kernels.py")
+    assert locator.get_source_stamp() != stamp
+    (tmp_path / "elsewhere.py").write_text("import numba\n\n@numba.njit(cache=True)\ndef twice(x):\n    return 2 * x\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    elsewhere = importlib.import_module("elsewhere")
+    other = elsewhere.twice._cache._impl.locator
+    assert other.get_source_stamp() == cached.NUMBA_SOURCE_STAMP(other)
+    assert isinstance(other.get_source_stamp(), bytes)

@@ -18,15 +18,39 @@ modules its environments import have given LLVM (numba's hashing secret, for one
 ``numba.cpython.hashing``): a new kernel belongs in tests/test_cached_kernels.py's comparison with numba's
 own loader, which runs every kernel module (every kernel but ``filter_block_moments``, the path of a
 sampler without a compiled block, which no built-in scenario takes).
+
+numba keys a kernel's cache on its own source file alone, although a kernel carries the compiled code
+of the kernels it calls in other files (``accumulate`` of ``montecarlo/sum_kernels.py`` is in every Monte
+Carlo kernel): changed there, a checkout's cache would go on running the old code. :func:`install_stamp`
+adds a digest of every kernel module (:data:`KERNEL_MODULES`) to the stamp of each of kalcal's kernels,
+so that a change to any of them recompiles them all once (about ten seconds); other packages' kernels
+keep numba's stamp.
 """
 
 from __future__ import annotations
+
+import functools
+import hashlib
+from pathlib import Path
 
 import numba
 from numba.core import caching
 from numba.core.runtime import rtsys
 
-__all__ = ["TESTED", "active", "install", "tested"]
+__all__ = ["KERNEL_MODULES", "TESTED", "active", "install", "install_stamp", "kernel_modules_digest", "tested"]
+
+#: kalcal's modules of compiled kernels, relative to the package: each kernel's cache stamp covers them all
+KERNEL_MODULES = (
+    "calibration/interval_model.py",
+    "calibration/ljung_box.py",
+    "filters/sequential.py",
+    "fitting/scale_bias_likelihood.py",
+    "montecarlo/kernels.py",
+    "montecarlo/regression_kernels.py",
+    "montecarlo/sampled_kernels.py",
+    "montecarlo/sum_kernels.py",
+)
+_PACKAGE = Path(__file__).resolve().parent
 
 #: numba releases (major, minor) the suite has run this with, whose ``Cache.load_overload`` refreshes the
 #: context and then loads the overload, as :func:`install` replaces it
@@ -75,4 +99,47 @@ def active() -> bool:
     return caching.Cache.load_overload is _load_without_refresh
 
 
+def kernel_modules_digest() -> bytes:
+    """sha256 of the names and contents of :data:`KERNEL_MODULES`, as they are now (read again only when
+    a file's modification time or size has changed)."""
+    return _digest(tuple((name, *_stat(name)) for name in KERNEL_MODULES))
+
+
+def _stat(name: str) -> tuple[int, int]:
+    status = (_PACKAGE / name).stat()
+    return status.st_mtime_ns, status.st_size
+
+
+@functools.lru_cache(maxsize=8)
+def _digest(stats: tuple) -> bytes:
+    digest = hashlib.sha256()
+    for name, *_ in stats:
+        digest.update(name.encode() + b"\0" + hashlib.sha256((_PACKAGE / name).read_bytes()).digest())
+    return digest.digest()
+
+
+#: numba's stamp of a kernel backed by a source file (None where numba's caching has no such locator)
+_MIXIN = getattr(caching, "_SourceFileBackedLocatorMixin", None)
+NUMBA_SOURCE_STAMP = getattr(_MIXIN, "get_source_stamp", None)
+
+
+def _stamp_with_kernel_modules(self):
+    """numba's stamp, and for a kernel of kalcal's the digest of every kernel module with it."""
+    stamp = NUMBA_SOURCE_STAMP(self)
+    py_file = getattr(self, "_py_file", None)
+    if py_file is not None and Path(py_file).resolve().is_relative_to(_PACKAGE):
+        return stamp, kernel_modules_digest()
+    return stamp
+
+
+def install_stamp() -> bool:
+    """Stamp kalcal's kernels with every kernel module (see the module's docstring); whether it is installed
+    (False where numba's caching has no source-file locator to extend)."""
+    if NUMBA_SOURCE_STAMP is None:
+        return False
+    _MIXIN.get_source_stamp = _stamp_with_kernel_modules
+    return True
+
+
 install()
+install_stamp()
