@@ -14,7 +14,9 @@ a temporary folder). Prints, measured in one run on this machine:
   before, with constrained layout, matplotlib's own ticks and mathtext log labels, and an RGBA PNG at
   PIL's default zlib level 6; and the ratio;
 * the PNG writer alone on the report's images: RGB at zlib level 1 against RGBA at level 6, time and
-  bytes.
+  bytes;
+* the shown realization redrawn (``draw_realization``, the exact engine's compiled block, warm as in a
+  verify job) against numpy's redraw of it (``montecarlo.engine.realization``), fastest of the repeats.
 """
 
 from __future__ import annotations
@@ -166,6 +168,32 @@ def png_writer(run: Path, repeats: int) -> None:
     print(f"  now / before: time {now_s / before_s:.2f}x, bytes {now_b / before_b:.2f}x")
 
 
+def realization_times(run: Path, repeats: int) -> tuple[float, float]:
+    """Wall seconds of the run's realization 0 redrawn through the compiled block and through numpy (each
+    called once first, so that the kernel is loaded, as in the verify job that drew the run)."""
+    import json
+
+    from kalcal.models.registry import build_scenario
+    from kalcal.montecarlo.engine import realization as numpy_realization
+    from kalcal.montecarlo.scenarios import build_problem
+
+    summary = json.loads((run / "summary.json").read_text())
+    scenario = build_scenario(summary["scenario"], None, report.settings_assignments(summary["settings"]))
+    problem, _ = build_problem(scenario, summary.get("form", "joseph"))
+    args = (problem, int(summary["seed"]), 0, int(summary["realizations"]), str(summary["engine"]))
+
+    def fastest(redraw) -> float:
+        redraw(*args)
+        times = []
+        for _ in range(repeats):
+            start = time.perf_counter()
+            redraw(*args)
+            times.append(time.perf_counter() - start)
+        return min(times)
+
+    return fastest(report.draw_realization), fastest(numpy_realization)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("run", nargs="?", type=Path, help="a kalcal verify output folder (default: a new default run)")
@@ -198,6 +226,9 @@ def main() -> None:
         report.render_report(run)  # the folder's figures as drawn now, for the writer below
         print("\nPNG writer on the report's images")
         png_writer(run, args.repeats)
+        compiled, through_numpy = realization_times(run, args.repeats)
+        print(f"\nshown realization redrawn: compiled block {compiled:.3f} s, numpy {through_numpy:.3f} s "
+              f"(numpy / compiled {through_numpy / compiled:.1f}x)")
 
 
 if __name__ == "__main__":

@@ -61,3 +61,7 @@ def test_index_outside_the_ensemble():
     problem, _ = build_problem(build_scenario("accel-gps", None, ["scenario.duration=6"]))
     with pytest.raises(ValueError, match=r"\[0, 100\), got 100"):
         draw_realization(problem, 3, 100, 100, "exact")
+    from kalcal.montecarlo.engine import block_generator
+
+    with pytest.raises(ValueError, match=r"\[0, 100\), got 100"):  # the kernel itself does not check
+        problem.traced_realization(block_generator(3, 0), 100, 100)

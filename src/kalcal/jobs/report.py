@@ -129,9 +129,11 @@ def draw_realization(problem, seed: int, index: int, n: int, engine: str) -> Sho
     Its block is drawn and filtered whole (the draws of a block are interleaved across its realizations).
     The exact engine of a fixed-gain problem runs the block through the Monte Carlo's compiled kernel,
     which keeps this realization's error and estimate as it goes (:meth:`FixedGainProblem.traced_realization`,
-    ten times faster than numpy): the values of :func:`kalcal.montecarlo.engine.realization` to rounding.
-    Elsewhere they are its values bit for bit, through numpy, without the statistics the figures do not
-    show (the whitened errors and innovations, NEES and NIS of every realization of the block).
+    a fraction of numpy's time once the kernel is loaded): the values of
+    :func:`kalcal.montecarlo.engine.realization` to rounding. The sampled engine's are its values bit for
+    bit, through numpy, without the statistics the figures do not show (the whitened errors and
+    innovations, NEES and NIS of every realization of the block); data-dependent gains (scale-bias) call
+    it.
     """
     if not isinstance(problem, FixedGainProblem):  # data-dependent gains: each realization's own P
         one = realization(problem, seed, index, n, engine)

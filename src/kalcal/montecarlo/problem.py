@@ -172,6 +172,9 @@ class FixedGainProblem:
         ``traced`` of the block ((0, 0, 0) for -1)."""
         from kalcal.montecarlo import kernels  # numba: loaded by the runs, not by what only describes a problem
 
+        if not -1 <= traced < n:  # the kernel does not check its indices
+            raise ValueError(f"traced realization must lie in [-1, {n}), got {traced}")
+
         truth = self.truth
         c = int(truth.shares_boundary)
         d0 = truth.x0_factor.shape[1]
@@ -199,9 +202,10 @@ class FixedGainProblem:
         return trace
 
     def traced_realization(self, rng: np.random.Generator, n: int, index: int) -> tuple[np.ndarray, np.ndarray]:
-        """Error and estimate (K, d) of realization ``index`` of an exact-engine block of n drawn from rng,
-        through the compiled block (its draws and arithmetic, so equal to ``run_block``'s to rounding, and
-        about ten times faster: the block's other realizations are drawn and filtered, not kept)."""
+        """Error and estimate (K, d), in the states' units, of realization ``index`` of an exact-engine block
+        of n drawn from rng, through the compiled block: its draws and arithmetic, so equal to ``run_block``'s
+        to rounding, in a fraction of numpy's time once the kernel is loaded (the block's other
+        realizations are drawn and filtered, not kept; ``benchmarks/bench_report.py`` prints both times)."""
         if not 0 <= index < n:
             raise ValueError(f"realization index must lie in [0, {n}), got {index}")
         sums = SumBuffers.zeros(self.truth.n_updates, self.filter_model.state_dim, self.filter_model.measurement_dim, n, False)
