@@ -80,6 +80,15 @@ def test_cached_kernels_load_without_numbas_registries_to_the_same_bits():
     assert ours["digest"] == numbas["digest"]
 
 
+def _second_run(code: str) -> list[str]:
+    """The words ``code`` prints in the second of two fresh processes (the first compiles and caches what
+    the machine's cache lacks)."""
+    runs = [subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=900) for _ in range(2)]
+    for done in runs:
+        assert done.returncode == 0, done.stderr
+    return runs[1].stdout.split()
+
+
 def test_a_kernel_not_in_the_cache_still_compiles_after_cached_ones_loaded():
     code = (
         "import numba, numpy as np\n"
@@ -96,10 +105,7 @@ def test_a_kernel_not_in_the_cache_still_compiles_after_cached_ones_loaded():
         "value = new(np.array([4.0, 9.0]))  # compiled here\n"
         "print(cached.active(), before, len(cpu_target.target_context._registries), value)\n"
     )
-    runs = [subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=900) for _ in range(2)]
-    for done in runs:  # the first compiles and caches what the machine's cache lacks
-        assert done.returncode == 0, done.stderr
-    active, before, after, value = runs[1].stdout.split()
+    active, before, after, value = _second_run(code)
     if cached.tested():  # the Monte Carlo's kernels were loaded without the registries
         assert (active, before) == ("True", "0")
     assert int(after) > 0 and value == "6.0"  # the new function's compile installed them, and it runs
@@ -134,10 +140,7 @@ def test_the_monte_carlos_kernels_load_from_the_cache_without_numbas_array_math_
         "    run_monte_carlo(build_problem(resolve(name, None, None))[0], 300, 0, engine=engine, workers=1)\n"
         "print(cached.active(), 'numba.np.arraymath' in sys.modules, 'scipy.linalg' in sys.modules)\n"
     )
-    runs = [subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=900) for _ in range(2)]
-    for done in runs:  # the first compiles and caches what the machine's cache lacks
-        assert done.returncode == 0, done.stderr
-    active, arraymath, linalg = runs[1].stdout.split()
+    active, arraymath, linalg = _second_run(code)
     assert active == str(cached.tested())
     if cached.tested():  # numba's own loader installs every registry, arraymath's among them
         assert (arraymath, linalg) == ("False", "False")
