@@ -148,7 +148,7 @@ def test_the_monte_carlos_kernels_load_from_the_cache_without_numbas_array_math_
 
 def test_the_kernel_modules_are_every_module_of_kalcal_that_compiles_kernels():
     package = Path(kalcal.__file__).parent
-    compiling = {p.relative_to(package).as_posix() for p in package.rglob("*.py") if "@numba.njit" in p.read_text()}
+    compiling = {p.relative_to(package).as_posix() for p in package.rglob("*.py") if "cache=True" in p.read_text()}
     assert set(cached.KERNEL_MODULES) == compiling
 
 
@@ -173,10 +173,11 @@ def test_kalcals_kernels_are_stamped_with_every_kernel_module_and_other_kernels_
     Carlo's kernels, which numba alone would not see)."""
     from kalcal.montecarlo import kernels
 
-    assert cached.install_stamp()
+    assert caching._SourceFileBackedLocatorMixin.get_source_stamp is cached._stamp_with_kernel_modules  # on import
     locator = kernels.exact_block_moments._cache._impl.locator
     stamp = locator.get_source_stamp()
     assert stamp == (cached.NUMBA_SOURCE_STAMP(locator), cached.kernel_modules_digest())
+    assert kernels.exact_block_moments._cache._cache_file._source_stamp == stamp  # what numba compares
     monkeypatch.setattr(cached, "kernel_modules_digest", lambda: b"another sum_kernels.py")
     assert locator.get_source_stamp() != stamp
     (tmp_path / "elsewhere.py").write_text("import numba\n\n@numba.njit(cache=True)\ndef twice(x):\n    return 2 * x\n")
@@ -185,3 +186,19 @@ def test_kalcals_kernels_are_stamped_with_every_kernel_module_and_other_kernels_
     other = elsewhere.twice._cache._impl.locator
     assert other.get_source_stamp() == cached.NUMBA_SOURCE_STAMP(other)
     assert isinstance(other.get_source_stamp(), bytes)
+
+
+def test_a_reloaded_cached_kernels_keeps_numbas_loader_and_stamp_underneath():
+    """A reload (IPython's autoreload) takes numba's loader and stamp from where the first import kept
+    them, not the ones it had installed: the stamp is not nested nor recursive, the loader still tested."""
+    code = (
+        "import importlib\n"
+        "import kalcal.cached_kernels as cached\n"
+        "importlib.reload(cached); importlib.reload(cached)\n"
+        "from kalcal.montecarlo import sum_kernels\n"
+        "stamp = sum_kernels.accumulate._cache._cache_file._source_stamp\n"
+        "print(cached.active() == cached.tested(), type(stamp[0]).__name__, stamp[1] == cached.kernel_modules_digest())\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["True", "bytes", "True"]

@@ -23,8 +23,9 @@ numba keys a kernel's cache on its own source file alone, although a kernel carr
 of the kernels it calls in other files (``accumulate`` of ``montecarlo/sum_kernels.py`` is in every Monte
 Carlo kernel): changed there, a checkout's cache would go on running the old code. :func:`install_stamp`
 adds a digest of every kernel module (:data:`KERNEL_MODULES`) to the stamp of each of kalcal's kernels,
-so that a change to any of them recompiles them all once (about ten seconds); other packages' kernels
-keep numba's stamp.
+so that a change to any of them recompiles them all once (a first run's cost, docs/verification.md,
+paid by the kernels each command uses); other packages' kernels keep numba's stamp, and so do kalcal's
+run from a zip archive (numba's zip locator stamps the archive).
 """
 
 from __future__ import annotations
@@ -56,8 +57,10 @@ _PACKAGE = Path(__file__).resolve().parent
 #: context and then loads the overload, as :func:`install` replaces it
 TESTED = ((0, 68),)
 
-#: numba's own loader, kept so that tests can compare the two
-NUMBA_LOAD_OVERLOAD = caching.Cache.load_overload
+#: numba's own loader, kept so that tests can compare the two (kept on the class too, so that a reload of
+#: this module takes numba's, not the one it installed)
+NUMBA_LOAD_OVERLOAD = caching.Cache.__dict__.get("_kalcal_numba_load_overload", caching.Cache.load_overload)
+caching.Cache._kalcal_numba_load_overload = NUMBA_LOAD_OVERLOAD
 
 #: the names numba's loader refers to in the releases tested: the refresh, then the guarded load
 NUMBA_LOADER_NAMES = ("refresh", "_guard_against_spurious_io_errors", "_load_overload")
@@ -118,17 +121,22 @@ def _digest(stats: tuple) -> bytes:
     return digest.digest()
 
 
-#: numba's stamp of a kernel backed by a source file (None where numba's caching has no such locator)
+#: numba's stamp of a kernel backed by a source file (None where numba's caching has no such locator),
+#: kept on the class as numba's loader is
 _MIXIN = getattr(caching, "_SourceFileBackedLocatorMixin", None)
-NUMBA_SOURCE_STAMP = getattr(_MIXIN, "get_source_stamp", None)
+NUMBA_SOURCE_STAMP = None if _MIXIN is None else _MIXIN.__dict__.get("_kalcal_numba_source_stamp", getattr(_MIXIN, "get_source_stamp", None))
 
 
-def _stamp_with_kernel_modules(self):
-    """numba's stamp, and for a kernel of kalcal's the digest of every kernel module with it."""
-    stamp = NUMBA_SOURCE_STAMP(self)
+def _stamp_with_kernel_modules(self, *args, **kwargs):
+    """numba's stamp, and for a kernel of kalcal's the digest of every kernel module with it (numba's
+    alone where a kernel module cannot be read: an application frozen without its sources)."""
+    stamp = NUMBA_SOURCE_STAMP(self, *args, **kwargs)
     py_file = getattr(self, "_py_file", None)
-    if py_file is not None and Path(py_file).resolve().is_relative_to(_PACKAGE):
-        return stamp, kernel_modules_digest()
+    try:
+        if py_file is not None and Path(py_file).resolve().is_relative_to(_PACKAGE):
+            return stamp, kernel_modules_digest()
+    except OSError:
+        pass
     return stamp
 
 
@@ -137,6 +145,7 @@ def install_stamp() -> bool:
     (False where numba's caching has no source-file locator to extend)."""
     if NUMBA_SOURCE_STAMP is None:
         return False
+    _MIXIN._kalcal_numba_source_stamp = NUMBA_SOURCE_STAMP
     _MIXIN.get_source_stamp = _stamp_with_kernel_modules
     return True
 

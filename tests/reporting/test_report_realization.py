@@ -61,7 +61,12 @@ def test_index_outside_the_ensemble():
     problem, _ = build_problem(build_scenario("accel-gps", None, ["scenario.duration=6"]))
     with pytest.raises(ValueError, match=r"\[0, 100\), got 100"):
         draw_realization(problem, 3, 100, 100, "exact")
+    from kalcal.montecarlo.accumulators import SumBuffers
     from kalcal.montecarlo.engine import block_generator
 
-    with pytest.raises(ValueError, match=r"\[0, 100\), got 100"):  # the kernel itself does not check
+    with pytest.raises(ValueError, match=r"\[0, 100\), got 100"):
         problem.traced_realization(block_generator(3, 0), 100, 100)
+    sums = SumBuffers.zeros(problem.truth.n_updates, 3, 2, 100, False)
+    for traced in (100, -2):  # the compiled block itself reads the index unchecked
+        with pytest.raises(ValueError, match=rf"\[-1, 100\), got {traced}"):
+            problem._exact_block(block_generator(3, 0), 100, sums, traced)

@@ -47,6 +47,8 @@ from kalcal.verification.results import Cause, CheckPart, chi2_two_sided_pvalues
 CONSISTENT = "noise settings consistent with the data"
 #: the tests, each held to an equal share of alpha
 PARTS = ("nis", "ljung_box")
+#: the confidence of a calibration's diagnostics
+CONFIDENCE = 0.99
 
 
 def _lags(n_fixes: int) -> int:
@@ -54,11 +56,11 @@ def _lags(n_fixes: int) -> int:
     return int(max(1, min(20, n_fixes // 5)))
 
 
-def whiteness_null(n_fixes: int, p: int, confidence: float = 0.99) -> np.ndarray | None:
+def whiteness_null(n_fixes: int, p: int, confidence: float = CONFIDENCE) -> np.ndarray | None:
     """The sorted simulated Ljung-Box null, (B,), that :func:`innovation_diagnostics` holds n_fixes fixes of
     p components to at ``confidence``; None where the series is too short for a statistic. Cached: it
-    depends on min(n_fixes, 500) and the lags (20 from 100 fixes on), so the calibration job draws it on
-    another core from the log's number of fixes while the filter runs."""
+    depends on min(n_fixes, 500) and the lags (20 from 100 fixes on), the same for every log of 500 fixes
+    or more, which the calibration job draws on another core while the filter runs."""
     lags = _lags(n_fixes)
     if lags >= n_fixes:
         return None
@@ -110,7 +112,7 @@ def _nan_max(values: list[float]) -> float:
 
 
 def innovation_diagnostics(
-    normalized: np.ndarray, names: tuple[str, ...] = ("position", "velocity"), confidence: float = 0.99
+    normalized: np.ndarray, names: tuple[str, ...] = ("position", "velocity"), confidence: float = CONFIDENCE
 ) -> InnovationDiagnostics:
     """Test normalized innovations (K, p) for size and whiteness, each at half of 1 - confidence.
 

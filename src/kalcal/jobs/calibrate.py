@@ -97,13 +97,14 @@ def save_calibration(calibration: Calibration, out: str | Path) -> dict[str, Pat
 
 
 def _whiteness_null() -> None:
-    """Draw (and so cache) the whiteness null of a log of REFERENCE_FIXES fixes or more; an error is left
-    to the diagnostics, which meet it drawing their own."""
-    from kalcal.calibration.diagnostics import whiteness_null
+    """Draw (and so cache) the whiteness null of a log of REFERENCE_FIXES fixes or more, of the job's two
+    innovations (position, velocity) at the diagnostics' confidence; an error is left to the diagnostics,
+    which meet it drawing their own."""
+    from kalcal.calibration.diagnostics import CONFIDENCE, whiteness_null
     from kalcal.calibration.ljung_box import REFERENCE_FIXES
 
     with contextlib.suppress(Exception):
-        whiteness_null(REFERENCE_FIXES + 1, 2)
+        whiteness_null(REFERENCE_FIXES + 1, 2, CONFIDENCE)
 
 
 def compute_accel_gps_calibration(
@@ -164,14 +165,17 @@ def compute_accel_gps_calibration(
     )
     require_increasing(imu["time"], imu_path, imu_map["time"])
     require_increasing(gps["time"], gps_path, gps_map["time"])
-    # the whiteness test's simulated null (0.1 s of CPU in a fresh process, cached after) is the same for
-    # every log of REFERENCE_FIXES fixes used or more: for a log of more it is drawn on another core while
-    # the filter runs. A few fixes go unused (the first starts the filter, a diffuse prior leaves out the
-    # next, the gate rejects some): with fewer than REFERENCE_FIXES left the diagnostics draw their own
+    # the whiteness test's simulated null (0.12-0.15 s of CPU in a fresh process, cached after) is the same
+    # for every log of REFERENCE_FIXES fixes used or more: for a log of more it is drawn on another core
+    # while the filter runs. A few fixes go unused (the first starts the filter, a diffuse prior leaves out
+    # the next, the gate rejects some): with fewer than REFERENCE_FIXES left the diagnostics draw their own
     null = None
     if gps["time"].size >= REFERENCE_FIXES + 10:
         null = threading.Thread(target=_whiteness_null, name="kalcal-whiteness-null", daemon=True)
-        null.start()
+        try:
+            null.start()
+        except RuntimeError:  # no thread to be had: the diagnostics draw it
+            null = None
     logs = (imu["time"], imu["accel"], gps["time"], gps["position"], gps["velocity"])
     stds = {"position_std": gps.get("position_std"), "velocity_std": gps.get("velocity_std")}
     options = dict(
