@@ -133,7 +133,7 @@ def draw_realization(problem, seed: int, index: int, n: int, engine: str) -> Sho
     :func:`kalcal.montecarlo.engine.realization` to rounding. The sampled engine's are its values bit for
     bit, through numpy, without the statistics the figures do not show (the whitened errors and
     innovations, NEES and NIS of every realization of the block); data-dependent gains (scale-bias) call
-    it.
+    :func:`~kalcal.montecarlo.engine.realization` itself.
     """
     if not isinstance(problem, FixedGainProblem):  # data-dependent gains: each realization's own P
         one = realization(problem, seed, index, n, engine)
