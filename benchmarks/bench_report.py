@@ -174,14 +174,11 @@ def realization_times(run: Path, repeats: int) -> tuple[str, float, float]:
     (each called once first, so that the kernel is loaded, as in the verify job that drew the run)."""
     import json
 
-    from kalcal.models.registry import build_scenario
     from kalcal.montecarlo.engine import realization as numpy_realization
-    from kalcal.montecarlo.problem import FixedGainProblem
     from kalcal.montecarlo.scenarios import build_problem
 
     summary = json.loads((run / "summary.json").read_text())
-    scenario = build_scenario(summary["scenario"], None, report.settings_assignments(summary["settings"]))
-    problem, _ = build_problem(scenario, summary.get("form", "joseph"))
+    problem, _ = build_problem(report.saved_scenario(summary, run / "summary.json"), summary.get("form", "joseph"))
     args = (problem, int(summary["seed"]), 0, int(summary["realizations"]), str(summary["engine"]))
 
     def fastest(redraw) -> float:
@@ -193,8 +190,8 @@ def realization_times(run: Path, repeats: int) -> tuple[str, float, float]:
             times.append(time.perf_counter() - start)
         return min(times)
 
-    compiled = isinstance(problem, FixedGainProblem) and args[-1] == "exact"
-    return ("compiled block" if compiled else "numpy"), fastest(report.draw_realization), fastest(numpy_realization)
+    how = "compiled block" if report.through_kernel(problem, args[-1]) else "numpy"
+    return how, fastest(report.draw_realization), fastest(numpy_realization)
 
 
 def main() -> None:

@@ -123,6 +123,25 @@ class ShownRealization(NamedTuple):
     filter_cov: np.ndarray  #: the filter's own P_k, (K, d, d)
 
 
+def through_kernel(problem, engine: str) -> bool:
+    """Whether :func:`draw_realization` redraws through the Monte Carlo's compiled block (the exact engine of
+    a fixed-gain problem) rather than through numpy."""
+    return engine == "exact" and isinstance(problem, FixedGainProblem)
+
+
+def saved_scenario(summary: Mapping[str, Any], summary_path: Path):
+    """The scenario a run's ``summary.json`` was drawn from: a model file's from its matrices, a built-in's
+    from its settings; their errors located in ``summary_path``."""
+    try:
+        if is_custom_settings(summary["settings"]):  # a model file's run: its matrices are the settings
+            return CustomModelScenario.from_settings(summary["settings"])
+        return build_scenario(str(summary["scenario"]), None, settings_assignments(summary["settings"]))
+    except SettingError as exc:  # the settings layer's wording, located in the summary
+        raise exc.located(source=str(summary_path)) from None
+    except ConfigError as exc:
+        raise ConfigError(f"{summary_path}: {exc}") from None
+
+
 def draw_realization(problem, seed: int, index: int, n: int, engine: str) -> ShownRealization:
     """Realization ``index`` of the n-realization ensemble drawn with ``seed``: its error, estimate and P.
 
@@ -142,7 +161,7 @@ def draw_realization(problem, seed: int, index: int, n: int, engine: str) -> Sho
         raise ValueError(f"realization index must lie in [0, {n}), got {index}")
     block, offset = divmod(index, BLOCK_SIZE)
     rng, size = block_generator(seed, block), block_sizes(n, BLOCK_SIZE)[block]
-    if engine == "exact":
+    if through_kernel(problem, engine):
         return ShownRealization(*problem.traced_realization(rng, size, offset), np.array(problem.schedule.posterior_cov))
     states, measurements = problem.sample(rng, size, engine)
     run = problem.filter(measurements)
@@ -250,15 +269,7 @@ def _draw_page(
     figure at once. The same figures and page either way (tests/reporting/test_report_parts.py)."""
     summary_path = out / "summary.json"
     count, seed, index = numbers
-    try:
-        if is_custom_settings(summary["settings"]):  # a model file's run: its matrices are the settings
-            scenario = CustomModelScenario.from_settings(summary["settings"])
-        else:
-            scenario = build_scenario(str(summary["scenario"]), None, settings_assignments(summary["settings"]))
-    except SettingError as exc:  # the settings layer's wording, located in the summary
-        raise exc.located(source=str(summary_path)) from None
-    except ConfigError as exc:
-        raise ConfigError(f"{summary_path}: {exc}") from None
+    scenario = saved_scenario(summary, summary_path)
     form = str(summary.get("form", "joseph"))  # runs before --form existed used the Joseph form
     check_form(form, f"{summary_path}: form")
     problem, _ = build_problem(scenario, form)
