@@ -40,7 +40,7 @@ import numpy as np
 from kalcal.calibration import accel_gps_evaluation as evaluation
 from kalcal.calibration.accel_gps_checks import check_plausible, fix_warnings
 from kalcal.calibration.accel_gps_result import AccelGpsCalibration, ImuGap
-from kalcal.calibration.interval_model import compose_by_source, interval_sources, scale_parameters
+from kalcal.calibration.interval_model import composed_sources, scale_parameters
 from kalcal.calibration.likelihood import innovation_loglik
 from kalcal.calibration.plausibility import CalibrationWarning
 from kalcal.errors import DataError
@@ -336,7 +336,7 @@ def prepare_accel_gps_log(
     samples = imu_time[(imu_time > start_time) & (imu_time < fix_times[-1])]
     cuts = np.union1d(np.concatenate([[start_time], samples]), fix_times)
     owner = np.searchsorted(fix_times, cuts[1:], side="left")
-    phis, sources = compose_by_source(*interval_sources(imu_time, steps, cuts, settings, period, scheme), owner, fix_times.size)
+    phis, sources = composed_sources(imu_time, steps, cuts, owner, fix_times.size, settings, period, scheme)
     # s multiplies the measured acceleration: its column over an interval is minus the position and
     # velocity that acceleration alone produces from rest, the free integration's increments.
     free_p_all, free_v_all = np.concatenate([[p_start], p_fix]), np.concatenate([[v_start], v_fix])

@@ -6,8 +6,8 @@ between samples, cut at the fixes. Each piece's transition is
 the decay and noise of :func:`~kalcal.models.accel_gps_discretization.bias_discretization`: a Gauss-Markov bias decays
 by exp(-dt_j / tau) at each sample, with the exact discrete noise, over each step's own dt_j), and a piece
 of length h adds the accelerometer noise g = [h^2/2, h, 0] sigma_a. The products over each interval's
-pieces are composed in one compiled pass, and only the 3x3 update runs in a loop over fixes. This is
-exactly the filter that ``verify`` runs (the same per-sample Phi, Gamma and W, the same prior and
+pieces are composed by compiled passes over chunks of pieces (:func:`composed_sources`), and only the
+3x3 update runs in a loop over fixes. This is exactly the filter that ``verify`` runs (the same per-sample Phi, Gamma and W, the same prior and
 updates) on a log that is evenly spaced at the scenario's rates, with a fix on every
 ``steps_per_update``-th sample from the first and none skipped or given its own accuracy, without a
 scale state (``scale_std`` = 0: here the scale column uses the measured acceleration, in ``verify`` the
@@ -26,7 +26,7 @@ import kalcal.cached_kernels  # noqa: F401  (cached kernels load without numba's
 from kalcal.linalg import symmetrize
 from kalcal.models.accel_gps_discretization import bias_discretization, error_transition
 
-__all__ = ["SOURCES", "compose_by_source", "compose_intervals", "continuous_bias_model", "interval_sources", "scale_parameters"]
+__all__ = ["CHUNK_PIECES", "SOURCES", "accumulate_by_source", "compose_intervals", "composed_sources", "continuous_bias_model", "interval_sources", "scale_parameters"]
 
 
 #: the process noise's sources, each composed with unit variance: Q_k = sum_r variance_r Q_k^(r)
@@ -68,11 +68,29 @@ def interval_sources(imu_time, steps, cuts, settings, period, scheme) -> tuple[n
     return phis, inputs
 
 
-def compose_by_source(phis, inputs, owner, n_intervals) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`compose_intervals` of each source apart: Phi_k (K, 3, 3) and Q_k^(r) (R, K, 3, 3)."""
-    out_q = np.empty((inputs.shape[2], n_intervals, 3, 3))
-    for r in range(inputs.shape[2]):
-        out_phi, out_q[r] = compose_intervals(phis, np.ascontiguousarray(inputs[:, :, r : r + 1]), owner, n_intervals)
+#: pieces composed at a time by :func:`composed_sources`: a chunk's arrays (at most about 450 bytes a piece
+#: at once, 7 MB) are reused from one chunk to the next, so that a log's preparation does not grow with its
+#: length and its memory is not mapped afresh in each chunk (docs/accel-gps.md, "Speed")
+CHUNK_PIECES = 1 << 14
+
+
+def composed_sources(imu_time, steps, cuts, owner, n_intervals, settings, period, scheme, *, chunk: int = CHUNK_PIECES):
+    """Phi_k (K, 3, 3) and Q_k^(r) (R, K, 3, 3) of every interval: the pieces between ``cuts`` (their
+    transitions and inputs by :func:`interval_sources`), composed into their intervals (``owner``, as in
+    :func:`compose_intervals`) by source, ``chunk`` pieces at a time.
+
+    The same values, bit for bit, as composing every piece at once (tests/calibration/test_interval_model.py):
+    each piece's transition and inputs are its own, and the products over an interval are taken in the
+    pieces' order across chunks as within one.
+    """
+    out_phi = np.broadcast_to(np.eye(3), (n_intervals, 3, 3)).copy()
+    out_q = np.zeros((len(SOURCES), n_intervals, 3, 3))
+    for start in range(0, cuts.size - 1, chunk):
+        stop = min(start + chunk, cuts.size - 1)
+        phis, inputs = interval_sources(imu_time, steps, cuts[start : stop + 1], settings, period, scheme)
+        accumulate_by_source(phis, inputs, owner[start:stop], out_phi, out_q)
+    for q in out_q:
+        _symmetrize_lower(q)
     return out_phi, out_q
 
 
@@ -129,25 +147,58 @@ def compose_intervals(phis, inputs, owner, n_intervals):
     for i in range(phis.shape[0]):
         k = owner[i]
         t = phis[i]
-        for a in range(3):
-            for b in range(3):
-                tmp[a, b] = t[a, 0] * out_phi[k, 0, b] + t[a, 1] * out_phi[k, 1, b] + t[a, 2] * out_phi[k, 2, b]
-        out_phi[k] = tmp
-        for a in range(3):
-            for b in range(3):
-                tmp[a, b] = t[a, 0] * out_q[k, 0, b] + t[a, 1] * out_q[k, 1, b] + t[a, 2] * out_q[k, 2, b]
-        for a in range(3):
-            for b in range(3):
-                value = tmp[a, 0] * t[b, 0] + tmp[a, 1] * t[b, 1] + tmp[a, 2] * t[b, 2]
-                for r in range(inputs.shape[2]):
-                    value += inputs[i, a, r] * inputs[i, b, r]
-                out_q[k, a, b] = value
-    for k in range(n_intervals):
+        _transition_step(t, out_phi[k], tmp)
+        _covariance_step(t, out_q[k], inputs[i], tmp)
+    _symmetrize_lower(out_q)
+    return out_phi, out_q
+
+
+@numba.njit(cache=True, nogil=True)
+def accumulate_by_source(phis, inputs, owner, out_phi, out_q):
+    """Compose pieces into running products, in place: piece i of interval k = ``owner[i]`` takes
+    ``out_phi[k]`` to T_i out_phi[k] and, for each source r, ``out_q[r, k]`` to T_i out_q[r, k] T_i^T + g g^T,
+    g = ``inputs[i, :, r]``. Pieces given in consecutive chunks compose as they would in one call;
+    :func:`_symmetrize_lower` each ``out_q[r]`` once all are in."""
+    tmp = np.empty((3, 3))
+    for i in range(phis.shape[0]):
+        k = owner[i]
+        t = phis[i]
+        _transition_step(t, out_phi[k], tmp)
+        for r in range(inputs.shape[2]):
+            _covariance_step(t, out_q[r, k], inputs[i, :, r : r + 1], tmp)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _transition_step(t, phi, tmp):
+    """phi <- t phi (3 x 3, in place; ``tmp`` scratch)."""
+    for a in range(3):
+        for b in range(3):
+            tmp[a, b] = t[a, 0] * phi[0, b] + t[a, 1] * phi[1, b] + t[a, 2] * phi[2, b]
+    phi[:, :] = tmp
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _covariance_step(t, q, g, tmp):
+    """q <- t q t^T + g g^T (3 x 3 and 3 x m, in place; ``tmp`` scratch)."""
+    for a in range(3):
+        for b in range(3):
+            tmp[a, b] = t[a, 0] * q[0, b] + t[a, 1] * q[1, b] + t[a, 2] * q[2, b]
+    for a in range(3):
+        for b in range(3):
+            value = tmp[a, 0] * t[b, 0] + tmp[a, 1] * t[b, 1] + tmp[a, 2] * t[b, 2]
+            for r in range(g.shape[1]):
+                value += g[a, r] * g[b, r]
+            q[a, b] = value
+
+
+@numba.njit(cache=True, nogil=True)
+def _symmetrize_lower(q):
+    """Each q[k] (K x 3 x 3) made exactly symmetric: both off-diagonal elements set to their mean."""
+    for k in range(q.shape[0]):
         for a in range(3):
             for b in range(a + 1, 3):
-                mean = 0.5 * (out_q[k, a, b] + out_q[k, b, a])
-                out_q[k, a, b] = out_q[k, b, a] = mean
-    return out_phi, out_q
+                mean = 0.5 * (q[k, a, b] + q[k, b, a])
+                q[k, a, b] = q[k, b, a] = mean
 
 
 def scale_parameters(states: np.ndarray, covariances: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
