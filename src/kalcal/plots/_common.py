@@ -84,8 +84,12 @@ def save(figure: Figure, path: str | Path) -> Path:
     if not getattr(figure, "_kalcal_fitted", False):
         fit_margins(figure)
     figure.canvas.draw()
-    pixels = np.asarray(figure.canvas.buffer_rgba())[..., :3]  # opaque white background: no alpha to keep
-    Image.fromarray(np.ascontiguousarray(pixels)).save(path, format="png", compress_level=COMPRESS_LEVEL, dpi=(DPI, DPI))
+    rgba = figure.canvas.buffer_rgba()
+    height, width = rgba.shape[:2]
+    # opaque white background: no alpha to keep. Pillow reads the RGBA rows as RGBX, the layout it keeps
+    # an RGB image in (a copy of the bytes), where numpy's copy of the three channels took 5 ms a figure
+    image = Image.frombytes("RGB", (width, height), rgba, "raw", "RGBX")
+    image.save(path, format="png", compress_level=COMPRESS_LEVEL, dpi=(DPI, DPI))
     return path
 
 
