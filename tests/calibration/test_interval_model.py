@@ -64,54 +64,108 @@ def test_compose_intervals_of_equal_steps_is_interval_transition():
         np.testing.assert_allclose(q_k[k], q_m, rtol=1e-12, atol=1e-13 * np.abs(q_m).max())
 
 
-def _log_pieces(samples: int, fixes: int, seed: int = 3):
+def _log_pieces(samples: int, fixes: int, seed: int = 3, on_samples: int = 0):
     """An irregular accelerometer log's pieces between cuts (its samples and fixes), as the calibration
-    prepares them: (imu_time, steps, cuts, owner, fixes)."""
+    prepares them: (imu_time, steps, cuts, owner, fixes); ``on_samples`` of the fixes fall on samples."""
     rng = np.random.default_rng(seed)
     imu_time = np.concatenate([[0.0], np.cumsum(rng.uniform(0.004, 0.006, samples - 1))])
-    fix_times = np.sort(rng.uniform(imu_time[3], imu_time[-3], fixes))
+    fix_times = rng.uniform(imu_time[3], imu_time[-3], fixes - on_samples)
+    fix_times = np.unique(np.concatenate([fix_times, rng.choice(imu_time[3:-3], on_samples, replace=False)]))
     start = 0.5 * (imu_time[1] + imu_time[2])  # inside a step, as a first fix is
     samples_in = imu_time[(imu_time > start) & (imu_time < fix_times[-1])]
     cuts = np.union1d(np.concatenate([[start], samples_in]), fix_times)
     owner = np.searchsorted(fix_times, cuts[1:], side="left")
-    return imu_time, np.diff(imu_time), cuts, owner, fixes
+    return imu_time, np.diff(imu_time), cuts, owner, fix_times.size
 
 
-#: a filter with every noise source: the accelerometer's, a random walk and a Gauss-Markov bias
-_SETTINGS = replace(build_scenario("accel-gps", None, []).filter_settings, bias_walk_std=1e-4, bias_correlation_time=40.0)
+_FILTER = build_scenario("accel-gps", None, []).filter_settings
+#: a constant (or random-walk) bias, whose Gauss-Markov source is 0, and a Gauss-Markov bias (every
+#: source): the sources are composed at unit variance, so only the correlation time changes them
+_SETTINGS = {"constant": _FILTER, "markov": replace(_FILTER, bias_walk_std=1e-4, bias_correlation_time=40.0)}
 
 
+def _python_by_source(phis, inputs, owner, n_intervals):
+    """The composition in plain Python floats, IEEE double like the kernel (no numba): for each piece,
+    Phi <- T Phi, and for each source Q <- T Q T^T + g g^T, then each Q's off-diagonal pairs averaged."""
+    phi = [np.eye(3).tolist() for _ in range(n_intervals)]
+    q = [[np.zeros((3, 3)).tolist() for _ in range(n_intervals)] for _ in range(inputs.shape[2])]
+    for t, g_all, k in zip(phis.tolist(), inputs.tolist(), owner.tolist()):
+        p = phi[k]
+        phi[k] = [[t[a][0] * p[0][b] + t[a][1] * p[1][b] + t[a][2] * p[2][b] for b in range(3)] for a in range(3)]
+        for r in range(len(q)):
+            old = q[r][k]
+            tq = [[t[a][0] * old[0][b] + t[a][1] * old[1][b] + t[a][2] * old[2][b] for b in range(3)] for a in range(3)]
+            q[r][k] = [
+                [tq[a][0] * t[b][0] + tq[a][1] * t[b][1] + tq[a][2] * t[b][2] + g_all[a][r] * g_all[b][r] for b in range(3)]
+                for a in range(3)
+            ]
+    out_q = np.array(q)
+    return np.array(phi), 0.5 * (out_q + np.swapaxes(out_q, -1, -2))
+
+
+@pytest.mark.parametrize("model", sorted(_SETTINGS))
 @pytest.mark.parametrize("scheme", ["trapezoid", "euler"])
 @pytest.mark.parametrize("chunk", [1, 7, 256, 10**9])
-def test_composed_sources_in_chunks_is_every_piece_at_once_bit_for_bit(scheme, chunk):
-    """Chunks of pieces compose into the same bits as all pieces in one pass, source by source."""
-    imu_time, steps, cuts, owner, fixes = _log_pieces(2000, 37)
-    phis, inputs = interval_sources(imu_time, steps, cuts, _SETTINGS, 0.005, scheme)
-    assert all(np.any(inputs[:, :, r] != 0.0) for r in range(len(SOURCES)))  # every source is exercised
+def test_composed_sources_in_chunks_is_every_piece_at_once_bit_for_bit(model, scheme, chunk):
+    """Chunks of pieces compose into the same bits as all pieces in one pass of compose_intervals, source
+    by source, and into the plain-Python composition to rounding; some fixes fall on samples."""
+    imu_time, steps, cuts, owner, fixes = _log_pieces(2000, 37, on_samples=9)
+    settings = _SETTINGS[model]
+    phis, inputs = interval_sources(imu_time, steps, cuts, settings, 0.005, scheme)
+    used = [r for r in range(len(SOURCES)) if np.any(inputs[:, :, r] != 0.0)]
+    assert used == {"constant": [0, 1], "markov": [0, 1, 2]}[model]  # the sources the model has
     expected = [compose_intervals(phis, np.ascontiguousarray(inputs[:, :, r : r + 1]), owner, fixes) for r in range(len(SOURCES))]
-    phi_k, q_k = composed_sources(imu_time, steps, cuts, owner, fixes, _SETTINGS, 0.005, scheme, chunk=chunk)
+    phi_k, q_k = composed_sources(imu_time, steps, cuts, owner, fixes, settings, 0.005, scheme, chunk=chunk)
     assert q_k.shape == (len(SOURCES), fixes, 3, 3)
     np.testing.assert_array_equal(phi_k, expected[0][0])
     for r in range(len(SOURCES)):
         np.testing.assert_array_equal(q_k[r], expected[r][1])
         np.testing.assert_array_equal(q_k[r], np.swapaxes(q_k[r], 1, 2))
+    if chunk == 7:  # the oracle once per model and scheme (it is slow)
+        ref_phi, ref_q = _python_by_source(phis, inputs, owner, fixes)
+        np.testing.assert_allclose(phi_k, ref_phi, rtol=1e-13, atol=1e-15)
+        np.testing.assert_allclose(q_k, ref_q, rtol=1e-12, atol=1e-13 * np.abs(ref_q).max())
+
+
+def test_composed_sources_refuses_what_its_kernel_would_not_check():
+    imu_time, steps, cuts, owner, fixes = _log_pieces(100, 5)
+    args = (imu_time, steps, cuts)
+    settings = (_SETTINGS["markov"], 0.005, "trapezoid")
+    for chunk in (0, -3, 2.5, True):
+        with pytest.raises(ValueError, match="chunk"):
+            composed_sources(*args, owner, fixes, *settings, chunk=chunk)
+    with pytest.raises(ValueError, match="one interval per piece"):
+        composed_sources(*args, owner[:-1], fixes, *settings)
+    with pytest.raises(ValueError, match=r"must lie in \[0, 4\)"):
+        composed_sources(*args, owner, fixes - 1, *settings)
+    with pytest.raises(ValueError, match="must lie in"):
+        composed_sources(*args, owner - 1, fixes, *settings)
 
 
 def _peak_bytes(samples: int, chunk: int) -> int:
+    """Peak of numpy's allocations (traced) during one composition beyond what was allocated before it,
+    bytes; a trace already running (``-X tracemalloc``) is kept running."""
     imu_time, steps, cuts, owner, fixes = _log_pieces(samples, 40)
-    composed_sources(imu_time, steps, cuts, owner, fixes, _SETTINGS, 0.005, "trapezoid", chunk=chunk)  # compiled
-    tracemalloc.start()
+    args = (imu_time, steps, cuts, owner, fixes, _SETTINGS["markov"], 0.005, "trapezoid")
+    composed_sources(*args, chunk=chunk)  # compiled
+    started = not tracemalloc.is_tracing()
+    if started:
+        tracemalloc.start()
     try:
-        composed_sources(imu_time, steps, cuts, owner, fixes, _SETTINGS, 0.005, "trapezoid", chunk=chunk)
-        return tracemalloc.get_traced_memory()[1]
+        tracemalloc.reset_peak()
+        before = tracemalloc.get_traced_memory()[0]
+        composed_sources(*args, chunk=chunk)
+        return tracemalloc.get_traced_memory()[1] - before
     finally:
-        tracemalloc.stop()
+        if started:
+            tracemalloc.stop()
 
 
-def test_composed_sources_memory_does_not_grow_with_the_log():
-    """The composition's peak memory (numpy's allocations, traced) is that of a chunk, whatever the log's
-    length: 8 times the samples at the same chunk size stays within 1.25x; one chunk of all pieces (what
-    the test would meet without chunking) grows with the log, by more than 4x."""
+def test_composed_sources_memory_does_not_grow_with_the_pieces():
+    """At the same number of fixes (the output, 288 bytes a fix), the composition's peak memory is that of
+    a chunk however many pieces there are: 8 times the samples stays within 1.25x; one chunk of all
+    pieces (what it would be without chunks) grows with them, by more than 4x."""
     small, large = _peak_bytes(4096, 1024), _peak_bytes(8 * 4096, 1024)
+    assert small > 1024 * 100  # a chunk's arrays were traced (numpy reports its buffers to tracemalloc)
     assert large < 1.25 * small
     assert _peak_bytes(8 * 4096, 10**9) > 4 * _peak_bytes(4096, 10**9)

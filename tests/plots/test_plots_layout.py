@@ -157,9 +157,12 @@ def test_the_png_is_rgb_at_the_figures_size(plots_run, tmp_path):
     assert np.asarray(Image.open(path)).shape == (_common.height_px(1), _common.WIDTH_PX, 3)
 
 
-def test_the_png_holds_the_canvass_pixels_channel_for_channel(tmp_path):
+def test_the_png_holds_the_canvas_pixels_channel_for_channel(tmp_path):
     """The PNG is the drawn canvas less its alpha, each channel in place: a red, a green and a blue band
-    come back as drawn (a reader of the RGBA rows with the channels out of order would swap them)."""
+    come back as drawn (a reader of the RGBA rows with the channels out of order would swap them), and
+    its bytes are those of numpy's copy of the three channels, which it replaced."""
+    import io
+
     from PIL import Image
 
     figure, axes = _common.new_figure()
@@ -167,8 +170,14 @@ def test_the_png_holds_the_canvass_pixels_channel_for_channel(tmp_path):
         axes[0, 0].axvspan(x, x + 1, color=color)
     path = _common.save(figure, tmp_path / "bands.png")
     drawn = np.asarray(figure.canvas.buffer_rgba())
-    saved = np.asarray(Image.open(path))
+    with Image.open(path) as image:
+        saved = np.asarray(image)
     np.testing.assert_array_equal(saved, drawn[..., :3])
     assert np.all(drawn[..., 3] == 255)  # opaque: nothing is lost with the alpha
     for color in ([255, 0, 0], [0, 255, 0], [0, 0, 255]):
         assert np.any(np.all(saved == color, axis=-1))
+    before = io.BytesIO()
+    Image.fromarray(np.ascontiguousarray(drawn[..., :3])).save(
+        before, format="png", compress_level=_common.COMPRESS_LEVEL, dpi=(_common.DPI, _common.DPI)
+    )
+    assert path.read_bytes() == before.getvalue()

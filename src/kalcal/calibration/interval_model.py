@@ -7,14 +7,14 @@ the decay and noise of :func:`~kalcal.models.accel_gps_discretization.bias_discr
 by exp(-dt_j / tau) at each sample, with the exact discrete noise, over each step's own dt_j), and a piece
 of length h adds the accelerometer noise g = [h^2/2, h, 0] sigma_a. The products over each interval's
 pieces are composed by compiled passes over chunks of pieces (:func:`composed_sources`), and only the
-3x3 update runs in a loop over fixes. This is exactly the filter that ``verify`` runs (the same per-sample Phi, Gamma and W, the same prior and
-updates) on a log that is evenly spaced at the scenario's rates, with a fix on every
-``steps_per_update``-th sample from the first and none skipped or given its own accuracy, without a
-scale state (``scale_std`` = 0: here the scale column uses the measured acceleration, in ``verify`` the
-true profile) and with ``init="prior"`` (``"first-fix"`` starts later, from the first fix and the GPS
-noise). A step cut by a fix is treated as two pieces with independent noise (the same sample's
-noise, and with the trapezoid rule the same bias noise, really enters both; the difference is one
-sample's share of a whole interval).
+3x3 update runs in a loop over fixes. This is exactly the filter that ``verify`` runs (the same
+per-sample Phi, Gamma and W, the same prior and updates) on a log that is evenly spaced at the
+scenario's rates, with a fix on every ``steps_per_update``-th sample from the first and none skipped
+or given its own accuracy, without a scale state (``scale_std`` = 0: here the scale column uses the
+measured acceleration, in ``verify`` the true profile) and with ``init="prior"`` (``"first-fix"`` starts
+later, from the first fix and the GPS noise). A step cut by a fix is treated as two pieces with
+independent noise (the same sample's noise, and with the trapezoid rule the same bias noise, really
+enters both; the difference is one sample's share of a whole interval).
 """
 
 from __future__ import annotations
@@ -26,7 +26,8 @@ import kalcal.cached_kernels  # noqa: F401  (cached kernels load without numba's
 from kalcal.linalg import symmetrize
 from kalcal.models.accel_gps_discretization import bias_discretization, error_transition
 
-__all__ = ["CHUNK_PIECES", "SOURCES", "accumulate_by_source", "compose_intervals", "composed_sources", "continuous_bias_model", "interval_sources", "scale_parameters"]
+__all__ = ["CHUNK_PIECES", "SOURCES", "compose_intervals", "composed_sources", "continuous_bias_model", "interval_sources",
+           "scale_parameters"]  # fmt: skip
 
 
 #: the process noise's sources, each composed with unit variance: Q_k = sum_r variance_r Q_k^(r)
@@ -69,28 +70,65 @@ def interval_sources(imu_time, steps, cuts, settings, period, scheme) -> tuple[n
 
 
 #: pieces composed at a time by :func:`composed_sources`: a chunk's arrays (at most about 450 bytes a piece
-#: at once, 7 MB) are reused from one chunk to the next, so that a log's preparation does not grow with its
-#: length and its memory is not mapped afresh in each chunk (docs/accel-gps.md, "Speed")
+#: at once, 7 MB) are freed after each chunk and reused by the allocator for the next, so that the
+#: composition's working memory does not grow with the number of pieces and is not mapped afresh
+#: (docs/accel-gps.md, "Speed")
 CHUNK_PIECES = 1 << 14
 
 
-def composed_sources(imu_time, steps, cuts, owner, n_intervals, settings, period, scheme, *, chunk: int = CHUNK_PIECES):
-    """Phi_k (K, 3, 3) and Q_k^(r) (R, K, 3, 3) of every interval: the pieces between ``cuts`` (their
-    transitions and inputs by :func:`interval_sources`), composed into their intervals (``owner``, as in
-    :func:`compose_intervals`) by source, ``chunk`` pieces at a time.
+def composed_sources(
+    imu_time, steps, cuts, owner, n_intervals: int, settings, period: float, scheme: str, *, chunk: int = CHUNK_PIECES
+) -> tuple[np.ndarray, np.ndarray]:
+    """Every interval's transition and process noise by source: the pieces between ``cuts`` (made by
+    :func:`interval_sources`) composed into their intervals, ``chunk`` pieces at a time.
 
-    The same values, bit for bit, as composing every piece at once (tests/calibration/test_interval_model.py):
-    each piece's transition and inputs are its own, and the products over an interval are taken in the
-    pieces' order across chunks as within one.
+    The same values, bit for bit, as composing every piece at once with :func:`compose_intervals`, source
+    by source (tests/calibration/test_interval_model.py): each piece's transition and inputs are its own,
+    and an interval's products are taken in its pieces' order across chunks as within one.
+
+    Parameters
+    ----------
+    imu_time : ndarray, shape (M,)
+        Accelerometer sample times, s, increasing.
+    steps : ndarray, shape (M - 1,)
+        ``np.diff(imu_time)``, s.
+    cuts : ndarray, shape (N + 1,)
+        The pieces' ends, s, increasing, within the log: N pieces.
+    owner : ndarray of int, shape (N,)
+        Each piece's interval, nondecreasing, in [0, n_intervals).
+    n_intervals : int
+        K, the intervals (fixes).
+    settings : AccelGpsTruth
+        The filter's settings (the bias model).
+    period : float
+        The nominal sample period, s.
+    scheme : {"euler", "trapezoid"}
+    chunk : int
+        Pieces per compiled pass (>= 1).
+
+    Returns
+    -------
+    phis : ndarray, shape (K, 3, 3)
+        Phi_k; I for an interval without pieces.
+    sources : ndarray, shape (R, K, 3, 3)
+        Q_k^(r) for each source of :data:`SOURCES` at unit variance, exactly symmetric; 0 without pieces.
     """
+    if isinstance(chunk, bool) or not isinstance(chunk, (int, np.integer)) or chunk < 1:
+        raise ValueError(f"chunk: expected a whole number of pieces >= 1, got {chunk!r}")
+    owner = np.ascontiguousarray(owner, dtype=np.int64)
+    if owner.shape != (cuts.size - 1,):
+        raise ValueError(f"owner: expected one interval per piece ({cuts.size - 1}), got shape {owner.shape}")
+    if owner.size and (owner.min() < 0 or owner.max() >= n_intervals):  # the kernel does not check its indices
+        raise ValueError(f"owner: intervals must lie in [0, {n_intervals}), got [{owner.min()}, {owner.max()}]")
     out_phi = np.broadcast_to(np.eye(3), (n_intervals, 3, 3)).copy()
     out_q = np.zeros((len(SOURCES), n_intervals, 3, 3))
     for start in range(0, cuts.size - 1, chunk):
         stop = min(start + chunk, cuts.size - 1)
         phis, inputs = interval_sources(imu_time, steps, cuts[start : stop + 1], settings, period, scheme)
-        accumulate_by_source(phis, inputs, owner[start:stop], out_phi, out_q)
+        assert inputs.shape[2] == out_q.shape[0], "interval_sources makes one input column per source"
+        _accumulate_by_source(phis, inputs, owner[start:stop], out_phi, out_q)
     for q in out_q:
-        _symmetrize_lower(q)
+        _symmetrize_each(q)
     return out_phi, out_q
 
 
@@ -149,16 +187,19 @@ def compose_intervals(phis, inputs, owner, n_intervals):
         t = phis[i]
         _transition_step(t, out_phi[k], tmp)
         _covariance_step(t, out_q[k], inputs[i], tmp)
-    _symmetrize_lower(out_q)
+    _symmetrize_each(out_q)
     return out_phi, out_q
 
 
 @numba.njit(cache=True, nogil=True)
-def accumulate_by_source(phis, inputs, owner, out_phi, out_q):
+def _accumulate_by_source(phis, inputs, owner, out_phi, out_q):
     """Compose pieces into running products, in place: piece i of interval k = ``owner[i]`` takes
     ``out_phi[k]`` to T_i out_phi[k] and, for each source r, ``out_q[r, k]`` to T_i out_q[r, k] T_i^T + g g^T,
     g = ``inputs[i, :, r]``. Pieces given in consecutive chunks compose as they would in one call;
-    :func:`_symmetrize_lower` each ``out_q[r]`` once all are in."""
+    :func:`_symmetrize_each` each ``out_q[r]`` once all are in.
+
+    Unchecked (its caller, :func:`composed_sources`, checks): phis (N, 3, 3), inputs (N, 3, R), owner (N,)
+    in [0, K), out_phi (K, 3, 3), out_q (R, K, 3, 3)."""
     tmp = np.empty((3, 3))
     for i in range(phis.shape[0]):
         k = owner[i]
@@ -192,7 +233,7 @@ def _covariance_step(t, q, g, tmp):
 
 
 @numba.njit(cache=True, nogil=True)
-def _symmetrize_lower(q):
+def _symmetrize_each(q):
     """Each q[k] (K x 3 x 3) made exactly symmetric: both off-diagonal elements set to their mean."""
     for k in range(q.shape[0]):
         for a in range(3):
