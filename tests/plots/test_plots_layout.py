@@ -2,6 +2,7 @@
 figure's edge and no panel's labels run into another panel; ticks stay few and log labels plain."""
 
 import dataclasses
+import io
 
 import numpy as np
 import pytest
@@ -161,8 +162,6 @@ def test_the_png_holds_the_canvas_pixels_channel_for_channel(tmp_path):
     """The PNG is the drawn canvas less its alpha, each channel in place: a red, a green and a blue band
     come back as drawn (a reader of the RGBA rows with the channels out of order would swap them), and
     its bytes are those of numpy's copy of the three channels, which it replaced."""
-    import io
-
     from PIL import Image
 
     figure, axes = _common.new_figure()

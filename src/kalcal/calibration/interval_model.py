@@ -69,9 +69,9 @@ def interval_sources(imu_time, steps, cuts, settings, period, scheme) -> tuple[n
     return phis, inputs
 
 
-#: pieces composed at a time by :func:`composed_sources`: a chunk's arrays (at most about 450 bytes a piece
-#: at once, 7 MB) are freed after each chunk and reused by the allocator for the next, so that the
-#: composition's working memory does not grow with the number of pieces and is not mapped afresh
+#: pieces composed at a time by :func:`composed_sources`: a chunk's arrays (at most about 300 bytes a piece
+#: at once, 5 MB) are freed after each chunk and their memory reused by the allocator for the next, so
+#: that the composition's working memory does not grow with the number of pieces and is not mapped afresh
 #: (docs/accel-gps.md, "Speed")
 CHUNK_PIECES = 1 << 14
 
@@ -115,6 +115,9 @@ def composed_sources(
     """
     if isinstance(chunk, bool) or not isinstance(chunk, (int, np.integer)) or chunk < 1:
         raise ValueError(f"chunk: expected a whole number of pieces >= 1, got {chunk!r}")
+    chunk = int(chunk)
+    if not np.issubdtype(np.asarray(owner).dtype, np.integer):
+        raise ValueError(f"owner: expected whole interval numbers, got dtype {np.asarray(owner).dtype}")
     owner = np.ascontiguousarray(owner, dtype=np.int64)
     if owner.shape != (cuts.size - 1,):
         raise ValueError(f"owner: expected one interval per piece ({cuts.size - 1}), got shape {owner.shape}")
@@ -127,6 +130,7 @@ def composed_sources(
         phis, inputs = interval_sources(imu_time, steps, cuts[start : stop + 1], settings, period, scheme)
         assert inputs.shape[2] == out_q.shape[0], "interval_sources makes one input column per source"
         _accumulate_by_source(phis, inputs, owner[start:stop], out_phi, out_q)
+        del phis, inputs  # freed before the next chunk's are made
     for q in out_q:
         _symmetrize_each(q)
     return out_phi, out_q
