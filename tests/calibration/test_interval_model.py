@@ -1,8 +1,9 @@
 """The compiled composition of an interval's pieces against the numpy reference predict of covariances.
 
-Oracle: :func:`kalcal.filters.steps.predict_covariance` applied piece by piece (Q <- T Q T^T + G G^T from
-Q = 0, Phi <- T Phi from I), and :func:`kalcal.filters.steps.interval_transition` where every piece is the
-same sample step.
+Oracles: :func:`kalcal.filters.steps.predict_covariance` applied piece by piece (Q <- T Q T^T + G G^T from
+Q = 0, Phi <- T Phi from I), :func:`kalcal.filters.steps.interval_transition` where every piece is the
+same sample step, and the same recursion in plain Python floats; composing in chunks against composing
+in one pass, bit for bit.
 """
 
 from __future__ import annotations
@@ -13,9 +14,26 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from kalcal.calibration.interval_model import SOURCES, compose_intervals, composed_sources, interval_sources
+from kalcal.calibration.interval_model import (
+    SOURCES,
+    _accumulate_by_source,
+    _symmetrize_each,
+    composed_sources,
+    interval_sources,
+)
 from kalcal.filters.steps import interval_transition, predict_covariance
 from kalcal.models.registry import build_scenario
+
+
+def _one_pass(phis, inputs, owner, n_intervals):
+    """Every piece composed in one compiled pass: Phi_k (K, 3, 3) and Q_k^(r) (R, K, 3, 3), a source per
+    column of ``inputs`` (N, 3, R)."""
+    out_phi = np.broadcast_to(np.eye(3), (n_intervals, 3, 3)).copy()
+    out_q = np.zeros((inputs.shape[2], n_intervals, 3, 3))
+    _accumulate_by_source(phis, np.ascontiguousarray(inputs), np.asarray(owner, dtype=np.int64), out_phi, out_q)
+    for q in out_q:
+        _symmetrize_each(q)
+    return out_phi, out_q
 
 
 def _reference(phis, inputs, owner, n_intervals):
@@ -27,8 +45,8 @@ def _reference(phis, inputs, owner, n_intervals):
     return out_phi, out_q
 
 
-@pytest.mark.parametrize("n_inputs", [1, 2])
-def test_compose_intervals_equals_reference_predicts_on_random_pieces(n_inputs):
+@pytest.mark.parametrize("n_sources", [1, 2])
+def test_composition_equals_reference_predicts_on_random_pieces(n_sources):
     rng = np.random.default_rng(41)
     n_intervals = 9
     # 0 to 6 pieces per interval, intervals 2 and 5 with none (I, 0)
@@ -36,18 +54,19 @@ def test_compose_intervals_equals_reference_predicts_on_random_pieces(n_inputs):
     counts[[2, 5]] = 0
     owner = np.repeat(np.arange(n_intervals), counts)
     phis = np.eye(3) + 0.3 * rng.standard_normal((owner.size, 3, 3))
-    inputs = rng.standard_normal((owner.size, 3, n_inputs))
-    phi_k, q_k = compose_intervals(phis, inputs, owner, n_intervals)
-    ref_phi, ref_q = _reference(phis, inputs, owner, n_intervals)
-    scale = np.abs(ref_q).max()
-    np.testing.assert_allclose(phi_k, ref_phi, rtol=1e-12, atol=1e-13 * np.abs(ref_phi).max())
-    np.testing.assert_allclose(q_k, ref_q, rtol=1e-12, atol=1e-13 * scale)
-    np.testing.assert_array_equal(q_k, np.swapaxes(q_k, 1, 2))
+    inputs = rng.standard_normal((owner.size, 3, n_sources))
+    phi_k, q_k = _one_pass(phis, inputs, owner, n_intervals)
+    for r in range(n_sources):
+        ref_phi, ref_q = _reference(phis, inputs[:, :, r : r + 1], owner, n_intervals)
+        np.testing.assert_allclose(phi_k, ref_phi, rtol=1e-12, atol=1e-13 * np.abs(ref_phi).max())
+        np.testing.assert_allclose(q_k[r], ref_q, rtol=1e-12, atol=1e-13 * np.abs(ref_q).max())
+        np.testing.assert_array_equal(q_k[r], np.swapaxes(q_k[r], 1, 2))
     np.testing.assert_array_equal(phi_k[[2, 5]], np.broadcast_to(np.eye(3), (2, 3, 3)))
-    np.testing.assert_array_equal(q_k[[2, 5]], 0.0)
+    np.testing.assert_array_equal(q_k[:, [2, 5]], 0.0)
 
 
-def test_compose_intervals_of_equal_steps_is_interval_transition():
+def test_composition_of_equal_steps_is_interval_transition():
+    """Two sources, the columns of G = Gamma chol(W), sum to the interval's Q of the sample-step model."""
     rng = np.random.default_rng(7)
     phi = np.eye(3) + 0.1 * rng.standard_normal((3, 3))
     gamma = rng.standard_normal((3, 2))
@@ -55,13 +74,12 @@ def test_compose_intervals_of_equal_steps_is_interval_transition():
     steps, n_intervals = 8, 3
     owner = np.repeat(np.arange(n_intervals), steps)
     g = gamma @ np.linalg.cholesky(w)
-    phi_k, q_k = compose_intervals(
-        np.broadcast_to(phi, (owner.size, 3, 3)).copy(), np.broadcast_to(g, (owner.size, 3, 2)).copy(), owner, n_intervals
-    )
+    pieces = np.broadcast_to(phi, (owner.size, 3, 3)).copy()
+    phi_k, q_k = _one_pass(pieces, np.broadcast_to(g, (owner.size, 3, 2)), owner, n_intervals)
     phi_m, q_m = interval_transition(phi, gamma, w, steps)
     for k in range(n_intervals):
         np.testing.assert_allclose(phi_k[k], phi_m, rtol=1e-12, atol=1e-14)
-        np.testing.assert_allclose(q_k[k], q_m, rtol=1e-12, atol=1e-13 * np.abs(q_m).max())
+        np.testing.assert_allclose(q_k[:, k].sum(axis=0), q_m, rtol=1e-12, atol=1e-13 * np.abs(q_m).max())
 
 
 def _log_pieces(samples: int, fixes: int, seed: int = 3, on_samples: int = 0):
@@ -70,7 +88,8 @@ def _log_pieces(samples: int, fixes: int, seed: int = 3, on_samples: int = 0):
     rng = np.random.default_rng(seed)
     imu_time = np.concatenate([[0.0], np.cumsum(rng.uniform(0.004, 0.006, samples - 1))])
     fix_times = rng.uniform(imu_time[3], imu_time[-3], fixes - on_samples)
-    fix_times = np.unique(np.concatenate([fix_times, rng.choice(imu_time[3:-3], on_samples, replace=False)]))
+    on = rng.choice(imu_time[3:-3], on_samples, replace=False)
+    fix_times = np.unique(np.concatenate([fix_times, on]))
     start = 0.5 * (imu_time[1] + imu_time[2])  # inside a step, as a first fix is
     samples_in = imu_time[(imu_time > start) & (imu_time < fix_times[-1])]
     cuts = np.union1d(np.concatenate([[start], samples_in]), fix_times)
@@ -107,20 +126,19 @@ def _python_by_source(phis, inputs, owner, n_intervals):
 @pytest.mark.parametrize("scheme", ["trapezoid", "euler"])
 @pytest.mark.parametrize("chunk", [1, 7, 256, 10**9])
 def test_composed_sources_in_chunks_is_every_piece_at_once_bit_for_bit(model, scheme, chunk):
-    """Chunks of pieces compose into the same bits as all pieces in one pass of compose_intervals, source
-    by source, and into the plain-Python composition to rounding; some fixes fall on samples."""
+    """Chunks of pieces compose into the same bits as all pieces in one compiled pass, and into the
+    plain-Python composition to rounding; some fixes fall on samples."""
     imu_time, steps, cuts, owner, fixes = _log_pieces(2000, 37, on_samples=9)
     settings = _SETTINGS[model]
     phis, inputs = interval_sources(imu_time, steps, cuts, settings, 0.005, scheme)
     used = [r for r in range(len(SOURCES)) if np.any(inputs[:, :, r] != 0.0)]
     assert used == {"constant": [0, 1], "markov": [0, 1, 2]}[model]  # the sources the model has
-    expected = [compose_intervals(phis, np.ascontiguousarray(inputs[:, :, r : r + 1]), owner, fixes) for r in range(len(SOURCES))]
+    expected_phi, expected_q = _one_pass(phis, inputs, owner, fixes)
     phi_k, q_k = composed_sources(imu_time, steps, cuts, owner, fixes, settings, 0.005, scheme, chunk=chunk)
     assert q_k.shape == (len(SOURCES), fixes, 3, 3)
-    np.testing.assert_array_equal(phi_k, expected[0][0])
-    for r in range(len(SOURCES)):
-        np.testing.assert_array_equal(q_k[r], expected[r][1])
-        np.testing.assert_array_equal(q_k[r], np.swapaxes(q_k[r], 1, 2))
+    np.testing.assert_array_equal(phi_k, expected_phi)
+    np.testing.assert_array_equal(q_k, expected_q)
+    np.testing.assert_array_equal(q_k, np.swapaxes(q_k, -1, -2))
     if chunk == 7:  # the oracle once per model and scheme (it is slow)
         ref_phi, ref_q = _python_by_source(phis, inputs, owner, fixes)
         np.testing.assert_allclose(phi_k, ref_phi, rtol=1e-13, atol=1e-15)

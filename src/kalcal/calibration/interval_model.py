@@ -26,7 +26,7 @@ import kalcal.cached_kernels  # noqa: F401  (cached kernels load without numba's
 from kalcal.linalg import symmetrize
 from kalcal.models.accel_gps_discretization import bias_discretization, error_transition
 
-__all__ = ["CHUNK_PIECES", "SOURCES", "compose_intervals", "composed_sources", "continuous_bias_model", "interval_sources",
+__all__ = ["CHUNK_PIECES", "SOURCES", "composed_sources", "continuous_bias_model", "interval_sources",
            "scale_parameters"]  # fmt: skip
 
 
@@ -82,9 +82,9 @@ def composed_sources(
     """Every interval's transition and process noise by source: the pieces between ``cuts`` (made by
     :func:`interval_sources`) composed into their intervals, ``chunk`` pieces at a time.
 
-    The same values, bit for bit, as composing every piece at once with :func:`compose_intervals`, source
-    by source (tests/calibration/test_interval_model.py): each piece's transition and inputs are its own,
-    and an interval's products are taken in its pieces' order across chunks as within one.
+    The same values, bit for bit, as composing every piece in one pass (tests/calibration/test_interval_model.py):
+    each piece's transition and inputs are its own, and an interval's products are taken in its pieces'
+    order across chunks as within one.
 
     Parameters
     ----------
@@ -174,25 +174,6 @@ def continuous_bias_model(spans: np.ndarray, tau: float) -> tuple[np.ndarray, np
     c = _bias_column(u, rate)
     integral = np.einsum("kn,kna,knb->kab", spans[:, None] * _WEIGHTS[None, :], c, c)
     return column, integral
-
-
-@numba.njit(cache=True, nogil=True)
-def compose_intervals(phis, inputs, owner, n_intervals):
-    """Phi_k = T_last ... T_first and Q_k = sum_i (T_last ... T_{i+1}) G_i G_i^T (...)^T over the pieces
-    of each interval (``owner``, nondecreasing, names each piece's interval; one with none is I, 0)."""
-    out_phi = np.zeros((n_intervals, 3, 3))
-    out_q = np.zeros((n_intervals, 3, 3))
-    for k in range(n_intervals):
-        for a in range(3):
-            out_phi[k, a, a] = 1.0
-    tmp = np.empty((3, 3))
-    for i in range(phis.shape[0]):
-        k = owner[i]
-        t = phis[i]
-        _transition_step(t, out_phi[k], tmp)
-        _covariance_step(t, out_q[k], inputs[i], tmp)
-    _symmetrize_each(out_q)
-    return out_phi, out_q
 
 
 @numba.njit(cache=True, nogil=True)
