@@ -181,3 +181,49 @@ def test_the_notes_say_which_parameters_the_observed_information_holds_at_the_es
     assert fit.parameters["extra"].at_bound and not fit.parameters["unused"].identified
     assert len(fit.notes) == 1 and "hold extra, unused at the estimate" in fit.notes[0]
     assert maximize(base, [Free("sigma", 0.5, 1e-3, 1e3)]).notes == ()
+
+
+def test_a_gradients_evaluations_run_on_threads_and_give_the_one_after_another_values():
+    """evaluate_all keeps the points' order and values; with two workers two threads evaluate (a
+    gradient's central differences), and the gradient is the same bits as one thread's."""
+    import threading
+    import time
+
+    names = set()
+
+    def f(u):
+        names.add(threading.current_thread().name)
+        time.sleep(0.01)  # releases the GIL, as the compiled filter does: the threads overlap
+        return float(np.sum(np.sin(u) * np.arange(1, u.size + 1)))
+
+    points = [np.array([0.1 * i, -0.2 * i, 0.3]) for i in range(8)]
+    assert local_search.evaluate_all(f, points, workers=2) == [f(p) for p in points]
+    assert len({n for n in names if n.startswith("kalcal-gradient")}) == 2
+    assert local_search.evaluate_all(f, points, workers=1) == [f(p) for p in points]
+    u, low, high = np.array([0.3, -0.1, 2.0]), np.full(3, -5.0), np.array([5.0, 5.0, 2.0])  # one at a bound
+    threaded = local_search.gradient(f, u, low, high)
+    original = local_search.evaluate_all
+    try:
+        local_search.evaluate_all = lambda f, points, workers=None: original(f, points, workers=1)
+        np.testing.assert_array_equal(local_search.gradient(f, u, low, high), threaded)
+    finally:
+        local_search.evaluate_all = original
+
+
+def test_the_fits_count_of_evaluations_is_exact_with_threaded_gradients():
+    """Every call of the log-likelihood is counted once, though a gradient's calls run on threads."""
+    import threading
+    import time
+
+    calls, lock = [0], threading.Lock()
+    x = np.random.default_rng(3).normal(0.0, 0.3, 200)
+    base = gaussian(x)
+
+    def loglik(values):
+        with lock:
+            calls[0] += 1
+        time.sleep(0.0005)  # lets the threads interleave
+        return base({"sigma": values["sigma"]}) - 0.5 * (values["mu"] - 0.1) ** 2
+
+    fit = maximize(loglik, [Free("sigma", 1.0, 1e-3, 1e3), Free("mu", 0.0, -5.0, 5.0, scale="linear")])
+    assert fit.converged and fit.evaluations == calls[0] > 20

@@ -34,6 +34,7 @@ False whatever the optimizer said, and the message names the point.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 
@@ -98,6 +99,7 @@ class _Objective:
     def __init__(self, loglik: Callable[[Mapping[str, float]], float], names: Sequence[str], linear: np.ndarray,
                  units: np.ndarray):
         self.loglik, self.names, self.count, self.linear, self.units = loglik, list(names), 0, linear, units
+        self._counting = threading.Lock()  # a gradient's evaluations run on threads (local_search.evaluate_all)
 
     def values(self, u: np.ndarray) -> np.ndarray:
         """The parameters' values at u."""
@@ -108,7 +110,8 @@ class _Objective:
         return np.where(self.linear, x / self.units, np.log(np.where(self.linear, 1.0, x)))
 
     def loglik_at(self, u: np.ndarray) -> float:
-        self.count += 1
+        with self._counting:
+            self.count += 1
         return guarded(self.loglik, dict(zip(self.names, self.values(u).tolist())))
 
 
