@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import threading
+import time
+
 import numpy as np
 import pytest
 from scipy import optimize, stats
@@ -183,38 +186,85 @@ def test_the_notes_say_which_parameters_the_observed_information_holds_at_the_es
     assert maximize(base, [Free("sigma", 0.5, 1e-3, 1e3)]).notes == ()
 
 
-def test_a_gradients_evaluations_run_on_threads_and_give_the_one_after_another_values():
-    """evaluate_all keeps the points' order and values; with two workers two threads evaluate (a
-    gradient's central differences), and the gradient is the same bits as one thread's."""
-    import threading
-    import time
-
+def _slow(f, seconds=0.003):
+    """f, taking ``seconds`` more (a sleep, which releases the GIL as the compiled filter does), recording
+    the threads it ran on."""
     names = set()
 
-    def f(u):
+    def slow(point):
         names.add(threading.current_thread().name)
-        time.sleep(0.01)  # releases the GIL, as the compiled filter does: the threads overlap
-        return float(np.sum(np.sin(u) * np.arange(1, u.size + 1)))
+        time.sleep(seconds)
+        return f(point)
 
-    points = [np.array([0.1 * i, -0.2 * i, 0.3]) for i in range(8)]
-    assert local_search.evaluate_all(f, points, workers=2) == [f(p) for p in points]
-    assert len({n for n in names if n.startswith("kalcal-gradient")}) == 2
-    assert local_search.evaluate_all(f, points, workers=1) == [f(p) for p in points]
-    u, low, high = np.array([0.3, -0.1, 2.0]), np.full(3, -5.0), np.array([5.0, 5.0, 2.0])  # one at a bound
-    threaded = local_search.gradient(f, u, low, high)
-    original = local_search.evaluate_all
-    try:
-        local_search.evaluate_all = lambda f, points, workers=None: original(f, points, workers=1)
-        np.testing.assert_array_equal(local_search.gradient(f, u, low, high), threaded)
-    finally:
-        local_search.evaluate_all = original
+    slow.names = names
+    return slow
 
 
-def test_the_fits_count_of_evaluations_is_exact_with_threaded_gradients():
-    """Every call of the log-likelihood is counted once, though a gradient's calls run on threads."""
-    import threading
-    import time
+def _pool_threads(names):
+    return {name for name in names if name.startswith("kalcal-evaluate")}
 
+
+def test_evaluate_all_keeps_the_points_order_and_values_on_two_threads():
+    """The later points run on two threads; the earlier ones finish last (they sleep longer), so values
+    put in the order they finish would be caught."""
+    def f(point):
+        time.sleep(0.002 * (10 - point[0]))
+        return float(np.sin(point[0]) + point[1])
+
+    f_named = _slow(f, 0.0)
+    points = [np.array([float(i), 0.5 * i]) for i in range(8)]
+    expected = [f(p) for p in points]
+    assert local_search.evaluate_all(f_named, points, workers=2) == expected
+    assert len(_pool_threads(f_named.names)) == 2
+    assert local_search.evaluate_all(f, points, workers=1) == expected
+
+
+def test_short_evaluations_stay_on_the_calling_thread():
+    """An evaluation under THREAD_MIN_S (a short log, a scale-bias fit) is not handed to threads."""
+    fast = _slow(lambda p: float(p[0]), 0.0)
+    assert local_search.evaluate_all(fast, [np.array([float(i)]) for i in range(8)], workers=2) == list(map(float, range(8)))
+    assert _pool_threads(fast.names) == set()
+
+
+def test_the_gradient_is_the_central_difference_one_sided_at_a_bound(monkeypatch):
+    """Against the differences written out, on two threads (the CPU count set to 2)."""
+    monkeypatch.setattr(local_search, "usable_cpus", lambda: 2)
+    f = _slow(lambda u: float(np.sum(np.sin(u) * np.arange(1, u.size + 1))))
+    u, low, high = np.array([0.3, -0.1, 2.0]), np.full(3, -5.0), np.array([5.0, 5.0, 2.0])  # the last at a bound
+    step = local_search.GRADIENT_STEP
+    expected = []
+    for i in range(3):
+        up, down = u.copy(), u.copy()
+        up[i], down[i] = min(u[i] + step, high[i]), max(u[i] - step, low[i])
+        expected.append((f(up) - f(down)) / (up[i] - down[i]))
+    np.testing.assert_array_equal(local_search.gradient(f, u, low, high), expected)
+    assert len(_pool_threads(f.names)) == 2
+    assert expected[2] == pytest.approx(3 * np.cos(2.0), rel=1e-3)  # one-sided: (f(u) - f(u - step)) / step
+
+
+def test_a_fit_on_threads_is_the_fit_on_one_thread(monkeypatch):
+    """maximize with its evaluations on two threads gives the same fit, field for field, as on one."""
+    x = np.random.default_rng(5).normal(0.0, 0.3, 200)
+    base = gaussian(x)
+
+    def loglik(values):
+        time.sleep(0.0025)
+        return base({"sigma": values["sigma"]}) - 0.5 * (values["mu"] - 0.1) ** 2
+
+    free = [Free("sigma", 1.0, 1e-3, 1e3), Free("mu", 0.0, -5.0, 5.0, scale="linear")]
+    fits = []
+    for cpus in (1, 2):
+        monkeypatch.setattr(local_search, "usable_cpus", lambda cpus=cpus: cpus)
+        fits.append(maximize(loglik, free))
+    assert fits[0] == fits[1]
+    assert fits[0].converged
+
+
+def test_the_fits_count_of_evaluations_is_exact_with_threaded_evaluations(monkeypatch):
+    """Every call of the log-likelihood is counted once though a gradient's calls run on threads. (On
+    CPython with the GIL an unlocked ``count += 1`` loses nothing either; the lock is for builds without
+    it, and this test shows the count, not the lock.)"""
+    monkeypatch.setattr(local_search, "usable_cpus", lambda: 2)
     calls, lock = [0], threading.Lock()
     x = np.random.default_rng(3).normal(0.0, 0.3, 200)
     base = gaussian(x)
@@ -222,8 +272,34 @@ def test_the_fits_count_of_evaluations_is_exact_with_threaded_gradients():
     def loglik(values):
         with lock:
             calls[0] += 1
-        time.sleep(0.0005)  # lets the threads interleave
+        time.sleep(0.0025)
         return base({"sigma": values["sigma"]}) - 0.5 * (values["mu"] - 0.1) ** 2
 
     fit = maximize(loglik, [Free("sigma", 1.0, 1e-3, 1e3), Free("mu", 0.0, -5.0, 5.0, scale="linear")])
     assert fit.converged and fit.evaluations == calls[0] > 20
+
+
+def test_threads_see_the_callers_errstate_and_a_nested_call_stays_on_its_thread():
+    def underflow(point):  # exp(0) at the first point, evaluated here; the later ones underflow on threads
+        time.sleep(0.003)
+        return float(np.exp(np.array(-1000.0 * point[0])))
+
+    points = [np.array([float(i)]) for i in range(4)]
+    with np.errstate(under="raise"), pytest.raises(FloatingPointError):
+        local_search.evaluate_all(underflow, points, workers=2)
+    assert local_search.evaluate_all(underflow, points, workers=2) == [1.0, 0.0, 0.0, 0.0]
+    pairs = []
+
+    def inner(point):
+        time.sleep(0.003)
+        return float(point[0]), threading.current_thread().name
+
+    def outer(point):
+        time.sleep(0.003)
+        values = local_search.evaluate_all(inner, [point, point + 1.0, point + 2.0], workers=2)
+        pairs.extend((threading.current_thread().name, name) for _, name in values)
+        return sum(value for value, _ in values)
+
+    assert local_search.evaluate_all(outer, points, workers=2) == [3 * i + 3.0 for i in range(4)]
+    from_pool = [(caller, callee) for caller, callee in pairs if caller.startswith("kalcal-evaluate")]
+    assert from_pool and all(caller == callee for caller, callee in from_pool)  # no wait on the pool from inside it

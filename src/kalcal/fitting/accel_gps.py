@@ -60,7 +60,8 @@ CANDIDATES = (
 
 
 class AccelGpsLikelihood(Protocol):
-    """What the fit needs of a log: its log-likelihood and its calibration under given settings."""
+    """What the fit needs of a log: its log-likelihood and its calibration under given settings. ``loglik``
+    may be called from several threads at once (:func:`kalcal.fitting.mle.maximize`)."""
 
     fixes: int
 

@@ -12,7 +12,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from kalcal.fitting.local_search import gradient
+from kalcal.fitting.local_search import evaluate_all, gradient
 
 #: step of the central differences in u = log(value) for the Hessian
 HESSIAN_STEP = 1e-2
@@ -49,26 +49,35 @@ def stationary(f, u: np.ndarray, low: np.ndarray, high: np.ndarray, interior: Se
 
 
 def hessian(f: Callable[[np.ndarray], float], u: np.ndarray, index: Sequence[int]) -> np.ndarray:
-    """The Hessian of f over the coordinates ``index`` at u, central differences of step HESSIAN_STEP."""
+    """The Hessian of f over the coordinates ``index`` at u, central differences of step HESSIAN_STEP;
+    its evaluations run together (:func:`~kalcal.fitting.local_search.evaluate_all`)."""
     n, h = len(index), HESSIAN_STEP
-    hess = np.empty((n, n))
-    center = f(u)
+    points, cells = [u], []  # the centre, then each cell's points: 2 on the diagonal, 4 corners off it
     for a, i in enumerate(index):
         for b, j in enumerate(index[: a + 1]):
+            first = len(points)
             if i == j:
                 up, down = u.copy(), u.copy()
                 up[i] += h
                 down[i] -= h
-                value = (f(up) - 2 * center + f(down)) / h**2
+                points += [up, down]
             else:
-                corners = []
                 for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
                     v = u.copy()
                     v[i] += si * h
                     v[j] += sj * h
-                    corners.append(f(v))
-                value = (corners[0] - corners[1] - corners[2] + corners[3]) / (4 * h * h)
-            hess[a, b] = hess[b, a] = value
+                    points.append(v)
+            cells.append((a, b, first, i == j))
+    values = evaluate_all(f, points)
+    center = values[0]
+    hess = np.empty((n, n))
+    for a, b, first, diagonal in cells:
+        if diagonal:
+            value = (values[first] - 2 * center + values[first + 1]) / h**2
+        else:
+            corners = values[first : first + 4]
+            value = (corners[0] - corners[1] - corners[2] + corners[3]) / (4 * h * h)
+        hess[a, b] = hess[b, a] = value
     return hess
 
 

@@ -1,5 +1,7 @@
 """The local searches of a fit: L-BFGS-B within bounds with central-difference gradients, and the profile likelihood.
 
+A gradient's evaluations run together on threads where they are long enough (:func:`evaluate_all`).
+
 Both minimize f = -log L over u (the parameters' log values, or a linear parameter's scaled value,
 :mod:`kalcal.fitting.mle`). A profile point re-maximizes log L over the other parameters with one
 parameter held; each such search starts from the optimum of the nearest point already profiled along that
@@ -10,24 +12,36 @@ du only, far below what moves an interval's end.
 
 from __future__ import annotations
 
-import os
+import contextvars
+import threading
+import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, wait
 
 import numpy as np
 from scipy import optimize
+
+from kalcal.cpus import usable_cpus
 
 #: step of the central differences in u for the gradient
 GRADIENT_STEP = 1e-4
 #: a profile point's search stops when an iteration changes log L by less than this (log L units)
 PROFILE_TOL = 1e-4
+#: an evaluation shorter than this (s) is not worth a thread: handing it over and sharing the GIL cost
+#: more (a log of a few hundred fixes, a scale-bias fit); one of a long log's filter runs takes ~10 ms
+THREAD_MIN_S = 2e-3
+
+#: the evaluation threads, by count, made once per process and kept (a pool per call cost 1.5-3.5 ms)
+_POOLS: dict[int, ThreadPoolExecutor] = {}
+_POOLS_LOCK = threading.Lock()
+#: set in an evaluation thread: an evaluate_all called from inside one runs there, one after another
+_IN_POOL = threading.local()
 
 
 def gradient(f: Callable[[np.ndarray], float], u: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
     """The gradient of f at u by central differences of :data:`GRADIENT_STEP`, one-sided at a bound, (n,).
 
-    Its 2n evaluations run on the CPUs this process may use (:func:`evaluate_all`): the same values as
-    one after another, since each evaluation depends on its point alone."""
+    Its 2n evaluations go to :func:`evaluate_all`: the same values as one after another."""
     ups, downs = [], []
     for i in range(u.size):
         up, down = u.copy(), u.copy()
@@ -41,20 +55,62 @@ def gradient(f: Callable[[np.ndarray], float], u: np.ndarray, low: np.ndarray, h
     return grad
 
 
-def evaluate_all(f: Callable[[np.ndarray], float], points: Sequence[np.ndarray], workers: int | None = None) -> list[float]:
-    """``[f(p) for p in points]``, on ``workers`` threads (default: the CPUs this process may use).
+def evaluate_all(f: Callable[[np.ndarray], float], points: Sequence, workers: int | None = None) -> list[float]:
+    """``[f(p) for p in points]``, the later points on threads when the first took long enough.
 
-    A log's likelihood spends most of an evaluation in the compiled filter, which releases the GIL
-    (filters/sequential.py), so that two threads take about 0.6x the time of one; ``f`` must not depend
-    on the order of its calls (a fit's objective counts its calls under a lock, :mod:`kalcal.fitting.mle`).
+    The first point is evaluated here; if it took at least :data:`THREAD_MIN_S`, the others run on
+    ``workers`` threads kept for the process, each in a copy of this thread's context (``np.errstate``
+    and other context variables reach it), and this thread waits. A long log's likelihood spends most
+    of an evaluation in the compiled filter, which releases the GIL (filters/sequential.py), so the
+    threads overlap. ``f`` must be safe to call from several threads at once and give each point's value
+    whatever else runs: every likelihood of kalcal's fits is (they read their log and write only what
+    they allocate).
+
+    Parameters
+    ----------
+    f : callable
+        f(point) -> float.
+    points : sequence
+        The points, in the order of the values returned.
+    workers : int, optional
+        Threads at most (default: the CPUs this process may use, :func:`kalcal.cpus.usable_cpus`); 1, or
+        a call from inside an evaluation thread, evaluates every point here, one after another.
+
+    Returns
+    -------
+    list of float
+        f at each point, in ``points``' order. An error of f is raised here (the point first in order
+        that failed among those started); an interrupt waits for the running evaluations.
     """
-    if workers is None:
-        workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    workers = max(1, min(workers, len(points)))
-    if workers == 1:
-        return [f(point) for point in points]
-    with ThreadPoolExecutor(workers, thread_name_prefix="kalcal-gradient") as pool:
-        return list(pool.map(f, points))
+    points = list(points)
+    if not points:
+        return []
+    workers = max(1, min(usable_cpus() if workers is None else int(workers), len(points) - 1))
+    started = time.perf_counter()
+    values = [f(points[0])]
+    if workers == 1 or getattr(_IN_POOL, "active", False) or time.perf_counter() - started < THREAD_MIN_S:
+        return values + [f(point) for point in points[1:]]
+    pool = _pool(workers)
+    futures = [pool.submit(contextvars.copy_context().run, _in_pool, f, point) for point in points[1:]]
+    try:
+        return values + [future.result() for future in futures]
+    except BaseException:
+        for future in futures:
+            future.cancel()
+        wait(futures)  # the running evaluations finish before the error goes on
+        raise
+
+
+def _pool(workers: int) -> ThreadPoolExecutor:
+    with _POOLS_LOCK:
+        if workers not in _POOLS:
+            _POOLS[workers] = ThreadPoolExecutor(workers, thread_name_prefix="kalcal-evaluate")
+        return _POOLS[workers]
+
+
+def _in_pool(f: Callable, point) -> float:
+    _IN_POOL.active = True
+    return f(point)
 
 
 def minimize(f, u0: np.ndarray, low: np.ndarray, high: np.ndarray, ftol: float = 1e-14):

@@ -43,7 +43,7 @@ from scipy import optimize, stats
 
 from kalcal.fitting.information import ridges, stationary
 from kalcal.fitting.information import hessian as _hessian
-from kalcal.fitting.local_search import Profile, minimize
+from kalcal.fitting.local_search import Profile, evaluate_all, minimize
 from kalcal.fitting.result import FitParameter
 
 #: a linear parameter's u counts its value in this many parts of its range
@@ -99,7 +99,7 @@ class _Objective:
     def __init__(self, loglik: Callable[[Mapping[str, float]], float], names: Sequence[str], linear: np.ndarray,
                  units: np.ndarray):
         self.loglik, self.names, self.count, self.linear, self.units = loglik, list(names), 0, linear, units
-        self._counting = threading.Lock()  # a gradient's evaluations run on threads (local_search.evaluate_all)
+        self._counting = threading.Lock()  # evaluations may run on threads (local_search.evaluate_all)
 
     def values(self, u: np.ndarray) -> np.ndarray:
         """The parameters' values at u."""
@@ -144,7 +144,9 @@ def maximize(
     Parameters
     ----------
     loglik : callable
-        ``loglik({name: value})`` -> log L (a float; it may raise ValueError for a refused setting).
+        ``loglik({name: value})`` -> log L (a float; it may raise ValueError for a refused setting). A
+        gradient's, a Hessian's and a slice's evaluations may run on several threads at once
+        (:func:`~kalcal.fitting.local_search.evaluate_all`): it must be safe to call concurrently.
     free : sequence of Free
     profile : bool
         Intervals and flatness from the profile likelihood instead of the observed information and slice.
@@ -272,7 +274,7 @@ def maximize(
         # a profile's curve: half the grid, with the points its ends and crossings already profiled
         known = [v for (j, v) in profiled.known if j == i] if profile else []
         curves[p.name] = _curve(along, i, u_hat, low, high, ci_low, ci_high, curve_points // 2 + 1 if profile else curve_points,
-                                float(units[i]) if linear[i] else None, known)
+                                float(units[i]) if linear[i] else None, known, together=not profile)
     method = "profile" if profile else "observed-information"
     message = str(result.message)
     for index, (name, curve) in enumerate(curves.items()):
@@ -301,10 +303,14 @@ def maximize(
     return MleFit(values, best, converged, parameters, curves, method, objective.count, message, notes)
 
 
-def _curve(along, i, u_hat, low, high, ci_low, ci_high, points, unit=None, known=()) -> dict[str, list[float]]:
+def _curve(
+    along, i, u_hat, low, high, ci_low, ci_high, points, unit=None, known=(), together=False
+) -> dict[str, list[float]]:
     """log L along parameter i over its interval widened by half its width each way (the whole search
     range where it has no interval), in the parameter's unit (``unit``: a linear parameter's u unit):
-    ``points`` evenly spaced, the estimate and the ``known`` u within that span."""
+    ``points`` evenly spaced, the estimate and the ``known`` u within that span. ``together``: the points
+    are independent (a slice, not a profile's warm starts) and are evaluated together
+    (:func:`~kalcal.fitting.local_search.evaluate_all`)."""
     linear = unit is not None
     if ci_low is not None and ci_high is not None and (linear or ci_low > 0):
         a, b = (ci_low / unit, ci_high / unit) if linear else (np.log(ci_low), np.log(ci_high))
@@ -315,6 +321,10 @@ def _curve(along, i, u_hat, low, high, ci_low, ci_high, points, unit=None, known
     inside = [v for v in known if a <= v <= b]
     grid = np.unique(np.concatenate([np.linspace(a, b, points), [u_hat[i]], inside]))
     loglik = np.empty(grid.size)
-    for k in np.argsort(np.abs(grid - u_hat[i]), kind="stable"):  # outward from the maximum: a profile's warm starts
-        loglik[k] = along(i, grid[k])
+    order = np.argsort(np.abs(grid - u_hat[i]), kind="stable")  # outward from the maximum: a profile's warm starts
+    if together:
+        loglik[order] = evaluate_all(lambda v: along(i, v), list(grid[order]))
+    else:
+        for k in order:
+            loglik[k] = along(i, grid[k])
     return {"value": (grid * unit if linear else np.exp(grid)).tolist(), "loglik": loglik.tolist()}

@@ -12,7 +12,6 @@ from __future__ import annotations
 import contextlib
 import functools
 import itertools
-import os
 import threading
 import time
 from collections.abc import Callable
@@ -25,6 +24,7 @@ from pathlib import Path
 import numpy as np
 from threadpoolctl import ThreadpoolController
 
+from kalcal.cpus import usable_cpus
 from kalcal.montecarlo.accumulators import MomentSums
 from kalcal.montecarlo.checkpoint import fingerprint
 from kalcal.montecarlo.checkpoint import load as load_checkpoint
@@ -210,7 +210,7 @@ def run_monte_carlo(
     pending: dict[int, MomentSums] = {}
 
     if client is None:
-        workers = max(1, workers or len(os.sched_getaffinity(0)))
+        workers = max(1, workers or usable_cpus())
         executor = ThreadPoolExecutor(max_workers=workers)
         # the BLAS limit is process-global: set once for the whole run (entered first, left last)
         contexts = [single_threaded_blas(), executor]

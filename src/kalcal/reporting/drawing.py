@@ -24,6 +24,7 @@ from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
+from kalcal.cpus import usable_cpus
 from kalcal.errors import ConfigError
 
 __all__ = ["PROCESSES_ENV", "draw_all", "drawing_workers"]
@@ -47,11 +48,6 @@ def drawing_workers(figures: int) -> int:
         return 1
     limit = usable_cpus()
     return max(1, min(limit, int(cap) if cap else limit, figures))
-
-
-def usable_cpus() -> int:
-    """The CPUs this process may run on (its affinity where the system says, else the machine's)."""
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
 def _quiet_worker(parent: int) -> None:
