@@ -108,3 +108,19 @@ def test_a_stream_that_cannot_be_flushed_takes_python_s_own_exit():
     assert plain.returncode == 120, plain.stderr  # Python's own exit, for comparison
     assert ran.returncode == 120, ran.stderr
     assert "BrokenPipeError" in ran.stderr or "Broken pipe" in ran.stderr, ran.stderr
+
+
+def test_a_fits_idle_evaluation_threads_do_not_keep_the_teardown():
+    """The threads a fit keeps for its evaluations (kalcal.fitting.local_search) are idle once the command
+    is done: the console script still skips the teardown."""
+    code = CHILD.replace(
+        "from kalcal.cli import main, run\n",
+        "import time\nimport numpy as np\nfrom kalcal.fitting import local_search\n"
+        "def slow(point):\n    time.sleep(0.003)\n    return float(point[0])\n"
+        "assert local_search.evaluate_all(slow, [np.array([float(i)]) for i in range(4)], workers=2) == [0.0, 1.0, 2.0, 3.0]\n"
+        "from kalcal.cli import main, run\n",
+    ).replace("sys.argv_entry", repr("run"))
+    ran = subprocess.run([sys.executable, "-c", code, "run", "--version"], capture_output=True, text=True, timeout=300)
+    assert ran.returncode == 0, ran.stderr
+    lines = ran.stdout.splitlines()
+    assert "exit handler" in lines and "teardown" not in lines, ran.stdout

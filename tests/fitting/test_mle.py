@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import signal
 import threading
 import time
 
@@ -219,8 +221,10 @@ def test_evaluate_all_keeps_the_points_order_and_values_on_two_threads():
     assert local_search.evaluate_all(f, points, workers=1) == expected
 
 
-def test_short_evaluations_stay_on_the_calling_thread():
-    """An evaluation under THREAD_MIN_S (a short log, a scale-bias fit) is not handed to threads."""
+def test_short_evaluations_stay_on_the_calling_thread(monkeypatch):
+    """An evaluation under THREAD_MIN_S (a short log, a scale-bias fit) is not handed to threads (the gate
+    raised to 1 s here, so that a loaded machine's clock cannot make a fast one look slow)."""
+    monkeypatch.setattr(local_search, "THREAD_MIN_S", 1.0)
     fast = _slow(lambda p: float(p[0]), 0.0)
     assert local_search.evaluate_all(fast, [np.array([float(i)]) for i in range(8)], workers=2) == list(map(float, range(8)))
     assert _pool_threads(fast.names) == set()
@@ -252,12 +256,15 @@ def test_a_fit_on_threads_is_the_fit_on_one_thread(monkeypatch):
         return base({"sigma": values["sigma"]}) - 0.5 * (values["mu"] - 0.1) ** 2
 
     free = [Free("sigma", 1.0, 1e-3, 1e3), Free("mu", 0.0, -5.0, 5.0, scale="linear")]
-    fits = []
+    fits, names = [], []
     for cpus in (1, 2):
         monkeypatch.setattr(local_search, "usable_cpus", lambda cpus=cpus: cpus)
-        fits.append(maximize(loglik, free))
+        named = _slow(loglik, 0.0)
+        fits.append(maximize(named, free))
+        names.append(_pool_threads(named.names))
     assert fits[0] == fits[1]
     assert fits[0].converged
+    assert names[0] == set() and len(names[1]) == 2  # one thread, then two
 
 
 def test_the_fits_count_of_evaluations_is_exact_with_threaded_evaluations(monkeypatch):
@@ -300,6 +307,45 @@ def test_threads_see_the_callers_errstate_and_a_nested_call_stays_on_its_thread(
         pairs.extend((threading.current_thread().name, name) for _, name in values)
         return sum(value for value, _ in values)
 
-    assert local_search.evaluate_all(outer, points, workers=2) == [3 * i + 3.0 for i in range(4)]
-    from_pool = [(caller, callee) for caller, callee in pairs if caller.startswith("kalcal-evaluate")]
+    result = []  # in a thread of its own, so that a nested call waiting on the pool fails here, not hangs
+    nested = threading.Thread(target=lambda: result.append(local_search.evaluate_all(outer, points, workers=2)), daemon=True)
+    nested.start()
+    nested.join(timeout=30)
+    assert not nested.is_alive() and result == [[3 * i + 3.0 for i in range(4)]]
+    from_pool = [(caller, callee) for caller, callee in pairs if caller.startswith(local_search.THREAD_PREFIX)]
     assert from_pool and all(caller == callee for caller, callee in from_pool)  # no wait on the pool from inside it
+
+
+def test_evaluation_threads_are_idle_between_calls_and_busy_during_one():
+    """cli's fast exit passes by the kept evaluation threads only while no evaluate_all waits on them."""
+    seen = []
+
+    def f(point):
+        time.sleep(0.003)
+        seen.append([local_search.idle(t) for t in threading.enumerate() if t.name.startswith(local_search.THREAD_PREFIX)])
+        return float(point[0])
+
+    local_search.evaluate_all(f, [np.array([float(i)]) for i in range(4)], workers=2)
+    threads = [t for t in threading.enumerate() if t.name.startswith(local_search.THREAD_PREFIX)]
+    assert threads and all(local_search.idle(t) for t in threads)
+    assert any(flags and not any(flags) for flags in seen[1:])  # during the call: none idle
+    assert not local_search.idle(threading.main_thread())
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="fork is POSIX")
+def test_a_forked_child_evaluates_on_threads_of_its_own():
+    """The parent's kept threads are not in a forked child: its pools are forgotten there, and a call
+    there makes its own (with the parent's pool it would wait for ever)."""
+    slow = _slow(lambda p: float(p[0]))
+    points = [np.array([float(i)]) for i in range(4)]
+    assert local_search.evaluate_all(slow, points, workers=2) == [0.0, 1.0, 2.0, 3.0]
+    child = os.fork()
+    if child == 0:  # the child: exit 0 when its call returns; the parent waits at most 30 s
+        signal.alarm(30)
+        ok = False
+        try:
+            ok = local_search.evaluate_all(slow, points, workers=2) == [0.0, 1.0, 2.0, 3.0]
+        finally:
+            os._exit(0 if ok else 1)
+    _, status = os.waitpid(child, 0)
+    assert os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0

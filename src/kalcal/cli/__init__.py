@@ -129,7 +129,9 @@ def run() -> None:
 
 def _leave(code) -> None:
     """End the process with ``code`` (a SystemExit's: None, a number or a message) as :func:`run` says."""
-    running = [t for t in threading.enumerate() if t is not threading.main_thread() and t.is_alive() and not t.daemon]
+    evaluations = sys.modules.get("kalcal.fitting.local_search")  # a fit's idle evaluation threads need no join
+    running = [t for t in threading.enumerate() if t is not threading.main_thread() and t.is_alive() and not t.daemon
+               and not (evaluations is not None and evaluations.idle(t))]  # fmt: skip
     if sys.getprofile() is not None or sys.gettrace() is not None or running:
         sys.exit(code)
     if code is None:

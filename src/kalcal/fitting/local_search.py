@@ -13,6 +13,7 @@ du only, far below what moves an interval's end.
 from __future__ import annotations
 
 import contextvars
+import os
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -31,11 +32,28 @@ PROFILE_TOL = 1e-4
 #: more (a log of a few hundred fixes, a scale-bias fit); one of a long log's filter runs takes ~10 ms
 THREAD_MIN_S = 2e-3
 
+#: the evaluation threads' names start with this (cli's fast exit passes them by when idle, :func:`idle`)
+THREAD_PREFIX = "kalcal-evaluate"
+
 #: the evaluation threads, by count, made once per process and kept (a pool per call cost 1.5-3.5 ms)
 _POOLS: dict[int, ThreadPoolExecutor] = {}
 _POOLS_LOCK = threading.Lock()
+#: evaluate_all calls now waiting on the pools (none: every evaluation thread is idle)
+_WAITING = [0]
 #: set in an evaluation thread: an evaluate_all called from inside one runs there, one after another
 _IN_POOL = threading.local()
+
+
+def _forget_pools() -> None:
+    """In a forked child: the parent's threads are not there, so neither are its pools."""
+    global _POOLS_LOCK
+    _POOLS.clear()
+    _POOLS_LOCK = threading.Lock()
+    _WAITING[0] = 0
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_pools)
 
 
 def gradient(f: Callable[[np.ndarray], float], u: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
@@ -73,8 +91,8 @@ def evaluate_all(f: Callable[[np.ndarray], float], points: Sequence, workers: in
     points : sequence
         The points, in the order of the values returned.
     workers : int, optional
-        Threads at most (default: the CPUs this process may use, :func:`kalcal.cpus.usable_cpus`); 1, or
-        a call from inside an evaluation thread, evaluates every point here, one after another.
+        Threads (default: the CPUs this process may use, :func:`kalcal.cpus.usable_cpus`). 1, two points
+        or fewer, or a call from inside an evaluation thread evaluate every point here, one after another.
 
     Returns
     -------
@@ -85,26 +103,40 @@ def evaluate_all(f: Callable[[np.ndarray], float], points: Sequence, workers: in
     points = list(points)
     if not points:
         return []
-    workers = max(1, min(usable_cpus() if workers is None else int(workers), len(points) - 1))
     started = time.perf_counter()
     values = [f(points[0])]
-    if workers == 1 or getattr(_IN_POOL, "active", False) or time.perf_counter() - started < THREAD_MIN_S:
+    if len(points) <= 2 or getattr(_IN_POOL, "active", False) or time.perf_counter() - started < THREAD_MIN_S:
+        return values + [f(point) for point in points[1:]]
+    workers = usable_cpus() if workers is None else int(workers)
+    if workers <= 1:
         return values + [f(point) for point in points[1:]]
     pool = _pool(workers)
-    futures = [pool.submit(contextvars.copy_context().run, _in_pool, f, point) for point in points[1:]]
+    with _POOLS_LOCK:
+        _WAITING[0] += 1
     try:
-        return values + [future.result() for future in futures]
-    except BaseException:
-        for future in futures:
-            future.cancel()
-        wait(futures)  # the running evaluations finish before the error goes on
-        raise
+        futures = [pool.submit(contextvars.copy_context().run, _in_pool, f, point) for point in points[1:]]
+        try:
+            return values + [future.result() for future in futures]
+        except BaseException:
+            for future in futures:
+                future.cancel()
+            wait(futures)  # the running evaluations finish before the error goes on
+            raise
+    finally:
+        with _POOLS_LOCK:
+            _WAITING[0] -= 1
+
+
+def idle(thread: threading.Thread) -> bool:
+    """Whether ``thread`` is one of the evaluation threads and none of them is evaluating (no
+    :func:`evaluate_all` is waiting on them): the process may then end without joining it."""
+    return thread.name.startswith(THREAD_PREFIX) and _WAITING[0] == 0
 
 
 def _pool(workers: int) -> ThreadPoolExecutor:
     with _POOLS_LOCK:
         if workers not in _POOLS:
-            _POOLS[workers] = ThreadPoolExecutor(workers, thread_name_prefix="kalcal-evaluate")
+            _POOLS[workers] = ThreadPoolExecutor(workers, thread_name_prefix=THREAD_PREFIX)
         return _POOLS[workers]
 
 
