@@ -17,11 +17,11 @@ import pytest
 from kalcal.calibration.interval_model import (
     SOURCES,
     _accumulate_by_source,
-    _symmetrize_each,
     composed_sources,
     interval_sources,
 )
 from kalcal.filters.steps import interval_transition, predict_covariance
+from kalcal.linalg import symmetrize
 from kalcal.models.registry import build_scenario
 
 
@@ -31,9 +31,7 @@ def _one_pass(phis, inputs, owner, n_intervals):
     out_phi = np.broadcast_to(np.eye(3), (n_intervals, 3, 3)).copy()
     out_q = np.zeros((inputs.shape[2], n_intervals, 3, 3))
     _accumulate_by_source(phis, np.ascontiguousarray(inputs), np.asarray(owner, dtype=np.int64), out_phi, out_q)
-    for q in out_q:
-        _symmetrize_each(q)
-    return out_phi, out_q
+    return out_phi, symmetrize(out_q)
 
 
 def _reference(phis, inputs, owner, n_intervals):

@@ -131,9 +131,7 @@ def composed_sources(
         assert inputs.shape[2] == out_q.shape[0], "interval_sources makes one input column per source"
         _accumulate_by_source(phis, inputs, owner[start:stop], out_phi, out_q)
         del phis, inputs  # freed before the next chunk's are made
-    for q in out_q:
-        _symmetrize_each(q)
-    return out_phi, out_q
+    return out_phi, symmetrize(out_q)  # exactly symmetric: the recursion leaves it so only to rounding
 
 
 #: Gauss-Legendre nodes and weights on [0, 1] for :func:`continuous_bias_model`'s integrals
@@ -181,7 +179,7 @@ def _accumulate_by_source(phis, inputs, owner, out_phi, out_q):
     """Compose pieces into running products, in place: piece i of interval k = ``owner[i]`` takes
     ``out_phi[k]`` to T_i out_phi[k] and, for each source r, ``out_q[r, k]`` to T_i out_q[r, k] T_i^T + g g^T,
     g = ``inputs[i, :, r]``. Pieces given in consecutive chunks compose as they would in one call;
-    :func:`_symmetrize_each` each ``out_q[r]`` once all are in.
+    ``out_q`` is made exactly symmetric (:func:`kalcal.linalg.symmetrize`) once all are in.
 
     Unchecked (its caller, :func:`composed_sources`, checks): phis (N, 3, 3), inputs (N, 3, R), owner (N,)
     in [0, K), out_phi (K, 3, 3), out_q (R, K, 3, 3)."""
@@ -215,16 +213,6 @@ def _covariance_step(t, q, g, tmp):
             for r in range(g.shape[1]):
                 value += g[a, r] * g[b, r]
             q[a, b] = value
-
-
-@numba.njit(cache=True, nogil=True)
-def _symmetrize_each(q):
-    """Each q[k] (K x 3 x 3) made exactly symmetric: both off-diagonal elements set to their mean."""
-    for k in range(q.shape[0]):
-        for a in range(3):
-            for b in range(a + 1, 3):
-                mean = 0.5 * (q[k, a, b] + q[k, b, a])
-                q[k, a, b] = q[k, b, a] = mean
 
 
 def scale_parameters(states: np.ndarray, covariances: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

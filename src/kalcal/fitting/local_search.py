@@ -105,9 +105,8 @@ def evaluate_all(f: Callable[[np.ndarray], float], points: Sequence, workers: in
         return []
     started = time.perf_counter()
     values = [f(points[0])]
-    if len(points) <= 2 or getattr(_IN_POOL, "active", False) or time.perf_counter() - started < THREAD_MIN_S:
-        return values + [f(point) for point in points[1:]]
-    workers = usable_cpus() if workers is None else int(workers)
+    alone = len(points) <= 2 or getattr(_IN_POOL, "active", False) or time.perf_counter() - started < THREAD_MIN_S
+    workers = 1 if alone else usable_cpus() if workers is None else int(workers)  # the CPUs asked only past the gate
     if workers <= 1:
         return values + [f(point) for point in points[1:]]
     pool = _pool(workers)
