@@ -144,6 +144,19 @@ def test_the_figure_draws_a_negative_latency_on_a_linear_axis_and_a_noise_std_on
     assert left == pytest.approx(-0.03)  # the interval's own negative end, not the curve's
 
 
+def test_the_figure_draws_a_setting_searched_on_a_linear_scale_on_a_linear_axis_all_positive_too():
+    """A latency whose every value is positive goes on a linear axis when the job names it (it passes
+    kalcal.fitting.accel_gps.LINEAR), on a log one when nothing says it was searched on a linear scale."""
+    from kalcal.fitting.accel_gps import LINEAR
+    from kalcal.plots.fit import fit_figure
+
+    curves = {"filter.gps_latency": {"value": [0.01, 0.02, 0.04], "loglik": [-3.0, 0.0, -3.0]}}
+    parameters = {"filter.gps_latency": {"value": 0.02, "ci_low": 0.015, "ci_high": 0.03, "unit": "s",
+                                         "identified": True, "at_bound": False}}  # fmt: skip
+    assert fit_figure(curves, parameters, linear=tuple(LINEAR)).axes[0].get_xscale() == "linear"
+    assert fit_figure(curves, parameters).axes[0].get_xscale() == "log"
+
+
 def test_a_100_hz_scale_bias_fit_writes_a_duration_within_verifys_limit(tmp_path):
     sim = kalcal.simulate("scale-bias", seed=5, settings={"scenario.duration": 10, "scenario.rate": 100})
     data = sim.logs["data"]

@@ -382,3 +382,62 @@ def test_a_calibration_whose_files_fail_waits_for_its_figure_and_leaves_no_outpu
         assert not out.exists()
         time.sleep(1.0)
     assert not out.exists()
+
+
+@pytest.fixture(scope="module")
+def minute_logs(tmp_path_factory):
+    """A simulated minute of accel-gps logs (CSV), for the commands that read logs."""
+    logs = tmp_path_factory.mktemp("logs")
+    simulated = subprocess.run(
+        [sys.executable, "-m", "kalcal", "simulate", "accel-gps", "--seed", "3", "--set", "scenario.duration=60",
+         "--out", str(logs)], capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+    assert simulated.returncode == 0, simulated.stderr
+    return logs
+
+
+def test_kalcal_fit_draws_its_figure_without_loading_matplotlib_the_same_bytes(tmp_path, minute_logs):
+    """fit.png is drawn in the figure process, loaded while the fit runs: the job never imports matplotlib,
+    and the figure is the bytes the job's own process draws."""
+    args = ["fit", "accel-gps", "--imu", str(minute_logs / "imu.csv"), "--gps", str(minute_logs / "gps.csv")]
+    loaded, _ = _loaded_after([*args, "--out", str(tmp_path / "there")])
+    assert loaded == ["pandas"]  # the logs are read with pandas; matplotlib stays in the figure process
+    here, _ = _loaded_after([*args, "--out", str(tmp_path / "here")], {"KALCAL_FIGURE_PROCESSES": "1"})
+    assert here == ["matplotlib", "pandas"]
+    assert (tmp_path / "there" / "fit.png").read_bytes() == (tmp_path / "here" / "fit.png").read_bytes()
+
+
+def test_a_fit_without_out_draws_nothing_and_starts_no_figure_process(minute_logs, monkeypatch):
+    import kalcal
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("a figure process was started for a fit that writes nothing")
+
+    monkeypatch.setattr(fp, "_helps", lambda: True)  # where one would help, were there a figure to draw
+    monkeypatch.setattr(fp, "FigureProcess", refuse)
+    result = kalcal.fit("accel-gps", imu=minute_logs / "imu.csv", gps=minute_logs / "gps.csv")
+    assert result.paths == {}
+
+
+def test_a_fit_whose_files_fail_waits_for_its_figure_and_leaves_no_outputs(tmp_path, monkeypatch, minute_logs):
+    """fit.json cannot be written while the figure process draws fit.png: as a calibration's, the figure is
+    stopped and waited for before the outputs are cleaned up."""
+    import kalcal.jobs.fit as fit_job
+    from kalcal.models.registry import build_scenario
+
+    scenario = build_scenario("accel-gps", None, ["scenario.integration=trapezoid"])
+    run = fit_job.compute_accel_gps_fit(scenario, minute_logs / "imu.csv", minute_logs / "gps.csv")
+
+    def full(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(fit_job, "write_json", full)
+    out = tmp_path / "out"
+    with fp.figure_process(fp.FIT_FIGURE, start=True) as process:
+        fp.call("os:getpid")  # loaded: the figure is taken at once
+        with pytest.raises(Exception, match="No space left on device"):
+            fit_job.save_fit(run, out)
+        assert process.ended and process._process.poll() is not None
+        assert not out.exists()
+        time.sleep(1.0)
+    assert not out.exists()

@@ -70,45 +70,49 @@ def fit(
     -------
     FitResult
     """
-    from kalcal.api._scenario import resolve
-    from kalcal.errors import KalcalError
+    from kalcal.reporting.figure_process import FIT_FIGURE, figure_process
 
-    if not 0.0 < confidence < 1.0:
-        raise KalcalError(f"confidence=: expected a number in (0, 1), got {confidence!r}")  # kalcal fit has no --confidence
-    keys = _free(free)
-    if scenario == "scale-bias":
-        if gate is not None:
-            raise KalcalError("--gate: not available for scale-bias (accel-gps only)")
-        if data is None:
-            raise KalcalError("--data: required for scale-bias (a log with a reference and a sensor column)")
-        if imu is not None or gps is not None:
-            raise KalcalError("--imu/--gps: not used by scale-bias (it reads --data)")
-        model = resolve("scale-bias", settings, config)
-        from kalcal.jobs.fit import compute_scale_bias_fit
+    # with out, fit.png is drawn: the plotting code loads in its own process while this one fits
+    with figure_process(FIT_FIGURE, start=None if out is not None else False):
+        from kalcal.api._scenario import resolve
+        from kalcal.errors import KalcalError
 
-        def compute():
-            return compute_scale_bias_fit(model, data, free=keys, reference=reference, sensor=sensor,
-                                          profile=profile, confidence=confidence)
-    else:
-        model = resolve(scenario, settings, config, defaults={"scenario.integration": "trapezoid"})
-        missing = [name for name, value in (("--imu", imu), ("--gps", gps)) if value is None]
-        if missing:
-            raise KalcalError(f"{' and '.join(missing)}: required for {scenario}")
-        if data is not None:
-            raise KalcalError(f"--data: not used by {scenario} (it reads --imu and --gps)")
-        from kalcal.jobs.fit import compute_accel_gps_fit
+        if not 0.0 < confidence < 1.0:
+            raise KalcalError(f"confidence=: expected a number in (0, 1), got {confidence!r}")  # kalcal fit has no --confidence
+        keys = _free(free)
+        if scenario == "scale-bias":
+            if gate is not None:
+                raise KalcalError("--gate: not available for scale-bias (accel-gps only)")
+            if data is None:
+                raise KalcalError("--data: required for scale-bias (a log with a reference and a sensor column)")
+            if imu is not None or gps is not None:
+                raise KalcalError("--imu/--gps: not used by scale-bias (it reads --data)")
+            model = resolve("scale-bias", settings, config)
+            from kalcal.jobs.fit import compute_scale_bias_fit
 
-        def compute():
-            return compute_accel_gps_fit(model, imu, gps, free=keys, imu_columns=imu_columns, gps_columns=gps_columns,
-                                         init=init, profile=profile, gate=gate, confidence=confidence)
-    if out is None:
-        return compute().result
-    from kalcal.io.outputs import inputs_of, run_outputs
-    from kalcal.jobs.fit import OUTPUT_NAMES, save_fit
+            def compute():
+                return compute_scale_bias_fit(model, data, free=keys, reference=reference, sensor=sensor,
+                                              profile=profile, confidence=confidence)
+        else:
+            model = resolve(scenario, settings, config, defaults={"scenario.integration": "trapezoid"})
+            missing = [name for name, value in (("--imu", imu), ("--gps", gps)) if value is None]
+            if missing:
+                raise KalcalError(f"{' and '.join(missing)}: required for {scenario}")
+            if data is not None:
+                raise KalcalError(f"--data: not used by {scenario} (it reads --imu and --gps)")
+            from kalcal.jobs.fit import compute_accel_gps_fit
 
-    command = "fit scale-bias" if scenario == "scale-bias" else "fit accel-gps"
-    files = [value for value in (imu, gps, data) if isinstance(value, (str, Path))]
-    with run_outputs(out, command, names=OUTPUT_NAMES, protect=[*files, *inputs_of(model)]) as staging:
-        run = compute()
-        save_fit(run, staging)
-    return dataclasses.replace(run.result, paths={name: Path(out) / name for name in OUTPUT_NAMES})
+            def compute():
+                return compute_accel_gps_fit(model, imu, gps, free=keys, imu_columns=imu_columns, gps_columns=gps_columns,
+                                             init=init, profile=profile, gate=gate, confidence=confidence)
+        if out is None:
+            return compute().result
+        from kalcal.io.outputs import inputs_of, run_outputs
+        from kalcal.jobs.fit import OUTPUT_NAMES, save_fit
+
+        command = "fit scale-bias" if scenario == "scale-bias" else "fit accel-gps"
+        files = [value for value in (imu, gps, data) if isinstance(value, (str, Path))]
+        with run_outputs(out, command, names=OUTPUT_NAMES, protect=[*files, *inputs_of(model)]) as staging:
+            run = compute()
+            save_fit(run, staging)
+        return dataclasses.replace(run.result, paths={name: Path(out) / name for name in OUTPUT_NAMES})
