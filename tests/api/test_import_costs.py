@@ -22,7 +22,7 @@ def _loaded(module: str, watched: tuple[str, ...]) -> list[str]:
     return eval(done.stdout.strip())  # a list of names printed by the child
 
 
-@pytest.mark.parametrize("module", ["kalcal.cli", "kalcal.api.verify", "kalcal.api.calibrate", "kalcal.api.fit"])
+@pytest.mark.parametrize("module", ["kalcal.cli", "kalcal.api.verify", "kalcal.api.calibrate", "kalcal.api.fit", "kalcal.api.noise"])
 def test_the_command_line_and_the_api_calls_import_nothing_heavy(module):
     assert _loaded(module, HEAVY) == []
 
@@ -46,6 +46,11 @@ def test_the_fit_job_imports_no_plotting_or_compiled_filters():
     """fit.png is drawn through the figure process (in the job's own process only without one), and the
     accel-gps filter loads when an accel-gps fit runs it."""
     assert _loaded("kalcal.jobs.fit", ("matplotlib", "numba")) == []
+
+
+def test_the_noise_job_imports_no_plotting():
+    """allan.png is drawn through the figure process, as fit.png is."""
+    assert _loaded("kalcal.jobs.noise", ("matplotlib",)) == []
 
 
 def test_a_scale_bias_calibration_loads_no_plotting_or_numba(tmp_path):

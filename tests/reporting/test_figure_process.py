@@ -311,13 +311,14 @@ def test_the_imports_run_at_the_lowest_priority_and_the_drawing_at_the_process_s
 
 
 def test_the_figure_process_loads_neither_xarray_nor_pandas_nor_scipy_linalg():
-    """What the figure process imports for the jobs' figures (the page's and a calibration's): half a second
-    of xarray and pandas less on a core the job's Monte Carlo is using, and scipy.linalg (which the steady
-    state it unpickles needs only to be solved, in the job)."""
+    """What the figure process imports for the jobs' figures (the page's, a calibration's and a fit's): half
+    a second of xarray and pandas less on a core the job's Monte Carlo is using, scipy.linalg (which the
+    steady state it unpickles needs only to be solved, in the job), and numba, which a fit's figure would
+    load through the fitting code."""
     code = (
         "import sys\n"
-        "import kalcal.reporting.figures, kalcal.plots.calibration\n"
-        "print(sorted(m for m in ('xarray', 'pandas', 'dask', 'scipy.linalg') if m in sys.modules))\n"
+        "import kalcal.reporting.figures, kalcal.plots.calibration, kalcal.plots.fit\n"
+        "print(sorted(m for m in ('xarray', 'pandas', 'dask', 'scipy.linalg', 'numba') if m in sys.modules))\n"
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
@@ -437,6 +438,47 @@ def test_a_fit_whose_files_fail_waits_for_its_figure_and_leaves_no_outputs(tmp_p
         fp.call("os:getpid")  # loaded: the figure is taken at once
         with pytest.raises(Exception, match="No space left on device"):
             fit_job.save_fit(run, out)
+        assert process.ended and process._process.poll() is not None
+        assert not out.exists()
+        time.sleep(1.0)
+    assert not out.exists()
+
+
+@pytest.fixture(scope="module")
+def static_csv(tmp_path_factory):
+    """A static accelerometer log (white noise at 100 Hz) as CSV, for ``kalcal noise``."""
+    import numpy as np
+
+    path = tmp_path_factory.mktemp("static") / "imu.csv"
+    accel = np.random.default_rng(0).normal(0.05, 0.02, 2**15)
+    path.write_text("time,accel\n" + "\n".join(f"{i / 100.0!r},{a!r}" for i, a in enumerate(accel.tolist())) + "\n")
+    return path
+
+
+def test_kalcal_noise_draws_its_figure_without_loading_matplotlib_the_same_bytes(tmp_path, static_csv):
+    """allan.png is drawn in the figure process, loaded while the log is read and identified."""
+    args = ["noise", "--imu", str(static_csv)]
+    loaded, _ = _loaded_after([*args, "--out", str(tmp_path / "there")])
+    assert loaded == ["pandas"]
+    here, _ = _loaded_after([*args, "--out", str(tmp_path / "here")], {"KALCAL_FIGURE_PROCESSES": "1"})
+    assert here == ["matplotlib", "pandas"]
+    assert (tmp_path / "there" / "allan.png").read_bytes() == (tmp_path / "here" / "allan.png").read_bytes()
+
+
+def test_a_noise_run_whose_files_fail_waits_for_its_figure_and_leaves_no_outputs(tmp_path, monkeypatch, static_csv):
+    import kalcal.jobs.noise as noise_job
+
+    run = noise_job.compute_noise(static_csv)
+
+    def full(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(noise_job, "write_json", full)
+    out = tmp_path / "out"
+    with fp.figure_process(fp.NOISE_FIGURE, start=True) as process:
+        fp.call("os:getpid")  # loaded: the figure is taken at once
+        with pytest.raises(Exception, match="No space left on device"):
+            noise_job.save_noise(run, out)
         assert process.ended and process._process.poll() is not None
         assert not out.exists()
         time.sleep(1.0)
