@@ -48,6 +48,27 @@ def test_the_fit_job_imports_no_plotting_or_compiled_filters():
     assert _loaded("kalcal.jobs.fit", ("matplotlib", "numba")) == []
 
 
+def test_kalcal_analyze_loads_no_plotting_xarray_or_dask(tmp_path):
+    """analysis.nc is written from numpy parts (xarray would import dask.array for its check of every
+    variable it builds) and the two figures are drawn in the figure process."""
+    loaded = _command_loaded(["analyze", "--out", str(tmp_path / "out")], ("matplotlib", "xarray", "dask"))
+    assert loaded == []
+    assert sorted(p.name for p in (tmp_path / "out" / "figures").iterdir()) == ["budget.png", "sigma.png"]
+
+
+def test_the_analyze_api_makes_its_dataset_when_asked():
+    code = (
+        "import sys, kalcal\n"
+        "result = kalcal.analyze('accel-gps', {'scenario.duration': 4})\n"
+        "before = 'xarray' in sys.modules\n"
+        "dims = result.dataset['budget'].dims\n"
+        "print([before, type(result.dataset).__name__, dims, result.dataset is result.dataset])\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert eval(done.stdout.strip().splitlines()[-1]) == [False, "Dataset", ("source", "update", "state", "state_col"), True]
+
+
 def test_the_noise_job_imports_no_plotting():
     """allan.png is drawn through the figure process, as fit.png is."""
     assert _loaded("kalcal.jobs.noise", ("matplotlib",)) == []

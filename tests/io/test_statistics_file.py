@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from kalcal.analysis.dataset import analysis_dataset
+from kalcal.analysis.dataset import analysis_dataset, analysis_parts
 from kalcal.analysis.fixed_gain import analyze_scenario
 from kalcal.io.dataset_parts import DatasetParts, Part
 from kalcal.io.statistics import _encode, read_statistics, write_statistics
@@ -44,10 +44,18 @@ def test_the_file_is_byte_for_byte_xarrays(run, tmp_path, name):
     xr.testing.assert_identical(read_statistics(ours), read_statistics(theirs))
 
 
-@pytest.mark.parametrize("name", ["dataset", "long_dataset"])
+def _parts(run, name):
+    """The numpy parts a job writes: the verify run's statistics, or the exact analysis's."""
+    if name == "analysis":
+        analysis = analyze_scenario(build_scenario("accel-gps", assignments=["scenario.duration=6"]))
+        return analysis_parts(analysis, {"form": "joseph"})
+    return getattr(run, name)
+
+
+@pytest.mark.parametrize("name", ["dataset", "long_dataset", "analysis"])
 def test_the_jobs_parts_are_written_as_the_bytes_of_their_dataset(run, tmp_path, name):
-    """The verify job writes its statistics from numpy parts: the file of the Dataset they make."""
-    parts = getattr(run, name)
+    """The verify and analyze jobs write their files from numpy parts: the file of the Dataset they make."""
+    parts = _parts(run, name)
     assert isinstance(parts, DatasetParts)
     assert _encode(parts) is not None
     ours, theirs = tmp_path / "ours.nc", tmp_path / "theirs.nc"
@@ -59,7 +67,7 @@ def test_the_jobs_parts_are_written_as_the_bytes_of_their_dataset(run, tmp_path,
 def test_the_parts_answer_as_their_dataset(run):
     """What the jobs ask of the parts (sizes, dims, variables in order, values, membership) is what the
     Dataset they make answers."""
-    for parts in (run.dataset, run.long_dataset):
+    for parts in (run.dataset, run.long_dataset, _parts(run, "analysis")):
         dataset = parts.to_xarray()
         assert parts.sizes == dict(dataset.sizes) and set(parts.dims) == set(dataset.dims)
         assert list(parts.variables) == list(dataset.variables)
@@ -68,6 +76,7 @@ def test_the_parts_answer_as_their_dataset(run):
             assert part.dims == dataset[name].dims, name
             np.testing.assert_array_equal(part.values, dataset[name].values)
         assert "mean_nis" in parts and "time" in parts and "no_such_variable" not in parts
+        assert dict(parts.attrs) == dataset.attrs
 
 
 def test_parts_whose_dimensions_disagree_are_refused():

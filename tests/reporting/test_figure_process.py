@@ -483,3 +483,34 @@ def test_a_noise_run_whose_files_fail_waits_for_its_figure_and_leaves_no_outputs
         assert not out.exists()
         time.sleep(1.0)
     assert not out.exists()
+
+
+def test_kalcal_analyze_draws_its_figures_without_loading_matplotlib_the_same_bytes(tmp_path):
+    loaded, _ = _loaded_after(["analyze", "--out", str(tmp_path / "there")])
+    assert loaded == []  # nor xarray nor pandas: analysis.nc is written from numpy parts
+    here, _ = _loaded_after(["analyze", "--out", str(tmp_path / "here")], {"KALCAL_FIGURE_PROCESSES": "1"})
+    assert here == ["matplotlib"]
+    for name in ("sigma.png", "budget.png"):
+        assert (tmp_path / "there" / "figures" / name).read_bytes() == (tmp_path / "here" / "figures" / name).read_bytes()
+    assert (tmp_path / "there" / "analysis.nc").read_bytes() == (tmp_path / "here" / "analysis.nc").read_bytes()
+
+
+def test_an_analysis_whose_files_fail_waits_for_its_figures_and_leaves_no_outputs(tmp_path, monkeypatch):
+    import kalcal
+    import kalcal.io.results
+
+    result = kalcal.analyze("accel-gps", {"scenario.duration": 10})
+
+    def full(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(kalcal.io.results, "write_json", full)
+    out = tmp_path / "out"
+    with fp.figure_process(fp.ANALYSIS_FIGURES, start=True) as process:
+        fp.call("os:getpid")  # loaded: the figures are taken at once
+        with pytest.raises(Exception, match="No space left on device"):
+            result.save(out)
+        assert process.ended and process._process.poll() is not None
+        assert not out.exists()
+        time.sleep(1.0)
+    assert not out.exists()

@@ -1,25 +1,40 @@
-"""The exact analysis as an xarray Dataset (``analysis.nc``) and as the JSON-ready ``final`` and ``budget``.
+"""The exact analysis as a Dataset (``analysis.nc``) and as the JSON-ready ``final`` and ``budget``.
 
 Dimensions: ``update`` (K fixes; coordinate ``time``, s), ``state``/``state_col`` (d), ``measurement``/
 ``measurement_col`` (p), ``update_col`` (a second copy of ``update`` for E[r_k r_j^T]) and ``source``
 (the budget's terms, with their ``kind``). Every variable carries ``long_name`` and ``units``; the units of
 a state-indexed variable are those of the ``state_unit`` coordinate (``state_unit x state_col_unit`` for
 matrices).
+
+It is built as :class:`kalcal.io.dataset_parts.DatasetParts` (:func:`analysis_parts`), which the job
+writes and draws without loading xarray (and the Dask check xarray makes of every variable it builds),
+and made an ``xarray.Dataset`` when asked (:func:`analysis_dataset`, :attr:`kalcal.AnalysisResult.dataset`).
 """
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-import xarray as xr
 
 from kalcal.analysis.fixed_gain import CovarianceAnalysis
+from kalcal.io.dataset_parts import DatasetParts, Part
+
+if TYPE_CHECKING:
+    import xarray as xr
 
 _MATRIX = ("update", "state", "state_col")
 _PAIRS = ("update", "measurement", "update_col", "measurement_col")
 
 
 def analysis_dataset(result: CovarianceAnalysis, attrs: dict | None = None) -> xr.Dataset:
-    """Every per-update quantity of the analysis, with named dimensions."""
+    """Every per-update quantity of the analysis, with named dimensions: :func:`analysis_parts` as an
+    ``xarray.Dataset``."""
+    return analysis_parts(result, attrs).to_xarray()
+
+
+def analysis_parts(result: CovarianceAnalysis, attrs: dict | None = None) -> DatasetParts:
+    """Every per-update quantity of the analysis, with named dimensions, as numpy parts."""
     m = result.moments
     state_units = "state_unit x state_col_unit"
     data = {
@@ -49,7 +64,7 @@ def analysis_dataset(result: CovarianceAnalysis, attrs: dict | None = None) -> x
     if m.residual_second_moment is not None:
         data["residual_second_moment"] = (_PAIRS, m.residual_second_moment, "exact E[r_k r_j^T] over pairs of updates", "measurement_unit x measurement_col_unit")
     variables = {
-        name: xr.Variable(dims, np.asarray(values, dtype=float), {"long_name": text, "units": units})
+        name: Part.of(dims, np.asarray(values, dtype=float), {"long_name": text, "units": units})
         for name, (dims, values, text, units) in data.items()
     }
     info = result.info
@@ -67,7 +82,8 @@ def analysis_dataset(result: CovarianceAnalysis, attrs: dict | None = None) -> x
         "source": ("source", [t.source for t in result.budget]),
         "kind": ("source", [t.kind for t in result.budget]),
     }
-    return xr.Dataset(variables, coords=coords, attrs={"scenario": info.scenario, **(attrs or {})})
+    return DatasetParts(variables, {name: Part.of(*spec) for name, spec in coords.items()},
+                        {"scenario": info.scenario, **(attrs or {})})
 
 
 def _sigma(cov: np.ndarray) -> np.ndarray:

@@ -6,6 +6,7 @@ import html
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -34,7 +35,10 @@ class AnalysisResult:
         "detection_n"}`` (docs/analysis.md, :mod:`kalcal.analysis.power`).
     dataset : xarray.Dataset
         Every per-update quantity (``analysis.nc``): dimensions ``update`` (coordinate ``time``, s),
-        ``state``, ``state_col``, ``measurement``, ``measurement_col``, ``update_col``, ``source``.
+        ``state``, ``state_col``, ``measurement``, ``measurement_col``, ``update_col``, ``source``. Made
+        from ``parts`` when first asked: a command that only writes the files never loads xarray.
+    parts : kalcal.io.dataset_parts.DatasetParts
+        The same, as numpy arrays.
     paths : dict
         The files written (by key) when the call was given ``out``; empty otherwise.
     sensitivity : list of dict or None
@@ -46,11 +50,18 @@ class AnalysisResult:
     final: dict
     budget: list
     power: Any
-    dataset: Any
+    parts: Any = field(repr=False, compare=False)
     document: dict = field(repr=False, compare=False)
     analysis: Any = field(repr=False, compare=False)
     paths: dict = field(default_factory=dict)
     sensitivity: Any = None
+
+    @cached_property
+    def dataset(self):
+        """``analysis.nc`` as an ``xarray.Dataset`` (see the class's docstring)."""
+        from kalcal.io.dataset_parts import as_xarray
+
+        return as_xarray(self.parts)
 
     @property
     def truth_equals_filter(self) -> bool:
@@ -159,16 +170,18 @@ def analyze(
     from dataclasses import replace
 
     from kalcal.io.outputs import inputs_of, run_outputs
+    from kalcal.reporting.figure_process import ANALYSIS_FIGURES, figure_process
 
-    # the folder is checked before the analysis runs, and its files are put in place as one set
-    with run_outputs(out, "analyze", names=OUTPUT_NAMES, protect=inputs_of(model)) as staging:
+    # the folder is checked before the analysis runs, and its files are put in place as one set; the
+    # plotting code loads in its own process meanwhile
+    with figure_process(ANALYSIS_FIGURES), run_outputs(out, "analyze", names=OUTPUT_NAMES, protect=inputs_of(model)) as staging:
         result = _compute(model, n, form, command)
         saved = save_analysis(result, staging)
     return replace(result, paths={key: Path(out) / Path(path).relative_to(staging) for key, path in saved.items()})
 
 
 def _compute(model, n: int, form: str, command: str) -> AnalysisResult:
-    from kalcal.analysis.dataset import analysis_dataset, budget_summary, final_summary
+    from kalcal.analysis.dataset import analysis_parts, budget_summary, final_summary
     from kalcal.analysis.fixed_gain import analyze_scenario
     from kalcal.models.config import section_values
 
@@ -189,8 +202,8 @@ def _compute(model, n: int, form: str, command: str) -> AnalysisResult:
         "timing": {"analysis_s": elapsed, "power_s": power_s},
         "command": command,
     }
-    dataset = analysis_dataset(analysis, {"form": form})
-    return AnalysisResult(final, budget, power, dataset, document, analysis, sensitivity=sensitivity)
+    parts = analysis_parts(analysis, {"form": form})
+    return AnalysisResult(final, budget, power, parts, document, analysis, sensitivity=sensitivity)
 
 
 def _power(model, analysis, n: int, form: str) -> tuple[list, list | None, float]:
@@ -210,12 +223,17 @@ def save_analysis(result: AnalysisResult, out: str | Path) -> dict[str, Path]:
     """``analysis.json``, ``analysis.nc`` and the two figures, written into ``out`` as one set."""
     from kalcal.io.results import write_json
     from kalcal.io.statistics import write_statistics
-    from kalcal.plots.analysis import plot_budget, plot_sigma
+    from kalcal.reporting.figure_process import ANALYSIS_FIGURES, submit
 
     out = Path(out)
-    return {
-        "summary": write_json(out / "analysis.json", result.document),
-        "dataset": write_statistics(out / "analysis.nc", result.dataset),
-        "sigma": plot_sigma(result.dataset, out / "figures" / "sigma.png"),
-        "budget": plot_budget(result.dataset, out / "figures" / "budget.png"),
-    }
+    # drawn in the job's figure process, if any, while the files below are written
+    figures = submit(ANALYSIS_FIGURES, result.parts, out / "figures")
+    try:
+        paths = {
+            "summary": write_json(out / "analysis.json", result.document),
+            "dataset": write_statistics(out / "analysis.nc", result.parts),
+        }
+    except BaseException:
+        figures.cancel()  # the figures are done or stopped before the outputs are cleaned up
+        raise
+    return {**paths, **figures.result()}

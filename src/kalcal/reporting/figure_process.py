@@ -2,7 +2,7 @@
 
 Loading matplotlib and the figure modules costs about half a second, in one thread, and a job that draws
 (``kalcal verify`` with its report, ``kalcal report``, ``kalcal calibrate accel-gps``, ``kalcal fit``,
-``kalcal noise``)
+``kalcal noise``, ``kalcal analyze``)
 would otherwise pay it after its computation, on its critical path. :func:`figure_process` starts a fresh interpreter beside
 the job instead (a subprocess, not a fork: the job may already run threads), which loads the plotting
 code on another core while the job loads its own libraries and computes; the job's figure calls
@@ -40,19 +40,21 @@ from multiprocessing.connection import Connection, Pipe
 from multiprocessing.reduction import ForkingPickler
 from typing import Any
 
-__all__ = ["CALIBRATION_FIGURE", "FIT_FIGURE", "NOISE_FIGURE", "REPORT_FIGURES", "REPORT_REALIZATION_FIGURES",
-           "REPORT_STATISTICS_FIGURES", "PendingFigure", "call", "elsewhere", "figure_process", "submit"]  # fmt: skip
+__all__ = ["ANALYSIS_FIGURES", "CALIBRATION_FIGURE", "FIT_FIGURE", "NOISE_FIGURE", "REPORT_FIGURES",
+           "REPORT_REALIZATION_FIGURES", "REPORT_STATISTICS_FIGURES", "PendingFigure", "call", "elsewhere",
+           "figure_process", "submit"]  # fmt: skip
 
 #: the figure functions the jobs call (``"module:function"``): a verification's page (all of its figures
 #: where they are drawn in the job's process; in the figure process in two parts, the statistics' drawn
 #: while the job simulates the realization shown, then the realization's), a calibration's, a fit's, a
-#: noise identification's
+#: noise identification's, an exact analysis's two
 REPORT_FIGURES = "kalcal.reporting.figures:render_figures"
 REPORT_STATISTICS_FIGURES = "kalcal.reporting.figures:render_statistics_figures"
 REPORT_REALIZATION_FIGURES = "kalcal.reporting.figures:render_realization_figures"
 CALIBRATION_FIGURE = "kalcal.plots.calibration:plot_calibration"
 FIT_FIGURE = "kalcal.plots.fit:plot_fit"
 NOISE_FIGURE = "kalcal.plots.allan:plot_allan"
+ANALYSIS_FIGURES = "kalcal.plots.analysis:plot_analysis"
 
 #: the figure process of the job running in this context, None where figures are drawn here
 _CURRENT: contextvars.ContextVar[FigureProcess | None] = contextvars.ContextVar("kalcal_figure_process", default=None)
@@ -109,9 +111,7 @@ class FigureProcess:
         try:
             self._process = subprocess.Popen(
                 [sys.executable, "-c", _BOOTSTRAP, str(child.fileno())],
-                pass_fds=(child.fileno(),),
-                stdin=subprocess.DEVNULL,
-                stdout=subprocess.DEVNULL,
+                pass_fds=(child.fileno(),), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                 # a process group of its own: the terminal's Ctrl-C (sent to the foreground group) is the
                 # job's, from the child's first instant; the job's session, so that on Linux it shares the
                 # job's scheduler autogroup, where its nice-19 loading yields to the job (a session of its
