@@ -181,7 +181,7 @@ class ScaleBiasProblem:
         regression_block_moments(
             np.ascontiguousarray(samples.reference),
             np.ascontiguousarray(regressors(samples.sensor)),
-            np.ascontiguousarray(samples.theta),
+            samples.theta,  # constant parameters: a view broadcast along K, read as it is (a copy was 20 MB a block)
             prior.mean,
             prior.cov,
             float(self.scenario.filter_noise_variance()),

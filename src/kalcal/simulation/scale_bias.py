@@ -56,8 +56,10 @@ def sample_scale_bias(scenario: ScaleBiasScenario, rng: np.random.Generator, n: 
         theta = theta0[:, None, :] + np.cumsum(steps, axis=1)
     else:
         theta = np.broadcast_to(theta0[:, None, :], (n, n_samples, 2))
-    eta = rng.standard_normal((n, n_samples)) * t.reference_noise_std
-    nu = rng.standard_normal((n, n_samples)) * t.sensor_noise_std
+    eta = rng.standard_normal((n, n_samples))  # scaled in place: the same numbers, a block's array fewer
+    eta *= t.reference_noise_std
+    nu = rng.standard_normal((n, n_samples))
+    nu *= t.sensor_noise_std
     profile = scenario.profile(time)
     if s.excitation == "sensor":
         clean = np.broadcast_to(profile, (n, n_samples))
@@ -65,7 +67,8 @@ def sample_scale_bias(scenario: ScaleBiasScenario, rng: np.random.Generator, n: 
     else:
         psi = np.broadcast_to(profile, (n, n_samples))
         clean = (profile - theta[..., 1]) / theta[..., 0]
-    return ScaleBiasSamples(time, theta, psi, clean, psi + eta, clean - nu)
+    # v = psi + eta and z = clean - nu, written over the noise (the same sums, no new arrays)
+    return ScaleBiasSamples(time, theta, psi, clean, np.add(psi, eta, out=eta), np.subtract(clean, nu, out=nu))
 
 
 def _factor(cov: np.ndarray) -> np.ndarray:
