@@ -51,10 +51,16 @@ def test_truth_of_its_own_states_realization_is_the_engines():
     _assert_same(problem, 5, 4100, 4500, "exact")
 
 
-def test_data_dependent_gains_realization_is_the_engines():
-    """Scale-bias (its own P per realization) takes the engine's path."""
-    problem, _ = build_problem(build_scenario("scale-bias", None, []))
-    _assert_same(problem, 4, 123, 500, "exact")
+@pytest.mark.parametrize(
+    ("settings", "form", "index", "n"),
+    [([], "joseph", 123, 500), ([], "joseph", 4100, 9000), (["filter.form=note"], "joseph", 8999, 9000),
+     (["scenario.drift=random-walk"], "joseph", 4097, 5000), (["scenario.excitation=sensor"], "joseph", 7, 300)],
+)  # fmt: skip
+def test_data_dependent_gains_realization_is_the_engines(settings, form, index, n):
+    """Scale-bias (its own P per realization) filters the shown series alone: the engine's values bit for
+    bit, in a full block, in the short last block, for both drifts, both excitations and both of its forms."""
+    problem, _ = build_problem(build_scenario("scale-bias", None, settings), form)
+    _assert_same(problem, 4, index, n, "exact")
 
 
 def test_index_outside_the_ensemble():

@@ -34,6 +34,7 @@ from kalcal.models.custom import CustomModelScenario, is_custom_settings
 from kalcal.models.registry import build_scenario
 from kalcal.montecarlo.engine import BLOCK_SIZE, block_generator, block_sizes, realization
 from kalcal.montecarlo.problem import FixedGainProblem
+from kalcal.montecarlo.scale_bias import ScaleBiasProblem
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.plots.realization_data import RealizationData
 from kalcal.reporting.drawing import drawing_workers
@@ -151,16 +152,20 @@ def draw_realization(problem, seed: int, index: int, n: int, engine: str) -> Sho
     a fraction of numpy's time once the kernel is loaded): the values of
     :func:`kalcal.montecarlo.engine.realization` to rounding. The sampled engine's are its values bit for
     bit, through numpy, without the statistics the figures do not show (the whitened errors and
-    innovations, NEES and NIS of every realization of the block); data-dependent gains (scale-bias) call
-    :func:`~kalcal.montecarlo.engine.realization` itself.
+    innovations, NEES and NIS of every realization of the block). Scale-bias (data-dependent gains, each
+    realization its own P) draws the block and filters this series alone
+    (:meth:`ScaleBiasProblem.shown_realization`): the engine's values bit for bit; any other problem
+    calls :func:`~kalcal.montecarlo.engine.realization` itself.
     """
-    if not isinstance(problem, FixedGainProblem):  # data-dependent gains: each realization's own P
-        one = realization(problem, seed, index, n, engine)
-        return ShownRealization(one.error[0], one.estimate[0], one.filter_cov[0])
     if not 0 <= index < n:
         raise ValueError(f"realization index must lie in [0, {n}), got {index}")
     block, offset = divmod(index, BLOCK_SIZE)
     rng, size = block_generator(seed, block), block_sizes(n, BLOCK_SIZE)[block]
+    if isinstance(problem, ScaleBiasProblem):
+        return ShownRealization(*problem.shown_realization(rng, size, offset))
+    if not isinstance(problem, FixedGainProblem):  # data-dependent gains: each realization's own P
+        one = realization(problem, seed, index, n, engine)
+        return ShownRealization(one.error[0], one.estimate[0], one.filter_cov[0])
     if through_kernel(problem, engine):
         return ShownRealization(*problem.traced_realization(rng, size, offset), np.array(problem.schedule.posterior_cov))
     states, measurements = problem.sample(rng, size, engine)

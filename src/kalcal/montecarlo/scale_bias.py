@@ -167,6 +167,20 @@ class ScaleBiasProblem:
             filter_cov=run.cov,
         )
 
+    def shown_realization(self, rng: np.random.Generator, n: int, index: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Realization ``index`` of a block of n drawn from ``rng``: its error, estimate and own P, (K, 2),
+        (K, 2), (K, 2, 2), the values of ``run_block``'s bit for bit (each series is filtered on its own).
+
+        The block is drawn whole (its draws are interleaved across its realizations) and only this series
+        is filtered: 0.05-0.13 s against 0.9-2.4 s for the block's 4096.
+        """
+        if not 0 <= index < n:
+            raise ValueError(f"realization index must lie in [0, {n}), got {index}")
+        samples = sample_scale_bias(self.scenario, rng, n)
+        one = slice(index, index + 1)
+        run = filter_scale_bias(self.scenario, samples.reference[one], samples.sensor[one], self.form)
+        return (samples.theta[index] - run.posterior[0], run.posterior[0], run.cov[0])
+
     def block_sums(self, rng: np.random.Generator, n: int, engine: str) -> MomentSums:
         """The moment sums of ``run_block`` (same draws), filtered and summed in one compiled pass.
 
