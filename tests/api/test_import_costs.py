@@ -69,9 +69,10 @@ def test_the_analyze_api_makes_its_dataset_when_asked():
     assert eval(done.stdout.strip().splitlines()[-1]) == [False, "Dataset", ("source", "update", "state", "state_col"), True]
 
 
-def test_the_noise_job_imports_no_plotting():
-    """allan.png is drawn through the figure process, as fit.png is."""
-    assert _loaded("kalcal.jobs.noise", ("matplotlib",)) == []
+@pytest.mark.parametrize("module", ["kalcal.jobs.noise", "kalcal.jobs.sweep", "kalcal.api.analyze"])
+def test_the_jobs_that_draw_one_figure_import_no_plotting(module):
+    """allan.png, sweep.png and the analysis's figures are drawn through the figure process, as fit.png is."""
+    assert _loaded(module, ("matplotlib",)) == []
 
 
 def test_a_scale_bias_calibration_loads_no_plotting_or_numba(tmp_path):

@@ -514,3 +514,12 @@ def test_an_analysis_whose_files_fail_waits_for_its_figures_and_leaves_no_output
         assert not out.exists()
         time.sleep(1.0)
     assert not out.exists()
+
+
+def test_kalcal_sweep_draws_its_figure_without_loading_matplotlib_the_same_bytes(tmp_path):
+    args = ["sweep", "-n", "300", "--set", "scenario.duration=4", "--set", "filter.accel_noise_std=0.01,0.04"]
+    loaded, _ = _loaded_after([*args, "--out", str(tmp_path / "there")])
+    assert "matplotlib" not in loaded  # pandas holds the table; xarray the runs' statistics, if they load it
+    here, _ = _loaded_after([*args, "--out", str(tmp_path / "here")], {"KALCAL_FIGURE_PROCESSES": "1"})
+    assert "matplotlib" in here
+    assert (tmp_path / "there" / "sweep.png").read_bytes() == (tmp_path / "here" / "sweep.png").read_bytes()

@@ -1,14 +1,14 @@
 """Figures drawn in a process started with the job, which loads the plotting code while the job computes.
 
 Loading matplotlib and the figure modules costs about half a second, in one thread, and a job that draws
-(``kalcal verify`` with its report, ``kalcal report``, ``kalcal calibrate accel-gps``, ``kalcal fit``,
-``kalcal noise``, ``kalcal analyze``)
-would otherwise pay it after its computation, on its critical path. :func:`figure_process` starts a fresh interpreter beside
-the job instead (a subprocess, not a fork: the job may already run threads), which loads the plotting
-code on another core while the job loads its own libraries and computes; the job's figure calls
-(:func:`call`, :func:`submit`) then run there, and the process that draws never needs matplotlib at all.
-A figure is the same bytes in either process (tests/reporting/test_figure_process.py); inside it, a page's
-figures are still shared among forked workers (:mod:`kalcal.reporting.drawing`).
+(``kalcal verify`` with its report, ``kalcal report``, ``calibrate accel-gps``, ``fit``, ``noise``,
+``analyze``, ``sweep``) would otherwise pay it after its computation, on its critical path.
+:func:`figure_process` starts a fresh interpreter beside the job instead (a subprocess, not a fork: the job
+may already run threads), which loads the plotting code on another core while the job loads its own
+libraries and computes; the job's figure calls (:func:`call`, :func:`submit`) then run there, and the
+process that draws never needs matplotlib at all. A figure is the same bytes in either process
+(tests/reporting/test_figure_process.py); inside it, a page's figures are still shared among forked workers
+(:mod:`kalcal.reporting.drawing`).
 
 It starts only where it can help and changes nothing else: on POSIX, with at least two usable CPUs,
 when this process has not loaded matplotlib yet (a notebook that has keeps drawing here, with its own
@@ -31,6 +31,7 @@ import contextlib
 import contextvars
 import importlib
 import os
+import pickle
 import signal
 import subprocess
 import sys
@@ -41,13 +42,13 @@ from multiprocessing.reduction import ForkingPickler
 from typing import Any
 
 __all__ = ["ANALYSIS_FIGURES", "CALIBRATION_FIGURE", "FIT_FIGURE", "NOISE_FIGURE", "REPORT_FIGURES",
-           "REPORT_REALIZATION_FIGURES", "REPORT_STATISTICS_FIGURES", "PendingFigure", "call", "elsewhere",
-           "figure_process", "submit"]  # fmt: skip
+           "REPORT_REALIZATION_FIGURES", "REPORT_STATISTICS_FIGURES", "SWEEP_FIGURE", "PendingFigure", "call",
+           "elsewhere", "figure_process", "submit"]  # fmt: skip
 
 #: the figure functions the jobs call (``"module:function"``): a verification's page (all of its figures
 #: where they are drawn in the job's process; in the figure process in two parts, the statistics' drawn
 #: while the job simulates the realization shown, then the realization's), a calibration's, a fit's, a
-#: noise identification's, an exact analysis's two
+#: noise identification's, an exact analysis's two, a sweep's
 REPORT_FIGURES = "kalcal.reporting.figures:render_figures"
 REPORT_STATISTICS_FIGURES = "kalcal.reporting.figures:render_statistics_figures"
 REPORT_REALIZATION_FIGURES = "kalcal.reporting.figures:render_realization_figures"
@@ -55,6 +56,7 @@ CALIBRATION_FIGURE = "kalcal.plots.calibration:plot_calibration"
 FIT_FIGURE = "kalcal.plots.fit:plot_fit"
 NOISE_FIGURE = "kalcal.plots.allan:plot_allan"
 ANALYSIS_FIGURES = "kalcal.plots.analysis:plot_analysis"
+SWEEP_FIGURE = "kalcal.plots.sweep:plot_sweep"
 
 #: the figure process of the job running in this context, None where figures are drawn here
 _CURRENT: contextvars.ContextVar[FigureProcess | None] = contextvars.ContextVar("kalcal_figure_process", default=None)
@@ -371,8 +373,6 @@ def _progress_sender(connection: Connection) -> Callable[[int, int], None]:
 
 def _picklable(exc: BaseException) -> BaseException:
     """``exc`` itself when it survives pickling, else a RuntimeError with its type and message."""
-    import pickle
-
     try:
         pickle.loads(pickle.dumps(exc))
         return exc
