@@ -1,4 +1,5 @@
-"""stats.nc as kalcal writes it: the bytes xarray's scipy writer gives, without importing Dask on the way."""
+"""stats.nc as kalcal writes it: the bytes xarray's scipy writer gives, without importing Dask on the way; and
+as the report reads it back, without xarray."""
 
 from __future__ import annotations
 
@@ -11,8 +12,9 @@ import xarray as xr
 
 from kalcal.analysis.dataset import analysis_dataset, analysis_parts
 from kalcal.analysis.fixed_gain import analyze_scenario
+from kalcal.errors import DataError
 from kalcal.io.dataset_parts import DatasetParts, Part
-from kalcal.io.statistics import _encode, read_statistics, write_statistics
+from kalcal.io.statistics import _encode, load_statistics, read_statistics, write_statistics
 from kalcal.jobs.verify import compute_verification
 from kalcal.models.registry import build_scenario
 
@@ -141,3 +143,42 @@ def test_kalcal_verify_makes_its_dataset_only_when_statistics_is_read():
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip().splitlines()[-1] == "False True True 20"
+
+
+@pytest.mark.parametrize("name", ["dataset", "long_dataset", "analysis"])
+def test_the_files_kalcal_writes_load_as_parts_with_xarrays_values(run, tmp_path, name):
+    """The report reads a run's files without xarray: the variables (data and coordinates, in the file's
+    order), dimensions, values, attributes and global attributes xarray reads, labels as str arrays."""
+    path = tmp_path / "stats.nc"
+    write_statistics(path, _parts(run, name))
+    parts, dataset = load_statistics(path), read_statistics(path)
+    assert isinstance(parts, DatasetParts)
+    assert list(parts.data_vars) == list(dataset.data_vars) and list(parts.coords) == list(dataset.coords)
+    for key in dataset.variables:
+        assert parts[key].dims == dataset[key].dims and parts[key].attrs == dataset[key].attrs, key
+        if dataset[key].dtype == object:  # xarray's labels are objects; the parts' str, the same words
+            assert parts[key].values.dtype.kind == "U" and parts[key].values.tolist() == dataset[key].values.tolist()
+        else:
+            assert parts[key].values.dtype == dataset[key].values.dtype == np.float64, key
+            np.testing.assert_array_equal(parts[key].values, dataset[key].values)
+    assert parts.attrs == dataset.attrs
+    assert all(type(parts.attrs[key]) is type(value) for key, value in dataset.attrs.items())
+
+
+def test_a_file_kalcal_did_not_write_loads_through_xarray(tmp_path):
+    """A variable xarray would decode (scale_factor) or of another type (integers): read_statistics's
+    Dataset, decoded as xarray decodes it; a file that is not NetCDF is a DataError, as there."""
+    scaled = tmp_path / "scaled.nc"
+    xr.Dataset({"a": ("time", np.array([1.0, 2.0]), {"scale_factor": 2.0})}).to_netcdf(scaled, engine="scipy")
+    loaded = load_statistics(scaled)
+    assert isinstance(loaded, xr.Dataset)
+    np.testing.assert_array_equal(loaded["a"].values, read_statistics(scaled)["a"].values)
+    counts = tmp_path / "counts.nc"
+    xr.Dataset({"n": ("time", np.array([1, 2], dtype=np.int32))}).to_netcdf(counts, engine="scipy")
+    assert isinstance(load_statistics(counts), xr.Dataset)
+    bad = tmp_path / "bad.nc"
+    bad.write_text("not netcdf")
+    with pytest.raises(DataError, match="not a kalcal statistics file"):
+        load_statistics(bad)
+    with pytest.raises(DataError, match="no such statistics file"):
+        load_statistics(tmp_path / "missing.nc")

@@ -258,7 +258,7 @@ def test_a_bad_process_count_stops_a_redraw_before_it_reads_the_run(copy_run, mo
     from kalcal.jobs import report as report_job
 
     read = []
-    monkeypatch.setattr(report_job, "read_statistics", lambda path: read.append(path))
+    monkeypatch.setattr(report_job, "load_statistics", lambda path: read.append(path))
     monkeypatch.setattr(report_job, "read_summary", lambda path: read.append(path))
     monkeypatch.setenv(drawing.PROCESSES_ENV, "0")
     with pytest.raises(ConfigError, match=f"^{drawing.PROCESSES_ENV}: expected a whole number >= 1, got '0'$"):

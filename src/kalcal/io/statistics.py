@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from kalcal.errors import DataError
-from kalcal.io.dataset_parts import DatasetParts, as_xarray
+from kalcal.io.dataset_parts import DatasetParts, Part, as_xarray
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -55,6 +55,65 @@ def read_statistics(path: str | Path) -> xr.Dataset:
             return dataset.load()
     except (OSError, ValueError, TypeError) as exc:
         raise DataError(f"{path}: not a kalcal statistics file ({exc})") from None
+
+
+def load_statistics(path: str | Path) -> DatasetParts | xr.Dataset:
+    """Read a statistics file as :class:`DatasetParts` (numbers as float64, labels as str arrays, bytes
+    attributes as str: the values ``read_statistics`` gives), straight through ``scipy.io.netcdf_file``
+    and without xarray, where it holds only what :func:`write_statistics` writes; any other file as
+    :func:`read_statistics`'s Dataset. The report reads a run's files this way: xarray, pandas and the
+    Dask check of xarray's variables were about a second of ``kalcal report``, in the job and again in its
+    figure process, which unpickles what it is sent."""
+    from scipy.io import netcdf_file
+
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"{path}: no such statistics file")
+    try:
+        with netcdf_file(path, mode="r", mmap=False) as file:
+            parts = _decoded(file)
+    except (OSError, ValueError, TypeError) as exc:
+        raise DataError(f"{path}: not a kalcal statistics file ({exc})") from None
+    return parts if parts is not None else read_statistics(path)
+
+
+#: variable attributes that xarray's CF decoding would act on, beyond those the writer uses
+_DECODED_BY_XARRAY = {"missing_value", "scale_factor", "add_offset", "calendar", "_Unsigned", "dtype", "bounds"}
+
+
+def _decoded(file) -> DatasetParts | None:
+    """The parts of an open NetCDF3 file as :func:`write_statistics` writes it, None for anything else."""
+    data_vars: dict[str, Part] = {}
+    coords: dict[str, Part] = {}
+    labels: set[str] = set()
+    for name, variable in file.variables.items():
+        attrs = {key: _value(value) for key, value in variable._attributes.items()}
+        dims = tuple(variable.dimensions)
+        data = variable.data
+        if _DECODED_BY_XARRAY & set(attrs) or " since " in str(attrs.get("units", "")):
+            return None
+        labels.update(str(attrs.pop("coordinates", "")).split())
+        if data.dtype.kind == "f" and np.isnan(attrs.pop("_FillValue", 0.0)):
+            values = np.asarray(data, dtype=np.float64)
+        elif data.dtype == "S1" and attrs.pop("_Encoding", None) == "utf-8" and dims and dims[-1].startswith("string"):
+            width = data.shape[-1]
+            joined = np.ascontiguousarray(data).view(f"S{width}").reshape(data.shape[:-1])
+            values = np.array([item.decode("utf-8") for item in joined.ravel()], dtype=str).reshape(joined.shape)
+            dims = dims[:-1]
+        else:
+            return None
+        (coords if dims == (name,) else data_vars)[name] = Part(dims, values, attrs)
+    for label in labels:
+        if label not in data_vars:
+            return None
+        coords[label] = data_vars.pop(label)
+    coords = {name: coords[name] for name in file.variables if name in coords}  # the file's order, as xarray's
+    return DatasetParts(data_vars, coords, {str(key): _value(value) for key, value in file._attributes.items()})
+
+
+def _value(value: Any) -> Any:
+    """An attribute as xarray gives it: bytes as str, anything else as scipy read it."""
+    return value.decode("utf-8") if isinstance(value, bytes) else value
 
 
 class _Unsupported(Exception):
