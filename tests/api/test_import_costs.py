@@ -69,6 +69,23 @@ def test_the_analyze_api_makes_its_dataset_when_asked():
     assert eval(done.stdout.strip().splitlines()[-1]) == [False, "Dataset", ("source", "update", "state", "state_col"), True]
 
 
+@pytest.mark.parametrize("module", ["kalcal.fitting.mle", "kalcal.fitting.nis_tail", "kalcal.jobs.fit"])
+def test_the_fits_import_no_scipy_stats(module):
+    """scipy.stats (about half a second) loads only where the NIS tail's binomial needs it (an ungated
+    accel-gps fit, when it judges the tail): the fits' chi-square and normal quantiles are
+    kalcal.verification.distributions'."""
+    assert _loaded(module, ("scipy.stats",)) == []
+
+
+def test_a_scale_bias_fit_loads_no_scipy_stats_or_plotting(tmp_path):
+    rows = "\n".join(f"{0.1 * i!r},{1.01 * (i % 7) + 0.1 + 0.01 * ((i * 37) % 11 - 5)!r}" for i in range(200))
+    (tmp_path / "log.csv").write_text("reference,sensor\n" + rows + "\n")
+    loaded = _command_loaded(["fit", "scale-bias", "--data", str(tmp_path / "log.csv"), "--out", str(tmp_path / "out")],
+                             ("scipy.stats", "matplotlib"))  # fmt: skip
+    assert loaded == []
+    assert (tmp_path / "out" / "fit.png").is_file()
+
+
 @pytest.mark.parametrize("module", ["kalcal.jobs.noise", "kalcal.jobs.sweep", "kalcal.api.analyze"])
 def test_the_jobs_that_draw_one_figure_import_no_plotting(module):
     """allan.png, sweep.png and the analysis's figures are drawn through the figure process, as fit.png is."""

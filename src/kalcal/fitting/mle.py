@@ -39,12 +39,13 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy import optimize, stats
+from scipy import optimize
 
 from kalcal.fitting.information import ridges, stationary
 from kalcal.fitting.information import hessian as _hessian
 from kalcal.fitting.local_search import Profile, evaluate_all, minimize
 from kalcal.fitting.result import FitParameter
+from kalcal.verification.distributions import chi2_ppf, normal_isf  # scipy.stats's values, without its import
 
 #: a linear parameter's u counts its value in this many parts of its range
 LINEAR_STEPS = 1000.0
@@ -118,7 +119,7 @@ class _Objective:
 def drop_of(confidence: float) -> float:
     """The fall of log L from its maximum that bounds a ``confidence`` interval: chi2.ppf(confidence, 1) / 2
     (Wilks; 1.92 at 0.95)."""
-    return float(stats.chi2.ppf(confidence, 1)) / 2.0
+    return float(chi2_ppf(confidence, 1)) / 2.0
 
 
 def guarded(loglik: Callable[[Mapping[str, float]], float], values: Mapping[str, float]) -> float:
@@ -172,7 +173,7 @@ def maximize(
     result = minimize(f, u0, low, high)
     u_hat, best = np.asarray(result.x, dtype=float), -float(result.fun)
     drop = drop_of(confidence)
-    z = float(stats.norm.isf((1.0 - confidence) / 2.0))
+    z = float(normal_isf((1.0 - confidence) / 2.0))
 
     profiled = Profile(f, u_hat, low, high, best)
 

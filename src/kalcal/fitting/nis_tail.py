@@ -22,7 +22,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy import stats
+from kalcal.verification.distributions import chi2_isf, chi2_ppf  # scipy.stats's values, without its import
 
 #: the tail whose share is tested: above the chi-square(p) 99.9% quantile
 TAIL = 0.001
@@ -76,6 +76,8 @@ def quantile(tail: float) -> str:
 def lower_side_fixes(tail: float = TAIL, alpha: float = ALPHA) -> int:
     """The fewest fixes at which the check's lower bound is 1 or more (7,601 at the defaults): below them
     only the upper side can fail."""
+    from scipy import stats  # the binomial's quantiles: scipy.stats, imported by the fits that judge the tail
+
     fixes = int(np.ceil(-np.log(alpha / 2) / tail))  # (1 - tail)^K < alpha / 2 from about K = -log(alpha / 2) / tail
     while stats.binom.ppf(alpha / 2, fixes - 1, tail) >= 1:
         fixes -= 1
@@ -86,7 +88,7 @@ def lower_side_fixes(tail: float = TAIL, alpha: float = ALPHA) -> int:
 
 def not_applicable(gate: float, p: int = 2) -> dict:
     """``diagnostics.nis_tail`` of a gated fit, where the check does not apply: ``applies`` false and the reason."""
-    cut, threshold = float(stats.chi2.ppf(gate, p)), float(stats.chi2.isf(TAIL, p))
+    cut, threshold = float(chi2_ppf(gate, p)), float(chi2_isf(TAIL, p))
     removed = (
         f"at or below the chi-square {quantile(TAIL)} quantile ({threshold:.3g}) the check counts, so the count would be 0 "
         "whatever the innovations"
@@ -113,9 +115,11 @@ def nis_tail(normalized: np.ndarray, *, tail: float = TAIL, alpha: float = ALPHA
     normalized : ndarray, shape (K, p)
         The fixes' normalized innovations L_k^{-1} r_k (dimensionless).
     """
+    from scipy import stats  # the binomial's quantiles and test: imported by the fits that judge the tail
+
     fixes, p = normalized.shape
     nis = np.sum(normalized**2, axis=1)
-    threshold = float(stats.chi2.isf(tail, p))
+    threshold = float(chi2_isf(tail, p))
     count = int(np.count_nonzero(nis > threshold))
     lower = int(stats.binom.ppf(alpha / 2, fixes, tail))
     upper = int(stats.binom.isf(alpha / 2, fixes, tail))
