@@ -7,12 +7,15 @@ from __future__ import annotations
 
 import inspect
 import json
+import os
 import subprocess
 import sys
 
 import pytest
 
 HEAVY = ("pandas", "xarray", "numba", "matplotlib", "dask", "dask.array", "distributed", "scipy")
+#: a command draws in a figure process (and so never loads matplotlib) with two usable CPUs or more
+PLOTTING = ("matplotlib",) if len(os.sched_getaffinity(0)) >= 2 else ()
 
 
 def _loaded(module: str, watched: tuple[str, ...]) -> list[str]:
@@ -51,7 +54,7 @@ def test_the_fit_job_imports_no_plotting_or_compiled_filters():
 def test_kalcal_analyze_loads_no_plotting_xarray_or_dask(tmp_path):
     """analysis.nc is written from numpy parts (xarray would import dask.array for its check of every
     variable it builds) and the two figures are drawn in the figure process."""
-    loaded = _command_loaded(["analyze", "--out", str(tmp_path / "out")], ("matplotlib", "xarray", "dask"))
+    loaded = _command_loaded(["analyze", "--out", str(tmp_path / "out")], (*PLOTTING, "xarray", "dask"))
     assert loaded == []
     assert sorted(p.name for p in (tmp_path / "out" / "figures").iterdir()) == ["budget.png", "sigma.png"]
 
@@ -81,14 +84,14 @@ def test_a_scale_bias_fit_loads_no_scipy_stats_or_plotting(tmp_path):
     rows = "\n".join(f"{0.1 * i!r},{1.01 * (i % 7) + 0.1 + 0.01 * ((i * 37) % 11 - 5)!r}" for i in range(200))
     (tmp_path / "log.csv").write_text("reference,sensor\n" + rows + "\n")
     loaded = _command_loaded(["fit", "scale-bias", "--data", str(tmp_path / "log.csv"), "--out", str(tmp_path / "out")],
-                             ("scipy.stats", "matplotlib"))  # fmt: skip
+                             ("scipy.stats", *PLOTTING))  # fmt: skip
     assert loaded == []
     assert (tmp_path / "out" / "fit.png").is_file()
 
 
-@pytest.mark.parametrize("module", ["kalcal.jobs.noise", "kalcal.jobs.sweep", "kalcal.api.analyze"])
+@pytest.mark.parametrize("module", ["kalcal.jobs.noise", "kalcal.jobs.sweep"])
 def test_the_jobs_that_draw_one_figure_import_no_plotting(module):
-    """allan.png, sweep.png and the analysis's figures are drawn through the figure process, as fit.png is."""
+    """allan.png and sweep.png are drawn through the figure process, as fit.png is."""
     assert _loaded(module, ("matplotlib",)) == []
 
 
@@ -117,7 +120,8 @@ def _command_loaded(args: list[str], watched: tuple[str, ...]) -> list[str]:
         "try:\n    main()\nexcept SystemExit as exc:\n    assert not exc.code, exc.code\n"
         f"print([m for m in {watched!r} if m in sys.modules])\n"
     )
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    inherited = {key: value for key, value in os.environ.items() if key != "KALCAL_FIGURE_PROCESSES"}
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, env=inherited)
     assert done.returncode == 0, done.stderr
     return eval(done.stdout.strip().splitlines()[-1])  # a list of names printed by the child
 

@@ -47,10 +47,12 @@ def test_the_file_is_byte_for_byte_xarrays(run, tmp_path, name):
 
 
 def _parts(run, name):
-    """The numpy parts a job writes: the verify run's statistics, or the exact analysis's."""
+    """The numpy parts a job writes: the verify run's statistics, a scale-bias run's, or the exact analysis's."""
     if name == "analysis":
         analysis = analyze_scenario(build_scenario("accel-gps", assignments=["scenario.duration=6"]))
         return analysis_parts(analysis, {"form": "joseph"})
+    if name == "scale_bias":
+        return compute_verification(build_scenario("scale-bias", None, ["scenario.duration=4"]), 200, 2).dataset
     return getattr(run, name)
 
 
@@ -145,7 +147,7 @@ def test_kalcal_verify_makes_its_dataset_only_when_statistics_is_read():
     assert done.stdout.strip().splitlines()[-1] == "False True True 20"
 
 
-@pytest.mark.parametrize("name", ["dataset", "long_dataset", "analysis"])
+@pytest.mark.parametrize("name", ["dataset", "long_dataset", "analysis", "scale_bias"])
 def test_the_files_kalcal_writes_load_as_parts_with_xarrays_values(run, tmp_path, name):
     """The report reads a run's files without xarray: the variables (data and coordinates, in the file's
     order), dimensions, values, attributes and global attributes xarray reads, labels as str arrays."""
@@ -173,12 +175,41 @@ def test_a_file_kalcal_did_not_write_loads_through_xarray(tmp_path):
     loaded = load_statistics(scaled)
     assert isinstance(loaded, xr.Dataset)
     np.testing.assert_array_equal(loaded["a"].values, read_statistics(scaled)["a"].values)
-    counts = tmp_path / "counts.nc"
-    xr.Dataset({"n": ("time", np.array([1, 2], dtype=np.int32))}).to_netcdf(counts, engine="scipy")
-    assert isinstance(load_statistics(counts), xr.Dataset)
+    others = {
+        "counts": xr.Dataset({"n": ("time", np.array([1, 2], dtype=np.int32))}),
+        "single": xr.Dataset({"a": ("time", np.array([1.0, 2.0], dtype=np.float32))}),
+        "timedelta": xr.Dataset({"a": ("time", np.array([1.0, 2.0]), {"units": "seconds"})}),
+        # a label over dimensions no variable has: xarray writes a global "coordinates" attribute
+        "global_coordinates": xr.Dataset({"a": ("x", [1.0, 2.0])}, coords={"label": ("y", ["p", "q"])}),
+    }
+    for name, other in others.items():
+        path = tmp_path / f"{name}.nc"
+        other.to_netcdf(path, engine="scipy")
+        assert isinstance(load_statistics(path), xr.Dataset), name
+    assert "label" in load_statistics(tmp_path / "global_coordinates.nc").coords
     bad = tmp_path / "bad.nc"
     bad.write_text("not netcdf")
     with pytest.raises(DataError, match="not a kalcal statistics file"):
         load_statistics(bad)
     with pytest.raises(DataError, match="no such statistics file"):
         load_statistics(tmp_path / "missing.nc")
+
+
+def test_a_cut_or_corrupt_file_is_one_data_error_in_either_reader(run, tmp_path):
+    """scipy's reader meets a file cut short with IndexError in its header, ValueError in its data, and a
+    corrupt one with KeyError or MemoryError: each reader says it in one DataError, never a traceback."""
+    whole = tmp_path / "whole.nc"
+    write_statistics(whole, run.dataset)
+    data = whole.read_bytes()
+    cut = tmp_path / "cut.nc"
+    for end in [*range(0, 600, 7), len(data) // 2, len(data) - 64]:  # (the last bytes may be padding)
+        cut.write_bytes(data[:end])
+        for reader in (load_statistics, read_statistics):
+            with pytest.raises(DataError, match=r"cut\.nc: not a kalcal statistics file"):
+                reader(cut)
+    corrupt = bytearray(data)
+    corrupt[40:48] = b"\xff" * 8  # a name's length or a type code in the header
+    cut.write_bytes(bytes(corrupt))
+    for reader in (load_statistics, read_statistics):
+        with pytest.raises(DataError, match="not a kalcal statistics file"):
+            reader(cut)

@@ -25,6 +25,58 @@ from kalcal.montecarlo.scenarios import build_problem
 SHORT = ["scenario.duration=8"]  # K = 80: quick, and the prior still counts over much of it
 
 
+@pytest.mark.parametrize("settings", [[], ["scenario.drift=random-walk"], ["scenario.excitation=reference"]])
+def test_the_samples_are_the_draws_written_out_bit_for_bit(settings):
+    """sample_scale_bias scales and sums the sensors' noise in place: the numbers of the expressions
+    written out (the module docstring's draw order), every bit."""
+    from kalcal.simulation.scale_bias import _factor, sample_scale_bias
+
+    scenario = build_scenario("scale-bias", assignments=SHORT + settings)
+    got = sample_scale_bias(scenario, np.random.default_rng(5), 60)
+    rng, s, t, n = np.random.default_rng(5), scenario.scenario, scenario.truth, 60
+    prior = scenario.truth_prior()
+    theta = prior.mean + rng.standard_normal((n, 2)) @ _factor(prior.cov).T
+    theta = np.broadcast_to(theta[:, None, :], (n, s.n_samples, 2))
+    if s.drift == "random-walk":
+        theta = theta + np.cumsum(rng.standard_normal((n, s.n_samples, 2)) * scenario.truth_drift_std, axis=1)
+    eta = rng.standard_normal((n, s.n_samples)) * t.reference_noise_std
+    nu = rng.standard_normal((n, s.n_samples)) * t.sensor_noise_std
+    profile = scenario.profile(s.sample_times())
+    if s.excitation == "sensor":
+        clean, psi = np.broadcast_to(profile, (n, s.n_samples)), theta[..., 0] * profile + theta[..., 1]
+    else:
+        psi, clean = np.broadcast_to(profile, (n, s.n_samples)), (profile - theta[..., 1]) / theta[..., 0]
+    for name, want in (("theta", theta), ("psi", psi), ("clean_sensor", clean), ("reference", psi + eta), ("sensor", clean - nu)):
+        np.testing.assert_array_equal(getattr(got, name), want, err_msg=name)
+        assert getattr(got, name).tobytes() == np.ascontiguousarray(want).tobytes(), name
+
+
+@pytest.mark.parametrize("settings", [[], ["scenario.drift=random-walk"]])
+def test_the_kernel_reads_the_broadcast_truth_as_it_would_a_copy(settings):
+    """block_sums hands the kernel the constant truth as a view broadcast along K (no copy): the sums of a
+    contiguous copy, bit for bit."""
+    from kalcal.filters.scale_bias import regressors
+    from kalcal.montecarlo.accumulators import SumBuffers
+    from kalcal.montecarlo.regression_kernels import regression_block_moments
+    from kalcal.simulation.scale_bias import sample_scale_bias
+
+    scenario = build_scenario("scale-bias", assignments=SHORT + settings)
+    samples = sample_scale_bias(scenario, np.random.default_rng(9), 300)
+    prior = scenario.filter_prior()
+    sums = []
+    for truth in (samples.theta, np.ascontiguousarray(samples.theta)):
+        buffers = SumBuffers.zeros(samples.time.size, 2, 1, 300, True)
+        regression_block_moments(np.ascontiguousarray(samples.reference), np.ascontiguousarray(regressors(samples.sensor)),
+                                 truth, prior.mean, prior.cov, float(scenario.filter_noise_variance()),
+                                 scenario.filter_process_noise(), True, buffers)  # fmt: skip
+        sums.append(MomentSums.from_buffers(300, buffers))
+    if not settings:
+        assert samples.theta.strides[1] == 0  # the view the engine passes
+    for f in fields(MomentSums):
+        a, b = getattr(sums[0], f.name), getattr(sums[1], f.name)
+        assert (a is None and b is None) or np.array_equal(a, b), f.name
+
+
 def _checks(outcome) -> dict:
     return {c.name: c for c in outcome.checks}
 

@@ -17,6 +17,9 @@ from kalcal.errors import DataError
 from kalcal.reporting import figure_process as fp
 
 CALLS = "tests.reporting.figure_calls"
+#: the commands start a figure process only with two usable CPUs or more (one CPU has nothing to overlap)
+two_cpus = pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2 if hasattr(os, "sched_getaffinity") else False,
+                              reason="a figure process starts with two usable CPUs or more")  # fmt: skip
 linux_only = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
 
 
@@ -253,8 +256,9 @@ def _loaded_after(args: list[str], env: dict | None = None) -> tuple[list[str], 
         "try:\n    main()\nexcept SystemExit as exc:\n    assert not exc.code, exc.code\n"
         "print([m for m in ('matplotlib', 'xarray', 'pandas') if m in sys.modules])\n"
     )
+    inherited = {key: value for key, value in os.environ.items() if key != "KALCAL_FIGURE_PROCESSES"}
     done = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, timeout=600, env={**os.environ, **(env or {})}
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=600, env={**inherited, **(env or {})}
     )
     assert done.returncode == 0, done.stderr
     return eval(done.stdout.strip().splitlines()[-1]), done.stdout
@@ -263,6 +267,7 @@ def _loaded_after(args: list[str], env: dict | None = None) -> tuple[list[str], 
 SHORT_VERIFY = ["verify", "-n", "200", "--set", "scenario.duration=4", "--long-run", "0"]
 
 
+@two_cpus
 def test_kalcal_verify_draws_its_page_without_loading_matplotlib_or_xarray_the_same_bytes(tmp_path):
     """The job sends its statistics as numpy parts, and the figures draw them as they are: neither the job's
     process nor the drawing loads xarray or pandas (drawn in the job's process, only matplotlib is added)."""
@@ -280,6 +285,7 @@ def test_kalcal_verify_draws_its_page_without_loading_matplotlib_or_xarray_the_s
     assert {path.name: path.read_bytes() for path in (tmp_path / "here" / "figures").glob("*.png")} == drawn
 
 
+@two_cpus
 def test_kalcal_calibrate_draws_its_figure_without_loading_matplotlib_the_same_bytes(tmp_path):
     logs = tmp_path / "logs"
     simulated = subprocess.run(
@@ -397,6 +403,7 @@ def minute_logs(tmp_path_factory):
     return logs
 
 
+@two_cpus
 def test_kalcal_fit_draws_its_figure_without_loading_matplotlib_the_same_bytes(tmp_path, minute_logs):
     """fit.png is drawn in the figure process, loaded while the fit runs: the job never imports matplotlib,
     and the figure is the bytes the job's own process draws."""
@@ -455,6 +462,7 @@ def static_csv(tmp_path_factory):
     return path
 
 
+@two_cpus
 def test_kalcal_noise_draws_its_figure_without_loading_matplotlib_the_same_bytes(tmp_path, static_csv):
     """allan.png is drawn in the figure process, loaded while the log is read and identified."""
     args = ["noise", "--imu", str(static_csv)]
@@ -485,6 +493,7 @@ def test_a_noise_run_whose_files_fail_waits_for_its_figure_and_leaves_no_outputs
     assert not out.exists()
 
 
+@two_cpus
 def test_kalcal_analyze_draws_its_figures_without_loading_matplotlib_the_same_bytes(tmp_path):
     loaded, _ = _loaded_after(["analyze", "--out", str(tmp_path / "there")])
     assert loaded == []  # nor xarray nor pandas: analysis.nc is written from numpy parts
@@ -516,6 +525,7 @@ def test_an_analysis_whose_files_fail_waits_for_its_figures_and_leaves_no_output
     assert not out.exists()
 
 
+@two_cpus
 def test_kalcal_sweep_draws_its_figure_without_loading_matplotlib_the_same_bytes(tmp_path):
     args = ["sweep", "-n", "300", "--set", "scenario.duration=4", "--set", "filter.accel_noise_std=0.01,0.04"]
     loaded, _ = _loaded_after([*args, "--out", str(tmp_path / "there")])
@@ -523,3 +533,42 @@ def test_kalcal_sweep_draws_its_figure_without_loading_matplotlib_the_same_bytes
     here, _ = _loaded_after([*args, "--out", str(tmp_path / "here")], {"KALCAL_FIGURE_PROCESSES": "1"})
     assert "matplotlib" in here
     assert (tmp_path / "there" / "sweep.png").read_bytes() == (tmp_path / "here" / "sweep.png").read_bytes()
+
+
+@two_cpus
+def test_a_process_starts_one_figure_process_and_later_calls_draw_here(minute_logs, tmp_path):
+    """A script that fits in a loop: the first call draws in a figure process, the later ones here (the
+    second loads matplotlib once), rather than a figure process each loading it again; the same figure."""
+    code = (
+        "import sys, kalcal\n"
+        "from kalcal.reporting import figure_process as fp\n"
+        "started, real = [], fp.FigureProcess.__init__\n"
+        "fp.FigureProcess.__init__ = lambda self, *a: started.append(1) or real(self, *a)\n"
+        "loaded = []\n"
+        "for i in range(3):\n"
+        f"    kalcal.fit('accel-gps', imu={str(minute_logs / 'imu.csv')!r}, gps={str(minute_logs / 'gps.csv')!r},\n"
+        f"               out={str(tmp_path)!r} + f'/fit{{i}}')\n"
+        "    loaded.append('matplotlib' in sys.modules)\n"
+        "print([len(started), loaded])\n"
+    )
+    inherited = {key: value for key, value in os.environ.items() if key != "KALCAL_FIGURE_PROCESSES"}
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600, env=inherited)
+    assert done.returncode == 0, done.stderr
+    assert eval(done.stdout.strip().splitlines()[-1]) == [1, [False, True, True]]
+    first = (tmp_path / "fit0" / "fit.png").read_bytes()
+    assert (tmp_path / "fit1" / "fit.png").read_bytes() == first == (tmp_path / "fit2" / "fit.png").read_bytes()
+
+
+def test_the_fit_names_the_latency_as_searched_on_a_linear_scale(minute_logs, tmp_path, monkeypatch):
+    """save_fit hands the figure accel-gps's linearly searched settings (the latency), scale-bias none."""
+    import kalcal
+    import kalcal.jobs.fit as fit_job
+    from kalcal.fitting.accel_gps import LINEAR
+
+    sent, real = [], fit_job.submit
+    monkeypatch.setattr(fit_job, "submit", lambda *a, **k: sent.append(k["linear"]) or real(*a, **k))
+    kalcal.fit("accel-gps", imu=minute_logs / "imu.csv", gps=minute_logs / "gps.csv", out=tmp_path / "accel")
+    rows = "\n".join(f"{0.1 * i!r},{1.01 * (i % 7) + 0.1 + 0.01 * ((i * 37) % 11 - 5)!r}" for i in range(200))
+    (tmp_path / "log.csv").write_text("reference,sensor\n" + rows + "\n")
+    kalcal.fit("scale-bias", data=tmp_path / "log.csv", out=tmp_path / "sb")
+    assert sent == [tuple(LINEAR), ()] and "filter.gps_latency" in LINEAR

@@ -70,36 +70,38 @@ def fit(
     -------
     FitResult
     """
+    from kalcal.api._scenario import resolve
+    from kalcal.errors import KalcalError
     from kalcal.reporting.figure_process import FIT_FIGURE, figure_process
 
-    # with out, fit.png is drawn: the plotting code loads in its own process while this one fits
+    if not 0.0 < confidence < 1.0:
+        raise KalcalError(f"confidence=: expected a number in (0, 1), got {confidence!r}")  # kalcal fit has no --confidence
+    keys = _free(free)
+    if scenario == "scale-bias":
+        if gate is not None:
+            raise KalcalError("--gate: not available for scale-bias (accel-gps only)")
+        if data is None:
+            raise KalcalError("--data: required for scale-bias (a log with a reference and a sensor column)")
+        if imu is not None or gps is not None:
+            raise KalcalError("--imu/--gps: not used by scale-bias (it reads --data)")
+        model = resolve("scale-bias", settings, config)
+    else:
+        model = resolve(scenario, settings, config, defaults={"scenario.integration": "trapezoid"})
+        missing = [name for name, value in (("--imu", imu), ("--gps", gps)) if value is None]
+        if missing:
+            raise KalcalError(f"{' and '.join(missing)}: required for {scenario}")
+        if data is not None:
+            raise KalcalError(f"--data: not used by {scenario} (it reads --imu and --gps)")
+    # the arguments checked: with out, fit.png is drawn, and the plotting code loads in its own process
+    # while this one reads the log and fits
     with figure_process(FIT_FIGURE, start=None if out is not None else False):
-        from kalcal.api._scenario import resolve
-        from kalcal.errors import KalcalError
-
-        if not 0.0 < confidence < 1.0:
-            raise KalcalError(f"confidence=: expected a number in (0, 1), got {confidence!r}")  # kalcal fit has no --confidence
-        keys = _free(free)
         if scenario == "scale-bias":
-            if gate is not None:
-                raise KalcalError("--gate: not available for scale-bias (accel-gps only)")
-            if data is None:
-                raise KalcalError("--data: required for scale-bias (a log with a reference and a sensor column)")
-            if imu is not None or gps is not None:
-                raise KalcalError("--imu/--gps: not used by scale-bias (it reads --data)")
-            model = resolve("scale-bias", settings, config)
             from kalcal.jobs.fit import compute_scale_bias_fit
 
             def compute():
                 return compute_scale_bias_fit(model, data, free=keys, reference=reference, sensor=sensor,
                                               profile=profile, confidence=confidence)
         else:
-            model = resolve(scenario, settings, config, defaults={"scenario.integration": "trapezoid"})
-            missing = [name for name, value in (("--imu", imu), ("--gps", gps)) if value is None]
-            if missing:
-                raise KalcalError(f"{' and '.join(missing)}: required for {scenario}")
-            if data is not None:
-                raise KalcalError(f"--data: not used by {scenario} (it reads --imu and --gps)")
             from kalcal.jobs.fit import compute_accel_gps_fit
 
             def compute():

@@ -36,15 +36,15 @@ def noise(
     -------
     NoiseResult
     """
+    from kalcal.errors import KalcalError
     from kalcal.reporting.figure_process import NOISE_FIGURE, figure_process
 
+    if imu is None:
+        raise KalcalError("--imu: required (a static accelerometer log: time [s], accel [m/s^2])")
     # with out, allan.png is drawn: the plotting code loads in its own process while this one reads the log
     with figure_process(NOISE_FIGURE, start=None if out is not None else False):
-        from kalcal.errors import KalcalError
         from kalcal.jobs.noise import compute_noise, output_names, save_noise
 
-        if imu is None:
-            raise KalcalError("--imu: required (a static accelerometer log: time [s], accel [m/s^2])")
         if out is None:
             return NoiseResult.from_run(compute_noise(imu, imu_columns=imu_columns, confidence=confidence, strict=strict))
         from kalcal.io.outputs import run_outputs

@@ -30,23 +30,23 @@ def sweep(
     (as ``kalcal sweep``). Returns a :class:`kalcal.SweepResult` (``key``, ``values``, ``table``: one row
     per value with every check's statistic, bounds and verdict, ``summaries`` and ``runs``: each value's
     summary.json and folder, ``paths``: the sweep's own files)."""
+    from kalcal.api._scenario import resolve
+    from kalcal.errors import KalcalError
     from kalcal.reporting.figure_process import SWEEP_FIGURE, figure_process
 
+    if out is None:
+        raise KalcalError("out: required (the folder for sweep.csv, sweep.png and one run per value; a sweep always writes)")
+    values = [str(value) for value in values]
+    if not key or len(values) < 2:
+        raise KalcalError(f"sweep: give a setting and at least two values (got {key!r} with {len(values)})")
+    if threads is not None and threads < 1:
+        raise KalcalError(f"--threads: expected a positive number, got {threads}")
     # sweep.png: the plotting code loads in its own process while the values are verified
     with figure_process(SWEEP_FIGURE):
-        from kalcal.api._scenario import resolve
-        from kalcal.errors import KalcalError
         from kalcal.jobs.sweep import sweep as run_sweep
         from kalcal.jobs.sweep import sweep_cells
         from kalcal.montecarlo.distributed import dask_client
 
-        if out is None:
-            raise KalcalError("out: required (the folder for sweep.csv, sweep.png and one run per value; a sweep always writes)")
-        values = [str(value) for value in values]
-        if not key or len(values) < 2:
-            raise KalcalError(f"sweep: give a setting and at least two values (got {key!r} with {len(values)})")
-        if threads is not None and threads < 1:
-            raise KalcalError(f"--threads: expected a positive number, got {threads}")
         model = resolve(scenario, settings, config)
         sweep_cells(model, key, values, n, engine=engine, long_run=0)  # every value checked before any cluster
         options = dict(engine=engine, workers=threads, long_run=0)

@@ -53,8 +53,8 @@ def read_statistics(path: str | Path) -> xr.Dataset:
     try:
         with xr.open_dataset(path, engine="scipy") as dataset:
             return dataset.load()
-    except (OSError, ValueError, TypeError) as exc:
-        raise DataError(f"{path}: not a kalcal statistics file ({exc})") from None
+    except Exception as exc:  # scipy's reader meets a cut or corrupt file with IndexError, KeyError, ...
+        raise DataError(f"{path}: not a kalcal statistics file ({type(exc).__name__}: {exc})") from None
 
 
 def load_statistics(path: str | Path) -> DatasetParts | xr.Dataset:
@@ -72,13 +72,15 @@ def load_statistics(path: str | Path) -> DatasetParts | xr.Dataset:
     try:
         with netcdf_file(path, mode="r", mmap=False) as file:
             parts = _decoded(file)
-    except (OSError, ValueError, TypeError) as exc:
-        raise DataError(f"{path}: not a kalcal statistics file ({exc})") from None
+    except Exception as exc:  # scipy's reader meets a cut or corrupt file with IndexError, KeyError, ...
+        raise DataError(f"{path}: not a kalcal statistics file ({type(exc).__name__}: {exc})") from None
     return parts if parts is not None else read_statistics(path)
 
 
 #: variable attributes that xarray's CF decoding would act on, beyond those the writer uses
 _DECODED_BY_XARRAY = {"missing_value", "scale_factor", "add_offset", "calendar", "_Unsigned", "dtype", "bounds"}
+#: units that some xarray releases decode into timedeltas (kalcal writes time in "s")
+_TIME_UNITS = {"days", "hours", "minutes", "seconds", "milliseconds", "microseconds", "nanoseconds"}
 
 
 def _decoded(file) -> DatasetParts | None:
@@ -86,16 +88,25 @@ def _decoded(file) -> DatasetParts | None:
     data_vars: dict[str, Part] = {}
     coords: dict[str, Part] = {}
     labels: set[str] = set()
+    if "coordinates" in file._attributes:  # labels on no variable: xarray's global attribute, its to decode
+        return None
     for name, variable in file.variables.items():
-        attrs = {key: _value(value) for key, value in variable._attributes.items()}
+        try:
+            attrs = {key: _value(value) for key, value in variable._attributes.items()}
+        except UnicodeDecodeError:  # xarray replaces the bytes it cannot decode
+            return None
         dims = tuple(variable.dimensions)
         data = variable.data
-        if _DECODED_BY_XARRAY & set(attrs) or " since " in str(attrs.get("units", "")):
+        units = str(attrs.get("units", ""))
+        if _DECODED_BY_XARRAY & set(attrs) or " since " in units or units in _TIME_UNITS:
             return None
         labels.update(str(attrs.pop("coordinates", "")).split())
-        if data.dtype.kind == "f" and np.isnan(attrs.pop("_FillValue", 0.0)):
+        fill = attrs.pop("_FillValue", None)
+        if data.dtype == ">f8" and isinstance(fill, float) and np.isnan(fill):  # the writer's floats
             values = np.asarray(data, dtype=np.float64)
         elif data.dtype == "S1" and attrs.pop("_Encoding", None) == "utf-8" and dims and dims[-1].startswith("string"):
+            if fill is not None:
+                return None
             width = data.shape[-1]
             joined = np.ascontiguousarray(data).view(f"S{width}").reshape(data.shape[:-1])
             values = np.array([item.decode("utf-8") for item in joined.ravel()], dtype=str).reshape(joined.shape)

@@ -12,8 +12,10 @@ process that draws never needs matplotlib at all. A figure is the same bytes in 
 
 It starts only where it can help and changes nothing else: on POSIX, with at least two usable CPUs,
 when this process has not loaded matplotlib yet (a notebook that has keeps drawing here, with its own
-rcParams), and unless :data:`~kalcal.reporting.drawing.PROCESSES_ENV` is 1 (draw in this process). Without
-it, :func:`call` imports the function and runs it here.
+rcParams), once per process (a script that calls the API in a loop pays matplotlib's import once, in its
+second call, rather than a figure process's in every call), and unless
+:data:`~kalcal.reporting.drawing.PROCESSES_ENV` is 1 (draw in this process). Without it, :func:`call`
+imports the function and runs it here.
 
 The process runs in a process group of its own and ignores SIGINT (an interrupt is the job's to handle:
 the terminal's Ctrl-C never reaches it) and SIGTTOU (as a background group it may still write to the
@@ -41,22 +43,16 @@ from multiprocessing.connection import Connection, Pipe
 from multiprocessing.reduction import ForkingPickler
 from typing import Any
 
+from kalcal.reporting.figure_names import (ANALYSIS_FIGURES, CALIBRATION_FIGURE, FIT_FIGURE, NOISE_FIGURE,  # re-exported
+    REPORT_FIGURES, REPORT_REALIZATION_FIGURES, REPORT_STATISTICS_FIGURES, SWEEP_FIGURE)  # fmt: skip
+
 __all__ = ["ANALYSIS_FIGURES", "CALIBRATION_FIGURE", "FIT_FIGURE", "NOISE_FIGURE", "REPORT_FIGURES",
            "REPORT_REALIZATION_FIGURES", "REPORT_STATISTICS_FIGURES", "SWEEP_FIGURE", "PendingFigure", "call",
            "elsewhere", "figure_process", "submit"]  # fmt: skip
 
-#: the figure functions the jobs call (``"module:function"``): a verification's page (all of its figures
-#: where they are drawn in the job's process; in the figure process in two parts, the statistics' drawn
-#: while the job simulates the realization shown, then the realization's), a calibration's, a fit's, a
-#: noise identification's, an exact analysis's two, a sweep's
-REPORT_FIGURES = "kalcal.reporting.figures:render_figures"
-REPORT_STATISTICS_FIGURES = "kalcal.reporting.figures:render_statistics_figures"
-REPORT_REALIZATION_FIGURES = "kalcal.reporting.figures:render_realization_figures"
-CALIBRATION_FIGURE = "kalcal.plots.calibration:plot_calibration"
-FIT_FIGURE = "kalcal.plots.fit:plot_fit"
-NOISE_FIGURE = "kalcal.plots.allan:plot_allan"
-ANALYSIS_FIGURES = "kalcal.plots.analysis:plot_analysis"
-SWEEP_FIGURE = "kalcal.plots.sweep:plot_sweep"
+#: whether this process has started a figure process where one helps: once (a command's one job; the
+#: later calls of a script's loop draw here, where matplotlib, loaded by the second, stays)
+_STARTED = False
 
 #: the figure process of the job running in this context, None where figures are drawn here
 _CURRENT: contextvars.ContextVar[FigureProcess | None] = contextvars.ContextVar("kalcal_figure_process", default=None)
@@ -241,7 +237,7 @@ def _helps() -> bool:
     """Whether a figure process would save this job time (see the module's docstring)."""
     from kalcal.reporting.drawing import PROCESSES_ENV, usable_cpus
 
-    return (os.name == "posix" and "matplotlib" not in sys.modules and usable_cpus() >= 2
+    return (os.name == "posix" and not _STARTED and "matplotlib" not in sys.modules and usable_cpus() >= 2
             and os.environ.get(PROCESSES_ENV, "").strip() != "1")  # fmt: skip
 
 
@@ -254,6 +250,8 @@ def figure_process(*functions: str, start: bool | None = None) -> Iterator[Figur
     ``start`` None starts it where it helps (see the module's docstring), True always, False never.
     Yields the process, or None where figures are drawn in this process.
     """
+    global _STARTED
+
     if not (_helps() if start is None else start):
         token = _CURRENT.set(None)
         try:
@@ -262,6 +260,7 @@ def figure_process(*functions: str, start: bool | None = None) -> Iterator[Figur
             _CURRENT.reset(token)
         return
     process = FigureProcess(tuple(dict.fromkeys(name.partition(":")[0] for name in functions)))
+    _STARTED = _STARTED or start is None
     token = _CURRENT.set(process)
     try:
         yield process
