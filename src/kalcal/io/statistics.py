@@ -15,6 +15,7 @@ are written without loading xarray at all. Any other Dataset goes through ``to_n
 
 from __future__ import annotations
 
+import struct
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -28,6 +29,11 @@ if TYPE_CHECKING:
 
 #: NetCDF3 with 64-bit offsets, as ``to_netcdf(engine="scipy")`` writes by default
 _VERSION = 2
+
+#: what scipy's NetCDF reader (and xarray over it) raises on a file cut short or corrupt: in the header
+#: an IndexError or a struct.error, a KeyError for a bad type code, a MemoryError or OverflowError for a
+#: huge count, a ValueError for short data, a LookupError for a bad encoding
+_UNREADABLE = (OSError, ValueError, TypeError, LookupError, MemoryError, OverflowError, struct.error, EOFError)
 
 
 def write_statistics(path: str | Path, dataset: xr.Dataset | DatasetParts) -> Path:
@@ -53,7 +59,7 @@ def read_statistics(path: str | Path) -> xr.Dataset:
     try:
         with xr.open_dataset(path, engine="scipy") as dataset:
             return dataset.load()
-    except Exception as exc:  # scipy's reader meets a cut or corrupt file with IndexError, KeyError, ...
+    except _UNREADABLE as exc:
         raise DataError(f"{path}: not a kalcal statistics file ({type(exc).__name__}: {exc})") from None
 
 
@@ -72,7 +78,7 @@ def load_statistics(path: str | Path) -> DatasetParts | xr.Dataset:
     try:
         with netcdf_file(path, mode="r", mmap=False) as file:
             parts = _decoded(file)
-    except Exception as exc:  # scipy's reader meets a cut or corrupt file with IndexError, KeyError, ...
+    except _UNREADABLE as exc:
         raise DataError(f"{path}: not a kalcal statistics file ({type(exc).__name__}: {exc})") from None
     return parts if parts is not None else read_statistics(path)
 
