@@ -136,3 +136,14 @@ v = [[1.0]]
 x0 = [{x0_truth!r}, 0.0]
 m0 = [[4.0, 0.0], [0.0, {gm_var!r}]]
 """
+
+
+def last_line_of(code: str) -> str:
+    """The last line a fresh ``python -c code`` prints (it must succeed): what a new process loads and
+    answers, apart from this test process's modules."""
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    return done.stdout.strip().splitlines()[-1]

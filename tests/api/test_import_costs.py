@@ -13,6 +13,8 @@ import sys
 
 import pytest
 
+from tests._helpers import last_line_of
+
 HEAVY = ("pandas", "xarray", "numba", "matplotlib", "dask", "dask.array", "distributed", "scipy")
 #: a command draws in a figure process (and so never loads matplotlib) with two usable CPUs or more
 PLOTTING = ("matplotlib",) if len(os.sched_getaffinity(0)) >= 2 else ()
@@ -67,9 +69,7 @@ def test_the_analyze_api_makes_its_dataset_when_asked():
         "dims = result.dataset['budget'].dims\n"
         "print([before, type(result.dataset).__name__, dims, result.dataset is result.dataset])\n"
     )
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
-    assert done.returncode == 0, done.stderr
-    assert eval(done.stdout.strip().splitlines()[-1]) == [False, "Dataset", ("source", "update", "state", "state_col"), True]
+    assert eval(last_line_of(code)) == [False, "Dataset", ("source", "update", "state", "state_col"), True]
 
 
 @pytest.mark.parametrize("module", ["kalcal.fitting.mle", "kalcal.fitting.nis_tail", "kalcal.jobs.fit"])

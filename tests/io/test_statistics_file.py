@@ -18,6 +18,8 @@ from kalcal.io.statistics import _encode, load_statistics, read_statistics, writ
 from kalcal.jobs.verify import compute_verification
 from kalcal.models.registry import build_scenario
 
+from tests._helpers import last_line_of
+
 SHORT = ["scenario.duration=2"]
 
 
@@ -142,9 +144,7 @@ def test_kalcal_verify_makes_its_dataset_only_when_statistics_is_read():
         "print(before, isinstance(r.statistics, xr.Dataset), r.statistics is r.statistics,"
         " dict(r.long_statistics.sizes)['time'])\n"
     )
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
-    assert done.returncode == 0, done.stderr
-    assert done.stdout.strip().splitlines()[-1] == "False True True 20"
+    assert last_line_of(code) == "False True True 20"
 
 
 @pytest.mark.parametrize("name", ["dataset", "long_dataset", "analysis", "scale_bias"])

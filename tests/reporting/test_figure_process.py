@@ -362,6 +362,20 @@ def test_a_send_interrupted_once_busy_stops_the_figure_process_before_the_interr
         assert process.ended and not process.busy and process._process.poll() is not None
 
 
+def _stopped_before_cleanup(figure: str, save, out: Path) -> None:
+    """``save(out)`` fails writing its files while the figure process draws ``figure``: the figure is
+    stopped and waited for before the outputs are cleaned up, so the folder the run created is gone and
+    nothing is written into it later (the process has ended before the error reaches here)."""
+    with fp.figure_process(figure, start=True) as process:
+        fp.call("os:getpid")  # loaded: the figure is taken at once
+        with pytest.raises(Exception, match="No space left on device"):
+            save(out)
+        assert process.ended and process._process.poll() is not None
+        assert not out.exists()
+        time.sleep(1.0)
+    assert not out.exists()
+
+
 def test_a_calibration_whose_files_fail_waits_for_its_figure_and_leaves_no_outputs(tmp_path, monkeypatch):
     """estimates.csv cannot be written while the figure process draws calibration.png: the figure is
     stopped and waited for before the outputs are cleaned up, so the folder this first run created is gone
@@ -380,15 +394,7 @@ def test_a_calibration_whose_files_fail_waits_for_its_figure_and_leaves_no_outpu
         raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(pd.DataFrame, "to_csv", full)
-    out = tmp_path / "out"
-    with fp.figure_process(fp.CALIBRATION_FIGURE, start=True) as process:
-        fp.call("os:getpid")  # loaded: the figure is taken at once
-        with pytest.raises(Exception, match="No space left on device"):
-            save_calibration(calibration, out)
-        assert process.ended and process._process.poll() is not None
-        assert not out.exists()
-        time.sleep(1.0)
-    assert not out.exists()
+    _stopped_before_cleanup(fp.CALIBRATION_FIGURE, lambda out: save_calibration(calibration, out), tmp_path / "out")
 
 
 @pytest.fixture(scope="module")
@@ -440,15 +446,7 @@ def test_a_fit_whose_files_fail_waits_for_its_figure_and_leaves_no_outputs(tmp_p
         raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(fit_job, "write_json", full)
-    out = tmp_path / "out"
-    with fp.figure_process(fp.FIT_FIGURE, start=True) as process:
-        fp.call("os:getpid")  # loaded: the figure is taken at once
-        with pytest.raises(Exception, match="No space left on device"):
-            fit_job.save_fit(run, out)
-        assert process.ended and process._process.poll() is not None
-        assert not out.exists()
-        time.sleep(1.0)
-    assert not out.exists()
+    _stopped_before_cleanup(fp.FIT_FIGURE, lambda out: fit_job.save_fit(run, out), tmp_path / "out")
 
 
 @pytest.fixture(scope="module")
@@ -482,15 +480,7 @@ def test_a_noise_run_whose_files_fail_waits_for_its_figure_and_leaves_no_outputs
         raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(noise_job, "write_json", full)
-    out = tmp_path / "out"
-    with fp.figure_process(fp.NOISE_FIGURE, start=True) as process:
-        fp.call("os:getpid")  # loaded: the figure is taken at once
-        with pytest.raises(Exception, match="No space left on device"):
-            noise_job.save_noise(run, out)
-        assert process.ended and process._process.poll() is not None
-        assert not out.exists()
-        time.sleep(1.0)
-    assert not out.exists()
+    _stopped_before_cleanup(fp.NOISE_FIGURE, lambda out: noise_job.save_noise(run, out), tmp_path / "out")
 
 
 @two_cpus
@@ -514,15 +504,7 @@ def test_an_analysis_whose_files_fail_waits_for_its_figures_and_leaves_no_output
         raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(kalcal.io.results, "write_json", full)
-    out = tmp_path / "out"
-    with fp.figure_process(fp.ANALYSIS_FIGURES, start=True) as process:
-        fp.call("os:getpid")  # loaded: the figures are taken at once
-        with pytest.raises(Exception, match="No space left on device"):
-            result.save(out)
-        assert process.ended and process._process.poll() is not None
-        assert not out.exists()
-        time.sleep(1.0)
-    assert not out.exists()
+    _stopped_before_cleanup(fp.ANALYSIS_FIGURES, result.save, tmp_path / "out")
 
 
 @two_cpus
