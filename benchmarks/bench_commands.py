@@ -7,13 +7,15 @@ defaults, a static accelerometer log of 2^15 samples at 100 Hz, a 20,000-realiza
 the long-run study), then prints, measured in one run on this machine, for each command:
 
 * the command: ``python -m kalcal ...`` in a child process, fastest of the repeats, the compiled kernels'
-  cache warm (every command is run once before it is timed);
+  cache warm (every command but ``report`` is run once before it is timed; the verify run that report
+  redraws warmed its kernels);
 * the same job through the Python API in this process, warm (the call repeated after a first one, so
   that its imports, kernel loads and matplotlib are paid already; its figures are drawn here);
-* their ratio: what the command adds to its job (the interpreter, the imports, the kernels' loading,
-  starting the figure process), the share of the user's wait that is not the work itself.
+* their ratio, command over job: how much longer the user waits than the work takes (the interpreter,
+  the imports, the kernels' loading, starting the figure process).
 
-``python -c pass`` is printed for scale. The commands write into fresh folders each time.
+``python -c pass`` is printed for scale. The commands write into fresh folders each time, but for
+``report``, which redraws the verify run's own page and figures in its folder.
 """
 
 from __future__ import annotations

@@ -17,7 +17,7 @@ from tests._helpers import last_line_of
 
 HEAVY = ("pandas", "xarray", "numba", "matplotlib", "dask", "dask.array", "distributed", "scipy")
 #: a command draws in a figure process (and so never loads matplotlib) with two usable CPUs or more
-PLOTTING = ("matplotlib",) if len(os.sched_getaffinity(0)) >= 2 else ()
+PLOTTING = ("matplotlib",) if not hasattr(os, "sched_getaffinity") or len(os.sched_getaffinity(0)) >= 2 else ()
 
 
 def _loaded(module: str, watched: tuple[str, ...]) -> list[str]:

@@ -235,9 +235,14 @@ def test_it_starts_only_where_it_helps(monkeypatch):
     import matplotlib  # noqa: F401 (this process has it: figures are drawn here, with its rcParams)
 
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
+    monkeypatch.delenv("KALCAL_FIGURE_PROCESSES", raising=False)
+    monkeypatch.setattr(fp, "_STARTED", False)
     assert not fp._helps()
     monkeypatch.delitem(sys.modules, "matplotlib")
     assert fp._helps()
+    monkeypatch.setattr(fp, "_STARTED", True)  # this process has drawn through one already
+    assert not fp._helps()
+    monkeypatch.setattr(fp, "_STARTED", False)
     monkeypatch.setenv("KALCAL_FIGURE_PROCESSES", "1")  # draw in this process
     assert not fp._helps()
     monkeypatch.setenv("KALCAL_FIGURE_PROCESSES", "2")
@@ -246,6 +251,45 @@ def test_it_starts_only_where_it_helps(monkeypatch):
     assert not fp._helps()
     with fp.figure_process("os:getpid") as process:
         assert process is None
+
+
+def test_only_a_figure_process_that_drew_uses_up_the_process_s_one(monkeypatch):
+    """A job that failed before drawing (a bad argument, a refused folder) leaves the one figure process
+    for the next job; once one has drawn, the later jobs draw here."""
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
+    monkeypatch.delenv("KALCAL_FIGURE_PROCESSES", raising=False)
+    monkeypatch.setattr(fp, "_STARTED", False)
+    monkeypatch.delitem(sys.modules, "matplotlib", raising=False)
+    with pytest.raises(DataError), fp.figure_process("os:getpid") as process:
+        assert process is not None
+        raise DataError("a bad log")
+    assert not fp._STARTED
+    with fp.figure_process("os:getpid") as process:
+        assert fp.call("os:getpid") == process._process.pid  # drawn there
+    assert fp._STARTED
+    with fp.figure_process("os:getpid") as process:
+        assert process is None and fp.call("os:getpid") == os.getpid()  # drawn here
+    with fp.figure_process("os:getpid", start=True) as process:  # a caller that asks for one still has it
+        assert process is not None
+
+
+@pytest.mark.parametrize("call", ["fit", "noise", "sweep"])
+def test_bad_arguments_are_refused_before_a_figure_process_starts(call, monkeypatch, tmp_path):
+    import kalcal
+    from kalcal.errors import KalcalError
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("a figure process was started for a call its arguments refuse")
+
+    monkeypatch.setattr(fp, "_helps", lambda: True)
+    monkeypatch.setattr(fp, "FigureProcess", refuse)
+    with pytest.raises(KalcalError):
+        if call == "fit":
+            kalcal.fit("accel-gps", gps=tmp_path / "gps.csv", out=tmp_path / "out")  # no --imu
+        elif call == "noise":
+            kalcal.noise(None, out=tmp_path / "out")
+        else:
+            kalcal.sweep("accel-gps", "filter.accel_noise_std", [0.01], out=tmp_path / "out")  # one value
 
 
 def _loaded_after(args: list[str], env: dict | None = None) -> tuple[list[str], str]:

@@ -5,6 +5,8 @@ and ``time2`` (a second copy of ``time``, always there; ``residual_second_moment
 residual correlation over pairs of updates, runs over it where the run kept the pairs). Written as
 NetCDF3 through scipy, so no extra library is needed to read it: ``xarray.open_dataset("stats.nc")``.
 
+:func:`load_statistics` reads such a file back as numpy parts without xarray, as the report does.
+
 The Datasets kalcal builds (float variables, string labels, number and string attributes), as an
 ``xarray.Dataset`` or as the :class:`kalcal.io.dataset_parts.DatasetParts` the verify job keeps, are
 written straight through ``scipy.io.netcdf_file``, byte for byte the file
@@ -30,10 +32,12 @@ if TYPE_CHECKING:
 #: NetCDF3 with 64-bit offsets, as ``to_netcdf(engine="scipy")`` writes by default
 _VERSION = 2
 
-#: what scipy's NetCDF reader (and xarray over it) raises on a file cut short or corrupt: in the header
-#: an IndexError or a struct.error, a KeyError for a bad type code, a MemoryError or OverflowError for a
-#: huge count, a ValueError for short data, a LookupError for a bad encoding
-_UNREADABLE = (OSError, ValueError, TypeError, LookupError, MemoryError, OverflowError, struct.error, EOFError)
+#: what scipy's NetCDF reader (and xarray's decoding over it) raises on a file cut short or corrupt: in
+#: the header an IndexError or a struct.error, a KeyError for a bad type code, a MemoryError or
+#: OverflowError for a huge count, a ValueError for short data, a LookupError for a bad encoding, an
+#: AttributeError or TypeError for an attribute of the wrong type (the nets hold the reading alone)
+_UNREADABLE = (OSError, ValueError, TypeError, LookupError, MemoryError, OverflowError, AttributeError, struct.error,
+               EOFError)  # fmt: skip
 
 
 def write_statistics(path: str | Path, dataset: xr.Dataset | DatasetParts) -> Path:
@@ -76,10 +80,11 @@ def load_statistics(path: str | Path) -> DatasetParts | xr.Dataset:
     if not path.is_file():
         raise DataError(f"{path}: no such statistics file")
     try:
-        with netcdf_file(path, mode="r", mmap=False) as file:
-            parts = _decoded(file)
+        file = netcdf_file(path, mode="r", mmap=False)  # the header and, without mmap, every variable's data
     except _UNREADABLE as exc:
         raise DataError(f"{path}: not a kalcal statistics file ({type(exc).__name__}: {exc})") from None
+    with file:  # decoded outside the net: an error of the decoder's own is not the file's
+        parts = _decoded(file)
     return parts if parts is not None else read_statistics(path)
 
 
@@ -91,22 +96,31 @@ _TIME_UNITS = {"days", "hours", "minutes", "seconds", "milliseconds", "microseco
 
 def _decoded(file) -> DatasetParts | None:
     """The parts of an open NetCDF3 file as :func:`write_statistics` writes it, None for anything else."""
+    if "coordinates" in file._attributes:  # labels on no variable: xarray's global attribute, its to decode
+        return None
+    try:  # attributes and labels that are not UTF-8: xarray's to read (it replaces the bytes it cannot decode)
+        return _decoded_utf8(file)
+    except UnicodeDecodeError:
+        return None
+
+
+def _decoded_utf8(file) -> DatasetParts | None:
+    """:func:`_decoded` of a file whose every attribute and label is UTF-8 (UnicodeDecodeError otherwise)."""
     data_vars: dict[str, Part] = {}
     coords: dict[str, Part] = {}
     labels: set[str] = set()
-    if "coordinates" in file._attributes:  # labels on no variable: xarray's global attribute, its to decode
-        return None
+    attributes = {str(key): _value(value) for key, value in file._attributes.items()}
     for name, variable in file.variables.items():
-        try:
-            attrs = {key: _value(value) for key, value in variable._attributes.items()}
-        except UnicodeDecodeError:  # xarray replaces the bytes it cannot decode
-            return None
+        attrs = {key: _value(value) for key, value in variable._attributes.items()}
         dims = tuple(variable.dimensions)
         data = variable.data
         units = str(attrs.get("units", ""))
         if _DECODED_BY_XARRAY & set(attrs) or " since " in units or units in _TIME_UNITS:
             return None
-        labels.update(str(attrs.pop("coordinates", "")).split())
+        over = attrs.pop("coordinates", "")
+        if not isinstance(over, str):
+            return None
+        labels.update(over.split())
         fill = attrs.pop("_FillValue", None)
         if data.dtype == ">f8" and isinstance(fill, float) and np.isnan(fill):  # the writer's floats
             values = np.asarray(data, dtype=np.float64)
@@ -125,7 +139,7 @@ def _decoded(file) -> DatasetParts | None:
             return None
         coords[label] = data_vars.pop(label)
     coords = {name: coords[name] for name in file.variables if name in coords}  # the file's order, as xarray's
-    return DatasetParts(data_vars, coords, {str(key): _value(value) for key, value in file._attributes.items()})
+    return DatasetParts(data_vars, coords, attributes)
 
 
 def _value(value: Any) -> Any:

@@ -50,8 +50,8 @@ __all__ = ["ANALYSIS_FIGURES", "CALIBRATION_FIGURE", "FIT_FIGURE", "NOISE_FIGURE
            "REPORT_REALIZATION_FIGURES", "REPORT_STATISTICS_FIGURES", "SWEEP_FIGURE", "PendingFigure", "call",
            "elsewhere", "figure_process", "submit"]  # fmt: skip
 
-#: whether this process has started a figure process where one helps: once (a command's one job; the
-#: later calls of a script's loop draw here, where matplotlib, loaded by the second, stays)
+#: whether this process has drawn through a figure process it started where one helps: once (a command's
+#: one job; the later calls of a script's loop draw here, where matplotlib, loaded by the second, stays)
 _STARTED = False
 
 #: the figure process of the job running in this context, None where figures are drawn here
@@ -122,6 +122,7 @@ class FigureProcess:
         parent.send(list(sys.path))
         parent.send((os.getpid(), modules))
         self.busy = False  # a call sent and not answered yet
+        self.used = False  # a call sent at all
         self.ended = False  # stopped or dead: calls are then drawn in the job's process
 
     def _died(self) -> FigureProcessDied:
@@ -140,7 +141,7 @@ class FigureProcess:
             message = ForkingPickler.dumps(("call", name, args, kwargs))
         except Exception:
             raise _NotSent from None
-        self.busy = True
+        self.busy = self.used = True
         try:
             self._connection.send_bytes(message)
         except OSError:
@@ -260,13 +261,13 @@ def figure_process(*functions: str, start: bool | None = None) -> Iterator[Figur
             _CURRENT.reset(token)
         return
     process = FigureProcess(tuple(dict.fromkeys(name.partition(":")[0] for name in functions)))
-    _STARTED = _STARTED or start is None
     token = _CURRENT.set(process)
     try:
         yield process
     finally:
         _CURRENT.reset(token)
         process.stop()
+        _STARTED = _STARTED or (start is None and process.used)  # a job that drew nothing leaves it for the next
 
 
 def _function(name: str) -> Callable[..., Any]:
