@@ -187,6 +187,17 @@ def test_a_file_kalcal_did_not_write_loads_through_xarray(tmp_path):
         other.to_netcdf(path, engine="scipy")
         assert isinstance(load_statistics(path), xr.Dataset), name
     assert "label" in load_statistics(tmp_path / "global_coordinates.nc").coords
+    from scipy.io import netcdf_file
+
+    for where in ("global", "variable"):  # attributes that are not UTF-8: xarray reads them its own way
+        path = tmp_path / f"latin1_{where}.nc"
+        with netcdf_file(path, mode="w", version=2) as file:
+            file.createDimension("time", 2)
+            variable = file.createVariable("a", np.dtype(">f8"), ["time"])
+            variable._FillValue = np.nan
+            variable[:] = [1.0, 2.0]
+            setattr(file if where == "global" else variable, "note", "caf\xe9".encode("latin-1"))
+        assert isinstance(load_statistics(path), xr.Dataset), where
     bad = tmp_path / "bad.nc"
     bad.write_text("not netcdf")
     with pytest.raises(DataError, match="not a kalcal statistics file"):

@@ -84,7 +84,10 @@ def load_statistics(path: str | Path) -> DatasetParts | xr.Dataset:
     except _UNREADABLE as exc:
         raise DataError(f"{path}: not a kalcal statistics file ({type(exc).__name__}: {exc})") from None
     with file:  # decoded outside the net: an error of the decoder's own is not the file's
-        parts = _decoded(file)
+        try:
+            parts = _decoded(file)
+        except UnicodeDecodeError:  # attributes or labels not UTF-8: xarray's to read (it replaces bad bytes)
+            parts = None
     return parts if parts is not None else read_statistics(path)
 
 
@@ -95,17 +98,10 @@ _TIME_UNITS = {"days", "hours", "minutes", "seconds", "milliseconds", "microseco
 
 
 def _decoded(file) -> DatasetParts | None:
-    """The parts of an open NetCDF3 file as :func:`write_statistics` writes it, None for anything else."""
+    """The parts of an open NetCDF3 file as :func:`write_statistics` writes it, None for anything else;
+    UnicodeDecodeError where an attribute or a label is not UTF-8."""
     if "coordinates" in file._attributes:  # labels on no variable: xarray's global attribute, its to decode
         return None
-    try:  # attributes and labels that are not UTF-8: xarray's to read (it replaces the bytes it cannot decode)
-        return _decoded_utf8(file)
-    except UnicodeDecodeError:
-        return None
-
-
-def _decoded_utf8(file) -> DatasetParts | None:
-    """:func:`_decoded` of a file whose every attribute and label is UTF-8 (UnicodeDecodeError otherwise)."""
     data_vars: dict[str, Part] = {}
     coords: dict[str, Part] = {}
     labels: set[str] = set()
