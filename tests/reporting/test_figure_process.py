@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 
 from kalcal.errors import DataError
+from kalcal.reporting import figure_names as names
 from kalcal.reporting import figure_process as fp
 
 CALLS = "tests.reporting.figure_calls"
@@ -438,7 +439,7 @@ def test_a_calibration_whose_files_fail_waits_for_its_figure_and_leaves_no_outpu
         raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(pd.DataFrame, "to_csv", full)
-    _stopped_before_cleanup(fp.CALIBRATION_FIGURE, lambda out: save_calibration(calibration, out), tmp_path / "out")
+    _stopped_before_cleanup(names.CALIBRATION_FIGURE, lambda out: save_calibration(calibration, out), tmp_path / "out")
 
 
 @pytest.fixture(scope="module")
@@ -490,7 +491,7 @@ def test_a_fit_whose_files_fail_waits_for_its_figure_and_leaves_no_outputs(tmp_p
         raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(fit_job, "write_json", full)
-    _stopped_before_cleanup(fp.FIT_FIGURE, lambda out: fit_job.save_fit(run, out), tmp_path / "out")
+    _stopped_before_cleanup(names.FIT_FIGURE, lambda out: fit_job.save_fit(run, out), tmp_path / "out")
 
 
 @pytest.fixture(scope="module")
@@ -524,7 +525,7 @@ def test_a_noise_run_whose_files_fail_waits_for_its_figure_and_leaves_no_outputs
         raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(noise_job, "write_json", full)
-    _stopped_before_cleanup(fp.NOISE_FIGURE, lambda out: noise_job.save_noise(run, out), tmp_path / "out")
+    _stopped_before_cleanup(names.NOISE_FIGURE, lambda out: noise_job.save_noise(run, out), tmp_path / "out")
 
 
 @two_cpus
@@ -548,7 +549,7 @@ def test_an_analysis_whose_files_fail_waits_for_its_figures_and_leaves_no_output
         raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(kalcal.io.results, "write_json", full)
-    _stopped_before_cleanup(fp.ANALYSIS_FIGURES, result.save, tmp_path / "out")
+    _stopped_before_cleanup(names.ANALYSIS_FIGURES, result.save, tmp_path / "out")
 
 
 @two_cpus

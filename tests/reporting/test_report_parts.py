@@ -11,6 +11,7 @@ import pytest
 from kalcal.io import outputs
 from kalcal.jobs import report as report_job
 from kalcal.jobs.report import render_report
+from kalcal.reporting import figure_names as names
 from kalcal.reporting import figure_process as fp
 from kalcal.reporting import figures
 from kalcal.reporting.figure_entries import GROUPS, REALIZATION_FIGURES_PER_STATE, page_order
@@ -41,9 +42,9 @@ def test_the_two_parts_are_the_page_drawn_at_once(copy_run, monkeypatch, tmp_pat
     skipped figures and PNG bytes of render_figures drawing them all from the same inputs."""
     run = copy_run()
     seen = _recorded(monkeypatch)
-    with fp.figure_process(fp.REPORT_FIGURES, start=True):  # the job's: there the page is drawn in two parts
+    with fp.figure_process(names.REPORT_FIGURES, start=True):  # the job's: there the page is drawn in two parts
         render_report(run, realization=REALIZATION)
-    assert [name for name, _, _ in seen] == [fp.REPORT_STATISTICS_FIGURES, fp.REPORT_REALIZATION_FIGURES]
+    assert [name for name, _, _ in seen] == [names.REPORT_STATISTICS_FIGURES, names.REPORT_REALIZATION_FIGURES]
     (_, (dataset, _, long_dataset), options), (_, (data, _), _) = seen
     options = {key: value for key, value in options.items() if key != "progress"}
 
@@ -77,7 +78,7 @@ def test_drawn_here_the_page_is_one_call_after_the_realization(copy_run, monkeyp
     real = report_job.draw_realization
     monkeypatch.setattr(report_job, "draw_realization", lambda *a, **k: events.append("realization") or real(*a, **k))
     render_report(run, realization=REALIZATION, progress=lambda stage, done, total: events.append((stage, done, total)))
-    assert [name for name, _, _ in seen] == [fp.REPORT_FIGURES]
+    assert [name for name, _, _ in seen] == [names.REPORT_FIGURES]
     assert events[0] == "realization"
     events = events[1:]
     counted = [(done, total) for stage, done, total in events if stage == "figures"]
@@ -103,7 +104,7 @@ def test_in_the_figure_process_the_statistics_figures_are_drawn_while_the_realiz
 
     monkeypatch.setattr(report_job, "draw_realization", spied)
     events = []
-    with fp.figure_process(fp.REPORT_FIGURES, start=True) as process:
+    with fp.figure_process(names.REPORT_FIGURES, start=True) as process:
         assert fp.call("os:getpid") == process._process.pid  # loaded, and drawing there
         render_report(run, realization=REALIZATION, progress=lambda stage, done, total: events.append((stage, done, total)))
     assert busy == [True]
@@ -145,7 +146,7 @@ def test_a_failed_realization_stops_the_statistics_figures_and_leaves_the_folder
         raise _Failed
 
     monkeypatch.setattr(report_job, "draw_realization", fail)
-    with fp.figure_process(fp.REPORT_FIGURES, start=True) as process:
+    with fp.figure_process(names.REPORT_FIGURES, start=True) as process:
         fp.call("os:getpid")  # loaded: the statistics' call is taken at once
         with pytest.raises(_Failed):
             render_report(run, realization=REALIZATION)

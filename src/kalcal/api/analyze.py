@@ -170,7 +170,8 @@ def analyze(
     from dataclasses import replace
 
     from kalcal.io.outputs import inputs_of, run_outputs
-    from kalcal.reporting.figure_process import ANALYSIS_FIGURES, figure_process
+    from kalcal.reporting.figure_names import ANALYSIS_FIGURES
+    from kalcal.reporting.figure_process import figure_process
 
     # the folder is checked before the analysis runs, and its files are put in place as one set; the
     # plotting code loads in its own process meanwhile
@@ -223,17 +224,14 @@ def save_analysis(result: AnalysisResult, out: str | Path) -> dict[str, Path]:
     """``analysis.json``, ``analysis.nc`` and the two figures, written into ``out`` as one set."""
     from kalcal.io.results import write_json
     from kalcal.io.statistics import write_statistics
-    from kalcal.reporting.figure_process import ANALYSIS_FIGURES, submit
+    from kalcal.reporting.figure_names import ANALYSIS_FIGURES
+    from kalcal.reporting.figure_process import submit
 
     out = Path(out)
     # drawn in the job's figure process, if any, while the files below are written
-    figures = submit(ANALYSIS_FIGURES, result.parts, out / "figures")
-    try:
+    with submit(ANALYSIS_FIGURES, result.parts, out / "figures") as figures:
         paths = {
             "summary": write_json(out / "analysis.json", result.document),
             "dataset": write_statistics(out / "analysis.nc", result.parts),
         }
-    except BaseException:
-        figures.cancel()  # the figures are done or stopped before the outputs are cleaned up
-        raise
     return {**paths, **figures.result()}

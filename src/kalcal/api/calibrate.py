@@ -59,7 +59,8 @@ def calibrate(
     -------
     CalibrationResult
     """
-    from kalcal.reporting.figure_process import CALIBRATION_FIGURE, figure_process
+    from kalcal.reporting.figure_names import CALIBRATION_FIGURE
+    from kalcal.reporting.figure_process import figure_process
 
     # accel-gps draws calibration.png: the plotting code loads in its own process while this one computes
     with figure_process(CALIBRATION_FIGURE, start=None if out is not None and scenario != "scale-bias" else False):

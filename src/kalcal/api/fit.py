@@ -72,7 +72,8 @@ def fit(
     """
     from kalcal.api._scenario import resolve
     from kalcal.errors import KalcalError
-    from kalcal.reporting.figure_process import FIT_FIGURE, figure_process
+    from kalcal.reporting.figure_names import FIT_FIGURE
+    from kalcal.reporting.figure_process import figure_process
 
     if not 0.0 < confidence < 1.0:
         raise KalcalError(f"confidence=: expected a number in (0, 1), got {confidence!r}")  # kalcal fit has no --confidence

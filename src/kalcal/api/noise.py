@@ -37,7 +37,8 @@ def noise(
     NoiseResult
     """
     from kalcal.errors import KalcalError
-    from kalcal.reporting.figure_process import NOISE_FIGURE, figure_process
+    from kalcal.reporting.figure_names import NOISE_FIGURE
+    from kalcal.reporting.figure_process import figure_process
 
     if imu is None:
         raise KalcalError("--imu: required (a static accelerometer log: time [s], accel [m/s^2])")

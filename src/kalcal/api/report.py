@@ -34,7 +34,8 @@ def report(
     KalcalError
         The folder is not a finished verification run, or ``realization`` is out of range.
     """
-    from kalcal.reporting.figure_process import REPORT_FIGURES, figure_process
+    from kalcal.reporting.figure_names import REPORT_FIGURES
+    from kalcal.reporting.figure_process import figure_process
 
     directory = Path(directory)
     with figure_process(REPORT_FIGURES):  # loads the plotting code while the run's files are read

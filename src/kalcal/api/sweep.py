@@ -32,7 +32,8 @@ def sweep(
     summary.json and folder, ``paths``: the sweep's own files)."""
     from kalcal.api._scenario import resolve
     from kalcal.errors import KalcalError
-    from kalcal.reporting.figure_process import SWEEP_FIGURE, figure_process
+    from kalcal.reporting.figure_names import SWEEP_FIGURE
+    from kalcal.reporting.figure_process import figure_process
 
     if out is None:
         raise KalcalError("out: required (the folder for sweep.csv, sweep.png and one run per value; a sweep always writes)")

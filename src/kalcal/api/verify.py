@@ -72,7 +72,8 @@ def verify(
     KalcalError
         Any bad input (a ValueError), with one line naming the setting and the value.
     """
-    from kalcal.reporting.figure_process import REPORT_FIGURES, figure_process
+    from kalcal.reporting.figure_names import REPORT_FIGURES
+    from kalcal.reporting.figure_process import figure_process
 
     # with a page to draw, the plotting code loads in its own process while this one loads and computes
     with figure_process(REPORT_FIGURES, start=None if out is not None and report else False):

@@ -19,7 +19,8 @@ from kalcal.io.outputs import mark_inputs, writes_outputs
 from kalcal.io.results import write_json
 from kalcal.models.accel_gps import AccelGpsScenario, AccelGpsSettings
 from kalcal.models.config import section_values
-from kalcal.reporting.figure_process import CALIBRATION_FIGURE, submit
+from kalcal.reporting.figure_names import CALIBRATION_FIGURE
+from kalcal.reporting.figure_process import submit
 
 
 IMU_ROLES = ("time", "accel")
@@ -72,6 +73,7 @@ def save_calibration(calibration: Calibration, out: str | Path) -> dict[str, Pat
     def write(calibration: Calibration, out: Path) -> dict[str, Path]:
         out = Path(out)
         paths = {}
+        figure = contextlib.nullcontext()
         if "calibration.png" in names:  # drawn in the job's figure process, if any, while the files below are written
             frame = calibration.estimates
             normalized = frame[["innovation_position", "innovation_velocity"]].to_numpy()
@@ -80,15 +82,11 @@ def save_calibration(calibration: Calibration, out: str | Path) -> dict[str, Pat
                 frame["time"].to_numpy(), frame["bias"].to_numpy(), frame["bias_std"].to_numpy(), normalized,
                 out / "calibration.png",
             )
-        try:
+        with figure:  # waited for, or stopped before an error goes on and the outputs are cleaned up
             paths["estimates.csv"] = out / "estimates.csv"
             paths["estimates.csv"].parent.mkdir(parents=True, exist_ok=True)
             calibration.estimates.to_csv(paths["estimates.csv"], index=False)
             paths["summary.json"] = write_json(out / "summary.json", calibration.summary)
-        except BaseException:
-            if "calibration.png" in names:
-                figure.cancel()  # the figure is done or stopped before the outputs are cleaned up
-            raise
         if "calibration.png" in names:
             paths["calibration.png"] = figure.result()
         return paths

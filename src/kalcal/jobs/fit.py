@@ -16,7 +16,8 @@ from kalcal.io.outputs import inputs_of, mark_inputs, run_outputs
 from kalcal.io.results import write_json
 from kalcal.jobs.calibrate import GPS_ROLES, IMU_ROLES, stated_rates
 from kalcal.jobs.verify_arguments import MAX_UPDATES
-from kalcal.reporting.figure_process import FIT_FIGURE, submit
+from kalcal.reporting.figure_names import FIT_FIGURE
+from kalcal.reporting.figure_process import submit
 
 #: the files of one fit
 OUTPUT_NAMES = ("fit.json", "filter.toml", "fit.png")
@@ -202,13 +203,8 @@ def save_fit(run: FitRun, out: str | Path) -> dict[str, Path]:
         if run.command == "fit accel-gps":
             from kalcal.fitting.accel_gps import LINEAR as linear
         # drawn in the job's figure process, if any, while the files below are written
-        figure = submit(FIT_FIGURE, run.result.curves, run.document["parameters"], staging / "fit.png",
-                        method=run.result.interval_method, drop=drop_of(run.result.confidence), linear=tuple(linear))
-        try:
+        with submit(FIT_FIGURE, run.result.curves, run.document["parameters"], staging / "fit.png",
+                    method=run.result.interval_method, drop=drop_of(run.result.confidence), linear=tuple(linear)):
             write_json(staging / "fit.json", run.document)
             (staging / "filter.toml").write_text(run.filter_text)
-        except BaseException:
-            figure.cancel()  # the figure is done or stopped before the outputs are cleaned up
-            raise
-        figure.result()
     return {name: out / name for name in OUTPUT_NAMES}

@@ -20,7 +20,8 @@ from kalcal.io.logs import numeric_columns, parse_column_map, read_table, requir
 from kalcal.io.outputs import final_path, inputs_of, mark_inputs, run_outputs
 from kalcal.io.results import write_json
 from kalcal.models.accel_gps import AccelGpsFilter
-from kalcal.reporting.figure_process import NOISE_FIGURE, submit
+from kalcal.reporting.figure_names import NOISE_FIGURE
+from kalcal.reporting.figure_process import submit
 
 IMU_ROLES = ("time", "accel")
 #: the identified values that map onto accel-gps ``filter.`` settings of the same name
@@ -115,8 +116,7 @@ def _write_noise(run: NoiseRun, out: Path, kalibr: bool) -> dict[str, Any]:
     }
     out.mkdir(parents=True, exist_ok=True)
     # drawn in the job's figure process, if any, while the files below are written
-    figure = submit(NOISE_FIGURE, run.identification, paths["plot"], title=run.title)
-    try:
+    with submit(NOISE_FIGURE, run.identification, paths["plot"], title=run.title):
         run.allan.to_csv(paths["allan"], index=False)
         paths["filter"].write_text(run.filter_text)
         if kalibr:
@@ -129,10 +129,6 @@ def _write_noise(run: NoiseRun, out: Path, kalibr: bool) -> dict[str, Any]:
         summary["files"] = {name: str(final_path(path)) for name, path in paths.items()}
         summary["warnings"] = warnings
         write_json(paths["summary"], summary)
-    except BaseException:
-        figure.cancel()  # the figure is done or stopped before the outputs are cleaned up
-        raise
-    figure.result()
     return summary
 
 

@@ -39,14 +39,8 @@ from kalcal.montecarlo.scenarios import build_problem
 from kalcal.plots.realization_data import RealizationData
 from kalcal.reporting.drawing import drawing_workers
 from kalcal.reporting.figure_entries import REALIZATION_FIGURES_PER_STATE, page_order
-from kalcal.reporting.figure_process import (
-    REPORT_FIGURES,
-    REPORT_REALIZATION_FIGURES,
-    REPORT_STATISTICS_FIGURES,
-    call,
-    elsewhere,
-    submit,
-)
+from kalcal.reporting.figure_names import REPORT_FIGURES, REPORT_REALIZATION_FIGURES, REPORT_STATISTICS_FIGURES
+from kalcal.reporting.figure_process import call, elsewhere, submit
 from kalcal.reporting.html import build_page, write_page
 from kalcal.reporting.steady_state import steady_state_view
 from kalcal.verification.self_check import exact_prediction

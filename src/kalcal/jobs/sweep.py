@@ -13,7 +13,8 @@ from kalcal.io.outputs import writes_outputs
 from kalcal.io.results import write_json
 from kalcal.jobs.verify import check_arguments, verify
 from kalcal.models.config import apply_settings
-from kalcal.reporting.figure_process import SWEEP_FIGURE, call
+from kalcal.reporting.figure_names import SWEEP_FIGURE
+from kalcal.reporting.figure_process import call
 
 
 @dataclass(frozen=True)

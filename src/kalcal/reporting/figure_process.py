@@ -43,15 +43,9 @@ from multiprocessing.connection import Connection, Pipe
 from multiprocessing.reduction import ForkingPickler
 from typing import Any
 
-from kalcal.reporting.figure_names import (ANALYSIS_FIGURES, CALIBRATION_FIGURE, FIT_FIGURE, NOISE_FIGURE,  # re-exported
-    REPORT_FIGURES, REPORT_REALIZATION_FIGURES, REPORT_STATISTICS_FIGURES, SWEEP_FIGURE)  # fmt: skip
+__all__ = ["PendingFigure", "call", "elsewhere", "figure_process", "submit"]  # the names it runs: figure_names.py
 
-__all__ = ["ANALYSIS_FIGURES", "CALIBRATION_FIGURE", "FIT_FIGURE", "NOISE_FIGURE", "REPORT_FIGURES",
-           "REPORT_REALIZATION_FIGURES", "REPORT_STATISTICS_FIGURES", "SWEEP_FIGURE", "PendingFigure", "call",
-           "elsewhere", "figure_process", "submit"]  # fmt: skip
-
-#: whether this process has drawn through a figure process it started where one helps: once (a command's
-#: one job; the later calls of a script's loop draw here, where matplotlib, loaded by the second, stays)
+#: whether this process has drawn through a figure process it started where one helps (once: the docstring)
 _STARTED = False
 
 #: the figure process of the job running in this context, None where figures are drawn here
@@ -201,7 +195,8 @@ class FigureProcess:
 
 
 class PendingFigure:
-    """A figure call started by :func:`submit`: :meth:`result` waits for it, :meth:`cancel` abandons it."""
+    """A figure call started by :func:`submit`: :meth:`result` waits for it, :meth:`cancel` abandons it; a
+    ``with`` block waits for it at its end, or stops it before the block's error goes on."""
 
     def __init__(self, process: FigureProcess | None, name: str, args: tuple, kwargs: dict[str, Any], progress):
         self._process, self._name, self._args, self._kwargs, self._progress = process, name, args, kwargs, progress
@@ -233,6 +228,12 @@ class PendingFigure:
             self._done = True
             self._process.stop()
 
+    def __enter__(self) -> PendingFigure:
+        return self
+
+    def __exit__(self, failed, *_) -> None:
+        self.cancel() if failed else self.result()  # noqa: B018 (one of the two, for its effect)
+
 
 def _helps() -> bool:
     """Whether a figure process would save this job time (see the module's docstring)."""
@@ -252,7 +253,6 @@ def figure_process(*functions: str, start: bool | None = None) -> Iterator[Figur
     Yields the process, or None where figures are drawn in this process.
     """
     global _STARTED
-
     if not (_helps() if start is None else start):
         token = _CURRENT.set(None)
         try:
