@@ -58,6 +58,23 @@ def test_an_error_there_is_raised_here_as_itself():
         assert fp.call("os:getpid") != os.getpid()  # still there for the next call
 
 
+def test_a_pending_figure_as_a_with_block_waits_raises_its_error_or_stops_behind_the_blocks(tmp_path):
+    """``with submit(...)``: the figure's value once the block ends; its error raised at the block's end;
+    a failing block's own error goes on (not the figure's), the figure process stopped before it does."""
+    with fp.figure_process(f"{CALLS}:pid_of", start=True) as process:
+        with fp.submit(f"{CALLS}:pid_of", None) as figure:
+            pass
+        assert figure.result() == process._process.pid
+        with pytest.raises(DataError, match="^x.png: cannot be drawn$"), fp.submit(f"{CALLS}:refuse", "x.png"):
+            pass
+    with fp.figure_process(f"{CALLS}:slow_files", start=True) as process:
+        fp.call("os:getpid")  # loaded: the figure is taken at once
+        with pytest.raises(KeyError, match="the block's own"):
+            with fp.submit(f"{CALLS}:slow_files", str(tmp_path), 2):
+                raise KeyError("the block's own")
+        assert process.ended and process._process.poll() is not None
+
+
 def test_a_dead_figure_process_is_drawn_around_here():
     with fp.figure_process("os:getpid", start=True) as process:
         process._process.kill()
