@@ -1,7 +1,8 @@
 """What each entry point imports: the command line and the API calls load nothing heavy until a job runs
 (``kalcal --help`` not even rich, which only a command that prints loads), a verify job loads no more than it
 uses (no plotting, no Dask, no scipy.stats, scipy.signal or scipy.io), and a calibration loads matplotlib
-and numba only for the accel-gps figure and filter."""
+and numba only for the accel-gps figure and filter, and pandas only for a CSV log, a DataFrame or the
+estimates asked for as a DataFrame."""
 
 from __future__ import annotations
 
@@ -208,3 +209,41 @@ def test_the_console_script_sets_the_full_collection_threshold_and_the_api_leave
         default, now = json.loads(done.stdout.strip().splitlines()[-1])
         assert now[:2] == default[:2]
         assert now[2] == (default[2] if third is None else third), (mode, default, now)
+
+
+@pytest.mark.parametrize("module", ["kalcal.io.logs", "kalcal.jobs.calibrate", "kalcal.jobs.scale_bias", "kalcal.jobs.fit"])
+def test_the_log_reader_and_the_calibrate_jobs_import_no_pandas(module):
+    """pandas (0.2-0.4 s) loads where a CSV log or a DataFrame is read, or a calibration's estimates
+    are asked for as a DataFrame."""
+    assert _loaded(module, ("pandas",)) == []
+
+
+@pytest.fixture(scope="module")
+def parquet_logs(tmp_path_factory):
+    import kalcal
+
+    folder = tmp_path_factory.mktemp("parquet")
+    sim = kalcal.simulate("accel-gps", seed=2, settings={"scenario.duration": 20})
+    for name in ("imu", "gps"):
+        sim.logs[name].to_parquet(folder / f"{name}.parquet")
+    kalcal.simulate("scale-bias", seed=2).logs["data"].to_parquet(folder / "data.parquet")
+    return folder
+
+
+@pytest.mark.parametrize("scenario", ["accel-gps", "scale-bias"])
+def test_a_calibrate_command_of_parquet_logs_loads_no_pandas(parquet_logs, tmp_path, scenario):
+    logs = (["--imu", str(parquet_logs / "imu.parquet"), "--gps", str(parquet_logs / "gps.parquet")]
+            if scenario == "accel-gps" else ["--data", str(parquet_logs / "data.parquet")])  # fmt: skip
+    assert _command_loaded(["calibrate", scenario, *logs, "--out", str(tmp_path / "out")], ("pandas",)) == []
+    assert (tmp_path / "out" / "estimates.csv").stat().st_size > 1000
+
+
+def test_a_calibration_makes_its_estimates_frame_when_asked(parquet_logs):
+    code = (
+        "import sys, kalcal\n"
+        f"result = kalcal.calibrate('scale-bias', data={str(parquet_logs / 'data.parquet')!r})\n"
+        "before = 'pandas' in sys.modules\n"
+        "frame = result.estimates\n"
+        "print([before, type(frame).__name__, list(frame.columns), frame is result.estimates])\n"
+    )
+    assert eval(last_line_of(code)) == [False, "DataFrame", ["time", "theta1", "theta2", "theta1_std", "theta2_std"], True]

@@ -442,9 +442,8 @@ def test_a_calibration_whose_files_fail_waits_for_its_figure_and_leaves_no_outpu
     """estimates.csv cannot be written while the figure process draws calibration.png: the figure is
     stopped and waited for before the outputs are cleaned up, so the folder this first run created is gone
     and nothing is written into it later."""
-    import pandas as pd
-
     import kalcal
+    from kalcal.jobs import calibrate as calibrate_job
     from kalcal.jobs.calibrate import compute_accel_gps_calibration, save_calibration
     from kalcal.models.registry import build_scenario
 
@@ -452,10 +451,10 @@ def test_a_calibration_whose_files_fail_waits_for_its_figure_and_leaves_no_outpu
     logs = kalcal.simulate(scenario, 3, out=tmp_path / "logs").paths
     calibration = compute_accel_gps_calibration(scenario, logs["imu"], logs["gps"])
 
-    def full(self, *args, **kwargs):
+    def full(*args, **kwargs):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(pd.DataFrame, "to_csv", full)
+    monkeypatch.setattr(calibrate_job, "write_csv", full)
     _stopped_before_cleanup(names.CALIBRATION_FIGURE, lambda out: save_calibration(calibration, out), tmp_path / "out")
 
 

@@ -160,7 +160,7 @@ class CalibrationResult:
         scale]; scale-bias: theta1, theta2).
     estimates : pandas.DataFrame
         ``estimates.csv``: one row per fix or sample, states, their 1-sigma and (accel-gps) the NIS and
-        normalized innovations.
+        normalized innovations; made when first read (a calibration from Parquet loads pandas only then).
     diagnostics : dict
         accel-gps: the innovation diagnostics (``consistent``, ``verdict``, ...); scale-bias: the mean
         NIS, its bounds, ``consistent`` and the observability ratios.
@@ -175,7 +175,6 @@ class CalibrationResult:
     scale_std: float | None
     covariance: np.ndarray
     covariance_states: tuple
-    estimates: pd.DataFrame
     diagnostics: dict
     warnings: list
     calibration: Any = field(repr=False, compare=False)
@@ -200,7 +199,6 @@ class CalibrationResult:
             None if scale_std is None else float(scale_std),
             np.asarray(covariance, dtype=float),
             tuple(states),
-            calibration.estimates,
             diagnostics,
             list(s["warnings"]),
             calibration,
@@ -212,6 +210,11 @@ class CalibrationResult:
         from kalcal.io.results import json_document
 
         return json_document(self.calibration.summary)
+
+    @property
+    def estimates(self) -> pd.DataFrame:
+        """``estimates.csv`` as a DataFrame: made (and pandas loaded) when first read."""
+        return self.calibration.estimates
 
     @property
     def stability(self) -> dict | None:

@@ -2,33 +2,135 @@
 
 Every problem raises :class:`~kalcal.errors.DataError` naming the file, the column and, where there is
 one, the row (1-based, counting data rows after the header) and the value.
+
+A Parquet file of numbers only is read without pandas (:class:`NumericTable`): importing pandas is
+0.2-0.4 s of a calibrate command's start. Anything else is read by pandas, as a CSV file always is.
 """
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 
 from kalcal.errors import DataError
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 READERS = {".csv": "csv", ".parquet": "parquet", ".pq": "parquet"}
 
 
+def is_frame(value: Any) -> bool:
+    """Whether ``value`` is a pandas DataFrame, without importing pandas (none can exist before it is)."""
+    pandas = sys.modules.get("pandas")
+    return pandas is not None and isinstance(value, pandas.DataFrame)
+
+
+class NumericTable:
+    """A log's columns as float64 arrays by name: a Parquet file of integer and float columns only.
+
+    What :func:`numeric_columns` reads of a DataFrame, without pandas: ``columns`` (the names, stripped,
+    in the file's order), ``table[name]`` (shape (rows,), float64; a null is NaN) and ``len(table)``.
+    """
+
+    def __init__(self, columns: dict[str, np.ndarray]):
+        self._arrays = columns
+        self.columns = tuple(columns)
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        return self._arrays[name]
+
+    def __len__(self) -> int:
+        return next(iter(self._arrays.values())).size if self._arrays else 0
+
+
+def _numeric_parquet(table) -> NumericTable | None:
+    """``table`` (a pyarrow Table) as a NumericTable, or None where pandas would read it otherwise: a
+    column that is not an integer or a float, names that repeat once stripped, or pandas metadata of an
+    index stored as columns or of columns on more than one level."""
+    import pyarrow.types as types
+
+    metadata = table.schema.pandas_metadata or {}
+    if any(not isinstance(index, dict) for index in metadata.get("index_columns", [])):
+        return None
+    if len(metadata.get("column_indexes", [])) > 1:
+        return None
+    names = [str(name).strip() for name in table.column_names]
+    if len(set(names)) < len(names):
+        return None
+    if not all(types.is_integer(field.type) or types.is_floating(field.type) for field in table.schema):
+        return None
+    return NumericTable(
+        {
+            name: np.concatenate([_float64(chunk) for chunk in column.chunks] or [np.empty(0)])
+            for name, column in zip(names, table.columns)
+        }
+    )
+
+
+def _float64(chunk) -> np.ndarray:
+    """A pyarrow array of integers or floats as a new float64 array, a null as NaN (as pandas reads it).
+
+    Read from the array's Arrow buffers (validity bitmap, values): pyarrow's ``to_numpy`` imports pandas.
+    """
+    import pyarrow as pa
+
+    if len(chunk) == 0:
+        return np.empty(0)
+    if chunk.type != pa.float64():
+        chunk = chunk.cast(pa.float64(), safe=False)  # ints rounded to nearest, as numpy's astype does
+    validity, data = chunk.buffers()
+    size, offset = len(chunk), chunk.offset
+    values = np.frombuffer(data, dtype=np.float64, count=size, offset=offset * 8).copy()
+    if chunk.null_count:
+        valid = np.unpackbits(np.frombuffer(validity, dtype=np.uint8), bitorder="little")[offset : offset + size]
+        values[valid == 0] = np.nan
+    return values
+
+
+def _read_parquet(path: Path) -> pd.DataFrame | NumericTable:
+    """A Parquet file: its numbers without pandas where :func:`_numeric_parquet` can, else pandas' frame."""
+    import pyarrow.parquet as parquet
+
+    table = _numeric_parquet(parquet.ParquetFile(path).read())
+    if table is not None:
+        return table
+    import pandas as pd
+
+    return pd.read_parquet(path)
+
+
+class _EmptyFile(Exception):
+    """A CSV file with nothing in it (pandas' EmptyDataError, which is a ValueError)."""
+
+
+def _read_csv(path: Path) -> pd.DataFrame:
+    import pandas as pd
+
+    try:
+        return pd.read_csv(path, skipinitialspace=True)
+    except pd.errors.EmptyDataError:
+        raise _EmptyFile from None
+
+
 def source_name(source: str | Path | pd.DataFrame, role: str) -> str:
     """How messages name a log: its path, or ``<ROLE DataFrame>`` for a DataFrame (``<imu DataFrame>``)."""
-    return f"<{role} DataFrame>" if isinstance(source, pd.DataFrame) else str(source)
+    return f"<{role} DataFrame>" if is_frame(source) else str(source)
 
 
-def read_table(path: str | Path | pd.DataFrame, role: str = "log") -> pd.DataFrame:
-    """Read a CSV or Parquet file into a DataFrame; refuse missing, unreadable or empty files.
+def read_table(path: str | Path | pd.DataFrame, role: str = "log") -> pd.DataFrame | NumericTable:
+    """Read a CSV or Parquet file; refuse missing, unreadable or empty files.
 
-    A DataFrame is taken as the file's content (a copy, with the same checks): empty is refused under
-    the name ``<ROLE DataFrame>`` (:func:`source_name`).
+    Returns a DataFrame, or a :class:`NumericTable` for a Parquet file of integer and float columns
+    only (the same numbers :func:`numeric_columns` takes from pandas' frame). A DataFrame is taken as
+    the file's content (a copy, with the same checks): empty is refused under the name
+    ``<ROLE DataFrame>`` (:func:`source_name`).
     """
-    if isinstance(path, pd.DataFrame):
+    if is_frame(path):
         if path.shape[0] == 0:
             raise DataError(f"{source_name(path, role)}: has columns but no data rows")
         frame = path.copy()
@@ -41,20 +143,21 @@ def read_table(path: str | Path | pd.DataFrame, role: str = "log") -> pd.DataFra
     if not path.is_file():
         raise DataError(f"{path}: no such file")
     try:
-        frame = pd.read_csv(path, skipinitialspace=True) if kind == "csv" else pd.read_parquet(path)
-    except pd.errors.EmptyDataError:
+        frame = _read_parquet(path) if kind == "parquet" else _read_csv(path)
+    except _EmptyFile:
         raise DataError(f"{path}: file is empty") from None
-    except (pd.errors.ParserError, UnicodeDecodeError, OSError, ValueError) as exc:
+    except (UnicodeDecodeError, OSError, ValueError) as exc:  # pandas' ParserError and pyarrow's ArrowInvalid too
         first_line = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise DataError(f"{path}: cannot be read as {kind} ({first_line})") from None
-    if frame.shape[0] == 0:
+    if len(frame) == 0:
         raise DataError(f"{path}: has a header but no data rows")
-    frame.columns = [str(c).strip() for c in frame.columns]
+    if is_frame(frame):
+        frame.columns = [str(c).strip() for c in frame.columns]
     return frame
 
 
 def numeric_columns(
-    frame: pd.DataFrame,
+    frame: pd.DataFrame | NumericTable,
     path: str | Path,
     columns: Mapping[str, str] | Sequence[str],
     *,
@@ -79,10 +182,15 @@ def numeric_columns(
                 + f" (columns: {', '.join(map(str, frame.columns))})"
             )
         raw = frame[name]
-        values = pd.to_numeric(raw, errors="coerce").to_numpy(dtype=float)
+        if isinstance(frame, NumericTable):
+            values = raw  # numbers already: no text to refuse
+        else:
+            import pandas as pd
+
+            values = pd.to_numeric(raw, errors="coerce").to_numpy(dtype=float)
         # Cells that did not parse: empty or "nan" stay NaN (allowed or not below); anything else is text.
-        unparsed = np.flatnonzero(np.isnan(values))
-        if unparsed.size:
+        unparsed = np.flatnonzero(np.isnan(values)) if not isinstance(frame, NumericTable) else ()
+        if len(unparsed):
             text = raw.iloc[unparsed]
             is_text = text.notna().to_numpy() & (text.astype(str).str.strip().str.lower() != "nan").to_numpy()
             if np.any(is_text):

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 import math
 import os
@@ -77,10 +79,39 @@ def write_json(path: str | Path, document: dict[str, Any]) -> Path:
 
 
 def write_csv(path: str | Path, columns: dict[str, np.ndarray]) -> Path:
-    """Write equal-length columns as a CSV table; floats in their shortest exact (round-trip) form."""
-    import pandas as pd  # here: the JSON writers' users (the verify job) need no pandas
+    """Write equal-length columns as a CSV table; floats in their shortest exact (round-trip) form.
 
+    The bytes of ``pandas.DataFrame(columns).to_csv(path, index=False)`` on Linux (lines end in
+    ``"\n"`` on every system; NaN is an empty field, infinities ``inf`` and ``-inf``). float64 and
+    integer columns are written without pandas, which a calibration otherwise does not load; other
+    columns (float32 among them), and columns of unequal lengths (refused), go through pandas.
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    pd.DataFrame(columns).to_csv(path, index=False)
+    arrays = [np.asarray(values) for values in columns.values()]
+    plain = all(array.ndim == 1 and (array.dtype == np.float64 or array.dtype.kind in "iu") for array in arrays)
+    if not arrays or not plain or len({array.size for array in arrays}) > 1:  # ragged: pandas' error
+        import pandas as pd
+
+        pd.DataFrame(columns).to_csv(path, index=False, lineterminator="\n")
+        return path
+    header = io.StringIO()
+    csv.writer(header, lineterminator="\n").writerow(columns)
+    # Python's repr of a float64 is numpy's str of it, which pandas writes: the shortest round-trip form
+    cells = [_cells(array) for array in arrays]
+    if len(cells) == 1:  # a row of one empty field is quoted, as the csv module writes it: a blank line is no row
+        cells[0] = [cell or '""' for cell in cells[0]]
+    with open(path, "w", encoding="utf-8", newline="") as file:
+        file.write(header.getvalue())
+        file.writelines(",".join(row) + "\n" for row in zip(*cells))
     return path
+
+
+def _cells(array: np.ndarray) -> list[str]:
+    """A column's CSV fields: shortest round-trip floats, NaN as an empty field; integers in full."""
+    if array.dtype.kind != "f":
+        return [str(value) for value in array.tolist()]
+    cells = list(map(repr, array.tolist()))
+    for row in np.flatnonzero(np.isnan(array)).tolist():
+        cells[row] = ""
+    return cells

@@ -5,23 +5,25 @@ from __future__ import annotations
 import contextlib
 import threading
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 
 from kalcal.calibration.likelihood import gate_excess
 from kalcal.calibration.plausibility import CalibrationWarning
 from kalcal.calibration.windows import accel_gps_stability, check_windows
-from kalcal.io.logs import numeric_columns, parse_column_map, read_table, require_increasing, source_name
+from kalcal.io.logs import is_frame, numeric_columns, parse_column_map, read_table, require_increasing, source_name
 from kalcal.io.outputs import mark_inputs, writes_outputs
-from kalcal.io.results import write_json
+from kalcal.io.results import write_csv, write_json
 from kalcal.models.accel_gps import AccelGpsScenario, AccelGpsSettings
 from kalcal.models.config import section_values
 from kalcal.reporting.figure_names import CALIBRATION_FIGURE
 from kalcal.reporting.figure_process import submit
 
+if TYPE_CHECKING:  # a calibration from Parquet files loads no pandas (kalcal.io.logs)
+    import pandas as pd
 
 IMU_ROLES = ("time", "accel")
 GPS_ROLES = ("time", "position", "velocity", "position_std", "velocity_std")
@@ -46,15 +48,23 @@ class Calibration:
     ----------
     command : str
         The command whose outputs these are (``"calibrate accel-gps"``, ``"calibrate scale-bias"``).
-    estimates : pandas.DataFrame
-        ``estimates.csv``: one row per fix (accel-gps) or sample (scale-bias), SI units.
+    columns : dict of str to ndarray
+        ``estimates.csv``'s columns, each of shape (rows,): one row per fix (accel-gps) or sample
+        (scale-bias), SI units.
     summary : dict
         ``summary.json``'s content.
     """
 
     command: str
-    estimates: pd.DataFrame
+    columns: dict[str, np.ndarray]
     summary: dict[str, Any]
+
+    @cached_property
+    def estimates(self) -> pd.DataFrame:
+        """``estimates.csv`` as a DataFrame (``columns``), made when first read: pandas is loaded then."""
+        import pandas as pd
+
+        return pd.DataFrame(self.columns)
 
 
 #: the files of a calibration of each scenario
@@ -75,17 +85,14 @@ def save_calibration(calibration: Calibration, out: str | Path) -> dict[str, Pat
         paths = {}
         figure = contextlib.nullcontext()
         if "calibration.png" in names:  # drawn in the job's figure process, if any, while the files below are written
-            frame = calibration.estimates
-            normalized = frame[["innovation_position", "innovation_velocity"]].to_numpy()
+            columns = calibration.columns
+            normalized = np.column_stack([columns["innovation_position"], columns["innovation_velocity"]])
             figure = submit(
-                CALIBRATION_FIGURE,
-                frame["time"].to_numpy(), frame["bias"].to_numpy(), frame["bias_std"].to_numpy(), normalized,
+                CALIBRATION_FIGURE, columns["time"], columns["bias"], columns["bias_std"], normalized,
                 out / "calibration.png",
             )
         with figure:  # waited for, or stopped before an error goes on and the outputs are cleaned up
-            paths["estimates.csv"] = out / "estimates.csv"
-            paths["estimates.csv"].parent.mkdir(parents=True, exist_ok=True)
-            calibration.estimates.to_csv(paths["estimates.csv"], index=False)
+            paths["estimates.csv"] = write_csv(out / "estimates.csv", calibration.columns)
             paths["summary.json"] = write_json(out / "summary.json", calibration.summary)
         if "calibration.png" in names:
             paths["calibration.png"] = figure.result()
@@ -199,20 +206,18 @@ def compute_accel_gps_calibration(
             **{f"smoothed_{name}": getattr(smoothed, name) for name in names},
             **{f"smoothed_{name}_std": smoothed_std[:, i] for i, name in enumerate(names)},
         }
-    estimates = pd.DataFrame(
-        {
-            "time": result.time,
-            "position": result.position,
-            "velocity": result.velocity,
-            "bias": result.bias,
-            **({"scale": result.error_state[:, 3]} if scenario.has_scale else {}),
-            **{f"{name}_std": std[:, i] for i, name in enumerate(scenario.state_names)},
-            "nis": result.nis,
-            "innovation_position": normalized[:, 0],
-            "innovation_velocity": normalized[:, 1],
-            **smoothed_columns,
-        }
-    )
+    estimates = {
+        "time": result.time,
+        "position": result.position,
+        "velocity": result.velocity,
+        "bias": result.bias,
+        **({"scale": result.error_state[:, 3]} if scenario.has_scale else {}),
+        **{f"{name}_std": std[:, i] for i, name in enumerate(scenario.state_names)},
+        "nis": result.nis,
+        "innovation_position": normalized[:, 0],
+        "innovation_velocity": normalized[:, 1],
+        **smoothed_columns,
+    }
     used = ~result.rejected
     used[: result.skip] = False
     if null is not None:
@@ -282,7 +287,7 @@ def compute_accel_gps_calibration(
     if smoothed is not None:
         summary["smoothed"] = _smoothed_summary(smoothed, std, scenario.state_names)
     # the log files (not DataFrames) are the run's inputs: a folder's set never removes them
-    files = [p for p in (imu_source, gps_source) if not isinstance(p, pd.DataFrame)]
+    files = [p for p in (imu_source, gps_source) if not is_frame(p)]
     return mark_inputs(Calibration("calibrate accel-gps", estimates, summary), *files)
 
 

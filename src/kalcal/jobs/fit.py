@@ -7,11 +7,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pandas as pd
 
 from kalcal.errors import DataError, KalcalError
 from kalcal.fitting.result import FitResult
-from kalcal.io.logs import numeric_columns, parse_column_map, read_table, require_increasing, source_name
+from kalcal.io.logs import is_frame, numeric_columns, parse_column_map, read_table, require_increasing, source_name
 from kalcal.io.outputs import inputs_of, mark_inputs, run_outputs
 from kalcal.io.results import write_json
 from kalcal.jobs.calibrate import GPS_ROLES, IMU_ROLES, stated_rates
@@ -146,7 +145,7 @@ def compute_accel_gps_fit(
         header.append(f"NOT ADEQUATE: {result.adequacy}")
     document = _document(result, "fit accel-gps", {"imu": imu_name, "gps": gps_name, "init": init}, free)
     run = FitRun("fit accel-gps", result, document, filter_toml(result, header))
-    files = [p for p in sources if not isinstance(p, pd.DataFrame)]
+    files = [p for p in sources if not is_frame(p)]
     return mark_inputs(run, *files)
 
 
@@ -188,7 +187,7 @@ def compute_scale_bias_fit(
         header.append(f"NOT ADEQUATE: {result.adequacy}")
     document = _document(result, "fit scale-bias", {"data": name}, list(free or result.parameters))
     run = FitRun("fit scale-bias", result, document, filter_toml(result, header))
-    return run if isinstance(data_path, pd.DataFrame) else mark_inputs(run, data_path)
+    return run if is_frame(data_path) else mark_inputs(run, data_path)
 
 
 def save_fit(run: FitRun, out: str | Path) -> dict[str, Path]:

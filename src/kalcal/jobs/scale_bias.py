@@ -3,15 +3,14 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 
 from kalcal.calibration.scale_bias import UNOBSERVABLE_RATIO, calibrate_scale_bias
 from kalcal.calibration.windows import check_windows, scale_bias_stability
 from kalcal.errors import DataError
-from kalcal.io.logs import numeric_columns, read_table, require_increasing, source_name
+from kalcal.io.logs import is_frame, numeric_columns, read_table, require_increasing, source_name
 from kalcal.io.outputs import mark_inputs, writes_outputs
 from kalcal.jobs.calibrate import Calibration
 from kalcal.jobs.simulate import OUTPUT_NAMES as SIMULATION_NAMES
@@ -20,6 +19,9 @@ from kalcal.models.config import section_values
 from kalcal.models.scale_bias import STATE_NAMES, ScaleBiasScenario
 from kalcal.models.scale_bias_theta import scale_bias_from_theta
 from kalcal.simulation.scale_bias import sample_scale_bias
+
+if TYPE_CHECKING:  # a calibration from a Parquet file loads no pandas (kalcal.io.logs)
+    import pandas as pd
 
 
 @writes_outputs("simulate scale-bias", names=SIMULATION_NAMES["simulate scale-bias"])
@@ -39,6 +41,8 @@ def compute_scale_bias_simulation(scenario: ScaleBiasScenario, seed: int) -> Sim
     samples = sample_scale_bias(scenario, np.random.default_rng(seed), 1)
     theta = samples.theta[0]
     a, b = scale_bias_from_theta(theta)
+    import pandas as pd
+
     data = pd.DataFrame({"time": samples.time, "reference": samples.reference[0], "sensor": samples.sensor[0]})
     truth: dict[str, Any] = {
         "scenario": scenario.NAME,
@@ -124,15 +128,13 @@ def compute_scale_bias_calibration(
     )
     stability = scale_bias_stability(scenario, result, time, columns["reference"], columns["sensor"], windows, **options)
     std = result.std
-    estimates = pd.DataFrame(
-        {
-            "time": result.time,
-            "theta1": result.theta[:, 0],
-            "theta2": result.theta[:, 1],
-            "theta1_std": std[:, 0],
-            "theta2_std": std[:, 1],
-        }
-    )
+    estimates = {
+        "time": result.time,
+        "theta1": result.theta[:, 0],
+        "theta2": result.theta[:, 1],
+        "theta1_std": std[:, 0],
+        "theta2_std": std[:, 1],
+    }
     a, b, ab_cov = result.scale_bias()
     unit = scenario.scenario.unit
     summary = {
@@ -167,4 +169,4 @@ def compute_scale_bias_calibration(
         "units": {"time": "s", "theta1": "1", "theta2": unit, "scale_error": "1", "bias": unit},
     }
     calibration = Calibration("calibrate scale-bias", estimates, summary)
-    return calibration if isinstance(source, pd.DataFrame) else mark_inputs(calibration, source)
+    return calibration if is_frame(source) else mark_inputs(calibration, source)

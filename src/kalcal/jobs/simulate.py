@@ -4,15 +4,17 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 
 from kalcal.io.outputs import writes_outputs
 from kalcal.io.results import write_json
 from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.simulation.sampled import sample_accel_gps_logs
+
+if TYPE_CHECKING:  # loaded where a simulation is made: a scale-bias calibration imports this module
+    import pandas as pd
 
 #: the files of a simulation of each scenario
 OUTPUT_NAMES = {
@@ -45,6 +47,8 @@ def compute_accel_gps_simulation(scenario: AccelGpsScenario, seed: int) -> Simul
     gps: time [s], position [m], velocity [m/s], one row per fix; time is the stamp, the time the fix
     describes plus ``truth.gps_latency``, and ``truth.gps_outlier_rate`` of the positions carry a gross error.
     truth: time [s], position [m], velocity [m/s], accel [m/s^2] (true), bias [m/s^2] at the samples."""
+    import pandas as pd
+
     logs = sample_accel_gps_logs(scenario, np.random.default_rng(seed), 1)
     return Simulation(
         "simulate accel-gps",
