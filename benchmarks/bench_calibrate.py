@@ -25,7 +25,7 @@ import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import kalcal  # noqa: E402
-from bench_job import elapsed  # noqa: E402
+from bench_job import elapsed, machine  # noqa: E402
 from kalcal.calibration.accel_gps import calibrate_accel_gps, prepare_accel_gps_log  # noqa: E402
 from kalcal.io.logs import numeric_columns, read_table  # noqa: E402
 from kalcal.models.registry import build_scenario  # noqa: E402
@@ -102,6 +102,7 @@ def main() -> None:
         imu = numeric_columns(imu_frame, "imu", ("time", "accel"))
         gps = numeric_columns(gps_frame, "gps", ("time", "position", "velocity"))
         input_mib = (sum(a.nbytes for a in imu.values()) + sum(a.nbytes for a in gps.values())) / 2**20
+        print(machine())
         print(f"kalcal calibrate benchmark: {imu['time'].size:,} accelerometer rows, {gps['time'].size:,} fixes "
               f"({input_mib:.1f} MiB as float64)")
         for kind in ("csv", "parquet"):

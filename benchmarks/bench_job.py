@@ -4,6 +4,7 @@
 
 Runs the command in a child process, as a user does, and prints from one run on this machine:
 
+* the machine: CPU model, usable CPUs, BLAS and its kernel (the ratios move with it);
 * start-up: ``kalcal --help`` against a bare ``python -c pass``;
 * the job's wall time, and its parts from ``summary.json``'s ``timing``: the Monte Carlo
   (``monte_carlo_s``), the long-run study's own Monte Carlo (``long_run_s``), the report (``report_s``),
@@ -23,6 +24,7 @@ and reported apart as "first run"; the timed runs follow with the cache warm.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import subprocess
@@ -36,6 +38,25 @@ from kalcal.montecarlo.engine import block_generator, block_sizes
 
 WORKERS = len(os.sched_getaffinity(0))
 KALCAL = [sys.executable, "-m", "kalcal"]
+
+
+def machine() -> str:
+    """The machine the ratios were measured on, in one line: the CPU's model, the CPUs this process may
+    use and the BLAS with the kernel it chose. The ratios move with the machine (the all-pairs products
+    run at BLAS's peak, the draws do not), so each printout says where it was made."""
+    from threadpoolctl import threadpool_info
+
+    model = "unknown CPU"
+    with contextlib.suppress(OSError):
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    blas = [
+        f"{info['internal_api']} {info.get('version') or ''} ({info.get('architecture') or 'kernel unknown'})".replace("  ", " ")
+        for info in threadpool_info() if info.get("user_api") == "blas"
+    ]  # fmt: skip
+    return f"machine: {model}, {WORKERS} CPUs usable, BLAS {', '.join(blas) or 'unknown'}"
 
 
 def elapsed(command: list[str], env: dict[str, str] | None = None) -> float:
@@ -94,6 +115,7 @@ def main() -> None:
 
     bare = min(elapsed([sys.executable, "-c", "pass"]) for _ in range(5))
     help_s = min(elapsed([*KALCAL, "--help"]) for _ in range(5))
+    print(machine())
     print(f"start-up ({WORKERS} threads)")
     print(f"  python -c pass:  {bare:7.3f} s")
     print(f"  kalcal --help:   {help_s:7.3f} s   ({help_s - bare:+.3f} s over bare python; goal +0.300 s)")
