@@ -143,6 +143,18 @@ def test_calibrate_takes_dataframes_and_gives_the_files_numbers(logs, tmp_path):
     assert json.loads(paths["summary.json"].read_text()) == result.to_dict()
 
 
+def test_editing_the_estimates_frame_changes_neither_the_result_nor_its_files(logs, tmp_path):
+    """estimates is a DataFrame of the calibration's columns, a copy: the files save writes are the run's."""
+    imu, gps, _ = logs
+    result = kalcal.calibrate("accel-gps", imu=imu, gps=gps)
+    bias = result.estimates["bias"].to_numpy().copy()
+    result.estimates.loc[:, "bias"] = 99.0
+    assert (result.estimates["bias"] == 99.0).all()  # the one frame, edited
+    np.testing.assert_array_equal(result.calibration.columns["bias"], bias)
+    written = pd.read_csv(result.save(tmp_path / "cal")["estimates.csv"])
+    np.testing.assert_array_equal(written["bias"].to_numpy(), bias)
+
+
 def test_a_bad_dataframe_is_named_in_the_error(logs):
     imu, gps, _ = logs
     with pytest.raises(kalcal.KalcalError, match=r"<imu DataFrame>: missing column 'accel'"):

@@ -230,11 +230,12 @@ def parquet_logs(tmp_path_factory):
     return folder
 
 
-@pytest.mark.parametrize("scenario", ["accel-gps", "scale-bias"])
-def test_a_calibrate_command_of_parquet_logs_loads_no_pandas(parquet_logs, tmp_path, scenario):
+@pytest.mark.parametrize("scenario, options", [("accel-gps", []), ("accel-gps", ["--smooth", "--gate", "0.999"]), ("scale-bias", [])])
+def test_a_calibrate_command_of_parquet_logs_loads_no_pandas(parquet_logs, tmp_path, scenario, options):
     logs = (["--imu", str(parquet_logs / "imu.parquet"), "--gps", str(parquet_logs / "gps.parquet")]
             if scenario == "accel-gps" else ["--data", str(parquet_logs / "data.parquet")])  # fmt: skip
-    assert _command_loaded(["calibrate", scenario, *logs, "--out", str(tmp_path / "out")], ("pandas",)) == []
+    args = ["calibrate", scenario, *logs, *options, "--out", str(tmp_path / "out")]
+    assert _command_loaded(args, ("pandas",)) == []
     assert (tmp_path / "out" / "estimates.csv").stat().st_size > 1000
 
 

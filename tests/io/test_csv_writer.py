@@ -46,6 +46,14 @@ def test_other_columns_go_through_pandas(tmp_path):
     assert write_csv(tmp_path / "ours.csv", columns).read_bytes() == _pandas_bytes(tmp_path, columns)
     alone = {"f32": columns["f32"]}  # float32's own shortest form, not its float64 value's
     assert write_csv(tmp_path / "f32.csv", alone).read_text() == 'f32\n0.1\n""\n' == _pandas_bytes(tmp_path, alone).decode()
+    others = {
+        "masked": {"a": np.ma.masked_array([1.0, 2.0], mask=[False, True]), "b": np.zeros(2)},
+        "tuple names": {("a", "x"): np.zeros(2), ("b", "y"): np.ones(2)},
+        "series": {"a": pd.Series([1.0, 2.0], index=[0, 1]), "b": pd.Series([3.0, 4.0], index=[1, 2])},
+        "big-endian": {"a": np.array([0.1, 2.0], dtype=">f8")},
+    }
+    for name, table in others.items():
+        assert write_csv(tmp_path / "o.csv", table).read_bytes() == _pandas_bytes(tmp_path, table), name
     with pytest.raises(ValueError, match="same length"):
         write_csv(tmp_path / "ragged.csv", {"a": np.zeros(2), "b": np.zeros(3)})
 

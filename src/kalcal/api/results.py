@@ -213,7 +213,8 @@ class CalibrationResult:
 
     @property
     def estimates(self) -> pd.DataFrame:
-        """``estimates.csv`` as a DataFrame: made (and pandas loaded) when first read."""
+        """``estimates.csv`` as a DataFrame: made (and pandas loaded) when first read, a copy of the
+        calibration's columns (editing it changes neither this result nor what :meth:`save` writes)."""
         return self.calibration.estimates
 
     @property

@@ -49,9 +49,12 @@ class NumericTable:
 
 
 def _numeric_parquet(table) -> NumericTable | None:
-    """``table`` (a pyarrow Table) as a NumericTable, or None where pandas would read it otherwise: a
-    column that is not an integer or a float, names that repeat once stripped, or pandas metadata of an
-    index stored as columns or of columns on more than one level."""
+    """``table`` (a pyarrow Table) as a NumericTable, or None for pandas to read: a column that is not an
+    integer or a float (text, booleans, times, decimals, categories, ...), names that repeat once
+    stripped, or pandas metadata of an index stored as columns or of columns on more than one level.
+
+    The names are the file's field names. pandas rebuilds names from its metadata instead, which differs
+    only for names that were not strings in pandas (bytes, booleans: ``b'time'``, ``True``)."""
     import pyarrow.types as types
 
     metadata = table.schema.pandas_metadata or {}
@@ -73,7 +76,8 @@ def _numeric_parquet(table) -> NumericTable | None:
 
 
 def _float64(chunk) -> np.ndarray:
-    """A pyarrow array of integers or floats as a new float64 array, a null as NaN (as pandas reads it).
+    """A pyarrow array of integers or floats as a new float64 array, a null as NaN (as pandas reads it;
+    the NaN's payload bits may differ: pandas widens float16's own NaN for a float16 column).
 
     Read from the array's Arrow buffers (validity bitmap, values): pyarrow's ``to_numpy`` imports pandas.
     """

@@ -82,14 +82,19 @@ def write_csv(path: str | Path, columns: dict[str, np.ndarray]) -> Path:
     """Write equal-length columns as a CSV table; floats in their shortest exact (round-trip) form.
 
     The bytes of ``pandas.DataFrame(columns).to_csv(path, index=False)`` on Linux (lines end in
-    ``"\n"`` on every system; NaN is an empty field, infinities ``inf`` and ``-inf``). float64 and
-    integer columns are written without pandas, which a calibration otherwise does not load; other
-    columns (float32 among them), and columns of unequal lengths (refused), go through pandas.
+    ``"\n"`` on every system; NaN is an empty field, infinities ``inf`` and ``-inf``). String names of
+    1-D float64 and integer numpy arrays of one length are written without pandas, which a calibration
+    otherwise does not load. Anything else goes through pandas: other dtypes (float32 among them),
+    masked arrays, Series (aligned on their index), other names (tuples: a header on two rows), and
+    columns of unequal lengths (refused).
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    arrays = [np.asarray(values) for values in columns.values()]
-    plain = all(array.ndim == 1 and (array.dtype == np.float64 or array.dtype.kind in "iu") for array in arrays)
+    arrays = list(columns.values())
+    plain = all(isinstance(name, str) for name in columns) and all(
+        type(array) is np.ndarray and array.ndim == 1 and (array.dtype == np.float64 or array.dtype.kind in "iu")
+        for array in arrays
+    )
     if not arrays or not plain or len({array.size for array in arrays}) > 1:  # ragged: pandas' error
         import pandas as pd
 

@@ -61,10 +61,11 @@ class Calibration:
 
     @cached_property
     def estimates(self) -> pd.DataFrame:
-        """``estimates.csv`` as a DataFrame (``columns``), made when first read: pandas is loaded then."""
+        """``estimates.csv`` as a DataFrame, made when first read (pandas is loaded then): a copy of
+        ``columns``, which :func:`save_calibration` writes."""
         import pandas as pd
 
-        return pd.DataFrame(self.columns)
+        return pd.DataFrame(self.columns, copy=True)
 
 
 #: the files of a calibration of each scenario
