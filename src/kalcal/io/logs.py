@@ -185,27 +185,30 @@ def numeric_columns(
                 f"{path}: missing column {name!r}" + (f" for {role}" if role != name else "")
                 + f" (columns: {', '.join(map(str, frame.columns))})"
             )
-        raw = frame[name]
-        if isinstance(frame, NumericTable):
-            values = raw  # numbers already: no text to refuse
-        else:
-            import pandas as pd
-
-            values = pd.to_numeric(raw, errors="coerce").to_numpy(dtype=float)
-        # Cells that did not parse: empty or "nan" stay NaN (allowed or not below); anything else is text.
-        unparsed = np.flatnonzero(np.isnan(values)) if not isinstance(frame, NumericTable) else ()
-        if len(unparsed):
-            text = raw.iloc[unparsed]
-            is_text = text.notna().to_numpy() & (text.astype(str).str.strip().str.lower() != "nan").to_numpy()
-            if np.any(is_text):
-                row = int(unparsed[np.argmax(is_text)])
-                raise DataError(f"{path}: row {row + 1}, column {name!r}: not a number: {raw.iloc[row]!r}")
+        # a NumericTable's columns are numbers already: no text to refuse
+        values = frame[name] if isinstance(frame, NumericTable) else _parsed(frame[name], path, name)
         not_finite = ~np.isfinite(values) if role not in allow_nan else np.isinf(values)
         if np.any(not_finite):
             row = int(np.argmax(not_finite))
             raise DataError(f"{path}: row {row + 1}, column {name!r}: value is {float(values[row])!r}, expected a finite number")
         result[role] = values
     return result
+
+
+def _parsed(raw: pd.Series, path: str | Path, name: str) -> np.ndarray:
+    """A frame's column as floats; a cell that is text is a DataError. Cells that do not parse as numbers
+    but are empty or "nan" stay NaN (allowed or not by the caller)."""
+    import pandas as pd
+
+    values = pd.to_numeric(raw, errors="coerce").to_numpy(dtype=float)
+    unparsed = np.flatnonzero(np.isnan(values))
+    if unparsed.size:
+        text = raw.iloc[unparsed]
+        is_text = text.notna().to_numpy() & (text.astype(str).str.strip().str.lower() != "nan").to_numpy()
+        if np.any(is_text):
+            row = int(unparsed[np.argmax(is_text)])
+            raise DataError(f"{path}: row {row + 1}, column {name!r}: not a number: {raw.iloc[row]!r}")
+    return values
 
 
 def require_increasing(time: np.ndarray, path: str | Path, column: str = "time") -> None:
