@@ -54,7 +54,7 @@ def _numeric_parquet(table) -> NumericTable | None:
     stripped, or pandas metadata of an index stored as columns or of columns on more than one level.
 
     The names are the file's field names. pandas rebuilds names from its metadata instead, which differs
-    only for names that were not strings in pandas (bytes, booleans: ``b'time'``, ``True``)."""
+    only for names that were not strings in pandas (booleans, for one)."""
     import pyarrow.types as types
 
     metadata = table.schema.pandas_metadata or {}
