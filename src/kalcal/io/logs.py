@@ -67,6 +67,7 @@ def _numeric_parquet(table) -> NumericTable | None:
         return None
     if not all(types.is_integer(field.type) or types.is_floating(field.type) for field in table.schema):
         return None
+    # concatenate makes each column's one copy: writable, and free of Arrow's memory
     return NumericTable(
         {
             name: np.concatenate([_float64(chunk) for chunk in column.chunks] or [np.empty(0)])
@@ -76,8 +77,9 @@ def _numeric_parquet(table) -> NumericTable | None:
 
 
 def _float64(chunk) -> np.ndarray:
-    """A pyarrow array of integers or floats as a new float64 array, a null as NaN (as pandas reads it;
-    the NaN's payload bits may differ: pandas widens float16's own NaN for a float16 column).
+    """A pyarrow array of integers or floats as float64, a null as NaN (as pandas reads it; the NaN's
+    payload bits may differ: pandas widens float16's own NaN for a float16 column). A read-only view of
+    the array's memory where it is float64 without nulls.
 
     Read from the array's Arrow buffers (validity bitmap, values): pyarrow's ``to_numpy`` imports pandas.
     """
@@ -89,8 +91,9 @@ def _float64(chunk) -> np.ndarray:
         chunk = chunk.cast(pa.float64(), safe=False)  # ints rounded to nearest, as numpy's astype does
     validity, data = chunk.buffers()
     size, offset = len(chunk), chunk.offset
-    values = np.frombuffer(data, dtype=np.float64, count=size, offset=offset * 8).copy()
+    values = np.frombuffer(data, dtype=np.float64, count=size, offset=offset * 8)
     if chunk.null_count:
+        values = values.copy()
         valid = np.unpackbits(np.frombuffer(validity, dtype=np.uint8), bitorder="little")[offset : offset + size]
         values[valid == 0] = np.nan
     return values
