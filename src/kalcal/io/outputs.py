@@ -43,15 +43,24 @@ import dataclasses
 import functools
 import inspect
 import os
+import secrets
 import shutil
 import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
-from kalcal.io.commit import commit, reason
+from kalcal.io.commit import STAGING_MARKER, commit, reason
+from kalcal.io.lock import FolderLock, host_name
 from kalcal.io.manifest import OutputError, listed_files, read_manifest, require_complete
-from kalcal.io.output_rules import folder_name, refuse_enclosing_set, refuse_strays, resolved
+from kalcal.io.output_rules import (
+    folder_name,
+    literal_folders,
+    refuse_enclosing_set,
+    refuse_linked_folders,
+    refuse_strays,
+    resolved,
+)
 
 __all__ = [
     "PARTIAL_PREFIX",
@@ -151,14 +160,41 @@ def _pid_alive(pid: int) -> bool:
     return True
 
 
+def _staging_owner(name: str) -> tuple[str, int] | None:
+    """(host, pid) of a staging folder's name ``.kalcal-partial-<host>-<pid>-<random>``; None for another name."""
+    parts = name[len(PARTIAL_PREFIX) :].rsplit("-", 2)
+    if len(parts) != 3 or not parts[0] or not parts[1].isdigit():
+        return None
+    return parts[0], int(parts[1])
+
+
 def _remove_stale_partials(out: Path) -> None:
-    """Staging folders of runs that died without cleaning up (SIGKILL): their process is gone."""
-    for entry in out.glob(PARTIAL_PREFIX + "*"):
-        pid_text = entry.name[len(PARTIAL_PREFIX) :].split("-", 1)[0]
-        if entry.is_dir() and not entry.is_symlink() and pid_text.isdigit():
-            pid = int(pid_text)
-            if pid != os.getpid() and not _pid_alive(pid):
-                shutil.rmtree(entry, ignore_errors=True)
+    """Staging folders of runs on this host that died without cleaning up (SIGKILL): their process is gone.
+
+    Called with the folder's lock held, so no live run of a kalcal that locks is staging here. A pid
+    says nothing about a process of another host (or a container with its own hostname) sharing the
+    disk: those folders, and any whose name carries no host, are never removed.
+    """
+    root = Path(resolved(out))
+    host = host_name()
+    for entry in root.glob(PARTIAL_PREFIX + "*"):
+        owner = _staging_owner(entry.name)
+        if owner is None or owner[0] != host or owner[1] == os.getpid():
+            continue
+        if entry.is_dir() and not entry.is_symlink() and entry.parent == root and not _pid_alive(owner[1]):
+            shutil.rmtree(entry, ignore_errors=True)
+
+
+def _make_staging(out: Path) -> tuple[Path, str]:
+    """A new staging folder in ``out`` and the token of the marker written into it (:data:`STAGING_MARKER`)."""
+    staging = Path(tempfile.mkdtemp(prefix=f"{PARTIAL_PREFIX}{host_name()}-{os.getpid()}-", dir=out))
+    token = f"{host_name()} {os.getpid()} {secrets.token_hex(16)}"
+    try:
+        (staging / STAGING_MARKER).write_text(token + "\n", encoding="utf-8")
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    return Path(resolved(staging)), token
 
 
 @contextlib.contextmanager
@@ -212,6 +248,7 @@ def run_outputs(
         marked incomplete).
     """
     out = Path(out)
+    names = tuple(names)
     active = _ACTIVE.get()
     if any(Path(resolved(out)) == staging for staging, _ in active):
         yield out
@@ -229,7 +266,9 @@ def run_outputs(
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise OutputError(f"{where}: cannot create the folder ({reason(exc)})") from None
+    lock = FolderLock(out, where, f"choose another {option}" if option else "choose another folder")
     try:
+        lock.acquire()
         old = read_manifest(out)
         listed = listed_files(out)
         if replaces is not None:
@@ -239,21 +278,22 @@ def run_outputs(
         else:
             refuse_enclosing_set(out, where)
         refuse_strays(out, names, listed, protected_paths, option, remedy)
+        refuse_linked_folders(out, [*listed, *(literal_folders(pattern) for pattern in names)], option)
         _remove_stale_partials(out)
         try:
-            staging = Path(tempfile.mkdtemp(prefix=f"{PARTIAL_PREFIX}{os.getpid()}-", dir=out))
+            staging, token = _make_staging(out)
         except OSError as exc:
             raise OutputError(f"{where}: cannot write in the folder ({reason(exc)})") from None
     except BaseException:
+        lock.release()
         _remove_created(created)
         raise
-    staging = Path(resolved(staging))
-    token = _ACTIVE.set((*active, (staging, out)))
+    token_var = _ACTIVE.set((*active, (staging, out)))
     try:
         try:
             yield staging
         finally:
-            _ACTIVE.reset(token)
+            _ACTIVE.reset(token_var)
         commit(
             out,
             staging,
@@ -264,11 +304,20 @@ def run_outputs(
             protected_paths,
             option,
             remedy,
+            marker=token,
         )
     except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
+        _remove_staging(out, staging)
+        lock.release()
         _remove_created(created)
         raise
+    lock.release()
+
+
+def _remove_staging(out: Path, staging: Path) -> None:
+    """Remove a failed run's staging folder: only the real folder of that name directly in ``out``."""
+    if staging.parent == Path(resolved(out)) and staging.name.startswith(PARTIAL_PREFIX) and not staging.is_symlink():
+        shutil.rmtree(staging, ignore_errors=True)
 
 
 def _remove_created(created: list[Path]) -> None:
