@@ -147,13 +147,13 @@ def test_another_hosts_staging_folder_survives_and_a_dead_run_of_this_host_is_cl
     [local_staging] = set(out.glob(".kalcal-partial-*")) - {foreign_staging}
     foreign_files = _tree(foreign_staging)
     assert "data.csv" in foreign_files
+    assert (out / LOCK).exists()  # left by the killed runs: the kernel released their locks
 
     result = _cli("simulate", "scale-bias", "--out", str(out))
     assert result.returncode == 0, result.stderr
     assert _tree(foreign_staging) == foreign_files
     assert not local_staging.exists()
-    # the names that tell them apart, and the lock file the killed runs left (the kernel released their
-    # locks), taken over and removed by the run
+    # the names that tell them apart; the lock file, taken over and removed by the run
     assert foreign_staging.name.startswith(f".kalcal-partial-another-host-{foreign.pid}-")
     assert local_staging.name.startswith(f".kalcal-partial-{host_name()}-{local.pid}-")
     assert not (out / LOCK).exists()
@@ -174,6 +174,23 @@ def test_the_lock_is_refused_within_one_process_too_and_released_after_a_failed_
             raise RuntimeError("boom")
     _run(out, {"a": "third"})  # the failed run released the lock
     assert not (out / LOCK).exists() and (out / "a").read_text() == "third"
+
+
+def test_a_redraw_in_a_sweeps_run_folder_is_refused_while_a_sweep_holds_the_sweeps_folder(tmp_path):
+    out = tmp_path / "sweep"
+    with run_outputs(out, "sweep") as staging:
+        _run(staging / "key=1", {"summary.json": "1"}, command="verify")
+    with run_outputs(out, "sweep") as staging:
+        with pytest.raises(OutputError) as caught:
+            _run(out / "key=1", {"report.html": "p"}, command="report", replaces=("report.html",), option=None)
+        assert str(caught.value) == (
+            f"{out / 'key=1'}: the enclosing folder {out}: another kalcal run is writing into this folder "
+            f"(host {host_name()}, pid {os.getpid()}, {LOCK}); wait for it to end or choose another folder"
+        )
+        _run(staging / "key=2", {"summary.json": "2"}, command="verify")
+    assert _tree(out).keys() == {"key=2/summary.json", f"key=2/{MANIFEST}", MANIFEST}
+    _run(out / "key=2", {"report.html": "p"}, command="report", replaces=("report.html",), option=None)
+    assert (out / "key=2" / "report.html").read_text() == "p" and not (out / LOCK).exists()
 
 
 def test_a_folder_that_cannot_be_locked_is_refused_in_one_line(tmp_path, monkeypatch):
@@ -248,6 +265,42 @@ def test_a_removal_through_a_link_made_after_the_checks_is_not_done(tmp_path):
     with pytest.raises(OSError, match="symbolic link out of the folder"):
         commit_module._remove(out, "figures/f3.png")
     assert _tree(elsewhere) == outside
+
+
+def test_a_link_made_after_the_commits_checks_stops_it_marked_incomplete_and_removes_nothing_outside(
+    tmp_path, monkeypatch
+):
+    out, elsewhere, outside = _linked_figures(tmp_path)
+    (out / "figures").unlink()
+    (out / "figures").mkdir()
+    for name in outside:
+        (out / "figures" / name).write_text("back in place")
+    real_check = commit_module.check_targets
+
+    def check_then_link(*args, **kwargs):
+        real_check(*args, **kwargs)
+        shutil.rmtree(out / "figures")
+        (out / "figures").symlink_to(elsewhere, target_is_directory=True)
+
+    monkeypatch.setattr(commit_module, "check_targets", check_then_link)
+    with pytest.raises(OutputError) as caught:
+        _run(out, {"summary.json": "s2"})
+    message = str(caught.value)
+    assert message.startswith(
+        f"--out {out}: putting the new files in place failed (a folder on its way is a symbolic link out of the folder: "
+    )
+    assert "marked incomplete" in message and not read_manifest(out).complete
+    assert _tree(elsewhere) == outside
+
+
+def test_out_itself_may_be_a_link(tmp_path):
+    real = tmp_path / "real"
+    real.mkdir()
+    link = tmp_path / "link"
+    link.symlink_to(real, target_is_directory=True)
+    _run(link, {"figures/a.png": "a", "summary.json": "1"})
+    _run(link, {"summary.json": "2"})
+    assert _tree(real) == {"summary.json": b"2", MANIFEST: (real / MANIFEST).read_bytes()}
 
 
 def test_a_listed_file_replaced_by_a_link_is_removed_as_a_link(tmp_path):

@@ -10,6 +10,7 @@ from kalcal.io.manifest import MANIFEST, OutputError, listed_files, read_manifes
 
 __all__ = [
     "check_targets",
+    "enclosing_sets",
     "folder_name",
     "inside",
     "literal_folders",
@@ -135,16 +136,22 @@ def check_targets(
             raise _not_ours(out, relative, option, remedy, "would be replaced")
 
 
-def refuse_enclosing_set(out: Path, where: str) -> None:
-    """Refuse ``out`` when a folder above it lists files inside it: ``out`` is part of another run's set
-    (a sweep's run folder), which a run of its own would leave describing files that are gone."""
+def enclosing_sets(out: Path) -> list[tuple[Path, str]]:
+    """The folders above ``out`` whose manifests list files inside it, nearest first, with their command."""
     target = Path(os.path.abspath(out))
+    found = []
     for parent in target.parents:
         manifest = read_manifest(parent)
         if manifest is None:
             continue
-        inside = target.relative_to(parent).as_posix() + "/"
-        if any(name.startswith(inside) for name in listed_files(parent)):
-            raise OutputError(
-                f"{where}: is part of the outputs of `kalcal {manifest.command}` in {parent}; choose another folder"
-            )
+        inside_out = target.relative_to(parent).as_posix() + "/"
+        if any(name.startswith(inside_out) for name in listed_files(parent)):
+            found.append((parent, manifest.command))
+    return found
+
+
+def refuse_enclosing_set(out: Path, where: str) -> None:
+    """Refuse ``out`` when a folder above it lists files inside it: ``out`` is part of another run's set
+    (a sweep's run folder), which a run of its own would leave describing files that are gone."""
+    for parent, command in enclosing_sets(out)[:1]:
+        raise OutputError(f"{where}: is part of the outputs of `kalcal {command}` in {parent}; choose another folder")

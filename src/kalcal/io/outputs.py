@@ -3,19 +3,28 @@
 Every job that writes an ``--out`` folder writes it through :func:`run_outputs` (or the
 :func:`writes_outputs` decorator around the job):
 
-0. Before the job runs: a folder whose manifest was written by another command is refused (its files
+0. Before the job runs: the folder is locked (an exclusive ``flock`` on ``OUT/.kalcal-lock``,
+   :mod:`kalcal.io.lock`), held until the commit ends or the staging folder of a failed run is
+   removed: a second run into the folder stops there, naming the holder's host and pid. Then a folder
+   whose manifest was written by another command is refused (its files
    are another job's outputs, not a previous run of this one; ``kalcal report`` redrawing the page of
    a verification run, ``replaces=``, is the one job that adds to another command's set), and so is a
    file in the place of a folder the outputs go into, or a file named like an output that no manifest
-   lists.
-1. The job writes into a staging folder inside the target, ``OUT/.kalcal-partial-<pid>-<random>/``
-   (the same file system, so that the final step is a rename).
+   lists, and so is a symbolic link where the outputs need a folder (removing or renaming through it
+   would change files outside ``OUT``). Staging folders of dead runs of this host are removed; another
+   host's are never (a pid says nothing about another host's processes).
+1. The job writes into a staging folder inside the target, ``OUT/.kalcal-partial-<host>-<pid>-<random>/``
+   (the same file system, so that the final step is a rename), which holds a marker with a token of the
+   run's own (``.kalcal-staging``): the commit requires it, so a staging folder removed while the job
+   wrote (and perhaps made again by a writer creating its parents) is never committed.
 2. If the job raises, or is interrupted (:class:`kalcal.interrupts.Interrupted`, ``KeyboardInterrupt``),
    the staging folder is removed and ``OUT`` is left exactly as it was.
 3. When the job returns, the set is committed: the manifest ``OUT/.kalcal-manifest.json`` is first
    rewritten with ``"complete": false`` and the files of both sets; then the files the previous
    manifest lists that the new run does not write are removed, the new files are renamed into place,
-   and the manifest is written again with ``"complete": true`` and the new set. SIGINT and SIGTERM
+   and the manifest is written again with ``"complete": true`` and the new set, after the new files,
+   the folders they went into and ``OUT`` are synced to disk. Every removal is of a file whose
+   resolved folder is its place in ``OUT`` (no link on the way). SIGINT and SIGTERM
    wait for the commit to end (a few renames). A folder whose manifest says ``"complete": false`` was
    cut in the middle of a commit (power loss, SIGKILL): ``kalcal report`` refuses it, and the next run
    into it cleans up every file either set wrote.
@@ -54,6 +63,7 @@ from kalcal.io.commit import STAGING_MARKER, commit, reason
 from kalcal.io.lock import FolderLock, host_name
 from kalcal.io.manifest import OutputError, listed_files, read_manifest, require_complete
 from kalcal.io.output_rules import (
+    enclosing_sets,
     folder_name,
     literal_folders,
     refuse_enclosing_set,
@@ -242,10 +252,12 @@ def run_outputs(
     Raises
     ------
     OutputError
-        ``out`` is a file, cannot be created or written, holds the outputs of another command, holds a
-        file named like an output that no manifest lists or a file where an output needs a folder; or
-        putting the files in place failed (then the message says whether the folder is unchanged or
-        marked incomplete).
+        ``out`` is a file, cannot be created, locked or written, is locked by another run (the message
+        names its host and pid), holds the outputs of another command, holds a symbolic link where an
+        output needs a folder, holds a
+        file named like an output that no manifest lists or a file where an output needs a folder; the
+        staging folder was removed while the job wrote; or putting the files in place failed (then the
+        message says whether the folder is unchanged or marked incomplete).
     """
     out = Path(out)
     names = tuple(names)
@@ -266,12 +278,18 @@ def run_outputs(
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise OutputError(f"{where}: cannot create the folder ({reason(exc)})") from None
-    lock = FolderLock(out, where, f"choose another {option}" if option else "choose another folder")
+    other = f"choose another {option}" if option else "choose another folder"
+    locks = [FolderLock(out, where, other)]
     try:
-        lock.acquire()
+        locks[0].acquire()
         old = read_manifest(out)
         listed = listed_files(out)
         if replaces is not None:
+            # a redraw in a sweep's run folder: the sweep's folder is locked too, so that a sweep into it
+            # cannot replace the run while its page is redrawn
+            for parent, _ in enclosing_sets(out):
+                locks.append(FolderLock(parent, f"{where}: the enclosing folder {parent}", other))
+                locks[-1].acquire()
             require_complete(out)
         elif old is not None and old.command != command:
             raise OutputError(f"{where}: holds the outputs of `kalcal {old.command}`; choose another folder")
@@ -285,7 +303,7 @@ def run_outputs(
         except OSError as exc:
             raise OutputError(f"{where}: cannot write in the folder ({reason(exc)})") from None
     except BaseException:
-        lock.release()
+        _release(locks)
         _remove_created(created)
         raise
     token_var = _ACTIVE.set((*active, (staging, out)))
@@ -308,10 +326,15 @@ def run_outputs(
         )
     except BaseException:
         _remove_staging(out, staging)
-        lock.release()
+        _release(locks)
         _remove_created(created)
         raise
-    lock.release()
+    _release(locks)
+
+
+def _release(locks: list[FolderLock]) -> None:
+    for lock in reversed(locks):
+        lock.release()
 
 
 def _remove_staging(out: Path, staging: Path) -> None:
