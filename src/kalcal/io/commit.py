@@ -12,11 +12,9 @@ from pathlib import Path
 from kalcal.interrupts import deferred_signals
 from kalcal.io.manifest import MANIFEST, Manifest, OutputError, fsync_folder, write_manifest
 from kalcal.io.output_rules import check_targets, folder_name, inside, resolved
+from kalcal.io.staging import STAGING_MARKER
 
-__all__ = ["STAGING_MARKER", "commit", "reason"]
-
-# written by the run into its staging folder when it makes it; the commit requires it, with the run's token
-STAGING_MARKER = ".kalcal-staging"
+__all__ = ["commit", "reason"]
 
 
 def reason(exc: OSError) -> str:

@@ -40,7 +40,8 @@ A job that writes into the folder another job is staging (``kalcal verify`` draw
 that job's set; a job that writes into a new folder inside it (each run of a sweep) commits its own set
 there, with its own manifest, which then moves with the outer set.
 
-The manifest is :mod:`kalcal.io.manifest`; the rules that refuse a folder (step 0 and the checks before
+The manifest is :mod:`kalcal.io.manifest`; the lock :mod:`kalcal.io.lock`; the staging folders
+:mod:`kalcal.io.staging`; the rules that refuse a folder (step 0 and the checks before
 any rename) :mod:`kalcal.io.output_rules`; step 3 :mod:`kalcal.io.commit`.
 """
 
@@ -52,15 +53,12 @@ import dataclasses
 import functools
 import inspect
 import os
-import secrets
-import shutil
-import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
-from kalcal.io.commit import STAGING_MARKER, commit, reason
-from kalcal.io.lock import FolderLock, host_name
+from kalcal.io.commit import commit, reason
+from kalcal.io.lock import FolderLock
 from kalcal.io.manifest import OutputError, listed_files, read_manifest, require_complete
 from kalcal.io.output_rules import (
     enclosing_sets,
@@ -71,6 +69,7 @@ from kalcal.io.output_rules import (
     refuse_strays,
     resolved,
 )
+from kalcal.io.staging import PARTIAL_PREFIX, make_staging, remove_stale_partials, remove_staging
 
 __all__ = [
     "PARTIAL_PREFIX",
@@ -82,9 +81,6 @@ __all__ = [
     "run_outputs",
     "writes_outputs",
 ]
-
-PARTIAL_PREFIX = ".kalcal-partial-"
-
 
 # (staging folder, target folder) of every set being written, innermost last
 _ACTIVE: contextvars.ContextVar[tuple[tuple[Path, Path], ...]] = contextvars.ContextVar("kalcal_outputs", default=())
@@ -158,53 +154,6 @@ def _relocate(value: Any, staging: Path, target: Path) -> Any:
                     changes[field.name] = new
         return dataclasses.replace(value, **changes) if changes else value
     return value
-
-
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
-def _staging_owner(name: str) -> tuple[str, int] | None:
-    """(host, pid) of a staging folder's name ``.kalcal-partial-<host>-<pid>-<random>``; None for another name."""
-    parts = name[len(PARTIAL_PREFIX) :].rsplit("-", 2)
-    if len(parts) != 3 or not parts[0] or not parts[1].isdigit():
-        return None
-    return parts[0], int(parts[1])
-
-
-def _remove_stale_partials(out: Path) -> None:
-    """Staging folders of runs on this host that died without cleaning up (SIGKILL): their process is gone.
-
-    Called with the folder's lock held, so no live run of a kalcal that locks is staging here. A pid
-    says nothing about a process of another host (or a container with its own hostname) sharing the
-    disk: those folders, and any whose name carries no host, are never removed.
-    """
-    root = Path(resolved(out))
-    host = host_name()
-    for entry in root.glob(PARTIAL_PREFIX + "*"):
-        owner = _staging_owner(entry.name)
-        if owner is None or owner[0] != host or owner[1] == os.getpid():
-            continue
-        if entry.is_dir() and not entry.is_symlink() and entry.parent == root and not _pid_alive(owner[1]):
-            shutil.rmtree(entry, ignore_errors=True)
-
-
-def _make_staging(out: Path) -> tuple[Path, str]:
-    """A new staging folder in ``out`` and the token of the marker written into it (:data:`STAGING_MARKER`)."""
-    staging = Path(tempfile.mkdtemp(prefix=f"{PARTIAL_PREFIX}{host_name()}-{os.getpid()}-", dir=out))
-    token = f"{host_name()} {os.getpid()} {secrets.token_hex(16)}"
-    try:
-        (staging / STAGING_MARKER).write_text(token + "\n", encoding="utf-8")
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
-    return Path(resolved(staging)), token
 
 
 @contextlib.contextmanager
@@ -297,9 +246,9 @@ def run_outputs(
             refuse_enclosing_set(out, where)
         refuse_strays(out, names, listed, protected_paths, option, remedy)
         refuse_linked_folders(out, [*listed, *(literal_folders(pattern) for pattern in names)], option)
-        _remove_stale_partials(out)
+        remove_stale_partials(out)
         try:
-            staging, token = _make_staging(out)
+            staging, token = make_staging(out)
         except OSError as exc:
             raise OutputError(f"{where}: cannot write in the folder ({reason(exc)})") from None
     except BaseException:
@@ -325,7 +274,7 @@ def run_outputs(
             marker=token,
         )
     except BaseException:
-        _remove_staging(out, staging)
+        remove_staging(out, staging)
         _release(locks)
         _remove_created(created)
         raise
@@ -335,12 +284,6 @@ def run_outputs(
 def _release(locks: list[FolderLock]) -> None:
     for lock in reversed(locks):
         lock.release()
-
-
-def _remove_staging(out: Path, staging: Path) -> None:
-    """Remove a failed run's staging folder: only the real folder of that name directly in ``out``."""
-    if staging.parent == Path(resolved(out)) and staging.name.startswith(PARTIAL_PREFIX) and not staging.is_symlink():
-        shutil.rmtree(staging, ignore_errors=True)
 
 
 def _remove_created(created: list[Path]) -> None:
