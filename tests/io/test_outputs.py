@@ -263,16 +263,23 @@ def test_paths_inside_a_returned_dataclass_are_moved_and_other_values_kept(tmp_p
     assert result == _Outcome({"a": tmp_path / "out" / "a.txt"}, 1.5)
 
 
-def test_staging_folders_of_dead_runs_are_removed(tmp_path):
+def test_staging_folders_of_dead_runs_on_this_host_are_removed_and_no_other(tmp_path):
+    """A pid is only known on its own host: another host's staging folder, or one whose name has no host, stays."""
+    from kalcal.io.lock import host_name
+
     out = tmp_path / "out"
     out.mkdir()
-    dead = out / ".kalcal-partial-999999999-abc"
-    dead.mkdir()
-    (dead / "summary.json").write_text("half")
-    alive = out / f".kalcal-partial-{os.getppid()}-abc"
-    alive.mkdir()
+    host = host_name()
+    dead = out / f".kalcal-partial-{host}-999999999-abc"
+    alive = out / f".kalcal-partial-{host}-{os.getppid()}-abc"
+    foreign = out / ".kalcal-partial-another-host-999999999-abc"
+    nameless = out / ".kalcal-partial-999999999-abc"
+    for folder in (dead, alive, foreign, nameless):
+        folder.mkdir()
+        (folder / "summary.json").write_text("half")
     _run(out, {"summary.json": "x"})
-    assert not dead.exists() and alive.exists()
+    assert not dead.exists()
+    assert all((folder / "summary.json").read_text() == "half" for folder in (alive, foreign, nameless))
 
 
 def test_a_manifest_kalcal_did_not_write_is_refused(tmp_path):

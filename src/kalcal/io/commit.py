@@ -3,14 +3,16 @@
 from __future__ import annotations
 
 import contextlib
+import errno
 import fnmatch
 import os
 import shutil
 from pathlib import Path
 
 from kalcal.interrupts import deferred_signals
-from kalcal.io.manifest import MANIFEST, Manifest, OutputError, write_manifest
-from kalcal.io.output_rules import check_targets, folder_name, resolved
+from kalcal.io.manifest import MANIFEST, Manifest, OutputError, fsync_folder, write_manifest
+from kalcal.io.output_rules import check_targets, folder_name, inside, resolved
+from kalcal.io.staging import STAGING_MARKER
 
 __all__ = ["commit", "reason"]
 
@@ -20,20 +22,76 @@ def reason(exc: OSError) -> str:
     return exc.strerror or type(exc).__name__
 
 
+def _cause(exc: OSError) -> str:
+    names = " -> ".join(str(f) for f in (exc.filename, exc.filename2) if f is not None)
+    return f"{reason(exc)}: {names}" if names else reason(exc)
+
+
 def _staged_files(staging: Path) -> list[str]:
     files = []
     for root, directories, names in os.walk(staging):
         for name in names + [d for d in directories if os.path.islink(os.path.join(root, d))]:
             files.append(Path(root, name).relative_to(staging).as_posix())
-    return sorted(files)
+    return sorted(f for f in files if f != STAGING_MARKER)
+
+
+def _require_marker(out: Path, staging: Path, marker: str | None, option: str | None) -> None:
+    """The staging folder is the one this run made: a real folder holding its marker with the run's token.
+
+    A folder that vanished while the run wrote (removed by another process) and was made again by a
+    writer creating its parents holds part of the set or none of it: it is never committed.
+    """
+    if marker is None:
+        return
+    try:
+        real = staging.is_dir() and not staging.is_symlink()
+        found = (staging / STAGING_MARKER).read_text(encoding="utf-8").strip() if real else None
+    except OSError:
+        found = None
+    if found != marker:
+        raise OutputError(
+            f"{folder_name(out, option)}: the run's staging folder {staging.name} was removed while the run wrote "
+            "into it (by another process); its set is incomplete and was not put in place; the folder is unchanged: "
+            "run again"
+        )
+
+
+def _fsync_files(staging: Path, new: list[str]) -> None:
+    """Every staged file's data on disk (a link has no data of its own: its folder's entry is synced)."""
+    for relative in new:
+        path = staging / relative
+        if path.is_symlink():
+            continue
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+
+def _fsync_folders(root: Path, relatives: list[str]) -> None:
+    """The entries renamed into (or removed from) ``root``'s subfolders on disk: every folder on their way, ``root`` last."""
+    folders = {Path(relative).parent for relative in relatives}
+    for folder in list(folders):
+        folders.update(folder.parents)
+    for folder in sorted(folders, key=lambda f: (-len(f.parts), f.as_posix())):
+        if (root / folder).is_dir():
+            fsync_folder(root / folder)
+
+
+def _outside(path: Path) -> OSError:
+    return OSError(errno.EXDEV, "a folder on its way is a symbolic link out of the folder", str(path))
 
 
 def _remove(out: Path, relative: str) -> None:
-    path = out / relative
+    root = Path(resolved(out))
+    path = root / relative
+    if not inside(root, relative):
+        raise _outside(path)  # never a file outside OUT (a subfolder replaced by a link after the checks)
     if path.is_symlink() or path.is_file():
         path.unlink()
     parent = path.parent
-    while parent != out and out in parent.parents:
+    while parent != root and root in parent.parents:
         try:
             parent.rmdir()  # only when empty: a user's file in a kalcal subfolder keeps it
         except OSError:
@@ -51,15 +109,20 @@ def commit(
     protected_paths: frozenset[str],
     option: str | None = "--out",
     remedy: str | None = None,
+    *,
+    marker: str | None = None,
 ) -> None:
     """Put the files staged in ``staging`` in place in ``out`` as one set, or raise and say what is left.
 
     ``listed`` are the files the manifests of ``out`` list (``old`` its own manifest); ``replaces`` None
     replaces the whole previous set, else glob patterns of the previous files replaced (the others stay,
     and so does ``old``'s command). Files in ``protected_paths`` (resolved) are never removed or replaced.
-    SIGINT and SIGTERM wait until the set is whole. Raises :class:`OutputError`, saying whether the folder
-    is unchanged or marked incomplete.
+    SIGINT and SIGTERM wait until the set is whole. ``marker``: the token the run wrote into
+    ``staging/.kalcal-staging`` (None: not required); a staging folder without it is never committed.
+    The new files, the folders they are renamed into and ``out`` are synced to disk before the manifest
+    says complete. Raises :class:`OutputError`, saying whether the folder is unchanged or marked incomplete.
     """
+    _require_marker(out, staging, marker, option)
     new = _staged_files(staging)
     new_set = set(new)
     check_targets(out, new, listed, protected_paths, option, remedy)
@@ -76,6 +139,12 @@ def commit(
             removed.add(relative)
     if replaces is not None and old is not None:
         command = old.command  # a redraw adds to the run that is there
+    try:
+        _fsync_files(staging, new)
+    except OSError as exc:
+        raise OutputError(
+            f"{folder_name(out, option)}: cannot write the new files to disk ({_cause(exc)}); the folder is unchanged"
+        ) from None
     marked = False
     try:
         with deferred_signals():
@@ -86,11 +155,13 @@ def commit(
             for relative in new:
                 target = out / relative
                 target.parent.mkdir(parents=True, exist_ok=True)
+                if not inside(out, relative):
+                    raise _outside(target)
                 os.replace(staging / relative, target)
+            _fsync_folders(out, [*new, *removed])
             write_manifest(out, command, kept | new_set, complete=True)
     except OSError as exc:
-        names = " -> ".join(str(f) for f in (exc.filename, exc.filename2) if f is not None)
-        cause = f"{reason(exc)}: {names}" if names else reason(exc)
+        cause = _cause(exc)
         if not marked:
             with contextlib.suppress(OSError):
                 (out / (MANIFEST + ".tmp")).unlink()
@@ -101,4 +172,5 @@ def commit(
             f"{folder_name(out, option)}: putting the new files in place failed ({cause}); the folder is marked "
             f"incomplete ({MANIFEST}): free the space or fix the cause and run again"
         ) from None
-    shutil.rmtree(staging, ignore_errors=True)
+    if not staging.is_symlink():
+        shutil.rmtree(staging, ignore_errors=True)

@@ -23,6 +23,7 @@ __all__ = [
     "listed_files",
     "read_manifest",
     "require_complete",
+    "fsync_folder",
     "write_manifest",
 ]
 
@@ -108,7 +109,7 @@ def _safe_relative(name: str, folder: Path) -> str:
 
 
 def write_manifest(folder: str | Path, command: str, files: Iterable[str], *, complete: bool = True) -> Path:
-    """Write ``folder/.kalcal-manifest.json`` atomically (a temporary file, then a rename)."""
+    """Write ``folder/.kalcal-manifest.json`` atomically (a temporary file, synced, then a rename, and the folder synced)."""
     from kalcal import __version__
 
     path = Path(folder) / MANIFEST
@@ -121,6 +122,19 @@ def write_manifest(folder: str | Path, command: str, files: Iterable[str], *, co
         "files": sorted(set(files)),
     }
     temporary = path.with_name(path.name + ".tmp")
-    temporary.write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
+    with open(temporary, "w", encoding="utf-8") as stream:
+        stream.write(json.dumps(document, indent=2) + "\n")
+        stream.flush()
+        os.fsync(stream.fileno())  # the manifest's bytes on disk before its name says what it says
     os.replace(temporary, path)
+    fsync_folder(path.parent)
     return path
+
+
+def fsync_folder(folder: str | Path) -> None:
+    """Put ``folder``'s entries (names created, renamed or removed in it) on disk."""
+    fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY | os.O_CLOEXEC)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)

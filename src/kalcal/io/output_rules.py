@@ -8,12 +8,32 @@ from pathlib import Path
 
 from kalcal.io.manifest import MANIFEST, OutputError, listed_files, read_manifest
 
-__all__ = ["check_targets", "folder_name", "refuse_enclosing_set", "refuse_strays", "resolved"]
+__all__ = [
+    "check_targets",
+    "enclosing_sets",
+    "folder_name",
+    "inside",
+    "literal_folders",
+    "refuse_enclosing_set",
+    "refuse_linked_folders",
+    "refuse_strays",
+    "resolved",
+]
 
 
 def resolved(path: str | Path) -> str:
     """The absolute path of ``path`` with every symbolic link followed."""
     return os.path.realpath(os.fspath(path))
+
+
+def inside(out: str | Path, relative: str) -> bool:
+    """Whether ``out/relative``'s folder, every symbolic link followed, is ``out``'s own subfolder ``relative``'s.
+
+    True when no folder between ``out`` and the file is a link: a file removed or put in place there is
+    inside ``out``. (The file itself may be a link: removing a link removes the link, not its target.)
+    """
+    parent = os.path.dirname(relative)
+    return resolved(os.path.join(out, parent)) == os.path.normpath(os.path.join(resolved(out), parent))
 
 
 def folder_name(out: Path, option: str | None) -> str:
@@ -47,7 +67,22 @@ def _refuse_file_parents(out: Path, relatives: Iterable[str], option: str | None
                 raise OutputError(f"{folder_name(out, option)}: {parent.as_posix()} is a file where kalcal writes a folder")
 
 
-def _literal_folders(pattern: str) -> str:
+def refuse_linked_folders(out: Path, relatives: Iterable[str], option: str | None) -> None:
+    """A symbolic link where one of ``relatives`` needs a folder (``figures -> elsewhere`` for ``figures/a.png``).
+
+    Removing or renaming files through it would change files outside ``out``.
+    """
+    for relative in sorted(set(relatives)):
+        for parent in reversed(Path(relative).parents):
+            if str(parent) != "." and (out / parent).is_symlink():
+                raise OutputError(
+                    f"{folder_name(out, option)}: {parent.as_posix()} is a symbolic link where kalcal writes a folder "
+                    "(kalcal removes and writes files only inside the folder); replace it with a folder or "
+                    + (f"choose another {option}" if option else "choose another folder")
+                )
+
+
+def literal_folders(pattern: str) -> str:
     """The leading folders of a glob pattern that have no wildcard (``figures`` for ``figures/*.png``), + a name."""
     parts = pattern.split("/")
     literal = []
@@ -69,7 +104,7 @@ def refuse_strays(
     """Before the job runs: a file named like one of its outputs that no manifest lists, an input, or a file
     where the outputs need a folder stops it."""
     names = tuple(names)
-    _refuse_file_parents(out, [_literal_folders(pattern) for pattern in names], option)
+    _refuse_file_parents(out, [literal_folders(pattern) for pattern in names], option)
     for pattern in names:
         for path in sorted(out.glob(pattern)):
             relative = path.relative_to(out).as_posix()
@@ -87,8 +122,10 @@ def check_targets(
     option: str | None,
     remedy: str | None,
 ) -> None:
-    """Every new file can be renamed into place without replacing a directory, an input or a file not kalcal's."""
+    """Every new file can be renamed into place without replacing a directory, an input or a file not kalcal's,
+    and without a symbolic link on its way (nor on the way to a file of the old set)."""
     _refuse_file_parents(out, new, option)
+    refuse_linked_folders(out, [*new, *listed], option)
     for relative in new:
         target = out / relative
         if resolved(target) in protected_paths:
@@ -99,16 +136,22 @@ def check_targets(
             raise _not_ours(out, relative, option, remedy, "would be replaced")
 
 
-def refuse_enclosing_set(out: Path, where: str) -> None:
-    """Refuse ``out`` when a folder above it lists files inside it: ``out`` is part of another run's set
-    (a sweep's run folder), which a run of its own would leave describing files that are gone."""
+def enclosing_sets(out: Path) -> list[tuple[Path, str]]:
+    """The folders above ``out`` whose manifests list files inside it, nearest first, with their command."""
     target = Path(os.path.abspath(out))
+    found = []
     for parent in target.parents:
         manifest = read_manifest(parent)
         if manifest is None:
             continue
-        inside = target.relative_to(parent).as_posix() + "/"
-        if any(name.startswith(inside) for name in listed_files(parent)):
-            raise OutputError(
-                f"{where}: is part of the outputs of `kalcal {manifest.command}` in {parent}; choose another folder"
-            )
+        inside_out = target.relative_to(parent).as_posix() + "/"
+        if any(name.startswith(inside_out) for name in listed_files(parent)):
+            found.append((parent, manifest.command))
+    return found
+
+
+def refuse_enclosing_set(out: Path, where: str) -> None:
+    """Refuse ``out`` when a folder above it lists files inside it: ``out`` is part of another run's set
+    (a sweep's run folder), which a run of its own would leave describing files that are gone."""
+    for parent, command in enclosing_sets(out)[:1]:
+        raise OutputError(f"{where}: is part of the outputs of `kalcal {command}` in {parent}; choose another folder")

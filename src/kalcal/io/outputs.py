@@ -3,19 +3,28 @@
 Every job that writes an ``--out`` folder writes it through :func:`run_outputs` (or the
 :func:`writes_outputs` decorator around the job):
 
-0. Before the job runs: a folder whose manifest was written by another command is refused (its files
+0. Before the job runs: the folder is locked (an exclusive ``flock`` on ``OUT/.kalcal-lock``,
+   :mod:`kalcal.io.lock`), held until the commit ends or the staging folder of a failed run is
+   removed: a second run into the folder stops there, naming the holder's host and pid. Then a folder
+   whose manifest was written by another command is refused (its files
    are another job's outputs, not a previous run of this one; ``kalcal report`` redrawing the page of
    a verification run, ``replaces=``, is the one job that adds to another command's set), and so is a
    file in the place of a folder the outputs go into, or a file named like an output that no manifest
-   lists.
-1. The job writes into a staging folder inside the target, ``OUT/.kalcal-partial-<pid>-<random>/``
-   (the same file system, so that the final step is a rename).
+   lists, and so is a symbolic link where the outputs need a folder (removing or renaming through it
+   would change files outside ``OUT``). Staging folders of dead runs of this host are removed; another
+   host's are never (a pid says nothing about another host's processes).
+1. The job writes into a staging folder inside the target, ``OUT/.kalcal-partial-<host>-<pid>-<random>/``
+   (the same file system, so that the final step is a rename), which holds a marker with a token of the
+   run's own (``.kalcal-staging``): the commit requires it, so a staging folder removed while the job
+   wrote (and perhaps made again by a writer creating its parents) is never committed.
 2. If the job raises, or is interrupted (:class:`kalcal.interrupts.Interrupted`, ``KeyboardInterrupt``),
    the staging folder is removed and ``OUT`` is left exactly as it was.
 3. When the job returns, the set is committed: the manifest ``OUT/.kalcal-manifest.json`` is first
    rewritten with ``"complete": false`` and the files of both sets; then the files the previous
    manifest lists that the new run does not write are removed, the new files are renamed into place,
-   and the manifest is written again with ``"complete": true`` and the new set. SIGINT and SIGTERM
+   and the manifest is written again with ``"complete": true`` and the new set, after the new files,
+   the folders they went into and ``OUT`` are synced to disk. Every removal is of a file whose
+   resolved folder is its place in ``OUT`` (no link on the way). SIGINT and SIGTERM
    wait for the commit to end (a few renames). A folder whose manifest says ``"complete": false`` was
    cut in the middle of a commit (power loss, SIGKILL): ``kalcal report`` refuses it, and the next run
    into it cleans up every file either set wrote.
@@ -31,7 +40,8 @@ A job that writes into the folder another job is staging (``kalcal verify`` draw
 that job's set; a job that writes into a new folder inside it (each run of a sweep) commits its own set
 there, with its own manifest, which then moves with the outer set.
 
-The manifest is :mod:`kalcal.io.manifest`; the rules that refuse a folder (step 0 and the checks before
+The manifest is :mod:`kalcal.io.manifest`; the lock :mod:`kalcal.io.lock`; the staging folders
+:mod:`kalcal.io.staging`; the rules that refuse a folder (step 0 and the checks before
 any rename) :mod:`kalcal.io.output_rules`; step 3 :mod:`kalcal.io.commit`.
 """
 
@@ -43,15 +53,23 @@ import dataclasses
 import functools
 import inspect
 import os
-import shutil
-import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
 from kalcal.io.commit import commit, reason
+from kalcal.io.lock import FolderLock
 from kalcal.io.manifest import OutputError, listed_files, read_manifest, require_complete
-from kalcal.io.output_rules import folder_name, refuse_enclosing_set, refuse_strays, resolved
+from kalcal.io.output_rules import (
+    enclosing_sets,
+    folder_name,
+    literal_folders,
+    refuse_enclosing_set,
+    refuse_linked_folders,
+    refuse_strays,
+    resolved,
+)
+from kalcal.io.staging import PARTIAL_PREFIX, make_staging, remove_stale_partials, remove_staging
 
 __all__ = [
     "PARTIAL_PREFIX",
@@ -63,9 +81,6 @@ __all__ = [
     "run_outputs",
     "writes_outputs",
 ]
-
-PARTIAL_PREFIX = ".kalcal-partial-"
-
 
 # (staging folder, target folder) of every set being written, innermost last
 _ACTIVE: contextvars.ContextVar[tuple[tuple[Path, Path], ...]] = contextvars.ContextVar("kalcal_outputs", default=())
@@ -141,26 +156,6 @@ def _relocate(value: Any, staging: Path, target: Path) -> Any:
     return value
 
 
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
-def _remove_stale_partials(out: Path) -> None:
-    """Staging folders of runs that died without cleaning up (SIGKILL): their process is gone."""
-    for entry in out.glob(PARTIAL_PREFIX + "*"):
-        pid_text = entry.name[len(PARTIAL_PREFIX) :].split("-", 1)[0]
-        if entry.is_dir() and not entry.is_symlink() and pid_text.isdigit():
-            pid = int(pid_text)
-            if pid != os.getpid() and not _pid_alive(pid):
-                shutil.rmtree(entry, ignore_errors=True)
-
-
 @contextlib.contextmanager
 def run_outputs(
     out: str | Path,
@@ -206,12 +201,15 @@ def run_outputs(
     Raises
     ------
     OutputError
-        ``out`` is a file, cannot be created or written, holds the outputs of another command, holds a
-        file named like an output that no manifest lists or a file where an output needs a folder; or
-        putting the files in place failed (then the message says whether the folder is unchanged or
-        marked incomplete).
+        ``out`` is a file, cannot be created, locked or written, is locked by another run (the message
+        names its host and pid), holds the outputs of another command, holds a symbolic link where an
+        output needs a folder, holds a
+        file named like an output that no manifest lists or a file where an output needs a folder; the
+        staging folder was removed while the job wrote; or putting the files in place failed (then the
+        message says whether the folder is unchanged or marked incomplete).
     """
     out = Path(out)
+    names = tuple(names)
     active = _ACTIVE.get()
     if any(Path(resolved(out)) == staging for staging, _ in active):
         yield out
@@ -229,31 +227,40 @@ def run_outputs(
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise OutputError(f"{where}: cannot create the folder ({reason(exc)})") from None
+    other = f"choose another {option}" if option else "choose another folder"
+    locks = [FolderLock(out, where, other)]
     try:
+        locks[0].acquire()
         old = read_manifest(out)
         listed = listed_files(out)
         if replaces is not None:
+            # a redraw in a sweep's run folder: the sweep's folder is locked too, so that a sweep into it
+            # cannot replace the run while its page is redrawn
+            for parent, _ in enclosing_sets(out):
+                locks.append(FolderLock(parent, f"{where}: the enclosing folder {parent}", other))
+                locks[-1].acquire()
             require_complete(out)
         elif old is not None and old.command != command:
             raise OutputError(f"{where}: holds the outputs of `kalcal {old.command}`; choose another folder")
         else:
             refuse_enclosing_set(out, where)
         refuse_strays(out, names, listed, protected_paths, option, remedy)
-        _remove_stale_partials(out)
+        refuse_linked_folders(out, [*listed, *(literal_folders(pattern) for pattern in names)], option)
+        remove_stale_partials(out)
         try:
-            staging = Path(tempfile.mkdtemp(prefix=f"{PARTIAL_PREFIX}{os.getpid()}-", dir=out))
+            staging, token = make_staging(out)
         except OSError as exc:
             raise OutputError(f"{where}: cannot write in the folder ({reason(exc)})") from None
     except BaseException:
+        _release(locks)
         _remove_created(created)
         raise
-    staging = Path(resolved(staging))
-    token = _ACTIVE.set((*active, (staging, out)))
+    token_var = _ACTIVE.set((*active, (staging, out)))
     try:
         try:
             yield staging
         finally:
-            _ACTIVE.reset(token)
+            _ACTIVE.reset(token_var)
         commit(
             out,
             staging,
@@ -264,11 +271,19 @@ def run_outputs(
             protected_paths,
             option,
             remedy,
+            marker=token,
         )
     except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
+        remove_staging(out, staging)
+        _release(locks)
         _remove_created(created)
         raise
+    _release(locks)
+
+
+def _release(locks: list[FolderLock]) -> None:
+    for lock in reversed(locks):
+        lock.release()
 
 
 def _remove_created(created: list[Path]) -> None:
