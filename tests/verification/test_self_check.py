@@ -199,6 +199,10 @@ def test_verify_prints_the_self_check_line(tmp_path):
     stdout = _cli("verify", "-n", 300, "--no-report", "--long-run", 0, "--set", "scenario.duration=2", "--out", out)
     summary = json.loads((out / "summary.json").read_text())
     assert self_check_line(summary["self_check"]) in stdout.splitlines()
+    # a PASS is about the filter on synthetic motion, not a log: the console says so, pointing to fit
+    from kalcal.reporting.text import scope_statement
+
+    assert scope_statement(summary) in stdout.splitlines()
 
 
 def test_scale_bias_says_why_there_is_no_self_check(tmp_path):
