@@ -20,8 +20,8 @@ __all__ = ["confidence_statement", "levels_text", "measured_text", "scope_statem
 
 #: what a verification is about, on the console and the page: a PASS is read as being about a log otherwise
 SCOPE_STATEMENT = (
-    "kalcal verify tests the filter against its own settings (the truth of [truth]) on the scenario's built-in synthetic "
-    "motion, not against any log: a PASS says nothing about whether the model fits a log; for that, see "
+    "kalcal verify tests the filter against its own settings (the truth of [truth]) on synthetic motion simulated "
+    "from them, not against any log: a PASS says nothing about whether the model fits a log; for that, see "
     "`kalcal fit`'s `adequate`"
 )
 
