@@ -57,6 +57,12 @@ PRIORS = ("diffuse", "settings")
 CONFLICT_CONFIDENCE = 0.99
 #: the information matrix counts as nonsingular once det(Y) exceeds this share of trace(Y)^2
 DIFFUSE_RCOND = 1e-12
+#: a data-only sigma above this many no-data sigmas: the log tells the parameter less than the prior does.
+#: sqrt(0.9^2 / (1 - 0.9^2)) = 2.06, where a posterior of independent prior and data sigmas reaches
+#: UNOBSERVABLE_RATIO of the prior's
+DATA_ONLY_FACTOR = float(np.sqrt(UNOBSERVABLE_RATIO**2 / (1.0 - UNOBSERVABLE_RATIO**2)))
+#: the data-only theta1 is tested against 0 (a sensor that does not track the reference) at this confidence
+TRACKING_CONFIDENCE = 0.99
 
 
 @dataclass(frozen=True)
@@ -76,6 +82,8 @@ class ScaleBiasCalibration:
     start_samples: int = 0
     #: the data-and-prior test with the settings' prior: statistic, pvalue, bound, conflict (None without)
     conflict: dict | None = None
+    #: what the log alone tells of theta (:func:`data_only_information`); None where not computed
+    data_only: dict | None = None
 
     @property
     def std_ratio(self) -> np.ndarray:
@@ -83,8 +91,48 @@ class ScaleBiasCalibration:
         return self.std[-1] / self.prior_std
 
     def unobservable(self, threshold: float = UNOBSERVABLE_RATIO) -> list[str]:
-        """The parameters (of theta1, theta2) whose final sigma is above ``threshold`` times the no-data sigma."""
-        return [name for name, ratio in zip(STATE_NAMES, self.std_ratio) if ratio > threshold]
+        """The parameters (of theta1, theta2) the log does not determine.
+
+        Judged from the data-only information where it was computed (:func:`data_only_information`): a
+        singular one, a data-only sigma above ``DATA_ONLY_FACTOR`` no-data sigmas, or (both parameters)
+        a sensor that does not track the reference. Otherwise, from the final sigma above ``threshold``
+        times the no-data sigma."""
+        ratio_names = [name for name, ratio in zip(STATE_NAMES, self.std_ratio) if ratio > threshold]
+        if self.data_only is None:
+            return ratio_names
+        d = self.data_only
+        if d["singular"] or not d["tracks"]:
+            return list(STATE_NAMES)
+        names = [name for name, weak in zip(STATE_NAMES, d["weaker_than_prior"]) if weak]
+        return [name for name in STATE_NAMES if name in names or name in ratio_names]
+
+    def unobservable_cause(self) -> str | None:
+        """Why :meth:`unobservable` names parameters, in words (None when it names none)."""
+        names = self.unobservable()
+        if not names:
+            return None
+        d = self.data_only
+        if d is not None and d["singular"]:
+            return (
+                f"the log alone does not determine theta (its information matrix is singular, "
+                f"reciprocal condition {d['rcond']:.2g}): the sensor reads one value, so only theta1 z + theta2 is seen"
+            )
+        parts = []
+        for name, weak, sigma, prior in zip(STATE_NAMES, *(
+            (d["weaker_than_prior"], d["std"], self.prior_std) if d is not None else ((), (), ())
+        )):
+            if weak:
+                parts.append(f"{name}'s data-only sigma {sigma:.3g} is above {DATA_ONLY_FACTOR:.3g} times its prior sigma {prior:.3g}")
+        if parts:
+            return f"the log tells less than the prior ({'; '.join(parts)}; reciprocal condition {d['rcond']:.2g})"
+        if d is not None and not d["tracks"]:
+            return (
+                f"the sensor does not track the reference (the log alone gives theta1 = "
+                f"{d['theta'][0]:.3g} +- {d['empirical_std'][0]:.2g}, with the residual scatter the log shows, "
+                f"not distinguishable from 0 at {TRACKING_CONFIDENCE:.0%})"
+            )
+        ratios = ", ".join(f"{name} {ratio:.2f}" for name, ratio in zip(STATE_NAMES, self.std_ratio) if name in names)
+        return f"the final sigma is above {UNOBSERVABLE_RATIO:g} of the sigma with no data ({ratios})"
 
     def nis_bounds(self, confidence: float = NIS_CONFIDENCE) -> tuple[float, float]:
         """Two-sided bounds of the mean NIS of the samples used, chi-square(K) / K, at ``confidence``."""
@@ -98,10 +146,24 @@ class ScaleBiasCalibration:
         return bool(lower <= self.mean_nis <= upper)
 
     def warnings(self, source: str = "data") -> list[CalibrationWarning]:
-        """An ``unobservable`` warning naming the parameters the log did not excite, and a
-        ``noise-inconsistent`` one when the mean NIS is outside its bounds; empty when neither."""
+        """An ``unobservable`` warning naming the parameters the log does not determine and why; a
+        ``prior-conflict`` one when data and prior disagree; a ``noise-inconsistent`` one when the mean NIS
+        is outside its bounds. Beside ``unobservable`` neither of the other two is a cause: the data-only
+        estimate that the prior is tested against is not determined, and innovations that the model
+        cannot follow are not fixed by the noise settings, so they say so and give no advice of their own."""
         found = []
-        if self.conflict is not None and self.conflict["conflict"]:
+        names = self.unobservable()
+        cause = self.unobservable_cause()
+        if names:
+            found.append(
+                CalibrationWarning(
+                    "unobservable",
+                    f"{source}: {' and '.join(names)} unobservable (no excitation): {cause}, so the estimate is the prior's, "
+                    "not the log's; the sensor must track the reference and vary over its range (scale_error and bias "
+                    "follow from both)",
+                )
+            )
+        if self.conflict is not None and self.conflict["conflict"] and not names:
             c = self.conflict
             found.append(
                 CalibrationWarning(
@@ -111,27 +173,20 @@ class ScaleBiasCalibration:
                     f"{CONFLICT_CONFIDENCE:.0%}, p = {c['pvalue']:.2g}): check filter.scale_error, filter.bias and their stds",
                 )
             )
-        names = self.unobservable()
-        if names:
-            ratios = ", ".join(f"{name} {ratio:.2f}" for name, ratio in zip(STATE_NAMES, self.std_ratio) if name in names)
-            found.append(
-                CalibrationWarning(
-                    "unobservable",
-                    f"{source}: {' and '.join(names)} unobservable (no excitation): the final sigma is above "
-                    f"{UNOBSERVABLE_RATIO:g} of the sigma with no data ({ratios}), so the estimate is the prior's, "
-                    "not the log's; the sensor must vary over its range (scale_error and bias follow from both)",
-                )
-            )
         if not self.consistent:
             lower, upper = self.nis_bounds()
-            found.append(
-                CalibrationWarning(
-                    "noise-inconsistent",
-                    f"{source}: mean NIS {self.mean_nis:.4g} is outside its {NIS_CONFIDENCE:.0%} bounds "
-                    f"[{lower:.4g}, {upper:.4g}] for {self.samples_used} samples: the noise settings do not fit the "
-                    "log (set filter.reference_noise_std / sensor_noise_std), so the sigmas are not to be trusted",
-                )
+            measured = (
+                f"{source}: mean NIS {self.mean_nis:.4g} is outside its {NIS_CONFIDENCE:.0%} bounds "
+                f"[{lower:.4g}, {upper:.4g}] for {self.samples_used} samples"
             )
+            advice = (
+                ": the model cannot follow a reference that the sensor does not determine (the unobservable "
+                f"{' and '.join(names)} above), which no noise setting mends"
+                if names
+                else ": the noise settings do not fit the log (set filter.reference_noise_std / sensor_noise_std), "
+                "so the sigmas are not to be trusted"
+            )
+            found.append(CalibrationWarning("noise-inconsistent", measured + advice))
         return found
 
     @property
@@ -205,6 +260,47 @@ def _diffuse_run(scenario: ScaleBiasScenario, reference: np.ndarray, sensor: np.
         rest.posterior, rest.cov, rest.residual, rest.innovation_var, rest.used,
     )
     return m, posterior, covs, residual, innovation, used
+
+
+def data_only_information(reference: np.ndarray, sensor: np.ndarray, noise_variance: float) -> dict:
+    """What the log alone says of theta: the least-squares fit of reference = theta1 sensor + theta2 over
+    the samples with both values (the filter with a diffuse prior and Q = 0).
+
+    Returns a dict: ``information`` Y = H^T H / R (2, 2) with R = ``noise_variance`` (the settings'),
+    ``rcond`` (its smallest over largest eigenvalue), ``singular`` (``rcond`` below ``DIFFUSE_RCOND``: the
+    sensor reads one value), ``theta`` (the data-only estimate, NaN when singular), ``std`` (the data-only
+    sigmas sqrt(diag(Y^-1)), inf when singular), ``empirical_std`` (the same with R replaced by the fit's
+    own residual variance RSS / (K - 2), which does not rest on the noise settings: a sensor that does not
+    track the reference leaves the reference's whole variance in the residual), ``tracks`` (whether theta1
+    is distinguishable from 0 with the empirical sigma, two-sided at ``TRACKING_CONFIDENCE``) and
+    ``weaker_than_prior`` (filled in by the caller where there is a prior: the data-only sigma above
+    ``DATA_ONLY_FACTOR`` no-data sigmas).
+    """
+    from scipy import special  # scipy.stats.norm.ppf is special.ndtri, without scipy.stats's import
+
+    both = np.isfinite(reference) & np.isfinite(sensor)
+    h = regressors(sensor[both])
+    v = reference[both]
+    gram = h.T @ h
+    eigen = np.linalg.eigvalsh(gram)
+    rcond = float(eigen[0] / eigen[-1]) if eigen[-1] > 0 else 0.0
+    k = int(np.count_nonzero(both))
+    singular = not rcond > DIFFUSE_RCOND or k < 3
+    if singular:
+        theta, std, empirical = np.full(2, np.nan), np.full(2, np.inf), np.full(2, np.inf)
+    else:
+        factor = np.linalg.cholesky(gram)
+        theta = np.linalg.solve(gram, h.T @ v)
+        inverse_diagonal = np.sum(np.linalg.solve(factor, np.eye(2)) ** 2, axis=0)  # diag(gram^-1)
+        residual = v - h @ theta
+        std = np.sqrt(inverse_diagonal * noise_variance)
+        empirical = np.sqrt(inverse_diagonal * float(residual @ residual) / (k - 2))
+    limit = float(special.ndtri(0.5 + TRACKING_CONFIDENCE / 2))
+    tracks = bool(not singular and abs(theta[0]) > limit * empirical[0])
+    return {
+        "information": gram / noise_variance, "rcond": rcond, "singular": bool(singular), "theta": theta,
+        "std": std, "empirical_std": empirical, "tracks": tracks, "weaker_than_prior": [False, False],
+    }  # fmt: skip
 
 
 def _conflict(scenario: ScaleBiasScenario, data_theta: np.ndarray, data_cov: np.ndarray, samples: int) -> dict:
@@ -284,6 +380,12 @@ def calibrate_scale_bias(
             prior_std=np.sqrt(np.diag(scenario.filter_prior().cov + reference.size * scenario.filter_process_noise())),
             conflict=found,
         )
+    data_only = data_only_information(reference, sensor, scenario.filter_noise_variance())
+    if prior != "diffuse":
+        data_only["weaker_than_prior"] = [bool(s > DATA_ONLY_FACTOR * p) for s, p in zip(data_only["std"], result.prior_std)]
+    from dataclasses import replace
+
+    result = replace(result, data_only=data_only)
     theta1 = float(result.theta[-1, 0])
     if not theta1 > 0:
         raise DataError(
