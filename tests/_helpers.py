@@ -147,3 +147,21 @@ def last_line_of(code: str) -> str:
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     return done.stdout.strip().splitlines()[-1]
+
+
+def assert_standard_normal_spread(z, *, family_alpha: float = 1e-3, what: str = "") -> None:
+    """z-scores (M, q) of q quantities over M independent seeds, each N(0, 1) when the sigma is right, held
+    from both sides: each column's sample variance, (M - 1) s^2 ~ chi-square(M - 1), within its two-sided
+    bounds, and its mean, sqrt(M) zbar ~ N(0, 1), within its normal bound; 2 q comparisons, Bonferroni at
+    ``family_alpha``. A sigma too large (s^2 below the lower bound) fails as a sigma too small does."""
+    from kalcal.verification.bounds import chi2_bounds_at, normal_bound_at
+
+    z = np.asarray(z, dtype=float).reshape(len(z), -1)
+    m, q = z.shape
+    lower, upper = chi2_bounds_at(family_alpha, 2 * q, m - 1, m - 1)
+    bound = normal_bound_at(family_alpha, 2 * q)
+    variance, mean = z.var(axis=0, ddof=1), z.mean(axis=0)
+    assert np.all((variance >= lower) & (variance <= upper)), (
+        f"{what}: variance of z {variance} outside [{lower:.3g}, {upper:.3g}] over {m} seeds"
+    )
+    assert np.all(np.abs(mean) * np.sqrt(m) <= bound), f"{what}: mean of z {mean} beyond ±{bound / np.sqrt(m):.3g}"

@@ -109,3 +109,18 @@ def test_the_whiteness_parts_statistic_does_not_depend_on_the_order_of_a_constan
     (lb_second,) = [part for part in second.parts if part.name == "ljung_box"]
     assert np.isfinite(lb_first.statistic) and lb_first.statistic == lb_second.statistic
     assert "p = nan" not in first.verdict and "p = nan" not in second.verdict
+
+
+def test_a_monte_carlo_pvalue_at_its_floor_prints_as_below_it():
+    """No simulated white series reaches an AR(1) series' Ljung-Box statistic: its Monte Carlo p-value is the
+    floor 1 / (1 + B) = 1 / 8,000, which bounds the tail probability from above, not equals it. It printed
+    as 'p = 0.00013'."""
+    from kalcal.calibration.diagnostics import monte_carlo_pvalue_text
+
+    d = innovation_diagnostics(CASES["correlated"](np.random.default_rng(5)), confidence=0.99)
+    assert min(d.ljung_box_pvalue) == pytest.approx(1 / 8000, rel=1e-12)  # B = 7,999 at the 0.25% tail
+    assert "p < 0.00013 against" in d.verdict and "p = 0.00013" not in d.verdict
+    assert monte_carlo_pvalue_text(1 / 8000, 7999) == "p < 0.00013"
+    assert monte_carlo_pvalue_text(2 / 8000, 7999) == "p = 0.00025"  # above the floor: the value itself
+    assert monte_carlo_pvalue_text(1 / 100, 99) == "p ≤ 0.01"  # a floor that two digits show exactly
+    assert monte_carlo_pvalue_text(1 / 3, 2) == "p < 0.35"  # rounded up, never below the floor

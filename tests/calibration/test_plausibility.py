@@ -338,7 +338,50 @@ def test_constant_sensor_is_reported_unobservable():
     assert [w.code for w in constant.warnings("d.csv")] == ["unobservable", "noise-inconsistent"]
     assert constant.mean_nis > constant.nis_bounds()[1]
     warning = constant.warnings("d.csv")[0]
-    assert warning.code == "unobservable" and "theta1" in warning.message and "(no excitation)" in warning.message
+    assert warning.code == "unobservable" and "theta1" in warning.message and "unobservable (no excitation): " in warning.message
+    assert "information matrix is singular" in warning.message  # the cause, from the data-only information
+    # beside unobservable, the innovations are no noise-setting problem: no noise advice
+    assert "set filter.reference_noise_std" not in constant.warnings("d.csv")[1].message
+
+
+def _not_tracking(seed: int):
+    """A log whose reference varies (the default sinusoids) while the sensor reads noise that does not track it."""
+    scenario = build_scenario("scale-bias")
+    samples = sample_scale_bias(scenario, np.random.default_rng(seed), 1)
+    sensor = np.random.default_rng(seed + 100).standard_normal(samples.time.size)
+    return scenario, samples.time, samples.reference[0], sensor
+
+
+@pytest.mark.parametrize("seed", range(3, 8))
+def test_a_sensor_that_does_not_track_the_reference_is_unobservable_not_a_prior_or_noise_problem(seed):
+    """With a prior, such a log got prior-conflict and noise-inconsistent with advice to change the noise
+    settings, and no unobservable (the prior keeps the final sigma well below the no-data one). The data-only
+    fit, with its own residual scatter, cannot tell theta1 from 0: the cause is named, and nothing else
+    is advised."""
+    scenario, time, reference, sensor = _not_tracking(seed)
+    result = calibrate_scale_bias(scenario, time, reference, sensor, prior="settings", conflict=True, source="d.csv")
+    assert result.std_ratio[0] < UNOBSERVABLE_RATIO  # the old judgement did not see it
+    assert not result.data_only["tracks"] and not result.data_only["singular"]
+    found = result.warnings("d.csv")
+    assert [w.code for w in found] == ["unobservable", "noise-inconsistent"]
+    assert "the sensor does not track the reference" in found[0].message
+    assert "noise_std" not in found[1].message and "no noise setting mends" in found[1].message
+
+
+def test_a_prior_stronger_than_a_weakly_excited_log_is_named_by_the_data_only_sigma():
+    """A sensor that varies by 0.01 around 1 tracks the reference, but the log alone tells theta1 with a
+    sigma far above the prior's: unobservable, with that comparison as the cause."""
+    scenario = build_scenario("scale-bias")
+    samples = sample_scale_bias(scenario, np.random.default_rng(3), 1)
+    rng = np.random.default_rng(9)
+    sensor = 1.0 + 0.01 * rng.standard_normal(samples.time.size)
+    reference = 1.02 * sensor + 0.2 * rng.standard_normal(samples.time.size) - 0.05
+    result = calibrate_scale_bias(scenario, samples.time, reference, sensor, prior="settings", conflict=True)
+    d = result.data_only
+    assert not d["singular"] and d["weaker_than_prior"][0] and d["std"][0] > 2.06 * result.prior_std[0]
+    found = result.warnings()
+    assert found and found[0].code == "unobservable" and "data-only sigma" in found[0].message
+    assert all(w.code != "prior-conflict" for w in found)
 
 
 @pytest.mark.parametrize(

@@ -133,6 +133,17 @@ def test_all_passed_has_no_failures_section():
     assert 'class="failures"' not in page and "Every check passed" in page
 
 
+def test_the_page_says_a_pass_is_about_the_filter_not_a_log():
+    """A PASS is read as being about the log the settings came from: the page says what it tests, and
+    points to fit's adequate."""
+    from kalcal.reporting.text import scope_statement
+
+    page = build_page(_summary([_test("nis", True, 2.0, 2.1, "mean NIS 2", lower=1.9)]), [], [])
+    line = scope_statement()
+    assert "synthetic motion" in line and "not against any log" in line and "`kalcal fit`'s `adequate`" in line
+    assert f"<p class='scope'>{html.escape(line)}.</p>" in page
+
+
 def test_skipped_figure_is_noted():
     skipped = [SkippedFigure("mean_error_long", "ensemble", "Longer run", "this run has no stats_long.nc", "5.8")]
     page = build_page(_summary([_test("nis", True, 2.0, 2.1, "ok")]), [], skipped)

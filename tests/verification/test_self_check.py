@@ -73,6 +73,12 @@ def test_the_ensemble_agrees_with_the_exact_analysis(name):
     assert abs(result.statistic) <= result.bound and result.pvalue >= 0.01
     assert [part.name for part in result.parts] == list(SELF_CHECK_PARTS)
     assert result.reason is None and result.detail.startswith("The ensemble agrees")
+    # the detail's "largest |z|" is the largest over every part, with its part named
+    largest = max(result.parts, key=lambda part: abs(part.statistic))
+    assert f"largest |z| = {abs(largest.statistic):.3g} (" in result.detail
+    assert f"; {largest.name}) within ±{largest.upper:.3g}" in result.detail
+    if largest is not decisive:
+        assert f"the smallest p-value is {decisive.name}'s, |z| = {abs(decisive.statistic):.3g}" in result.detail
     if name == "colored gps":  # the report's 150 updates and 3 states: the bound docs/verification.md quotes
         assert (k, d, p) == (150, 3, 2)
         assert [round(parts[name].upper, 2) for name in SELF_CHECK_PARTS] == [4.54, 4.54, 4.77, 4.46]
@@ -193,6 +199,10 @@ def test_verify_prints_the_self_check_line(tmp_path):
     stdout = _cli("verify", "-n", 300, "--no-report", "--long-run", 0, "--set", "scenario.duration=2", "--out", out)
     summary = json.loads((out / "summary.json").read_text())
     assert self_check_line(summary["self_check"]) in stdout.splitlines()
+    # a PASS is about the filter on synthetic motion, not a log: the console says so, pointing to fit
+    from kalcal.reporting.text import scope_statement
+
+    assert scope_statement(summary) in stdout.splitlines()
 
 
 def test_scale_bias_says_why_there_is_no_self_check(tmp_path):
@@ -215,9 +225,37 @@ def test_scale_bias_says_why_there_is_no_self_check(tmp_path):
 def test_the_cli_line_for_each_outcome():
     lead = "self-check of the bench (ensemble against the exact analysis; not in the verdict)"
     base = {"statistic": -5.123, "bound": 4.4, "p_value": 1e-4, "reason": None}
-    assert self_check_line({**base, "agrees": False}) == f"{lead}: DISAGREES, largest |z| 5.12 against ±4.4, p = 0.0001"
-    assert self_check_line({**base, "agrees": False, "statistic": None, "p_value": None}).endswith("|z| nan against ±4.4, p = nan")
+    # a summary without its parts: the statistic is named for what it is, the deciding part's
+    assert self_check_line({**base, "agrees": False}) == (
+        f"{lead}: DISAGREES, |z| 5.12 of the part with the smallest p-value against ±4.4, p = 0.0001"
+    )
+    assert self_check_line({**base, "agrees": False, "statistic": None, "p_value": None}).endswith(
+        "|z| nan of the part with the smallest p-value against ±4.4, p = nan"
+    )
     assert self_check_line(None) == f"{lead}: not recorded"
+
+
+def _part(name, statistic, pvalue, bound, comparisons):
+    from kalcal.verification.results import CheckPart
+
+    share = 0.01 / 4
+    return CheckPart(name, statistic, pvalue, -bound, bound, 1 - share, share, comparisons, pvalue >= share).as_dict()
+
+
+def test_the_line_prints_the_largest_z_not_the_deciding_parts():
+    """Parts of different sizes: the part with the smallest p-value (|z| 2.29 of 150 comparisons) is not the
+    one with the largest |z| (3.14 of 13,500). The line prints the largest as the largest, and the deciding
+    part's apart (the line printed 'largest |z| 2.29' for this run)."""
+    lead = "self-check of the bench (ensemble against the exact analysis; not in the verdict)"
+    parts = [_part("mean_error", 2.29, 0.33, 3.9, 150), _part("error_estimate", 3.14, 0.9, 4.6, 13_500)]
+    document = {"statistic": 2.29, "bound": 3.9, "p_value": 1.0, "agrees": True, "reason": None, "parts": parts}
+    line = self_check_line(document)
+    assert line == (
+        f"{lead}: agrees, largest |z| 3.14 (error_estimate) against ±4.6; smallest p-value: |z| 2.29 (mean_error) "
+        "against ±3.9, p = 1"
+    )
+    same = {**document, "parts": [parts[1]], "statistic": 3.14, "bound": 4.6}
+    assert self_check_line(same) == f"{lead}: agrees, largest |z| 3.14 (error_estimate) against ±4.6, p = 1"
 
 
 def test_a_rounding_level_variance_is_left_out_not_a_disagreement():

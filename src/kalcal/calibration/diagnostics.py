@@ -105,6 +105,19 @@ class InnovationDiagnostics:
         return document
 
 
+def monte_carlo_pvalue_text(pvalue: float, draws: int) -> str:
+    """A Monte Carlo p-value (1 + #{simulated >= Q}) / (1 + B) in words: ``p = 0.0031``, or at its floor
+    1 / (1 + B), where no simulated value reached the statistic, ``p < 0.00013`` (the tail probability is
+    below the resolution of B draws, not equal to it)."""
+    floor = 1.0 / (1.0 + draws)
+    if pvalue <= floor * (1.0 + 1e-9):
+        shown = float(f"{floor:.2g}")
+        if shown < floor:  # rounded down: the next value of two digits up, so the printed bound holds
+            shown = float(f"{floor * (1 + 0.05):.2g}")
+        return f"p ≤ {shown:.2g}" if shown == floor else f"p < {shown:.2g}"
+    return f"p = {pvalue:.2g}"
+
+
 def _nan_max(values: list[float]) -> float:
     """The largest value that is a number (NaN when none is), whatever their order."""
     finite = [v for v in values if not np.isnan(v)]
@@ -171,7 +184,7 @@ def innovation_diagnostics(
     if correlated:
         problems.append(
             f"{' and '.join(correlated)} innovations correlated in time (Ljung-Box over {lags} lags, "
-            f"p = {np.nanmin(pvalues):.2g} against {share / p:.2g}): the model misses a dynamic (a drifting bias, a scale "
+            f"{monte_carlo_pvalue_text(float(np.nanmin(pvalues)), null.size)} against {share / p:.2g}): the model misses a dynamic (a drifting bias, a scale "
             "factor) or the fixes are correlated"
         )
     verdict = CONSISTENT if not problems else "; ".join(problems)

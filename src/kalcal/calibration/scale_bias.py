@@ -38,6 +38,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from kalcal.calibration.plausibility import CalibrationWarning, check_limit
+from kalcal.calibration.scale_bias_observability import (  # noqa: F401 (DIFFUSE_RCOND: this module's before)
+    DATA_ONLY_FACTOR,
+    DIFFUSE_RCOND,
+    TRACKING_CONFIDENCE,
+    UNOBSERVABLE_RATIO,
+    data_only_information,
+)
 from kalcal.errors import DataError
 from kalcal.filters.regression import run_regression_filter
 from kalcal.filters.scale_bias import filter_scale_bias, regressors
@@ -45,8 +52,6 @@ from kalcal.models.scale_bias import STATE_NAMES, ScaleBiasScenario
 from kalcal.models.scale_bias_theta import scale_bias_from_theta, scale_bias_jacobian
 from kalcal.verification.distributions import chi2_isf, chi2_ppf, chi2_sf  # scipy.stats's values, without its import
 
-#: a final sigma above this share of the no-data sigma (near it) means the log did not excite the parameter
-UNOBSERVABLE_RATIO = 0.9
 #: the mean NIS is tested two-sided at this confidence (a consistent log fails with probability 1 - it)
 NIS_CONFIDENCE = 0.99
 #: largest plausible abs(reference), abs(sensor), in the log's own unit
@@ -55,8 +60,6 @@ SIGNAL_LIMIT = 1e12
 PRIORS = ("diffuse", "settings")
 #: data and a given prior conflict when their chi-square(2) difference exceeds this quantile
 CONFLICT_CONFIDENCE = 0.99
-#: the information matrix counts as nonsingular once det(Y) exceeds this share of trace(Y)^2
-DIFFUSE_RCOND = 1e-12
 
 
 @dataclass(frozen=True)
@@ -76,6 +79,8 @@ class ScaleBiasCalibration:
     start_samples: int = 0
     #: the data-and-prior test with the settings' prior: statistic, pvalue, bound, conflict (None without)
     conflict: dict | None = None
+    #: what the log alone tells of theta (:func:`data_only_information`); None where not computed
+    data_only: dict | None = None
 
     @property
     def std_ratio(self) -> np.ndarray:
@@ -83,8 +88,48 @@ class ScaleBiasCalibration:
         return self.std[-1] / self.prior_std
 
     def unobservable(self, threshold: float = UNOBSERVABLE_RATIO) -> list[str]:
-        """The parameters (of theta1, theta2) whose final sigma is above ``threshold`` times the no-data sigma."""
-        return [name for name, ratio in zip(STATE_NAMES, self.std_ratio) if ratio > threshold]
+        """The parameters (of theta1, theta2) the log does not determine.
+
+        Judged from the data-only information where it was computed (:func:`data_only_information`): a
+        singular one, a data-only sigma above ``DATA_ONLY_FACTOR`` no-data sigmas, or (both parameters)
+        a sensor that does not track the reference. Otherwise, from the final sigma above ``threshold``
+        times the no-data sigma."""
+        ratio_names = [name for name, ratio in zip(STATE_NAMES, self.std_ratio) if ratio > threshold]
+        if self.data_only is None:
+            return ratio_names
+        d = self.data_only
+        if d["singular"] or not d["tracks"]:
+            return list(STATE_NAMES)
+        names = [name for name, weak in zip(STATE_NAMES, d["weaker_than_prior"]) if weak]
+        return [name for name in STATE_NAMES if name in names or name in ratio_names]
+
+    def unobservable_cause(self) -> str | None:
+        """Why :meth:`unobservable` names parameters, in words (None when it names none)."""
+        names = self.unobservable()
+        if not names:
+            return None
+        d = self.data_only
+        if d is not None and d["singular"]:
+            return (
+                f"the log alone does not determine theta (its information matrix is singular, "
+                f"reciprocal condition {d['rcond']:.2g}): the sensor reads one value, so only theta1 z + theta2 is seen"
+            )
+        parts = []
+        for name, weak, sigma, prior in zip(STATE_NAMES, *(
+            (d["weaker_than_prior"], d["std"], self.prior_std) if d is not None else ((), (), ())
+        )):
+            if weak:
+                parts.append(f"{name}'s data-only sigma {sigma:.3g} is above {DATA_ONLY_FACTOR:.3g} times its prior sigma {prior:.3g}")
+        if parts:
+            return f"the log tells less than the prior ({'; '.join(parts)}; reciprocal condition {d['rcond']:.2g})"
+        if d is not None and not d["tracks"]:
+            return (
+                f"the sensor does not track the reference (the log alone gives theta1 = "
+                f"{d['theta'][0]:.3g} +- {d['empirical_std'][0]:.2g}, with the residual scatter the log shows, "
+                f"not distinguishable from 0 at {TRACKING_CONFIDENCE:.0%})"
+            )
+        ratios = ", ".join(f"{name} {ratio:.2f}" for name, ratio in zip(STATE_NAMES, self.std_ratio) if name in names)
+        return f"the final sigma is above {UNOBSERVABLE_RATIO:g} of the sigma with no data ({ratios})"
 
     def nis_bounds(self, confidence: float = NIS_CONFIDENCE) -> tuple[float, float]:
         """Two-sided bounds of the mean NIS of the samples used, chi-square(K) / K, at ``confidence``."""
@@ -98,10 +143,24 @@ class ScaleBiasCalibration:
         return bool(lower <= self.mean_nis <= upper)
 
     def warnings(self, source: str = "data") -> list[CalibrationWarning]:
-        """An ``unobservable`` warning naming the parameters the log did not excite, and a
-        ``noise-inconsistent`` one when the mean NIS is outside its bounds; empty when neither."""
+        """An ``unobservable`` warning naming the parameters the log does not determine and why; a
+        ``prior-conflict`` one when data and prior disagree; a ``noise-inconsistent`` one when the mean NIS
+        is outside its bounds. Beside ``unobservable`` neither of the other two is a cause: the data-only
+        estimate that the prior is tested against is not determined, and innovations that the model
+        cannot follow are not fixed by the noise settings, so they say so and give no advice of their own."""
         found = []
-        if self.conflict is not None and self.conflict["conflict"]:
+        names = self.unobservable()
+        cause = self.unobservable_cause()
+        if names:
+            found.append(
+                CalibrationWarning(
+                    "unobservable",
+                    f"{source}: {' and '.join(names)} unobservable (no excitation): {cause}, so the estimate is the prior's, "
+                    "not the log's; the sensor must track the reference and vary over its range (scale_error and bias "
+                    "follow from both)",
+                )
+            )
+        if self.conflict is not None and self.conflict["conflict"] and not names:
             c = self.conflict
             found.append(
                 CalibrationWarning(
@@ -111,27 +170,20 @@ class ScaleBiasCalibration:
                     f"{CONFLICT_CONFIDENCE:.0%}, p = {c['pvalue']:.2g}): check filter.scale_error, filter.bias and their stds",
                 )
             )
-        names = self.unobservable()
-        if names:
-            ratios = ", ".join(f"{name} {ratio:.2f}" for name, ratio in zip(STATE_NAMES, self.std_ratio) if name in names)
-            found.append(
-                CalibrationWarning(
-                    "unobservable",
-                    f"{source}: {' and '.join(names)} unobservable (no excitation): the final sigma is above "
-                    f"{UNOBSERVABLE_RATIO:g} of the sigma with no data ({ratios}), so the estimate is the prior's, "
-                    "not the log's; the sensor must vary over its range (scale_error and bias follow from both)",
-                )
-            )
         if not self.consistent:
             lower, upper = self.nis_bounds()
-            found.append(
-                CalibrationWarning(
-                    "noise-inconsistent",
-                    f"{source}: mean NIS {self.mean_nis:.4g} is outside its {NIS_CONFIDENCE:.0%} bounds "
-                    f"[{lower:.4g}, {upper:.4g}] for {self.samples_used} samples: the noise settings do not fit the "
-                    "log (set filter.reference_noise_std / sensor_noise_std), so the sigmas are not to be trusted",
-                )
+            measured = (
+                f"{source}: mean NIS {self.mean_nis:.4g} is outside its {NIS_CONFIDENCE:.0%} bounds "
+                f"[{lower:.4g}, {upper:.4g}] for {self.samples_used} samples"
             )
+            advice = (
+                ": the model cannot follow a reference that the sensor does not determine (the unobservable "
+                f"{' and '.join(names)} above), which no noise setting mends"
+                if names
+                else ": the noise settings do not fit the log (set filter.reference_noise_std / sensor_noise_std), "
+                "so the sigmas are not to be trusted"
+            )
+            found.append(CalibrationWarning("noise-inconsistent", measured + advice))
         return found
 
     @property
@@ -284,6 +336,12 @@ def calibrate_scale_bias(
             prior_std=np.sqrt(np.diag(scenario.filter_prior().cov + reference.size * scenario.filter_process_noise())),
             conflict=found,
         )
+    data_only = data_only_information(reference, sensor, scenario.filter_noise_variance())
+    if prior != "diffuse":
+        data_only["weaker_than_prior"] = [bool(s > DATA_ONLY_FACTOR * p) for s, p in zip(data_only["std"], result.prior_std)]
+    from dataclasses import replace
+
+    result = replace(result, data_only=data_only)
     theta1 = float(result.theta[-1, 0])
     if not theta1 > 0:
         raise DataError(

@@ -77,6 +77,9 @@ def verify(
             )
     summary = result.run.summary
     _common._print_checks(summary)
+    from kalcal.reporting.text import scope_statement
+
+    _common.console.print(scope_statement(summary), markup=False, soft_wrap=True)
     from kalcal.analysis.power import power_line
     from kalcal.verification.self_check import self_check_line
 

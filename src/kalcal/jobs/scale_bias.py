@@ -161,7 +161,14 @@ def compute_scale_bias_calibration(
             "std_ratio": dict(zip(STATE_NAMES, result.std_ratio.tolist())),
             "threshold": UNOBSERVABLE_RATIO,
             "unobservable": result.unobservable(),
-            "note": "final sigma / sigma with no data; above the threshold the log did not excite the parameter",
+            "cause": result.unobservable_cause(),
+            # what the log alone tells (the judgement's grounds): its information's reciprocal condition and
+            # each parameter's data-only sigma, with the noise settings and with the log's own residual scatter
+            "data_only": {
+                key: result.data_only[key]
+                for key in ("rcond", "singular", "theta", "std", "empirical_std", "tracks", "weaker_than_prior")
+            },
+            "note": "final sigma / sigma with no data; the judgement rests on the data-only information (cause)",
         },
         "prior": {"kind": prior, "note": why, "start_samples": result.start_samples, "conflict": result.conflict},
         "stability": stability.as_dict(),

@@ -25,7 +25,7 @@ from kalcal.reporting.figure_entries import FigureEntry, SkippedFigure
 from kalcal.reporting.markup import esc
 from kalcal.reporting.run_tables import final_table, reproduce_section, settings_section, timing_section
 from kalcal.filters.steady_state import SteadyStateView
-from kalcal.reporting.text import confidence_statement
+from kalcal.reporting.text import confidence_statement, scope_statement
 from kalcal.reporting.theory import power_section, self_check_section
 from kalcal.reporting.verdicts import failures_section, verdicts_section
 from kalcal.verification.text import fmt
@@ -104,6 +104,7 @@ def build_page(
         engine=summary["engine"],
         seed=summary["seed"],
         statement=confidence_statement(summary),
+        scope=scope_statement(summary),
         version=summary.get("kalcal_version", ""),
         css=Markup(page_css()),
         # each section escapes the run's text it holds: marked as markup so it is not escaped twice

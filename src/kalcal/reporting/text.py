@@ -16,7 +16,14 @@ from kalcal.verification.text import (
     written_nan,
 )
 
-__all__ = ["confidence_statement", "levels_text", "measured_text", "shortfall"]
+__all__ = ["confidence_statement", "levels_text", "measured_text", "scope_statement", "shortfall"]
+
+#: what a verification is about, on the console and the page: a PASS is read as being about a log otherwise
+SCOPE_STATEMENT = (
+    "kalcal verify tests the filter against its own settings (the truth of [truth]) on synthetic motion simulated "
+    "from them, not against any log: a PASS says nothing about whether the model fits a log; for that, see "
+    "`kalcal fit`'s `adequate`"
+)
 
 
 def levels_text(test: Mapping[str, Any], summary: Mapping[str, Any] | None = None) -> str:
@@ -76,3 +83,8 @@ def confidence_statement(summary: Mapping[str, Any]) -> str:
         f"{fmt(100 * (1 - confidence))}%); a correct filter fails at least one of the {checks} checks with "
         f"probability at most {fmt(100 * bound)}% (Bonferroni)"
     )
+
+
+def scope_statement(summary: Mapping[str, Any] | None = None) -> str:
+    """What the run's verdict is about (the filter on synthetic motion, not a log), in one line."""
+    return SCOPE_STATEMENT

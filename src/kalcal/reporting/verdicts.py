@@ -36,11 +36,12 @@ def failures_section(summary: Mapping[str, Any]) -> str:
     for test in failed:
         cause = _cause(test)
         reason = cause.get("reason")
-        lead = (
-            f'<p class="cause">Likely cause: {esc(reason.rstrip("."))}.</p>'
-            if reason
-            else '<p class="cause">Likely cause: not identified by the check; see the figures below.</p>'
-        )
+        if cause.get("explained_by") == "false_alarm":  # the truth equals the filter: no cause to name
+            lead = f'<p class="cause">{esc(reason.rstrip("."))}.</p>'
+        elif reason:
+            lead = f'<p class="cause">Likely cause: {esc(reason.rstrip("."))}.</p>'
+        else:
+            lead = '<p class="cause">Likely cause: not identified by the check; see the figures below.</p>'
         explained, direction = explained_by_text(cause), direction_text(cause)
         if explained:
             lead += f"<p><strong>Accounted for by:</strong> {esc(explained)}.</p>"

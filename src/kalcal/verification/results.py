@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
@@ -27,6 +27,7 @@ from kalcal.verification.distributions import chi2_cdf, chi2_sf, normal_sf
 EXPLAINED_BY_TEXT = {
     "model_error": "the mean error the filter's model predicts against the truth (the deterministic model error)",
     "mean_error": "the nonzero mean error (centered on the ensemble means this check passes; see mean_error)",
+    "false_alarm": "a false alarm: the truth equals the filter, and a correct filter fails a check at its stated rate",
 }
 #: which way a filter's covariance is wrong (each value of ``Cause.direction``), in words
 DIRECTION_TEXT = {
@@ -43,10 +44,12 @@ class Cause:
 
     Attributes
     ----------
-    explained_by : {"model_error", "mean_error"} or None
+    explained_by : {"model_error", "mean_error", "false_alarm"} or None
         ``"model_error"``: the mean error the filter's model predicts against the truth (the filter run on
         the truth's mean trajectory) accounts for the failure; ``"mean_error"``: the failure of a raw-moment
-        check goes away once centered on the ensemble means (see the ``mean_error`` check); None: not
+        check goes away once centered on the ensemble means (see the ``mean_error`` check);
+        ``"false_alarm"``: the truth equals the filter, so the failure is one of the false alarms a correct
+        filter gives at the check's stated rate (:func:`as_false_alarm`), with no direction; None: not
         accounted for (or the check passed).
     direction : {"overconfident", "underconfident"} or None
         ``"overconfident"``: the actual spread is larger than the filter's covariance says (noise
@@ -184,6 +187,31 @@ class CheckResult:
         document = asdict(self)
         document["parts"] = [part.as_dict() for part in self.parts]
         return document
+
+
+def false_alarm_cause(confidence: float) -> Cause:
+    """The cause of a failed check where the truth equals the filter: a false alarm at the stated rate."""
+    return Cause(
+        explained_by="false_alarm",
+        reason=(
+            f"False alarm: the truth equals the filter, so nothing is wrong with it; a correct filter fails this check "
+            f"with probability at most {1.0 - confidence:.3g} (its stated rate), and this run is one of those: rerun "
+            "with another seed (--seed)"
+        ),
+    )
+
+
+def as_false_alarm(check: CheckResult) -> CheckResult:
+    """A failed check of a run whose truth equals its filter, named a false alarm instead of given a cause.
+
+    Where the truth equals the filter (in everything the checks see) a failure cannot have a cause: the
+    check failed at its stated rate, and a direction or a model error would be a diagnosis of nothing.
+    A passed check is returned as it is.
+    """
+    if check.passed:
+        return check
+    cause = false_alarm_cause(check.confidence)
+    return replace(check, cause=cause, detail=with_reason(check.measured, cause))
 
 
 def normal_family_pvalue(worst: float, comparisons: int) -> float:

@@ -127,7 +127,9 @@ class SelfCheck:
     Attributes
     ----------
     statistic : float or None
-        The signed largest z of the part with the smallest p-value (None without a prediction).
+        The signed largest z of the part with the smallest p-value, the part that decides ``pvalue`` (None
+        without a prediction); not always the largest |z| over the parts, whose families differ in size
+        (each part's own is in ``parts``; the detail and :func:`self_check_line` name both).
     bound : float or None
         That part's bound (its m comparisons at alpha / 4).
     pvalue : float or None
@@ -201,6 +203,23 @@ def _worst(z: np.ndarray) -> tuple[float, int]:
     return float(z[index]), index
 
 
+def _number(value) -> float:
+    """A part's value as a float; None (a NaN written to JSON as null) as NaN."""
+    return math.nan if value is None else float(value)
+
+
+def _deciding(pvalues) -> int:
+    """The index of the part with the smallest p-value (a NaN one first)."""
+    p = [_number(v) for v in pvalues]
+    return min(range(len(p)), key=lambda j: -math.inf if math.isnan(p[j]) else p[j])
+
+
+def _largest(statistics) -> int:
+    """The index of the part with the largest |z| (a NaN one first)."""
+    z = [_number(v) for v in statistics]
+    return max(range(len(z)), key=lambda j: math.inf if math.isnan(z[j]) else abs(z[j]))
+
+
 def _z(difference: np.ndarray, var: np.ndarray, keep: np.ndarray, n: int) -> np.ndarray:
     return difference[keep] / np.sqrt(var[keep] / n)
 
@@ -267,13 +286,25 @@ def self_check(statistics: EnsembleStatistics, exact: ExactPrediction, confidenc
         worst.append((value, index, where, bound, m))
     pvalue = family_pvalue([part.pvalue for part in parts], len(SELF_CHECK_PARTS))
     agrees = bool(pvalue >= 1.0 - confidence)
-    first = min(range(len(parts)), key=lambda j: -math.inf if math.isnan(parts[j].pvalue) else parts[j].pvalue)
+    first = _deciding([part.pvalue for part in parts])
+    largest = _largest([part.statistic for part in parts])
     value, index, where, bound, m = worst[first]
     total = sum(part.comparisons for part in parts)
+
+    def located(j: int) -> str:
+        part_value, part_index, part_where, part_bound, part_m = worst[j]
+        place = part_where(part_index) if part_index >= 0 else "none"
+        side = "within" if abs(part_value) <= part_bound else "beyond"
+        return f"|z| = {abs(part_value):.3g} ({place}; {parts[j].name}) {side} ±{part_bound:.3g} (its part's {part_m} comparisons)"
+
+    # The largest |z| and the part that decides the p-value (the smallest p) differ where the parts' families
+    # differ in size: say both, each against its own part's bound.
+    lead = f"largest {located(largest)}"
+    if first != largest:
+        lead += f"; the smallest p-value is {parts[first].name}'s, {located(first)}"
     measured = (
-        f"largest |z| = {abs(value):.3g} ({where(index) if index >= 0 else 'none'}) "
-        f"{'within' if agrees else 'beyond'} ±{bound:.3g} (its part's {m} comparisons) over {total} comparisons (the "
-        f"mean error and variance of every state, E[e x̂ᵀ] and the mean innovations at every update), p = {pvalue:.3g}"
+        f"{lead}, over {total} comparisons (the mean error and variance of every state, E[e x̂ᵀ] and the mean "
+        f"innovations at every update), p = {pvalue:.3g}"
     )
     detail = (
         f"The ensemble agrees with the exact analysis of the same filter and truth: {measured}."
@@ -294,5 +325,19 @@ def self_check_line(document: dict | None) -> str:
         return f"{lead}: none ({document.get('reason')})"
     word = "agrees" if document["agrees"] else "DISAGREES"
     statistic, pvalue = document["statistic"], document["p_value"]  # NaN is written as null
-    size = "nan" if statistic is None else f"{abs(statistic):.3g}"
-    return f"{lead}: {word}, largest |z| {size} against ±{document['bound']:.3g}, p = {'nan' if pvalue is None else f'{pvalue:.3g}'}"
+    p_text = "nan" if pvalue is None else f"{pvalue:.3g}"
+    parts = document.get("parts") or []
+    if not parts:  # a summary without its parts: the deciding part's z, named for what it is
+        size = "nan" if statistic is None else f"{abs(statistic):.3g}"
+        return f"{lead}: {word}, |z| {size} of the part with the smallest p-value against ±{document['bound']:.3g}, p = {p_text}"
+
+    def z_text(part: dict) -> str:
+        size = "nan" if part["statistic"] is None else f"{abs(part['statistic']):.3g}"
+        return f"|z| {size} ({part['name']}) against ±{part['upper']:.3g}"
+
+    largest = _largest([part["statistic"] for part in parts])
+    first = _deciding([part["pvalue"] for part in parts])
+    text = f"{lead}: {word}, largest {z_text(parts[largest])}"
+    if first != largest:
+        text += f"; smallest p-value: {z_text(parts[first])}"
+    return f"{text}, p = {p_text}"
