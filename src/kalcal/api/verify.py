@@ -102,7 +102,7 @@ def verify(
         )
         with progress_callback(progress, f"{scenario if isinstance(scenario, str) else 'model'} x {n:,}") as update:
             if client is None and (workers is not None or scheduler is not None):
-                with dask_client(workers, scheduler) as client:
+                with dask_client(workers, scheduler, notes) as client:
                     return _run(model, n, seed, options, client, update, out, report, realization)
             return _run(model, n, seed, options, client, update, out, report, realization)
 
