@@ -13,7 +13,7 @@ import warnings
 import numpy as np
 import pytest
 
-from kalcal.calibration import plausibility
+from kalcal.calibration import plausibility, unit_slips
 from kalcal.calibration.accel_gps import calibrate_accel_gps
 from kalcal.calibration.diagnostics import innovation_diagnostics
 from kalcal.calibration.noise import identify_noise
@@ -392,7 +392,7 @@ def test_scale_bias_noise_settings_far_off_are_flagged():
 def test_gravity_left_in_the_accelerometer_is_flagged(sign):
     scenario = _scenario()
     imu_time, accel, fix_time, position, velocity = _logs(scenario)
-    result = _calibrate(scenario, imu_time, accel + sign * plausibility.STANDARD_GRAVITY, fix_time, position, velocity)
+    result = _calibrate(scenario, imu_time, accel + sign * unit_slips.STANDARD_GRAVITY, fix_time, position, velocity)
     codes = [w.code for w in result.warnings]
     assert codes == ["gravity-in-accel"], result.warnings
     expected = "+g" if sign > 0 else "-g"
@@ -405,18 +405,18 @@ def test_gravity_is_flagged_on_a_log_without_motion():
     still finds the offset."""
     imu_time = np.arange(0.0, 30.0, 0.005)
     rng = np.random.default_rng(1)
-    accel = plausibility.STANDARD_GRAVITY + 0.02 + 0.01 * rng.standard_normal(imu_time.size)
+    accel = unit_slips.STANDARD_GRAVITY + 0.02 + 0.01 * rng.standard_normal(imu_time.size)
     fix_time = np.arange(0.0, 30.0, 0.2)
     velocity = 0.05 * rng.standard_normal(fix_time.size)
-    warning = plausibility.accelerometer_units(imu_time, accel, fix_time, velocity, "imu.csv")
+    warning = unit_slips.accelerometer_units(imu_time, accel, fix_time, velocity, "imu.csv")
     assert warning is not None and warning.code == "gravity-in-accel"
-    assert plausibility.accelerometer_units(imu_time, accel - plausibility.STANDARD_GRAVITY, fix_time, velocity, "imu.csv") is None
+    assert unit_slips.accelerometer_units(imu_time, accel - unit_slips.STANDARD_GRAVITY, fix_time, velocity, "imu.csv") is None
 
 
 def test_acceleration_in_g_is_refused_naming_the_unit():
     scenario = _scenario()
     imu_time, accel, fix_time, position, velocity = _logs(scenario)
-    g = plausibility.STANDARD_GRAVITY
+    g = unit_slips.STANDARD_GRAVITY
     with pytest.raises(
         DataError,
         match=r"imu.csv: column 'accel': .*integrated accelerometer / GPS velocity change = 0.10\d*\): "
@@ -446,9 +446,9 @@ def test_genuine_logs_are_far_from_every_unit_slip(name):
         imu_time, accel, fix_time, position, velocity = _logs(scenario, seed)
         inside = (fix_time >= imu_time[0]) & (fix_time <= imu_time[-1])
         t, p, v = fix_time[inside], position[inside], velocity[inside]
-        assert plausibility.accelerometer_units(imu_time, accel, t, v, "imu.csv") is None
-        plausibility.position_units(t, p, v, "gps.csv")
-        integral = np.interp(t, imu_time, plausibility._cumulative_trapezoid(imu_time, accel))
-        (k, _, _), _ = plausibility._fit(v, [integral, np.ones_like(t), t - t[0]])
-        (m, _), _ = plausibility._fit(p, [plausibility._cumulative_trapezoid(t, v), np.ones_like(t)])
-        assert abs(k - 1) < plausibility.SLIP_TOLERANCE and abs(m - 1) < plausibility.SLIP_TOLERANCE, (k, m)
+        assert unit_slips.accelerometer_units(imu_time, accel, t, v, "imu.csv") is None
+        unit_slips.position_units(t, p, v, "gps.csv")
+        integral = np.interp(t, imu_time, unit_slips._cumulative_trapezoid(imu_time, accel))
+        (k, _, _), _ = unit_slips._fit(v, [integral, np.ones_like(t), t - t[0]])
+        (m, _), _ = unit_slips._fit(p, [unit_slips._cumulative_trapezoid(t, v), np.ones_like(t)])
+        assert abs(k - 1) < unit_slips.SLIP_TOLERANCE and abs(m - 1) < unit_slips.SLIP_TOLERANCE, (k, m)

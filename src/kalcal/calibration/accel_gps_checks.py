@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from kalcal.calibration import plausibility
+from kalcal.calibration import plausibility, unit_slips as slips
 from kalcal.calibration.plausibility import CalibrationWarning
 
 __all__ = ["check_plausible", "fix_warnings", "unit_slips"]
@@ -70,6 +70,6 @@ def unit_slips(
     """Unit slips that still give a number, over the usable fixes: positions in mm or ft, an accelerometer
     in g (DataError naming the unit), gravity left in the accelerometer (a warning)."""
     time, position, velocity = (np.asarray(a, dtype=float)[usable] for a in (gps_time, position, velocity))
-    plausibility.position_units(time, position, velocity, source, columns.get("position", "position"))
-    gravity = plausibility.accelerometer_units(imu_time, accel, time, velocity, imu_source, columns.get("accel", "accel"))
+    slips.position_units(time, position, velocity, source, columns.get("position", "position"))
+    gravity = slips.accelerometer_units(imu_time, accel, time, velocity, imu_source, columns.get("accel", "accel"))
     return [gravity] if gravity is not None else []
