@@ -66,6 +66,33 @@ def test_velocity_in_kmh_is_exit_status_2(sim, tmp_path):
     _one_line_error(_calibrate(sim, tmp_path, None, gps), "column 'velocity'", "is the velocity in km/h instead of m/s?")
 
 
+def test_acceleration_in_g_is_exit_status_2(sim, tmp_path):
+    imu = pd.read_csv(sim / "imu.csv")
+    imu["accel"] /= 9.80665
+    _one_line_error(_calibrate(sim, tmp_path, imu), "column 'accel'", "is the acceleration in g instead of m/s^2?")
+
+
+@pytest.mark.parametrize(("factor", "unit"), [(1000.0, "millimetres"), (1 / 0.3048, "feet")])
+def test_position_in_mm_or_ft_is_exit_status_2(sim, tmp_path, factor, unit):
+    gps = pd.read_csv(sim / "gps.csv")
+    gps["position"] *= factor
+    _one_line_error(_calibrate(sim, tmp_path, None, gps), "column 'position'", f"is the position in {unit} instead of m?")
+
+
+def test_gravity_left_in_is_a_warning_and_strict_exits_1(sim, tmp_path):
+    """On 2114039: bias 9.848, diagnostics consistent, no warning, exit 0 with --strict."""
+    imu = pd.read_csv(sim / "imu.csv")
+    imu["accel"] += 9.80665
+    for strict, status in (((), 0), (("--strict",), 1)):
+        result = _calibrate(sim, tmp_path, imu, None, *strict)
+        assert result.exit_code == status, result.output + result.stderr
+        summary = json.loads((tmp_path / "cal" / "summary.json").read_text())
+        assert [w["code"] for w in summary["warnings"]] == ["gravity-in-accel"]
+        lines = result.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("kalcal: warning: "), lines
+        assert "near +g (9.80665 m/s^2): was gravity removed from the vertical accelerometer?" in lines[0]
+
+
 def test_one_huge_sample_is_exit_status_2_naming_the_row(sim, tmp_path):
     imu = pd.read_csv(sim / "imu.csv")
     imu.loc[1000, "accel"] = 1e300

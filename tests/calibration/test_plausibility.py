@@ -13,7 +13,7 @@ import warnings
 import numpy as np
 import pytest
 
-from kalcal.calibration import plausibility
+from kalcal.calibration import plausibility, unit_slips
 from kalcal.calibration.accel_gps import calibrate_accel_gps
 from kalcal.calibration.diagnostics import innovation_diagnostics
 from kalcal.calibration.noise import identify_noise
@@ -425,3 +425,73 @@ def test_scale_bias_noise_settings_far_off_are_flagged():
     assert result.mean_nis > 50 and not result.consistent
     (warning,) = result.warnings("d.csv")
     assert warning.code == "noise-inconsistent" and "d.csv: mean NIS" in warning.message
+
+
+# Unit slips that still gave a number on 2114039: gravity left in (bias 9.848, "consistent", no warning),
+# the accelerometer in g, positions in mm or ft (each only "inconsistent", no unit named).
+
+
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_gravity_left_in_the_accelerometer_is_flagged(sign):
+    scenario = _scenario()
+    imu_time, accel, fix_time, position, velocity = _logs(scenario)
+    result = _calibrate(scenario, imu_time, accel + sign * unit_slips.STANDARD_GRAVITY, fix_time, position, velocity)
+    codes = [w.code for w in result.warnings]
+    assert codes == ["gravity-in-accel"], result.warnings
+    expected = "+g" if sign > 0 else "-g"
+    assert f"near {expected} (9.80665 m/s^2): was gravity removed from the vertical accelerometer?" in result.warnings[0].message
+    assert "imu.csv: column 'accel'" in result.warnings[0].message
+
+
+def test_gravity_is_flagged_on_a_log_without_motion():
+    """A stationary accelerometer with gravity in: the integral is g t, the velocity 0; the fit with k = 1
+    still finds the offset."""
+    imu_time = np.arange(0.0, 30.0, 0.005)
+    rng = np.random.default_rng(1)
+    accel = unit_slips.STANDARD_GRAVITY + 0.02 + 0.01 * rng.standard_normal(imu_time.size)
+    fix_time = np.arange(0.0, 30.0, 0.2)
+    velocity = 0.05 * rng.standard_normal(fix_time.size)
+    warning = unit_slips.accelerometer_units(imu_time, accel, fix_time, velocity, "imu.csv")
+    assert warning is not None and warning.code == "gravity-in-accel"
+    assert unit_slips.accelerometer_units(imu_time, accel - unit_slips.STANDARD_GRAVITY, fix_time, velocity, "imu.csv") is None
+
+
+def test_acceleration_in_g_is_refused_naming_the_unit():
+    scenario = _scenario()
+    imu_time, accel, fix_time, position, velocity = _logs(scenario)
+    g = unit_slips.STANDARD_GRAVITY
+    with pytest.raises(
+        DataError,
+        match=r"imu.csv: column 'accel': .*integrated accelerometer / GPS velocity change = 0.10\d*\): "
+        r"is the acceleration in g instead of m/s\^2\?",
+    ):
+        _calibrate(scenario, imu_time, accel / g, fix_time, position, velocity)
+    with pytest.raises(DataError, match=r"in g instead of m/s\^2"):  # gravity left in as well: still g first
+        _calibrate(scenario, imu_time, (accel + g) / g, fix_time, position, velocity)
+    with pytest.raises(DataError, match=r"9.807 times too large \(converted from g to m/s\^2 twice\?\)"):
+        _calibrate(scenario, imu_time, accel * g, fix_time, position, velocity)
+
+
+@pytest.mark.parametrize(("factor", "unit"), [(1000.0, "millimetres"), (1 / 0.3048, "feet")])
+def test_position_in_mm_or_ft_is_refused_naming_the_unit(factor, unit):
+    scenario = _scenario()
+    imu_time, accel, fix_time, position, velocity = _logs(scenario)
+    with pytest.raises(DataError, match=rf"gps.csv: column 'position': .*: is the position in {unit} instead of m\?"):
+        _calibrate(scenario, imu_time, accel, fix_time, position * factor, velocity)
+
+
+@pytest.mark.parametrize("name", list(GENUINE))
+def test_genuine_logs_are_far_from_every_unit_slip(name):
+    """The fitted ratios of genuine logs lie within SLIP_TOLERANCE of 1 (SI) and the bias far from g, so the
+    checks that name a slip have margin on both sides."""
+    scenario = _scenario(*GENUINE[name])
+    for seed in range(3):
+        imu_time, accel, fix_time, position, velocity = _logs(scenario, seed)
+        inside = (fix_time >= imu_time[0]) & (fix_time <= imu_time[-1])
+        t, p, v = fix_time[inside], position[inside], velocity[inside]
+        assert unit_slips.accelerometer_units(imu_time, accel, t, v, "imu.csv") is None
+        unit_slips.position_units(t, p, v, "gps.csv")
+        integral = np.interp(t, imu_time, unit_slips._cumulative_trapezoid(imu_time, accel))
+        (k, _, _), _ = unit_slips._fit(v, [integral, np.ones_like(t), t - t[0]])
+        (m, _), _ = unit_slips._fit(p, [unit_slips._cumulative_trapezoid(t, v), np.ones_like(t)])
+        assert abs(k - 1) < unit_slips.SLIP_TOLERANCE and abs(m - 1) < unit_slips.SLIP_TOLERANCE, (k, m)

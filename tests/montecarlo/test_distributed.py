@@ -76,3 +76,71 @@ def test_a_local_cluster_keeps_distributeds_warnings_off_stderr():
         holder.close()
     raw = [str(w.message) for w in seen if issubclass(w.category, UserWarning) and "distributed" in w.filename]
     assert raw == []
+
+
+KILL_SCRIPT = """
+import os, signal, sys
+from kalcal.cli._common import print_note
+from kalcal.models.accel_gps import AccelGpsScenario
+from kalcal.montecarlo.distributed import dask_client
+from kalcal.montecarlo.engine import run_monte_carlo
+from kalcal.montecarlo.scenarios import accel_gps_problem
+
+if __name__ == "__main__":
+    problem = accel_gps_problem(AccelGpsScenario())
+    with dask_client(2, notes=print_note) as client:
+        pids = list(client.run(os.getpid).values())
+        killed = []
+
+        def kill_one_worker(done, total):
+            if not killed and total / 3 <= done < total:
+                os.kill(pids[0], signal.SIGKILL)
+                killed.append(done)
+
+        run_monte_carlo(problem, 60_000, seed=3, block_size=1000, client=client, progress=kill_one_worker)
+    print("killed" if killed else "not killed")
+"""
+
+
+def test_a_killed_workers_log_lines_are_one_note(tmp_path):
+    """A real worker SIGKILLed mid-run: distributed logs the loss from the scheduler, the client and the
+    nanny (4 lines on 2114039, 'distributed.nanny - WARNING - Restarting worker' among them); the user
+    sees one line, ``kalcal: note: a Dask worker ...``."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "kill.py"
+    script.write_text(KILL_SCRIPT, encoding="utf-8")
+    process = subprocess.run(
+        [sys.executable, str(script)], capture_output=True, text=True, timeout=300, env={**os.environ, "COLUMNS": "400"}
+    )
+    assert process.returncode == 0, process.stderr[-3000:]
+    assert process.stdout.strip() == "killed"
+    lines = process.stderr.strip().splitlines()
+    assert len(lines) == 1, lines
+    assert lines[0].startswith("kalcal: note: a Dask worker ") and "the numbers do not change" in lines[0], lines
+
+
+def test_log_records_close_together_are_one_event():
+    import logging
+
+    from kalcal.montecarlo.distributed import EVENT_WINDOW_S, NoteHandler
+
+    notes = []
+    handler = NoteHandler(notes.append)
+
+    def record(message, at, name="distributed.scheduler"):
+        made = logging.LogRecord(name, logging.WARNING, __file__, 1, message, None, None)
+        made.created = at
+        handler.handle(made)
+
+    record("Removing worker 'tcp://127.0.0.1:1' caused the cluster to lose already computed task(s)", 100.0)
+    record("Couldn't gather keys", 100.01)
+    record("Restarting worker (status=Status.running)", 100.02, "distributed.nanny")
+    record("Restarting worker (status=Status.running)", 100.03 + EVENT_WINDOW_S + 0.01, "distributed.nanny")
+    record("Unmanaged memory use is high\nmore", 200.0, "distributed.worker.memory")
+    assert notes == [
+        "a Dask worker (tcp://127.0.0.1:1) was lost; its tasks run again on the others (the numbers do not change)",
+        "a Dask worker stopped and is restarted; its tasks run again (the numbers do not change)",
+        "Dask (distributed.worker.memory, warning): Unmanaged memory use is high",
+    ]

@@ -32,6 +32,8 @@ def verify(
     report: bool = False,
     realization: int = 0,
     command: str = "",
+    notes: Callable[[str], None] | None = None,
+    max_run_s: float | None = 24 * 3600.0,
 ) -> VerificationResult:
     """Verify a filter with a Monte Carlo: mean error, covariance, orthogonality, whiteness, NIS.
 
@@ -62,6 +64,12 @@ def verify(
         run starts); ``report`` draws the page and figures, showing realization ``realization``.
     command : str
         What ``summary.json`` records as the command.
+    notes : callable, optional
+        ``notes(text)`` hears what the run's user should know while it runs: the estimated wall time of a
+        Monte Carlo of a minute or more, and each event of a Dask cluster's own log (a worker restarted).
+    max_run_s : float, optional
+        A run estimated (half a second in) to take longer than this (s; default 24 h) is refused unless it
+        saves a ``checkpoint``; None: no limit.
 
     Returns
     -------
@@ -90,11 +98,11 @@ def verify(
             check_drawing()  # before a Dask cluster or the Monte Carlo starts
         options = dict(
             engine=engine, confidence=confidence, workers=threads, command=command, long_run=long_run,
-            batch_size=batch_size, checkpoint=checkpoint, form=form,
+            batch_size=batch_size, checkpoint=checkpoint, form=form, notes=notes, max_run_s=max_run_s,
         )
         with progress_callback(progress, f"{scenario if isinstance(scenario, str) else 'model'} x {n:,}") as update:
             if client is None and (workers is not None or scheduler is not None):
-                with dask_client(workers, scheduler) as client:
+                with dask_client(workers, scheduler, notes) as client:
                     return _run(model, n, seed, options, client, update, out, report, realization)
             return _run(model, n, seed, options, client, update, out, report, realization)
 

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from kalcal.calibration import plausibility
+from kalcal.calibration import plausibility, unit_slips as slips
 from kalcal.calibration.plausibility import CalibrationWarning
 
-__all__ = ["check_plausible", "fix_warnings"]
+__all__ = ["check_plausible", "fix_warnings", "unit_slips"]
 
 
 def check_plausible(
@@ -62,3 +62,14 @@ def fix_warnings(
         (columns.get("position", "position"), columns.get("velocity", "velocity"), columns.get("time", "time")),
     )
     return warnings + ([mismatch] if mismatch is not None else [])
+
+
+def unit_slips(
+    imu_time, accel, usable, gps_time, position, velocity, source: str, imu_source: str, columns: dict[str, str]
+) -> list[CalibrationWarning]:
+    """Unit slips that still give a number, over the usable fixes: positions in mm or ft, an accelerometer
+    in g (DataError naming the unit), gravity left in the accelerometer (a warning)."""
+    time, position, velocity = (np.asarray(a, dtype=float)[usable] for a in (gps_time, position, velocity))
+    slips.position_units(time, position, velocity, source, columns.get("position", "position"))
+    gravity = slips.accelerometer_units(imu_time, accel, time, velocity, imu_source, columns.get("accel", "accel"))
+    return [gravity] if gravity is not None else []

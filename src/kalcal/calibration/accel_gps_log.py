@@ -38,7 +38,7 @@ from typing import Any, Literal
 import numpy as np
 
 from kalcal.calibration import accel_gps_evaluation as evaluation
-from kalcal.calibration.accel_gps_checks import check_plausible, fix_warnings
+from kalcal.calibration.accel_gps_checks import check_plausible, fix_warnings, unit_slips
 from kalcal.calibration.accel_gps_result import AccelGpsCalibration, ImuGap
 from kalcal.calibration.interval_model import composed_sources, scale_parameters
 from kalcal.calibration.likelihood import innovation_loglik
@@ -306,7 +306,8 @@ def prepare_accel_gps_log(
             f"{source}: needs at least two usable fixes within the accelerometer log, got {usable.size} "
             f"({np.count_nonzero(~finite)} with a NaN field, {np.count_nonzero(finite & ~inside)} outside the log)"
         )
-    warnings = fix_warnings(
+    slips = unit_slips(imu_time, accel, usable, gps_time, gps_position, gps_velocity, source, imu_source, dict(columns or {}))
+    warnings = slips + fix_warnings(
         usable, gps_time, gps_position, gps_velocity, fix_std_p, fix_std_v, nan_std_p, nan_std_v,
         settings, source, dict(columns or {}),
     )  # fmt: skip

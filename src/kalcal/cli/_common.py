@@ -141,6 +141,11 @@ def _note_nonfinite(*paths) -> None:
             )
 
 
+def print_note(text: str) -> None:
+    """One line on stderr, ``kalcal: note: TEXT``: what a run's user should know while it runs."""
+    _error_console().print(f"kalcal: note: {text}", markup=False)
+
+
 def _print_warnings(summary: dict) -> None:
     """Each of the summary's warnings as one line on stderr."""
     for warning in summary["warnings"]:

@@ -74,6 +74,7 @@ def verify(
                 report=not no_report,
                 realization=realization,
                 command=shlex.join(["kalcal", *sys.argv[1:]]),
+                notes=_common.print_note,
             )
     summary = result.run.summary
     _common._print_checks(summary)

@@ -15,12 +15,14 @@ from kalcal.io.outputs import writes_outputs
 from kalcal.jobs.progress import JobProgress, stage
 from kalcal.jobs.verify_arguments import (  # noqa: F401 (MAX_UPDATES, MIN_REALIZATIONS, run_length: the job's limits)
     LONG_RUN_REALIZATIONS,
+    MAX_RUN_SECONDS,
     MAX_UPDATES,
     MIN_REALIZATIONS,
     check_arguments,
     check_drawing,
     default_long_run,
     info_name,
+    run_estimate_check,
     run_length,
 )
 from kalcal.jobs.verify_save import OUTPUT_NAMES, save_verification
@@ -165,6 +167,8 @@ def compute_verification(
     batch_size: int | None = None,
     checkpoint: str | Path | None = None,
     form: str = "joseph",
+    notes=None,
+    max_run_s: float | None = MAX_RUN_SECONDS,
 ) -> Verification:
     """Run n realizations and check the filter, in memory (the options are :func:`verify`'s).
 
@@ -195,6 +199,9 @@ def compute_verification(
             "settings": settings,
             **({"form": form} if form != "joseph" else {}),
         },
+        estimate=run_estimate_check(
+            checkpoint=checkpoint, notes=notes, max_run_s=max_run_s, backend="threads" if client is None else "dask"
+        ),
     )
     statistics = ensemble_statistics(run.sums)
     expected = problem.expected_mean_error()
@@ -306,6 +313,8 @@ def verify(
     form: str = "joseph",
     report: bool = False,
     realization: int = 0,
+    notes=None,
+    max_run_s: float | None = MAX_RUN_SECONDS,
 ) -> VerifyOutcome:
     """Run n realizations, check the filter, write ``out/summary.json`` and ``out/stats.nc``:
     :func:`compute_verification` then :func:`save_verification`, with the folder checked first.
@@ -324,6 +333,10 @@ def verify(
     figures and page; None without a report) and ``wall_s`` (the whole job, report included).
     The files are put in ``out`` together when the run ends, replacing the previous run's set there
     (:mod:`kalcal.io.outputs`); a run that fails or is interrupted leaves ``out`` as it was.
+    Half a second into the Monte Carlo its wall time is estimated from the rate measured so far
+    (:func:`~kalcal.jobs.verify_arguments.run_estimate_check`): a run predicted beyond ``max_run_s`` (s;
+    default 24 h, None for no limit) without a ``checkpoint``, or whose sums would not fit in the memory
+    available, is refused with a ConfigError; ``notes(text)`` hears the estimate of a run of a minute or more.
     """
     if report:
         check_drawing()  # before the Monte Carlo, which compute_verification starts
@@ -341,6 +354,8 @@ def verify(
         batch_size=batch_size,
         checkpoint=checkpoint,
         form=form,
+        notes=notes,
+        max_run_s=max_run_s,
     )
     saved = save_verification(run, out, report=report, realization=realization, progress=progress)
     return VerifyOutcome(saved.summary, run.statistics, run.checks, run.dataset, saved.paths)

@@ -117,3 +117,81 @@ def check_drawing() -> None:
 def info_name(scenario) -> str:
     """The registry name of a scenario object."""
     return type(scenario).NAME
+
+
+#: A run predicted (:class:`~kalcal.montecarlo.engine.RunEstimate`) to take longer than this on the machine
+#: at hand (s; 24 h) is refused unless it saves a checkpoint: a day's work lost to one crash is not a risk
+#: to take unasked.
+MAX_RUN_SECONDS = 24 * 3600.0
+#: A run predicted to take at least this long (s) is announced with its estimate before it goes on.
+ANNOUNCE_SECONDS = 60.0
+
+
+def duration_text(seconds: float) -> str:
+    """``seconds`` in the unit a person reads best: s, min, h, days or years (3 significant digits)."""
+    for unit, size, below in (("s", 1.0, 120.0), ("min", 60.0, 7200.0), ("h", 3600.0, 172800.0), ("days", 86400.0, 3.15576e8)):
+        if seconds < below:
+            return f"{seconds / size:.3g} {unit}"
+    return f"{seconds / 3.15576e7:.3g} years"
+
+
+def available_memory() -> int | None:
+    """Bytes this process may still allocate, as far as the system says: the smaller of the kernel's
+    ``MemAvailable`` and what the control group's ``memory.max`` leaves (cgroup v2); None where neither is
+    known (another system than Linux)."""
+    found = []
+    try:
+        with open("/proc/meminfo", encoding="ascii") as meminfo:
+            for line in meminfo:
+                if line.startswith("MemAvailable:"):
+                    found.append(int(line.split()[1]) * 1024)
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        with open("/sys/fs/cgroup/memory.max", encoding="ascii") as limit_file:
+            limit = limit_file.read().strip()
+        if limit != "max":
+            with open("/sys/fs/cgroup/memory.current", encoding="ascii") as current_file:
+                found.append(max(0, int(limit) - int(current_file.read().strip())))
+    except (OSError, ValueError):
+        pass
+    return min(found) if found else None
+
+
+def run_estimate_check(
+    *,
+    checkpoint,
+    notes=None,
+    max_run_s: float | None = MAX_RUN_SECONDS,
+    memory: int | None | str = "system",
+    backend: str = "threads",
+):
+    """The Monte Carlo's ``estimate`` callback (:func:`~kalcal.montecarlo.engine.run_monte_carlo`): refuse
+    a run predicted beyond ``max_run_s`` (s; None: no limit) without a ``checkpoint``, or one whose sums
+    would not fit in ``memory`` (bytes; ``"system"``: :func:`available_memory`; None: not checked), with a
+    :class:`~kalcal.errors.ConfigError` naming what to change; announce through ``notes(text)`` a run
+    predicted to last :data:`ANNOUNCE_SECONDS` or more."""
+
+    def check(estimate) -> None:
+        rate = (
+            f"{estimate.realizations_per_s:,.0f} realizations/s measured on {estimate.workers} "
+            f"{'Dask threads' if backend == 'dask' else 'threads'}"
+        )
+        free = available_memory() if memory == "system" else memory
+        if free is not None and estimate.memory_bytes > free:
+            raise ConfigError(
+                f"-n {estimate.total:,}: the run's sums would hold about {estimate.memory_bytes / 2**30:.3g} GiB at "
+                f"once, more than the {free / 2**30:.3g} GiB available; use fewer threads (--threads) or "
+                "processes (--workers), or a shorter scenario.duration"
+            )
+        if max_run_s is not None and checkpoint is None and estimate.total_s > max_run_s:
+            raise ConfigError(
+                f"-n {estimate.total:,}: estimated {duration_text(estimate.total_s)} on this machine ({rate}), more "
+                f"than the {duration_text(max_run_s)} a run without a checkpoint may take; spread it over more "
+                "processes (--workers N) or a cluster (--scheduler ADDRESS), or give --checkpoint FILE to run it "
+                "in parts that resume"
+            )
+        if notes is not None and estimate.total_s >= ANNOUNCE_SECONDS:
+            notes(f"estimated wall time of the Monte Carlo: {duration_text(estimate.total_s)} ({rate})")
+
+    return check

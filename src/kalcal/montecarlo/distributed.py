@@ -6,16 +6,22 @@ mid-task has its task rerun by the scheduler on another worker. The local cluste
 ignore SIGINT: a Ctrl-C stops the run (one line, ``kalcal: interrupted``) and this process closes them.
 Dask (``dask[distributed]``) is a
 default dependency of kalcal.
+
+distributed logs its own events (a worker lost, the nanny restarting it, keys gathered again) as several
+lines on stderr. Given a ``notes`` callback, :func:`dask_client` routes them while the client lives: each
+event is one call of ``notes(text)`` (the CLI prints ``kalcal: note: TEXT``), and the log lines of the
+local cluster's worker processes are forwarded to this process and routed the same way.
 """
 
 from __future__ import annotations
 
 import contextlib
 import logging
+import re
 import signal
 import threading
 import warnings
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 from kalcal.errors import ConfigError
 from kalcal.interrupts import Interrupted
@@ -30,10 +36,111 @@ def _quiet_distributed() -> Iterator[None]:
         yield
 
 
+#: log records of distributed that follow one another by less than this (s) are one event: a worker lost
+#: is logged by the scheduler, the client and the nanny within milliseconds
+EVENT_WINDOW_S = 1.0
+
+#: what a note says for the first record of an event, by the record's message
+_EVENTS = (
+    (
+        re.compile(r"Removing worker '?([^' ]+?)'? caused the cluster to lose"),
+        "a Dask worker ({0}) was lost; its tasks run again on the others (the numbers do not change)",
+    ),
+    (
+        re.compile(r"Restarting worker"),
+        "a Dask worker stopped and is restarted; its tasks run again (the numbers do not change)",
+    ),
+)
+
+
+def event_text(record: logging.LogRecord) -> str:
+    """The note of an event that begins with ``record``: a known event in words, any other as
+    ``Dask (logger, level): first line of the message``."""
+    message = record.getMessage().splitlines()[0] if record.getMessage() else ""
+    for pattern, text in _EVENTS:
+        if (match := pattern.search(message)) is not None:
+            return text.format(*match.groups())
+    return f"Dask ({record.name}, {record.levelname.lower()}): {message[:300]}"
+
+
+class NoteHandler(logging.Handler):
+    """A logging handler that turns each event of distributed's log (records closer than
+    :data:`EVENT_WINDOW_S` to the one before) into one ``notes(text)`` call (:func:`event_text`)."""
+
+    def __init__(self, notes: Callable[[str], None], window: float = EVENT_WINDOW_S):
+        super().__init__(level=logging.WARNING)
+        self.notes = notes
+        self.window = window
+        self.last = float("-inf")
+
+    def emit(self, record: logging.LogRecord) -> None:
+        fresh = record.created - self.last > self.window
+        self.last = max(self.last, record.created)
+        if fresh:
+            try:
+                self.notes(event_text(record))
+            except Exception:
+                self.handleError(record)
+
+
+def _distributed_loggers() -> list[logging.Logger]:
+    """The loggers of distributed that have handlers of their own (dask's logging configuration gives
+    ``distributed``, ``distributed.client`` and ``distributed.gc`` each a stderr handler)."""
+    names = ["distributed", *sorted(n for n in logging.root.manager.loggerDict if n.startswith("distributed."))]
+    return [logger for logger in map(logging.getLogger, names) if logger.handlers]
+
+
 @contextlib.contextmanager
-def dask_client(workers: int | None = None, scheduler: str | None = None) -> Iterator[object | None]:
+def notes_for_logs(notes: Callable[[str], None] | None) -> Iterator[None]:
+    """While the block runs, distributed's log in this process goes to ``notes`` (one call per event)
+    instead of its own stderr handlers; nothing changes for None."""
+    if notes is None:
+        yield
+        return
+    handler = NoteHandler(notes)
+    saved = [(logger, list(logger.handlers), logger.propagate) for logger in _distributed_loggers()]
+    if not any(logger.name == "distributed" for logger, _, _ in saved):
+        saved.append((logging.getLogger("distributed"), [], logging.getLogger("distributed").propagate))
+    for logger, handlers, _ in saved:
+        for old in handlers:
+            logger.removeHandler(old)
+        logger.addHandler(handler)
+        logger.propagate = False
+    try:
+        yield
+    finally:
+        for logger, handlers, propagate in saved:
+            logger.removeHandler(handler)
+            for old in handlers:
+                logger.addHandler(old)
+            logger.propagate = propagate
+
+
+def _worker_logs_forwarded_only(client) -> None:
+    """The local cluster's workers (and those the nannies restart) send their distributed log records to
+    this process (:meth:`Client.forward_logging`) instead of writing them to the terminal themselves."""
+    from distributed.diagnostics.plugin import WorkerPlugin
+
+    class SilentStderr(WorkerPlugin):
+        def setup(self, worker):
+            names = ["distributed", *(n for n in logging.root.manager.loggerDict if n.startswith("distributed."))]
+            for logger in map(logging.getLogger, names):
+                for handler in list(logger.handlers):
+                    if type(handler) is logging.StreamHandler:  # the terminal's, not the forwarding handler
+                        logger.removeHandler(handler)
+
+    client.register_plugin(SilentStderr(), name="kalcal-silent-stderr")
+    client.forward_logging("distributed", level=logging.WARNING)
+
+
+@contextlib.contextmanager
+def dask_client(
+    workers: int | None = None, scheduler: str | None = None, notes: Callable[[str], None] | None = None
+) -> Iterator[object | None]:
     """A ``dask.distributed.Client``: on ``scheduler`` if given, else on a new local cluster of ``workers``
-    single-threaded processes; None when neither is asked for (the engine then uses local threads)."""
+    single-threaded processes; None when neither is asked for (the engine then uses local threads).
+    ``notes(text)``, if given, hears each event of distributed's own log instead of stderr (module
+    docstring)."""
     if workers is None and scheduler is None:
         yield None
         return
@@ -50,11 +157,19 @@ def dask_client(workers: int | None = None, scheduler: str | None = None) -> Ite
             client = Client(scheduler, timeout="10s")
         except (OSError, TimeoutError, ValueError) as exc:
             raise ConfigError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
-        with client:
+        with notes_for_logs(notes), client:
             yield client
         return
     # the worker processes start with SIGINT ignored: Ctrl-C (sent to the whole process group) stops this
     # process, which then closes the cluster, instead of every worker printing its own traceback
+    with notes_for_logs(notes):
+        yield from _local_cluster(workers, notes)
+
+
+def _local_cluster(workers: int, notes) -> Iterator[object]:
+    """:func:`dask_client`'s local cluster, its client yielded."""
+    from distributed import Client, LocalCluster
+
     with _sigint_ignored(), _quiet_distributed():
         cluster = LocalCluster(
             n_workers=workers,
@@ -66,6 +181,8 @@ def dask_client(workers: int | None = None, scheduler: str | None = None) -> Ite
             scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
         )
     with _quiet_distributed(), cluster, Client(cluster) as client:
+        if notes is not None:
+            _worker_logs_forwarded_only(client)
         try:
             yield client
         except (Interrupted, KeyboardInterrupt):

@@ -14,7 +14,7 @@ import functools
 import itertools
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor
 from concurrent.futures import wait as futures_wait
 from dataclasses import dataclass
@@ -36,11 +36,21 @@ Progress = Callable[[int, int], None]
 
 
 def block_sizes(n: int, block_size: int = BLOCK_SIZE) -> list[int]:
-    """Sizes of the blocks that make up n realizations (all full but the last)."""
+    """Sizes of the blocks that make up n realizations (all full but the last), as a list: for a test or
+    a benchmark of a modest n (the engine itself never lists them: :func:`block_count`, :func:`block_size_of`)."""
+    return [block_size_of(n, b, block_size) for b in range(block_count(n, block_size))]
+
+
+def block_count(n: int, block_size: int = BLOCK_SIZE) -> int:
+    """How many blocks make up n realizations: ceil(n / block_size)."""
     if n < 1:
         raise ValueError(f"number of realizations must be positive, got {n}")
-    full, rest = divmod(n, block_size)
-    return [block_size] * full + ([rest] if rest else [])
+    return -(-n // block_size)
+
+
+def block_size_of(n: int, block: int, block_size: int = BLOCK_SIZE) -> int:
+    """The size of block ``block`` of n realizations: ``block_size``, the last block what is left."""
+    return min(block_size, n - block * block_size)
 
 
 def block_generator(seed: int, block: int) -> np.random.Generator:
@@ -68,7 +78,7 @@ def realization(
     if not 0 <= index < n:
         raise ValueError(f"realization index must lie in [0, {n}), got {index}")
     block, offset = divmod(index, block_size)
-    result = run_block(problem, seed, block, block_sizes(n, block_size)[block], engine)
+    result = run_block(problem, seed, block, block_size_of(n, block, block_size), engine)
     one = slice(offset, offset + 1)
     own = np.array(result.filter_cov[offset])
     normalized = None if result.normalized_residual is None else result.normalized_residual[one]
@@ -142,9 +152,57 @@ def _merge_in_order(pending: dict[int, MomentSums], merged: MomentSums | None, n
     return merged, next_block
 
 
-def _chunks(first: int, sizes: list[int], per_task: int) -> list[list[tuple[int, int]]]:
-    todo = [(b, sizes[b]) for b in range(first, len(sizes))]
-    return [todo[i : i + per_task] for i in range(0, len(todo), per_task)]
+def _chunks(first: int, n: int, block_size: int, per_task: int) -> Iterator[list[tuple[int, int]]]:
+    """The tasks' lists of consecutive ``(block, size)`` from block ``first`` on, made as they are asked for:
+    the engine holds only the tasks in flight, so its memory does not grow with n (n = 10^12 is 2.4 x 10^8
+    blocks; listed up front, they took more memory than a usual machine has)."""
+    count = block_count(n, block_size)
+    for start in range(first, count, per_task):
+        yield [(b, block_size_of(n, b, block_size)) for b in range(start, min(start + per_task, count))]
+
+
+@dataclass(frozen=True)
+class RunEstimate:
+    """What the first :data:`PILOT_S` seconds of a run measured, and what they predict for the whole.
+
+    Attributes
+    ----------
+    total_s : float
+        Predicted wall time of the whole run (s): the time so far plus the realizations left at the rate
+        measured since the first task finished (the first tasks also load the compiled kernels).
+    elapsed_s : float
+        Wall time so far (s).
+    realizations_per_s : float
+        The measured rate (realizations per second, all workers together).
+    done, total : int
+        Realizations finished (or resumed from the checkpoint) and asked for.
+    workers : int
+        Threads, or the Dask cluster's threads.
+    memory_bytes : int
+        The most the run's sums may hold at once (bytes): one task's sums as measured, times the tasks in
+        flight and those waiting for their turn in the block-order fold, plus the fold itself. It does not
+        grow with N; the blocks' own working arrays (per thread or worker, freed as each block ends) are
+        not in it.
+    """
+
+    total_s: float
+    elapsed_s: float
+    realizations_per_s: float
+    done: int
+    total: int
+    workers: int
+    memory_bytes: int
+
+
+#: Seconds after the first task finishes over which the rate of a run is measured for its estimate.
+PILOT_S = 0.5
+
+Estimate = Callable[[RunEstimate], None]
+
+
+def _nbytes(sums: MomentSums) -> int:
+    """Bytes of a MomentSums' arrays."""
+    return sum(v.nbytes for v in vars(sums).values() if isinstance(v, np.ndarray))
 
 
 def run_monte_carlo(
@@ -160,6 +218,7 @@ def run_monte_carlo(
     blocks_per_task: int = 1,
     checkpoint: str | Path | None = None,
     checkpoint_key: dict | None = None,
+    estimate: Estimate | None = None,
 ) -> MonteCarloRun:
     """Run n realizations of ``problem`` and return their merged sums.
 
@@ -187,15 +246,24 @@ def run_monte_carlo(
     checkpoint_key : dict, optional
         What else identifies the run for the checkpoint (the scenario's settings); N, seed, engine and
         block size are always included.
+    estimate : callable, optional
+        ``estimate(RunEstimate)``, called once, :data:`PILOT_S` seconds after the first task finished
+        (not at all for a run done by then): the predicted wall time and memory. An exception it raises
+        stops the run (the tasks in flight end first) and reaches the caller.
 
     Returns
     -------
     MonteCarloRun
         Whatever runs the blocks and however they are grouped, the sums are folded in block order, so
         a given seed and N give identical numbers.
+
+    Notes
+    -----
+    The blocks' list is never built: tasks are made as earlier ones finish, at most two per worker in
+    flight, so the memory a run holds does not depend on N.
     """
     check_engine(problem, engine)
-    sizes = block_sizes(n, block_size)
+    count = block_count(n, block_size)
     digest = fingerprint({"n": n, "seed": seed, "engine": engine, "block_size": block_size, **(checkpoint_key or {})})
     start = time.perf_counter()
     merged: MomentSums | None = None
@@ -203,10 +271,10 @@ def run_monte_carlo(
     if checkpoint is not None and (saved := load_checkpoint(checkpoint, digest)) is not None:
         merged, next_block = saved
     resumed = next_block
-    done = sum(sizes[:next_block])
+    done = min(n, next_block * block_size)
     if progress is not None:
         progress(done, n)
-    chunks = _chunks(next_block, sizes, max(1, int(blocks_per_task)))
+    chunks = _chunks(next_block, n, block_size, max(1, int(blocks_per_task)))
     pending: dict[int, MomentSums] = {}
 
     if client is None:
@@ -225,10 +293,13 @@ def run_monte_carlo(
         first_done = partial(dask_wait, return_when="FIRST_COMPLETED")
         in_flight_limit = 2 * workers
 
+    # the pilot: the rate is measured from the first finished task on, after the kernels are loaded
+    pilot: tuple[float, int] | None = None  # (time, realizations done) when the first task finished
+    part_bytes = 0
     with contextlib.ExitStack() as stack:
         for context in contexts:
             stack.enter_context(context)
-        queue = iter(chunks)
+        queue = chunks
         running = {submit(block_task, problem, seed, chunk, engine) for chunk in itertools.islice(queue, in_flight_limit)}
         while running:
             finished, running = first_done(running)
@@ -236,7 +307,8 @@ def run_monte_carlo(
             for future in finished:
                 for b, part in future.result():
                     pending[b] = part
-                    done += sizes[b]
+                    done += block_size_of(n, b, block_size)
+                    part_bytes = part_bytes or _nbytes(part)
                 for chunk in itertools.islice(queue, 1):
                     running.add(submit(block_task, problem, seed, chunk, engine))
             before = next_block
@@ -245,6 +317,25 @@ def run_monte_carlo(
                 save_checkpoint(checkpoint, merged, next_block, digest)
             if progress is not None:
                 progress(done, n)
-    if merged is None or pending or next_block != len(sizes):
+            if estimate is not None and running:
+                now = time.perf_counter()
+                if pilot is None:
+                    pilot = (now, done)
+                elif now - pilot[0] >= PILOT_S and done > pilot[1]:
+                    rate = (done - pilot[1]) / (now - pilot[0])
+                    per_task = max(1, int(blocks_per_task))
+                    estimate(
+                        RunEstimate(
+                            total_s=now - start + (n - done) / rate,
+                            elapsed_s=now - start,
+                            realizations_per_s=rate,
+                            done=done,
+                            total=n,
+                            workers=workers,
+                            memory_bytes=(2 * in_flight_limit * per_task + 1) * part_bytes,
+                        )
+                    )
+                    estimate = None
+    if merged is None or pending or next_block != count:
         raise RuntimeError("Monte Carlo run ended with blocks missing")  # a bug, not a user error
     return MonteCarloRun(merged, seed, engine, block_size, time.perf_counter() - start, workers, resumed)
