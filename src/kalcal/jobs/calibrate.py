@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import contextlib
-import threading
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -102,17 +101,6 @@ def save_calibration(calibration: Calibration, out: str | Path) -> dict[str, Pat
     return write(calibration, out)
 
 
-def _whiteness_null() -> None:
-    """Draw (and so cache) the whiteness null of a log of REFERENCE_FIXES fixes or more, of the job's two
-    innovations (position, velocity) at the diagnostics' confidence; an error is left to the diagnostics,
-    which meet it drawing their own."""
-    from kalcal.calibration.diagnostics import CONFIDENCE, whiteness_null
-    from kalcal.calibration.ljung_box import REFERENCE_FIXES
-
-    with contextlib.suppress(Exception):
-        whiteness_null(REFERENCE_FIXES + 1, 2, CONFIDENCE)
-
-
 def compute_accel_gps_calibration(
     scenario: AccelGpsScenario,
     imu_path: str | Path | pd.DataFrame,
@@ -152,7 +140,6 @@ def compute_accel_gps_calibration(
     # the accel-gps filter (and numba under it) when it runs: a scale-bias calibration imports this module too
     from kalcal.calibration.accel_gps import bias_walk_variance, calibrate_accel_gps, prior_conflict
     from kalcal.calibration.diagnostics import innovation_diagnostics
-    from kalcal.calibration.ljung_box import REFERENCE_FIXES
     from kalcal.calibration.smoothing import smooth_calibration
 
     windows = check_windows(windows)
@@ -171,17 +158,6 @@ def compute_accel_gps_calibration(
     )
     require_increasing(imu["time"], imu_path, imu_map["time"])
     require_increasing(gps["time"], gps_path, gps_map["time"])
-    # the whiteness test's simulated null (0.12-0.15 s of CPU in a fresh process, cached after) is the same
-    # for every log of REFERENCE_FIXES fixes used or more: for a log of more it is drawn on another core
-    # while the filter runs. A few fixes go unused (the first starts the filter, a diffuse prior leaves out
-    # the next, the gate rejects some): with fewer than REFERENCE_FIXES left the diagnostics draw their own
-    null = None
-    if gps["time"].size >= REFERENCE_FIXES + 10:
-        null = threading.Thread(target=_whiteness_null, name="kalcal-whiteness-null", daemon=True)
-        try:
-            null.start()
-        except RuntimeError:  # no thread to be had: the diagnostics draw it
-            null = None
     logs = (imu["time"], imu["accel"], gps["time"], gps["position"], gps["velocity"])
     stds = {"position_std": gps.get("position_std"), "velocity_std": gps.get("velocity_std")}
     options = dict(
@@ -221,8 +197,6 @@ def compute_accel_gps_calibration(
     }
     used = ~result.rejected
     used[: result.skip] = False
-    if null is not None:
-        null.join()
     diagnostics = innovation_diagnostics(normalized[used])
     warnings = list(result.warnings)
     conflict = prior_conflict(result, walk_variance=bias_walk_variance(scenario, result, imu["time"]))
