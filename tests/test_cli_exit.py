@@ -10,11 +10,11 @@ import pytest
 
 @pytest.mark.parametrize(
     ("args", "status"),
-    [(["--version"], 0), (["verify", "-n", "5", "--no-report"], 2), (["verify", "--no-such-option"], 2)],
+    [(["--version"], 0), (["--help"], 0), (["verify", "-n", "5", "--no-report"], 2), (["verify", "--no-such-option"], 2)],
 )
 def test_the_console_script_keeps_main_s_exit_status_and_its_one_line(args, status):
     ran = subprocess.run([sys.executable, "-m", "kalcal", *args], capture_output=True, text=True, timeout=300)
-    assert ran.returncode == status, ran.stdout + ran.stderr
+    assert ran.returncode == status and "Traceback" not in ran.stderr, ran.stdout + ran.stderr
     if status:
         assert ran.stderr.startswith("kalcal: error: ") and len(ran.stderr.strip().splitlines()) == 1, ran.stderr
 
