@@ -32,8 +32,7 @@ def _refuse_nc(event, args):
 def _refusing_nc(draw):
     """``draw`` with every open of a ``*.nc`` file refused while it runs: Python's ``open``, ``os.open``
     (and so scipy's netcdf_file, which xarray's scipy engine reads through) raise the ``open`` audit
-    event, in this process and in the drawing workers forked from it, where the refusal fails the figure
-    and so the job."""
+    event, where the refusal fails the figure and so the job."""
     global _HOOKED
 
     if not _HOOKED:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -18,8 +17,6 @@ from kalcal.io.outputs import mark_inputs, writes_outputs
 from kalcal.io.results import write_csv, write_json
 from kalcal.models.accel_gps import AccelGpsScenario, AccelGpsSettings
 from kalcal.models.config import section_values
-from kalcal.reporting.figure_names import CALIBRATION_FIGURE
-from kalcal.reporting.figure_process import submit
 
 if TYPE_CHECKING:  # a calibration from Parquet files loads no pandas (kalcal.io.logs)
     import pandas as pd
@@ -83,19 +80,16 @@ def save_calibration(calibration: Calibration, out: str | Path) -> dict[str, Pat
     def write(calibration: Calibration, out: Path) -> dict[str, Path]:
         out = Path(out)
         paths = {}
-        figure = contextlib.nullcontext()
-        if "calibration.png" in names:  # drawn in the job's figure process, if any, while the files below are written
+        paths["estimates.csv"] = write_csv(out / "estimates.csv", calibration.columns)
+        paths["summary.json"] = write_json(out / "summary.json", calibration.summary)
+        if "calibration.png" in names:
+            from kalcal.plots.calibration import plot_calibration
+
             columns = calibration.columns
             normalized = np.column_stack([columns["innovation_position"], columns["innovation_velocity"]])
-            figure = submit(
-                CALIBRATION_FIGURE, columns["time"], columns["bias"], columns["bias_std"], normalized,
-                out / "calibration.png",
+            paths["calibration.png"] = plot_calibration(
+                columns["time"], columns["bias"], columns["bias_std"], normalized, out / "calibration.png"
             )
-        with figure:  # waited for, or stopped before an error goes on and the outputs are cleaned up
-            paths["estimates.csv"] = write_csv(out / "estimates.csv", calibration.columns)
-            paths["summary.json"] = write_json(out / "summary.json", calibration.summary)
-        if "calibration.png" in names:
-            paths["calibration.png"] = figure.result()
         return paths
 
     return write(calibration, out)

@@ -18,7 +18,6 @@ from kalcal.jobs.verify_arguments import (  # noqa: F401 (MAX_UPDATES, MIN_REALI
     MAX_UPDATES,
     MIN_REALIZATIONS,
     check_arguments,
-    check_drawing,
     default_long_run,
     info_name,
     run_length,
@@ -294,8 +293,6 @@ def verify(
     The files are put in ``out`` together when the run ends, replacing the previous run's set there
     (:mod:`kalcal.io.outputs`); a run that fails or is interrupted leaves ``out`` as it was.
     """
-    if report:
-        check_drawing()  # before the Monte Carlo, which compute_verification starts
     run = compute_verification(
         scenario,
         n,
