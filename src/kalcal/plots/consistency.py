@@ -26,7 +26,6 @@ from kalcal.plots._common import (
     styled,
     time_label,
 )
-from kalcal.plots._layout import colorbar_beside
 from kalcal.verification.bounds import COVARIANCE_PARTS, centered_nees_bounds, chi2_mean_bounds, whiteness_pairs_bound
 from kalcal.verification.covariance import centered_nees
 
@@ -186,7 +185,7 @@ def plot_residual_correlation(dataset: xr.Dataset, path: str | Path) -> Path:
             ax.set_ylabel(label("t_k", "s"))
             ax.set_xlabel(label("t_j", "s"))
     figure.suptitle(f"Residual correlation over pairs of updates, N = {count:,}; whiteness bound ±{bound:.3g} (black ticks)")
-    colorbar = colorbar_beside(figure, image, "correlation (dimensionless)", shrink=0.9)
+    colorbar = figure.colorbar(image, ax=list(figure.axes), shrink=0.9, label="correlation (dimensionless)")
     colorbar.ax.axhline(bound, color="black", linewidth=1.0)
     colorbar.ax.axhline(-bound, color="black", linewidth=1.0)
     return save(figure, path)
