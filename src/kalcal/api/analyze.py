@@ -35,10 +35,9 @@ class AnalysisResult:
         "detection_n"}`` (docs/analysis.md, :mod:`kalcal.analysis.power`).
     dataset : xarray.Dataset
         Every per-update quantity (``analysis.nc``): dimensions ``update`` (coordinate ``time``, s),
-        ``state``, ``state_col``, ``measurement``, ``measurement_col``, ``update_col``, ``source``. Made
-        from ``parts`` when first asked: a command that only writes the files never loads xarray.
-    parts : kalcal.io.dataset_parts.DatasetParts
-        The same, as numpy arrays.
+        ``state``, ``state_col``, ``measurement``, ``measurement_col``, ``update_col``, ``source``.
+    parts : xarray.Dataset
+        The same Dataset.
     paths : dict
         The files written (by key) when the call was given ``out``; empty otherwise.
     sensitivity : list of dict or None
@@ -58,9 +57,7 @@ class AnalysisResult:
     @cached_property
     def dataset(self):
         """``analysis.nc`` as an ``xarray.Dataset`` (see the class's docstring)."""
-        from kalcal.io.dataset_parts import as_xarray
-
-        return as_xarray(self.parts)
+        return self.parts
 
     @property
     def truth_equals_filter(self) -> bool:

@@ -28,7 +28,7 @@ from kalcal.filters.steps import check_form
 from kalcal.io.manifest import require_complete
 from kalcal.io.outputs import run_outputs
 from kalcal.io.results import SCHEMA_VERSION
-from kalcal.io.statistics import load_statistics
+from kalcal.io.statistics import read_statistics
 from kalcal.jobs.progress import JobProgress, stage
 from kalcal.models.custom import CustomModelScenario, is_custom_settings
 from kalcal.models.registry import build_scenario
@@ -198,13 +198,13 @@ def render_report(out: str | Path, *, realization: int = 0, progress: JobProgres
     summary_path = out / "summary.json"
     summary = read_summary(summary_path)
     numbers = _run_numbers(summary, summary_path, realization)  # a bad --realization: refused before stats.nc is read
-    dataset = load_statistics(out / "stats.nc")  # numpy parts, without xarray, for the files kalcal writes
+    dataset = read_statistics(out / "stats.nc")
     _require_same_run(dataset, summary, out / "stats.nc", summary_path)
     long_path = out / "stats_long.nc"
     long_dataset = None
     # a stats_long.nc the run did not write (a summary without a long study) is not this run's
     if long_path.is_file() and summary.get("long_run", True) is not None:
-        long_dataset = load_statistics(long_path)
+        long_dataset = read_statistics(long_path)
         _require_same_run(long_dataset, summary, long_path, summary_path)
     return _draw_page(out, summary, dataset, long_dataset, numbers, progress)
 

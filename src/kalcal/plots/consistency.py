@@ -29,7 +29,7 @@ from kalcal.plots._common import (
 from kalcal.verification.bounds import COVARIANCE_PARTS, centered_nees_bounds, chi2_mean_bounds, whiteness_pairs_bound
 from kalcal.verification.covariance import centered_nees
 
-if TYPE_CHECKING:  # the figures take a Dataset or the verify job's DatasetParts: no xarray here
+if TYPE_CHECKING:
     import xarray as xr
 
 #: pixel height of the residual correlation map (its width is the common 900 px)
@@ -84,7 +84,7 @@ def plot_nees(dataset: xr.Dataset, path: str | Path) -> Path:
 
     Parameters
     ----------
-    dataset : xarray.Dataset or DatasetParts
+    dataset : xarray.Dataset
         A ``stats.nc`` Dataset (attributes ``realizations`` and ``confidence``).
     path : path of the PNG to write
     """
@@ -131,7 +131,7 @@ def plot_nis(dataset: xr.Dataset, path: str | Path) -> Path:
 
     Parameters
     ----------
-    dataset : xarray.Dataset or DatasetParts
+    dataset : xarray.Dataset
         A ``stats.nc`` Dataset (attributes ``realizations`` and ``confidence``).
     path : path of the PNG to write
     """
@@ -153,7 +153,7 @@ def plot_residual_correlation(dataset: xr.Dataset, path: str | Path) -> Path:
 
     Parameters
     ----------
-    dataset : xarray.Dataset or DatasetParts
+    dataset : xarray.Dataset
         With ``residual_second_moment`` (K, p, K, p), E[r_k r_j^T] over all pairs of updates.
     path : path of the PNG to write
     """
@@ -208,7 +208,7 @@ def plot_model_error(dataset: xr.Dataset, path: str | Path) -> Path:
 
     Parameters
     ----------
-    dataset : xarray.Dataset or DatasetParts
+    dataset : xarray.Dataset
         A ``stats.nc`` Dataset: ``expected_mean_error`` and ``mean_error`` (K, d), ``filter_cov`` (K, d, d).
     path : path of the PNG to write
     """

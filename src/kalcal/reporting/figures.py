@@ -16,7 +16,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from kalcal.filters.steady_state import SteadyStateView
-from kalcal.io.dataset_parts import DatasetParts
 from kalcal.plots import consistency, ensemble
 from kalcal.plots import realization as single
 from kalcal.plots.realization_data import RealizationData
@@ -25,7 +24,7 @@ from kalcal.reporting.figure_entries import GROUPS, FigureEntry, SkippedFigure  
 from kalcal.reporting.figure_entries import page_order, sort_key
 from kalcal.reporting.theory import SIGMA_EXACT, SIGMA_EXACT_TITLE, sigma_exact_spec
 
-if TYPE_CHECKING:  # the figures read a Dataset's values, which the verify job's DatasetParts give too
+if TYPE_CHECKING:
     import xarray as xr
 
 #: the scenario of the source report, whose figure numbers the page quotes
@@ -252,10 +251,10 @@ def _steady_state_spec(steady: SteadyStateView) -> _Spec:
 
 
 def render_figures(
-    dataset: xr.Dataset | DatasetParts,
+    dataset: xr.Dataset,
     data: RealizationData,
     figure_dir: str | Path,
-    long_dataset: xr.Dataset | DatasetParts | None = None,
+    long_dataset: xr.Dataset | None = None,
     *,
     scenario: str = REPORT_SCENARIO,
     steady: SteadyStateView | None = None,
@@ -267,7 +266,7 @@ def render_figures(
 
     Parameters
     ----------
-    dataset : xarray.Dataset or DatasetParts
+    dataset : xarray.Dataset
         The run's ``stats.nc``: read back (``kalcal report``) or the parts the verify job keeps, drawn as
         they are (the figures read only ``dataset[name].values``, ``sizes``, ``attrs`` and ``name in
         dataset``, which both give).
@@ -276,7 +275,7 @@ def render_figures(
     figure_dir : path
         Folder for the PNGs (created). The jobs draw into a fresh staging folder (:mod:`kalcal.io.outputs`),
         so it holds only this page's figures; a PNG already in a folder given here is left as it is.
-    long_dataset : xarray.Dataset or DatasetParts, optional
+    long_dataset : xarray.Dataset, optional
         ``stats_long.nc`` of the same run, for figure 5.8.
     scenario : str
         The run's scenario: figures carry the source report's numbers only for ``REPORT_SCENARIO``.
