@@ -390,32 +390,9 @@ def test_a_failing_first_run_removes_every_folder_it_created(tmp_path):
     assert not (tmp_path / "a").exists()
 
 
-def test_the_figure_processes_line_of_the_docs_is_what_report_prints(previous, monkeypatch):
-    """docs/outputs.md quotes the refusal of a bad KALCAL_FIGURE_PROCESSES: that line, exit 2, the folder
-    as it was; 1 draws the page in this process, with no child process."""
-    import multiprocessing
-
-    docs = (Path(__file__).resolve().parents[1] / "docs" / "outputs.md").read_text(encoding="utf-8")
-    quoted = [line.strip() for line in docs.splitlines() if "kalcal: error: KALCAL_FIGURE_PROCESSES" in line]
-    assert len(quoted) == 1
-    out, before = previous
-    for value in ("0", "two", "²", "+2"):
-        monkeypatch.setenv("KALCAL_FIGURE_PROCESSES", value)
-        result = _invoke("report", out)
-        _one_line_error(result)
-        assert result.stderr.strip() == quoted[0].replace("'0'", repr(value))
-        assert _tree(out) == before
-    monkeypatch.setenv("KALCAL_FIGURE_PROCESSES", "1")
-    started = []
-    monkeypatch.setattr(multiprocessing.context.ForkContext, "Process", lambda *a, **k: started.append(1))
-    _ok("report", out)
-    assert started == [] and (out / "report.html").read_bytes() != b""
-
-
 def test_ctrl_c_while_the_figures_are_drawn_is_one_line_and_leaves_nothing(tmp_path):
-    """Ctrl-C (SIGINT to the whole process group) once the page's first figure is staged: the figure
-    process and its workers ignore it, the job stops them and waits before its folder is removed, exit
-    status 130 and one line, and nothing appears in the folder afterwards."""
+    """Ctrl-C (SIGINT to the whole process group) once the page's first figure is staged: exit status 130
+    and one line, the folder removed, and nothing appears in it afterwards."""
     out = tmp_path / "out"
     process, stderr = _interrupted(
         ["verify", "-n", "3000", "--set", "scenario.duration=20", "--out", str(out)],
@@ -426,7 +403,7 @@ def test_ctrl_c_while_the_figures_are_drawn_is_one_line_and_leaves_nothing(tmp_p
     assert not out.exists()
     time.sleep(1.0)
     assert not out.exists()
-    if sys.platform.startswith("linux"):  # the figure process and its workers stay in the job's session
+    if sys.platform.startswith("linux"):  # nothing of the job's session outlives it
         assert _session(process.pid) == [], "a process of the job's session outlived it"
 
 

@@ -1,11 +1,9 @@
-"""The whiteness test's simulated null: one per capped log length, drawn by the calibration job on another
-thread while its filter runs, and the diagnostics' own."""
+"""The whiteness test's simulated null: one per capped log length, drawn by the diagnostics and cached."""
 
 from __future__ import annotations
 
 import functools
 import threading
-import time
 
 import numpy as np
 import pandas as pd
@@ -13,23 +11,19 @@ import pytest
 
 from kalcal.calibration import diagnostics, ljung_box
 from kalcal.calibration.diagnostics import innovation_diagnostics, whiteness_null
-from kalcal.jobs import calibrate as calibrate_job
 from kalcal.jobs.calibrate import compute_accel_gps_calibration
 from kalcal.models.registry import build_scenario
 from kalcal.simulation.sampled import sample_accel_gps_logs
 
 
-def _recorded(monkeypatch, thread_s: float = 0.0) -> list[tuple[str, int, int, int]]:
-    """Each null drawn (the thread that drew it, its length, lags and draws), with an empty cache; the job's
-    thread takes ``thread_s`` longer, so that a job that did not wait for it would draw its own."""
+def _recorded(monkeypatch) -> list[tuple[str, int, int, int]]:
+    """Each null drawn (the thread that drew it, its length, lags and draws), with an empty cache."""
     calls = []
     real = ljung_box._simulated.__wrapped__
 
     @functools.lru_cache(maxsize=16)
     def simulated(length, lags, draws):
         calls.append((threading.current_thread().name, length, lags, draws))
-        if threading.current_thread().name == "kalcal-whiteness-null":
-            time.sleep(thread_s)
         return real(length, lags, draws)
 
     monkeypatch.setattr(ljung_box, "_simulated", simulated)
@@ -62,43 +56,14 @@ def test_the_diagnostics_hold_the_innovations_to_that_null(monkeypatch):
     assert diagnostics.ljung_box_upper == ljung_box.largest_passing(null, 2, (1.0 - 0.99) / 2)  # its share of alpha
 
 
-@pytest.mark.parametrize("duration", [102.0, 120.0])
-def test_the_job_draws_a_long_logs_null_on_another_thread_before_its_diagnostics(monkeypatch, duration):
-    """510 fixes (508 used: the first starts the filter, the diffuse prior leaves out the next) and 600."""
-    scenario, imu, gps = _logs(duration)
-    assert gps.shape[0] == round(5 * duration)
-    calls = _recorded(monkeypatch, thread_s=2.0)  # the job waits for it: drawn there once, found cached after
-    calibration = compute_accel_gps_calibration(scenario, imu, gps)
-    assert [name for name, *_ in calls] == ["kalcal-whiteness-null"], calls
-    assert not any(t.name == "kalcal-whiteness-null" for t in threading.enumerate())
-    calls = _recorded(monkeypatch)
-    monkeypatch.setattr(calibrate_job, "_whiteness_null", lambda: None)  # the thread draws nothing
-    alone = compute_accel_gps_calibration(scenario, imu, gps)
-    assert [name for name, *_ in calls] == ["MainThread"]
-    assert alone.summary["diagnostics"] == calibration.summary["diagnostics"]
-
-
-def test_a_thread_that_fails_leaves_the_null_to_the_diagnostics(monkeypatch):
-    scenario, imu, gps = _logs(120.0)
-    calls = _recorded(monkeypatch)
-    real = diagnostics.whiteness_null
-
-    def failing(*args):
-        if threading.current_thread().name == "kalcal-whiteness-null":
-            raise MemoryError("no room for the null")
-        return real(*args)
-
-    monkeypatch.setattr(diagnostics, "whiteness_null", failing)
-    calibration = compute_accel_gps_calibration(scenario, imu, gps)
-    assert [name for name, *_ in calls] == ["MainThread"]
-    assert calibration.summary["diagnostics"]["consistent"] in (True, False)
-
-
-@pytest.mark.parametrize("duration", [30.0, 101.8])
-def test_the_job_draws_a_short_logs_null_itself(monkeypatch, duration):
-    """150 and 509 fixes (fewer than REFERENCE_FIXES + 10): drawn by the diagnostics."""
+@pytest.mark.parametrize("duration", [30.0, 120.0])
+def test_the_job_draws_its_null_once_in_its_own_thread(monkeypatch, duration):
+    """150 and 600 fixes: the diagnostics draw the null, once, in the job's thread; a second calibration
+    of the same log finds it cached and the same diagnostics."""
     scenario, imu, gps = _logs(duration)
     assert gps.shape[0] == round(5 * duration)
     calls = _recorded(monkeypatch)
-    compute_accel_gps_calibration(scenario, imu, gps)
+    first = compute_accel_gps_calibration(scenario, imu, gps)
+    again = compute_accel_gps_calibration(scenario, imu, gps)
     assert [name for name, *_ in calls] == ["MainThread"]
+    assert again.summary["diagnostics"] == first.summary["diagnostics"]

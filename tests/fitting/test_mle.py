@@ -316,22 +316,6 @@ def test_threads_see_the_callers_errstate_and_a_nested_call_stays_on_its_thread(
     assert from_pool and all(caller == callee for caller, callee in from_pool)  # no wait on the pool from inside it
 
 
-def test_evaluation_threads_are_idle_between_calls_and_busy_during_one():
-    """cli's fast exit passes by the kept evaluation threads only while no evaluate_all waits on them."""
-    seen = []
-
-    def f(point):
-        time.sleep(0.003)
-        seen.append([local_search.idle(t) for t in threading.enumerate() if t.name.startswith(local_search.THREAD_PREFIX)])
-        return float(point[0])
-
-    local_search.evaluate_all(f, [np.array([float(i)]) for i in range(4)], workers=2)
-    threads = [t for t in threading.enumerate() if t.name.startswith(local_search.THREAD_PREFIX)]
-    assert threads and all(local_search.idle(t) for t in threads)
-    assert any(flags and not any(flags) for flags in seen[1:])  # during the call: none idle
-    assert not local_search.idle(threading.main_thread())
-
-
 @pytest.mark.skipif(not hasattr(os, "fork"), reason="fork is POSIX")
 def test_a_forked_child_evaluates_on_threads_of_its_own():
     """The parent's kept threads are not in a forked child: its pools are forgotten there, and a call

@@ -32,8 +32,7 @@ def _refuse_nc(event, args):
 def _refusing_nc(draw):
     """``draw`` with every open of a ``*.nc`` file refused while it runs: Python's ``open``, ``os.open``
     (and so scipy's netcdf_file, which xarray's scipy engine reads through) raise the ``open`` audit
-    event, in this process and in the drawing workers forked from it, where the refusal fails the figure
-    and so the job."""
+    event, where the refusal fails the figure and so the job."""
     global _HOOKED
 
     if not _HOOKED:
@@ -55,7 +54,7 @@ def test_the_hook_refuses_a_statistics_file(tmp_path):
     path = tmp_path / "stats.nc"
     path.write_bytes(b"CDF")
     with pytest.raises(AssertionError, match="stats.nc opened while the job drew its page"):
-        _refusing_nc(report_job.load_statistics)(path)
+        _refusing_nc(report_job.read_statistics)(path)
     assert _OPENED.pop() == str(path) and not _REFUSING and path.read_bytes() == b"CDF"  # off again
 
 
@@ -69,8 +68,8 @@ def _drawn(folder):
 def test_the_jobs_page_is_the_redraws_bytes(tmp_path, monkeypatch):
     """Another scenario than the shared run's (accel-gps with a long run: test_report_job.py), without a long run."""
     read = []
-    real_read = report_job.load_statistics
-    monkeypatch.setattr(report_job, "load_statistics", lambda path: read.append(path) or real_read(path))
+    real_read = report_job.read_statistics
+    monkeypatch.setattr(report_job, "read_statistics", lambda path: read.append(path) or real_read(path))
     # nor opened at all, through any reader, while the job draws (its stats.nc is written before)
     monkeypatch.setattr(report_job, "draw_report", _refusing_nc(report_job.draw_report))
     _OPENED.clear()

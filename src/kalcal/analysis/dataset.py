@@ -6,22 +6,15 @@ Dimensions: ``update`` (K fixes; coordinate ``time``, s), ``state``/``state_col`
 a state-indexed variable are those of the ``state_unit`` coordinate (``state_unit x state_col_unit`` for
 matrices).
 
-It is built as :class:`kalcal.io.dataset_parts.DatasetParts` (:func:`analysis_parts`), which the job
-writes and draws without loading xarray (and the Dask check xarray makes of every variable it builds),
-and made an ``xarray.Dataset`` when asked (:func:`analysis_dataset`, :attr:`kalcal.AnalysisResult.dataset`).
+It is built as an ``xarray.Dataset`` (:func:`analysis_parts`, :attr:`kalcal.AnalysisResult.dataset`).
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
+import xarray as xr
 
 from kalcal.analysis.fixed_gain import CovarianceAnalysis
-from kalcal.io.dataset_parts import DatasetParts, Part
-
-if TYPE_CHECKING:
-    import xarray as xr
 
 _MATRIX = ("update", "state", "state_col")
 _PAIRS = ("update", "measurement", "update_col", "measurement_col")
@@ -30,11 +23,11 @@ _PAIRS = ("update", "measurement", "update_col", "measurement_col")
 def analysis_dataset(result: CovarianceAnalysis, attrs: dict | None = None) -> xr.Dataset:
     """Every per-update quantity of the analysis, with named dimensions: :func:`analysis_parts` as an
     ``xarray.Dataset``."""
-    return analysis_parts(result, attrs).to_xarray()
+    return analysis_parts(result, attrs)
 
 
-def analysis_parts(result: CovarianceAnalysis, attrs: dict | None = None) -> DatasetParts:
-    """Every per-update quantity of the analysis, with named dimensions, as numpy parts."""
+def analysis_parts(result: CovarianceAnalysis, attrs: dict | None = None) -> xr.Dataset:
+    """Every per-update quantity of the analysis, with named dimensions, as an ``xarray.Dataset``."""
     m = result.moments
     state_units = "state_unit x state_col_unit"
     data = {
@@ -64,7 +57,7 @@ def analysis_parts(result: CovarianceAnalysis, attrs: dict | None = None) -> Dat
     if m.residual_second_moment is not None:
         data["residual_second_moment"] = (_PAIRS, m.residual_second_moment, "exact E[r_k r_j^T] over pairs of updates", "measurement_unit x measurement_col_unit")
     variables = {
-        name: Part.of(dims, np.asarray(values, dtype=float), {"long_name": text, "units": units})
+        name: (dims, np.asarray(values, dtype=float), {"long_name": text, "units": units})
         for name, (dims, values, text, units) in data.items()
     }
     info = result.info
@@ -82,8 +75,7 @@ def analysis_parts(result: CovarianceAnalysis, attrs: dict | None = None) -> Dat
         "source": ("source", [t.source for t in result.budget]),
         "kind": ("source", [t.kind for t in result.budget]),
     }
-    return DatasetParts(variables, {name: Part.of(*spec) for name, spec in coords.items()},
-                        {"scenario": info.scenario, **(attrs or {})})
+    return xr.Dataset(variables, coords=coords, attrs={"scenario": info.scenario, **(attrs or {})})
 
 
 def _sigma(cov: np.ndarray) -> np.ndarray:

@@ -35,10 +35,9 @@ class AnalysisResult:
         "detection_n"}`` (docs/analysis.md, :mod:`kalcal.analysis.power`).
     dataset : xarray.Dataset
         Every per-update quantity (``analysis.nc``): dimensions ``update`` (coordinate ``time``, s),
-        ``state``, ``state_col``, ``measurement``, ``measurement_col``, ``update_col``, ``source``. Made
-        from ``parts`` when first asked: a command that only writes the files never loads xarray.
-    parts : kalcal.io.dataset_parts.DatasetParts
-        The same, as numpy arrays.
+        ``state``, ``state_col``, ``measurement``, ``measurement_col``, ``update_col``, ``source``.
+    parts : xarray.Dataset
+        The same Dataset.
     paths : dict
         The files written (by key) when the call was given ``out``; empty otherwise.
     sensitivity : list of dict or None
@@ -46,7 +45,6 @@ class AnalysisResult:
         ``{"setting", "increase", "decrease"}``, the smallest relative error (a fraction) that ``n``
         realizations detect with power 0.99 (:mod:`kalcal.analysis.sensitivity`); None otherwise.
     """
-
     final: dict
     budget: list
     power: Any
@@ -59,9 +57,7 @@ class AnalysisResult:
     @cached_property
     def dataset(self):
         """``analysis.nc`` as an ``xarray.Dataset`` (see the class's docstring)."""
-        from kalcal.io.dataset_parts import as_xarray
-
-        return as_xarray(self.parts)
+        return self.parts
 
     @property
     def truth_equals_filter(self) -> bool:
@@ -170,12 +166,9 @@ def analyze(
     from dataclasses import replace
 
     from kalcal.io.outputs import inputs_of, run_outputs
-    from kalcal.reporting.figure_names import ANALYSIS_FIGURES
-    from kalcal.reporting.figure_process import figure_process
 
-    # the folder is checked before the analysis runs, and its files are put in place as one set; the
-    # plotting code loads in its own process meanwhile
-    with figure_process(ANALYSIS_FIGURES), run_outputs(out, "analyze", names=OUTPUT_NAMES, protect=inputs_of(model)) as staging:
+    # the folder is checked before the analysis runs, and its files are put in place as one set
+    with run_outputs(out, "analyze", names=OUTPUT_NAMES, protect=inputs_of(model)) as staging:
         result = _compute(model, n, form, command)
         saved = save_analysis(result, staging)
     return replace(result, paths={key: Path(out) / Path(path).relative_to(staging) for key, path in saved.items()})
@@ -224,14 +217,11 @@ def save_analysis(result: AnalysisResult, out: str | Path) -> dict[str, Path]:
     """``analysis.json``, ``analysis.nc`` and the two figures, written into ``out`` as one set."""
     from kalcal.io.results import write_json
     from kalcal.io.statistics import write_statistics
-    from kalcal.reporting.figure_names import ANALYSIS_FIGURES
-    from kalcal.reporting.figure_process import submit
+    from kalcal.plots.analysis import plot_analysis
 
     out = Path(out)
-    # drawn in the job's figure process, if any, while the files below are written
-    with submit(ANALYSIS_FIGURES, result.parts, out / "figures") as figures:
-        paths = {
-            "summary": write_json(out / "analysis.json", result.document),
-            "dataset": write_statistics(out / "analysis.nc", result.parts),
-        }
-    return {**paths, **figures.result()}
+    paths = {
+        "summary": write_json(out / "analysis.json", result.document),
+        "dataset": write_statistics(out / "analysis.nc", result.parts),
+    }
+    return {**paths, **plot_analysis(result.parts, out / "figures")}

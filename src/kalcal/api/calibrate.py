@@ -59,61 +59,56 @@ def calibrate(
     -------
     CalibrationResult
     """
-    from kalcal.reporting.figure_names import CALIBRATION_FIGURE
-    from kalcal.reporting.figure_process import figure_process
+    from kalcal.api._scenario import resolve
+    from kalcal.errors import KalcalError
 
-    # accel-gps draws calibration.png: the plotting code loads in its own process while this one computes
-    with figure_process(CALIBRATION_FIGURE, start=None if out is not None and scenario != "scale-bias" else False):
-        from kalcal.api._scenario import resolve
-        from kalcal.errors import KalcalError
+    if scenario == "scale-bias":
+        if form != "joseph" or smooth or gate is not None:
+            option = "--form" if form != "joseph" else "--smooth" if smooth else "--gate"
+            raise KalcalError(f"{option}: not available for scale-bias (accel-gps only)")
+        model = resolve("scale-bias", settings, config)
+        if data is None:
+            raise KalcalError("--data: required for scale-bias (a log with a reference and a sensor column)")
+        if imu is not None or gps is not None:
+            raise KalcalError("--imu/--gps: not used by scale-bias (it reads --data)")
+        from kalcal.jobs.scale_bias import compute_scale_bias_calibration
 
-        if scenario == "scale-bias":
-            if form != "joseph" or smooth or gate is not None:
-                option = "--form" if form != "joseph" else "--smooth" if smooth else "--gate"
-                raise KalcalError(f"{option}: not available for scale-bias (accel-gps only)")
-            model = resolve("scale-bias", settings, config)
-            if data is None:
-                raise KalcalError("--data: required for scale-bias (a log with a reference and a sensor column)")
-            if imu is not None or gps is not None:
-                raise KalcalError("--imu/--gps: not used by scale-bias (it reads --data)")
-            from kalcal.jobs.scale_bias import compute_scale_bias_calibration
+        def compute():
+            return compute_scale_bias_calibration(
+                model, data, reference=reference, sensor=sensor, prior=prior, windows=windows
+            )
 
-            def compute():
-                return compute_scale_bias_calibration(
-                    model, data, reference=reference, sensor=sensor, prior=prior, windows=windows
-                )
+        command = "calibrate scale-bias"
+    else:
+        model = resolve(scenario, settings, config, defaults={"scenario.integration": "trapezoid"})
+        missing = [name for name, value in (("--imu", imu), ("--gps", gps)) if value is None]
+        if missing:
+            raise KalcalError(f"{' and '.join(missing)}: required for {scenario}")
+        if data is not None:
+            raise KalcalError(f"--data: not used by {scenario} (it reads --imu and --gps)")
+        if prior is not None:
+            raise KalcalError("--prior: not available for accel-gps (scale-bias only)")
+        if on_gap not in ("continue", "stop"):
+            raise KalcalError(f"--on-gap: expected continue or stop, got {on_gap!r}")
+        from kalcal.jobs.calibrate import compute_accel_gps_calibration
 
-            command = "calibrate scale-bias"
-        else:
-            model = resolve(scenario, settings, config, defaults={"scenario.integration": "trapezoid"})
-            missing = [name for name, value in (("--imu", imu), ("--gps", gps)) if value is None]
-            if missing:
-                raise KalcalError(f"{' and '.join(missing)}: required for {scenario}")
-            if data is not None:
-                raise KalcalError(f"--data: not used by {scenario} (it reads --imu and --gps)")
-            if prior is not None:
-                raise KalcalError("--prior: not available for accel-gps (scale-bias only)")
-            if on_gap not in ("continue", "stop"):
-                raise KalcalError(f"--on-gap: expected continue or stop, got {on_gap!r}")
-            from kalcal.jobs.calibrate import compute_accel_gps_calibration
+        def compute():
+            return compute_accel_gps_calibration(
+                model, imu, gps, imu_columns=imu_columns, gps_columns=gps_columns, init=init,
+                max_imu_gap=max_imu_gap, stop_on_gap=on_gap == "stop", form=form, smooth=smooth, gate=gate,
+                windows=windows,
+            )
 
-            def compute():
-                return compute_accel_gps_calibration(
-                    model, imu, gps, imu_columns=imu_columns, gps_columns=gps_columns, init=init,
-                    max_imu_gap=max_imu_gap, stop_on_gap=on_gap == "stop", form=form, smooth=smooth, gate=gate,
-                    windows=windows,
-                )
+        command = "calibrate accel-gps"
+    if out is None:
+        return CalibrationResult.from_calibration(compute())
+    from kalcal.io.outputs import inputs_of, run_outputs
+    from kalcal.jobs.calibrate import OUTPUT_NAMES, save_calibration
 
-            command = "calibrate accel-gps"
-        if out is None:
-            return CalibrationResult.from_calibration(compute())
-        from kalcal.io.outputs import inputs_of, run_outputs
-        from kalcal.jobs.calibrate import OUTPUT_NAMES, save_calibration
-
-        files = [value for value in (imu, gps, data) if isinstance(value, (str, Path))]
-        with run_outputs(out, command, names=OUTPUT_NAMES[command], protect=[*files, *inputs_of(model)]) as staging:
-            calibration = compute()
-            paths = save_calibration(calibration, staging)
-        return CalibrationResult.from_calibration(
-            calibration, {name: Path(out) / Path(path).relative_to(staging) for name, path in paths.items()}
-        )
+    files = [value for value in (imu, gps, data) if isinstance(value, (str, Path))]
+    with run_outputs(out, command, names=OUTPUT_NAMES[command], protect=[*files, *inputs_of(model)]) as staging:
+        calibration = compute()
+        paths = save_calibration(calibration, staging)
+    return CalibrationResult.from_calibration(
+        calibration, {name: Path(out) / Path(path).relative_to(staging) for name, path in paths.items()}
+    )

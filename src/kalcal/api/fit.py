@@ -72,8 +72,6 @@ def fit(
     """
     from kalcal.api._scenario import resolve
     from kalcal.errors import KalcalError
-    from kalcal.reporting.figure_names import FIT_FIGURE
-    from kalcal.reporting.figure_process import figure_process
 
     if not 0.0 < confidence < 1.0:
         raise KalcalError(f"confidence=: expected a number in (0, 1), got {confidence!r}")  # kalcal fit has no --confidence
@@ -93,29 +91,26 @@ def fit(
             raise KalcalError(f"{' and '.join(missing)}: required for {scenario}")
         if data is not None:
             raise KalcalError(f"--data: not used by {scenario} (it reads --imu and --gps)")
-    # the arguments checked: with out, fit.png is drawn, and the plotting code loads in its own process
-    # while this one reads the log and fits
-    with figure_process(FIT_FIGURE, start=None if out is not None else False):
-        if scenario == "scale-bias":
-            from kalcal.jobs.fit import compute_scale_bias_fit
+    if scenario == "scale-bias":
+        from kalcal.jobs.fit import compute_scale_bias_fit
 
-            def compute():
-                return compute_scale_bias_fit(model, data, free=keys, reference=reference, sensor=sensor,
-                                              profile=profile, confidence=confidence)
-        else:
-            from kalcal.jobs.fit import compute_accel_gps_fit
+        def compute():
+            return compute_scale_bias_fit(model, data, free=keys, reference=reference, sensor=sensor,
+                                          profile=profile, confidence=confidence)
+    else:
+        from kalcal.jobs.fit import compute_accel_gps_fit
 
-            def compute():
-                return compute_accel_gps_fit(model, imu, gps, free=keys, imu_columns=imu_columns, gps_columns=gps_columns,
-                                             init=init, profile=profile, gate=gate, confidence=confidence)
-        if out is None:
-            return compute().result
-        from kalcal.io.outputs import inputs_of, run_outputs
-        from kalcal.jobs.fit import OUTPUT_NAMES, save_fit
+        def compute():
+            return compute_accel_gps_fit(model, imu, gps, free=keys, imu_columns=imu_columns, gps_columns=gps_columns,
+                                         init=init, profile=profile, gate=gate, confidence=confidence)
+    if out is None:
+        return compute().result
+    from kalcal.io.outputs import inputs_of, run_outputs
+    from kalcal.jobs.fit import OUTPUT_NAMES, save_fit
 
-        command = "fit scale-bias" if scenario == "scale-bias" else "fit accel-gps"
-        files = [value for value in (imu, gps, data) if isinstance(value, (str, Path))]
-        with run_outputs(out, command, names=OUTPUT_NAMES, protect=[*files, *inputs_of(model)]) as staging:
-            run = compute()
-            save_fit(run, staging)
-        return dataclasses.replace(run.result, paths={name: Path(out) / name for name in OUTPUT_NAMES})
+    command = "fit scale-bias" if scenario == "scale-bias" else "fit accel-gps"
+    files = [value for value in (imu, gps, data) if isinstance(value, (str, Path))]
+    with run_outputs(out, command, names=OUTPUT_NAMES, protect=[*files, *inputs_of(model)]) as staging:
+        run = compute()
+        save_fit(run, staging)
+    return dataclasses.replace(run.result, paths={name: Path(out) / name for name in OUTPUT_NAMES})

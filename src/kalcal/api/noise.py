@@ -37,21 +37,17 @@ def noise(
     NoiseResult
     """
     from kalcal.errors import KalcalError
-    from kalcal.reporting.figure_names import NOISE_FIGURE
-    from kalcal.reporting.figure_process import figure_process
 
     if imu is None:
         raise KalcalError("--imu: required (a static accelerometer log: time [s], accel [m/s^2])")
-    # with out, allan.png is drawn: the plotting code loads in its own process while this one reads the log
-    with figure_process(NOISE_FIGURE, start=None if out is not None else False):
-        from kalcal.jobs.noise import compute_noise, output_names, save_noise
+    from kalcal.jobs.noise import compute_noise, output_names, save_noise
 
-        if out is None:
-            return NoiseResult.from_run(compute_noise(imu, imu_columns=imu_columns, confidence=confidence, strict=strict))
-        from kalcal.io.outputs import run_outputs
+    if out is None:
+        return NoiseResult.from_run(compute_noise(imu, imu_columns=imu_columns, confidence=confidence, strict=strict))
+    from kalcal.io.outputs import run_outputs
 
-        protect = [imu] if isinstance(imu, (str, Path)) else []
-        with run_outputs(out, "noise", names=output_names(kalibr), protect=protect) as staging:
-            run = compute_noise(imu, imu_columns=imu_columns, confidence=confidence, strict=strict)
-            summary = save_noise(run, staging, kalibr=kalibr)
-        return NoiseResult.from_run(run, summary["files"])
+    protect = [imu] if isinstance(imu, (str, Path)) else []
+    with run_outputs(out, "noise", names=output_names(kalibr), protect=protect) as staging:
+        run = compute_noise(imu, imu_columns=imu_columns, confidence=confidence, strict=strict)
+        summary = save_noise(run, staging, kalibr=kalibr)
+    return NoiseResult.from_run(run, summary["files"])

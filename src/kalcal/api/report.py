@@ -34,13 +34,9 @@ def report(
     KalcalError
         The folder is not a finished verification run, or ``realization`` is out of range.
     """
-    from kalcal.reporting.figure_names import REPORT_FIGURES
-    from kalcal.reporting.figure_process import figure_process
-
     directory = Path(directory)
-    with figure_process(REPORT_FIGURES):  # loads the plotting code while the run's files are read
-        from kalcal.jobs.report import FIGURE_DIR, render_report
+    from kalcal.jobs.report import FIGURE_DIR, render_report
 
-        with progress_callback(progress, str(directory)) as update:
-            page = render_report(directory, realization=realization, progress=update)
+    with progress_callback(progress, str(directory)) as update:
+        page = render_report(directory, realization=realization, progress=update)
     return {"report": page, "figures": directory / FIGURE_DIR}

@@ -12,7 +12,6 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from kalcal.io.dataset_parts import as_xarray
 
 if TYPE_CHECKING:  # annotations only: a verification result needs no pandas
     import pandas as pd
@@ -77,14 +76,13 @@ class VerificationResult:
 
     @cached_property
     def statistics(self):
-        """``stats.nc`` as an ``xarray.Dataset`` (made from the run's numpy parts when first asked: a command
-        that only writes the files never loads xarray)."""
-        return as_xarray(self.run.dataset)
+        """``stats.nc`` as an ``xarray.Dataset``."""
+        return self.run.dataset
 
     @cached_property
     def long_statistics(self):
         """``stats_long.nc`` as an ``xarray.Dataset``, None without a long run."""
-        return as_xarray(self.run.long_dataset)
+        return self.run.long_dataset
 
     @property
     def summary(self) -> dict[str, Any]:

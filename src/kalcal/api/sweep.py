@@ -32,8 +32,6 @@ def sweep(
     summary.json and folder, ``paths``: the sweep's own files)."""
     from kalcal.api._scenario import resolve
     from kalcal.errors import KalcalError
-    from kalcal.reporting.figure_names import SWEEP_FIGURE
-    from kalcal.reporting.figure_process import figure_process
 
     if out is None:
         raise KalcalError("out: required (the folder for sweep.csv, sweep.png and one run per value; a sweep always writes)")
@@ -42,19 +40,17 @@ def sweep(
         raise KalcalError(f"sweep: give a setting and at least two values (got {key!r} with {len(values)})")
     if threads is not None and threads < 1:
         raise KalcalError(f"--threads: expected a positive number, got {threads}")
-    # sweep.png: the plotting code loads in its own process while the values are verified
-    with figure_process(SWEEP_FIGURE):
-        from kalcal.jobs.sweep import sweep as run_sweep
-        from kalcal.jobs.sweep import sweep_cells
-        from kalcal.montecarlo.distributed import dask_client
+    from kalcal.jobs.sweep import sweep as run_sweep
+    from kalcal.jobs.sweep import sweep_cells
+    from kalcal.montecarlo.distributed import dask_client
 
-        model = resolve(scenario, settings, config)
-        sweep_cells(model, key, values, n, engine=engine, long_run=0)  # every value checked before any cluster
-        options = dict(engine=engine, workers=threads, long_run=0)
-        if client is None and (workers is not None or scheduler is not None):
-            with dask_client(workers, scheduler) as client:
-                return SweepResult.from_sweep(run_sweep(model, key, values, n, seed, out, client=client, **options), values)
-        return SweepResult.from_sweep(run_sweep(model, key, values, n, seed, out, client=client, **options), values)
+    model = resolve(scenario, settings, config)
+    sweep_cells(model, key, values, n, engine=engine, long_run=0)  # every value checked before any cluster
+    options = dict(engine=engine, workers=threads, long_run=0)
+    if client is None and (workers is not None or scheduler is not None):
+        with dask_client(workers, scheduler) as client:
+            return SweepResult.from_sweep(run_sweep(model, key, values, n, seed, out, client=client, **options), values)
+    return SweepResult.from_sweep(run_sweep(model, key, values, n, seed, out, client=client, **options), values)
 
 
 def sweep_settings(assignments: Sequence[str]) -> tuple[str, list[str], dict[str, str]]:

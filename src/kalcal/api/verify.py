@@ -80,31 +80,24 @@ def verify(
     KalcalError
         Any bad input (a ValueError), with one line naming the setting and the value.
     """
-    from kalcal.reporting.figure_names import REPORT_FIGURES
-    from kalcal.reporting.figure_process import figure_process
+    from kalcal.api._scenario import resolve
+    from kalcal.errors import KalcalError
+    from kalcal.jobs.verify import check_arguments
+    from kalcal.montecarlo.distributed import dask_client
 
-    # with a page to draw, the plotting code loads in its own process while this one loads and computes
-    with figure_process(REPORT_FIGURES, start=None if out is not None and report else False):
-        from kalcal.api._scenario import resolve
-        from kalcal.errors import KalcalError
-        from kalcal.jobs.verify import check_arguments, check_drawing
-        from kalcal.montecarlo.distributed import dask_client
-
-        model = resolve(scenario, settings, config, engine=engine, long_run=long_run, models=True)
-        if threads is not None and threads < 1:
-            raise KalcalError(f"--threads: expected a positive number, got {threads}")
-        check_arguments(model, n, engine=engine, confidence=confidence, long_run=long_run, batch_size=batch_size, form=form)
-        if out is not None and report:
-            check_drawing()  # before a Dask cluster or the Monte Carlo starts
-        options = dict(
-            engine=engine, confidence=confidence, workers=threads, command=command, long_run=long_run,
-            batch_size=batch_size, checkpoint=checkpoint, form=form, notes=notes, max_run_s=max_run_s,
-        )
-        with progress_callback(progress, f"{scenario if isinstance(scenario, str) else 'model'} x {n:,}") as update:
-            if client is None and (workers is not None or scheduler is not None):
-                with dask_client(workers, scheduler, notes) as client:
-                    return _run(model, n, seed, options, client, update, out, report, realization)
-            return _run(model, n, seed, options, client, update, out, report, realization)
+    model = resolve(scenario, settings, config, engine=engine, long_run=long_run, models=True)
+    if threads is not None and threads < 1:
+        raise KalcalError(f"--threads: expected a positive number, got {threads}")
+    check_arguments(model, n, engine=engine, confidence=confidence, long_run=long_run, batch_size=batch_size, form=form)
+    options = dict(
+        engine=engine, confidence=confidence, workers=threads, command=command, long_run=long_run,
+        batch_size=batch_size, checkpoint=checkpoint, form=form, notes=notes, max_run_s=max_run_s,
+    )
+    with progress_callback(progress, f"{scenario if isinstance(scenario, str) else 'model'} x {n:,}") as update:
+        if client is None and (workers is not None or scheduler is not None):
+            with dask_client(workers, scheduler, notes) as client:
+                return _run(model, n, seed, options, client, update, out, report, realization)
+        return _run(model, n, seed, options, client, update, out, report, realization)
 
 
 def _run(model, n, seed, options, client, update, out, report, realization) -> VerificationResult:

@@ -60,7 +60,7 @@ def whiteness_null(n_fixes: int, p: int, confidence: float = CONFIDENCE) -> np.n
     """The sorted simulated Ljung-Box null, (B,), that :func:`innovation_diagnostics` holds n_fixes fixes of
     p components to at ``confidence``; None where the series is too short for a statistic. Cached: it
     depends on min(n_fixes, 500) and the lags (20 from 100 fixes on), the same for every log of 500 fixes
-    or more, which the calibration job draws on another core while the filter runs."""
+    or more."""
     lags = _lags(n_fixes)
     if lags >= n_fixes:
         return None

@@ -22,7 +22,6 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-import kalcal.cached_kernels  # noqa: F401  (cached kernels load without numba's registries)
 from kalcal.linalg import symmetrize
 from kalcal.models.accel_gps_discretization import bias_discretization, error_transition
 

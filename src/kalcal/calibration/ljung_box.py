@@ -34,7 +34,6 @@ from functools import lru_cache
 import numba
 import numpy as np
 
-import kalcal.cached_kernels  # noqa: F401  (cached kernels load without numba's registries)
 
 #: the fixed seed of the simulated null
 SEED = 201112

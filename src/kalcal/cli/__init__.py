@@ -6,11 +6,7 @@ velocity in m/s, acceleration and bias in m/s^2. Bad input of any kind is one li
 status 2.
 """
 
-import atexit
-import gc
-import os
 import sys
-import threading
 from pathlib import Path
 from typing import Annotated
 
@@ -56,23 +52,6 @@ def _named_files(args: list[str]) -> list[str]:
     return [c for c in candidates if Path(c).is_file()]
 
 
-#: full collections of the cyclic garbage collector wait for this many collections of its middle generation
-#: (Python's default: 10); see :func:`_fewer_full_collections`
-FULL_COLLECTION_THRESHOLD = 1000
-
-
-def _fewer_full_collections() -> None:
-    """Let the garbage collector's full collections wait 100 times longer than Python's default.
-
-    A command is one job in a short process, and most of what it allocates while it starts is long-lived:
-    the modules, classes and functions of numpy, numba's type registries, pandas and matplotlib. Each full
-    collection traverses all of them and finds them alive. Young garbage is still collected as before: the
-    first two generations keep their thresholds.
-    """
-    young, middle, _ = gc.get_threshold()
-    gc.set_threshold(young, middle, FULL_COLLECTION_THRESHOLD)
-
-
 def main() -> None:
     """The console script: the app, with click's own usage errors (a bad option value, a missing
     argument) as one line on stderr and exit status 2, like every other bad input.
@@ -87,7 +66,6 @@ def main() -> None:
     from kalcal.interrupts import Interrupted, raise_on_signals
     from kalcal.io.outputs import protected
 
-    _fewer_full_collections()
     try:
         with raise_on_signals(), protected(*_named_files(sys.argv[1:])):
             code = app(prog_name="kalcal", standalone_mode=False)
@@ -106,45 +84,6 @@ def main() -> None:
     sys.exit(code or 0)
 
 
-def run() -> None:
-    """The console script and ``python -m kalcal``: :func:`main`, then leave the process at once.
 
-    A command's last act is the interpreter's shutdown, which frees every module, class and function of
-    the libraries it loaded, one by one (0.3 s after the imports of a ``kalcal verify``, when it still
-    loaded numpy, numba, scipy, xarray and pandas itself), nothing of it needed once the outputs are in
-    place. So, once :func:`main` is
-    done, the exit handlers run (``atexit``: Dask's, multiprocessing's, temporary files'), stdout and
-    stderr are flushed and the process ends with main's status, without that teardown. It keeps Python's
-    own exit where that teardown may matter: under a profiler or tracer (``python -m cProfile``,
-    coverage), with a thread other than the main one still running, or when flushing a stream fails (a
-    closed pipe: Python's message and status 120).
-    """
-    try:
-        main()
-        code = 0
-    except SystemExit as exc:
-        code = exc.code
-    _leave(code)
-
-
-def _leave(code) -> None:
-    """End the process with ``code`` (a SystemExit's: None, a number or a message) as :func:`run` says."""
-    evaluations = sys.modules.get("kalcal.fitting.local_search")  # a fit's idle evaluation threads need no join
-    running = [t for t in threading.enumerate() if t is not threading.main_thread() and t.is_alive() and not t.daemon
-               and not (evaluations is not None and evaluations.idle(t))]  # fmt: skip
-    if sys.getprofile() is not None or sys.gettrace() is not None or running:
-        sys.exit(code)
-    if code is None:
-        status = 0
-    elif isinstance(code, int):
-        status = code
-    else:  # sys.exit("message"): the message on stderr, status 1
-        print(code, file=sys.stderr)
-        status = 1
-    atexit._run_exitfuncs()  # what Python runs at exit, before its teardown
-    try:
-        sys.stdout.flush()
-        sys.stderr.flush()
-    except (OSError, ValueError):  # a closed pipe or stream: Python's own exit reports it
-        sys.exit(code)
-    os._exit(status)
+#: the console script (``kalcal``, ``python -m kalcal``): main, ended by Python's own exit
+run = main

@@ -25,8 +25,6 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-import kalcal.cached_kernels  # noqa: F401  (cached kernels load without numba's registries)
-
 
 class SequentialRun(NamedTuple):
     """K fixes, d states, p measurements."""

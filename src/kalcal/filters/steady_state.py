@@ -138,7 +138,7 @@ def steady_state(model: LinearGaussianModel, state_names: tuple[str, ...] = ()) 
     unseen = _uncontrolled_modes(phi.T, h.T)
     if unseen:
         causes.append(f"(Phi, H) is not detectable: the measurements never see the mode at {_describe(unseen, state_names)}")
-    import scipy.linalg  # here: the figure process unpickles steady states without loading it
+    import scipy.linalg
 
     try:
         with np.errstate(all="ignore"):

@@ -32,14 +32,12 @@ PROFILE_TOL = 1e-4
 #: more (a log of a few hundred fixes, a scale-bias fit); one of a long log's filter runs takes ~10 ms
 THREAD_MIN_S = 2e-3
 
-#: the evaluation threads' names start with this (cli's fast exit passes them by when idle, :func:`idle`)
+#: the evaluation threads' names start with this
 THREAD_PREFIX = "kalcal-evaluate"
 
 #: the evaluation threads, by count, made once per process and kept (a pool per call cost 1.5-3.5 ms)
 _POOLS: dict[int, ThreadPoolExecutor] = {}
 _POOLS_LOCK = threading.Lock()
-#: evaluate_all calls now waiting on the pools (none: every evaluation thread is idle)
-_WAITING = [0]
 #: set in an evaluation thread: an evaluate_all called from inside one runs there, one after another
 _IN_POOL = threading.local()
 
@@ -49,7 +47,6 @@ def _forget_pools() -> None:
     global _POOLS_LOCK
     _POOLS.clear()
     _POOLS_LOCK = threading.Lock()
-    _WAITING[0] = 0
 
 
 if hasattr(os, "register_at_fork"):
@@ -110,26 +107,14 @@ def evaluate_all(f: Callable[[np.ndarray], float], points: Sequence, workers: in
     if workers <= 1:
         return values + [f(point) for point in points[1:]]
     pool = _pool(workers)
-    with _POOLS_LOCK:
-        _WAITING[0] += 1
+    futures = [pool.submit(contextvars.copy_context().run, _in_pool, f, point) for point in points[1:]]
     try:
-        futures = [pool.submit(contextvars.copy_context().run, _in_pool, f, point) for point in points[1:]]
-        try:
-            return values + [future.result() for future in futures]
-        except BaseException:
-            for future in futures:
-                future.cancel()
-            wait(futures)  # the running evaluations finish before the error goes on
-            raise
-    finally:
-        with _POOLS_LOCK:
-            _WAITING[0] -= 1
-
-
-def idle(thread: threading.Thread) -> bool:
-    """Whether ``thread`` is one of the evaluation threads and none of them is evaluating (no
-    :func:`evaluate_all` is waiting on them): the process may then end without joining it."""
-    return thread.name.startswith(THREAD_PREFIX) and _WAITING[0] == 0
+        return values + [future.result() for future in futures]
+    except BaseException:
+        for future in futures:
+            future.cancel()
+        wait(futures)  # the running evaluations finish before the error goes on
+        raise
 
 
 def _pool(workers: int) -> ThreadPoolExecutor:

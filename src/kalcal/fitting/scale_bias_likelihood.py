@@ -20,7 +20,6 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-import kalcal.cached_kernels  # noqa: F401  (cached kernels load without numba's registries)
 
 #: the information matrix counts as nonsingular once det(Y) exceeds this share of trace(Y)^2
 DIFFUSE_RCOND = 1e-12

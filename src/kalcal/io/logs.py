@@ -1,10 +1,8 @@
 """Read sensor logs (CSV or Parquet, chosen by extension, or a pandas DataFrame) into validated float columns.
 
 Every problem raises :class:`~kalcal.errors.DataError` naming the file, the column and, where there is
-one, the row (1-based, counting data rows after the header) and the value.
-
-A Parquet file of numbers only is read without pandas (:class:`NumericTable`): importing pandas is
-0.2-0.4 s of a calibrate command's start. Anything else is read by pandas, as a CSV file always is.
+one, the row (1-based, counting data rows after the header) and the value. Both formats are read by
+pandas (``read_csv``, ``read_parquet``).
 """
 
 from __future__ import annotations
@@ -30,82 +28,7 @@ def is_frame(value: Any) -> bool:
     return pandas is not None and isinstance(value, pandas.DataFrame)
 
 
-class NumericTable:
-    """A log's columns as float64 arrays by name: a Parquet file of integer and float columns only.
-
-    What :func:`numeric_columns` reads of a DataFrame, without pandas: ``columns`` (the names, stripped,
-    in the file's order), ``table[name]`` (shape (rows,), float64; a null is NaN) and ``len(table)``.
-    """
-
-    def __init__(self, columns: dict[str, np.ndarray]):
-        self._arrays = columns
-        self.columns = tuple(columns)
-
-    def __getitem__(self, name: str) -> np.ndarray:
-        return self._arrays[name]
-
-    def __len__(self) -> int:
-        return next(iter(self._arrays.values())).size if self._arrays else 0
-
-
-def _numeric_parquet(table) -> NumericTable | None:
-    """``table`` (a pyarrow Table) as a NumericTable, or None for pandas to read: a column that is not an
-    integer or a float (text, booleans, times, decimals, categories, ...), names that repeat once
-    stripped, or pandas metadata of an index stored as columns or of columns on more than one level.
-
-    The names are the file's field names. pandas rebuilds names from its metadata instead, which differs
-    only for names that were not strings in pandas (booleans, for one)."""
-    import pyarrow.types as types
-
-    metadata = table.schema.pandas_metadata or {}
-    if any(not isinstance(index, dict) for index in metadata.get("index_columns", [])):
-        return None
-    if len(metadata.get("column_indexes", [])) > 1:
-        return None
-    names = [str(name).strip() for name in table.column_names]
-    if len(set(names)) < len(names):
-        return None
-    if not all(types.is_integer(field.type) or types.is_floating(field.type) for field in table.schema):
-        return None
-    # concatenate makes each column's one copy: writable, and free of Arrow's memory
-    return NumericTable(
-        {
-            name: np.concatenate([_float64(chunk) for chunk in column.chunks] or [np.empty(0)])
-            for name, column in zip(names, table.columns)
-        }
-    )
-
-
-def _float64(chunk) -> np.ndarray:
-    """A pyarrow array of integers or floats as float64, a null as NaN (as pandas reads it; the NaN's
-    payload bits may differ: pandas widens float16's own NaN for a float16 column). A read-only view of
-    the array's memory where it is float64 without nulls.
-
-    Read from the array's Arrow buffers (validity bitmap, values): pyarrow's ``to_numpy`` imports pandas.
-    """
-    import pyarrow as pa
-
-    if len(chunk) == 0:
-        return np.empty(0)
-    if chunk.type != pa.float64():
-        chunk = chunk.cast(pa.float64(), safe=False)  # ints rounded to nearest, as numpy's astype does
-    validity, data = chunk.buffers()
-    size, offset = len(chunk), chunk.offset
-    values = np.frombuffer(data, dtype=np.float64, count=size, offset=offset * 8)
-    if chunk.null_count:
-        values = values.copy()
-        valid = np.unpackbits(np.frombuffer(validity, dtype=np.uint8), bitorder="little")[offset : offset + size]
-        values[valid == 0] = np.nan
-    return values
-
-
-def _read_parquet(path: Path) -> pd.DataFrame | NumericTable:
-    """A Parquet file: its numbers without pandas where :func:`_numeric_parquet` can, else pandas' frame."""
-    import pyarrow.parquet as parquet
-
-    table = _numeric_parquet(parquet.ParquetFile(path).read())
-    if table is not None:
-        return table
+def _read_parquet(path: Path) -> pd.DataFrame:
     import pandas as pd
 
     return pd.read_parquet(path)
@@ -129,12 +52,10 @@ def source_name(source: str | Path | pd.DataFrame, role: str) -> str:
     return f"<{role} DataFrame>" if is_frame(source) else str(source)
 
 
-def read_table(path: str | Path | pd.DataFrame, role: str = "log") -> pd.DataFrame | NumericTable:
+def read_table(path: str | Path | pd.DataFrame, role: str = "log") -> pd.DataFrame:
     """Read a CSV or Parquet file; refuse missing, unreadable or empty files.
 
-    Returns a DataFrame, or a :class:`NumericTable` for a Parquet file of integer and float columns
-    only (the same numbers :func:`numeric_columns` takes from pandas' frame). A DataFrame is taken as
-    the file's content (a copy, with the same checks): empty is refused under the name
+    Returns a DataFrame, its column names stripped. A DataFrame is taken as the file's content (a copy, with the same checks): empty is refused under the name
     ``<ROLE DataFrame>`` (:func:`source_name`).
     """
     if is_frame(path):
@@ -158,13 +79,12 @@ def read_table(path: str | Path | pd.DataFrame, role: str = "log") -> pd.DataFra
         raise DataError(f"{path}: cannot be read as {kind} ({first_line})") from None
     if len(frame) == 0:
         raise DataError(f"{path}: has a header but no data rows")
-    if is_frame(frame):
-        frame.columns = [str(c).strip() for c in frame.columns]
+    frame.columns = [str(c).strip() for c in frame.columns]
     return frame
 
 
 def numeric_columns(
-    frame: pd.DataFrame | NumericTable,
+    frame: pd.DataFrame,
     path: str | Path,
     columns: Mapping[str, str] | Sequence[str],
     *,
@@ -188,8 +108,7 @@ def numeric_columns(
                 f"{path}: missing column {name!r}" + (f" for {role}" if role != name else "")
                 + f" (columns: {', '.join(map(str, frame.columns))})"
             )
-        # a NumericTable's columns are numbers already: no text to refuse
-        values = frame[name] if isinstance(frame, NumericTable) else _parsed(frame[name], path, name)
+        values = _parsed(frame[name], path, name)
         not_finite = ~np.isfinite(values) if role not in allow_nan else np.isinf(values)
         if np.any(not_finite):
             row = int(np.argmax(not_finite))

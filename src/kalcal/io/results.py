@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import csv
-import io
 import json
 import math
 import os
@@ -79,44 +77,12 @@ def write_json(path: str | Path, document: dict[str, Any]) -> Path:
 
 
 def write_csv(path: str | Path, columns: dict[str, np.ndarray]) -> Path:
-    """Write equal-length columns as a CSV table; floats in their shortest exact (round-trip) form.
+    """Write equal-length columns as a CSV table through pandas (``DataFrame.to_csv``, no index): floats in
+    their shortest round-trip form, NaN an empty field, lines ending in ``"\n"`` on every system. Columns
+    of unequal lengths are refused (pandas' ValueError)."""
+    import pandas as pd
 
-    The bytes of ``pandas.DataFrame(columns).to_csv(path, index=False)`` on Linux (lines end in
-    ``"\n"`` on every system; NaN is an empty field, infinities ``inf`` and ``-inf``). String names of
-    1-D float64 and integer numpy arrays of one length are written without pandas, which a calibration
-    otherwise does not load. Anything else goes through pandas: other dtypes (float32 among them),
-    masked arrays, Series (aligned on their index), other names (tuples: a header on two rows), and
-    columns of unequal lengths (refused).
-    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    arrays = list(columns.values())
-    plain = all(isinstance(name, str) for name in columns) and all(
-        type(array) is np.ndarray and array.ndim == 1 and (array.dtype == np.float64 or array.dtype.kind in "iu")
-        for array in arrays
-    )
-    if not arrays or not plain or len({array.size for array in arrays}) > 1:  # ragged: pandas' error
-        import pandas as pd
-
-        pd.DataFrame(columns).to_csv(path, index=False, lineterminator="\n")
-        return path
-    header = io.StringIO()
-    csv.writer(header, lineterminator="\n").writerow(columns)
-    # Python's repr of a float64 is numpy's str of it, which pandas writes: the shortest round-trip form
-    cells = [_cells(array) for array in arrays]
-    if len(cells) == 1:  # a row of one empty field is quoted, as the csv module writes it: a blank line is no row
-        cells[0] = [cell or '""' for cell in cells[0]]
-    with open(path, "w", encoding="utf-8", newline="") as file:
-        file.write(header.getvalue())
-        file.writelines(",".join(row) + "\n" for row in zip(*cells))
+    pd.DataFrame(columns).to_csv(path, index=False, lineterminator="\n")
     return path
-
-
-def _cells(array: np.ndarray) -> list[str]:
-    """A column's CSV fields: shortest round-trip floats, NaN as an empty field; integers in full."""
-    if array.dtype.kind != "f":
-        return [str(value) for value in array.tolist()]
-    cells = list(map(repr, array.tolist()))
-    for row in np.flatnonzero(np.isnan(array)).tolist():
-        cells[row] = ""
-    return cells

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
-import threading
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -19,8 +17,6 @@ from kalcal.io.outputs import mark_inputs, writes_outputs
 from kalcal.io.results import write_csv, write_json
 from kalcal.models.accel_gps import AccelGpsScenario, AccelGpsSettings
 from kalcal.models.config import section_values
-from kalcal.reporting.figure_names import CALIBRATION_FIGURE
-from kalcal.reporting.figure_process import submit
 
 if TYPE_CHECKING:  # a calibration from Parquet files loads no pandas (kalcal.io.logs)
     import pandas as pd
@@ -84,33 +80,19 @@ def save_calibration(calibration: Calibration, out: str | Path) -> dict[str, Pat
     def write(calibration: Calibration, out: Path) -> dict[str, Path]:
         out = Path(out)
         paths = {}
-        figure = contextlib.nullcontext()
-        if "calibration.png" in names:  # drawn in the job's figure process, if any, while the files below are written
+        paths["estimates.csv"] = write_csv(out / "estimates.csv", calibration.columns)
+        paths["summary.json"] = write_json(out / "summary.json", calibration.summary)
+        if "calibration.png" in names:
+            from kalcal.plots.calibration import plot_calibration
+
             columns = calibration.columns
             normalized = np.column_stack([columns["innovation_position"], columns["innovation_velocity"]])
-            figure = submit(
-                CALIBRATION_FIGURE, columns["time"], columns["bias"], columns["bias_std"], normalized,
-                out / "calibration.png",
+            paths["calibration.png"] = plot_calibration(
+                columns["time"], columns["bias"], columns["bias_std"], normalized, out / "calibration.png"
             )
-        with figure:  # waited for, or stopped before an error goes on and the outputs are cleaned up
-            paths["estimates.csv"] = write_csv(out / "estimates.csv", calibration.columns)
-            paths["summary.json"] = write_json(out / "summary.json", calibration.summary)
-        if "calibration.png" in names:
-            paths["calibration.png"] = figure.result()
         return paths
 
     return write(calibration, out)
-
-
-def _whiteness_null() -> None:
-    """Draw (and so cache) the whiteness null of a log of REFERENCE_FIXES fixes or more, of the job's two
-    innovations (position, velocity) at the diagnostics' confidence; an error is left to the diagnostics,
-    which meet it drawing their own."""
-    from kalcal.calibration.diagnostics import CONFIDENCE, whiteness_null
-    from kalcal.calibration.ljung_box import REFERENCE_FIXES
-
-    with contextlib.suppress(Exception):
-        whiteness_null(REFERENCE_FIXES + 1, 2, CONFIDENCE)
 
 
 def compute_accel_gps_calibration(
@@ -152,7 +134,6 @@ def compute_accel_gps_calibration(
     # the accel-gps filter (and numba under it) when it runs: a scale-bias calibration imports this module too
     from kalcal.calibration.accel_gps import bias_walk_variance, calibrate_accel_gps, prior_conflict
     from kalcal.calibration.diagnostics import innovation_diagnostics
-    from kalcal.calibration.ljung_box import REFERENCE_FIXES
     from kalcal.calibration.smoothing import smooth_calibration
 
     windows = check_windows(windows)
@@ -171,17 +152,6 @@ def compute_accel_gps_calibration(
     )
     require_increasing(imu["time"], imu_path, imu_map["time"])
     require_increasing(gps["time"], gps_path, gps_map["time"])
-    # the whiteness test's simulated null (0.12-0.15 s of CPU in a fresh process, cached after) is the same
-    # for every log of REFERENCE_FIXES fixes used or more: for a log of more it is drawn on another core
-    # while the filter runs. A few fixes go unused (the first starts the filter, a diffuse prior leaves out
-    # the next, the gate rejects some): with fewer than REFERENCE_FIXES left the diagnostics draw their own
-    null = None
-    if gps["time"].size >= REFERENCE_FIXES + 10:
-        null = threading.Thread(target=_whiteness_null, name="kalcal-whiteness-null", daemon=True)
-        try:
-            null.start()
-        except RuntimeError:  # no thread to be had: the diagnostics draw it
-            null = None
     logs = (imu["time"], imu["accel"], gps["time"], gps["position"], gps["velocity"])
     stds = {"position_std": gps.get("position_std"), "velocity_std": gps.get("velocity_std")}
     options = dict(
@@ -221,8 +191,6 @@ def compute_accel_gps_calibration(
     }
     used = ~result.rejected
     used[: result.skip] = False
-    if null is not None:
-        null.join()
     diagnostics = innovation_diagnostics(normalized[used])
     warnings = list(result.warnings)
     conflict = prior_conflict(result, walk_variance=bias_walk_variance(scenario, result, imu["time"]))

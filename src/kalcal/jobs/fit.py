@@ -15,8 +15,6 @@ from kalcal.io.outputs import inputs_of, mark_inputs, run_outputs
 from kalcal.io.results import write_json
 from kalcal.jobs.calibrate import GPS_ROLES, IMU_ROLES, stated_rates
 from kalcal.jobs.verify_arguments import MAX_UPDATES
-from kalcal.reporting.figure_names import FIT_FIGURE
-from kalcal.reporting.figure_process import submit
 
 #: the files of one fit
 OUTPUT_NAMES = ("fit.json", "filter.toml", "fit.png")
@@ -197,13 +195,13 @@ def save_fit(run: FitRun, out: str | Path) -> dict[str, Path]:
     with run_outputs(out, run.command, names=OUTPUT_NAMES, protect=inputs_of(run)) as staging:
         staging.mkdir(parents=True, exist_ok=True)
         from kalcal.fitting.mle import drop_of
+        from kalcal.plots.fit import plot_fit
 
         linear = ()
         if run.command == "fit accel-gps":
             from kalcal.fitting.accel_gps import LINEAR as linear
-        # drawn in the job's figure process, if any, while the files below are written
-        with submit(FIT_FIGURE, run.result.curves, run.document["parameters"], staging / "fit.png",
-                    method=run.result.interval_method, drop=drop_of(run.result.confidence), linear=tuple(linear)):
-            write_json(staging / "fit.json", run.document)
-            (staging / "filter.toml").write_text(run.filter_text)
+        write_json(staging / "fit.json", run.document)
+        (staging / "filter.toml").write_text(run.filter_text)
+        plot_fit(run.result.curves, run.document["parameters"], staging / "fit.png",
+                 method=run.result.interval_method, drop=drop_of(run.result.confidence), linear=tuple(linear))
     return {name: out / name for name in OUTPUT_NAMES}

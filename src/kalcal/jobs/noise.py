@@ -20,8 +20,6 @@ from kalcal.io.logs import numeric_columns, parse_column_map, read_table, requir
 from kalcal.io.outputs import final_path, inputs_of, mark_inputs, run_outputs
 from kalcal.io.results import write_json
 from kalcal.models.accel_gps import AccelGpsFilter
-from kalcal.reporting.figure_names import NOISE_FIGURE
-from kalcal.reporting.figure_process import submit
 
 IMU_ROLES = ("time", "accel")
 #: the identified values that map onto accel-gps ``filter.`` settings of the same name
@@ -115,20 +113,21 @@ def _write_noise(run: NoiseRun, out: Path, kalibr: bool) -> dict[str, Any]:
         "filter": out / "filter.toml",
     }
     out.mkdir(parents=True, exist_ok=True)
-    # drawn in the job's figure process, if any, while the files below are written
-    with submit(NOISE_FIGURE, run.identification, paths["plot"], title=run.title):
-        run.allan.to_csv(paths["allan"], index=False)
-        paths["filter"].write_text(run.filter_text)
-        if kalibr:
-            from kalcal.calibration.kalibr import kalibr_yaml
+    from kalcal.plots.allan import plot_allan
 
-            paths["kalibr"] = out / KALIBR_NAME
-            paths["kalibr"].write_text(kalibr_yaml(run.identification))
-        summary = dict(run.summary)
-        warnings = summary.pop("warnings")
-        summary["files"] = {name: str(final_path(path)) for name, path in paths.items()}
-        summary["warnings"] = warnings
-        write_json(paths["summary"], summary)
+    plot_allan(run.identification, paths["plot"], title=run.title)
+    run.allan.to_csv(paths["allan"], index=False)
+    paths["filter"].write_text(run.filter_text)
+    if kalibr:
+        from kalcal.calibration.kalibr import kalibr_yaml
+
+        paths["kalibr"] = out / KALIBR_NAME
+        paths["kalibr"].write_text(kalibr_yaml(run.identification))
+    summary = dict(run.summary)
+    warnings = summary.pop("warnings")
+    summary["files"] = {name: str(final_path(path)) for name, path in paths.items()}
+    summary["warnings"] = warnings
+    write_json(paths["summary"], summary)
     return summary
 
 

@@ -28,7 +28,7 @@ from kalcal.filters.steps import check_form
 from kalcal.io.manifest import require_complete
 from kalcal.io.outputs import run_outputs
 from kalcal.io.results import SCHEMA_VERSION
-from kalcal.io.statistics import load_statistics
+from kalcal.io.statistics import read_statistics
 from kalcal.jobs.progress import JobProgress, stage
 from kalcal.models.custom import CustomModelScenario, is_custom_settings
 from kalcal.models.registry import build_scenario
@@ -37,10 +37,6 @@ from kalcal.montecarlo.problem import FixedGainProblem
 from kalcal.montecarlo.scale_bias import ScaleBiasProblem
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.plots.realization_data import RealizationData
-from kalcal.reporting.drawing import drawing_workers
-from kalcal.reporting.figure_entries import REALIZATION_FIGURES_PER_STATE, page_order
-from kalcal.reporting.figure_names import REPORT_FIGURES, REPORT_REALIZATION_FIGURES, REPORT_STATISTICS_FIGURES
-from kalcal.reporting.figure_process import call, elsewhere, submit
 from kalcal.reporting.html import build_page, write_page
 from kalcal.reporting.steady_state import steady_state_view
 from kalcal.verification.self_check import exact_prediction
@@ -194,24 +190,21 @@ def render_report(out: str | Path, *, realization: int = 0, progress: JobProgres
         ``realization`` is not in [0, N), or the saved settings no longer build a scenario.
     OutputError
         The folder's last kalcal run did not finish, or it holds a page or figure kalcal did not write.
-    ConfigError
-        ``KALCAL_FIGURE_PROCESSES`` is set but not a whole number >= 1 (checked before anything is read).
     """
     out = Path(out)
     if not out.is_dir():
         raise DataError(f"{out}: no such run directory")
-    drawing_workers(1)  # a malformed KALCAL_FIGURE_PROCESSES is refused before any file is read
     require_complete(out)
     summary_path = out / "summary.json"
     summary = read_summary(summary_path)
     numbers = _run_numbers(summary, summary_path, realization)  # a bad --realization: refused before stats.nc is read
-    dataset = load_statistics(out / "stats.nc")  # numpy parts, without xarray, for the files kalcal writes
+    dataset = read_statistics(out / "stats.nc")
     _require_same_run(dataset, summary, out / "stats.nc", summary_path)
     long_path = out / "stats_long.nc"
     long_dataset = None
     # a stats_long.nc the run did not write (a summary without a long study) is not this run's
     if long_path.is_file() and summary.get("long_run", True) is not None:
-        long_dataset = load_statistics(long_path)
+        long_dataset = read_statistics(long_path)
         _require_same_run(long_dataset, summary, long_path, summary_path)
     return _draw_page(out, summary, dataset, long_dataset, numbers, progress)
 
@@ -260,12 +253,8 @@ def _draw_page(
     out: Path, summary: dict[str, Any], dataset, long_dataset, numbers: tuple[int, int, int], progress
 ) -> Path:
     """The figures and page of a run from its summary and statistics (read from ``out`` or in memory);
-    ``numbers`` is the run's (N, seed, shown realization) as :func:`_run_numbers` checked them.
-
-    In the job's figure process, where it has one, the statistics' figures are drawn while the shown
-    realization is redrawn here, and its figures follow (:func:`_two_parts`; a realization that fails stops
-    the figures being drawn before its error goes on); drawn here, the realization comes first, then every
-    figure at once. The same figures and page either way (tests/reporting/test_report_parts.py)."""
+    ``numbers`` is the run's (N, seed, shown realization) as :func:`_run_numbers` checked them: the
+    realization shown is redrawn first, then every figure is drawn, in this process."""
     summary_path = out / "summary.json"
     count, seed, index = numbers
     scenario = saved_scenario(summary, summary_path)
@@ -292,42 +281,17 @@ def _draw_page(
         remedy=f"to draw a page here (a folder from a kalcal version without manifests), move {PAGE} and "
         f"{FIGURE_DIR}/ out of it first",
     ) as staging:
-        shown = lambda: _realization_data(problem, scenario, seed, index, count, str(summary["engine"]))  # noqa: E731
+        shown = _realization_data(problem, scenario, seed, index, count, str(summary["engine"]))
         options = dict(scenario=str(summary["scenario"]), steady=steady, exact_cov=exact.error_cov, exact_reason=exact.reason)
-        if elsewhere():  # the job's figure process: the statistics' figures while the realization is redrawn here
-            figures, skipped = _two_parts(dataset, long_dataset, staging / FIGURE_DIR, shown, len(problem.info.state_names),
-                                          stage(progress, "figures"), options)  # fmt: skip
-        else:  # drawn here, where nothing would run meanwhile: the realization, then every figure at once
-            figures, skipped = call(REPORT_FIGURES, dataset, shown(), staging / FIGURE_DIR, long_dataset,
-                                    progress=stage(progress, "figures"), **options)  # fmt: skip
+        from kalcal.reporting.figures import render_figures
+
+        figures, skipped = render_figures(dataset, shown, staging / FIGURE_DIR, long_dataset,
+                                          progress=stage(progress, "figures"), **options)  # fmt: skip
         page = build_page(summary, figures, skipped, realization=index, figure_dir_name=FIGURE_DIR, steady_state=steady)
         write_page(staging / PAGE, page)
     if progress is not None:
         progress("report", 1, 1)
     return out / PAGE
-
-
-def _two_parts(dataset, long_dataset, figure_dir: Path, shown, states: int, counted, options: dict[str, Any]):
-    """The page's figures and those skipped, in two calls to the job's figure process: the statistics'
-    figures, drawn there while ``shown()`` redraws the realization here, then the realization's, once the
-    statistics' are done. ``counted(done, total)`` hears of both as one count; the first call reports its
-    progress even without it, since the figure process hears of a stop only there."""
-    later = REALIZATION_FIGURES_PER_STATE * states
-    counted = counted or (lambda done, total: None)
-    pending = None
-    try:
-        pending = submit(REPORT_STATISTICS_FIGURES, dataset, figure_dir, long_dataset, **options,
-                         progress=lambda done, total: counted(done, total + later))  # fmt: skip
-        data = shown()
-        statistics_figures, skipped = pending.result()
-    except BaseException:
-        if pending is not None:
-            pending.cancel()  # its running figures finish before the error goes on; the others are dropped
-        raise
-    first = len(statistics_figures)
-    realization_figures = call(REPORT_REALIZATION_FIGURES, data, figure_dir, scenario=options["scenario"],
-                               progress=lambda done, total: counted(first + done, first + total))  # fmt: skip
-    return page_order(realization_figures + statistics_figures), skipped
 
 
 def _realization_data(problem, scenario, seed: int, index: int, count: int, engine: str) -> RealizationData:

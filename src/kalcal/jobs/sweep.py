@@ -13,8 +13,6 @@ from kalcal.io.outputs import writes_outputs
 from kalcal.io.results import write_json
 from kalcal.jobs.verify import check_arguments, verify
 from kalcal.models.config import apply_settings
-from kalcal.reporting.figure_names import SWEEP_FIGURE
-from kalcal.reporting.figure_process import call
 
 
 @dataclass(frozen=True)
@@ -96,7 +94,9 @@ def sweep(scenario, key: str, values: list[str], n: int, seed: int, out: str | P
     paths["summary"] = write_json(
         out / "sweep.json", {"key": key, "values": values, "realizations": n, "seed": seed, "rows": rows}
     )
-    paths["figure"] = call(SWEEP_FIGURE, table, key, out / "sweep.png")  # in the job's figure process, if any
+    from kalcal.plots.sweep import plot_sweep
+
+    paths["figure"] = plot_sweep(table, key, out / "sweep.png")
     return SweepResult(key, table, paths, tuple(runs), tuple(summaries))
 
 

@@ -5,12 +5,14 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+if TYPE_CHECKING:
+    import xarray as xr
+
 from kalcal import __version__
-from kalcal.io.dataset_parts import DatasetParts
 from kalcal.io.outputs import writes_outputs
 from kalcal.jobs.progress import JobProgress, stage
 from kalcal.jobs.verify_arguments import (  # noqa: F401 (MAX_UPDATES, MIN_REALIZATIONS, run_length: the job's limits)
@@ -19,7 +21,6 @@ from kalcal.jobs.verify_arguments import (  # noqa: F401 (MAX_UPDATES, MIN_REALI
     MAX_UPDATES,
     MIN_REALIZATIONS,
     check_arguments,
-    check_drawing,
     default_long_run,
     info_name,
     run_estimate_check,
@@ -110,7 +111,7 @@ class VerifyOutcome:
     summary: dict[str, Any]
     statistics: EnsembleStatistics
     checks: list[CheckResult]
-    dataset: DatasetParts
+    dataset: xr.Dataset
     paths: dict[str, Path]
 
 
@@ -129,9 +130,9 @@ class Verification:
         The per-update ensemble statistics of the run.
     checks : list of CheckResult
         The statistical checks, in the summary's order.
-    dataset : DatasetParts
-        ``stats.nc``'s content (``dataset.to_xarray()``: the ``xarray.Dataset``).
-    long_dataset : DatasetParts or None
+    dataset : xarray.Dataset
+        ``stats.nc``'s content.
+    long_dataset : xarray.Dataset or None
         ``stats_long.nc``'s content, None without a long run.
     checkpoint : Path or None
         The run's checkpoint file (an input: never removed by the outputs).
@@ -145,8 +146,8 @@ class Verification:
     summary: dict[str, Any]
     statistics: EnsembleStatistics
     checks: list[CheckResult]
-    dataset: DatasetParts
-    long_dataset: DatasetParts | None
+    dataset: xr.Dataset
+    long_dataset: xr.Dataset | None
     checkpoint: Path | None
     compute_s: float
     self_check: SelfCheck | None = None
@@ -338,8 +339,6 @@ def verify(
     default 24 h, None for no limit) without a ``checkpoint``, or whose sums would not fit in the memory
     available, is refused with a ConfigError; ``notes(text)`` hears the estimate of a run of a minute or more.
     """
-    if report:
-        check_drawing()  # before the Monte Carlo, which compute_verification starts
     run = compute_verification(
         scenario,
         n,

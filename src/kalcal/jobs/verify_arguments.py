@@ -75,7 +75,6 @@ def check_arguments(
     batch size below 1, a negative or non-finite ``long_run`` or one not longer than the run, and a run or
     long run of more than :data:`MAX_UPDATES` updates per realization (``scenario.duration`` too long),
     and the log-only GNSS faults of accel-gps (:func:`~kalcal.montecarlo.scenarios.refuse_log_faults`).
-    A run that will draw its page checks :func:`check_drawing` too.
     """
     if n < MIN_REALIZATIONS:
         raise ConfigError(
@@ -103,15 +102,6 @@ def check_arguments(
     if long_seconds and long_seconds > horizon:
         long_count, _ = run_length(apply_settings(scenario, {"scenario.duration": long_seconds}))
         _require_fits(long_count, "--long-run")
-
-
-def check_drawing() -> None:
-    """Refuse, with a :class:`~kalcal.errors.ConfigError`, a malformed ``KALCAL_FIGURE_PROCESSES``
-    (:func:`kalcal.reporting.drawing.drawing_workers`) before a run that will draw figures starts, not
-    after its Monte Carlo; a run that draws none does not read it."""
-    from kalcal.reporting.drawing import drawing_workers
-
-    drawing_workers(1)
 
 
 def info_name(scenario) -> str:

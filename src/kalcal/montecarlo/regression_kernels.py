@@ -24,7 +24,6 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-import kalcal.cached_kernels  # noqa: F401  (cached kernels load without numba's registries)
 from kalcal.montecarlo.sum_kernels import accumulate
 
 #: realizations filtered together, update by update: their inputs (strided by K in the (n, K) layout)

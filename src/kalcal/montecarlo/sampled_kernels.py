@@ -22,7 +22,6 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-import kalcal.cached_kernels  # noqa: F401  (cached kernels load without numba's registries)
 from kalcal.filters.mechanization import interval_weights
 from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.montecarlo.accumulators import SumBuffers

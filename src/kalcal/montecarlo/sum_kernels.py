@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import numba
 
-import kalcal.cached_kernels  # noqa: F401  (cached kernels load without numba's registries)
 
 FAST = {"reassoc", "contract"}  #: the fast-math flags of the reductions over realizations
 

@@ -1,9 +1,10 @@
 """What every figure shares: size, style, unit strings, the sigma band and a deterministic PNG writer.
 
 Figures are built on :class:`matplotlib.figure.Figure` with an Agg canvas (no pyplot, no global figure
-manager, no interactive backend touched), rendered at a fixed size and dpi, without ``bbox_inches="tight"``: a figure with ``rows`` rows
-of panels is always ``WIDTH_PX`` x ``height_px(rows)`` pixels, and the same data give the same bytes
-(the PNG carries no software or time stamp).
+manager, no interactive backend touched), laid out by matplotlib's constrained layout and rendered at a
+fixed size and dpi, without ``bbox_inches="tight"``: a figure with ``rows`` rows of panels is always
+``WIDTH_PX`` x ``height_px(rows)`` pixels, and the same data give the same bytes (``savefig`` writes the
+PNG without a software stamp; Agg's PNGs carry no time).
 """
 
 from __future__ import annotations
@@ -16,13 +17,8 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
-from PIL import Image
-
-from kalcal.plots._layout import fit_margins
 
 DPI = 100
-#: zlib level of the PNGs: see docs
-COMPRESS_LEVEL = 1
 #: width of every figure, px
 WIDTH_PX = 900
 #: height of a figure with one row of panels, px; each further row adds ROW_PX
@@ -32,9 +28,6 @@ ROW_PX = 250
 STYLE = {
     "font.size": 10.0,
     "axes.titlesize": 10.5,
-    # a title at a fixed height above its panel: matplotlib does not lay out the tick labels again to
-    # find where the title goes (no panel has tick labels on top)
-    "axes.titley": 1.0,
     "axes.labelsize": 10.0,
     "legend.fontsize": 8.5,
     "xtick.labelsize": 9.0,
@@ -62,8 +55,7 @@ def height_px(rows: int) -> int:
 
 
 def new_figure(rows: int = 1, cols: int = 1, *, height: int | None = None, sharex: bool = True):
-    """A figure of ``WIDTH_PX`` x ``height`` (default ``height_px(rows)``) pixels, laid out when saved
-    (:func:`kalcal.plots._layout.fit_margins`).
+    """A figure of ``WIDTH_PX`` x ``height`` (default ``height_px(rows)``) pixels, in constrained layout.
 
     Returns
     -------
@@ -71,7 +63,7 @@ def new_figure(rows: int = 1, cols: int = 1, *, height: int | None = None, share
     axes : ndarray of Axes, shape (rows, cols)
     """
     height = height_px(rows) if height is None else height
-    figure = Figure(figsize=(WIDTH_PX / DPI, height / DPI), dpi=DPI)
+    figure = Figure(figsize=(WIDTH_PX / DPI, height / DPI), dpi=DPI, layout="constrained")
     FigureCanvasAgg(figure)
     axes = figure.subplots(rows, cols, sharex=sharex, squeeze=False)
     return figure, axes
@@ -81,15 +73,7 @@ def save(figure: Figure, path: str | Path) -> Path:
     """Write ``figure`` as a PNG of exactly its pixel size, with no software or time metadata."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    if not getattr(figure, "_kalcal_fitted", False):
-        fit_margins(figure)
-    figure.canvas.draw()
-    rgba = figure.canvas.buffer_rgba()
-    height, width = rgba.shape[:2]
-    # opaque white background: no alpha to keep. Pillow reads the RGBA rows as RGBX, the layout it keeps
-    # an RGB image in (a copy of the bytes), where numpy's copy of the three channels took 5 ms a figure
-    image = Image.frombytes("RGB", (width, height), rgba, "raw", "RGBX")
-    image.save(path, format="png", compress_level=COMPRESS_LEVEL, dpi=(DPI, DPI))
+    figure.savefig(path, format="png", dpi=DPI, metadata={"Software": None})
     return path
 
 
@@ -139,8 +123,8 @@ def legend_below(figure: Figure, axes, *, ncols: int | None = None):
     """One legend for the whole figure, centred below its panels, of the labelled artists of ``axes``.
 
     For figures whose panels would each repeat the same legend. Entries come in the order of ``axes``
-    and their artists, each label once; ``ncols`` defaults to one row of all of them. The layout
-    (:func:`kalcal.plots._layout.fit_margins`) reserves its height below the panels.
+    and their artists, each label once; ``ncols`` defaults to one row of all of them. The constrained
+    layout reserves its height below the panels.
     """
     handles, labels = [], []
     for ax in axes:

@@ -12,7 +12,6 @@ from kalcal.plots._common import ENSEMBLE, FILTER, STATE_COLORS, label, new_figu
 if TYPE_CHECKING:  # type hints only
     import xarray as xr
 
-    from kalcal.io.dataset_parts import DatasetParts
 
 #: colours of the budget's sources by kind, light to dark within a kind
 _KIND_COLORS = {
@@ -22,7 +21,7 @@ _KIND_COLORS = {
 }
 
 
-def plot_analysis(dataset: xr.Dataset | DatasetParts, figure_dir: str | Path) -> dict[str, Path]:
+def plot_analysis(dataset: xr.Dataset, figure_dir: str | Path) -> dict[str, Path]:
     """Both figures of ``analysis.nc`` (a Dataset or its parts) into ``figure_dir``, by key: ``sigma``
     (``sigma.png``, :func:`plot_sigma`) and ``budget`` (``budget.png``, :func:`plot_budget`)."""
     figure_dir = Path(figure_dir)
@@ -30,7 +29,7 @@ def plot_analysis(dataset: xr.Dataset | DatasetParts, figure_dir: str | Path) ->
 
 
 @styled
-def plot_sigma(dataset: xr.Dataset | DatasetParts, path: str | Path) -> Path:
+def plot_sigma(dataset: xr.Dataset, path: str | Path) -> Path:
     """The filter's sigma sqrt(P_ii) (dashed) against the true sigma sqrt(P_true,ii) (solid), one panel per state.
 
     Also sqrt(E[e_i^2]) (dotted) where the mean error adds to the spread. 900 x (150 + 250 d) px.
@@ -67,7 +66,7 @@ def _colors(kinds: list[str]) -> list[str]:
 
 
 @styled
-def plot_budget(dataset: xr.Dataset | DatasetParts, path: str | Path) -> Path:
+def plot_budget(dataset: xr.Dataset, path: str | Path) -> Path:
     """Each source's share of each state's true error variance over time, stacked to 1, one panel per state.
 
     The shares are the diagonal of each budget term over the diagonal of P_true; the legend names the

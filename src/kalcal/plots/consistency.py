@@ -26,11 +26,10 @@ from kalcal.plots._common import (
     styled,
     time_label,
 )
-from kalcal.plots._layout import colorbar_beside
 from kalcal.verification.bounds import COVARIANCE_PARTS, centered_nees_bounds, chi2_mean_bounds, whiteness_pairs_bound
 from kalcal.verification.covariance import centered_nees
 
-if TYPE_CHECKING:  # the figures take a Dataset or the verify job's DatasetParts: no xarray here
+if TYPE_CHECKING:
     import xarray as xr
 
 #: pixel height of the residual correlation map (its width is the common 900 px)
@@ -85,7 +84,7 @@ def plot_nees(dataset: xr.Dataset, path: str | Path) -> Path:
 
     Parameters
     ----------
-    dataset : xarray.Dataset or DatasetParts
+    dataset : xarray.Dataset
         A ``stats.nc`` Dataset (attributes ``realizations`` and ``confidence``).
     path : path of the PNG to write
     """
@@ -132,7 +131,7 @@ def plot_nis(dataset: xr.Dataset, path: str | Path) -> Path:
 
     Parameters
     ----------
-    dataset : xarray.Dataset or DatasetParts
+    dataset : xarray.Dataset
         A ``stats.nc`` Dataset (attributes ``realizations`` and ``confidence``).
     path : path of the PNG to write
     """
@@ -154,7 +153,7 @@ def plot_residual_correlation(dataset: xr.Dataset, path: str | Path) -> Path:
 
     Parameters
     ----------
-    dataset : xarray.Dataset or DatasetParts
+    dataset : xarray.Dataset
         With ``residual_second_moment`` (K, p, K, p), E[r_k r_j^T] over all pairs of updates.
     path : path of the PNG to write
     """
@@ -186,7 +185,7 @@ def plot_residual_correlation(dataset: xr.Dataset, path: str | Path) -> Path:
             ax.set_ylabel(label("t_k", "s"))
             ax.set_xlabel(label("t_j", "s"))
     figure.suptitle(f"Residual correlation over pairs of updates, N = {count:,}; whiteness bound ±{bound:.3g} (black ticks)")
-    colorbar = colorbar_beside(figure, image, "correlation (dimensionless)", shrink=0.9)
+    colorbar = figure.colorbar(image, ax=list(figure.axes), shrink=0.9, label="correlation (dimensionless)")
     colorbar.ax.axhline(bound, color="black", linewidth=1.0)
     colorbar.ax.axhline(-bound, color="black", linewidth=1.0)
     return save(figure, path)
@@ -209,7 +208,7 @@ def plot_model_error(dataset: xr.Dataset, path: str | Path) -> Path:
 
     Parameters
     ----------
-    dataset : xarray.Dataset or DatasetParts
+    dataset : xarray.Dataset
         A ``stats.nc`` Dataset: ``expected_mean_error`` and ``mean_error`` (K, d), ``filter_cov`` (K, d, d).
     path : path of the PNG to write
     """

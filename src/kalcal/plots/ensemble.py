@@ -34,7 +34,7 @@ from kalcal.plots._common import (
 from kalcal.verification.bounds import covariance_element_bound, normal_bound
 from kalcal.verification.self_check import compared_states, variance_ratio_band
 
-if TYPE_CHECKING:  # the figures take a Dataset or the verify job's DatasetParts: no xarray here
+if TYPE_CHECKING:
     import xarray as xr
 
 
@@ -60,7 +60,7 @@ def plot_mean_error(dataset: xr.Dataset, path: str | Path, *, title: str | None 
 
     Parameters
     ----------
-    dataset : xarray.Dataset or DatasetParts
+    dataset : xarray.Dataset
         A ``stats.nc`` Dataset: ``mean_error`` (K, d), ``expected_mean_error`` (K, d), ``error_cov``
         (K, d, d), attributes ``realizations`` and ``confidence``.
     path : path of the PNG to write
@@ -101,7 +101,7 @@ def plot_variance_diagonal(dataset: xr.Dataset, path: str | Path) -> Path:
 
     Parameters
     ----------
-    dataset : xarray.Dataset or DatasetParts
+    dataset : xarray.Dataset
         A ``stats.nc`` Dataset: ``error_cov`` and ``filter_cov`` (K, d, d), attributes ``realizations``
         and ``confidence``.
     path : path of the PNG to write
@@ -148,7 +148,7 @@ def plot_variance_offdiagonal(dataset: xr.Dataset, path: str | Path) -> Path:
 
     Parameters
     ----------
-    dataset : xarray.Dataset or DatasetParts
+    dataset : xarray.Dataset
         A ``stats.nc`` Dataset (attributes ``realizations`` and ``confidence``).
     path : path of the PNG to write
     """
@@ -221,7 +221,7 @@ def plot_orthogonality_diagonal(dataset: xr.Dataset, path: str | Path) -> Path:
 
     Parameters
     ----------
-    dataset : xarray.Dataset or DatasetParts
+    dataset : xarray.Dataset
         A ``stats.nc`` Dataset (attributes ``realizations`` and ``confidence``).
     path : path of the PNG to write
     """
@@ -237,7 +237,7 @@ def plot_orthogonality_offdiagonal(dataset: xr.Dataset, path: str | Path) -> Pat
 
     Parameters
     ----------
-    dataset : xarray.Dataset or DatasetParts
+    dataset : xarray.Dataset
         A ``stats.nc`` Dataset (attributes ``realizations`` and ``confidence``).
     path : path of the PNG to write
     """
@@ -259,7 +259,7 @@ def plot_sigma_exact(dataset: xr.Dataset, exact_cov: np.ndarray, path: str | Pat
 
     Parameters
     ----------
-    dataset : xarray.Dataset or DatasetParts
+    dataset : xarray.Dataset
         A ``stats.nc`` Dataset: ``error_cov``, ``filter_cov`` (K, d, d), attributes ``realizations`` and
         ``confidence``.
     exact_cov : ndarray, shape (K, d, d)

@@ -16,17 +16,15 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from kalcal.filters.steady_state import SteadyStateView
-from kalcal.io.dataset_parts import DatasetParts
 from kalcal.plots import consistency, ensemble
 from kalcal.plots import realization as single
 from kalcal.plots.realization_data import RealizationData
 from kalcal.plots.steady_state import plot_steady_state
-from kalcal.reporting.drawing import draw_all
-from kalcal.reporting.figure_entries import GROUPS, REALIZATION_FIGURES_PER_STATE, FigureEntry, SkippedFigure  # noqa: F401
+from kalcal.reporting.figure_entries import GROUPS, FigureEntry, SkippedFigure  # noqa: F401
 from kalcal.reporting.figure_entries import page_order, sort_key
 from kalcal.reporting.theory import SIGMA_EXACT, SIGMA_EXACT_TITLE, sigma_exact_spec
 
-if TYPE_CHECKING:  # the figures read a Dataset's values, which the verify job's DatasetParts give too
+if TYPE_CHECKING:
     import xarray as xr
 
 #: the scenario of the source report, whose figure numbers the page quotes
@@ -253,10 +251,10 @@ def _steady_state_spec(steady: SteadyStateView) -> _Spec:
 
 
 def render_figures(
-    dataset: xr.Dataset | DatasetParts,
+    dataset: xr.Dataset,
     data: RealizationData,
     figure_dir: str | Path,
-    long_dataset: xr.Dataset | DatasetParts | None = None,
+    long_dataset: xr.Dataset | None = None,
     *,
     scenario: str = REPORT_SCENARIO,
     steady: SteadyStateView | None = None,
@@ -264,22 +262,20 @@ def render_figures(
     exact_cov: np.ndarray | None = None,
     exact_reason: str | None = None,
 ) -> tuple[list[FigureEntry], list[SkippedFigure]]:
-    """Draw every figure of the report into ``figure_dir``: a page drawn in the job's own process (in the
-    job's figure process it is drawn in two parts, :func:`render_statistics_figures` then
-    :func:`render_realization_figures`, the same figures).
+    """Draw every figure of the report into ``figure_dir``, one after another, in this process.
 
     Parameters
     ----------
-    dataset : xarray.Dataset or DatasetParts
+    dataset : xarray.Dataset
         The run's ``stats.nc``: read back (``kalcal report``) or the parts the verify job keeps, drawn as
         they are (the figures read only ``dataset[name].values``, ``sizes``, ``attrs`` and ``name in
-        dataset``, which both give), so that the job's figure process loads neither xarray nor pandas.
+        dataset``, which both give).
     data : RealizationData
         The realization shown in the single-run figures.
     figure_dir : path
         Folder for the PNGs (created). The jobs draw into a fresh staging folder (:mod:`kalcal.io.outputs`),
         so it holds only this page's figures; a PNG already in a folder given here is left as it is.
-    long_dataset : xarray.Dataset or DatasetParts, optional
+    long_dataset : xarray.Dataset, optional
         ``stats_long.nc`` of the same run, for figure 5.8.
     scenario : str
         The run's scenario: figures carry the source report's numbers only for ``REPORT_SCENARIO``.
@@ -301,27 +297,6 @@ def render_figures(
     return _draw_specs(specs, figure_dir, scenario, progress), _skipped(dataset, long_dataset, scenario, steady, exact_cov, exact_reason)
 
 
-def render_statistics_figures(
-    dataset: xr.Dataset | DatasetParts, figure_dir: str | Path, long_dataset: xr.Dataset | DatasetParts | None = None,
-    *, scenario: str = REPORT_SCENARIO, steady: SteadyStateView | None = None,
-    progress: Callable[[int, int], None] | None = None, exact_cov: np.ndarray | None = None, exact_reason: str | None = None,
-) -> tuple[list[FigureEntry], list[SkippedFigure]]:  # fmt: skip
-    """:func:`render_figures` less the realization's figures (drawn while it is simulated, then by
-    :func:`render_realization_figures`), in page order; ``progress(done, total)`` counts these alone."""
-    figures = _draw_specs(_statistics_specs(dataset, long_dataset, steady, exact_cov), figure_dir, scenario, progress)
-    return figures, _skipped(dataset, long_dataset, scenario, steady, exact_cov, exact_reason)
-
-
-def render_realization_figures(
-    data: RealizationData, figure_dir: str | Path, *, scenario: str = REPORT_SCENARIO, progress: Callable[[int, int], None] | None = None
-) -> list[FigureEntry]:  # fmt: skip
-    """The figures of the realization shown (two per state), in page order: the part of
-    :func:`render_figures` that :func:`render_statistics_figures` leaves out."""
-    specs = _realization_specs(data)
-    assert len(specs) == REALIZATION_FIGURES_PER_STATE * len(data.state_names)  # what the job's progress counts
-    return _draw_specs(specs, figure_dir, scenario, progress)
-
-
 def _statistics_specs(dataset, long_dataset, steady: SteadyStateView | None, exact_cov) -> list[_Spec]:
     specs = _ensemble_specs(dataset, long_dataset, exact_cov) + _consistency_specs(dataset)
     if steady is not None and steady.has_matrices:
@@ -330,11 +305,15 @@ def _statistics_specs(dataset, long_dataset, steady: SteadyStateView | None, exa
 
 
 def _draw_specs(specs: list[_Spec], figure_dir: str | Path, scenario: str, progress) -> list[FigureEntry]:
-    """Draw ``specs`` into ``figure_dir`` (created), in parallel (:func:`draw_all`); their entries in page order."""
+    """Draw ``specs`` into ``figure_dir`` (created); their entries in page order."""
     figure_dir = Path(figure_dir)
     figure_dir.mkdir(parents=True, exist_ok=True)
     numbers = REPORT_NUMBERS if scenario == REPORT_SCENARIO else {}
-    paths = draw_all([spec.draw for spec in specs], [figure_dir / f"{spec.key}.png" for spec in specs], progress=progress)
+    paths = []
+    for done, spec in enumerate(specs, start=1):
+        paths.append(spec.draw(figure_dir / f"{spec.key}.png"))
+        if progress is not None:
+            progress(done, len(specs))
     figures = [
         FigureEntry(spec.key, spec.group, spec.title, spec.caption, path, numbers.get(spec.key))
         for spec, path in zip(specs, paths, strict=True)

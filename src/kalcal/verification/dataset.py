@@ -8,16 +8,11 @@ all its elements (matrices over states of mixed units keep theirs in the ``state
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
+import xarray as xr
 
-from kalcal.io.dataset_parts import DatasetParts, Part
 from kalcal.montecarlo.accumulators import EnsembleStatistics
 from kalcal.montecarlo.problem import ProblemInfo
-
-if TYPE_CHECKING:
-    import xarray as xr
 
 _MATRIX = ("time", "state", "state2")
 
@@ -25,14 +20,14 @@ _MATRIX = ("time", "state", "state2")
 def statistics_dataset(
     s: EnsembleStatistics, info: ProblemInfo, expected_mean_error: np.ndarray, attrs: dict
 ) -> xr.Dataset:
-    """Every per-update statistic of a run as an ``xarray.Dataset`` (:func:`statistics_parts`, made one)."""
-    return statistics_parts(s, info, expected_mean_error, attrs).to_xarray()
+    """Every per-update statistic of a run as an ``xarray.Dataset`` (:func:`statistics_parts`)."""
+    return statistics_parts(s, info, expected_mean_error, attrs)
 
 
 def statistics_parts(
     s: EnsembleStatistics, info: ProblemInfo, expected_mean_error: np.ndarray, attrs: dict
-) -> DatasetParts:
-    """Every per-update statistic of a run, as numpy parts of the Dataset (no xarray loaded)."""
+) -> xr.Dataset:
+    """Every per-update statistic of a run, as an ``xarray.Dataset``."""
     data = {
         "mean_error": (("time", "state"), s.mean_error, "ensemble mean of e = x - xhat"),
         "expected_mean_error": (
@@ -63,21 +58,21 @@ def statistics_parts(
     }
     units = _units(info)
     variables = {
-        name: Part.of(dims, values, {"long_name": text, **({"units": units[name]} if units.get(name) else {})})
+        name: (dims, values, {"long_name": text, **({"units": units[name]} if units.get(name) else {})})
         for name, (dims, values, text) in data.items()
         if values is not None
     }
     coords = {
-        "time": Part.of("time", info.update_times, {"units": "s"}),
-        "time2": Part.of("time2", info.update_times, {"units": "s"}),
-        "state": Part.of("state", list(info.state_names)),
-        "state2": Part.of("state2", list(info.state_names)),
-        "measurement": Part.of("measurement", list(info.measurement_names)),
-        "measurement2": Part.of("measurement2", list(info.measurement_names)),
-        "state_unit": Part.of("state", list(info.state_units)),
-        "measurement_unit": Part.of("measurement", list(info.measurement_units)),
+        "time": ("time", info.update_times, {"units": "s"}),
+        "time2": ("time2", info.update_times, {"units": "s"}),
+        "state": ("state", list(info.state_names)),
+        "state2": ("state2", list(info.state_names)),
+        "measurement": ("measurement", list(info.measurement_names)),
+        "measurement2": ("measurement2", list(info.measurement_names)),
+        "state_unit": ("state", list(info.state_units)),
+        "measurement_unit": ("measurement", list(info.measurement_units)),
     }
-    return DatasetParts(variables, coords, {"realizations": s.count, **attrs})
+    return xr.Dataset(variables, coords=coords, attrs={"realizations": s.count, **attrs})
 
 
 def _single(units) -> str | None:
