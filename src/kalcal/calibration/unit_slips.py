@@ -117,9 +117,11 @@ def accelerometer_units(
     fitted = _fit(velocity, [integral, np.ones_like(elapsed), elapsed])
     if fitted is not None:
         (k, _, _), (se, _, _) = fitted
+        # only a slope near a unit's factor is quoted, so 1 / k is taken only where k is far from 0
+        inverse = f"{1 / k:.4g}" if k != 0 else "inf"
         detail = (
             f"the GPS velocity changes are {k:.4g} times the integrated accelerometer (integrated "
-            f"accelerometer / GPS velocity change = {1 / k:.4g})"
+            f"accelerometer / GPS velocity change = {inverse})"
         )
         for unit, factor in ACCEL_UNITS:
             if _named_slip(k, se, factor):
