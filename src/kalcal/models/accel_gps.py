@@ -411,6 +411,31 @@ class AccelGpsScenario:
         """The rate (Hz) :meth:`at_rate` bound the filter's noise to; None for settings as given."""
         return getattr(self, "_noise_rate", None)
 
+    def per_sample_settings(self) -> tuple[dict[str, float], float | None]:
+        """The noise settings given per sample that the filter uses, ``{"filter.accel_noise_std": value,
+        ...}`` (a truth's where the filter takes it; a zero walk, rate-free, left out), and the rate (Hz)
+        recorded for them: ``scenario.imu_rate`` where it was given (a file of ``kalcal fit`` records the
+        log's), else None. Both empty/None for settings :meth:`at_rate` bound to a rate."""
+        from kalcal.models.config import given_keys
+
+        if self.noise_rate is not None:
+            return {}, None
+        found = {}
+        for name, (density, _) in DENSITIES.items():
+            if getattr(self.filter, density) is not None:
+                continue
+            for section in (self.filter, self.given_truth):
+                value = getattr(section, name)
+                if value is not None:
+                    if value > 0:
+                        found[f"{section.SECTION}.{name}"] = float(value)
+                    break
+                if getattr(section, density) is not None:
+                    break
+        keys = given_keys(self)
+        stated = "scenario.imu_rate" in keys or (not keys and self.scenario.imu_rate != AccelGpsSettings.imu_rate)
+        return found, (self.scenario.imu_rate if stated else None)
+
     def at_rate(self, rate: float) -> AccelGpsScenario:
         """These settings for a log sampled at ``rate`` (Hz): the filter's noise densities (and the
         truth's, where the filter's noise is unset) converted to per-sample values at ``rate``
