@@ -411,15 +411,17 @@ class AccelGpsScenario:
         """The rate (Hz) :meth:`at_rate` bound the filter's noise to; None for settings as given."""
         return getattr(self, "_noise_rate", None)
 
-    def per_sample_settings(self) -> tuple[dict[str, float], float | None]:
-        """The noise settings given per sample that the filter uses, ``{"filter.accel_noise_std": value,
-        ...}`` (a truth's where the filter takes it; a zero walk, rate-free, left out), and the rate (Hz)
+    def per_sample_settings(self) -> tuple[dict[str, tuple[float, str | None]], float | None]:
+        """The noise settings given per sample that the filter uses, ``{"filter.accel_noise_std": (value,
+        file or None), ...}`` (a truth's where the filter takes it; a zero walk, rate-free, left out; the
+        file the value was read from, None for ``--set`` or a value given in code), and the rate (Hz)
         recorded for them: ``scenario.imu_rate`` where it was given (a file of ``kalcal fit`` records the
-        log's), else None. Both empty/None for settings :meth:`at_rate` bound to a rate."""
-        from kalcal.models.config import given_keys
+        log's), else None. Empty and None for settings :meth:`at_rate` bound to a rate."""
+        from kalcal.models.config import given_keys, setting_files
 
         if self.noise_rate is not None:
             return {}, None
+        files = setting_files(self)
         found = {}
         for name, (density, _) in DENSITIES.items():
             if getattr(self.filter, density) is not None:
@@ -427,8 +429,9 @@ class AccelGpsScenario:
             for section in (self.filter, self.given_truth):
                 value = getattr(section, name)
                 if value is not None:
+                    key = f"{section.SECTION}.{name}"
                     if value > 0:
-                        found[f"{section.SECTION}.{name}"] = float(value)
+                        found[key] = (float(value), files.get(key))
                     break
                 if getattr(section, density) is not None:
                     break

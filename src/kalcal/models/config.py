@@ -111,9 +111,17 @@ def apply_settings(scenario: S, settings: Mapping[str, Any], sources: Mapping[st
         if exc.source is None and exc.key in sources:
             raise exc.located(source=sources[exc.key]) from None
         raise
-    with contextlib.suppress(AttributeError, TypeError):  # a record outside the fields, as mark_inputs's
+    with contextlib.suppress(AttributeError, TypeError):  # records outside the fields, as mark_inputs's
         object.__setattr__(result, "_given_keys", given_keys(scenario) | frozenset(settings))
+        files = {key: file for key, file in setting_files(scenario).items() if key not in settings}
+        files.update({key: sources[key] for key in settings if key in sources})
+        object.__setattr__(result, "_setting_files", files)
     return result
+
+
+def setting_files(scenario: Any) -> dict[str, str]:
+    """``{section.key: file}`` for each setting of ``scenario`` that a file gave (not overridden since)."""
+    return dict(getattr(scenario, "_setting_files", {}))
 
 
 def _given(scenario: Any, section: str) -> Any:
