@@ -106,11 +106,20 @@ def test_filter_toml_holds_the_settings_calibrate_accepts(drifting, tmp_path):
     settings = tomllib.loads((out / "filter.toml").read_text())
     assert set(settings) == {"filter"}
     accepted = {f.name for f in dataclasses.fields(AccelGpsFilter)}
-    expected = {"accel_noise_std"} | ({"bias_walk_std"} & accepted)
-    assert set(settings["filter"]) == expected
+    # [filter] holds the rate-free densities only, N and K; their per-sample values at the log's rate
+    # in comments and in summary.json
+    identified = {"accel_noise_density": "velocity_random_walk", "bias_walk_density": "rate_random_walk"}
+    per_sample = {"accel_noise_density": "accel_noise_std", "bias_walk_density": "bias_walk_std"}
+    expected = {"accel_noise_density", "bias_walk_density"} & accepted
+    assert set(settings["filter"]) == expected == {"accel_noise_density", "bias_walk_density"}
+    text = (out / "filter.toml").read_text()
     for key in expected:
-        assert settings["filter"][key] == pytest.approx(summary[key]["value"], rel=1e-5)
+        assert settings["filter"][key] == pytest.approx(summary[identified[key]]["value"], rel=1e-5)
         assert summary["filter"][key] == settings["filter"][key]
+        name = per_sample[key]
+        assert summary["per_sample"][name] == pytest.approx(summary[name]["value"], rel=1e-5)
+        assert f"# {key}: {name} = {summary[name]['value']:.6g} m/s^2 per sample at 200 Hz" in text
+    assert summary["per_sample"]["rate"] == pytest.approx(RATE)
 
     # Round trip: a short simulated flight calibrated with the identified settings.
     sim = tmp_path / "sim"
@@ -121,9 +130,12 @@ def test_filter_toml_holds_the_settings_calibrate_accepts(drifting, tmp_path):
         "--config", out / "filter.toml",
     )
     assert result.exit_code == 0, result.stdout + result.stderr
-    used = json.loads((cal / "summary.json").read_text())["settings"]["filter"]
+    cal_summary = json.loads((cal / "summary.json").read_text())
+    used = cal_summary["settings"]["filter"]
     for key in expected:
         assert used[key] == settings["filter"][key]
+    # densities carry their own rate: nothing about the noise's rate to warn of
+    assert not [w for w in cal_summary["warnings"] if w["code"].startswith("noise-rate")]
 
 
 def test_white_noise_log_reports_what_it_cannot_see(white):
@@ -136,8 +148,8 @@ def test_white_noise_log_reports_what_it_cannot_see(white):
         assert "too short a log" in item["note"]
     assert len(summary["notes"]) == 2
     settings = tomllib.loads((out / "filter.toml").read_text())
-    assert set(settings["filter"]) == {"accel_noise_std"}
-    assert "# bias_walk_std: not written" in (out / "filter.toml").read_text()
+    assert set(settings["filter"]) == {"accel_noise_density"}
+    assert "# bias_walk_density: not written" in (out / "filter.toml").read_text()
     assert "not seen" in result.stdout and "note: rate_random_walk: not identified" in result.stdout
 
 

@@ -112,7 +112,10 @@ def coverage(seeds, duration):
         result = kalcal.fit("accel-gps", imu=imu, gps=gps, free=free)
         assert result.converged, (seed, duration)  # a clean log's fit converges
         for key, value in COVERAGE_TRUTH.items():
-            p = result.parameters[f"filter.{key}"]
+            if key == "accel_noise_std":  # fitted as its density: the per-sample value at 200 Hz / sqrt(200)
+                p, value = result.parameters["filter.accel_noise_density"], value / np.sqrt(200.0)
+            else:
+                p = result.parameters[f"filter.{key}"]
             covered[key] += bool(p.identified and p.ci_low <= value <= p.ci_high)
     return covered
 

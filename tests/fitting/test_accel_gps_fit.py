@@ -50,8 +50,8 @@ def test_a_setting_without_influence_is_unidentified_and_a_gps_noise_is_recovere
 
 def test_bias_walk_on_a_log_without_walk_is_consistent_with_zero():
     imu, gps = logs(5, 30)
-    result = kalcal.fit("accel-gps", imu=imu, gps=gps, free=["filter.bias_walk_std"])
-    walk = result.parameters["filter.bias_walk_std"]
+    result = kalcal.fit("accel-gps", imu=imu, gps=gps, free=["filter.bias_walk_std"])  # fitted as its density
+    walk = result.parameters["filter.bias_walk_density"]
     assert walk.identified and walk.at_bound and walk.ci_low == 0.0 and walk.ci_high > walk.value
     assert "consistent with 0" in walk.note
 
@@ -60,17 +60,20 @@ def test_a_log_whose_bias_drifts_is_not_adequate_for_a_constant_bias_and_the_sen
     imu, gps = logs(7, 30, bias_walk_std=2e-3)
     result = kalcal.fit("accel-gps", imu=imu, gps=gps, free="filter.gps_position_std,filter.gps_velocity_std")
     assert not result.adequate and not result.diagnostics["consistent"]
-    assert "a drifting bias (filter.bias_walk_std)" in result.adequacy and "time-correlated GNSS errors" in result.adequacy
-    freed = kalcal.fit("accel-gps", imu=imu, gps=gps, free="filter.bias_walk_std")
+    assert "a drifting bias (filter.bias_walk_density)" in result.adequacy and "time-correlated GNSS errors" in result.adequacy
+    freed = kalcal.fit("accel-gps", imu=imu, gps=gps, free="filter.bias_walk_density")
     assert freed.adequate, freed.adequacy
-    assert freed.parameters["filter.bias_walk_std"].ci_low <= 2e-3 <= freed.parameters["filter.bias_walk_std"].ci_high
+    walk = freed.parameters["filter.bias_walk_density"]  # 2e-3 per sample at 200 Hz: K = 2e-3 sqrt(200)
+    assert walk.ci_low <= 2e-3 * np.sqrt(200.0) <= walk.ci_high
+    per_sample = freed.extra["per_sample"]
+    assert per_sample["rate"] == pytest.approx(200.0) and per_sample["bias_walk_std"]["ci_low"] <= 2e-3 <= per_sample["bias_walk_std"]["ci_high"]
 
 
 def test_per_fix_std_columns_get_one_multiplier_each_instead_of_the_constant():
     from kalcal.fitting.accel_gps import default_free
 
     assert default_free(True, True) == [
-        "filter.accel_noise_std", "filter.bias_walk_std", "log.position_std_multiplier", "log.velocity_std_multiplier",
+        "filter.accel_noise_density", "filter.bias_walk_density", "log.position_std_multiplier", "log.velocity_std_multiplier",
     ]
     imu, gps = logs(3, 10, gps_position_std=2.0)
     gps = gps.assign(position_std=1.0)  # the receiver's stated accuracy, half the truth

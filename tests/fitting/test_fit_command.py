@@ -116,3 +116,42 @@ def test_scale_bias_end_to_end_fit_calibrate_and_verify(tmp_path):
     kalcal.calibrate("scale-bias", data=tmp_path / "sim" / "data.csv", config=out / "filter.toml")
     verification = kalcal.verify("scale-bias", config=out / "filter.toml", n=300, seed=0, long_run=0)
     assert verification.verdict == "pass"
+
+
+def test_the_noise_is_fitted_and_written_as_densities_with_per_sample_values_at_the_logs_rate(accel_logs, tmp_path):
+    """[filter] and [truth] hold the densities only; the per-sample values at the log's 200 Hz are in
+    comments, in fit.json's per_sample and on the terminal; imu.yaml holds the same densities."""
+    import numpy as np
+
+    imu, gps = accel_logs
+    out = tmp_path / "fit"
+    args = ["fit", "accel-gps", "--imu", imu, "--gps", gps, "--out", out, "--free", "filter.accel_noise_density,filter.gps_position_std"]
+    # a terminal wide enough for the table's unit column
+    result = CliRunner().invoke(app, [str(a) for a in args], catch_exceptions=False, env={"COLUMNS": "200"})
+    assert result.exit_code == 0, result.stdout + result.stderr
+    text = (out / "filter.toml").read_text()
+    written = tomllib.loads(text)
+    for section in ("filter", "truth"):
+        assert {"accel_noise_density", "bias_walk_density"} <= set(written[section])
+        assert not {"accel_noise_std", "bias_walk_std"} & set(written[section])
+    document = json.loads((out / "fit.json").read_text())
+    density = written["filter"]["accel_noise_density"]
+    per_sample = document["per_sample"]
+    assert per_sample["rate"] == pytest.approx(200.0)
+    assert per_sample["accel_noise_std"]["value"] == pytest.approx(density * np.sqrt(200.0), rel=1e-12)
+    p = document["parameters"]["filter.accel_noise_density"]
+    assert per_sample["accel_noise_std"]["ci_high"] == pytest.approx(p["ci_high"] * np.sqrt(200.0), rel=1e-12)
+    assert f"accel_noise_std = {density * np.sqrt(200.0):.6g} m/s^2 per sample at 200 Hz" in text
+    assert "m/s^2 per sample at 200 Hz" in result.stdout and "= accel_noise_std" in result.stdout
+    yaml = (out / "imu.yaml").read_text()
+    assert f"accelerometer_noise_density: {density:.6g}  # m/s^2/sqrt(Hz)\n" in yaml and "update_rate: 200  # Hz" in yaml
+    # calibrate on the log at its own rate: the densities give back the per-sample value the fit ran
+    cal = tmp_path / "cal"
+    done = _invoke("calibrate", "accel-gps", "--imu", imu, "--gps", gps, "--config", out / "filter.toml", "--out", cal)
+    assert done.exit_code == 0, done.stdout + done.stderr
+    summary = json.loads((cal / "summary.json").read_text())
+    assert not [w for w in summary["warnings"] if w["code"].startswith("noise-rate")]
+    from kalcal.models.registry import build_scenario
+
+    scenario = build_scenario("accel-gps", out / "filter.toml")
+    assert scenario.filter_settings.accel_noise_std == pytest.approx(per_sample["accel_noise_std"]["value"], rel=1e-6)

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from kalcal.errors import ConfigError
-from kalcal.models.accel_gps import AccelGpsFilter, AccelGpsTruth
+from kalcal.models.accel_gps import DENSITY_NAMES, AccelGpsFilter, AccelGpsTruth
 from kalcal.models.registry import build_scenario
 from kalcal.models.scale_bias import ScaleBiasTruth
 from kalcal.montecarlo.scenarios import build_problem
@@ -37,16 +37,18 @@ ACCEL_CONFIGS = {
 def _explicit_filter(assignments: list[str]) -> list[str]:
     """Every filter.* key given a value (the truth's default unless the config sets it)."""
     given = {a.split("=", 1)[0] for a in assignments}
-    defaults = AccelGpsTruth()
+    defaults = AccelGpsTruth().at_rate(200.0)  # the truth's defaults, per sample
     extra = [
         f"filter.{f.name}={getattr(defaults, f.name, 0.0)!r}"  # a filter-only setting (gps_latency): 0
         for f in dataclasses.fields(AccelGpsFilter)
-        if f"filter.{f.name}" not in given
+        if f"filter.{f.name}" not in given and f.name not in DENSITY_NAMES  # a density or its per-sample value
     ]
     return [*assignments, *extra]
 
 
-def _perturbed(name: str, value: float) -> float:
+def _perturbed(name: str, value: float | None) -> float:
+    if value is None:  # a density the truth was not given: one
+        return 3e-3
     return 5.0 if name == "bias_correlation_time" and value == 0 else (2e-4 if value == 0 else 1.7 * value + 0.3)
 
 
@@ -73,7 +75,7 @@ def _differing(a: dict, b: dict) -> list[str]:
 @pytest.mark.parametrize("name", [f.name for f in dataclasses.fields(AccelGpsTruth)])
 def test_accel_gps_filter_ignores_every_truth_setting_it_does_not_share(config, name):
     assignments = _explicit_filter(ACCEL_CONFIGS[config])
-    truth_value = getattr(build_scenario("accel-gps", None, assignments).truth, name)
+    truth_value = getattr(build_scenario("accel-gps", None, assignments).given_truth, name)
     if name == "scale_std" and truth_value == 0:
         # a filter without a scale state against a truth with one is refused, by design: nothing to compare
         with pytest.raises(ConfigError, match="filter.scale_std"):

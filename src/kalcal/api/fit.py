@@ -54,7 +54,7 @@ def fit(
     imu, gps, data, settings, config, init, imu_columns, gps_columns, reference, sensor
         As :func:`kalcal.calibrate`.
     free : str or list of str, optional
-        The settings to fit (``"filter.accel_noise_std,filter.bias_walk_std"``); default: accel-gps the
+        The settings to fit (``"filter.accel_noise_density,filter.bias_walk_density"``; a per-sample key is fitted as its density); default: accel-gps the
         accelerometer noise, bias walk and GPS noise (a multiplier on each per-fix std column the GPS log
         has), scale-bias the combined measurement noise and the drift.
     profile : bool
@@ -106,11 +106,12 @@ def fit(
     if out is None:
         return compute().result
     from kalcal.io.outputs import inputs_of, run_outputs
-    from kalcal.jobs.fit import OUTPUT_NAMES, save_fit
+    from kalcal.jobs.fit import output_names, save_fit
 
     command = "fit scale-bias" if scenario == "scale-bias" else "fit accel-gps"
+    names = output_names(command)
     files = [value for value in (imu, gps, data) if isinstance(value, (str, Path))]
-    with run_outputs(out, command, names=OUTPUT_NAMES, protect=[*files, *inputs_of(model)]) as staging:
+    with run_outputs(out, command, names=names, protect=[*files, *inputs_of(model)]) as staging:
         run = compute()
         save_fit(run, staging)
-    return dataclasses.replace(run.result, paths={name: Path(out) / name for name in OUTPUT_NAMES})
+    return dataclasses.replace(run.result, paths={name: Path(out) / name for name in names})

@@ -245,7 +245,8 @@ class NoiseResult:
     rate : float
         The log's median sample rate (Hz).
     filter : dict
-        The ``[filter]`` settings of ``filter.toml`` (accel_noise_std, bias_walk_std where identified).
+        The ``[filter]`` settings of ``filter.toml``: the rate-free densities accel_noise_density (N,
+        m/s^2/sqrt(Hz)) and bias_walk_density (K, m/s^3/sqrt(Hz)) where identified.
     kalibr : dict
         The Kalibr ``imu.yaml`` values (continuous-time densities; see :mod:`kalcal.calibration.kalibr`).
     allan : pandas.DataFrame

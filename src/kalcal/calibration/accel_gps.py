@@ -125,10 +125,10 @@ def bias_walk_variance(scenario: AccelGpsScenario, result: AccelGpsCalibration, 
     """The variance a random-walk bias accumulates from the calibration's start to its last fix, m^2/s^4:
     bias_walk_std^2 per accelerometer sample over the span, in median sample periods (0 for a constant or
     a Gauss-Markov bias, whose prior is its stationary spread at any time)."""
-    settings = scenario.filter_settings
+    period = float(np.median(np.diff(np.asarray(imu_time, dtype=float))))
+    settings = scenario.at_rate(1.0 / period).filter_settings  # per sample at the log's rate, as calibrated
     if settings.bias_correlation_time > 0 or settings.bias_walk_std == 0:
         return 0.0
-    period = float(np.median(np.diff(np.asarray(imu_time, dtype=float))))
     return float(settings.bias_walk_std**2 * (result.time[-1] - result.start_time) / period)
 
 

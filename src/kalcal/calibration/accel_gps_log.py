@@ -42,7 +42,7 @@ from kalcal.calibration.accel_gps_checks import check_plausible, fix_warnings, u
 from kalcal.calibration.accel_gps_result import AccelGpsCalibration, ImuGap
 from kalcal.calibration.interval_model import composed_sources, scale_parameters
 from kalcal.calibration.likelihood import innovation_loglik
-from kalcal.calibration.plausibility import CalibrationWarning
+from kalcal.calibration.plausibility import CalibrationWarning, noise_rate_warnings
 from kalcal.errors import DataError
 from kalcal.filters.mechanization import integrate, partial_step
 from kalcal.filters.steps import UpdateForm, check_form
@@ -266,6 +266,10 @@ def prepare_accel_gps_log(
         source, imu_source, imu_rate, gps_rate, dict(columns or {}),
     )  # fmt: skip
     period = float(np.median(steps))
+    # the noise settings per sample at this log's own rate: a density converted, a per-sample value
+    # given as such kept, with a warning where the rate it was written for is another or unknown
+    rate_warnings = noise_rate_warnings(*scenario.per_sample_settings(), 1.0 / period, imu_source)
+    scenario = scenario.at_rate(1.0 / period)
     gaps = [
         ImuGap(row=int(j) + 2, start=float(imu_time[j]), length=float(steps[j]))
         for j in np.flatnonzero(steps > max_imu_gap * period)
@@ -311,6 +315,7 @@ def prepare_accel_gps_log(
         usable, gps_time, gps_position, gps_velocity, fix_std_p, fix_std_v, nan_std_p, nan_std_v,
         settings, source, dict(columns or {}),
     )  # fmt: skip
+    warnings = [*rate_warnings, *warnings]
     default_std = {
         "position_std": int(np.count_nonzero(nan_std_p[usable])),
         "velocity_std": int(np.count_nonzero(nan_std_v[usable])),

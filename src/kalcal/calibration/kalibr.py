@@ -66,3 +66,37 @@ def kalibr_yaml(identification, rostopic: str = "/imu0") -> str:
         f"# VINS-Mono / OpenVINS names: acc_n: {_number(n)}, acc_w: {_number(k)} (the same densities)",
     ]
     return "\n".join(lines) + "\n"
+
+
+def fit_kalibr_yaml(result, source: str, rate: float, rostopic: str = "/imu0") -> str:
+    """The flat Kalibr ``imu.yaml`` of a ``kalcal fit accel-gps`` run (``result``: its
+    :class:`~kalcal.fitting.result.FitResult`), in :func:`kalibr_yaml`'s layout: the densities filter.toml
+    holds (``filter.accel_noise_density`` N, ``filter.bias_walk_density`` K: Kalibr's
+    ``accelerometer_noise_density`` and ``accelerometer_random_walk`` themselves), each with what the fit
+    said of it, and ``update_rate`` the log's accelerometer rate ``rate`` (Hz)."""
+    written = result.settings["filter"]
+    n, k = written["accel_noise_density"], written["bias_walk_density"]
+
+    def status(key: str) -> str:
+        p = result.parameters.get(f"filter.{key}")
+        if p is None:
+            return "  # not fitted: the input setting"
+        if not p.identified:
+            return "  # not identified by the log: the value filter.toml runs"
+        return ""
+
+    lines = [
+        f"# kalcal fit: Kalibr IMU noise model, accelerometer noise fitted to {source} at {rate:.6g} Hz",
+        "# (the densities of filter.toml's [filter]). Gyroscope values: null (kalcal sees the accelerometer only); Kalibr",
+        "# cannot load a null value: replace each with a number (e.g. the datasheet's) first.",
+        "# white noise density sigma_c = sigma_d * sqrt(dt) (sigma_d: per-sample std, m/s^2) = filter.accel_noise_density",
+        f"accelerometer_noise_density: {_number(n)}  # m/s^2/sqrt(Hz)" + status("accel_noise_density"),
+        "# bias random walk density sigma_b = sigma_bd / sqrt(dt) (sigma_bd: per-sample increment std, m/s^2) = filter.bias_walk_density",
+        f"accelerometer_random_walk: {_number(k)}  # m/s^3/sqrt(Hz)" + status("bias_walk_density"),
+        "gyroscope_noise_density: null  # rad/s/sqrt(Hz): not identified by kalcal (accelerometer only)",
+        "gyroscope_random_walk: null  # rad/s^2/sqrt(Hz): not identified by kalcal (accelerometer only)",
+        f"rostopic: {rostopic}",
+        f"update_rate: {rate:.6g}  # Hz",
+        f"# VINS-Mono / OpenVINS names: acc_n: {_number(n)}, acc_w: {_number(k)} (the same densities)",
+    ]
+    return "\n".join(lines) + "\n"

@@ -75,6 +75,8 @@ def accel_gps_stability(
     from kalcal.calibration.accel_gps import calibrate_accel_gps
 
     count = check_windows(windows)
+    # the noise per sample at the log's own rate, as the whole log's calibration took it
+    scenario = scenario.at_rate(1.0 / float(np.median(np.diff(np.asarray(imu_time, dtype=float)))))
     names = ("bias", "scale") if scenario.has_scale else ("bias",)
     units = ("m/s^2", "1")[: len(names)]
     model = _accel_gps_model(scenario)

@@ -9,6 +9,19 @@ from kalcal.cli import _common
 from kalcal.cli._common import ConfigOpt, ScenarioArg, SetOpt, escape, settings_of, user_errors
 
 
+def _per_sample_row(result, name: str, p) -> tuple[str, str, str, str] | None:
+    """The row under a fitted noise density: its per-sample value at the log's rate (fit.json's per_sample)."""
+    per_sample = result.extra.get("per_sample") if isinstance(result.extra, dict) else None
+    key = {"filter.accel_noise_density": "accel_noise_std", "filter.bias_walk_density": "bias_walk_std"}.get(name)
+    if not per_sample or key is None or not p.identified or p.trades_off:
+        return None
+    entry, rate = per_sample[key], per_sample["rate"]
+    low, high = entry["ci_low"], entry["ci_high"]
+    interval = f"[0, {'—' if high is None else f'{high:.4g}'}]" if p.at_bound else (
+        f"[{'—' if low is None else f'{low:.4g}'}, {'—' if high is None else f'{high:.4g}'}]")
+    return f"  = {key}", f"{entry['value']:.4g}", interval, f"m/s^2 per sample at {rate:.4g} Hz"
+
+
 def fit(
     scenario: ScenarioArg,
     imu: Annotated[
@@ -23,7 +36,7 @@ def fit(
     ] = None,
     free: Annotated[
         Optional[str],
-        typer.Option("--free", help="Settings to fit, KEY,KEY... (e.g. filter.accel_noise_std,filter.bias_walk_std)."),
+        typer.Option("--free", help="Settings to fit, KEY,KEY... (e.g. filter.accel_noise_density,filter.bias_walk_density)."),
     ] = None,
     profile: Annotated[
         bool, typer.Option("--profile", help="Intervals from the profile likelihood instead of the observed information.")
@@ -45,7 +58,7 @@ def fit(
     """Fit noise settings to a log by maximum likelihood: accel-gps (--imu, --gps) or scale-bias (--data).
 
     Writes fit.json (estimates, 95% intervals, log L, AIC, adequacy), filter.toml (for --config of
-    calibrate and verify) and fit.png. `kalcal verify --config DIR/filter.toml` checks the fitted filter.
+    calibrate and verify; the noise as rate-free densities), fit.png and, for accel-gps, Kalibr's imu.yaml. `kalcal verify --config DIR/filter.toml` checks the fitted filter.
     """
     from kalcal.api.fit import fit as run_fit
     from kalcal.fitting.latency_scan import unresolved
@@ -77,6 +90,9 @@ def fit(
             low = "—" if p.ci_low is None else f"{p.ci_low:.4g}"
             interval = f"[0, {high}], consistent with 0" if p.at_bound else f"[{low}, {high}]"
         table.add_row(escape(name), estimate, interval, escape(p.unit))
+        sample = _per_sample_row(result, name, p)
+        if sample is not None:
+            table.add_row(*sample)
     console.print(table)
     if result.rejected_fixes is not None:
         rows = ", ".join(str(row) for row in result.rejected_fixes[:10]) + (", ..." if len(result.rejected_fixes) > 10 else "")

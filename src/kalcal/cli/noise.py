@@ -35,8 +35,9 @@ def noise(
     """Identify accelerometer noise from a static log: Allan deviation, N, B, K and the [filter] settings.
 
     N (velocity random walk, m/s/sqrt(s)) from the -1/2 slope, B (bias instability, m/s^2) from the flat
-    minimum, K (rate random walk, m/s^2/sqrt(s)) from the +1/2 slope; filter.toml holds accel_noise_std
-    = N sqrt(rate) and, where K is seen, bias_walk_std = K sqrt(dt), for calibrate --config.
+    minimum, K (rate random walk, m/s^2/sqrt(s)) from the +1/2 slope; filter.toml holds the rate-free
+    accel_noise_density = N and, where K is seen, bias_walk_density = K, for calibrate --config, which
+    converts them at each log's own rate (the per-sample values at this log's rate are in comments).
     """
     from rich import box
 

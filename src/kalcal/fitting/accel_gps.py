@@ -31,12 +31,17 @@ from kalcal.fitting.accel_gps_settings import filter_toml
 from kalcal.fitting.mle import Free, maximize
 from kalcal.fitting.nis_tail import nis_tail, not_applicable
 from kalcal.fitting.result import FitResult, fitted_point
-from kalcal.models.accel_gps import AccelGpsFilter, AccelGpsScenario
+from kalcal.models.accel_gps import DENSITIES, DENSITY_UNITS, AccelGpsFilter, AccelGpsScenario, density_of, per_sample
 
-DEFAULT_FREE = ("filter.accel_noise_std", "filter.bias_walk_std", "filter.gps_position_std", "filter.gps_velocity_std")
-#: what a free setting that is 0 starts from (bias_walk_std per sample in m/s^2, times in s)
+DEFAULT_FREE = ("filter.accel_noise_density", "filter.bias_walk_density", "filter.gps_position_std", "filter.gps_velocity_std")
+#: each per-sample noise key and the rate-free key the fit takes and writes in its place (a per-sample
+#: value holds at one rate, a density at every rate: filter.toml holds densities only)
+RATE_FREE = {f"filter.{name}": f"filter.{density}" for name, (density, _) in DENSITIES.items()}
+#: what a free setting that is 0 starts from (bias_walk_std per sample in m/s^2, its density in
+#: m/s^3/sqrt(Hz), times in s)
 FLOORS = {
     "filter.bias_walk_std": 1e-5,
+    "filter.bias_walk_density": 1e-4,
     "filter.bias_correlation_time": 30.0,
     "filter.scale_std": 1e-4,
 }
@@ -55,7 +60,7 @@ CANDIDATES = (
     ("a Gauss-Markov bias (filter.bias_correlation_time with filter.bias_std)", "filter.bias_correlation_time"),
     ("a scale factor (filter.scale_std)", "filter.scale_std"),
     ("GPS latency (filter.gps_latency)", "filter.gps_latency"),
-    ("a drifting bias (filter.bias_walk_std)", "filter.bias_walk_std"),
+    ("a drifting bias (filter.bias_walk_density)", "filter.bias_walk_density"),
 )
 
 
@@ -72,6 +77,57 @@ class AccelGpsLikelihood(Protocol):
     def settings_value(self, key: str) -> float: ...
 
     def unit(self, key: str) -> str: ...
+
+
+class RateFreeLog:
+    """A log's likelihood (:class:`AccelGpsLikelihood`) addressed by the rate-free noise keys as well:
+    ``filter.accel_noise_density`` N is ``filter.accel_noise_std`` = N sqrt(rate) at the log's rate,
+    ``filter.bias_walk_density`` K is ``filter.bias_walk_std`` = K / sqrt(rate)
+    (:func:`kalcal.models.accel_gps.per_sample`). A search on a log scale is the same in either (the
+    factor is fixed), so the estimate, its interval and log L convert exactly."""
+
+    def __init__(self, log: AccelGpsLikelihood, rate: float) -> None:
+        self.log, self.rate = log, float(rate)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.log, name)
+
+    def _per_sample(self, values: Mapping[str, Any]) -> dict[str, Any]:
+        out = {}
+        for key, value in values.items():
+            name = next((n for n, d in RATE_FREE.items() if d == key), None)
+            out[name if name else key] = per_sample(name.split(".")[1], value, self.rate) if name else value
+        return out
+
+    def loglik(self, values: Mapping[str, float] = {}, **options) -> float:  # noqa: B006 (read only)
+        return self.log.loglik(self._per_sample(values), **options)
+
+    def calibrate(self, values: Mapping[str, float] = {}, **options) -> Any:  # noqa: B006 (read only)
+        return self.log.calibrate(self._per_sample(values), **options)
+
+    def settings_value(self, key: str) -> float:
+        name = next((n for n, d in RATE_FREE.items() if d == key), None)
+        if name is None:
+            return self.log.settings_value(key)
+        return density_of(name.split(".")[1], self.log.settings_value(name), self.rate)
+
+    def unit(self, key: str) -> str:
+        density = key.split(".", 1)[1]
+        return DENSITY_UNITS[density] if key in RATE_FREE.values() else self.log.unit(key)
+
+
+def rate_free(free: Sequence[str]) -> tuple[list[str], list[str]]:
+    """``free`` with each per-sample noise key replaced by its density (:data:`RATE_FREE`), and a note
+    for each replaced."""
+    keys, notes = [], []
+    for key in free:
+        if key in RATE_FREE:
+            notes.append(f"{key} fitted as {RATE_FREE[key]}, the rate-free setting filter.toml holds (its per-sample "
+                         "value at the log's rate is in fit.json's per_sample)")
+            key = RATE_FREE[key]
+        if key not in keys:
+            keys.append(key)
+    return keys, notes
 
 
 def default_free(position_std: bool = False, velocity_std: bool = False) -> list[str]:
@@ -126,8 +182,10 @@ def fit_accel_gps(
     max_updates : int, optional
         The most GPS intervals filter.toml's [scenario] duration may hold (verify's limit per realization).
     """
-    free = list(DEFAULT_FREE if free is None else free)
-    notes = []
+    free, notes = rate_free(DEFAULT_FREE if free is None else free)
+    # the noise at the log's own rate: the likelihood's per-sample settings, addressed by their densities
+    rate = noise_rate(log, rates, scenario)
+    log = RateFreeLog(log, rate)
     if "filter.bias_correlation_time" in free and "filter.bias_std" not in free:
         free.append("filter.bias_std")
         notes.append(
@@ -180,7 +238,7 @@ def fit_accel_gps(
             column = key.split(".")[1].removesuffix("_multiplier")
             notes.append(f"{key}: the log's {column} column times one fitted multiplier, instead of a constant std")
     rejected = getattr(calibration, "rejected_rows", None)
-    settings, comments = filter_toml(scenario, chosen, fit, rates, std_medians or {}, max_updates)
+    settings, comments, per_sample_values = filter_toml(scenario, chosen, fit, rates, std_medians or {}, max_updates, rate=rate)
     return FitResult.from_search(
         scenario.NAME,
         fit,
@@ -193,7 +251,7 @@ def fit_accel_gps(
         settings=settings,
         comments=comments,
         confidence=confidence,
-        extra={"bias": float(calibration.bias[-1]), "bias_std": float(calibration.std[-1, 2])},
+        extra={"bias": float(calibration.bias[-1]), "bias_std": float(calibration.std[-1, 2]), "per_sample": per_sample_values},
     )
 
 
@@ -290,6 +348,15 @@ def _holds(fit) -> bool:
     return latency is not None and latency_scan.unresolved(latency)
 
 
+def noise_rate(log, rates: tuple[float, float] | None, scenario: AccelGpsScenario) -> float:
+    """The rate (Hz) the log's per-sample noise settings hold at: its median accelerometer rate (the
+    log's ``period``), else ``rates``' first, else ``scenario.imu_rate``."""
+    period = getattr(log, "period", None)
+    if isinstance(period, (int, float)) and period > 0:
+        return 1.0 / float(period)
+    return float(rates[0]) if rates is not None else float(scenario.scenario.imu_rate)
+
+
 def log_rates(imu_time: np.ndarray, gps_time: np.ndarray) -> tuple[float, float]:
     """The logs' median rates, Hz."""
     return float(1.0 / np.median(np.diff(imu_time))), float(1.0 / np.median(np.diff(gps_time)))
@@ -298,7 +365,7 @@ def log_rates(imu_time: np.ndarray, gps_time: np.ndarray) -> tuple[float, float]
 def check_free(free: Sequence[str], *, position_std: bool, velocity_std: bool) -> None:
     """Refuse a key that the accel-gps filter has no setting for, or a multiplier of a column the log lacks."""
     accepted = {f"filter.{f.name}" for f in dataclasses.fields(AccelGpsFilter)} - {"filter.position0_mean", "filter.velocity0_mean"}
-    for key in free:
+    for key in rate_free(free)[0]:
         if key == "log.position_std_multiplier" and not position_std or key == "log.velocity_std_multiplier" and not velocity_std:
             raise KalcalError(f"--free: {key} needs the GPS log's {key.split('.')[1].removesuffix('_multiplier')} column")
         if key not in accepted and not key.startswith("log.") or key.startswith("log.") and not key.endswith("_std_multiplier"):

@@ -6,7 +6,7 @@ import dataclasses
 from typing import Any
 
 from kalcal.fitting.result import interval_text
-from kalcal.models.accel_gps import AccelGpsFilter, AccelGpsTruth
+from kalcal.models.accel_gps import DENSITIES, DENSITY_NAMES, AccelGpsFilter, AccelGpsTruth, density_of, per_sample
 
 
 def short(value: float) -> float:
@@ -14,12 +14,31 @@ def short(value: float) -> float:
     return float(f"{value:.6g}")
 
 
-def filter_toml(scenario, chosen, fit, rates, std_medians, max_updates=None) -> tuple[dict[str, dict], dict[str, str]]:
-    """filter.toml's sections and comments: the fitted filter in [filter] and [truth], the log's rates in [scenario]."""
-    resolved = scenario.filter_settings
+def filter_toml(scenario, chosen, fit, rates, std_medians, max_updates=None, *, rate=None):
+    """filter.toml's sections and comments: the fitted filter in [filter] and [truth], the log's rates in
+    [scenario]; and fit.json's ``per_sample``.
+
+    The noise is written as its rate-free densities only (a per-sample value holds at one rate): each
+    fitted density as fitted, each other one converted from the per-sample value the log ran at ``rate``
+    (Hz, the log's median accelerometer rate; default the first of ``rates``, else scenario.imu_rate).
+    Its per-sample values at that rate go in comments and in ``per_sample``.
+
+    Returns
+    -------
+    (sections, comments, per_sample)
+    """
+    rate = float(rate if rate is not None else rates[0] if rates is not None else scenario.scenario.imu_rate)
+    resolved = scenario.at_rate(rate).filter_settings  # per sample at the log's rate, as the log ran
     filter_values = {}
     for f in dataclasses.fields(AccelGpsFilter):
         key = f"filter.{f.name}"
+        if f.name in DENSITIES:
+            continue  # written as its density
+        if f.name in DENSITY_NAMES:
+            name = next(n for n, (d, _) in DENSITIES.items() if d == f.name)
+            value = chosen.get(key, density_of(name, getattr(resolved, name), rate))
+            filter_values[f.name] = short(value) if key in chosen else value
+            continue
         if key == "filter.gps_latency":  # the likelihood's: an unset latency is 0, never the truth's
             value = chosen.get(key, scenario.filter.gps_latency or 0.0)
         else:
@@ -28,7 +47,7 @@ def filter_toml(scenario, chosen, fit, rates, std_medians, max_updates=None) -> 
             continue  # unset, as in the fit: calibrate --config keeps the log's prior rule (diffuse), verify the truth's
         if value is not None:
             filter_values[f.name] = short(value) if key in chosen else value
-    truth_names = [f.name for f in dataclasses.fields(AccelGpsTruth)]
+    truth_names = [f.name for f in dataclasses.fields(AccelGpsTruth) if f.name not in DENSITIES]
     truth = {name: getattr(scenario.truth, name) for name in truth_names}
     # the Monte Carlo's truth is the fitted filter's model; the log's faults (latency, outliers) are the
     # log's, which verify's truth has not (it refuses them): 0
@@ -54,11 +73,24 @@ def filter_toml(scenario, chosen, fit, rates, std_medians, max_updates=None) -> 
                     f"{setting}: the fitted multiplier times the {column} column's median (calibrate reads the "
                     "column itself; this value is for fixes without one, and for verify)"
                 )
+    per_sample_values = {"rate": rate, "unit": "m/s^2", "note": (
+        f"per sample at the log's {rate:.6g} Hz, from the densities in filter.toml's [filter]: accel_noise_std = "
+        "N sqrt(rate), bias_walk_std = K / sqrt(rate)")}
+    for name, (density, _) in DENSITIES.items():
+        value = per_sample(name, filter_values[density], rate)
+        entry = {"value": value, "ci_low": None, "ci_high": None}
+        p = fit.parameters.get(f"filter.{density}")
+        if p is not None and p.identified:
+            entry.update(ci_low=None if p.ci_low is None else per_sample(name, p.ci_low, rate),
+                         ci_high=None if p.ci_high is None else per_sample(name, p.ci_high, rate))
+        per_sample_values[name] = entry
+        said = f"{name} = {value:.6g} m/s^2 per sample at {rate:.6g} Hz (the log's rate)"
+        comments[density] = f"{comments[density]}; {said}" if density in comments else f"{density}: {said}"
     section, shortened = rates_section(scenario, rates, max_updates)
     if shortened:
         comments["scenario.duration"] = shortened
     sections = {"scenario": section, "filter": filter_values, "truth": truth}
-    return sections, comments
+    return sections, comments, per_sample_values
 
 
 def name_of(key: str) -> str:

@@ -1,4 +1,5 @@
-"""``kalcal fit``: read a log, fit the filter's noise settings in memory, write fit.json, filter.toml and fit.png as one set."""
+"""``kalcal fit``: read a log, fit the filter's noise settings in memory, write fit.json, filter.toml and fit.png
+(and for accel-gps Kalibr's imu.yaml) as one set."""
 
 from __future__ import annotations
 
@@ -18,6 +19,13 @@ from kalcal.jobs.verify_arguments import MAX_UPDATES
 
 #: the files of one fit
 OUTPUT_NAMES = ("fit.json", "filter.toml", "fit.png")
+#: ... and of an accel-gps fit: the Kalibr noise file too, as ``kalcal noise`` writes it
+KALIBR_NAME = "imu.yaml"
+
+
+def output_names(command: str) -> tuple[str, ...]:
+    """The files of a ``command`` (``"fit accel-gps"``, ``"fit scale-bias"``) run."""
+    return (*OUTPUT_NAMES, KALIBR_NAME) if command == "fit accel-gps" else OUTPUT_NAMES
 
 
 @dataclass(frozen=True)
@@ -33,12 +41,15 @@ class FitRun:
         fit.json's content.
     filter_text : str
         filter.toml, loadable by ``--config`` of calibrate and verify.
+    kalibr_text : str or None
+        accel-gps: imu.yaml, the fitted noise densities in Kalibr's form (:func:`kalcal.calibration.kalibr.fit_kalibr_yaml`).
     """
 
     command: str
     result: FitResult
     document: dict[str, Any]
     filter_text: str
+    kalibr_text: str | None = None
 
 
 def _toml_value(value: Any) -> str:
@@ -132,7 +143,8 @@ def compute_accel_gps_fit(
     header = [
         f"kalcal fit accel-gps: noise settings fitted by maximum likelihood to {imu_name} and {gps_name}",
         f"({result.fixes} fixes, log L = {result.loglik:.6g}, {result.interval_method} intervals).",
-        "Per-sample values hold at [scenario] imu_rate, the log's rate. `kalcal verify --config` on this file",
+        "The noise is written as rate-free densities (calibrate converts them at each log's own rate; the per-sample",
+        "values at this log's rate are in comments). `kalcal verify --config` on this file",
         "runs the fitted filter against these settings as the truth, over [scenario] duration and the scenario's",
         "motion, not the log's.",
     ]
@@ -142,7 +154,10 @@ def compute_accel_gps_fit(
     if not result.adequate:
         header.append(f"NOT ADEQUATE: {result.adequacy}")
     document = _document(result, "fit accel-gps", {"imu": imu_name, "gps": gps_name, "init": init}, free)
-    run = FitRun("fit accel-gps", result, document, filter_toml(result, header))
+    from kalcal.calibration.kalibr import fit_kalibr_yaml
+
+    kalibr = fit_kalibr_yaml(result, str(imu_name), result.extra["per_sample"]["rate"])
+    run = FitRun("fit accel-gps", result, document, filter_toml(result, header), kalibr)
     files = [p for p in sources if not is_frame(p)]
     return mark_inputs(run, *files)
 
@@ -189,10 +204,11 @@ def compute_scale_bias_fit(
 
 
 def save_fit(run: FitRun, out: str | Path) -> dict[str, Path]:
-    """Write ``fit.json``, ``filter.toml`` and ``fit.png`` into ``out`` as one set (:mod:`kalcal.io.outputs`);
-    returns the files by name (where they are once the set is in place)."""
+    """Write ``fit.json``, ``filter.toml``, ``fit.png`` and, for accel-gps, ``imu.yaml`` into ``out`` as one
+    set (:mod:`kalcal.io.outputs`); returns the files by name (where they are once the set is in place)."""
     out = Path(out)
-    with run_outputs(out, run.command, names=OUTPUT_NAMES, protect=inputs_of(run)) as staging:
+    names = output_names(run.command)
+    with run_outputs(out, run.command, names=names, protect=inputs_of(run)) as staging:
         staging.mkdir(parents=True, exist_ok=True)
         from kalcal.fitting.mle import drop_of
         from kalcal.plots.fit import plot_fit
@@ -202,6 +218,8 @@ def save_fit(run: FitRun, out: str | Path) -> dict[str, Path]:
             from kalcal.fitting.accel_gps import LINEAR as linear
         write_json(staging / "fit.json", run.document)
         (staging / "filter.toml").write_text(run.filter_text)
+        if run.kalibr_text is not None:
+            (staging / KALIBR_NAME).write_text(run.kalibr_text)
         plot_fit(run.result.curves, run.document["parameters"], staging / "fit.png",
                  method=run.result.interval_method, drop=drop_of(run.result.confidence), linear=tuple(linear))
-    return {name: out / name for name in OUTPUT_NAMES}
+    return {name: out / name for name in names}

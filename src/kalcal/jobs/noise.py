@@ -1,6 +1,7 @@
 """``kalcal noise``: a static accelerometer log's noise identified in memory, then written as one set.
 
-It writes the summary, the Allan curve and plot, the matching ``[filter]`` settings and Kalibr's imu.yaml.
+It writes the summary, the Allan curve and plot, the matching ``[filter]`` settings (rate-free densities,
+converted by ``calibrate`` at each log's own rate) and Kalibr's imu.yaml.
 """
 
 from __future__ import annotations
@@ -19,28 +20,51 @@ from kalcal.errors import DataError
 from kalcal.io.logs import numeric_columns, parse_column_map, read_table, require_increasing, source_name
 from kalcal.io.outputs import final_path, inputs_of, mark_inputs, run_outputs
 from kalcal.io.results import write_json
-from kalcal.models.accel_gps import AccelGpsFilter
+from kalcal.models.accel_gps import AccelGpsFilter, per_sample
 
 IMU_ROLES = ("time", "accel")
-#: the identified values that map onto accel-gps ``filter.`` settings of the same name
-FILTER_KEYS = ("accel_noise_std", "bias_walk_std")
+#: each accel-gps ``filter.`` density the identification gives, the identified value it is (N, K), and
+#: the per-sample value it gives at the log's rate (written in a comment and in summary.json only: a
+#: per-sample value holds at one rate, a density at every rate)
+FILTER_KEYS = {
+    "accel_noise_density": ("velocity_random_walk", "accel_noise_std"),
+    "bias_walk_density": ("rate_random_walk", "bias_walk_std"),
+}
 
 
 def filter_settings(result: NoiseIdentification) -> dict[str, float]:
-    """The ``[filter]`` settings the identification gives: each identified value whose key accel-gps accepts."""
+    """The ``[filter]`` settings the identification gives: the density of each identified noise whose key
+    accel-gps accepts (``accel_noise_density`` = N, ``bias_walk_density`` = K)."""
     accepted = {f.name for f in dataclasses.fields(AccelGpsFilter)}
-    values = {key: getattr(result, key).value for key in FILTER_KEYS}
+    values = {key: getattr(result, name).value for key, (name, _) in FILTER_KEYS.items()}
     # A TOML number written with 6 significant digits, read back as the same float.
     return {key: float(f"{value:.6g}") for key, value in values.items() if value is not None and key in accepted}
 
 
+def per_sample_settings(result: NoiseIdentification, settings: dict[str, float]) -> dict[str, Any]:
+    """summary.json's ``per_sample``: each written density's per-sample value at the log's rate (m/s^2),
+    what ``calibrate`` uses on a log at that rate (at another it converts the density anew)."""
+    values = {FILTER_KEYS[key][1]: per_sample(FILTER_KEYS[key][1], value, result.rate) for key, value in settings.items()}
+    return {
+        "rate": result.rate,
+        "unit": "m/s^2",
+        **values,
+        "note": (
+            f"per sample at this log's {result.rate:.6g} Hz, from the densities in [filter]: accel_noise_std = N sqrt(rate), "
+            "bias_walk_std = K / sqrt(rate); calibrate converts the densities at each log's own rate"
+        ),
+    }
+
+
 def filter_toml(result: NoiseIdentification, settings: dict[str, float], source: str) -> str:
-    """A TOML snippet for ``kalcal calibrate accel-gps --config``: ``[filter]`` with ``settings``, commented."""
+    """A TOML snippet for ``kalcal calibrate accel-gps --config``: ``[filter]`` with the densities in
+    ``settings``, commented with their per-sample values at the log's rate."""
     rate = result.rate
     lines = [
         f"# kalcal noise: accelerometer noise identified from {source}",
-        f"# ({result.samples} samples at {rate:.6g} Hz, {result.duration:.6g} s). Per-sample values hold at {rate:.6g} Hz;",
-        "# for a log at another rate f: accel_noise_std = N sqrt(f), bias_walk_std = K / sqrt(f).",
+        f"# ({result.samples} samples at {rate:.6g} Hz, {result.duration:.6g} s). [filter] holds rate-free densities:",
+        "# calibrate converts them at each log's own rate f (accel_noise_std = N sqrt(f), bias_walk_std = K / sqrt(f)),",
+        "# assuming each sample averages over its period (docs/noise.md: a log decimated without averaging).",
     ]
     vrw, rrw = result.velocity_random_walk, result.rate_random_walk
     if vrw.identified:
@@ -50,9 +74,12 @@ def filter_toml(result: NoiseIdentification, settings: dict[str, float], source:
         lines.append(f"# B = {b.value:.6g} {b.unit} (bias instability; no filter setting of its own)")
     if rrw.identified:
         lines.append(f"# K = {rrw.value:.6g} {rrw.unit} (rate random walk)")
-    for key in FILTER_KEYS:
-        if key not in settings:
-            parameter = getattr(result, key)
+    for key, (name, sample_name) in FILTER_KEYS.items():
+        if key in settings:
+            value = per_sample(sample_name, settings[key], rate)
+            lines.append(f"# {key}: {sample_name} = {value:.6g} m/s^2 per sample at {rate:.6g} Hz (this log's rate)")
+        else:
+            parameter = getattr(result, name)
             why = parameter.note if not parameter.identified else "the accel-gps filter has no such setting"
             lines.append(f"# {key}: not written ({why})")
     lines += ["", "[filter]"]
@@ -195,6 +222,7 @@ def compute_noise(
         "confidence": confidence,
         **{parameter.name: parameter.as_dict() for parameter in result.parameters},
         "filter": settings,
+        "per_sample": per_sample_settings(result, settings),
         "notes": [
             f"{p.name}: {p.note}"
             for p in (result.velocity_random_walk, result.bias_instability, result.rate_random_walk)

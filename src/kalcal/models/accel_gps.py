@@ -43,6 +43,9 @@ one (a second-order difference, s times the accelerometer's own errors).
 
 from __future__ import annotations
 
+import dataclasses
+import math
+import weakref
 from dataclasses import dataclass, field, fields
 from typing import ClassVar, Literal
 
@@ -54,6 +57,57 @@ from kalcal.models.settings import SettingError, require_nonnegative, require_po
 
 TruthKind = Literal["analytic", "discrete"]
 IntegrationScheme = Literal["euler", "trapezoid"]
+
+#: each per-sample noise setting, its rate-free density and the power of the rate that converts the
+#: density to it: the white noise averaged over a sample period dt = 1 / f has the std N sqrt(f)
+#: (m/s^2 from m/s^2/sqrt(Hz)); a random walk's increment over dt has the std K sqrt(dt) = K / sqrt(f)
+#: (m/s^2 from m/s^3/sqrt(Hz))
+DENSITIES = {"accel_noise_std": ("accel_noise_density", 0.5), "bias_walk_std": ("bias_walk_density", -0.5)}
+DENSITY_NAMES = frozenset(density for density, _ in DENSITIES.values())
+#: the units of the densities and of their per-sample values
+DENSITY_UNITS = {"accel_noise_density": "m/s^2/sqrt(Hz)", "bias_walk_density": "m/s^3/sqrt(Hz)"}
+#: the truth's white noise per sample where neither it nor its density is given, m/s^2 (at scenario.imu_rate)
+DEFAULT_ACCEL_NOISE_STD = 0.02
+DEFAULTS = {"accel_noise_std": DEFAULT_ACCEL_NOISE_STD, "bias_walk_std": 0.0}
+
+
+def per_sample(name: str, density: float, rate: float) -> float:
+    """The per-sample value of the noise ``name`` (a key of :data:`DENSITIES`) at ``rate`` (Hz) from its
+    density: N sqrt(rate) for ``accel_noise_std`` (m/s^2), K / sqrt(rate) for ``bias_walk_std`` (m/s^2).
+
+    Both assume each sample averages the signal over its period (an anti-aliased sensor); a log
+    decimated by dropping samples keeps the per-sample std of its original rate (docs/noise.md).
+    """
+    return float(density * rate ** DENSITIES[name][1])
+
+
+def density_of(name: str, value: float, rate: float) -> float:
+    """The density whose per-sample value at ``rate`` (Hz) is ``value`` (:func:`per_sample`'s inverse)."""
+    return float(value / rate ** DENSITIES[name][1])
+
+
+def per_sample_values(section, rate: float, defaults: dict) -> dict:
+    """``{name: value, density: None}`` for each noise of ``section`` (a truth or filter): the per-sample
+    value given, else the density converted at ``rate``, else ``defaults.get(name)``."""
+    if not (math.isfinite(rate) and rate > 0):
+        raise SettingError("scenario.imu_rate", "a positive rate to convert the noise densities at", show(rate))
+    values = {}
+    for name, (density_name, _) in DENSITIES.items():
+        given, density = getattr(section, name), getattr(section, density_name)
+        values[name] = given if given is not None else per_sample(name, density, rate) if density is not None else defaults.get(name)
+        values[density_name] = None
+    return values
+
+
+def _check_noise_pairs(section) -> None:
+    """Refuse a per-sample noise setting given together with its density (one is the other at a rate)."""
+    for name, (density_name, _) in DENSITIES.items():
+        if getattr(section, name) is not None and getattr(section, density_name) is not None:
+            raise SettingError(
+                f"{section.SECTION}.{density_name}",
+                f"either {section.SECTION}.{name} (per sample) or {section.SECTION}.{density_name} (rate-free), not both",
+                f"both ({name} = {show(getattr(section, name))}, {density_name} = {show(getattr(section, density_name))})",
+            )
 
 
 @dataclass(frozen=True)
@@ -122,7 +176,9 @@ class AccelGpsTruth:
 
     accel_amplitude: float = 10.0  # A, m/s^2
     accel_frequency: float = 0.1  # omega, rad/s
-    accel_noise_std: float = 0.02  # sigma_a, m/s^2 per sample
+    #: sigma_a, m/s^2 per sample at ``scenario.imu_rate`` (unset: from ``accel_noise_density``, else
+    #: :data:`DEFAULT_ACCEL_NOISE_STD`)
+    accel_noise_std: float | None = None
     bias_std: float = 0.1  # sigma_b, m/s^2
     position0_mean: float = 0.0  # m
     position0_std: float = 10.0  # m
@@ -130,7 +186,9 @@ class AccelGpsTruth:
     velocity0_std: float = 1.0  # m/s
     gps_position_std: float = 1.0  # m
     gps_velocity_std: float = 0.04  # m/s
-    bias_walk_std: float = 0.0  # std of the bias increment per accelerometer sample, m/s^2 (0: no walk)
+    #: std of the bias increment per accelerometer sample at ``scenario.imu_rate``, m/s^2 (unset: from
+    #: ``bias_walk_density``, else 0: no walk)
+    bias_walk_std: float | None = None
     bias_correlation_time: float = 0.0  # s; > 0 makes the bias first-order Gauss-Markov (0: constant)
     scale_std: float = 0.0  # std of the scale-factor error s (dimensionless): a_c = (1 + s) a + b + w
     # Log-only faults of the GNSS (kalcal simulate; verify refuses them): the fix's time stamp minus the
@@ -138,18 +196,25 @@ class AccelGpsTruth:
     gps_latency: float = 0.0
     gps_outlier_rate: float = 0.0
     gps_outlier_std: float = 0.0
+    #: the white noise's density N, m/s^2/sqrt(Hz): accel_noise_std = N sqrt(rate) at each rate
+    accel_noise_density: float | None = None
+    #: the bias random walk's density K, m/s^3/sqrt(Hz): bias_walk_std = K / sqrt(rate) at each rate
+    bias_walk_density: float | None = None
 
     SECTION: ClassVar[str] = "truth"
 
     def __post_init__(self) -> None:
+        _check_noise_pairs(self)
         require_positive(
             self.SECTION,
             accel_noise_std=self.accel_noise_std,
             gps_position_std=self.gps_position_std,
             gps_velocity_std=self.gps_velocity_std,
+            accel_noise_density=self.accel_noise_density,
         )
         require_nonnegative(
             self.SECTION,
+            bias_walk_density=self.bias_walk_density,
             bias_std=self.bias_std,
             position0_std=self.position0_std,
             velocity0_std=self.velocity0_std,
@@ -162,6 +227,11 @@ class AccelGpsTruth:
         )
         if not self.gps_outlier_rate <= 1:
             raise SettingError(f"{self.SECTION}.gps_outlier_rate", "a share of the fixes from 0 to 1", show(self.gps_outlier_rate))
+
+    def at_rate(self, rate: float) -> AccelGpsTruth:
+        """These settings with every noise per sample at ``rate`` (Hz): a density converted
+        (:func:`per_sample`), an unset value its default; no density left."""
+        return dataclasses.replace(self, **per_sample_values(self, rate, DEFAULTS))
 
     def bias_decay(self, dt: float) -> float:
         """phi_b = exp(-dt / tau) of the bias over one sample step of dt seconds (1 for a constant or
@@ -191,10 +261,15 @@ class AccelGpsFilter:
     #: s, a fix's time stamp minus the time it describes (calibrate on a log; verify refuses a nonzero
     #: value): the filter compares the fix with the nominal at t - gps_latency; unset: 0
     gps_latency: float | None = None
+    #: the white noise's density N, m/s^2/sqrt(Hz), converted at each log's own rate (verify: scenario.imu_rate)
+    accel_noise_density: float | None = None
+    #: the bias random walk's density K, m/s^3/sqrt(Hz), converted at each log's own rate
+    bias_walk_density: float | None = None
 
     SECTION: ClassVar[str] = "filter"
 
     def __post_init__(self) -> None:
+        _check_noise_pairs(self)
         require_positive(
             self.SECTION,
             accel_noise_std=self.accel_noise_std,
@@ -203,9 +278,11 @@ class AccelGpsFilter:
             bias_std=self.bias_std,
             position0_std=self.position0_std,
             velocity0_std=self.velocity0_std,
+            accel_noise_density=self.accel_noise_density,
         )
         require_nonnegative(
             self.SECTION,
+            bias_walk_density=self.bias_walk_density,
             bias_walk_std=self.bias_walk_std,
             bias_correlation_time=self.bias_correlation_time,
             scale_std=self.scale_std,
@@ -213,10 +290,24 @@ class AccelGpsFilter:
         if self.gps_latency is not None and not np.isfinite(self.gps_latency):
             raise SettingError(f"{self.SECTION}.gps_latency", "a finite number of seconds", show(self.gps_latency))
 
+    def at_rate(self, rate: float, truth: AccelGpsTruth) -> AccelGpsFilter:
+        """These settings with every noise per sample at ``rate`` (Hz): a density converted
+        (:func:`per_sample`); an unset noise whose ``truth`` (as given) has a density, that density
+        converted; any other unset value left unset (the truth's per-sample value). No density left."""
+        values = per_sample_values(self, rate, {})
+        inherited = per_sample_values(truth, rate, {})
+        for name in DENSITIES:
+            if values[name] is None and getattr(truth, DENSITIES[name][0]) is not None:
+                values[name] = inherited[name]
+        return dataclasses.replace(self, **values)
+
     def resolved(self, truth: AccelGpsTruth) -> AccelGpsTruth:
-        """The filter's settings with every unset value taken from ``truth``."""
+        """The filter's settings with every unset value taken from ``truth`` (per sample: both at one
+        rate, :meth:`at_rate`)."""
+        if any(getattr(self, density) is not None for density, _ in DENSITIES.values()):
+            raise ValueError("a filter with noise densities: convert them with at_rate first")  # a programming error
         known = {f.name for f in fields(AccelGpsTruth)}
-        values = {f.name: getattr(self, f.name) for f in fields(self) if f.name in known}
+        values = {f.name: getattr(self, f.name) for f in fields(self) if f.name in known and f.name not in DENSITY_NAMES}
         return AccelGpsTruth(
             accel_amplitude=truth.accel_amplitude,
             accel_frequency=truth.accel_frequency,
@@ -237,6 +328,23 @@ MEASUREMENT_NAMES = ("position", "velocity")
 MEASUREMENT_UNITS = ("m", "m/s")
 
 
+#: id(resolved truth) -> (a weak reference to it, the truth as given): the given truth of a scenario
+#: derived with dataclasses.replace, which passes the resolved one
+_GIVEN: dict[int, tuple[weakref.ref, AccelGpsTruth]] = {}
+
+
+def _remember_given(resolved: AccelGpsTruth, given: AccelGpsTruth) -> None:
+    if resolved is given:
+        return
+    key = id(resolved)
+    _GIVEN[key] = (weakref.ref(resolved, lambda _ref, key=key: _GIVEN.pop(key, None)), given)
+
+
+def _given_of(truth: AccelGpsTruth) -> AccelGpsTruth:
+    entry = _GIVEN.get(id(truth))
+    return entry[1] if entry is not None and entry[0]() is truth else truth
+
+
 @dataclass(frozen=True)
 class AccelGpsScenario:
     """The whole accelerometer/GPS study: timing, truth and filter settings."""
@@ -248,6 +356,15 @@ class AccelGpsScenario:
     NAME: ClassVar[str] = "accel-gps"
 
     def __post_init__(self) -> None:
+        # ``truth`` as given (a density, or an unset per-sample value) is kept for the settings layer
+        # (kalcal.models.config) and for a log at another rate (at_rate); the field itself holds the
+        # truth per sample at scenario.imu_rate, what the simulations and the truth's model read
+        # (a scenario derived with dataclasses.replace passes the resolved truth: its given one is looked up)
+        given = _given_of(self.truth)
+        resolved = given.at_rate(self.scenario.imu_rate)
+        object.__setattr__(self, "_given_truth", given)
+        object.__setattr__(self, "truth", resolved)
+        _remember_given(resolved, given)
         if self.truth.scale_std > 0 and self.filter_settings.scale_std == 0:
             raise SettingError(
                 "filter.scale_std",
@@ -276,8 +393,66 @@ class AccelGpsScenario:
 
     @property
     def filter_settings(self) -> AccelGpsTruth:
-        """The filter's noise and prior values, unset ones taken from the truth."""
-        return self.filter.resolved(self.truth)
+        """The filter's noise and prior values, unset ones taken from the truth; noise per sample at
+        ``scenario.imu_rate`` (a log's calibration first takes :meth:`at_rate` of its own rate)."""
+        return self.filter.at_rate(self.scenario.imu_rate, self.given_truth).resolved(self.truth)
+
+    @property
+    def given_truth(self) -> AccelGpsTruth:
+        """The truth's settings as given: a density where one was given, unset values unset."""
+        return getattr(self, "_given_truth", self.truth)
+
+    def given_section(self, name: str):
+        """A section as given (``truth``: :attr:`given_truth`), for the settings layer to change."""
+        return self.given_truth if name == "truth" else getattr(self, name)
+
+    @property
+    def noise_rate(self) -> float | None:
+        """The rate (Hz) :meth:`at_rate` bound the filter's noise to; None for settings as given."""
+        return getattr(self, "_noise_rate", None)
+
+    def per_sample_settings(self) -> tuple[dict[str, tuple[float, str | None]], float | None]:
+        """The noise settings given per sample that the filter uses, ``{"filter.accel_noise_std": (value,
+        file or None), ...}`` (a truth's where the filter takes it; a zero walk, rate-free, left out; the
+        file the value was read from, None for ``--set`` or a value given in code), and the rate (Hz)
+        recorded for them: ``scenario.imu_rate`` where it was given (a file of ``kalcal fit`` records the
+        log's), else None. Empty and None for settings :meth:`at_rate` bound to a rate."""
+        from kalcal.models.config import given_keys, setting_files
+
+        if self.noise_rate is not None:
+            return {}, None
+        files = setting_files(self)
+        found = {}
+        for name, (density, _) in DENSITIES.items():
+            if getattr(self.filter, density) is not None:
+                continue
+            for section in (self.filter, self.given_truth):
+                value = getattr(section, name)
+                if value is not None:
+                    key = f"{section.SECTION}.{name}"
+                    if value > 0:
+                        found[key] = (float(value), files.get(key))
+                    break
+                if getattr(section, density) is not None:
+                    break
+        keys = given_keys(self)
+        stated = "scenario.imu_rate" in keys or (not keys and self.scenario.imu_rate != AccelGpsSettings.imu_rate)
+        return found, (self.scenario.imu_rate if stated else None)
+
+    def at_rate(self, rate: float) -> AccelGpsScenario:
+        """These settings for a log sampled at ``rate`` (Hz): the filter's noise densities (and the
+        truth's, where the filter's noise is unset) converted to per-sample values at ``rate``
+        (:func:`per_sample`), every other setting as it is. A log's calibration and fit run this once
+        with the log's median rate; per-sample values given as such are kept (:func:`noise_rate_settings`
+        says what a warning needs to know about them)."""
+        rate = float(rate)
+        bound = dataclasses.replace(self, filter=self.filter.at_rate(rate, self.given_truth))
+        object.__setattr__(bound, "_noise_rate", rate)
+        if hasattr(self, "_given_keys"):
+            object.__setattr__(bound, "_given_keys", self._given_keys)
+        from kalcal.io.outputs import inputs_of, mark_inputs
+
+        return mark_inputs(bound, *inputs_of(self))
 
     def _model(self, values: AccelGpsTruth, x0: np.ndarray) -> LinearGaussianModel:
         dt = self.scenario.sample_period

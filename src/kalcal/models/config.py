@@ -10,6 +10,7 @@ words every error). A value read from a ``--config`` file is reported with the f
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import types
 import typing
@@ -82,7 +83,7 @@ def _changes(scenario: Any, settings: Mapping[str, Any]) -> dict[str, dict[str, 
         section, _, name = key.partition(".")
         if section not in sections:
             raise unknown(key, f"a setting of {', '.join(f'[{s}]' for s in sorted(sections))}", "section")
-        current = getattr(scenario, section)
+        current = _given(scenario, section)
         hints = typing.get_type_hints(type(current))
         names = [f.name for f in dataclasses.fields(current)]
         if not name or name not in hints or name not in names:
@@ -99,12 +100,40 @@ def apply_settings(scenario: S, settings: Mapping[str, Any], sources: Mapping[st
     sources = sources or {}
     try:
         changes = _changes(scenario, settings)
-        replaced = {s: dataclasses.replace(getattr(scenario, s), **values) for s, values in changes.items()}
-        return dataclasses.replace(scenario, **replaced)
+        # every section as given (a scenario may hold a section resolved from its settings: accel-gps's
+        # truth per sample at its rate), so that a changed rate converts a density anew
+        sections = {
+            f.name: dataclasses.replace(_given(scenario, f.name), **changes[f.name]) if f.name in changes else _given(scenario, f.name)
+            for f in dataclasses.fields(scenario)
+        }
+        result = dataclasses.replace(scenario, **sections)
     except SettingError as exc:
         if exc.source is None and exc.key in sources:
             raise exc.located(source=sources[exc.key]) from None
         raise
+    with contextlib.suppress(AttributeError, TypeError):  # records outside the fields, as mark_inputs's
+        object.__setattr__(result, "_given_keys", given_keys(scenario) | frozenset(settings))
+        files = {key: file for key, file in setting_files(scenario).items() if key not in settings}
+        files.update({key: sources[key] for key in settings if key in sources})
+        object.__setattr__(result, "_setting_files", files)
+    return result
+
+
+def setting_files(scenario: Any) -> dict[str, str]:
+    """``{section.key: file}`` for each setting of ``scenario`` that a file gave (not overridden since)."""
+    return dict(getattr(scenario, "_setting_files", {}))
+
+
+def _given(scenario: Any, section: str) -> Any:
+    """A section as given, where the scenario keeps it apart from the one it resolved (``given_section``)."""
+    given = getattr(scenario, "given_section", None)
+    return given(section) if given is not None else getattr(scenario, section)
+
+
+def given_keys(scenario: Any) -> frozenset[str]:
+    """The ``section.key`` settings given to :func:`apply_settings` on the way to ``scenario`` (a config
+    file, ``--set`` or a job's defaults); empty for a scenario built otherwise."""
+    return frozenset(getattr(scenario, "_given_keys", frozenset()))
 
 
 def section_values(scenario: Any) -> dict[str, dict[str, Any]]:
