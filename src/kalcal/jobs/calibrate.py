@@ -7,6 +7,7 @@ import threading
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -90,7 +91,7 @@ def save_calibration(calibration: Calibration, out: str | Path) -> dict[str, Pat
             normalized = np.column_stack([columns["innovation_position"], columns["innovation_velocity"]])
             figure = submit(
                 CALIBRATION_FIGURE, columns["time"], columns["bias"], columns["bias_std"], normalized,
-                out / "calibration.png",
+                out / "calibration.png", note=sigma_note(calibration.summary),
             )
         with figure:  # waited for, or stopped before an error goes on and the outputs are cleaned up
             paths["estimates.csv"] = write_csv(out / "estimates.csv", calibration.columns)
@@ -100,6 +101,51 @@ def save_calibration(calibration: Calibration, out: str | Path) -> dict[str, Pat
         return paths
 
     return write(calibration, out)
+
+
+#: the warning that the headline sigma is not to be trusted, and the one that it depends on the settings
+UNTRUSTED, SETTINGS_DEPENDENT = "sigma-untrusted", "sigma-depends-on-settings"
+
+
+def sigma_note(summary: Mapping[str, Any]) -> str:
+    """What must stand beside the bias sigma wherever it is shown ("" when nothing): untrusted when the
+    diagnostics say inconsistent or the windows not stable; else, where it was computed, the sigma over the
+    noise settings the log cannot reject."""
+    if summary.get("sigma_trusted") is False:
+        return "sigma NOT trusted: " + summary.get("sigma_untrusted_because", "the diagnostics disown it")
+    over = summary.get("settings_sigma")
+    if over:
+        return f"over the settings the log cannot reject: ± {over['bias_std']:.2g} ({over['ratio']:.3g}x)"
+    return ""
+
+
+def fit_command(imu: str, gps: str, extra: Sequence[str] = ()) -> str:
+    """The ``kalcal fit accel-gps`` command line for the same logs and arguments (``extra``: the options
+    beyond the logs, already spelled as on the command line), quoted where a word needs it."""
+    import shlex
+
+    return " ".join(["kalcal", "fit", "accel-gps", "--imu", shlex.quote(imu), "--gps", shlex.quote(gps),
+                     *(shlex.quote(word) for word in extra), "--out", "fit"])
+
+
+def untrusted_warning(diagnostics: Mapping[str, Any], stability: Mapping[str, Any], bias_std: float, unit: str,
+                      next_step: str) -> tuple[str, CalibrationWarning] | None:
+    """Why the bias sigma is not to be trusted, and the warning that says it and names the next step;
+    None when the diagnostics say consistent and the windows are not found unstable."""
+    reasons = []
+    if not diagnostics["consistent"]:
+        reasons.append(f"the diagnostics say inconsistent ({diagnostics['verdict']})")
+    if stability.get("stable") is False:
+        reasons.append("the windows' estimates disagree (stability: NOT stable)")
+    if not reasons:
+        return None
+    because = " and ".join(reasons)
+    return because, CalibrationWarning(
+        UNTRUSTED,
+        f"the bias 1-sigma {bias_std:.3g} {unit} is NOT trusted: it holds only for a model and noise settings that "
+        f"fit the log, and {because}. Next: fit the settings to this log, `{next_step}`, then calibrate again "
+        "with --config fit/filter.toml (and free more of the model where the fit says it is not adequate)",
+    )
 
 
 def _whiteness_null() -> None:
@@ -127,6 +173,8 @@ def compute_accel_gps_calibration(
     smooth: bool = False,
     windows: int = 2,
     gate: float | None = None,
+    settings_sigma: bool = True,
+    fit_options: Sequence[str] = (),
 ) -> Calibration:
     """Calibrate from an accelerometer log (time [s], accel [m/s^2]) and a GPS log (time [s], position [m],
     velocity [m/s], optionally position_std [m] and velocity_std [m/s] per fix): files or DataFrames.
@@ -148,9 +196,17 @@ def compute_accel_gps_calibration(
     its stationary std): ``prior`` says which, and a ``prior-conflict`` warning says when the estimate lies
     too far from a given prior (:func:`~kalcal.calibration.accel_gps.prior_conflict`). The diagnostics
     leave out the rejected fixes and, with a diffuse prior, the first fix.
+
+    When the diagnostics say inconsistent or the windows are not stable, the bias's sigma is not trusted:
+    ``sigma_trusted`` is false, ``sigma_untrusted_because`` says why, and a ``sigma-untrusted`` warning
+    names the next step, ``kalcal fit accel-gps`` over the same logs (``fit_options``: the command line's
+    other options, such as ``--config FILE``, repeated in it). ``settings_sigma`` (on by default) adds
+    ``settings_sigma``, the bias's sigma over the noise settings the log cannot reject
+    (:mod:`kalcal.calibration.accel_gps_settings_sigma`; about a ``kalcal fit``'s time), with a
+    ``sigma-depends-on-settings`` warning when it exceeds the conditional one by more than its factor.
     """
     # the accel-gps filter (and numba under it) when it runs: a scale-bias calibration imports this module too
-    from kalcal.calibration.accel_gps import bias_walk_variance, calibrate_accel_gps, prior_conflict
+    from kalcal.calibration.accel_gps import bias_walk_variance, prepare_accel_gps_log, prior_conflict
     from kalcal.calibration.diagnostics import innovation_diagnostics
     from kalcal.calibration.ljung_box import REFERENCE_FIXES
     from kalcal.calibration.smoothing import smooth_calibration
@@ -194,7 +250,10 @@ def compute_accel_gps_calibration(
         **stated_rates(scenario),
         columns={**{role: gps_map[role] for role in GPS_ROLES}, "imu_time": imu_map["time"], "accel": imu_map["accel"]},
     )
-    result = calibrate_accel_gps(scenario, *logs, **stds, init=init, stop_on_gap=stop_on_gap, **options)
+    gate_option = options.pop("gate")
+    log = prepare_accel_gps_log(scenario, *logs, **stds, init=init, stop_on_gap=stop_on_gap, **options)
+    result = log.calibrate(gate=gate_option)
+    options["gate"] = gate_option
     stability = accel_gps_stability(scenario, result, *logs, windows, **stds, **options)
     std = result.std
     normalized = result.normalized_innovations
@@ -248,6 +307,17 @@ def compute_accel_gps_calibration(
                 f"{longest.length:.6g} s after t = {longest.start:.9g} s (row {longest.row})",
             )
         )
+    untrusted = untrusted_warning(diagnostics.as_dict(), stability.as_dict(), float(std[-1, 2]), "m/s^2",
+                                  fit_command(str(imu_path), str(gps_path), _fit_extra(imu_columns, gps_columns, init, gate, fit_options)))
+    if untrusted is not None:
+        warnings.append(untrusted[1])
+    over = None
+    if settings_sigma:
+        from kalcal.calibration.accel_gps_settings_sigma import settings_sigma as sigma_over_settings
+
+        over = sigma_over_settings(log, result, gate=gate)
+        if over.warns:
+            warnings.append(_settings_warning(over))
     summary = {
         "scenario": scenario.NAME,
         "settings": section_values(scenario),
@@ -272,6 +342,9 @@ def compute_accel_gps_calibration(
         "time": float(result.time[-1]),
         "bias": float(result.bias[-1]),
         "bias_std": float(std[-1, 2]),
+        "sigma_trusted": untrusted is None,
+        **({"sigma_untrusted_because": untrusted[0]} if untrusted is not None else {}),
+        "settings_sigma": None if over is None else over.as_dict(),
         "position": float(result.position[-1]),
         "position_std": float(std[-1, 0]),
         "velocity": float(result.velocity[-1]),
@@ -290,6 +363,29 @@ def compute_accel_gps_calibration(
     # the log files (not DataFrames) are the run's inputs: a folder's set never removes them
     files = [p for p in (imu_source, gps_source) if not is_frame(p)]
     return mark_inputs(Calibration("calibrate accel-gps", estimates, summary), *files)
+
+
+def _fit_extra(imu_columns, gps_columns, init: str, gate, options: Sequence[str]) -> list[str]:
+    """The options of ``kalcal fit accel-gps`` that repeat this calibration's: columns, start, gate, config."""
+    extra = [*(["--imu-columns", imu_columns] if imu_columns else []), *(["--gps-columns", gps_columns] if gps_columns else [])]
+    if init != "first-fix":
+        extra += ["--init", init]
+    if gate is not None:
+        extra += ["--gate", f"{gate:g}"]
+    return extra + list(options)
+
+
+def _settings_warning(over) -> CalibrationWarning:
+    """The ``sigma-depends-on-settings`` warning: the sigma over the settings the log cannot reject is more
+    than the factor times the conditional one."""
+    at = ", ".join(f"{key} {value:.3g}" for key, value in over.at.items())
+    return CalibrationWarning(
+        SETTINGS_DEPENDENT,
+        f"the bias 1-sigma {over.conditional_bias_std:.3g} m/s^2 holds only if the noise settings are right: over "
+        f"the settings this log cannot reject (log L within the {over.confidence:g} region) it reaches "
+        f"{over.bias_std:.3g} m/s^2, {over.ratio:.3g} times as large (at {at}); report that one, or pin the settings "
+        "down with a longer or livelier log (`kalcal fit`)",
+    )
 
 
 def _prior_kind(result, scenario: AccelGpsScenario) -> str:
