@@ -38,7 +38,7 @@ def plot_calibration(
     top.set_ylabel(label("bias", "m/s²"))
     title = f"accelerometer bias: {bias[-1]:.5g} ± {bias_std[-1]:.2g} m/s² at t = {time[-1]:g} s"
     untrusted = note.startswith("sigma NOT trusted")
-    top.set_title(title + (f"\n{note}" if note else ""), color="firebrick" if untrusted else None)
+    top.set_title(title + (f"\n{note}" if note else ""), **({"color": "firebrick"} if untrusted else {}))
     top.legend(loc="upper right")
     for component, name in enumerate(names):
         bottom.plot(time, normalized_innovations[:, component], ".", markersize=2.5, label=name)
