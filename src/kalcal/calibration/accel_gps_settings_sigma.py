@@ -51,9 +51,10 @@ __all__ = ["CONFIDENCE", "WARN_FACTOR", "SettingsSigma", "error_variance_terms",
 #: the confidence of the region of settings the log cannot reject (``kalcal fit``'s intervals' own)
 CONFIDENCE = 0.95
 #: a settings sigma more than this many times the conditional one is a warning. On the default 30 s
-#: scenario with the right settings the ratio is 4.2 (median) and at most 10.7 over 100 simulated logs,
-#: because that log cannot pin the accelerometer noise down; with 10 times the filter's accelerometer noise
-#: its median is 11.5 (40 logs): no factor tells the two apart on such a log, only the sigma itself is safe
+#: scenario with the right settings the ratio is 4.7 (median), 7.2 (90%) and at most 11.0 over 100
+#: simulated logs (seeds 100-199), because that log cannot pin the accelerometer noise down; with 10 times
+#: the filter's accelerometer noise its median is 11.8 and 48% of 60 logs exceed 12: no factor tells the
+#: two apart on such a log, only the sigma itself is safe
 WARN_FACTOR = 12.0
 #: the settings whose variance enters the error linearly, each a source of :func:`error_variance_terms`
 SOURCES = (

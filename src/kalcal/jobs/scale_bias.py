@@ -13,7 +13,8 @@ from kalcal.calibration.windows import check_windows, scale_bias_stability
 from kalcal.errors import DataError
 from kalcal.io.logs import is_frame, numeric_columns, read_table, require_increasing, source_name
 from kalcal.io.outputs import mark_inputs, writes_outputs
-from kalcal.jobs.calibrate import Calibration, untrusted_warning
+from kalcal.jobs.calibrate import Calibration
+from kalcal.jobs.calibrate_warnings import untrusted_warning
 from kalcal.jobs.simulate import OUTPUT_NAMES as SIMULATION_NAMES
 from kalcal.jobs.simulate import Simulation, save_simulation
 from kalcal.models.config import section_values
