@@ -31,7 +31,7 @@ and a flat likelihood toward 0, as the accelerometer noise's on a short log, han
 prior) and over the largest sigma on the box of the marginal intervals (whose corner the log may reject).
 
 Cost: one maximum-likelihood search of 3 settings (without the intervals' curves) and one constrained
-search, some hundreds of O(fixes) filter runs: about 0.2-0.6 s on the default 30 s log (a calibration
+search, some hundreds of O(fixes) filter runs: about 0.2-0.9 s on the default 30 s log (a calibration
 alone: 0.01 s), about what ``kalcal fit`` costs on a long log.
 """
 
