@@ -164,6 +164,13 @@ class CalibrationResult:
         NIS, its bounds, ``consistent`` and the observability ratios.
     warnings : list of dict
         ``{"code", "message"}`` each, empty when none.
+    sigma_trusted : bool
+        False when the diagnostics say inconsistent or the windows are not stable: ``bias_std`` is then
+        not to be used (a ``sigma-untrusted`` warning names the next step).
+    settings_sigma : SettingsSigma or None
+        accel-gps: the bias's sigma over the noise settings the log cannot reject, beside ``bias_std``
+        (:class:`kalcal.calibration.accel_gps_settings_sigma.SettingsSigma`: ``bias_std``, ``ratio``,
+        ``at``, ...); None when not computed.
     """
 
     scenario: str
@@ -177,6 +184,8 @@ class CalibrationResult:
     warnings: list
     calibration: Any = field(repr=False, compare=False)
     paths: dict = field(default_factory=dict)
+    sigma_trusted: bool = True
+    settings_sigma: Any = None
 
     @classmethod
     def from_calibration(cls, calibration, paths: dict | None = None) -> CalibrationResult:
@@ -201,6 +210,8 @@ class CalibrationResult:
             list(s["warnings"]),
             calibration,
             dict(paths or {}),
+            sigma_trusted=bool(s.get("sigma_trusted", s.get("consistent", True))),
+            settings_sigma=_settings_sigma(s.get("settings_sigma")),
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -229,7 +240,24 @@ class CalibrationResult:
 
     def __repr__(self) -> str:
         scale = "" if self.scale is None else f", scale={self.scale:.6g} ± {self.scale_std:.3g}"
-        return f"CalibrationResult({self.scenario}: bias={self.bias:.6g} ± {self.bias_std:.3g}{scale}, warnings={len(self.warnings)})"
+        trust = "" if self.sigma_trusted else " (sigma NOT trusted)"
+        over = "" if self.settings_sigma is None else f", over the settings ± {self.settings_sigma.bias_std:.3g}"
+        return (f"CalibrationResult({self.scenario}: bias={self.bias:.6g} ± {self.bias_std:.3g}{trust}{over}{scale}, "
+                f"warnings={len(self.warnings)})")
+
+
+def _settings_sigma(document: dict | None):
+    """summary.json's ``settings_sigma`` as a SettingsSigma (None stays None)."""
+    if document is None:
+        return None
+    from kalcal.calibration.accel_gps_settings_sigma import SettingsSigma
+
+    return SettingsSigma(
+        bias_std=float(document["bias_std"]), conditional_bias_std=float(document["conditional_bias_std"]),
+        ratio=float(document["ratio"]), factor=float(document["factor"]), confidence=float(document["confidence"]),
+        free=tuple(document["free"]), at=dict(document["at"]), fitted=dict(document["fitted"]),
+        filter_rejected=bool(document["filter_rejected"]), seconds=float(document["seconds"]),
+    )
 
 
 @dataclass(frozen=True, repr=False, eq=False)

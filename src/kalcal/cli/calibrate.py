@@ -62,6 +62,13 @@ def calibrate(
             help="accel-gps: reject a fix whose NIS exceeds the chi-square quantile at this confidence (e.g. 0.999); off by default.",
         ),
     ] = None,
+    settings_sigma: Annotated[
+        bool,
+        typer.Option(
+            "--settings-sigma/--no-settings-sigma",
+            help="accel-gps: also give the bias sigma over the noise settings the log cannot reject (on; about a fit's time).",
+        ),
+    ] = True,
     out: Annotated[Path, typer.Option("--out", help="Directory for estimates.csv and summary.json.")] = Path(
         "kalcal-cal"
     ),
@@ -99,6 +106,7 @@ def calibrate(
             prior=prior,
             windows=windows,
             gate=gate,
+            settings_sigma=settings_sigma,
             out=out,
         )
     summary = result.calibration.summary
@@ -110,9 +118,17 @@ def calibrate(
     table.add_column("estimate", justify="right")
     table.add_column("1-sigma", justify="right")
     table.add_column("unit")
+    trusted = summary.get("sigma_trusted", True)
     for name in ("bias", "scale", "position", "velocity"):
         if name in summary:
-            table.add_row(name, f"{summary[name]:.6g}", f"{summary[name + '_std']:.3g}", summary["units"][name])
+            sigma = f"{summary[name + '_std']:.3g}"
+            table.add_row(name, f"{summary[name]:.6g}", sigma if trusted else f"[bold red]{sigma} NOT trusted[/bold red]",
+                          summary["units"][name])
+    over = summary.get("settings_sigma")
+    if over:
+        # the bias sigma that carries the noise settings' uncertainty, beside the conditional one
+        table.add_row("bias, over the settings", "", f"{over['bias_std']:.3g}", f"{summary['units']['bias']} "
+                      f"({over['ratio']:.3g}x)")
     console = _common.console
     console.print(table)
     if "smoothed" in summary:
@@ -145,6 +161,7 @@ def calibrate(
 def _print_scale_bias(summary: dict, out: Path, paths: dict[str, Path], strict: bool) -> None:
     """``kalcal calibrate scale-bias``'s table: the scale error and bias of a sensor against a reference."""
     unit = summary["units"]["bias"]
+    trusted = summary.get("sigma_trusted", True)
     table = _common._table(f"kalcal calibrate scale-bias: {summary['samples_used']} samples", f"t = {summary['time']:g} s")
     table.add_column("quantity")
     table.add_column("estimate", justify="right")
@@ -156,7 +173,7 @@ def _print_scale_bias(summary: dict, out: Path, paths: dict[str, Path], strict: 
         ("theta1", summary["theta"][0], summary["theta_std"][0], "1"),
         ("theta2", summary["theta"][1], summary["theta_std"][1], unit),
     ):
-        table.add_row(name, f"{value:.6g}", f"{std:.3g}", unit_)
+        table.add_row(name, f"{value:.6g}", f"{std:.3g}" if trusted else f"[bold red]{std:.3g} NOT trusted[/bold red]", unit_)
     _common.console.print(table)
     _common._print_warnings(summary)
     _print_stability(summary)

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -12,6 +13,7 @@ import numpy as np
 from kalcal.calibration.likelihood import gate_excess
 from kalcal.calibration.plausibility import CalibrationWarning
 from kalcal.calibration.windows import accel_gps_stability, check_windows
+from kalcal.jobs.calibrate_warnings import fit_command, fit_extra, settings_warning, sigma_note, untrusted_warning
 from kalcal.io.logs import is_frame, numeric_columns, parse_column_map, read_table, require_increasing, source_name
 from kalcal.io.outputs import mark_inputs, writes_outputs
 from kalcal.io.results import write_csv, write_json
@@ -88,7 +90,8 @@ def save_calibration(calibration: Calibration, out: str | Path) -> dict[str, Pat
             columns = calibration.columns
             normalized = np.column_stack([columns["innovation_position"], columns["innovation_velocity"]])
             paths["calibration.png"] = plot_calibration(
-                columns["time"], columns["bias"], columns["bias_std"], normalized, out / "calibration.png"
+                columns["time"], columns["bias"], columns["bias_std"], normalized, out / "calibration.png",
+                note=sigma_note(calibration.summary),
             )
         return paths
 
@@ -109,6 +112,8 @@ def compute_accel_gps_calibration(
     smooth: bool = False,
     windows: int = 2,
     gate: float | None = None,
+    settings_sigma: bool = True,
+    fit_options: Sequence[str] = (),
 ) -> Calibration:
     """Calibrate from an accelerometer log (time [s], accel [m/s^2]) and a GPS log (time [s], position [m],
     velocity [m/s], optionally position_std [m] and velocity_std [m/s] per fix): files or DataFrames.
@@ -130,9 +135,17 @@ def compute_accel_gps_calibration(
     its stationary std): ``prior`` says which, and a ``prior-conflict`` warning says when the estimate lies
     too far from a given prior (:func:`~kalcal.calibration.accel_gps.prior_conflict`). The diagnostics
     leave out the rejected fixes and, with a diffuse prior, the first fix.
+
+    When the diagnostics say inconsistent or the windows are not stable, the bias's sigma is not trusted:
+    ``sigma_trusted`` is false, ``sigma_untrusted_because`` says why, and a ``sigma-untrusted`` warning
+    names the next step, ``kalcal fit accel-gps`` over the same logs (``fit_options``: the command line's
+    other options, such as ``--config FILE``, repeated in it). ``settings_sigma`` (on by default) adds
+    ``settings_sigma``, the bias's sigma over the noise settings the log cannot reject
+    (:mod:`kalcal.calibration.accel_gps_settings_sigma`; about a ``kalcal fit``'s time), with a
+    ``sigma-depends-on-settings`` warning when it exceeds the conditional one by more than its factor.
     """
     # the accel-gps filter (and numba under it) when it runs: a scale-bias calibration imports this module too
-    from kalcal.calibration.accel_gps import bias_walk_variance, calibrate_accel_gps, prior_conflict
+    from kalcal.calibration.accel_gps import bias_walk_variance, prepare_accel_gps_log, prior_conflict
     from kalcal.calibration.diagnostics import innovation_diagnostics
     from kalcal.calibration.smoothing import smooth_calibration
 
@@ -164,7 +177,10 @@ def compute_accel_gps_calibration(
         **stated_rates(scenario),
         columns={**{role: gps_map[role] for role in GPS_ROLES}, "imu_time": imu_map["time"], "accel": imu_map["accel"]},
     )
-    result = calibrate_accel_gps(scenario, *logs, **stds, init=init, stop_on_gap=stop_on_gap, **options)
+    gate_option = options.pop("gate")
+    log = prepare_accel_gps_log(scenario, *logs, **stds, init=init, stop_on_gap=stop_on_gap, **options)
+    result = log.calibrate(gate=gate_option)
+    options["gate"] = gate_option
     stability = accel_gps_stability(scenario, result, *logs, windows, **stds, **options)
     std = result.std
     normalized = result.normalized_innovations
@@ -216,6 +232,17 @@ def compute_accel_gps_calibration(
                 f"{longest.length:.6g} s after t = {longest.start:.9g} s (row {longest.row})",
             )
         )
+    untrusted = untrusted_warning(diagnostics.as_dict(), stability.as_dict(), float(std[-1, 2]), "m/s^2",
+                                  fit_command(str(imu_path), str(gps_path), fit_extra(imu_columns, gps_columns, init, gate, fit_options)))
+    if untrusted is not None:
+        warnings.append(untrusted[1])
+    over = None
+    if settings_sigma:
+        from kalcal.calibration.accel_gps_settings_sigma import settings_sigma as sigma_over_settings
+
+        over = sigma_over_settings(log, result, gate=gate)
+        if over.warns:
+            warnings.append(settings_warning(over))
     summary = {
         "scenario": scenario.NAME,
         "settings": section_values(scenario),
@@ -240,6 +267,9 @@ def compute_accel_gps_calibration(
         "time": float(result.time[-1]),
         "bias": float(result.bias[-1]),
         "bias_std": float(std[-1, 2]),
+        "sigma_trusted": untrusted is None,
+        **({"sigma_untrusted_because": untrusted[0]} if untrusted is not None else {}),
+        "settings_sigma": None if over is None else over.as_dict(),
         "position": float(result.position[-1]),
         "position_std": float(std[-1, 0]),
         "velocity": float(result.velocity[-1]),

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shlex
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -13,6 +14,7 @@ from kalcal.errors import DataError
 from kalcal.io.logs import is_frame, numeric_columns, read_table, require_increasing, source_name
 from kalcal.io.outputs import mark_inputs, writes_outputs
 from kalcal.jobs.calibrate import Calibration
+from kalcal.jobs.calibrate_warnings import untrusted_warning
 from kalcal.jobs.simulate import OUTPUT_NAMES as SIMULATION_NAMES
 from kalcal.jobs.simulate import Simulation, save_simulation
 from kalcal.models.config import section_values
@@ -137,6 +139,16 @@ def compute_scale_bias_calibration(
     }
     a, b, ab_cov = result.scale_bias()
     unit = scenario.scenario.unit
+    warnings = [warning.as_dict() for warning in result.warnings(str(data_path))]
+    # the sigmas hold only for a filter the log agrees with: when the NIS or the windows disown it, say so
+    # and name the next step, a fit of the noise settings to the same log
+    extra = [*(["--reference", reference] if reference != "reference" else []), *(["--sensor", sensor] if sensor != "sensor" else [])]
+    fit = " ".join(["kalcal", "fit", "scale-bias", "--data", shlex.quote(str(data_path)), *map(shlex.quote, extra), "--out", "fit"])
+    untrusted = untrusted_warning({"consistent": result.consistent, "verdict": f"mean NIS {result.mean_nis:.3g} outside "
+                                   f"[{result.nis_bounds()[0]:.3g}, {result.nis_bounds()[1]:.3g}]"},
+                                  stability.as_dict(), float(np.sqrt(ab_cov[1, 1])), unit, fit)
+    if untrusted is not None:
+        warnings.append(untrusted[1].as_dict())
     summary = {
         "scenario": scenario.NAME,
         "settings": section_values(scenario),
@@ -153,6 +165,8 @@ def compute_scale_bias_calibration(
         "scale_error_std": float(np.sqrt(ab_cov[0, 0])),
         "bias": b,
         "bias_std": float(np.sqrt(ab_cov[1, 1])),
+        "sigma_trusted": untrusted is None,
+        **({"sigma_untrusted_because": untrusted[0]} if untrusted is not None else {}),
         "scale_bias_correlation": float(ab_cov[0, 1] / np.sqrt(ab_cov[0, 0] * ab_cov[1, 1])),
         "mean_nis": result.mean_nis,
         "nis_bounds": list(result.nis_bounds()),
@@ -172,7 +186,7 @@ def compute_scale_bias_calibration(
         },
         "prior": {"kind": prior, "note": why, "start_samples": result.start_samples, "conflict": result.conflict},
         "stability": stability.as_dict(),
-        "warnings": [warning.as_dict() for warning in result.warnings(str(data_path))],
+        "warnings": warnings,
         "units": {"time": "s", "theta1": "1", "theta2": unit, "scale_error": "1", "bias": unit},
     }
     calibration = Calibration("calibrate scale-bias", estimates, summary)

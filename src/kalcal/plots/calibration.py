@@ -17,6 +17,7 @@ def plot_calibration(
     normalized_innovations: np.ndarray,
     path: str | Path,
     names: tuple[str, ...] = ("position", "velocity"),
+    note: str = "",
 ) -> Path:
     """Bias estimate +- 1 and 2 sigma against time, and each normalized innovation with its +-3 band.
 
@@ -25,6 +26,9 @@ def plot_calibration(
     Parameters
     ----------
     time : (K,) s; bias, bias_std : (K,) m/s^2; normalized_innovations : (K, p), dimensionless.
+    note : str
+        A second title line that must stand beside the sigma (it is not trusted, or its value over the
+        noise settings the log cannot reject); "" for none.
     """
     figure, axes = new_figure(2)
     top, bottom = axes[0, 0], axes[1, 0]
@@ -32,7 +36,9 @@ def plot_calibration(
     shade_band(top, time, bias - bias_std, bias + bias_std, "±1σ", ESTIMATE)
     top.plot(time, bias, color=ESTIMATE, linewidth=1.2, label="bias estimate")
     top.set_ylabel(label("bias", "m/s²"))
-    top.set_title(f"accelerometer bias: {bias[-1]:.5g} ± {bias_std[-1]:.2g} m/s² at t = {time[-1]:g} s")
+    title = f"accelerometer bias: {bias[-1]:.5g} ± {bias_std[-1]:.2g} m/s² at t = {time[-1]:g} s"
+    untrusted = note.startswith("sigma NOT trusted")
+    top.set_title(title + (f"\n{note}" if note else ""), **({"color": "firebrick"} if untrusted else {}))
     top.legend(loc="upper right")
     for component, name in enumerate(names):
         bottom.plot(time, normalized_innovations[:, component], ".", markersize=2.5, label=name)

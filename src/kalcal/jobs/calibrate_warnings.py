@@ -1,0 +1,75 @@
+"""What a calibration must say beside its sigma: not trusted (and the fit to run next), or dependent on the settings."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from kalcal.calibration.plausibility import CalibrationWarning
+
+#: the warning that the headline sigma is not to be trusted, and the one that it depends on the settings
+UNTRUSTED, SETTINGS_DEPENDENT = "sigma-untrusted", "sigma-depends-on-settings"
+
+
+def sigma_note(summary: Mapping[str, Any]) -> str:
+    """What must stand beside the bias sigma wherever it is shown ("" when nothing): untrusted when the
+    diagnostics say inconsistent or the windows not stable; else, where it was computed, the sigma over the
+    noise settings the log cannot reject."""
+    if summary.get("sigma_trusted") is False:
+        return "sigma NOT trusted: " + summary.get("sigma_untrusted_because", "the diagnostics disown it")
+    over = summary.get("settings_sigma")
+    if over:
+        return f"over the settings the log cannot reject: ± {over['bias_std']:.2g} ({over['ratio']:.3g}x)"
+    return ""
+
+
+def fit_command(imu: str, gps: str, extra: Sequence[str] = ()) -> str:
+    """The ``kalcal fit accel-gps`` command line for the same logs and arguments (``extra``: the options
+    beyond the logs, already spelled as on the command line), quoted where a word needs it."""
+    import shlex
+
+    return " ".join(["kalcal", "fit", "accel-gps", "--imu", shlex.quote(imu), "--gps", shlex.quote(gps),
+                     *(shlex.quote(word) for word in extra), "--out", "fit"])
+
+
+def untrusted_warning(diagnostics: Mapping[str, Any], stability: Mapping[str, Any], bias_std: float, unit: str,
+                      next_step: str) -> tuple[str, CalibrationWarning] | None:
+    """Why the bias sigma is not to be trusted, and the warning that says it and names the next step;
+    None when the diagnostics say consistent and the windows are not found unstable."""
+    reasons = []
+    if not diagnostics["consistent"]:
+        reasons.append(f"the diagnostics say inconsistent ({diagnostics['verdict']})")
+    if stability.get("stable") is False:
+        reasons.append("the windows' estimates disagree (stability: NOT stable)")
+    if not reasons:
+        return None
+    because = " and ".join(reasons)
+    return because, CalibrationWarning(
+        UNTRUSTED,
+        f"the bias 1-sigma {bias_std:.3g} {unit} is NOT trusted: it holds only for a model and noise settings that "
+        f"fit the log, and {because}. Next: fit the settings to this log, `{next_step}`, then calibrate again "
+        "with --config fit/filter.toml (and free more of the model where the fit says it is not adequate)",
+    )
+
+
+def fit_extra(imu_columns, gps_columns, init: str, gate, options: Sequence[str]) -> list[str]:
+    """The options of ``kalcal fit accel-gps`` that repeat this calibration's: columns, start, gate, config."""
+    extra = [*(["--imu-columns", imu_columns] if imu_columns else []), *(["--gps-columns", gps_columns] if gps_columns else [])]
+    if init != "first-fix":
+        extra += ["--init", init]
+    if gate is not None:
+        extra += ["--gate", f"{gate:g}"]
+    return extra + list(options)
+
+
+def settings_warning(over) -> CalibrationWarning:
+    """The ``sigma-depends-on-settings`` warning: the sigma over the settings the log cannot reject is more
+    than the factor times the conditional one."""
+    at = ", ".join(f"{key} {value:.3g}" for key, value in over.at.items())
+    return CalibrationWarning(
+        SETTINGS_DEPENDENT,
+        f"the bias 1-sigma {over.conditional_bias_std:.3g} m/s^2 holds only if the noise settings are right: over "
+        f"the settings this log cannot reject (log L within the {over.confidence:g} region) it reaches "
+        f"{over.bias_std:.3g} m/s^2, {over.ratio:.3g} times as large (at {at}); report that one, or pin the settings "
+        "down with a longer or livelier log (`kalcal fit`)",
+    )
