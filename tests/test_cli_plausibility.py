@@ -177,8 +177,9 @@ def test_scale_bias_constant_sensor_is_flagged_unobservable(sim, tmp_path):
     summary = json.loads((tmp_path / "c" / "summary.json").read_text())
     assert "theta1" in summary["observability"]["unobservable"]
     assert summary["observability"]["std_ratio"]["theta1"] > 0.9
-    # a constant sensor cannot follow the varying reference: its NIS is inconsistent too
-    assert [w["code"] for w in summary["warnings"]] == ["unobservable", "noise-inconsistent"]
+    # a constant sensor cannot follow the varying reference: its NIS is inconsistent too, so its sigma is
+    # not trusted
+    assert [w["code"] for w in summary["warnings"]] == ["unobservable", "noise-inconsistent", "sigma-untrusted"]
     assert not summary["consistent"] and summary["mean_nis"] > summary["nis_bounds"][1]
 
 
@@ -221,7 +222,7 @@ def test_scale_bias_strict_exits_1_when_the_nis_is_inconsistent(sim, tmp_path):
         assert result.exit_code == status, result.output + result.stderr
         summary = json.loads((tmp_path / "n" / "summary.json").read_text())
         assert not summary["consistent"] and summary["mean_nis"] > 50
-        assert [w["code"] for w in summary["warnings"]] == ["noise-inconsistent"]
+        assert [w["code"] for w in summary["warnings"]] == ["noise-inconsistent", "sigma-untrusted"]
         assert "kalcal: warning: " in result.stderr and "mean NIS" in result.stderr
 
 

@@ -47,8 +47,9 @@ def test_dask_is_a_default_dependency():
     assert any(req.replace(" ", "").startswith("dask[distributed]") for req in project["dependencies"])
 
 
-def test_every_module_opens_with_one_line_saying_its_job_and_stays_short():
-    """docs/architecture.md: one job per module, said in its first docstring line, about 350 lines at most."""
+def test_every_module_opens_with_one_line_saying_its_job():
+    """docs/architecture.md: one job per module, said in its first docstring line (no cap on its length:
+    a concept stays in one module rather than being split by size)."""
     package = ROOT / "src" / "kalcal"
     modules = sorted(package.rglob("*.py"))
     assert len(modules) > 50
@@ -57,7 +58,6 @@ def test_every_module_opens_with_one_line_saying_its_job_and_stays_short():
         docstring = ast.get_docstring(ast.parse(text))
         assert docstring, f"{module}: no docstring"
         assert "\n" not in docstring.split("\n\n")[0], f"{module}: its opening line runs on"
-        assert text.count("\n") <= 380, f"{module}: {text.count(chr(10))} lines"
 
 
 def test_no_merge_conflict_markers_are_left_in_the_text():

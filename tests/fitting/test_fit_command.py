@@ -118,7 +118,7 @@ def test_scale_bias_end_to_end_fit_calibrate_and_verify(tmp_path):
     assert verification.verdict == "pass"
 
 
-def test_the_noise_is_fitted_and_written_as_densities_with_per_sample_values_at_the_logs_rate(accel_logs, tmp_path):
+def test_the_noise_is_fitted_and_written_as_densities_with_per_sample_values_at_the_logs_rate(accel_logs, tmp_path, monkeypatch):
     """[filter] and [truth] hold the densities only; the per-sample values at the log's 200 Hz are in
     comments, in fit.json's per_sample and on the terminal; imu.yaml holds the same densities."""
     import numpy as np
@@ -126,8 +126,14 @@ def test_the_noise_is_fitted_and_written_as_densities_with_per_sample_values_at_
     imu, gps = accel_logs
     out = tmp_path / "fit"
     args = ["fit", "accel-gps", "--imu", imu, "--gps", gps, "--out", out, "--free", "filter.accel_noise_density,filter.gps_position_std"]
-    # a terminal wide enough for the table's unit column
-    result = CliRunner().invoke(app, [str(a) for a in args], catch_exceptions=False, env={"COLUMNS": "200"})
+    # a terminal wide enough for the table's unit column (the console is made once per process, so an
+    # earlier test's console of another width is replaced, not reread from COLUMNS)
+    from rich.console import Console
+
+    import kalcal.cli._common as common
+
+    monkeypatch.setattr(common, "console", Console(width=200), raising=False)
+    result = CliRunner().invoke(app, [str(a) for a in args], catch_exceptions=False)
     assert result.exit_code == 0, result.stdout + result.stderr
     text = (out / "filter.toml").read_text()
     written = tomllib.loads(text)

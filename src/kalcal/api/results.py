@@ -256,7 +256,7 @@ def _settings_sigma(document: dict | None):
         bias_std=float(document["bias_std"]), conditional_bias_std=float(document["conditional_bias_std"]),
         ratio=float(document["ratio"]), factor=float(document["factor"]), confidence=float(document["confidence"]),
         free=tuple(document["free"]), at=dict(document["at"]), fitted=dict(document["fitted"]),
-        filter_rejected=bool(document["filter_rejected"]), seconds=float(document["seconds"]),
+        filter_rejected=bool(document["filter_rejected"]),
     )
 
 

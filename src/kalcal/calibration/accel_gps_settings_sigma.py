@@ -37,7 +37,6 @@ alone: 0.01 s), about what ``kalcal fit`` costs on a long log.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -92,8 +91,6 @@ class SettingsSigma:
         The settings' maximum-likelihood estimates.
     filter_rejected : bool
         Whether the filter's own settings lie outside the region (the log rejects them).
-    seconds : float
-        The computation's wall time, s.
     """
 
     bias_std: float
@@ -105,7 +102,6 @@ class SettingsSigma:
     at: dict[str, float] = field(default_factory=dict)
     fitted: dict[str, float] = field(default_factory=dict)
     filter_rejected: bool = False
-    seconds: float = 0.0
 
     @property
     def warns(self) -> bool:
@@ -125,7 +121,6 @@ class SettingsSigma:
             "at": dict(self.at),
             "fitted": dict(self.fitted),
             "filter_rejected": self.filter_rejected,
-            "seconds": self.seconds,
         }
 
 
@@ -220,7 +215,6 @@ def settings_sigma(log, calibration, *, gate: float | None = None, confidence: f
     from kalcal.fitting.accel_gps import FLOORS, RANGE
     from kalcal.fitting.mle import Free, drop_of, guarded, maximize
 
-    started = time.perf_counter()
     free = list(settings_free(log) if free is None else free)
     rejected = None if gate is None else np.asarray(calibration.rejected, dtype=bool)
 
@@ -274,5 +268,4 @@ def settings_sigma(log, calibration, *, gate: float | None = None, confidence: f
         at=at(best["u"]) if largest >= conditional else {key: float(resolved[key]) for key in free},
         fitted={key: float(fit.values[key]) for key in free},
         filter_rejected=bool(loglik({}) < level),
-        seconds=time.perf_counter() - started,
     )

@@ -1,5 +1,6 @@
-"""``kalcal fit``: read a log, fit the filter's noise settings in memory, write fit.json, filter.toml and fit.png
-(and for accel-gps Kalibr's imu.yaml) as one set."""
+"""``kalcal fit``: read a log, fit the filter's noise settings in memory, write its files as one set.
+
+The files are fit.json, filter.toml and fit.png, and for accel-gps Kalibr's imu.yaml."""
 
 from __future__ import annotations
 
