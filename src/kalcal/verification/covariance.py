@@ -73,12 +73,15 @@ def whitened_moments(s: EnsembleStatistics) -> Whitened:
         return Whitened(mean, cov, second, estimate, np.zeros(k, dtype=bool))
     p = s.filter_cov
     singular = np.zeros(k, dtype=bool)
-    factor = np.broadcast_to(np.eye(d), (k, d, d)).copy()
-    for i in range(k):
-        try:
-            factor[i] = np.linalg.cholesky(p[i])
-        except np.linalg.LinAlgError:
-            singular[i] = True
+    try:
+        factor = np.linalg.cholesky(p)
+    except np.linalg.LinAlgError:  # some P_k not positive definite: factor the others one by one
+        factor = np.broadcast_to(np.eye(d), (k, d, d)).copy()
+        for i in range(k):
+            try:
+                factor[i] = np.linalg.cholesky(p[i])
+            except np.linalg.LinAlgError:
+                singular[i] = True
     mean = _lower_solve(factor, s.mean_error[:, :, None])[:, :, 0]
 
     def both(m: np.ndarray) -> np.ndarray:  # L^-1 M L^-T
