@@ -8,7 +8,7 @@ probability at most 1e-4 each).
 
 At N = 100 the element-wise covariance test of the earlier code (a normal approximation to each
 element, sd^2 = (P_il^2 + P_ii P_ll) / N) failed 1.2% of these ensembles against its 0.5% share; the
-slow test's bound at M = 20,000 is 0.63%. The default-suite version (M = 2,000, bound 1.05%) is
+slow test's bound at M = 20,000 is 0.70%. The default-suite version (M = 2,000, bound 1.2%) is
 a smoke test of the same statistic.
 """
 
@@ -133,8 +133,8 @@ def test_whiteness_parts_and_nis_at_their_rates(n):
 
 
 def test_state_checks_and_parts_at_their_rates_fast():
-    """The default suite's version: 2,000 ensembles at N = 100 (the elements part's bound is 1.05%, so
-    it catches a rate twice its share only about half the time; the slow test is the one that decides)."""
+    """The default suite's version: 2,000 ensembles at N = 100 (the elements part's bound is 1.2%, so
+    it catches a rate of 1.2% only about half the time; the slow test is the one that decides)."""
     runs = 2000
     _assert_rates(_state_failures(100, runs, seed=1), runs, 100)
 

@@ -152,7 +152,7 @@ def check_residual_whiteness(s: EnsembleStatistics, info: ProblemInfo, confidenc
     pvalue = combined_pvalue(parts)
     passed = pvalue >= alpha
     detail = (
-        f"largest |E[r_k r_j^T]| {sd_text(worst)} standard errors ({info.measurement_names[a]} at "
+        f"largest |E[r_k r_j^T]| {sd_text(worst)} sd-equivalent (a t({s.count - 1}) correlation; {info.measurement_names[a]} at "
         f"t = {info.update_times[k]:g} s with {info.measurement_names[b]} at t = {info.update_times[j]:g} s) over "
         f"{pairs} pairs of updates, bound {bound:.2f} (at alpha / 2 = {share:.3g}); portmanteau "
         f"{q.statistic:.6g} on {q.dof} degrees of freedom, bound {portmanteau_part.upper:.6g} (at alpha / 2)"
