@@ -95,7 +95,9 @@ def _covariance(a: CovarianceAnalysis, confidence: float) -> dict[str, Family]:
     # whitened correlation rho = A_il / sqrt(A_ii A_ll) (t, about N(rho, (1 - rho^2)^2 / N)); under the
     # null A = I: variances 2 / N and 1 / N
     diag = np.diagonal(ratio, axis1=1, axis2=2)
-    rho = ratio / np.sqrt(diag[:, :, None] * diag[:, None, :])
+    spread = np.sqrt(np.maximum(diag[:, :, None] * diag[:, None, :], 0.0))
+    # a whitened state without spread under the truth: its correlations are undefined, taken as 0
+    rho = np.divide(ratio, spread, out=np.zeros_like(ratio), where=spread > 0)
     on = (i == l)[None, :]
     elements = NormalFamily(
         np.where(on, diag[:, i] - 1.0, rho[:, i, l]).ravel(),
