@@ -76,14 +76,21 @@ def test_regression_kernel_equals_the_regression_filter_at_every_step(form):
     x0, cov0, r = np.array([1.0, 0.0]), np.diag([0.04, 0.25]), 0.01
     q = np.diag([1e-6, 4e-6])
     for i in range(n):
-        sums = SumBuffers.zeros(n_updates, d, 1, 1, True)
+        sums = SumBuffers.zeros(n_updates, d, 1, 1, True, own_cov=True)
         regression_block_moments(y[i:i + 1].copy(), h[i:i + 1].copy(), truth[i:i + 1].copy(), x0, cov0, r, q, form == "joseph", sums)
         run = run_regression_filter(y[i], h[i], x0, cov0, r, q, form)
         error = truth[i] - run.posterior
         np.testing.assert_allclose(sums.estimate, run.posterior, rtol=1e-12, atol=1e-14)
         np.testing.assert_allclose(sums.error, error, rtol=1e-10, atol=1e-14)
         np.testing.assert_allclose(sums.filter_cov, run.cov, rtol=1e-12, atol=1e-16)
-        np.testing.assert_allclose(sums.residuals[:, 0], run.residual, rtol=1e-12, atol=1e-14)
+        # the pairs are kept of the innovations normalized by each realization's own S_k
+        normalized = run.residual / np.sqrt(run.innovation_var)
+        np.testing.assert_allclose(sums.residuals[:, 0], normalized, rtol=1e-12, atol=1e-14)
         np.testing.assert_allclose(sums.nis, run.residual**2 / run.innovation_var, rtol=1e-10)
         nees = np.einsum("ki,ki->k", error, np.linalg.solve(run.cov, error[..., None])[..., 0])
         np.testing.assert_allclose(sums.nees, nees, rtol=1e-9)
+        # eps = L^-1 e by the filter's own P_k, L lower Cholesky: |eps|^2 is the NEES
+        white = np.linalg.solve(np.linalg.cholesky(run.cov), error[..., None])[..., 0]
+        np.testing.assert_allclose(sums.whitened_error, white, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(sums.whitened_outer, white[:, :, None] * white[:, None, :], rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(sums.whitened_estimate, white[:, :, None] * run.posterior[:, None, :], rtol=1e-9, atol=1e-12)

@@ -7,22 +7,25 @@ from dataclasses import fields
 import numpy as np
 import pytest
 
-from kalcal.montecarlo.accumulators import BlockResult, MomentSums, SumBuffers
+from kalcal.montecarlo.accumulators import BlockResult, MomentSums, SumBuffers, _normalized, whiten
 from kalcal.montecarlo.sum_kernels import accumulate
 
 
 def _block(rng, n, n_updates, d, p) -> BlockResult:
-    """Random errors, estimates and innovations with each realization's own SPD P_k."""
+    """Random errors, estimates and innovations with each realization's own SPD P_k (and, for p > 1, its
+    normalized innovations, here any numbers: the sums only carry them)."""
     factor = rng.standard_normal((n, n_updates, d, d))
     cov = factor @ np.swapaxes(factor, -1, -2) + np.eye(d)
+    residual = rng.standard_normal((n, n_updates, p))
     return BlockResult(
         error=rng.standard_normal((n, n_updates, d)),
         estimate=3.0 + rng.standard_normal((n, n_updates, d)),
-        residual=rng.standard_normal((n, n_updates, p)),
+        residual=residual,
         nees=rng.chisquare(d, (n, n_updates)),
         nis=rng.chisquare(p, (n, n_updates)),
         filter_cov_sum=cov.sum(axis=0),
         filter_cov=cov,
+        normalized_residual=None if p == 1 else 0.5 * residual,
     )
 
 
@@ -30,7 +33,11 @@ def _compiled(block: BlockResult, tiles: list[int], own: bool, pairs: bool) -> M
     """The sums of ``block`` by ``accumulate``, update by update, over the realizations in ``tiles``."""
     n, n_updates, d = block.error.shape
     p = block.residual.shape[2]
-    sums = SumBuffers.zeros(n_updates, d, p, n, pairs)
+    sums = SumBuffers.zeros(n_updates, d, p, n, pairs, own_cov=own)
+    white = whiten(block.filter_cov, block.error)
+    # where P_k is each realization's own, the pairs are those of the normalized innovations (stored
+    # by the kernel itself, as the regression kernel does)
+    stored = _normalized(block) if own else block.residual
 
     def soa(a, first, m):  # (n, ...) of one update -> (..., m), realizations last and contiguous
         return np.ascontiguousarray(np.moveaxis(a[first:first + m], 0, -1))
@@ -48,11 +55,16 @@ def _compiled(block: BlockResult, tiles: list[int], own: bool, pairs: bool) -> M
                 soa(block.nees[:, k], first, m) if own else empty,
                 soa(block.nis[:, k], first, m) if own else empty,
                 soa(block.filter_cov[:, k], first, m) if own else np.empty((0, 0, 0)),
+                soa(white[:, k], first, m) if own else np.empty((0, m)),
                 sums,
+                False,
             )
+            if pairs:
+                sums.residuals[k * p:(k + 1) * p, first:first + m] = soa(stored[:, k], first, m)
             first += m
     assert first == n
-    return MomentSums.from_buffers(n, sums)
+    normalized = None if block.normalized_residual is None else block.normalized_residual.sum(axis=0)
+    return MomentSums.from_buffers(n, sums, normalized)
 
 
 @pytest.mark.parametrize("d, p", [(2, 1), (3, 2)])
@@ -71,7 +83,7 @@ def test_accumulate_equals_from_block(d, p, tiles):
             continue
         np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12 * np.abs(expected).max(), err_msg=f.name)
     # the symmetric sums are symmetric bit for bit (the lower triangle is a copy)
-    for name in ("error_outer", "estimate_outer", "filter_cov"):
+    for name in ("error_outer", "estimate_outer", "filter_cov", "whitened_outer"):
         value = getattr(compiled, name)
         assert np.array_equal(value, np.swapaxes(value, 1, 2)), name
 
@@ -84,6 +96,7 @@ def test_shared_covariance_leaves_nees_nis_and_p_to_the_caller():
     assert own.residual_outer is None and shared.residual_outer is None
     for name in ("nees", "nis", "filter_cov"):
         assert not np.any(getattr(shared, name)), name
+    assert shared.whitened_error is None and shared.whitened_outer is None and shared.whitened_estimate is None
     for name in ("error", "error_outer", "estimate", "estimate_outer", "error_estimate", "residual", "residual_own"):
         assert np.array_equal(getattr(own, name), getattr(shared, name)), name
 
@@ -94,6 +107,9 @@ def test_zero_buffers_and_the_pairs():
     assert sums.error_outer.shape == (5, 3, 3) and sums.residual_own.shape == (5, 2, 2) and sums.nees.shape == (5,)
     assert all(not np.any(a) for name, a in sums._asdict().items() if name != "residuals")
     assert SumBuffers.zeros(5, 3, 2, 7, residual_pairs=False).residuals.shape == (0, 7)
+    assert sums.whitened_error.shape == (0, 3) and sums.whitened_outer.shape == (0, 3, 3)
+    own = SumBuffers.zeros(5, 3, 2, 7, residual_pairs=False, own_cov=True)
+    assert own.whitened_error.shape == (5, 3) and own.whitened_estimate.shape == (5, 3, 3)
     # every sum a kernel adds into is a field of MomentSums; the pair sums come from ``residuals`` by syrk
     kernel_sums = {f.name for f in fields(MomentSums)} - {"count", "residual_outer", "normalized_residual"}
     assert set(SumBuffers._fields) == kernel_sums | {"residuals"}

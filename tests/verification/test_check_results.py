@@ -192,6 +192,8 @@ def test_verdict_false_alarm_bound():
 def test_covariance_failing_off_the_diagonal_alone_states_no_direction(eps):
     """P = I2, C = [[1 + eps, 0.1], [0.1, 1]], N = 20000: (x0, x1) is 14.1 sd off, every variance agrees.
 
+    The statistic is the |z| of the correlation's exact t(N - 2) p-value.
+
     The old rule took the sign of the largest diagonal z, which here is noise: ``underconfident`` for
     eps = 0 (argmax of zeros) and flipping with the sign of eps."""
     n = 20000
@@ -199,7 +201,10 @@ def test_covariance_failing_off_the_diagonal_alone_states_no_direction(eps):
     check = check_covariance(_stats(n, c, np.eye(2)), _info(1, 2), 0.99)
     elements, nees = check.parts
     assert not check.passed and not elements.passed and nees.passed
-    assert elements.statistic == pytest.approx(0.1 / np.sqrt(1 / n))  # 14.1 sd in (x0, x1)
+    r = 0.1 / np.sqrt(1.0 + eps)
+    p = 2 * stats.t.sf(r * np.sqrt(n - 2) / np.sqrt(1 - r * r), n - 2)
+    assert elements.statistic == pytest.approx(stats.norm.isf(p / 2), rel=1e-9)
+    assert elements.statistic == pytest.approx(0.1 / np.sqrt(1 / n), rel=0.01)  # about 14.1 sd in (x0, x1)
     assert check.cause.direction is None and check.cause.explained_by is None
     assert check.cause.reason.startswith("The correlation of x0 and x1 differs from P's (the variances agree")
     assert check.detail.endswith(check.cause.reason)
@@ -213,7 +218,9 @@ def test_covariance_failing_by_the_centered_nees_alone_takes_its_side(scale, dir
     check = check_covariance(_stats(n, scale * np.eye(3)[None], np.eye(3)), _info(1, 3), 0.99)
     elements, nees = check.parts
     assert elements.passed and not nees.passed and not check.passed
-    assert elements.statistic == pytest.approx(0.025 / np.sqrt(2 / n)) and elements.statistic < elements.upper
+    p = 2 * min(stats.chi2.sf((n - 1) * scale, n - 1), stats.chi2.cdf((n - 1) * scale, n - 1))
+    assert elements.statistic == pytest.approx(stats.norm.isf(p / 2), rel=1e-9)
+    assert elements.statistic == pytest.approx(0.025 / np.sqrt(2 / n), rel=0.02) and elements.statistic < elements.upper
     assert (nees.statistic > nees.upper) == (direction == "overconfident")
     assert (nees.statistic < nees.lower) == (direction == "underconfident")
     assert check.cause.direction == direction
@@ -224,7 +231,7 @@ def test_covariance_variances_failing_both_ways_state_no_direction():
     c = np.diag([1.1, 0.9])[None]
     check = check_covariance(_stats(n, c, np.eye(2)), _info(1, 2), 0.99)
     assert not check.passed and check.cause.direction is None
-    assert "variance of x0 exceeds P's and that of x1 falls short" in check.cause.reason
+    assert "whitened ensemble variance of x0 exceeds 1 and that of x1 falls short" in check.cause.reason
 
 
 def test_covariance_variance_outside_the_bound_gives_the_direction_by_its_sign():

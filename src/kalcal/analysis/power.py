@@ -87,16 +87,24 @@ def _covariance(a: CovarianceAnalysis, confidence: float) -> dict[str, Family]:
     s, p = a.moments.error_cov, a.filter_cov
     n_updates, d, _ = p.shape
     i, l = np.triu_indices(d)
-    sd, pd = np.diagonal(s, axis1=1, axis2=2), np.diagonal(p, axis1=1, axis2=2)
-    elements = NormalFamily(
-        (s - p)[:, i, l].ravel(),
-        (s[:, i, l] ** 2 + sd[:, i] * sd[:, l]).ravel(),  # a centered Wishart element's spread
-        (p[:, i, l] ** 2 + pd[:, i] * pd[:, l]).ravel(),
-        covariance_element_bound(confidence, n_updates, d),
-    )
-    # A = P^-1/2 S P^-T/2: tr A = tr(P^-1 S), tr A^2 = tr((P^-1 S)^2)
+    # A = L^-1 S L^-T, L the lower Cholesky factor of P, as the check whitens: tr A = tr(P^-1 S),
+    # tr A^2 = tr((P^-1 S)^2)
     w = whitener(p)
     ratio = w @ s @ np.swapaxes(w, 1, 2)
+    # the elements part tests each whitened variance (chi-square, about N(A_ii, 2 A_ii^2 / N)) and each
+    # whitened correlation rho = A_il / sqrt(A_ii A_ll) (t, about N(rho, (1 - rho^2)^2 / N)); under the
+    # null A = I: variances 2 / N and 1 / N
+    diag = np.diagonal(ratio, axis1=1, axis2=2)
+    spread = np.sqrt(np.maximum(diag[:, :, None] * diag[:, None, :], 0.0))
+    # a whitened state without spread under the truth: its correlations are undefined, taken as 0
+    rho = np.divide(ratio, spread, out=np.zeros_like(ratio), where=spread > 0)
+    on = (i == l)[None, :]
+    elements = NormalFamily(
+        np.where(on, diag[:, i] - 1.0, rho[:, i, l]).ravel(),
+        np.where(on, 2.0 * diag[:, i] ** 2, (1.0 - rho[:, i, l] ** 2) ** 2).ravel(),
+        np.broadcast_to(np.where(on, 2.0, 1.0), (n_updates, i.size)).ravel(),
+        covariance_element_bound(confidence, n_updates, d),
+    )
     zero = np.zeros(n_updates)
 
     def bounds(n: int) -> tuple[float, float]:

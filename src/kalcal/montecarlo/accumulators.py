@@ -6,6 +6,15 @@ the number of realizations and any grouping of blocks, merged in block order, gi
 the same fields, allocated once by :meth:`SumBuffers.zeros` (:mod:`kalcal.montecarlo.sum_kernels`).
 Second moments are raw sums; central moments are derived at the end in float64 (the errors' means are
 small against their spread, so the subtraction loses no meaningful precision).
+
+**Whitened errors.** The covariance and orthogonality checks test eps_k = L_k^-1 e_k (P_k = L_k L_k^T,
+the filter's own P), which is exactly N(0, I) and independent of the estimate for a correct filter.
+Where every realization shares P_k (fixed gains) the whitened sums follow from the raw ones
+(sum eps = L^-1 sum e, sum eps eps^T = L^-1 (sum e e^T) L^-T), so the sums keep none
+(``whitened_error`` is None) and :func:`ensemble_statistics` derives them. Where P_k depends on the data
+(scale-bias) each realization is whitened by its own P_k and the sums keep sum eps, sum eps eps^T and
+sum eps xhat^T: the mean P is no valid reference when P varies (by Jensen's inequality a whitening by it
+is not N(0, I)).
 """
 
 from __future__ import annotations
@@ -29,6 +38,32 @@ class BlockResult(NamedTuple):
     #: for data-dependent gains; required, so that a realization's P is never a block mean
     filter_cov: np.ndarray
     normalized_residual: np.ndarray | None = None  #: L_k^{-1} r_k with S_k = L_k L_k^T, (n, K, p), if known
+
+
+def shares_cov(filter_cov: np.ndarray) -> bool:
+    """Whether a block's per-realization P (n, K, d, d) is one schedule broadcast over the realizations
+    (fixed gains: a view of stride 0 along n), so that the whitened sums follow from the raw ones."""
+    return filter_cov.shape[0] <= 1 or filter_cov.strides[0] == 0
+
+
+def whiten(filter_cov: np.ndarray, vectors: np.ndarray) -> np.ndarray:
+    """eps = L^-1 v with P = L L^T (lower Cholesky factor), by a triangular solve.
+
+    filter_cov (..., d, d) and vectors (..., d) broadcast together; returns (..., d).
+    """
+    factor = np.linalg.cholesky(filter_cov)
+    return _solve_lower(factor, vectors)
+
+
+def _solve_lower(factor: np.ndarray, vectors: np.ndarray) -> np.ndarray:
+    """x with L x = v for lower-triangular L (..., d, d), by forward substitution (d is small)."""
+    factor, vectors = np.broadcast_arrays(factor, vectors[..., None])
+    vectors = vectors[..., 0]
+    d = factor.shape[-1]
+    out = np.empty(vectors.shape)
+    for a in range(d):
+        out[..., a] = (vectors[..., a] - np.einsum("...b,...b->...", factor[..., a, :a], out[..., :a])) / factor[..., a, a]
+    return out
 
 
 class ResidualProducts:
@@ -72,12 +107,21 @@ class SumBuffers(NamedTuple):
     residual_own: np.ndarray  #: sum r_k r_k^T, (K, p, p)
     filter_cov: np.ndarray  #: sum of the filter's P_k, (K, d, d)
     #: each realization's stacked innovations [r_0; ...; r_{K-1}] as a column, (K p, n), for the pair
-    #: sums after the kernel; (0, n) when the pairs are not kept
+    #: sums after the kernel; (0, n) when the pairs are not kept. A kernel whose S_k varies between
+    #: realizations stores the normalized innovations L_k^-1 r_k here (see :class:`MomentSums`)
     residuals: np.ndarray
+    #: sum eps_k, eps_k = L_k^-1 e_k with each realization's own P_k, (K, d); (0, d) where P_k is shared
+    whitened_error: np.ndarray
+    whitened_outer: np.ndarray  #: sum eps_k eps_k^T, (K, d, d); (0, d, d) where P_k is shared
+    whitened_estimate: np.ndarray  #: sum eps_k xhat_k^T, (K, d, d); (0, d, d) where P_k is shared
 
     @classmethod
-    def zeros(cls, n_updates: int, d: int, p: int, n: int, residual_pairs: bool) -> SumBuffers:
-        """Zero sums for K = ``n_updates``, and room for the innovations of n realizations if the pairs are kept."""
+    def zeros(
+        cls, n_updates: int, d: int, p: int, n: int, residual_pairs: bool, own_cov: bool = False
+    ) -> SumBuffers:
+        """Zero sums for K = ``n_updates``, and room for the innovations of n realizations if the pairs are
+        kept; ``own_cov``: every realization has its own P_k, so the whitened sums are kept."""
+        kept = n_updates if own_cov else 0
         return cls(
             error=np.zeros((n_updates, d)),
             error_outer=np.zeros((n_updates, d, d)),
@@ -90,6 +134,9 @@ class SumBuffers(NamedTuple):
             residual_own=np.zeros((n_updates, p, p)),
             filter_cov=np.zeros((n_updates, d, d)),
             residuals=np.empty((n_updates * p if residual_pairs else 0, n)),
+            whitened_error=np.zeros((kept, d)),
+            whitened_outer=np.zeros((kept, d, d)),
+            whitened_estimate=np.zeros((kept, d, d)),
         )
 
 
@@ -100,7 +147,10 @@ class MomentSums:
     ``residual_outer`` holds the upper triangle of sum r r^T over the stacked residual vector
     [r_0, r_1, ..., r_{K-1}] (length K p, update-major); its lower triangle is zero until
     :func:`residual_second_moment` fills it. It is None when the run did not keep the pairs (it costs
-    O(N K^2 p^2)); ``residual_own`` (the same update's products, for NIS) is always kept.
+    O(N K^2 p^2)); ``residual_own`` (the same update's products, for NIS) is always kept. Where S_k varies
+    between realizations (``whitened_error`` kept) the pairs are those of the normalized innovations
+    L_k^-1 r_k, which are N(0, I) and independent across updates for a correct filter (the raw ones, of
+    varying variance, are not identically distributed over the realizations).
     """
 
     count: int
@@ -116,14 +166,30 @@ class MomentSums:
     residual_outer: np.ndarray | None  #: upper triangle of sum r r^T over all pairs, (K p, K p)
     filter_cov: np.ndarray  #: sum of the filter's P_k, (K, d, d)
     normalized_residual: np.ndarray | None = None  #: sum of L_k^{-1} r_k, (K, p), where the problem knows S_k
+    #: sum of eps_k = L_k^-1 e_k, each realization whitened by its own P_k, (K, d); None where P_k is shared
+    whitened_error: np.ndarray | None = None
+    whitened_outer: np.ndarray | None = None  #: sum eps_k eps_k^T, (K, d, d); None where P_k is shared
+    whitened_estimate: np.ndarray | None = None  #: sum eps_k xhat_k^T, (K, d, d); None where P_k is shared
 
     @classmethod
     def from_block(cls, block: BlockResult) -> MomentSums:
-        """The sums of one block (n realizations)."""
+        """The sums of one block (n realizations); where P_k varies between them, the whitened sums too, and
+        the pair sums of the innovations normalized by each realization's own S_k."""
         e = np.ascontiguousarray(block.error.transpose(1, 0, 2))  # (K, n, d)
         x = np.ascontiguousarray(block.estimate.transpose(1, 0, 2))
         n, n_updates, p = block.residual.shape
-        outer = ResidualProducts.upper(np.ascontiguousarray(block.residual.reshape(n, n_updates * p).T))
+        own = not shares_cov(block.filter_cov)
+        stacked = block.residual
+        whitened = {}
+        if own:
+            eps = np.ascontiguousarray(whiten(block.filter_cov, block.error).transpose(1, 0, 2))  # (K, n, d)
+            whitened = dict(
+                whitened_error=eps.sum(axis=1),
+                whitened_outer=np.swapaxes(eps, 1, 2) @ eps,
+                whitened_estimate=np.swapaxes(eps, 1, 2) @ x,
+            )
+            stacked = _normalized(block)
+        outer = ResidualProducts.upper(np.ascontiguousarray(stacked.reshape(n, n_updates * p).T))
         return cls(
             count=n,
             error=e.sum(axis=1),
@@ -138,6 +204,7 @@ class MomentSums:
             residual_outer=outer,
             filter_cov=np.asarray(block.filter_cov_sum, dtype=float),
             normalized_residual=None if block.normalized_residual is None else block.normalized_residual.sum(axis=0),
+            **whitened,
         )
 
     @classmethod
@@ -146,6 +213,9 @@ class MomentSums:
         sums = buffers._asdict()
         residuals = sums.pop("residuals")
         outer = ResidualProducts.upper(residuals) if residuals.shape[0] else None
+        for name in ("whitened_error", "whitened_outer", "whitened_estimate"):
+            if not sums[name].shape[0]:  # P_k shared: derived from the raw sums
+                sums[name] = None
         return cls(count=count, **sums, residual_outer=outer, normalized_residual=normalized_residual)
 
     def merge(self, other: MomentSums) -> MomentSums:
@@ -157,6 +227,17 @@ class MomentSums:
             count=self.count + other.count,
             **{f.name: add(getattr(self, f.name), getattr(other, f.name)) for f in fields(self) if f.name != "count"},
         )
+
+
+def _normalized(block: BlockResult) -> np.ndarray:
+    """The innovations normalized by each realization's own S_k, (n, K, p): the block's
+    ``normalized_residual`` where it has them, else, for scalar measurements, r / sqrt(S) =
+    sign(r) sqrt(NIS)."""
+    if block.normalized_residual is not None:
+        return block.normalized_residual
+    if block.residual.shape[2] != 1:
+        raise ValueError("a block whose S_k varies needs its normalized innovations for the pair sums")
+    return np.sign(block.residual) * np.sqrt(block.nis)[..., None]
 
 
 def residual_second_moment(sums: MomentSums) -> np.ndarray | None:
@@ -187,6 +268,11 @@ class EnsembleStatistics:
     residual_own_moment: np.ndarray  #: E[r_k r_k^T], (K, p, p)
     residual_second_moment: np.ndarray | None  #: E[r_k r_j^T] over all pairs, (K, p, K, p), if kept
     mean_normalized_residual: np.ndarray | None = None  #: E[L_k^{-1} r_k], (K, p), where known
+    #: E[eps_k], eps_k = L_k^-1 e_k whitened by each realization's own P_k, (K, d); None where every
+    #: realization shares P_k (the checks then whiten the raw moments by it)
+    mean_whitened_error: np.ndarray | None = None
+    whitened_second_moment: np.ndarray | None = None  #: E[eps_k eps_k^T], (K, d, d), or None as above
+    whitened_estimate: np.ndarray | None = None  #: E[eps_k xhat_k^T], (K, d, d), or None as above
 
 
 def ensemble_statistics(sums: MomentSums) -> EnsembleStatistics:
@@ -211,4 +297,7 @@ def ensemble_statistics(sums: MomentSums) -> EnsembleStatistics:
         residual_own_moment=sums.residual_own / n,
         residual_second_moment=residual_second_moment(sums),
         mean_normalized_residual=None if sums.normalized_residual is None else sums.normalized_residual / n,
+        mean_whitened_error=None if sums.whitened_error is None else sums.whitened_error / n,
+        whitened_second_moment=None if sums.whitened_outer is None else sums.whitened_outer / n,
+        whitened_estimate=None if sums.whitened_estimate is None else sums.whitened_estimate / n,
     )

@@ -60,7 +60,7 @@ def _filter_and_accumulate(k, truth, z, x, xbar, residual, phi, h, gains, sums):
         for i in range(n):
             truth[a, i] -= x[a, i]
     shared = np.empty(0)
-    accumulate(k, 0, truth, x, residual, shared, shared, np.empty((0, 0, 0)), sums, not keep)
+    accumulate(k, 0, truth, x, residual, shared, shared, np.empty((0, 0, 0)), np.empty((0, n)), sums, not keep)
 
 
 @numba.njit(nogil=True, cache=True)

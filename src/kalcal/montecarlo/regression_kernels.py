@@ -5,7 +5,7 @@ floating-point operations each behind a dispatch: about 0.2 ms per step for 4096
 kernel runs the same recursion as :func:`kalcal.filters.regression.run_regression_filter` for a tile of
 realizations at a time, update by update, each line of it one pass over the tile (structure of arrays:
 realizations innermost, so that the passes vectorize), and hands each update's errors, estimates,
-innovations, NEES, NIS and P of the tile to :func:`kalcal.montecarlo.sum_kernels.accumulate`. The numpy
+innovations, NEES, NIS, P and whitened errors L_k^-1 e_k of the tile to :func:`kalcal.montecarlo.sum_kernels.accumulate`. The numpy
 path stays as the oracle of the tests (``ScaleBiasProblem.run_block`` + ``MomentSums.from_block``); both
 agree to rounding, and tests/montecarlo/test_kernel_steps.py holds the recursion to the regression filter
 update by update. It has no missing-measurement rule: the Monte Carlo never feeds it a NaN (its
@@ -151,7 +151,12 @@ def _filter_tile(y, h, truth, x0, cov0, r, q, joseph, sums, first, m):
                 nees[j] += white[u, j] * white[u, j]
         for j in range(m):
             nis[j] = res[j] * res[j] / s[j]
-        accumulate(k, first, err, x, residual, nees, nis, cov, sums)
+        accumulate(k, first, err, x, residual, nees, nis, cov, white, sums, False)
+        if sums.residuals.shape[0]:
+            # the pairs of the normalized innovations r / sqrt(S): each realization has its own S_k, and
+            # only these are N(0, 1) and independent across updates for every realization alike
+            for j in range(m):
+                sums.residuals[k, first + j] = res[j] / np.sqrt(s[j])
 
 
 @numba.njit(nogil=True, cache=True)
@@ -166,7 +171,8 @@ def regression_block_moments(y, h, truth, x0, cov0, r, q, joseph, sums):
     y : (n, K) measurements; h : (n, K, d) regressor rows; truth : (n, K, d) true states
     x0 : (d,) x_0^+; cov0 : (d, d) P_0^+; r : float R; q : (d, d) Q per step; joseph : bool
     sums : the block's :class:`~kalcal.montecarlo.accumulators.SumBuffers` for K updates, d states and
-        p = 1, added to (each realization's own P_k, NEES and NIS included)
+        p = 1, added to (each realization's own P_k, NEES and NIS included, the whitened errors
+        L_k^-1 e_k where it keeps them, and the normalized innovations r_k / sqrt(S_k) for the pairs)
     """
     n = y.shape[0]
     for first in range(0, n, TILE):

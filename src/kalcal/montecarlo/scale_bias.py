@@ -1,8 +1,10 @@
 """The scale/bias filter as a verification problem: theta drawn from the prior, h_k = [z_k, 1] per realization.
 
 The filter's gains depend on the data (through z_k), so every realization carries its own P_k and S_k:
-the NEES and NIS are normalized by them, and the covariance check compares the ensemble covariance of
-the errors with the mean of P_k over realizations (for a filter whose model is right, E[e e^T] = E[P]).
+the NEES and NIS are normalized by them, the covariance and orthogonality checks test the errors
+whitened by each realization's own P_k (eps = L_k^-1 e_k, N(0, I) for a filter whose model is right;
+the mean of P_k is no valid reference when P varies), and the whiteness check the innovations
+normalized by each realization's own S_k.
 
 The one departure from the filter's model that the truth keeps on purpose is *errors in variables*: the
 regressor h_k = [z_k, 1] holds the noisy reading z_k = zeta_k - nu_k, and the same nu_k enters the
@@ -191,7 +193,7 @@ class ScaleBiasProblem:
         check_engine(self, engine)
         samples = sample_scale_bias(self.scenario, rng, n)
         prior = self.scenario.filter_prior()
-        sums = SumBuffers.zeros(samples.time.size, 2, 1, n, self.residual_pairs)
+        sums = SumBuffers.zeros(samples.time.size, 2, 1, n, self.residual_pairs, own_cov=True)
         regression_block_moments(
             np.ascontiguousarray(samples.reference),
             np.ascontiguousarray(regressors(samples.sensor)),

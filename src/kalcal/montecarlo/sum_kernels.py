@@ -55,7 +55,7 @@ def total(u):
 
 
 @numba.njit(nogil=True, cache=True, fastmath=FAST)
-def accumulate(k, first, error, estimate, residual, nees, nis, cov, sums, store=True):
+def accumulate(k, first, error, estimate, residual, nees, nis, cov, white, sums, store=True):
     """Add update k of n realizations into the sums (in place), as ``MomentSums.from_block`` sums them.
 
     Parameters
@@ -75,6 +75,9 @@ def accumulate(k, first, error, estimate, residual, nees, nis, cov, sums, store=
         Each realization's e^T P^{-1} e and r^T S^{-1} r, with ``cov`` (d, d, n) its P_k; all three empty
         (n = 0) where every realization shares P_k and S_k: the caller then forms the NEES and NIS sums
         from the second moments and the P sum as n P_k, and this adds nothing to them.
+    white : ndarray, shape (d, n) or (0, n)
+        eps_k = L_k^-1 e_k of each realization, by its own P_k = L_k L_k^T, added into the whitened sums
+        where ``sums`` keeps them (P_k varies between realizations); empty where P_k is shared.
     sums : SumBuffers
     store : bool
         Copy the innovations into ``sums.residuals`` (when it keeps the pairs).
@@ -107,3 +110,13 @@ def accumulate(k, first, error, estimate, residual, nees, nis, cov, sums, store=
     if own:
         sums.nees[k] += total(nees)
         sums.nis[k] += total(nis)
+    if white.shape[0] and sums.whitened_error.shape[0]:
+        for a in range(d):
+            sums.whitened_error[k, a] += total(white[a])
+            for b in range(d):
+                sums.whitened_estimate[k, a, b] += dot(white[a], estimate[b])
+                if b >= a:
+                    sums.whitened_outer[k, a, b] += dot(white[a], white[b])
+        for a in range(d):
+            for b in range(a):
+                sums.whitened_outer[k, a, b] = sums.whitened_outer[k, b, a]

@@ -93,7 +93,12 @@ def plot_nees(dataset: xr.Dataset, path: str | Path) -> Path:
     confidence = float(dataset.attrs["confidence"])
     d = dataset.sizes["state"]
     figure, axes = new_figure(2)
-    centered = centered_nees(dataset["error_cov"].values, dataset["filter_cov"].values)
+    if "whitened_second_moment" in dataset:  # each realization whitened by its own P_k: tr of W_k, as the check
+        mean = dataset["mean_whitened_error"].values
+        second = dataset["whitened_second_moment"].values - mean[:, :, None] * mean[:, None, :]
+        centered = np.trace(second, axis1=1, axis2=2) * count / (count - 1)
+    else:
+        centered = centered_nees(dataset["error_cov"].values, dataset["filter_cov"].values)
     low, high = centered_nees_bounds(confidence, times.size, d, count)
     _chi2_panel(
         axes[0, 0],

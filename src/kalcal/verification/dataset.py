@@ -2,7 +2,10 @@
 
 Dimensions: ``time`` (K update times, s), ``state``/``state2`` (d), ``measurement``/``measurement2`` (p),
 and ``time2`` (a second copy of ``time``, always there; ``residual_second_moment``, the
-residual correlation over pairs of updates, runs over it where the run kept the pairs). Every variable has a ``long_name``; ``units`` where one unit applies to
+residual correlation over pairs of updates, runs over it where the run kept the pairs). Where P_k varies
+between realizations (scale-bias) the whitened moments (``mean_whitened_error``,
+``whitened_second_moment``, ``whitened_estimate``) are there too, and the pairs are those of the
+normalized innovations. Every variable has a ``long_name``; ``units`` where one unit applies to
 all its elements (matrices over states of mixed units keep theirs in the ``state_unit`` coordinate).
 """
 
@@ -53,10 +56,19 @@ def statistics_parts(
         "residual_second_moment": (
             ("time", "measurement", "time2", "measurement2"),
             s.residual_second_moment,
-            "E[r_k r_j^T] over pairs of updates",
+            "E[r_k r_j^T] over pairs of updates"
+            if s.mean_whitened_error is None
+            else "E[nu_k nu_j^T] over pairs of updates, nu = L^-1 r normalized by each realization's own S",
         ),
+        "mean_whitened_error": (
+            ("time", "state"),
+            s.mean_whitened_error,
+            "E[L_k^-1 e_k], each realization whitened by its own P_k = L_k L_k^T",
+        ),
+        "whitened_second_moment": (_MATRIX, s.whitened_second_moment, "E[eps_k eps_k^T], eps_k = L_k^-1 e_k"),
+        "whitened_estimate": (_MATRIX, s.whitened_estimate, "E[eps_k xhat_k^T], eps_k = L_k^-1 e_k"),
     }
-    units = _units(info)
+    units = _units(info, s.mean_whitened_error)
     variables = {
         name: (dims, values, {"long_name": text, **({"units": units[name]} if units.get(name) else {})})
         for name, (dims, values, text) in data.items()
@@ -81,7 +93,7 @@ def _single(units) -> str | None:
     return units.pop() if len(units) == 1 else None
 
 
-def _units(info: ProblemInfo) -> dict[str, str | None]:
+def _units(info: ProblemInfo, s_normalized: np.ndarray | None = None) -> dict[str, str | None]:
     """CF ``units`` of each variable where one unit applies to all its elements (products of a state and a
     state have the square of that unit; NEES and NIS are dimensionless, "1")."""
     state, measurement = _single(info.state_units), _single(info.measurement_units)
@@ -100,5 +112,8 @@ def _units(info: ProblemInfo) -> dict[str, str | None]:
         "mean_residual": measurement,
         "residual_own_moment": square(measurement),
         "mean_normalized_residual": "1",
-        "residual_second_moment": square(measurement),
+        "residual_second_moment": square(measurement) if s_normalized is None else "1",
+        "mean_whitened_error": "1",
+        "whitened_second_moment": "1",
+        "whitened_estimate": None,
     }

@@ -1,8 +1,8 @@
-"""Normal and chi-square tail probabilities and quantiles, from scipy.special without scipy.stats.
+"""Normal, chi-square and Student t tail probabilities and quantiles, from scipy.special without scipy.stats.
 
 ``scipy.stats`` takes over a second to import (it builds the docstrings of every distribution), more
 than a default run's Monte Carlo spends on its random draws; the checks need six functions of two
-distributions. Each is the scipy.special function that ``scipy.stats.norm`` / ``scipy.stats.chi2`` call
+distributions (and the t's upper tail). Each is the scipy.special function that ``scipy.stats.norm`` / ``scipy.stats.chi2`` call
 for valid arguments, so the values are the same to the bit (tests/verification/test_distributions.py
 holds them to scipy.stats), with scipy.stats's answers at the edges: a probability outside [0, 1] or a
 non-positive dof gives NaN.
@@ -13,7 +13,17 @@ from __future__ import annotations
 import numpy as np
 from scipy import special
 
-__all__ = ["chi2_cdf", "chi2_isf", "chi2_ppf", "chi2_sf", "ncx2_cdf", "ncx2_sf", "normal_isf", "normal_sf"]
+__all__ = [
+    "chi2_cdf",
+    "chi2_isf",
+    "chi2_ppf",
+    "chi2_sf",
+    "ncx2_cdf",
+    "ncx2_sf",
+    "normal_isf",
+    "normal_sf",
+    "t_sf",
+]
 
 
 def normal_sf(x):
@@ -66,3 +76,10 @@ def ncx2_cdf(x, dof, nc):
 def ncx2_sf(x, dof, nc):
     """P(X > x) = 1 - :func:`ncx2_cdf` (absolute, not relative, accuracy in the far upper tail)."""
     return 1.0 - ncx2_cdf(x, dof, nc)
+
+
+def t_sf(x, dof):
+    """P(T > x) for T ~ Student t(dof) (scipy.special.stdtr at -x, as ``scipy.stats.t.sf`` for valid
+    arguments); NaN for a non-positive dof."""
+    x = np.asarray(x, dtype=float)
+    return special.stdtr(_dof(dof), -x)

@@ -2,8 +2,12 @@
 
 Two parts, each at half the check's alpha (as the covariance check's, :mod:`kalcal.verification.covariance`):
 
-* ``pairs``: max over j < k and elements of |E[r_k r_j^T]| / sqrt(E[r_k^2] E[r_j^2] / N), normal quantile
-  for m = p^2 K (K - 1) / 2 comparisons. Strong against one large correlation; weak against a correlation
+* ``pairs``: for j < k and each pair of elements the uncentered sample correlation
+  r = E[r_k,a r_j,b] / sqrt(E[r_k,a^2] E[r_j,b^2]); given the N values of r_j,b those of r_k,a are iid
+  N(0, S_k,aa) for a correct filter (innovations independent across updates), so
+  r sqrt(N - 1) / sqrt(1 - r^2) ~ t(N - 1) exactly at every N; each is shown as the normal |z| of its
+  two-sided p-value, against the normal quantile for m = p^2 K (K - 1) / 2 comparisons (the earlier
+  sqrt(N) r against N(0, 1) was an approximation with no exact law). Strong against one large correlation; weak against a correlation
   spread thinly over many pairs (at the defaults its bound is about 5.3 sigma, so a shift of one sigma in
   every element goes unseen).
 * ``portmanteau``: Q = N sum_{j<k} ||C_kj||_F^2 with C_kj = S_k^{-1/2} E[r_k r_j^T] S_j^{-T/2}, the cross
@@ -57,7 +61,8 @@ import numpy as np
 from kalcal.montecarlo.accumulators import EnsembleStatistics
 from kalcal.montecarlo.problem import ProblemInfo
 from kalcal.verification.bounds import WHITENESS_PARTS, portmanteau_bound, whiteness_pairs_bound
-from kalcal.verification.check_steps import check_result, failed_cause, max_abs, sd_text, standardized, zero_se_text
+from kalcal.verification.check_steps import check_result, failed_cause, max_abs, sd_text, zero_se_text
+from kalcal.verification.covariance import correlation_z
 from kalcal.verification.distributions import chi2_sf
 from kalcal.verification.results import Cause, CheckPart, CheckResult, combined_pvalue, normal_family_pvalue
 
@@ -104,8 +109,15 @@ def portmanteau(moment: np.ndarray, mean: np.ndarray | None, count: int) -> Port
     return _whitened_sum(moment - np.einsum("ka,jb->kajb", mean, mean), count - 1)
 
 
-def _pairs_z(moment: np.ndarray, power: np.ndarray, count: int, lower: np.ndarray) -> tuple[np.ndarray, int, int]:
-    return standardized(moment, np.sqrt(np.einsum("ka,jb->kajb", power, power) / count), lower)
+def _pairs_z(moment: np.ndarray, power: np.ndarray, dof: int, lower: np.ndarray) -> tuple[np.ndarray, int, int]:
+    """Each pair's sample correlation as a normal-equivalent z of its t(dof) law, only where ``lower``."""
+    z, zero_pass, zero_fail = correlation_z(moment, np.einsum("ka,jb->kajb", power, power), dof)
+    keep = np.broadcast_to(lower, z.shape)
+    zero = np.broadcast_to(np.einsum("ka,jb->kajb", power, power) <= 0, z.shape)
+    # the counts within the pairs j < k only
+    zero_pass = int(np.count_nonzero(keep & zero & (moment == 0)))
+    zero_fail = int(np.count_nonzero(keep & zero & (moment != 0)))
+    return np.where(keep, z, 0.0), zero_pass, zero_fail
 
 
 def _portmanteau_part(q: Portmanteau, share: float) -> CheckPart:
@@ -128,7 +140,9 @@ def check_residual_whiteness(s: EnsembleStatistics, info: ProblemInfo, confidenc
     bound = whiteness_pairs_bound(confidence, n_updates, p)
     power = np.diagonal(moment.reshape(n_updates * p, n_updates * p)).reshape(n_updates, p)
     lower = np.tril(np.ones((n_updates, n_updates), dtype=bool), -1)[:, None, :, None]  # j < k
-    z, zero_pass, zero_fail = _pairs_z(moment, power, s.count, lower)
+    # given the earlier update's N innovations r_j,b, the later r_k,a are iid N(0, S_k,aa) for a correct
+    # filter (independent across updates), so the uncentered correlation is t(N - 1) exactly
+    z, zero_pass, zero_fail = _pairs_z(moment, power, s.count - 1, lower)
     worst, (k, a, j, b) = max_abs(z)
     p_pairs = normal_family_pvalue(worst, m)
     pairs_part = CheckPart("pairs", worst, p_pairs, None, bound, 1.0 - share, share, m, p_pairs >= share)
@@ -138,7 +152,7 @@ def check_residual_whiteness(s: EnsembleStatistics, info: ProblemInfo, confidenc
     pvalue = combined_pvalue(parts)
     passed = pvalue >= alpha
     detail = (
-        f"largest |E[r_k r_j^T]| {sd_text(worst)} standard errors ({info.measurement_names[a]} at "
+        f"largest |E[r_k r_j^T]| {sd_text(worst)} sd-equivalent (a t({s.count - 1}) correlation; {info.measurement_names[a]} at "
         f"t = {info.update_times[k]:g} s with {info.measurement_names[b]} at t = {info.update_times[j]:g} s) over "
         f"{pairs} pairs of updates, bound {bound:.2f} (at alpha / 2 = {share:.3g}); portmanteau "
         f"{q.statistic:.6g} on {q.dof} degrees of freedom, bound {portmanteau_part.upper:.6g} (at alpha / 2)"
@@ -158,7 +172,7 @@ def _centered_cause(
     """Both parts again on the moments centered on the mean residuals: if both pass at their shares, the
     nonzero mean residuals account for the failure."""
     mean = s.mean_residual
-    rest_z, _, _ = _pairs_z(moment - np.einsum("ka,jb->kajb", mean, mean), np.maximum(power - mean**2, 0.0), s.count, lower)
+    rest_z, _, _ = _pairs_z(moment - np.einsum("ka,jb->kajb", mean, mean), np.maximum(power - mean**2, 0.0), s.count - 2, lower)
     rest, _ = max_abs(rest_z)
     q = portmanteau(moment, mean, s.count)
     lead = (
