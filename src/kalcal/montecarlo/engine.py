@@ -10,7 +10,6 @@ A checkpoint holds the fold of the blocks finished so far; a killed run resumes 
 from __future__ import annotations
 
 import contextlib
-import functools
 import itertools
 import threading
 import time
@@ -98,9 +97,10 @@ class MonteCarloRun:
     resumed_blocks: int = 0  #: blocks taken from a checkpoint instead of computed
 
 
-@functools.lru_cache(maxsize=None)
 def _thread_pools() -> ThreadpoolController:
-    """This process's thread pools (BLAS, OpenMP), found once: looking them up costs ~2 ms, a block ~20."""
+    """This process's thread pools (BLAS, OpenMP) as loaded now: looked up at each outermost entry of
+    :func:`single_threaded_blas` (~2 ms, once per run or Dask task of several blocks), because a BLAS
+    loaded after a first lookup (scipy's own, say) would otherwise keep its threads."""
     return ThreadpoolController()
 
 
