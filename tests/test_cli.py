@@ -242,9 +242,10 @@ CASES = {
         lambda imu, gps, d: (_csv(imu, d / "imu.csv"), _csv(gps.assign(time=gps["time"] + 100.0), d / "gps.csv"), []),
         r"gps\.csv: no fix lies within the accelerometer log",
     ),
-    "fewer than two fixes": (
-        lambda imu, gps, d: (_csv(imu, d / "imu.csv"), _csv(gps.iloc[:1], d / "gps.csv"), []),
-        r"gps\.csv: needs at least two usable fixes",
+    # the CLI's first-fix start and diffuse bias need a third fix to check the filter against
+    "fewer than three fixes": (
+        lambda imu, gps, d: (_csv(imu, d / "imu.csv"), _csv(gps.iloc[:2], d / "gps.csv"), []),
+        r"gps\.csv: needs at least three usable fixes .*got 2.*no fix to check",
     ),
     "single accelerometer sample": (
         lambda imu, gps, d: (_csv(imu.iloc[:1], d / "imu.csv"), _csv(gps, d / "gps.csv"), []),

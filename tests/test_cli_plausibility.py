@@ -180,6 +180,9 @@ def test_scale_bias_constant_sensor_is_flagged_unobservable(sim, tmp_path):
     # a constant sensor cannot follow the varying reference: its NIS is inconsistent too, so its sigma is
     # not trusted
     assert [w["code"] for w in summary["warnings"]] == ["unobservable", "noise-inconsistent", "sigma-untrusted"]
+    # untrusted for the unobservable theta, with its cause and no noise advice (no fit to run)
+    untrusted = summary["warnings"][2]["message"]
+    assert "theta1" in untrusted and "unobservable" in untrusted and "kalcal fit" not in untrusted
     assert not summary["consistent"] and summary["mean_nis"] > summary["nis_bounds"][1]
 
 
@@ -266,3 +269,31 @@ def test_noise_names_the_row_then_the_column_of_a_huge_sample(tmp_path):
     frame.to_csv(tmp_path / "static.csv", index=False)
     result = _invoke("noise", "--imu", tmp_path / "static.csv", "--out", tmp_path / "n")
     _one_line_error(result, "static.csv: row 101, column 'accel': 1e+300 m/s^2 is beyond the physical limit")
+
+
+def test_accel_gps_scale_without_acceleration_is_unobservable_and_strict_exits_1(sim, tmp_path):
+    """A constant-speed log with a scale state: an ``unobservable`` warning naming the scale and its cause,
+    the bias's sigma untrusted for it with no noise advice, summary.json's observability shaped as
+    scale-bias's; ``--strict`` exits 1. The genuine log with a scale state warns of nothing."""
+    good = _calibrate(sim, tmp_path, None, None, "--set", "filter.scale_std=0.01", "--strict")
+    assert good.exit_code == 0, good.output + good.stderr
+    summary = json.loads((tmp_path / "cal" / "summary.json").read_text())
+    assert summary["warnings"] == [] and summary["observability"]["unobservable"] == [] and summary["observability"]["cause"] is None
+    imu, gps = pd.read_csv(sim / "imu.csv"), pd.read_csv(sim / "gps.csv")
+    rng = np.random.default_rng(5)
+    imu["accel"] = 0.05 + 0.02 * rng.standard_normal(len(imu))
+    gps["position"] = 20.0 * gps["time"] + rng.standard_normal(len(gps))
+    gps["velocity"] = 20.0 + 0.04 * rng.standard_normal(len(gps))
+    for strict, status in (((), 0), (("--strict",), 1)):
+        result = _calibrate(sim, tmp_path, imu, gps, "--set", "filter.scale_std=0.01", *strict)
+        assert result.exit_code == status, result.output + result.stderr
+        assert "kalcal: warning: " in result.stderr and "scale unobservable" in result.stderr
+    summary = json.loads((tmp_path / "cal" / "summary.json").read_text())
+    observability = summary["observability"]
+    assert observability["unobservable"] == ["scale"] and observability["std_ratio"]["scale"] > 0.9
+    assert set(observability["data_only"]) >= {"rcond", "singular", "std", "no_data_std", "weaker_than_prior"}
+    assert "no excitation" in observability["cause"]
+    codes = [w["code"] for w in summary["warnings"]]
+    assert codes[0] == "unobservable" and "sigma-untrusted" in codes and not summary["sigma_trusted"]
+    untrusted = next(w["message"] for w in summary["warnings"] if w["code"] == "sigma-untrusted")
+    assert "scale unobservable" in untrusted and "kalcal fit" not in untrusted and "noise setting" in untrusted

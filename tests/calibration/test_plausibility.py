@@ -495,3 +495,85 @@ def test_genuine_logs_are_far_from_every_unit_slip(name):
         (k, _, _), _ = unit_slips._fit(v, [integral, np.ones_like(t), t - t[0]])
         (m, _), _ = unit_slips._fit(p, [unit_slips._cumulative_trapezoid(t, v), np.ones_like(t)])
         assert abs(k - 1) < unit_slips.SLIP_TOLERANCE and abs(m - 1) < unit_slips.SLIP_TOLERANCE, (k, m)
+
+
+# --- accel-gps observability: judged from the data-only information of the bias and scale ---------------
+
+
+def _observability(scenario, logs, init="first-fix", prior="auto"):
+    from kalcal.calibration.accel_gps import prepare_accel_gps_log
+    from kalcal.calibration.accel_gps_observability import data_only_information, unobservable, unobservable_cause
+
+    log = prepare_accel_gps_log(scenario, *logs, init=init, prior=prior, source="gps.csv", imu_source="imu.csv")
+    result = log.calibrate()
+    final = np.sqrt(np.diagonal(result.filter_covariance[-1]))[2:]
+    d = data_only_information(log, result.rejected)
+    return d, unobservable(d, final), unobservable_cause(d, final)
+
+
+def _constant_velocity_logs(scenario, seed=1, bias=0.05, speed=20.0):
+    """A log of a vehicle at constant speed: the accelerometer reads its bias and noise alone."""
+    imu_time, accel, fix_time, _, _ = _logs(scenario, seed)
+    rng = np.random.default_rng(seed)
+    accel = bias + scenario.truth.accel_noise_std * rng.standard_normal(imu_time.size)
+    position = speed * fix_time + scenario.truth.gps_position_std * rng.standard_normal(fix_time.size)
+    velocity = speed + scenario.truth.gps_velocity_std * rng.standard_normal(fix_time.size)
+    return imu_time, accel, fix_time, position, velocity
+
+
+@pytest.mark.parametrize("name", [*GENUINE, "scale", "scale-prior"])
+def test_genuine_accel_gps_logs_are_observable(name):
+    """Genuine simulated logs (the default settings, the noisy and other-rate ones, with a scale state, with
+    a given bias prior) determine the bias and the scale: nothing is unobservable, the data-only sigmas are
+    far below the no-data ones, and the acceleration spreads over 100 times its noise."""
+    extra = {"scale": ["truth.scale_std=0.01"], "scale-prior": ["truth.scale_std=0.01", "filter.bias_std=0.1"]}
+    scenario = _scenario(*GENUINE.get(name, extra.get(name, [])))
+    for seed in range(3):
+        d, names, cause = _observability(scenario, _logs(scenario, seed))
+        assert names == [] and cause is None, (name, seed, cause)
+        assert len(d["names"]) == (2 if "scale" in name else 1)
+        assert np.all(d["std"] < 0.1 * d["no_data_std"]) and not d["singular"], (name, seed, d["std"], d["no_data_std"])
+        assert d["excitation"]["ratio"] > 100 or "noisy" in name, (name, d["excitation"])
+
+
+def test_data_only_information_does_not_depend_on_the_prior():
+    """For a constant bias and scale the data-only information is the likelihood's, whatever the prior
+    (diffuse or given) that the calibration started from."""
+    scenario = _scenario("truth.scale_std=0.01")
+    logs = _logs(scenario, 4)
+    diffuse, _, _ = _observability(scenario, logs)
+    given, _, _ = _observability(_scenario("truth.scale_std=0.01", "filter.bias_std=0.1"), logs)
+    np.testing.assert_allclose(given["std"], diffuse["std"], rtol=1e-6)
+    np.testing.assert_allclose(given["no_data_std"], [0.1, 0.01], rtol=1e-9)
+
+
+def test_scale_state_without_acceleration_is_unobservable_with_its_cause():
+    """At constant speed the accelerometer reads its bias and noise alone: s a_c is a second bias, so the
+    scale's data-only sigma is far above its prior's, and the cause names the acceleration's spread."""
+    scenario = _scenario("truth.scale_std=0.01")
+    d, names, cause = _observability(scenario, _constant_velocity_logs(scenario))
+    assert names == ["scale"]
+    assert d["weaker_than_prior"] == [False, True] and d["std"][1] > 1.0  # a 100% scale error: nothing learned
+    assert 0.9 < d["excitation"]["ratio"] < 1.1
+    assert "scale's data-only sigma" in cause and "no excitation" in cause and "spread about its mean" in cause
+    # the same log without a scale state determines its bias
+    plain = _scenario()
+    assert _observability(plain, _constant_velocity_logs(plain))[1] == []
+
+
+def test_bias_from_too_few_fixes_is_unobservable_or_refused():
+    """Fixes nearly all NaN: with a given prior the bias's data-only sigma from one update 0.2 s after the
+    first fix is above 2.06 prior sigmas (unobservable, the fixes named); with the diffuse prior no fix is
+    left to check the filter against, which is refused in one line."""
+    scenario = _scenario("filter.bias_std=0.1")
+    imu_time, accel, fix_time, position, velocity = _logs(scenario)
+    position, velocity = position.copy(), velocity.copy()
+    position[2:], velocity[2:] = np.nan, np.nan
+    logs = (imu_time, accel, fix_time, position, velocity)
+    d, names, cause = _observability(scenario, logs)
+    assert names == ["bias"] and d["weaker_than_prior"] == [True]
+    # b from two velocity fixes 0.2 s apart, each to 0.04 m/s: sqrt(2) 0.04 / 0.2 = 0.283 (positions add little)
+    assert d["std"][0] == pytest.approx(np.sqrt(2) * 0.04 / 0.2, rel=0.02)
+    assert "1 fix(es) update the filter over 0.2 s, of 150 in the GPS log (148 with a NaN field" in cause
+    with pytest.raises(DataError, match=r"gps.csv: needs at least three usable fixes .* got 2 \(148 with a NaN field.*no fix to check"):
+        _observability(_scenario(), logs)

@@ -305,10 +305,19 @@ def prepare_accel_gps_log(
             f"{source}: no fix lies within the accelerometer log [{imu_time[0]:.9g}, {imu_time[-1]:.9g}] s "
             f"(fixes span [{np.nanmin(gps_time):.9g}, {np.nanmax(gps_time):.9g}] s)"
         )
-    if usable.size < 2:
+    chosen = "scenario" if prior == "scenario" or (prior == "auto" and scenario.filter.bias_std is not None) else "diffuse"
+    # one fix at least must be left to check the filter against, after the one that starts it (first-fix)
+    # and the one that first determines a diffuse bias (whose innovation the likelihood skips)
+    needed = max(2, 1 + (init == "first-fix") + (chosen == "diffuse"))
+    if usable.size < needed:
+        why = "" if needed == 2 else (
+            ": the first starts the filter (--init first-fix) and the next determines the diffuse bias, which "
+            "leaves no fix to check the filter and the bias's sigma against"
+        )
         raise DataError(
-            f"{source}: needs at least two usable fixes within the accelerometer log, got {usable.size} "
-            f"({np.count_nonzero(~finite)} with a NaN field, {np.count_nonzero(finite & ~inside)} outside the log)"
+            f"{source}: needs at least {('two', 'three')[needed - 2]} usable fixes within the accelerometer log, got "
+            f"{usable.size} ({np.count_nonzero(~finite)} with a NaN field, {np.count_nonzero(finite & ~inside)} outside "
+            f"the log){why}"
         )
     slips = unit_slips(imu_time, accel, usable, gps_time, gps_position, gps_velocity, source, imu_source, dict(columns or {}))
     warnings = slips + fix_warnings(
@@ -348,7 +357,6 @@ def prepare_accel_gps_log(
     free_p_all, free_v_all = np.concatenate([[p_start], p_fix]), np.concatenate([[v_start], v_fix])
     spans = np.diff(np.concatenate([[start_time], fix_times]))
     scale_columns = np.stack([-(np.diff(free_p_all) - free_v_all[:-1] * spans), -np.diff(free_v_all)], axis=1)
-    chosen = "scenario" if prior == "scenario" or (prior == "auto" and scenario.filter.bias_std is not None) else "diffuse"
     return AccelGpsLog(
         scenario=scenario, settings=settings, latency=float(scenario.filter.gps_latency or 0.0), init=init, prior=chosen,
         skip=1 if chosen == "diffuse" else 0, form=form, imu_time=imu_time, accel=accel, steps=steps,

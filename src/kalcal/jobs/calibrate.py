@@ -136,6 +136,13 @@ def compute_accel_gps_calibration(
     too far from a given prior (:func:`~kalcal.calibration.accel_gps.prior_conflict`). The diagnostics
     leave out the rejected fixes and, with a diffuse prior, the first fix.
 
+    ``summary["observability"]`` judges, as the scale-bias scenario does, whether the log alone determines
+    the bias and the scale (:mod:`kalcal.calibration.accel_gps_observability`): each one's final sigma over
+    its no-data sigma, the ``unobservable`` ones, their ``cause`` and the ``data_only`` grounds (the
+    information's reciprocal condition, each data-only and no-data sigma, the fixes and the acceleration);
+    an unobservable one makes an ``unobservable`` warning and the bias's sigma untrusted, with no advice
+    on the noise settings.
+
     When the diagnostics say inconsistent or the windows are not stable, the bias's sigma is not trusted:
     ``sigma_trusted`` is false, ``sigma_untrusted_because`` says why, and a ``sigma-untrusted`` warning
     names the next step, ``kalcal fit accel-gps`` over the same logs (``fit_options``: the command line's
@@ -146,6 +153,8 @@ def compute_accel_gps_calibration(
     """
     # the accel-gps filter (and numba under it) when it runs: a scale-bias calibration imports this module too
     from kalcal.calibration.accel_gps import bias_walk_variance, prepare_accel_gps_log, prior_conflict
+    from kalcal.calibration.accel_gps_observability import data_only_information, unobservable_warning
+    from kalcal.calibration.accel_gps_observability import summary_block as observability_summary
     from kalcal.calibration.diagnostics import innovation_diagnostics
     from kalcal.calibration.smoothing import smooth_calibration
 
@@ -209,8 +218,16 @@ def compute_accel_gps_calibration(
     used[: result.skip] = False
     diagnostics = innovation_diagnostics(normalized[used])
     warnings = list(result.warnings)
+    # what the log alone tells of the bias (and scale): an unobservable one is the prior's, and beside it
+    # neither a prior conflict nor the noise settings are a cause (kalcal.calibration.accel_gps_observability)
+    final_std = np.sqrt(np.diagonal(result.filter_covariance[-1]))[2:]
+    data_only = data_only_information(log, result.rejected)
+    observability = observability_summary(data_only, final_std)
+    unobservable = unobservable_warning(data_only, final_std, str(gps_path))
+    if unobservable is not None:
+        warnings.append(unobservable)
     conflict = prior_conflict(result, walk_variance=bias_walk_variance(scenario, result, imu["time"]))
-    if conflict is not None:
+    if conflict is not None and "bias" not in observability["unobservable"]:
         warnings.append(conflict)
     excess = "" if gate is None else gate_excess(int(np.count_nonzero(result.rejected)), int(result.rejected[result.skip:].size), gate)
     if excess:
@@ -232,8 +249,10 @@ def compute_accel_gps_calibration(
                 f"{longest.length:.6g} s after t = {longest.start:.9g} s (row {longest.row})",
             )
         )
+    names = observability["unobservable"]
     untrusted = untrusted_warning(diagnostics.as_dict(), stability.as_dict(), float(std[-1, 2]), "m/s^2",
-                                  fit_command(str(imu_path), str(gps_path), fit_extra(imu_columns, gps_columns, init, gate, fit_options)))
+                                  fit_command(str(imu_path), str(gps_path), fit_extra(imu_columns, gps_columns, init, gate, fit_options)),
+                                  f"{' and '.join(names)} unobservable ({observability['cause']})" if names else None)
     if untrusted is not None:
         warnings.append(untrusted[1])
     over = None
@@ -278,6 +297,7 @@ def compute_accel_gps_calibration(
         "covariance_states": list(scenario.state_names),
         "diagnostics": diagnostics.as_dict(),
         "stability": stability.as_dict(),
+        "observability": observability,
         "warnings": [warning.as_dict() for warning in warnings],
         "units": {"time": "s", **dict(zip(scenario.state_names, scenario.state_units))},
     }

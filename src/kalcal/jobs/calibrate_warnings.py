@@ -33,10 +33,15 @@ def fit_command(imu: str, gps: str, extra: Sequence[str] = ()) -> str:
 
 
 def untrusted_warning(diagnostics: Mapping[str, Any], stability: Mapping[str, Any], bias_std: float, unit: str,
-                      next_step: str) -> tuple[str, CalibrationWarning] | None:
+                      next_step: str, unobservable: str | None = None) -> tuple[str, CalibrationWarning] | None:
     """Why the bias sigma is not to be trusted, and the warning that says it and names the next step;
-    None when the diagnostics say consistent and the windows are not found unstable."""
-    reasons = []
+    None when the log determines its parameters, the diagnostics say consistent and the windows are not
+    found unstable.
+
+    ``unobservable`` (the parameters the log does not determine and why, in words) comes first: the sigma
+    is then the prior's, and no noise setting mends it, so the warning gives no noise advice (no fit to
+    run) beside it, whatever the diagnostics say."""
+    reasons = [f"{unobservable}, so it rests on the prior, not the log"] if unobservable else []
     if not diagnostics["consistent"]:
         reasons.append(f"the diagnostics say inconsistent ({diagnostics['verdict']})")
     if stability.get("stable") is False:
@@ -44,6 +49,12 @@ def untrusted_warning(diagnostics: Mapping[str, Any], stability: Mapping[str, An
     if not reasons:
         return None
     because = " and ".join(reasons)
+    if unobservable:
+        return because, CalibrationWarning(
+            UNTRUSTED,
+            f"the bias 1-sigma {bias_std:.3g} {unit} is NOT trusted: {because}. No noise setting mends this: "
+            "calibrate on a log that excites what is unobservable",
+        )
     return because, CalibrationWarning(
         UNTRUSTED,
         f"the bias 1-sigma {bias_std:.3g} {unit} is NOT trusted: it holds only for a model and noise settings that "

@@ -144,9 +144,11 @@ def compute_scale_bias_calibration(
     # and name the next step, a fit of the noise settings to the same log
     extra = [*(["--reference", reference] if reference != "reference" else []), *(["--sensor", sensor] if sensor != "sensor" else [])]
     fit = " ".join(["kalcal", "fit", "scale-bias", "--data", shlex.quote(str(data_path)), *map(shlex.quote, extra), "--out", "fit"])
+    unobservable = result.unobservable()  # an unobservable parameter untrusts the sigma with no noise advice
     untrusted = untrusted_warning({"consistent": result.consistent, "verdict": f"mean NIS {result.mean_nis:.3g} outside "
                                    f"[{result.nis_bounds()[0]:.3g}, {result.nis_bounds()[1]:.3g}]"},
-                                  stability.as_dict(), float(np.sqrt(ab_cov[1, 1])), unit, fit)
+                                  stability.as_dict(), float(np.sqrt(ab_cov[1, 1])), unit, fit,
+                                  f"{' and '.join(unobservable)} unobservable ({result.unobservable_cause()})" if unobservable else None)
     if untrusted is not None:
         warnings.append(untrusted[1].as_dict())
     summary = {
