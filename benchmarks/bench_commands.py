@@ -12,7 +12,7 @@ the long-run study), then prints, measured in one run on this machine, for each 
 * the same job through the Python API in this process, warm (the call repeated after a first one, so
   that its imports, kernel loads and matplotlib are paid already; its figures are drawn here);
 * their ratio, command over job: how much longer the user waits than the work takes (the interpreter,
-  the imports, the kernels' loading, starting the figure process).
+  the imports, the kernels' loading).
 
 ``python -c pass`` is printed for scale. The commands write into fresh folders each time, but for
 ``report``, which redraws the verify run's own page and figures in its folder.
@@ -96,7 +96,7 @@ def main() -> None:
              lambda out: kalcal.verify(n=20_000, long_run=0, out=out, report=True)),
             ("report DIR (that verify's)", ["report", str(run)], lambda out: kalcal.report(run)),
         ]  # fmt: skip
-        for _, args, _job in jobs:  # the kernels cached, the figure process's imports compiled, once
+        for _, args, _job in jobs:  # the kernels cached and the modules' bytecode compiled, once
             if args[0] != "report":
                 command_wall(args, 1)
         bare = min(_elapsed([sys.executable, "-c", "pass"]) for _ in range(3))

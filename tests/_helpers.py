@@ -138,17 +138,6 @@ m0 = [[4.0, 0.0], [0.0, {gm_var!r}]]
 """
 
 
-def last_line_of(code: str) -> str:
-    """The last line a fresh ``python -c code`` prints (it must succeed): what a new process loads and
-    answers, apart from this test process's modules."""
-    import subprocess
-    import sys
-
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
-    assert done.returncode == 0, done.stderr
-    return done.stdout.strip().splitlines()[-1]
-
-
 def assert_standard_normal_spread(z, *, family_alpha: float = 1e-3, what: str = "") -> None:
     """z-scores (M, q) of q quantities over M independent seeds, each N(0, 1) when the sigma is right, held
     from both sides: each column's sample variance, (M - 1) s^2 ~ chi-square(M - 1), within its two-sided

@@ -1,10 +1,15 @@
-"""A verify run loads its compiled kernels from numba's cache: the second run on a machine compiles nothing."""
+"""A verify run loads its compiled kernels from numba's cache: the second run on a machine compiles nothing;
+and every kernel in kalcal's source, whichever command runs it, is compiled with ``cache=True``."""
 
 from __future__ import annotations
 
+import ast
 import os
 import subprocess
 import sys
+from pathlib import Path
+
+import kalcal
 
 RUN = (
     "import kalcal\n"
@@ -32,3 +37,64 @@ def test_the_second_run_loads_every_kernel_from_the_cache():
     counted = next(line for line in log.splitlines() if line.startswith("kernels "))
     assert counted.endswith("uncached []") and not counted.startswith("kernels 0 "), counted
     assert "data saved" not in log and "index saved" not in log, log
+
+
+#: numba's compiling entry points; a kernel made by any of them without ``cache=True`` compiles anew in
+#: every process (jitclass and stencil cannot be cached at all, so they are refused here too)
+COMPILERS = {"jit", "njit", "generated_jit", "vectorize", "guvectorize", "cfunc", "jitclass", "stencil"}
+
+
+def _compiler_uses(tree: ast.Module) -> tuple[list[tuple[int, bool]], bool]:
+    """Each use of a numba compiler in a module, as (line, whether it passes ``cache=True``), and whether
+    the module imports numba at all. Module aliases (``import numba as nb``) and names imported from
+    numba (``from numba import njit as jit_``) are followed."""
+    modules, names, imports_numba = set(), set(), False
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.name == "numba" or alias.name.startswith("numba."):
+                    imports_numba = True
+                    if alias.name == "numba":
+                        modules.add(alias.asname or "numba")
+        elif isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] == "numba":
+            imports_numba = True
+            names.update(alias.asname or alias.name for alias in node.names if alias.name in COMPILERS)
+
+    def is_compiler(expr: ast.expr) -> bool:
+        if isinstance(expr, ast.Name):
+            return expr.id in names
+        # numba.njit, numba.experimental.jitclass, nb.njit
+        root = expr
+        while isinstance(root, ast.Attribute):
+            root = root.value
+        return (isinstance(expr, ast.Attribute) and expr.attr in COMPILERS and isinstance(root, ast.Name)
+                and root.id in modules)
+
+    uses, called = [], set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Call) and is_compiler(node.func):
+            called.add(id(node.func))
+            cached = any(k.arg == "cache" and isinstance(k.value, ast.Constant) and k.value.value is True
+                         for k in node.keywords)
+            uses.append((node.lineno, cached))
+    for node in ast.walk(tree):  # a bare decorator or reference (@numba.njit, njit(f) is a call above)
+        if isinstance(node, (ast.Name, ast.Attribute)) and is_compiler(node) and id(node) not in called:
+            uses.append((node.lineno, False))
+    return uses, imports_numba
+
+
+def test_every_kernel_in_the_source_is_compiled_with_cache_true():
+    """Walks every module of src/kalcal, not only those a verify run imports: the calibration, filter and
+    fit kernels are held to the same rule."""
+    root = Path(kalcal.__file__).parent
+    uncached, kernels, silent = [], 0, []
+    for path in sorted(root.rglob("*.py")):
+        uses, imports_numba = _compiler_uses(ast.parse(path.read_text(encoding="utf-8"), str(path)))
+        name = path.relative_to(root).as_posix()
+        kernels += len(uses)
+        uncached += [f"{name}:{line}" for line, cached in uses if not cached]
+        if imports_numba and not uses:
+            silent.append(name)  # numba imported and no kernel seen: a form of decorator this walk misses
+    assert kernels >= 10, kernels
+    assert not uncached, f"kernels compiled without cache=True: {uncached}"
+    assert not silent, f"modules importing numba with no kernel found in them: {silent}"

@@ -6,7 +6,7 @@ Dimensions: ``update`` (K fixes; coordinate ``time``, s), ``state``/``state_col`
 a state-indexed variable are those of the ``state_unit`` coordinate (``state_unit x state_col_unit`` for
 matrices).
 
-It is built as an ``xarray.Dataset`` (:func:`analysis_parts`, :attr:`kalcal.AnalysisResult.dataset`).
+It is built as an ``xarray.Dataset`` (:func:`analysis_dataset`, :attr:`kalcal.AnalysisResult.dataset`).
 """
 
 from __future__ import annotations
@@ -21,12 +21,6 @@ _PAIRS = ("update", "measurement", "update_col", "measurement_col")
 
 
 def analysis_dataset(result: CovarianceAnalysis, attrs: dict | None = None) -> xr.Dataset:
-    """Every per-update quantity of the analysis, with named dimensions: :func:`analysis_parts` as an
-    ``xarray.Dataset``."""
-    return analysis_parts(result, attrs)
-
-
-def analysis_parts(result: CovarianceAnalysis, attrs: dict | None = None) -> xr.Dataset:
     """Every per-update quantity of the analysis, with named dimensions, as an ``xarray.Dataset``."""
     m = result.moments
     state_units = "state_unit x state_col_unit"

@@ -175,7 +175,7 @@ def analyze(
 
 
 def _compute(model, n: int, form: str, command: str) -> AnalysisResult:
-    from kalcal.analysis.dataset import analysis_parts, budget_summary, final_summary
+    from kalcal.analysis.dataset import analysis_dataset, budget_summary, final_summary
     from kalcal.analysis.fixed_gain import analyze_scenario
     from kalcal.models.config import section_values
 
@@ -196,8 +196,8 @@ def _compute(model, n: int, form: str, command: str) -> AnalysisResult:
         "timing": {"analysis_s": elapsed, "power_s": power_s},
         "command": command,
     }
-    parts = analysis_parts(analysis, {"form": form})
-    return AnalysisResult(final, budget, power, parts, document, analysis, sensitivity=sensitivity)
+    dataset = analysis_dataset(analysis, {"form": form})
+    return AnalysisResult(final, budget, power, dataset, document, analysis, sensitivity=sensitivity)
 
 
 def _power(model, analysis, n: int, form: str) -> tuple[list, list | None, float]:

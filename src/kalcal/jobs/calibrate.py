@@ -20,7 +20,7 @@ from kalcal.io.results import write_csv, write_json
 from kalcal.models.accel_gps import AccelGpsScenario, AccelGpsSettings
 from kalcal.models.config import section_values
 
-if TYPE_CHECKING:  # a calibration from Parquet files loads no pandas (kalcal.io.logs)
+if TYPE_CHECKING:  # for the annotations; pandas is imported where a DataFrame is made
     import pandas as pd
 
 IMU_ROLES = ("time", "accel")

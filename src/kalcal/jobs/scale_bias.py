@@ -22,7 +22,7 @@ from kalcal.models.scale_bias import STATE_NAMES, ScaleBiasScenario
 from kalcal.models.scale_bias_theta import scale_bias_from_theta
 from kalcal.simulation.scale_bias import sample_scale_bias
 
-if TYPE_CHECKING:  # a calibration from a Parquet file loads no pandas (kalcal.io.logs)
+if TYPE_CHECKING:  # for the annotations; pandas is imported where a DataFrame is made
     import pandas as pd
 
 

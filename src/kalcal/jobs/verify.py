@@ -33,7 +33,7 @@ from kalcal.montecarlo.engine import BLOCK_SIZE, run_monte_carlo
 from kalcal.montecarlo.problem import check_engine
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.verification.checks import REPORT_RESIDUAL_PAIR, CheckResult, residual_pair, run_checks, verdict
-from kalcal.verification.dataset import statistics_parts
+from kalcal.verification.dataset import statistics_dataset
 from kalcal.verification.results import as_false_alarm
 from kalcal.verification.self_check import SelfCheck, exact_prediction, self_check
 
@@ -214,7 +214,7 @@ def compute_verification(
         checks = [as_false_alarm(check) for check in checks]
     bench = self_check(statistics, exact, confidence, info)
     attrs = {"scenario": info.scenario, "seed": seed, "engine": engine, "confidence": confidence}
-    dataset = statistics_parts(statistics, info, expected, attrs)
+    dataset = statistics_dataset(statistics, info, expected, attrs)
     long_seconds = default_long_run(scenario) if long_run is None else long_run
     has_long = bool(long_seconds and long_seconds > info.update_times[-1])
     files = 3 if has_long else 2  # stats.nc, stats_long.nc, summary.json
@@ -228,7 +228,7 @@ def compute_verification(
         long = run_monte_carlo(
             long_problem, long_n, seed, engine=engine, workers=workers, client=client, progress=stage(progress, "long run")
         )
-        long_dataset = statistics_parts(
+        long_dataset = statistics_dataset(
             ensemble_statistics(long.sums), long_problem.info, long_problem.expected_mean_error(), attrs
         )
         built(2, files)

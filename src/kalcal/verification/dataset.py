@@ -23,13 +23,6 @@ _MATRIX = ("time", "state", "state2")
 def statistics_dataset(
     s: EnsembleStatistics, info: ProblemInfo, expected_mean_error: np.ndarray, attrs: dict
 ) -> xr.Dataset:
-    """Every per-update statistic of a run as an ``xarray.Dataset`` (:func:`statistics_parts`)."""
-    return statistics_parts(s, info, expected_mean_error, attrs)
-
-
-def statistics_parts(
-    s: EnsembleStatistics, info: ProblemInfo, expected_mean_error: np.ndarray, attrs: dict
-) -> xr.Dataset:
     """Every per-update statistic of a run, as an ``xarray.Dataset``."""
     data = {
         "mean_error": (("time", "state"), s.mean_error, "ensemble mean of e = x - xhat"),
