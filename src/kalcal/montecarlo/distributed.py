@@ -36,52 +36,64 @@ def _quiet_distributed() -> Iterator[None]:
         yield
 
 
-#: log records of distributed that follow one another by less than this (s) are one event: a worker lost
-#: is logged by the scheduler, the client and the nanny within milliseconds on an idle machine, and
-#: seconds apart on a loaded one (the nanny's restart waits for the process to be reaped)
+#: records of distributed of one kind (:func:`event_kind`) within this many seconds of the first record of
+#: their event belong to that event: a worker lost is logged by the scheduler, the client and the nanny
+#: within a tenth of a second on an idle machine, and seconds apart on a loaded one (the nanny's restart
+#: waits for the process to be reaped). The window is counted from the event's first record, so a steady
+#: stream of records (a memory warning every second, say) is one note per window, not one note in all.
 EVENT_WINDOW_S = 5.0
 
-#: what a note says for the first record of an event, by the record's message
-_EVENTS = (
-    (
-        re.compile(r"Removing worker '?([^' ]+?)'? caused the cluster to lose"),
-        "a Dask worker ({0}) was lost; its tasks run again on the others (the numbers do not change)",
-    ),
-    (
-        re.compile(r"Restarting worker"),
-        "a Dask worker stopped and is restarted; its tasks run again (the numbers do not change)",
-    ),
+#: the note of a lost worker, whichever of its records arrives first
+WORKER_LOST = "a Dask worker was lost; its tasks run again (the numbers do not change)"
+
+#: the records distributed (2026.8) logs when a worker dies mid-run, by message. Which of them arrives
+#: first varies from run to run: the scheduler's ``Couldn't gather keys: {key: 'memory'}`` (the key was in the
+#: dead worker's memory, not an out-of-memory error) came first in some runs, the nanny's ``Restarting
+#: worker`` in others, so every one of them names the same event.
+_WORKER_LOST_RECORDS = re.compile(
+    r"Removing worker .* caused the cluster to lose"
+    r"|Restarting worker"
+    r"|Couldn't gather (\d+ )?keys"
+    r"|Worker process \d+ was killed by (unknown )?signal"
 )
 
 
+def event_kind(record: logging.LogRecord) -> str:
+    """The kind of event a record of distributed belongs to: ``"worker-lost"`` for the records of a
+    worker dying (:data:`_WORKER_LOST_RECORDS`), ``"other"`` for any other."""
+    return "worker-lost" if _WORKER_LOST_RECORDS.search(record.getMessage()) else "other"
+
+
 def event_text(record: logging.LogRecord) -> str:
-    """The note of an event that begins with ``record``: a known event in words, any other as
-    ``Dask (logger, level): first line of the message``."""
+    """The note of an event whose first record is ``record``: :data:`WORKER_LOST` for a worker's death,
+    any other as ``Dask (logger, level): first line of the message``."""
+    if event_kind(record) == "worker-lost":
+        return WORKER_LOST
     message = record.getMessage().splitlines()[0] if record.getMessage() else ""
-    for pattern, text in _EVENTS:
-        if (match := pattern.search(message)) is not None:
-            return text.format(*match.groups())
     return f"Dask ({record.name}, {record.levelname.lower()}): {message[:300]}"
 
 
 class NoteHandler(logging.Handler):
-    """A logging handler that turns each event of distributed's log (records closer than
-    :data:`EVENT_WINDOW_S` to the one before) into one ``notes(text)`` call (:func:`event_text`)."""
+    """A logging handler that turns each event of distributed's log into one ``notes(text)`` call
+    (:func:`event_text`). An event is the records of one kind (:func:`event_kind`) from its first record
+    to :data:`EVENT_WINDOW_S` after it; a record of another kind inside that window is an event of its
+    own (a worker lost during a stream of memory warnings is still noted)."""
 
     def __init__(self, notes: Callable[[str], None], window: float = EVENT_WINDOW_S):
         super().__init__(level=logging.WARNING)
         self.notes = notes
         self.window = window
-        self.last = float("-inf")
+        self.started: dict[str, float] = {}  # kind -> time of the first record of its current event (s)
 
     def emit(self, record: logging.LogRecord) -> None:
-        fresh = record.created - self.last > self.window
-        self.last = max(self.last, record.created)
-        if fresh:
-            try:
-                self.notes(event_text(record))
-            except Exception:
-                self.handleError(record)
+        kind = event_kind(record)
+        if record.created - self.started.get(kind, float("-inf")) <= self.window:
+            return
+        self.started[kind] = record.created
+        try:
+            self.notes(event_text(record))
+        except Exception:
+            self.handleError(record)
 
 
 def _distributed_loggers() -> list[logging.Logger]:
