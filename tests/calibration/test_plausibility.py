@@ -495,3 +495,41 @@ def test_genuine_logs_are_far_from_every_unit_slip(name):
         (k, _, _), _ = unit_slips._fit(v, [integral, np.ones_like(t), t - t[0]])
         (m, _), _ = unit_slips._fit(p, [unit_slips._cumulative_trapezoid(t, v), np.ones_like(t)])
         assert abs(k - 1) < unit_slips.SLIP_TOLERANCE and abs(m - 1) < unit_slips.SLIP_TOLERANCE, (k, m)
+
+
+def _motionless_logs(seed):
+    """A motionless 60 s log: accelerometer noise 0.5 m/s^2 at 200 Hz (bias 0.05), GPS velocity noise
+    0.05 m/s and position noise 0.5 m at 5 Hz. The slope k of the accelerometer fit is 0 give or take
+    about 0.045: no unit is in it to name."""
+    rng = np.random.default_rng(seed)
+    imu_time = np.arange(0.0, 60.0, 1 / 200)
+    accel = 0.05 + 0.5 * rng.standard_normal(imu_time.size)
+    fix_time = np.arange(0.0, 60.0, 1 / 5)
+    velocity = 0.05 * rng.standard_normal(fix_time.size)
+    position = 100.0 + 0.5 * rng.standard_normal(fix_time.size)
+    return imu_time, accel, fix_time, position, velocity
+
+
+def test_motionless_genuine_logs_name_no_unit():
+    """300 seeds, zero refusals. A k within 5% of 1/g and 10 standard errors from 1 was once enough to be
+    named "converted from g to m/s^2 twice" without k differing measurably from 0: seeds 55, 59 and 255
+    (k = 0.097, 0.098, 0.104) were refused. A unit is now named only for a slope measurably different
+    from both 1 and 0 (10 se from 0 here is |k| > 0.45, far from 1/g)."""
+    for seed in range(300):
+        imu_time, accel, fix_time, position, velocity = _motionless_logs(seed)
+        assert unit_slips.accelerometer_units(imu_time, accel, fix_time, velocity, "imu.csv") is None, seed
+        unit_slips.position_units(fix_time, position, velocity, "gps.csv")
+
+
+def test_a_motionless_log_once_refused_calibrates():
+    """Seed 55 of the motionless logs through the whole calibration: it runs, without a warning."""
+    scenario = build_scenario(
+        "accel-gps",
+        assignments=[
+            "scenario.integration=trapezoid", "scenario.imu_rate=200", "scenario.gps_rate=5",
+            "filter.accel_noise_std=0.5", "truth.accel_noise_std=0.5", "filter.gps_velocity_std=0.05",
+            "filter.gps_position_std=0.5",
+        ],
+    )
+    result = _calibrate(scenario, *_motionless_logs(55))
+    assert result.warnings == []

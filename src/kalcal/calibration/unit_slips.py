@@ -23,9 +23,9 @@ POSITION_UNITS = (("millimetres", 1000.0), ("feet", 1 / 0.3048))
 #: a fitted ratio within this relative distance of a unit's factor names that unit: wider than
 #: :data:`~kalcal.calibration.plausibility.UNIT_TOLERANCE`, for an integral of noisy samples is fitted, not a difference of fixes
 SLIP_TOLERANCE = 0.05
-#: ... and only when it lies this many standard errors from 1 (what SI units give): the fits' residuals
-#: are not white (the bias drifts, the integrals carry the noise along), so their standard errors are
-#: optimistic and the margin is wide
+#: ... and only when it lies this many standard errors from 1 (what SI units give) and from 0 (what a log
+#: without motion gives): the fits' residuals are not white (the bias drifts, the integrals carry the
+#: noise along), so their standard errors are optimistic and the margin is wide
 SLIP_Z = 10.0
 #: a bias within this relative distance of g is gravity left in: g varies by 0.3 % over the Earth, a mount
 #: tilted by 25 degrees reads 0.91 g, a MEMS bias is at most a few hundredths of g
@@ -65,8 +65,12 @@ def _fit(y: np.ndarray, columns: list[np.ndarray]) -> tuple[np.ndarray, np.ndarr
 
 
 def _named_slip(ratio: float, se: float, factor: float) -> bool:
-    """Whether a fitted ``ratio`` (standard error ``se``) is the unit of ``factor``, not SI's 1."""
-    return abs(ratio / factor - 1) <= SLIP_TOLERANCE and abs(ratio - 1) > SLIP_Z * se
+    """Whether a fitted ``ratio`` (standard error ``se``) is the unit of ``factor``: within
+    :data:`SLIP_TOLERANCE` of it, and measurably different (:data:`SLIP_Z` standard errors) both from SI's
+    1 and from 0. The last keeps a log without motion out: its slope is 0 give or take a wide se (0.045 on
+    a 60 s motionless log), and without it landed within 5% of 1/g in 3 of 300 seeds, refused as "converted
+    from g to m/s^2 twice"."""
+    return abs(ratio / factor - 1) <= SLIP_TOLERANCE and abs(ratio - 1) > SLIP_Z * se and abs(ratio) > SLIP_Z * se
 
 
 def accelerometer_units(
@@ -83,8 +87,8 @@ def accelerometer_units(
     velocity fixes are fitted as v_f = k I(t_f) + v_0 - b t_f: a measured a [unit] = (a [m/s^2] + b) / k
     gives k = 1 for m/s^2 and k = g = 9.807 for an accelerometer in g (the integrated accelerometer is
     then 1/9.81 of the GPS velocity change). A k within :data:`SLIP_TOLERANCE` of a unit's factor
-    (:data:`ACCEL_UNITS`), or of its inverse (converted twice), and :data:`SLIP_Z` standard errors from 1 is
-    an error naming the unit. Otherwise, b is fitted with k = 1 (v_f - I(t_f) = v_0 - b t_f, which a log
+    (:data:`ACCEL_UNITS`), or of its inverse (converted twice), and :data:`SLIP_Z` standard errors from both 1
+    and 0 is an error naming the unit. Otherwise, b is fitted with k = 1 (v_f - I(t_f) = v_0 - b t_f, which a log
     without motion still determines): a b within :data:`GRAVITY_BAND` of +-g and :data:`SLIP_Z` standard
     errors from 0 is gravity left in the vertical accelerometer, flagged (the calibrated bias then holds
     gravity; it is a number, not the sensor's bias).
@@ -155,7 +159,7 @@ def position_units(
     p_f = m V(t_f) + p_0: m = 1 for positions in m, 1000 for millimetres and 3.281 for feet (the
     position differences are that many times the integrated velocity). An m within
     :data:`SLIP_TOLERANCE` of a unit's factor (:data:`POSITION_UNITS`) and :data:`SLIP_Z` standard errors
-    from 1 is an error naming the unit.
+    from both 1 and 0 is an error naming the unit.
 
     Parameters
     ----------
