@@ -533,3 +533,29 @@ def test_a_motionless_log_once_refused_calibrates():
     )
     result = _calibrate(scenario, *_motionless_logs(55))
     assert result.warnings == []
+
+
+def test_a_gps_log_wholly_in_feet_is_refused_naming_the_unit():
+    """Position and velocity both times 3.281: the position fit sees 1, and on 2114039's fix the calibration
+    ran to a bias of -17.9 m/s^2 without a word. The accelerometer fit's slope is 3.281."""
+    scenario = _scenario()
+    imu_time, accel, fix_time, position, velocity = _logs(scenario)
+    feet = 1 / 0.3048
+    with pytest.raises(
+        DataError,
+        match=r"^gps.csv: the GPS velocity changes are 3.2\d* times the integrated accelerometer .*: are its position "
+        r"and velocity in feet \(and ft/s\) instead of m \(and m/s\)\?$",
+    ):
+        _calibrate(scenario, imu_time, accel, fix_time, position * feet, velocity * feet)
+
+
+def test_a_gps_log_wholly_in_mm_is_refused_naming_the_unit():
+    """The fits themselves (through the calibration, this log's velocities in mm/s pass the physical limit
+    of 1e5 and are refused as such; a slower log's would not): the accelerometer fit's slope is 1000."""
+    scenario = _scenario()
+    imu_time, accel, fix_time, position, velocity = _logs(scenario)
+    inside = (fix_time >= imu_time[0]) & (fix_time <= imu_time[-1])
+    t, p, v = fix_time[inside], 1000.0 * position[inside], 1000.0 * velocity[inside]
+    unit_slips.position_units(t, p, v, "gps.csv")  # the positions agree with the velocities
+    with pytest.raises(DataError, match=r"^gps.csv: .*: are its position and velocity in millimetres \(and mm/s\) instead of m"):
+        unit_slips.accelerometer_units(imu_time, accel, t, v, "imu.csv", gps_source="gps.csv")
