@@ -10,7 +10,9 @@ default dependency of kalcal.
 distributed logs its own events (a worker lost, the nanny restarting it, keys gathered again) as several
 lines on stderr. Given a ``notes`` callback, :func:`dask_client` routes them while the client lives: each
 event is one call of ``notes(text)`` (the CLI prints ``kalcal: note: TEXT``), and the log lines of the
-local cluster's worker processes are forwarded to this process and routed the same way.
+local cluster's worker processes are forwarded to this process and routed the same way. A worker the nanny
+starts in a lost one's place ignores SIGINT once it is set up (a Ctrl-C had printed its traceback); one in
+the second or two while that worker imports still reaches it. Once a run is stopped, no more notes.
 """
 
 from __future__ import annotations
@@ -84,8 +86,11 @@ class NoteHandler(logging.Handler):
         self.notes = notes
         self.window = window
         self.started: dict[str, float] = {}  # kind -> time of the first record of its current event (s)
+        self.muted = False  # set when the run is stopped: the cluster's closing records are not news
 
     def emit(self, record: logging.LogRecord) -> None:
+        if self.muted:
+            return
         kind = event_kind(record)
         if record.created - self.started.get(kind, float("-inf")) <= self.window:
             return
@@ -136,6 +141,11 @@ def _worker_logs_forwarded_only(client) -> None:
 
     class SilentStderr(WorkerPlugin):
         def setup(self, worker):
+            # a worker the nanny starts again (after one was lost) is spawned with SIGINT at its default,
+            # and a Ctrl-C then printed its KeyboardInterrupt traceback: ignored here, in the worker's main
+            # thread, as for the first workers (:func:`_sigint_ignored`)
+            if threading.current_thread() is threading.main_thread():
+                signal.signal(signal.SIGINT, signal.SIG_IGN)
             names = ["distributed", *(n for n in logging.root.manager.loggerDict if n.startswith("distributed."))]
             for logger in map(logging.getLogger, names):
                 for handler in list(logger.handlers):
@@ -225,6 +235,11 @@ def _sigint_ignored() -> Iterator[None]:
 
 
 def _quiet_dask() -> None:
-    """Silence the ``distributed`` loggers of this process (for the rest of it)."""
+    """Silence the ``distributed`` loggers of this process (for the rest of it), and the notes of its log:
+    records forwarded from the workers are handled whatever the logger's level."""
     for name in ["distributed", *[n for n in logging.root.manager.loggerDict if n.startswith("distributed.")]]:
-        logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+        logger = logging.getLogger(name)
+        logger.setLevel(logging.CRITICAL + 1)
+        for handler in logger.handlers:
+            if isinstance(handler, NoteHandler):
+                handler.muted = True
