@@ -482,10 +482,11 @@ def test_position_in_mm_or_ft_is_refused_naming_the_unit(factor, unit):
 
 @pytest.mark.parametrize("name", list(GENUINE))
 def test_genuine_logs_are_far_from_every_unit_slip(name):
-    """The fitted ratios of genuine logs lie within SLIP_TOLERANCE of 1 (SI) and the bias far from g, so the
-    checks that name a slip have margin on both sides."""
+    """What docs/accel-gps.md states, on seeds 0-7 of each genuine log: k within 1% of 1 and m within 0.1%
+    (5 and 50 times inside SLIP_TOLERANCE), the offset b (the drawn sensor bias) below 0.5 m/s^2 (the
+    gravity band starts at 8.8). Measured: |k - 1| up to 0.71% (noisy), |m - 1| up to 0.04%, |b| up to 0.256."""
     scenario = _scenario(*GENUINE[name])
-    for seed in range(3):
+    for seed in range(8):
         imu_time, accel, fix_time, position, velocity = _logs(scenario, seed)
         inside = (fix_time >= imu_time[0]) & (fix_time <= imu_time[-1])
         t, p, v = fix_time[inside], position[inside], velocity[inside]
@@ -494,7 +495,8 @@ def test_genuine_logs_are_far_from_every_unit_slip(name):
         integral = np.interp(t, imu_time, unit_slips._cumulative_trapezoid(imu_time, accel))
         (k, _, _), _ = unit_slips._fit(v, [integral, np.ones_like(t), t - t[0]])
         (m, _), _ = unit_slips._fit(p, [unit_slips._cumulative_trapezoid(t, v), np.ones_like(t)])
-        assert abs(k - 1) < unit_slips.SLIP_TOLERANCE and abs(m - 1) < unit_slips.SLIP_TOLERANCE, (k, m)
+        (_, slope), _ = unit_slips._fit(v - integral, [np.ones_like(t), t - t[0]])
+        assert abs(k - 1) < 0.01 and abs(m - 1) < 0.001 and abs(slope) < 0.5, (seed, k, m, -slope)
 
 
 def _motionless_logs(seed):
