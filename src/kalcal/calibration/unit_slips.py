@@ -32,8 +32,9 @@ SLIP_TOLERANCE = 0.05
 #: without motion gives): the fits' residuals are not white (the bias drifts, the integrals carry the
 #: noise along), so their standard errors are optimistic and the margin is wide
 SLIP_Z = 10.0
-#: a bias within this relative distance of g is gravity left in: g varies by 0.3 % over the Earth, a mount
-#: tilted by 25 degrees reads 0.91 g, a MEMS bias is at most a few hundredths of g
+#: a bias within this relative distance of g is gravity left in: g is within about 0.27 % of standard
+#: gravity over the Earth (9.780 m/s^2 at the equator, 9.832 at the poles), a mount tilted by 25 degrees
+#: reads 0.91 g, a MEMS bias is at most a few hundredths of g
 GRAVITY_BAND = 0.1
 
 
