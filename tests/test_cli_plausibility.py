@@ -79,6 +79,17 @@ def test_position_in_mm_or_ft_is_exit_status_2(sim, tmp_path, factor, unit):
     _one_line_error(_calibrate(sim, tmp_path, None, gps), "column 'position'", f"is the position in {unit} instead of m?")
 
 
+def test_a_gps_log_wholly_in_feet_is_exit_status_2(sim, tmp_path):
+    """Position and velocity (and their stds) in feet: consistent with each other, 3.281 times the
+    accelerometer; silent on 2114039's fix (a bias of -17.9 m/s^2)."""
+    gps = pd.read_csv(sim / "gps.csv")
+    for column in [c for c in gps.columns if c != "time"]:
+        gps[column] *= 1 / 0.3048
+    _one_line_error(
+        _calibrate(sim, tmp_path, None, gps), "gps.csv: ", "are its position and velocity in feet (and ft/s) instead of m"
+    )
+
+
 def test_gravity_left_in_is_a_warning_and_strict_exits_1(sim, tmp_path):
     """On 2114039: bias 9.848, diagnostics consistent, no warning, exit 0 with --strict."""
     imu = pd.read_csv(sim / "imu.csv")

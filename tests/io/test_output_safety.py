@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import errno
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -291,6 +292,32 @@ def test_a_link_made_after_the_commits_checks_stops_it_marked_incomplete_and_rem
     )
     assert "marked incomplete" in message and not read_manifest(out).complete
     assert _tree(elsewhere) == outside
+
+
+@pytest.mark.parametrize("linked", ["figures", "figures/deep"])
+def test_a_link_made_after_the_commits_checks_creates_no_folder_outside(tmp_path, monkeypatch, linked):
+    """A new file two folders deep, and a level on its way replaced by a link after the checks: the
+    commit stops marked incomplete and the link's target stays empty (2114039's fix made its folders with
+    mkdir(parents=True) before checking, creating elsewhere/deep/ or elsewhere/more/)."""
+    out = tmp_path / "out"
+    _run(out, {"summary.json": "s"})
+    (out / "figures").mkdir()  # a user's folder: the set lists nothing in it
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    real_check = commit_module.check_targets
+
+    def check_then_link(*args, **kwargs):
+        real_check(*args, **kwargs)
+        shutil.rmtree(out / "figures")
+        if linked == "figures/deep":
+            (out / "figures").mkdir()
+        (out / linked).symlink_to(elsewhere, target_is_directory=True)
+
+    monkeypatch.setattr(commit_module, "check_targets", check_then_link)
+    with pytest.raises(OutputError, match=rf"a symbolic link out of the folder: {re.escape(str(out / linked))}\); "):
+        _run(out, {"summary.json": "s2", "figures/deep/more/b.png": "b"})
+    assert list(elsewhere.iterdir()) == []
+    assert not read_manifest(out).complete
 
 
 def test_out_itself_may_be_a_link(tmp_path):

@@ -68,8 +68,11 @@ def unit_slips(
     imu_time, accel, usable, gps_time, position, velocity, source: str, imu_source: str, columns: dict[str, str]
 ) -> list[CalibrationWarning]:
     """Unit slips that still give a number, over the usable fixes: positions in mm or ft, an accelerometer
-    in g (DataError naming the unit), gravity left in the accelerometer (a warning)."""
+    in g, a GPS log wholly in mm or ft (DataError naming the unit), gravity left in the accelerometer (a
+    warning)."""
     time, position, velocity = (np.asarray(a, dtype=float)[usable] for a in (gps_time, position, velocity))
     slips.position_units(time, position, velocity, source, columns.get("position", "position"))
-    gravity = slips.accelerometer_units(imu_time, accel, time, velocity, imu_source, columns.get("accel", "accel"))
+    gravity = slips.accelerometer_units(
+        imu_time, accel, time, velocity, imu_source, columns.get("accel", "accel"), gps_source=source
+    )
     return [gravity] if gravity is not None else []

@@ -1,4 +1,5 @@
-"""Unit slips that still give a number: an accelerometer in g or with gravity left in, positions in mm or ft.
+"""Unit slips that still give a number: an accelerometer in g or with gravity left in, positions in mm or ft,
+a GPS log wholly in mm or ft.
 
 The checks of :mod:`kalcal.calibration.plausibility` let these through: each value is within its physical
 limit and the velocity fixes agree with the positions. Two fits over the usable fixes name them, as the
@@ -20,15 +21,20 @@ STANDARD_GRAVITY = 9.80665
 ACCEL_UNITS = (("g", STANDARD_GRAVITY),)
 #: position units whose factor a fitted ratio is tested against: p [unit] = factor * p [m]
 POSITION_UNITS = (("millimetres", 1000.0), ("feet", 1 / 0.3048))
+#: units of a GPS log wholly in another unit (position and velocity both), by the factor the fitted ratio of
+#: the accelerometer fit is tested against: v [unit/s] = factor * v [m/s], so the GPS velocity changes are
+#: that many times the integrated accelerometer (the position fit, velocity against position, sees 1)
+GPS_UNITS = (("millimetres (and mm/s)", 1000.0), ("feet (and ft/s)", 1 / 0.3048))
 #: a fitted ratio within this relative distance of a unit's factor names that unit: wider than
 #: :data:`~kalcal.calibration.plausibility.UNIT_TOLERANCE`, for an integral of noisy samples is fitted, not a difference of fixes
 SLIP_TOLERANCE = 0.05
-#: ... and only when it lies this many standard errors from 1 (what SI units give): the fits' residuals
-#: are not white (the bias drifts, the integrals carry the noise along), so their standard errors are
-#: optimistic and the margin is wide
+#: ... and only when it lies this many standard errors from 1 (what SI units give) and from 0 (what a log
+#: without motion gives): the fits' residuals are not white (the bias drifts, the integrals carry the
+#: noise along), so their standard errors are optimistic and the margin is wide
 SLIP_Z = 10.0
-#: a bias within this relative distance of g is gravity left in: g varies by 0.3 % over the Earth, a mount
-#: tilted by 25 degrees reads 0.91 g, a MEMS bias is at most a few hundredths of g
+#: a bias within this relative distance of g is gravity left in: g is within about 0.27 % of standard
+#: gravity over the Earth (9.780 m/s^2 at the equator, 9.832 at the poles), a mount tilted by 25 degrees
+#: reads 0.91 g, a MEMS bias is at most a few hundredths of g
 GRAVITY_BAND = 0.1
 
 
@@ -65,8 +71,12 @@ def _fit(y: np.ndarray, columns: list[np.ndarray]) -> tuple[np.ndarray, np.ndarr
 
 
 def _named_slip(ratio: float, se: float, factor: float) -> bool:
-    """Whether a fitted ``ratio`` (standard error ``se``) is the unit of ``factor``, not SI's 1."""
-    return abs(ratio / factor - 1) <= SLIP_TOLERANCE and abs(ratio - 1) > SLIP_Z * se
+    """Whether a fitted ``ratio`` (standard error ``se``) is the unit of ``factor``: within
+    :data:`SLIP_TOLERANCE` of it, and measurably different (:data:`SLIP_Z` standard errors) both from SI's
+    1 and from 0. The last keeps a log without motion out: its slope is 0 give or take a wide se (0.045 on
+    a 60 s motionless log), and without it landed within 5% of 1/g in 3 of 300 seeds, refused as "converted
+    from g to m/s^2 twice"."""
+    return abs(ratio / factor - 1) <= SLIP_TOLERANCE and abs(ratio - 1) > SLIP_Z * se and abs(ratio) > SLIP_Z * se
 
 
 def accelerometer_units(
@@ -76,15 +86,18 @@ def accelerometer_units(
     velocity: np.ndarray,
     imu_source: str,
     column: str = "accel",
+    gps_source: str = "the GPS log",
 ) -> CalibrationWarning | None:
     """The accelerometer against the GPS velocities: its unit, and gravity left in.
 
     With I(t) the accelerometer integrated by the trapezoid rule (at the fix times, interpolated), the
     velocity fixes are fitted as v_f = k I(t_f) + v_0 - b t_f: a measured a [unit] = (a [m/s^2] + b) / k
     gives k = 1 for m/s^2 and k = g = 9.807 for an accelerometer in g (the integrated accelerometer is
-    then 1/9.81 of the GPS velocity change). A k within :data:`SLIP_TOLERANCE` of a unit's factor
-    (:data:`ACCEL_UNITS`), or of its inverse (converted twice), and :data:`SLIP_Z` standard errors from 1 is
-    an error naming the unit. Otherwise, b is fitted with k = 1 (v_f - I(t_f) = v_0 - b t_f, which a log
+    then 1/9.81 of the GPS velocity change), and k = 3.281 or 1000 for a GPS log wholly in feet or millimetres
+    (position and velocity both: the position fit of :func:`position_units` then sees 1). A k within
+    :data:`SLIP_TOLERANCE` of an accelerometer unit's factor (:data:`ACCEL_UNITS`), or of its inverse
+    (converted twice), or of a GPS unit's factor (:data:`GPS_UNITS`), and :data:`SLIP_Z` standard errors
+    from both 1 and 0 is an error naming the unit. Otherwise, b is fitted with k = 1 (v_f - I(t_f) = v_0 - b t_f, which a log
     without motion still determines): a b within :data:`GRAVITY_BAND` of +-g and :data:`SLIP_Z` standard
     errors from 0 is gravity left in the vertical accelerometer, flagged (the calibrated bias then holds
     gravity; it is a number, not the sensor's bias).
@@ -97,6 +110,8 @@ def accelerometer_units(
         The usable fixes: times within [imu_time[0], imu_time[-1]] (s) and velocities (m/s).
     imu_source, column : str
         The accelerometer log and its column, quoted.
+    gps_source : str
+        The GPS log, quoted when its units are named.
 
     Returns
     -------
@@ -106,7 +121,7 @@ def accelerometer_units(
     Raises
     ------
     DataError
-        When k names a unit.
+        When k names a unit (of the accelerometer, or of the GPS log).
     """
     imu_time, accel = np.asarray(imu_time, dtype=float), np.asarray(accel, dtype=float)
     fix_time, velocity = np.asarray(fix_time, dtype=float), np.asarray(velocity, dtype=float)
@@ -130,6 +145,11 @@ def accelerometer_units(
                 raise DataError(
                     f"{imu_source}: column {column!r}: {detail}: the acceleration looks {factor:.4g} times too large "
                     f"(converted from {unit} to m/s^2 twice?)"
+                )
+        for unit, factor in GPS_UNITS:
+            if _named_slip(k, se, factor):
+                raise DataError(
+                    f"{gps_source}: {detail}: are its position and velocity in {unit} instead of m (and m/s)?"
                 )
     fitted = _fit(velocity - integral, [np.ones_like(elapsed), elapsed])
     if fitted is None:
@@ -155,7 +175,7 @@ def position_units(
     p_f = m V(t_f) + p_0: m = 1 for positions in m, 1000 for millimetres and 3.281 for feet (the
     position differences are that many times the integrated velocity). An m within
     :data:`SLIP_TOLERANCE` of a unit's factor (:data:`POSITION_UNITS`) and :data:`SLIP_Z` standard errors
-    from 1 is an error naming the unit.
+    from both 1 and 0 is an error naming the unit.
 
     Parameters
     ----------

@@ -7,6 +7,7 @@ import errno
 import fnmatch
 import os
 import shutil
+import stat
 from pathlib import Path
 
 from kalcal.interrupts import deferred_signals
@@ -83,6 +84,34 @@ def _outside(path: Path) -> OSError:
     return OSError(errno.EXDEV, "a folder on its way is a symbolic link out of the folder", str(path))
 
 
+def _make_folders(out: Path, relative: str) -> None:
+    """The folders of ``out/relative`` made one level at a time, each level opened without following a link.
+
+    Each level is made (``mkdir`` relative to the open folder above it) and then opened with
+    ``O_NOFOLLOW``: a level that is a symbolic link (one made after the checks) stops the commit before
+    anything is made beyond it, so no folder is ever created outside ``out``. (``mkdir(parents=True)``
+    followed the link and made ``elsewhere/deep/`` before the check that refused the file.)
+    """
+    parts = Path(relative).parent.parts
+    if not parts:
+        return
+    fd = os.open(resolved(out), os.O_RDONLY | os.O_DIRECTORY | os.O_CLOEXEC)
+    try:
+        for depth, part in enumerate(parts):
+            with contextlib.suppress(FileExistsError):
+                os.mkdir(part, dir_fd=fd)  # never through a link: mkdir does not follow its last component
+            try:
+                child = os.open(part, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW | os.O_CLOEXEC, dir_fd=fd)
+            except OSError:
+                if stat.S_ISLNK(os.stat(part, dir_fd=fd, follow_symlinks=False).st_mode):
+                    raise _outside(Path(out, *parts[: depth + 1])) from None
+                raise
+            os.close(fd)
+            fd = child
+    finally:
+        os.close(fd)
+
+
 def _remove(out: Path, relative: str) -> None:
     root = Path(resolved(out))
     path = root / relative
@@ -154,8 +183,8 @@ def commit(
                 _remove(out, relative)
             for relative in new:
                 target = out / relative
-                target.parent.mkdir(parents=True, exist_ok=True)
-                if not inside(out, relative):
+                _make_folders(out, relative)
+                if not inside(out, relative):  # a link made since: never a rename outside OUT
                     raise _outside(target)
                 os.replace(staging / relative, target)
             _fsync_folders(out, [*new, *removed])

@@ -10,7 +10,9 @@ default dependency of kalcal.
 distributed logs its own events (a worker lost, the nanny restarting it, keys gathered again) as several
 lines on stderr. Given a ``notes`` callback, :func:`dask_client` routes them while the client lives: each
 event is one call of ``notes(text)`` (the CLI prints ``kalcal: note: TEXT``), and the log lines of the
-local cluster's worker processes are forwarded to this process and routed the same way.
+local cluster's worker processes are forwarded to this process and routed the same way. A worker the nanny
+starts in a lost one's place ignores SIGINT once it is set up (a Ctrl-C had printed its traceback); one in
+the second or two while that worker imports still reaches it. Once a run is stopped, no more notes.
 """
 
 from __future__ import annotations
@@ -36,52 +38,67 @@ def _quiet_distributed() -> Iterator[None]:
         yield
 
 
-#: log records of distributed that follow one another by less than this (s) are one event: a worker lost
-#: is logged by the scheduler, the client and the nanny within milliseconds on an idle machine, and
-#: seconds apart on a loaded one (the nanny's restart waits for the process to be reaped)
+#: records of distributed of one kind (:func:`event_kind`) within this many seconds of the first record of
+#: their event belong to that event: a worker lost is logged by the scheduler, the client and the nanny
+#: within a tenth of a second on an idle machine, and seconds apart on a loaded one (the nanny's restart
+#: waits for the process to be reaped). The window is counted from the event's first record, so a steady
+#: stream of records (a memory warning every second, say) is one note per window, not one note in all.
 EVENT_WINDOW_S = 5.0
 
-#: what a note says for the first record of an event, by the record's message
-_EVENTS = (
-    (
-        re.compile(r"Removing worker '?([^' ]+?)'? caused the cluster to lose"),
-        "a Dask worker ({0}) was lost; its tasks run again on the others (the numbers do not change)",
-    ),
-    (
-        re.compile(r"Restarting worker"),
-        "a Dask worker stopped and is restarted; its tasks run again (the numbers do not change)",
-    ),
+#: the note of a lost worker, whichever of its records arrives first
+WORKER_LOST = "a Dask worker was lost; its tasks run again (the numbers do not change)"
+
+#: the records distributed (2026.8) logs when a worker dies mid-run, by message. Which of them arrives
+#: first varies from run to run: the scheduler's ``Couldn't gather keys: {key: 'memory'}`` (the key was in the
+#: dead worker's memory, not an out-of-memory error) came first in some runs, the nanny's ``Restarting
+#: worker`` in others, so every one of them names the same event.
+_WORKER_LOST_RECORDS = re.compile(
+    r"Removing worker .* caused the cluster to lose"
+    r"|Restarting worker"
+    r"|Couldn't gather (\d+ )?keys"
+    r"|Worker process \d+ was killed by (unknown )?signal"
 )
 
 
+def event_kind(record: logging.LogRecord) -> str:
+    """The kind of event a record of distributed belongs to: ``"worker-lost"`` for the records of a
+    worker dying (:data:`_WORKER_LOST_RECORDS`), ``"other"`` for any other."""
+    return "worker-lost" if _WORKER_LOST_RECORDS.search(record.getMessage()) else "other"
+
+
 def event_text(record: logging.LogRecord) -> str:
-    """The note of an event that begins with ``record``: a known event in words, any other as
-    ``Dask (logger, level): first line of the message``."""
+    """The note of an event whose first record is ``record``: :data:`WORKER_LOST` for a worker's death,
+    any other as ``Dask (logger, level): first line of the message``."""
+    if event_kind(record) == "worker-lost":
+        return WORKER_LOST
     message = record.getMessage().splitlines()[0] if record.getMessage() else ""
-    for pattern, text in _EVENTS:
-        if (match := pattern.search(message)) is not None:
-            return text.format(*match.groups())
     return f"Dask ({record.name}, {record.levelname.lower()}): {message[:300]}"
 
 
 class NoteHandler(logging.Handler):
-    """A logging handler that turns each event of distributed's log (records closer than
-    :data:`EVENT_WINDOW_S` to the one before) into one ``notes(text)`` call (:func:`event_text`)."""
+    """A logging handler that turns each event of distributed's log into one ``notes(text)`` call
+    (:func:`event_text`). An event is the records of one kind (:func:`event_kind`) from its first record
+    to :data:`EVENT_WINDOW_S` after it; a record of another kind inside that window is an event of its
+    own (a worker lost during a stream of memory warnings is still noted)."""
 
     def __init__(self, notes: Callable[[str], None], window: float = EVENT_WINDOW_S):
         super().__init__(level=logging.WARNING)
         self.notes = notes
         self.window = window
-        self.last = float("-inf")
+        self.started: dict[str, float] = {}  # kind -> time of the first record of its current event (s)
+        self.muted = False  # set when the run is stopped: the cluster's closing records are not news
 
     def emit(self, record: logging.LogRecord) -> None:
-        fresh = record.created - self.last > self.window
-        self.last = max(self.last, record.created)
-        if fresh:
-            try:
-                self.notes(event_text(record))
-            except Exception:
-                self.handleError(record)
+        if self.muted:
+            return
+        kind = event_kind(record)
+        if record.created - self.started.get(kind, float("-inf")) <= self.window:
+            return
+        self.started[kind] = record.created
+        try:
+            self.notes(event_text(record))
+        except Exception:
+            self.handleError(record)
 
 
 def _distributed_loggers() -> list[logging.Logger]:
@@ -124,6 +141,11 @@ def _worker_logs_forwarded_only(client) -> None:
 
     class SilentStderr(WorkerPlugin):
         def setup(self, worker):
+            # a worker the nanny starts again (after one was lost) is spawned with SIGINT at its default,
+            # and a Ctrl-C then printed its KeyboardInterrupt traceback: ignored here, in the worker's main
+            # thread, as for the first workers (:func:`_sigint_ignored`)
+            if threading.current_thread() is threading.main_thread():
+                signal.signal(signal.SIGINT, signal.SIG_IGN)
             names = ["distributed", *(n for n in logging.root.manager.loggerDict if n.startswith("distributed."))]
             for logger in map(logging.getLogger, names):
                 for handler in list(logger.handlers):
@@ -213,6 +235,11 @@ def _sigint_ignored() -> Iterator[None]:
 
 
 def _quiet_dask() -> None:
-    """Silence the ``distributed`` loggers of this process (for the rest of it)."""
+    """Silence the ``distributed`` loggers of this process (for the rest of it), and the notes of its log:
+    records forwarded from the workers are handled whatever the logger's level."""
     for name in ["distributed", *[n for n in logging.root.manager.loggerDict if n.startswith("distributed.")]]:
-        logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+        logger = logging.getLogger(name)
+        logger.setLevel(logging.CRITICAL + 1)
+        for handler in logger.handlers:
+            if isinstance(handler, NoteHandler):
+                handler.muted = True
