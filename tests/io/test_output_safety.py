@@ -373,3 +373,23 @@ def test_every_file_and_folder_is_synced_before_the_manifest_says_complete(tmp_p
     # the manifest itself: its bytes synced before the rename, and the folder after it
     after = [path for kind, path in events[complete:] if kind == "fsync"]
     assert after[0].endswith(f"{MANIFEST}.tmp") and after[-1] == root
+
+
+def test_a_refused_verify_with_workers_starts_no_dask_cluster(tmp_path, monkeypatch):
+    """The folder is locked before the run's Dask cluster starts: a second ``verify --workers`` into a held
+    folder is refused without paying for a cluster (docs/outputs.md: it stops before it starts)."""
+    import kalcal
+    from kalcal.montecarlo import distributed
+
+    started = []
+
+    def no_cluster(*args, **kwargs):
+        started.append(args)
+        raise AssertionError("a Dask cluster was started for a refused run")
+
+    monkeypatch.setattr(distributed, "dask_client", no_cluster)
+    out = tmp_path / "out"
+    with run_outputs(out, "verify"):
+        with pytest.raises(OutputError, match="another kalcal run is writing into this folder"):
+            kalcal.verify(n=1000, workers=2, out=out, report=False)
+    assert started == []

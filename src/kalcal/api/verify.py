@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -93,14 +94,17 @@ def verify(
         engine=engine, confidence=confidence, workers=threads, command=command, long_run=long_run,
         batch_size=batch_size, checkpoint=checkpoint, form=form, notes=notes, max_run_s=max_run_s,
     )
-    with progress_callback(progress, f"{scenario if isinstance(scenario, str) else 'model'} x {n:,}") as update:
+    def cluster():
+        """The Dask client the run computes on: the caller's, a new one for ``workers``/``scheduler``, or none."""
         if client is None and (workers is not None or scheduler is not None):
-            with dask_client(workers, scheduler, notes) as client:
-                return _run(model, n, seed, options, client, update, out, report, realization)
-        return _run(model, n, seed, options, client, update, out, report, realization)
+            return dask_client(workers, scheduler, notes)
+        return contextlib.nullcontext(client)
+
+    with progress_callback(progress, f"{scenario if isinstance(scenario, str) else 'model'} x {n:,}") as update:
+        return _run(model, n, seed, options, cluster, update, out, report, realization)
 
 
-def _run(model, n, seed, options, client, update, out, report, realization) -> VerificationResult:
+def _run(model, n, seed, options, cluster, update, out, report, realization) -> VerificationResult:
     import dataclasses
 
     from kalcal.io.outputs import inputs_of, run_outputs
@@ -108,11 +112,14 @@ def _run(model, n, seed, options, client, update, out, report, realization) -> V
     from kalcal.jobs.verify_save import OUTPUT_NAMES, save_verification
 
     if out is None:
-        return VerificationResult.from_run(compute_verification(model, n, seed, client=client, progress=update, **options))
-    # the folder is checked before the run starts, and the run's files are put in place as one set
+        with cluster() as client:
+            return VerificationResult.from_run(compute_verification(model, n, seed, client=client, progress=update, **options))
+    # the folder is checked and locked before a Dask cluster starts or the run begins, and the run's files
+    # are put in place as one set
     protect = [options["checkpoint"], *inputs_of(model)]
     with run_outputs(out, "verify", names=OUTPUT_NAMES, protect=protect) as staging:
-        run = compute_verification(model, n, seed, client=client, progress=update, **options)
+        with cluster() as client:
+            run = compute_verification(model, n, seed, client=client, progress=update, **options)
         saved = save_verification(run, staging, report=report, realization=realization, progress=update)
     final = {key: Path(out) / Path(path).relative_to(staging) for key, path in saved.paths.items()}
     # the summary as written: its timing covers the writing too
