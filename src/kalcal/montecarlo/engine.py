@@ -179,10 +179,12 @@ class RunEstimate:
     workers : int
         Threads, or the Dask cluster's threads.
     memory_bytes : int
-        The most the run's sums may hold at once (bytes): one task's sums as measured, times the tasks in
-        flight and those waiting for their turn in the block-order fold, plus the fold itself. It does not
-        grow with N; the blocks' own working arrays (per thread or worker, freed as each block ends) are
-        not in it.
+        The run's sums at once in the usual case (bytes): one task's sums as measured, times twice the
+        tasks in flight (those running, and as many finished ones waiting for their turn in the
+        block-order fold), plus the fold itself. It does not grow with N. It is an estimate, not a bound:
+        a task that stalls (a Dask worker lost and its task rerun) holds the fold back, and every task
+        finished after it waits in memory until it ends; the blocks' own working arrays (per thread or
+        worker, freed as each block ends) are not in it.
     """
 
     total_s: float
