@@ -163,3 +163,45 @@ def test_the_batched_whiteness_parts_are_the_checks(p):
             assert check.parts[1].pvalue == pytest.approx(float(p_port[0]), rel=1e-9)
         else:
             assert check.parts[0].comparisons == p * p * n_updates * (n_updates - 1) // 2
+
+
+def _own_cov_failures(n: int, runs: int, n_updates: int = 150, d: int = 3, seed: int = 0) -> tuple[dict, dict]:
+    """Failures of the state checks over ``runs`` null ensembles whose P_k differs between realizations
+    (``_null_ensembles.own_cov_statistics``): each realization whitened by its own P_k, and the same
+    ensembles whitened by the mean P (the per-realization sums dropped)."""
+    rng = np.random.default_rng(seed)
+    info = null.info(n_updates, d, 1)
+    p_cov = null.filter_covariances(rng, n_updates, d)
+    names = ("covariance", "elements", "centered_nees", "orthogonality")
+    own, mean_p = dict.fromkeys(names, 0), dict.fromkeys(names, 0)
+    for _ in range(runs):
+        s = null.own_cov_statistics(rng, p_cov, n)
+        for failures, stats_ in ((own, s), (mean_p, null.without_own_whitening(s))):
+            cov = check_covariance(stats_, info, CONFIDENCE)
+            failures["covariance"] += not cov.passed
+            failures["elements"] += not cov.parts[0].passed
+            failures["centered_nees"] += not cov.parts[1].passed
+            failures["orthogonality"] += not check_orthogonality(stats_, info, CONFIDENCE).passed
+    return own, mean_p
+
+
+def _assert_own_whitening_matters(n: int, runs: int, seed: int) -> None:
+    """Whitened realization by realization, each check and part inside its rate; whitened by the mean
+    P, the covariance check fails far above it (more than half of the ensembles: the errors' scale
+    mixture has variances far wider than chi-square's)."""
+    own, mean_p = _own_cov_failures(n, runs, seed=seed)
+    print(f"whitened by the mean P: {mean_p}")
+    _assert_rates(own, runs, n)
+    assert mean_p["covariance"] > runs / 2, mean_p
+
+
+def test_per_realization_whitening_holds_the_rates_where_p_varies_fast():
+    """400 ensembles at N = 100 whose P_k differs between realizations."""
+    _assert_own_whitening_matters(100, 400, seed=2)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("n", "runs"), [(100, 10000), (400, 3000)])
+def test_per_realization_whitening_holds_the_rates_where_p_varies(n, runs):
+    """10,000 ensembles at N = 100 and 3,000 at N = 400 (each drawn realization by realization)."""
+    _assert_own_whitening_matters(n, runs, seed=n + 1)
