@@ -14,12 +14,14 @@ a smoke test of the same statistic.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from scipy import stats
 
 from kalcal.verification.checks import check_mean_error, check_nis, check_orthogonality
-from kalcal.verification.covariance import check_covariance, correlation_z
+from kalcal.verification.covariance import check_covariance, correlation_z, t_equivalent_z, whitened_moments
 from kalcal.verification.distributions import chi2_sf, normal_sf
 from kalcal.verification.results import chi2_two_sided_pvalues
 from kalcal.verification.whiteness import check_residual_whiteness
@@ -172,7 +174,7 @@ def _own_cov_failures(n: int, runs: int, n_updates: int = 150, d: int = 3, seed:
     rng = np.random.default_rng(seed)
     info = null.info(n_updates, d, 1)
     p_cov = null.filter_covariances(rng, n_updates, d)
-    names = ("covariance", "elements", "centered_nees", "orthogonality")
+    names = ("mean_error", "covariance", "elements", "centered_nees", "orthogonality")
     own, mean_p = dict.fromkeys(names, 0), dict.fromkeys(names, 0)
     for _ in range(runs):
         s = null.own_cov_statistics(rng, p_cov, n)
@@ -182,17 +184,27 @@ def _own_cov_failures(n: int, runs: int, n_updates: int = 150, d: int = 3, seed:
             failures["elements"] += not cov.parts[0].passed
             failures["centered_nees"] += not cov.parts[1].passed
             failures["orthogonality"] += not check_orthogonality(stats_, info, CONFIDENCE).passed
+            failures["mean_error"] += not check_mean_error(stats_, info, CONFIDENCE).passed
     return own, mean_p
 
 
-def _assert_own_whitening_matters(n: int, runs: int, seed: int) -> None:
+def _assert_own_whitening_matters(n: int, runs: int, seed: int, exact_lower: bool = False) -> None:
     """Whitened realization by realization, each check and part inside its rate; whitened by the mean
     P, the covariance check fails far above it (more than half of the ensembles: the errors' scale
-    mixture has variances far wider than chi-square's)."""
+    mixture has variances far wider than chi-square's).
+
+    ``exact_lower``: mean_error's K d whitened comparisons are independent t(N - 1) (the components of
+    eps are iid N(0, 1) and independent across updates in these draws), so its Bonferroni family fails
+    at exactly 1 - (1 - alpha / m)^m; its count must also stay above that rate's 0.01% binomial quantile
+    (the raw mean over a standard error of errors of different variances, a scale mixture, fell below it)."""
     own, mean_p = _own_cov_failures(n, runs, seed=seed)
     print(f"whitened by the mean P: {mean_p}")
     _assert_rates(own, runs, n)
     assert mean_p["covariance"] > runs / 2, mean_p
+    if exact_lower:
+        m = 150 * 3
+        exact = 1.0 - (1.0 - ALPHA / m) ** m
+        assert own["mean_error"] >= stats.binom.ppf(1e-4, runs, exact), (own["mean_error"], exact)
 
 
 def test_per_realization_whitening_holds_the_rates_where_p_varies_fast():
@@ -204,4 +216,23 @@ def test_per_realization_whitening_holds_the_rates_where_p_varies_fast():
 @pytest.mark.parametrize(("n", "runs"), [(100, 10000), (400, 3000)])
 def test_per_realization_whitening_holds_the_rates_where_p_varies(n, runs):
     """10,000 ensembles at N = 100 and 3,000 at N = 400 (each drawn realization by realization)."""
-    _assert_own_whitening_matters(n, runs, seed=n + 1)
+    _assert_own_whitening_matters(n, runs, seed=n + 1, exact_lower=True)
+
+
+def test_mean_error_tests_the_whitened_error_where_p_varies():
+    """Where the whitened sums are kept, mean_error is the t(N - 1) of each whitened component's mean
+    over its own standard error: a mean in the whitened errors alone fails it, and its statistic is
+    that t's normal equivalent (the raw errors, of different variances, have no exact law)."""
+    rng = np.random.default_rng(4)
+    n_updates, d, n = 20, 3, 100
+    info = null.info(n_updates, d, 1)
+    s = null.own_cov_statistics(rng, null.filter_covariances(rng, n_updates, d), n)
+    white = whitened_moments(s)
+    t = white.mean / np.sqrt(np.diagonal(white.cov, axis1=1, axis2=2) / n)
+    expected = float(np.max(np.abs(t_equivalent_z(t, n - 1))))
+    assert check_mean_error(s, info, CONFIDENCE).statistic == pytest.approx(expected, rel=1e-12)
+    # half a standard deviation in the whitened errors' mean, the raw sums untouched: t about 5 at N = 100
+    shifted = dataclasses.replace(s, mean_whitened_error=s.mean_whitened_error + 0.5)
+    result = check_mean_error(shifted, info, CONFIDENCE)
+    assert not result.passed and "mean whitened error" in result.detail
+    assert check_mean_error(null.without_own_whitening(shifted), info, CONFIDENCE).passed
