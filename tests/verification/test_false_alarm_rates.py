@@ -149,7 +149,8 @@ def test_whiteness_parts_at_their_rates_fast():
 @pytest.mark.parametrize("p", [1, 2])
 def test_the_batched_whiteness_parts_are_the_checks(p):
     """The batch above forms the parts' p-values as the check does: equal to rounding on a few ensembles
-    (p = 1 by the batch itself; p = 2 the check on its own, inside its rate on a smaller sample)."""
+    (p = 1; the nis p-value at p = 1 and 2). The batch is of scalar innovations only: the check itself
+    at p = 2 is held to its rates by :func:`test_whiteness_and_nis_checks_at_their_rates_with_two_measurements`."""
     rng = np.random.default_rng(3)
     n_updates, n = 30, 100
     lower = np.tril(np.ones((n_updates, n_updates), dtype=bool), -1)
@@ -236,3 +237,34 @@ def test_mean_error_tests_the_whitened_error_where_p_varies():
     result = check_mean_error(shifted, info, CONFIDENCE)
     assert not result.passed and "mean whitened error" in result.detail
     assert check_mean_error(null.without_own_whitening(shifted), info, CONFIDENCE).passed
+
+
+def _check_failures_p2(n: int, runs: int, n_updates: int = 30, seed: int = 0) -> dict[str, int]:
+    """Failures of the whiteness check itself (and its parts) and of nis over ``runs`` null ensembles of
+    K updates of p = 2 correlated innovations (``_null_ensembles.innovation_statistics``), one at a time."""
+    rng = np.random.default_rng(seed)
+    info = null.info(n_updates, 1, 2)
+    failures = dict.fromkeys(("residual_whiteness", "pairs", "portmanteau", "nis"), 0)
+    for _ in range(runs):
+        s = null.innovation_statistics(rng, n_updates, 2, n)
+        check = check_residual_whiteness(s, info, CONFIDENCE)
+        failures["residual_whiteness"] += not check.passed
+        failures["pairs"] += not check.parts[0].passed
+        failures["portmanteau"] += not check.parts[1].passed
+        failures["nis"] += not check_nis(s, info, CONFIDENCE).passed
+    return failures
+
+
+def test_whiteness_and_nis_checks_at_their_rates_with_two_measurements():
+    """The checks themselves (not the batch) at p = 2, K = 30, N = 100: 2,000 ensembles, each count
+    within its share's 99.99% binomial quantile (4,000 ms-scale checks: about 8 s)."""
+    runs = 2000
+    _assert_rates(_check_failures_p2(100, runs, seed=5), runs, 100)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("n", [100, 400])
+def test_whiteness_and_nis_checks_at_their_rates_with_two_measurements_slow(n):
+    """20,000 ensembles of the checks themselves at p = 2, K = 30."""
+    runs = 20000
+    _assert_rates(_check_failures_p2(n, runs, seed=n + 2), runs, n)
