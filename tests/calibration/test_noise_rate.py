@@ -102,9 +102,48 @@ def test_a_per_sample_setting_written_for_another_rate_warns_naming_both(logs, t
     assert "filter.accel_noise_density = 0.002 m/s^2/sqrt(Hz)" in white
     walk = found["filter.bias_walk_std"]["message"]
     assert "1.41 times" in walk and "filter.bias_walk_density = 0.001 m/s^3/sqrt(Hz)" in walk
-    # the same file at its own rate: nothing to warn of
-    assert not [w for w in _calibrate(sim, tmp_path / "same", "--config", old, "--set", "scenario.imu_rate=200")["warnings"]
-                if w["code"].startswith("noise-rate")]
+    # a file written at the log's own rate: nothing to warn of
+    own = tmp_path / "own.toml"
+    own.write_text(old.read_text().replace("imu_rate = 100.0", "imu_rate = 200.0"))
+    assert not [w for w in _calibrate(sim, tmp_path / "same", "--config", own)["warnings"] if w["code"].startswith("noise-rate")]
+    # the file's rate replaced on the command line: the rate the file's values were written for is unknown now
+    over = _calibrate(sim, tmp_path / "over", "--config", old, "--set", "scenario.imu_rate=200")["warnings"]
+    assert sorted(w["code"] for w in over if w["code"].startswith("noise-rate")) == ["noise-rate-unknown"] * 2
+
+
+def test_a_rate_on_the_command_line_is_not_an_old_files_rate(logs, tmp_path):
+    """An old noise file (its rate in a comment only) with ``--set scenario.imu_rate=200``: the command
+    line's rate says nothing about the rate the file's value was written for, so the warning stays."""
+    _, sim = logs
+    old = tmp_path / "old.toml"
+    old.write_text("# kalcal noise: ... Per-sample values hold at 100 Hz;\n\n[filter]\naccel_noise_std = 0.02\n")
+    summary = _calibrate(sim, tmp_path / "cal", "--config", old, "--set", "scenario.imu_rate=200")
+    assert [w["code"] for w in summary["warnings"] if w["code"].startswith("noise-rate")] == ["noise-rate-unknown"]
+    # a value given on the command line with its rate is the command line's own: no warning
+    both = _calibrate(sim, tmp_path / "set", "--set", "filter.accel_noise_std=0.02", "--set", "scenario.imu_rate=200")
+    assert not [w for w in both["warnings"] if w["code"].startswith("noise-rate")]
+
+
+def test_the_built_in_noise_is_a_density_at_the_default_rate(tmp_path):
+    """The built-in 0.02 m/s^2 per sample holds at scenario.imu_rate (200 Hz): a log at another rate
+    gets the same noise density, 0.02 sqrt(rate / 200) per sample; within 1% of 200 Hz it stays 0.02;
+    a value given (filter or truth) stays as given."""
+    scenario = build_scenario("accel-gps")
+    assert scenario.at_rate(100.0).filter_settings.accel_noise_std == pytest.approx(0.02 * np.sqrt(0.5), rel=1e-12)
+    assert scenario.at_rate(400.0).filter_settings.accel_noise_std == pytest.approx(0.02 * np.sqrt(2.0), rel=1e-12)
+    assert scenario.at_rate(201.0).filter_settings.accel_noise_std == 0.02
+    assert build_scenario("accel-gps", assignments=["scenario.imu_rate=100"]).at_rate(100.0).filter_settings.accel_noise_std == 0.02
+    for key in ("filter.accel_noise_std", "truth.accel_noise_std"):
+        given = build_scenario("accel-gps", assignments=[f"{key}=0.03"])
+        assert given.at_rate(100.0).filter_settings.accel_noise_std == 0.03
+    # a 100 Hz log calibrated with the built-in noise: the same sigma as with its 100 Hz per-sample value
+    sim = tmp_path / "sim"
+    assert _invoke("simulate", "accel-gps", "--seed", "4", "--out", sim, "--set", "scenario.imu_rate=100").exit_code == 0
+    default = _calibrate(sim, tmp_path / "default")
+    at_rate = _calibrate(sim, tmp_path / "set", "--set", f"filter.accel_noise_std={float(0.02 * np.sqrt(0.5))!r}")
+    assert _bias_sigma(default) == pytest.approx(_bias_sigma(at_rate), rel=1e-9)
+    stale = _calibrate(sim, tmp_path / "stale", "--set", "filter.accel_noise_std=0.02")
+    assert _bias_sigma(stale) > 1.01 * _bias_sigma(default)
 
 
 def test_density_converts_at_the_rate_it_runs_at():

@@ -1,7 +1,9 @@
 """The bias sigma that carries the noise settings' uncertainty, and the sigma the diagnostics disown.
 
 The 10x case: the accelerometer noise 10 times the filter's (truth.accel_noise_std = 0.2 against 0.02
-m/s^2 per sample) on the default 30 s scenario. The conditional sigma's z-scores are far too wide; the
+m/s^2 per sample) on the default 30 s scenario, calibrated with trapezoid integration, prior "auto" and
+first-fix initialization. The conditional sigma's z-scores are far too wide (root mean square 7.02 over
+seeds 0-29 here; the issue's 4.83 came from other calibration options); the
 sigma over the settings the log cannot reject must bring their spread to at most the chi-square bound of
 a unit spread, and on logs whose settings are right agree with the conditional one within the warning's
 factor.
@@ -103,22 +105,39 @@ def test_the_settings_sigma_carries_ten_times_the_accelerometer_noise_over_30_lo
     assert np.sqrt(np.mean(conditional**2)) > _sd_bound(30, 0.001)
 
 
+#: the settings sigma's cost on logs whose settings are right: its median ratio to the conditional one
+#: over seeds 0-29 was 4.68 (4.7 over seeds 100-199); a median of 30 above 6 means the region or its
+#: maximum grew (a sigma that is safe by being needlessly large)
+MEDIAN_RATIO_LIMIT = 6.0
+#: the same over the fast test's 4 logs (seeds 0-3: 4.66), looser for 4 logs: above the single logs'
+#: 90% quantile (7.2 over seeds 100-199)
+MEDIAN_RATIO_LIMIT_FAST = 8.0
+
+
 @pytest.mark.slow
 def test_with_the_right_settings_the_two_sigmas_agree_within_the_warnings_factor():
     """30 logs whose filter is the truth: the settings sigma exceeds the conditional one by the warning's
-    factor on at most the Binomial(30, 0.03) 0.999 quantile of them (WARN_FACTOR's documented rate: 0 of
-    100 logs exceeded it), and its z-scores stay within the unit spread's bound."""
+    factor on at most 1 of them, its median ratio is at most MEDIAN_RATIO_LIMIT, and its z-scores stay
+    within the unit spread's bound.
+
+    At most 1 of 30: WARN_FACTOR (12) lies above the largest ratio measured on right settings (11.0 over
+    seeds 100-199: 0 of 100 exceeded it); at a rate of 1% two or more of 30 would exceed it with
+    probability 3.6%, and these seeded logs reach at most 9.99."""
     _, over, ratios = _z_scores(range(30), 0.02)
-    print(f"ratio: median {np.median(ratios):.3g}, largest {ratios.max():.3g}; factor {WARN_FACTOR:g}")
-    assert np.count_nonzero(ratios > WARN_FACTOR) <= stats.binom.ppf(0.999, 30, 0.03)
+    print(f"ratio: median {np.median(ratios):.3g}, largest {ratios.max():.3g}; factor {WARN_FACTOR:g}; "
+          f"z rms over the settings {np.sqrt(np.mean(over**2)):.3f}")
+    assert np.count_nonzero(ratios > WARN_FACTOR) <= 1
+    assert np.median(ratios) <= MEDIAN_RATIO_LIMIT
     assert np.all(ratios >= 1.0)
     assert np.sqrt(np.mean(over**2)) <= _sd_bound(30)
 
 
 def test_with_the_right_settings_the_settings_sigma_stays_within_the_factor_fast():
-    """4 logs whose filter is the truth: no warning, and the settings sigma never below the conditional one."""
+    """4 logs whose filter is the truth: no warning, the settings sigma never below the conditional one,
+    and its median ratio at most MEDIAN_RATIO_LIMIT_FAST (its cost bounded from above)."""
     _, _, ratios = _z_scores(range(4), 0.02)
     assert np.all((ratios >= 1.0) & (ratios <= WARN_FACTOR))
+    assert np.median(ratios) <= MEDIAN_RATIO_LIMIT_FAST
 
 
 def test_a_rover_like_log_with_the_default_filter_marks_its_sigma_untrusted_everywhere(tmp_path):

@@ -6,13 +6,18 @@ only the ensemble moments, and these have exact laws: the centered scatter of th
 is Wishart(Sigma, N - 1) and independent of its mean, N(mu, Sigma / N); the pair sums of the
 innovations are the Gram matrix of an N x K p normal sample; N times the mean NIS is chi-square(N p).
 Each draw is one ensemble of N realizations, so that tens of thousands of ensembles cost seconds.
+
+Where P_k differs between realizations (:func:`own_cov_statistics`) the moments have no such closed
+law: those ensembles are drawn realization by realization and summed by the accumulators' own code.
 """
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
-from kalcal.montecarlo.accumulators import EnsembleStatistics
+from kalcal.montecarlo.accumulators import BlockResult, EnsembleStatistics, MomentSums, ensemble_statistics
 from kalcal.montecarlo.problem import ProblemInfo
 
 
@@ -107,3 +112,42 @@ def innovation_statistics(rng: np.random.Generator, n_updates: int, p: int, n: i
         residual_own_moment=own,
         residual_second_moment=moment,
     )
+
+
+def own_cov_statistics(rng: np.random.Generator, p_cov: np.ndarray, n: int, spread: float = 1.5) -> EnsembleStatistics:
+    """One ensemble of N = ``n`` realizations of a correct filter whose P_k differs between realizations
+    (data-dependent gains, as scale-bias's), its sums built by :meth:`MomentSums.from_block`, the numpy
+    definition the compiled kernels are held to (each realization whitened by its own P_k).
+
+    Realization j has P_jk = D_jk ``p_cov``_k D_jk, D_jk diagonal with entries exp(U(-spread, spread))
+    (unequal scales per realization, update and state), and error e_jk = L_jk z_jk, z_jk ~ N(0, I) (so
+    eps_jk = L_jk^-1 e_jk ~ N(0, I) exactly). Its estimate depends on P_jk (a filter's estimate and P both
+    follow the data) and not on z: the error stays independent of it given P, as for a correct filter.
+    The error's ensemble covariance is then a scale mixture of normals with mean the mean P, not
+    normal: whitened by the mean P its variances are not chi-square (the check's bound would be
+    anticonservative; :func:`without_own_whitening`).
+    """
+    n_updates, d, _ = p_cov.shape
+    scale = np.exp(rng.uniform(-spread, spread, (n, n_updates, d)))
+    p_own = scale[..., :, None] * p_cov[None] * scale[..., None, :]  # (N, K, d, d)
+    factor = np.linalg.cholesky(p_own)
+    error = np.einsum("nkab,nkb->nka", factor, rng.standard_normal((n, n_updates, d)))
+    sd = np.sqrt(np.diagonal(p_own, axis1=2, axis2=3))
+    estimate = 3.0 * sd + sd * rng.standard_normal((n, n_updates, d)) + rng.standard_normal((n_updates, d))
+    residual = rng.standard_normal((n, n_updates, 1))
+    whitened = np.linalg.solve(factor, error[..., None])[..., 0]
+    block = BlockResult(
+        error=error,
+        estimate=estimate,
+        residual=residual,
+        nees=np.sum(whitened**2, axis=2),
+        nis=residual[..., 0] ** 2,
+        filter_cov_sum=p_own.sum(axis=0),
+        filter_cov=p_own,
+    )
+    return ensemble_statistics(MomentSums.from_block(block))
+
+
+def without_own_whitening(s: EnsembleStatistics) -> EnsembleStatistics:
+    """``s`` without its per-realization whitened moments: the checks then whiten by the mean P."""
+    return dataclasses.replace(s, mean_whitened_error=None, whitened_second_moment=None, whitened_estimate=None)

@@ -160,7 +160,7 @@ def check_rate(
 
 
 def noise_rate_warnings(
-    per_sample: Mapping[str, tuple[float, str | None]], recorded: float | None, rate: float, source: str
+    per_sample: Mapping[str, tuple[float, str | None]], recorded: Mapping[str, float | None], rate: float, source: str
 ) -> list[CalibrationWarning]:
     """Warnings for noise settings given per sample (``filter.accel_noise_std``, ``filter.bias_walk_std``
     or the truth's they fall back to), applied as they stand at a log's rate.
@@ -172,16 +172,17 @@ def noise_rate_warnings(
     (``noise-rate-mismatch``) where they differ by more than :data:`NOISE_RATE_TOLERANCE`. Where no rate is
     recorded (a filter.toml of ``kalcal noise`` from before the densities names it in a comment only), a
     warning that the rate cannot be checked (``noise-rate-unknown``) for a value read from a file; a value
-    given with ``--set`` or in code is taken as given for the log at hand. Both name the density to give
-    instead.
+    given with ``--set`` or in code is taken as given for the log at hand. A file's value has a recorded
+    rate only where the same file gives ``scenario.imu_rate``: ``--set scenario.imu_rate=...`` does not
+    make an old file's rate known. Both name the density to give instead.
 
     Parameters
     ----------
     per_sample : mapping of str to (float, str or None)
         The settings given per sample, by key, m/s^2, and the file each was read from
         (:meth:`AccelGpsScenario.per_sample_settings`).
-    recorded : float or None
-        The rate recorded for them (``scenario.imu_rate`` where given), Hz.
+    recorded : mapping of str to float or None
+        The rate recorded for each, by key, Hz (None where none is).
     rate : float
         The log's median accelerometer rate, Hz.
     source : str
@@ -191,24 +192,25 @@ def noise_rate_warnings(
 
     warnings = []
     for key, (value, file) in per_sample.items():
+        at = recorded.get(key)
         section, name = key.split(".", 1)
         density_key = f"{section}.{DENSITIES[name][0]}"
         unit = DENSITY_UNITS[DENSITIES[name][0]]
         where = f"{file}: " if file else ""
-        if recorded is None and file is not None:
+        if at is None and file is not None:
             warnings.append(CalibrationWarning(
                 "noise-rate-unknown",
                 f"{where}{key} = {value:.6g} m/s^2 is a per-sample value and no rate is recorded for it "
-                f"(scenario.imu_rate not given; a filter.toml of kalcal noise from before the densities names "
+                f"(its file gives no scenario.imu_rate; a filter.toml of kalcal noise from before the densities names "
                 f"its rate in a comment only): it is applied per sample at {source}'s {rate:.6g} Hz, which "
                 f"cannot be checked. Give {density_key} (rate-free, {unit}) instead",
             ))
-        elif recorded is not None and abs(rate / recorded - 1) > NOISE_RATE_TOLERANCE:
-            density = density_of(name, value, recorded)
+        elif at is not None and abs(rate / at - 1) > NOISE_RATE_TOLERANCE:
+            density = density_of(name, value, at)
             ratio = value / (density * rate ** DENSITIES[name][1])
             warnings.append(CalibrationWarning(
                 "noise-rate-mismatch",
-                f"{where}{key} = {value:.6g} m/s^2 per sample was written for {recorded:.6g} Hz "
+                f"{where}{key} = {value:.6g} m/s^2 per sample was written for {at:.6g} Hz "
                 f"(scenario.imu_rate), but {source} samples at {rate:.6g} Hz: applied as it stands it is "
                 f"{ratio:.3g} times the std the same noise has per sample at {rate:.6g} Hz. Give "
                 f"{density_key} = {density:.6g} {unit} (rate-free) instead",

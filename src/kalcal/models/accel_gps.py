@@ -69,6 +69,9 @@ DENSITY_UNITS = {"accel_noise_density": "m/s^2/sqrt(Hz)", "bias_walk_density": "
 #: the truth's white noise per sample where neither it nor its density is given, m/s^2 (at scenario.imu_rate)
 DEFAULT_ACCEL_NOISE_STD = 0.02
 DEFAULTS = {"accel_noise_std": DEFAULT_ACCEL_NOISE_STD, "bias_walk_std": 0.0}
+#: a log's rate within this relative distance of scenario.imu_rate keeps the built-in noise per sample as
+#: it stands (the same 1% as a recorded rate's warning, kalcal.calibration.plausibility)
+DEFAULT_NOISE_RATE_TOLERANCE = 0.01
 
 
 def per_sample(name: str, density: float, rate: float) -> float:
@@ -340,6 +343,12 @@ def _remember_given(resolved: AccelGpsTruth, given: AccelGpsTruth) -> None:
     _GIVEN[key] = (weakref.ref(resolved, lambda _ref, key=key: _GIVEN.pop(key, None)), given)
 
 
+def _default_accel_noise(filter_: AccelGpsFilter, truth: AccelGpsTruth) -> bool:
+    """Whether the filter's accelerometer noise is the built-in default: neither it nor the truth (as
+    given) sets the per-sample value or the density."""
+    return all(getattr(section, key) is None for section in (filter_, truth) for key in ("accel_noise_std", "accel_noise_density"))
+
+
 def _given_of(truth: AccelGpsTruth) -> AccelGpsTruth:
     entry = _GIVEN.get(id(truth))
     return entry[1] if entry is not None and entry[0]() is truth else truth
@@ -411,16 +420,19 @@ class AccelGpsScenario:
         """The rate (Hz) :meth:`at_rate` bound the filter's noise to; None for settings as given."""
         return getattr(self, "_noise_rate", None)
 
-    def per_sample_settings(self) -> tuple[dict[str, tuple[float, str | None]], float | None]:
+    def per_sample_settings(self) -> tuple[dict[str, tuple[float, str | None]], dict[str, float | None]]:
         """The noise settings given per sample that the filter uses, ``{"filter.accel_noise_std": (value,
         file or None), ...}`` (a truth's where the filter takes it; a zero walk, rate-free, left out; the
         file the value was read from, None for ``--set`` or a value given in code), and the rate (Hz)
-        recorded for them: ``scenario.imu_rate`` where it was given (a file of ``kalcal fit`` records the
-        log's), else None. Empty and None for settings :meth:`at_rate` bound to a rate."""
+        recorded for each, by key: for a value read from a file, ``scenario.imu_rate`` only where that same
+        file gave it (a file of ``kalcal fit`` records its log's; a rate given with ``--set`` or by another
+        file says nothing about the rate the file's value was written for); for a value given with
+        ``--set`` or in code, ``scenario.imu_rate`` where it was given; else None. Both empty for settings
+        :meth:`at_rate` bound to a rate."""
         from kalcal.models.config import given_keys, setting_files
 
         if self.noise_rate is not None:
-            return {}, None
+            return {}, {}
         files = setting_files(self)
         found = {}
         for name, (density, _) in DENSITIES.items():
@@ -437,16 +449,31 @@ class AccelGpsScenario:
                     break
         keys = given_keys(self)
         stated = "scenario.imu_rate" in keys or (not keys and self.scenario.imu_rate != AccelGpsSettings.imu_rate)
-        return found, (self.scenario.imu_rate if stated else None)
+        rate_file = files.get("scenario.imu_rate")
+        recorded = {
+            key: self.scenario.imu_rate if stated and (file is None or file == rate_file) else None
+            for key, (_, file) in found.items()
+        }
+        return found, recorded
 
     def at_rate(self, rate: float) -> AccelGpsScenario:
         """These settings for a log sampled at ``rate`` (Hz): the filter's noise densities (and the
         truth's, where the filter's noise is unset) converted to per-sample values at ``rate``
         (:func:`per_sample`), every other setting as it is. A log's calibration and fit run this once
-        with the log's median rate; per-sample values given as such are kept (:func:`noise_rate_settings`
-        says what a warning needs to know about them)."""
+        with the log's median rate; per-sample values given as such are kept (:meth:`per_sample_settings`
+        says what a warning needs to know about them).
+
+        The built-in accelerometer noise (:data:`DEFAULT_ACCEL_NOISE_STD`, per sample at
+        ``scenario.imu_rate``), where neither the filter nor the truth gives one, is a density too: at a
+        ``rate`` more than :data:`DEFAULT_NOISE_RATE_TOLERANCE` from ``scenario.imu_rate`` it is converted,
+        DEFAULT_ACCEL_NOISE_STD sqrt(rate / imu_rate) (within it, kept as it stands, so that a log's jitter
+        about the default rate does not move the numbers)."""
         rate = float(rate)
-        bound = dataclasses.replace(self, filter=self.filter.at_rate(rate, self.given_truth))
+        filter_ = self.filter.at_rate(rate, self.given_truth)
+        if _default_accel_noise(self.filter, self.given_truth) and abs(rate / self.scenario.imu_rate - 1) > DEFAULT_NOISE_RATE_TOLERANCE:
+            density = density_of("accel_noise_std", DEFAULT_ACCEL_NOISE_STD, self.scenario.imu_rate)
+            filter_ = dataclasses.replace(filter_, accel_noise_std=per_sample("accel_noise_std", density, rate))
+        bound = dataclasses.replace(self, filter=filter_)
         object.__setattr__(bound, "_noise_rate", rate)
         if hasattr(self, "_given_keys"):
             object.__setattr__(bound, "_given_keys", self._given_keys)

@@ -11,7 +11,8 @@ error whitened by the filter's own P_k = L_k L_k^T (each realization by its own 
 ==================== ===================================================== =====================================
 check                statistic                                             bound
 ==================== ===================================================== =====================================
-mean_error           max |mean(e) / se|, se = sqrt(ensemble var / N)       t(N - 1), m = K d
+mean_error           max |mean(e) / se|, se = sqrt(ensemble var / N); of    t(N - 1), m = K d
+                     eps where P varies between realizations
 covariance           whitened covariance W_k of eps_k: (N - 1) W_ii and    at alpha / 2: chi-square(N - 1) and
                      the correlations r_il, t = r sqrt(N - 2) /            t(N - 2), m = K d (d + 1) / 2; and
                      sqrt(1 - r^2); and the centered NEES tr(W_k)          at alpha / 2: chi-square(d (N - 1)) /
@@ -116,6 +117,13 @@ def check_mean_error(
 ) -> CheckResult:
     """E[e_k] = 0 for every update and state.
 
+    Where every realization shares P_k each state's error is iid N(0, P_ii) over the realizations, so
+    its mean over its own standard error (from the ensemble variance) is t(N - 1) exactly. Where P_k
+    differs between realizations (the whitened sums kept) the raw errors are not identically
+    distributed and that ratio has no exact law (a scale mixture: conservative, so it loses power); the
+    check then tests the whitened error eps_k = L_k^-1 e_k (each realization's own P_k), whose
+    components are iid N(0, 1): the mean of each over its own standard error is t(N - 1) exactly.
+
     When it fails and ``expected`` (K, d) is the mean error the filter's model predicts against the truth,
     the failure is ``explained_by="model_error"`` if removing it leaves every deviation inside the bound.
     ``cause`` names what makes the truth depart from the filter's model, for the detail.
@@ -125,7 +133,14 @@ def check_mean_error(
     m = n_updates * d
     bound = normal_bound(confidence, m)
     se = np.sqrt(np.maximum(np.diagonal(s.error_cov, axis1=1, axis2=2), 0.0) / s.count)
-    t, zero_pass, zero_fail = standardized(s.mean_error, se)
+    whitened = s.mean_whitened_error is not None
+    if whitened:  # P_k differs between realizations: the whitened errors, iid N(0, I) for a correct filter
+        white = whitened_moments(s)
+        tested = white.mean
+        tested_se = np.sqrt(np.maximum(np.diagonal(white.cov, axis1=1, axis2=2), 0.0) / s.count)
+    else:
+        tested, tested_se = s.mean_error, se
+    t, zero_pass, zero_fail = standardized(tested, tested_se)
     # mean / se of N normal errors (se from their sample variance) is t(N - 1) exactly, not N(0, 1): at
     # N = 100 the normal tail is about 3 times too light at 4.3 sigma, where a family of 450 reaches
     z = t_equivalent_z(t, s.count - 1)
@@ -134,16 +149,19 @@ def check_mean_error(
     passed = pvalue >= alpha
     sigma = np.sqrt(np.diagonal(s.filter_cov, axis1=1, axis2=2))
     big, (kb, ib) = max_abs(safe_ratio(s.mean_error, sigma))
+    what = "mean whitened error (eps = L^-1 e, each realization's own P)" if whitened else "mean error"
     detail = (
-        f"largest |mean error| {sd_text(abs(t[k, i]))} standard errors, t({s.count - 1}), {sd_text(worst)} sd-equivalent "
+        f"largest |{what}| {sd_text(abs(t[k, i]))} standard errors, t({s.count - 1}), {sd_text(worst)} sd-equivalent "
         f"({where_text(info, k, info.state_names[i])}"
-        + (f": mean error {s.mean_error[k, i]:.6g} with zero standard error" if np.isinf(worst) else "")
+        + (f": {what} {tested[k, i]:.6g} with zero standard error" if np.isinf(worst) else "")
         + f"); largest in filter sigma {big:.2f} sigma ({where_text(info, kb, info.state_names[ib])})"
         + zero_se_text(zero_pass, zero_fail, "mean error")
     )
     diagnosis = Cause()
     if not passed and expected is not None and np.any(expected != 0):
         predicted, (kp, ip) = max_abs(safe_ratio(expected, sigma))
+        # ``expected`` is in the states' units: removed from the raw mean error, over the raw standard error
+        # (where P varies the raw ratio is conservative, so this explanation errs toward "does not explain")
         rest_t, _, _ = standardized(s.mean_error - expected, se)
         rest, _ = max_abs(t_equivalent_z(rest_t, s.count - 1))
         if normal_family_pvalue(rest, m) >= alpha:
