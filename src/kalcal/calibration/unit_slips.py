@@ -1,5 +1,7 @@
-"""Unit slips that still give a number: an accelerometer in g or with gravity left in, positions in mm or ft,
-a GPS log wholly in mm or ft.
+"""Unit slips that still give a number: acceleration in g or with gravity left in, GPS in mm or ft.
+
+The slips named: an accelerometer in g or with gravity left in, positions in mm or ft, and a GPS log
+wholly in mm or ft.
 
 The checks of :mod:`kalcal.calibration.plausibility` let these through: each value is within its physical
 limit and the velocity fixes agree with the positions. Two fits over the usable fixes name them, as the
