@@ -11,10 +11,13 @@ numpy reference :func:`kalcal.filters.steps.gain_and_covariance`, with the same 
 
 It works on a tile of m realizations in structure of arrays (realizations on the last, contiguous axis:
 a covariance is (d, d, m), a measurement matrix (p, d, m)), so that each line of it is a pass over the
-tile that vectorizes; one realization is a tile of m = 1. K comes from a Cholesky factor of S and two
-triangular solves, or a division where p = 1 (a scalar measurement: the Monte Carlo's numbers stay those
-of a division, bit for bit). The fixed-gain block kernel (:mod:`kalcal.montecarlo.kernels`) does not call
-it: it applies gains computed before any data and has no covariance to update.
+tile that vectorizes; one realization is a tile of m = 1. The arrays are C-contiguous. K comes from a
+Cholesky factor of S and two triangular solves (p > 1), or a division where p = 1: a scalar measurement
+runs on arrays of one axis fewer (the regressor row (d, m), S (m,)), the loops the Monte Carlo kernel ran
+before, so that its numbers stay the same bit for bit and its time the same to the measurement's noise
+(the same equations indexed through the (p, d, m) arrays with loops over p = 1 measured 10-20% slower).
+The fixed-gain block kernel (:mod:`kalcal.montecarlo.kernels`) does not call it: it applies gains computed
+before any data and has no covariance to update.
 
 :func:`measured` is the compiled twin of :func:`kalcal.filters.missing.measured`, the one
 missing-measurement rule: a measurement with a non-finite component (or a non-finite entry of its H) is
@@ -25,8 +28,9 @@ numba's cache and this module. A kernel that calls these functions compiles them
 machine code, and numba keys that cache on the caller's source file alone: after a change to this
 module the callers' caches are stale until their own files change. tests/filters/test_kernel_callers.py
 fails when a cached caller is older than this file; remove the cache (``__pycache__/*.nbi``, ``*.nbc``
-of the callers, or ``NUMBA_CACHE_DIR``) or touch the callers after editing here. An installed release
-writes every file anew, so its caches start empty.
+of the callers, or ``NUMBA_CACHE_DIR``) or touch the callers after editing here: until then a caller runs
+the update it was compiled with, silently. An installed release writes every file anew, so its caches
+start empty.
 """
 
 from __future__ import annotations
@@ -90,6 +94,16 @@ def covariance_update(cov, h, v, joseph, gain, s, work):
     """
     d, p, m = cov.shape[0], h.shape[0], cov.shape[2]
     hm, lower, a, ap, acc = work.hm, work.lower, work.a, work.ap, work.acc
+    if p == 1:
+        _scalar_update(cov, h.reshape((d, m)), v[0, 0], joseph, gain.reshape((d, m)), s.reshape(m), hm.reshape((d, m)), a, ap, acc)
+    else:
+        _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc)
+
+
+@numba.njit(cache=True, nogil=True)
+def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc):
+    """:func:`covariance_update` where p > 1: K by a Cholesky factor of S and two triangular solves."""
+    d, p, m = cov.shape[0], h.shape[0], cov.shape[2]
     for i in range(p):  # H M, as (M H^T)^T
         for u in range(d):
             for j in range(m):
@@ -97,7 +111,8 @@ def covariance_update(cov, h, v, joseph, gain, s, work):
             for w in range(d):
                 for j in range(m):
                     acc[j] += cov[u, w, j] * h[i, w, j]
-            hm[i, u, :] = acc[:m]
+            for j in range(m):
+                hm[i, u, j] = acc[j]
     for i in range(p):  # S = H M H^T + V
         for k in range(p):
             for j in range(m):
@@ -111,11 +126,7 @@ def covariance_update(cov, h, v, joseph, gain, s, work):
                 mid = 0.5 * (s[i, k, j] + s[k, i, j])
                 s[i, k, j] = mid
                 s[k, i, j] = mid
-    if p == 1:  # K = M h^T / S
-        for u in range(d):
-            for j in range(m):
-                gain[u, 0, j] = hm[0, u, j] / s[0, 0, j]
-    else:
+    if p > 1:
         for i in range(p):  # S = L L^T
             for k in range(i + 1):
                 for j in range(m):
@@ -154,7 +165,8 @@ def covariance_update(cov, h, v, joseph, gain, s, work):
                 for i in range(p):
                     for j in range(m):
                         acc[j] -= gain[u, i, j] * h[i, w, j]
-                a[u, w, :] = acc[:m]
+                for j in range(m):
+                    a[u, w, j] = acc[j]
         for u in range(d):  # A M
             for w in range(d):
                 for j in range(m):
@@ -162,7 +174,8 @@ def covariance_update(cov, h, v, joseph, gain, s, work):
                 for c in range(d):
                     for j in range(m):
                         acc[j] += a[u, c, j] * cov[c, w, j]
-                ap[u, w, :] = acc[:m]
+                for j in range(m):
+                    ap[u, w, j] = acc[j]
         for u in range(d):  # P = A M A^T + K V K^T (M is not needed any more: written in place)
             for w in range(d):
                 for j in range(m):
@@ -174,7 +187,8 @@ def covariance_update(cov, h, v, joseph, gain, s, work):
                     for k in range(p):
                         for j in range(m):
                             acc[j] += gain[u, i, j] * v[i, k] * gain[w, k, j]
-                cov[u, w, :] = acc[:m]
+                for j in range(m):
+                    cov[u, w, j] = acc[j]
     else:
         for u in range(d):  # P = M - K (H M)
             for w in range(d):
@@ -187,3 +201,61 @@ def covariance_update(cov, h, v, joseph, gain, s, work):
                 mid = 0.5 * (cov[u, w, j] + cov[w, u, j])
                 cov[u, w, j] = mid
                 cov[w, u, j] = mid
+
+
+@numba.njit(cache=True, nogil=True)
+def _scalar_update(cov, h, r, joseph, gain, s, ph, a, ap, acc):
+    """:func:`covariance_update` where p = 1: h a regressor row (d, m), r the variance V, S (m,), and
+    K = M h^T / S by a division (``ph`` holds M h^T)."""
+    d, m = h.shape
+    for u in range(d):  # M h^T
+        for j in range(m):
+            acc[j] = 0.0
+        for v in range(d):
+            for j in range(m):
+                acc[j] += cov[u, v, j] * h[v, j]
+        for j in range(m):
+            ph[u, j] = acc[j]
+    for j in range(m):  # S = h M h^T + R
+        s[j] = r
+    for u in range(d):
+        for j in range(m):
+            s[j] += h[u, j] * ph[u, j]
+    for u in range(d):  # K = M h^T / S
+        for j in range(m):
+            gain[u, j] = ph[u, j] / s[j]
+    if joseph:
+        for u in range(d):  # A = I - K h
+            for v in range(d):
+                eye = 1.0 if u == v else 0.0
+                for j in range(m):
+                    a[u, v, j] = eye - gain[u, j] * h[v, j]
+        for u in range(d):  # A M
+            for v in range(d):
+                for j in range(m):
+                    acc[j] = 0.0
+                for w in range(d):
+                    for j in range(m):
+                        acc[j] += a[u, w, j] * cov[w, v, j]
+                for j in range(m):
+                    ap[u, v, j] = acc[j]
+        for u in range(d):  # P = A M A^T + R K K^T
+            for v in range(d):
+                for j in range(m):
+                    acc[j] = 0.0
+                for w in range(d):
+                    for j in range(m):
+                        acc[j] += ap[u, w, j] * a[v, w, j]
+                for j in range(m):
+                    cov[u, v, j] = acc[j] + r * gain[u, j] * gain[v, j]
+    else:
+        for u in range(d):  # P = M - K (h M)
+            for v in range(d):
+                for j in range(m):
+                    cov[u, v, j] -= gain[u, j] * ph[v, j]
+    for u in range(d):
+        for v in range(u + 1, d):
+            for j in range(m):
+                mid = 0.5 * (cov[u, v, j] + cov[v, u, j])
+                cov[u, v, j] = mid
+                cov[v, u, j] = mid
