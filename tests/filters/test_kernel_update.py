@@ -50,10 +50,10 @@ def test_compiled_update_equals_the_reference_step_for_every_realization(case, f
         h = np.zeros((m, 1, d))
         h[:, 0, 1] = 1.0
     v = _spd(rng, p)
-    gain, s, cov = np.empty((d, p, m)), np.empty((p, p, m)), _tile(prior)
+    gain, s, cov = np.empty((p, d, m)), np.empty((p, p, m)), _tile(prior)
     covariance_update(cov, _tile(h), v, form == "joseph", gain, s, update_work(d, p, m))
     want_gain, want_cov, want_s = gain_and_covariance(prior, h, v, form)
-    for name, got, want in (("K", gain, want_gain), ("P", cov, want_cov), ("S", s, want_s)):
+    for name, got, want in (("K^T", gain, np.swapaxes(want_gain, -1, -2)), ("P", cov, want_cov), ("S", s, want_s)):
         got = np.moveaxis(got, -1, 0)
         scale = np.abs(want).max()
         np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-13 * scale, err_msg=name)
@@ -72,7 +72,7 @@ def test_the_joseph_form_keeps_a_precise_measurement_s_variance_where_the_standa
     h[:, 0, 0] = 1.0
     v = np.array([[1e-12]])
     cov = _tile(prior)
-    covariance_update(cov, _tile(h), v, True, np.empty((d, 1, m)), np.empty((1, 1, m)), update_work(d, 1, m))
+    covariance_update(cov, _tile(h), v, True, np.empty((1, d, m)), np.empty((1, 1, m)), update_work(d, 1, m))
     exact = v[0, 0] * prior[:, 0, 0] / (prior[:, 0, 0] + v[0, 0])
     np.testing.assert_allclose(cov[0, 0], exact, rtol=1e-6)
     assert np.linalg.eigvalsh(np.moveaxis(cov, -1, 0)).min() > 0.0

@@ -70,7 +70,7 @@ def _run(phis, qs, h, vs, z, x0, m0, threshold, states, covs, residuals, innovat
     h3 = np.empty((p, d, 1))
     h3[:, :, 0] = h
     tx, t1, t2 = np.empty(d), np.empty((d, d)), np.empty((d, d))
-    gain3, s3, work = np.empty((d, p, 1)), np.empty((p, p, 1)), update_work(d, p, 1)
+    gain3, s3, work = np.empty((p, d, 1)), np.empty((p, p, 1)), update_work(d, p, 1)
     lower, solved, r = work.lower[:, :, 0], np.empty(p), np.empty(p)
     for k in range(n_fixes):
         phi = phis[k]
@@ -129,7 +129,7 @@ def _run(phis, qs, h, vs, z, x0, m0, threshold, states, covs, residuals, innovat
         for a in range(d):  # x = xbar + K r
             value = x[a]
             for i in range(p):
-                value += gain3[a, i, 0] * r[i]
+                value += gain3[i, a, 0] * r[i]
             x[a] = value
         states[k] = x
         covs[k] = cov

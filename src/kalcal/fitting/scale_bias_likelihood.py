@@ -38,7 +38,7 @@ def _diffuse_filter(reference, sensor, r, q2, normalized):
     cov = np.zeros((2, 2, 1))
     row = np.ones((1, 2, 1))  # h = [z, 1]
     noise = np.full((1, 1), r)
-    gain, s, work = np.empty((2, 1, 1)), np.empty((1, 1, 1)), update_work(2, 1, 1)
+    gain, s, work = np.empty((1, 2, 1)), np.empty((1, 1, 1)), update_work(2, 1, 1)
     v_k = np.empty(1)  # the measurement v_k (its regressor is row)
     x1 = x2 = 0.0
     diffuse = True
@@ -80,7 +80,7 @@ def _diffuse_filter(reference, sensor, r, q2, normalized):
         e = v - (x1 * z + x2)
         covariance_update(cov, row, noise, True, gain, s, work)
         x1 += gain[0, 0, 0] * e
-        x2 += gain[1, 0, 0] * e
+        x2 += gain[0, 1, 0] * e
         loglik -= 0.5 * (log2pi + np.log(s[0, 0, 0]) + e * e / s[0, 0, 0])
         normalized[k] = e / np.sqrt(s[0, 0, 0])
         used += 1

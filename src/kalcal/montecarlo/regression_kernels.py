@@ -55,7 +55,7 @@ def _filter_tile(y, h, truth, x0, cov0, r, q, joseph, sums, first, m):
     res = residual[0]
     s3 = np.empty((1, 1, m))
     s = s3[0, 0]
-    gain3 = np.empty((d, 1, m))
+    gain3 = np.empty((1, d, m))
     work = update_work(d, 1, m)
     rv = np.full((1, 1), r)
     nees = np.empty(m)
@@ -81,7 +81,7 @@ def _filter_tile(y, h, truth, x0, cov0, r, q, joseph, sums, first, m):
         covariance_update(cov, hk3, rv, joseph, gain3, s3, work)
         for u in range(d):  # x^+ = x^- + K r
             for j in range(m):
-                x[u, j] += gain3[u, 0, j] * res[j]
+                x[u, j] += gain3[0, u, j] * res[j]
         for u in range(d):  # e = x - x^+
             for j in range(m):
                 err[u, j] -= x[u, j]
