@@ -16,8 +16,9 @@ Cholesky factor of S and two triangular solves (p > 1), or a division where p = 
 runs on arrays of one axis fewer (the regressor row (d, m), S (m,)), the loops the Monte Carlo kernel ran
 before, so that its numbers stay the same bit for bit and its time the same to the measurement's noise
 (the same equations indexed through the (p, d, m) arrays with loops over p = 1 measured 10-20% slower).
-The functions are inlined into their callers: a call per update cost the log filter 4x and the
-likelihood 25x their time (a tile of one realization does a few dozen flops per update); inlined, the
+The functions are inlined into their callers: called, with reshaped views of the arrays, they cost the
+log filter 4x and the likelihood 25x their time (a tile of one realization does a few dozen flops per
+update); inlined, with views by indexing, the
 log filter runs as fast as its own loops did and the likelihood in ~30 ns a sample (~16 ns before).
 The fixed-gain block kernel (:mod:`kalcal.montecarlo.kernels`) does not call it: it applies gains computed
 before any data and has no covariance to update.
