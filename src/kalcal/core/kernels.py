@@ -18,8 +18,8 @@ before, so that its numbers stay the same bit for bit and its time the same to t
 (the same equations indexed through the (p, d, m) arrays with loops over p = 1 measured 10-20% slower).
 The functions are inlined into their callers: called, with reshaped views of the arrays, they cost the
 log filter 4x and the likelihood 25x their time (a tile of one realization does a few dozen flops per
-update); inlined, with views by indexing, the
-log filter runs as fast as its own loops did and the likelihood in ~30 ns a sample (~16 ns before).
+update); inlined, with views by indexing, the log filter runs as fast as its own loops did and the
+likelihood in ~30 ns a sample (~16 ns before).
 The fixed-gain block kernel (:mod:`kalcal.montecarlo.kernels`) does not call it: it applies gains computed
 before any data and has no covariance to update.
 
