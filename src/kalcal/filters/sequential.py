@@ -13,9 +13,10 @@ and S (under the prior) are kept and it is marked in ``rejected``; with no thres
 of the ungated filter, operation for operation. numpy spends ~70 us per fix on the dozen tiny 3x3 products;
 compiled as loops over preallocated scratch, a fix costs well under a microsecond, so an hour of 5 Hz fixes filters in milliseconds.
 
-Its Joseph update is written apart from the one of :mod:`kalcal.montecarlo.regression_kernels` (one
-realization, a p-vector measurement, small matrix products here; tiles of realizations in structure of
-arrays, a scalar measurement, there); tests/filters/test_sequential.py holds this one to the reference steps.
+Its update (S, K and the Joseph-form P) is the package's one compiled covariance update,
+:func:`kalcal.core.kernels.covariance_update`, on a tile of one realization, and its missing-measurement
+test the compiled :func:`kalcal.core.kernels.measured`; tests/filters/test_sequential.py holds this filter
+to the reference steps fix by fix.
 """
 
 from __future__ import annotations
@@ -24,6 +25,8 @@ from typing import NamedTuple
 
 import numba
 import numpy as np
+
+from kalcal.core.kernels import covariance_update, measured, update_work
 
 
 class SequentialRun(NamedTuple):
@@ -56,13 +59,19 @@ def _solve_chol(lower, rhs, out):
 @numba.njit(cache=True, nogil=True)
 def _run(phis, qs, h, vs, z, x0, m0, threshold, states, covs, residuals, innovations, prior_states, prior_covs, rejected):
     # Written as loops over preallocated scratch: the 3x3 and 2x2 products of one fix cost well under a
-    # microsecond this way (array expressions allocate at every step). S is factored by Cholesky.
+    # microsecond this way (array expressions allocate at every step). The update is the package's one
+    # compiled covariance update on a tile of one realization (the trailing axis of length 1).
     n_fixes, d = states.shape
     p = z.shape[1]
-    x, cov = x0.copy(), m0.copy()
+    x = x0.copy()
+    cov3 = np.empty((d, d, 1))
+    cov3[:, :, 0] = m0
+    cov = cov3[:, :, 0]
+    h3 = np.empty((p, d, 1))
+    h3[:, :, 0] = h
     tx, t1, t2 = np.empty(d), np.empty((d, d)), np.empty((d, d))
-    hm, s, lower = np.empty((p, d)), np.empty((p, p)), np.empty((p, p))
-    gain, column, solved, r = np.empty((d, p)), np.empty(p), np.empty(p), np.empty(p)
+    gain3, s3, work = np.empty((p, d, 1)), np.empty((p, p, 1)), update_work(d, p, 1)
+    lower, solved, r = work.lower[:, :, 0], np.empty(p), np.empty(p)
     for k in range(n_fixes):
         phi = phis[k]
         for a in range(d):  # xbar = Phi x
@@ -88,95 +97,44 @@ def _run(phis, qs, h, vs, z, x0, m0, threshold, states, covs, residuals, innovat
                 cov[a, b] = 0.5 * (t2[a, b] + t2[b, a])
         prior_states[k] = x
         prior_covs[k] = cov
-        present = True
-        for i in range(p):
-            if not np.isfinite(z[k, i]):
-                present = False
-        if not present:
+        if not measured(z[k], h):
             states[k] = x
             covs[k] = cov
             residuals[k] = np.nan
             innovations[k] = np.nan
             continue
-        for i in range(p):  # H M and S = H M H^T + V
-            for a in range(d):
-                value = 0.0
-                for b in range(d):
-                    value += h[i, b] * cov[b, a]
-                hm[i, a] = value
-        for i in range(p):
-            for j in range(p):
-                value = vs[k, i, j]
-                for a in range(d):
-                    value += hm[i, a] * h[j, a]
-                s[i, j] = value
-        for i in range(p):
-            for j in range(i):
-                s[i, j] = s[j, i] = 0.5 * (s[i, j] + s[j, i])
-        for i in range(p):  # S = L L^T
-            for j in range(i + 1):
-                value = s[i, j]
-                for c in range(j):
-                    value -= lower[i, c] * lower[j, c]
-                lower[i, j] = np.sqrt(value) if i == j else value / lower[j, j]
-            for j in range(i + 1, p):
-                lower[i, j] = 0.0
         for i in range(p):  # r = z - H xbar
             value = z[k, i]
             for b in range(d):
                 value -= h[i, b] * x[b]
             r[i] = value
+        # S, K and the Joseph-form P, in place of M (kept in prior_covs[k] should the gate refuse the fix)
+        covariance_update(cov3, h3, vs[k], True, gain3, s3, work)
         if threshold < np.inf:
-            _solve_chol(lower, r, solved)
-            nis = 0.0
-            for i in range(p):
-                nis += r[i] * solved[i]
+            if p == 1:
+                nis = r[0] * r[0] / s3[0, 0, 0]
+            else:
+                _solve_chol(lower, r, solved)
+                nis = 0.0
+                for i in range(p):
+                    nis += r[i] * solved[i]
             if nis > threshold:  # gated out: kept for the record, filtered as a prediction only
                 rejected[k] = True
+                cov[:, :] = prior_covs[k]
                 states[k] = x
                 covs[k] = cov
                 residuals[k] = r
-                innovations[k] = s
+                innovations[k] = s3[:, :, 0]
                 continue
-        for a in range(d):  # K = M H^T S^{-1}, one row at a time (S^{-1} (H M)[:, a])
-            for i in range(p):
-                column[i] = hm[i, a]
-            _solve_chol(lower, column, solved)
-            for i in range(p):
-                gain[a, i] = solved[i]
         for a in range(d):  # x = xbar + K r
             value = x[a]
             for i in range(p):
-                value += gain[a, i] * r[i]
+                value += gain3[i, a, 0] * r[i]
             x[a] = value
-        for a in range(d):  # Joseph: (I - K H) M (I - K H)^T + K V K^T
-            for b in range(d):
-                value = 1.0 if a == b else 0.0
-                for i in range(p):
-                    value -= gain[a, i] * h[i, b]
-                t1[a, b] = value
-        for a in range(d):
-            for b in range(d):
-                value = 0.0
-                for c in range(d):
-                    value += t1[a, c] * cov[c, b]
-                t2[a, b] = value
-        for a in range(d):
-            for b in range(d):
-                value = 0.0
-                for c in range(d):
-                    value += t2[a, c] * t1[b, c]
-                for i in range(p):
-                    for j in range(p):
-                        value += gain[a, i] * vs[k, i, j] * gain[b, j]
-                cov[a, b] = value
-        for a in range(d):
-            for b in range(a):
-                cov[a, b] = cov[b, a] = 0.5 * (cov[a, b] + cov[b, a])
         states[k] = x
         covs[k] = cov
         residuals[k] = r
-        innovations[k] = s
+        innovations[k] = s3[:, :, 0]
 
 
 def sequential_filter(

@@ -13,8 +13,9 @@ The update's post-array follows from the pre-array by an orthogonal transformati
 same Gram matrix: S^{1/2} S^{T/2} = V + H M H^T = S, Kbar = M H^T S^{-T/2} and
 L_P L_P^T = M - Kbar Kbar^T = M - M H^T S^{-1} H M = P.
 
-A missing measurement (:mod:`kalcal.filters.missing`) keeps the prior factor, L_P = L_M, as in
-:func:`kalcal.filters.steps.update`. Shapes as in :mod:`kalcal.filters.steps`.
+A missing measurement keeps the prior factor, L_P = L_M, by the same wrapper as
+:func:`kalcal.filters.steps.update` (:func:`kalcal.filters.missing.update_where_measured`). Shapes as in
+:mod:`kalcal.filters.steps`.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from kalcal.filters.missing import fill_missing, measured
+from kalcal.filters.missing import update_where_measured
 from kalcal.linalg import matvec, symmetrize
 
 
@@ -199,18 +200,11 @@ def sqrt_update(
     v_chol : ndarray, shape (p, p) or (..., p, p)
         A factor of V.
     """
-    present = measured(z, h)
-    if not np.all(present):
-        z_filled, h_filled = fill_missing(present, z, h)
-        full = sqrt_update(x, chol, z_filled, h_filled, v_chol)
-        keep = present[..., None]
-        return SqrtUpdateResult(
-            np.where(keep, full.x, x),
-            np.where(keep[..., None], full.chol, chol),
-            np.where(keep, full.residual, np.nan),
-            np.where(keep[..., None], full.innovation_chol, np.nan),
-            np.where(keep[..., None], full.gain, 0.0),
-        )
+    return update_where_measured(_sqrt_update_every, x, chol, z, h, v_chol)
+
+
+def _sqrt_update_every(x, chol, z, h, v_chol) -> SqrtUpdateResult:
+    """:func:`sqrt_update` of every realization, its z and H finite."""
     gain, posterior, s_chol = sqrt_gain_and_factor(chol, h, v_chol)
     residual = z - matvec(h, x)
     return SqrtUpdateResult(x + matvec(gain, residual), posterior, residual, s_chol, gain)

@@ -6,7 +6,9 @@ steps in :mod:`kalcal.filters.sqrt_form` (:func:`~kalcal.filters.sqrt_form.sqrt_
 :func:`~kalcal.filters.sqrt_form.sqrt_update`); :func:`kalcal.filters.gains.run_with_gains` applies the
 covariance pass's gains to the states with products alone, and is tested against :func:`predict` and
 :func:`update` step by step. The compiled kernels are tested against these steps update by update: the
-sequential filter (tests/filters/test_sequential.py), the composition of an interval's pieces
+one compiled covariance update they share (:func:`kalcal.core.kernels.covariance_update`, against
+:func:`gain_and_covariance` in tests/filters/test_kernel_update.py), the sequential filter
+(tests/filters/test_sequential.py), the composition of an interval's pieces
 (tests/calibration/test_interval_model.py) and the Monte Carlo block kernels
 (tests/montecarlo/test_kernel_steps.py; besides, their block sums against the numpy path).
 
@@ -27,11 +29,12 @@ over a time-invariant model's update intervals (:func:`interval_transition`), in
 
 Missing measurements (:mod:`kalcal.filters.missing`). A realization whose measurement has a non-finite
 component, or whose own H holds one, is not updated: xhat = xbar and P = M, with K = 0 and the residual
-r and S NaN. :func:`update` does this realization by realization (and
-:func:`~kalcal.filters.sqrt_form.sqrt_update` the same), so no numpy filter handles a missing value its
-own way. Elsewhere: the compiled sequential filter applies the same rule (to z; its H is shared and
-finite), :func:`~kalcal.filters.gains.run_with_gains` refuses a missing value (its gains assume every
-update), and the Monte Carlo kernels are never given one (simulated data are finite).
+r and S NaN. :func:`update` and :func:`~kalcal.filters.sqrt_form.sqrt_update` do this realization by
+realization through one wrapper (:func:`kalcal.filters.missing.update_where_measured`), so no numpy
+filter handles a missing value its own way. Elsewhere: the compiled sequential filter and the scale-bias
+likelihood apply the same rule (:func:`kalcal.core.kernels.measured`),
+:func:`~kalcal.filters.gains.run_with_gains` refuses a missing value (its gains assume every update), and
+the Monte Carlo kernels are never given one (simulated data are finite).
 """
 
 from __future__ import annotations
@@ -41,7 +44,7 @@ from typing import Literal, NamedTuple
 import numpy as np
 
 from kalcal.errors import ConfigError
-from kalcal.filters.missing import fill_missing, measured
+from kalcal.filters.missing import update_where_measured
 from kalcal.filters.sqrt_form import cholesky_factor, gram, interval_noise_factor, sqrt_gain_and_factor, sqrt_predict
 from kalcal.linalg import matvec, symmetrize
 from kalcal.models.linear import LinearGaussianModel
@@ -208,18 +211,11 @@ def update(
     v : ndarray, shape (p, p) or (..., p, p)
     form : {"joseph", "standard"}
     """
-    present = measured(z, h)
-    if not np.all(present):
-        z_filled, h_filled = fill_missing(present, z, h)
-        full = update(x, cov, z_filled, h_filled, v, form)
-        keep = present[..., None]
-        return UpdateResult(
-            np.where(keep, full.x, x),
-            np.where(keep[..., None], full.cov, cov),
-            np.where(keep, full.residual, np.nan),
-            np.where(keep[..., None], full.innovation_cov, np.nan),
-            np.where(keep[..., None], full.gain, 0.0),
-        )
+    return update_where_measured(_update_every, x, cov, z, h, v, form)
+
+
+def _update_every(x, cov, z, h, v, form) -> UpdateResult:
+    """:func:`update` of every realization, its z and H finite."""
     gain, posterior, s = gain_and_covariance(cov, h, v, form)
     residual = z - matvec(h, x)
     return UpdateResult(x + matvec(gain, residual), posterior, residual, s, gain)

@@ -12,13 +12,17 @@ readings make it, then as the covariance filter (Joseph form). The log-likelihoo
 
 which is log p(v_{m+1..K} | v_{1..m}) and, up to a constant free of R and Q, the diffuse likelihood. With a
 diffuse prior only R = sigma_eta^2 + theta1^2 sigma_nu^2 (the combined measurement noise) and q enter it:
-sigma_eta and sigma_nu apart are not identifiable from one log. A sample with a NaN is a prediction only.
+sigma_eta and sigma_nu apart are not identifiable from one log. A sample with a NaN is a prediction only
+(the compiled :func:`kalcal.core.kernels.measured`); after the start, each update is the package's one
+compiled covariance update, :func:`kalcal.core.kernels.covariance_update`, on a tile of one realization.
 """
 
 from __future__ import annotations
 
 import numba
 import numpy as np
+
+from kalcal.core.kernels import covariance_update, measured, update_work
 
 
 #: the information matrix counts as nonsingular once det(Y) exceeds this share of trace(Y)^2
@@ -30,7 +34,12 @@ def _diffuse_filter(reference, sensor, r, q2, normalized):
     """log L, the number of samples in it, and (into ``normalized``) r_k / sqrt(S_k) (NaN elsewhere)."""
     y11 = y12 = y22 = 0.0  # Y = P^-1 while diffuse
     i1 = i2 = 0.0  # y = P^-1 x
-    p11 = p12 = p22 = 0.0
+    # after the diffuse start: P as a tile of one realization, for the one compiled covariance update
+    cov = np.zeros((2, 2, 1))
+    row = np.ones((1, 2, 1))  # h = [z, 1]
+    noise = np.full((1, 1), r)
+    gain, s, work = np.empty((1, 2, 1)), np.empty((1, 1, 1)), update_work(2, 1, 1)
+    v_k = np.empty(1)  # the measurement v_k (its regressor is row)
     x1 = x2 = 0.0
     diffuse = True
     loglik, used = 0.0, 0
@@ -47,9 +56,10 @@ def _diffuse_filter(reference, sensor, r, q2, normalized):
                 y11, y12, y22 = m11 * y11 + m12 * y12, m11 * y12 + m12 * y22, m21 * y12 + m22 * y22
                 i1, i2 = m11 * i1 + m12 * i2, m21 * i1 + m22 * i2
         else:
-            p11 += q2
-            p22 += q2
-        if not (np.isfinite(v) and np.isfinite(z)):
+            cov[0, 0, 0] += q2
+            cov[1, 1, 0] += q2
+        v_k[0], row[0, 0, 0] = v, z
+        if not measured(v_k, row[:, :, 0]):  # the one missing-measurement rule: a prediction only
             continue
         if diffuse:
             y11 += z * z / r
@@ -60,26 +70,19 @@ def _diffuse_filter(reference, sensor, r, q2, normalized):
             det = y11 * y22 - y12 * y12
             trace = y11 + y22
             if det > DIFFUSE_RCOND * trace * trace:
-                p11, p12, p22 = y22 / det, -y12 / det, y11 / det
-                x1, x2 = p11 * i1 + p12 * i2, p12 * i1 + p22 * i2
+                cov[0, 0, 0], cov[1, 1, 0] = y22 / det, y11 / det
+                cov[0, 1, 0] = cov[1, 0, 0] = -y12 / det
+                x1 = cov[0, 0, 0] * i1 + cov[0, 1, 0] * i2
+                x2 = cov[0, 1, 0] * i1 + cov[1, 1, 0] * i2
                 diffuse = False
             continue
-        # h = [z, 1]: S = h P h^T + R, K = P h^T / S, Joseph P^+ = (I - K h) P (I - K h)^T + K R K^T
-        ph1, ph2 = p11 * z + p12, p12 * z + p22
-        s = z * ph1 + ph2 + r
+        # S = h P h^T + R, K = P h^T / S and the Joseph-form P^+: the one compiled covariance update
         e = v - (x1 * z + x2)
-        g1, g2 = ph1 / s, ph2 / s
-        x1 += g1 * e
-        x2 += g2 * e
-        a11, a12, a21, a22 = 1.0 - g1 * z, -g1, -g2 * z, 1.0 - g2
-        b11, b12 = a11 * p11 + a12 * p12, a11 * p12 + a12 * p22
-        b21, b22 = a21 * p11 + a22 * p12, a21 * p12 + a22 * p22
-        n11 = b11 * a11 + b12 * a12 + g1 * g1 * r
-        n12 = b11 * a21 + b12 * a22 + g1 * g2 * r
-        n22 = b21 * a21 + b22 * a22 + g2 * g2 * r
-        p11, p12, p22 = n11, n12, n22
-        loglik -= 0.5 * (log2pi + np.log(s) + e * e / s)
-        normalized[k] = e / np.sqrt(s)
+        covariance_update(cov, row, noise, True, gain, s, work)
+        x1 += gain[0, 0, 0] * e
+        x2 += gain[0, 1, 0] * e
+        loglik -= 0.5 * (log2pi + np.log(s[0, 0, 0]) + e * e / s[0, 0, 0])
+        normalized[k] = e / np.sqrt(s[0, 0, 0])
         used += 1
     return loglik, used
 

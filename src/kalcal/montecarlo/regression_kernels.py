@@ -11,9 +11,10 @@ agree to rounding, and tests/montecarlo/test_kernel_steps.py holds the recursion
 update by update. It has no missing-measurement rule: the Monte Carlo never feeds it a NaN (its
 measurements and regressors are simulated, always finite).
 
-Its Joseph update is written apart from the one of :mod:`kalcal.filters.sequential` (one realization,
-small matrix products there; tiles of realizations in structure of arrays, scalar measurement, here);
-tests/montecarlo/test_kernel_steps.py holds this one to the reference steps through the regression filter.
+Its covariance update (S, K and P^+, Joseph or standard form) is the package's one compiled update,
+:func:`kalcal.core.kernels.covariance_update`, on the tile as it lies (p = 1: K by a division);
+tests/montecarlo/test_kernel_steps.py holds this kernel to the reference steps through the regression
+filter, and tests/filters/test_kernel_update.py the update itself to :func:`kalcal.filters.steps.gain_and_covariance`.
 
 The filter step itself is compiled without fast-math (each realization's numbers are the same on every
 machine and in any tile); only the sums over realizations are reassociated.
@@ -24,6 +25,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from kalcal.core.kernels import covariance_update, update_work
 from kalcal.montecarlo.sum_kernels import accumulate
 
 #: realizations filtered together, update by update: their inputs (strided by K in the (n, K) layout)
@@ -46,18 +48,19 @@ def _filter_tile(y, h, truth, x0, cov0, r, q, joseph, sums, first, m):
         x[u, :] = x0[u]
         for v in range(d):
             cov[u, v, :] = cov0[u, v]
-    hk = np.empty((d, m))  # this update's regressors and true states, gathered from the (n, K) layout
+    hk3 = np.empty((1, d, m))  # this update's regressor rows (as the (p, d, m) H of p = 1) and true states,
+    hk = hk3[0]  # gathered from the (n, K) layout
     err = np.empty((d, m))
     residual = np.empty((1, m))
     res = residual[0]
-    s = np.empty(m)
+    s3 = np.empty((1, 1, m))
+    s = s3[0, 0]
+    gain3 = np.empty((1, d, m))
+    work = update_work(d, 1, m)
+    rv = np.full((1, 1), r)
     nees = np.empty(m)
     nis = np.empty(m)
     acc = np.empty(m)
-    ph = np.empty((d, m))
-    gain = np.empty((d, m))
-    a = np.empty((d, d, m))
-    ap = np.empty((d, d, m))
     chol = np.empty((d, d, m))
     white = np.empty((d, m))
     for k in range(n_steps):
@@ -71,57 +74,14 @@ def _filter_tile(y, h, truth, x0, cov0, r, q, joseph, sums, first, m):
             for v in range(d):
                 for j in range(m):
                     cov[u, v, j] += q[u, v]
-        for u in range(d):  # P^- h^T
+        for u in range(d):  # r = y - h x^-
             for j in range(m):
-                acc[j] = 0.0
-            for v in range(d):
-                for j in range(m):
-                    acc[j] += cov[u, v, j] * hk[v, j]
-            ph[u, :] = acc
-        for j in range(m):
-            s[j] = r
-        for u in range(d):  # S = h P^- h^T + R, r = y - h x^-
-            for j in range(m):
-                s[j] += hk[u, j] * ph[u, j]
                 res[j] -= hk[u, j] * x[u, j]
-        for u in range(d):  # K = P^- h^T / S, x^+ = x^- + K r
+        # S, K and P^+ (Joseph or standard form): the one compiled covariance update
+        covariance_update(cov, hk3, rv, joseph, gain3, s3, work)
+        for u in range(d):  # x^+ = x^- + K r
             for j in range(m):
-                gain[u, j] = ph[u, j] / s[j]
-                x[u, j] += gain[u, j] * res[j]
-        if joseph:
-            for u in range(d):  # A = I - K h
-                for v in range(d):
-                    eye = 1.0 if u == v else 0.0
-                    for j in range(m):
-                        a[u, v, j] = eye - gain[u, j] * hk[v, j]
-            for u in range(d):  # A P^-
-                for v in range(d):
-                    for j in range(m):
-                        acc[j] = 0.0
-                    for w in range(d):
-                        for j in range(m):
-                            acc[j] += a[u, w, j] * cov[w, v, j]
-                    ap[u, v, :] = acc
-            for u in range(d):  # P^+ = A P^- A^T + R K K^T
-                for v in range(d):
-                    for j in range(m):
-                        acc[j] = 0.0
-                    for w in range(d):
-                        for j in range(m):
-                            acc[j] += ap[u, w, j] * a[v, w, j]
-                    for j in range(m):
-                        cov[u, v, j] = acc[j] + r * gain[u, j] * gain[v, j]
-        else:
-            for u in range(d):  # P^+ = P^- - K (h P^-)
-                for v in range(d):
-                    for j in range(m):
-                        cov[u, v, j] -= gain[u, j] * ph[v, j]
-        for u in range(d):
-            for v in range(u + 1, d):
-                for j in range(m):
-                    mid = 0.5 * (cov[u, v, j] + cov[v, u, j])
-                    cov[u, v, j] = mid
-                    cov[v, u, j] = mid
+                x[u, j] += gain3[0, u, j] * res[j]
         for u in range(d):  # e = x - x^+
             for j in range(m):
                 err[u, j] -= x[u, j]
