@@ -3,14 +3,15 @@
 Every compiled function of the package that updates a covariance calls
 :func:`kalcal.core.kernels.covariance_update`; the fixed-gain block kernel applies its precomputed gains
 and has no covariance update. numba keys a cached kernel on its own source file only, so a kernel that
-compiled another module's function into itself is stale once that module changes; the second test fails
-then (clear the callers' cache: see :mod:`kalcal.core.kernels`).
+compiled another module's function into itself is stale once that module changes: each such module
+carries a stamp of its callees' sources (the second test), so that a callee's change changes the caller's
+file too.
 """
 
 from __future__ import annotations
 
+import hashlib
 import importlib
-import os
 import pkgutil
 import sys
 
@@ -60,25 +61,40 @@ def test_every_compiled_covariance_update_is_the_one_function():
     )
 
 
-def test_no_cached_kernel_is_older_than_a_compiled_function_it_calls_from_another_module():
+def _stamp_line(callees: set[str]) -> str:
+    """The line a module whose kernels compile ``callees`` (module names) into themselves must carry: each
+    callee with the first 16 hex digits of the SHA-256 of its source as it is now."""
+    parts = []
+    for name in sorted(callees):
+        digest = hashlib.sha256(open(sys.modules[name].__file__, "rb").read()).hexdigest()[:16]
+        parts.append(f"{name} {digest}")
+    return "# numba cache stamp: " + ", ".join(parts)
+
+
+def test_every_kernel_that_compiles_another_modules_function_carries_its_stamp():
+    """numba keys a cached kernel on its own source file alone, so a kernel that compiled a function of
+    another module into itself would be loaded stale after that module changed (in a checkout, and after an
+    upgrade, which leaves numba's cache files in place). Each such module carries a line naming each callee
+    module with the digest of its source: a change to a callee fails this test until the caller's line is
+    renewed, and the renewed line changes the caller's file, which numba's own cache then sees. The line of
+    a callee is part of its source, so a change two modules down renews every module up the chain."""
     found = _kernels(_compiled_modules())
-    stale = []
-    for (name, key), kernel in found.items():
-        cache_file = kernel._cache._cache_file
-        # the data files the index names (an index of an older source of the kernel itself names none:
-        # numba would compile anew; a data file it no longer names is left over, never loaded)
-        cached = [os.path.join(kernel._cache._cache_path, data) for data in cache_file._load_index().values()]
-        if not cached:
-            continue  # not compiled on this machine yet: it compiles against the present sources
-        oldest = min(os.path.getmtime(path) for path in cached)
-        seen, todo = set(), list(_callees(kernel))
-        while todo:  # the callees' callees too: all of them are compiled into this kernel
-            callee = todo.pop()
-            if id(callee) in seen:
-                continue
-            seen.add(id(callee))
-            todo.extend(_callees(callee))
-            source = sys.modules[callee.py_func.__module__].__file__
-            if callee.py_func.__module__ != name and os.path.getmtime(source) > oldest:
-                stale.append(f"{name}.{key} (cached before {source} changed)")
-    assert not stale, "stale compiled kernels; remove their numba cache: " + ", ".join(sorted(set(stale)))
+    callees: dict[str, set[str]] = {}
+    for (name, _), kernel in found.items():
+        for callee in _callees(kernel):
+            module = callee.py_func.__module__
+            if module != name:
+                callees.setdefault(name, set()).add(module)
+    assert callees, "no kernel calls another module's: the test found nothing to hold"
+    wrong = []
+    for name, modules in sorted(callees.items()):
+        expected = _stamp_line(modules)
+        lines = [line.rstrip("\n") for line in open(sys.modules[name].__file__, encoding="utf-8")]
+        if expected not in lines:
+            wrong.append(f"{sys.modules[name].__file__}: needs the line\n{expected}")
+    assert not wrong, "stale numba cache stamps (each caller would load its cached kernels compiled against the old callee):\n" + "\n".join(wrong)
+    # and no module carries a stamp for callees it no longer compiles in
+    for name, module in _compiled_modules().items():
+        if module.__file__ and name not in callees:
+            lines = open(module.__file__, encoding="utf-8").read().splitlines()
+            assert not any(line.startswith("# numba cache stamp:") for line in lines), name

@@ -29,12 +29,10 @@ not used, and the step is a prediction only (the caller keeps P = M). The update
 inputs.
 
 numba's cache and this module. A kernel that calls these functions compiles them into its own cached
-machine code, and numba keys that cache on the caller's source file alone: after a change to this
-module the callers' caches are stale until their own files change. tests/filters/test_kernel_callers.py
-fails when a cached caller is older than this file; remove the cache (``__pycache__/*.nbi``, ``*.nbc``
-of the callers, or ``NUMBA_CACHE_DIR``) or touch the callers after editing here: until then a caller runs
-the update it was compiled with, silently. An installed release writes every file anew, so its caches
-start empty.
+machine code, and numba keys that cache on the caller's source file alone. Each caller therefore carries
+a ``# numba cache stamp:`` line with the digest of this file, which tests/filters/test_kernel_callers.py
+holds to the present source: after a change here that test names each caller's new line, and the
+renewed line makes numba compile the caller anew (docs/verification.md).
 """
 
 from __future__ import annotations

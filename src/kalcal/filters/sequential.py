@@ -19,6 +19,8 @@ test the compiled :func:`kalcal.core.kernels.measured`; tests/filters/test_seque
 to the reference steps fix by fix.
 """
 
+# numba cache stamp: kalcal.core.kernels e2912fff4cc6900a
+
 from __future__ import annotations
 
 from typing import NamedTuple

@@ -14,6 +14,8 @@ the innovations are formed in their rows of the block's residual buffer, not cop
 both consume the same draws and agree to rounding.
 """
 
+# numba cache stamp: kalcal.montecarlo.sum_kernels 2b967b9980519480
+
 from __future__ import annotations
 
 import numba

@@ -20,6 +20,8 @@ The filter step itself is compiled without fast-math (each realization's numbers
 machine and in any tile); only the sums over realizations are reassociated.
 """
 
+# numba cache stamp: kalcal.core.kernels e2912fff4cc6900a, kalcal.montecarlo.sum_kernels 2b967b9980519480
+
 from __future__ import annotations
 
 import numba

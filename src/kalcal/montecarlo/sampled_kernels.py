@@ -17,6 +17,8 @@ stays the tests' oracle: the sums agree to rounding, not bit for bit, because nu
 interval as one BLAS matrix product, whose order of additions this kernel does not reproduce.
 """
 
+# numba cache stamp: kalcal.montecarlo.kernels e52533a4f91f8ec9
+
 from __future__ import annotations
 
 import numba
