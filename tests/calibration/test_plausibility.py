@@ -640,6 +640,25 @@ def test_bias_from_too_few_fixes_is_unobservable_or_refused():
     assert names == ["bias"] and d["weaker_than_prior"] == [True]
     # b from two velocity fixes 0.2 s apart, each to 0.04 m/s: sqrt(2) 0.04 / 0.2 = 0.283 (positions add little)
     assert d["std"][0] == pytest.approx(np.sqrt(2) * 0.04 / 0.2, rel=0.02)
-    assert "1 fix(es) update the filter over 0.2 s, of 150 in the GPS log (148 with a NaN field" in cause
+    assert "1 fix(es) update the filter over 0.2 s, of 150 in the GPS log (1 starts the filter, 148 with a NaN field" in cause
     with pytest.raises(DataError, match=r"gps.csv: needs at least three usable fixes .* got 2 \(148 with a NaN field.*no fix to check"):
         _observability(_scenario(), logs)
+
+
+def test_the_fixes_text_adds_up_with_the_gate_and_the_starting_fix():
+    """Used + rejected by the gate + the fix that starts the filter + NaN + outside = the fixes in the log:
+    the gate's rejections and the starting fix were once left out of the text ("148 used of 150 (0 with a
+    NaN field, 0 outside)")."""
+    from kalcal.calibration.accel_gps import prepare_accel_gps_log
+    from kalcal.calibration.accel_gps_observability import _fixes_text, data_only_information
+
+    scenario = _scenario("filter.bias_std=0.1")
+    log = prepare_accel_gps_log(scenario, *_logs(scenario), init="first-fix", source="gps.csv", imu_source="imu.csv")
+    rejected = np.zeros(log.fixes, dtype=bool)
+    rejected[[10, 40]] = True
+    fixes = data_only_information(log, rejected)["fixes"]
+    assert (fixes["used"], fixes["rejected"], fixes["start"], fixes["in_log"]) == (log.fixes - 2, 2, 1, log.fixes + 1)
+    assert fixes["used"] + fixes["rejected"] + fixes["start"] + fixes["nan"] + fixes["outside"] == fixes["in_log"]
+    text = _fixes_text(fixes)
+    assert f"{log.fixes - 2} fix(es) update the filter" in text and f"of {log.fixes + 1} in the GPS log" in text
+    assert "(2 rejected by the gate, 1 starts the filter, 0 with a NaN field, 0 outside the accelerometer log)" in text

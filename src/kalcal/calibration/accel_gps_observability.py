@@ -137,6 +137,8 @@ def data_only_information(log, rejected: np.ndarray | None = None) -> dict[str, 
         "fixes": {
             "used": int(np.count_nonzero(~mask)),
             "in_log": int(log.fixes + log.skipped_nan + log.skipped_outside + (1 if log.init == "first-fix" else 0)),
+            "rejected": int(np.count_nonzero(mask)),
+            "start": 1 if log.init == "first-fix" else 0,
             "nan": int(log.skipped_nan),
             "outside": int(log.skipped_outside),
             "span": float(log.fix_times[-1] - log.start_time),
@@ -162,9 +164,14 @@ def unobservable(d: dict[str, Any], final_std: np.ndarray, threshold: float = UN
 
 
 def _fixes_text(fixes: dict[str, Any]) -> str:
+    """The fixes used and where the others of the log went; the counts add up to the log's: used +
+    rejected by the gate + the one that starts the filter (``--init first-fix``) + NaN + outside."""
+    others = [f"{fixes['rejected']} rejected by the gate"] if fixes.get("rejected") else []
+    others += [f"{fixes['start']} starts the filter"] if fixes.get("start") else []
+    others += [f"{fixes['nan']} with a NaN field", f"{fixes['outside']} outside the accelerometer log"]
     return (
         f"{fixes['used']} fix(es) update the filter over {fixes['span']:.3g} s, of {fixes['in_log']} in the GPS log "
-        f"({fixes['nan']} with a NaN field, {fixes['outside']} outside the accelerometer log)"
+        f"({', '.join(others)})"
     )
 
 
