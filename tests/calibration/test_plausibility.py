@@ -370,7 +370,8 @@ def test_a_sensor_that_does_not_track_the_reference_is_unobservable_not_a_prior_
 
 def test_a_prior_stronger_than_a_weakly_excited_log_is_named_by_the_data_only_sigma():
     """A sensor that varies by 0.01 around 1 tracks the reference, but the log alone tells theta1 with a
-    sigma far above the prior's: unobservable, with that comparison as the cause."""
+    sigma far above the prior's: the log determines theta, less sharply than the prior claims, so the
+    prior is the cause (prior-dominates), not an unobservable theta1, and a prior conflict is not hidden."""
     scenario = build_scenario("scale-bias")
     samples = sample_scale_bias(scenario, np.random.default_rng(3), 1)
     rng = np.random.default_rng(9)
@@ -380,8 +381,11 @@ def test_a_prior_stronger_than_a_weakly_excited_log_is_named_by_the_data_only_si
     d = result.data_only
     assert not d["singular"] and d["weaker_than_prior"][0] and d["std"][0] > 2.06 * result.prior_std[0]
     found = result.warnings()
-    assert found and found[0].code == "unobservable" and "data-only sigma" in found[0].message
-    assert all(w.code != "prior-conflict" for w in found)
+    assert result.unobservable() == [] and result.prior_tighter()[0] == "theta1"
+    assert found and found[0].code == "prior-dominates" and "theta1's data-only sigma" in found[0].message
+    assert all(w.code != "unobservable" for w in found) and "no excitation" not in found[0].message
+    # the conflict test is kept beside it: its verdict is reported whenever it finds one
+    assert any(w.code == "prior-conflict" for w in found) == bool(result.conflict["conflict"])
 
 
 @pytest.mark.parametrize(
@@ -662,3 +666,49 @@ def test_the_fixes_text_adds_up_with_the_gate_and_the_starting_fix():
     text = _fixes_text(fixes)
     assert f"{log.fixes - 2} fix(es) update the filter" in text and f"of {log.fixes + 1} in the GPS log" in text
     assert "(2 rejected by the gate, 1 starts the filter, 0 with a NaN field, 0 outside the accelerometer log)" in text
+
+
+def _calibration_summary(scenario, logs):
+    """summary.json of ``calibrate accel-gps`` on the logs (as DataFrames), without the sigma over settings."""
+    import pandas as pd
+
+    from kalcal.jobs.calibrate import compute_accel_gps_calibration
+
+    imu_time, accel, fix_time, position, velocity = logs
+    imu = pd.DataFrame({"time": imu_time, "accel": accel})
+    gps = pd.DataFrame({"time": fix_time, "position": position, "velocity": velocity})
+    return compute_accel_gps_calibration(scenario, imu, gps, settings_sigma=False).summary
+
+
+def test_a_tight_prior_on_a_genuine_log_is_named_as_the_cause_not_unobservable():
+    """filter.bias_std = 0.0002 on the default log (149 fixes): the bias was called unobservable with the
+    log blamed ("the bias needs fixes over the log"), its sigma NOT trusted, and the prior conflict hidden.
+    The log determines the bias; the prior is the cause (prior-dominates), and the conflict is reported."""
+    scenario = _scenario("filter.bias_std=0.0002")
+    logs = _logs(scenario, 3)
+    d, names, cause = _observability(scenario, logs)
+    assert names == [] and cause is None and d["weaker_than_prior"] == [True] and d["determined"] == [True]
+    assert d["fixes"]["used"] >= 100 and d["std"][0] > 2.06 * 0.0002
+    summary = _calibration_summary(scenario, logs)
+    codes = [w["code"] for w in summary["warnings"]]
+    assert "unobservable" not in codes and "prior-dominates" in codes and "prior-conflict" in codes, codes
+    assert summary["observability"]["prior_tighter"] == ["bias"]
+    message = next(w["message"] for w in summary["warnings"] if w["code"] == "prior-dominates")
+    assert "the prior filter.bias_std = 0.0002 is tighter than this log can tell (data-only sigma" in message
+    assert "needs fixes" not in message and "unobservable" not in message
+
+
+def test_a_realistic_scale_prior_on_an_excited_log_is_not_no_excitation():
+    """truth.scale_std = 1e-4 (100 ppm) on the default log: the scale was "unobservable ... (no excitation)"
+    beside an accelerometer spread 142 times its noise. The log determines the scale, less sharply than
+    the prior: prior-dominates names filter.scale_std, and nothing is unobservable."""
+    scenario = _scenario("truth.scale_std=0.0001")
+    d, names, cause = _observability(scenario, _logs(scenario, 0))
+    assert d["excitation"]["ratio"] > 100 and d["weaker_than_prior"][1] and d["determined"] == [True, True]
+    assert names == [] and cause is None
+    summary = _calibration_summary(scenario, _logs(scenario, 0))
+    codes = [w["code"] for w in summary["warnings"]]
+    assert "unobservable" not in codes and "prior-dominates" in codes, codes
+    message = next(w["message"] for w in summary["warnings"] if w["code"] == "prior-dominates")
+    assert "the prior filter.scale_std = 0.0001 is tighter than this log can tell" in message
+    assert "no excitation" not in message

@@ -153,7 +153,7 @@ def compute_accel_gps_calibration(
     """
     # the accel-gps filter (and numba under it) when it runs: a scale-bias calibration imports this module too
     from kalcal.calibration.accel_gps import bias_walk_variance, prepare_accel_gps_log, prior_conflict
-    from kalcal.calibration.accel_gps_observability import data_only_information, unobservable_warning
+    from kalcal.calibration.accel_gps_observability import data_only_information, prior_warning, unobservable_warning
     from kalcal.calibration.accel_gps_observability import summary_block as observability_summary
     from kalcal.calibration.diagnostics import innovation_diagnostics
     from kalcal.calibration.smoothing import smooth_calibration
@@ -219,13 +219,18 @@ def compute_accel_gps_calibration(
     diagnostics = innovation_diagnostics(normalized[used])
     warnings = list(result.warnings)
     # what the log alone tells of the bias (and scale): an unobservable one is the prior's, and beside it
-    # neither a prior conflict nor the noise settings are a cause (kalcal.calibration.accel_gps_observability)
+    # neither a prior conflict nor the noise settings are a cause; one the log determines less sharply
+    # than a tight prior is the prior's doing, named as such (kalcal.calibration.accel_gps_observability)
     final_std = np.sqrt(np.diagonal(result.filter_covariance[-1]))[2:]
     data_only = data_only_information(log, result.rejected)
     observability = observability_summary(data_only, final_std)
     unobservable = unobservable_warning(data_only, final_std, str(gps_path))
     if unobservable is not None:
         warnings.append(unobservable)
+    # a prior tighter than the log can tell: the prior is the cause, and a conflict with it is still news
+    tighter = prior_warning(data_only, final_std, str(gps_path))
+    if tighter is not None:
+        warnings.append(tighter)
     conflict = prior_conflict(result, walk_variance=bias_walk_variance(scenario, result, imu["time"]))
     if conflict is not None and "bias" not in observability["unobservable"]:
         warnings.append(conflict)
