@@ -712,3 +712,21 @@ def test_a_realistic_scale_prior_on_an_excited_log_is_not_no_excitation():
     message = next(w["message"] for w in summary["warnings"] if w["code"] == "prior-dominates")
     assert "the prior filter.scale_std = 0.0001 is tighter than this log can tell" in message
     assert "no excitation" not in message
+
+
+def test_the_untrusted_warning_beside_unobservable_gives_no_noise_advice():
+    """Innovations far too large give accel-gps's verdict "... the noise settings are too small, or ...";
+    beside an unobservable parameter the warning said that and then "No noise setting mends this". It now
+    quotes the bare numbers (mean NIS against its bounds, the Ljung-Box p-value) there, and the verdict
+    with its advice where nothing is unobservable."""
+    from kalcal.calibration.diagnostics import innovation_diagnostics
+    from kalcal.jobs.calibrate_warnings import untrusted_warning
+
+    normalized = 3.0 * np.random.default_rng(0).standard_normal((150, 2))
+    diagnostics = innovation_diagnostics(normalized).as_dict()
+    assert not diagnostics["consistent"] and "noise settings are too small" in diagnostics["verdict"]
+    because, warning = untrusted_warning(diagnostics, {}, 0.01, "m/s^2", "kalcal fit ...", "bias unobservable (few fixes)")
+    assert "noise settings are too small" not in warning.message and "No noise setting mends this" in warning.message
+    assert f"mean NIS {diagnostics['mean_nis']:.3g} against [" in because and "Ljung-Box p = " in because
+    _, plain = untrusted_warning(diagnostics, {}, 0.01, "m/s^2", "kalcal fit ...")
+    assert "noise settings are too small" in plain.message and "kalcal fit ..." in plain.message
