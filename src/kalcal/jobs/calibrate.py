@@ -140,8 +140,9 @@ def compute_accel_gps_calibration(
     the bias and the scale (:mod:`kalcal.calibration.accel_gps_observability`): each one's final sigma over
     its no-data sigma, the ``unobservable`` ones, their ``cause`` and the ``data_only`` grounds (the
     information's reciprocal condition, each data-only and no-data sigma, the fixes and the acceleration);
-    an unobservable one makes an ``unobservable`` warning and the bias's sigma untrusted, with no advice
-    on the noise settings.
+    an unobservable one makes an ``unobservable`` warning; an unobservable bias (or singular information)
+    makes the bias's sigma untrusted, with no advice on the noise settings, and an unobservable scale
+    makes ``scale_sigma_trusted`` false (the bias's sigma then stands on the diagnostics alone).
 
     When the diagnostics say inconsistent or the windows are not stable, the bias's sigma is not trusted:
     ``sigma_trusted`` is false, ``sigma_untrusted_because`` says why, and a ``sigma-untrusted`` warning
@@ -255,9 +256,13 @@ def compute_accel_gps_calibration(
             )
         )
     names = observability["unobservable"]
+    # the bias's sigma rests on the prior only where the bias itself is unobservable or the information is
+    # singular; a scale unobservable alone leaves the bias determined (only its s a_c share leans on the
+    # scale's prior): then the scale's own sigma is the one marked (scale_sigma_trusted)
+    bias_unobservable = "bias" in names or data_only["singular"]
     untrusted = untrusted_warning(diagnostics.as_dict(), stability.as_dict(), float(std[-1, 2]), "m/s^2",
                                   fit_command(str(imu_path), str(gps_path), fit_extra(imu_columns, gps_columns, init, gate, fit_options)),
-                                  f"{' and '.join(names)} unobservable ({observability['cause']})" if names else None)
+                                  f"{' and '.join(names)} unobservable ({observability['cause']})" if bias_unobservable else None)
     if untrusted is not None:
         warnings.append(untrusted[1])
     over = None
@@ -308,6 +313,7 @@ def compute_accel_gps_calibration(
     }
     if scenario.has_scale:
         summary["scale"], summary["scale_std"] = float(result.error_state[-1, 3]), float(std[-1, 3])
+        summary["scale_sigma_trusted"] = "scale" not in names
     if smoothed is not None:
         summary["smoothed"] = _smoothed_summary(smoothed, std, scenario.state_names)
     # the log files (not DataFrames) are the run's inputs: a folder's set never removes them
