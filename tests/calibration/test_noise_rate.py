@@ -106,9 +106,13 @@ def test_a_per_sample_setting_written_for_another_rate_warns_naming_both(logs, t
     own = tmp_path / "own.toml"
     own.write_text(old.read_text().replace("imu_rate = 100.0", "imu_rate = 200.0"))
     assert not [w for w in _calibrate(sim, tmp_path / "same", "--config", own)["warnings"] if w["code"].startswith("noise-rate")]
-    # the file's rate replaced on the command line: the rate the file's values were written for is unknown now
+    # the file's rate replaced on the command line: the file still says its values were written for 100 Hz
+    # (they were called "unknown", the message claiming "its file gives no scenario.imu_rate")
     over = _calibrate(sim, tmp_path / "over", "--config", old, "--set", "scenario.imu_rate=200")["warnings"]
-    assert sorted(w["code"] for w in over if w["code"].startswith("noise-rate")) == ["noise-rate-unknown"] * 2
+    rated = [w for w in over if w["code"].startswith("noise-rate")]
+    assert sorted(w["code"] for w in rated) == ["noise-rate-mismatch"] * 2
+    assert all("written for 100 Hz" in w["message"] and "at 200 Hz" in w["message"] for w in rated)
+    assert not any("gives no scenario.imu_rate" in w["message"] for w in over)
 
 
 def test_a_rate_on_the_command_line_is_not_an_old_files_rate(logs, tmp_path):

@@ -424,12 +424,13 @@ class AccelGpsScenario:
         """The noise settings given per sample that the filter uses, ``{"filter.accel_noise_std": (value,
         file or None), ...}`` (a truth's where the filter takes it; a zero walk, rate-free, left out; the
         file the value was read from, None for ``--set`` or a value given in code), and the rate (Hz)
-        recorded for each, by key: for a value read from a file, ``scenario.imu_rate`` only where that same
-        file gave it (a file of ``kalcal fit`` records its log's; a rate given with ``--set`` or by another
-        file says nothing about the rate the file's value was written for); for a value given with
+        recorded for each, by key: for a value read from a file, the ``scenario.imu_rate`` that same file
+        gave, whether or not a later file or ``--set`` replaced it for the run (a file of ``kalcal fit``
+        records its log's; a rate given with ``--set`` or by another file says nothing about the rate the
+        file's value was written for); for a value given with
         ``--set`` or in code, ``scenario.imu_rate`` where it was given; else None. Both empty for settings
         :meth:`at_rate` bound to a rate."""
-        from kalcal.models.config import given_keys, setting_files
+        from kalcal.models.config import file_settings, given_keys, setting_files
 
         if self.noise_rate is not None:
             return {}, {}
@@ -449,11 +450,14 @@ class AccelGpsScenario:
                     break
         keys = given_keys(self)
         stated = "scenario.imu_rate" in keys or (not keys and self.scenario.imu_rate != AccelGpsSettings.imu_rate)
-        rate_file = files.get("scenario.imu_rate")
-        recorded = {
-            key: self.scenario.imu_rate if stated and (file is None or file == rate_file) else None
-            for key, (_, file) in found.items()
-        }
+        given_by_file = file_settings(self)
+        recorded = {}
+        for key, (_, file) in found.items():
+            if file is None:
+                recorded[key] = self.scenario.imu_rate if stated else None
+            else:
+                rate = given_by_file.get(file, {}).get("scenario.imu_rate")
+                recorded[key] = None if rate is None else float(rate)
         return found, recorded
 
     def at_rate(self, rate: float) -> AccelGpsScenario:

@@ -116,7 +116,20 @@ def apply_settings(scenario: S, settings: Mapping[str, Any], sources: Mapping[st
         files = {key: file for key, file in setting_files(scenario).items() if key not in settings}
         files.update({key: sources[key] for key in settings if key in sources})
         object.__setattr__(result, "_setting_files", files)
+        # what each file gave, kept when a later file or --set overrides it: a file's own values (the rate
+        # its per-sample noise was written for) say what the file meant, whatever runs in the end
+        given = {file: dict(values) for file, values in file_settings(scenario).items()}
+        for key in settings:
+            if key in sources:
+                given.setdefault(sources[key], {})[key] = settings[key]
+        object.__setattr__(result, "_file_settings", given)
     return result
+
+
+def file_settings(scenario: Any) -> dict[str, dict[str, Any]]:
+    """``{file: {section.key: value}}``: what each settings file gave on the way to ``scenario``, kept
+    where a later file or ``--set`` overrode it (:func:`setting_files` holds only the settings in force)."""
+    return {file: dict(values) for file, values in getattr(scenario, "_file_settings", {}).items()}
 
 
 def setting_files(scenario: Any) -> dict[str, str]:
