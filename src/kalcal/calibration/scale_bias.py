@@ -109,7 +109,7 @@ class ScaleBiasCalibration:
         sigmas, or a final sigma above ``threshold`` times the no-data one. Their estimate and sigma lean on
         the prior, which is the cause (a ``prior-dominates`` warning); a prior conflict is still reported."""
         d = self.data_only
-        if d is None or d["singular"] or not d["tracks"]:
+        if d is None or d["singular"] or not d["tracks"] or self.prior == "diffuse":  # no prior to be tighter
             return []
         return [
             name for name, weak, ratio in zip(STATE_NAMES, d["weaker_than_prior"], self.std_ratio)
