@@ -106,9 +106,13 @@ def test_a_per_sample_setting_written_for_another_rate_warns_naming_both(logs, t
     own = tmp_path / "own.toml"
     own.write_text(old.read_text().replace("imu_rate = 100.0", "imu_rate = 200.0"))
     assert not [w for w in _calibrate(sim, tmp_path / "same", "--config", own)["warnings"] if w["code"].startswith("noise-rate")]
-    # the file's rate replaced on the command line: the rate the file's values were written for is unknown now
+    # the file's rate replaced on the command line: the file still says its values were written for 100 Hz
+    # (they were called "unknown", the message claiming "its file gives no scenario.imu_rate")
     over = _calibrate(sim, tmp_path / "over", "--config", old, "--set", "scenario.imu_rate=200")["warnings"]
-    assert sorted(w["code"] for w in over if w["code"].startswith("noise-rate")) == ["noise-rate-unknown"] * 2
+    rated = [w for w in over if w["code"].startswith("noise-rate")]
+    assert sorted(w["code"] for w in rated) == ["noise-rate-mismatch"] * 2
+    assert all("written for 100 Hz" in w["message"] and "at 200 Hz" in w["message"] for w in rated)
+    assert not any("gives no scenario.imu_rate" in w["message"] for w in over)
 
 
 def test_a_rate_on_the_command_line_is_not_an_old_files_rate(logs, tmp_path):
@@ -125,23 +129,30 @@ def test_a_rate_on_the_command_line_is_not_an_old_files_rate(logs, tmp_path):
 
 
 def test_the_built_in_noise_is_a_density_at_the_default_rate(tmp_path):
-    """The built-in 0.02 m/s^2 per sample holds at scenario.imu_rate (200 Hz): a log at another rate
-    gets the same noise density, 0.02 sqrt(rate / 200) per sample; within 1% of 200 Hz it stays 0.02;
-    a value given (filter or truth) stays as given."""
+    """The built-in noise is one density, 0.02 m/s^2 per sample at 200 Hz, everywhere: a log at another
+    rate gets 0.02 sqrt(rate / 200) per sample; within 1% of scenario.imu_rate the truth's value there is
+    kept; simulate and verify at another scenario.imu_rate draw the same density (the truth was 0.02 per
+    sample at 100 Hz while calibrate assumed 0.0141: a bias sigma 0.86x the right one, silently); a value
+    given (filter or truth) stays as given."""
     scenario = build_scenario("accel-gps")
+    assert scenario.truth.accel_noise_std == 0.02  # 200 Hz, unchanged
     assert scenario.at_rate(100.0).filter_settings.accel_noise_std == pytest.approx(0.02 * np.sqrt(0.5), rel=1e-12)
     assert scenario.at_rate(400.0).filter_settings.accel_noise_std == pytest.approx(0.02 * np.sqrt(2.0), rel=1e-12)
     assert scenario.at_rate(201.0).filter_settings.accel_noise_std == 0.02
-    assert build_scenario("accel-gps", assignments=["scenario.imu_rate=100"]).at_rate(100.0).filter_settings.accel_noise_std == 0.02
+    at_100 = build_scenario("accel-gps", assignments=["scenario.imu_rate=100"])
+    assert at_100.truth.accel_noise_std == pytest.approx(0.02 * np.sqrt(0.5), rel=1e-12)  # what simulate draws
+    assert at_100.at_rate(100.0).filter_settings.accel_noise_std == at_100.truth.accel_noise_std
+    assert at_100.at_rate(200.0).filter_settings.accel_noise_std == pytest.approx(0.02, rel=1e-12)
     for key in ("filter.accel_noise_std", "truth.accel_noise_std"):
         given = build_scenario("accel-gps", assignments=[f"{key}=0.03"])
         assert given.at_rate(100.0).filter_settings.accel_noise_std == 0.03
-    # a 100 Hz log calibrated with the built-in noise: the same sigma as with its 100 Hz per-sample value
+    # a log simulated at 100 Hz with the defaults, calibrated with the defaults: the sigma of its true noise
     sim = tmp_path / "sim"
     assert _invoke("simulate", "accel-gps", "--seed", "4", "--out", sim, "--set", "scenario.imu_rate=100").exit_code == 0
     default = _calibrate(sim, tmp_path / "default")
-    at_rate = _calibrate(sim, tmp_path / "set", "--set", f"filter.accel_noise_std={float(0.02 * np.sqrt(0.5))!r}")
-    assert _bias_sigma(default) == pytest.approx(_bias_sigma(at_rate), rel=1e-9)
+    true = at_100.truth.accel_noise_std
+    with_truth = _calibrate(sim, tmp_path / "set", "--set", f"filter.accel_noise_std={true!r}")
+    assert _bias_sigma(default) == pytest.approx(_bias_sigma(with_truth), rel=1e-9)
     stale = _calibrate(sim, tmp_path / "stale", "--set", "filter.accel_noise_std=0.02")
     assert _bias_sigma(stale) > 1.01 * _bias_sigma(default)
 

@@ -369,19 +369,33 @@ def test_a_sensor_that_does_not_track_the_reference_is_unobservable_not_a_prior_
 
 
 def test_a_prior_stronger_than_a_weakly_excited_log_is_named_by_the_data_only_sigma():
-    """A sensor that varies by 0.01 around 1 tracks the reference, but the log alone tells theta1 with a
-    sigma far above the prior's: unobservable, with that comparison as the cause."""
+    """A sensor that varies by 0.1 around 1 tracks the reference (with the filter's own noise, 0.2), but the
+    log alone tells theta1 with a sigma 5.6 times the prior's: it was called unobservable ("no excitation").
+    The log determines theta, less sharply than the prior claims, so the prior is the cause
+    (prior-dominates), and the prior-conflict test is not hidden. A sensor that varies by 0.01 under a
+    reference noise of 0.2 does not track it: unobservable, with that cause."""
     scenario = build_scenario("scale-bias")
     samples = sample_scale_bias(scenario, np.random.default_rng(3), 1)
-    rng = np.random.default_rng(9)
-    sensor = 1.0 + 0.01 * rng.standard_normal(samples.time.size)
-    reference = 1.02 * sensor + 0.2 * rng.standard_normal(samples.time.size) - 0.05
-    result = calibrate_scale_bias(scenario, samples.time, reference, sensor, prior="settings", conflict=True)
+    noise = float(np.sqrt(scenario.filter_noise_variance()))
+
+    def calibrate(spread, reference_noise):
+        rng = np.random.default_rng(9)
+        sensor = 1.0 + spread * rng.standard_normal(samples.time.size)
+        reference = 1.02 * sensor + reference_noise * rng.standard_normal(samples.time.size) - 0.05
+        return calibrate_scale_bias(scenario, samples.time, reference, sensor, prior="settings", conflict=True)
+
+    result = calibrate(0.1, noise)
     d = result.data_only
-    assert not d["singular"] and d["weaker_than_prior"][0] and d["std"][0] > 2.06 * result.prior_std[0]
+    assert not d["singular"] and d["tracks"] and d["weaker_than_prior"][0] and d["std"][0] > 2.06 * result.prior_std[0]
     found = result.warnings()
-    assert found and found[0].code == "unobservable" and "data-only sigma" in found[0].message
-    assert all(w.code != "prior-conflict" for w in found)
+    assert result.unobservable() == [] and result.prior_tighter() == ["theta1"]
+    assert found and found[0].code == "prior-dominates" and "theta1's data-only sigma" in found[0].message
+    assert all(w.code != "unobservable" for w in found) and "no excitation" not in found[0].message
+    # the conflict test is kept beside it: its verdict is reported whenever it finds one
+    assert any(w.code == "prior-conflict" for w in found) == bool(result.conflict["conflict"])
+    weak = calibrate(0.01, 0.2)
+    assert not weak.data_only["tracks"] and weak.unobservable() == ["theta1", "theta2"] and weak.prior_tighter() == []
+    assert weak.warnings()[0].code == "unobservable" and "does not track" in weak.warnings()[0].message
 
 
 @pytest.mark.parametrize(
@@ -640,6 +654,89 @@ def test_bias_from_too_few_fixes_is_unobservable_or_refused():
     assert names == ["bias"] and d["weaker_than_prior"] == [True]
     # b from two velocity fixes 0.2 s apart, each to 0.04 m/s: sqrt(2) 0.04 / 0.2 = 0.283 (positions add little)
     assert d["std"][0] == pytest.approx(np.sqrt(2) * 0.04 / 0.2, rel=0.02)
-    assert "1 fix(es) update the filter over 0.2 s, of 150 in the GPS log (148 with a NaN field" in cause
+    assert "1 fix(es) update the filter over 0.2 s, of 150 in the GPS log (1 starts the filter, 148 with a NaN field" in cause
     with pytest.raises(DataError, match=r"gps.csv: needs at least three usable fixes .* got 2 \(148 with a NaN field.*no fix to check"):
         _observability(_scenario(), logs)
+
+
+def test_the_fixes_text_adds_up_with_the_gate_and_the_starting_fix():
+    """Used + rejected by the gate + the fix that starts the filter + NaN + outside = the fixes in the log:
+    the gate's rejections and the starting fix were once left out of the text ("148 used of 150 (0 with a
+    NaN field, 0 outside)")."""
+    from kalcal.calibration.accel_gps import prepare_accel_gps_log
+    from kalcal.calibration.accel_gps_observability import _fixes_text, data_only_information
+
+    scenario = _scenario("filter.bias_std=0.1")
+    log = prepare_accel_gps_log(scenario, *_logs(scenario), init="first-fix", source="gps.csv", imu_source="imu.csv")
+    rejected = np.zeros(log.fixes, dtype=bool)
+    rejected[[10, 40]] = True
+    fixes = data_only_information(log, rejected)["fixes"]
+    assert (fixes["used"], fixes["rejected"], fixes["start"], fixes["in_log"]) == (log.fixes - 2, 2, 1, log.fixes + 1)
+    assert fixes["used"] + fixes["rejected"] + fixes["start"] + fixes["nan"] + fixes["outside"] == fixes["in_log"]
+    text = _fixes_text(fixes)
+    assert f"{log.fixes - 2} fix(es) update the filter" in text and f"of {log.fixes + 1} in the GPS log" in text
+    assert "(2 rejected by the gate, 1 starts the filter, 0 with a NaN field, 0 outside the accelerometer log)" in text
+
+
+def _calibration_summary(scenario, logs):
+    """summary.json of ``calibrate accel-gps`` on the logs (as DataFrames), without the sigma over settings."""
+    import pandas as pd
+
+    from kalcal.jobs.calibrate import compute_accel_gps_calibration
+
+    imu_time, accel, fix_time, position, velocity = logs
+    imu = pd.DataFrame({"time": imu_time, "accel": accel})
+    gps = pd.DataFrame({"time": fix_time, "position": position, "velocity": velocity})
+    return compute_accel_gps_calibration(scenario, imu, gps, settings_sigma=False).summary
+
+
+def test_a_tight_prior_on_a_genuine_log_is_named_as_the_cause_not_unobservable():
+    """filter.bias_std = 0.0002 on the default log (149 fixes): the bias was called unobservable with the
+    log blamed ("the bias needs fixes over the log"), its sigma NOT trusted, and the prior conflict hidden.
+    The log determines the bias; the prior is the cause (prior-dominates), and the conflict is reported."""
+    scenario = _scenario("filter.bias_std=0.0002")
+    logs = _logs(scenario, 3)
+    d, names, cause = _observability(scenario, logs)
+    assert names == [] and cause is None and d["weaker_than_prior"] == [True] and d["determined"] == [True]
+    assert d["fixes"]["used"] >= 100 and d["std"][0] > 2.06 * 0.0002
+    summary = _calibration_summary(scenario, logs)
+    codes = [w["code"] for w in summary["warnings"]]
+    assert "unobservable" not in codes and "prior-dominates" in codes and "prior-conflict" in codes, codes
+    assert summary["observability"]["prior_tighter"] == ["bias"]
+    message = next(w["message"] for w in summary["warnings"] if w["code"] == "prior-dominates")
+    assert "the prior filter.bias_std = 0.0002 is tighter than this log can tell (data-only sigma" in message
+    assert "needs fixes" not in message and "unobservable" not in message
+
+
+def test_a_realistic_scale_prior_on_an_excited_log_is_not_no_excitation():
+    """truth.scale_std = 1e-4 (100 ppm) on the default log: the scale was "unobservable ... (no excitation)"
+    beside an accelerometer spread 142 times its noise. The log determines the scale, less sharply than
+    the prior: prior-dominates names filter.scale_std, and nothing is unobservable."""
+    scenario = _scenario("truth.scale_std=0.0001")
+    d, names, cause = _observability(scenario, _logs(scenario, 0))
+    assert d["excitation"]["ratio"] > 100 and d["weaker_than_prior"][1] and d["determined"] == [True, True]
+    assert names == [] and cause is None
+    summary = _calibration_summary(scenario, _logs(scenario, 0))
+    codes = [w["code"] for w in summary["warnings"]]
+    assert "unobservable" not in codes and "prior-dominates" in codes, codes
+    message = next(w["message"] for w in summary["warnings"] if w["code"] == "prior-dominates")
+    assert "the prior filter.scale_std = 0.0001 is tighter than this log can tell" in message
+    assert "no excitation" not in message
+
+
+def test_the_untrusted_warning_beside_unobservable_gives_no_noise_advice():
+    """Innovations far too large give accel-gps's verdict "... the noise settings are too small, or ...";
+    beside an unobservable parameter the warning said that and then "No noise setting mends this". It now
+    quotes the bare numbers (mean NIS against its bounds, the Ljung-Box p-value) there, and the verdict
+    with its advice where nothing is unobservable."""
+    from kalcal.calibration.diagnostics import innovation_diagnostics
+    from kalcal.jobs.calibrate_warnings import untrusted_warning
+
+    normalized = 3.0 * np.random.default_rng(0).standard_normal((150, 2))
+    diagnostics = innovation_diagnostics(normalized).as_dict()
+    assert not diagnostics["consistent"] and "noise settings are too small" in diagnostics["verdict"]
+    because, warning = untrusted_warning(diagnostics, {}, 0.01, "m/s^2", "kalcal fit ...", "bias unobservable (few fixes)")
+    assert "noise settings are too small" not in warning.message and "No noise setting mends this" in warning.message
+    assert f"mean NIS {diagnostics['mean_nis']:.3g} against [" in because and "Ljung-Box p = " in because
+    _, plain = untrusted_warning(diagnostics, {}, 0.01, "m/s^2", "kalcal fit ...")
+    assert "noise settings are too small" in plain.message and "kalcal fit ..." in plain.message

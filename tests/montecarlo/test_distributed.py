@@ -192,3 +192,21 @@ def test_a_steady_stream_of_records_is_not_one_event():
     memory = "Dask (distributed.worker.memory, warning): Unmanaged memory use is high"
     assert EVENT_WINDOW_S == 5.0  # the count below is for this window
     assert notes == [memory, memory, memory, WORKER_LOST, memory]  # at 10, 16, 22, 22.5 and 28 s
+
+
+def test_an_error_after_a_warning_is_a_note_of_its_own():
+    """Other records are grouped by logger and level: an ERROR 1 s after a memory WARNING (within the
+    window) once fell into the warning's event and was never shown; a second warning of the same logger
+    inside the window is still one event."""
+    import logging
+
+    notes, record = _handler_and_record()
+    record("Unmanaged memory use is high", 10.0, "distributed.worker.memory")
+    record("Unmanaged memory use is high", 10.5, "distributed.worker.memory")
+    record("Task exceeded its memory budget", 11.0, "distributed.worker.memory", level=logging.ERROR)
+    record("Scheduler lost contact", 11.5, "distributed.client", level=logging.ERROR)
+    assert notes == [
+        "Dask (distributed.worker.memory, warning): Unmanaged memory use is high",
+        "Dask (distributed.worker.memory, error): Task exceeded its memory budget",
+        "Dask (distributed.client, error): Scheduler lost contact",
+    ]

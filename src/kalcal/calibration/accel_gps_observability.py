@@ -10,6 +10,13 @@ does not determine it, whatever the prior makes of the posterior:
   than the prior);
 * or its final sigma is above ``UNOBSERVABLE_RATIO`` (0.9) times its no-data sigma.
 
+The last two alone are not enough where the log does determine the parameter: its data-only information
+is not singular, and for the bias at least ``MIN_FIXES`` (3) fixes update the filter, for the scale the
+accelerometer's spread is at least ``MIN_EXCITATION`` (2) times its noise setting. A parameter weaker than
+its prior on such a log is not unobservable: the log tells it, only less sharply than the prior claims,
+and the cause is the prior (:func:`prior_tighter`, the ``prior-dominates`` warning), beside which a prior
+conflict (an estimate far from the data's answer) is still reported.
+
 The data-only information Y of theta = [b', s'] (the filter's own parameters, :func:`~kalcal.calibration.
 interval_model.scale_parameters`; b and s to first order in s) is that of the filter's fixes given theta,
 the position and velocity kept with their priors and the process noise as set: the same filter is run
@@ -37,7 +44,10 @@ from kalcal.calibration.accel_gps_evaluation import DIFFUSE_BIAS_STD
 from kalcal.calibration.plausibility import CalibrationWarning
 from kalcal.calibration.scale_bias_observability import DATA_ONLY_FACTOR, DIFFUSE_RCOND, UNOBSERVABLE_RATIO
 
-__all__ = ["DIFFUSE_SCALE_STD", "data_only_information", "unobservable", "unobservable_cause", "unobservable_warning"]
+__all__ = [
+    "DIFFUSE_SCALE_STD", "MIN_EXCITATION", "MIN_FIXES", "data_only_information", "prior_tighter", "prior_warning",
+    "unobservable", "unobservable_cause", "unobservable_warning",
+]
 
 #: the scale's prior 1-sigma that stands for "diffuse" in the data-only run (a 100% scale-factor error:
 #: no accelerometer comes near; its information, 1, is below 1e-4 of what a log with any acceleration gives)
@@ -45,6 +55,13 @@ DIFFUSE_SCALE_STD = 1.0
 #: a parameter's data-only information below this share of the diffuse prior's own is none at all (the
 #: subtraction Y = P_data^-1 - P_diffuse^-1 leaves rounding of about 1e-12 of the latter)
 NO_INFORMATION = 1e-6
+#: the fewest fixes updating the filter that determine the bias (each gives a position and a velocity;
+#: three leave the bias over-determined); fewer: a bias weaker than its prior is unobservable
+MIN_FIXES = 3
+#: the accelerometer's spread about its mean over its noise setting below which the scale has no
+#: excitation: with no acceleration the ratio is 1 up to sampling scatter; at 2 the acceleration's own
+#: spread is sqrt(3) times the noise. Above it a scale weaker than its prior is the prior's doing
+MIN_EXCITATION = 2.0
 
 
 def _theta_block(covariance: np.ndarray, d: int) -> np.ndarray:
@@ -126,6 +143,12 @@ def data_only_information(log, rejected: np.ndarray | None = None) -> dict[str, 
     inside = (log.imu_time >= log.start_time) & (log.imu_time <= log.fix_times[-1])
     accel = log.accel[inside] if np.count_nonzero(inside) > 1 else log.accel
     spread, noise = float(np.std(accel)), float(log.settings.accel_noise_std)
+    ratio = spread / noise if noise > 0 else float("inf")
+    used_fixes = int(np.count_nonzero(~mask))
+    # the log determines a parameter it informs (not singular, a finite data-only sigma) through enough
+    # fixes (the bias) or enough acceleration (the scale), however it compares with the prior
+    grounds = {"bias": used_fixes >= MIN_FIXES, "scale": ratio >= MIN_EXCITATION}
+    determined = [bool(not singular and np.isfinite(std[i]) and grounds[name]) for i, name in enumerate(names)]
     return {
         "names": names,
         "information": information,
@@ -134,14 +157,18 @@ def data_only_information(log, rejected: np.ndarray | None = None) -> dict[str, 
         "std": std,
         "no_data_std": no_data_std,
         "weaker_than_prior": weaker,
+        "determined": determined,
+        "prior_settings": {"bias": float(log.settings.bias_std), "scale": float(log.settings.scale_std)},
         "fixes": {
-            "used": int(np.count_nonzero(~mask)),
+            "used": used_fixes,
             "in_log": int(log.fixes + log.skipped_nan + log.skipped_outside + (1 if log.init == "first-fix" else 0)),
+            "rejected": int(np.count_nonzero(mask)),
+            "start": 1 if log.init == "first-fix" else 0,
             "nan": int(log.skipped_nan),
             "outside": int(log.skipped_outside),
             "span": float(log.fix_times[-1] - log.start_time),
         },
-        "excitation": {"accel_spread": spread, "accel_noise_std": noise, "ratio": spread / noise if noise > 0 else float("inf")},
+        "excitation": {"accel_spread": spread, "accel_noise_std": noise, "ratio": ratio},
     }
 
 
@@ -156,15 +183,56 @@ def unobservable(d: dict[str, Any], final_std: np.ndarray, threshold: float = UN
     ratios = std_ratio(final_std, d)
     names = []
     for i, name in enumerate(d["names"]):
-        if d["singular"] or d["weaker_than_prior"][i] or ratios[i] > threshold:
+        if d["singular"] or (not d["determined"][i] and (d["weaker_than_prior"][i] or ratios[i] > threshold)):
             names.append(name)
     return names
 
 
+def prior_tighter(d: dict[str, Any], final_std: np.ndarray, threshold: float = UNOBSERVABLE_RATIO) -> list[str]:
+    """The parameters the log determines (the module docstring) but less sharply than the prior claims:
+    a data-only sigma above ``DATA_ONLY_FACTOR`` no-data sigmas, or a final sigma above ``threshold``
+    times the no-data one. Their estimate and sigma lean on the prior; the prior, not the log, is the cause."""
+    ratios = std_ratio(final_std, d)
+    return [
+        name for i, name in enumerate(d["names"])
+        if not d["singular"] and d["determined"][i] and (d["weaker_than_prior"][i] or ratios[i] > threshold)
+    ]  # fmt: skip
+
+
+def prior_warning(d: dict[str, Any], final_std: np.ndarray, source: str) -> CalibrationWarning | None:
+    """The ``prior-dominates`` warning for :func:`prior_tighter`'s parameters (None when none): the prior
+    setting named with its value, against the data-only sigma the log gives."""
+    names = prior_tighter(d, final_std)
+    if not names:
+        return None
+    parts = []
+    for name in names:
+        i = d["names"].index(name)
+        grounds = (
+            f"{d['fixes']['used']} fixes over {d['fixes']['span']:.3g} s" if name == "bias"
+            else f"the accelerometer's spread is {d['excitation']['ratio']:.3g} times its noise setting"
+        )
+        parts.append(
+            f"the prior filter.{name}_std = {d['prior_settings'][name]:.3g} is tighter than this log can tell "
+            f"(data-only sigma {d['std'][i]:.3g}, {d['std'][i] / d['no_data_std'][i]:.3g} times the prior's "
+            f"{d['no_data_std'][i]:.3g} at the last fix; the log determines the {name}: {grounds})"
+        )
+    return CalibrationWarning(
+        "prior-dominates",
+        f"{source}: {'; '.join(parts)}, so the {' and '.join(names)} estimate and sigma lean on the prior and hold "
+        f"only if it is right; give a looser filter.{names[0]}_std (or none) for the log's own answer",
+    )
+
+
 def _fixes_text(fixes: dict[str, Any]) -> str:
+    """The fixes used and where the others of the log went; the counts add up to the log's: used +
+    rejected by the gate + the one that starts the filter (``--init first-fix``) + NaN + outside."""
+    others = [f"{fixes['rejected']} rejected by the gate"] if fixes.get("rejected") else []
+    others += [f"{fixes['start']} starts the filter"] if fixes.get("start") else []
+    others += [f"{fixes['nan']} with a NaN field", f"{fixes['outside']} outside the accelerometer log"]
     return (
         f"{fixes['used']} fix(es) update the filter over {fixes['span']:.3g} s, of {fixes['in_log']} in the GPS log "
-        f"({fixes['nan']} with a NaN field, {fixes['outside']} outside the accelerometer log)"
+        f"({', '.join(others)})"
     )
 
 
@@ -202,7 +270,12 @@ def unobservable_cause(d: dict[str, Any], final_std: np.ndarray) -> str | None:
     if "bias" in names:
         why.append(f"the bias is seen through the fixes alone: {_fixes_text(d['fixes'])}")
     if "scale" in names:
-        why.append(f"the scale is seen through the acceleration alone (no excitation): {_excitation_text(d['excitation'])}")
+        # "no excitation" only where the accelerometer's spread is near its noise (below MIN_EXCITATION times it)
+        excited = d["excitation"]["ratio"] >= MIN_EXCITATION
+        why.append(
+            f"the scale is seen through the acceleration alone{'' if excited else ' (no excitation)'}: "
+            f"{_excitation_text(d['excitation'])}"
+        )
     return "; ".join(parts) + ": " + "; ".join(why)
 
 
@@ -215,8 +288,10 @@ def unobservable_warning(d: dict[str, Any], final_std: np.ndarray, source: str) 
     return CalibrationWarning(
         "unobservable",
         f"{source}: {' and '.join(names)} unobservable: {unobservable_cause(d, final_std)}, so the estimate is the "
-        "prior's, not the log's; the bias needs fixes over the log, the scale an accelerometer that varies well "
-        "beyond its noise",
+        "prior's, not the log's; "
+        + ", ".join(need for name, need in (("bias", "the bias needs fixes over the log"),
+                                            ("scale", "the scale an accelerometer that varies well beyond its noise"))
+                    if name in names or d["singular"]),
     )
 
 
@@ -228,6 +303,7 @@ def summary_block(d: dict[str, Any], final_std: np.ndarray) -> dict[str, Any]:
         "threshold": UNOBSERVABLE_RATIO,
         "unobservable": unobservable(d, final_std),
         "cause": unobservable_cause(d, final_std),
+        "prior_tighter": prior_tighter(d, final_std),
         "data_only": {
             "states": names,
             "rcond": d["rcond"],
@@ -236,6 +312,9 @@ def summary_block(d: dict[str, Any], final_std: np.ndarray) -> dict[str, Any]:
             "no_data_std": d["no_data_std"],
             "factor": DATA_ONLY_FACTOR,
             "weaker_than_prior": d["weaker_than_prior"],
+            "determined": d["determined"],
+            "min_fixes": MIN_FIXES,
+            "min_excitation": MIN_EXCITATION,
             "fixes": d["fixes"],
             "excitation": d["excitation"],
         },

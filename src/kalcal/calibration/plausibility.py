@@ -174,7 +174,8 @@ def noise_rate_warnings(
     warning that the rate cannot be checked (``noise-rate-unknown``) for a value read from a file; a value
     given with ``--set`` or in code is taken as given for the log at hand. A file's value has a recorded
     rate only where the same file gives ``scenario.imu_rate``: ``--set scenario.imu_rate=...`` does not
-    make an old file's rate known. Both name the density to give instead.
+    make an old file's rate known, and replacing a file's rate there does not make it unknown (the file's own
+    rate is kept apart, :func:`kalcal.models.config.file_settings`). Both name the density to give instead.
 
     Parameters
     ----------

@@ -91,17 +91,30 @@ class ScaleBiasCalibration:
         """The parameters (of theta1, theta2) the log does not determine.
 
         Judged from the data-only information where it was computed (:func:`data_only_information`): a
-        singular one, a data-only sigma above ``DATA_ONLY_FACTOR`` no-data sigmas, or (both parameters)
-        a sensor that does not track the reference. Otherwise, from the final sigma above ``threshold``
-        times the no-data sigma."""
+        singular one or (both parameters) a sensor that does not track the reference. A log that
+        determines theta (nonsingular, tracking) but less sharply than the prior claims is not
+        unobservable: :meth:`prior_tighter` names the prior as the cause. Without the data-only
+        information, from the final sigma above ``threshold`` times the no-data sigma."""
         ratio_names = [name for name, ratio in zip(STATE_NAMES, self.std_ratio) if ratio > threshold]
         if self.data_only is None:
             return ratio_names
         d = self.data_only
         if d["singular"] or not d["tracks"]:
             return list(STATE_NAMES)
-        names = [name for name, weak in zip(STATE_NAMES, d["weaker_than_prior"]) if weak]
-        return [name for name in STATE_NAMES if name in names or name in ratio_names]
+        return []
+
+    def prior_tighter(self, threshold: float = UNOBSERVABLE_RATIO) -> list[str]:
+        """The parameters a log determines (data-only information nonsingular, the sensor tracking the
+        reference) less sharply than the prior claims: a data-only sigma above ``DATA_ONLY_FACTOR`` prior
+        sigmas, or a final sigma above ``threshold`` times the no-data one. Their estimate and sigma lean on
+        the prior, which is the cause (a ``prior-dominates`` warning); a prior conflict is still reported."""
+        d = self.data_only
+        if d is None or d["singular"] or not d["tracks"] or self.prior == "diffuse":  # no prior to be tighter
+            return []
+        return [
+            name for name, weak, ratio in zip(STATE_NAMES, d["weaker_than_prior"], self.std_ratio)
+            if weak or ratio > threshold
+        ]  # fmt: skip
 
     def unobservable_cause(self) -> str | None:
         """Why :meth:`unobservable` names parameters, in words (None when it names none)."""
@@ -114,14 +127,6 @@ class ScaleBiasCalibration:
                 f"the log alone does not determine theta (its information matrix is singular, "
                 f"reciprocal condition {d['rcond']:.2g}): the sensor reads one value, so only theta1 z + theta2 is seen"
             )
-        parts = []
-        for name, weak, sigma, prior in zip(STATE_NAMES, *(
-            (d["weaker_than_prior"], d["std"], self.prior_std) if d is not None else ((), (), ())
-        )):
-            if weak:
-                parts.append(f"{name}'s data-only sigma {sigma:.3g} is above {DATA_ONLY_FACTOR:.3g} times its prior sigma {prior:.3g}")
-        if parts:
-            return f"the log tells less than the prior ({'; '.join(parts)}; reciprocal condition {d['rcond']:.2g})"
         if d is not None and not d["tracks"]:
             return (
                 f"the sensor does not track the reference (the log alone gives theta1 = "
@@ -151,6 +156,23 @@ class ScaleBiasCalibration:
         found = []
         names = self.unobservable()
         cause = self.unobservable_cause()
+        tighter = self.prior_tighter()
+        if tighter:
+            d = self.data_only
+            parts = "; ".join(
+                f"{name}'s data-only sigma {d['std'][i]:.3g} is {d['std'][i] / self.prior_std[i]:.3g} times its prior sigma "
+                f"{self.prior_std[i]:.3g}"
+                for i, name in enumerate(STATE_NAMES) if name in tighter
+            )
+            found.append(
+                CalibrationWarning(
+                    "prior-dominates",
+                    f"{source}: the prior (filter.scale_error, filter.bias and their stds) is tighter than this log can "
+                    f"tell ({parts}; the log determines theta: the sensor tracks the reference, reciprocal condition "
+                    f"{d['rcond']:.2g}), so the {' and '.join(tighter)} estimate and sigma lean on the prior and hold only "
+                    "if it is right; loosen the prior (or calibrate with the diffuse one) for the log's own answer",
+                )
+            )
         if names:
             found.append(
                 CalibrationWarning(

@@ -2,12 +2,14 @@
 
 A parameter is unobservable from a log (``ScaleBiasCalibration.unobservable``) where the log alone does
 not determine it, whatever the prior makes of the posterior: the data-only information Y = H^T H / R is
-singular (a sensor that reads one value), a parameter's data-only sigma is above ``DATA_ONLY_FACTOR``
-times its no-data sigma (the log tells less than the prior), or the data-only theta1 cannot be told from
+singular (a sensor that reads one value), or the data-only theta1 cannot be told from
 0 with the residual scatter the log itself shows (a sensor that does not track the reference: with a prior
 its posterior sigma can still fall well below the prior's, and its symptoms, a prior conflict and
 innovations far beyond the noise, are consequences, not causes). The data-only fit ignores the process
-noise Q (0 by default): with a drifting theta it is the log's average theta.
+noise Q (0 by default): with a drifting theta it is the log's average theta. A log that determines theta
+(Y nonsingular, the sensor tracking) with a data-only sigma above ``DATA_ONLY_FACTOR`` times the prior's
+is not unobservable: the prior is tighter than the log can tell, and is named as the cause
+(``ScaleBiasCalibration.prior_tighter``).
 """
 
 from __future__ import annotations

@@ -140,8 +140,9 @@ def compute_accel_gps_calibration(
     the bias and the scale (:mod:`kalcal.calibration.accel_gps_observability`): each one's final sigma over
     its no-data sigma, the ``unobservable`` ones, their ``cause`` and the ``data_only`` grounds (the
     information's reciprocal condition, each data-only and no-data sigma, the fixes and the acceleration);
-    an unobservable one makes an ``unobservable`` warning and the bias's sigma untrusted, with no advice
-    on the noise settings.
+    an unobservable one makes an ``unobservable`` warning; an unobservable bias (or singular information)
+    makes the bias's sigma untrusted, with no advice on the noise settings, and an unobservable scale
+    makes ``scale_sigma_trusted`` false (the bias's sigma then stands on the diagnostics alone).
 
     When the diagnostics say inconsistent or the windows are not stable, the bias's sigma is not trusted:
     ``sigma_trusted`` is false, ``sigma_untrusted_because`` says why, and a ``sigma-untrusted`` warning
@@ -153,7 +154,7 @@ def compute_accel_gps_calibration(
     """
     # the accel-gps filter (and numba under it) when it runs: a scale-bias calibration imports this module too
     from kalcal.calibration.accel_gps import bias_walk_variance, prepare_accel_gps_log, prior_conflict
-    from kalcal.calibration.accel_gps_observability import data_only_information, unobservable_warning
+    from kalcal.calibration.accel_gps_observability import data_only_information, prior_warning, unobservable_warning
     from kalcal.calibration.accel_gps_observability import summary_block as observability_summary
     from kalcal.calibration.diagnostics import innovation_diagnostics
     from kalcal.calibration.smoothing import smooth_calibration
@@ -219,13 +220,18 @@ def compute_accel_gps_calibration(
     diagnostics = innovation_diagnostics(normalized[used])
     warnings = list(result.warnings)
     # what the log alone tells of the bias (and scale): an unobservable one is the prior's, and beside it
-    # neither a prior conflict nor the noise settings are a cause (kalcal.calibration.accel_gps_observability)
+    # neither a prior conflict nor the noise settings are a cause; one the log determines less sharply
+    # than a tight prior is the prior's doing, named as such (kalcal.calibration.accel_gps_observability)
     final_std = np.sqrt(np.diagonal(result.filter_covariance[-1]))[2:]
     data_only = data_only_information(log, result.rejected)
     observability = observability_summary(data_only, final_std)
     unobservable = unobservable_warning(data_only, final_std, str(gps_path))
     if unobservable is not None:
         warnings.append(unobservable)
+    # a prior tighter than the log can tell: the prior is the cause, and a conflict with it is still news
+    tighter = prior_warning(data_only, final_std, str(gps_path))
+    if tighter is not None:
+        warnings.append(tighter)
     conflict = prior_conflict(result, walk_variance=bias_walk_variance(scenario, result, imu["time"]))
     if conflict is not None and "bias" not in observability["unobservable"]:
         warnings.append(conflict)
@@ -250,9 +256,13 @@ def compute_accel_gps_calibration(
             )
         )
     names = observability["unobservable"]
+    # the bias's sigma rests on the prior only where the bias itself is unobservable or the information is
+    # singular; a scale unobservable alone leaves the bias determined (only its s a_c share leans on the
+    # scale's prior): then the scale's own sigma is the one marked (scale_sigma_trusted)
+    bias_unobservable = "bias" in names or data_only["singular"]
     untrusted = untrusted_warning(diagnostics.as_dict(), stability.as_dict(), float(std[-1, 2]), "m/s^2",
                                   fit_command(str(imu_path), str(gps_path), fit_extra(imu_columns, gps_columns, init, gate, fit_options)),
-                                  f"{' and '.join(names)} unobservable ({observability['cause']})" if names else None)
+                                  f"{' and '.join(names)} unobservable ({observability['cause']})" if bias_unobservable else None)
     if untrusted is not None:
         warnings.append(untrusted[1])
     over = None
@@ -303,6 +313,7 @@ def compute_accel_gps_calibration(
     }
     if scenario.has_scale:
         summary["scale"], summary["scale_std"] = float(result.error_state[-1, 3]), float(std[-1, 3])
+        summary["scale_sigma_trusted"] = "scale" not in names
     if smoothed is not None:
         summary["smoothed"] = _smoothed_summary(smoothed, std, scenario.state_names)
     # the log files (not DataFrames) are the run's inputs: a folder's set never removes them

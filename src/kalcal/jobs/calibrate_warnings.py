@@ -43,7 +43,10 @@ def untrusted_warning(diagnostics: Mapping[str, Any], stability: Mapping[str, An
     run) beside it, whatever the diagnostics say."""
     reasons = [f"{unobservable}, so it rests on the prior, not the log"] if unobservable else []
     if not diagnostics["consistent"]:
-        reasons.append(f"the diagnostics say inconsistent ({diagnostics['verdict']})")
+        # beside unobservable the diagnostics' own verdict would advise on the noise settings, which the
+        # warning says mend nothing: their bare numbers instead
+        verdict = _bare_verdict(diagnostics) if unobservable else diagnostics["verdict"]
+        reasons.append(f"the diagnostics say inconsistent ({verdict})")
     if stability.get("stable") is False:
         reasons.append("the windows' estimates disagree (stability: NOT stable)")
     if not reasons:
@@ -61,6 +64,17 @@ def untrusted_warning(diagnostics: Mapping[str, Any], stability: Mapping[str, An
         f"fit the log, and {because}. Next: fit the settings to this log, `{next_step}`, then calibrate again "
         "with --config fit/filter.toml (and free more of the model where the fit says it is not adequate)",
     )
+
+
+def _bare_verdict(diagnostics: Mapping[str, Any]) -> str:
+    """The diagnostics' numbers without their advice: the mean NIS against its bounds and the smallest
+    Ljung-Box p-value (accel-gps's :class:`~kalcal.calibration.diagnostics.InnovationDiagnostics`); a
+    verdict given as bare numbers already (scale-bias's) as it stands."""
+    if "mean_nis" not in diagnostics or "nis_lower" not in diagnostics:
+        return diagnostics["verdict"]
+    text = f"mean NIS {diagnostics['mean_nis']:.3g} against [{diagnostics['nis_lower']:.3g}, {diagnostics['nis_upper']:.3g}]"
+    pvalues = [p for p in diagnostics.get("ljung_box_pvalue", []) if p == p]  # NaN: not testable
+    return text + (f", Ljung-Box p = {min(pvalues):.2g}" if pvalues else "")
 
 
 def fit_extra(imu_columns, gps_columns, init: str, gate, options: Sequence[str]) -> list[str]:

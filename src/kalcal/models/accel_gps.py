@@ -66,12 +66,22 @@ DENSITIES = {"accel_noise_std": ("accel_noise_density", 0.5), "bias_walk_std": (
 DENSITY_NAMES = frozenset(density for density, _ in DENSITIES.values())
 #: the units of the densities and of their per-sample values
 DENSITY_UNITS = {"accel_noise_density": "m/s^2/sqrt(Hz)", "bias_walk_density": "m/s^3/sqrt(Hz)"}
-#: the truth's white noise per sample where neither it nor its density is given, m/s^2 (at scenario.imu_rate)
+#: the built-in white noise where neither the truth nor the filter gives one: 0.02 m/s^2 per sample at
+#: DEFAULT_NOISE_RATE (200 Hz), one density everywhere, 0.02 / sqrt(200) = 1.41e-3 m/s^2/sqrt(Hz), so
+#: that simulate and verify at another scenario.imu_rate draw, and calibrate and fit at a log's rate
+#: assume, the same noise (:func:`default_accel_noise_std`)
 DEFAULT_ACCEL_NOISE_STD = 0.02
-DEFAULTS = {"accel_noise_std": DEFAULT_ACCEL_NOISE_STD, "bias_walk_std": 0.0}
+DEFAULT_NOISE_RATE = 200.0
+DEFAULT_ACCEL_NOISE_DENSITY = DEFAULT_ACCEL_NOISE_STD / math.sqrt(DEFAULT_NOISE_RATE)
 #: a log's rate within this relative distance of scenario.imu_rate keeps the built-in noise per sample as
 #: it stands (the same 1% as a recorded rate's warning, kalcal.calibration.plausibility)
 DEFAULT_NOISE_RATE_TOLERANCE = 0.01
+
+
+def default_accel_noise_std(rate: float) -> float:
+    """The built-in white noise per sample at ``rate`` (Hz), m/s^2: 0.02 sqrt(rate / 200), exactly 0.02
+    at 200 Hz (:data:`DEFAULT_ACCEL_NOISE_DENSITY` converted as :func:`per_sample` does)."""
+    return DEFAULT_ACCEL_NOISE_STD * math.sqrt(float(rate) / DEFAULT_NOISE_RATE)
 
 
 def per_sample(name: str, density: float, rate: float) -> float:
@@ -180,7 +190,7 @@ class AccelGpsTruth:
     accel_amplitude: float = 10.0  # A, m/s^2
     accel_frequency: float = 0.1  # omega, rad/s
     #: sigma_a, m/s^2 per sample at ``scenario.imu_rate`` (unset: from ``accel_noise_density``, else
-    #: :data:`DEFAULT_ACCEL_NOISE_STD`)
+    #: the built-in density, 0.02 per sample at 200 Hz: :func:`default_accel_noise_std`)
     accel_noise_std: float | None = None
     bias_std: float = 0.1  # sigma_b, m/s^2
     position0_mean: float = 0.0  # m
@@ -234,7 +244,8 @@ class AccelGpsTruth:
     def at_rate(self, rate: float) -> AccelGpsTruth:
         """These settings with every noise per sample at ``rate`` (Hz): a density converted
         (:func:`per_sample`), an unset value its default; no density left."""
-        return dataclasses.replace(self, **per_sample_values(self, rate, DEFAULTS))
+        defaults = {"accel_noise_std": default_accel_noise_std(rate), "bias_walk_std": 0.0}
+        return dataclasses.replace(self, **per_sample_values(self, rate, defaults))
 
     def bias_decay(self, dt: float) -> float:
         """phi_b = exp(-dt / tau) of the bias over one sample step of dt seconds (1 for a constant or
@@ -424,12 +435,13 @@ class AccelGpsScenario:
         """The noise settings given per sample that the filter uses, ``{"filter.accel_noise_std": (value,
         file or None), ...}`` (a truth's where the filter takes it; a zero walk, rate-free, left out; the
         file the value was read from, None for ``--set`` or a value given in code), and the rate (Hz)
-        recorded for each, by key: for a value read from a file, ``scenario.imu_rate`` only where that same
-        file gave it (a file of ``kalcal fit`` records its log's; a rate given with ``--set`` or by another
-        file says nothing about the rate the file's value was written for); for a value given with
+        recorded for each, by key: for a value read from a file, the ``scenario.imu_rate`` that same file
+        gave, whether or not a later file or ``--set`` replaced it for the run (a file of ``kalcal fit``
+        records its log's; a rate given with ``--set`` or by another file says nothing about the rate the
+        file's value was written for); for a value given with
         ``--set`` or in code, ``scenario.imu_rate`` where it was given; else None. Both empty for settings
         :meth:`at_rate` bound to a rate."""
-        from kalcal.models.config import given_keys, setting_files
+        from kalcal.models.config import file_settings, given_keys, setting_files
 
         if self.noise_rate is not None:
             return {}, {}
@@ -449,11 +461,14 @@ class AccelGpsScenario:
                     break
         keys = given_keys(self)
         stated = "scenario.imu_rate" in keys or (not keys and self.scenario.imu_rate != AccelGpsSettings.imu_rate)
-        rate_file = files.get("scenario.imu_rate")
-        recorded = {
-            key: self.scenario.imu_rate if stated and (file is None or file == rate_file) else None
-            for key, (_, file) in found.items()
-        }
+        given_by_file = file_settings(self)
+        recorded = {}
+        for key, (_, file) in found.items():
+            if file is None:
+                recorded[key] = self.scenario.imu_rate if stated else None
+            else:
+                rate = given_by_file.get(file, {}).get("scenario.imu_rate")
+                recorded[key] = None if rate is None else float(rate)
         return found, recorded
 
     def at_rate(self, rate: float) -> AccelGpsScenario:
@@ -463,16 +478,16 @@ class AccelGpsScenario:
         with the log's median rate; per-sample values given as such are kept (:meth:`per_sample_settings`
         says what a warning needs to know about them).
 
-        The built-in accelerometer noise (:data:`DEFAULT_ACCEL_NOISE_STD`, per sample at
-        ``scenario.imu_rate``), where neither the filter nor the truth gives one, is a density too: at a
-        ``rate`` more than :data:`DEFAULT_NOISE_RATE_TOLERANCE` from ``scenario.imu_rate`` it is converted,
-        DEFAULT_ACCEL_NOISE_STD sqrt(rate / imu_rate) (within it, kept as it stands, so that a log's jitter
-        about the default rate does not move the numbers)."""
+        The built-in accelerometer noise, where neither the filter nor the truth gives one, is one
+        density (:data:`DEFAULT_ACCEL_NOISE_DENSITY`, 0.02 per sample at 200 Hz, whatever
+        ``scenario.imu_rate``): at a ``rate`` more than :data:`DEFAULT_NOISE_RATE_TOLERANCE` from
+        ``scenario.imu_rate`` it is converted, 0.02 sqrt(rate / 200) (within it, the truth's value at
+        ``scenario.imu_rate`` is kept as it stands, so that a log's jitter about that rate does not move
+        the numbers)."""
         rate = float(rate)
         filter_ = self.filter.at_rate(rate, self.given_truth)
         if _default_accel_noise(self.filter, self.given_truth) and abs(rate / self.scenario.imu_rate - 1) > DEFAULT_NOISE_RATE_TOLERANCE:
-            density = density_of("accel_noise_std", DEFAULT_ACCEL_NOISE_STD, self.scenario.imu_rate)
-            filter_ = dataclasses.replace(filter_, accel_noise_std=per_sample("accel_noise_std", density, rate))
+            filter_ = dataclasses.replace(filter_, accel_noise_std=default_accel_noise_std(rate))
         bound = dataclasses.replace(self, filter=filter_)
         object.__setattr__(bound, "_noise_rate", rate)
         if hasattr(self, "_given_keys"):

@@ -92,10 +92,17 @@ def _changes(scenario: Any, settings: Mapping[str, Any]) -> dict[str, dict[str, 
     return changes
 
 
-def apply_settings(scenario: S, settings: Mapping[str, Any], sources: Mapping[str, str] | None = None) -> S:
+def apply_settings(
+    scenario: S,
+    settings: Mapping[str, Any],
+    sources: Mapping[str, str] | None = None,
+    files: Mapping[str, Mapping[str, Any]] | None = None,
+) -> S:
     """Return a copy of ``scenario`` with ``settings`` (``{"section.key": value}``) applied and validated.
 
     ``sources`` maps a key to the file its value was read from; an error about that key names the file.
+    ``files`` (``{file: {section.key: value}}``) is what each file gave, overridden values included
+    (:func:`file_settings`).
     """
     sources = sources or {}
     try:
@@ -113,10 +120,25 @@ def apply_settings(scenario: S, settings: Mapping[str, Any], sources: Mapping[st
         raise
     with contextlib.suppress(AttributeError, TypeError):  # records outside the fields, as mark_inputs's
         object.__setattr__(result, "_given_keys", given_keys(scenario) | frozenset(settings))
-        files = {key: file for key, file in setting_files(scenario).items() if key not in settings}
-        files.update({key: sources[key] for key in settings if key in sources})
-        object.__setattr__(result, "_setting_files", files)
+        in_force = {key: file for key, file in setting_files(scenario).items() if key not in settings}
+        in_force.update({key: sources[key] for key in settings if key in sources})
+        object.__setattr__(result, "_setting_files", in_force)
+        # what each file gave, kept when a later file or --set overrides it: a file's own values (the rate
+        # its per-sample noise was written for) say what the file meant, whatever runs in the end
+        given = {file: dict(values) for file, values in file_settings(scenario).items()}
+        for file, values in (files or {}).items():
+            given.setdefault(file, {}).update(values)
+        for key in settings:
+            if key in sources:
+                given.setdefault(sources[key], {})[key] = settings[key]
+        object.__setattr__(result, "_file_settings", given)
     return result
+
+
+def file_settings(scenario: Any) -> dict[str, dict[str, Any]]:
+    """``{file: {section.key: value}}``: what each settings file gave on the way to ``scenario``, kept
+    where a later file or ``--set`` overrode it (:func:`setting_files` holds only the settings in force)."""
+    return {file: dict(values) for file, values in getattr(scenario, "_file_settings", {}).items()}
 
 
 def setting_files(scenario: Any) -> dict[str, str]:

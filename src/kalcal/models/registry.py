@@ -39,4 +39,5 @@ def build_scenario(
     settings.update(assigned)
     sources = {key: str(config) for key in from_file if key not in assigned}
     # a job given the scenario never removes or replaces the config it was read from
-    return mark_inputs(apply_settings(scenario, settings, sources), config)
+    files = {str(config): from_file} if config is not None else None  # the file's own, overridden ones too
+    return mark_inputs(apply_settings(scenario, settings, sources, files), config)

@@ -62,8 +62,13 @@ _WORKER_LOST_RECORDS = re.compile(
 
 def event_kind(record: logging.LogRecord) -> str:
     """The kind of event a record of distributed belongs to: ``"worker-lost"`` for the records of a
-    worker dying (:data:`_WORKER_LOST_RECORDS`), ``"other"`` for any other."""
-    return "worker-lost" if _WORKER_LOST_RECORDS.search(record.getMessage()) else "other"
+    worker dying (:data:`_WORKER_LOST_RECORDS`), whatever their logger and level; any other record is of
+    the kind ``"logger:level"`` (``"distributed.worker.memory:WARNING"``), so that an error is never
+    taken for the tail of another logger's or another level's event (a memory warning followed by an
+    error within the window gives two notes)."""
+    if _WORKER_LOST_RECORDS.search(record.getMessage()):
+        return "worker-lost"
+    return f"{record.name}:{record.levelname}"
 
 
 def event_text(record: logging.LogRecord) -> str:
@@ -77,9 +82,10 @@ def event_text(record: logging.LogRecord) -> str:
 
 class NoteHandler(logging.Handler):
     """A logging handler that turns each event of distributed's log into one ``notes(text)`` call
-    (:func:`event_text`). An event is the records of one kind (:func:`event_kind`) from its first record
-    to :data:`EVENT_WINDOW_S` after it; a record of another kind inside that window is an event of its
-    own (a worker lost during a stream of memory warnings is still noted)."""
+    (:func:`event_text`). An event is the records of one kind (:func:`event_kind`: a worker lost, or one
+    logger at one level) from its first record to :data:`EVENT_WINDOW_S` after it; a record of another
+    kind inside that window is an event of its own (a worker lost during a stream of memory warnings is
+    still noted, and so is an error after a warning)."""
 
     def __init__(self, notes: Callable[[str], None], window: float = EVENT_WINDOW_S):
         super().__init__(level=logging.WARNING)
