@@ -312,3 +312,20 @@ def test_accel_gps_scale_without_acceleration_is_unobservable_and_strict_exits_1
     assert summary["sigma_trusted"] == (summary["diagnostics"]["consistent"] and summary["stability"].get("stable") is not False)
     for warning in summary["warnings"]:
         assert warning["code"] != "sigma-untrusted" or "scale unobservable" not in warning["message"]
+
+
+def test_a_tight_prior_that_the_log_contradicts_is_named_as_the_cause_not_the_noise_settings(sim, tmp_path):
+    """The seed-3 log with filter.bias_std = 0.0002: prior-dominates and prior-conflict (81 sigma), and the
+    diagnostics inconsistent. The sigma-untrusted warning gave the diagnostics' noise advice ("the noise
+    settings are too small") and a fit that keeps the same prior (which inflates the noise to absorb it):
+    it names the prior as the likely cause, the bare numbers, and a looser or unset prior as the next step."""
+    result = _calibrate(sim, tmp_path, None, None, "--set", "filter.bias_std=0.0002", "--no-settings-sigma")
+    assert result.exit_code == 0, result.output + result.stderr
+    summary = json.loads((tmp_path / "cal" / "summary.json").read_text())
+    found = {w["code"]: w["message"] for w in summary["warnings"]}
+    assert {"prior-dominates", "prior-conflict", "sigma-untrusted"} <= set(found), found
+    untrusted = found["sigma-untrusted"]
+    assert "the likely cause is the prior (filter.bias_std = 0.0002)" in untrusted
+    assert "noise settings are too small" not in untrusted and "kalcal fit" not in untrusted
+    assert "mean NIS" in untrusted and "looser filter.bias_std or leave it unset" in untrusted
+    assert "noise settings are too small" not in summary["sigma_untrusted_because"]
