@@ -312,6 +312,17 @@ def test_accel_gps_scale_without_acceleration_is_unobservable_and_strict_exits_1
     assert summary["sigma_trusted"] == (summary["diagnostics"]["consistent"] and summary["stability"].get("stable") is not False)
     for warning in summary["warnings"]:
         assert warning["code"] != "sigma-untrusted" or "scale unobservable" not in warning["message"]
+    # the scale's sigma is marked wherever it is shown: the table's scale row, the figure's note, the repr
+    # (it was printed unmarked, "scale 0.000100755 ± 0.01", with only summary.json saying so)
+    scale_row = next(line for line in result.output.splitlines() if line.lstrip("│┃ ").startswith("scale"))
+    assert "NOT trusted" in scale_row, result.output
+    from kalcal.jobs.calibrate_warnings import sigma_note
+
+    assert "scale" in sigma_note(summary) and "NOT trusted" in sigma_note(summary)
+    api = kalcal.calibrate("accel-gps", imu=tmp_path / "imu.csv", gps=tmp_path / "gps.csv",
+                           settings={"filter.scale_std": 0.01}, settings_sigma=False)
+    assert api.scale_sigma_trusted is False and "scale=" in repr(api)
+    assert repr(api).split("scale=")[1].split(",")[0].endswith("(sigma NOT trusted)"), repr(api)
 
 
 def test_a_tight_prior_that_the_log_contradicts_is_named_as_the_cause_not_the_noise_settings(sim, tmp_path):

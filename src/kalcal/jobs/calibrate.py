@@ -320,7 +320,9 @@ def compute_accel_gps_calibration(
     }
     if scenario.has_scale:
         summary["scale"], summary["scale_std"] = float(result.error_state[-1, 3]), float(std[-1, 3])
-        summary["scale_sigma_trusted"] = "scale" not in names
+        # the scale's sigma stands on the same diagnostics and windows as the bias's, and on the scale's
+        # own observability
+        summary["scale_sigma_trusted"] = untrusted is None and "scale" not in names
     if smoothed is not None:
         summary["smoothed"] = _smoothed_summary(smoothed, std, scenario.state_names)
     # the log files (not DataFrames) are the run's inputs: a folder's set never removes them

@@ -14,13 +14,18 @@ UNTRUSTED, SETTINGS_DEPENDENT = "sigma-untrusted", "sigma-depends-on-settings"
 def sigma_note(summary: Mapping[str, Any]) -> str:
     """What must stand beside the bias sigma wherever it is shown ("" when nothing): untrusted when the
     diagnostics say inconsistent or the windows not stable; else, where it was computed, the sigma over the
-    noise settings the log cannot reject."""
+    noise settings the log cannot reject, and the scale's sigma marked where ``scale_sigma_trusted`` is
+    false."""
     if summary.get("sigma_trusted") is False:
         return "sigma NOT trusted: " + summary.get("sigma_untrusted_because", "the diagnostics disown it")
+    notes = []
     over = summary.get("settings_sigma")
     if over:
-        return f"over the settings the log cannot reject: ± {over['bias_std']:.2g} ({over['ratio']:.3g}x)"
-    return ""
+        notes.append(f"over the settings the log cannot reject: ± {over['bias_std']:.2g} ({over['ratio']:.3g}x)")
+    if summary.get("scale_sigma_trusted") is False:
+        # the bias's sigma stands, the scale's is the prior's (the scale unobservable)
+        notes.append(f"scale {summary['scale']:.3g} ± {summary['scale_std']:.2g}: sigma NOT trusted (scale unobservable)")
+    return "; ".join(notes)
 
 
 def fit_command(imu: str, gps: str, extra: Sequence[str] = ()) -> str:
