@@ -306,6 +306,8 @@ def test_accel_gps_scale_without_acceleration_is_unobservable_and_strict_exits_1
     assert "no excitation" in observability["cause"]
     codes = [w["code"] for w in summary["warnings"]]
     assert codes[0] == "unobservable" and summary["scale_sigma_trusted"] is False
+    # the scale named alone: a whole sentence (it read "...; the scale an accelerometer that varies ...")
+    assert summary["warnings"][0]["message"].endswith("the scale needs an accelerometer that varies well beyond its noise")
     # the scale alone unobservable leaves the bias determined: its sigma is not untrusted for the scale (it
     # was, "scale unobservable ... rests on the prior"); only the diagnostics or the windows could untrust it
     assert not summary["observability"]["data_only"]["singular"]

@@ -290,7 +290,7 @@ def unobservable_warning(d: dict[str, Any], final_std: np.ndarray, source: str) 
         f"{source}: {' and '.join(names)} unobservable: {unobservable_cause(d, final_std)}, so the estimate is the "
         "prior's, not the log's; "
         + ", ".join(need for name, need in (("bias", "the bias needs fixes over the log"),
-                                            ("scale", "the scale an accelerometer that varies well beyond its noise"))
+                                            ("scale", "the scale needs an accelerometer that varies well beyond its noise"))
                     if name in names or d["singular"]),
     )
 
