@@ -746,3 +746,22 @@ def test_the_untrusted_warning_beside_unobservable_gives_no_noise_advice():
     assert f"mean NIS {diagnostics['mean_nis']:.3g} against [" in because and "Ljung-Box p = " in because
     _, plain = untrusted_warning(diagnostics, {}, 0.01, "m/s^2", "kalcal fit ...")
     assert "noise settings are too small" in plain.message and "kalcal fit ..." in plain.message
+
+
+def test_prior_dominates_names_each_parameters_setting_and_says_the_log_informs_it():
+    """Bias and scale both tighter in their priors than the log tells: the advice names filter.bias_std and
+    filter.scale_std (it named only the first), and the text says the log informs them (the grounds are
+    counts, not a bound on the data-only sigma)."""
+    from kalcal.calibration.accel_gps_observability import prior_warning
+
+    d = {
+        "names": ["bias", "scale"], "singular": False, "determined": [True, True], "weaker_than_prior": [True, True],
+        "std": np.array([4e-4, 0.05]), "no_data_std": np.array([2e-4, 0.01]),
+        "prior_settings": {"bias": 2e-4, "scale": 0.01}, "fixes": {"used": 149, "span": 29.8},
+        "excitation": {"ratio": 140.0},
+    }
+    found = prior_warning(d, np.array([1.9e-4, 0.0099]), "gps.csv")
+    assert found.code == "prior-dominates"
+    assert "give a looser filter.bias_std and filter.scale_std (or none)" in found.message
+    assert "the log informs the bias" in found.message and "the log informs the scale" in found.message
+    assert "determines" not in found.message
