@@ -332,8 +332,8 @@ def test_a_tight_prior_that_the_log_contradicts_is_named_as_the_cause_not_the_no
     diagnostics inconsistent. The sigma-untrusted warning gave the diagnostics' noise advice ("the noise
     settings are too small") and a fit that keeps the same prior (which inflates the noise to absorb it):
     it names the prior as the likely cause, the bare numbers, and a looser or unset prior as the next step."""
-    result = _calibrate(sim, tmp_path, None, None, "--set", "filter.bias_std=0.0002", "--no-settings-sigma")
-    assert result.exit_code == 0, result.output + result.stderr
+    result = _calibrate(sim, tmp_path, None, None, "--set", "filter.bias_std=0.0002", "--no-settings-sigma", "--strict")
+    assert result.exit_code == 1, result.output + result.stderr  # --strict: a prior tighter than the log warns
     summary = json.loads((tmp_path / "cal" / "summary.json").read_text())
     found = {w["code"]: w["message"] for w in summary["warnings"]}
     assert {"prior-dominates", "prior-conflict", "sigma-untrusted"} <= set(found), found
