@@ -306,9 +306,39 @@ def test_accel_gps_scale_without_acceleration_is_unobservable_and_strict_exits_1
     assert "no excitation" in observability["cause"]
     codes = [w["code"] for w in summary["warnings"]]
     assert codes[0] == "unobservable" and summary["scale_sigma_trusted"] is False
+    # the scale named alone: a whole sentence (it read "...; the scale an accelerometer that varies ...")
+    assert summary["warnings"][0]["message"].endswith("the scale needs an accelerometer that varies well beyond its noise")
     # the scale alone unobservable leaves the bias determined: its sigma is not untrusted for the scale (it
     # was, "scale unobservable ... rests on the prior"); only the diagnostics or the windows could untrust it
     assert not summary["observability"]["data_only"]["singular"]
     assert summary["sigma_trusted"] == (summary["diagnostics"]["consistent"] and summary["stability"].get("stable") is not False)
     for warning in summary["warnings"]:
         assert warning["code"] != "sigma-untrusted" or "scale unobservable" not in warning["message"]
+    # the scale's sigma is marked wherever it is shown: the table's scale row, the figure's note, the repr
+    # (it was printed unmarked, "scale 0.000100755 ± 0.01", with only summary.json saying so)
+    scale_row = next(line for line in result.output.splitlines() if line.lstrip("│┃ ").startswith("scale"))
+    assert "NOT trusted" in scale_row, result.output
+    from kalcal.jobs.calibrate_warnings import sigma_note
+
+    assert "scale" in sigma_note(summary) and "NOT trusted" in sigma_note(summary)
+    api = kalcal.calibrate("accel-gps", imu=tmp_path / "imu.csv", gps=tmp_path / "gps.csv",
+                           settings={"filter.scale_std": 0.01}, settings_sigma=False)
+    assert api.scale_sigma_trusted is False and "scale=" in repr(api)
+    assert repr(api).split("scale=")[1].split(",")[0].endswith("(sigma NOT trusted)"), repr(api)
+
+
+def test_a_tight_prior_that_the_log_contradicts_is_named_as_the_cause_not_the_noise_settings(sim, tmp_path):
+    """The seed-3 log with filter.bias_std = 0.0002: prior-dominates and prior-conflict (81 sigma), and the
+    diagnostics inconsistent. The sigma-untrusted warning gave the diagnostics' noise advice ("the noise
+    settings are too small") and a fit that keeps the same prior (which inflates the noise to absorb it):
+    it names the prior as the likely cause, the bare numbers, and a looser or unset prior as the next step."""
+    result = _calibrate(sim, tmp_path, None, None, "--set", "filter.bias_std=0.0002", "--no-settings-sigma", "--strict")
+    assert result.exit_code == 1, result.output + result.stderr  # --strict: a prior tighter than the log warns
+    summary = json.loads((tmp_path / "cal" / "summary.json").read_text())
+    found = {w["code"]: w["message"] for w in summary["warnings"]}
+    assert {"prior-dominates", "prior-conflict", "sigma-untrusted"} <= set(found), found
+    untrusted = found["sigma-untrusted"]
+    assert "the likely cause is the prior (filter.bias_std = 0.0002)" in untrusted
+    assert "noise settings are too small" not in untrusted and "kalcal fit" not in untrusted
+    assert "mean NIS" in untrusted and "looser filter.bias_std or leave it unset" in untrusted
+    assert "noise settings are too small" not in summary["sigma_untrusted_because"]

@@ -378,10 +378,10 @@ def test_a_prior_stronger_than_a_weakly_excited_log_is_named_by_the_data_only_si
     samples = sample_scale_bias(scenario, np.random.default_rng(3), 1)
     noise = float(np.sqrt(scenario.filter_noise_variance()))
 
-    def calibrate(spread, reference_noise):
+    def calibrate(spread, reference_noise, gain=1.02):
         rng = np.random.default_rng(9)
         sensor = 1.0 + spread * rng.standard_normal(samples.time.size)
-        reference = 1.02 * sensor + reference_noise * rng.standard_normal(samples.time.size) - 0.05
+        reference = gain * sensor + reference_noise * rng.standard_normal(samples.time.size) - 0.05
         return calibrate_scale_bias(scenario, samples.time, reference, sensor, prior="settings", conflict=True)
 
     result = calibrate(0.1, noise)
@@ -393,6 +393,12 @@ def test_a_prior_stronger_than_a_weakly_excited_log_is_named_by_the_data_only_si
     assert all(w.code != "unobservable" for w in found) and "no excitation" not in found[0].message
     # the conflict test is kept beside it: its verdict is reported whenever it finds one
     assert any(w.code == "prior-conflict" for w in found) == bool(result.conflict["conflict"])
+    # and where the conflict is there it is reported: a tracking sensor whose theta1 (1.5) lies far from
+    # the prior's 1 (the 1.02 sensor above has none to report, so that line alone cannot catch a hidden one)
+    far = calibrate(0.1, noise, gain=1.5)
+    assert far.data_only["tracks"] and far.unobservable() == [] and far.prior_tighter() == ["theta1"]
+    assert far.conflict["conflict"] and far.conflict["pvalue"] < 1e-4
+    assert [w.code for w in far.warnings()] == ["prior-dominates", "prior-conflict"]
     weak = calibrate(0.01, 0.2)
     assert not weak.data_only["tracks"] and weak.unobservable() == ["theta1", "theta2"] and weak.prior_tighter() == []
     assert weak.warnings()[0].code == "unobservable" and "does not track" in weak.warnings()[0].message
@@ -740,3 +746,22 @@ def test_the_untrusted_warning_beside_unobservable_gives_no_noise_advice():
     assert f"mean NIS {diagnostics['mean_nis']:.3g} against [" in because and "Ljung-Box p = " in because
     _, plain = untrusted_warning(diagnostics, {}, 0.01, "m/s^2", "kalcal fit ...")
     assert "noise settings are too small" in plain.message and "kalcal fit ..." in plain.message
+
+
+def test_prior_dominates_names_each_parameters_setting_and_says_the_log_informs_it():
+    """Bias and scale both tighter in their priors than the log tells: the advice names filter.bias_std and
+    filter.scale_std (it named only the first), and the text says the log informs them (the grounds are
+    counts, not a bound on the data-only sigma)."""
+    from kalcal.calibration.accel_gps_observability import prior_warning
+
+    d = {
+        "names": ["bias", "scale"], "singular": False, "determined": [True, True], "weaker_than_prior": [True, True],
+        "std": np.array([4e-4, 0.05]), "no_data_std": np.array([2e-4, 0.01]),
+        "prior_settings": {"bias": 2e-4, "scale": 0.01}, "fixes": {"used": 149, "span": 29.8},
+        "excitation": {"ratio": 140.0},
+    }
+    found = prior_warning(d, np.array([1.9e-4, 0.0099]), "gps.csv")
+    assert found.code == "prior-dominates"
+    assert "give a looser filter.bias_std and filter.scale_std (or none)" in found.message
+    assert "the log informs the bias" in found.message and "the log informs the scale" in found.message
+    assert "determines" not in found.message

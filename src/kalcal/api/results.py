@@ -171,6 +171,9 @@ class CalibrationResult:
         accel-gps: the bias's sigma over the noise settings the log cannot reject, beside ``bias_std``
         (:class:`kalcal.calibration.accel_gps_settings_sigma.SettingsSigma`: ``bias_std``, ``ratio``,
         ``at``, ...); None when not computed.
+    scale_sigma_trusted : bool or None
+        Whether ``scale_std`` is to be used: False where the diagnostics or windows disown the sigmas or
+        (accel-gps) the scale is unobservable, its sigma then the prior's; None without a scale.
     """
 
     scenario: str
@@ -186,6 +189,7 @@ class CalibrationResult:
     paths: dict = field(default_factory=dict)
     sigma_trusted: bool = True
     settings_sigma: Any = None
+    scale_sigma_trusted: bool | None = None
 
     @classmethod
     def from_calibration(cls, calibration, paths: dict | None = None) -> CalibrationResult:
@@ -212,6 +216,7 @@ class CalibrationResult:
             dict(paths or {}),
             sigma_trusted=bool(s.get("sigma_trusted", s.get("consistent", True))),
             settings_sigma=_settings_sigma(s.get("settings_sigma")),
+            scale_sigma_trusted=None if scale is None else bool(s.get("scale_sigma_trusted", s.get("sigma_trusted", True))),
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -240,6 +245,8 @@ class CalibrationResult:
 
     def __repr__(self) -> str:
         scale = "" if self.scale is None else f", scale={self.scale:.6g} ± {self.scale_std:.3g}"
+        if self.scale is not None and self.scale_sigma_trusted is False:
+            scale += " (sigma NOT trusted)"
         trust = "" if self.sigma_trusted else " (sigma NOT trusted)"
         over = "" if self.settings_sigma is None else f", over the settings ± {self.settings_sigma.bias_std:.3g}"
         return (f"CalibrationResult({self.scenario}: bias={self.bias:.6g} ± {self.bias_std:.3g}{trust}{over}{scale}, "

@@ -200,8 +200,10 @@ def prior_tighter(d: dict[str, Any], final_std: np.ndarray, threshold: float = U
 
 
 def prior_warning(d: dict[str, Any], final_std: np.ndarray, source: str) -> CalibrationWarning | None:
-    """The ``prior-dominates`` warning for :func:`prior_tighter`'s parameters (None when none): the prior
-    setting named with its value, against the data-only sigma the log gives."""
+    """The ``prior-dominates`` warning for :func:`prior_tighter`'s parameters (None when none): each one's
+    prior setting named with its value, against the data-only sigma the log gives. The log *informs* such a
+    parameter (the counts of ``determined``: enough fixes, enough acceleration, a finite data-only sigma),
+    the wording claims no more."""
     names = prior_tighter(d, final_std)
     if not names:
         return None
@@ -215,12 +217,13 @@ def prior_warning(d: dict[str, Any], final_std: np.ndarray, source: str) -> Cali
         parts.append(
             f"the prior filter.{name}_std = {d['prior_settings'][name]:.3g} is tighter than this log can tell "
             f"(data-only sigma {d['std'][i]:.3g}, {d['std'][i] / d['no_data_std'][i]:.3g} times the prior's "
-            f"{d['no_data_std'][i]:.3g} at the last fix; the log determines the {name}: {grounds})"
+            f"{d['no_data_std'][i]:.3g} at the last fix; the log informs the {name}: {grounds})"
         )
     return CalibrationWarning(
         "prior-dominates",
         f"{source}: {'; '.join(parts)}, so the {' and '.join(names)} estimate and sigma lean on the prior and hold "
-        f"only if it is right; give a looser filter.{names[0]}_std (or none) for the log's own answer",
+        f"only if it is right; give a looser {' and '.join(f'filter.{name}_std' for name in names)} (or none) for "
+        "the log's own answer",
     )
 
 
@@ -290,7 +293,7 @@ def unobservable_warning(d: dict[str, Any], final_std: np.ndarray, source: str) 
         f"{source}: {' and '.join(names)} unobservable: {unobservable_cause(d, final_std)}, so the estimate is the "
         "prior's, not the log's; "
         + ", ".join(need for name, need in (("bias", "the bias needs fixes over the log"),
-                                            ("scale", "the scale an accelerometer that varies well beyond its noise"))
+                                            ("scale", "the scale needs an accelerometer that varies well beyond its noise"))
                     if name in names or d["singular"]),
     )
 

@@ -122,7 +122,9 @@ def calibrate(
     for name in ("bias", "scale", "position", "velocity"):
         if name in summary:
             sigma = f"{summary[name + '_std']:.3g}"
-            table.add_row(name, f"{summary[name]:.6g}", sigma if trusted else f"[bold red]{sigma} NOT trusted[/bold red]",
+            # the scale's sigma has its own trust (an unobservable scale leaves the bias's standing)
+            shown = summary.get("scale_sigma_trusted", trusted) if name == "scale" else trusted
+            table.add_row(name, f"{summary[name]:.6g}", sigma if shown else f"[bold red]{sigma} NOT trusted[/bold red]",
                           summary["units"][name])
     over = summary.get("settings_sigma")
     if over:

@@ -260,9 +260,16 @@ def compute_accel_gps_calibration(
     # singular; a scale unobservable alone leaves the bias determined (only its s a_c share leans on the
     # scale's prior): then the scale's own sigma is the one marked (scale_sigma_trusted)
     bias_unobservable = "bias" in names or data_only["singular"]
+    # a prior the log contradicts is the likely cause of what the diagnostics see: name it (and the scale's
+    # where prior-dominates names it too), not the noise settings
+    conflicting = None
+    if any(warning.code == "prior-conflict" for warning in warnings):
+        conflicting = {f"filter.{name}_std": data_only["prior_settings"][name]
+                       for name in ("bias", *(["scale"] if "scale" in observability["prior_tighter"] else []))}
     untrusted = untrusted_warning(diagnostics.as_dict(), stability.as_dict(), float(std[-1, 2]), "m/s^2",
                                   fit_command(str(imu_path), str(gps_path), fit_extra(imu_columns, gps_columns, init, gate, fit_options)),
-                                  f"{' and '.join(names)} unobservable ({observability['cause']})" if bias_unobservable else None)
+                                  f"{' and '.join(names)} unobservable ({observability['cause']})" if bias_unobservable else None,
+                                  prior=conflicting)
     if untrusted is not None:
         warnings.append(untrusted[1])
     over = None
@@ -313,7 +320,9 @@ def compute_accel_gps_calibration(
     }
     if scenario.has_scale:
         summary["scale"], summary["scale_std"] = float(result.error_state[-1, 3]), float(std[-1, 3])
-        summary["scale_sigma_trusted"] = "scale" not in names
+        # the scale's sigma stands on the same diagnostics and windows as the bias's, and on the scale's
+        # own observability
+        summary["scale_sigma_trusted"] = untrusted is None and "scale" not in names
     if smoothed is not None:
         summary["smoothed"] = _smoothed_summary(smoothed, std, scenario.state_names)
     # the log files (not DataFrames) are the run's inputs: a folder's set never removes them

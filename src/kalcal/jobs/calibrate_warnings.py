@@ -14,13 +14,18 @@ UNTRUSTED, SETTINGS_DEPENDENT = "sigma-untrusted", "sigma-depends-on-settings"
 def sigma_note(summary: Mapping[str, Any]) -> str:
     """What must stand beside the bias sigma wherever it is shown ("" when nothing): untrusted when the
     diagnostics say inconsistent or the windows not stable; else, where it was computed, the sigma over the
-    noise settings the log cannot reject."""
+    noise settings the log cannot reject, and the scale's sigma marked where ``scale_sigma_trusted`` is
+    false."""
     if summary.get("sigma_trusted") is False:
         return "sigma NOT trusted: " + summary.get("sigma_untrusted_because", "the diagnostics disown it")
+    notes = []
     over = summary.get("settings_sigma")
     if over:
-        return f"over the settings the log cannot reject: ± {over['bias_std']:.2g} ({over['ratio']:.3g}x)"
-    return ""
+        notes.append(f"over the settings the log cannot reject: ± {over['bias_std']:.2g} ({over['ratio']:.3g}x)")
+    if summary.get("scale_sigma_trusted") is False:
+        # the bias's sigma stands, the scale's is the prior's (the scale unobservable)
+        notes.append(f"scale {summary['scale']:.3g} ± {summary['scale_std']:.2g}: sigma NOT trusted (scale unobservable)")
+    return "; ".join(notes)
 
 
 def fit_command(imu: str, gps: str, extra: Sequence[str] = ()) -> str:
@@ -33,19 +38,25 @@ def fit_command(imu: str, gps: str, extra: Sequence[str] = ()) -> str:
 
 
 def untrusted_warning(diagnostics: Mapping[str, Any], stability: Mapping[str, Any], bias_std: float, unit: str,
-                      next_step: str, unobservable: str | None = None) -> tuple[str, CalibrationWarning] | None:
+                      next_step: str, unobservable: str | None = None,
+                      prior: Mapping[str, float] | None = None) -> tuple[str, CalibrationWarning] | None:
     """Why the bias sigma is not to be trusted, and the warning that says it and names the next step;
     None when the log determines its parameters, the diagnostics say consistent and the windows are not
     found unstable.
 
     ``unobservable`` (the parameters the log does not determine and why, in words) comes first: the sigma
     is then the prior's, and no noise setting mends it, so the warning gives no noise advice (no fit to
-    run) beside it, whatever the diagnostics say."""
+    run) beside it, whatever the diagnostics say.
+
+    ``prior`` (the prior settings the log conflicts with, such as ``{"filter.bias_std": 0.0002}``: a
+    ``prior-conflict``, with those that ``prior-dominates`` names) makes the prior the likely cause: the
+    diagnostics' bare numbers stand without their noise advice, and the next step is a looser or unset
+    prior, not a fit that keeps it (which would inflate the noise settings to absorb the wrong prior)."""
     reasons = [f"{unobservable}, so it rests on the prior, not the log"] if unobservable else []
     if not diagnostics["consistent"]:
-        # beside unobservable the diagnostics' own verdict would advise on the noise settings, which the
-        # warning says mend nothing: their bare numbers instead
-        verdict = _bare_verdict(diagnostics) if unobservable else diagnostics["verdict"]
+        # beside unobservable or a prior in conflict with the log the diagnostics' own verdict would
+        # advise on the noise settings, which mend neither: their bare numbers instead
+        verdict = _bare_verdict(diagnostics) if unobservable or prior else diagnostics["verdict"]
         reasons.append(f"the diagnostics say inconsistent ({verdict})")
     if stability.get("stable") is False:
         reasons.append("the windows' estimates disagree (stability: NOT stable)")
@@ -57,6 +68,15 @@ def untrusted_warning(diagnostics: Mapping[str, Any], stability: Mapping[str, An
             UNTRUSTED,
             f"the bias 1-sigma {bias_std:.3g} {unit} is NOT trusted: {because}. No noise setting mends this: "
             "calibrate on a log that excites what is unobservable",
+        )
+    if prior:
+        settings = " and ".join(f"{key} = {value:.3g}" for key, value in prior.items())
+        return because, CalibrationWarning(
+            UNTRUSTED,
+            f"the bias 1-sigma {bias_std:.3g} {unit} is NOT trusted: {because}; the likely cause is the prior "
+            f"({settings}), which this log contradicts (prior-conflict), not the noise settings. Next: give a "
+            f"looser {' and '.join(prior)} or leave {'them' if len(prior) > 1 else 'it'} unset (a diffuse prior) "
+            "and calibrate again; a fit that keeps this prior would inflate the noise settings to absorb it",
         )
     return because, CalibrationWarning(
         UNTRUSTED,
