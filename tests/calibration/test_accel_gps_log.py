@@ -8,7 +8,7 @@ from scipy import stats
 
 from kalcal.calibration.accel_gps import calibrate_accel_gps, prepare_accel_gps_log
 from kalcal.calibration.accel_gps_evaluation import DIFFUSE_BIAS_STD, latency_map
-from kalcal.calibration.likelihood import innovation_loglik
+from kalcal.core.likelihood import innovation_loglik
 from kalcal.errors import ConfigError
 from kalcal.filters.mechanization import integrate
 from kalcal.models.registry import build_scenario

@@ -12,7 +12,7 @@ from kalcal.io.results import to_jsonable
 from kalcal.models.config import section_values
 from kalcal.models.custom import MODEL_KEYS, CustomModelScenario, load_model_file, parse_model
 from kalcal.models.custom_truth import MappedTruthModel
-from kalcal.models.linear import LinearGaussianModel
+from kalcal.core.model import LinearGaussianModel
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 SOURCE = "reduced.toml"

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kalcal.analysis.covariance import FilterArrays, TruthArrays, source_covariances
+from kalcal.core.lincov import FilterArrays, TruthArrays, source_covariances
 from kalcal.analysis.sources import Source
 
 

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from kalcal.calibration.likelihood import gate_excess
+from kalcal.core.likelihood import gate_excess
 from kalcal.calibration.plausibility import CalibrationWarning
 from kalcal.calibration.windows import accel_gps_stability, check_windows
 from kalcal.jobs.calibrate_warnings import fit_command, fit_extra, settings_warning, sigma_note, untrusted_warning

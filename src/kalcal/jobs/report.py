@@ -24,7 +24,7 @@ import numpy as np
 
 from kalcal.errors import ConfigError, DataError
 from kalcal.models.settings import SettingError
-from kalcal.filters.steps import check_form
+from kalcal.core.steps import check_form
 from kalcal.io.manifest import require_complete
 from kalcal.io.outputs import run_outputs
 from kalcal.io.results import SCHEMA_VERSION

@@ -7,10 +7,10 @@ from functools import partial
 import numpy as np
 
 from kalcal.errors import ConfigError
-from kalcal.filters.steps import UpdateForm, interval_transition
+from kalcal.core.steps import UpdateForm, interval_transition
 from kalcal.models.accel_gps import MEASUREMENT_NAMES, MEASUREMENT_UNITS, AccelGpsScenario
 from kalcal.models.custom import CustomModelScenario
-from kalcal.models.linear import LinearGaussianModel
+from kalcal.core.model import LinearGaussianModel
 from kalcal.models.settings import SettingError, show
 from kalcal.models.scale_bias import ScaleBiasScenario
 from kalcal.montecarlo.problem import FixedGainProblem, Problem, ProblemInfo
