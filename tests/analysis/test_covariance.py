@@ -17,13 +17,13 @@ import dataclasses
 import numpy as np
 import pytest
 
-from kalcal.core.lincov import FilterArrays, mean_normalized_square, propagate
 from kalcal.analysis.fixed_gain import analyze_problem, analyze_scenario, truth_arrays
+from kalcal.core.lincov import FilterArrays, mean_normalized_square, propagate
+from kalcal.core.model import LinearGaussianModel
+from kalcal.core.steps import covariance_pass
 from kalcal.errors import KalcalError
 from kalcal.filters.gains import run_with_gains
-from kalcal.core.steps import covariance_pass
 from kalcal.models.custom import parse_model
-from kalcal.core.model import LinearGaussianModel
 from kalcal.models.registry import build_scenario
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.simulation.exact import UpdateRateTruth, sample_exact, truth_from_model

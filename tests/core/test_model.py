@@ -7,8 +7,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from kalcal.errors import ConfigError, KalcalError
 from kalcal.core.model import LinearGaussianModel, check_covariance
+from kalcal.errors import ConfigError, KalcalError
 
 
 def _valid(**changes):

@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 from filterpy.kalman import KalmanFilter
 
-from kalcal.errors import ConfigError
-from kalcal.filters.gains import run_with_gains
 from kalcal.core.missing import measured
 from kalcal.core.sqrt_form import cholesky_factor, gram, sqrt_update
 from kalcal.core.steps import covariance_pass, gain_and_covariance, predict, update
+from kalcal.errors import ConfigError
+from kalcal.filters.gains import run_with_gains
 from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.models.registry import build_scenario
 from kalcal.simulation.sampled import sample_accel_gps_errors

@@ -9,10 +9,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kalcal.filters.gains import run_with_gains
-from kalcal.core.steps import covariance_pass, interval_transition, predict, update
-from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.core.model import LinearGaussianModel
+from kalcal.core.steps import covariance_pass, interval_transition, predict, update
+from kalcal.filters.gains import run_with_gains
+from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.models.registry import build_scenario
 from tests._helpers import assert_close, cov_atol
 from tests.core._models import blind_model

@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kalcal.filters.sequential import sequential_filter
 from kalcal.core.steps import predict, update
+from kalcal.filters.sequential import sequential_filter
 from tests._helpers import assert_close, cov_atol
 
 

@@ -12,8 +12,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kalcal.filters.regression import run_regression_filter
 from kalcal.core.steps import gain_and_covariance, predict, predict_covariance, update
+from kalcal.filters.regression import run_regression_filter
 from kalcal.montecarlo.accumulators import SumBuffers
 from kalcal.montecarlo.kernels import filter_block_moments
 from kalcal.montecarlo.regression_kernels import regression_block_moments

@@ -12,10 +12,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from kalcal.analysis.budget import BudgetTerm, error_budget
-from kalcal.core.lincov import FilterArrays, Moments, TruthArrays, mean_normalized_square, propagate
 from kalcal.analysis.sources import Source, accel_gps_sources, factor_sources, model_sources
-from kalcal.errors import KalcalError
+from kalcal.core.lincov import FilterArrays, Moments, TruthArrays, mean_normalized_square, propagate
 from kalcal.core.steps import UpdateForm
+from kalcal.errors import KalcalError
 from kalcal.linalg import whitener
 from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.models.custom import CustomModelScenario

@@ -15,9 +15,9 @@ from typing import Literal
 
 import numpy as np
 
+from kalcal.core.model import LinearGaussianModel
 from kalcal.core.steps import interval_transition
 from kalcal.models.accel_gps import AccelGpsScenario
-from kalcal.core.model import LinearGaussianModel
 from kalcal.simulation.exact import accel_gps_process_noise
 
 Kind = Literal["prior", "process", "measurement"]

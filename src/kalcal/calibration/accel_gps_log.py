@@ -41,11 +41,11 @@ from kalcal.calibration import accel_gps_evaluation as evaluation
 from kalcal.calibration.accel_gps_checks import check_plausible, fix_warnings, unit_slips
 from kalcal.calibration.accel_gps_result import AccelGpsCalibration, ImuGap
 from kalcal.calibration.interval_model import composed_sources, scale_parameters
-from kalcal.core.likelihood import innovation_loglik
 from kalcal.calibration.plausibility import CalibrationWarning, noise_rate_warnings
+from kalcal.core.likelihood import innovation_loglik
+from kalcal.core.steps import UpdateForm, check_form
 from kalcal.errors import DataError
 from kalcal.filters.mechanization import integrate, partial_step
-from kalcal.core.steps import UpdateForm, check_form
 from kalcal.linalg import symmetrize
 from kalcal.models.accel_gps import AccelGpsScenario, AccelGpsTruth
 

@@ -16,8 +16,8 @@ import numpy as np
 
 from kalcal.calibration.accel_gps_result import AccelGpsCalibration
 from kalcal.calibration.interval_model import scale_parameters
-from kalcal.errors import DataError
 from kalcal.core.smoother import rts_smooth
+from kalcal.errors import DataError
 
 
 @dataclass(frozen=True)

@@ -43,11 +43,11 @@ from typing import Literal, NamedTuple
 
 import numpy as np
 
-from kalcal.errors import ConfigError
 from kalcal.core.missing import update_where_measured
-from kalcal.core.sqrt_form import cholesky_factor, gram, interval_noise_factor, sqrt_gain_and_factor, sqrt_predict
-from kalcal.linalg import matvec, symmetrize
 from kalcal.core.model import LinearGaussianModel
+from kalcal.core.sqrt_form import cholesky_factor, gram, interval_noise_factor, sqrt_gain_and_factor, sqrt_predict
+from kalcal.errors import ConfigError
+from kalcal.linalg import matvec, symmetrize
 
 UpdateForm = Literal["joseph", "standard", "sqrt"]
 UPDATE_FORMS: tuple[str, ...] = ("joseph", "standard", "sqrt")

@@ -29,9 +29,9 @@ from typing import Literal, NamedTuple
 
 import numpy as np
 
-from kalcal.errors import ConfigError
 from kalcal.core.missing import measured
 from kalcal.core.steps import predict, update
+from kalcal.errors import ConfigError
 
 RegressionForm = Literal["joseph", "standard", "note"]
 REGRESSION_FORMS: tuple[str, ...] = ("joseph", "standard", "note")

@@ -27,9 +27,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from kalcal.core.model import LinearGaussianModel
 from kalcal.core.steps import gain_and_covariance, interval_transition
 from kalcal.linalg import psd_factor
-from kalcal.core.model import LinearGaussianModel
 
 #: the default tolerance of :func:`convergence`: ||P_k - P_inf|| / ||P_inf|| below this counts as converged
 CONVERGENCE_TOLERANCE = 1e-3

@@ -47,9 +47,9 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from kalcal.core.model import LinearGaussianModel
 from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.models.custom_truth import MAP_KEYS, MODEL_KEYS, MappedTruthModel, mapped_truth, truth_from_settings
-from kalcal.core.model import LinearGaussianModel
 from kalcal.models.scale_bias import ScaleBiasScenario
 from kalcal.models.settings import (
     SettingError,

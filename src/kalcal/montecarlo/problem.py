@@ -14,11 +14,11 @@ from typing import Protocol
 
 import numpy as np
 
+from kalcal.core.model import LinearGaussianModel
+from kalcal.core.steps import GainSchedule, UpdateForm, covariance_pass
 from kalcal.errors import ConfigError
 from kalcal.filters.gains import run_with_gains
-from kalcal.core.steps import GainSchedule, UpdateForm, covariance_pass
 from kalcal.linalg import whitener
-from kalcal.core.model import LinearGaussianModel
 from kalcal.montecarlo.accumulators import BlockResult, MomentSums, SumBuffers
 from kalcal.simulation.exact import UpdateRateTruth, sample_exact
 
