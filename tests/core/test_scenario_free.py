@@ -24,7 +24,7 @@ ALLOWED_OUTSIDE = {"kalcal.errors", "kalcal.linalg", "kalcal.models.settings"}
 def _core_sources() -> dict[str, str]:
     root = Path(kalcal.core.__file__).parent
     sources = {path.name: path.read_text(encoding="utf-8") for path in sorted(root.rglob("*.py"))}
-    assert {"model.py", "steps.py", "sqrt_form.py", "missing.py", "smoother.py", "likelihood.py", "lincov.py", "kernels.py"} <= set(sources)
+    assert {"model.py", "steps.py", "sqrt_form.py", "missing.py", "smoother.py", "likelihood.py", "lincov.py", "sources.py", "budget.py", "kernels.py"} <= set(sources)
     return sources
 
 

@@ -8,6 +8,8 @@
 - :mod:`kalcal.core.smoother`: the RTS smoother over a filter's run.
 - :mod:`kalcal.core.likelihood`: the prediction-error decomposition of a filter's innovations.
 - :mod:`kalcal.core.lincov`: the exact moments of a fixed-gain filter against its linear truth.
+- :mod:`kalcal.core.sources`, :mod:`kalcal.core.budget`: the truth's independent noise sources, and the
+  error budget, each source's exact share of the true error covariance.
 - :mod:`kalcal.core.kernels`: the one compiled covariance update that every compiled path calls.
 
 Nothing in it names a scenario (tests/core/test_scenario_free.py).

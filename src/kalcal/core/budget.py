@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kalcal.analysis.sources import Source
+from kalcal.core.sources import Source
 from kalcal.core.lincov import FilterArrays, TruthArrays, source_covariances
 
 
