@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from kalcal.analysis.fixed_gain import analyze_scenario
-from kalcal.analysis.sources import blocks, model_sources
+from kalcal.core.sources import blocks, model_sources
 from kalcal.models.custom import parse_model
 from kalcal.models.registry import build_scenario
 from kalcal.simulation.exact import accel_gps_process_noise, accel_gps_truth

@@ -17,13 +17,13 @@ import dataclasses
 import numpy as np
 import pytest
 
-from kalcal.analysis.covariance import FilterArrays, mean_normalized_square, propagate
 from kalcal.analysis.fixed_gain import analyze_problem, analyze_scenario, truth_arrays
+from kalcal.core.lincov import FilterArrays, mean_normalized_square, propagate
+from kalcal.core.model import LinearGaussianModel
+from kalcal.core.steps import covariance_pass
 from kalcal.errors import KalcalError
 from kalcal.filters.gains import run_with_gains
-from kalcal.filters.steps import covariance_pass
 from kalcal.models.custom import parse_model
-from kalcal.models.linear import LinearGaussianModel
 from kalcal.models.registry import build_scenario
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.simulation.exact import UpdateRateTruth, sample_exact, truth_from_model
@@ -63,7 +63,7 @@ def _dense(truth: UpdateRateTruth, filt: FilterArrays, error_map=None):
 
 def covariance_pass_like(filt: FilterArrays):
     """A gain schedule holding the filter's own gains and transitions (for run_with_gains)."""
-    from kalcal.filters.steps import GainSchedule
+    from kalcal.core.steps import GainSchedule
 
     k, d, _ = filt.transitions.shape
     empty = np.zeros((k, d, d))

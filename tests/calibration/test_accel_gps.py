@@ -9,9 +9,9 @@ import pytest
 from scipy import stats
 
 from kalcal.calibration.accel_gps import calibrate_accel_gps
+from kalcal.core.steps import covariance_pass
 from kalcal.errors import DataError
 from kalcal.filters.gains import run_with_gains
-from kalcal.filters.steps import covariance_pass
 from kalcal.filters.mechanization import integrate
 from kalcal.models.registry import build_scenario
 from kalcal.simulation.sampled import sample_accel_gps_logs

@@ -8,7 +8,7 @@ from scipy import stats
 
 from kalcal.calibration.accel_gps import calibrate_accel_gps, prepare_accel_gps_log
 from kalcal.calibration.accel_gps_evaluation import DIFFUSE_BIAS_STD, latency_map
-from kalcal.calibration.likelihood import innovation_loglik
+from kalcal.core.likelihood import innovation_loglik
 from kalcal.errors import ConfigError
 from kalcal.filters.mechanization import integrate
 from kalcal.models.registry import build_scenario
@@ -218,17 +218,6 @@ def test_settings_keys_values_and_units():
         log.loglik({"filter.accel_noise_std": -1.0})
 
 
-def test_innovation_loglik_leaves_out_nan_rows_and_skipped_fixes():
-    rng = np.random.default_rng(2)
-    a = rng.standard_normal((6, 2, 2))
-    s = a @ np.swapaxes(a, 1, 2) + np.eye(2)
-    r = rng.standard_normal((6, 2))
-    each = [stats.multivariate_normal(np.zeros(2), s[k]).logpdf(r[k]) for k in range(6)]
-    assert np.isclose(innovation_loglik(r, s), sum(each), rtol=1e-12)
-    r[2] = np.nan
-    assert np.isclose(innovation_loglik(r, s, skip=1), sum(each) - each[0] - each[2], rtol=1e-12)
-
-
 def _report(*extra, seed=3):
     scenario = build_scenario("accel-gps", assignments=["scenario.duration=60", *extra])
     return scenario, sample_accel_gps_logs(scenario, np.random.default_rng(seed), 1)
@@ -302,12 +291,3 @@ def test_verify_refuses_a_filter_latency():
     scenario = build_scenario("accel-gps", assignments=["filter.gps_latency=0.02"])
     with pytest.raises(ConfigError, match="filter.gps_latency"):
         scenario.filter_model()
-
-
-def test_innovation_loglik_of_three_components():
-    rng = np.random.default_rng(3)
-    a = rng.standard_normal((4, 3, 3))
-    s = a @ np.swapaxes(a, 1, 2) + np.eye(3)
-    r = rng.standard_normal((4, 3))
-    want = sum(stats.multivariate_normal(np.zeros(3), s[k]).logpdf(r[k]) for k in range(4))
-    assert np.isclose(innovation_loglik(r, s), want, rtol=1e-12)

@@ -21,8 +21,8 @@ from kalcal.calibration.accel_gps import calibrate_accel_gps
 from kalcal.calibration.accel_gps_evaluation import python_filter as _python_filter
 from kalcal.calibration.smoothing import smooth_calibration
 from kalcal.cli import app
+from kalcal.core.steps import interval_transition
 from kalcal.errors import ConfigError, DataError
-from kalcal.filters.steps import interval_transition
 from kalcal.filters.mechanization import integrate
 from kalcal.filters.sequential import sequential_filter
 from kalcal.models.accel_gps_discretization import error_transition

@@ -1,7 +1,7 @@
 """The compiled composition of an interval's pieces against the numpy reference predict of covariances.
 
-Oracles: :func:`kalcal.filters.steps.predict_covariance` applied piece by piece (Q <- T Q T^T + G G^T from
-Q = 0, Phi <- T Phi from I), :func:`kalcal.filters.steps.interval_transition` where every piece is the
+Oracles: :func:`kalcal.core.steps.predict_covariance` applied piece by piece (Q <- T Q T^T + G G^T from
+Q = 0, Phi <- T Phi from I), :func:`kalcal.core.steps.interval_transition` where every piece is the
 same sample step, and the same recursion in plain Python floats; composing in chunks against composing
 in one pass, bit for bit.
 """
@@ -20,7 +20,7 @@ from kalcal.calibration.interval_model import (
     composed_sources,
     interval_sources,
 )
-from kalcal.filters.steps import interval_transition, predict_covariance
+from kalcal.core.steps import interval_transition, predict_covariance
 from kalcal.linalg import symmetrize
 from kalcal.models.registry import build_scenario
 

@@ -9,13 +9,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from kalcal.core.model import LinearGaussianModel
+from kalcal.core.steps import covariance_pass, interval_transition, predict, update
 from kalcal.filters.gains import run_with_gains
-from kalcal.filters.steps import covariance_pass, interval_transition, predict, update
 from kalcal.models.accel_gps import AccelGpsScenario
-from kalcal.models.linear import LinearGaussianModel
 from kalcal.models.registry import build_scenario
 from tests._helpers import assert_close, cov_atol
-from tests.filters._models import blind_model
+from tests.core._models import blind_model
 
 
 def _reference_riccati(model: LinearGaussianModel, n_updates: int):

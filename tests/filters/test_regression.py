@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from kalcal.core.steps import update
 from kalcal.errors import ConfigError
-from kalcal.filters.steps import update
 from kalcal.filters.regression import note_update, run_regression_filter, scalar_update
 from kalcal.filters.scale_bias import filter_scale_bias, regressors
 from kalcal.models.registry import build_scenario

@@ -1,6 +1,6 @@
 """The compiled sequential filter against the reference steps, fix by fix.
 
-Oracle: :func:`kalcal.filters.steps.predict` and :func:`~kalcal.filters.steps.update` (Joseph form) in a
+Oracle: :func:`kalcal.core.steps.predict` and :func:`~kalcal.core.steps.update` (Joseph form) in a
 Python loop over the same per-fix transitions and noise, with and without missing fixes.
 """
 
@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from kalcal.core.steps import predict, update
 from kalcal.filters.sequential import sequential_filter
-from kalcal.filters.steps import predict, update
 from tests._helpers import assert_close, cov_atol
 
 

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 import scipy.linalg
 
+from kalcal.core.model import LinearGaussianModel
+from kalcal.core.steps import covariance_pass, interval_transition
 from kalcal.filters.steady_state import convergence, model_steady_state_view, no_steady_state, steady_state
-from kalcal.filters.steps import covariance_pass, interval_transition
-from kalcal.models.linear import LinearGaussianModel
 from kalcal.models.registry import build_scenario
 from tests._helpers import assert_close, cov_atol
 

@@ -7,12 +7,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from kalcal.core.model import LinearGaussianModel
 from kalcal.errors import ConfigError
 from kalcal.io.results import to_jsonable
 from kalcal.models.config import section_values
 from kalcal.models.custom import MODEL_KEYS, CustomModelScenario, load_model_file, parse_model
 from kalcal.models.custom_truth import MappedTruthModel
-from kalcal.models.linear import LinearGaussianModel
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 SOURCE = "reduced.toml"

@@ -3,7 +3,7 @@
 A block of one realization makes the kernels' sums that realization's own numbers (its estimate, error,
 innovation and, for the regression kernel, P_k and NIS), and the kept innovations give every
 realization's r_k: so each update of the compiled recursion is compared with
-:func:`kalcal.filters.steps.predict` and :func:`~kalcal.filters.steps.update` (fixed gains), and with
+:func:`kalcal.core.steps.predict` and :func:`~kalcal.core.steps.update` (fixed gains), and with
 :func:`kalcal.filters.regression.run_regression_filter`, which runs those steps (data-dependent gains).
 """
 
@@ -12,8 +12,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from kalcal.core.steps import gain_and_covariance, predict, predict_covariance, update
 from kalcal.filters.regression import run_regression_filter
-from kalcal.filters.steps import gain_and_covariance, predict, predict_covariance, update
 from kalcal.montecarlo.accumulators import SumBuffers
 from kalcal.montecarlo.kernels import filter_block_moments
 from kalcal.montecarlo.regression_kernels import regression_block_moments

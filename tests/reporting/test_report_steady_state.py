@@ -15,12 +15,12 @@ import numpy as np
 import pytest
 
 import kalcal.jobs.report as report_job
+from kalcal.core.model import LinearGaussianModel
+from kalcal.core.steps import covariance_pass
 from kalcal.errors import ConfigError
-from kalcal.filters.steps import covariance_pass
 from kalcal.filters.steady_state import SteadyStateView, convergence, steady_state
 from kalcal.jobs.report import render_report
 from kalcal.jobs.verify import verify
-from kalcal.models.linear import LinearGaussianModel
 from kalcal.models.registry import build_scenario
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.plots.steady_state import plot_steady_state

@@ -12,9 +12,9 @@ from functools import lru_cache
 import numpy as np
 import pytest
 
-from kalcal.filters.steps import interval_transition
+from kalcal.core.model import LinearGaussianModel
+from kalcal.core.steps import interval_transition
 from kalcal.filters.mechanization import interval_weights
-from kalcal.models.linear import LinearGaussianModel
 from kalcal.models.registry import build_scenario
 from kalcal.simulation.exact import accel_gps_model_error, accel_gps_truth, sample_exact, truth_from_model
 from kalcal.simulation.sampled import sample_accel_gps_errors

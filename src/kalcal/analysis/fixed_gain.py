@@ -11,18 +11,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kalcal.analysis.budget import BudgetTerm, error_budget
-from kalcal.analysis.covariance import FilterArrays, Moments, TruthArrays, mean_normalized_square, propagate
-from kalcal.analysis.sources import Source, accel_gps_sources, factor_sources, model_sources
+from kalcal.core.budget import BudgetTerm, error_budget
+from kalcal.core.lincov import FilterArrays, Moments, TruthArrays, mean_normalized_square, propagate
+from kalcal.core.sources import Source, covariance_sources, factor_sources, model_sources
+from kalcal.core.steps import UpdateForm
 from kalcal.errors import KalcalError
-from kalcal.filters.steps import UpdateForm
 from kalcal.linalg import whitener
 from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.models.custom import CustomModelScenario
 from kalcal.models.scale_bias import ScaleBiasScenario
 from kalcal.montecarlo.problem import FixedGainProblem, ProblemInfo
 from kalcal.montecarlo.scenarios import accel_gps_problem, custom_problem, refuse_log_faults
-from kalcal.simulation.exact import UpdateRateTruth
+from kalcal.simulation.exact import UpdateRateTruth, accel_gps_process_noise
 
 
 @dataclass(frozen=True)
@@ -36,6 +36,14 @@ class CovarianceAnalysis:
     mean_nees: np.ndarray  #: E[e^T P^-1 e] under the truth, (K,)
     mean_nis: np.ndarray  #: E[r^T S^-1 r] under the truth, (K,)
     budget: tuple[BudgetTerm, ...]  #: one term of Cov(e_k) per source; they sum to moments.error_cov
+
+
+def accel_gps_sources(scenario: AccelGpsScenario) -> list[Source]:
+    """prior:position, prior:velocity, prior:bias (, prior:scale), process:accel (, process:bias),
+    measurement:position, measurement:velocity."""
+    model = scenario.truth_model()
+    measurement_names = ("position", "velocity")
+    return covariance_sources(model.m0, model.v, accel_gps_process_noise(scenario), scenario.state_names, measurement_names)
 
 
 def truth_arrays(truth: UpdateRateTruth) -> TruthArrays:

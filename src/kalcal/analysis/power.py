@@ -120,7 +120,7 @@ def _covariance(a: CovarianceAnalysis, confidence: float) -> dict[str, Family]:
 def _orthogonality(a: CovarianceAnalysis, confidence: float) -> NormalFamily:
     m = a.moments
     if m.estimate_cov is None:
-        raise ValueError("the analysis has no Cov(xhat): run it with kalcal.analysis.covariance.propagate")
+        raise ValueError("the analysis has no Cov(xhat): run it with kalcal.core.lincov.propagate")
     mu_e, mu_x = m.mean_error[:, :, None], m.mean_estimate[:, None, :]
     var_e = np.diagonal(m.error_cov, axis1=1, axis2=2)[:, :, None]
     var_x = np.diagonal(m.estimate_cov, axis1=1, axis2=2)[:, None, :]

@@ -155,7 +155,7 @@ def analyze(
     """
     from kalcal.api._scenario import resolve
     from kalcal.errors import KalcalError
-    from kalcal.filters.steps import check_form
+    from kalcal.core.steps import check_form
 
     if isinstance(n, bool) or not isinstance(n, int) or n < 1:
         raise KalcalError(f"-n: expected a positive number of realizations, got {n!r}")

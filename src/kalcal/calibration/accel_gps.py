@@ -36,7 +36,7 @@ from kalcal.calibration.accel_gps_evaluation import DIFFUSE_BIAS_STD
 from kalcal.calibration.accel_gps_log import INITS, AccelGpsLog, Init, Prior, prepare_accel_gps_log
 from kalcal.calibration.accel_gps_result import AccelGpsCalibration, ImuGap
 from kalcal.calibration.plausibility import CalibrationWarning
-from kalcal.filters.steps import UpdateForm
+from kalcal.core.steps import UpdateForm
 from kalcal.models.accel_gps import AccelGpsScenario
 
 __all__ = ["INITS", "AccelGpsCalibration", "AccelGpsLog", "ImuGap", "calibrate_accel_gps", "prepare_accel_gps_log", "prior_conflict"]

@@ -15,9 +15,9 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numpy as np
 
 from kalcal.calibration.interval_model import continuous_bias_model
+from kalcal.core.sqrt_form import cholesky_factor, gram, sqrt_predict, sqrt_update
+from kalcal.core.steps import UpdateForm, predict, update
 from kalcal.filters.sequential import SequentialRun, sequential_filter
-from kalcal.filters.sqrt_form import cholesky_factor, gram, sqrt_predict, sqrt_update
-from kalcal.filters.steps import UpdateForm, predict, update
 from kalcal.models.settings import SettingError, show, to_float
 from kalcal.verification.distributions import chi2_ppf  # scipy.stats's values, without its import
 

@@ -41,11 +41,11 @@ from kalcal.calibration import accel_gps_evaluation as evaluation
 from kalcal.calibration.accel_gps_checks import check_plausible, fix_warnings, unit_slips
 from kalcal.calibration.accel_gps_result import AccelGpsCalibration, ImuGap
 from kalcal.calibration.interval_model import composed_sources, scale_parameters
-from kalcal.calibration.likelihood import innovation_loglik
 from kalcal.calibration.plausibility import CalibrationWarning, noise_rate_warnings
+from kalcal.core.likelihood import innovation_loglik
+from kalcal.core.steps import UpdateForm, check_form
 from kalcal.errors import DataError
 from kalcal.filters.mechanization import integrate, partial_step
-from kalcal.filters.steps import UpdateForm, check_form
 from kalcal.linalg import symmetrize
 from kalcal.models.accel_gps import AccelGpsScenario, AccelGpsTruth
 
@@ -179,7 +179,7 @@ class AccelGpsLog:
 
     def loglik(self, values: Mapping[str, Any] = {}, *, gate: float | None = None, rejected: np.ndarray | None = None) -> float:  # noqa: B006 (read only)
         """log L of the fixes used (the prediction-error decomposition,
-        :func:`~kalcal.calibration.likelihood.innovation_loglik`), for the filter with ``values`` over the
+        :func:`~kalcal.core.likelihood.innovation_loglik`), for the filter with ``values`` over the
         log's settings; the gate's rejections and the first ``skip`` fixes contribute nothing.
 
         ``rejected`` (bool, (K,)) holds the left-out fixes fixed instead of gating (they are then only

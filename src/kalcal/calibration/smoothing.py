@@ -2,7 +2,7 @@
 
 The filter's estimate at fix k uses the fixes up to k; the smoothed one uses all of them, so early
 position, velocity and bias estimates gain most (the last fix's are the filter's). The error state
-[dp, dv, b] is smoothed by :func:`kalcal.filters.smoother.rts_smooth` over the filter's priors,
+[dp, dv, b] is smoothed by :func:`kalcal.core.smoother.rts_smooth` over the filter's priors,
 posteriors and transitions, and added to the same nominal as the filter's: p_s = p_c + dp_s,
 v_s = v_c + dv_s, b_s. With a scale-factor state the filter runs on [dp, dv, b', s']; the smoother runs
 there too, and its result is converted to [dp, dv, b, s] as the filter's own estimates are.
@@ -16,8 +16,8 @@ import numpy as np
 
 from kalcal.calibration.accel_gps_result import AccelGpsCalibration
 from kalcal.calibration.interval_model import scale_parameters
+from kalcal.core.smoother import rts_smooth
 from kalcal.errors import DataError
-from kalcal.filters.smoother import rts_smooth
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,16 @@
-"""The scenario-free Kalman algebra: for now its one compiled covariance update (:mod:`kalcal.core.kernels`).
+"""The scenario-free Kalman algebra: what a linear Gaussian model is, and the one algebra over it.
 
-core will hold the model containers, the numpy reference of every step (predict; update in Joseph,
-standard and square-root form; a missing measurement as a prediction only), the covariance pass, the
-RTS smoother, the prediction-error likelihood and the exact covariance analysis. Nothing in it names a
-scenario.
+- :mod:`kalcal.core.model`: :class:`~kalcal.core.model.LinearGaussianModel`, the immutable model container.
+- :mod:`kalcal.core.steps`: the numpy reference of every step (predict; the Joseph and standard updates;
+  the interval transition; the covariance pass).
+- :mod:`kalcal.core.sqrt_form`: the square-root predict and update and their factor algebra.
+- :mod:`kalcal.core.missing`: a missing measurement is a prediction only, one wrapper for every form.
+- :mod:`kalcal.core.smoother`: the RTS smoother over a filter's run.
+- :mod:`kalcal.core.likelihood`: the prediction-error decomposition of a filter's innovations.
+- :mod:`kalcal.core.lincov`: the exact moments of a fixed-gain filter against its linear truth.
+- :mod:`kalcal.core.sources`, :mod:`kalcal.core.budget`: the truth's independent noise sources, and the
+  error budget, each source's exact share of the true error covariance.
+- :mod:`kalcal.core.kernels`: the one compiled covariance update that every compiled path calls.
+
+Nothing in it names a scenario (tests/core/test_scenario_free.py).
 """

@@ -2,9 +2,9 @@
 
 Every compiled path of the package that updates a covariance calls :func:`covariance_update`: the
 sequential filter of a log (:mod:`kalcal.filters.sequential`), the data-dependent Monte Carlo block
-kernel (:mod:`kalcal.montecarlo.regression_kernels`) and the scale-bias likelihood
-(:mod:`kalcal.fitting.scale_bias_likelihood`). It is the compiled twin of the covariance half of the
-numpy reference :func:`kalcal.filters.steps.gain_and_covariance`, with the same equations::
+kernel (:mod:`kalcal.montecarlo.regression_kernels`) and the compiled diffuse likelihood of the
+regression model's fit (tests/core/test_kernel_callers.py names each caller). It is the compiled twin of the covariance half of the
+numpy reference :func:`kalcal.core.steps.gain_and_covariance`, with the same equations::
 
     S = H M H^T + V (symmetrized),   K = M H^T S^{-1},
     P = (I - K H) M (I - K H)^T + K V K^T   (joseph)   or   P = M - K H M   (standard), symmetrized.
@@ -23,14 +23,14 @@ likelihood in ~30 ns a sample (~16 ns before).
 The fixed-gain block kernel (:mod:`kalcal.montecarlo.kernels`) does not call it: it applies gains computed
 before any data and has no covariance to update.
 
-:func:`measured` is the compiled twin of :func:`kalcal.filters.missing.measured`, the one
+:func:`measured` is the compiled twin of :func:`kalcal.core.missing.measured`, the one
 missing-measurement rule: a measurement with a non-finite component (or a non-finite entry of its H) is
 not used, and the step is a prediction only (the caller keeps P = M). The update itself assumes finite
 inputs.
 
 numba's cache and this module. A kernel that calls these functions compiles them into its own cached
 machine code, and numba keys that cache on the caller's source file alone. Each caller therefore carries
-a ``# numba cache stamp:`` line with the digest of this file, which tests/filters/test_kernel_callers.py
+a ``# numba cache stamp:`` line with the digest of this file, which tests/core/test_kernel_callers.py
 holds to the present source: after a change here that test names each caller's new line, and the
 renewed line makes numba compile the caller anew (docs/verification.md).
 """

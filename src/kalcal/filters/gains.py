@@ -1,7 +1,7 @@
 """The state recursion of a gain schedule: a batch of measurement sequences filtered with precomputed gains.
 
 The schedule (M_k, P_k, K_k, S_k of every update) comes from the covariance pass,
-:func:`kalcal.filters.steps.covariance_pass`; with it, each update is products alone.
+:func:`kalcal.core.steps.covariance_pass`; with it, each update is products alone.
 """
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from kalcal.filters.steps import GainSchedule
+from kalcal.core.steps import GainSchedule
 
 
 class FilterRun(NamedTuple):
@@ -27,7 +27,7 @@ def run_with_gains(schedule: GainSchedule, h: np.ndarray, z: np.ndarray, x0: np.
     Parameters
     ----------
     schedule : GainSchedule
-        From :func:`~kalcal.filters.steps.covariance_pass`; its gains do not depend on the data.
+        From :func:`~kalcal.core.steps.covariance_pass`; its gains do not depend on the data.
     h : ndarray, shape (p, d)
     z : ndarray, shape (n, K, p)
         Measurements at the K updates.
@@ -35,7 +35,7 @@ def run_with_gains(schedule: GainSchedule, h: np.ndarray, z: np.ndarray, x0: np.
         Estimate at sample 0 (the prior mean).
 
     Every measurement must be present: the gains assume every update is made (a missing measurement
-    changes the covariances after it, which :func:`kalcal.filters.steps.update` handles, one step at a
+    changes the covariances after it, which :func:`kalcal.core.steps.update` handles, one step at a
     time).
 
     Raises
@@ -49,7 +49,7 @@ def run_with_gains(schedule: GainSchedule, h: np.ndarray, z: np.ndarray, x0: np.
         raise ValueError(
             f"z: measurement {z[i, k].tolist()} of realization {i} at update {k} is not finite; "
             "run_with_gains needs every measurement (its gains assume every update is made): filter data "
-            "with missing values step by step with kalcal.filters.steps.update"
+            "with missing values step by step with kalcal.core.steps.update"
         )
     n, n_updates, p = z.shape
     d = schedule.phi_interval.shape[0]

@@ -9,8 +9,8 @@ regressor row h_k is data (it differs per realization and per step)::
     x_0 ~ N(x0, P0) is the estimate x_0^+ before the first measurement.
 
 Each step is the time propagation x^- = x^+, P^- = P^+ + Q (the reference
-:func:`kalcal.filters.steps.predict` with Phi = I), then a measurement update by the reference
-:func:`kalcal.filters.steps.update` with p = 1: the row h_k as a (1, d) H, R as a (1, 1) V. Three update
+:func:`kalcal.core.steps.predict` with Phi = I), then a measurement update by the reference
+:func:`kalcal.core.steps.update` with p = 1: the row h_k as a (1, d) H, R as a (1, 1) V. Three update
 forms give the same estimates in exact arithmetic:
 
 * ``"joseph"``: the Joseph form (the package default);
@@ -20,7 +20,7 @@ forms give the same estimates in exact arithmetic:
   which are the standard form with p = 1: it runs as ``"standard"`` (K by a division by the scalar S).
 
 A measurement that is NaN (or whose regressor row holds a NaN) is missing: as in every filter of the
-package (:mod:`kalcal.filters.steps`), that step is a prediction only, with r_k and S_k NaN.
+package (:mod:`kalcal.core.steps`), that step is a prediction only, with r_k and S_k NaN.
 """
 
 from __future__ import annotations
@@ -29,9 +29,9 @@ from typing import Literal, NamedTuple
 
 import numpy as np
 
+from kalcal.core.missing import measured
+from kalcal.core.steps import predict, update
 from kalcal.errors import ConfigError
-from kalcal.filters.missing import measured
-from kalcal.filters.steps import predict, update
 
 RegressionForm = Literal["joseph", "standard", "note"]
 REGRESSION_FORMS: tuple[str, ...] = ("joseph", "standard", "note")
@@ -73,7 +73,7 @@ def note_update(x: np.ndarray, cov: np.ndarray, y: np.ndarray, h: np.ndarray, r:
 def scalar_update(
     x: np.ndarray, cov: np.ndarray, y: np.ndarray, h: np.ndarray, r: float, form: RegressionForm = "joseph"
 ) -> ScalarUpdate:
-    """One update in the chosen form, by the reference :func:`kalcal.filters.steps.update` with p = 1.
+    """One update in the chosen form, by the reference :func:`kalcal.core.steps.update` with p = 1.
 
     ``"note"`` is the standard form (:func:`note_update`). Shapes as in :func:`note_update`; where y or
     h is not finite the prior is kept, with r and S NaN.

@@ -1,10 +1,10 @@
 """A compiled sequential Kalman filter for long logs: one predict and one Joseph update per fix.
 
 It keeps each fix's prior (xbar_k, M_k) besides the posterior, for the RTS smoother
-(:mod:`kalcal.filters.smoother`).
+(:mod:`kalcal.core.smoother`).
 
-The same equations as the reference steps :func:`kalcal.filters.steps.predict` and
-:func:`~kalcal.filters.steps.update` in Joseph form (which the tests hold it equal to, fix by fix), for a
+The same equations as the reference steps :func:`kalcal.core.steps.predict` and
+:func:`~kalcal.core.steps.update` in Joseph form (which the tests hold it equal to, fix by fix), for a
 single realization with a transition, process noise and measurement noise of its own at every fix, and
 the same convention for a missing measurement: a fix with a non-finite component is a prediction only
 (posterior = prior, residual and S NaN). An optional innovation gate rejects a fix whose NIS
@@ -19,7 +19,7 @@ test the compiled :func:`kalcal.core.kernels.measured`; tests/filters/test_seque
 to the reference steps fix by fix.
 """
 
-# numba cache stamp: kalcal.core.kernels e2912fff4cc6900a
+# numba cache stamp: kalcal.core.kernels 42455b28a219f39d
 
 from __future__ import annotations
 

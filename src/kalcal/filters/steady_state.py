@@ -1,7 +1,7 @@
 """The steady state of a time-invariant filter: the discrete algebraic Riccati equation (DARE).
 
 Over one update interval the model is x_k = Phi x_{k-1} + w_k, w_k ~ N(0, Q), z_k = H x_k + v_k,
-v_k ~ N(0, V) (Phi = Phi_m and Q = Q_m of :func:`~kalcal.filters.steps.interval_transition`). The prior
+v_k ~ N(0, V) (Phi = Phi_m and Q = Q_m of :func:`~kalcal.core.steps.interval_transition`). The prior
 covariance M_k of the time-varying filter follows the Riccati recursion; its fixed point M_inf solves
 
     M = Phi M Phi^T - Phi M H^T (H M H^T + V)^{-1} H M Phi^T + Q
@@ -27,9 +27,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kalcal.filters.steps import gain_and_covariance, interval_transition
+from kalcal.core.model import LinearGaussianModel
+from kalcal.core.steps import gain_and_covariance, interval_transition
 from kalcal.linalg import psd_factor
-from kalcal.models.linear import LinearGaussianModel
 
 #: the default tolerance of :func:`convergence`: ||P_k - P_inf|| / ||P_inf|| below this counts as converged
 CONVERGENCE_TOLERANCE = 1e-3
@@ -174,7 +174,7 @@ def convergence(posterior_cov: np.ndarray, steady: np.ndarray, tolerance: float 
     Parameters
     ----------
     posterior_cov : ndarray, shape (K, d, d)
-        P_k of the time-varying filter (a :class:`~kalcal.filters.steps.GainSchedule`'s posterior_cov).
+        P_k of the time-varying filter (a :class:`~kalcal.core.steps.GainSchedule`'s posterior_cov).
     steady : ndarray, shape (d, d)
         P_inf.
     tolerance : float
@@ -242,7 +242,7 @@ def model_steady_state_view(
     model : LinearGaussianModel
         The filter's model (time-invariant: no per-interval transitions).
     posterior_cov : ndarray, shape (K, d, d)
-        P_k of the time-varying filter (its :class:`~kalcal.filters.steps.GainSchedule`'s posterior_cov).
+        P_k of the time-varying filter (its :class:`~kalcal.core.steps.GainSchedule`'s posterior_cov).
     times : ndarray, shape (K,)
         Update times, s.
     state_names, state_units : tuple of str, length d

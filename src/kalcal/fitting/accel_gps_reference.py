@@ -18,7 +18,7 @@ import numpy as np
 
 from kalcal.calibration.accel_gps import AccelGpsCalibration, calibrate_accel_gps
 from kalcal.calibration.accel_gps_evaluation import UNITS
-from kalcal.calibration.likelihood import innovation_loglik
+from kalcal.core.likelihood import innovation_loglik
 from kalcal.errors import KalcalError
 from kalcal.models.accel_gps import AccelGpsFilter, AccelGpsScenario
 

@@ -17,7 +17,7 @@ sigma_eta and sigma_nu apart are not identifiable from one log. A sample with a 
 compiled covariance update, :func:`kalcal.core.kernels.covariance_update`, on a tile of one realization.
 """
 
-# numba cache stamp: kalcal.core.kernels e2912fff4cc6900a
+# numba cache stamp: kalcal.core.kernels 42455b28a219f39d
 
 from __future__ import annotations
 

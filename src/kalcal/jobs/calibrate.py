@@ -10,13 +10,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from kalcal.calibration.likelihood import gate_excess
 from kalcal.calibration.plausibility import CalibrationWarning
 from kalcal.calibration.windows import accel_gps_stability, check_windows
-from kalcal.jobs.calibrate_warnings import fit_command, fit_extra, settings_warning, sigma_note, untrusted_warning
+from kalcal.core.likelihood import gate_excess
 from kalcal.io.logs import is_frame, numeric_columns, parse_column_map, read_table, require_increasing, source_name
 from kalcal.io.outputs import mark_inputs, writes_outputs
 from kalcal.io.results import write_csv, write_json
+from kalcal.jobs.calibrate_warnings import fit_command, fit_extra, settings_warning, sigma_note, untrusted_warning
 from kalcal.models.accel_gps import AccelGpsScenario, AccelGpsSettings
 from kalcal.models.config import section_values
 

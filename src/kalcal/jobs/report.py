@@ -22,9 +22,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from kalcal.core.steps import check_form
 from kalcal.errors import ConfigError, DataError
-from kalcal.models.settings import SettingError
-from kalcal.filters.steps import check_form
 from kalcal.io.manifest import require_complete
 from kalcal.io.outputs import run_outputs
 from kalcal.io.results import SCHEMA_VERSION
@@ -32,6 +31,7 @@ from kalcal.io.statistics import read_statistics
 from kalcal.jobs.progress import JobProgress, stage
 from kalcal.models.custom import CustomModelScenario, is_custom_settings
 from kalcal.models.registry import build_scenario
+from kalcal.models.settings import SettingError
 from kalcal.montecarlo.engine import BLOCK_SIZE, block_generator, block_sizes, realization
 from kalcal.montecarlo.problem import FixedGainProblem
 from kalcal.montecarlo.scale_bias import ScaleBiasProblem

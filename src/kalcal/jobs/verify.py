@@ -326,7 +326,7 @@ def verify(
     is refused (the scenario's default is skipped when the run is already that long).
     ``client`` runs the blocks on a Dask cluster, ``batch_size`` realizations per task (rounded up to
     whole blocks); ``checkpoint`` resumes from and saves to a file. None of them changes the numbers.
-    ``form`` is the filter's update form (joseph, standard or sqrt; see :mod:`kalcal.filters.steps`).
+    ``form`` is the filter's update form (joseph, standard or sqrt; see :mod:`kalcal.core.steps`).
     ``progress(stage, done, total)`` hears of every stage: ``"monte carlo"`` and ``"long run"`` in
     realizations, ``"statistics"`` in files (see :mod:`kalcal.jobs.progress`).
     ``report`` also draws ``out/figures/`` and ``out/report.html`` (showing realization ``realization``).

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import math
 
+from kalcal.core.steps import check_form
 from kalcal.errors import ConfigError
-from kalcal.filters.steps import check_form
 from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.models.config import apply_settings
 from kalcal.montecarlo.scenarios import refuse_log_faults

@@ -51,8 +51,8 @@ from typing import ClassVar, Literal
 
 import numpy as np
 
+from kalcal.core.model import LinearGaussianModel
 from kalcal.models.accel_gps_discretization import bias_discretization, error_transition
-from kalcal.models.linear import LinearGaussianModel
 from kalcal.models.settings import SettingError, require_nonnegative, require_positive, require_whole, show
 
 TruthKind = Literal["analytic", "discrete"]

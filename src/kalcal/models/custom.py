@@ -22,7 +22,7 @@ The file describes the filter's model (top-level keys) and, optionally, a truth 
     [truth]                           # optional: what the world does where it differs
     w = [[0.16]]
 
-The model is the one of :class:`~kalcal.models.linear.LinearGaussianModel`: the first measurement is
+The model is the one of :class:`~kalcal.core.model.LinearGaussianModel`: the first measurement is
 taken after ``steps_per_update`` steps, update k (k = 1..updates) at t_k = k * steps_per_update *
 sample_period. The truth shares the filter's timing and dimensions (d states, p measurements; its
 noise input may have another q), or, with a ``map``, has n states of its own (:mod:`.custom_truth`).
@@ -47,9 +47,9 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from kalcal.core.model import LinearGaussianModel
 from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.models.custom_truth import MAP_KEYS, MODEL_KEYS, MappedTruthModel, mapped_truth, truth_from_settings
-from kalcal.models.linear import LinearGaussianModel
 from kalcal.models.scale_bias import ScaleBiasScenario
 from kalcal.models.settings import (
     SettingError,

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from kalcal.models.linear import LinearGaussianModel
+from kalcal.core.model import LinearGaussianModel
 from kalcal.models.settings import SettingError, show, to_labels, to_matrix, to_vector
 
 #: The model's arrays, in the order of LinearGaussianModel; all but x0 are matrices.
@@ -38,7 +38,7 @@ class MappedTruthModel(LinearGaussianModel):
     Attributes
     ----------
     phi, gamma, h, w, v, x0, m0, steps_per_update, sample_period
-        As in :class:`~kalcal.models.linear.LinearGaussianModel`, in the truth's dimension n (h is (p, n)).
+        As in :class:`~kalcal.core.model.LinearGaussianModel`, in the truth's dimension n (h is (p, n)).
     map : ndarray, shape (d, n)
         M: the filter's states are M x_truth, so the filter's error is e = M x_truth - xhat.
     state_names : tuple of str, length n, or None

@@ -14,11 +14,11 @@ from typing import Protocol
 
 import numpy as np
 
+from kalcal.core.model import LinearGaussianModel
+from kalcal.core.steps import GainSchedule, UpdateForm, covariance_pass
 from kalcal.errors import ConfigError
 from kalcal.filters.gains import run_with_gains
-from kalcal.filters.steps import GainSchedule, UpdateForm, covariance_pass
 from kalcal.linalg import whitener
-from kalcal.models.linear import LinearGaussianModel
 from kalcal.montecarlo.accumulators import BlockResult, MomentSums, SumBuffers
 from kalcal.simulation.exact import UpdateRateTruth, sample_exact
 
@@ -96,7 +96,7 @@ class FixedGainProblem:
         for engine "sampled" (:func:`kalcal.montecarlo.sampled_kernels.accel_gps_block_sums`); without
         it, ``sampled``'s arrays are filtered by :func:`kalcal.montecarlo.kernels.filter_block_moments`.
     form : {"joseph", "standard", "sqrt"}
-        The covariance update of the gain schedule (:func:`~kalcal.filters.steps.covariance_pass`).
+        The covariance update of the gain schedule (:func:`~kalcal.core.steps.covariance_pass`).
     """
 
     info: ProblemInfo

@@ -14,13 +14,13 @@ measurements and regressors are simulated, always finite).
 Its covariance update (S, K and P^+, Joseph or standard form) is the package's one compiled update,
 :func:`kalcal.core.kernels.covariance_update`, on the tile as it lies (p = 1: K by a division);
 tests/montecarlo/test_kernel_steps.py holds this kernel to the reference steps through the regression
-filter, and tests/filters/test_kernel_update.py the update itself to :func:`kalcal.filters.steps.gain_and_covariance`.
+filter, and tests/core/test_kernel_update.py the update itself to :func:`kalcal.core.steps.gain_and_covariance`.
 
 The filter step itself is compiled without fast-math (each realization's numbers are the same on every
 machine and in any tile); only the sums over realizations are reassociated.
 """
 
-# numba cache stamp: kalcal.core.kernels e2912fff4cc6900a, kalcal.montecarlo.sum_kernels 2b967b9980519480
+# numba cache stamp: kalcal.core.kernels 42455b28a219f39d, kalcal.montecarlo.sum_kernels 2b967b9980519480
 
 from __future__ import annotations
 

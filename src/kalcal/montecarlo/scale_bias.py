@@ -20,8 +20,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from kalcal.core.steps import gain_and_covariance, predict_covariance
 from kalcal.filters.scale_bias import filter_scale_bias, regressors
-from kalcal.filters.steps import gain_and_covariance, predict_covariance
 from kalcal.models.scale_bias import MEASUREMENT_NAMES, STATE_NAMES, ScaleBiasScenario
 from kalcal.montecarlo.accumulators import BlockResult, MomentSums, SumBuffers
 from kalcal.montecarlo.problem import ProblemInfo, check_engine

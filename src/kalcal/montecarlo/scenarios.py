@@ -6,13 +6,13 @@ from functools import partial
 
 import numpy as np
 
+from kalcal.core.model import LinearGaussianModel
+from kalcal.core.steps import UpdateForm, interval_transition
 from kalcal.errors import ConfigError
-from kalcal.filters.steps import UpdateForm, interval_transition
 from kalcal.models.accel_gps import MEASUREMENT_NAMES, MEASUREMENT_UNITS, AccelGpsScenario
 from kalcal.models.custom import CustomModelScenario
-from kalcal.models.linear import LinearGaussianModel
-from kalcal.models.settings import SettingError, show
 from kalcal.models.scale_bias import ScaleBiasScenario
+from kalcal.models.settings import SettingError, show
 from kalcal.montecarlo.problem import FixedGainProblem, Problem, ProblemInfo
 from kalcal.montecarlo.scale_bias import ScaleBiasProblem, model_error_cause
 from kalcal.simulation.exact import accel_gps_transitions, accel_gps_truth, truth_from_model

@@ -26,12 +26,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kalcal.filters.steps import interval_transition
+from kalcal.core.model import LinearGaussianModel
+from kalcal.core.steps import interval_transition
 from kalcal.filters.mechanization import integrate, interval_weights
 from kalcal.linalg import psd_factor
 from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.models.custom_truth import MappedTruthModel
-from kalcal.models.linear import LinearGaussianModel
 
 
 @dataclass(frozen=True)

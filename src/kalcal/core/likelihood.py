@@ -41,7 +41,7 @@ def innovation_loglik(residual: np.ndarray, innovation_cov: np.ndarray, *, skip:
     r, s = residual[used], innovation_cov[used]
     if r.shape[0] == 0:
         return 0.0
-    if r.shape[1] == 2:  # the GPS fix: the 2x2 determinant and inverse in closed form, ten times faster
+    if r.shape[1] == 2:  # a two-row measurement (a position fix): the 2x2 determinant and inverse in closed form, ten times faster
         a, b, c = s[:, 0, 0], s[:, 1, 1], 0.5 * (s[:, 0, 1] + s[:, 1, 0])
         det = a * b - c * c
         quad = (b * r[:, 0] ** 2 - 2.0 * c * r[:, 0] * r[:, 1] + a * r[:, 1] ** 2) / det

@@ -15,10 +15,8 @@ from typing import Literal
 
 import numpy as np
 
-from kalcal.filters.steps import interval_transition
-from kalcal.models.accel_gps import AccelGpsScenario
-from kalcal.models.linear import LinearGaussianModel
-from kalcal.simulation.exact import accel_gps_process_noise
+from kalcal.core.model import LinearGaussianModel
+from kalcal.core.steps import interval_transition
 
 Kind = Literal["prior", "process", "measurement"]
 
@@ -112,14 +110,6 @@ def model_process(model: LinearGaussianModel) -> list[tuple[str, np.ndarray, flo
 def model_sources(model: LinearGaussianModel, state_names: Sequence[str], measurement_names: Sequence[str]) -> list[Source]:
     """The sources of a truth given as a linear Gaussian model (a model file's truth)."""
     return covariance_sources(model.m0, model.v, model_process(model), state_names, measurement_names)
-
-
-def accel_gps_sources(scenario: AccelGpsScenario) -> list[Source]:
-    """prior:position, prior:velocity, prior:bias (, prior:scale), process:accel (, process:bias),
-    measurement:position, measurement:velocity."""
-    model = scenario.truth_model()
-    measurement_names = ("position", "velocity")
-    return covariance_sources(model.m0, model.v, accel_gps_process_noise(scenario), scenario.state_names, measurement_names)
 
 
 def factor_sources(

@@ -11,16 +11,16 @@ import numpy as np
 import pytest
 from filterpy.kalman import KalmanFilter
 
+from kalcal.core.missing import measured
+from kalcal.core.sqrt_form import cholesky_factor, gram, sqrt_update
+from kalcal.core.steps import covariance_pass, gain_and_covariance, predict, update
 from kalcal.errors import ConfigError
 from kalcal.filters.gains import run_with_gains
-from kalcal.filters.missing import measured
-from kalcal.filters.sqrt_form import cholesky_factor, gram, sqrt_update
-from kalcal.filters.steps import covariance_pass, gain_and_covariance, predict, update
 from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.models.registry import build_scenario
 from kalcal.simulation.sampled import sample_accel_gps_errors
 from tests._helpers import assert_close, cov_atol
-from tests.filters._models import blind_model
+from tests.core._models import blind_model
 
 
 @pytest.fixture(scope="module")

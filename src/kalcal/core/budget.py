@@ -8,8 +8,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kalcal.analysis.covariance import FilterArrays, TruthArrays, source_covariances
-from kalcal.analysis.sources import Source
+from kalcal.core.sources import Source
+from kalcal.core.lincov import FilterArrays, TruthArrays, source_covariances
 
 
 @dataclass(frozen=True)

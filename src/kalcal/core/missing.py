@@ -1,10 +1,10 @@
 """The missing-measurement rule of every update: which realizations have a measurement, and the fill for the rest.
 
 A realization whose measurement has a non-finite component (NaN marks a missing value), or whose own H
-holds one, is not updated: its step is a prediction only. :func:`kalcal.filters.steps.update` and
-:func:`kalcal.filters.sqrt_form.sqrt_update` apply this rule through one wrapper,
+holds one, is not updated: its step is a prediction only. :func:`kalcal.core.steps.update` and
+:func:`kalcal.core.sqrt_form.sqrt_update` apply this rule through one wrapper,
 :func:`update_where_measured`, so that no numpy path handles a missing value its own way; the compiled
-filters apply it through :func:`kalcal.core.kernels.measured`, which tests/filters/test_kernel_update.py
+filters apply it through :func:`kalcal.core.kernels.measured`, which tests/core/test_kernel_update.py
 holds to :func:`measured`.
 """
 

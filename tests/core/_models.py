@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from kalcal.models.linear import LinearGaussianModel
+from kalcal.core.model import LinearGaussianModel
 
 
 def blind_model() -> LinearGaussianModel:

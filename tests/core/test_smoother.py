@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 from scipy.linalg import block_diag
 
+from kalcal.core.model import LinearGaussianModel
+from kalcal.core.smoother import rts_smooth
+from kalcal.core.steps import covariance_pass, interval_transition, predict, update
 from kalcal.errors import ConfigError
 from kalcal.filters.gains import run_with_gains
-from kalcal.filters.steps import covariance_pass, interval_transition, predict, update
-from kalcal.filters.smoother import rts_smooth
-from kalcal.models.linear import LinearGaussianModel
 from tests._helpers import assert_close, cov_atol
 
 

@@ -1,13 +1,13 @@
 """The numpy reference of the Kalman filter's steps: predict, the Joseph / standard updates, the covariance pass.
 
 Every numpy filter of the package (the gain schedule, the regression filter, the calibration's loops,
-the steady state, the scale/bias mean-error prediction) calls these functions, or the square-root form's
-steps in :mod:`kalcal.filters.sqrt_form` (:func:`~kalcal.filters.sqrt_form.sqrt_predict`,
-:func:`~kalcal.filters.sqrt_form.sqrt_update`); :func:`kalcal.filters.gains.run_with_gains` applies the
+the steady state, a Monte Carlo problem's mean-error prediction) calls these functions, or the square-root form's
+steps in :mod:`kalcal.core.sqrt_form` (:func:`~kalcal.core.sqrt_form.sqrt_predict`,
+:func:`~kalcal.core.sqrt_form.sqrt_update`); :func:`kalcal.filters.gains.run_with_gains` applies the
 covariance pass's gains to the states with products alone, and is tested against :func:`predict` and
 :func:`update` step by step. The compiled kernels are tested against these steps update by update: the
 one compiled covariance update they share (:func:`kalcal.core.kernels.covariance_update`, against
-:func:`gain_and_covariance` in tests/filters/test_kernel_update.py), the sequential filter
+:func:`gain_and_covariance` in tests/core/test_kernel_update.py), the sequential filter
 (tests/filters/test_sequential.py), the composition of an interval's pieces
 (tests/calibration/test_interval_model.py) and the Monte Carlo block kernels
 (tests/montecarlo/test_kernel_steps.py; besides, their block sums against the numpy path).
@@ -27,11 +27,11 @@ Equations (prior ``xbar, M``; posterior ``xhat, P``)::
 The covariance pass (:func:`covariance_pass`) runs the covariance halves of these steps without data
 over a time-invariant model's update intervals (:func:`interval_transition`), in any of the three forms.
 
-Missing measurements (:mod:`kalcal.filters.missing`). A realization whose measurement has a non-finite
+Missing measurements (:mod:`kalcal.core.missing`). A realization whose measurement has a non-finite
 component, or whose own H holds one, is not updated: xhat = xbar and P = M, with K = 0 and the residual
-r and S NaN. :func:`update` and :func:`~kalcal.filters.sqrt_form.sqrt_update` do this realization by
-realization through one wrapper (:func:`kalcal.filters.missing.update_where_measured`), so no numpy
-filter handles a missing value its own way. Elsewhere: the compiled sequential filter and the scale-bias
+r and S NaN. :func:`update` and :func:`~kalcal.core.sqrt_form.sqrt_update` do this realization by
+realization through one wrapper (:func:`kalcal.core.missing.update_where_measured`), so no numpy
+filter handles a missing value its own way. Elsewhere: the compiled sequential filter and the compiled diffuse
 likelihood apply the same rule (:func:`kalcal.core.kernels.measured`),
 :func:`~kalcal.filters.gains.run_with_gains` refuses a missing value (its gains assume every update), and
 the Monte Carlo kernels are never given one (simulated data are finite).
@@ -43,17 +43,17 @@ from typing import Literal, NamedTuple
 
 import numpy as np
 
+from kalcal.core.missing import update_where_measured
+from kalcal.core.model import LinearGaussianModel
+from kalcal.core.sqrt_form import cholesky_factor, gram, interval_noise_factor, sqrt_gain_and_factor, sqrt_predict
 from kalcal.errors import ConfigError
-from kalcal.filters.missing import update_where_measured
-from kalcal.filters.sqrt_form import cholesky_factor, gram, interval_noise_factor, sqrt_gain_and_factor, sqrt_predict
 from kalcal.linalg import matvec, symmetrize
-from kalcal.models.linear import LinearGaussianModel
 
 UpdateForm = Literal["joseph", "standard", "sqrt"]
 UPDATE_FORMS: tuple[str, ...] = ("joseph", "standard", "sqrt")
 #: forms that map a covariance to a covariance (:func:`gain_and_covariance`, :func:`update`); "sqrt"
-#: carries a factor instead (:func:`~kalcal.filters.sqrt_form.sqrt_predict`,
-#: :func:`~kalcal.filters.sqrt_form.sqrt_update`)
+#: carries a factor instead (:func:`~kalcal.core.sqrt_form.sqrt_predict`,
+#: :func:`~kalcal.core.sqrt_form.sqrt_update`)
 COVARIANCE_FORMS: tuple[str, ...] = ("joseph", "standard")
 
 
@@ -110,7 +110,7 @@ def interval_transition(phi: np.ndarray, gamma: np.ndarray, w: np.ndarray, steps
 
     Phi_m = Phi^m and Q_m = sum_{i=0}^{m-1} Phi^i Gamma W Gamma^T (Phi^i)^T, so that
     x_{j+m} = Phi_m x_j + (noise ~ N(0, Q_m)) exactly: Q_m is m predictions of the covariance
-    (:func:`~kalcal.filters.steps.predict_covariance`) from Q_0 = 0.
+    (:func:`~kalcal.core.steps.predict_covariance`) from Q_0 = 0.
 
     Parameters
     ----------
@@ -159,7 +159,7 @@ def gain_and_covariance(
     h : ndarray, shape (p, d) or (..., p, d)
     v : ndarray, shape (p, p) or (..., p, p)
     form : {"joseph", "standard"}
-        ("sqrt" carries a factor, not a covariance: :func:`~kalcal.filters.sqrt_form.sqrt_gain_and_factor`)
+        ("sqrt" carries a factor, not a covariance: :func:`~kalcal.core.sqrt_form.sqrt_gain_and_factor`)
 
     Returns
     -------
@@ -245,8 +245,8 @@ def covariance_pass(
     ``transitions[k]`` (K, d, d) when the caller gives the transition of each interval explicitly (a
     transition that depends on a known input, such as an accelerometer scale factor's column; the
     process noise Q_m must not depend on it). ``form="sqrt"`` carries L with P = L L^T instead
-    (:func:`~kalcal.filters.sqrt_form.sqrt_predict`, :func:`~kalcal.filters.sqrt_form.sqrt_gain_and_factor`,
-    the interval noise by :func:`~kalcal.filters.sqrt_form.interval_noise_factor`); the schedule holds the
+    (:func:`~kalcal.core.sqrt_form.sqrt_predict`, :func:`~kalcal.core.sqrt_form.sqrt_gain_and_factor`,
+    the interval noise by :func:`~kalcal.core.sqrt_form.interval_noise_factor`); the schedule holds the
     covariances L L^T all the same.
     """
     check_form(form)

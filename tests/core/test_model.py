@@ -7,8 +7,8 @@ import dataclasses
 import numpy as np
 import pytest
 
+from kalcal.core.model import LinearGaussianModel, check_covariance
 from kalcal.errors import ConfigError, KalcalError
-from kalcal.models.linear import LinearGaussianModel, check_covariance
 
 
 def _valid(**changes):

@@ -1,7 +1,7 @@
 """The one compiled covariance update against the numpy reference step, update by update.
 
-Oracle: :func:`kalcal.filters.steps.gain_and_covariance` (Joseph and standard forms) on each
-realization of a tile, and :func:`kalcal.filters.missing.measured` for the compiled missing-measurement
+Oracle: :func:`kalcal.core.steps.gain_and_covariance` (Joseph and standard forms) on each
+realization of a tile, and :func:`kalcal.core.missing.measured` for the compiled missing-measurement
 rule. The inputs are random SPD priors, random measurement matrices (a full p x d H, a regressor row that
 differs per realization as the time-varying regressors of the scale-bias filter, and a scalar
 measurement of one state) and random SPD noise; the rounding bound is relative to the reference's scale.
@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from kalcal.core.kernels import covariance_update, measured, update_work
-from kalcal.filters.missing import measured as measured_reference
-from kalcal.filters.steps import gain_and_covariance
+from kalcal.core.missing import measured as measured_reference
+from kalcal.core.steps import gain_and_covariance
 
 
 def _spd(rng, d, n=None):

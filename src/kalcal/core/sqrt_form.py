@@ -1,9 +1,9 @@
 """The square-root form: tria, factors of given covariances, L L^T, and the square-root predict and update.
 
 The square-root steps carry a lower-triangular factor L with P = L L^T and never form P to factor it
-again; they are the square-root counterparts of :func:`kalcal.filters.steps.predict` and
-:func:`~kalcal.filters.steps.update` (form="sqrt" of the covariance pass,
-:func:`~kalcal.filters.steps.covariance_pass`). With tria(A) the lower-triangular T, diagonal >= 0,
+again; they are the square-root counterparts of :func:`kalcal.core.steps.predict` and
+:func:`~kalcal.core.steps.update` (form="sqrt" of the covariance pass,
+:func:`~kalcal.core.steps.covariance_pass`). With tria(A) the lower-triangular T, diagonal >= 0,
 such that T T^T = A A^T (from a QR decomposition of A^T), every step is one tria of a pre-array::
 
     predict:  L_M = tria([Phi L, G])                                  with G G^T = Q
@@ -14,8 +14,8 @@ same Gram matrix: S^{1/2} S^{T/2} = V + H M H^T = S, Kbar = M H^T S^{-T/2} and
 L_P L_P^T = M - Kbar Kbar^T = M - M H^T S^{-1} H M = P.
 
 A missing measurement keeps the prior factor, L_P = L_M, by the same wrapper as
-:func:`kalcal.filters.steps.update` (:func:`kalcal.filters.missing.update_where_measured`). Shapes as in
-:mod:`kalcal.filters.steps`.
+:func:`kalcal.core.steps.update` (:func:`kalcal.core.missing.update_where_measured`). Shapes as in
+:mod:`kalcal.core.steps`.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from kalcal.filters.missing import update_where_measured
+from kalcal.core.missing import update_where_measured
 from kalcal.linalg import matvec, symmetrize
 
 
@@ -96,7 +96,7 @@ def broadcast_lead(*arrays: np.ndarray) -> list[np.ndarray]:
 
 
 def interval_noise_factor(phi: np.ndarray, gamma: np.ndarray, w: np.ndarray, steps: int) -> np.ndarray:
-    """G_m, lower triangular, with G_m G_m^T = Q_m of :func:`kalcal.filters.steps.interval_transition`, in square-root form.
+    """G_m, lower triangular, with G_m G_m^T = Q_m of :func:`kalcal.core.steps.interval_transition`, in square-root form.
 
     G_{i+1} = tria([Phi G_i, Gamma W^{1/2}]), G_0 = 0: the sum of the samples' noise pushed through the
     transition, without forming Q_m.
@@ -125,7 +125,7 @@ def sqrt_predict(
         L, a factor of the posterior covariance P = L L^T.
     phi : ndarray, shape (d, d) or (..., d, d)
     q_chol : ndarray, shape (d, r) or (..., d, r)
-        G, a factor of the process noise Q = G G^T (e.g. :func:`~kalcal.filters.sqrt_form.cholesky_factor`
+        G, a factor of the process noise Q = G G^T (e.g. :func:`~kalcal.core.sqrt_form.cholesky_factor`
         of Q).
 
     Returns
@@ -188,7 +188,7 @@ def sqrt_update(
 ) -> SqrtUpdateResult:
     """Square-root measurement update of a prior (xbar, L_M) with measurement z.
 
-    A missing measurement (non-finite z or own H) keeps the prior, L_P = L_M, as in :func:`kalcal.filters.steps.update`.
+    A missing measurement (non-finite z or own H) keeps the prior, L_P = L_M, as in :func:`kalcal.core.steps.update`.
 
     Parameters
     ----------

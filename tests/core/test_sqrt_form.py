@@ -16,7 +16,7 @@ from filterpy.kalman import SquareRootKalmanFilter
 
 from kalcal.errors import ConfigError
 from kalcal.filters.gains import run_with_gains
-from kalcal.filters.sqrt_form import (
+from kalcal.core.sqrt_form import (
     cholesky_factor,
     gram,
     interval_noise_factor,
@@ -25,8 +25,8 @@ from kalcal.filters.sqrt_form import (
     sqrt_update,
     triangularize,
 )
-from kalcal.filters.steps import covariance_pass, gain_and_covariance, interval_transition, predict, update
-from kalcal.models.linear import LinearGaussianModel
+from kalcal.core.model import LinearGaussianModel
+from kalcal.core.steps import covariance_pass, gain_and_covariance, interval_transition, predict, update
 from kalcal.models.registry import build_scenario
 from kalcal.montecarlo.scenarios import build_problem
 from tests._helpers import assert_close, cov_atol
