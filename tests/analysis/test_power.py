@@ -28,7 +28,7 @@ from kalcal.models.registry import build_scenario
 from kalcal.montecarlo.accumulators import ensemble_statistics
 from kalcal.montecarlo.engine import run_monte_carlo
 from kalcal.montecarlo.scenarios import build_problem
-from kalcal.verification.checks import run_checks
+from kalcal.stats.checks import run_checks
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 ALPHA = 0.01
@@ -240,7 +240,7 @@ def test_chi_square_part_without_spread_is_its_fixed_value():
 def test_exact_prediction_computes_no_budget(monkeypatch):
     """The self-check's and the report's exact prediction needs only the moments: no error budget is run."""
     from kalcal.analysis import fixed_gain
-    from kalcal.verification.self_check import exact_prediction
+    from kalcal.stats.self_check import exact_prediction
 
     def refuse(*args, **kwargs):
         raise AssertionError("the budget was computed")

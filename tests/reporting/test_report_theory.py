@@ -15,7 +15,7 @@ from kalcal.models.registry import build_scenario
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.reporting.figure_html import png_size
 from kalcal.reporting.theory import SIGMA_EXACT_TITLE, self_check_section
-from kalcal.verification.self_check import SELF_CHECK_PARTS, exact_prediction
+from kalcal.stats.self_check import SELF_CHECK_PARTS, exact_prediction
 
 
 def test_the_page_shows_filter_exact_and_ensemble_sigma(report_run):

@@ -1,7 +1,7 @@
 """The power of every check at N realizations under the truth, and the smallest N that detects the truth.
 
 From a :class:`~kalcal.analysis.fixed_gain.CovarianceAnalysis` (the exact means and covariances of the
-errors, estimates and innovations), each part of each check of :mod:`kalcal.verification.checks` is
+errors, estimates and innovations), each part of each check of :mod:`kalcal.stats.checks` is
 held to the statistic and bound the check uses (:mod:`kalcal.analysis.power_parts` for the
 approximations). A check made of parts fails when any part does, so its bracket is
 [max over parts of power_low, min(1, sum of power_high)]; the verdict's likewise over the checks.
@@ -21,7 +21,7 @@ import numpy as np
 from kalcal.analysis.fixed_gain import CovarianceAnalysis
 from kalcal.analysis.power_parts import ChiSquareFamily, NormalFamily, PortmanteauPower, portmanteau_power, product_variance
 from kalcal.linalg import whitener
-from kalcal.verification.bounds import (
+from kalcal.stats.bounds import (
     COVARIANCE_PARTS,
     WHITENESS_PARTS,
     centered_nees_bounds,
@@ -31,7 +31,7 @@ from kalcal.verification.bounds import (
     portmanteau_bound,
     whiteness_pairs_bound,
 )
-from kalcal.verification.whiteness import RANK_RTOL
+from kalcal.stats.whiteness import RANK_RTOL
 
 __all__ = [
     "DETECTION_POWER",
@@ -170,7 +170,7 @@ def _nis(a: CovarianceAnalysis, confidence: float) -> ChiSquareFamily:
 
 
 def check_families(a: CovarianceAnalysis, confidence: float = 0.99) -> list[CheckPower]:
-    """The five checks' families, in :func:`~kalcal.verification.checks.run_checks`' order (the
+    """The five checks' families, in :func:`~kalcal.stats.checks.run_checks`' order (the
     whiteness check only where the analysis has the pair moments E[r_k r_j^T])."""
     checks = [
         CheckPower("mean_error", {None: _mean_error(a, confidence)}),

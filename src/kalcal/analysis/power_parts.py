@@ -3,7 +3,7 @@
 Every part is a family of comparisons (a max-|z| over many elements, or one chi-square test per update),
 so its rejection probability is bracketed by Bonferroni's two ends: [max_i P_i, min(1, sum_i P_i)], P_i
 the probability that comparison i alone leaves its bound (the part's per-comparison critical value, as
-:mod:`kalcal.verification.bounds` gives it). The P_i are approximations, stated with each family:
+:mod:`kalcal.stats.bounds` gives it). The P_i are approximations, stated with each family:
 
 * :class:`NormalFamily` (mean_error, covariance ``elements``, orthogonality, whiteness ``pairs``): the
   comparison's z = xbar / sqrt(D / N) is taken as normal with mean a sqrt(N / D) and variance v / D, a
@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ndtr
 
-from kalcal.verification.distributions import chi2_cdf, chi2_sf, ncx2_cdf, ncx2_sf
+from kalcal.stats.distributions import chi2_cdf, chi2_sf, ncx2_cdf, ncx2_sf
 
 __all__ = ["ChiSquareFamily", "NormalFamily", "PortmanteauPower", "bracket", "portmanteau_power", "product_variance"]
 

@@ -32,10 +32,10 @@ from kalcal.montecarlo.accumulators import EnsembleStatistics, ensemble_statisti
 from kalcal.montecarlo.engine import BLOCK_SIZE, run_monte_carlo
 from kalcal.montecarlo.problem import check_engine
 from kalcal.montecarlo.scenarios import build_problem
-from kalcal.verification.checks import REPORT_RESIDUAL_PAIR, CheckResult, residual_pair, run_checks, verdict
-from kalcal.verification.dataset import statistics_dataset
-from kalcal.verification.results import as_false_alarm
-from kalcal.verification.self_check import SelfCheck, exact_prediction, self_check
+from kalcal.stats.checks import REPORT_RESIDUAL_PAIR, CheckResult, residual_pair, run_checks, verdict
+from kalcal.stats.dataset import statistics_dataset
+from kalcal.stats.results import as_false_alarm
+from kalcal.stats.self_check import SelfCheck, exact_prediction, self_check
 
 
 def report_residual_pair(statistics: EnsembleStatistics, info) -> dict[str, Any] | None:

@@ -12,7 +12,7 @@ import numpy as np
 from kalcal.reporting.figure_entries import GROUPS, FigureEntry, SkippedFigure
 from kalcal.reporting.markup import esc, table
 from kalcal.filters.steady_state import SteadyStateView
-from kalcal.verification.text import fmt
+from kalcal.stats.text import fmt
 
 __all__ = ["figures_section", "png_size", "residual_pair_table"]
 

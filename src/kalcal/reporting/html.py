@@ -28,7 +28,7 @@ from kalcal.filters.steady_state import SteadyStateView
 from kalcal.reporting.text import confidence_statement, scope_statement
 from kalcal.reporting.theory import power_section, self_check_section
 from kalcal.reporting.verdicts import failures_section, verdicts_section
-from kalcal.verification.text import fmt
+from kalcal.stats.text import fmt
 
 __all__ = ["CSS_FILE", "PAGE_TEMPLATE", "build_page", "page_css", "write_page"]
 

@@ -27,10 +27,10 @@ import numpy as np
 
 from kalcal.montecarlo.accumulators import EnsembleStatistics
 from kalcal.montecarlo.problem import ProblemInfo
-from kalcal.verification.bounds import COVARIANCE_PARTS, centered_nees_bounds, covariance_element_bound
-from kalcal.verification.check_steps import check_result, failed_cause, max_abs, safe_ratio, sd_text, standardized
-from kalcal.verification.distributions import chi2_cdf, chi2_sf, normal_isf, t_sf
-from kalcal.verification.results import Cause, CheckPart, CheckResult, chi2_two_sided_pvalues, combined_pvalue, family_pvalue
+from kalcal.stats.bounds import COVARIANCE_PARTS, centered_nees_bounds, covariance_element_bound
+from kalcal.stats.check_steps import check_result, failed_cause, max_abs, safe_ratio, sd_text, standardized
+from kalcal.stats.distributions import chi2_cdf, chi2_sf, normal_isf, t_sf
+from kalcal.stats.results import Cause, CheckPart, CheckResult, chi2_two_sided_pvalues, combined_pvalue, family_pvalue
 
 __all__ = [
     "Whitened",
@@ -121,7 +121,7 @@ def correlation_z(moment: np.ndarray, power: np.ndarray, dof: float) -> tuple[np
 
     ``power`` is the product of the two samples' mean squares (centered or not, as ``moment``). A zero
     ``power`` (no spread) gives z = 0 for an exactly zero moment and +-inf otherwise, counted as by
-    :func:`~kalcal.verification.check_steps.standardized` (its two counts are returned).
+    :func:`~kalcal.stats.check_steps.standardized` (its two counts are returned).
     """
     r, zero_pass, zero_fail = standardized(moment, np.sqrt(np.maximum(power, 0.0)))
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -1,6 +1,6 @@
 """The residual whiteness check: E[r_k r_j^T] = 0 for every pair of updates, by its largest |z| and a portmanteau.
 
-Two parts, each at half the check's alpha (as the covariance check's, :mod:`kalcal.verification.covariance`):
+Two parts, each at half the check's alpha (as the covariance check's, :mod:`kalcal.stats.covariance`):
 
 * ``pairs``: for j < k and each pair of elements the uncentered sample correlation
   r = E[r_k,a r_j,b] / sqrt(E[r_k,a^2] E[r_j,b^2]); given the N values of r_j,b those of r_k,a are iid
@@ -60,11 +60,11 @@ import numpy as np
 
 from kalcal.montecarlo.accumulators import EnsembleStatistics
 from kalcal.montecarlo.problem import ProblemInfo
-from kalcal.verification.bounds import WHITENESS_PARTS, portmanteau_bound, whiteness_pairs_bound
-from kalcal.verification.check_steps import check_result, failed_cause, max_abs, sd_text, zero_se_text
-from kalcal.verification.covariance import correlation_z
-from kalcal.verification.distributions import chi2_sf
-from kalcal.verification.results import Cause, CheckPart, CheckResult, combined_pvalue, normal_family_pvalue
+from kalcal.stats.bounds import WHITENESS_PARTS, portmanteau_bound, whiteness_pairs_bound
+from kalcal.stats.check_steps import check_result, failed_cause, max_abs, sd_text, zero_se_text
+from kalcal.stats.covariance import correlation_z
+from kalcal.stats.distributions import chi2_sf
+from kalcal.stats.results import Cause, CheckPart, CheckResult, combined_pvalue, normal_family_pvalue
 
 __all__ = ["RANK_RTOL", "Portmanteau", "check_residual_whiteness", "portmanteau"]
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from kalcal.verification import distributions
+from kalcal.stats import distributions
 
 X = np.array([-3.0, -1e-300, 0.0, 1e-12, 0.3, 1.0, 2.5, 7.0, 40.0, 300.0, 1e4, np.inf, -np.inf, np.nan])
 P = np.array([-0.1, 0.0, 1e-300, 1e-20, 1e-9, 0.025, 0.5, 0.975, 1 - 1e-12, 1.0, 1.1, np.nan])

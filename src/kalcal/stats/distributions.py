@@ -3,7 +3,7 @@
 ``scipy.stats`` takes over a second to import (it builds the docstrings of every distribution), more
 than a default run's Monte Carlo spends on its random draws; the checks need six functions of two
 distributions (and the t's upper tail). Each is the scipy.special function that ``scipy.stats.norm`` / ``scipy.stats.chi2`` call
-for valid arguments, so the values are the same to the bit (tests/verification/test_distributions.py
+for valid arguments, so the values are the same to the bit (tests/stats/test_distributions.py
 holds them to scipy.stats), with scipy.stats's answers at the edges: a probability outside [0, 1] or a
 non-positive dof gives NaN.
 """

@@ -39,9 +39,9 @@ from kalcal.analysis.fixed_gain import analyze_problem
 from kalcal.analysis.power_parts import product_variance
 from kalcal.montecarlo.accumulators import EnsembleStatistics
 from kalcal.montecarlo.problem import FixedGainProblem, ProblemInfo
-from kalcal.verification.bounds import chi2_bounds_at, normal_bound_at
-from kalcal.verification.distributions import normal_isf
-from kalcal.verification.results import CheckPart, chi2_two_sided_pvalues, family_pvalue, normal_family_pvalue
+from kalcal.stats.bounds import chi2_bounds_at, normal_bound_at
+from kalcal.stats.distributions import normal_isf
+from kalcal.stats.results import CheckPart, chi2_two_sided_pvalues, family_pvalue, normal_family_pvalue
 
 #: the self-check's parts, each held to an equal share of its alpha
 SELF_CHECK_PARTS = ("mean_error", "error_variance", "error_estimate", "residual_mean")

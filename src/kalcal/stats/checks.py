@@ -28,7 +28,7 @@ nis                  mean NIS at the update farthest from p                 chi-
 Each t or chi-square comparison's two-sided p-value is shown as the normal |z| with that p-value, so
 that a family's statistic stands against its normal Bonferroni bound. Measured on exact draws of a
 correct filter's moments (20,000 ensembles each, confidence 0.99, K = 150 and d = 3 for the state
-checks, K = 100 scalar innovations for whiteness and nis; tests/verification/test_false_alarm_rates.py):
+checks, K = 100 scalar innovations for whiteness and nis; tests/stats/test_false_alarm_rates.py):
 
 ====================== ============ ============ ===========
 check / part           share        N = 100      N = 400
@@ -44,15 +44,15 @@ whiteness.portmanteau  0.5%         88 (0.44%)   91 (0.46%)
 nis                    1%           171 (0.86%)  200 (1.00%)
 ====================== ============ ============ ===========
 
-Each result carries its family-wise p-value (:mod:`kalcal.verification.results`; the bounds: :mod:`kalcal.verification.bounds`), with
+Each result carries its family-wise p-value (:mod:`kalcal.stats.results`; the bounds: :mod:`kalcal.stats.bounds`), with
 ``passed == (pvalue >= 1 - confidence)``, and the cause of a failure as data (:class:`Cause`).
 
 A comparison whose standard error is zero (no spread over the ensemble) passes when its value is
 exactly zero and fails otherwise (its z is infinite: no spread cannot hide a nonzero mean); the detail
 counts both kinds.
 
-The residual whiteness check (:mod:`kalcal.verification.whiteness`) whitens each update's innovations with
-their ensemble second moment S_k. The covariance check (:mod:`kalcal.verification.covariance`) compares the *centered* ensemble covariance, so that a mean error is reported once,
+The residual whiteness check (:mod:`kalcal.stats.whiteness`) whitens each update's innovations with
+their ensemble second moment S_k. The covariance check (:mod:`kalcal.stats.covariance`) compares the *centered* ensemble covariance, so that a mean error is reported once,
 by ``mean_error``; orthogonality, whiteness and NIS use raw moments, as the source report does, and
 when they fail their cause says whether the mean error accounts for it (the centered statistic passes).
 
@@ -66,8 +66,8 @@ import numpy as np
 
 from kalcal.montecarlo.accumulators import EnsembleStatistics
 from kalcal.montecarlo.problem import ProblemInfo
-from kalcal.verification.bounds import chi2_mean_bounds, normal_bound
-from kalcal.verification.check_steps import (
+from kalcal.stats.bounds import chi2_mean_bounds, normal_bound
+from kalcal.stats.check_steps import (
     centered_cause,
     check_result,
     failed_cause,
@@ -78,9 +78,9 @@ from kalcal.verification.check_steps import (
     where_text,
     zero_se_text,
 )
-from kalcal.verification.covariance import check_covariance, correlation_z, t_equivalent_z, whitened_moments
-from kalcal.verification.whiteness import check_residual_whiteness
-from kalcal.verification.results import (
+from kalcal.stats.covariance import check_covariance, correlation_z, t_equivalent_z, whitened_moments
+from kalcal.stats.whiteness import check_residual_whiteness
+from kalcal.stats.results import (
     Cause,
     CheckPart,
     CheckResult,
@@ -189,7 +189,7 @@ def check_orthogonality(s: EnsembleStatistics, info: ProblemInfo, confidence: fl
     uncentered sample correlation r = sum eps_i xhat_l / sqrt(sum eps_i^2 sum xhat_l^2) has
     r sqrt(N - 1) / sqrt(1 - r^2) ~ t(N - 1) exactly, at every N. (The earlier z = sqrt(N) r against
     N(0, 1) was no exact law: a product of two normals has heavy tails.) The statistic is the |z| of
-    the smallest of the K d^2 two-sided p-values (:func:`~kalcal.verification.covariance.equivalent_z`).
+    the smallest of the K d^2 two-sided p-values (:func:`~kalcal.stats.covariance.equivalent_z`).
     """
     alpha = 1.0 - confidence
     n_updates, d, _ = s.error_estimate.shape
