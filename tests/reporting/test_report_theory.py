@@ -55,7 +55,7 @@ def test_a_disagreeing_self_check_and_one_from_before_it():
 
 def test_the_page_shows_each_checks_power(report_run):
     """The power section: verify's power line and one row per check and part, its bracket and detection_n."""
-    from kalcal.analysis.power import power_line
+    from kalcal.stats.power import power_line
 
     out, page_path = report_run
     page = page_path.read_text(encoding="utf-8")

@@ -16,7 +16,7 @@ import pytest
 from scipy import stats as sps
 
 from kalcal.analysis.fixed_gain import analyze_problem
-from kalcal.analysis.power_parts import product_variance
+from kalcal.stats.power import product_variance
 from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.models.config import apply_settings
 from kalcal.models.custom import load_model_file

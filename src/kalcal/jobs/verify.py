@@ -61,8 +61,8 @@ def exact_analysis(problem):
 
 def power_summary(problem, n: int, confidence: float, analysis=None) -> dict[str, Any]:
     """``summary.json``'s ``power`` (each check's and part's power at n, from the exact analysis of the same
-    problem: :func:`kalcal.analysis.power.problem_power`) and ``power_reason`` (why it is None, where it is)."""
-    from kalcal.analysis.power import problem_power
+    problem: :func:`kalcal.stats.checks.problem_power`) and ``power_reason`` (why it is None, where it is)."""
+    from kalcal.stats.checks import problem_power
 
     rows, reason = problem_power(problem, n, confidence, analysis)
     return {"power": rows, "power_reason": reason}
@@ -70,8 +70,8 @@ def power_summary(problem, n: int, confidence: float, analysis=None) -> dict[str
 
 def truth_equals(analysis) -> bool | None:
     """``summary.json``'s ``power_truth_equals_filter``: whether the truth equals the filter in everything
-    the checks see (:func:`kalcal.analysis.power.truth_equals_filter`); None without an exact analysis."""
-    from kalcal.analysis.power import truth_equals_filter
+    the checks see (:func:`kalcal.stats.power.truth_equals_filter`); None without an exact analysis."""
+    from kalcal.stats.power import truth_equals_filter
 
     return None if analysis is None else truth_equals_filter(analysis)
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from kalcal.analysis.power import power_line
+from kalcal.stats.power import power_line
 from kalcal.reporting.markup import esc, table
 from kalcal.stats.text import fmt
 
