@@ -8,7 +8,7 @@ import re
 import pytest
 
 from kalcal.reporting.figures import REPORT_NUMBERS, FigureEntry, SkippedFigure
-from kalcal.reporting.figure_html import png_size
+from kalcal.reporting.html import png_size
 from kalcal.reporting.html import build_page
 from kalcal.reporting.text import measured_text, shortfall
 

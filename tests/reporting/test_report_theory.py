@@ -13,7 +13,7 @@ import xarray as xr
 from kalcal.jobs.report import render_report
 from kalcal.models.registry import build_scenario
 from kalcal.montecarlo.scenarios import build_problem
-from kalcal.reporting.figure_html import png_size
+from kalcal.reporting.html import png_size
 from kalcal.reporting.theory import SIGMA_EXACT_TITLE, self_check_section
 from kalcal.stats.self_check import SELF_CHECK_PARTS, exact_prediction
 

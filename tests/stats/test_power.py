@@ -13,7 +13,7 @@ from kalcal.analysis.fixed_gain import analyze_problem, analyze_scenario
 from kalcal.stats.checks import check_families, power_rows, problem_power
 from kalcal.stats.power import DETECTION_POWER, MIN_N, N_CAP, detection_n, power_line, verdict_power
 from kalcal.stats.sensitivity import detected_error, sensitivity, sensitivity_text
-from kalcal.jobs.verify_arguments import MIN_REALIZATIONS
+from kalcal.jobs.verify import MIN_REALIZATIONS
 from kalcal.models.custom import load_model_file, parse_model
 from kalcal.models.registry import build_scenario
 from kalcal.montecarlo.accumulators import ensemble_statistics

@@ -100,7 +100,7 @@ class VerificationResult:
         """Write ``summary.json``, ``stats.nc`` (``stats_long.nc``) and, with ``report``, ``report.html``
         and ``figures/`` into ``out``, as ``kalcal verify --out`` does (one set: whole or not at all,
         docs/outputs.md); returns the files by key."""
-        from kalcal.jobs.verify_save import save_verification
+        from kalcal.jobs.verify import save_verification
 
         saved = save_verification(
             self.run, out, report=report, realization=realization, checkpoint=self.run.checkpoint, scenario=self.run.scenario
