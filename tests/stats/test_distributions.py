@@ -15,6 +15,43 @@ DOFS = [0.5, 1, 2, 3, 10, 44_700, 1e6, 0, -1]
 def test_normal_tails_equal_scipy_stats():
     assert np.array_equal(distributions.normal_sf(X), stats.norm.sf(X), equal_nan=True)
     assert np.array_equal(distributions.normal_isf(P), stats.norm.isf(P), equal_nan=True)
+    assert np.array_equal(distributions.normal_cdf(X), stats.norm.cdf(X), equal_nan=True)
+    assert np.array_equal(distributions.normal_ppf(P), stats.norm.ppf(P), equal_nan=True)
+
+
+def test_the_calibration_gates_are_the_quantiles_they_were():
+    # the two-sided z of the calibration's bias-conflict and tracking tests was special.ndtri(0.5 + c / 2)
+    # in their own modules; through normal_ppf it is the same number to the bit
+    from scipy import special
+
+    for confidence in (0.9, 0.95, 0.99, 0.997):
+        assert distributions.normal_ppf(0.5 + confidence / 2) == special.ndtri(0.5 + confidence / 2)
+
+
+def test_no_module_computes_its_own_quantile():
+    # every normal and chi-square quantile and tail of the package comes from kalcal.stats.distributions:
+    # no other module's code (docstrings aside: the syntax tree) calls scipy's for them
+    import ast
+    from pathlib import Path
+
+    import kalcal
+
+    own = {"ndtri", "ndtr", "chdtri", "chdtr", "chdtrc", "gammaincinv", "gammaincc", "stdtr"}
+    package = Path(kalcal.__file__).resolve().parent
+    found = []
+    for path in sorted(package.rglob("*.py")):
+        if path.name == "distributions.py":
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Attribute) and (
+                node.attr in own or (node.attr in {"ppf", "isf", "cdf", "sf"} and getattr(node.value, "attr", "") in {"norm", "chi2"})
+            ):
+                found.append(f"{path.relative_to(package)}:{node.lineno}: .{node.attr}")
+            elif isinstance(node, ast.ImportFrom) and node.module in {"scipy.special", "scipy.stats"}:
+                names = {alias.name for alias in node.names}
+                if names & (own | {"norm", "chi2"}):
+                    found.append(f"{path.relative_to(package)}:{node.lineno}: from {node.module} import {sorted(names)}")
+    assert not found, found
 
 
 @pytest.mark.parametrize("dof", DOFS)

@@ -43,10 +43,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import ndtr
 
 from kalcal.analysis.fixed_gain import CovarianceAnalysis
-from kalcal.stats.distributions import chi2_cdf, chi2_sf, ncx2_cdf, ncx2_sf
+from kalcal.stats.distributions import chi2_cdf, chi2_sf, ncx2_cdf, ncx2_sf, normal_cdf
 
 __all__ = [
     "DETECTION_POWER",
@@ -128,7 +127,7 @@ class NormalFamily:
         root_n = np.sqrt(float(n))
         shift = self.mean * root_n
         with np.errstate(divide="ignore", invalid="ignore"):
-            normal = ndtr((shift - edge) / spread) + ndtr((-shift - edge) / spread)
+            normal = normal_cdf((shift - edge) / spread) + normal_cdf((-shift - edge) / spread)
         if all_random:  # every comparison has spread and a standard error: the rules below change nothing
             return np.minimum(1.0, normal)
         # no spread: the comparison is its mean, outside the bound or not (zero D with a nonzero value fails)
