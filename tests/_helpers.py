@@ -143,7 +143,7 @@ def assert_standard_normal_spread(z, *, family_alpha: float = 1e-3, what: str = 
     from both sides: each column's sample variance, (M - 1) s^2 ~ chi-square(M - 1), within its two-sided
     bounds, and its mean, sqrt(M) zbar ~ N(0, 1), within its normal bound; 2 q comparisons, Bonferroni at
     ``family_alpha``. A sigma too large (s^2 below the lower bound) fails as a sigma too small does."""
-    from kalcal.verification.bounds import chi2_bounds_at, normal_bound_at
+    from kalcal.stats.bounds import chi2_bounds_at, normal_bound_at
 
     z = np.asarray(z, dtype=float).reshape(len(z), -1)
     m, q = z.shape

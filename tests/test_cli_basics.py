@@ -132,7 +132,7 @@ def test_simulate_and_calibrate_close_with_one_line_naming_what_they_wrote(tmp_p
 
 
 def test_values_written_as_null_are_named_in_one_line(tmp_path, monkeypatch):
-    import kalcal.jobs.verify_save as job
+    import kalcal.jobs.verify as job
 
     real = job.write_json
 

@@ -8,10 +8,10 @@ import numpy as np
 from rich.console import Console
 
 from kalcal.cli import _common as cli
-from kalcal.verification.checks import check_nis
-from kalcal.verification.covariance import check_covariance
-from kalcal.verification.text import check_bounds_text
-from tests.verification.test_check_results import _info, _stats
+from kalcal.stats.checks import check_nis
+from kalcal.stats.covariance import check_covariance
+from kalcal.stats.text import check_bounds_text
+from tests.stats.test_check_results import _info, _stats
 
 
 def _printed(monkeypatch, tests, **extra) -> str:

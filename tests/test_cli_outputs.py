@@ -106,7 +106,7 @@ def test_a_run_that_fails_in_the_middle_leaves_the_previous_set_byte_identical(p
     def broken_writer(path, document):
         raise RuntimeError("the summary writer failed")  # after stats.nc is written, before the page
 
-    monkeypatch.setattr("kalcal.jobs.verify_save.write_json", broken_writer)
+    monkeypatch.setattr("kalcal.jobs.verify.write_json", broken_writer)
     result = _invoke("verify", *SMALL, "--seed", "7", "--long-run", "0", "--out", out, catch=True)
     assert isinstance(result.exception, RuntimeError) and "summary writer" in str(result.exception)
     assert _tree(out) == before

@@ -32,9 +32,9 @@ _EXPORTS = {
     "SimulationResult": "kalcal.api.results",
     "SweepResult": "kalcal.api.sweep_result",
     "FitResult": "kalcal.fitting.result",
-    "CheckResult": "kalcal.verification.results",
-    "CheckPart": "kalcal.verification.results",
-    "Cause": "kalcal.verification.results",
+    "CheckResult": "kalcal.stats.results",
+    "CheckPart": "kalcal.stats.results",
+    "Cause": "kalcal.stats.results",
     "KalcalError": "kalcal.errors",
 }
 

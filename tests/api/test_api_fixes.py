@@ -43,7 +43,7 @@ def test_dir_lists_the_exports_and_dunders_only():
     assert set(names) - set(kalcal.__all__) == {n for n in names if n.startswith("__") and n.endswith("__")} - set(kalcal.__all__)
     for helper in ("version", "sys", "types", "import_module"):
         assert helper not in names
-    from kalcal.verification.results import Cause, CheckPart, CheckResult
+    from kalcal.stats.results import Cause, CheckPart, CheckResult
 
     assert (kalcal.CheckResult, kalcal.CheckPart, kalcal.Cause) == (CheckResult, CheckPart, Cause)
 

@@ -337,10 +337,10 @@ def test_a_forked_child_evaluates_on_threads_of_its_own():
 
 @pytest.mark.parametrize("confidence", [0.5, 0.68, 0.9, 0.95, 0.99, 0.999])
 def test_the_fits_quantiles_are_scipy_stats_bit_for_bit(confidence):
-    """The fit takes its chi-square and normal quantiles from kalcal.verification.distributions, without
+    """The fit takes its chi-square and normal quantiles from kalcal.stats.distributions, without
     scipy.stats's import: the values scipy.stats gives at the confidences a fit uses, every bit."""
     from kalcal.fitting import nis_tail
-    from kalcal.verification.distributions import normal_isf
+    from kalcal.stats.distributions import normal_isf
 
     assert mle.drop_of(confidence) == float(stats.chi2.ppf(confidence, 1)) / 2.0
     assert float(normal_isf((1.0 - confidence) / 2.0)) == float(stats.norm.isf((1.0 - confidence) / 2.0))

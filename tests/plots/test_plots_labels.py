@@ -13,8 +13,8 @@ from kalcal.montecarlo.engine import run_monte_carlo
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.plots import consistency, ensemble
 from kalcal.plots import realization as single
-from kalcal.verification.bounds import COVARIANCE_PARTS, centered_nees_bounds
-from kalcal.verification.covariance import centered_nees, check_covariance
+from kalcal.stats.bounds import COVARIANCE_PARTS, centered_nees_bounds
+from kalcal.stats.covariance import centered_nees, check_covariance
 
 
 @pytest.fixture

@@ -8,7 +8,7 @@ import re
 import pytest
 
 from kalcal.reporting.figures import REPORT_NUMBERS, FigureEntry, SkippedFigure
-from kalcal.reporting.figure_html import png_size
+from kalcal.reporting.html import png_size
 from kalcal.reporting.html import build_page
 from kalcal.reporting.text import measured_text, shortfall
 
@@ -197,8 +197,8 @@ def test_unknown_cause_value_is_an_error_not_dropped(field):
 
 
 def test_cause_words_cover_exactly_the_values_a_cause_takes():
-    from kalcal.verification.results import DIRECTIONS, EXPLAINED_BY, Cause
-    from kalcal.verification.text import direction_text, explained_by_text
+    from kalcal.stats.results import DIRECTIONS, EXPLAINED_BY, Cause
+    from kalcal.stats.text import direction_text, explained_by_text
 
     for value in EXPLAINED_BY:
         assert explained_by_text(Cause(explained_by=value).__dict__)

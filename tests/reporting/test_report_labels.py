@@ -3,7 +3,7 @@ what it covers, and the report's E[r_k r_j^T] pair only where the run has it."""
 
 import json
 
-from kalcal.reporting.figure_html import residual_pair_table
+from kalcal.reporting.html import residual_pair_table
 
 
 def test_realization_figures_name_the_error_states(report_run):

@@ -13,9 +13,9 @@ import xarray as xr
 from kalcal.jobs.report import render_report
 from kalcal.models.registry import build_scenario
 from kalcal.montecarlo.scenarios import build_problem
-from kalcal.reporting.figure_html import png_size
+from kalcal.reporting.html import png_size
 from kalcal.reporting.theory import SIGMA_EXACT_TITLE, self_check_section
-from kalcal.verification.self_check import SELF_CHECK_PARTS, exact_prediction
+from kalcal.stats.self_check import SELF_CHECK_PARTS, exact_prediction
 
 
 def test_the_page_shows_filter_exact_and_ensemble_sigma(report_run):
@@ -55,7 +55,7 @@ def test_a_disagreeing_self_check_and_one_from_before_it():
 
 def test_the_page_shows_each_checks_power(report_run):
     """The power section: verify's power line and one row per check and part, its bracket and detection_n."""
-    from kalcal.analysis.power import power_line
+    from kalcal.stats.power import power_line
 
     out, page_path = report_run
     page = page_path.read_text(encoding="utf-8")

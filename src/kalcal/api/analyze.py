@@ -32,7 +32,7 @@ class AnalysisResult:
     power : list of dict
         The power each check (``part`` None) and each of its parts had at ``n`` realizations under the
         truth, at 99% confidence: ``{"name", "part", "power_low", "power_high", "detectable",
-        "detection_n"}`` (docs/analysis.md, :mod:`kalcal.analysis.power`).
+        "detection_n"}`` (docs/analysis.md, :mod:`kalcal.stats.power`).
     dataset : xarray.Dataset
         Every per-update quantity (``analysis.nc``): dimensions ``update`` (coordinate ``time``, s),
         ``state``, ``state_col``, ``measurement``, ``measurement_col``, ``update_col``, ``source``.
@@ -43,7 +43,7 @@ class AnalysisResult:
     sensitivity : list of dict or None
         For a correct filter (no check detects the truth at any N), per noise setting of the truth:
         ``{"setting", "increase", "decrease"}``, the smallest relative error (a fraction) that ``n``
-        realizations detect with power 0.99 (:mod:`kalcal.analysis.sensitivity`); None otherwise.
+        realizations detect with power 0.99 (:mod:`kalcal.stats.sensitivity`); None otherwise.
     """
     final: dict
     budget: list
@@ -62,8 +62,8 @@ class AnalysisResult:
     @property
     def truth_equals_filter(self) -> bool:
         """Whether the truth equals the filter in everything the checks see (then no check can detect it at
-        any N; :func:`kalcal.analysis.power.truth_equals_filter`)."""
-        from kalcal.analysis.power import truth_equals_filter
+        any N; :func:`kalcal.stats.power.truth_equals_filter`)."""
+        from kalcal.stats.power import truth_equals_filter
 
         return truth_equals_filter(self.analysis)
 
@@ -202,8 +202,8 @@ def _compute(model, n: int, form: str, command: str) -> AnalysisResult:
 
 def _power(model, analysis, n: int, form: str) -> tuple[list, list | None, float]:
     """The checks' power at ``n``, the sensitivity where no check detects the truth, and the seconds both took."""
-    from kalcal.analysis.power import power_rows
-    from kalcal.analysis.sensitivity import sensitivity
+    from kalcal.stats.checks import power_rows
+    from kalcal.stats.sensitivity import sensitivity
 
     start = time.perf_counter()
     power = power_rows(analysis, n)

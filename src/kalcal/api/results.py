@@ -36,7 +36,7 @@ class VerificationResult:
     checks : list of CheckResult
         Each check: ``name``, ``statistic``, ``pvalue`` (family-wise), ``lower``, ``upper``,
         ``confidence``, ``comparisons``, ``passed``, ``detail``, ``cause`` (``explained_by``,
-        ``direction``) and ``parts`` (:class:`kalcal.verification.results.CheckResult`).
+        ``direction``) and ``parts`` (:class:`kalcal.stats.results.CheckResult`).
     statistics : xarray.Dataset
         The per-update ensemble statistics (``stats.nc``): dimensions ``time`` (s), ``state``,
         ``measurement``; a ``long_name`` on every variable, ``units`` where one unit applies.
@@ -48,7 +48,7 @@ class VerificationResult:
         The bench's self-check, apart from the verdict: the ensemble's mean error, variances, E[e xhat^T]
         and mean innovations against the exact analysis of the same filter and truth (``statistic``, ``bound``, ``pvalue``, ``agrees``,
         ``confidence``, ``parts``, ``detail``; ``agrees`` None and a ``reason`` where no exact analysis
-        exists) (:class:`kalcal.verification.self_check.SelfCheck`).
+        exists) (:class:`kalcal.stats.self_check.SelfCheck`).
     power : list of dict or None
         The power each check and part had at the run's N under the truth (``summary.json``'s ``power``:
         ``{"name", "part", "power_low", "power_high", "detectable", "detection_n"}``), from the exact
@@ -100,7 +100,7 @@ class VerificationResult:
         """Write ``summary.json``, ``stats.nc`` (``stats_long.nc``) and, with ``report``, ``report.html``
         and ``figures/`` into ``out``, as ``kalcal verify --out`` does (one set: whole or not at all,
         docs/outputs.md); returns the files by key."""
-        from kalcal.jobs.verify_save import save_verification
+        from kalcal.jobs.verify import save_verification
 
         saved = save_verification(
             self.run, out, report=report, realization=realization, checkpoint=self.run.checkpoint, scenario=self.run.scenario

@@ -109,7 +109,7 @@ def _run(model, n, seed, options, cluster, update, out, report, realization) -> 
 
     from kalcal.io.outputs import inputs_of, run_outputs
     from kalcal.jobs.verify import compute_verification
-    from kalcal.jobs.verify_save import OUTPUT_NAMES, save_verification
+    from kalcal.jobs.verify import OUTPUT_NAMES, save_verification
 
     if out is None:
         with cluster() as client:

@@ -144,7 +144,7 @@ def prior_conflict(
     to the last fix, :func:`bias_walk_variance`; a Gauss-Markov bias stays at its stationary sigma_0^2).
     None for a diffuse prior (nothing to conflict with) or when the data did not move the bias's variance.
     """
-    from scipy import special  # scipy.stats.norm.ppf is special.ndtri, without scipy.stats's import
+    from kalcal.stats.distributions import normal_ppf  # loaded on first use, as scipy.special was
 
     if result.bias_prior_std >= DIFFUSE_BIAS_STD:
         return None
@@ -153,7 +153,7 @@ def prior_conflict(
     if not spread > 1e-12 * unconditional:
         return None
     z = float(result.bias[-1] / np.sqrt(spread))
-    limit = float(special.ndtri(0.5 + confidence / 2))
+    limit = float(normal_ppf(0.5 + confidence / 2))
     if abs(z) <= limit:
         return None
     return CalibrationWarning(

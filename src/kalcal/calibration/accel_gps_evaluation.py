@@ -19,7 +19,7 @@ from kalcal.core.sqrt_form import cholesky_factor, gram, sqrt_predict, sqrt_upda
 from kalcal.core.steps import UpdateForm, predict, update
 from kalcal.filters.sequential import SequentialRun, sequential_filter
 from kalcal.models.settings import SettingError, show, to_float
-from kalcal.verification.distributions import chi2_ppf  # scipy.stats's values, without its import
+from kalcal.stats.distributions import chi2_ppf  # scipy.stats's values, without its import
 
 if TYPE_CHECKING:
     from kalcal.calibration.accel_gps_log import AccelGpsLog

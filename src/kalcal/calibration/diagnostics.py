@@ -40,9 +40,9 @@ from kalcal.calibration.ljung_box import (
     monte_carlo_pvalues,
     simulated_null,
 )
-from kalcal.verification.bounds import chi2_bounds_at
-from kalcal.verification.distributions import chi2_isf  # scipy.stats's values, without its import
-from kalcal.verification.results import Cause, CheckPart, chi2_two_sided_pvalues, combined_pvalue, family_pvalue
+from kalcal.stats.bounds import chi2_bounds_at
+from kalcal.stats.distributions import chi2_isf  # scipy.stats's values, without its import
+from kalcal.stats.results import Cause, CheckPart, chi2_two_sided_pvalues, combined_pvalue, family_pvalue
 
 CONSISTENT = "noise settings consistent with the data"
 #: the tests, each held to an equal share of alpha

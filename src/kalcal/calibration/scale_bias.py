@@ -50,7 +50,7 @@ from kalcal.filters.regression import run_regression_filter
 from kalcal.filters.scale_bias import filter_scale_bias, regressors
 from kalcal.models.scale_bias import STATE_NAMES, ScaleBiasScenario
 from kalcal.models.scale_bias_theta import scale_bias_from_theta, scale_bias_jacobian
-from kalcal.verification.distributions import chi2_isf, chi2_ppf, chi2_sf  # scipy.stats's values, without its import
+from kalcal.stats.distributions import chi2_isf, chi2_ppf, chi2_sf  # scipy.stats's values, without its import
 
 #: the mean NIS is tested two-sided at this confidence (a consistent log fails with probability 1 - it)
 NIS_CONFIDENCE = 0.99

@@ -45,7 +45,7 @@ def data_only_information(reference: np.ndarray, sensor: np.ndarray, noise_varia
     ``weaker_than_prior`` (filled in by the caller where there is a prior: the data-only sigma above
     ``DATA_ONLY_FACTOR`` no-data sigmas).
     """
-    from scipy import special  # scipy.stats.norm.ppf is special.ndtri, without scipy.stats's import
+    from kalcal.stats.distributions import normal_ppf  # loaded on first use, as scipy.special was
 
     both = np.isfinite(reference) & np.isfinite(sensor)
     h = regressors(sensor[both])
@@ -64,7 +64,7 @@ def data_only_information(reference: np.ndarray, sensor: np.ndarray, noise_varia
         residual = v - h @ theta
         std = np.sqrt(inverse_diagonal * noise_variance)
         empirical = np.sqrt(inverse_diagonal * float(residual @ residual) / (k - 2))
-    limit = float(special.ndtri(0.5 + TRACKING_CONFIDENCE / 2))
+    limit = float(normal_ppf(0.5 + TRACKING_CONFIDENCE / 2))
     tracks = bool(not singular and abs(theta[0]) > limit * empirical[0])
     return {
         "information": gram / noise_variance, "rcond": rcond, "singular": bool(singular), "theta": theta,

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kalcal.verification.distributions import chi2_sf  # scipy.stats's values, without its import
+from kalcal.stats.distributions import chi2_sf  # scipy.stats's values, without its import
 
 #: the test's level: a constant log with a consistent filter is called unstable with this probability
 LEVEL = 0.01

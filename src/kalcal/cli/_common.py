@@ -164,7 +164,7 @@ def _print_checks(summary: dict) -> None:
     table.add_column("bounds", justify="right")
     table.add_column("p-value", justify="right")
     table.add_column("result")
-    from kalcal.verification.text import CHECK_PVALUE_FIELD, check_bounds_text, fmt, pvalue_text, written_nan
+    from kalcal.stats.text import CHECK_PVALUE_FIELD, check_bounds_text, fmt, pvalue_text, written_nan
 
     nan = written_nan(summary, CHECK_PVALUE_FIELD)
     for test in summary["tests"]:

@@ -52,8 +52,8 @@ def analyze(
             row["top_source"], f"{100 * row['top_share']:.0f}%",
         )  # fmt: skip
     _common.console.print(table)
-    from kalcal.analysis.power import N_CAP, power_line
-    from kalcal.analysis.sensitivity import sensitivity_text
+    from kalcal.stats.power import N_CAP, power_line
+    from kalcal.stats.sensitivity import sensitivity_text
 
     equal = result.truth_equals_filter
     _common.console.print(power_line(result.power, n, equal=equal), markup=False, soft_wrap=True)

@@ -81,8 +81,8 @@ def verify(
     from kalcal.reporting.text import scope_statement
 
     _common.console.print(scope_statement(summary), markup=False, soft_wrap=True)
-    from kalcal.analysis.power import power_line
-    from kalcal.verification.self_check import self_check_line
+    from kalcal.stats.power import power_line
+    from kalcal.stats.self_check import self_check_line
 
     equal = bool(summary.get("power_truth_equals_filter"))
     _common.console.print(power_line(summary["power"], n, summary["power_reason"], equal), markup=False, soft_wrap=True)

@@ -45,7 +45,7 @@ from kalcal.fitting.information import ridges, stationary
 from kalcal.fitting.information import hessian as _hessian
 from kalcal.fitting.local_search import Profile, evaluate_all, minimize
 from kalcal.fitting.result import FitParameter
-from kalcal.verification.distributions import chi2_ppf, normal_isf  # scipy.stats's values, without its import
+from kalcal.stats.distributions import chi2_ppf, normal_isf  # scipy.stats's values, without its import
 
 #: a linear parameter's u counts its value in this many parts of its range
 LINEAR_STEPS = 1000.0

@@ -22,7 +22,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from kalcal.verification.distributions import chi2_isf, chi2_ppf  # scipy.stats's values, without its import
+from kalcal.stats.distributions import chi2_isf, chi2_ppf  # scipy.stats's values, without its import
 
 #: the tail whose share is tested: above the chi-square(p) 99.9% quantile
 TAIL = 0.001

@@ -1,4 +1,4 @@
-"""Ensemble statistics to and from NetCDF (``stats.nc``): the Dataset of :mod:`kalcal.verification.dataset`.
+"""Ensemble statistics to and from NetCDF (``stats.nc``): the Dataset of :mod:`kalcal.stats.dataset`.
 
 Dimensions: ``time`` (K update times, s), ``state``/``state2`` (d), ``measurement``/``measurement2`` (p),
 and ``time2`` (a second copy of ``time``, always there; ``residual_second_moment``, the

@@ -16,7 +16,7 @@ from kalcal.io.logs import is_frame, numeric_columns, parse_column_map, read_tab
 from kalcal.io.outputs import inputs_of, mark_inputs, run_outputs
 from kalcal.io.results import write_json
 from kalcal.jobs.calibrate import GPS_ROLES, IMU_ROLES, stated_rates
-from kalcal.jobs.verify_arguments import MAX_UPDATES
+from kalcal.jobs.verify import MAX_UPDATES
 
 #: the files of one fit
 OUTPUT_NAMES = ("fit.json", "filter.toml", "fit.png")

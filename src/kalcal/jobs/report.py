@@ -39,7 +39,7 @@ from kalcal.montecarlo.scenarios import build_problem
 from kalcal.plots.realization_data import RealizationData
 from kalcal.reporting.html import build_page, write_page
 from kalcal.reporting.steady_state import steady_state_view
-from kalcal.verification.self_check import exact_prediction
+from kalcal.stats.self_check import exact_prediction
 
 FIGURE_DIR = "figures"
 PAGE = "report.html"

@@ -26,8 +26,8 @@ from kalcal.plots._common import (
     styled,
     time_label,
 )
-from kalcal.verification.bounds import COVARIANCE_PARTS, centered_nees_bounds, chi2_mean_bounds, whiteness_pairs_bound
-from kalcal.verification.covariance import centered_nees
+from kalcal.stats.bounds import COVARIANCE_PARTS, centered_nees_bounds, chi2_mean_bounds, whiteness_pairs_bound
+from kalcal.stats.covariance import centered_nees
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -65,7 +65,7 @@ def _mean_chi2(dataset: xr.Dataset, variable: str, dof: int, what: str, path) ->
 
 def nees_band_label(confidence: float, n_updates: int, d: int) -> str:
     """The legend of the centered NEES band: the covariance check's NEES part, at its share of the
-    check's alpha (:func:`~kalcal.verification.bounds.centered_nees_bounds`), e.g. 99.5% (alpha / 2) at 99%."""
+    check's alpha (:func:`~kalcal.stats.bounds.centered_nees_bounds`), e.g. 99.5% (alpha / 2) at 99%."""
     parts = len(COVARIANCE_PARTS)
     share = 1.0 - (1.0 - confidence) / parts
     return (
@@ -78,7 +78,7 @@ def nees_band_label(confidence: float, n_updates: int, d: int) -> str:
 def plot_nees(dataset: xr.Dataset, path: str | Path) -> Path:
     """(a) The centered mean NEES, tr(P_k^-1 C_k) with C_k the ensemble covariance of e_k (divisor N - 1),
     the statistic the ``covariance`` check holds against chi-square(d (N - 1)) / (N - 1) bounds for K
-    comparisons (:func:`~kalcal.verification.covariance.centered_nees`, the same bounds as the check); (b) the raw
+    comparisons (:func:`~kalcal.stats.covariance.centered_nees`, the same bounds as the check); (b) the raw
     mean NEES, mean over realizations of e_k^T P_k^-1 e_k, with chi-square(N d) / N bounds: it uses the
     raw error, so a mean error lifts it, and no check tests it. 900 x 650 px.
 

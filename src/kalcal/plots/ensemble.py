@@ -2,7 +2,7 @@
 
 Each has the band a correct filter stays in (source report, figures 5.7-5.12).
 
-Every band is the one the matching check in :mod:`kalcal.verification.checks` holds the statistic to: the
+Every band is the one the matching check in :mod:`kalcal.stats.checks` holds the statistic to: the
 standard error of the statistic times the Bonferroni-corrected normal quantile for the family of all
 updates and elements, at the run's confidence (``dataset.attrs["confidence"]``). N realizations, K
 updates, d states.
@@ -31,8 +31,8 @@ from kalcal.plots._common import (
     unit_product,
     unit_square,
 )
-from kalcal.verification.bounds import covariance_element_bound, normal_bound
-from kalcal.verification.self_check import compared_states, variance_ratio_band
+from kalcal.stats.bounds import covariance_element_bound, normal_bound
+from kalcal.stats.self_check import compared_states, variance_ratio_band
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -251,7 +251,7 @@ def plot_sigma_exact(dataset: xr.Dataset, exact_cov: np.ndarray, path: str | Pat
     """Three 1-sigma curves per state in time: the filter's sqrt(P_ii), the exact sqrt(P_true,ii) of the
     covariance analysis and the ensemble's s_i, one panel per state.
 
-    The band about the exact curve is the self-check's (:mod:`kalcal.verification.self_check`): the
+    The band about the exact curve is the self-check's (:mod:`kalcal.stats.self_check`): the
     ensemble variance s^2 lies in P_true,ii [q_lo, q_hi], the chi-square(N - 1) / (N - 1) quantiles for
     the self-check's ``error_variance`` comparisons (K d less those of zero exact variance) at its share of
     the run's alpha, so a correct engine keeps s inside it everywhere (at the run's confidence). The filter's curve apart from the exact one is the mistuning, seen without

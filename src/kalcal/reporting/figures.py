@@ -20,8 +20,8 @@ from kalcal.plots import consistency, ensemble
 from kalcal.plots import realization as single
 from kalcal.plots.realization_data import RealizationData
 from kalcal.plots.steady_state import plot_steady_state
-from kalcal.reporting.figure_entries import GROUPS, FigureEntry, SkippedFigure  # noqa: F401
-from kalcal.reporting.figure_entries import page_order, sort_key
+from kalcal.reporting.html import GROUPS, FigureEntry, SkippedFigure  # noqa: F401
+from kalcal.reporting.html import page_order, sort_key
 from kalcal.reporting.theory import SIGMA_EXACT, SIGMA_EXACT_TITLE, sigma_exact_spec
 
 if TYPE_CHECKING:

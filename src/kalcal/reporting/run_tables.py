@@ -6,7 +6,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from kalcal.reporting.markup import esc, table
-from kalcal.verification.text import fmt
+from kalcal.stats.text import fmt
 
 __all__ = ["final_table", "reproduce_section", "settings_section", "timing_section"]
 

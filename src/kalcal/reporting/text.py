@@ -5,8 +5,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from kalcal.verification.bounds import verdict_false_alarm_bound
-from kalcal.verification.text import (
+from kalcal.stats.bounds import verdict_false_alarm_bound
+from kalcal.stats.text import (
     CHECK_PVALUE_FIELD,
     PART_PVALUE_FIELD,
     bounds_text,

@@ -5,9 +5,9 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from kalcal.analysis.power import power_line
+from kalcal.stats.power import power_line
 from kalcal.reporting.markup import esc, table
-from kalcal.verification.text import fmt
+from kalcal.stats.text import fmt
 
 __all__ = ["SIGMA_EXACT", "SIGMA_EXACT_CAPTION", "SIGMA_EXACT_TITLE", "power_section", "self_check_section", "sigma_exact_spec"]
 

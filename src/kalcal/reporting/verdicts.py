@@ -7,7 +7,7 @@ from typing import Any
 
 from kalcal.reporting.markup import esc, table
 from kalcal.reporting.text import confidence_statement, levels_text, measured_text, shortfall
-from kalcal.verification.text import (
+from kalcal.stats.text import (
     CHECK_PVALUE_FIELD,
     check_bounds_text,
     direction_text,

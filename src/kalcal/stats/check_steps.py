@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from kalcal.montecarlo.problem import ProblemInfo
-from kalcal.verification.results import Cause, CheckResult, normal_family_pvalue, with_reason
+from kalcal.stats.results import Cause, CheckResult, normal_family_pvalue, with_reason
 
 __all__ = [
     "centered_cause",

@@ -5,7 +5,7 @@ import json
 import time
 
 from kalcal.jobs import report as report_job
-from kalcal.jobs import verify_save as save_job
+from kalcal.jobs import verify as save_job
 from kalcal.jobs.verify import verify
 from kalcal.models.registry import build_scenario
 

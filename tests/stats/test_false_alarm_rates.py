@@ -8,7 +8,7 @@ probability at most 1e-4 each).
 
 The element-wise covariance test of the earlier code (version 2114039: a normal approximation to each
 element, sd^2 = (P_il^2 + P_ii P_ll) / N), run on the slow test's own draws (its seeds, 20,000 ensembles;
-2114039's ``kalcal.verification`` extracted with ``git archive`` and first on the path), failed 697
+2114039's ``kalcal.stats`` extracted with ``git archive`` and first on the path), failed 697
 (3.49%) of them at N = 100 and 257 (1.29%) at N = 400 against its 0.5% share (the whole covariance
 check 792 and 335, its mean_error 430 and 233); the slow test's bound at M = 20,000 is 0.70%. The
 default-suite version (M = 2,000 at N = 100, seed 1, bound 24 failures) catches it too: the earlier
@@ -23,11 +23,11 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from kalcal.verification.checks import check_mean_error, check_nis, check_orthogonality
-from kalcal.verification.covariance import check_covariance, correlation_z, t_equivalent_z, whitened_moments
-from kalcal.verification.distributions import chi2_sf, normal_sf
-from kalcal.verification.results import chi2_two_sided_pvalues
-from kalcal.verification.whiteness import check_residual_whiteness
+from kalcal.stats.checks import check_mean_error, check_nis, check_orthogonality
+from kalcal.stats.covariance import check_covariance, correlation_z, t_equivalent_z, whitened_moments
+from kalcal.stats.distributions import chi2_sf, normal_sf
+from kalcal.stats.results import chi2_two_sided_pvalues
+from kalcal.stats.whiteness import check_residual_whiteness
 
 from . import _null_ensembles as null
 

@@ -11,7 +11,7 @@ from typer.testing import CliRunner
 from kalcal.cli import app
 from kalcal.jobs.verify import verify
 from kalcal.models.registry import build_scenario
-from kalcal.verification.bounds import normal_bound
+from kalcal.stats.bounds import normal_bound
 
 runner = CliRunner()
 SHORT = ["--set", "scenario.duration=4", "--no-report", "--long-run", "0"]

@@ -13,17 +13,17 @@ from scipy import stats
 from kalcal.io.results import to_jsonable
 from kalcal.montecarlo.accumulators import EnsembleStatistics
 from kalcal.montecarlo.problem import ProblemInfo
-from kalcal.verification.bounds import verdict_false_alarm_bound
-from kalcal.verification.checks import (
+from kalcal.stats.bounds import verdict_false_alarm_bound
+from kalcal.stats.checks import (
     Cause,
     CheckPart,
     CheckResult,
     check_mean_error,
     check_orthogonality,
 )
-from kalcal.verification.covariance import check_covariance
-from kalcal.verification.whiteness import check_residual_whiteness
-from kalcal.verification.results import family_pvalue, normal_family_pvalue
+from kalcal.stats.covariance import check_covariance
+from kalcal.stats.whiteness import check_residual_whiteness
+from kalcal.stats.results import family_pvalue, normal_family_pvalue
 
 
 def _info(n_updates, d, p=1):

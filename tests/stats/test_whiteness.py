@@ -12,9 +12,9 @@ from scipy import stats
 
 from kalcal.montecarlo.accumulators import EnsembleStatistics
 from kalcal.montecarlo.problem import ProblemInfo
-from kalcal.verification.bounds import normal_bound_at, portmanteau_bound, whiteness_pairs_bound
-from kalcal.verification.text import check_bounds_text
-from kalcal.verification.whiteness import check_residual_whiteness, portmanteau
+from kalcal.stats.bounds import normal_bound_at, portmanteau_bound, whiteness_pairs_bound
+from kalcal.stats.text import check_bounds_text
+from kalcal.stats.whiteness import check_residual_whiteness, portmanteau
 
 
 def _info(n_updates, p):

@@ -16,15 +16,15 @@ import pytest
 from scipy import stats as sps
 
 from kalcal.analysis.fixed_gain import analyze_problem
-from kalcal.analysis.power_parts import product_variance
+from kalcal.stats.power import product_variance
 from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.models.config import apply_settings
 from kalcal.models.custom import load_model_file
 from kalcal.montecarlo.accumulators import ensemble_statistics
 from kalcal.montecarlo.engine import run_monte_carlo
 from kalcal.montecarlo.scenarios import build_problem
-from kalcal.verification.bounds import normal_bound
-from kalcal.verification.self_check import (
+from kalcal.stats.bounds import normal_bound
+from kalcal.stats.self_check import (
     SELF_CHECK_PARTS,
     exact_prediction,
     self_check,
@@ -236,7 +236,7 @@ def test_the_cli_line_for_each_outcome():
 
 
 def _part(name, statistic, pvalue, bound, comparisons):
-    from kalcal.verification.results import CheckPart
+    from kalcal.stats.results import CheckPart
 
     share = 0.01 / 4
     return CheckPart(name, statistic, pvalue, -bound, bound, 1 - share, share, comparisons, pvalue >= share).as_dict()
@@ -261,7 +261,7 @@ def test_the_line_prints_the_largest_z_not_the_deciding_parts():
 def test_a_rounding_level_variance_is_left_out_not_a_disagreement():
     """A state whose exact variance is rounding-level (1e-14 of the largest) and whose ensemble variance is 0
     is no comparison: the self-check agrees over the other states' 2 K (d - 1) comparisons."""
-    from kalcal.verification.self_check import VARIANCE_RTOL, compared_states
+    from kalcal.stats.self_check import VARIANCE_RTOL, compared_states
 
     problem = _problem("correct")
     exact = exact_prediction(problem)
@@ -297,7 +297,7 @@ def test_a_rounding_level_variance_is_left_out_not_a_disagreement():
 def test_the_figure_band_uses_the_self_checks_comparisons(monkeypatch, tmp_path):
     """plot_sigma_exact's band is variance_ratio_band at the self-check's count (states of zero variance out)."""
     from kalcal.plots import ensemble
-    from kalcal.verification.dataset import statistics_dataset
+    from kalcal.stats.dataset import statistics_dataset
 
     problem = _problem("correct")
     stats = _run(problem, 200)

@@ -28,7 +28,7 @@ nis                  mean NIS at the update farthest from p                 chi-
 Each t or chi-square comparison's two-sided p-value is shown as the normal |z| with that p-value, so
 that a family's statistic stands against its normal Bonferroni bound. Measured on exact draws of a
 correct filter's moments (20,000 ensembles each, confidence 0.99, K = 150 and d = 3 for the state
-checks, K = 100 scalar innovations for whiteness and nis; tests/verification/test_false_alarm_rates.py):
+checks, K = 100 scalar innovations for whiteness and nis; tests/stats/test_false_alarm_rates.py):
 
 ====================== ============ ============ ===========
 check / part           share        N = 100      N = 400
@@ -44,15 +44,15 @@ whiteness.portmanteau  0.5%         88 (0.44%)   91 (0.46%)
 nis                    1%           171 (0.86%)  200 (1.00%)
 ====================== ============ ============ ===========
 
-Each result carries its family-wise p-value (:mod:`kalcal.verification.results`; the bounds: :mod:`kalcal.verification.bounds`), with
+Each result carries its family-wise p-value (:mod:`kalcal.stats.results`; the bounds: :mod:`kalcal.stats.bounds`), with
 ``passed == (pvalue >= 1 - confidence)``, and the cause of a failure as data (:class:`Cause`).
 
 A comparison whose standard error is zero (no spread over the ensemble) passes when its value is
 exactly zero and fails otherwise (its z is infinite: no spread cannot hide a nonzero mean); the detail
 counts both kinds.
 
-The residual whiteness check (:mod:`kalcal.verification.whiteness`) whitens each update's innovations with
-their ensemble second moment S_k. The covariance check (:mod:`kalcal.verification.covariance`) compares the *centered* ensemble covariance, so that a mean error is reported once,
+The residual whiteness check (:mod:`kalcal.stats.whiteness`) whitens each update's innovations with
+their ensemble second moment S_k. The covariance check (:mod:`kalcal.stats.covariance`) compares the *centered* ensemble covariance, so that a mean error is reported once,
 by ``mean_error``; orthogonality, whiteness and NIS use raw moments, as the source report does, and
 when they fail their cause says whether the mean error accounts for it (the centered statistic passes).
 
@@ -64,10 +64,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from kalcal.analysis.fixed_gain import CovarianceAnalysis
+from kalcal.linalg import whitener
 from kalcal.montecarlo.accumulators import EnsembleStatistics
 from kalcal.montecarlo.problem import ProblemInfo
-from kalcal.verification.bounds import chi2_mean_bounds, normal_bound
-from kalcal.verification.check_steps import (
+from kalcal.stats.bounds import chi2_mean_bounds, normal_bound
+from kalcal.stats.check_steps import (
     centered_cause,
     check_result,
     failed_cause,
@@ -78,9 +80,10 @@ from kalcal.verification.check_steps import (
     where_text,
     zero_se_text,
 )
-from kalcal.verification.covariance import check_covariance, correlation_z, t_equivalent_z, whitened_moments
-from kalcal.verification.whiteness import check_residual_whiteness
-from kalcal.verification.results import (
+from kalcal.stats.covariance import check_covariance, correlation_z, covariance_power, t_equivalent_z, whitened_moments
+from kalcal.stats.power import ChiSquareFamily, CheckPower, NormalFamily, detection_n, power_row, product_variance
+from kalcal.stats.whiteness import check_residual_whiteness, whiteness_power
+from kalcal.stats.results import (
     Cause,
     CheckPart,
     CheckResult,
@@ -97,7 +100,13 @@ __all__ = [
     "CheckResult",
     "check_mean_error",
     "check_nis",
+    "check_families",
     "check_orthogonality",
+    "mean_error_power",
+    "nis_power",
+    "orthogonality_power",
+    "power_rows",
+    "problem_power",
     "residual_pair",
     "run_checks",
     "verdict",
@@ -189,7 +198,7 @@ def check_orthogonality(s: EnsembleStatistics, info: ProblemInfo, confidence: fl
     uncentered sample correlation r = sum eps_i xhat_l / sqrt(sum eps_i^2 sum xhat_l^2) has
     r sqrt(N - 1) / sqrt(1 - r^2) ~ t(N - 1) exactly, at every N. (The earlier z = sqrt(N) r against
     N(0, 1) was no exact law: a product of two normals has heavy tails.) The statistic is the |z| of
-    the smallest of the K d^2 two-sided p-values (:func:`~kalcal.verification.covariance.equivalent_z`).
+    the smallest of the K d^2 two-sided p-values (:func:`~kalcal.stats.covariance.equivalent_z`).
     """
     alpha = 1.0 - confidence
     n_updates, d, _ = s.error_estimate.shape
@@ -312,3 +321,86 @@ def run_checks(
 def verdict(checks: list[CheckResult]) -> str:
     """``"pass"`` when every check passed, else ``"fail"``."""
     return "pass" if all(c.passed for c in checks) else "fail"
+
+
+def mean_error_power(a: CovarianceAnalysis, confidence: float) -> NormalFamily:
+    m = a.moments
+    var = np.diagonal(m.error_cov, axis1=1, axis2=2)
+    return NormalFamily(m.mean_error.ravel(), var.ravel(), var.ravel(), normal_bound(confidence, var.size))
+
+
+def orthogonality_power(a: CovarianceAnalysis, confidence: float) -> NormalFamily:
+    m = a.moments
+    if m.estimate_cov is None:
+        raise ValueError("the analysis has no Cov(xhat): run it with kalcal.core.lincov.propagate")
+    mu_e, mu_x = m.mean_error[:, :, None], m.mean_estimate[:, None, :]
+    var_e = np.diagonal(m.error_cov, axis1=1, axis2=2)[:, :, None]
+    var_x = np.diagonal(m.estimate_cov, axis1=1, axis2=2)[:, None, :]
+    cov = m.error_estimate - mu_e * mu_x
+    variance = product_variance(mu_e, mu_x, var_e, var_x, cov)
+    scale = (var_e + mu_e**2) * (var_x + mu_x**2)
+    return NormalFamily(m.error_estimate.ravel(), variance.ravel(), scale.ravel(), normal_bound(confidence, cov.size))
+
+
+def nis_power(a: CovarianceAnalysis, confidence: float) -> ChiSquareFamily:
+    m = a.moments
+    n_updates, p = m.mean_residual.shape
+    w = whitener(a.innovation_cov)
+    ratio = w @ m.residual_cov @ np.swapaxes(w, 1, 2)  # A = S^-1/2 C S^-T/2
+    mu = np.einsum("kab,kb->ka", w, m.mean_residual)
+
+    def bounds(n: int) -> tuple[float, float]:
+        low, high = chi2_mean_bounds(confidence, n_updates, p * n, n)
+        return low * n, high * n
+
+    return ChiSquareFamily(
+        np.trace(ratio, axis1=1, axis2=2),
+        np.einsum("kij,kji->k", ratio, ratio),
+        np.sum(mu**2, axis=1),
+        np.einsum("ka,kab,kb->k", mu, ratio, mu),
+        0,
+        bounds,
+    )
+
+
+def check_families(a: CovarianceAnalysis, confidence: float = 0.99) -> list[CheckPower]:
+    """The five checks' families, in :func:`~kalcal.stats.checks.run_checks`' order (the
+    whiteness check only where the analysis has the pair moments E[r_k r_j^T])."""
+    checks = [
+        CheckPower("mean_error", {None: mean_error_power(a, confidence)}),
+        CheckPower("covariance", covariance_power(a, confidence)),
+        CheckPower("orthogonality", {None: orthogonality_power(a, confidence)}),
+    ]
+    if a.moments.residual_second_moment is not None:
+        checks.append(CheckPower("residual_whiteness", whiteness_power(a, confidence)))
+    checks.append(CheckPower("nis", {None: nis_power(a, confidence)}))
+    return checks
+
+
+def power_rows(a: CovarianceAnalysis, n: int, confidence: float = 0.99) -> list[dict]:
+    """``power``: per check a row for the whole check (``part`` None) and, for a check of two parts, one per
+    part: ``power_low``, ``power_high`` at N = ``n``, ``detectable`` and ``detection_n``."""
+    rows = []
+    for check in check_families(a, confidence):
+        at_n = {part: family.bracket(n) for part, family in check.parts.items()}  # each family once at n
+        found = {part: detection_n(lambda k, f=family: f.bracket(k)[0]) for part, family in check.parts.items()}
+        reached = [k for k in found.values() if k is not None]
+        rows.append(power_row(check.name, None, CheckPower.combine(at_n.values()), min(reached) if reached else None))
+        rows.extend(power_row(check.name, part, at_n[part], found[part]) for part in check.parts if part is not None)
+    return rows
+
+
+def problem_power(problem, n: int, confidence: float, analysis=None) -> tuple[list[dict] | None, str | None]:
+    """``summary.json``'s ``power`` for a verification problem, and why it is None where it is.
+
+    A fixed-gain problem gets :func:`power_rows` of its exact analysis (its budget left out; ``analysis``
+    where the caller already has it, with the pairs); any other (scale-bias: gains that depend on the
+    data) gets None and the reason."""
+    from kalcal.analysis.fixed_gain import analyze_problem
+    from kalcal.montecarlo.problem import FixedGainProblem
+
+    if not isinstance(problem, FixedGainProblem):
+        return None, "no exact analysis: the filter's gains depend on the data"
+    if analysis is None:
+        analysis = analyze_problem(problem, budget=False)
+    return power_rows(analysis, n, confidence), None

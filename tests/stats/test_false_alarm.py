@@ -14,7 +14,7 @@ import pytest
 from kalcal.jobs.verify import compute_verification, scale_bias_truth_equals
 from kalcal.models.custom import load_model_file
 from kalcal.models.registry import build_scenario
-from kalcal.verification.results import EXPLAINED_BY_TEXT, as_false_alarm
+from kalcal.stats.results import EXPLAINED_BY_TEXT, as_false_alarm
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 #: scale-bias whose filter is its truth's model: no sensor noise in the regressor, the filter's settings the truth's

@@ -13,7 +13,7 @@ add its realizations up, must reproduce them within sampling error. With N reali
   Var(s^2) = 2 sigma^4 / (N - 1) errs in the far tails that a large family reaches;
 * ``error_estimate``: the mean of e_ki xhat_kl (orthogonality's sum E[e xhat^T], every i, l) against its
   exact value, z = difference / sqrt(V / N) with V the Gaussian product variance
-  (:func:`kalcal.analysis.power_parts.product_variance`), normal by the central limit theorem;
+  (:func:`kalcal.stats.power.product_variance`), normal by the central limit theorem;
 * ``residual_mean``: z = (rbar_ka - E[r_ka]) / sqrt(Cov(r_k)_aa / N), exactly standard normal.
 
 Each part is a max-|z| family held to alpha / 4 (Bonferroni, alpha = 1 - confidence, the run's), each at
@@ -36,12 +36,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from kalcal.analysis.fixed_gain import analyze_problem
-from kalcal.analysis.power_parts import product_variance
+from kalcal.stats.power import product_variance
 from kalcal.montecarlo.accumulators import EnsembleStatistics
 from kalcal.montecarlo.problem import FixedGainProblem, ProblemInfo
-from kalcal.verification.bounds import chi2_bounds_at, normal_bound_at
-from kalcal.verification.distributions import normal_isf
-from kalcal.verification.results import CheckPart, chi2_two_sided_pvalues, family_pvalue, normal_family_pvalue
+from kalcal.stats.bounds import chi2_bounds_at, normal_bound_at
+from kalcal.stats.distributions import normal_isf
+from kalcal.stats.results import CheckPart, chi2_two_sided_pvalues, family_pvalue, normal_family_pvalue
 
 #: the self-check's parts, each held to an equal share of its alpha
 SELF_CHECK_PARTS = ("mean_error", "error_variance", "error_estimate", "residual_mean")

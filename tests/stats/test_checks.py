@@ -11,8 +11,8 @@ from kalcal.models.config import apply_settings
 from kalcal.montecarlo.accumulators import ensemble_statistics
 from kalcal.montecarlo.engine import run_monte_carlo
 from kalcal.montecarlo.scenarios import build_problem
-from kalcal.verification.bounds import chi2_mean_bounds, covariance_element_bound, normal_bound
-from kalcal.verification.checks import run_checks, verdict
+from kalcal.stats.bounds import chi2_mean_bounds, covariance_element_bound, normal_bound
+from kalcal.stats.checks import run_checks, verdict
 
 
 def _checks(n, seed=0, **settings):

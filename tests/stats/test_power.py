@@ -10,25 +10,16 @@ import pytest
 from scipy import stats as sps
 
 from kalcal.analysis.fixed_gain import analyze_problem, analyze_scenario
-from kalcal.analysis.power import (
-    DETECTION_POWER,
-    MIN_N,
-    N_CAP,
-    check_families,
-    detection_n,
-    power_line,
-    power_rows,
-    problem_power,
-    verdict_power,
-)
-from kalcal.analysis.sensitivity import detected_error, sensitivity, sensitivity_text
-from kalcal.jobs.verify_arguments import MIN_REALIZATIONS
+from kalcal.stats.checks import check_families, power_rows, problem_power
+from kalcal.stats.power import DETECTION_POWER, MIN_N, N_CAP, detection_n, power_line, verdict_power
+from kalcal.stats.sensitivity import detected_error, sensitivity, sensitivity_text
+from kalcal.jobs.verify import MIN_REALIZATIONS
 from kalcal.models.custom import load_model_file, parse_model
 from kalcal.models.registry import build_scenario
 from kalcal.montecarlo.accumulators import ensemble_statistics
 from kalcal.montecarlo.engine import run_monte_carlo
 from kalcal.montecarlo.scenarios import build_problem
-from kalcal.verification.checks import run_checks
+from kalcal.stats.checks import run_checks
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 ALPHA = 0.01
@@ -194,7 +185,7 @@ def test_verification_power_is_null_with_its_reason_for_scale_bias():
 
 def test_sensitivity_finds_the_smallest_detected_error():
     """For a correct filter, each setting's reported error is detected and one RESOLUTION step below is not."""
-    from kalcal.analysis import sensitivity as module
+    from kalcal.stats import sensitivity as module
 
     model = load_model_file(EXAMPLES / "constant_velocity.toml")
     rows = sensitivity(model, 20_000)
@@ -213,7 +204,7 @@ def test_sensitivity_finds_the_smallest_detected_error():
 
 def test_sensitivity_holds_the_filter_of_accel_gps():
     """Scaling a truth setting leaves the filter's (unset, so taken from the truth) where it was."""
-    from kalcal.analysis.sensitivity import noise_settings
+    from kalcal.stats.sensitivity import noise_settings
 
     model = build_scenario("accel-gps", assignments=["scenario.truth=discrete"])
     scaled = noise_settings(model)["truth.accel_noise_std"](1.1)
@@ -224,7 +215,7 @@ def test_sensitivity_holds_the_filter_of_accel_gps():
 
 def test_chi_square_part_without_spread_is_its_fixed_value():
     """A = 0 with a nonzero mean: every term is |mu|^2, so X = N m2 exactly, failing only outside the bounds."""
-    from kalcal.analysis.power_parts import ChiSquareFamily
+    from kalcal.stats.power import ChiSquareFamily
 
     zero = np.zeros(2)
 
@@ -240,7 +231,7 @@ def test_chi_square_part_without_spread_is_its_fixed_value():
 def test_exact_prediction_computes_no_budget(monkeypatch):
     """The self-check's and the report's exact prediction needs only the moments: no error budget is run."""
     from kalcal.analysis import fixed_gain
-    from kalcal.verification.self_check import exact_prediction
+    from kalcal.stats.self_check import exact_prediction
 
     def refuse(*args, **kwargs):
         raise AssertionError("the budget was computed")
@@ -253,7 +244,7 @@ def test_exact_prediction_computes_no_budget(monkeypatch):
 def test_truth_equals_filter_only_where_it_does():
     """Equal for the correct examples; not for a mistuned one, a larger truth, nor a truth 1e-7 off in v, which
     no check detects up to N_CAP either: its line then says only that, not that no check can."""
-    from kalcal.analysis.power import truth_equals_filter
+    from kalcal.stats.power import truth_equals_filter
 
     assert truth_equals_filter(analyze_scenario(load_model_file(EXAMPLES / "constant_velocity.toml"), budget=False))
     assert truth_equals_filter(analyze_scenario(build_scenario("accel-gps", assignments=["scenario.truth=discrete"]), budget=False))
@@ -289,7 +280,7 @@ def _probabilities_by_the_rule(family, n):
 def test_normal_family_gives_the_rules_bits_at_every_n(with_degenerate):
     """Precomputed once and evaluated at many N (as the detection search does), the family's P_i are the
     bits of the rule evaluated afresh, with and without comparisons that have no spread or no standard error."""
-    from kalcal.analysis.power_parts import NormalFamily
+    from kalcal.stats.power import NormalFamily
 
     rng = np.random.default_rng(7)
     mean, variance, scale = rng.normal(0, 0.05, 500), rng.uniform(0.5, 2.0, 500), rng.uniform(0.5, 2.0, 500)

@@ -21,7 +21,7 @@ from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
-from kalcal.verification.distributions import chi2_cdf, chi2_sf, normal_sf
+from kalcal.stats.distributions import chi2_cdf, chi2_sf, normal_sf
 
 #: what a failure is accounted for by (each value of ``Cause.explained_by``), in words
 EXPLAINED_BY_TEXT = {

@@ -1,9 +1,11 @@
-"""The probability that each part of each check fails at N realizations under the truth, from the exact moments.
+"""The power of the checks: how likely each part fails at N realizations under the truth, and the N that detects it.
+
+Each part's probability of failing is computed from the exact moments.
 
 Every part is a family of comparisons (a max-|z| over many elements, or one chi-square test per update),
 so its rejection probability is bracketed by Bonferroni's two ends: [max_i P_i, min(1, sum_i P_i)], P_i
 the probability that comparison i alone leaves its bound (the part's per-comparison critical value, as
-:mod:`kalcal.verification.bounds` gives it). The P_i are approximations, stated with each family:
+:mod:`kalcal.stats.bounds` gives it). The P_i are approximations, stated with each family:
 
 * :class:`NormalFamily` (mean_error, covariance ``elements``, orthogonality, whiteness ``pairs``): the
   comparison's z = xbar / sqrt(D / N) is taken as normal with mean a sqrt(N / D) and variance v / D, a
@@ -22,6 +24,16 @@ the probability that comparison i alone leaves its bound (the part's per-compari
   bounded by Cauchy-Schwarz, and the bracket spans both ends.
 
 A comparison with zero spread follows the checks' rule: it fails where its value is nonzero.
+
+Each check's own families are built beside the check (``*_power`` in :mod:`kalcal.stats.mean_error`,
+:mod:`kalcal.stats.covariance`, ...), from a :class:`~kalcal.analysis.fixed_gain.CovarianceAnalysis`
+(the exact means and covariances of the errors, estimates and innovations) and the bounds the check
+uses. A check made of parts fails when any part does, so its bracket is [max over parts of power_low,
+min(1, sum of power_high)]; the verdict's likewise over the checks.
+
+``detection_n`` is the smallest N in [``MIN_N``, ``N_CAP``] at which ``power_low`` (the conservative end)
+reaches ``DETECTION_POWER``, found by doubling then bisection (power taken as increasing in N); None
+(``detectable`` false) when even ``N_CAP`` does not reach it, as for a correct filter.
 """
 
 from __future__ import annotations
@@ -31,11 +43,36 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import ndtr
 
-from kalcal.verification.distributions import chi2_cdf, chi2_sf, ncx2_cdf, ncx2_sf
+from kalcal.analysis.fixed_gain import CovarianceAnalysis
+from kalcal.stats.distributions import chi2_cdf, chi2_sf, ncx2_cdf, ncx2_sf, normal_cdf
 
-__all__ = ["ChiSquareFamily", "NormalFamily", "PortmanteauPower", "bracket", "portmanteau_power", "product_variance"]
+__all__ = [
+    "DETECTION_POWER",
+    "MIN_N",
+    "N_CAP",
+    "ChiSquareFamily",
+    "CheckPower",
+    "NormalFamily",
+    "PortmanteauPower",
+    "bracket",
+    "detection_n",
+    "portmanteau_power",
+    "power_line",
+    "power_row",
+    "product_variance",
+    "truth_equals_filter",
+    "verdict_power",
+]
+
+#: the power at which a check is said to detect the truth
+DETECTION_POWER = 0.99
+#: the smallest N searched (verify's minimum number of realizations)
+MIN_N = 100
+#: the largest N searched: a truth no check detects with this many realizations is not detectable
+N_CAP = 10**9
+#: the truth equals the filter when the moments the checks see agree with the filter's to this fraction
+EQUAL_RTOL = 1e-9
 
 
 def bracket(probabilities: np.ndarray) -> tuple[float, float]:
@@ -90,7 +127,7 @@ class NormalFamily:
         root_n = np.sqrt(float(n))
         shift = self.mean * root_n
         with np.errstate(divide="ignore", invalid="ignore"):
-            normal = ndtr((shift - edge) / spread) + ndtr((-shift - edge) / spread)
+            normal = normal_cdf((shift - edge) / spread) + normal_cdf((-shift - edge) / spread)
         if all_random:  # every comparison has spread and a standard error: the rules below change nothing
             return np.minimum(1.0, normal)
         # no spread: the comparison is its mean, outside the bound or not (zero D with a nonzero value fails)
@@ -242,3 +279,124 @@ def portmanteau_power(raw: np.ndarray, bound_of: Callable[[int], float], rank_rt
         m1=float(np.sum(sigma * (m_sigma @ m.T))),
         m2=float(np.sum(sigma * (m_sigma @ m))),
     )
+
+
+Family = NormalFamily | ChiSquareFamily | PortmanteauPower
+
+
+@dataclass(frozen=True)
+class CheckPower:
+    """The families of one check: ``parts`` maps a part's name (None for a check of one part) to its family."""
+
+    name: str
+    parts: dict[str | None, Family]
+
+    def bracket(self, n: int) -> tuple[float, float]:
+        """The check's [power_low, power_high] at N = ``n``: any part failing fails the check."""
+        return self.combine(family.bracket(n) for family in self.parts.values())
+
+    @staticmethod
+    def combine(brackets) -> tuple[float, float]:
+        """[max of the lows, min(1, sum of the highs)] of the parts' brackets."""
+        brackets = list(brackets)
+        return max(b[0] for b in brackets), min(1.0, sum(b[1] for b in brackets))
+
+
+def truth_equals_filter(a: CovarianceAnalysis) -> bool:
+    """Whether the truth equals the filter in everything the checks see, to ``EQUAL_RTOL`` (rounding):
+    E[e_k] = 0, Cov(e_k) = P_k, E[r_k] = 0, Cov(r_k) = S_k and (where the analysis has the pairs)
+    E[r_k r_j^T] = 0 for j != k, each measured against the filter's own spread at that update. Then every
+    check is at its alpha at every N: no check can detect the truth."""
+    m = a.moments
+
+    def small(value: np.ndarray, cov: np.ndarray) -> bool:
+        scale = np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1))  # (K, d)
+        return bool(np.all(np.abs(value) <= EQUAL_RTOL * scale))
+
+    def same(cov: np.ndarray, belief: np.ndarray) -> bool:
+        scale = np.diagonal(belief, axis1=1, axis2=2)
+        outer = np.sqrt(scale[:, :, None] * scale[:, None, :])
+        return bool(np.all(np.abs(cov - belief) <= EQUAL_RTOL * outer))
+
+    equal = (
+        small(m.mean_error, a.filter_cov)
+        and same(m.error_cov, a.filter_cov)
+        and small(m.mean_residual, a.innovation_cov)
+        and same(m.residual_cov, a.innovation_cov)
+    )
+    if equal and m.residual_second_moment is not None:
+        raw = m.residual_second_moment
+        k, p = raw.shape[:2]
+        s = np.sqrt(np.diagonal(a.innovation_cov, axis1=1, axis2=2))  # (K, p)
+        outer = s[:, :, None, None] * s[None, None, :, :]
+        off = ~np.eye(k, dtype=bool)[:, None, :, None].repeat(p, 1).repeat(p, 3)
+        equal = bool(np.all(np.abs(raw[off]) <= EQUAL_RTOL * outer[off]))
+    return equal
+
+
+def detection_n(low_at: Callable[[int], float], target: float = DETECTION_POWER) -> int | None:
+    """The smallest N in [MIN_N, N_CAP] with ``low_at(N) >= target``, ``low_at`` taken as increasing; None if
+    N_CAP falls short."""
+    if low_at(N_CAP) < target:
+        return None
+    if low_at(MIN_N) >= target:
+        return MIN_N
+    low, high = MIN_N, 2 * MIN_N
+    while high < N_CAP and low_at(high) < target:
+        low, high = high, min(2 * high, N_CAP)
+    while high - low > 1:
+        mid = (low + high) // 2
+        low, high = (low, mid) if low_at(mid) >= target else (mid, high)
+    return high
+
+
+def power_row(name: str, part: str | None, bracket: tuple[float, float], n_detect: int | None) -> dict:
+    """One row of ``power``: a check's (or its part's) bracket at N and the smallest N that detects."""
+    return {
+        "name": name,
+        "part": part,
+        "power_low": bracket[0],
+        "power_high": bracket[1],
+        "detectable": n_detect is not None,
+        "detection_n": n_detect,
+    }
+
+
+def verdict_power(rows: list[dict]) -> dict:
+    """The verdict's power from the whole-check rows: any check failing fails it, so [max low, min(1, sum high)]."""
+    whole = [row for row in rows if row["part"] is None]
+    reached = [row["detection_n"] for row in whole if row["detection_n"] is not None]
+    return {
+        "power_low": max(row["power_low"] for row in whole),
+        "power_high": min(1.0, sum(row["power_high"] for row in whole)),
+        "detectable": bool(reached),
+        "detection_n": min(reached) if reached else None,
+    }
+
+
+def _bracket_text(low: float, high: float) -> str:
+    a, b = f"{low:.2f}", f"{high:.2f}"
+    return a if a == b else f"{a}–{b}"
+
+
+def undetected_text(equal: bool) -> str:
+    """What an undetectable truth's line says: that no check can detect it where the truth equals the filter
+    (:func:`truth_equals_filter`), otherwise only that no check detects it up to N_CAP."""
+    found = f"not detected up to N = {N_CAP:,}"
+    return f"{found}: no check can detect it (the truth equals the filter)" if equal else found
+
+
+def power_line(rows: list[dict] | None, n: int, reason: str | None = None, equal: bool = False) -> str:
+    """One line: the verdict's power and each check's bracket at N = ``n``, and the smallest N that detects
+    (``equal``: the truth equals the filter, :func:`undetected_text`).
+
+    ``"power at N = 20,000: verdict 1.00 (detected from N = 100); mean_error 0.00–0.01, covariance 1.00, ..."``
+    """
+    if rows is None:
+        return f"power: not computed ({reason or 'no exact analysis'})"
+    whole = verdict_power(rows)
+    found = f"detected from N = {whole['detection_n']:,}" if whole["detectable"] else undetected_text(equal)
+    checks = ", ".join(
+        f"{row['name']} {_bracket_text(row['power_low'], row['power_high'])}" for row in rows if row["part"] is None
+    )
+    return f"power at N = {n:,}: verdict {_bracket_text(whole['power_low'], whole['power_high'])} ({found}); {checks}"

@@ -13,7 +13,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from kalcal.errors import KalcalError
-from kalcal.verification.results import DIRECTION_TEXT, EXPLAINED_BY_TEXT
+from kalcal.stats.results import DIRECTION_TEXT, EXPLAINED_BY_TEXT
 
 #: how a check's parts are named in words
 PART_LABELS = {

@@ -2,7 +2,7 @@
 
 For each noise setting the truth's value is scaled by 1 + eps (an increase) or 1 - eps (a decrease)
 with the filter's held, the exact analysis rerun, and the verdict's conservative power (the largest
-``power_low`` of the checks, :mod:`kalcal.analysis.power`) compared with ``DETECTION_POWER``. From
+``power_low`` of the checks, :mod:`kalcal.stats.power`) compared with ``DETECTION_POWER``. From
 ``START`` eps is doubled while not detected, or halved while detected (down to ``FLOOR``), then bisected
 in log eps to a ratio of ``RESOLUTION`` (power taken as increasing in eps); the detected end is
 reported, and ``FLOOR`` itself where even the floor is detected. The search runs first without the
@@ -22,7 +22,8 @@ from collections.abc import Callable
 import numpy as np
 
 from kalcal.analysis.fixed_gain import analyze_scenario
-from kalcal.analysis.power import DETECTION_POWER, check_families
+from kalcal.stats.checks import check_families
+from kalcal.stats.power import DETECTION_POWER
 from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.models.custom import CustomModelScenario
 

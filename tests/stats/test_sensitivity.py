@@ -6,10 +6,10 @@ from pathlib import Path
 
 import pytest
 
-from kalcal.analysis import sensitivity as module
+from kalcal.stats import sensitivity as module
 from kalcal.analysis.fixed_gain import analyze_scenario
-from kalcal.analysis.power import check_families
-from kalcal.analysis.sensitivity import FLOOR, RESOLUTION, START, detected_error, sensitivity, sensitivity_text
+from kalcal.stats.checks import check_families
+from kalcal.stats.sensitivity import FLOOR, RESOLUTION, START, detected_error, sensitivity, sensitivity_text
 from kalcal.models.custom import load_model_file
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"

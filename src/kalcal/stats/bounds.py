@@ -7,7 +7,7 @@ whiteness check among its ``WHITENESS_PARTS``.
 
 from __future__ import annotations
 
-from kalcal.verification.distributions import chi2_isf, chi2_ppf, normal_isf
+from kalcal.stats.distributions import chi2_isf, chi2_ppf, normal_isf
 
 __all__ = [
     "COVARIANCE_PARTS",
@@ -76,6 +76,6 @@ def centered_nees_bounds(confidence: float, n_updates: int, d: int, count: int) 
     """Bounds of :func:`centered_nees` in the covariance check, whose confidence is ``confidence``.
 
     K = ``n_updates`` comparisons of N = ``count`` realizations at the part's share of alpha (alpha / 2,
-    see :func:`kalcal.verification.covariance.check_covariance`)."""
+    see :func:`kalcal.stats.covariance.check_covariance`)."""
     share = (1.0 - confidence) / len(COVARIANCE_PARTS)
     return chi2_bounds_at(share, n_updates, d * (count - 1), count - 1)

@@ -25,12 +25,15 @@ from typing import NamedTuple
 
 import numpy as np
 
+from kalcal.analysis.fixed_gain import CovarianceAnalysis
+from kalcal.linalg import whitener
 from kalcal.montecarlo.accumulators import EnsembleStatistics
 from kalcal.montecarlo.problem import ProblemInfo
-from kalcal.verification.bounds import COVARIANCE_PARTS, centered_nees_bounds, covariance_element_bound
-from kalcal.verification.check_steps import check_result, failed_cause, max_abs, safe_ratio, sd_text, standardized
-from kalcal.verification.distributions import chi2_cdf, chi2_sf, normal_isf, t_sf
-from kalcal.verification.results import Cause, CheckPart, CheckResult, chi2_two_sided_pvalues, combined_pvalue, family_pvalue
+from kalcal.stats.bounds import COVARIANCE_PARTS, centered_nees_bounds, covariance_element_bound
+from kalcal.stats.check_steps import check_result, failed_cause, max_abs, safe_ratio, sd_text, standardized
+from kalcal.stats.distributions import chi2_cdf, chi2_sf, normal_isf, t_sf
+from kalcal.stats.power import ChiSquareFamily, NormalFamily
+from kalcal.stats.results import Cause, CheckPart, CheckResult, chi2_two_sided_pvalues, combined_pvalue, family_pvalue
 
 __all__ = [
     "Whitened",
@@ -121,7 +124,7 @@ def correlation_z(moment: np.ndarray, power: np.ndarray, dof: float) -> tuple[np
 
     ``power`` is the product of the two samples' mean squares (centered or not, as ``moment``). A zero
     ``power`` (no spread) gives z = 0 for an exactly zero moment and +-inf otherwise, counted as by
-    :func:`~kalcal.verification.check_steps.standardized` (its two counts are returned).
+    :func:`~kalcal.stats.check_steps.standardized` (its two counts are returned).
     """
     r, zero_pass, zero_fail = standardized(moment, np.sqrt(np.maximum(power, 0.0)))
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -344,3 +347,37 @@ def _covariance_cause(
         "The filter is underconfident: its P is larger than the actual spread (noise settings too large)",
         direction="underconfident",
     )
+
+
+def covariance_power(a: CovarianceAnalysis, confidence: float) -> dict[str, NormalFamily | ChiSquareFamily]:
+    s, p = a.moments.error_cov, a.filter_cov
+    n_updates, d, _ = p.shape
+    i, l = np.triu_indices(d)
+    # A = L^-1 S L^-T, L the lower Cholesky factor of P, as the check whitens: tr A = tr(P^-1 S),
+    # tr A^2 = tr((P^-1 S)^2)
+    w = whitener(p)
+    ratio = w @ s @ np.swapaxes(w, 1, 2)
+    # the elements part tests each whitened variance (chi-square, about N(A_ii, 2 A_ii^2 / N)) and each
+    # whitened correlation rho = A_il / sqrt(A_ii A_ll) (t, about N(rho, (1 - rho^2)^2 / N)); under the
+    # null A = I: variances 2 / N and 1 / N
+    diag = np.diagonal(ratio, axis1=1, axis2=2)
+    spread = np.sqrt(np.maximum(diag[:, :, None] * diag[:, None, :], 0.0))
+    # a whitened state without spread under the truth: its correlations are undefined, taken as 0
+    rho = np.divide(ratio, spread, out=np.zeros_like(ratio), where=spread > 0)
+    on = (i == l)[None, :]
+    elements = NormalFamily(
+        np.where(on, diag[:, i] - 1.0, rho[:, i, l]).ravel(),
+        np.where(on, 2.0 * diag[:, i] ** 2, (1.0 - rho[:, i, l] ** 2) ** 2).ravel(),
+        np.broadcast_to(np.where(on, 2.0, 1.0), (n_updates, i.size)).ravel(),
+        covariance_element_bound(confidence, n_updates, d),
+    )
+    zero = np.zeros(n_updates)
+
+    def bounds(n: int) -> tuple[float, float]:
+        low, high = centered_nees_bounds(confidence, n_updates, d, n)
+        return low * (n - 1), high * (n - 1)
+
+    nees = ChiSquareFamily(
+        np.trace(ratio, axis1=1, axis2=2), np.einsum("kij,kji->k", ratio, ratio), zero, zero, -1, bounds
+    )
+    return dict(zip(COVARIANCE_PARTS, (elements, nees)))

@@ -1,11 +1,12 @@
-"""Normal, chi-square and Student t tail probabilities and quantiles, from scipy.special without scipy.stats.
+"""Every normal, chi-square and Student t probability and quantile of the package, from scipy.special without scipy.stats.
 
 ``scipy.stats`` takes over a second to import (it builds the docstrings of every distribution), more
 than a default run's Monte Carlo spends on its random draws; the checks need six functions of two
 distributions (and the t's upper tail). Each is the scipy.special function that ``scipy.stats.norm`` / ``scipy.stats.chi2`` call
-for valid arguments, so the values are the same to the bit (tests/verification/test_distributions.py
+for valid arguments, so the values are the same to the bit (tests/stats/test_distributions.py
 holds them to scipy.stats), with scipy.stats's answers at the edges: a probability outside [0, 1] or a
-non-positive dof gives NaN.
+non-positive dof gives NaN. No module of kalcal computes such a quantile or tail itself: the bounds
+(:mod:`kalcal.stats.bounds`), the power, the calibration's and the fits' gates and intervals call these.
 """
 
 from __future__ import annotations
@@ -20,10 +21,23 @@ __all__ = [
     "chi2_sf",
     "ncx2_cdf",
     "ncx2_sf",
+    "normal_cdf",
     "normal_isf",
+    "normal_ppf",
     "normal_sf",
     "t_sf",
 ]
+
+
+def normal_cdf(x):
+    """Phi(x), the standard normal's lower tail (scipy.stats.norm.cdf)."""
+    return special.ndtr(np.asarray(x, dtype=float))
+
+
+def normal_ppf(p):
+    """The x with Phi(x) = p, p in [0, 1] (scipy.stats.norm.ppf)."""
+    p = np.asarray(p, dtype=float)
+    return np.where((p >= 0) & (p <= 1), special.ndtri(p), np.nan)
 
 
 def normal_sf(x):

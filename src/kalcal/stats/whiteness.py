@@ -1,6 +1,6 @@
 """The residual whiteness check: E[r_k r_j^T] = 0 for every pair of updates, by its largest |z| and a portmanteau.
 
-Two parts, each at half the check's alpha (as the covariance check's, :mod:`kalcal.verification.covariance`):
+Two parts, each at half the check's alpha (as the covariance check's, :mod:`kalcal.stats.covariance`):
 
 * ``pairs``: for j < k and each pair of elements the uncentered sample correlation
   r = E[r_k,a r_j,b] / sqrt(E[r_k,a^2] E[r_j,b^2]); given the N values of r_j,b those of r_k,a are iid
@@ -58,13 +58,15 @@ from typing import NamedTuple
 
 import numpy as np
 
+from kalcal.analysis.fixed_gain import CovarianceAnalysis
 from kalcal.montecarlo.accumulators import EnsembleStatistics
 from kalcal.montecarlo.problem import ProblemInfo
-from kalcal.verification.bounds import WHITENESS_PARTS, portmanteau_bound, whiteness_pairs_bound
-from kalcal.verification.check_steps import check_result, failed_cause, max_abs, sd_text, zero_se_text
-from kalcal.verification.covariance import correlation_z
-from kalcal.verification.distributions import chi2_sf
-from kalcal.verification.results import Cause, CheckPart, CheckResult, combined_pvalue, normal_family_pvalue
+from kalcal.stats.bounds import WHITENESS_PARTS, portmanteau_bound, whiteness_pairs_bound
+from kalcal.stats.check_steps import check_result, failed_cause, max_abs, sd_text, zero_se_text
+from kalcal.stats.covariance import correlation_z
+from kalcal.stats.distributions import chi2_sf
+from kalcal.stats.power import NormalFamily, PortmanteauPower, portmanteau_power, product_variance
+from kalcal.stats.results import Cause, CheckPart, CheckResult, combined_pvalue, normal_family_pvalue
 
 __all__ = ["RANK_RTOL", "Portmanteau", "check_residual_whiteness", "portmanteau"]
 
@@ -182,3 +184,21 @@ def _centered_cause(
     if normal_family_pvalue(rest, m) >= share and q.pvalue >= share:
         return failed_cause(lead + "nonzero mean residuals account for it (see mean_error)", explained_by="mean_error")
     return failed_cause(lead + "the innovations are correlated in time: the model's dynamics or noise are wrong")
+
+
+def whiteness_power(a: CovarianceAnalysis, confidence: float) -> dict[str, NormalFamily | PortmanteauPower]:
+    m = a.moments
+    raw = m.residual_second_moment  # (K, p, K, p)
+    n_updates, p = raw.shape[:2]
+    mean = m.mean_residual
+    var = np.diagonal(m.residual_cov, axis1=1, axis2=2)  # (K, p)
+    # the pairs j < k only, element by element (the same operations as over the whole array, on half of it)
+    k, a, j, b = np.nonzero(np.broadcast_to(np.tril(np.ones((n_updates, n_updates), dtype=bool), -1)[:, None, :, None], raw.shape))
+    mu_x, mu_y, var_x, var_y = mean[k, a], mean[j, b], var[k, a], var[j, b]
+    values = raw[k, a, j, b]
+    variance = product_variance(mu_x, mu_y, var_x, var_y, values - mu_x * mu_y)
+    scale = (var_x + mu_x**2) * (var_y + mu_y**2)
+    pairs = NormalFamily(values, variance, scale, whiteness_pairs_bound(confidence, n_updates, p))
+    share = (1.0 - confidence) / len(WHITENESS_PARTS)
+    q = portmanteau_power(raw, lambda dof: portmanteau_bound(share, dof), RANK_RTOL)
+    return dict(zip(WHITENESS_PARTS, (pairs, q)))
