@@ -251,3 +251,32 @@ def test_a_result_keeps_its_measured_text_apart_from_the_reason():
         CheckResult("x", 5.0, 0.001, None, 4.0, 0.99, 10, False, "5 sd. Too small.", cause)
     with pytest.raises(ValueError, match="is not the measured text"):
         CheckResult("x", 5.0, 0.001, None, 4.0, 0.99, 10, False, "6 sd. Too small.", cause, measured="5 sd")
+
+
+def test_far_off_statistics_are_finite_sd_continuous_with_the_exact_tail():
+    """Beyond the smallest double the t and chi-square tails underflow; the sd-equivalent then comes from
+    Wallace's and Wilson-Hilferty's transforms: finite, increasing, and within 0.5% of the exact value
+    just before the switch (the default run's mean error reaches t = 42 at N = 300,000)."""
+    from kalcal.stats.covariance import chi2_equivalent_z, t_equivalent_z
+    from kalcal.stats.distributions import chi2_sf, t_sf
+
+    for dof in (98.0, 399.0, 299999.0):
+        t = np.linspace(1.0, 2000.0, 20001)
+        z = t_equivalent_z(t, dof)
+        assert np.all(np.isfinite(z)) and np.all(np.diff(z) > 0), dof
+        exact = t_sf(t, dof) > 0
+        last = np.nonzero(exact)[0][-1]
+        # at the last exact point the transform that takes over gives nearly the same z
+        wallace = (8 * dof + 1) / (8 * dof + 3) * np.sqrt(dof * np.log1p(t[last] ** 2 / dof))
+        assert abs(wallace / z[last] - 1) < 5e-3, (dof, z[last], wallace)
+        x = np.linspace(dof, 50 * dof, 20001)
+        zc = chi2_equivalent_z(x, dof)
+        exact = chi2_sf(x, dof) > 0
+        last = np.nonzero(exact)[0][-1]
+        assert np.all(np.isfinite(zc)), dof
+        assert np.all(np.diff(zc[: last + 1]) >= 0) and np.all(np.diff(zc[last + 1 :]) >= 0), dof
+        # Wilson-Hilferty is coarser in so far a tail: about 9% at 98 dof, 0.5% at 3 x 10^5
+        c = 2 / (9 * dof)
+        wilson_hilferty = ((x[last] / dof) ** (1 / 3) - (1 - c)) / np.sqrt(c)
+        assert abs(wilson_hilferty / zc[last] - 1) < (0.1 if dof < 1000 else 5e-3), (dof, zc[last], wilson_hilferty)
+    assert t_equivalent_z(np.array([np.inf, -np.inf]), 99.0).tolist() == [np.inf, -np.inf]
