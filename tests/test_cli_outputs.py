@@ -357,6 +357,7 @@ def test_ctrl_c_with_workers_is_one_line(tmp_path):
     reader.start()
     try:
         assert running.wait(120), lines
+        time.sleep(0.5)  # the Monte Carlo under way, not the instant the note is written
         os.killpg(process.pid, signal.SIGINT)
         process.wait(timeout=60)
         reader.join(10)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import sys
 from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Optional
@@ -142,8 +143,13 @@ def _note_nonfinite(*paths) -> None:
 
 
 def print_note(text: str) -> None:
-    """One line on stderr, ``kalcal: note: TEXT``: what a run's user should know while it runs."""
-    _error_console().print(f"kalcal: note: {text}", markup=False)
+    """One line on stderr, ``kalcal: note: TEXT``: what a run's user should know while it runs.
+
+    Written straight to stderr, not through the console: a note comes while a run goes on (from the
+    engine or from Dask's log thread), and a Ctrl-C landing inside rich's print left the line in its
+    buffer, to be written a second time by the next message."""
+    sys.stderr.write(f"kalcal: note: {text}\n")
+    sys.stderr.flush()
 
 
 def _print_warnings(summary: dict) -> None:

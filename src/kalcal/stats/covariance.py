@@ -111,35 +111,38 @@ def correlation_pvalues(r: np.ndarray, dof: float) -> np.ndarray:
     return np.minimum(1.0, 2.0 * t_sf(t, dof))
 
 
+#: tails below the smallest normal double are subnormal (few significant bits) or 0: the transforms take over
+_SMALLEST = float(np.finfo(float).tiny)
+
+
 def t_equivalent_z(t: np.ndarray, dof: float) -> np.ndarray:
     """The signed normal z with the same two-sided tail as each t(dof) value (inf stays inf, NaN NaN).
 
     Families of t comparisons are then held to their normal Bonferroni bounds exactly: 2 (1 - Phi(|z|))
-    is the t's two-sided p-value. Where that tail is below the smallest double (|t| of about 38 and more
-    at large dof), Wallace's transform z = (8 dof + 1) / (8 dof + 3) sqrt(dof ln(1 + t^2 / dof)) stands
+    is the t's two-sided p-value. Where that tail is below the smallest normal double (|t| of about 38
+    and more at large dof), Wallace's transform z = (8 dof + 1) / (8 dof + 3) sqrt(dof ln(1 + t^2 / dof)) stands
     in for it, so that a far-off value is shown as a finite number of sd: its p-value is 0 all the same."""
     t = np.asarray(t, dtype=float)
     tail = t_sf(np.abs(t), dof)
     exact = normal_isf(tail)
     with np.errstate(divide="ignore", invalid="ignore"):
         wallace = (8.0 * dof + 1.0) / (8.0 * dof + 3.0) * np.sqrt(dof * np.log1p(t * t / dof))
-    far = (tail == 0) & np.isfinite(t)
+    far = (tail < _SMALLEST) & np.isfinite(t)
     return np.sign(t) * np.where(far, wallace, exact)
 
 
 def chi2_equivalent_z(total: np.ndarray, dof: float) -> np.ndarray:
     """The normal |z| with the same two-sided tail as each chi-square(dof) value ``total``.
 
-    Where that tail is below the smallest double, the Wilson-Hilferty transform
-    |((x / dof)^(1/3) - (1 - 2 / (9 dof))) / sqrt(2 / (9 dof))| stands in for it (a finite number of sd
-    for a far-off variance, coarse so far out: about 9% below the exact side at the switch for 98 degrees
-    of freedom, 0.5% at 3 x 10^5; its p-value is 0 all the same)."""
+    Where that tail is below the smallest normal double, the signed root of the deviance,
+    sqrt(x - dof - dof ln(x / dof)), stands in for it on either side of the mean (a finite number of sd
+    for a far-off variance, within 0.5% of the exact side at the switch; its p-value is 0 all the same)."""
     total = np.asarray(total, dtype=float)
     tail = np.minimum(chi2_cdf(total, dof), chi2_sf(total, dof))
     exact = normal_isf(tail)
-    c = 2.0 / (9.0 * dof)
-    wilson_hilferty = np.abs((np.cbrt(total / dof) - (1.0 - c)) / np.sqrt(c))
-    return np.where((tail == 0) & np.isfinite(total), wilson_hilferty, exact)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        deviance = np.sqrt(np.maximum(total - dof - dof * np.log(total / dof), 0.0))
+    return np.where((tail < _SMALLEST) & np.isfinite(total), deviance, exact)
 
 
 def correlation_z(moment: np.ndarray, power: np.ndarray, dof: float) -> tuple[np.ndarray, int, int]:
@@ -191,9 +194,10 @@ def equivalent_z(pvalue: float) -> float:
     return float(normal_isf(pvalue / 2.0)) if pvalue > 0 else float("inf")
 
 
-def _far_element_z(cov: np.ndarray, count: int, far: np.ndarray, upper) -> float:
-    """The largest |z| among the elements whose p-value underflowed (``far``, (K, m) over ``upper``):
-    the diagonal's by :func:`chi2_equivalent_z`, the correlations' by :func:`t_equivalent_z`."""
+def _far_element_z(cov: np.ndarray, count: int, far: np.ndarray, upper) -> tuple[float, tuple[int, int]]:
+    """The largest |z| among the elements whose p-value underflowed (``far``, (K, m) over ``upper``), and
+    where it is (update, element): the diagonal's by :func:`chi2_equivalent_z`, the correlations' by
+    :func:`t_equivalent_z`."""
     var = np.diagonal(cov, axis1=-2, axis2=-1)
     diag_z = chi2_equivalent_z((count - 1) * var, count - 1)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -201,8 +205,9 @@ def _far_element_z(cov: np.ndarray, count: int, far: np.ndarray, upper) -> float
         t = r * np.sqrt(count - 2) / np.sqrt(np.maximum(1.0 - r * r, 0.0))
     z = np.abs(t_equivalent_z(t, count - 2))
     eye = np.eye(cov.shape[-1], dtype=bool)
-    z = np.where(eye, diag_z[..., None, :] * eye, z)[:, upper[0], upper[1]]
-    return float(np.max(np.where(far, z, 0.0)))
+    z = np.where(far, np.where(eye, diag_z[..., None, :] * eye, z)[:, upper[0], upper[1]], 0.0)
+    k, e = np.unravel_index(int(np.argmax(z)), z.shape)
+    return float(z[k, e]), (int(k), int(e))
 
 
 def centered_nees(error_cov: np.ndarray, filter_cov: np.ndarray) -> np.ndarray:
@@ -265,7 +270,8 @@ def check_covariance(s: EnsembleStatistics, info: ProblemInfo, confidence: float
     worst = equivalent_z(smallest) if not np.isnan(smallest) else np.nan
     if smallest == 0 and not np.any(zero_fail):
         # beyond the smallest double: each underflowed element's z from its own statistic, shown finite
-        worst = _far_element_z(white.cov, s.count, family == 0, upper)
+        worst, (k, e) = _far_element_z(white.cov, s.count, family == 0, upper)
+        i, l = int(upper[0][e]), int(upper[1][e])
     elements = CheckPart(
         name="elements",
         statistic=worst,
