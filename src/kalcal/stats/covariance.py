@@ -205,7 +205,7 @@ def _far_element_z(cov: np.ndarray, count: int, far: np.ndarray, upper) -> tuple
         t = r * np.sqrt(count - 2) / np.sqrt(np.maximum(1.0 - r * r, 0.0))
     z = np.abs(t_equivalent_z(t, count - 2))
     eye = np.eye(cov.shape[-1], dtype=bool)
-    z = np.where(far, np.where(eye, diag_z[..., None, :] * eye, z)[:, upper[0], upper[1]], 0.0)
+    z = np.where(far, np.where(eye, diag_z[..., None, :], z)[:, upper[0], upper[1]], 0.0)
     k, e = np.unravel_index(int(np.argmax(z)), z.shape)
     return float(z[k, e]), (int(k), int(e))
 
