@@ -197,8 +197,9 @@ def check_orthogonality(s: EnsembleStatistics, info: ProblemInfo, confidence: fl
     the estimate, so given the N estimates xhat_k,l the N values eps_k,i are iid N(0, 1) and the
     uncentered sample correlation r = sum eps_i xhat_l / sqrt(sum eps_i^2 sum xhat_l^2) has
     r sqrt(N - 1) / sqrt(1 - r^2) ~ t(N - 1) exactly, at every N. (The earlier z = sqrt(N) r against
-    N(0, 1) was no exact law: a product of two normals has heavy tails.) The statistic is the |z| of
-    the smallest of the K d^2 two-sided p-values (:func:`~kalcal.stats.covariance.equivalent_z`).
+    N(0, 1) was no exact law: a product of two normals has heavy tails.) The statistic is the largest of
+    the K d^2 correlations' |z| (:func:`~kalcal.stats.covariance.correlation_z`: the |z| of the smallest
+    two-sided p-value, finite also where it underflows).
     """
     alpha = 1.0 - confidence
     n_updates, d, _ = s.error_estimate.shape

@@ -42,7 +42,7 @@ __all__ = [
     "correlation_pvalues",
     "correlation_z",
     "element_pvalues",
-    "equivalent_z",
+    "element_z",
     "t_equivalent_z",
     "chi2_equivalent_z",
     "whitened_moments",
@@ -188,26 +188,19 @@ def element_pvalues(cov: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray
     return pvalues, signs
 
 
-def equivalent_z(pvalue: float) -> float:
-    """The |z| of a two-sided normal test with this p-value (inf for 0): the comparisons' common scale,
-    so that a part's statistic stands against its normal Bonferroni bound."""
-    return float(normal_isf(pvalue / 2.0)) if pvalue > 0 else float("inf")
+def element_z(cov: np.ndarray, count: int) -> np.ndarray:
+    """Each whitened covariance element as the normal |z| of its own exact two-sided test, (..., d, d).
 
-
-def _far_element_z(cov: np.ndarray, count: int, far: np.ndarray, upper) -> tuple[float, tuple[int, int]]:
-    """The largest |z| among the elements whose p-value underflowed (``far``, (K, m) over ``upper``), and
-    where it is (update, element): the diagonal's by :func:`chi2_equivalent_z`, the correlations' by
-    :func:`t_equivalent_z`."""
+    The diagonal's by :func:`chi2_equivalent_z` ((N - 1) W_ii against chi-square(N - 1)), the
+    correlations' by :func:`t_equivalent_z` (t(N - 2)): the |z| whose two-sided normal tail is the
+    element's p-value of :func:`element_pvalues`, finite also where that tail underflows."""
     var = np.diagonal(cov, axis1=-2, axis2=-1)
     diag_z = chi2_equivalent_z((count - 1) * var, count - 1)
     with np.errstate(divide="ignore", invalid="ignore"):
         r = cov / np.sqrt(var[..., :, None] * var[..., None, :])
         t = r * np.sqrt(count - 2) / np.sqrt(np.maximum(1.0 - r * r, 0.0))
     z = np.abs(t_equivalent_z(t, count - 2))
-    eye = np.eye(cov.shape[-1], dtype=bool)
-    z = np.where(far, np.where(eye, diag_z[..., None, :], z)[:, upper[0], upper[1]], 0.0)
-    k, e = np.unravel_index(int(np.argmax(z)), z.shape)
-    return float(z[k, e]), (int(k), int(e))
+    return np.where(np.eye(cov.shape[-1], dtype=bool), diag_z[..., None, :], z)
 
 
 def centered_nees(error_cov: np.ndarray, filter_cov: np.ndarray) -> np.ndarray:
@@ -239,8 +232,9 @@ def check_covariance(s: EnsembleStatistics, info: ProblemInfo, confidence: float
     every N (every comparison's law is exact; see the module docstring):
 
     * ``elements``: the K d (d + 1) / 2 whitened variances (chi-square) and correlations (t), each
-      two-sided; Bonferroni. The statistic is the |z| of the smallest p-value
-      (:func:`equivalent_z`), against the normal quantile of the family (the same bound as before);
+      two-sided; Bonferroni. The statistic is the largest |z| of the elements' own tests
+      (:func:`element_z`: the |z| of the smallest p-value, finite also where it underflows), against the
+      normal quantile of the family (the same bound as before);
     * ``centered_nees``: tr(W_k), whose (N - 1) multiple is chi-square(d (N - 1)), two-sided for K
       comparisons.
 
@@ -264,14 +258,13 @@ def check_covariance(s: EnsembleStatistics, info: ProblemInfo, confidence: float
     pvalues = np.where(zero_pass[:, None, None], 1.0, np.where(zero_fail[:, None, None], 0.0, pvalues))
     family = pvalues[:, upper[0], upper[1]]
     smallest = float(np.nanmin(family)) if not np.all(np.isnan(family)) else np.nan
-    k, e = np.unravel_index(int(np.nanargmin(family)), family.shape) if not np.isnan(smallest) else (0, 0)
-    i, l = int(upper[0][e]), int(upper[1][e])
     p_elements = family_pvalue(family)
-    worst = equivalent_z(smallest) if not np.isnan(smallest) else np.nan
-    if smallest == 0 and not np.any(zero_fail):
-        # beyond the smallest double: each underflowed element's z from its own statistic, shown finite
-        worst, (k, e) = _far_element_z(white.cov, s.count, family == 0, upper)
-        i, l = int(upper[0][e]), int(upper[1][e])
+    # the statistic: the largest |z| of the elements' own tests (finite where a p-value underflows)
+    z = element_z(white.cov, s.count)
+    z = np.where(zero_pass[:, None, None], 0.0, np.where(zero_fail[:, None, None], np.inf, z))[:, upper[0], upper[1]]
+    worst = float(np.nanmax(z)) if not np.isnan(smallest) else np.nan
+    k, e = np.unravel_index(int(np.nanargmax(z)), z.shape) if not np.isnan(smallest) else (0, 0)
+    i, l = int(upper[0][e]), int(upper[1][e])
     elements = CheckPart(
         name="elements",
         statistic=worst,
