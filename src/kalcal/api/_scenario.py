@@ -6,7 +6,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from kalcal.api.model import Model, assignments_of
+from kalcal.api.model import Model, assignments_of, flat_settings
 from kalcal.errors import KalcalError
 
 
@@ -58,7 +58,7 @@ def resolve(
     if settings or config is not None:
         from kalcal.models.config import apply_settings, load_toml
 
-        merged = {**(load_toml(config) if config is not None else {}), **dict(settings or {})}
+        merged = {**(load_toml(config) if config is not None else {}), **flat_settings(settings)}
         return apply_settings(scenario, merged)
     return scenario  # a scenario built already (kalcal.load_model, build_scenario)
 

@@ -65,6 +65,7 @@ def calibrate(
     CalibrationResult
     """
     from kalcal.api._scenario import resolve
+    from kalcal.api.model import flat_settings
     from kalcal.errors import KalcalError
 
     if scenario == "scale-bias":
@@ -99,7 +100,7 @@ def calibrate(
 
         # the options a `kalcal fit` of the same logs repeats, named in a warning's next step
         fit_options = [*(["--config", str(config)] if config is not None else []),
-                       *(word for key, value in (settings or {}).items() for word in ("--set", f"{key}={value}"))]
+                       *(word for key, value in flat_settings(settings).items() for word in ("--set", f"{key}={value}"))]
 
         def compute():
             return compute_accel_gps_calibration(

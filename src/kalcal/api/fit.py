@@ -69,6 +69,9 @@ def fit(
     Returns
     -------
     FitResult
+        With ``params``, ``bse``, ``conf_int()``, ``llf``, ``aic``, ``bic``, ``nobs``, ``summary()`` and
+        ``save(out)``; its ``settings`` go straight back into :func:`kalcal.calibrate` and
+        :func:`kalcal.verify` (``settings=fit.settings``).
     """
     from kalcal.api._scenario import resolve
     from kalcal.errors import KalcalError
@@ -104,7 +107,8 @@ def fit(
             return compute_accel_gps_fit(model, imu, gps, free=keys, imu_columns=imu_columns, gps_columns=gps_columns,
                                          init=init, profile=profile, gate=gate, confidence=confidence)
     if out is None:
-        return compute().result
+        run = compute()
+        return dataclasses.replace(run.result, run=run)  # what save() writes
     from kalcal.io.outputs import inputs_of, run_outputs
     from kalcal.jobs.fit import output_names, save_fit
 
@@ -114,4 +118,4 @@ def fit(
     with run_outputs(out, command, names=names, protect=[*files, *inputs_of(model)]) as staging:
         run = compute()
         save_fit(run, staging)
-    return dataclasses.replace(run.result, paths={name: Path(out) / name for name in names})
+    return dataclasses.replace(run.result, paths={name: Path(out) / name for name in names}, run=run)

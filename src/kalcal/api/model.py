@@ -108,9 +108,39 @@ class Model:
         return path
 
 
+def flat_settings(settings: Mapping[str, Any] | None) -> dict[str, Any]:
+    """``settings`` as ``{"section.key": value}``: a section given as a table, ``{"filter": {"key": value}}``,
+    is its dotted keys, as in TOML (``[filter] key = 1`` is ``filter.key = 1``), so that the sectioned
+    settings kalcal writes (``FitResult.settings``, summary.json's ``settings``) go back in as they are.
+
+    Raises
+    ------
+    ConfigError
+        A key given both ways, or a table inside a section's table (settings are ``section.key``).
+    """
+    from kalcal.errors import ConfigError
+
+    flat: dict[str, Any] = {}
+    for key, value in (settings or {}).items():
+        if isinstance(value, Mapping):
+            items = []
+            for name, inner in value.items():
+                if isinstance(inner, Mapping):
+                    raise ConfigError(f"settings: {key}.{name}: expected a value, got a table (settings are section.key)")
+                items.append((f"{key}.{name}", inner))
+        else:
+            items = [(str(key), value)]
+        for name, inner in items:
+            if name in flat:
+                raise ConfigError(f"settings: {name}: given twice (as a dotted key and in its section's table)")
+            flat[name] = inner
+    return flat
+
+
 def assignments_of(settings: Mapping[str, Any] | None) -> list[str]:
-    """``{"section.key": value}`` as the ``--set`` assignments ``section.key=value`` (values as TOML)."""
-    return [f"{key}={value if isinstance(value, str) else _toml(value)}" for key, value in (settings or {}).items()]
+    """``{"section.key": value}`` (or a section's table, :func:`flat_settings`) as the ``--set`` assignments
+    ``section.key=value`` (values as TOML)."""
+    return [f"{key}={value if isinstance(value, str) else _toml(value)}" for key, value in flat_settings(settings).items()]
 
 
 def load_model(path: str | Path, settings: Mapping[str, Any] | None = None):

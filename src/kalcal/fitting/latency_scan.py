@@ -166,7 +166,7 @@ def _markov(parameter):
 
 def _unidentified(parameter, note: str):
     """``parameter`` held at its input: no value and no interval, unidentified, saying ``note``."""
-    return replace(parameter, value=None, ci_low=None, ci_high=None, identified=False, at_bound=False, note=note, held=True)
+    return replace(parameter, value=None, ci_low=None, ci_high=None, identified=False, at_bound=False, note=note, held=True, se=None)
 
 
 def _widened(parameter, grid, values, level, estimate, drop, step):
@@ -191,5 +191,7 @@ def _widened(parameter, grid, values, level, estimate, drop, step):
         notes.append(f"interval widened to where log L along the latency stays within {drop:.3g} of its maximum "
                      f"(a {step * 1e3:.3g} ms grid over the range)")
     span = (float(grid[index[0]]), float(grid[index[-1]]))
-    return replace(parameter, ci_low=ci_low, ci_high=ci_high, note="; ".join(notes)), pieces, span
+    # a widened interval is the grid's set, no longer the Wald one: no other level follows from a standard error
+    se = parameter.se if (ci_low, ci_high) == (parameter.ci_low, parameter.ci_high) else None
+    return replace(parameter, ci_low=ci_low, ci_high=ci_high, note="; ".join(notes), se=se), pieces, span
 

@@ -271,7 +271,11 @@ def maximize(
                 if below is None and linear[i] or above is None:
                     note += "; no limit within the search range on the side where the profile does not fall"
         partners = tuple(free[j].name for j in ridge[i]) if i in ridge else ()
-        parameters[p.name] = FitParameter(p.name, value, ci_low, ci_high, p.unit, p.start, identified, at_bound, note, partners)
+        # the standard error on the search's scale (of ln(value), or of the value on a linear scale) where the
+        # interval is its Wald interval, so that another level follows from it (FitResult.conf_int)
+        wald = float(se[i] * units[i] if linear[i] else se[i]) if i in se and ci_low is not None else None
+        parameters[p.name] = FitParameter(p.name, value, ci_low, ci_high, p.unit, p.start, identified, at_bound, note, partners,
+                                          scale=p.scale, se=wald)
         # a profile's curve: half the grid, with the points its ends and crossings already profiled
         known = [v for (j, v) in profiled.known if j == i] if profile else []
         curves[p.name] = _curve(along, i, u_hat, low, high, ci_low, ci_high, curve_points // 2 + 1 if profile else curve_points,

@@ -3,7 +3,13 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:  # annotations only: a fit needs pandas only when its tables are read
+    import pandas as pd
 
 #: how the 95% intervals were computed
 INTERVAL_METHODS = ("observed-information", "profile")
@@ -42,6 +48,13 @@ class FitParameter:
         True for a latency the fit could not resolve (:mod:`kalcal.fitting.latency_scan`): unidentified,
         held at its input while the other settings were refitted. Not in fit.json's entry (the ``note``
         says it).
+    scale : {"log", "linear"}
+        The scale the search ran on: u = ln(value) (a positive setting), or u = value (a time offset).
+    se : float or None
+        The standard error of u from the observed information (dimensionless for ``scale="log"``, the
+        setting's unit for ``"linear"``) where ``ci_low``/``ci_high`` are its Wald interval
+        u_hat +- z se mapped back; None where the interval is a likelihood-ratio one (profile, one-sided,
+        consistent with 0, a latency's grid) or there is none. Not in fit.json's entry.
     """
 
     name: str
@@ -55,6 +68,8 @@ class FitParameter:
     note: str = ""
     trades_off: tuple[str, ...] = ()
     held: bool = False
+    scale: str = "log"
+    se: float | None = None
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -69,9 +84,13 @@ class FitParameter:
         }
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)
 class FitResult:
     """A fit of one log's noise settings by maximum likelihood.
+
+    Read as a statsmodels fit is: :attr:`params` and :attr:`bse` (pandas Series by setting name),
+    :meth:`conf_int`, :attr:`llf`, :attr:`aic`, :attr:`bic`, :attr:`nobs`, :meth:`summary` (also ``str()``)
+    and :meth:`save` (the files of ``kalcal fit --out``).
 
     Attributes
     ----------
@@ -113,6 +132,11 @@ class FitResult:
         More of fit.json (accel-gps: the fitted filter's final ``bias`` and ``bias_std``, m/s^2).
     paths : dict
         The files written, by name, when the fit wrote a folder.
+    df_model : int or None
+        The parameters the search maximized log L over (k in the AIC; a latency held at its input is not
+        one); None for a result not made by a search (then the parameters not held).
+    run : FitRun or None
+        What :meth:`save` writes (:class:`kalcal.jobs.fit.FitRun`): set by :func:`kalcal.fit`.
     """
 
     scenario: str
@@ -134,6 +158,8 @@ class FitResult:
     extra: dict[str, Any] = field(default_factory=dict)
     #: the files written, by name, when the fit was given a folder (``kalcal.fit(..., out=...)``)
     paths: dict[str, Any] = field(default_factory=dict)
+    df_model: int | None = None
+    run: Any = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
         if self.interval_method not in INTERVAL_METHODS:
@@ -147,12 +173,153 @@ class FitResult:
         notes = [*rest.pop("notes", []), *getattr(fit, "notes", ())]
         return cls(
             scenario=scenario, parameters=fit.parameters, loglik=fit.loglik, aic=fit.aic, converged=fit.converged,
-            interval_method=fit.interval_method, curves=fit.curves, notes=notes, **rest,
+            interval_method=fit.interval_method, curves=fit.curves, notes=notes, df_model=len(fit.values), **rest,
         )
 
     def value(self, name: str) -> float | None:
         """The estimate of ``name`` (None when unidentified)."""
         return self.parameters[name].value
+
+    # -- the statsmodels shape ------------------------------------------------------------------------
+
+    @property
+    def params(self) -> pd.Series:
+        """The estimates by setting name, in their units (NaN where unidentified)."""
+        import pandas as pd
+
+        return pd.Series({name: _nan(p.value) for name, p in self.parameters.items()}, dtype=float, name="estimate")
+
+    @property
+    def bse(self) -> pd.Series:
+        """The standard errors of :attr:`params` from the observed information, by setting name: on a log
+        scale the delta method's value x se(ln value) (the intervals are asymmetric: :meth:`conf_int`);
+        NaN where the interval is not the observed information's Wald one (profile, one-sided, consistent
+        with 0, a latency's grid) or the setting is unidentified."""
+        import pandas as pd
+
+        return pd.Series({name: _standard_error(p) for name, p in self.parameters.items()}, dtype=float, name="bse")
+
+    def conf_int(self, alpha: float | None = None, level: float | None = None) -> pd.DataFrame:
+        """The intervals at ``level`` (or ``1 - alpha``; default the fit's :attr:`confidence`), one row per
+        setting, columns ``lower`` and ``upper`` in the setting's unit (NaN: no limit, or unidentified).
+
+        At the fit's own level these are the stored ``ci_low``/``ci_high`` (0 as ``lower`` for an estimate
+        consistent with 0). At another level: the Wald interval on the search's scale from the same
+        observed information, exp(ln(value) +- z se) for a positive setting (value +- z se on a linear
+        scale), z the normal quantile of (1 + level) / 2. A likelihood-ratio interval (profile, one-sided,
+        consistent with 0, a latency's grid) holds at the fit's level only: another level raises a
+        KalcalError (a ValueError) naming the settings; fit again with ``confidence=level``.
+        """
+        import pandas as pd
+
+        from kalcal.api._display import level_of, same_level
+        from kalcal.errors import KalcalError
+
+        confidence = level_of(alpha, level, self.confidence)
+        stored = same_level(confidence, self.confidence)
+        rows, refused = {}, []
+        for name, p in self.parameters.items():
+            if p.value is None:
+                rows[name] = (np.nan, np.nan)
+            elif stored:
+                rows[name] = (_nan(p.ci_low), _nan(p.ci_high))
+            elif p.se is not None:
+                rows[name] = wald_interval(p, confidence)
+            else:
+                refused.append(name)
+        if refused:
+            kind = "profile-likelihood" if self.interval_method == "profile" else "likelihood-ratio"
+            raise KalcalError(
+                f"conf_int: level {confidence:g}: the {kind} interval of {', '.join(refused)} holds at the fit's "
+                f"level {self.confidence:g} only; fit again with confidence={confidence:g}"
+            )
+        return pd.DataFrame.from_dict(rows, orient="index", columns=["lower", "upper"])
+
+    @property
+    def llf(self) -> float:
+        """log L at the estimate (:attr:`loglik`)."""
+        return self.loglik
+
+    @property
+    def nobs(self) -> int:
+        """The measurements in the likelihood (:attr:`fixes`: fixes, or samples for scale-bias)."""
+        return self.fixes
+
+    @property
+    def k(self) -> int:
+        """The free parameters counted by :attr:`aic` and :attr:`bic` (:attr:`df_model`)."""
+        return self.df_model if self.df_model is not None else sum(not p.held for p in self.parameters.values())
+
+    @property
+    def bic(self) -> float:
+        """k ln(nobs) - 2 log L (Schwarz), k the free parameters (:attr:`k`)."""
+        return self.k * float(np.log(self.nobs)) - 2.0 * self.loglik
+
+    def summary(self) -> str:
+        """The fit as a text table, as statsmodels' ``summary()``: log L, AIC, BIC, observations, then per
+        setting the estimate, standard error, interval at the fit's level and unit, then the notes."""
+        from kalcal.api._display import fmt, text_table
+
+        level = self.confidence
+        tail = (1.0 - level) / 2.0
+        table = text_table(
+            ["setting", "estimate", "std err", f"[{tail:.3g}", f"{1 - tail:.3g}]", "unit"],
+            [[name, *row] for name, row in self._rows()],
+        )
+        width = max(len(line) for line in table)
+        facts = [
+            ("log-likelihood", fmt(self.llf, 6)), ("AIC", fmt(self.aic, 6)), ("BIC", fmt(self.bic, 6)),
+            ("observations", str(self.nobs)), ("free parameters", str(self.k)),
+            ("converged", fmt(self.converged)), ("intervals", f"{self.interval_method}, {level:.4g}"),
+        ]
+        pairs = [f"{name}: {value}" for name, value in facts]
+        lines = [f"kalcal fit {self.scenario}".center(width), "=" * width, *pairs, "=" * width, *table, "=" * width]
+        lines.append(f"{'adequate' if self.adequate else 'NOT ADEQUATE'}: {self.adequacy}")
+        notes = [f"{name}: {p.note}" for name, p in self.parameters.items() if p.note] + list(self.notes)
+        lines += [f"[{i}] {note}" for i, note in enumerate(notes, 1)]
+        return "\n".join(lines)
+
+    def _rows(self) -> list[tuple[str, list[Any]]]:
+        """Per setting: estimate, standard error, lower, upper (stored level), unit."""
+        ci, se = self.conf_int(), self.bse
+        return [(name, [_nan(p.value), se[name], ci.loc[name, "lower"], ci.loc[name, "upper"], p.unit])
+                for name, p in self.parameters.items()]
+
+    def __str__(self) -> str:
+        return self.summary()
+
+    def __repr__(self) -> str:
+        shown = ", ".join(
+            f"{name}=" + ("unidentified" if p.value is None else f"{p.value:.4g}") for name, p in self.parameters.items()
+        )
+        return (f"FitResult({self.scenario}: {shown}; loglik={self.loglik:.6g}, nobs={self.nobs}, "
+                f"adequate={self.adequate})")
+
+    def _repr_html_(self) -> str:
+        import html
+
+        from kalcal.api._display import html_facts, html_table
+
+        tail = (1.0 - self.confidence) / 2.0
+        facts = html_facts(f"kalcal fit {self.scenario}", [
+            ("log L", self.llf), ("AIC", self.aic), ("BIC", self.bic), ("observations", self.nobs),
+            ("converged", self.converged), ("intervals", f"{self.interval_method} {self.confidence:g}"),
+        ])
+        table = html_table(["setting", "estimate", "std err", f"[{tail:.3g}", f"{1 - tail:.3g}]", "unit", "note"],
+                           [[name, *row, self.parameters[name].note] for name, row in self._rows()])
+        verdict = f"<b>{'adequate' if self.adequate else 'NOT ADEQUATE'}</b>: {html.escape(self.adequacy)}"
+        return f"<div>{facts}<br>{verdict}{table}</div>"
+
+    def save(self, out: str | Path) -> dict[str, Path]:
+        """Write ``fit.json``, ``filter.toml``, ``fit.png`` and (accel-gps) ``imu.yaml`` into ``out``, as
+        ``kalcal fit --out`` does (one set: whole or not at all, docs/outputs.md); returns the files by name."""
+        from kalcal.errors import KalcalError
+
+        if self.run is None:
+            raise KalcalError("save: this FitResult holds no files to write (only kalcal.fit's results do)")
+        from kalcal.jobs.fit import save_fit
+
+        return save_fit(self.run, out)
 
     def to_dict(self) -> dict[str, Any]:
         """fit.json's content (``schema_version`` is added by the writer, :func:`kalcal.io.results.write_json`)."""
@@ -175,6 +342,29 @@ class FitResult:
         if self.rejected_fixes is not None:
             document["rejected_fixes"] = {"count": len(self.rejected_fixes), "rows": list(self.rejected_fixes)}
         return document
+
+
+def _nan(value: float | None) -> float:
+    return np.nan if value is None else float(value)
+
+
+def _standard_error(p: FitParameter) -> float:
+    """The standard error of ``p``'s value: se itself on a linear scale, value x se(ln value) on a log one."""
+    if p.se is None or p.value is None:
+        return np.nan
+    return float(p.se) if p.scale == "linear" else float(p.value) * float(p.se)
+
+
+def wald_interval(p: FitParameter, level: float) -> tuple[float, float]:
+    """The Wald interval of ``p`` at ``level`` on its search's scale: u_hat +- z se, z the normal quantile of
+    (1 + level) / 2, mapped back (exp on the log scale); ``p.se`` must be set."""
+    from kalcal.stats.distributions import normal_isf
+
+    z = float(normal_isf((1.0 - level) / 2.0))
+    if p.scale == "linear":
+        return float(p.value - z * p.se), float(p.value + z * p.se)
+    u = float(np.log(p.value))
+    return float(np.exp(u - z * p.se)), float(np.exp(u + z * p.se))
 
 
 def fitted_point(fit) -> dict[str, float]:
