@@ -243,6 +243,76 @@ class CalibrationResult:
 
         return save_calibration(self.calibration, out)
 
+    @property
+    def params(self) -> pd.Series:
+        """The estimates: ``bias`` and, where estimated, ``scale`` (:attr:`bias`, :attr:`scale`)."""
+        import pandas as pd
+
+        return pd.Series({name: value for name, (value, _, _) in self._estimates().items()}, dtype=float, name="estimate")
+
+    @property
+    def bse(self) -> pd.Series:
+        """Their 1-sigma from the final covariance (:attr:`bias_std`, :attr:`scale_std`), same index."""
+        import pandas as pd
+
+        return pd.Series({name: sigma for name, (_, sigma, _) in self._estimates().items()}, dtype=float, name="bse")
+
+    def conf_int(self, alpha: float | None = None, level: float | None = None) -> pd.DataFrame:
+        """estimate +- z sigma at ``level`` (or ``1 - alpha``; default 0.95), z the normal quantile of
+        (1 + level) / 2: the filter's Gaussian posterior at the last fix or sample. Columns ``lower`` and
+        ``upper``, one row per estimate (:attr:`params`' index).
+
+        A sigma the diagnostics disown (:attr:`sigma_trusted`, :attr:`scale_sigma_trusted` False) gives an
+        interval that is not to be used: a ``UserWarning`` names the estimates (and the next step is in
+        :attr:`warnings`). accel-gps's :attr:`settings_sigma` (the bias's sigma over the noise settings the
+        log cannot reject) is not in these intervals.
+        """
+        import warnings
+
+        import pandas as pd
+
+        from kalcal.api._display import level_of
+        from kalcal.stats.distributions import normal_isf
+
+        confidence = level_of(alpha, level, 0.95)
+        z = float(normal_isf((1.0 - confidence) / 2.0))
+        estimates = self._estimates()
+        untrusted = [name for name, (_, _, trusted) in estimates.items() if not trusted]
+        if untrusted:
+            warnings.warn(f"conf_int: the sigma of {', '.join(untrusted)} is not trusted (the diagnostics or the "
+                          "windows disown it): the interval is not to be used; see the result's warnings", stacklevel=2)
+        rows = {name: (value - z * sigma, value + z * sigma) for name, (value, sigma, _) in estimates.items()}
+        return pd.DataFrame.from_dict(rows, orient="index", columns=["lower", "upper"])
+
+    def _estimates(self) -> dict[str, tuple[float, float, bool]]:
+        """Per estimate: value, 1-sigma and whether the sigma is trusted."""
+        rows = {"bias": (self.bias, self.bias_std, bool(self.sigma_trusted))}
+        if self.scale is not None:
+            rows["scale"] = (self.scale, np.nan if self.scale_std is None else self.scale_std, bool(self.scale_sigma_trusted))
+        return rows
+
+    def _repr_html_(self) -> str:
+        from kalcal.api._display import html_facts, html_table
+
+        ci = self._conf_int_quiet()
+        rows = [[name, value, sigma, ci.loc[name, "lower"], ci.loc[name, "upper"], "yes" if trusted else "NO"]
+                for name, (value, sigma, trusted) in self._estimates().items()]
+        facts = html_facts(f"kalcal calibrate {self.scenario}", [
+            ("consistent", self.diagnostics.get("consistent")), ("warnings", len(self.warnings)),
+        ] + ([] if self.settings_sigma is None else [("bias sigma over the settings", self.settings_sigma.bias_std)]))
+        table = html_table(["estimate", "value", "sigma", "[0.025", "0.975]", "sigma trusted"], rows)
+        notes = "".join(f"<li>{html.escape(str(w.get('code', '')))}: {html.escape(str(w.get('message', '')))}</li>"
+                        for w in self.warnings)
+        return f"<div>{facts}{table}" + (f"<ul>{notes}</ul>" if notes else "") + "</div>"
+
+    def _conf_int_quiet(self, level: float = 0.95) -> pd.DataFrame:
+        """:meth:`conf_int` without its warning (the HTML table says whether each sigma is trusted)."""
+        import warnings
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)
+            return self.conf_int(level=level)
+
     def __repr__(self) -> str:
         scale = "" if self.scale is None else f", scale={self.scale:.6g} ± {self.scale_std:.3g}"
         if self.scale is not None and self.scale_sigma_trusted is False:
@@ -344,6 +414,21 @@ class NoiseResult:
 
         return kalibr_yaml(self.run.identification, rostopic=rostopic)
 
+    def _repr_html_(self) -> str:
+        from kalcal.api._display import html_facts, html_table
+
+        names = ("velocity_random_walk", "bias_instability", "rate_random_walk", "accel_noise_std", "bias_walk_std")
+        rows = []
+        for name in names:
+            p = getattr(self, name)
+            rows.append([name, p.value, p.low, p.high, p.upper_bound, p.unit, p.note])
+        confidence = self.velocity_random_walk.confidence
+        facts = html_facts("kalcal noise", [("rate, Hz", self.rate), ("confidence", confidence), ("warnings", len(self.warnings))])
+        table = html_table(["parameter", "value", "lower", "upper", "upper bound", "unit", "note"], rows)
+        notes = "".join(f"<li>{html.escape(str(w.get('code', '')))}: {html.escape(str(w.get('message', '')))}</li>"
+                        for w in self.warnings)
+        return f"<div>{facts}{table}" + (f"<ul>{notes}</ul>" if notes else "") + "</div>"
+
     def __repr__(self) -> str:
         def show(p) -> str:
             return "not identified" if p.value is None else f"{p.value:.4g} {p.unit}"
@@ -379,3 +464,13 @@ class SimulationResult:
 
     def __repr__(self) -> str:
         return f"SimulationResult({self.scenario}: {', '.join(f'{k} ({len(v)} rows)' for k, v in self.logs.items())})"
+
+    def _repr_html_(self) -> str:
+        from kalcal.api._display import html_facts, html_table
+
+        logs = html_table(["log", "rows", "columns"], [[name, len(frame), ", ".join(map(str, frame.columns))]
+                                                       for name, frame in self.logs.items()])
+        truth = "" if not self.truth else html_table(
+            ["truth", "value"], [[key, value] for key, value in self.truth.items() if not isinstance(value, (dict, list))]
+        )
+        return f"<div>{html_facts(f'kalcal simulate {self.scenario}', [])}{logs}{truth}</div>"
