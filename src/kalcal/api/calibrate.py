@@ -45,6 +45,8 @@ def calibrate(
         scale-bias: a log with a ``reference`` and a ``sensor`` column (and optionally ``time`` [s]).
     settings : dict, optional
         ``{"section.key": value}``, the keys of ``--set``; ``config`` a TOML file of them.
+        A section's table, ``{"filter": {"key": value}}``, is its dotted keys, as in TOML: a fit's
+        ``settings`` go in as they are (``settings=fit.settings``).
     imu_columns, gps_columns, init, max_imu_gap, on_gap, form, smooth, gate, reference, sensor
         As ``kalcal calibrate``'s options of those names (``gate``: accel-gps, a confidence or None).
     prior : {"diffuse", "settings"}, optional

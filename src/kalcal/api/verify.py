@@ -49,6 +49,8 @@ def verify(
         Root seed: the same seed gives the same numbers, whatever ``threads``, ``workers``, ``batch_size``.
     settings : dict, optional
         ``{"section.key": value}``, the keys of ``--set`` (``{"truth.bias_std": 0.2}``).
+        A section's table, ``{"filter": {"key": value}}``, is its dotted keys, as in TOML: a fit's
+        ``settings`` go in as they are (``settings=fit.settings``).
     config : path, optional
         A TOML file of settings (``--config``).
     engine, confidence, batch_size, checkpoint, long_run, form
