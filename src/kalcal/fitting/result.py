@@ -272,8 +272,14 @@ class FitResult:
             ("observations", str(self.nobs)), ("free parameters", str(self.k)),
             ("converged", fmt(self.converged)), ("intervals", f"{self.interval_method}, {level:.4g}"),
         ]
-        pairs = [f"{name}: {value}" for name, value in facts]
-        lines = [f"kalcal fit {self.scenario}".center(width), "=" * width, *pairs, "=" * width, *table, "=" * width]
+        # two facts a line, as statsmodels' header
+        left = max(len(f"{name}: {value}") for name, value in facts[0::2]) + 4
+        pairs = [
+            (f"{facts[i][0]}: {facts[i][1]}".ljust(left) + (f"{facts[i + 1][0]}: {facts[i + 1][1]}" if i + 1 < len(facts) else "")).rstrip()
+            for i in range(0, len(facts), 2)
+        ]
+        width = max(width, *map(len, pairs))
+        lines = [f"kalcal fit {self.scenario}".center(width).rstrip(), "=" * width, *pairs, "=" * width, *table, "=" * width]
         lines.append(f"{'adequate' if self.adequate else 'NOT ADEQUATE'}: {self.adequacy}")
         notes = [f"{name}: {p.note}" for name, p in self.parameters.items() if p.note] + list(self.notes)
         lines += [f"[{i}] {note}" for i, note in enumerate(notes, 1)]
