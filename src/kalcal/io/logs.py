@@ -140,7 +140,7 @@ def read_table(
         ending = "".join(path.suffixes[-2:]) if path.suffix.lower() in (".gz", ".bz2", ".xz", ".zst") else path.suffix
         raise DataError(f"{path}: unknown file type {ending!r} (expected {FORMAT_NAMES})")
     if kind in TOPIC_FORMATS:
-        return _read_topic(path, kind, topic or topic_of(columns, path))
+        return _read_topic(path, kind, topic or topic_of(columns, path), role)
     if topic is not None:
         raise DataError(f"{path}: --topic {topic}: applies to a ROS bag or a ULog, not a {kind} file")
     if not path.is_file():
@@ -165,7 +165,28 @@ def read_table(
     return frame
 
 
-def _read_topic(path: Path, kind: str, topic: str | None) -> pd.DataFrame:
+#: what accel-gps takes of a GNSS receiver in a bag or ULog, said where a GPS topic lacks it
+GNSS_SUPPORTED = (
+    "accel-gps takes position [m] and velocity [m/s] along the axis of motion, named as TOPIC.FIELD in "
+    "--gps-columns, e.g. position=/odom.pose.pose.position.x,velocity=/odom.twist.twist.linear.x "
+    "(nav_msgs/Odometry) or position=vehicle_local_position.x,velocity=vehicle_local_position.vx (ULog); "
+    "sensor_msgs/NavSatFix and vehicle_gps_position (latitude/longitude) are not taken: convert them to "
+    "metres along the axis first"
+)
+
+
+def check_gnss_columns(frame: pd.DataFrame, name: str, columns: Mapping[str, str]) -> None:
+    """For a GPS log read from a bag or ULog topic: refuse, in one line saying what accel-gps takes
+    (:data:`GNSS_SUPPORTED`), a topic without the position or velocity column asked for."""
+    if "source" not in frame.attrs:
+        return  # a table's missing column is numeric_columns' message
+    missing = [f"{role} {columns[role]!r}" for role in ("position", "velocity") if columns[role] not in frame.columns]
+    if missing:
+        kind = frame.attrs.get("type")
+        raise DataError(f"{name}{f' ({kind})' if kind else ''}: has no {' or '.join(missing)}: {GNSS_SUPPORTED}")
+
+
+def _read_topic(path: Path, kind: str, topic: str | None, role: str = "log") -> pd.DataFrame:
     """One topic of a bag or ULog (:mod:`kalcal.io.rosbag`, :mod:`kalcal.io.ulog`)."""
     if not path.exists():
         raise DataError(f"{path}: no such file")
@@ -180,6 +201,7 @@ def _read_topic(path: Path, kind: str, topic: str | None) -> pd.DataFrame:
         raise DataError(
             f"{path}: {what} holds topics: name the columns as TOPIC.FIELD "
             f"(e.g. /imu.linear_acceleration.x, sensor_combined.accelerometer_m_s2[0]) or give the topic (topics: {listing})"
+            + (f"; {GNSS_SUPPORTED}" if role == "gps" else "")
         )
     if kind == "rosbag":
         from kalcal.io.rosbag import read_bag

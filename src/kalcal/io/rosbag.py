@@ -184,6 +184,7 @@ def read_bag(path: str | Path, topic: str, *, message_type: str | None = None) -
     frame = pd.DataFrame(np.asarray(rows, dtype=float).reshape(len(rows), len(names)), columns=names)
     frame.insert(0, "time", time)
     frame.attrs["source"] = f"{path} topic {topic}"
+    frame.attrs["type"] = kind
     frame.attrs["time"] = (
         "header stamp, s from the bag's start" if header else "receive time (no header), s from the bag's start"
     )
