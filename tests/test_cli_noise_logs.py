@@ -212,3 +212,26 @@ def test_accel_gps_from_one_bag_equals_the_same_samples_from_csv(tmp_path):
     for key in ("bias", "bias_std", "fixes_used", "diagnostics"):
         assert a[key] == b[key], key
     assert a["imu"] == f"{bag} topic /imu" and a["gps"] == f"{bag} topic /odom"
+
+
+def test_scale_bias_from_a_bag_topic_equals_csv(tmp_path):
+    """--reference and --sensor as TOPIC.FIELD of one bag topic (here an Imu's x and y carrying them)."""
+    sim = tmp_path / "sim"
+    assert _invoke("simulate", "scale-bias", "--out", sim).exit_code == 0
+    data = pd.read_csv(sim / "data.csv")
+    stamps = ORIGIN_NS + np.round(data["time"].to_numpy() * 1e9).astype(np.int64)
+    values = np.column_stack([data["reference"], data["sensor"], np.zeros(len(data))])
+    bag = write_imu_bag(tmp_path / "sb.bag", stamps, values)
+    from kalcal.io.logs import read_table
+
+    frame = read_table(bag, columns=["/imu.linear_acceleration.x"])
+    pd.DataFrame({"time": frame["time"], "reference": frame["/imu.linear_acceleration.x"],
+                  "sensor": frame["/imu.linear_acceleration.y"]}).to_csv(tmp_path / "sb.csv", index=False, float_format="%.17g")
+    from_csv = _invoke("calibrate", "scale-bias", "--data", tmp_path / "sb.csv", "--out", tmp_path / "csv")
+    from_bag = _invoke("calibrate", "scale-bias", "--data", bag, "--reference", "/imu.linear_acceleration.x",
+                       "--sensor", "/imu.linear_acceleration.y", "--out", tmp_path / "bag")
+    assert from_csv.exit_code == 0 and from_bag.exit_code == 0, from_csv.output + from_bag.output
+    a, b = _summary(tmp_path / "bag"), _summary(tmp_path / "csv")
+    for key in ("theta", "theta_covariance", "scale_error", "bias", "mean_nis", "consistent", "samples_used"):
+        assert a[key] == b[key], key
+    assert a["data"] == f"{bag} topic /imu"

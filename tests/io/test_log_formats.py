@@ -137,3 +137,13 @@ def test_topic_is_refused_for_a_table(tmp_path):
     path.write_text("time,accel\n0,1\n")
     assert "--topic /imu: applies to a ROS bag or a ULog" in _error(lambda: read_table(path, topic="/imu"))
     assert "unknown file type '.txt.gz'" in _error(lambda: read_table(tmp_path / "log.txt.gz"))
+
+
+def test_a_ulog_topic_of_several_instances_is_topic_colon_n():
+    from pyulog import ULog
+
+    ulog = ULog(str(ULOG))
+    second = next(d for d in ulog.data_list if d.name == "sensor_accel" and d.multi_id == 1)
+    frame = read_table(ULOG, columns=["sensor_accel:1.x"])
+    np.testing.assert_array_equal(frame["sensor_accel:1.x"], second.data["x"].astype(float))
+    assert len(read_table(ULOG, topic="sensor_accel")) == len(next(d for d in ulog.data_list if d.name == "sensor_accel").data["x"])

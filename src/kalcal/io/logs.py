@@ -1,6 +1,6 @@
-"""Read sensor logs into validated float columns: CSV (also compressed), Parquet, ROS bags, PX4 ULog, or a
-pandas DataFrame, the reader chosen by the file's name (:data:`READERS`, :func:`log_format`).
+"""Read sensor logs (CSV, also compressed, Parquet, ROS bags, PX4 ULog, or a DataFrame) into validated float columns.
 
+The reader is chosen by the file's name (:data:`READERS`, :func:`log_format`).
 Every problem raises :class:`~kalcal.errors.DataError` naming the file, the column and, where there is
 one, the row (1-based, counting data rows after the header, or messages of a topic) and the value. CSV
 and Parquet are read by pandas (``read_csv``, which decompresses ``.csv.gz``, ``.csv.bz2``, ``.csv.xz``
