@@ -68,7 +68,7 @@ def _help_texts():
 
 def test_every_help_text_with_brackets_is_found():
     pairs = list(_help_texts())
-    assert ("calibrate", "accel-gps: accelerometer log (CSV or Parquet): time [s], accel [m/s^2].") in pairs
+    assert ("calibrate", "accel-gps: accelerometer log (CSV, Parquet, ROS bag, ULog; a topic's columns TOPIC.FIELD): time [s], accel [m/s^2].") in pairs
     assert len(pairs) >= 6
 
 

@@ -15,13 +15,17 @@ def noise(
     strict: bool = False,
     out: str | Path | None = None,
     kalibr: bool = True,
+    topic: str | None = None,
+    axis: str | None = None,
 ) -> NoiseResult:
     """Identify accelerometer noise from a static log: Allan deviation, N, B, K and the [filter] settings.
 
     Parameters
     ----------
     imu : DataFrame or path
-        The static log: time [s], accel [m/s^2] (CSV, Parquet or a DataFrame).
+        The static log: time [s], accel [m/s^2] (CSV, also .csv.gz/.bz2/.xz/.zst, Parquet or a DataFrame),
+        or a ROS 1/2 bag's ``sensor_msgs/msg/Imu`` topic or a PX4 ULog's ``sensor_combined``, read as
+        three axes (:func:`kalcal.jobs.noise.compute_noise`).
     imu_columns : str, optional
         Map roles to columns, ``"time=t,accel=ax"``.
     confidence : float
@@ -31,6 +35,11 @@ def noise(
     out : path, optional
         Also write the files there, as ``kalcal noise --out`` (the folder is checked first), the Kalibr
         ``imu.yaml`` among them unless ``kalibr`` is False.
+    topic : str, optional
+        A bag's topic (default: its only ``sensor_msgs/msg/Imu`` topic) or a ULog's (``sensor_combined``).
+    axis : {"x", "y", "z"}, optional
+        Of a three-axis log, the axis whose ``[filter]`` settings are written (filter.toml) and whose
+        parameters the result's attributes hold; every axis is in ``result.axes`` either way.
 
     Returns
     -------
@@ -43,11 +52,11 @@ def noise(
     from kalcal.jobs.noise import compute_noise, output_names, save_noise
 
     if out is None:
-        return NoiseResult.from_run(compute_noise(imu, imu_columns=imu_columns, confidence=confidence, strict=strict))
+        return NoiseResult.from_run(compute_noise(imu, imu_columns=imu_columns, confidence=confidence, strict=strict, topic=topic, axis=axis))
     from kalcal.io.outputs import run_outputs
 
     protect = [imu] if isinstance(imu, (str, Path)) else []
     with run_outputs(out, "noise", names=output_names(kalibr), protect=protect) as staging:
-        run = compute_noise(imu, imu_columns=imu_columns, confidence=confidence, strict=strict)
+        run = compute_noise(imu, imu_columns=imu_columns, confidence=confidence, strict=strict, topic=topic, axis=axis)
         summary = save_noise(run, staging, kalibr=kalibr)
     return NoiseResult.from_run(run, summary["files"])

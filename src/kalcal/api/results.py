@@ -358,6 +358,10 @@ class NoiseResult:
         ``allan.csv``: tau [s], adev and its bounds [m/s^2], edf, noise type.
     warnings : list of dict
         ``{"code", "message"}`` each (a log that does not look static), empty when none.
+    axes : dict
+        A three-axis log's (a bag's or ULog's accelerometer) ``{"x": NoiseIdentification, "y": ..., "z":
+        ...}``, empty for one column. The parameters above are then the selected axis's (``axis=``), None
+        without one, and ``kalibr`` holds the largest densities over the axes.
     """
 
     velocity_random_walk: Any
@@ -372,26 +376,27 @@ class NoiseResult:
     warnings: list
     run: Any = field(repr=False, compare=False)
     paths: dict = field(default_factory=dict)
+    axes: dict = field(default_factory=dict, repr=False)
 
     @classmethod
     def from_run(cls, run, paths: dict | None = None) -> NoiseResult:
         """The result of a :class:`kalcal.jobs.noise.NoiseRun`."""
-        from kalcal.calibration.kalibr import kalibr_values
+        from kalcal.calibration.kalibr import axes_kalibr_values, kalibr_values
 
         r = run.identification
+        rostopic = getattr(run, "topic", None) or "/imu0"
+        axes = dict(getattr(run, "axes", {}) or {})
+        names = ("velocity_random_walk", "bias_instability", "rate_random_walk", "accel_noise_std", "bias_walk_std")
         return cls(
-            r.velocity_random_walk,
-            r.bias_instability,
-            r.rate_random_walk,
-            r.accel_noise_std,
-            r.bias_walk_std,
-            float(r.rate),
+            *(None if r is None else getattr(r, name) for name in names),
+            float(run.summary["rate"]["value"]),
             dict(run.summary["filter"]),
-            kalibr_values(r),
+            axes_kalibr_values(axes, rostopic) if axes else kalibr_values(r, rostopic),
             run.allan,
             list(run.summary["warnings"]),
             run,
             dict(paths or {}),
+            axes,
         )
 
     def to_dict(self) -> dict[str, Any]:

@@ -100,3 +100,56 @@ def fit_kalibr_yaml(result, source: str, rate: float, rostopic: str = "/imu0") -
         f"# VINS-Mono / OpenVINS names: acc_n: {_number(n)}, acc_w: {_number(k)} (the same densities)",
     ]
     return "\n".join(lines) + "\n"
+
+
+def _largest(parameters: dict[str, Any]):
+    """The largest of the axes' values of one parameter, as a parameter: the axis's own where every axis
+    has one; else not identified (the largest density is then unknown), with the largest value or upper
+    bound over the axes as its bound and the axes without a value named in its note."""
+    import dataclasses
+
+    missing = [axis for axis, p in parameters.items() if not p.identified]
+    if not missing:
+        return max(parameters.values(), key=lambda p: p.value)
+    bound = max(p.value if p.identified else p.upper_bound for p in parameters.values())
+    first = parameters[missing[0]]
+    note = f"axis {', '.join(missing)}: {first.note}"
+    return dataclasses.replace(first, value=None, low=None, high=None, upper_bound=bound, note=note)
+
+
+def largest_identification(axes: dict[str, Any]):
+    """One identification holding, for N and K, the largest over ``axes`` (``{axis: NoiseIdentification}``,
+    all at the same rate): the conservative single value a one-IMU noise model (Kalibr's) takes."""
+    import dataclasses
+
+    first = next(iter(axes.values()))
+    return dataclasses.replace(
+        first,
+        velocity_random_walk=_largest({a: r.velocity_random_walk for a, r in axes.items()}),
+        rate_random_walk=_largest({a: r.rate_random_walk for a, r in axes.items()}),
+    )
+
+
+def axes_kalibr_values(axes: dict[str, Any], rostopic: str = "/imu0") -> dict[str, Any]:
+    """:func:`kalibr_values` of the largest densities over the axes (:func:`largest_identification`)."""
+    return kalibr_values(largest_identification(axes), rostopic)
+
+
+def axes_kalibr_yaml(axes: dict[str, Any], rostopic: str = "/imu0") -> str:
+    """The Kalibr ``imu.yaml`` of a three-axis log: each density the largest of the axes', stated in its header
+    with every axis's value."""
+
+    def listing(name: str) -> str:
+        return ", ".join(
+            f"{axis} {getattr(r, name).value:.6g}" if getattr(r, name).identified else f"{axis} not identified"
+            for axis, r in axes.items()
+        )
+
+    header = [
+        f"# each density is the largest of the {len(axes)} axes' (Kalibr takes one value for all axes):",
+        f"#   accelerometer_noise_density (N) per axis: {listing('velocity_random_walk')}",
+        f"#   accelerometer_random_walk (K) per axis: {listing('rate_random_walk')}",
+    ]
+    text = kalibr_yaml(largest_identification(axes), rostopic)
+    first, rest = text.split("\n", 1)
+    return "\n".join([first, *header, rest])

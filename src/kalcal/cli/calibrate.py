@@ -12,15 +12,15 @@ from kalcal.cli._common import ConfigOpt, ScenarioArg, SetOpt, escape, settings_
 def calibrate(
     scenario: ScenarioArg,
     imu: Annotated[
-        Optional[Path], typer.Option("--imu", help="accel-gps: accelerometer log (CSV or Parquet): time [s], accel [m/s^2].")
+        Optional[Path], typer.Option("--imu", help="accel-gps: accelerometer log (CSV, Parquet, ROS bag, ULog; a topic's columns TOPIC.FIELD): time [s], accel [m/s^2].")
     ] = None,
     gps: Annotated[
         Optional[Path],
-        typer.Option("--gps", help="accel-gps: GPS log (CSV or Parquet): time [s], position [m], velocity [m/s]."),
+        typer.Option("--gps", help="accel-gps: GPS log (CSV, Parquet, ROS bag, ULog): time [s], position [m], velocity [m/s]."),
     ] = None,
     data: Annotated[
         Optional[Path],
-        typer.Option("--data", help="scale-bias: log (CSV or Parquet) of a reference and a sensor column (time [s] optional)."),
+        typer.Option("--data", help="scale-bias: log (CSV, Parquet, ROS bag, ULog) of a reference and a sensor column (time [s] optional)."),
     ] = None,
     reference: Annotated[str, typer.Option("--reference", help="scale-bias: the reference's column.")] = "reference",
     sensor: Annotated[str, typer.Option("--sensor", help="scale-bias: the sensor's column.")] = "sensor",

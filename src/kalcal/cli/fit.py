@@ -25,7 +25,7 @@ def _per_sample_row(result, name: str, p) -> tuple[str, str, str, str] | None:
 def fit(
     scenario: ScenarioArg,
     imu: Annotated[
-        Optional[Path], typer.Option("--imu", help="accel-gps: accelerometer log (CSV or Parquet): time [s], accel [m/s^2].")
+        Optional[Path], typer.Option("--imu", help="accel-gps: accelerometer log (CSV, Parquet, ROS bag, ULog; a topic's columns TOPIC.FIELD): time [s], accel [m/s^2].")
     ] = None,
     gps: Annotated[
         Optional[Path],

@@ -1,8 +1,14 @@
-"""Read sensor logs (CSV or Parquet, chosen by extension, or a pandas DataFrame) into validated float columns.
+"""Read sensor logs (CSV, also compressed, Parquet, ROS bags, PX4 ULog, or a DataFrame) into validated float columns.
 
+The reader is chosen by the file's name (:data:`READERS`, :func:`log_format`).
 Every problem raises :class:`~kalcal.errors.DataError` naming the file, the column and, where there is
-one, the row (1-based, counting data rows after the header) and the value. Both formats are read by
-pandas (``read_csv``, ``read_parquet``).
+one, the row (1-based, counting data rows after the header, or messages of a topic) and the value. CSV
+and Parquet are read by pandas (``read_csv``, which decompresses ``.csv.gz``, ``.csv.bz2``, ``.csv.xz``
+and, with the ``zstandard`` package installed, ``.csv.zst``; ``read_parquet``). A ROS 1 or ROS 2 bag
+(:mod:`kalcal.io.rosbag`) or a ULog (:mod:`kalcal.io.ulog`) holds topics: one read is one topic, a table
+of ``time`` [s] and ``TOPIC.FIELD`` columns (``/imu.linear_acceleration.x``,
+``sensor_combined.accelerometer_m_s2[0]``), named in every message as ``FILE topic TOPIC``. The topic is
+given, or read off the columns asked for (the part of ``TOPIC.FIELD`` before its first dot).
 """
 
 from __future__ import annotations
@@ -19,7 +25,47 @@ from kalcal.errors import DataError
 if TYPE_CHECKING:
     import pandas as pd
 
-READERS = {".csv": "csv", ".parquet": "parquet", ".pq": "parquet"}
+#: the format of a log by its name's ending (a ROS 2 bag may also be its folder, :func:`log_format`)
+READERS = {
+    ".csv": "csv",
+    ".csv.gz": "csv",
+    ".csv.bz2": "csv",
+    ".csv.xz": "csv",
+    ".csv.zst": "csv",
+    ".parquet": "parquet",
+    ".pq": "parquet",
+    ".bag": "rosbag",
+    ".db3": "rosbag",
+    ".mcap": "rosbag",
+    ".ulg": "ulog",
+}
+#: formats that hold topics, each read as a table of its own
+TOPIC_FORMATS = ("rosbag", "ulog")
+#: what the formats are called in messages
+FORMAT_NAMES = "CSV (.csv, .csv.gz, .csv.bz2, .csv.xz, .csv.zst), Parquet, ROS bag (.bag, .db3, .mcap, bag folder), ULog (.ulg)"
+
+
+def log_format(path: str | Path) -> str | None:
+    """``"csv"``, ``"parquet"``, ``"rosbag"`` or ``"ulog"`` by the name's ending (a folder holding a
+    ROS 2 bag's ``metadata.yaml`` is ``"rosbag"``); None when unknown."""
+    path = Path(path)
+    name = path.name.lower()
+    for ending in sorted(READERS, key=len, reverse=True):
+        if name.endswith(ending):
+            return READERS[ending]
+    if path.is_dir() and (path / "metadata.yaml").is_file():
+        return "rosbag"
+    return None
+
+
+def topic_of(columns: Mapping[str, str] | Sequence[str], path: str | Path = "") -> str | None:
+    """The one topic that ``TOPIC.FIELD`` column names name (None when none names one); a DataError when
+    they name several (one read of a bag or ULog is one topic)."""
+    names = columns.values() if isinstance(columns, Mapping) else columns
+    topics = sorted({name.split(".", 1)[0] for name in names if "." in name and name.split(".", 1)[0]})
+    if len(topics) > 1:
+        raise DataError(f"{path}: columns name topics {', '.join(topics)}: one log is read from one topic")
+    return topics[0] if topics else None
 
 
 def is_frame(value: Any) -> bool:
@@ -47,33 +93,69 @@ def _read_csv(path: Path) -> pd.DataFrame:
         raise _EmptyFile from None
 
 
-def source_name(source: str | Path | pd.DataFrame, role: str) -> str:
-    """How messages name a log: its path, or ``<ROLE DataFrame>`` for a DataFrame (``<imu DataFrame>``)."""
+def source_name(source: str | Path | pd.DataFrame, role: str, frame: pd.DataFrame | None = None) -> str:
+    """How messages name a log: its path, ``FILE topic TOPIC`` for a topic read from a bag or ULog (given
+    its ``frame`` from :func:`read_table`), or ``<ROLE DataFrame>`` for a DataFrame (``<imu DataFrame>``)."""
+    if frame is not None and "source" in frame.attrs:
+        return str(frame.attrs["source"])
     return f"<{role} DataFrame>" if is_frame(source) else str(source)
 
 
-def read_table(path: str | Path | pd.DataFrame, role: str = "log") -> pd.DataFrame:
-    """Read a CSV or Parquet file; refuse missing, unreadable or empty files.
+def read_table(
+    path: str | Path | pd.DataFrame,
+    role: str = "log",
+    *,
+    topic: str | None = None,
+    columns: Mapping[str, str] | Sequence[str] = (),
+) -> pd.DataFrame:
+    """Read a log; refuse missing, unreadable or empty files.
 
-    Returns a DataFrame, its column names stripped. A DataFrame is taken as the file's content (a copy, with the same checks): empty is refused under the name
-    ``<ROLE DataFrame>`` (:func:`source_name`).
+    Parameters
+    ----------
+    path : path or DataFrame
+        The log (:func:`log_format` picks the reader).
+    role : str
+        What the log is (``imu``, ``gps``, ``data``): names a DataFrame in messages.
+    topic : str, optional
+        For a bag or ULog: the topic to read (default: the one ``columns`` name). Refused for other logs.
+    columns : mapping or sequence
+        The columns the caller will take (``{role: column}`` or names): a bag's or ULog's topic is read off
+        their ``TOPIC.FIELD`` names when ``topic`` is not given.
+
+    Returns a DataFrame, its column names stripped; a topic's has ``attrs["source"]`` (``FILE topic
+    TOPIC``, :func:`source_name`). A DataFrame is taken as the file's content (a copy, with the same
+    checks): empty is refused under the name ``<ROLE DataFrame>`` (:func:`source_name`).
     """
     if is_frame(path):
+        if topic is not None:
+            raise DataError(f"{source_name(path, role)}: --topic applies to a ROS bag or a ULog, not a DataFrame")
         if path.shape[0] == 0:
             raise DataError(f"{source_name(path, role)}: has columns but no data rows")
         frame = path.copy()
         frame.columns = [str(c).strip() for c in frame.columns]
         return frame.reset_index(drop=True)
     path = Path(path)
-    kind = READERS.get(path.suffix.lower())
+    kind = log_format(path)
     if kind is None:
-        raise DataError(f"{path}: unknown file type {path.suffix!r} (expected .csv or .parquet)")
+        ending = "".join(path.suffixes[-2:]) if path.suffix.lower() in (".gz", ".bz2", ".xz", ".zst") else path.suffix
+        raise DataError(f"{path}: unknown file type {ending!r} (expected {FORMAT_NAMES})")
+    if kind in TOPIC_FORMATS:
+        return _read_topic(path, kind, topic or topic_of(columns, path), role)
+    if topic is not None:
+        raise DataError(f"{path}: --topic {topic}: applies to a ROS bag or a ULog, not a {kind} file")
     if not path.is_file():
         raise DataError(f"{path}: no such file")
+    if path.name.lower().endswith(".zst"):
+        try:
+            import zstandard  # noqa: F401  (pandas' reader of .zst)
+        except ImportError:
+            raise DataError(f"{path}: reading a .zst file needs the zstandard package (pip install zstandard)") from None
     try:
         frame = _read_parquet(path) if kind == "parquet" else _read_csv(path)
     except _EmptyFile:
         raise DataError(f"{path}: file is empty") from None
+    except EOFError as exc:  # a truncated .gz, .bz2 or .xz
+        raise DataError(f"{path}: cannot be read as {kind} ({str(exc).strip() or 'truncated'})") from None
     except (UnicodeDecodeError, OSError, ValueError) as exc:  # pandas' ParserError and pyarrow's ArrowInvalid too
         first_line = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise DataError(f"{path}: cannot be read as {kind} ({first_line})") from None
@@ -81,6 +163,53 @@ def read_table(path: str | Path | pd.DataFrame, role: str = "log") -> pd.DataFra
         raise DataError(f"{path}: has a header but no data rows")
     frame.columns = [str(c).strip() for c in frame.columns]
     return frame
+
+
+#: what accel-gps takes of a GNSS receiver in a bag or ULog, said where a GPS topic lacks it
+GNSS_SUPPORTED = (
+    "accel-gps takes position [m] and velocity [m/s] along the axis of motion, named as TOPIC.FIELD in "
+    "--gps-columns, e.g. position=/odom.pose.pose.position.x,velocity=/odom.twist.twist.linear.x "
+    "(nav_msgs/Odometry) or position=vehicle_local_position.x,velocity=vehicle_local_position.vx (ULog); "
+    "sensor_msgs/NavSatFix and vehicle_gps_position (latitude/longitude) are not taken: convert them to "
+    "metres along the axis first"
+)
+
+
+def check_gnss_columns(frame: pd.DataFrame, name: str, columns: Mapping[str, str]) -> None:
+    """For a GPS log read from a bag or ULog topic: refuse, in one line saying what accel-gps takes
+    (:data:`GNSS_SUPPORTED`), a topic without the position or velocity column asked for."""
+    if "source" not in frame.attrs:
+        return  # a table's missing column is numeric_columns' message
+    missing = [f"{role} {columns[role]!r}" for role in ("position", "velocity") if columns[role] not in frame.columns]
+    if missing:
+        kind = frame.attrs.get("type")
+        raise DataError(f"{name}{f' ({kind})' if kind else ''}: has no {' or '.join(missing)}: {GNSS_SUPPORTED}")
+
+
+def _read_topic(path: Path, kind: str, topic: str | None, role: str = "log") -> pd.DataFrame:
+    """One topic of a bag or ULog (:mod:`kalcal.io.rosbag`, :mod:`kalcal.io.ulog`)."""
+    if not path.exists():
+        raise DataError(f"{path}: no such file")
+    what = "a ROS bag" if kind == "rosbag" else "a ULog"
+    if topic is None:
+        if kind == "rosbag":
+            from kalcal.io.rosbag import bag_topics
+
+            listing = ", ".join(f"{name} ({msgtype})" for name, (msgtype, _) in bag_topics(path).items())
+        else:
+            listing = "e.g. sensor_combined, vehicle_local_position"
+        raise DataError(
+            f"{path}: {what} holds topics: name the columns as TOPIC.FIELD "
+            f"(e.g. /imu.linear_acceleration.x, sensor_combined.accelerometer_m_s2[0]) or give the topic (topics: {listing})"
+            + (f"; {GNSS_SUPPORTED}" if role == "gps" else "")
+        )
+    if kind == "rosbag":
+        from kalcal.io.rosbag import read_bag
+
+        return read_bag(path, topic)
+    from kalcal.io.ulog import read_ulog
+
+    return read_ulog(path, topic)
 
 
 def numeric_columns(

@@ -13,7 +13,7 @@ import numpy as np
 from kalcal.calibration.plausibility import CalibrationWarning
 from kalcal.calibration.windows import accel_gps_stability, check_windows
 from kalcal.core.likelihood import gate_excess
-from kalcal.io.logs import is_frame, numeric_columns, parse_column_map, read_table, require_increasing, source_name
+from kalcal.io.logs import check_gnss_columns, is_frame, numeric_columns, parse_column_map, read_table, require_increasing, source_name
 from kalcal.io.outputs import mark_inputs, writes_outputs
 from kalcal.io.results import write_csv, write_json
 from kalcal.jobs.calibrate_warnings import fit_command, fit_extra, settings_warning, sigma_note, untrusted_warning
@@ -163,8 +163,10 @@ def compute_accel_gps_calibration(
     imu_map = parse_column_map(imu_columns, IMU_ROLES, "--imu-columns")
     gps_map = parse_column_map(gps_columns, GPS_ROLES, "--gps-columns")
     imu_source, gps_source = imu_path, gps_path
-    imu_frame, gps_frame = read_table(imu_path, "imu"), read_table(gps_path, "gps")
-    imu_path, gps_path = source_name(imu_path, "imu"), source_name(gps_path, "gps")
+    imu_frame = read_table(imu_path, "imu", columns=imu_map)
+    gps_frame = read_table(gps_path, "gps", columns={role: gps_map[role] for role in ("time", "position", "velocity")})
+    imu_path, gps_path = source_name(imu_path, "imu", imu_frame), source_name(gps_path, "gps", gps_frame)
+    check_gnss_columns(gps_frame, gps_path, gps_map)
     imu = numeric_columns(imu_frame, imu_path, imu_map)
     optional = [role for role in ("position_std", "velocity_std") if gps_map[role] in gps_frame.columns]
     gps = numeric_columns(

@@ -12,7 +12,7 @@ import numpy as np
 
 from kalcal.errors import DataError, KalcalError
 from kalcal.fitting.result import FitResult
-from kalcal.io.logs import is_frame, numeric_columns, parse_column_map, read_table, require_increasing, source_name
+from kalcal.io.logs import check_gnss_columns, is_frame, numeric_columns, parse_column_map, read_table, require_increasing, source_name
 from kalcal.io.outputs import inputs_of, mark_inputs, run_outputs
 from kalcal.io.results import write_json
 from kalcal.jobs.calibrate import GPS_ROLES, IMU_ROLES, stated_rates
@@ -117,8 +117,10 @@ def compute_accel_gps_fit(
     imu_map = parse_column_map(imu_columns, IMU_ROLES, "--imu-columns")
     gps_map = parse_column_map(gps_columns, GPS_ROLES, "--gps-columns")
     sources = (imu_path, gps_path)
-    imu_frame, gps_frame = read_table(imu_path, "imu"), read_table(gps_path, "gps")
-    imu_name, gps_name = source_name(imu_path, "imu"), source_name(gps_path, "gps")
+    imu_frame = read_table(imu_path, "imu", columns=imu_map)
+    gps_frame = read_table(gps_path, "gps", columns={role: gps_map[role] for role in ("time", "position", "velocity")})
+    imu_name, gps_name = source_name(imu_path, "imu", imu_frame), source_name(gps_path, "gps", gps_frame)
+    check_gnss_columns(gps_frame, gps_name, gps_map)
     imu = numeric_columns(imu_frame, imu_name, imu_map)
     optional = [role for role in ("position_std", "velocity_std") if gps_map[role] in gps_frame.columns]
     gps = numeric_columns(
@@ -176,8 +178,8 @@ def compute_scale_bias_fit(
     """Fit a scale-bias log (a reference and a sensor column, optionally ``time`` [s]); nothing is written."""
     from kalcal.fitting.scale_bias import fit_scale_bias
 
-    frame = read_table(data_path, "data")
-    name = source_name(data_path, "data")
+    frame = read_table(data_path, "data", columns=(reference, sensor))
+    name = source_name(data_path, "data", frame)
     if reference == sensor:
         raise DataError(f"{name}: --reference and --sensor name the same column {reference!r}")
     columns = numeric_columns(frame, name, {"reference": reference, "sensor": sensor}, allow_nan=("reference", "sensor"))

@@ -110,9 +110,9 @@ def compute_scale_bias_calibration(
     (:mod:`kalcal.calibration.windows`; 1: none), ``summary["stability"]``.
     """
     windows = check_windows(windows)
-    frame = read_table(data_path, "data")
+    frame = read_table(data_path, "data", columns=(reference, sensor))
     source = data_path
-    data_path = source_name(data_path, "data")
+    data_path = source_name(data_path, "data", frame)
     if reference == sensor:
         raise DataError(f"{data_path}: --reference and --sensor name the same column {reference!r}")
     columns = numeric_columns(frame, data_path, {"reference": reference, "sensor": sensor}, allow_nan=("reference", "sensor"))

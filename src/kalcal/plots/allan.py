@@ -64,3 +64,43 @@ def plot_allan(result: NoiseIdentification, path: str | Path, title: str = "") -
     ax.set_title(f"{title}\n{subtitle}" if title else subtitle)
     ax.legend(loc="best")
     return save(figure, path)
+
+
+#: colours of a three-axis log's curves
+AXIS_COLORS = {"x": "tab:blue", "y": "tab:green", "z": "tab:red"}
+
+
+@styled
+def plot_allan_axes(axes_results: dict[str, NoiseIdentification], path: str | Path, title: str = "",
+                    selected: str | None = None) -> Path:
+    """Log-log sigma(tau) of each axis of a three-axis log, with its confidence band; the legend gives
+    each axis's N, B and K (the read-off lines of one axis are :func:`plot_allan`'s). 900 x 550 px.
+
+    Parameters
+    ----------
+    axes_results : ``{axis: identification}``; tau in s, sigma in m/s^2.
+    selected : the axis ``--axis`` selected (drawn thicker), if any.
+    """
+    figure, axes = new_figure(1, 1, height=height_px(1) + 150)
+    ax = axes[0, 0]
+    first = next(iter(axes_results.values()))
+    for name, result in axes_results.items():
+        curve = result.curve
+        color = AXIS_COLORS.get(name, None)
+        shade_band(ax, curve.tau, curve.low, curve.high, None, color=color)
+        values = [
+            f"{symbol} = {p.value:.3g}" if p.identified else f"{symbol} not seen"
+            for symbol, p in (("N", result.velocity_random_walk), ("B", result.bias_instability),
+                              ("K", result.rate_random_walk))
+        ]
+        ax.plot(curve.tau, curve.adev, "o-", color=color, ms=3, lw=2.2 if name == selected else 1.2,
+                label=f"axis {name}: " + ", ".join(values) + (" (selected)" if name == selected else ""))
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel(label("averaging time τ", "s"))
+    ax.set_ylabel(label("Allan deviation σ(τ)", "m/s²"))
+    subtitle = (f"{first.samples:,} samples at {first.rate:.6g} Hz, {first.duration:.6g} s; "
+                f"bands: {percent(first.curve.confidence)} confidence; N m/s/√s, B m/s², K m/s²/√s")
+    ax.set_title(f"{title}\n{subtitle}" if title else subtitle)
+    ax.legend(loc="best")
+    return save(figure, path)

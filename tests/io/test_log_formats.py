@@ -1,0 +1,149 @@
+"""ROS 1/2 bags, PX4 ULog and compressed CSV read as tables: the samples and times as written, every bad
+file one DataError line naming the file (and the topic)."""
+
+from __future__ import annotations
+
+import bz2
+import gzip
+import lzma
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from kalcal.errors import DataError
+from kalcal.io.logs import read_table, source_name
+from kalcal.io.rosbag import read_bag
+from kalcal.io.ulog import read_ulog
+from tests._logfiles import ORIGIN_NS, float64_messages, write_imu_bag
+
+ULOG = Path(__file__).resolve().parents[1] / "data" / "px4-ulog" / "sample_log_small.ulg"
+AXES = [f"/imu.linear_acceleration.{a}" for a in "xyz"]
+
+
+def _signal(n: int = 50, seed: int = 3):
+    rng = np.random.default_rng(seed)
+    stamps = ORIGIN_NS + np.arange(n, dtype=np.int64) * 5_000_000 + rng.integers(0, 1000, n)  # ns, jittered
+    return stamps, rng.normal([0.1, -0.2, 9.81], 0.01, (n, 3))
+
+
+@pytest.mark.parametrize("ros, storage, name", [(1, "", "s.bag"), (2, "sqlite3", "s2"), (2, "mcap", "s2m")])
+def test_a_bag_topic_reads_as_written(tmp_path, ros, storage, name):
+    """Header stamps (not receive times) in s from the bag's start, taken in integer ns; float64 samples
+    bit for bit."""
+    stamps, accel = _signal()
+    receive = stamps + 3_000_000 + np.arange(stamps.size) * 7  # recorded 3 ms (and more) after the stamp
+    bag = write_imu_bag(tmp_path / name, stamps, accel, ros=ros, storage=storage, receive_ns=receive)
+    frame = read_table(bag, "imu", columns={"accel": AXES[0]})
+    np.testing.assert_array_equal(frame["time"].to_numpy(), (stamps - receive[0]).astype(float) * 1e-9)
+    np.testing.assert_array_equal(frame[AXES].to_numpy(), accel)
+    assert source_name(bag, "imu", frame) == f"{bag} topic /imu"
+    assert frame.attrs["time"].startswith("header stamp")
+    if ros == 2:  # the storage file itself reads the same as its folder
+        storage_file = next(p for p in bag.iterdir() if p.suffix in (".db3", ".mcap"))
+        pd.testing.assert_frame_equal(read_bag(storage_file, "/imu")[AXES], frame[AXES])
+
+
+def test_a_topic_without_header_takes_the_receive_time(tmp_path):
+    stamps, accel = _signal(5)
+    bag = write_imu_bag(tmp_path / "h.bag", stamps, accel, extra={"/value": ("std_msgs/msg/Float64", float64_messages(1, [1, 2, 3]))})
+    frame = read_table(bag, topic="/value")
+    np.testing.assert_array_equal(frame["time"], [0.0, 1e-3, 2e-3])
+    np.testing.assert_array_equal(frame["/value.data"], [1.0, 2.0, 3.0])
+    assert frame.attrs["time"].startswith("receive time")
+
+
+def _error(call) -> str:
+    with pytest.raises(DataError) as info:
+        call()
+    message = str(info.value)
+    assert "\n" not in message
+    return message
+
+
+def test_bad_bags_are_one_line_naming_file_and_topic(tmp_path):
+    stamps, accel = _signal()
+    bag = write_imu_bag(tmp_path / "b.bag", stamps, accel, extra={"/value": ("std_msgs/msg/Float64", [])})
+    assert "no topic /imu/data (topics: /imu (sensor_msgs/msg/Imu, 50 messages), /value (std_msgs/msg/Float64, 0 messages))" in _error(lambda: read_table(bag, topic="/imu/data"))
+    assert _error(lambda: read_table(bag, topic="/value")).endswith("topic /value has no messages")
+    assert "holds std_msgs/msg/Float64 messages, expected sensor_msgs/msg/Imu" in _error(
+        lambda: read_bag(bag, "/value", message_type="sensor_msgs/msg/Imu"))
+    assert "name the columns as TOPIC.FIELD" in _error(lambda: read_table(bag, columns={"accel": "accel"}))
+    assert "columns name topics /a, /imu" in _error(lambda: read_table(bag, columns={"t": "/imu.x", "a": "/a.y"}))
+    truncated = tmp_path / "t.bag"
+    truncated.write_bytes(bag.read_bytes()[: bag.stat().st_size // 2])
+    assert _error(lambda: read_table(truncated, columns=AXES)).startswith(f"{truncated}: cannot be read as a ROS 1 bag (")
+    assert _error(lambda: read_table(tmp_path / "none.bag", columns=AXES)) == f"{tmp_path / 'none.bag'}: no such file"
+
+
+def test_ulog_reads_as_pyulog_reads_it():
+    """sensor_combined: time = timestamp + accelerometer_timestamp_relative (us) from the log's start, in s."""
+    from pyulog import ULog
+
+    ulog = ULog(str(ULOG))
+    data = ulog.get_dataset("sensor_combined").data
+    frame = read_ulog(ULOG, "sensor_combined")
+    assert len(frame) == 1298
+    expected = (data["timestamp"].astype(np.int64) + data["accelerometer_timestamp_relative"] - ulog.start_timestamp) * 1e-6
+    np.testing.assert_array_equal(frame["time"], expected)
+    for i in range(3):
+        np.testing.assert_array_equal(frame[f"sensor_combined.accelerometer_m_s2[{i}]"], data[f"accelerometer_m_s2[{i}]"].astype(float))
+    gps = read_table(ULOG, columns={"position": "vehicle_gps_position.lat"})
+    assert len(gps) == 32
+    np.testing.assert_array_equal(gps["time"], (ulog.get_dataset("vehicle_gps_position").data["timestamp"].astype(np.int64) - ulog.start_timestamp) * 1e-6)
+    assert source_name(ULOG, "imu", gps) == f"{ULOG} topic vehicle_gps_position"
+    assert "topics: " in _error(lambda: read_ulog(ULOG, "vehicle_odometry"))
+
+
+def test_bad_ulogs_are_one_line(tmp_path):
+    junk = tmp_path / "junk.ulg"
+    junk.write_text("not a log\n")
+    assert _error(lambda: read_ulog(junk, "sensor_combined")).startswith(f"{junk}: cannot be read as a ULog (")
+    cut = tmp_path / "cut.ulg"
+    cut.write_bytes(ULOG.read_bytes()[:100])  # cut inside its definitions: no data at all
+    assert _error(lambda: read_ulog(cut, "sensor_combined")) == f"{cut}: no topic sensor_combined (topics: none)"
+
+
+@pytest.mark.parametrize("ending, opener", [(".gz", gzip.open), (".bz2", bz2.open), (".xz", lzma.open)])
+def test_compressed_csv_reads_as_the_plain_file(tmp_path, ending, opener):
+    frame = pd.DataFrame({"time": np.arange(5) / 200.0, "accel": [9.8, 9.81, 9.79, 9.8, 1 / 3]})
+    plain = tmp_path / "log.csv"
+    frame.to_csv(plain, index=False)
+    packed = tmp_path / f"log.csv{ending}"
+    with opener(packed, "wb") as handle:
+        handle.write(plain.read_bytes())
+    pd.testing.assert_frame_equal(read_table(packed), read_table(plain))
+    broken = tmp_path / f"broken.csv{ending}"
+    broken.write_bytes(packed.read_bytes()[:-12])
+    assert _error(lambda: read_table(broken)).startswith(f"{broken}: cannot be read as csv (")
+
+
+def test_zstandard_csv_reads_or_says_what_it_needs(tmp_path):
+    frame = pd.DataFrame({"time": [0.0, 0.005], "accel": [9.8, 9.81]})
+    path = tmp_path / "log.csv.zst"
+    try:
+        import zstandard
+    except ImportError:
+        path.write_bytes(b"\x28\xb5\x2f\xfd")
+        assert _error(lambda: read_table(path)) == f"{path}: reading a .zst file needs the zstandard package (pip install zstandard)"
+        return
+    path.write_bytes(zstandard.ZstdCompressor().compress(frame.to_csv(index=False).encode()))
+    pd.testing.assert_frame_equal(read_table(path), frame)
+
+
+def test_topic_is_refused_for_a_table(tmp_path):
+    path = tmp_path / "log.csv"
+    path.write_text("time,accel\n0,1\n")
+    assert "--topic /imu: applies to a ROS bag or a ULog" in _error(lambda: read_table(path, topic="/imu"))
+    assert "unknown file type '.txt.gz'" in _error(lambda: read_table(tmp_path / "log.txt.gz"))
+
+
+def test_a_ulog_topic_of_several_instances_is_topic_colon_n():
+    from pyulog import ULog
+
+    ulog = ULog(str(ULOG))
+    second = next(d for d in ulog.data_list if d.name == "sensor_accel" and d.multi_id == 1)
+    frame = read_table(ULOG, columns=["sensor_accel:1.x"])
+    np.testing.assert_array_equal(frame["sensor_accel:1.x"], second.data["x"].astype(float))
+    assert len(read_table(ULOG, topic="sensor_accel")) == len(next(d for d in ulog.data_list if d.name == "sensor_accel").data["x"])
