@@ -165,7 +165,7 @@ def _sentence(summary: Mapping[str, Any], lines: Sequence[CheckLine]) -> tuple[s
             f"Passes: all {total} checks lie within their bounds, so this ensemble shows no departure of the "
             "filter from its own settings."
         )
-    count = f"{len(failed)} of {total} checks fail"
+    count = f"{len(failed)} of {total} checks {'fails' if len(failed) == 1 else 'fail'}"
     roots = {line.root for line in failed}
     if roots == {"model_error"}:
         return "explained", (
