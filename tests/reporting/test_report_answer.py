@@ -77,7 +77,7 @@ def test_a_mean_error_the_model_does_not_account_for_is_not_the_model_error():
     result = answer(_summary(*tests))
     assert result.kind == "unexplained"
     assert result.sentence == (
-        "Fails (2 of 5 checks fail): mean_error and nis are not accounted for by a known model error "
+        "Fails (2 of 5 checks fail): mean_error and nis are not accounted for by a known cause "
         "(nis only through a nonzero mean error: see mean_error)."
     )
     assert [line.root for line in result.checks] == [None, None, None, None, "mean_error"]
@@ -97,7 +97,7 @@ def test_unexplained_failures_name_their_direction_and_what_is_accounted_for():
     assert (result.verdict, result.kind) == ("fail", "unexplained")
     assert result.sentence == (
         "Fails (5 of 5 checks fail): covariance, residual_whiteness and nis are not accounted for by a known "
-        "model error; covariance and nis find the filter overconfident: the actual spread is larger than the "
+        "cause; covariance and nis find the filter overconfident: the actual spread is larger than the "
         f"filter's P; mean_error and orthogonality are accounted for by the known model error of {EULER}."
     )
     assert result.checks[1].cause == "overconfident: the actual spread is larger than the filter's P"
@@ -110,7 +110,7 @@ def test_one_underconfident_check():
     tests = [_check("mean_error", True), _check("covariance", False, direction="underconfident"), *PASSED[1:]]
     result = answer(_summary(*tests, cause=""))
     assert result.sentence == (
-        "Fails (1 of 5 checks fails): covariance is not accounted for by a known model error; covariance finds "
+        "Fails (1 of 5 checks fails): covariance is not accounted for by a known cause; covariance finds "
         "the filter underconfident: the actual spread is smaller than the filter's P."
     )
     assert result.figures[0] == "nees"

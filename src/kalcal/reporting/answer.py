@@ -182,7 +182,7 @@ def _sentence(summary: Mapping[str, Any], lines: Sequence[CheckLine]) -> tuple[s
     unaccounted = [line for line in failed if line.root not in ("model_error", "false_alarm")]
     sentence = f"Fails ({count}): {_names([line.name for line in unaccounted])} "
     sentence += "is" if len(unaccounted) == 1 else "are"
-    sentence += " not accounted for by a known model error"
+    sentence += " not accounted for by a known cause"
     mean = [line.name for line in unaccounted if line.root == "mean_error"]
     if mean:
         sentence += f" ({_names(mean)} only through a nonzero mean error: see mean_error)"
