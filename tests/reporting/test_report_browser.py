@@ -1,4 +1,5 @@
-"""The page in a real browser: headless Chromium loads it offline and every figure decodes.
+"""The page in a real browser: headless Chromium loads it offline, every figure decodes, and the answer
+leads: the verdict's sentence and the first figure lie inside the first 1,200 pixels at 1,400 px width.
 
 Skipped when no ``chromium`` is on PATH (Debian's ``chromium`` package provides it), except under CI
 (``CI=true``), where ``.ci/run`` installs it: there a missing browser is an error, not a skip.
@@ -14,6 +15,7 @@ import sys
 
 import pytest
 
+import kalcal
 from tests._helpers import ci_requested
 
 CHROMIUM = shutil.which("chromium")
@@ -42,14 +44,17 @@ window.addEventListener("load", function () {
 """
 
 
-@pytest.mark.skipif(
+needs_chromium = pytest.mark.skipif(
     CHROMIUM is None and not IN_CI, reason="chromium is not installed (Debian's chromium package; CI installs it)"
 )
-def test_page_renders_in_headless_chromium_with_no_broken_image(chromium, report_run, tmp_path):
-    out, page = report_run
+
+
+def _run_in_chromium(chromium, page, script, probe_id, tmp_path, window="1400,1200"):
+    """Load ``page`` (a path) with ``script`` added before ``</body>`` in headless Chromium at a ``window``
+    of width,height pixels, and return the JSON the script wrote into ``<pre id=probe_id>``."""
     source = page.read_text(encoding="utf-8")
-    probe = tmp_path / "probe.html"
-    probe.write_text(source.replace("</body>", CHECK + "</body>"), encoding="utf-8")
+    probe = tmp_path / f"{probe_id}.html"
+    probe.write_text(source.replace("</body>", script + "</body>"), encoding="utf-8")
     command = [
         chromium,
         "--headless",
@@ -60,20 +65,102 @@ def test_page_renders_in_headless_chromium_with_no_broken_image(chromium, report
         "--disable-component-update",
         "--disable-sync",
         "--no-first-run",
-        f"--user-data-dir={tmp_path / 'profile'}",
+        f"--user-data-dir={tmp_path / f'profile-{probe_id}'}",
+        f"--window-size={window}",
         "--virtual-time-budget=10000",
         "--dump-dom",
         probe.as_uri(),
     ]
     result = subprocess.run(command, capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr[-2000:]
-    match = re.search(r'<pre id="kalcal-image-check">(.*?)</pre>', result.stdout, re.S)
+    match = re.search(rf'<pre id="{probe_id}">(.*?)</pre>', result.stdout, re.S)
     assert match, f"the check script did not run; stderr: {result.stderr[-2000:]}"
-    report = json.loads(html.unescape(match.group(1)))
+    return json.loads(html.unescape(match.group(1)))
+
+
+@needs_chromium
+def test_page_renders_in_headless_chromium_with_no_broken_image(chromium, report_run, tmp_path):
+    out, page = report_run
+    report = _run_in_chromium(chromium, page, CHECK, "kalcal-image-check", tmp_path)
     expected = len(list((out / "figures").glob("*.png")))
     assert report["count"] == expected == 18
     assert report["broken"] == []
     assert all(width == 900 for width in report["widths"])
+
+
+#: where the verdict's sentence and the page's first figure lie, in CSS pixels from the page's top, once
+#: every image has loaded (their width and height attributes fix the layout before they decode)
+LAYOUT = """<script>
+window.addEventListener("load", function () {
+  function box(element) {
+    if (!element) { return null; }
+    var r = element.getBoundingClientRect();
+    return {top: r.top + window.scrollY, bottom: r.bottom + window.scrollY, left: r.left, right: r.right};
+  }
+  var image = document.querySelector("figure img");
+  var out = document.createElement("pre");
+  out.id = "kalcal-layout";
+  out.textContent = JSON.stringify({width: window.innerWidth, verdict: box(document.querySelector("#answer .verdict")),
+                                    figure: box(image), file: image && image.getAttribute("data-file"),
+                                    loaded: image && image.complete && image.naturalWidth > 0});
+  document.body.appendChild(out);
+});
+</script>
+"""
+#: the first screen: the answer and its first figure lie inside it, at the page's width
+FIRST_SCREEN_PX, PAGE_WIDTH_PX = 1200, 1400
+
+
+def _assert_first_screen(chromium, page, tmp_path, first_figure):
+    layout = _run_in_chromium(chromium, page, LAYOUT, "kalcal-layout", tmp_path, f"{PAGE_WIDTH_PX},{FIRST_SCREEN_PX}")
+    assert layout["width"] == PAGE_WIDTH_PX
+    assert layout["verdict"] is not None, "no verdict sentence on the page"
+    assert layout["figure"] is not None and layout["loaded"], "no figure on the page"
+    assert layout["file"] == f"figures/{first_figure}"
+    for what in ("verdict", "figure"):
+        box = layout[what]
+        assert 0 <= box["top"] < box["bottom"] <= FIRST_SCREEN_PX, (what, box)
+        assert 0 <= box["left"] < box["right"] <= PAGE_WIDTH_PX, (what, box)
+    return layout
+
+
+@pytest.fixture(scope="module")
+def default_report(tmp_path_factory):
+    """The default run (accel-gps with its default settings: Euler against the analytic truth) at a smaller N."""
+    out = tmp_path_factory.mktemp("default-run")
+    kalcal.verify(n=20_000, seed=0, long_run=0, out=out, report=True)
+    return out / "report.html"
+
+
+@pytest.fixture(scope="module")
+def passing_report(tmp_path_factory):
+    """A run that passes: the same scenario integrated by the trapezoid rule, 6 s."""
+    out = tmp_path_factory.mktemp("passing-run")
+    settings = {"scenario.duration": 6, "scenario.integration": "trapezoid"}
+    kalcal.verify(n=5_000, seed=3, settings=settings, long_run=0, out=out, report=True)
+    return out / "report.html"
+
+
+@needs_chromium
+def test_the_default_runs_answer_and_first_figure_are_on_the_first_screen(chromium, default_report, tmp_path):
+    assert 'class="answer fail"' in default_report.read_text(encoding="utf-8")
+    _assert_first_screen(chromium, default_report, tmp_path, "mean_error.png")
+
+
+@needs_chromium
+def test_a_passing_runs_answer_and_first_figure_are_on_the_first_screen(chromium, passing_report, tmp_path):
+    assert 'class="answer pass"' in passing_report.read_text(encoding="utf-8")
+    _assert_first_screen(chromium, passing_report, tmp_path, "mean_error.png")
+
+
+@pytest.mark.slow
+@needs_chromium
+def test_the_full_default_runs_answer_is_on_the_first_screen(chromium, tmp_path):
+    """``kalcal verify`` as it runs by default (N = 300,000, with its long run): four checks fail."""
+    kalcal.verify(out=tmp_path / "run", report=True)
+    page = tmp_path / "run" / "report.html"
+    assert "(4 of 5 checks fail)" in page.read_text(encoding="utf-8")
+    _assert_first_screen(chromium, page, tmp_path, "mean_error.png")
 
 
 @pytest.mark.parametrize("ci, outcome", [("true", "1 error"), ("", "1 skipped")])

@@ -130,7 +130,37 @@ def test_failure_says_what_by_how_much_and_why_escaped():
 
 def test_all_passed_has_no_failures_section():
     page = build_page(_summary([_test("nis", True, 2.0, 2.1, "mean NIS 2", lower=1.9)]), [], [])
-    assert 'class="failures"' not in page and "Every check passed" in page
+    assert 'class="failures"' not in page and 'href="#failures"' not in page
+    assert '<section class="answer pass" id="answer"><p class="verdict">Passes: all 1 checks' in page
+
+
+def test_the_page_leads_with_its_answer_and_folds_the_detail(report_run):
+    """The verdict's sentence, a row per check and the figures that show it come before every section;
+    What failed, the full verdicts, the power table and the settings are folded."""
+    out, page_path = report_run
+    page = page_path.read_text(encoding="utf-8")
+    summary = json.loads((out / "summary.json").read_text())
+    answer = page.index('<section class="answer fail" id="answer">')
+    checks = page.index('<table class="checks" id="checks">')
+    lead = page.index('<div class="lead-figures">')
+    assert page.index("<h1>") < answer < checks < lead < page.index("<nav>") < page.index('id="failures"')
+    sentence = re.search(r'<p class="verdict">(.*?)</p>', page).group(1)
+    assert html.unescape(sentence).startswith("Fails only through the known model error of the euler integration")
+    # the model error's cause as the summary names it, not as the page writes it
+    assert summary["model_error"]["cause"] in html.unescape(sentence)
+    rows = re.findall(r"<tr class=\"(pass|fail)\"><td>(?:<a href=\"#fail-\w+\">)?<code>(\w+)</code>",
+                      page[checks : page.index("</table>", checks)])
+    assert [(name, state == "pass") for state, name in rows] == [(t["name"], t["passed"]) for t in summary["tests"]]
+    figures = re.findall(r'<figure id="fig-(\w+)">', page[lead : page.index("<nav>")])
+    assert figures == ["mean_error", "model_error", "nees", "nis"]
+    for key in figures:  # shown once, linked from its group
+        assert page.count(f'<figure id="fig-{key}">') == 1 and f'<a href="#fig-{key}">' in page
+    for test in summary["tests"]:
+        if not test["passed"]:
+            assert f'<details id="fail-{test["name"]}"><summary><code>{test["name"]}</code>: ' in page
+    assert "<details><summary>Statistic, bounds, levels and detail of each check</summary>" in page
+    assert "<details><summary>Power of each check and part</summary>" in page
+    assert f"<details><summary>All {sum(len(v) for v in summary['settings'].values())} settings</summary>" in page
 
 
 def test_the_page_says_a_pass_is_about_the_filter_not_a_log():

@@ -6,6 +6,10 @@ Every piece of text that comes from the run (settings, check details, the comman
 sections escape their own text (:func:`kalcal.reporting.markup.esc`) and enter the template as markup; the
 template's autoescaping escapes the values it is given.
 
+The page leads with its answer (:mod:`kalcal.reporting.answer`): the verdict in one sentence with its
+cause, a row per check and the three or four figures that show it; the detail, power, settings and
+self-check follow, folded where long (``<details>``), then the other figures.
+
 Its figures section lives here too: the figures as the page lists them (:class:`FigureEntry`,
 :class:`SkippedFigure`, their groups and order; data only, without matplotlib, so that the page is built
 in a process that need not load the plotting code) and their markup (embedded PNGs with captions, notes
@@ -30,11 +34,13 @@ import numpy as np
 from markupsafe import Markup
 
 from kalcal.filters.steady_state import SteadyStateView
+from kalcal.reporting.answer import answer as page_answer
+from kalcal.reporting.answer import lead_figures
 from kalcal.reporting.markup import esc, table
 from kalcal.reporting.run_tables import final_table, reproduce_section, settings_section, timing_section
 from kalcal.reporting.text import confidence_statement, scope_statement
 from kalcal.reporting.theory import power_section, self_check_section
-from kalcal.reporting.verdicts import failures_section, verdicts_section
+from kalcal.reporting.verdicts import answer_section, checks_table, failures_section, verdicts_section
 from kalcal.stats.text import fmt
 
 GROUPS = (
@@ -114,6 +120,18 @@ def residual_pair_table(summary: Mapping[str, Any]) -> str:
         "<p class='sub'>The pair the source report quotes; each entry ± its standard error, with the correlation ρ.</p>"
         + table(header, rows)
     )
+
+
+def _figure_label(entry: FigureEntry) -> str:
+    """``Figure 5.7 (title)``, or the title alone for a figure without a report number."""
+    return f"Figure {entry.number} ({entry.title})" if entry.number else entry.title
+
+
+def lead_section(figures: list[FigureEntry], figure_dir_name: str) -> str:
+    """The figures that show the answer, side by side under it (empty without any)."""
+    if not figures:
+        return ""
+    return '<div class="lead-figures">' + "".join(_figure(f, figure_dir_name) for f in figures) + "</div>"
 
 
 def _figure(entry: FigureEntry, figure_dir_name: str) -> str:
@@ -199,14 +217,18 @@ def figures_section(
     realization: int,
     figure_dir_name: str,
     steady: SteadyStateView | None = None,
+    shown: frozenset[str] = frozenset(),
 ) -> str:
-    """Every figure group in page order: its drawn figures, notes for those skipped, and its tables."""
+    """Every figure group in page order: its drawn figures, notes for those skipped, and its tables; a
+    figure whose key is in ``shown`` leads the page already, and its group links to it instead."""
     parts = ['<h2 id="figures">Figures</h2>']
     for group, heading in GROUPS:
         members = [f for f in figures if f.group == group]
         missing = [s for s in skipped if s.group == group]
         if not members and not missing:
             continue
+        above = [f for f in members if f.key in shown]
+        members = [f for f in members if f.key not in shown]
         intro = ""
         if group == "realization":
             intro = (
@@ -214,6 +236,9 @@ def figures_section(
                 f"run's seed {esc(summary['seed'])} (the same draws as in the ensemble).</p>"
             )
         body = "".join(_figure(f, figure_dir_name) for f in members) + "".join(_skipped(s) for s in missing)
+        if above:
+            links = ", ".join(f'<a href="#fig-{esc(f.key)}">{esc(_figure_label(f))}</a>' for f in above)
+            intro += f"<p class='sub'>Shown at the top of the page: {links}.</p>"
         if group == "consistency":
             body += residual_pair_table(summary)
         if group == "steady_state":
@@ -230,6 +255,7 @@ __all__ = [
     "SkippedFigure",
     "build_page",
     "figures_section",
+    "lead_section",
     "page_css",
     "page_order",
     "png_size",
@@ -291,29 +317,43 @@ def build_page(
     steady_state : SteadyStateView, optional
         The filter's steady state, tabled beside its figure.
     """
+    figures = list(figures)
+    answer = page_answer(summary)
+    lead_keys = lead_figures(answer.figures, [f.key for f in figures])
+    lead = sorted((f for f in figures if f.key in lead_keys), key=lambda f: lead_keys.index(f.key))
+    # (anchor the navigation links to, its label, the section): a section a run lacks is left out, link too
     sections = (
-        failures_section(summary),
-        verdicts_section(summary),
-        power_section(summary),
-        settings_section(summary),
-        final_table(summary),
-        self_check_section(summary),
-        figures_section(summary, list(figures), list(skipped), realization, figure_dir_name, steady_state),
-        timing_section(summary),
-        reproduce_section(summary, realization),
+        ("failures", "failures", failures_section(summary, answer)),
+        ("verdicts", "verdicts", verdicts_section(summary)),
+        ("power", "power", power_section(summary)),
+        ("scenario", "settings", settings_section(summary)),
+        ("", "", final_table(summary)),
+        ("self-check", "self-check", self_check_section(summary)),
+        (
+            "figures",
+            "figures",
+            figures_section(
+                summary, figures, list(skipped), realization, figure_dir_name, steady_state, frozenset(lead_keys)
+            ),
+        ),
+        ("timing", "timing", timing_section(summary)),
+        ("reproduce", "reproduce", reproduce_section(summary, realization)),
     )
     return _environment().get_template(PAGE_TEMPLATE).render(
         title=f"kalcal verification report: {summary['scenario']}",
-        verdict="pass" if all(t["passed"] for t in summary["tests"]) else "fail",
+        verdict=answer.verdict,
+        answer=Markup(answer_section(answer, scope_statement(summary))),
+        checks=Markup(checks_table(answer)),
+        lead=Markup(lead_section(lead, figure_dir_name)),
         realizations=fmt(summary["realizations"]),
         engine=summary["engine"],
         seed=summary["seed"],
         statement=confidence_statement(summary),
-        scope=scope_statement(summary),
         version=summary.get("kalcal_version", ""),
         css=Markup(page_css()),
         # each section escapes the run's text it holds: marked as markup so it is not escaped twice
-        sections=[Markup(section) for section in sections],
+        nav=[(anchor, label) for anchor, label, section in sections if anchor and section],
+        sections=[Markup(section) for _, _, section in sections],
     )
 
 

@@ -14,7 +14,9 @@ def esc(value: Any) -> str:
     return html.escape(str(value), quote=True)
 
 
-def table(header: Iterable[str], rows: Iterable[str]) -> str:
-    """A table with the (escaped) ``header`` cells over ``rows``, already written as ``<tr>`` HTML."""
+def table(header: Iterable[str], rows: Iterable[str], *, css_class: str = "", table_id: str = "") -> str:
+    """A table with the (escaped) ``header`` cells over ``rows``, already written as ``<tr>`` HTML;
+    ``css_class`` and ``table_id`` its class and id, where given."""
     head = "".join(f"<th>{esc(h)}</th>" for h in header)
-    return f"<table><thead><tr>{head}</tr></thead><tbody>{''.join(rows)}</tbody></table>"
+    attributes = (f' class="{esc(css_class)}"' if css_class else "") + (f' id="{esc(table_id)}"' if table_id else "")
+    return f"<table{attributes}><thead><tr>{head}</tr></thead><tbody>{''.join(rows)}</tbody></table>"

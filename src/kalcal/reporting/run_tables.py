@@ -18,7 +18,8 @@ def _setting(section: str, value: Any) -> str:
 
 
 def settings_section(summary: Mapping[str, Any]) -> str:
-    """The run's identity (scenario, N, seed, engine, form, confidence), every setting, and the model-error note."""
+    """The run's identity (scenario, N, seed, engine, form, confidence), the model-error note, and every
+    setting (folded)."""
     rows = []
     for section, values in summary.get("settings", {}).items():
         for key, value in values.items():
@@ -39,8 +40,11 @@ def settings_section(summary: Mapping[str, Any]) -> str:
     return (
         '<h2 id="scenario">Scenario and parameters</h2>'
         + table(("run", "value"), run_rows)
-        + table(("setting", "value"), rows)
         + note
+        # the settings are long (40 rows for accel-gps): folded under their count
+        + f"<details><summary>All {len(rows)} settings</summary>"
+        + table(("setting", "value"), rows)
+        + "</details>"
     )
 
 

@@ -63,7 +63,7 @@ def _bracket(row: Mapping[str, Any]) -> str:
 
 def power_section(summary: Mapping[str, Any]) -> str:
     """The checks' power at the run's N (summary.json's ``power``): verify's power line and, per check and
-    part, the bracket [power_low, power_high] and ``detection_n``; the reason where there is none; empty for
+    part, the bracket [power_low, power_high] and ``detection_n`` (folded); the reason where there is none; empty for
     a summary from before it."""
     if "power" not in summary:
         return ""
@@ -87,5 +87,7 @@ def power_section(summary: Mapping[str, Any]) -> str:
         head
         + note
         + f"<p>{esc(line)}</p>"
+        + "<details><summary>Power of each check and part</summary>"
         + table(("check", "part", f"power at N = {n:,}", "detected from N"), rows)
+        + "</details>"
     )

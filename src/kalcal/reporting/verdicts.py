@@ -1,12 +1,15 @@
-"""The page's sections on the checks: what failed (cause, shortfall, measurement) and the verdicts table."""
+"""The page's sections on the checks: the answer (the verdict's sentence and a row per check, which lead
+the page), what failed (cause, shortfall, measurement; each folded under its short cause) and the verdicts
+table in full (folded)."""
 
 from __future__ import annotations
 
 from collections.abc import Mapping
 from typing import Any
 
+from kalcal.reporting.answer import Answer
 from kalcal.reporting.markup import esc, table
-from kalcal.reporting.text import confidence_statement, levels_text, measured_text, shortfall
+from kalcal.reporting.text import levels_text, measured_text, shortfall
 from kalcal.stats.text import (
     CHECK_PVALUE_FIELD,
     check_bounds_text,
@@ -17,21 +20,44 @@ from kalcal.stats.text import (
     written_nan,
 )
 
-__all__ = ["failures_section", "verdicts_section"]
+__all__ = ["answer_section", "checks_table", "failures_section", "verdicts_section"]
 
 
 def _cause(test: Mapping[str, Any]) -> Mapping[str, Any]:
     return test.get("cause") or {}
 
 
-def failures_section(summary: Mapping[str, Any]) -> str:
-    """What failed, each failed check led by its likely cause; a short all-passed note when none did."""
+def answer_section(answer: Answer, scope: str) -> str:
+    """The verdict in one sentence with its cause, and what a verdict is about (``scope``)."""
+    return (
+        f'<section class="answer {esc(answer.verdict)}" id="answer"><p class="verdict">{esc(answer.sentence)}</p>'
+        f"<p class='scope'>{esc(scope)}.</p></section>"
+    )
+
+
+def checks_table(answer: Answer) -> str:
+    """One row per check: its name, verdict, p-value and short cause; a failed check's name links to its
+    block under What failed."""
+    rows = []
+    for line in answer.checks:
+        state = "pass" if line.passed else "fail"
+        name = f"<code>{esc(line.name)}</code>"
+        if not line.passed:
+            name = f'<a href="#fail-{esc(line.name)}">{name}</a>'
+        rows.append(
+            f'<tr class="{state}"><td>{name}</td><td class="{state}">{"passed" if line.passed else "FAILED"}</td>'
+            f'<td class="num">{esc(line.pvalue)}</td><td>{esc(line.cause)}</td></tr>'
+        )
+    return table(("check", "verdict", "p-value", "cause"), rows, css_class="checks", table_id="checks")
+
+
+def failures_section(summary: Mapping[str, Any], answer: Answer | None = None) -> str:
+    """What failed: each failed check folded under its name and short cause (from ``answer``), and led by
+    its likely cause when opened; nothing when every check passed (the answer says so)."""
     failed = [t for t in summary["tests"] if not t["passed"]]
     if not failed:
-        return (
-            '<section class="allpass" id="failures"><strong>Every check passed</strong>: '
-            f"{esc(confidence_statement(summary))}.</section>"
-        )
+        return ""
+    short = {line.name: line.cause for line in answer.checks} if answer is not None else {}
     items = []
     for test in failed:
         cause = _cause(test)
@@ -48,16 +74,20 @@ def failures_section(summary: Mapping[str, Any]) -> str:
         if direction:
             lead += f"<p><strong>Direction:</strong> {esc(direction)}.</p>"
         pvalue = pvalue_text(test.get("pvalue"), written_nan(summary, CHECK_PVALUE_FIELD))
+        summary_line = f"<code>{esc(test['name'])}</code>"
+        if test["name"] in short:
+            summary_line += f": {esc(short[test['name']])}"
         items.append(
-            f'<h3 id="fail-{esc(test["name"])}">{esc(test["name"])}</h3>{lead}'
+            f'<details id="fail-{esc(test["name"])}"><summary>{summary_line}</summary>{lead}'
             f"<p><strong>By how much:</strong> {esc(shortfall(test))} ({esc(pvalue)} "
             f"against {esc(fmt(1 - test['confidence'], 3))}).</p>"
-            f"<p><strong>Measured:</strong> {esc(measured_text(test))}.</p>"
+            f"<p><strong>Measured:</strong> {esc(measured_text(test))}.</p></details>"
         )
     names = ", ".join(t["name"] for t in failed)
     return (
         '<section class="failures" id="failures"><h2>What failed</h2>'
-        f"<p>{len(failed)} of {len(summary['tests'])} checks failed ({esc(names)}).</p>{''.join(items)}</section>"
+        f"<p>{len(failed)} of {len(summary['tests'])} checks failed ({esc(names)}); open each for its likely "
+        f"cause, by how much and what was measured.</p>{''.join(items)}</section>"
     )
 
 
@@ -74,6 +104,6 @@ def verdicts_section(summary: Mapping[str, Any]) -> str:
             f"<td>{esc(test['detail'])}<br><small>{esc(levels_text(test, summary))}</small></td></tr>"
         )
     return (
-        '<h2 id="verdicts">Verdicts</h2>'
-        + table(("check", "statistic", "bounds", "passed", "detail"), rows)
+        '<h2 id="verdicts">Verdicts</h2><details><summary>Statistic, bounds, levels and detail of each check'
+        "</summary>" + table(("check", "statistic", "bounds", "passed", "detail"), rows) + "</details>"
     )
