@@ -12,7 +12,7 @@ import numpy as np
 
 from kalcal.calibration.plausibility import CalibrationWarning
 from kalcal.calibration.windows import accel_gps_stability, check_windows
-from kalcal.core.likelihood import gate_excess
+from kalcal.stats.nis import gate_excess
 from kalcal.io.logs import is_frame, numeric_columns, parse_column_map, read_table, require_increasing, source_name
 from kalcal.io.outputs import mark_inputs, writes_outputs
 from kalcal.io.results import write_csv, write_json
