@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from kalcal.core.steps import nis
 from kalcal.linalg import whitener
 from kalcal.stats.bounds import chi2_mean_bounds
 from kalcal.stats.power import ChiSquareFamily
@@ -51,7 +52,7 @@ def check_nis(s: EnsembleStatistics, info: ProblemInfo, confidence: float) -> Ch
         centered = None
         if s.mean_normalized_residual is not None:
             # E|nu - E nu|^2 = E|nu|^2 - |E nu|^2 for the normalized innovations nu = L^{-1} r
-            centered = s.mean_nis - np.sum(s.mean_normalized_residual**2, axis=1)
+            centered = s.mean_nis - nis(s.mean_normalized_residual)
         if centered is not None and np.all((centered >= low) & (centered <= high)):
             diagnosis = failed_cause(
                 f"Centered on the mean innovations the mean NIS lies within the bounds "
@@ -86,7 +87,7 @@ def nis_power(a: CovarianceAnalysis, confidence: float) -> ChiSquareFamily:
     return ChiSquareFamily(
         np.trace(ratio, axis1=1, axis2=2),
         np.einsum("kij,kji->k", ratio, ratio),
-        np.sum(mu**2, axis=1),
+        nis(mu),  # |mu|^2, the NIS of the mean innovation
         np.einsum("ka,kab,kb->k", mu, ratio, mu),
         0,
         bounds,
