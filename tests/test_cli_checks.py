@@ -8,7 +8,7 @@ import numpy as np
 from rich.console import Console
 
 from kalcal.cli import _common as cli
-from kalcal.stats.checks import check_nis
+from kalcal.stats.nis import check_nis
 from kalcal.stats.covariance import check_covariance
 from kalcal.stats.text import check_bounds_text
 from tests.stats.test_check_results import _info, _stats

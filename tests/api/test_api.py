@@ -24,12 +24,12 @@ def test_no_subpackage_takes_an_exported_name_so_both_import_as_usual():
     import pkgutil
 
     import kalcal.calibration.noise as noise_module
-    import kalcal.stats.checks as checks
+    import kalcal.stats.suite as suite
 
     subpackages = {info.name for info in pkgutil.iter_modules(kalcal.__path__)}
     assert not subpackages & set(kalcal.__all__), subpackages & set(kalcal.__all__)
     assert callable(kalcal.verify) and callable(kalcal.calibrate) and callable(kalcal.report)
-    assert kalcal.stats.checks is checks and callable(checks.run_checks)
+    assert kalcal.stats.suite is suite and callable(suite.run_checks)
     assert noise_module.identify_noise is kalcal.calibration.noise.identify_noise
     assert {"verify", "calibrate", "noise", "Model", "load_model", "KalcalError"} <= set(dir(kalcal))
     with pytest.raises(AttributeError):

@@ -1,4 +1,4 @@
-"""The reference Kalman steps (predict, the Joseph and standard updates, a missing measurement).
+"""The reference Kalman steps (predict, the Joseph and standard updates, a missing measurement, the NIS).
 
 Oracles: FilterPy's ``KalmanFilter`` on the same measurements (its ``update(None)`` for a missing one),
 the textbook formulas written out with an inverse, Python loops over single realizations, and the
@@ -13,7 +13,7 @@ from filterpy.kalman import KalmanFilter
 
 from kalcal.core.missing import measured
 from kalcal.core.sqrt_form import cholesky_factor, gram, sqrt_update
-from kalcal.core.steps import covariance_pass, gain_and_covariance, predict, update
+from kalcal.core.steps import covariance_pass, gain_and_covariance, nis, predict, summed_nis, update
 from kalcal.errors import ConfigError
 from kalcal.filters.gains import run_with_gains
 from kalcal.models.accel_gps import AccelGpsScenario
@@ -225,3 +225,31 @@ def test_missing_measurement_equals_the_blind_update():
     np.testing.assert_array_equal(missing.x, blind.x)
     np.testing.assert_allclose(missing.cov, blind.cov, rtol=1e-15)
     np.testing.assert_array_equal(missing.gain, blind.gain)
+
+
+@pytest.mark.parametrize("m", [1, 2, 3])
+def test_nis_is_the_quadratic_form_of_the_inverse_at_every_size(m):
+    """r^T S^{-1} r against the textbook inverse, one realization at a time, over batch axes that broadcast
+    (an S per update, shared by the realizations); each size takes its own path (a division, the 2 x 2
+    closed form, Cholesky)."""
+    rng = np.random.default_rng(40 + m)
+    a = rng.standard_normal((6, m, m + 2))
+    s = a @ np.swapaxes(a, 1, 2) + 0.1 * np.eye(m)  # (K, m, m)
+    r = rng.standard_normal((5, 6, m)) * 3.0  # (n, K, m)
+    got = nis(r, s)
+    assert got.shape == (5, 6)
+    want = np.array([[r[i, k] @ np.linalg.inv(s[k]) @ r[i, k] for k in range(6)] for i in range(5)])
+    np.testing.assert_allclose(got, want, rtol=1e-12)
+    # the normalized innovation's squared norm: L^-1 r by the Cholesky factor, S = L L^T
+    white = np.linalg.solve(np.linalg.cholesky(s), r[..., None])[..., 0]
+    np.testing.assert_allclose(nis(white), got, rtol=1e-12)
+    # summed over the realizations that share S, from their outer products
+    np.testing.assert_allclose(summed_nis(np.einsum("nka,nkb->kab", r, r), s), got.sum(axis=0), rtol=1e-12)
+
+
+def test_nis_of_a_missing_measurement_is_nan_and_a_wrong_shape_is_refused():
+    s = np.array([[2.0, 0.3], [0.3, 1.0]])
+    assert np.isnan(nis(np.array([np.nan, 1.0]), s))
+    assert np.isnan(nis(np.array([1.0, 1.0]), np.full((2, 2), np.nan)))
+    with pytest.raises(ValueError, match="innovation_cov"):
+        nis(np.zeros(2), np.eye(3))

@@ -1,7 +1,8 @@
 """The compiled sequential filter against the reference steps, fix by fix.
 
 Oracle: :func:`kalcal.core.steps.predict` and :func:`~kalcal.core.steps.update` (Joseph form) in a
-Python loop over the same per-fix transitions and noise, with and without missing fixes.
+Python loop over the same per-fix transitions and noise, with and without missing fixes; the gate's NIS
+against :func:`kalcal.core.steps.nis`.
 """
 
 from __future__ import annotations
@@ -9,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kalcal.core.steps import predict, update
+from kalcal.core.steps import nis, predict, update
 from kalcal.filters.sequential import sequential_filter
 from tests._helpers import assert_close, cov_atol
 
@@ -66,8 +67,7 @@ def test_the_gate_rejects_exactly_the_fixes_whose_nis_exceeds_the_threshold():
     for k in range(40):
         x, cov = predict(x, cov, phis[k], qs[k])
         result = update(x, cov, z[k], h, vs[k], "joseph")
-        nis = result.residual @ np.linalg.solve(result.innovation_cov, result.residual)
-        want.append(nis > threshold)
+        want.append(nis(result.residual, result.innovation_cov) > threshold)
         if not want[-1]:
             x, cov = result.x, result.cov
         np.testing.assert_allclose(run.state[k], x, rtol=1e-10, atol=1e-12)
@@ -77,3 +77,26 @@ def test_the_gate_rejects_exactly_the_fixes_whose_nis_exceeds_the_threshold():
     plain, off = sequential_filter(phis, qs, h, vs, z, x0, m0), sequential_filter(phis, qs, h, vs, z, x0, m0, threshold=None)
     for a, b in zip(plain, off):
         np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("p", [1, 2, 3])
+def test_the_gates_nis_is_the_reference_nis_fix_by_fix(p):
+    """The compiled gate's NIS equals :func:`kalcal.core.steps.nis` at every fix, to 1e-9: from the
+    reference posterior before fix k, a threshold 1e-9 below the reference NIS of fix k rejects it and one
+    1e-9 above keeps it (one, two and three rows: the kernel's division and its Cholesky solve)."""
+    phis, qs, _, vs3, z3, x0, m0 = _fixes(12, seed=30 + p)
+    rng = np.random.default_rng(p)
+    h = np.eye(3)[:p] + 0.2 * rng.standard_normal((p, 3))
+    a = rng.standard_normal((12, p, p))
+    vs = a @ np.swapaxes(a, 1, 2) + 0.5 * np.eye(p)
+    z = rng.standard_normal((12, p)) * 2.0
+    x, cov = x0, m0
+    for k in range(12):
+        xbar, prior = predict(x, cov, phis[k], qs[k])
+        result = update(xbar, prior, z[k], h, vs[k], "joseph")
+        want = float(nis(result.residual, result.innovation_cov))
+        for factor, rejects in ((1.0 - 1e-9, True), (1.0 + 1e-9, False)):
+            rejected = np.zeros(1, dtype=bool)
+            sequential_filter(phis[k:k + 1], qs[k:k + 1], h, vs[k:k + 1], z[k:k + 1], x, cov, threshold=want * factor, rejected=rejected)
+            assert rejected[0] == rejects, (k, want, factor)
+        x, cov = result.x, result.cov

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 import kalcal
-from kalcal.fitting.accel_gps import _used, gate_excess
+from kalcal.fitting.accel_gps import _used
+from kalcal.stats.nis import gate_excess
 
 ROVER = Path(__file__).resolve().parents[2] / "examples" / "rover-like.toml"
 

@@ -6,6 +6,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
+from kalcal.core.likelihood import innovation_loglik
+from kalcal.core.steps import nis
 from kalcal.filters.regression import run_regression_filter
 from kalcal.filters.scale_bias import regressors
 from kalcal.fitting.scale_bias import DRIFT, NOISE, fit_scale_bias
@@ -46,11 +48,13 @@ def test_with_drift_it_is_the_limit_of_the_filter_with_an_ever_wider_prior():
     loglik, used, normalized = diffuse_loglik(v, z, 0.25, 0.01)
     kappa = 1e6
     run = run_regression_filter(v, regressors(z), np.zeros(2), kappa * np.eye(2), 0.25**2, 0.01**2 * np.eye(2))
-    s, e = run.innovation_var[2:], run.residual[2:]
-    reference = float(-0.5 * np.sum(np.log(2 * np.pi * s) + e**2 / s))
+    s, e = run.innovation_var[2:, None, None], run.residual[2:, None]
+    reference = innovation_loglik(e, s)
     # the finite prior differs from the diffuse one by O(P_data / kappa) in each term
     assert loglik == pytest.approx(reference, rel=1e-6)
-    assert np.allclose(normalized[2:], e / np.sqrt(s), rtol=1e-5, atol=1e-8) and np.all(np.isnan(normalized[:2]))
+    # each sample's normalized innovation: its square the NIS of the numpy steps (kalcal.core.steps.nis)
+    assert np.allclose(normalized[2:], e[:, 0] / np.sqrt(s[:, 0, 0]), rtol=1e-5, atol=1e-8) and np.all(np.isnan(normalized[:2]))
+    np.testing.assert_allclose(normalized[2:] ** 2, nis(e, s), rtol=2e-5, atol=1e-12)
 
 
 def test_the_fit_does_not_depend_on_the_prior_of_a_and_b():

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kalcal.core.steps import gain_and_covariance, predict, predict_covariance, update
+from kalcal.core.steps import gain_and_covariance, nis, predict, predict_covariance, update
 from kalcal.filters.regression import run_regression_filter
 from kalcal.montecarlo.accumulators import SumBuffers
 from kalcal.montecarlo.kernels import filter_block_moments
@@ -86,7 +86,7 @@ def test_regression_kernel_equals_the_regression_filter_at_every_step(form):
         # the pairs are kept of the innovations normalized by each realization's own S_k
         normalized = run.residual / np.sqrt(run.innovation_var)
         np.testing.assert_allclose(sums.residuals[:, 0], normalized, rtol=1e-12, atol=1e-14)
-        np.testing.assert_allclose(sums.nis, run.residual**2 / run.innovation_var, rtol=1e-10)
+        np.testing.assert_allclose(sums.nis, nis(run.residual[:, None], run.innovation_var[:, None, None]), rtol=1e-10)
         nees = np.einsum("ki,ki->k", error, np.linalg.solve(run.cov, error[..., None])[..., 0])
         np.testing.assert_allclose(sums.nees, nees, rtol=1e-9)
         # eps = L^-1 e by the filter's own P_k, L lower Cholesky: |eps|^2 is the NEES

@@ -11,7 +11,7 @@ from kalcal.montecarlo.accumulators import ensemble_statistics
 from kalcal.montecarlo.engine import run_monte_carlo
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.simulation.sampled import sample_accel_gps_errors, sample_accel_gps_logs
-from kalcal.stats.checks import run_checks
+from kalcal.stats.suite import run_checks
 
 WALK = ["truth.bias_walk_std=2e-4"]
 MARKOV = ["truth.bias_correlation_time=5"]

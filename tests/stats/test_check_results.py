@@ -14,14 +14,10 @@ from kalcal.io.results import to_jsonable
 from kalcal.montecarlo.accumulators import EnsembleStatistics
 from kalcal.montecarlo.problem import ProblemInfo
 from kalcal.stats.bounds import verdict_false_alarm_bound
-from kalcal.stats.checks import (
-    Cause,
-    CheckPart,
-    CheckResult,
-    check_mean_error,
-    check_orthogonality,
-)
 from kalcal.stats.covariance import check_covariance
+from kalcal.stats.mean_error import check_mean_error
+from kalcal.stats.orthogonality import check_orthogonality
+from kalcal.stats.results import Cause, CheckPart, CheckResult
 from kalcal.stats.whiteness import check_residual_whiteness
 from kalcal.stats.results import family_pvalue, normal_family_pvalue
 

@@ -12,7 +12,7 @@ from kalcal.montecarlo.accumulators import ensemble_statistics
 from kalcal.montecarlo.engine import run_monte_carlo
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.stats.bounds import chi2_mean_bounds, covariance_element_bound, normal_bound
-from kalcal.stats.checks import run_checks, verdict
+from kalcal.stats.suite import run_checks, verdict
 
 
 def _checks(n, seed=0, **settings):

@@ -23,7 +23,9 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from kalcal.stats.checks import check_mean_error, check_nis, check_orthogonality
+from kalcal.stats.mean_error import check_mean_error
+from kalcal.stats.nis import check_nis
+from kalcal.stats.orthogonality import check_orthogonality
 from kalcal.stats.covariance import check_covariance, correlation_z, t_equivalent_z, whitened_moments
 from kalcal.stats.distributions import chi2_sf, normal_sf
 from kalcal.stats.results import chi2_two_sided_pvalues

@@ -10,7 +10,7 @@ import pytest
 from scipy import stats as sps
 
 from kalcal.analysis.fixed_gain import analyze_problem, analyze_scenario
-from kalcal.stats.checks import check_families, power_rows, problem_power
+from kalcal.stats.suite import check_families, power_rows, problem_power
 from kalcal.stats.power import DETECTION_POWER, MIN_N, N_CAP, detection_n, power_line, verdict_power
 from kalcal.stats.sensitivity import detected_error, sensitivity, sensitivity_text
 from kalcal.jobs.verify import MIN_REALIZATIONS
@@ -19,7 +19,7 @@ from kalcal.models.registry import build_scenario
 from kalcal.montecarlo.accumulators import ensemble_statistics
 from kalcal.montecarlo.engine import run_monte_carlo
 from kalcal.montecarlo.scenarios import build_problem
-from kalcal.stats.checks import run_checks
+from kalcal.stats.suite import run_checks
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 ALPHA = 0.01

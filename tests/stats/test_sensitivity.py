@@ -8,7 +8,7 @@ import pytest
 
 from kalcal.stats import sensitivity as module
 from kalcal.analysis.fixed_gain import analyze_scenario
-from kalcal.stats.checks import check_families
+from kalcal.stats.suite import check_families
 from kalcal.stats.sensitivity import FLOOR, RESOLUTION, START, detected_error, sensitivity, sensitivity_text
 from kalcal.models.custom import load_model_file
 

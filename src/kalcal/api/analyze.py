@@ -202,7 +202,7 @@ def _compute(model, n: int, form: str, command: str) -> AnalysisResult:
 
 def _power(model, analysis, n: int, form: str) -> tuple[list, list | None, float]:
     """The checks' power at ``n``, the sensitivity where no check detects the truth, and the seconds both took."""
-    from kalcal.stats.checks import power_rows
+    from kalcal.stats.suite import power_rows
     from kalcal.stats.sensitivity import sensitivity
 
     start = time.perf_counter()

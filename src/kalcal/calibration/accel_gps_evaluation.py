@@ -16,7 +16,7 @@ import numpy as np
 
 from kalcal.calibration.interval_model import continuous_bias_model
 from kalcal.core.sqrt_form import cholesky_factor, gram, sqrt_predict, sqrt_update
-from kalcal.core.steps import UpdateForm, predict, update
+from kalcal.core.steps import UpdateForm, nis, predict, update
 from kalcal.filters.sequential import SequentialRun, sequential_filter
 from kalcal.models.settings import SettingError, show, to_float
 from kalcal.stats.distributions import chi2_ppf  # scipy.stats's values, without its import
@@ -189,7 +189,7 @@ def python_filter(phis, noise, h, v, dz, x0, m0, form: UpdateForm, threshold=Non
             result = update(x, cov, dz[k], h, v[k], form)
             innovation = result.innovation_cov
         residual = result.residual
-        if threshold is not None and residual @ np.linalg.solve(innovation, residual) > threshold:
+        if threshold is not None and nis(residual, innovation) > threshold:
             rejected[k] = True  # a prediction only: x, cov (chol) stay the prior's
             cov = prior_covariances[k]
         elif form == "sqrt":

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from kalcal.calibration.plausibility import CalibrationWarning
+from kalcal.core.steps import nis as normalized_square
 
 __all__ = ["AccelGpsCalibration", "ImuGap"]
 
@@ -73,4 +74,4 @@ class AccelGpsCalibration:
     @property
     def nis(self) -> np.ndarray:
         """r_k^T S_k^{-1} r_k, (K,)."""
-        return np.sum(self.normalized_innovations**2, axis=-1)
+        return normalized_square(self.residual, self.innovation_cov)

@@ -40,6 +40,7 @@ from kalcal.calibration.ljung_box import (
     monte_carlo_pvalues,
     simulated_null,
 )
+from kalcal.core.steps import nis as normalized_square
 from kalcal.stats.bounds import chi2_bounds_at
 from kalcal.stats.distributions import chi2_isf  # scipy.stats's values, without its import
 from kalcal.stats.results import Cause, CheckPart, chi2_two_sided_pvalues, combined_pvalue, family_pvalue
@@ -144,7 +145,7 @@ def innovation_diagnostics(
     n_fixes, p = normalized.shape
     alpha = 1.0 - confidence
     share = alpha / len(PARTS)
-    nis = np.sum(normalized**2, axis=1)
+    nis = normalized_square(normalized)  # each fix's NIS, the squared norm of its normalized innovation
     mean_nis = float(nis.mean())
     lower, upper = chi2_bounds_at(share, 1, n_fixes * p, n_fixes)  # two-sided, at the NIS part's share
     nis_p = float(chi2_two_sided_pvalues(np.array([mean_nis]), n_fixes * p, n_fixes)[0])

@@ -45,6 +45,7 @@ from kalcal.calibration.scale_bias_observability import (  # noqa: F401 (DIFFUSE
     UNOBSERVABLE_RATIO,
     data_only_information,
 )
+from kalcal.core.steps import nis
 from kalcal.errors import DataError
 from kalcal.filters.regression import run_regression_filter
 from kalcal.filters.scale_bias import filter_scale_bias, regressors
@@ -229,7 +230,7 @@ class ScaleBiasCalibration:
     def mean_nis(self) -> float:
         """The mean of r_k^2 / S_k over the samples used: about 1 when the noise settings fit the log."""
         used = self.used
-        return float(np.mean(self.residual[used] ** 2 / self.innovation_var[used]))
+        return float(np.mean(nis(self.residual[used, None], self.innovation_var[used, None, None])))
 
 
 def diffuse_start(scenario: ScaleBiasScenario, reference: np.ndarray, sensor: np.ndarray):

@@ -1,7 +1,7 @@
 """The scenario-free Kalman algebra: what a linear Gaussian model is, and the one algebra over it.
 
 - :mod:`kalcal.core.model`: :class:`~kalcal.core.model.LinearGaussianModel`, the immutable model container.
-- :mod:`kalcal.core.steps`: the numpy reference of every step (predict; the Joseph and standard updates;
+- :mod:`kalcal.core.steps`: the numpy reference of every step (predict; the Joseph and standard updates; the NIS;
   the interval transition; the covariance pass).
 - :mod:`kalcal.core.sqrt_form`: the square-root predict and update and their factor algebra.
 - :mod:`kalcal.core.missing`: a missing measurement is a prediction only, one wrapper for every form.

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["gate_excess", "innovation_loglik"]
+from kalcal.core.steps import nis
+
+__all__ = ["innovation_loglik"]
 
 
 def innovation_loglik(residual: np.ndarray, innovation_cov: np.ndarray, *, skip: int = 0) -> float:
@@ -41,33 +43,10 @@ def innovation_loglik(residual: np.ndarray, innovation_cov: np.ndarray, *, skip:
     r, s = residual[used], innovation_cov[used]
     if r.shape[0] == 0:
         return 0.0
-    if r.shape[1] == 2:  # a two-row measurement (a position fix): the 2x2 determinant and inverse in closed form, ten times faster
-        a, b, c = s[:, 0, 0], s[:, 1, 1], 0.5 * (s[:, 0, 1] + s[:, 1, 0])
-        det = a * b - c * c
-        quad = (b * r[:, 0] ** 2 - 2.0 * c * r[:, 0] * r[:, 1] + a * r[:, 1] ** 2) / det
-        return float(-0.5 * (np.sum(np.log(det)) + np.sum(quad) + r.size * np.log(2.0 * np.pi)))
-    lower = np.linalg.cholesky(s)
-    white = np.linalg.solve(lower, r[..., None])[..., 0]
-    log_det = 2.0 * np.sum(np.log(np.diagonal(lower, axis1=1, axis2=2)))
-    return float(-0.5 * (log_det + np.sum(white * white) + r.size * np.log(2.0 * np.pi)))
-
-
-def gate_excess(rejected: int, gated: int, gate: float) -> str:
-    """A sentence when an innovation gate rejected far more of ``gated`` fixes than its (1 - gate) share:
-    more than the share's mean plus 3 binomial standard deviations plus 3 fixes; "" otherwise.
-
-    Parameters
-    ----------
-    rejected, gated : int
-        The fixes rejected, and the fixes the gate judged (rejected ones included).
-    gate : float
-        The gate's confidence, in (0, 1).
-    """
-    share = 1.0 - gate
-    limit = gated * share + 3.0 * np.sqrt(gated * share * gate) + 3.0
-    if rejected <= limit:
-        return ""
-    return (
-        f"the gate rejected {rejected} of {gated} fixes, far more than its {share:.3g} share ({limit:.0f} at most "
-        "for settings that describe the fixes)"
-    )
+    quad = nis(r, s)  # r_k^T S_k^{-1} r_k, each fix's NIS (a closed form for a two-row fix)
+    if r.shape[1] == 2:  # a two-row measurement (a position fix): the 2x2 determinant in closed form, ten times faster
+        c = 0.5 * (s[:, 0, 1] + s[:, 1, 0])
+        log_det = np.sum(np.log(s[:, 0, 0] * s[:, 1, 1] - c * c))
+    else:
+        log_det = 2.0 * np.sum(np.log(np.diagonal(np.linalg.cholesky(s), axis1=1, axis2=2)))
+    return float(-0.5 * (log_det + np.sum(quad) + r.size * np.log(2.0 * np.pi)))

@@ -24,6 +24,15 @@ Equations (prior ``xbar, M``; posterior ``xhat, P``)::
               P = (I - K H) M (I - K H)^T + K V K^T        (form="joseph", the default)
               P = M - K H M                                (form="standard")
 
+The normalized innovation squared (:func:`nis`), NIS = r^T S^{-1} r, is computed here once for every
+numpy path of the package (the Monte Carlo's reference blocks, the calibrations' diagnostics and gates,
+the likelihood); :func:`summed_nis` is its sum over realizations that share S, from their outer products.
+The compiled paths that compute a NIS are held to :func:`nis`: the sequential filter's gate
+(tests/filters/test_sequential.py), the data-dependent (regression) block kernel
+(tests/montecarlo/test_kernel_steps.py), the fixed-gain block kernels through :func:`summed_nis`
+(tests/montecarlo/test_engine.py) and the compiled diffuse likelihood (in tests/fitting, against a
+numpy filter of a wide prior).
+
 The covariance pass (:func:`covariance_pass`) runs the covariance halves of these steps without data
 over a time-invariant model's update intervals (:func:`interval_transition`), in any of the three forms.
 
@@ -219,6 +228,81 @@ def _update_every(x, cov, z, h, v, form) -> UpdateResult:
     gain, posterior, s = gain_and_covariance(cov, h, v, form)
     residual = z - matvec(h, x)
     return UpdateResult(x + matvec(gain, residual), posterior, residual, s, gain)
+
+
+def nis(innovation: np.ndarray, innovation_cov: np.ndarray | None = None) -> np.ndarray:
+    """The normalized innovation squared, NIS = r^T S^{-1} r, of each innovation.
+
+    chi-square(m) for a consistent filter's innovation r ~ N(0, S).
+
+    Parameters
+    ----------
+    innovation : ndarray, shape (..., m)
+        r = z - H xbar, in the measurement's units; or, with ``innovation_cov`` None, the normalized
+        innovation L^{-1} r (S = L L^T, dimensionless), whose NIS is its squared norm.
+    innovation_cov : ndarray, shape (..., m, m), or None
+        S, symmetric positive definite, broadcast against ``innovation``'s leading (batch) axes.
+
+    Returns
+    -------
+    ndarray, shape (...)
+        Dimensionless; NaN where r or S is NaN (a missing measurement).
+
+    Notes
+    -----
+    m = 1 is a division and m = 2 the closed form (b r_1^2 - 2 c r_1 r_2 + a r_2^2) / (a b - c^2) of
+    S = [[a, c], [c, b]] (a tenth of a batched solve's time; the likelihood evaluates it for every fix of
+    every fit's step); otherwise |L^{-1} r|^2 by a Cholesky factor and a triangular solve, never an inverse.
+    """
+    r = np.asarray(innovation, dtype=float)
+    if innovation_cov is None:
+        return np.sum(r * r, axis=-1)
+    s = np.asarray(innovation_cov, dtype=float)
+    m = r.shape[-1]
+    if s.shape[-2:] != (m, m):
+        raise ValueError(f"innovation_cov: expected shape (..., {m}, {m}) for innovations (..., {m}), got {s.shape}")
+    if m == 1:
+        return r[..., 0] * r[..., 0] / s[..., 0, 0]
+    if m == 2:
+        a, b, c = s[..., 0, 0], s[..., 1, 1], 0.5 * (s[..., 0, 1] + s[..., 1, 0])
+        r1, r2 = r[..., 0], r[..., 1]
+        return (b * r1 * r1 - 2.0 * c * r1 * r2 + a * r2 * r2) / (a * b - c * c)
+    lower = np.linalg.cholesky(s)
+    white = np.linalg.solve(lower, r[..., None])[..., 0]
+    return np.sum(white * white, axis=-1)
+
+
+def summed_nis(residual_outer: np.ndarray, innovation_cov: np.ndarray) -> np.ndarray:
+    """sum_i r_i^T S^{-1} r_i = tr(S^{-1} sum_i r_i r_i^T): the sum of :func:`nis` over realizations that share S.
+
+    Parameters
+    ----------
+    residual_outer : ndarray, shape (..., m, m)
+        sum_i r_i r_i^T over the realizations, in the measurement's units squared.
+    innovation_cov : ndarray, shape (..., m, m)
+        S, shared by the realizations, symmetric positive definite.
+
+    Returns
+    -------
+    ndarray, shape (...)
+        Dimensionless.
+
+    Notes
+    -----
+    The same sizes take the same paths as :func:`nis` (m = 1 a division, m = 2 the closed form of S^{-1}),
+    so that a Monte Carlo block's sums cost no batched solve; otherwise a solve with S, never an inverse.
+    """
+    s = np.asarray(innovation_cov, dtype=float)
+    outer = np.asarray(residual_outer, dtype=float)
+    m = s.shape[-1]
+    if outer.shape[-2:] != (m, m):
+        raise ValueError(f"residual_outer: expected shape (..., {m}, {m}) for innovation_cov (..., {m}, {m}), got {outer.shape}")
+    if m == 1:
+        return outer[..., 0, 0] / s[..., 0, 0]
+    if m == 2:
+        a, b, c = s[..., 0, 0], s[..., 1, 1], 0.5 * (s[..., 0, 1] + s[..., 1, 0])
+        return (b * outer[..., 0, 0] - c * (outer[..., 0, 1] + outer[..., 1, 0]) + a * outer[..., 1, 1]) / (a * b - c * c)
+    return np.trace(np.linalg.solve(s, outer), axis1=-2, axis2=-1)
 
 
 class GainSchedule(NamedTuple):

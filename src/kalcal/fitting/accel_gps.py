@@ -24,7 +24,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from kalcal.calibration.diagnostics import innovation_diagnostics
-from kalcal.core.likelihood import gate_excess
+from kalcal.stats.nis import gate_excess
 from kalcal.errors import KalcalError
 from kalcal.fitting import latency_scan
 from kalcal.fitting.accel_gps_settings import filter_toml

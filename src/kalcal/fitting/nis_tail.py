@@ -22,6 +22,8 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
+
+from kalcal.core.steps import nis as normalized_square
 from kalcal.stats.distributions import chi2_isf, chi2_ppf  # scipy.stats's values, without its import
 
 #: the tail whose share is tested: above the chi-square(p) 99.9% quantile
@@ -118,7 +120,7 @@ def nis_tail(normalized: np.ndarray, *, tail: float = TAIL, alpha: float = ALPHA
     from scipy import stats  # the binomial's quantiles and test: imported by the fits that judge the tail
 
     fixes, p = normalized.shape
-    nis = np.sum(normalized**2, axis=1)
+    nis = normalized_square(normalized)
     threshold = float(chi2_isf(tail, p))
     count = int(np.count_nonzero(nis > threshold))
     lower = int(stats.binom.ppf(alpha / 2, fixes, tail))

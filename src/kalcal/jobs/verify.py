@@ -31,7 +31,9 @@ from kalcal.montecarlo.accumulators import EnsembleStatistics, ensemble_statisti
 from kalcal.montecarlo.engine import BLOCK_SIZE, run_monte_carlo
 from kalcal.montecarlo.problem import check_engine
 from kalcal.montecarlo.scenarios import build_problem, refuse_log_faults
-from kalcal.stats.checks import REPORT_RESIDUAL_PAIR, CheckResult, residual_pair, run_checks, verdict
+from kalcal.stats.results import CheckResult
+from kalcal.stats.suite import run_checks, verdict
+from kalcal.stats.whiteness import REPORT_RESIDUAL_PAIR, residual_pair
 from kalcal.stats.dataset import statistics_dataset
 from kalcal.stats.results import as_false_alarm
 from kalcal.stats.self_check import SelfCheck, exact_prediction, self_check
@@ -236,8 +238,8 @@ def exact_analysis(problem):
 
 def power_summary(problem, n: int, confidence: float, analysis=None) -> dict[str, Any]:
     """``summary.json``'s ``power`` (each check's and part's power at n, from the exact analysis of the same
-    problem: :func:`kalcal.stats.checks.problem_power`) and ``power_reason`` (why it is None, where it is)."""
-    from kalcal.stats.checks import problem_power
+    problem: :func:`kalcal.stats.suite.problem_power`) and ``power_reason`` (why it is None, where it is)."""
+    from kalcal.stats.suite import problem_power
 
     rows, reason = problem_power(problem, n, confidence, analysis)
     return {"power": rows, "power_reason": reason}

@@ -15,7 +15,7 @@ from typing import Protocol
 import numpy as np
 
 from kalcal.core.model import LinearGaussianModel
-from kalcal.core.steps import GainSchedule, UpdateForm, covariance_pass
+from kalcal.core.steps import GainSchedule, UpdateForm, covariance_pass, nis, summed_nis
 from kalcal.errors import ConfigError
 from kalcal.filters.gains import run_with_gains
 from kalcal.linalg import whitener
@@ -112,7 +112,6 @@ class FixedGainProblem:
     _state_whitener: np.ndarray = field(init=False, repr=False)
     _innovation_whitener: np.ndarray = field(init=False, repr=False)
     _state_inverse: np.ndarray = field(init=False, repr=False)
-    _innovation_inverse: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         d, p = self.filter_model.state_dim, self.filter_model.measurement_dim
@@ -124,9 +123,8 @@ class FixedGainProblem:
         object.__setattr__(self, "schedule", schedule)
         object.__setattr__(self, "_state_whitener", whitener(schedule.posterior_cov))
         object.__setattr__(self, "_innovation_whitener", whitener(schedule.innovation_cov))
-        # sum_i e_i^T P^{-1} e_i = tr(P^{-1} sum_i e_i e_i^T): NEES and NIS sums from the second moments.
+        # sum_i e_i^T P^{-1} e_i = tr(P^{-1} sum_i e_i e_i^T): the NEES sums from the second moments.
         object.__setattr__(self, "_state_inverse", _inverse_spd(schedule.posterior_cov))
-        object.__setattr__(self, "_innovation_inverse", _inverse_spd(schedule.innovation_cov))
 
     @property
     def engines(self) -> tuple[str, ...]:
@@ -157,7 +155,7 @@ class FixedGainProblem:
             estimate=run.posterior,
             residual=run.residual,
             nees=np.einsum("nki,nki->nk", whitened_error, whitened_error),
-            nis=np.einsum("nki,nki->nk", whitened_residual, whitened_residual),
+            nis=nis(run.residual, self.schedule.innovation_cov),
             filter_cov_sum=n * self.schedule.posterior_cov,
             normalized_residual=whitened_residual,
             filter_cov=np.broadcast_to(self.schedule.posterior_cov, (n, *self.schedule.posterior_cov.shape)),
@@ -231,11 +229,12 @@ class FixedGainProblem:
                 *gains,
                 sums,
             )
-        # Every realization shares P_k and S_k: sum_i e_i^T P^{-1} e_i = tr(P^{-1} sum_i e_i e_i^T), and
-        # the whitening is linear, so the sum of L^{-1} r is L^{-1} times the sum of r.
+        # Every realization shares P_k and S_k: sum_i e_i^T P^{-1} e_i = tr(P^{-1} sum_i e_i e_i^T) (the NIS
+        # likewise, :func:`summed_nis`), and the whitening is linear, so the sum of L^{-1} r is L^{-1} times
+        # the sum of r.
         shared = sums._replace(
             nees=np.einsum("kij,kij->k", self._state_inverse, sums.error_outer),
-            nis=np.einsum("kij,kij->k", self._innovation_inverse, sums.residual_own),
+            nis=summed_nis(sums.residual_own, self.schedule.innovation_cov),
             filter_cov=n * self.schedule.posterior_cov,
         )
         return MomentSums.from_buffers(n, shared, np.einsum("kij,kj->ki", self._innovation_whitener, sums.residual))

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from kalcal.core.steps import gain_and_covariance, predict_covariance
+from kalcal.core.steps import gain_and_covariance, nis, predict_covariance
 from kalcal.filters.scale_bias import filter_scale_bias, regressors
 from kalcal.models.scale_bias import MEASUREMENT_NAMES, STATE_NAMES, ScaleBiasScenario
 from kalcal.montecarlo.accumulators import BlockResult, MomentSums, SumBuffers
@@ -164,7 +164,7 @@ class ScaleBiasProblem:
             estimate=run.posterior,
             residual=run.residual[..., None],
             nees=nees,
-            nis=run.residual**2 / run.innovation_var,
+            nis=nis(run.residual[..., None], run.innovation_var[..., None, None]),
             filter_cov_sum=run.cov.sum(axis=0),
             filter_cov=run.cov,
         )

@@ -2,7 +2,7 @@
 
 Each has the band a correct filter stays in (source report, figures 5.7-5.12).
 
-Every band is the one the matching check in :mod:`kalcal.stats.checks` holds the statistic to: the
+Every band is the one the matching check in :mod:`kalcal.stats.suite` holds the statistic to: the
 standard error of the statistic times the Bonferroni-corrected normal quantile for the family of all
 updates and elements, at the run's confidence (``dataset.attrs["confidence"]``). N realizations, K
 updates, d states.

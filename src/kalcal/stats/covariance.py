@@ -30,10 +30,22 @@ from kalcal.linalg import whitener
 from kalcal.montecarlo.accumulators import EnsembleStatistics
 from kalcal.montecarlo.problem import ProblemInfo
 from kalcal.stats.bounds import COVARIANCE_PARTS, centered_nees_bounds, covariance_element_bound
-from kalcal.stats.check_steps import check_result, failed_cause, max_abs, safe_ratio, sd_text, standardized
 from kalcal.stats.distributions import chi2_cdf, chi2_sf, normal_isf, t_sf
 from kalcal.stats.power import ChiSquareFamily, NormalFamily
-from kalcal.stats.results import Cause, CheckPart, CheckResult, chi2_two_sided_pvalues, combined_pvalue, family_pvalue
+from kalcal.stats.results import (
+    Cause,
+    CheckPart,
+    CheckResult,
+    check_result,
+    chi2_two_sided_pvalues,
+    combined_pvalue,
+    failed_cause,
+    family_pvalue,
+    max_abs,
+    safe_ratio,
+    sd_text,
+    standardized,
+)
 
 __all__ = [
     "Whitened",
@@ -41,6 +53,7 @@ __all__ = [
     "check_covariance",
     "correlation_pvalues",
     "correlation_z",
+    "covariance_power",
     "element_pvalues",
     "element_z",
     "t_equivalent_z",
@@ -150,7 +163,7 @@ def correlation_z(moment: np.ndarray, power: np.ndarray, dof: float) -> tuple[np
 
     ``power`` is the product of the two samples' mean squares (centered or not, as ``moment``). A zero
     ``power`` (no spread) gives z = 0 for an exactly zero moment and +-inf otherwise, counted as by
-    :func:`~kalcal.stats.check_steps.standardized` (its two counts are returned).
+    :func:`~kalcal.stats.results.standardized` (its two counts are returned).
     """
     r, zero_pass, zero_fail = standardized(moment, np.sqrt(np.maximum(power, 0.0)))
     with np.errstate(divide="ignore", invalid="ignore"):

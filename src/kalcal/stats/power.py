@@ -41,11 +41,14 @@ from __future__ import annotations
 import functools
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from kalcal.analysis.fixed_gain import CovarianceAnalysis
 from kalcal.stats.distributions import chi2_cdf, chi2_sf, ncx2_cdf, ncx2_sf, normal_cdf
+
+if TYPE_CHECKING:  # annotations only: a check's module (the NIS gate's rule) loads without the analysis
+    from kalcal.analysis.fixed_gain import CovarianceAnalysis
 
 __all__ = [
     "DETECTION_POWER",

@@ -22,7 +22,7 @@ from collections.abc import Callable
 import numpy as np
 
 from kalcal.analysis.fixed_gain import analyze_scenario
-from kalcal.stats.checks import check_families
+from kalcal.stats.suite import check_families
 from kalcal.stats.power import DETECTION_POWER
 from kalcal.models.accel_gps import AccelGpsScenario
 from kalcal.models.custom import CustomModelScenario

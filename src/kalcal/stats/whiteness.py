@@ -62,16 +62,37 @@ from kalcal.analysis.fixed_gain import CovarianceAnalysis
 from kalcal.montecarlo.accumulators import EnsembleStatistics
 from kalcal.montecarlo.problem import ProblemInfo
 from kalcal.stats.bounds import WHITENESS_PARTS, portmanteau_bound, whiteness_pairs_bound
-from kalcal.stats.check_steps import check_result, failed_cause, max_abs, sd_text, zero_se_text
 from kalcal.stats.covariance import correlation_z
 from kalcal.stats.distributions import chi2_sf
 from kalcal.stats.power import NormalFamily, PortmanteauPower, portmanteau_power, product_variance
-from kalcal.stats.results import Cause, CheckPart, CheckResult, combined_pvalue, normal_family_pvalue
+from kalcal.stats.results import (
+    Cause,
+    CheckPart,
+    CheckResult,
+    check_result,
+    combined_pvalue,
+    failed_cause,
+    max_abs,
+    normal_family_pvalue,
+    safe_ratio,
+    sd_text,
+    zero_se_text,
+)
 
-__all__ = ["RANK_RTOL", "Portmanteau", "check_residual_whiteness", "portmanteau"]
+__all__ = [
+    "RANK_RTOL",
+    "REPORT_RESIDUAL_PAIR",
+    "Portmanteau",
+    "check_residual_whiteness",
+    "portmanteau",
+    "residual_pair",
+    "whiteness_power",
+]
 
 #: an eigenvalue of S_k at most this times the largest of that update is a direction without power
 RANK_RTOL = 1e-9
+#: where the source report quotes E[r_k r_j^T]
+REPORT_RESIDUAL_PAIR = (23.8, 5.8)
 
 
 class Portmanteau(NamedTuple):
@@ -184,6 +205,22 @@ def _centered_cause(
     if normal_family_pvalue(rest, m) >= share and q.pvalue >= share:
         return failed_cause(lead + "nonzero mean residuals account for it (see mean_error)", explained_by="mean_error")
     return failed_cause(lead + "the innovations are correlated in time: the model's dynamics or noise are wrong")
+
+
+def residual_pair(s: EnsembleStatistics, info: ProblemInfo, t_k: float, t_j: float) -> dict:
+    """E[r_k r_j^T] at the updates nearest to t_k and t_j (the report quotes k = 23.8 s, j = 5.8 s)."""
+    times = info.update_times
+    k = int(np.argmin(np.abs(times - t_k)))
+    j = int(np.argmin(np.abs(times - t_j)))
+    moment = s.residual_second_moment
+    scale = np.sqrt(np.outer(np.diagonal(moment[k, :, k, :]), np.diagonal(moment[j, :, j, :])))
+    return {
+        "k_time": float(times[k]),
+        "j_time": float(times[j]),
+        "matrix": moment[k, :, j, :],
+        "correlation": safe_ratio(moment[k, :, j, :], scale),
+        "standard_error": scale / np.sqrt(s.count),
+    }
 
 
 def whiteness_power(a: CovarianceAnalysis, confidence: float) -> dict[str, NormalFamily | PortmanteauPower]:
