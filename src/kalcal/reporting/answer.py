@@ -1,5 +1,6 @@
-"""The page's answer: the verdict in one sentence with its cause, one short line per check, and the
-figures that show it, all read from the checks' causes in ``summary.json`` (never from their wording).
+"""The report page's answer: the verdict in one sentence with its cause, a line per check, the lead figures.
+
+All of it is read from the checks' causes in ``summary.json`` (never from their wording).
 
 A failed check's cause (``tests[].cause``) says what accounts for it (``explained_by``) and which way
 the filter's covariance is wrong (``direction``). The causes chain: a check ``explained_by`` the mean

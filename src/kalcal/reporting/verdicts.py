@@ -1,6 +1,8 @@
-"""The page's sections on the checks: the answer (the verdict's sentence and a row per check, which lead
-the page), what failed (cause, shortfall, measurement; each folded under its short cause) and the verdicts
-table in full (folded)."""
+"""The report page's sections on the checks: the answer, what failed, and the verdicts table.
+
+The answer (the verdict's sentence and a row per check) leads the page; what failed (cause, shortfall,
+measurement) is folded under each short cause, and the verdicts table in full is folded below.
+"""
 
 from __future__ import annotations
 
