@@ -26,9 +26,9 @@ import pandas as pd
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import kalcal  # noqa: E402
 from bench_job import elapsed, machine  # noqa: E402
-from kalcal.calibration.accel_gps import calibrate_accel_gps, prepare_accel_gps_log  # noqa: E402
+from kalcal.scenarios.accel_gps.calibration import calibrate_accel_gps, prepare_accel_gps_log  # noqa: E402
 from kalcal.io.logs import numeric_columns, read_table  # noqa: E402
-from kalcal.models.registry import build_scenario  # noqa: E402
+from kalcal.scenarios import build_scenario  # noqa: E402
 
 HOURS = 1.0
 REPEATS = 2

@@ -17,7 +17,7 @@ import time
 import numpy as np
 from distributed import Client, LocalCluster
 
-from kalcal.models.accel_gps import AccelGpsScenario
+from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
 from kalcal.montecarlo.engine import BLOCK_SIZE, run_monte_carlo
 from kalcal.montecarlo.scenarios import accel_gps_problem
 

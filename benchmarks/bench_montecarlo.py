@@ -38,7 +38,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 from scipy.linalg.blas import dsyrk, ssyrk
 
-from kalcal.models.accel_gps import AccelGpsScenario
+from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
 from kalcal.montecarlo import engine
 from kalcal.montecarlo.accumulators import MomentSums, ResidualProducts
 from kalcal.montecarlo.engine import BLOCK_SIZE, block_generator, block_sizes, run_monte_carlo
@@ -200,7 +200,7 @@ def dynamax_rate(problem, realizations: int) -> float | None:
 FRESH = """
 import json, sys, time
 start = time.perf_counter()
-from kalcal.models.accel_gps import AccelGpsScenario
+from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
 from kalcal.montecarlo.engine import run_monte_carlo
 from kalcal.montecarlo.scenarios import accel_gps_problem
 imported = time.perf_counter() - start

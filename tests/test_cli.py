@@ -10,10 +10,10 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from kalcal.calibration.accel_gps import calibrate_accel_gps
+from kalcal.scenarios.accel_gps.calibration import calibrate_accel_gps
 from kalcal.cli import app
-from kalcal.models.registry import build_scenario
-from kalcal.simulation.sampled import sample_accel_gps_logs
+from kalcal.scenarios import build_scenario
+from kalcal.scenarios.accel_gps.sampled import sample_accel_gps_logs
 
 ESTIMATE_COLUMNS = [
     "time", "position", "velocity", "bias", "position_std", "velocity_std", "bias_std",

@@ -213,7 +213,7 @@ def test_a_run_whose_arrays_would_not_fit_is_refused_before_it_runs(tmp_path, mo
 
 def test_the_default_runs_fit():
     from kalcal.jobs.verify import MAX_UPDATES, check_arguments, run_length
-    from kalcal.models.registry import build_scenario
+    from kalcal.scenarios import build_scenario
 
     scenario = build_scenario("accel-gps")
     check_arguments(scenario, 300_000)  # the default run with its 120 s long run

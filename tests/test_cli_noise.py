@@ -15,7 +15,7 @@ import pytest
 from typer.testing import CliRunner
 
 from kalcal.cli import app
-from kalcal.models.accel_gps import AccelGpsFilter
+from kalcal.scenarios.accel_gps.settings import AccelGpsFilter
 
 RATE = 200.0
 NOISE_STD = 0.02  # m/s^2 per sample

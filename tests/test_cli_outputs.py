@@ -271,7 +271,7 @@ def test_the_command_lines_files_are_never_removed(tmp_path):
 def test_a_python_job_keeps_the_config_its_scenario_was_read_from(tmp_path):
     """No command line names the config here: the scenario carries it (docs/outputs.md)."""
     import kalcal
-    from kalcal.models.registry import build_scenario
+    from kalcal.scenarios import build_scenario
 
     out = tmp_path / "sim"
     kalcal.simulate(build_scenario("accel-gps", None, ["scenario.duration=2"]), 0, out=out)
@@ -301,7 +301,7 @@ def test_the_jobs_return_the_final_paths(tmp_path):
     """The Python jobs write through the same staging: what they return is where the files now are."""
     import kalcal
     from kalcal.jobs.verify import verify
-    from kalcal.models.registry import build_scenario
+    from kalcal.scenarios import build_scenario
 
     scenario = build_scenario("accel-gps", None, ["scenario.duration=2"])
     outcome = verify(scenario, 200, 0, tmp_path / "v", long_run=0)

@@ -62,10 +62,10 @@ def test_round_trip_recovers_the_truth(simulated, tmp_path):
 def _scale_bias_z(count: int, seed: int, scenario=None):
     """(estimate - truth) / sigma of scale_error and bias, (count, 2), over ``count`` logs drawn from the
     study (its prior, which the calibration takes with --prior settings): the calibrate job's filter."""
-    from kalcal.calibration.scale_bias import calibrate_scale_bias
-    from kalcal.models.registry import build_scenario
-    from kalcal.models.scale_bias_theta import scale_bias_from_theta
-    from kalcal.simulation.scale_bias import sample_scale_bias
+    from kalcal.scenarios.scale_bias.calibration import calibrate_scale_bias
+    from kalcal.scenarios import build_scenario
+    from kalcal.scenarios.scale_bias.theta import scale_bias_from_theta
+    from kalcal.scenarios.scale_bias.simulation import sample_scale_bias
 
     scenario = build_scenario("scale-bias") if scenario is None else scenario
     samples = sample_scale_bias(scenario, np.random.default_rng(seed), count)

@@ -12,7 +12,7 @@ import pytest
 
 from kalcal.analysis.fixed_gain import analyze_problem
 from kalcal.models.config import apply_settings
-from kalcal.models.accel_gps import AccelGpsScenario
+from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
 from kalcal.montecarlo.accumulators import ensemble_statistics
 from kalcal.montecarlo.engine import run_monte_carlo
 from kalcal.montecarlo.scenarios import build_problem

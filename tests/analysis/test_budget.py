@@ -7,8 +7,8 @@ import pytest
 
 from kalcal.analysis.fixed_gain import analyze_scenario
 from kalcal.core.sources import blocks, model_sources
-from kalcal.models.custom import parse_model
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios.model_file.model import parse_model
+from kalcal.scenarios import build_scenario
 from kalcal.simulation.exact import accel_gps_process_noise, accel_gps_truth
 from tests._helpers import assert_close, cov_atol
 

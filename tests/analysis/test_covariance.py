@@ -23,8 +23,8 @@ from kalcal.core.model import LinearGaussianModel
 from kalcal.core.steps import covariance_pass
 from kalcal.errors import KalcalError
 from kalcal.filters.gains import run_with_gains
-from kalcal.models.custom import parse_model
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios.model_file.model import parse_model
+from kalcal.scenarios import build_scenario
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.simulation.exact import UpdateRateTruth, sample_exact, truth_from_model
 from tests._helpers import assert_close, cov_atol

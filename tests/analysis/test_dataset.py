@@ -10,7 +10,7 @@ import xarray as xr
 
 from kalcal.analysis.dataset import analysis_dataset, budget_summary, final_summary
 from kalcal.analysis.fixed_gain import analyze_scenario
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios import build_scenario
 from kalcal.plots.analysis import plot_budget, plot_sigma
 
 SETTINGS = ["scenario.duration=6", "truth.accel_noise_std=0.04", "filter.accel_noise_std=0.02", "truth.bias_walk_std=2e-4"]

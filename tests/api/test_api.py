@@ -38,7 +38,7 @@ def test_no_subpackage_takes_an_exported_name_so_both_import_as_usual():
 
 def test_the_cli_names_the_registry_scenarios():
     from kalcal.cli._common import SCENARIO_NAMES
-    from kalcal.models.registry import SCENARIOS
+    from kalcal.scenarios import SCENARIOS
 
     assert SCENARIO_NAMES == tuple(SCENARIOS)
 
@@ -227,7 +227,7 @@ def test_a_model_built_in_python_verifies_like_its_file(tmp_path):
     [{"w": [[-1.0]]}, {"phi": [[1.0, 0.1]]}, {"updates": 0}, {"steps_per_update": 1.5}, {"x0": "zero"}],
 )
 def test_model_errors_are_the_model_files_errors(tmp_path, change):
-    from kalcal.models.custom import load_model_file
+    from kalcal.scenarios.model_file.model import load_model_file
 
     model = kalcal.Model(**{**CV, **change})
     path = model.save(tmp_path / "bad.toml")

@@ -6,13 +6,13 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from kalcal.calibration.accel_gps import calibrate_accel_gps, prepare_accel_gps_log
-from kalcal.calibration.accel_gps_evaluation import DIFFUSE_BIAS_STD, latency_map
+from kalcal.scenarios.accel_gps.calibration import calibrate_accel_gps, prepare_accel_gps_log
+from kalcal.scenarios.accel_gps.evaluation import DIFFUSE_BIAS_STD, latency_map
 from kalcal.core.likelihood import innovation_loglik
 from kalcal.errors import ConfigError
 from kalcal.filters.mechanization import integrate
-from kalcal.models.registry import build_scenario
-from kalcal.simulation.sampled import sample_accel_gps_logs
+from kalcal.scenarios import build_scenario
+from kalcal.scenarios.accel_gps.sampled import sample_accel_gps_logs
 
 #: a small log: 2 s at 100 Hz with 10 Hz fixes (201 samples, 20 fixes)
 SMALL = ["scenario.duration=2", "scenario.imu_rate=100", "scenario.gps_rate=10"]

@@ -9,11 +9,11 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from kalcal.calibration.accel_gps import calibrate_accel_gps, prior_conflict
+from kalcal.scenarios.accel_gps.calibration import calibrate_accel_gps, prior_conflict
 from kalcal.cli import app
 from kalcal.jobs.calibrate import compute_accel_gps_calibration
-from kalcal.models.registry import build_scenario
-from kalcal.simulation.sampled import sample_accel_gps_logs
+from kalcal.scenarios import build_scenario
+from kalcal.scenarios.accel_gps.sampled import sample_accel_gps_logs
 
 BAD = np.array([30, 75, 120])  # 0-based fixes given gross position errors
 
@@ -92,7 +92,7 @@ def test_a_walking_bias_that_follows_its_prior_rarely_raises_a_conflict():
     so at 0.999 the warning fires at rate 0.001 (without the walk's variance it fired at about 5%)."""
     from scipy import stats
 
-    from kalcal.calibration.accel_gps import bias_walk_variance
+    from kalcal.scenarios.accel_gps.calibration import bias_walk_variance
 
     settings = ["truth.bias_walk_std=2e-3", "filter.bias_walk_std=2e-3", "filter.bias_std=0.1"]
     scenario = build_scenario("accel-gps", assignments=settings)

@@ -17,17 +17,17 @@ from scipy import stats
 from scipy.linalg import block_diag
 from typer.testing import CliRunner
 
-from kalcal.calibration.accel_gps import calibrate_accel_gps
-from kalcal.calibration.accel_gps_evaluation import python_filter as _python_filter
-from kalcal.calibration.smoothing import smooth_calibration
+from kalcal.scenarios.accel_gps.calibration import calibrate_accel_gps
+from kalcal.scenarios.accel_gps.evaluation import python_filter as _python_filter
+from kalcal.scenarios.accel_gps.smoothing import smooth_calibration
 from kalcal.cli import app
 from kalcal.core.steps import interval_transition
 from kalcal.errors import ConfigError, DataError
 from kalcal.filters.mechanization import integrate
 from kalcal.filters.sequential import sequential_filter
-from kalcal.models.accel_gps_discretization import error_transition
-from kalcal.models.registry import build_scenario
-from kalcal.simulation.sampled import sample_accel_gps_logs
+from kalcal.scenarios.accel_gps.discretization import error_transition
+from kalcal.scenarios import build_scenario
+from kalcal.scenarios.accel_gps.sampled import sample_accel_gps_logs
 from tests._helpers import assert_close, cov_atol
 
 SMOOTHED_COLUMNS = [

@@ -14,7 +14,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from kalcal.calibration.interval_model import (
+from kalcal.scenarios.accel_gps.interval_model import (
     SOURCES,
     _accumulate_by_source,
     composed_sources,
@@ -22,7 +22,7 @@ from kalcal.calibration.interval_model import (
 )
 from kalcal.core.steps import interval_transition, predict_covariance
 from kalcal.linalg import symmetrize
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios import build_scenario
 
 
 def _one_pass(phis, inputs, owner, n_intervals):

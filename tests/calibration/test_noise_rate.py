@@ -17,7 +17,7 @@ import pytest
 from typer.testing import CliRunner
 
 from kalcal.cli import app
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios import build_scenario
 
 STATIC_RATE, FLIGHT_RATE = 100.0, 200.0
 DENSITY = 2e-3  # N, m/s^2/sqrt(Hz): 0.02 m/s^2 per sample at 100 Hz, 0.0283 at 200 Hz

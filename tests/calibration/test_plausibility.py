@@ -14,15 +14,15 @@ import numpy as np
 import pytest
 
 from kalcal.calibration import plausibility, unit_slips
-from kalcal.calibration.accel_gps import calibrate_accel_gps
+from kalcal.scenarios.accel_gps.calibration import calibrate_accel_gps
 from kalcal.calibration.diagnostics import innovation_diagnostics
 from kalcal.calibration.noise import identify_noise
-from kalcal.calibration.scale_bias import UNOBSERVABLE_RATIO, calibrate_scale_bias
+from kalcal.scenarios.scale_bias.calibration import UNOBSERVABLE_RATIO, calibrate_scale_bias
 from kalcal.errors import DataError
 from kalcal.jobs.calibrate import stated_rates
-from kalcal.models.registry import build_scenario
-from kalcal.simulation.sampled import sample_accel_gps_logs
-from kalcal.simulation.scale_bias import sample_scale_bias
+from kalcal.scenarios import build_scenario
+from kalcal.scenarios.accel_gps.sampled import sample_accel_gps_logs
+from kalcal.scenarios.scale_bias.simulation import sample_scale_bias
 
 GENUINE = {
     "default": [],
@@ -587,8 +587,8 @@ def test_a_gps_log_wholly_in_mm_is_refused_naming_the_unit():
 
 
 def _observability(scenario, logs, init="first-fix", prior="auto"):
-    from kalcal.calibration.accel_gps import prepare_accel_gps_log
-    from kalcal.calibration.accel_gps_observability import data_only_information, unobservable, unobservable_cause
+    from kalcal.scenarios.accel_gps.calibration import prepare_accel_gps_log
+    from kalcal.scenarios.accel_gps.observability import data_only_information, unobservable, unobservable_cause
 
     log = prepare_accel_gps_log(scenario, *logs, init=init, prior=prior, source="gps.csv", imu_source="imu.csv")
     result = log.calibrate()
@@ -669,8 +669,8 @@ def test_the_fixes_text_adds_up_with_the_gate_and_the_starting_fix():
     """Used + rejected by the gate + the fix that starts the filter + NaN + outside = the fixes in the log:
     the gate's rejections and the starting fix were once left out of the text ("148 used of 150 (0 with a
     NaN field, 0 outside)")."""
-    from kalcal.calibration.accel_gps import prepare_accel_gps_log
-    from kalcal.calibration.accel_gps_observability import _fixes_text, data_only_information
+    from kalcal.scenarios.accel_gps.calibration import prepare_accel_gps_log
+    from kalcal.scenarios.accel_gps.observability import _fixes_text, data_only_information
 
     scenario = _scenario("filter.bias_std=0.1")
     log = prepare_accel_gps_log(scenario, *_logs(scenario), init="first-fix", source="gps.csv", imu_source="imu.csv")
@@ -752,7 +752,7 @@ def test_prior_dominates_names_each_parameters_setting_and_says_the_log_informs_
     """Bias and scale both tighter in their priors than the log tells: the advice names filter.bias_std and
     filter.scale_std (it named only the first), and the text says the log informs them (the grounds are
     counts, not a bound on the data-only sigma)."""
-    from kalcal.calibration.accel_gps_observability import prior_warning
+    from kalcal.scenarios.accel_gps.observability import prior_warning
 
     d = {
         "names": ["bias", "scale"], "singular": False, "determined": [True, True], "weaker_than_prior": [True, True],

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from kalcal.calibration.accel_gps import calibrate_accel_gps
-from kalcal.models.accel_gps_discretization import error_transition
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios.accel_gps.calibration import calibrate_accel_gps
+from kalcal.scenarios.accel_gps.discretization import error_transition
+from kalcal.scenarios import build_scenario
 
 AMPLITUDES = np.array([1.5, 0.8, 0.4])
 OMEGAS = np.array([0.3, 1.1, 2.3])
@@ -200,7 +200,7 @@ def test_gaps_are_reported_and_can_stop_the_run(scenario):
 
 
 def test_compiled_sequential_filter_equals_predict_update_loop(scenario):
-    from kalcal.calibration.accel_gps_evaluation import python_filter as _python_filter
+    from kalcal.scenarios.accel_gps.evaluation import python_filter as _python_filter
     from kalcal.filters.sequential import sequential_filter
 
     rng = np.random.default_rng(16)

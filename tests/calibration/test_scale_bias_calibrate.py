@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from kalcal.calibration.scale_bias import calibrate_scale_bias
+from kalcal.scenarios.scale_bias.calibration import calibrate_scale_bias
 from kalcal.errors import DataError
-from kalcal.models.registry import build_scenario
-from kalcal.models.scale_bias_theta import scale_bias_from_theta
-from kalcal.simulation.scale_bias import sample_scale_bias
+from kalcal.scenarios import build_scenario
+from kalcal.scenarios.scale_bias.theta import scale_bias_from_theta
+from kalcal.scenarios.scale_bias.simulation import sample_scale_bias
 from tests._helpers import bonferroni_k
 
 SEEDS = range(100, 150)

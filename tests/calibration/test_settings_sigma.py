@@ -18,9 +18,9 @@ import pytest
 from scipy import stats
 
 import kalcal
-from kalcal.calibration.accel_gps_log import prepare_accel_gps_log
-from kalcal.calibration.accel_gps_settings_sigma import WARN_FACTOR, error_variance_terms, settings_sigma
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios.accel_gps.log import prepare_accel_gps_log
+from kalcal.scenarios.accel_gps.settings_sigma import WARN_FACTOR, error_variance_terms, settings_sigma
+from kalcal.scenarios import build_scenario
 
 SCENARIO = build_scenario("accel-gps", None, ["scenario.integration=trapezoid"])
 

@@ -11,16 +11,16 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from kalcal.calibration.accel_gps import calibrate_accel_gps
-from kalcal.calibration.scale_bias import calibrate_scale_bias
+from kalcal.scenarios.accel_gps.calibration import calibrate_accel_gps
+from kalcal.scenarios.scale_bias.calibration import calibrate_scale_bias
 from kalcal.calibration.stability import LEVEL, difference_statistic, time_windows, weighted_mean_statistic
 from kalcal.calibration.windows import accel_gps_stability, check_windows, scale_bias_stability
 from kalcal.errors import ConfigError
-from kalcal.models.accel_gps import AccelGpsScenario
+from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
 from kalcal.models.config import apply_settings
-from kalcal.models.scale_bias import ScaleBiasScenario
-from kalcal.simulation.sampled import sample_accel_gps_logs
-from kalcal.simulation.scale_bias import sample_scale_bias
+from kalcal.scenarios.scale_bias.settings import ScaleBiasScenario
+from kalcal.scenarios.accel_gps.sampled import sample_accel_gps_logs
+from kalcal.scenarios.scale_bias.simulation import sample_scale_bias
 
 LOGS = 40
 EXACT = {"scenario.truth": "discrete", "scenario.integration": "trapezoid"}

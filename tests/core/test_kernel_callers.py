@@ -52,8 +52,8 @@ def test_every_compiled_covariance_update_is_the_one_function():
     callers = {key for key, kernel in found.items() if kernels.covariance_update in _callees(kernel)}
     assert callers == {
         ("kalcal.filters.sequential", "_run"),
-        ("kalcal.montecarlo.regression_kernels", "_filter_tile"),
-        ("kalcal.fitting.scale_bias_likelihood", "_diffuse_filter"),
+        ("kalcal.scenarios.scale_bias.kernels", "_filter_tile"),
+        ("kalcal.scenarios.scale_bias.likelihood", "_diffuse_filter"),
     }
     # the fixed-gain block kernel applies its gain schedule: no covariance update in it
     assert not any(

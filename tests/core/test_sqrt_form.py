@@ -27,7 +27,7 @@ from kalcal.core.sqrt_form import (
 )
 from kalcal.core.model import LinearGaussianModel
 from kalcal.core.steps import covariance_pass, gain_and_covariance, interval_transition, predict, update
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios import build_scenario
 from kalcal.montecarlo.scenarios import build_problem
 from tests._helpers import assert_close, cov_atol
 

@@ -16,9 +16,9 @@ from kalcal.core.sqrt_form import cholesky_factor, gram, sqrt_update
 from kalcal.core.steps import covariance_pass, gain_and_covariance, nis, predict, summed_nis, update
 from kalcal.errors import ConfigError
 from kalcal.filters.gains import run_with_gains
-from kalcal.models.accel_gps import AccelGpsScenario
-from kalcal.models.registry import build_scenario
-from kalcal.simulation.sampled import sample_accel_gps_errors
+from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
+from kalcal.scenarios import build_scenario
+from kalcal.scenarios.accel_gps.sampled import sample_accel_gps_errors
 from tests._helpers import assert_close, cov_atol
 from tests.core._models import blind_model
 

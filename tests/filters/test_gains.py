@@ -12,8 +12,8 @@ import pytest
 from kalcal.core.model import LinearGaussianModel
 from kalcal.core.steps import covariance_pass, interval_transition, predict, update
 from kalcal.filters.gains import run_with_gains
-from kalcal.models.accel_gps import AccelGpsScenario
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
+from kalcal.scenarios import build_scenario
 from tests._helpers import assert_close, cov_atol
 from tests.core._models import blind_model
 

@@ -13,9 +13,9 @@ import pytest
 from kalcal.core.steps import update
 from kalcal.errors import ConfigError
 from kalcal.filters.regression import note_update, run_regression_filter, scalar_update
-from kalcal.filters.scale_bias import filter_scale_bias, regressors
-from kalcal.models.registry import build_scenario
-from kalcal.simulation.scale_bias import sample_scale_bias
+from kalcal.scenarios.scale_bias.filter import filter_scale_bias, regressors
+from kalcal.scenarios import build_scenario
+from kalcal.scenarios.scale_bias.simulation import sample_scale_bias
 from tests._helpers import assert_close, cov_atol
 
 

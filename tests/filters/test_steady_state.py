@@ -17,7 +17,7 @@ import scipy.linalg
 from kalcal.core.model import LinearGaussianModel
 from kalcal.core.steps import covariance_pass, interval_transition
 from kalcal.filters.steady_state import convergence, model_steady_state_view, no_steady_state, steady_state
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios import build_scenario
 from tests._helpers import assert_close, cov_atol
 
 NAMES = ("position", "velocity", "bias")

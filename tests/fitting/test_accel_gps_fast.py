@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 import kalcal
-from kalcal.calibration.accel_gps_log import prepare_accel_gps_log
-from kalcal.fitting.accel_gps_reference import prepare_reference_accel_gps_log
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios.accel_gps.log import prepare_accel_gps_log
+from kalcal.scenarios.accel_gps.fit_reference import prepare_reference_accel_gps_log
+from kalcal.scenarios import build_scenario
 
 
 def simulated(seed, duration, settings=(), config=None):

@@ -8,9 +8,9 @@ import pytest
 from scipy import stats
 
 import kalcal
-from kalcal.calibration.accel_gps import calibrate_accel_gps
-from kalcal.fitting.accel_gps_reference import loglik_of, prepare_reference_accel_gps_log
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios.accel_gps.calibration import calibrate_accel_gps
+from kalcal.scenarios.accel_gps.fit_reference import loglik_of, prepare_reference_accel_gps_log
+from kalcal.scenarios import build_scenario
 
 
 def logs(seed, duration, **truth):
@@ -70,7 +70,7 @@ def test_a_log_whose_bias_drifts_is_not_adequate_for_a_constant_bias_and_the_sen
 
 
 def test_per_fix_std_columns_get_one_multiplier_each_instead_of_the_constant():
-    from kalcal.fitting.accel_gps import default_free
+    from kalcal.scenarios.accel_gps.fit import default_free
 
     assert default_free(True, True) == [
         "filter.accel_noise_density", "filter.bias_walk_density", "log.position_std_multiplier", "log.velocity_std_multiplier",

@@ -157,7 +157,7 @@ def test_the_noise_is_fitted_and_written_as_densities_with_per_sample_values_at_
     assert done.exit_code == 0, done.stdout + done.stderr
     summary = json.loads((cal / "summary.json").read_text())
     assert not [w for w in summary["warnings"] if w["code"].startswith("noise-rate")]
-    from kalcal.models.registry import build_scenario
+    from kalcal.scenarios import build_scenario
 
     scenario = build_scenario("accel-gps", out / "filter.toml")
     assert scenario.filter_settings.accel_noise_std == pytest.approx(per_sample["accel_noise_std"]["value"], rel=1e-6)

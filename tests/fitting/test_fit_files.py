@@ -12,7 +12,7 @@ from typer.testing import CliRunner
 import kalcal
 from kalcal.cli import app
 from kalcal.jobs.verify import MAX_UPDATES, check_arguments, default_long_run
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios import build_scenario
 
 ROVER = Path(__file__).resolve().parents[2] / "examples" / "rover-like.toml"
 
@@ -146,8 +146,8 @@ def test_the_figure_draws_a_negative_latency_on_a_linear_axis_and_a_noise_std_on
 
 def test_the_figure_draws_a_setting_searched_on_a_linear_scale_on_a_linear_axis_all_positive_too():
     """A latency whose every value is positive goes on a linear axis when the job names it (it passes
-    kalcal.fitting.accel_gps.LINEAR), on a log one when nothing says it was searched on a linear scale."""
-    from kalcal.fitting.accel_gps import LINEAR
+    kalcal.scenarios.accel_gps.fit.LINEAR), on a log one when nothing says it was searched on a linear scale."""
+    from kalcal.scenarios.accel_gps.fit import LINEAR
     from kalcal.plots.fit import fit_figure
 
     curves = {"filter.gps_latency": {"value": [0.01, 0.02, 0.04], "loglik": [-3.0, 0.0, -3.0]}}

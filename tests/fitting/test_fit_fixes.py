@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import kalcal
-from kalcal.fitting.accel_gps import _used
+from kalcal.scenarios.accel_gps.fit import _used
 from kalcal.stats.nis import gate_excess
 
 ROVER = Path(__file__).resolve().parents[2] / "examples" / "rover-like.toml"
@@ -32,9 +32,9 @@ def test_the_gated_fit_scores_one_fixed_set_of_fixes_and_does_not_reject_everyth
 
 
 def test_a_fixed_rejected_set_is_left_out_like_missing_fixes_in_the_fast_and_the_reference_likelihood():
-    from kalcal.calibration.accel_gps_log import prepare_accel_gps_log
-    from kalcal.fitting.accel_gps_reference import prepare_reference_accel_gps_log
-    from kalcal.models.registry import build_scenario
+    from kalcal.scenarios.accel_gps.log import prepare_accel_gps_log
+    from kalcal.scenarios.accel_gps.fit_reference import prepare_reference_accel_gps_log
+    from kalcal.scenarios import build_scenario
 
     imu, gps = rover(3, 10)
     scenario = build_scenario("accel-gps", ROVER, [])

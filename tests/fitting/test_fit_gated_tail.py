@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
-from kalcal.fitting.accel_gps import fit_accel_gps
+from kalcal.scenarios.accel_gps.fit import fit_accel_gps
 from kalcal.fitting.nis_tail import lower_side_fixes, nis_tail
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios import build_scenario
 
 from tests.fitting.fake_log import FakeLog
 

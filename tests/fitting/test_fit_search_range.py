@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kalcal.fitting.accel_gps import fit_accel_gps
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios.accel_gps.fit import fit_accel_gps
+from kalcal.scenarios import build_scenario
 
 from tests.fitting.fake_log import FakeLog
 

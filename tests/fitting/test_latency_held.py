@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 import kalcal
-from kalcal.fitting.accel_gps import fit_accel_gps
-from kalcal.fitting.latency_scan import MARKOV, NOT_RESOLVED, UNRESOLVED
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios.accel_gps.fit import fit_accel_gps
+from kalcal.scenarios.accel_gps.latency_scan import MARKOV, NOT_RESOLVED, UNRESOLVED
+from kalcal.scenarios import build_scenario
 
 from tests.fitting.fake_log import FakeLog
 

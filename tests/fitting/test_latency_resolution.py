@@ -11,7 +11,7 @@ import pytest
 from scipy import stats
 
 import kalcal
-from kalcal.fitting.latency_scan import ROUGH, UNRESOLVED, roughness
+from kalcal.scenarios.accel_gps.latency_scan import ROUGH, UNRESOLVED, roughness
 
 ROVER = Path(__file__).resolve().parents[2] / "examples" / "rover-like.toml"
 DROP = stats.chi2.ppf(0.95, 1) / 2
@@ -69,8 +69,8 @@ def test_a_default_log_resolves_a_20_ms_latency_though_its_hill_falls_by_more_th
 
 @pytest.mark.parametrize("gate", [None, 0.999])
 def test_an_unresolved_latencys_fitted_filter_and_its_adequacy_use_the_input_latency(gate):
-    from kalcal.fitting.accel_gps import fit_accel_gps
-    from kalcal.models.registry import build_scenario
+    from kalcal.scenarios.accel_gps.fit import fit_accel_gps
+    from kalcal.scenarios import build_scenario
 
     from tests.fitting.fake_log import FakeLog
 

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 import kalcal
-from kalcal.calibration.accel_gps_log import prepare_accel_gps_log
-from kalcal.fitting.latency_scan import UNRESOLVED, scan_step
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios.accel_gps.log import prepare_accel_gps_log
+from kalcal.scenarios.accel_gps.latency_scan import UNRESOLVED, scan_step
+from kalcal.scenarios import build_scenario
 
 ROVER = Path(__file__).resolve().parents[2] / "examples" / "rover-like.toml"
 

@@ -9,11 +9,11 @@ from scipy import stats
 from kalcal.core.likelihood import innovation_loglik
 from kalcal.core.steps import nis
 from kalcal.filters.regression import run_regression_filter
-from kalcal.filters.scale_bias import regressors
-from kalcal.fitting.scale_bias import DRIFT, NOISE, fit_scale_bias
-from kalcal.fitting.scale_bias_likelihood import diffuse_loglik
-from kalcal.models.registry import build_scenario
-from kalcal.simulation.scale_bias import sample_scale_bias
+from kalcal.scenarios.scale_bias.filter import regressors
+from kalcal.scenarios.scale_bias.fit import DRIFT, NOISE, fit_scale_bias
+from kalcal.scenarios.scale_bias.likelihood import diffuse_loglik
+from kalcal.scenarios import build_scenario
+from kalcal.scenarios.scale_bias.simulation import sample_scale_bias
 
 
 def scenario(**settings):

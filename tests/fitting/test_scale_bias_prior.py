@@ -7,9 +7,9 @@ import pytest
 from scipy import stats
 
 import kalcal
-from kalcal.calibration.scale_bias import calibrate_scale_bias
-from kalcal.models.registry import build_scenario
-from kalcal.simulation.scale_bias import sample_scale_bias
+from kalcal.scenarios.scale_bias.calibration import calibrate_scale_bias
+from kalcal.scenarios import build_scenario
+from kalcal.scenarios.scale_bias.simulation import sample_scale_bias
 
 
 def test_a_log_without_a_prior_is_calibrated_from_a_diffuse_one_and_one_with_a_prior_from_it():

@@ -424,7 +424,7 @@ def test_the_file_a_scenario_was_read_from_is_an_input_of_every_job_given_it(tmp
 
 
 def test_build_scenario_records_its_config(tmp_path):
-    from kalcal.models.registry import build_scenario
+    from kalcal.scenarios import build_scenario
 
     config = tmp_path / "cfg.toml"
     config.write_text("[scenario]\nduration = 2\n")

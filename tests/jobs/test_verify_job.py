@@ -10,7 +10,7 @@ from typer.testing import CliRunner
 
 from kalcal.cli import app
 from kalcal.jobs.verify import verify
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios import build_scenario
 from kalcal.stats.bounds import normal_bound
 
 runner = CliRunner()

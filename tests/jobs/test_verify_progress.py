@@ -7,7 +7,7 @@ import pytest
 from kalcal.jobs.progress import STAGES, VERIFY_ORDER, stage
 from kalcal.jobs.report import render_report
 from kalcal.jobs.verify import verify
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios import build_scenario
 
 
 def _record():

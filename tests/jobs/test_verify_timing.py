@@ -7,7 +7,7 @@ import time
 from kalcal.jobs import report as report_job
 from kalcal.jobs import verify as save_job
 from kalcal.jobs.verify import verify
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios import build_scenario
 
 PAUSE = 0.5  # s added to drawing the report
 

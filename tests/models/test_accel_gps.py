@@ -7,8 +7,8 @@ import pytest
 from scipy.integrate import quad
 
 from kalcal.errors import ConfigError
-from kalcal.models.accel_gps import AccelGpsScenario, AccelGpsSettings
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios.accel_gps.settings import AccelGpsScenario, AccelGpsSettings
+from kalcal.scenarios import build_scenario
 
 
 def test_filter_model_is_the_reports_model():

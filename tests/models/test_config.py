@@ -7,9 +7,9 @@ import dataclasses
 import pytest
 
 from kalcal.errors import ConfigError
-from kalcal.models.accel_gps import AccelGpsScenario
+from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
 from kalcal.models.config import apply_settings, known_keys, load_toml, section_values
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios import build_scenario
 from kalcal.models.settings import parse_assignments
 
 # A valid, non-default value for every setting of the accel/GPS scenario.

@@ -11,7 +11,7 @@ import pytest
 from kalcal.errors import ConfigError
 from kalcal.io.results import to_jsonable
 from kalcal.models.config import section_values
-from kalcal.models.custom import MODEL_KEYS, CustomModelScenario, is_custom_settings, load_model_file, parse_model
+from kalcal.scenarios.model_file.model import MODEL_KEYS, CustomModelScenario, is_custom_settings, load_model_file, parse_model
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 SOURCE = "my-model.toml"

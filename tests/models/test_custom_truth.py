@@ -11,8 +11,8 @@ from kalcal.core.model import LinearGaussianModel
 from kalcal.errors import ConfigError
 from kalcal.io.results import to_jsonable
 from kalcal.models.config import section_values
-from kalcal.models.custom import MODEL_KEYS, CustomModelScenario, load_model_file, parse_model
-from kalcal.models.custom_truth import MappedTruthModel
+from kalcal.scenarios.model_file.model import MODEL_KEYS, CustomModelScenario, load_model_file, parse_model
+from kalcal.scenarios.model_file.truth import MappedTruthModel
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 SOURCE = "reduced.toml"
@@ -144,7 +144,7 @@ def test_state_names_need_a_map():
 
 
 def test_the_colored_gps_example_holds_the_seed_filter():
-    from kalcal.models.accel_gps import AccelGpsScenario
+    from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
 
     scenario = load_model_file(EXAMPLES / "accel_gps_colored_gps.toml")
     seed = AccelGpsScenario().filter_model()

@@ -7,9 +7,9 @@ import pytest
 
 from kalcal.errors import ConfigError
 from kalcal.models.config import known_keys
-from kalcal.models.registry import SCENARIOS, build_scenario
-from kalcal.models.scale_bias import ScaleBiasScenario
-from kalcal.models.scale_bias_theta import scale_bias_from_theta, scale_bias_jacobian, theta_from_scale_bias, theta_prior
+from kalcal.scenarios import SCENARIOS, build_scenario
+from kalcal.scenarios.scale_bias.settings import ScaleBiasScenario
+from kalcal.scenarios.scale_bias.theta import scale_bias_from_theta, scale_bias_jacobian, theta_from_scale_bias, theta_prior
 
 # A valid, non-default value for every setting.
 NON_DEFAULT = {

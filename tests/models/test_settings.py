@@ -9,8 +9,8 @@ import pytest
 
 from kalcal.errors import ConfigError, KalcalError
 from kalcal.models import settings as st
-from kalcal.models.custom import parse_model
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios.model_file.model import parse_model
+from kalcal.scenarios import build_scenario
 from kalcal.models.settings import SettingError
 
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from kalcal.errors import ConfigError
-from kalcal.models.accel_gps import AccelGpsScenario
+from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
 from kalcal.models.config import apply_settings
 from kalcal.montecarlo import checkpoint
 from kalcal.montecarlo.engine import run_monte_carlo

@@ -17,7 +17,7 @@ import pytest
 import scipy.linalg
 
 from kalcal.jobs.verify import verify
-from kalcal.models.custom import load_model_file
+from kalcal.scenarios.model_file.model import load_model_file
 from kalcal.montecarlo.scenarios import build_problem
 from tests._helpers import assert_close, bonferroni_k
 

@@ -9,7 +9,7 @@ import signal
 import distributed
 import pytest
 
-from kalcal.models.accel_gps import AccelGpsScenario
+from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
 from kalcal.models.config import apply_settings
 from kalcal.montecarlo.engine import run_monte_carlo
 from kalcal.montecarlo.scenarios import accel_gps_problem
@@ -81,7 +81,7 @@ def test_a_local_cluster_keeps_distributeds_warnings_off_stderr():
 KILL_SCRIPT = """
 import os, signal, sys
 from kalcal.cli._common import print_note
-from kalcal.models.accel_gps import AccelGpsScenario
+from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
 from kalcal.montecarlo.distributed import dask_client
 from kalcal.montecarlo.engine import run_monte_carlo
 from kalcal.montecarlo.scenarios import accel_gps_problem

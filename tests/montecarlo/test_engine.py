@@ -5,12 +5,12 @@ import dataclasses
 import numpy as np
 import pytest
 
-from kalcal.models.accel_gps import AccelGpsScenario
+from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
 from kalcal.models.config import apply_settings
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios import build_scenario
 from kalcal.montecarlo.accumulators import BlockResult, MomentSums, ensemble_statistics
 from kalcal.montecarlo.engine import block_generator, block_sizes, realization, run_monte_carlo
-from kalcal.montecarlo.scale_bias import ScaleBiasProblem
+from kalcal.scenarios.scale_bias.problem import ScaleBiasProblem
 from kalcal.montecarlo.scenarios import accel_gps_problem
 
 SHORT = {"scenario.duration": 4.0}

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from kalcal.errors import ConfigError
-from kalcal.models.accel_gps import DENSITY_NAMES, AccelGpsFilter, AccelGpsTruth
-from kalcal.models.registry import build_scenario
-from kalcal.models.scale_bias import ScaleBiasTruth
+from kalcal.scenarios.accel_gps.settings import DENSITY_NAMES, AccelGpsFilter, AccelGpsTruth
+from kalcal.scenarios import build_scenario
+from kalcal.scenarios.scale_bias.settings import ScaleBiasTruth
 from kalcal.montecarlo.scenarios import build_problem
 
 SHORT = ["scenario.duration=4"]
@@ -111,8 +111,8 @@ SCALE_BIAS_FILTER = [
 @pytest.mark.parametrize("name", [f.name for f in dataclasses.fields(ScaleBiasTruth)])
 def test_scale_bias_filter_ignores_every_truth_setting(drift, name):
     """The scale/bias filter's gains depend on the data, so it is run on the same data: same output."""
-    from kalcal.filters.scale_bias import filter_scale_bias
-    from kalcal.simulation.scale_bias import sample_scale_bias
+    from kalcal.scenarios.scale_bias.filter import filter_scale_bias
+    from kalcal.scenarios.scale_bias.simulation import sample_scale_bias
 
     assignments = [f"scenario.drift={drift}", "scenario.duration=5", *SCALE_BIAS_FILTER]
     scenario = build_scenario("scale-bias", None, assignments)

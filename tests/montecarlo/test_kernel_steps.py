@@ -16,7 +16,7 @@ from kalcal.core.steps import gain_and_covariance, nis, predict, predict_covaria
 from kalcal.filters.regression import run_regression_filter
 from kalcal.montecarlo.accumulators import SumBuffers
 from kalcal.montecarlo.kernels import filter_block_moments
-from kalcal.montecarlo.regression_kernels import regression_block_moments
+from kalcal.scenarios.scale_bias.kernels import regression_block_moments
 
 
 def _spd(rng, d):

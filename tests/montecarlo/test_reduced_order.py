@@ -16,8 +16,8 @@ import scipy.stats
 
 from kalcal.core.model import LinearGaussianModel
 from kalcal.jobs.verify import verify
-from kalcal.models.custom import parse_model
-from kalcal.models.custom_truth import MODEL_KEYS, MappedTruthModel
+from kalcal.scenarios.model_file.model import parse_model
+from kalcal.scenarios.model_file.truth import MODEL_KEYS, MappedTruthModel
 from kalcal.montecarlo.accumulators import MomentSums
 from kalcal.montecarlo.problem import FixedGainProblem
 from kalcal.montecarlo.scenarios import build_problem

@@ -8,7 +8,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from kalcal.models.accel_gps import AccelGpsScenario
+from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
 from kalcal.models.config import apply_settings
 from kalcal.montecarlo.accumulators import MomentSums
 from kalcal.montecarlo.engine import block_generator

@@ -15,11 +15,11 @@ import numpy as np
 import pytest
 
 from kalcal.errors import ConfigError
-from kalcal.filters.scale_bias import filter_scale_bias
+from kalcal.scenarios.scale_bias.filter import filter_scale_bias
 from kalcal.jobs.verify import verify
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios import build_scenario
 from kalcal.montecarlo.accumulators import MomentSums
-from kalcal.montecarlo.scale_bias import ScaleBiasProblem, eiv_mean_error, mean_regressor_signal
+from kalcal.scenarios.scale_bias.problem import ScaleBiasProblem, eiv_mean_error, mean_regressor_signal
 from kalcal.montecarlo.scenarios import build_problem
 
 SHORT = ["scenario.duration=8"]  # K = 80: quick, and the prior still counts over much of it
@@ -29,7 +29,7 @@ SHORT = ["scenario.duration=8"]  # K = 80: quick, and the prior still counts ove
 def test_the_samples_are_the_draws_written_out_bit_for_bit(settings):
     """sample_scale_bias scales and sums the sensors' noise in place: the numbers of the expressions
     written out (the module docstring's draw order), every bit."""
-    from kalcal.simulation.scale_bias import _factor, sample_scale_bias
+    from kalcal.scenarios.scale_bias.simulation import _factor, sample_scale_bias
 
     scenario = build_scenario("scale-bias", assignments=SHORT + settings)
     got = sample_scale_bias(scenario, np.random.default_rng(5), 60)
@@ -55,10 +55,10 @@ def test_the_samples_are_the_draws_written_out_bit_for_bit(settings):
 def test_the_kernel_reads_the_broadcast_truth_as_it_would_a_copy(settings):
     """block_sums hands the kernel the constant truth as a view broadcast along K (no copy): the sums of a
     contiguous copy, bit for bit."""
-    from kalcal.filters.scale_bias import regressors
+    from kalcal.scenarios.scale_bias.filter import regressors
     from kalcal.montecarlo.accumulators import SumBuffers
-    from kalcal.montecarlo.regression_kernels import regression_block_moments
-    from kalcal.simulation.scale_bias import sample_scale_bias
+    from kalcal.scenarios.scale_bias.kernels import regression_block_moments
+    from kalcal.scenarios.scale_bias.simulation import sample_scale_bias
 
     scenario = build_scenario("scale-bias", assignments=SHORT + settings)
     samples = sample_scale_bias(scenario, np.random.default_rng(9), 300)
@@ -190,7 +190,7 @@ def test_a_realization_carries_its_own_filter_covariance(index):
     """The scale/bias filter's P depends on the data: realization K's P is its own filter run's, not the
     mean over its block (which the report's +-1 sigma bands once showed)."""
     from kalcal.montecarlo.engine import block_generator, block_sizes, realization
-    from kalcal.simulation.scale_bias import sample_scale_bias
+    from kalcal.scenarios.scale_bias.simulation import sample_scale_bias
 
     scenario = build_scenario("scale-bias", assignments=SHORT)
     problem = ScaleBiasProblem(scenario)

@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios import build_scenario
 from kalcal.montecarlo.accumulators import ensemble_statistics
 from kalcal.montecarlo.engine import run_monte_carlo
 from kalcal.montecarlo.scenarios import build_problem

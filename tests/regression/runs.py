@@ -39,8 +39,8 @@ RUNS: dict[str, tuple[str, dict]] = {
 def run(name: str, out: Path) -> xr.Dataset:
     """Run ``RUNS[name]`` with N realizations and seed SEED into ``out``; its ``stats.nc``, loaded."""
     from kalcal.jobs.verify import verify
-    from kalcal.models.custom import load_model_file
-    from kalcal.models.registry import build_scenario
+    from kalcal.scenarios.model_file.model import load_model_file
+    from kalcal.scenarios import build_scenario
 
     target, settings = RUNS[name]
     assignments = [f"{key}={value}" for key, value in settings.items()]

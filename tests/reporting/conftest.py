@@ -13,7 +13,7 @@ import shutil
 import pytest
 
 from kalcal.jobs.verify import verify
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios import build_scenario
 
 N = 5000
 SEED = 3

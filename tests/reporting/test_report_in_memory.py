@@ -8,7 +8,7 @@ import pytest
 
 from kalcal.jobs import report as report_job
 from kalcal.jobs.verify import verify
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios import build_scenario
 
 RUN_FILES = ("summary.json", "stats.nc", "stats_long.nc", ".kalcal-manifest.json")
 

@@ -8,7 +8,7 @@ import pytest
 from kalcal.errors import ConfigError, DataError
 from kalcal.io.statistics import read_statistics
 from kalcal.jobs.report import draw_realization, render_report, settings_assignments
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios import build_scenario
 from kalcal.montecarlo.engine import block_sizes, run_block
 from kalcal.montecarlo.scenarios import build_problem
 

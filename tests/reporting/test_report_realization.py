@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from kalcal.jobs.report import draw_realization
-from kalcal.models.custom import parse_model
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios.model_file.model import parse_model
+from kalcal.scenarios import build_scenario
 from kalcal.montecarlo.engine import realization
 from kalcal.montecarlo.problem import FixedGainProblem
 from kalcal.montecarlo.scenarios import build_problem

@@ -21,7 +21,7 @@ from kalcal.errors import ConfigError
 from kalcal.filters.steady_state import SteadyStateView, convergence, steady_state
 from kalcal.jobs.report import render_report
 from kalcal.jobs.verify import verify
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios import build_scenario
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.plots.steady_state import plot_steady_state
 from kalcal.reporting.figures import FigureEntry

@@ -11,7 +11,7 @@ import numpy as np
 import xarray as xr
 
 from kalcal.jobs.report import render_report
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios import build_scenario
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.reporting.html import png_size
 from kalcal.reporting.theory import SIGMA_EXACT_TITLE, self_check_section

@@ -15,9 +15,9 @@ import pytest
 from kalcal.core.model import LinearGaussianModel
 from kalcal.core.steps import interval_transition
 from kalcal.filters.mechanization import interval_weights
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios import build_scenario
 from kalcal.simulation.exact import accel_gps_model_error, accel_gps_truth, sample_exact, truth_from_model
-from kalcal.simulation.sampled import sample_accel_gps_errors
+from kalcal.scenarios.accel_gps.sampled import sample_accel_gps_errors
 from tests._helpers import assert_gaussian_moments, assert_same_distribution
 
 N = 20_000

@@ -19,8 +19,8 @@ from typer.testing import CliRunner
 import kalcal
 from kalcal.cli import app
 from kalcal.errors import ConfigError
-from kalcal.models.registry import build_scenario
-from kalcal.simulation.sampled import sample_accel_gps_logs
+from kalcal.scenarios import build_scenario
+from kalcal.scenarios.accel_gps.sampled import sample_accel_gps_logs
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "rover-like.toml"
 

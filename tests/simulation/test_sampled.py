@@ -7,8 +7,8 @@ import pytest
 from scipy import stats
 
 from kalcal.filters.mechanization import integrate
-from kalcal.models.registry import build_scenario
-from kalcal.simulation.sampled import sample_accel_gps_errors, sample_accel_gps_logs
+from kalcal.scenarios import build_scenario
+from kalcal.scenarios.accel_gps.sampled import sample_accel_gps_errors, sample_accel_gps_logs
 
 
 def _scenario(integration="euler", truth="analytic", *extra):

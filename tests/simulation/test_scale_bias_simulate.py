@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kalcal.models.registry import build_scenario
-from kalcal.models.scale_bias_theta import scale_bias_from_theta
-from kalcal.simulation.scale_bias import normals_per_realization, sample_scale_bias
+from kalcal.scenarios import build_scenario
+from kalcal.scenarios.scale_bias.theta import scale_bias_from_theta
+from kalcal.scenarios.scale_bias.simulation import normals_per_realization, sample_scale_bias
 from tests._helpers import assert_gaussian_moments
 
 

@@ -4,13 +4,13 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from kalcal.calibration.accel_gps import calibrate_accel_gps
-from kalcal.models.accel_gps_discretization import bias_discretization, error_transition
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios.accel_gps.calibration import calibrate_accel_gps
+from kalcal.scenarios.accel_gps.discretization import bias_discretization, error_transition
+from kalcal.scenarios import build_scenario
 from kalcal.montecarlo.accumulators import ensemble_statistics
 from kalcal.montecarlo.engine import run_monte_carlo
 from kalcal.montecarlo.scenarios import build_problem
-from kalcal.simulation.sampled import sample_accel_gps_errors, sample_accel_gps_logs
+from kalcal.scenarios.accel_gps.sampled import sample_accel_gps_errors, sample_accel_gps_logs
 from kalcal.stats.suite import run_checks
 
 WALK = ["truth.bias_walk_std=2e-4"]

@@ -12,8 +12,8 @@ from pathlib import Path
 import pytest
 
 from kalcal.jobs.verify import compute_verification, scale_bias_truth_equals
-from kalcal.models.custom import load_model_file
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios.model_file.model import load_model_file
+from kalcal.scenarios import build_scenario
 from kalcal.stats.results import EXPLAINED_BY_TEXT, as_false_alarm
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"

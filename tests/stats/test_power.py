@@ -14,8 +14,8 @@ from kalcal.stats.suite import check_families, power_rows, problem_power
 from kalcal.stats.power import DETECTION_POWER, MIN_N, N_CAP, detection_n, power_line, verdict_power
 from kalcal.stats.sensitivity import detected_error, sensitivity, sensitivity_text
 from kalcal.jobs.verify import MIN_REALIZATIONS
-from kalcal.models.custom import load_model_file, parse_model
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios.model_file.model import load_model_file, parse_model
+from kalcal.scenarios import build_scenario
 from kalcal.montecarlo.accumulators import ensemble_statistics
 from kalcal.montecarlo.engine import run_monte_carlo
 from kalcal.montecarlo.scenarios import build_problem

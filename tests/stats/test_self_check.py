@@ -17,9 +17,9 @@ from scipy import stats as sps
 
 from kalcal.analysis.fixed_gain import analyze_problem
 from kalcal.stats.power import product_variance
-from kalcal.models.accel_gps import AccelGpsScenario
+from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
 from kalcal.models.config import apply_settings
-from kalcal.models.custom import load_model_file
+from kalcal.scenarios.model_file.model import load_model_file
 from kalcal.montecarlo.accumulators import ensemble_statistics
 from kalcal.montecarlo.engine import run_monte_carlo
 from kalcal.montecarlo.scenarios import build_problem

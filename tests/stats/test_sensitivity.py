@@ -10,7 +10,7 @@ from kalcal.stats import sensitivity as module
 from kalcal.analysis.fixed_gain import analyze_scenario
 from kalcal.stats.suite import check_families
 from kalcal.stats.sensitivity import FLOOR, RESOLUTION, START, detected_error, sensitivity, sensitivity_text
-from kalcal.models.custom import load_model_file
+from kalcal.scenarios.model_file.model import load_model_file
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 

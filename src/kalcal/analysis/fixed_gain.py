@@ -17,9 +17,9 @@ from kalcal.core.sources import Source, covariance_sources, factor_sources, mode
 from kalcal.core.steps import UpdateForm
 from kalcal.errors import KalcalError
 from kalcal.linalg import whitener
-from kalcal.models.accel_gps import AccelGpsScenario
-from kalcal.models.custom import CustomModelScenario
-from kalcal.models.scale_bias import ScaleBiasScenario
+from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
+from kalcal.scenarios.model_file.model import CustomModelScenario
+from kalcal.scenarios.scale_bias.settings import ScaleBiasScenario
 from kalcal.montecarlo.problem import FixedGainProblem, ProblemInfo
 from kalcal.montecarlo.scenarios import accel_gps_problem, custom_problem, refuse_log_faults
 from kalcal.simulation.exact import UpdateRateTruth, accel_gps_process_noise

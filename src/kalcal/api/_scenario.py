@@ -24,10 +24,10 @@ def resolve(
     and the TOML ``config`` applied; a model (file or :class:`Model`) refuses the sampled engine and a
     long run as ``kalcal verify`` does. Only with ``models`` (verify) is a model file or Model taken; elsewhere
     a name goes to the registry, which says that model files work with verify."""
-    from kalcal.models.custom import is_model_file, load_model_file
-    from kalcal.models.registry import build_scenario
+    from kalcal.scenarios.model_file.model import is_model_file, load_model_file
+    from kalcal.scenarios import build_scenario
 
-    from kalcal.models.custom import CustomModelScenario
+    from kalcal.scenarios.model_file.model import CustomModelScenario
 
     assignments = assignments_of(settings)
     inputs: tuple[str, ...] = ()

@@ -51,7 +51,7 @@ def calibrate(
         As ``kalcal calibrate``'s options of those names (``gate``: accel-gps, a confidence or None).
     prior : {"diffuse", "settings"}, optional
         scale-bias: start from no information on theta, or from the filter's prior of a and b; by default
-        the settings' prior only where a ``filter.`` prior key is given (:func:`kalcal.jobs.scale_bias.resolve_prior`).
+        the settings' prior only where a ``filter.`` prior key is given (:func:`kalcal.scenarios.scale_bias.job.resolve_prior`).
     windows : int
         The log is split into this many windows for the stability test (``summary["stability"]``,
         :mod:`kalcal.calibration.windows`); 1 turns it off.
@@ -79,7 +79,7 @@ def calibrate(
             raise KalcalError("--data: required for scale-bias (a log with a reference and a sensor column)")
         if imu is not None or gps is not None:
             raise KalcalError("--imu/--gps: not used by scale-bias (it reads --data)")
-        from kalcal.jobs.scale_bias import compute_scale_bias_calibration
+        from kalcal.scenarios.scale_bias.job import compute_scale_bias_calibration
 
         def compute():
             return compute_scale_bias_calibration(

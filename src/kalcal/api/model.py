@@ -95,9 +95,9 @@ class Model:
         return "\n".join(lines) + "\n"
 
     def scenario(self, settings: Mapping[str, Any] | None = None):
-        """The validated scenario (a :class:`~kalcal.models.custom.CustomModelScenario`), with ``settings``
+        """The validated scenario (a :class:`~kalcal.scenarios.model_file.model.CustomModelScenario`), with ``settings``
         (``{"filter.w": [[0.01]], ...}``, the keys ``--set`` takes for a model file) applied."""
-        from kalcal.models.custom import parse_model
+        from kalcal.scenarios.model_file.model import parse_model
 
         return parse_model(self.document(), self.source, assignments_of(settings))
 
@@ -145,6 +145,6 @@ def assignments_of(settings: Mapping[str, Any] | None) -> list[str]:
 
 def load_model(path: str | Path, settings: Mapping[str, Any] | None = None):
     """Read and validate a model file (``kalcal verify MODEL.toml``): the scenario :func:`kalcal.verify` takes."""
-    from kalcal.models.custom import load_model_file
+    from kalcal.scenarios.model_file.model import load_model_file
 
     return load_model_file(path, assignments_of(settings))

@@ -169,7 +169,7 @@ class CalibrationResult:
         not to be used (a ``sigma-untrusted`` warning names the next step).
     settings_sigma : SettingsSigma or None
         accel-gps: the bias's sigma over the noise settings the log cannot reject, beside ``bias_std``
-        (:class:`kalcal.calibration.accel_gps_settings_sigma.SettingsSigma`: ``bias_std``, ``ratio``,
+        (:class:`kalcal.scenarios.accel_gps.settings_sigma.SettingsSigma`: ``bias_std``, ``ratio``,
         ``at``, ...); None when not computed.
     scale_sigma_trusted : bool or None
         Whether ``scale_std`` is to be used: False where the diagnostics or windows disown the sigmas or
@@ -327,7 +327,7 @@ def _settings_sigma(document: dict | None):
     """summary.json's ``settings_sigma`` as a SettingsSigma (None stays None)."""
     if document is None:
         return None
-    from kalcal.calibration.accel_gps_settings_sigma import SettingsSigma
+    from kalcal.scenarios.accel_gps.settings_sigma import SettingsSigma
 
     return SettingsSigma(
         bias_std=float(document["bias_std"]), conditional_bias_std=float(document["conditional_bias_std"]),

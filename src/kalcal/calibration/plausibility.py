@@ -165,7 +165,7 @@ def noise_rate_warnings(
     """Warnings for noise settings given per sample (``filter.accel_noise_std``, ``filter.bias_walk_std``
     or the truth's they fall back to), applied as they stand at a log's rate.
 
-    A per-sample std holds at one rate only (:func:`kalcal.models.accel_gps.per_sample`): the white
+    A per-sample std holds at one rate only (:func:`kalcal.scenarios.accel_gps.settings.per_sample`): the white
     noise's is N sqrt(f), the bias walk's step K / sqrt(f). Applied at a log's rate ``rate`` when written
     for ``recorded`` Hz, the white noise's std is sqrt(recorded / rate) of the right one (0.71 for 100 Hz
     settings on a 200 Hz log) and the walk's sqrt(rate / recorded): a warning naming both rates
@@ -189,7 +189,7 @@ def noise_rate_warnings(
     source : str
         The accelerometer log, quoted.
     """
-    from kalcal.models.accel_gps import DENSITIES, DENSITY_UNITS, density_of
+    from kalcal.scenarios.accel_gps.settings import DENSITIES, DENSITY_UNITS, density_of
 
     warnings = []
     for key, (value, file) in per_sample.items():

@@ -24,13 +24,13 @@ import dataclasses
 
 import numpy as np
 
-from kalcal.calibration.accel_gps_result import AccelGpsCalibration
-from kalcal.calibration.scale_bias import ScaleBiasCalibration, calibrate_scale_bias
+from kalcal.scenarios.accel_gps.result import AccelGpsCalibration
+from kalcal.scenarios.scale_bias.calibration import ScaleBiasCalibration, calibrate_scale_bias
 from kalcal.calibration.stability import Stability, Window, compare_windows, time_windows, untested
 from kalcal.errors import ConfigError, DataError
-from kalcal.models.accel_gps import AccelGpsScenario
-from kalcal.models.accel_gps_discretization import bias_discretization
-from kalcal.models.scale_bias import STATE_NAMES, ScaleBiasScenario
+from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
+from kalcal.scenarios.accel_gps.discretization import bias_discretization
+from kalcal.scenarios.scale_bias.settings import STATE_NAMES, ScaleBiasScenario
 
 #: a window's diffuse prior std, over sqrt(K) times the whole log's final sigma
 DIFFUSE = 1e3
@@ -68,11 +68,11 @@ def accel_gps_stability(
 
     ``whole`` is the calibration of the whole log (its final sigma sets the diffuse priors); the logs
     and ``options`` (``form``, ``max_imu_gap``, ``source``, ...) are those given to
-    :func:`~kalcal.calibration.accel_gps.calibrate_accel_gps` for it; ``init`` is always "first-fix".
+    :func:`~kalcal.scenarios.accel_gps.calibration.calibrate_accel_gps` for it; ``init`` is always "first-fix".
     A window the filter cannot run on (too few fixes) leaves the test not run, its sentence saying why.
     """
     # the accel-gps filter (and numba, under it) only for an accel-gps log: scale-bias runs import this module too
-    from kalcal.calibration.accel_gps import calibrate_accel_gps
+    from kalcal.scenarios.accel_gps.calibration import calibrate_accel_gps
 
     count = check_windows(windows)
     # the noise per sample at the log's own rate, as the whole log's calibration took it
@@ -141,7 +141,7 @@ def scale_bias_stability(
     """The stability of theta = [theta1, theta2] of a scale-bias log across ``windows`` runs of samples.
 
     ``whole`` is the calibration of the whole log; ``options`` (``source``, ``columns``) those given to
-    :func:`~kalcal.calibration.scale_bias.calibrate_scale_bias` for it.
+    :func:`~kalcal.scenarios.scale_bias.calibration.calibrate_scale_bias` for it.
     """
     count = check_windows(windows)
     units = scenario.state_units

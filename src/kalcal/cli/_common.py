@@ -49,7 +49,7 @@ def escape(text: str) -> str:
 
     return rich_escape(text)
 
-SCENARIO_NAMES = ("accel-gps", "scale-bias")  # kalcal.models.registry.SCENARIOS, without importing numpy for --help
+SCENARIO_NAMES = ("accel-gps", "scale-bias")  # kalcal.scenarios.SCENARIOS, without importing numpy for --help
 ScenarioArg = Annotated[str, typer.Argument(help=f"Scenario: {', '.join(SCENARIO_NAMES)}.")]
 SetOpt = Annotated[
     Optional[list[str]],

@@ -61,7 +61,7 @@ def fit(
     calibrate and verify; the noise as rate-free densities), fit.png and, for accel-gps, Kalibr's imu.yaml. `kalcal verify --config DIR/filter.toml` checks the fitted filter.
     """
     from kalcal.api.fit import fit as run_fit
-    from kalcal.fitting.latency_scan import unresolved
+    from kalcal.scenarios.accel_gps.latency_scan import unresolved
 
     with user_errors():
         result = run_fit(
@@ -80,7 +80,7 @@ def fit(
     for name, p in result.parameters.items():
         if p.trades_off:
             estimate, interval = "unidentified", f"trades off with {', '.join(p.trades_off)}: fitted point kept"
-        elif unresolved(p):  # a latency held at its input (kalcal.fitting.latency_scan)
+        elif unresolved(p):  # a latency held at its input (kalcal.scenarios.accel_gps.latency_scan)
             estimate, interval = "not resolved", "input kept"
         elif not p.identified:
             estimate, interval = "unidentified", "input kept"

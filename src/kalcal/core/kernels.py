@@ -2,7 +2,7 @@
 
 Every compiled path of the package that updates a covariance calls :func:`covariance_update`: the
 sequential filter of a log (:mod:`kalcal.filters.sequential`), the data-dependent Monte Carlo block
-kernel (:mod:`kalcal.montecarlo.regression_kernels`) and the compiled diffuse likelihood of the
+kernel of a regression with data-dependent rows and the compiled diffuse likelihood of the
 regression model's fit (tests/core/test_kernel_callers.py names each caller). It is the compiled twin of the covariance half of the
 numpy reference :func:`kalcal.core.steps.gain_and_covariance`, with the same equations::
 

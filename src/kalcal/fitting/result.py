@@ -35,7 +35,7 @@ class FitParameter:
         False when the log-likelihood is flat: it falls by less than the interval's drop (1.92 for 95%)
         over the whole search range on both sides of the estimate; when the parameter trades off with
         others along a ridge (``trades_off``); and for a latency whose log-likelihood is too rough at the
-        sample scale for an interval (:mod:`kalcal.fitting.latency_scan`).
+        sample scale for an interval (:mod:`kalcal.scenarios.accel_gps.latency_scan`).
     at_bound : bool
         True when the log-likelihood at the search range's lower end is within the drop of the maximum:
         the estimate is consistent with 0 and ``ci_high`` is an upper limit.
@@ -45,7 +45,7 @@ class FitParameter:
         The parameters this one trades off with along a ridge of log L (unidentified: only their
         combination is); () otherwise. Not in fit.json's entry (the ``note`` names them).
     held : bool
-        True for a latency the fit could not resolve (:mod:`kalcal.fitting.latency_scan`): unidentified,
+        True for a latency the fit could not resolve (:mod:`kalcal.scenarios.accel_gps.latency_scan`): unidentified,
         held at its input while the other settings were refitted. Not in fit.json's entry (the ``note``
         says it).
     scale : {"log", "linear"}

@@ -17,7 +17,7 @@ from kalcal.stats.nis import gate_excess
 from kalcal.io.outputs import mark_inputs, writes_outputs
 from kalcal.io.results import write_csv, write_json
 from kalcal.jobs.calibrate_warnings import fit_command, fit_extra, settings_warning, sigma_note, untrusted_warning
-from kalcal.models.accel_gps import AccelGpsScenario, AccelGpsSettings
+from kalcal.scenarios.accel_gps.settings import AccelGpsScenario, AccelGpsSettings
 from kalcal.models.config import section_values
 
 if TYPE_CHECKING:  # for the annotations; pandas is imported where a DataFrame is made
@@ -133,11 +133,11 @@ def compute_accel_gps_calibration(
     exceeds chi2.ppf(gate, 2): ``fixes_rejected`` counts them and ``rejected_rows`` lists their 1-based
     GPS rows. The bias's prior is diffuse unless ``filter.bias_std`` is given (a Gauss-Markov bias keeps
     its stationary std): ``prior`` says which, and a ``prior-conflict`` warning says when the estimate lies
-    too far from a given prior (:func:`~kalcal.calibration.accel_gps.prior_conflict`). The diagnostics
+    too far from a given prior (:func:`~kalcal.scenarios.accel_gps.calibration.prior_conflict`). The diagnostics
     leave out the rejected fixes and, with a diffuse prior, the first fix.
 
     ``summary["observability"]`` judges, as the scale-bias scenario does, whether the log alone determines
-    the bias and the scale (:mod:`kalcal.calibration.accel_gps_observability`): each one's final sigma over
+    the bias and the scale (:mod:`kalcal.scenarios.accel_gps.observability`): each one's final sigma over
     its no-data sigma, the ``unobservable`` ones, their ``cause`` and the ``data_only`` grounds (the
     information's reciprocal condition, each data-only and no-data sigma, the fixes and the acceleration);
     an unobservable one makes an ``unobservable`` warning; an unobservable bias (or singular information)
@@ -149,15 +149,15 @@ def compute_accel_gps_calibration(
     names the next step, ``kalcal fit accel-gps`` over the same logs (``fit_options``: the command line's
     other options, such as ``--config FILE``, repeated in it). ``settings_sigma`` (on by default) adds
     ``settings_sigma``, the bias's sigma over the noise settings the log cannot reject
-    (:mod:`kalcal.calibration.accel_gps_settings_sigma`; about a ``kalcal fit``'s time), with a
+    (:mod:`kalcal.scenarios.accel_gps.settings_sigma`; about a ``kalcal fit``'s time), with a
     ``sigma-depends-on-settings`` warning when it exceeds the conditional one by more than its factor.
     """
     # the accel-gps filter (and numba under it) when it runs: a scale-bias calibration imports this module too
-    from kalcal.calibration.accel_gps import bias_walk_variance, prepare_accel_gps_log, prior_conflict
-    from kalcal.calibration.accel_gps_observability import data_only_information, prior_warning, unobservable_warning
-    from kalcal.calibration.accel_gps_observability import summary_block as observability_summary
+    from kalcal.scenarios.accel_gps.calibration import bias_walk_variance, prepare_accel_gps_log, prior_conflict
+    from kalcal.scenarios.accel_gps.observability import data_only_information, prior_warning, unobservable_warning
+    from kalcal.scenarios.accel_gps.observability import summary_block as observability_summary
     from kalcal.calibration.diagnostics import innovation_diagnostics
-    from kalcal.calibration.smoothing import smooth_calibration
+    from kalcal.scenarios.accel_gps.smoothing import smooth_calibration
 
     windows = check_windows(windows)
     imu_map = parse_column_map(imu_columns, IMU_ROLES, "--imu-columns")
@@ -223,7 +223,7 @@ def compute_accel_gps_calibration(
     warnings = list(result.warnings)
     # what the log alone tells of the bias (and scale): an unobservable one is the prior's, and beside it
     # neither a prior conflict nor the noise settings are a cause; one the log determines less sharply
-    # than a tight prior is the prior's doing, named as such (kalcal.calibration.accel_gps_observability)
+    # than a tight prior is the prior's doing, named as such (kalcal.scenarios.accel_gps.observability)
     final_std = np.sqrt(np.diagonal(result.filter_covariance[-1]))[2:]
     data_only = data_only_information(log, result.rejected)
     observability = observability_summary(data_only, final_std)
@@ -276,7 +276,7 @@ def compute_accel_gps_calibration(
         warnings.append(untrusted[1])
     over = None
     if settings_sigma:
-        from kalcal.calibration.accel_gps_settings_sigma import settings_sigma as sigma_over_settings
+        from kalcal.scenarios.accel_gps.settings_sigma import settings_sigma as sigma_over_settings
 
         over = sigma_over_settings(log, result, gate=gate)
         if over.warns:

@@ -103,17 +103,17 @@ def compute_accel_gps_fit(
     """Fit an accel-gps log (files or DataFrames, as ``calibrate``); nothing is written (:func:`save_fit`).
 
     ``prepare(scenario, imu_time, accel, gps_time, gps_position, gps_velocity, **options)`` builds the
-    log-likelihood (default: :func:`kalcal.calibration.accel_gps_log.prepare_accel_gps_log`, O(fixes) per
-    evaluation; :func:`kalcal.fitting.accel_gps_reference.prepare_reference_accel_gps_log` is its oracle).
+    log-likelihood (default: :func:`kalcal.scenarios.accel_gps.log.prepare_accel_gps_log`, O(fixes) per
+    evaluation; :func:`kalcal.scenarios.accel_gps.fit_reference.prepare_reference_accel_gps_log` is its oracle).
     The log's prior is ``calibrate``'s ("auto": a diffuse bias unless ``filter.bias_std`` is given, with
     the conditional likelihood).
     """
-    from kalcal.fitting.accel_gps import check_free, default_free, fit_accel_gps, log_rates
+    from kalcal.scenarios.accel_gps.fit import check_free, default_free, fit_accel_gps, log_rates
 
     if gate is not None and not 0.0 < gate < 1.0:
         raise KalcalError(f"--gate: expected a confidence in (0, 1), got {gate!r}")
     if prepare is None:
-        from kalcal.calibration.accel_gps_log import prepare_accel_gps_log as prepare
+        from kalcal.scenarios.accel_gps.log import prepare_accel_gps_log as prepare
     imu_map = parse_column_map(imu_columns, IMU_ROLES, "--imu-columns")
     gps_map = parse_column_map(gps_columns, GPS_ROLES, "--gps-columns")
     sources = (imu_path, gps_path)
@@ -176,7 +176,7 @@ def compute_scale_bias_fit(
     confidence: float = 0.95,
 ) -> FitRun:
     """Fit a scale-bias log (a reference and a sensor column, optionally ``time`` [s]); nothing is written."""
-    from kalcal.fitting.scale_bias import fit_scale_bias
+    from kalcal.scenarios.scale_bias.fit import fit_scale_bias
 
     frame = read_table(data_path, "data", columns=(reference, sensor))
     name = source_name(data_path, "data", frame)
@@ -218,7 +218,7 @@ def save_fit(run: FitRun, out: str | Path) -> dict[str, Path]:
 
         linear = ()
         if run.command == "fit accel-gps":
-            from kalcal.fitting.accel_gps import LINEAR as linear
+            from kalcal.scenarios.accel_gps.fit import LINEAR as linear
         write_json(staging / "fit.json", run.document)
         (staging / "filter.toml").write_text(run.filter_text)
         if run.kalibr_text is not None:

@@ -20,7 +20,7 @@ from kalcal.errors import DataError
 from kalcal.io.logs import numeric_columns, parse_column_map, read_table, require_increasing, source_name, topic_of
 from kalcal.io.outputs import final_path, inputs_of, mark_inputs, run_outputs
 from kalcal.io.results import write_json
-from kalcal.models.accel_gps import AccelGpsFilter, per_sample
+from kalcal.scenarios.accel_gps.settings import AccelGpsFilter, per_sample
 
 IMU_ROLES = ("time", "accel")
 #: each accel-gps ``filter.`` density the identification gives, the identified value it is (N, K), and

@@ -29,12 +29,12 @@ from kalcal.io.outputs import run_outputs
 from kalcal.io.results import SCHEMA_VERSION
 from kalcal.io.statistics import read_statistics
 from kalcal.jobs.progress import JobProgress, stage
-from kalcal.models.custom import CustomModelScenario, is_custom_settings
-from kalcal.models.registry import build_scenario
+from kalcal.scenarios.model_file.model import CustomModelScenario, is_custom_settings
+from kalcal.scenarios import build_scenario
 from kalcal.models.settings import SettingError
 from kalcal.montecarlo.engine import BLOCK_SIZE, block_generator, block_sizes, realization
 from kalcal.montecarlo.problem import FixedGainProblem
-from kalcal.montecarlo.scale_bias import ScaleBiasProblem
+from kalcal.scenarios.scale_bias.problem import ScaleBiasProblem
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.plots.realization_data import RealizationData
 from kalcal.reporting.html import build_page, write_page

@@ -10,8 +10,8 @@ import numpy as np
 
 from kalcal.io.outputs import writes_outputs
 from kalcal.io.results import write_json
-from kalcal.models.accel_gps import AccelGpsScenario
-from kalcal.simulation.sampled import sample_accel_gps_logs
+from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
+from kalcal.scenarios.accel_gps.sampled import sample_accel_gps_logs
 
 if TYPE_CHECKING:  # loaded where a simulation is made: a scale-bias calibration imports this module
     import pandas as pd
@@ -36,7 +36,7 @@ class Simulation:
 def compute_simulation(scenario, seed: int) -> Simulation:
     """The realization of ``scenario`` drawn with ``seed`` (accel-gps or scale-bias)."""
     if scenario.NAME == "scale-bias":
-        from kalcal.jobs.scale_bias import compute_scale_bias_simulation
+        from kalcal.scenarios.scale_bias.job import compute_scale_bias_simulation
 
         return compute_scale_bias_simulation(scenario, seed)
     return compute_accel_gps_simulation(scenario, seed)

@@ -25,7 +25,7 @@ from kalcal.io.outputs import writes_outputs
 from kalcal.io.results import json_document, write_json
 from kalcal.io.statistics import write_statistics
 from kalcal.jobs.progress import JobProgress, stage
-from kalcal.models.accel_gps import AccelGpsScenario
+from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
 from kalcal.models.config import apply_settings, section_values
 from kalcal.montecarlo.accumulators import EnsembleStatistics, ensemble_statistics
 from kalcal.montecarlo.engine import BLOCK_SIZE, run_monte_carlo
@@ -257,7 +257,7 @@ def scale_bias_truth_equals(scenario) -> bool:
     """Whether a scale-bias scenario's filter is its truth's own model: the same Gaussian prior of theta,
     the same process noise and the same measurement noise variance, with nothing the model lacks (no
     sensor noise in the regressor, the excitation not theta's: :func:`model_error_cause` names none)."""
-    from kalcal.montecarlo.scale_bias import model_error_cause
+    from kalcal.scenarios.scale_bias.problem import model_error_cause
 
     if model_error_cause(scenario):
         return False
@@ -274,7 +274,7 @@ def scale_bias_truth_equals(scenario) -> bool:
 def equals_filter(scenario, analysis) -> bool:
     """Whether the run's truth equals its filter: from the exact analysis where there is one, from the
     settings for scale-bias. Then every failed check is a false alarm at its stated rate."""
-    from kalcal.models.scale_bias import ScaleBiasScenario
+    from kalcal.scenarios.scale_bias.settings import ScaleBiasScenario
 
     if analysis is not None:
         return bool(truth_equals(analysis))

@@ -2,7 +2,7 @@
 
 Both kinds of settings go through it: a built-in scenario's ``section.key`` settings (defaults, a
 ``--config`` TOML file, ``--set section.key=value``; :mod:`kalcal.models.config`) and a model file's keys
-(:mod:`kalcal.models.custom`). Every problem is a :class:`SettingError`, a
+(:mod:`kalcal.scenarios.model_file.model`). Every problem is a :class:`SettingError`, a
 :class:`~kalcal.errors.ConfigError` of one line worded::
 
     FILE: KEY: expected WHAT, got VALUE

@@ -14,7 +14,7 @@ the innovations are formed in their rows of the block's residual buffer, not cop
 both consume the same draws and agree to rounding.
 """
 
-# numba cache stamp: kalcal.montecarlo.sum_kernels 2b967b9980519480
+# numba cache stamp: kalcal.montecarlo.sum_kernels 3018497ad2c665be
 
 from __future__ import annotations
 
@@ -138,7 +138,7 @@ def exact_block_moments(
 @numba.njit(nogil=True, cache=True, fastmath=FAST)
 def filter_block_moments(states, measurements, phis, h, gains, x0, sums):
     """Filter given truths and accumulate, for a sampler without a compiled block of its own (the sampled
-    engine has one: :func:`kalcal.montecarlo.sampled_kernels.sampled_block_moments`).
+    engine has one: :func:`kalcal.scenarios.accel_gps.sampled_kernels.sampled_block_moments`).
 
     states (K, d, n) (overwritten with the errors), measurements (K, p, n); the rest as in
     :func:`exact_block_moments`.

@@ -93,7 +93,7 @@ class FixedGainProblem:
     sampled_block : callable, optional
         The same realizations (same draws of ``rng``) simulated, filtered and summed by one compiled
         pass, ``sampled_block(rng, n, phis, h, gains, x0, sums)``, which :meth:`block_sums` then uses
-        for engine "sampled" (:func:`kalcal.montecarlo.sampled_kernels.accel_gps_block_sums`); without
+        for engine "sampled" (:func:`kalcal.scenarios.accel_gps.sampled_kernels.accel_gps_block_sums`); without
         it, ``sampled``'s arrays are filtered by :func:`kalcal.montecarlo.kernels.filter_block_moments`.
     form : {"joseph", "standard", "sqrt"}
         The covariance update of the gain schedule (:func:`~kalcal.core.steps.covariance_pass`).

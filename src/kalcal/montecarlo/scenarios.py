@@ -9,19 +9,19 @@ import numpy as np
 from kalcal.core.model import LinearGaussianModel
 from kalcal.core.steps import UpdateForm, interval_transition
 from kalcal.errors import ConfigError
-from kalcal.models.accel_gps import MEASUREMENT_NAMES, MEASUREMENT_UNITS, AccelGpsScenario
-from kalcal.models.custom import CustomModelScenario
-from kalcal.models.scale_bias import ScaleBiasScenario
+from kalcal.scenarios.accel_gps.settings import MEASUREMENT_NAMES, MEASUREMENT_UNITS, AccelGpsScenario
+from kalcal.scenarios.model_file.model import CustomModelScenario
+from kalcal.scenarios.scale_bias.settings import ScaleBiasScenario
 from kalcal.models.settings import SettingError, show
 from kalcal.montecarlo.problem import FixedGainProblem, Problem, ProblemInfo
-from kalcal.montecarlo.scale_bias import ScaleBiasProblem, model_error_cause
+from kalcal.scenarios.scale_bias.problem import ScaleBiasProblem, model_error_cause
 from kalcal.simulation.exact import accel_gps_transitions, accel_gps_truth, truth_from_model
-from kalcal.simulation.sampled import sample_accel_gps_errors
+from kalcal.scenarios.accel_gps.sampled import sample_accel_gps_errors
 
 
 def sampled_normals_per_realization(scenario: AccelGpsScenario) -> int:
     """Normals the per-sample engine draws: p0, v0, b, sample 0 (and s); per interval m samples and 2 fix
-    noises (and m bias-noise draws when the bias drifts). See :mod:`kalcal.simulation.sampled`."""
+    noises (and m bias-noise draws when the bias drifts). See :mod:`kalcal.scenarios.accel_gps.sampled`."""
     s = scenario.scenario
     m = s.steps_per_update
     drifts = scenario.truth.bias_step_variance(s.sample_period) > 0
@@ -163,8 +163,8 @@ def build_problem(scenario, form: UpdateForm = "joseph", residual_pairs: bool = 
 
 
 def _sampled_block(scenario, *args):
-    """The sampled engine's compiled block (:func:`kalcal.montecarlo.sampled_kernels.accel_gps_block_sums`),
+    """The sampled engine's compiled block (:func:`kalcal.scenarios.accel_gps.sampled_kernels.accel_gps_block_sums`),
     its numba module loaded when a run first calls it, not when a problem is built."""
-    from kalcal.montecarlo.sampled_kernels import accel_gps_block_sums
+    from kalcal.scenarios.accel_gps.sampled_kernels import accel_gps_block_sums
 
     return accel_gps_block_sums(scenario, *args)

@@ -1,6 +1,6 @@
 """The compiled accumulation of a block's moment sums and the small compiled helpers the block kernels share.
 
-Both block kernels (:mod:`kalcal.montecarlo.kernels` for fixed gains, :mod:`kalcal.montecarlo.regression_kernels`
+Both block kernels (:mod:`kalcal.montecarlo.kernels` for fixed gains, :mod:`kalcal.scenarios.scale_bias.kernels`
 for data-dependent ones) keep one update's quantities of n realizations (the block, or a tile of it) as
 structure of arrays (a state is (d, n), realizations innermost and contiguous) and hand them to
 :func:`accumulate`, the compiled mirror of :meth:`kalcal.montecarlo.accumulators.MomentSums.from_block`:

@@ -26,7 +26,7 @@ def fit_figure(curves: dict, parameters: dict, *, method: str = "observed-inform
                linear: Collection[str] = ()):
     """The figure of :func:`plot_fit`: a log x axis for a setting searched on a log scale, a linear one for
     one searched on a linear scale (named in ``linear``: the job passes the latency,
-    :data:`kalcal.fitting.accel_gps.LINEAR`) or with a value at or below 0, which a log axis would drop.
+    :data:`kalcal.scenarios.accel_gps.fit.LINEAR`) or with a value at or below 0, which a log axis would drop.
 
     Parameters
     ----------

@@ -30,8 +30,8 @@ from kalcal.core.model import LinearGaussianModel
 from kalcal.core.steps import interval_transition
 from kalcal.filters.mechanization import integrate, interval_weights
 from kalcal.linalg import psd_factor
-from kalcal.models.accel_gps import AccelGpsScenario
-from kalcal.models.custom_truth import MappedTruthModel
+from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
+from kalcal.scenarios.model_file.truth import MappedTruthModel
 
 
 @dataclass(frozen=True)
@@ -81,7 +81,7 @@ class UpdateRateTruth:
 def truth_from_model(model: LinearGaussianModel, n_updates: int, model_error: np.ndarray | None = None) -> UpdateRateTruth:
     """A linear Gaussian model sampled exactly at its update rate (independent intervals).
 
-    A :class:`~kalcal.models.custom_truth.MappedTruthModel` brings its map to the filter's states
+    A :class:`~kalcal.scenarios.model_file.truth.MappedTruthModel` brings its map to the filter's states
     (``error_map``); any other model is over the filter's own states.
     """
     phi_m, q_m = interval_transition(model.phi, model.gamma, model.w, model.steps_per_update)
@@ -168,7 +168,7 @@ def accel_gps_truth(scenario: AccelGpsScenario) -> UpdateRateTruth:
     """The accelerometer/GPS error state at the fixes, exactly in distribution for either scheme.
 
     The truth model's per-sample Phi and bias-noise input are the scheme's own
-    (:func:`~kalcal.models.accel_gps_discretization.error_transition`), so a drifting bias composes exactly over an
+    (:func:`~kalcal.scenarios.accel_gps.discretization.error_transition`), so a drifting bias composes exactly over an
     interval; the accelerometer noise, which the trapezoid rule shares between steps, by its weights.
     """
     s = scenario.scenario

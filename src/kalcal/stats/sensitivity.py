@@ -24,8 +24,8 @@ import numpy as np
 from kalcal.analysis.fixed_gain import analyze_scenario
 from kalcal.stats.suite import check_families
 from kalcal.stats.power import DETECTION_POWER
-from kalcal.models.accel_gps import AccelGpsScenario
-from kalcal.models.custom import CustomModelScenario
+from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
+from kalcal.scenarios.model_file.model import CustomModelScenario
 
 __all__ = ["FLOOR", "RESOLUTION", "START", "detected_error", "noise_settings", "sensitivity", "sensitivity_text"]
 

@@ -7,10 +7,10 @@ from pathlib import Path
 from typing import Any
 
 from kalcal.io.outputs import mark_inputs
-from kalcal.models.accel_gps import AccelGpsScenario
+from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
 from kalcal.models.config import apply_settings, load_toml
 from kalcal.models.settings import SettingError, parse_assignments, show
-from kalcal.models.scale_bias import ScaleBiasScenario
+from kalcal.scenarios.scale_bias.settings import ScaleBiasScenario
 
 SCENARIOS: dict[str, type] = {AccelGpsScenario.NAME: AccelGpsScenario, ScaleBiasScenario.NAME: ScaleBiasScenario}
 

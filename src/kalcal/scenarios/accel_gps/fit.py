@@ -1,7 +1,7 @@
 """Fit the accel-gps filter's noise and prior settings to one log by maximum likelihood.
 
 The fit takes any log-likelihood of the log (:class:`AccelGpsLikelihood`: ``loglik(values)`` and
-``calibrate(values)``), the reference one of :mod:`kalcal.fitting.accel_gps_reference` or a faster one
+``calibrate(values)``), the reference one of :mod:`kalcal.scenarios.accel_gps.fit_reference` or a faster one
 over the same log, and searches the free settings on a log scale (:mod:`kalcal.fitting.mle`) within a
 factor :data:`RANGE` of their starts (a setting that is 0 starts from its :data:`FLOORS` value); the
 latency on a linear scale within +-max(:data:`LINEAR`'s 0.5 s, |setting|), from its setting. The
@@ -9,7 +9,7 @@ fitted filter's innovation diagnostics (NIS and whiteness, :mod:`kalcal.calibrat
 decide whether the model family is adequate for the log, with the NIS tail
 (:mod:`kalcal.fitting.nis_tail`) on an ungated fit only; they are judged at the fitted point
 (:func:`kalcal.fitting.result.fitted_point`: a ridge's members at the point the search reached on it).
-A free latency that is not resolved (:mod:`kalcal.fitting.latency_scan`) is held at its input, what
+A free latency that is not resolved (:mod:`kalcal.scenarios.accel_gps.latency_scan`) is held at its input, what
 filter.toml runs, and the other free settings are refitted there; it does not by itself make the fit
 inadequate (its note and ``notes`` say it is not resolved).
 """
@@ -26,12 +26,12 @@ import numpy as np
 from kalcal.calibration.diagnostics import innovation_diagnostics
 from kalcal.stats.nis import gate_excess
 from kalcal.errors import KalcalError
-from kalcal.fitting import latency_scan
-from kalcal.fitting.accel_gps_settings import filter_toml
+from kalcal.scenarios.accel_gps import latency_scan
+from kalcal.scenarios.accel_gps.fit_settings import filter_toml
 from kalcal.fitting.mle import Free, maximize
 from kalcal.fitting.nis_tail import nis_tail, not_applicable
 from kalcal.fitting.result import FitResult, fitted_point
-from kalcal.models.accel_gps import DENSITIES, DENSITY_UNITS, AccelGpsFilter, AccelGpsScenario, density_of, per_sample
+from kalcal.scenarios.accel_gps.settings import DENSITIES, DENSITY_UNITS, AccelGpsFilter, AccelGpsScenario, density_of, per_sample
 
 DEFAULT_FREE = ("filter.accel_noise_density", "filter.bias_walk_density", "filter.gps_position_std", "filter.gps_velocity_std")
 #: each per-sample noise key and the rate-free key the fit takes and writes in its place (a per-sample
@@ -83,7 +83,7 @@ class RateFreeLog:
     """A log's likelihood (:class:`AccelGpsLikelihood`) addressed by the rate-free noise keys as well:
     ``filter.accel_noise_density`` N is ``filter.accel_noise_std`` = N sqrt(rate) at the log's rate,
     ``filter.bias_walk_density`` K is ``filter.bias_walk_std`` = K / sqrt(rate)
-    (:func:`kalcal.models.accel_gps.per_sample`). A search on a log scale is the same in either (the
+    (:func:`kalcal.scenarios.accel_gps.settings.per_sample`). A search on a log scale is the same in either (the
     factor is fixed), so the estimate, its interval and log L convert exactly."""
 
     def __init__(self, log: AccelGpsLikelihood, rate: float) -> None:
@@ -291,7 +291,7 @@ def _search(log, parameters, gate, profile, confidence, step=None, notes=None, m
     """The fit over a fixed set of fixes: with a gate, gate with the start settings, fit with that
     rejected set held fixed, re-gate with the fitted settings and refit until the set stops changing
     (at most :data:`MAX_GATE_ROUNDS` fits). With a free latency and a grid ``step`` (s), the latency's
-    range is scanned before the first fit and at the last one (:mod:`kalcal.fitting.latency_scan`; a
+    range is scanned before the first fit and at the last one (:mod:`kalcal.scenarios.accel_gps.latency_scan`; a
     multimodal or unresolved latency is said in ``notes``; ``markov``: the model has a Gauss-Markov bias).
     Returns the fit, the fitted calibration, the rejected set and the rounds taken (None where the set
     never settled); the calibration is None where the latency is unresolved (held at its input:

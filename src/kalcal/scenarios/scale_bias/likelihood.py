@@ -17,7 +17,7 @@ sigma_eta and sigma_nu apart are not identifiable from one log. A sample with a 
 compiled covariance update, :func:`kalcal.core.kernels.covariance_update`, on a tile of one realization.
 """
 
-# numba cache stamp: kalcal.core.kernels 42455b28a219f39d
+# numba cache stamp: kalcal.core.kernels a06579bff82c7382
 
 from __future__ import annotations
 

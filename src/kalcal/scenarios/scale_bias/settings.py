@@ -49,7 +49,7 @@ from typing import ClassVar, Literal, NamedTuple
 
 import numpy as np
 
-from kalcal.models.scale_bias_theta import ThetaPrior, theta_prior
+from kalcal.scenarios.scale_bias.theta import ThetaPrior, theta_prior
 from kalcal.models.settings import (
     SettingError,
     require_below,

@@ -4,24 +4,24 @@
 composes each interval's transition and its process noise split by source, Q_k = sigma_a^2 Q_k^a +
 bias_walk_std^2 Q_k^w + bias_std^2 Q_k^m (each composed once with a unit variance; the noise covariance
 is linear in the noise variances). :meth:`AccelGpsLog.calibrate` and :meth:`AccelGpsLog.loglik` then cost
-O(fixes) each (:mod:`kalcal.calibration.accel_gps_evaluation`), whatever settings they override.
+O(fixes) each (:mod:`kalcal.scenarios.accel_gps.evaluation`), whatever settings they override.
 
 What is exact and what is not:
 
 * With ``filter.bias_correlation_time`` as prepared, every setting's run is exactly the filter of
-  :func:`~kalcal.calibration.accel_gps.calibrate_accel_gps` with those settings (the per-sample model,
+  :func:`~kalcal.scenarios.accel_gps.calibration.calibrate_accel_gps` with those settings (the per-sample model,
   composed piece by piece; the numbers agree to rounding).
 * A different ``bias_correlation_time`` changes the transition's bias column and the bias noise by the
   continuous-time model's change over each interval
-  (:func:`~kalcal.calibration.accel_gps_evaluation.continuous_terms`): off from the exact per-sample
+  (:func:`~kalcal.scenarios.accel_gps.evaluation.continuous_terms`): off from the exact per-sample
   composition by a relative amount of order dt / tau.
 * ``filter.gps_latency`` L compares each fix with the nominal at t - L (integrated exactly, O(fixes)) and
-  maps the error state with H_L (:func:`~kalcal.calibration.accel_gps_evaluation.latency_map`): exact
+  maps the error state with H_L (:func:`~kalcal.scenarios.accel_gps.evaluation.latency_map`): exact
   for a constant bias over L, without the accelerometer noise between t - L and t; the scale state's
   column of H_L is taken as 0 (s a L: second order).
 
 The prior: ``prior="scenario"`` is the settings' own; ``"diffuse"`` gives the bias a prior 1-sigma of
-:data:`~kalcal.calibration.accel_gps_evaluation.DIFFUSE_BIAS_STD` (a Gauss-Markov bias keeps its
+:data:`~kalcal.scenarios.accel_gps.evaluation.DIFFUSE_BIAS_STD` (a Gauss-Markov bias keeps its
 stationary ``bias_std``) and the likelihood skips the first fix (``skip = 1``), whose innovation a diffuse
 bias leaves uninformative in one direction: the conditional log-likelihood of the fixes given the first
 one. ``"auto"`` is "diffuse" unless ``filter.bias_std`` was given (``scenario.filter.bias_std`` set).
@@ -37,17 +37,17 @@ from typing import Any, Literal
 
 import numpy as np
 
-from kalcal.calibration import accel_gps_evaluation as evaluation
-from kalcal.calibration.accel_gps_checks import check_plausible, fix_warnings, unit_slips
-from kalcal.calibration.accel_gps_result import AccelGpsCalibration, ImuGap
-from kalcal.calibration.interval_model import composed_sources, scale_parameters
+from kalcal.scenarios.accel_gps import evaluation
+from kalcal.scenarios.accel_gps.log_checks import check_plausible, fix_warnings, unit_slips
+from kalcal.scenarios.accel_gps.result import AccelGpsCalibration, ImuGap
+from kalcal.scenarios.accel_gps.interval_model import composed_sources, scale_parameters
 from kalcal.calibration.plausibility import CalibrationWarning, noise_rate_warnings
 from kalcal.core.likelihood import innovation_loglik
 from kalcal.core.steps import UpdateForm, check_form
 from kalcal.errors import DataError
 from kalcal.filters.mechanization import integrate, partial_step
 from kalcal.linalg import symmetrize
-from kalcal.models.accel_gps import AccelGpsScenario, AccelGpsTruth
+from kalcal.scenarios.accel_gps.settings import AccelGpsScenario, AccelGpsTruth
 
 Init = Literal["prior", "first-fix"]
 INITS: tuple[str, ...] = ("prior", "first-fix")
@@ -245,7 +245,7 @@ def prepare_accel_gps_log(
     gps_rate: float | None = None,
     columns: Mapping[str, str] | None = None,
 ) -> AccelGpsLog:
-    """Check and prepare one log; the arguments are :func:`~kalcal.calibration.accel_gps.calibrate_accel_gps`'s.
+    """Check and prepare one log; the arguments are :func:`~kalcal.scenarios.accel_gps.calibration.calibrate_accel_gps`'s.
 
     ``prior``: "scenario", "diffuse" or "auto" (the module docstring). Raises DataError for a log that
     cannot be used or is implausible, naming the log, the row or rate, and the value.

@@ -28,7 +28,7 @@ Beyond the report, the bias may drift (``bias_walk_std``: a random walk, the inc
 or be first-order Gauss-Markov (``bias_correlation_time`` tau > 0: b_{j+1} = exp(-dt/tau) b_j + noise,
 stationary with std ``bias_std``): Phi[2, 2] = exp(-dt/tau) and the bias gets a noise input of its own.
 The bias is discretized at the samples, where the accelerometer reads it, and enters dp, dv as the
-scheme integrates it (:mod:`kalcal.models.accel_gps_discretization`: with the trapezoid rule and
+scheme integrates it (:mod:`kalcal.scenarios.accel_gps.discretization`: with the trapezoid rule and
 a drifting bias, Phi[:2, 2] and the bias noise's input differ from the Euler ones above). The exact
 engine's truth, the filter of ``verify`` and that of ``calibrate`` use both functions; the sampled
 engine uses only :func:`bias_discretization` (through :meth:`AccelGpsTruth.bias_decay` and
@@ -52,7 +52,7 @@ from typing import ClassVar, Literal
 import numpy as np
 
 from kalcal.core.model import LinearGaussianModel
-from kalcal.models.accel_gps_discretization import bias_discretization, error_transition
+from kalcal.scenarios.accel_gps.discretization import bias_discretization, error_transition
 from kalcal.models.settings import SettingError, require_nonnegative, require_positive, require_whole, show
 
 TruthKind = Literal["analytic", "discrete"]

@@ -6,7 +6,7 @@ import dataclasses
 from typing import Any
 
 from kalcal.fitting.result import interval_text
-from kalcal.models.accel_gps import DENSITIES, DENSITY_NAMES, AccelGpsFilter, AccelGpsTruth, density_of, per_sample
+from kalcal.scenarios.accel_gps.settings import DENSITIES, DENSITY_NAMES, AccelGpsFilter, AccelGpsTruth, density_of, per_sample
 
 
 def short(value: float) -> float:

@@ -9,7 +9,7 @@ settings the log cannot reject:
 1. **The region.** The noise settings the filter's model has (``filter.accel_noise_std``, the GPS stds or
    the multipliers of a GPS log's per-fix std columns, and ``filter.bias_walk_std`` where the filter has a
    walk) are fitted by maximum likelihood as ``kalcal fit`` fits them (:func:`kalcal.fitting.mle.maximize`
-   over the same log-likelihood :meth:`~kalcal.calibration.accel_gps_log.AccelGpsLog.loglik`, the same
+   over the same log-likelihood :meth:`~kalcal.scenarios.accel_gps.log.AccelGpsLog.loglik`, the same
    search ranges). The region is every setting whose log L lies within drop = chi2.ppf(confidence, 1) / 2
    of the maximum (1.92 at 0.95): the set whose boundary gives the fit's own intervals, and, for one
    function of the settings, the profile-likelihood interval of that function at ``confidence``. A walk
@@ -43,7 +43,7 @@ from typing import Any
 
 import numpy as np
 
-from kalcal.calibration import accel_gps_evaluation as evaluation
+from kalcal.scenarios.accel_gps import evaluation
 
 __all__ = ["CONFIDENCE", "WARN_FACTOR", "SettingsSigma", "error_variance_terms", "settings_free", "settings_sigma"]
 
@@ -212,7 +212,7 @@ def settings_sigma(log, calibration, *, gate: float | None = None, confidence: f
     """
     from scipy import optimize
 
-    from kalcal.fitting.accel_gps import FLOORS, RANGE
+    from kalcal.scenarios.accel_gps.fit import FLOORS, RANGE
     from kalcal.fitting.mle import Free, drop_of, guarded, maximize
 
     free = list(settings_free(log) if free is None else free)

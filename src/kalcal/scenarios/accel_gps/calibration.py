@@ -21,9 +21,9 @@ Real logs, as they are:
   the positions' finite differences; a gross velocity/position disagreement of no known unit is flagged.
 
 Between two fixes the filter propagates with the model of the Monte Carlo, piece by piece
-(:mod:`kalcal.calibration.interval_model`): this is exactly the filter that ``verify`` runs on an evenly
+(:mod:`kalcal.scenarios.accel_gps.interval_model`): this is exactly the filter that ``verify`` runs on an evenly
 spaced log with a fix on every ``steps_per_update``-th sample; the logs are checked first
-(:mod:`kalcal.calibration.accel_gps_checks`).
+(:mod:`kalcal.scenarios.accel_gps.log_checks`).
 """
 
 from __future__ import annotations
@@ -32,12 +32,12 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from kalcal.calibration.accel_gps_evaluation import DIFFUSE_BIAS_STD
-from kalcal.calibration.accel_gps_log import INITS, AccelGpsLog, Init, Prior, prepare_accel_gps_log
-from kalcal.calibration.accel_gps_result import AccelGpsCalibration, ImuGap
+from kalcal.scenarios.accel_gps.evaluation import DIFFUSE_BIAS_STD
+from kalcal.scenarios.accel_gps.log import INITS, AccelGpsLog, Init, Prior, prepare_accel_gps_log
+from kalcal.scenarios.accel_gps.result import AccelGpsCalibration, ImuGap
 from kalcal.calibration.plausibility import CalibrationWarning
 from kalcal.core.steps import UpdateForm
-from kalcal.models.accel_gps import AccelGpsScenario
+from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
 
 __all__ = ["INITS", "AccelGpsCalibration", "AccelGpsLog", "ImuGap", "calibrate_accel_gps", "prepare_accel_gps_log", "prior_conflict"]
 
@@ -97,7 +97,7 @@ def calibrate_accel_gps(
         chi2.ppf(gate, 2) is rejected, a prediction only, and listed in ``rejected_rows``. None: no gate.
     prior : {"scenario", "diffuse", "auto"}
         The bias's prior: the settings' (the default), diffuse, or diffuse unless ``filter.bias_std`` was
-        given (what a log's calibration uses); :mod:`kalcal.calibration.accel_gps_log`.
+        given (what a log's calibration uses); :mod:`kalcal.scenarios.accel_gps.log`.
     source, imu_source : str
         Names of the GPS and accelerometer logs, quoted in errors.
     imu_rate, gps_rate : float, optional

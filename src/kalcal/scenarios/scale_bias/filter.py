@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from kalcal.filters.regression import RegressionRun, run_regression_filter
-from kalcal.models.scale_bias import ScaleBiasScenario
+from kalcal.scenarios.scale_bias.settings import ScaleBiasScenario
 
 
 def regressors(sensor: np.ndarray) -> np.ndarray:

@@ -2,7 +2,7 @@
 
 The one place where the scenario's continuous bias model (constant, random walk, Gauss-Markov) and the
 nominal's integration scheme (Euler, trapezoid) become the discrete error model of
-:mod:`kalcal.models.accel_gps`; see that module's docstring for the choices.
+:mod:`kalcal.scenarios.accel_gps.settings`; see that module's docstring for the choices.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import numpy as np
 from kalcal.models.settings import SettingError, show
 
 if TYPE_CHECKING:
-    from kalcal.models.accel_gps import AccelGpsTruth
+    from kalcal.scenarios.accel_gps.settings import AccelGpsTruth
 
 
 def bias_discretization(values: AccelGpsTruth, step, period: float) -> tuple[np.ndarray, np.ndarray]:

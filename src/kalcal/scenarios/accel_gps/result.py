@@ -43,8 +43,8 @@ class AccelGpsCalibration:
     init: str = "prior"
     start_time: float = 0.0  #: s, where the nominal starts
     form: str = "joseph"  #: the filter's update form
-    # What the RTS smoother needs (kalcal.calibration.smoothing), in the filter's own state (which differs
-    # from error_state when a scale factor is estimated: [dp, dv, b', s'], see kalcal.calibration.interval_model.scale_parameters):
+    # What the RTS smoother needs (kalcal.scenarios.accel_gps.smoothing), in the filter's own state (which differs
+    # from error_state when a scale factor is estimated: [dp, dv, b', s'], see kalcal.scenarios.accel_gps.interval_model.scale_parameters):
     filter_state: np.ndarray | None = None  #: posterior x_k of the filter, (K, d)
     filter_covariance: np.ndarray | None = None  #: its P_k, (K, d, d)
     prior_state: np.ndarray | None = None  #: xbar_k before fix k, (K, d)

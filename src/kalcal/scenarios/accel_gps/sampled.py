@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from kalcal.filters.mechanization import integrate, interval_weights
-from kalcal.models.accel_gps import AccelGpsScenario
+from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
 
 
 @dataclass(frozen=True)

@@ -2,8 +2,8 @@
 
 Between two fixes the filter propagates with the model of the Monte Carlo, piece by piece: the steps
 between samples, cut at the fixes. Each piece's transition is
-:func:`~kalcal.models.accel_gps_discretization.error_transition` (the bias as the scheme integrates its samples, with
-the decay and noise of :func:`~kalcal.models.accel_gps_discretization.bias_discretization`: a Gauss-Markov bias decays
+:func:`~kalcal.scenarios.accel_gps.discretization.error_transition` (the bias as the scheme integrates its samples, with
+the decay and noise of :func:`~kalcal.scenarios.accel_gps.discretization.bias_discretization`: a Gauss-Markov bias decays
 by exp(-dt_j / tau) at each sample, with the exact discrete noise, over each step's own dt_j), and a piece
 of length h adds the accelerometer noise g = [h^2/2, h, 0] sigma_a. The products over each interval's
 pieces are composed by compiled passes over chunks of pieces (:func:`composed_sources`), and only the
@@ -23,7 +23,7 @@ import numba
 import numpy as np
 
 from kalcal.linalg import symmetrize
-from kalcal.models.accel_gps_discretization import bias_discretization, error_transition
+from kalcal.scenarios.accel_gps.discretization import bias_discretization, error_transition
 
 __all__ = ["CHUNK_PIECES", "SOURCES", "composed_sources", "continuous_bias_model", "interval_sources",
            "scale_parameters"]  # fmt: skip
@@ -37,8 +37,8 @@ def interval_sources(imu_time, steps, cuts, settings, period, scheme) -> tuple[n
     """Every piece between two cuts (samples and fixes): its transition and its noise inputs per source.
 
     A piece [c_i, c_{i+1}] lies in the sample step [t_j, t_{j+1}]; its transition is
-    :func:`~kalcal.models.accel_gps_discretization.error_transition` over its part of that step, with the
-    step's bias decay (:func:`~kalcal.models.accel_gps_discretization.bias_discretization`). Its noise
+    :func:`~kalcal.scenarios.accel_gps.discretization.error_transition` over its part of that step, with the
+    step's bias decay (:func:`~kalcal.scenarios.accel_gps.discretization.bias_discretization`). Its noise
     inputs, one column per source of :data:`SOURCES`, each for a unit variance: the accelerometer sample
     held over it, g = [h^2/2, h, 0] (times sigma_a); the bias noise's weights times sqrt(step_j / period)
     (times bias_walk_std); and, for a Gauss-Markov bias, times sqrt(1 - exp(-2 step_j / tau)) (times

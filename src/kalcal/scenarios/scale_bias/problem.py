@@ -21,11 +21,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from kalcal.core.steps import gain_and_covariance, nis, predict_covariance
-from kalcal.filters.scale_bias import filter_scale_bias, regressors
-from kalcal.models.scale_bias import MEASUREMENT_NAMES, STATE_NAMES, ScaleBiasScenario
+from kalcal.scenarios.scale_bias.filter import filter_scale_bias, regressors
+from kalcal.scenarios.scale_bias.settings import MEASUREMENT_NAMES, STATE_NAMES, ScaleBiasScenario
 from kalcal.montecarlo.accumulators import BlockResult, MomentSums, SumBuffers
 from kalcal.montecarlo.problem import ProblemInfo, check_engine
-from kalcal.simulation.scale_bias import normals_per_realization, sample_scale_bias
+from kalcal.scenarios.scale_bias.simulation import normals_per_realization, sample_scale_bias
 
 
 def problem_info(scenario: ScaleBiasScenario) -> ProblemInfo:
@@ -188,7 +188,7 @@ class ScaleBiasProblem:
 
         ``MomentSums.from_block(self.run_block(rng, n, engine))`` is the numpy oracle of the tests.
         """
-        from kalcal.montecarlo.regression_kernels import regression_block_moments  # numba: loaded by the runs
+        from kalcal.scenarios.scale_bias.kernels import regression_block_moments  # numba: loaded by the runs
 
         check_engine(self, engine)
         samples = sample_scale_bias(self.scenario, rng, n)

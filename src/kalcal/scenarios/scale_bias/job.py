@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from kalcal.calibration.scale_bias import UNOBSERVABLE_RATIO, calibrate_scale_bias
+from kalcal.scenarios.scale_bias.calibration import UNOBSERVABLE_RATIO, calibrate_scale_bias
 from kalcal.calibration.windows import check_windows, scale_bias_stability
 from kalcal.errors import DataError
 from kalcal.io.logs import is_frame, numeric_columns, read_table, require_increasing, source_name
@@ -18,9 +18,9 @@ from kalcal.jobs.calibrate_warnings import untrusted_warning
 from kalcal.jobs.simulate import OUTPUT_NAMES as SIMULATION_NAMES
 from kalcal.jobs.simulate import Simulation, save_simulation
 from kalcal.models.config import section_values
-from kalcal.models.scale_bias import STATE_NAMES, ScaleBiasScenario
-from kalcal.models.scale_bias_theta import scale_bias_from_theta
-from kalcal.simulation.scale_bias import sample_scale_bias
+from kalcal.scenarios.scale_bias.settings import STATE_NAMES, ScaleBiasScenario
+from kalcal.scenarios.scale_bias.theta import scale_bias_from_theta
+from kalcal.scenarios.scale_bias.simulation import sample_scale_bias
 
 if TYPE_CHECKING:  # for the annotations; pandas is imported where a DataFrame is made
     import pandas as pd

@@ -10,7 +10,7 @@ samples to sum over. For n realizations the draws are made in one fixed order, r
 4. ``(n, K)``: the sensor noise nu_k / sigma_nu (drawn even when sigma_nu = 0, so that the stream does
    not depend on it).
 
-With the profile s_k = s(t_k) (see :class:`~kalcal.models.scale_bias.ScaleBiasScenario`):
+With the profile s_k = s(t_k) (see :class:`~kalcal.scenarios.scale_bias.settings.ScaleBiasScenario`):
 ``excitation = "sensor"``: zeta_k = s_k, psi_k = theta1_k s_k + theta2_k;
 ``excitation = "reference"``: psi_k = s_k, zeta_k = (s_k - theta2_k) / theta1_k; then
 v_k = psi_k + eta_k and z_k = zeta_k - nu_k (zeta = (1 - a) psi - b is the sensor's noise-free reading).
@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from kalcal.linalg import psd_factor
-from kalcal.models.scale_bias import ScaleBiasScenario
+from kalcal.scenarios.scale_bias.settings import ScaleBiasScenario
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,7 @@
 """One evaluation of a prepared accelerometer/GPS log: its settings resolved, the filter's inputs built, the run.
 
 Everything here is O(fixes): the pieces' composition was done once by
-:func:`~kalcal.calibration.accel_gps_log.prepare_accel_gps_log`; an evaluation scales the per-source
+:func:`~kalcal.scenarios.accel_gps.log.prepare_accel_gps_log`; an evaluation scales the per-source
 noise (Q_k = sigma_a^2 Q_k^a + bias_walk_std^2 Q_k^w + bias_std^2 Q_k^m), corrects the transition and the
 bias noise for a changed ``bias_correlation_time`` (:func:`continuous_terms`), moves the comparison to
 t - latency, and runs the compiled filter.
@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
-from kalcal.calibration.interval_model import continuous_bias_model
+from kalcal.scenarios.accel_gps.interval_model import continuous_bias_model
 from kalcal.core.sqrt_form import cholesky_factor, gram, sqrt_predict, sqrt_update
 from kalcal.core.steps import UpdateForm, nis, predict, update
 from kalcal.filters.sequential import SequentialRun, sequential_filter
@@ -22,7 +22,7 @@ from kalcal.models.settings import SettingError, show, to_float
 from kalcal.stats.distributions import chi2_ppf  # scipy.stats's values, without its import
 
 if TYPE_CHECKING:
-    from kalcal.calibration.accel_gps_log import AccelGpsLog
+    from kalcal.scenarios.accel_gps.log import AccelGpsLog
 
 #: the settings an evaluation may override, and their units
 UNITS: dict[str, str] = {
@@ -86,7 +86,7 @@ def continuous_terms(log: AccelGpsLog, tau: float) -> tuple[np.ndarray, np.ndarr
 
     The log holds the exact per-sample composition at tau_0. A new tau adds the difference between the
     continuous-time model's terms at tau and at tau_0 over each interval
-    (:func:`~kalcal.calibration.interval_model.continuous_bias_model`): exact at tau = tau_0, and
+    (:func:`~kalcal.scenarios.accel_gps.interval_model.continuous_bias_model`): exact at tau = tau_0, and
     elsewhere off from the exact per-sample composition by the continuous model's own discretization
     difference times the relative change, of order dt / tau (a sample period over the correlation time).
     """

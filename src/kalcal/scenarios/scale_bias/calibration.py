@@ -21,7 +21,7 @@ Prior. ``prior="settings"`` starts from the filter's prior of a and b (the simul
 datasheet's). ``prior="diffuse"`` starts with no information on theta at all (P_0^{-1} = 0, the limit of
 N(m, kappa I) as kappa -> infinity): the filter runs in information form until the first samples with two
 different sensor readings determine theta (:func:`diffuse_start`), then as before; those samples have no
-innovation. A log is calibrated with the diffuse prior unless the user gives one (kalcal.jobs.scale_bias).
+innovation. A log is calibrated with the diffuse prior unless the user gives one (kalcal.scenarios.scale_bias.job).
 With a prior, the data-only (diffuse) estimate is tested against it: with Q = 0 the difference d =
 theta_data - m_0 is N(0, P_data + P_0) under the model, so d^T (P_data + P_0 + K Q)^-1 d is chi-square(2);
 above its ``CONFLICT_CONFIDENCE`` quantile a ``prior-conflict`` warning says that data and prior disagree.
@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from kalcal.calibration.plausibility import CalibrationWarning, check_limit
-from kalcal.calibration.scale_bias_observability import (  # noqa: F401 (DIFFUSE_RCOND: this module's before)
+from kalcal.scenarios.scale_bias.observability import (  # noqa: F401 (DIFFUSE_RCOND: this module's before)
     DATA_ONLY_FACTOR,
     DIFFUSE_RCOND,
     TRACKING_CONFIDENCE,
@@ -48,9 +48,9 @@ from kalcal.calibration.scale_bias_observability import (  # noqa: F401 (DIFFUSE
 from kalcal.core.steps import nis
 from kalcal.errors import DataError
 from kalcal.filters.regression import run_regression_filter
-from kalcal.filters.scale_bias import filter_scale_bias, regressors
-from kalcal.models.scale_bias import STATE_NAMES, ScaleBiasScenario
-from kalcal.models.scale_bias_theta import scale_bias_from_theta, scale_bias_jacobian
+from kalcal.scenarios.scale_bias.filter import filter_scale_bias, regressors
+from kalcal.scenarios.scale_bias.settings import STATE_NAMES, ScaleBiasScenario
+from kalcal.scenarios.scale_bias.theta import scale_bias_from_theta, scale_bias_jacobian
 from kalcal.stats.distributions import chi2_isf, chi2_ppf, chi2_sf  # scipy.stats's values, without its import
 
 #: the mean NIS is tested two-sided at this confidence (a consistent log fails with probability 1 - it)

@@ -1,6 +1,6 @@
 """Fit the scale-bias filter's combined measurement noise and parameter drift to one log by maximum likelihood.
 
-Only two noise settings are identifiable from one log (:mod:`kalcal.fitting.scale_bias_likelihood`): the
+Only two noise settings are identifiable from one log (:mod:`kalcal.scenarios.scale_bias.likelihood`): the
 combined measurement noise sigma_w = sqrt(sigma_eta^2 + theta1^2 sigma_nu^2), fitted as
 ``filter.reference_noise_std`` with ``filter.sensor_noise_std`` = 0 (the same filter: its R is sigma_w^2),
 and the drift ``filter.parameter_drift_std`` (q per sample). theta itself has a diffuse prior: the fit
@@ -17,8 +17,8 @@ from kalcal.calibration.diagnostics import innovation_diagnostics
 from kalcal.errors import KalcalError
 from kalcal.fitting.mle import Free, maximize
 from kalcal.fitting.result import FitResult, fitted_point, interval_text
-from kalcal.fitting.scale_bias_likelihood import diffuse_loglik
-from kalcal.models.scale_bias import ScaleBiasScenario
+from kalcal.scenarios.scale_bias.likelihood import diffuse_loglik
+from kalcal.scenarios.scale_bias.settings import ScaleBiasScenario
 
 NOISE, DRIFT = "filter.reference_noise_std", "filter.parameter_drift_std"
 FREE_KEYS = (NOISE, DRIFT)

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kalcal.calibration.accel_gps_result import AccelGpsCalibration
-from kalcal.calibration.interval_model import scale_parameters
+from kalcal.scenarios.accel_gps.result import AccelGpsCalibration
+from kalcal.scenarios.accel_gps.interval_model import scale_parameters
 from kalcal.core.smoother import rts_smooth
 from kalcal.errors import DataError
 
@@ -50,7 +50,7 @@ def smooth_calibration(result: AccelGpsCalibration) -> SmoothedCalibration:
     Parameters
     ----------
     result : AccelGpsCalibration
-        From :func:`~kalcal.calibration.accel_gps.calibrate_accel_gps`, which keeps the priors M_k and the
+        From :func:`~kalcal.scenarios.accel_gps.calibration.calibrate_accel_gps`, which keeps the priors M_k and the
         transitions Phi_k the smoother needs.
 
     Raises

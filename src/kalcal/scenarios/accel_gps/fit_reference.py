@@ -1,10 +1,10 @@
 """The reference accel-gps log-likelihood: one whole calibration per evaluation (O(samples), slow, exact).
 
-Each evaluation runs :func:`~kalcal.calibration.accel_gps.calibrate_accel_gps` with the scenario's
+Each evaluation runs :func:`~kalcal.scenarios.accel_gps.calibration.calibrate_accel_gps` with the scenario's
 filter settings replaced by the given values and sums the prediction-error decomposition of its
 innovations, log L = -1/2 sum_k (log det S_k + r_k^T S_k^-1 r_k + p log 2 pi). It is the likelihood's
 definition, which a faster evaluation over the same log is held to; the fit
-(:mod:`kalcal.fitting.accel_gps`) takes either. With ``init="first-fix"`` the first fix starts the filter
+(:mod:`kalcal.scenarios.accel_gps.fit`) takes either. With ``init="first-fix"`` the first fix starts the filter
 and is not in the sum: the conditional likelihood of the other fixes given it.
 """
 
@@ -16,11 +16,11 @@ from typing import Any
 
 import numpy as np
 
-from kalcal.calibration.accel_gps import AccelGpsCalibration, calibrate_accel_gps
-from kalcal.calibration.accel_gps_evaluation import UNITS
+from kalcal.scenarios.accel_gps.calibration import AccelGpsCalibration, calibrate_accel_gps
+from kalcal.scenarios.accel_gps.evaluation import UNITS
 from kalcal.core.likelihood import innovation_loglik
 from kalcal.errors import KalcalError
-from kalcal.models.accel_gps import AccelGpsFilter, AccelGpsScenario
+from kalcal.scenarios.accel_gps.settings import AccelGpsFilter, AccelGpsScenario
 
 MULTIPLIERS = {"log.position_std_multiplier": "position_std", "log.velocity_std_multiplier": "velocity_std"}
 
@@ -41,7 +41,7 @@ class ReferenceAccelGpsLog:
     scenario : AccelGpsScenario
         The settings that are not free, and the starts of those that are.
     imu_time, accel, gps_time, gps_position, gps_velocity, position_std, velocity_std
-        As :func:`~kalcal.calibration.accel_gps.calibrate_accel_gps` (s, m/s^2, m, m/s).
+        As :func:`~kalcal.scenarios.accel_gps.calibration.calibrate_accel_gps` (s, m/s^2, m, m/s).
     **options
         The rest of calibrate_accel_gps's keywords (``init``, ``source``, ``columns``, rates, ...).
     """

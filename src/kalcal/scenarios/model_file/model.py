@@ -48,9 +48,9 @@ from typing import Any, ClassVar
 import numpy as np
 
 from kalcal.core.model import LinearGaussianModel
-from kalcal.models.accel_gps import AccelGpsScenario
-from kalcal.models.custom_truth import MAP_KEYS, MODEL_KEYS, MappedTruthModel, mapped_truth, truth_from_settings
-from kalcal.models.scale_bias import ScaleBiasScenario
+from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
+from kalcal.scenarios.model_file.truth import MAP_KEYS, MODEL_KEYS, MappedTruthModel, mapped_truth, truth_from_settings
+from kalcal.scenarios.scale_bias.settings import ScaleBiasScenario
 from kalcal.models.settings import (
     SettingError,
     missing,
@@ -123,7 +123,7 @@ class CustomModelScenario:
     truth : LinearGaussianModel or MappedTruthModel
         What the world does: the ``[truth]`` table over the filter's matrices (same d, p,
         steps_per_update and sample_period as the filter), or, with a ``map``, a model of its own n
-        states (:mod:`kalcal.models.custom_truth`; same p and timing, map of shape (d, n)).
+        states (:mod:`kalcal.scenarios.model_file.truth`; same p and timing, map of shape (d, n)).
     """
 
     NAME: ClassVar[str] = "custom"

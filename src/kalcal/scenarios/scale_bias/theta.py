@@ -1,6 +1,6 @@
 """The scale/bias parametrization theta = [1 / (1 - a), b / (1 - a)], both ways, and its Gaussian prior.
 
-The filter of :mod:`kalcal.models.scale_bias` estimates theta; the sensor's datasheet (and the settings)
+The filter of :mod:`kalcal.scenarios.scale_bias.settings` estimates theta; the sensor's datasheet (and the settings)
 speak of the scale-factor error a (1) and the bias b (signal unit). The prior of theta is the first-order
 image of independent Gaussian priors of a and b.
 """

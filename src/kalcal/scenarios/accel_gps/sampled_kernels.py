@@ -1,9 +1,9 @@
 """The sampled engine's block kernel: simulate every accelerometer sample, filter and sum, in one compiled pass.
 
-:func:`kalcal.simulation.sampled.sample_accel_gps_errors` (numpy) makes some fifteen passes over each GPS
+:func:`kalcal.scenarios.accel_gps.sampled.sample_accel_gps_errors` (numpy) makes some fifteen passes over each GPS
 interval's (n, m + 2) draws: scaling, the measured samples, their integration as a matrix product, the
 error states and the fixes, each with its own temporary. :func:`sampled_block_moments` draws the same
-normals from the block's generator in the same order (:mod:`kalcal.simulation.sampled`'s stream: the
+normals from the block's generator in the same order (:mod:`kalcal.scenarios.accel_gps.sampled`'s stream: the
 interval's (n, m + 2) samples and fix noises, then its (n, m) bias-noise draws when the bias drifts,
 through :func:`~kalcal.montecarlo.kernels.standard_normals`, so that realization i's draws and the
 generator's final state are numpy's), integrates each realization's samples as it reads them, and hands
@@ -17,7 +17,7 @@ stays the tests' oracle: the sums agree to rounding, not bit for bit, because nu
 interval as one BLAS matrix product, whose order of additions this kernel does not reproduce.
 """
 
-# numba cache stamp: kalcal.montecarlo.kernels e52533a4f91f8ec9
+# numba cache stamp: kalcal.montecarlo.kernels 558163becd5e6ffc
 
 from __future__ import annotations
 
@@ -25,11 +25,11 @@ import numba
 import numpy as np
 
 from kalcal.filters.mechanization import interval_weights
-from kalcal.models.accel_gps import AccelGpsScenario
+from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
 from kalcal.montecarlo.accumulators import SumBuffers
 from kalcal.montecarlo.kernels import _filter_and_accumulate, _filter_buffers, standard_normals
 from kalcal.montecarlo.sum_kernels import FAST
-from kalcal.simulation.sampled import deterministic_motion, initial_draws
+from kalcal.scenarios.accel_gps.sampled import deterministic_motion, initial_draws
 
 
 @numba.njit(nogil=True, cache=True, fastmath=FAST)
@@ -76,7 +76,7 @@ def sampled_block_moments(
 ):
     """Simulate the accelerometer/GPS truth sample by sample and filter it, in one pass.
 
-    rng: the block's generator, past the initial draws (:func:`~kalcal.simulation.sampled.initial_draws`),
+    rng: the block's generator, past the initial draws (:func:`~kalcal.scenarios.accel_gps.sampled.initial_draws`),
     which give p0, v0, bias0 (b at sample 0), noise0 (sample 0's noise) and scale (s, zero without
     one), each (n,); true_accel (J + 1,) m/s^2; weights (m + 1, 2); fix_times (K,) s; motion (K, 2) the
     deterministic position and velocity at each fix; nominal0 (2,) p_c(0), v_c(0); accel_std m/s^2;
@@ -124,7 +124,7 @@ def accel_gps_block_sums(scenario: AccelGpsScenario, rng: np.random.Generator, n
                          h: np.ndarray, gains: np.ndarray, x0: np.ndarray, sums: SumBuffers) -> None:
     """Add n sampled realizations of ``scenario`` into ``sums`` through :func:`sampled_block_moments`.
 
-    Consumes ``rng`` exactly as :func:`~kalcal.simulation.sampled.sample_accel_gps_errors` does (same
+    Consumes ``rng`` exactly as :func:`~kalcal.scenarios.accel_gps.sampled.sample_accel_gps_errors` does (same
     draws, same order, same final state). phis (K, d, d), h (2, d), gains (K, d, 2), x0 (d,): the filter.
     """
     s, t = scenario.scenario, scenario.truth

@@ -1,7 +1,7 @@
 """What an accelerometer/GPS log alone tells of the calibrated parameters: the bias and, with a scale state, the scale.
 
-The scale-bias scenario's vocabulary (:mod:`kalcal.calibration.scale_bias_observability`), for the
-filter of :mod:`kalcal.calibration.accel_gps`. A parameter is unobservable from a log where the log alone
+The scale-bias scenario's vocabulary (:mod:`kalcal.scenarios.scale_bias.observability`), for the
+filter of :mod:`kalcal.scenarios.accel_gps.calibration`. A parameter is unobservable from a log where the log alone
 does not determine it, whatever the prior makes of the posterior:
 
 * its data-only information is (numerically) zero, or the parameters' data-only information is singular
@@ -39,10 +39,10 @@ from typing import Any
 
 import numpy as np
 
-from kalcal.calibration import accel_gps_evaluation as evaluation
-from kalcal.calibration.accel_gps_evaluation import DIFFUSE_BIAS_STD
+from kalcal.scenarios.accel_gps import evaluation
+from kalcal.scenarios.accel_gps.evaluation import DIFFUSE_BIAS_STD
 from kalcal.calibration.plausibility import CalibrationWarning
-from kalcal.calibration.scale_bias_observability import DATA_ONLY_FACTOR, DIFFUSE_RCOND, UNOBSERVABLE_RATIO
+from kalcal.scenarios.scale_bias.observability import DATA_ONLY_FACTOR, DIFFUSE_RCOND, UNOBSERVABLE_RATIO
 
 __all__ = [
     "DIFFUSE_SCALE_STD", "MIN_EXCITATION", "MIN_FIXES", "data_only_information", "prior_tighter", "prior_warning",
@@ -83,7 +83,7 @@ def data_only_information(log, rejected: np.ndarray | None = None) -> dict[str, 
     Parameters
     ----------
     log : AccelGpsLog
-        The prepared log (:func:`~kalcal.calibration.accel_gps_log.prepare_accel_gps_log`) with the
+        The prepared log (:func:`~kalcal.scenarios.accel_gps.log.prepare_accel_gps_log`) with the
         settings the calibration used.
     rejected : ndarray of bool, shape (K,), optional
         The fixes the calibration left out (its gate's rejections): they are left out here too.

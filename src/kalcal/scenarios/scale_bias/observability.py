@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from kalcal.filters.scale_bias import regressors
+from kalcal.scenarios.scale_bias.filter import regressors
 
 #: a final sigma above this share of the no-data sigma (near it) means the log did not excite the parameter
 UNOBSERVABLE_RATIO = 0.9
