@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Annotated, Optional
 import typer
 
 from kalcal.errors import KalcalError
+from kalcal.scenarios import scenario_names
 
 if TYPE_CHECKING:
     from rich.table import Table
@@ -49,7 +50,7 @@ def escape(text: str) -> str:
 
     return rich_escape(text)
 
-SCENARIO_NAMES = ("accel-gps", "scale-bias")  # kalcal.scenarios.SCENARIOS, without importing numpy for --help
+SCENARIO_NAMES = scenario_names()  # the registry's names: kalcal.scenarios imports no scenario (nor numpy) for --help
 ScenarioArg = Annotated[str, typer.Argument(help=f"Scenario: {', '.join(SCENARIO_NAMES)}.")]
 SetOpt = Annotated[
     Optional[list[str]],

@@ -1,18 +1,66 @@
-"""Built-in scenarios by name, and their construction from defaults, a TOML file and overrides."""
+"""The scenarios, one package each, and the one registry of them: names, classes, construction.
+
+Each scenario's package (:mod:`kalcal.scenarios.accel_gps`, :mod:`kalcal.scenarios.scale_bias`,
+:mod:`kalcal.scenarios.model_file`) holds everything that is its own; the rest of kalcal asks a scenario
+through the :class:`~kalcal.scenarios.protocol.Scenario` protocol, never by its name or class
+(tests/scenarios/test_scenario_boundary.py walks every module for that). This module is the only way in:
+the built-in names (:func:`scenario_names`, for ``--help`` without importing numpy: the classes load on
+first use), the classes (``SCENARIOS``), a scenario built from defaults, a TOML file and overrides
+(:func:`build_scenario`), and a model file (:func:`is_model_file`, :func:`load_model_file`).
+"""
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
-from kalcal.io.outputs import mark_inputs
-from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
-from kalcal.models.config import apply_settings, load_toml
-from kalcal.models.settings import SettingError, parse_assignments, show
-from kalcal.scenarios.scale_bias.settings import ScaleBiasScenario
+# name -> (module, class) of each built-in scenario, imported on first use: --help lists the names
+# without loading numpy, and a scenario's modules may import this registry without a cycle
+_BUILT_IN: dict[str, tuple[str, str]] = {
+    "accel-gps": ("kalcal.scenarios.accel_gps.settings", "AccelGpsScenario"),
+    "scale-bias": ("kalcal.scenarios.scale_bias.settings", "ScaleBiasScenario"),
+}
 
-SCENARIOS: dict[str, type] = {AccelGpsScenario.NAME: AccelGpsScenario, ScaleBiasScenario.NAME: ScaleBiasScenario}
+MODEL_FILE = "model-file"
+"""What a model file (a linear Gaussian model in TOML, docs/custom-models.md) is called where a scenario's name is asked."""
+
+__all__ = [
+    "MODEL_FILE", "SCENARIOS", "build_scenario", "is_model_file", "load_model_file", "scenario_class", "scenario_names",
+]
+
+
+def scenario_names() -> tuple[str, ...]:
+    """The built-in scenarios' names, in the order ``--help`` lists them."""
+    return tuple(_BUILT_IN)
+
+
+def scenario_class(name: str) -> type:
+    """The class of the built-in scenario ``name`` (KeyError for another name)."""
+    module, cls = _BUILT_IN[name]
+    return getattr(importlib.import_module(module), cls)
+
+
+def __getattr__(name: str) -> Any:
+    # SCENARIOS (name -> class) is built on first use, as its classes are
+    if name == "SCENARIOS":
+        return {key: scenario_class(key) for key in _BUILT_IN}
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def is_model_file(scenario: str) -> bool:
+    """Whether ``scenario`` names a model file rather than a built-in scenario."""
+    from kalcal.scenarios.model_file.model import is_model_file as is_file
+
+    return is_file(scenario)
+
+
+def load_model_file(*args, **kwargs):
+    """The model-file scenario of a TOML file (:func:`kalcal.scenarios.model_file.model.load_model_file`)."""
+    from kalcal.scenarios.model_file.model import load_model_file as load
+
+    return load(*args, **kwargs)
 
 
 def build_scenario(
@@ -28,10 +76,14 @@ def build_scenario(
     The config file is recorded on the scenario (:func:`kalcal.io.outputs.mark_inputs`): a job writing
     outputs with it never removes or replaces that file.
     """
-    if name not in SCENARIOS:
+    from kalcal.io.outputs import mark_inputs
+    from kalcal.models.config import apply_settings, load_toml
+    from kalcal.models.settings import SettingError, parse_assignments, show
+
+    if name not in _BUILT_IN:
         hint = " (a model file (.toml) works with kalcal verify)" if str(name).lower().endswith(".toml") else ""
-        raise SettingError("SCENARIO", f"one of {', '.join(SCENARIOS)}", f"{show(name)}{hint}")
-    scenario = SCENARIOS[name]()
+        raise SettingError("SCENARIO", f"one of {', '.join(_BUILT_IN)}", f"{show(name)}{hint}")
+    scenario = scenario_class(name)()
     settings: dict[str, Any] = dict(defaults or {})
     from_file = load_toml(config) if config is not None else {}
     settings.update(from_file)

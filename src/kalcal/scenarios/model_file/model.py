@@ -48,9 +48,8 @@ from typing import Any, ClassVar
 import numpy as np
 
 from kalcal.core.model import LinearGaussianModel
-from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
+from kalcal.scenarios import scenario_names
 from kalcal.scenarios.model_file.truth import MAP_KEYS, MODEL_KEYS, MappedTruthModel, mapped_truth, truth_from_settings
-from kalcal.scenarios.scale_bias.settings import ScaleBiasScenario
 from kalcal.models.settings import (
     SettingError,
     missing,
@@ -80,7 +79,7 @@ _SET_KEYS = {
 }
 #: ``--set`` keys of a truth with its own states, beside those its section lists (truth.map, truth.state_names)
 _TRUTH_MAP_SET_KEYS = tuple(f"truth.{key}" for key in MAP_KEYS)
-_RESERVED_NAMES = (AccelGpsScenario.NAME, ScaleBiasScenario.NAME)
+_RESERVED_NAMES = scenario_names()
 
 
 def is_model_file(scenario: str) -> bool:
