@@ -19,7 +19,7 @@ from distributed import Client, LocalCluster
 
 from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
 from kalcal.montecarlo.engine import BLOCK_SIZE, run_monte_carlo
-from kalcal.montecarlo.scenarios import accel_gps_problem
+from kalcal.scenarios.accel_gps.problem import accel_gps_problem
 
 
 def timed_run(problem, n, **options):

@@ -42,7 +42,7 @@ from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
 from kalcal.montecarlo import engine
 from kalcal.montecarlo.accumulators import MomentSums, ResidualProducts
 from kalcal.montecarlo.engine import BLOCK_SIZE, block_generator, block_sizes, run_monte_carlo
-from kalcal.montecarlo.scenarios import accel_gps_problem
+from kalcal.scenarios.accel_gps.problem import accel_gps_problem
 
 WORKERS = len(os.sched_getaffinity(0))
 
@@ -202,7 +202,7 @@ import json, sys, time
 start = time.perf_counter()
 from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
 from kalcal.montecarlo.engine import run_monte_carlo
-from kalcal.montecarlo.scenarios import accel_gps_problem
+from kalcal.scenarios.accel_gps.problem import accel_gps_problem
 imported = time.perf_counter() - start
 setup = 0.0
 problem = accel_gps_problem(AccelGpsScenario())

@@ -9,7 +9,7 @@ from kalcal.analysis.fixed_gain import analyze_scenario
 from kalcal.core.sources import blocks, model_sources
 from kalcal.scenarios.model_file.model import parse_model
 from kalcal.scenarios import build_scenario
-from kalcal.simulation.exact import accel_gps_process_noise, accel_gps_truth
+from kalcal.scenarios.accel_gps.truth import accel_gps_process_noise, accel_gps_truth
 from tests._helpers import assert_close, cov_atol
 
 SETTINGS = [

@@ -14,7 +14,7 @@ from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
 from kalcal.models.config import apply_settings
 from kalcal.montecarlo import checkpoint
 from kalcal.montecarlo.engine import run_monte_carlo
-from kalcal.montecarlo.scenarios import accel_gps_problem
+from kalcal.scenarios.accel_gps.problem import accel_gps_problem
 from tests._helpers import sums_equal
 
 

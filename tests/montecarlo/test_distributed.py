@@ -12,7 +12,7 @@ import pytest
 from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
 from kalcal.models.config import apply_settings
 from kalcal.montecarlo.engine import run_monte_carlo
-from kalcal.montecarlo.scenarios import accel_gps_problem
+from kalcal.scenarios.accel_gps.problem import accel_gps_problem
 from tests._helpers import sums_equal
 
 
@@ -84,7 +84,7 @@ from kalcal.cli._common import print_note
 from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
 from kalcal.montecarlo.distributed import dask_client
 from kalcal.montecarlo.engine import run_monte_carlo
-from kalcal.montecarlo.scenarios import accel_gps_problem
+from kalcal.scenarios.accel_gps.problem import accel_gps_problem
 
 if __name__ == "__main__":
     problem = accel_gps_problem(AccelGpsScenario())

@@ -11,7 +11,7 @@ from kalcal.scenarios import build_scenario
 from kalcal.montecarlo.accumulators import BlockResult, MomentSums, ensemble_statistics
 from kalcal.montecarlo.engine import block_generator, block_sizes, realization, run_monte_carlo
 from kalcal.scenarios.scale_bias.problem import ScaleBiasProblem
-from kalcal.montecarlo.scenarios import accel_gps_problem
+from kalcal.scenarios.accel_gps.problem import accel_gps_problem
 
 SHORT = {"scenario.duration": 4.0}
 

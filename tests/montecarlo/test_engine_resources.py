@@ -27,7 +27,7 @@ from kalcal.montecarlo.engine import (
     block_sizes,
     run_monte_carlo,
 )
-from kalcal.montecarlo.scenarios import accel_gps_problem
+from kalcal.scenarios.accel_gps.problem import accel_gps_problem
 from tests._helpers import sums_equal
 
 

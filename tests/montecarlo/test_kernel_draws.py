@@ -9,7 +9,7 @@ from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
 from kalcal.models.config import apply_settings
 from kalcal.montecarlo.engine import block_generator
 from kalcal.montecarlo.kernels import standard_normals
-from kalcal.montecarlo.scenarios import accel_gps_problem
+from kalcal.scenarios.accel_gps.problem import accel_gps_problem
 
 
 @pytest.mark.parametrize("bit_generator", [np.random.SFC64, np.random.PCG64, np.random.Philox])

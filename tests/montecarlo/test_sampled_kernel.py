@@ -12,7 +12,7 @@ from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
 from kalcal.models.config import apply_settings
 from kalcal.montecarlo.accumulators import MomentSums
 from kalcal.montecarlo.engine import block_generator
-from kalcal.montecarlo.scenarios import accel_gps_problem
+from kalcal.scenarios.accel_gps.problem import accel_gps_problem
 
 #: every truth the sampled engine simulates: a constant, random-walk or Gauss-Markov bias, a scale-factor
 #: error, both integration schemes, the discrete truth, a filter prior that differs from the truth's, and

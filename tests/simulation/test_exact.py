@@ -16,7 +16,8 @@ from kalcal.core.model import LinearGaussianModel
 from kalcal.core.steps import interval_transition
 from kalcal.filters.mechanization import interval_weights
 from kalcal.scenarios import build_scenario
-from kalcal.simulation.exact import accel_gps_model_error, accel_gps_truth, sample_exact, truth_from_model
+from kalcal.scenarios.accel_gps.truth import accel_gps_model_error, accel_gps_truth
+from kalcal.simulation.exact import sample_exact, truth_from_model
 from kalcal.scenarios.accel_gps.sampled import sample_accel_gps_errors
 from tests._helpers import assert_gaussian_moments, assert_same_distribution
 

@@ -13,16 +13,13 @@ import numpy as np
 
 from kalcal.core.budget import BudgetTerm, error_budget
 from kalcal.core.lincov import FilterArrays, Moments, TruthArrays, mean_normalized_square, propagate
-from kalcal.core.sources import Source, covariance_sources, factor_sources, model_sources
+from kalcal.core.sources import Source, factor_sources
 from kalcal.core.steps import UpdateForm
 from kalcal.errors import KalcalError
 from kalcal.linalg import whitener
-from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
-from kalcal.scenarios.model_file.model import CustomModelScenario
-from kalcal.scenarios.scale_bias.settings import ScaleBiasScenario
 from kalcal.montecarlo.problem import FixedGainProblem, ProblemInfo
-from kalcal.montecarlo.scenarios import accel_gps_problem, custom_problem, refuse_log_faults
-from kalcal.simulation.exact import UpdateRateTruth, accel_gps_process_noise
+from kalcal.scenarios.protocol import require
+from kalcal.simulation.exact import UpdateRateTruth
 
 
 @dataclass(frozen=True)
@@ -36,14 +33,6 @@ class CovarianceAnalysis:
     mean_nees: np.ndarray  #: E[e^T P^-1 e] under the truth, (K,)
     mean_nis: np.ndarray  #: E[r^T S^-1 r] under the truth, (K,)
     budget: tuple[BudgetTerm, ...]  #: one term of Cov(e_k) per source; they sum to moments.error_cov
-
-
-def accel_gps_sources(scenario: AccelGpsScenario) -> list[Source]:
-    """prior:position, prior:velocity, prior:bias (, prior:scale), process:accel (, process:bias),
-    measurement:position, measurement:velocity."""
-    model = scenario.truth_model()
-    measurement_names = ("position", "velocity")
-    return covariance_sources(model.m0, model.v, accel_gps_process_noise(scenario), scenario.state_names, measurement_names)
 
 
 def truth_arrays(truth: UpdateRateTruth) -> TruthArrays:
@@ -109,26 +98,15 @@ def analyze_problem(
 
 
 def analyze_scenario(scenario, form: UpdateForm = "joseph", *, pairs: bool = True, budget: bool = True) -> CovarianceAnalysis:
-    """The exact analysis of an accel-gps scenario or a model file (:class:`CustomModelScenario`); ``pairs``
-    and ``budget`` as :func:`analyze_problem`'s.
+    """The exact analysis of a scenario that has one (``capabilities.exact_analysis``: accel-gps, a model
+    file), with its own error sources; ``pairs`` and ``budget`` as :func:`analyze_problem`'s.
 
     Raises
     ------
     KalcalError
         For scale-bias, whose gains hold the noisy readings (no exact analysis exists).
     """
-    if isinstance(scenario, ScaleBiasScenario):
-        raise KalcalError(
-            "scale-bias: no exact covariance analysis (its filter's gains depend on the noisy readings); use kalcal verify"
-        )
-    if isinstance(scenario, AccelGpsScenario):
-        refuse_log_faults(scenario)
-        return analyze_problem(accel_gps_problem(scenario, form, residual_pairs=False), accel_gps_sources(scenario), pairs=pairs, budget=budget)
-    if isinstance(scenario, CustomModelScenario):
-        problem = custom_problem(scenario, form, residual_pairs=False)
-        truth = scenario.truth
-        names = getattr(truth, "state_names", None) or scenario.model.state_names  # a larger truth's own names
-        if truth.state_dim != len(names):
-            names = tuple(f"x{i + 1}" for i in range(truth.state_dim))
-        return analyze_problem(problem, model_sources(truth, names, scenario.model.measurement_names), pairs=pairs, budget=budget)
-    raise TypeError(f"no exact covariance analysis for {type(scenario).__name__}")
+    require(scenario, "analyze")  # scale-bias: its gains hold the noisy readings
+    scenario.check_settings("analyze")
+    problem = scenario.problem(form, residual_pairs=False)
+    return analyze_problem(problem, scenario.error_sources(), pairs=pairs, budget=budget)

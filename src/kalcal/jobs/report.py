@@ -34,7 +34,6 @@ from kalcal.scenarios import build_scenario
 from kalcal.models.settings import SettingError
 from kalcal.montecarlo.engine import BLOCK_SIZE, block_generator, block_sizes, realization
 from kalcal.montecarlo.problem import FixedGainProblem
-from kalcal.scenarios.scale_bias.problem import ScaleBiasProblem
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.plots.realization_data import RealizationData
 from kalcal.reporting.html import build_page, write_page
@@ -151,7 +150,7 @@ def draw_realization(problem, seed: int, index: int, n: int, engine: str) -> Sho
         raise ValueError(f"realization index must lie in [0, {n}), got {index}")
     block, offset = divmod(index, BLOCK_SIZE)
     rng, size = block_generator(seed, block), block_sizes(n, BLOCK_SIZE)[block]
-    if isinstance(problem, ScaleBiasProblem):
+    if hasattr(problem, "shown_realization"):  # scale-bias: the block drawn, this series filtered alone
         return ShownRealization(*problem.shown_realization(rng, size, offset))
     if not isinstance(problem, FixedGainProblem):  # data-dependent gains: each realization's own P
         one = realization(problem, seed, index, n, engine)

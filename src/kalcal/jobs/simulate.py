@@ -35,11 +35,7 @@ class Simulation:
 
 def compute_simulation(scenario, seed: int) -> Simulation:
     """The realization of ``scenario`` drawn with ``seed`` (accel-gps or scale-bias)."""
-    if scenario.NAME == "scale-bias":
-        from kalcal.scenarios.scale_bias.job import compute_scale_bias_simulation
-
-        return compute_scale_bias_simulation(scenario, seed)
-    return compute_accel_gps_simulation(scenario, seed)
+    return scenario.simulate(seed)  # kalcal.scenarios.protocol.Scenario.simulate
 
 
 def compute_accel_gps_simulation(scenario: AccelGpsScenario, seed: int) -> Simulation:

@@ -25,12 +25,11 @@ from kalcal.io.outputs import writes_outputs
 from kalcal.io.results import json_document, write_json
 from kalcal.io.statistics import write_statistics
 from kalcal.jobs.progress import JobProgress, stage
-from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
 from kalcal.models.config import apply_settings, section_values
 from kalcal.montecarlo.accumulators import EnsembleStatistics, ensemble_statistics
 from kalcal.montecarlo.engine import BLOCK_SIZE, run_monte_carlo
 from kalcal.montecarlo.problem import check_engine
-from kalcal.montecarlo.scenarios import build_problem, refuse_log_faults
+from kalcal.montecarlo.scenarios import build_problem
 from kalcal.stats.results import CheckResult
 from kalcal.stats.suite import run_checks, verdict
 from kalcal.stats.whiteness import REPORT_RESIDUAL_PAIR, residual_pair
@@ -39,8 +38,6 @@ from kalcal.stats.results import as_false_alarm
 from kalcal.stats.self_check import SelfCheck, exact_prediction, self_check
 
 ENGINES = ("exact", "sampled")
-#: Horizon (s) of the extra mean-error study per scenario: the source report's figure 5.8 used 120 s.
-LONG_RUN_SECONDS = {"accel-gps": 120.0}
 #: Realizations of that study at most (the report used 5 x 10^4).
 LONG_RUN_REALIZATIONS = 50_000
 #: Fewest realizations a verification accepts: below it the normal approximations behind the checks'
@@ -57,13 +54,10 @@ MAX_UPDATES = 2000
 
 
 def default_long_run(scenario) -> float:
-    """The long run's horizon (s) when none is given: :data:`LONG_RUN_SECONDS`, shortened for accel-gps to
-    the :data:`MAX_UPDATES` GPS intervals that a realization may hold (100 s at 20 Hz), so that a faster
-    GPS is not refused by a study the user did not ask for."""
-    seconds = LONG_RUN_SECONDS.get(info_name(scenario), 0.0)
-    if seconds and isinstance(scenario, AccelGpsScenario):
-        seconds = min(seconds, MAX_UPDATES / scenario.scenario.gps_rate)
-    return seconds
+    """The long run's horizon (s) when none is given, within the :data:`MAX_UPDATES` updates that a
+    realization may hold (:meth:`~kalcal.scenarios.protocol.Scenario.default_long_run`: the source report's
+    120 s for accel-gps, 100 s at a 20 Hz GPS; none for the others)."""
+    return scenario.default_long_run(MAX_UPDATES)
 
 
 def run_length(scenario) -> tuple[int, float]:
@@ -102,7 +96,7 @@ def check_arguments(
     ``n`` below :data:`MIN_REALIZATIONS`, an unknown engine or form, a confidence outside (0, 1), a
     batch size below 1, a negative or non-finite ``long_run`` or one not longer than the run, and a run or
     long run of more than :data:`MAX_UPDATES` updates per realization (``scenario.duration`` too long),
-    and the log-only GNSS faults of accel-gps (:func:`~kalcal.montecarlo.scenarios.refuse_log_faults`).
+    and the log-only GNSS faults of accel-gps (:meth:`~kalcal.scenarios.protocol.Scenario.check_settings`).
     """
     if n < MIN_REALIZATIONS:
         raise ConfigError(
@@ -118,8 +112,7 @@ def check_arguments(
     if batch_size is not None and batch_size < 1:
         raise ConfigError(f"--batch-size: expected a positive number of realizations, got {batch_size}")
     check_form(form, "--form")
-    if isinstance(scenario, AccelGpsScenario):
-        refuse_log_faults(scenario)
+    scenario.check_settings("verify")  # accel-gps: the truth's log-only GNSS faults
     count, horizon = run_length(scenario)
     _require_fits(count, "model.updates" if hasattr(scenario, "model") else "scenario.duration")
     if long_run and long_run <= horizon:
@@ -256,29 +249,17 @@ def truth_equals(analysis) -> bool | None:
 def scale_bias_truth_equals(scenario) -> bool:
     """Whether a scale-bias scenario's filter is its truth's own model: the same Gaussian prior of theta,
     the same process noise and the same measurement noise variance, with nothing the model lacks (no
-    sensor noise in the regressor, the excitation not theta's: :func:`model_error_cause` names none)."""
-    from kalcal.scenarios.scale_bias.problem import model_error_cause
-
-    if model_error_cause(scenario):
-        return False
-    truth, belief = scenario.truth_prior(), scenario.filter_prior()
-    noise = scenario.truth.reference_noise_std**2  # the truth's w_k = eta_k without sensor noise
-    return bool(
-        np.array_equal(truth.mean, belief.mean)
-        and np.array_equal(truth.cov, belief.cov)
-        and np.array_equal(scenario.truth_process_noise(), scenario.filter_process_noise())
-        and noise == scenario.filter_noise_variance()
-    )
+    sensor noise in the regressor, the excitation not theta's: its model error's cause is none)."""
+    return scenario.truth_is_filter()
 
 
 def equals_filter(scenario, analysis) -> bool:
     """Whether the run's truth equals its filter: from the exact analysis where there is one, from the
-    settings for scale-bias. Then every failed check is a false alarm at its stated rate."""
-    from kalcal.scenarios.scale_bias.settings import ScaleBiasScenario
-
+    settings for scale-bias (:meth:`~kalcal.scenarios.protocol.Scenario.truth_is_filter`). Then every
+    failed check is a false alarm at its stated rate."""
     if analysis is not None:
         return bool(truth_equals(analysis))
-    return isinstance(scenario, ScaleBiasScenario) and scale_bias_truth_equals(scenario)
+    return scenario.truth_is_filter()
 
 
 @dataclass(frozen=True)

@@ -14,13 +14,6 @@ import numpy as np
 from kalcal.filters.steady_state import SteadyStateView, model_steady_state_view, no_steady_state
 from kalcal.montecarlo.problem import FixedGainProblem
 
-#: why a problem other than a fixed-gain one has no steady state, by scenario
-NOT_TIME_INVARIANT = {
-    "scale-bias": (
-        "its measurement row h_k = [z_k, 1] holds the sensor's reading, so it changes at every sample and the "
-        "gains depend on the data: the filter is not time-invariant and there is no algebraic Riccati equation"
-    ),
-}
 
 #: why a fixed-gain problem with a transition per interval has no steady state
 VARYING_TRANSITION = (
@@ -35,9 +28,8 @@ def steady_state_view(problem) -> SteadyStateView:
     info = problem.info
     names, units = tuple(info.state_names), tuple(info.state_units)
     if not isinstance(problem, FixedGainProblem):
-        reason = NOT_TIME_INVARIANT.get(
-            info.scenario, "its gains depend on the data, so the filter is not time-invariant"
-        )
+        # a problem says why its own filter is not time-invariant (scale-bias: its measurement row)
+        reason = getattr(problem, "NOT_TIME_INVARIANT", "its gains depend on the data, so the filter is not time-invariant")
         return no_steady_state(reason, names, units)
     if getattr(problem, "filter_transitions", None) is not None:
         return no_steady_state(VARYING_TRANSITION, names, units)

@@ -16,7 +16,6 @@ deviations).
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Callable
 
 import numpy as np
@@ -24,8 +23,6 @@ import numpy as np
 from kalcal.analysis.fixed_gain import analyze_scenario
 from kalcal.stats.suite import check_families
 from kalcal.stats.power import DETECTION_POWER
-from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
-from kalcal.scenarios.model_file.model import CustomModelScenario
 
 __all__ = ["FLOOR", "RESOLUTION", "START", "detected_error", "noise_settings", "sensitivity", "sensitivity_text"]
 
@@ -39,48 +36,13 @@ RESOLUTION = 1.1
 MAX_INCREASE, MAX_DECREASE = 9.0, 0.9
 
 
-def _accel_gps_settings(scenario: AccelGpsScenario) -> dict[str, Callable[[float], AccelGpsScenario]]:
-    truth, pinned = scenario.truth, scenario.filter_settings
-    out = {}
-    for field in dataclasses.fields(truth):
-        name = field.name
-        value = getattr(truth, name)
-        if not name.endswith("_std") or not isinstance(value, float) or value <= 0:
-            continue
-
-        def scaled(factor: float, name: str = name, value: float = value) -> AccelGpsScenario:
-            return dataclasses.replace(
-                scenario,
-                truth=dataclasses.replace(truth, **{name: value * factor}),
-                filter=dataclasses.replace(scenario.filter, **{name: getattr(pinned, name)}),
-            )
-
-        out[f"truth.{name}"] = scaled
-    return out
-
-
-def _model_settings(scenario: CustomModelScenario) -> dict[str, Callable[[float], CustomModelScenario]]:
-    out = {}
-    for key in ("w", "v", "m0"):
-        value = np.asarray(getattr(scenario.truth, key), dtype=float)
-        if not np.any(value):
-            continue
-
-        def scaled(factor: float, key: str = key, value: np.ndarray = value) -> CustomModelScenario:
-            return dataclasses.replace(scenario, truth=dataclasses.replace(scenario.truth, **{key: value * factor**2}))
-
-        out[f"truth.{key}"] = scaled
-    return out
-
-
 def noise_settings(scenario) -> dict[str, Callable[[float], object]]:
     """The truth's noise settings, each as factor -> the scenario with that setting's std times ``factor``
     (the filter's settings held)."""
-    if isinstance(scenario, AccelGpsScenario):
-        return _accel_gps_settings(scenario)
-    if isinstance(scenario, CustomModelScenario):
-        return _model_settings(scenario)
-    raise TypeError(f"no noise settings to scale for {type(scenario).__name__}")
+    settings = scenario.noise_settings()
+    if not settings:
+        raise TypeError(f"no noise settings to scale for {type(scenario).__name__}")
+    return settings
 
 
 def _detects(scenario, n: int, confidence: float, form: str, pairs: bool = True) -> bool:

@@ -54,6 +54,7 @@ import numpy as np
 from kalcal.core.model import LinearGaussianModel
 from kalcal.scenarios.accel_gps.discretization import bias_discretization, error_transition
 from kalcal.models.settings import SettingError, require_nonnegative, require_positive, require_whole, show
+from kalcal.scenarios.protocol import Capabilities
 
 TruthKind = Literal["analytic", "discrete"]
 IntegrationScheme = Literal["euler", "trapezoid"]
@@ -374,6 +375,61 @@ class AccelGpsScenario:
     filter: AccelGpsFilter = field(default_factory=AccelGpsFilter)
 
     NAME: ClassVar[str] = "accel-gps"
+    SUMMARY: ClassVar[str] = "an accelerometer's bias (and scale) estimated with GPS position and velocity fixes"
+    capabilities: ClassVar[Capabilities] = Capabilities(
+        exact_analysis=True, fixed_gains=True, engines=("exact", "sampled")
+    )
+    #: the source report's long-run study of the mean error (its figure 5.8), s
+    LONG_RUN_SECONDS: ClassVar[float] = 120.0
+
+    # The Scenario protocol (kalcal.scenarios.protocol): each answer from this package's modules, imported
+    # where asked because they import this one.
+
+    def problem(self, form="joseph", residual_pairs: bool = True):
+        """The report's filter against its truth (:func:`kalcal.scenarios.accel_gps.problem.accel_gps_problem`)."""
+        from kalcal.scenarios.accel_gps.problem import accel_gps_problem
+
+        return accel_gps_problem(self, form, residual_pairs)
+
+    def model_error_cause(self) -> str:
+        """The integration scheme against the analytic truth, and a prior mean differing from the truth's."""
+        from kalcal.scenarios.accel_gps.problem import accel_gps_model_error_cause
+
+        return accel_gps_model_error_cause(self)
+
+    def check_settings(self, command: str) -> None:
+        """A verification and an analysis refuse the truth's log-only GNSS faults (they have no time stamps)."""
+        if command in ("verify", "analyze", "sweep"):
+            from kalcal.scenarios.accel_gps.problem import refuse_log_faults
+
+            refuse_log_faults(self)
+
+    def error_sources(self) -> list:
+        """prior, process and measurement sources of the exact analysis's budget."""
+        from kalcal.scenarios.accel_gps.problem import accel_gps_sources
+
+        return accel_gps_sources(self)
+
+    def noise_settings(self) -> dict:
+        """Each positive ``truth.*_std`` as factor -> the scenario with it scaled (the filter's held)."""
+        from kalcal.scenarios.accel_gps.problem import noise_settings
+
+        return noise_settings(self)
+
+    def default_long_run(self, max_updates: int) -> float:
+        """The source report's 120 s, shortened to ``max_updates`` GPS intervals (100 s at 20 Hz), so that a
+        faster GPS is not refused by a study the user did not ask for."""
+        return min(self.LONG_RUN_SECONDS, max_updates / self.scenario.gps_rate)
+
+    def truth_is_filter(self) -> bool:
+        """False: its exact analysis says whether the truth equals the filter."""
+        return False
+
+    def simulate(self, seed: int):
+        """The accelerometer and GPS logs of one realization (:func:`kalcal.jobs.simulate.compute_accel_gps_simulation`)."""
+        from kalcal.jobs.simulate import compute_accel_gps_simulation
+
+        return compute_accel_gps_simulation(self, seed)
 
     def __post_init__(self) -> None:
         # ``truth`` as given (a density, or an unset per-sample value) is kept for the settings layer

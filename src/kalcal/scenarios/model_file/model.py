@@ -49,6 +49,7 @@ import numpy as np
 
 from kalcal.core.model import LinearGaussianModel
 from kalcal.scenarios import scenario_names
+from kalcal.scenarios.protocol import Capabilities
 from kalcal.scenarios.model_file.truth import MAP_KEYS, MODEL_KEYS, MappedTruthModel, mapped_truth, truth_from_settings
 from kalcal.models.settings import (
     SettingError,
@@ -126,6 +127,53 @@ class CustomModelScenario:
     """
 
     NAME: ClassVar[str] = "custom"
+    SUMMARY: ClassVar[str] = "a linear Gaussian model read from a TOML file (docs/custom-models.md)"
+    capabilities: ClassVar[Capabilities] = Capabilities(
+        exact_analysis=True, fixed_gains=True, commands=frozenset({"verify", "analyze", "report"})
+    )
+
+    # The Scenario protocol (kalcal.scenarios.protocol): each answer from this package's modules, imported
+    # where asked because they import this one.
+
+    def problem(self, form="joseph", residual_pairs: bool = True):
+        """The file's filter against its truth (:func:`kalcal.scenarios.model_file.problem.custom_problem`)."""
+        from kalcal.scenarios.model_file.problem import custom_problem
+
+        return custom_problem(self, form, residual_pairs)
+
+    def model_error_cause(self) -> str:
+        """The truth's matrices that move the filter's mean error."""
+        from kalcal.scenarios.model_file.problem import custom_model_error_cause
+
+        return custom_model_error_cause(self)
+
+    def check_settings(self, command: str) -> None:
+        """Nothing to refuse: the file was checked when it was read."""
+
+    def error_sources(self) -> list:
+        """The truth's prior, process and measurement blocks."""
+        from kalcal.scenarios.model_file.problem import model_error_sources
+
+        return model_error_sources(self)
+
+    def noise_settings(self) -> dict:
+        """The truth's w, v and m0, each as factor -> the scenario with it scaled."""
+        from kalcal.scenarios.model_file.problem import noise_settings
+
+        return noise_settings(self)
+
+    def default_long_run(self, max_updates: int) -> float:
+        """0: a model file sets its own updates."""
+        return 0.0
+
+    def truth_is_filter(self) -> bool:
+        """False: its exact analysis says whether the truth equals the filter."""
+        return False
+
+    def simulate(self, seed: int):
+        from kalcal.errors import KalcalError
+
+        raise KalcalError(f"{self.model.name}: kalcal simulate writes the built-in scenarios' logs, not a model file's")
 
     model: CustomModelInfo
     filter: LinearGaussianModel

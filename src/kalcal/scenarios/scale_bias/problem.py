@@ -17,6 +17,7 @@ prediction leaves out; see docs/scale-bias.md.)
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 
@@ -138,6 +139,12 @@ class ScaleBiasProblem:
     "sampled" engine. ``form`` defaults to the scenario's ``filter.form``; ``residual_pairs=False`` skips
     the sums of r_k r_j over all pairs of samples (and so the whiteness check).
     """
+
+    #: why this filter has no steady state (kalcal.reporting.steady_state)
+    NOT_TIME_INVARIANT: ClassVar[str] = (
+        "its measurement row h_k = [z_k, 1] holds the sensor's reading, so it changes at every sample and the "
+        "gains depend on the data: the filter is not time-invariant and there is no algebraic Riccati equation"
+    )
 
     scenario: ScaleBiasScenario
     form: str | None = None

@@ -49,6 +49,7 @@ from typing import ClassVar, Literal, NamedTuple
 
 import numpy as np
 
+from kalcal.scenarios.protocol import COMMANDS, Capabilities
 from kalcal.scenarios.scale_bias.theta import ThetaPrior, theta_prior
 from kalcal.models.settings import (
     SettingError,
@@ -220,6 +221,69 @@ class ScaleBiasScenario:
     filter: ScaleBiasFilter = field(default_factory=ScaleBiasFilter)
 
     NAME: ClassVar[str] = "scale-bias"
+    SUMMARY: ClassVar[str] = "a sensor's scale and bias estimated against a reference reading (the regressors are data)"
+    capabilities: ClassVar[Capabilities] = Capabilities(
+        exact_analysis=False,
+        fixed_gains=False,
+        rows_from_data=True,
+        commands=COMMANDS - {"analyze"},
+        why_not=(("analyze", "no exact covariance analysis (its filter's gains depend on the noisy readings); use kalcal verify"),),
+    )
+
+    # The Scenario protocol (kalcal.scenarios.protocol): each answer from this package's modules, imported
+    # where asked because they import this one.
+
+    def problem(self, form="joseph", residual_pairs: bool = True):
+        """The filter with data-dependent gains against its truth (:class:`~kalcal.scenarios.scale_bias.problem.ScaleBiasProblem`)."""
+        from kalcal.errors import ConfigError
+        from kalcal.scenarios.scale_bias.problem import ScaleBiasProblem
+
+        # The scale/bias filter's update form is its own setting, filter.form ("joseph" or "note").
+        if form != "joseph":
+            raise ConfigError(f"--form: {form!r} is not available for scale-bias (set filter.form=joseph or note instead)")
+        return ScaleBiasProblem(self, residual_pairs=residual_pairs)
+
+    def model_error_cause(self) -> str:
+        """What the filter's model lacks of the truth (:func:`kalcal.scenarios.scale_bias.problem.model_error_cause`)."""
+        from kalcal.scenarios.scale_bias.problem import model_error_cause
+
+        return model_error_cause(self)
+
+    def check_settings(self, command: str) -> None:
+        """Nothing to refuse: every setting holds in every command it has."""
+
+    def error_sources(self) -> list:
+        """None: no exact analysis."""
+        return []
+
+    def noise_settings(self) -> dict:
+        """None to scale: the sensitivity needs an exact analysis."""
+        return {}
+
+    def default_long_run(self, max_updates: int) -> float:
+        """0: no long-run study."""
+        return 0.0
+
+    def truth_is_filter(self) -> bool:
+        """Whether the filter is the truth's own model: the same Gaussian prior of theta, the same process
+        noise and measurement noise variance, with nothing the model lacks (no sensor noise in the
+        regressor, the excitation not theta's: :meth:`model_error_cause` names none)."""
+        if self.model_error_cause():
+            return False
+        truth, belief = self.truth_prior(), self.filter_prior()
+        noise = self.truth.reference_noise_std**2  # the truth's w_k = eta_k without sensor noise
+        return bool(
+            np.array_equal(truth.mean, belief.mean)
+            and np.array_equal(truth.cov, belief.cov)
+            and np.array_equal(self.truth_process_noise(), self.filter_process_noise())
+            and noise == self.filter_noise_variance()
+        )
+
+    def simulate(self, seed: int):
+        """The sensor and reference log of one realization (:func:`kalcal.scenarios.scale_bias.job.compute_scale_bias_simulation`)."""
+        from kalcal.scenarios.scale_bias.job import compute_scale_bias_simulation
+
+        return compute_scale_bias_simulation(self, seed)
 
     def __post_init__(self) -> None:
         # Unset filter settings come from the truth, whose zero stds are legal there (a known parameter) but

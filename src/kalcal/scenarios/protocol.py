@@ -1,0 +1,121 @@
+"""The Scenario protocol: what the engine, the checks, the analysis, the report, the API and the CLI ask of a scenario.
+
+Whatever differs between scenarios is a method here or a capability, never a test of a scenario's name or
+class outside its package (tests/scenarios/test_scenario_boundary.py holds that). The capabilities are
+the questions the rest of kalcal used to answer by asking which scenario it had: whether an exact
+analysis exists, whether P is the same in every realization, whether the measurement rows come from
+data, whether the model is nonlinear, whether the estimator is a batch one; and which engines and
+commands the scenario has. A command a scenario lacks is refused in one line that names the scenario
+and why (:func:`require`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, ClassVar, Protocol, runtime_checkable
+
+from kalcal.errors import KalcalError
+
+COMMANDS = frozenset({"verify", "analyze", "sweep", "simulate", "calibrate", "fit", "report"})
+
+
+@dataclass(frozen=True)
+class Capabilities:
+    """What a scenario has, asked where kalcal's behaviour depends on it.
+
+    Attributes
+    ----------
+    exact_analysis : bool
+        A linear Gaussian truth filtered with gains fixed before any data: ``kalcal analyze``, the exact
+        prediction of the ensemble (self-check) and the checks' power by analysis apply.
+    fixed_gains : bool
+        P_k and the gains are the same in every realization (one whitening for the whole ensemble).
+    rows_from_data : bool
+        The measurement rows H_k are taken from data (the regressors), so each realization has its own P_k.
+    nonlinear : bool
+        f and h are code (EKF/IEKF/UKF): effect sizes and shape checks stand in for exact moments.
+    batch : bool
+        One final estimate per realization: only the final-time checks apply.
+    engines : tuple of str
+        The Monte Carlo engines it has, the default first.
+    commands : frozenset of str
+        The commands it supports, of :data:`COMMANDS`.
+    why_not : dict of str to str
+        For a command it lacks, why (the refusal's reason); a command absent here is refused as unsupported.
+    """
+
+    exact_analysis: bool
+    fixed_gains: bool
+    rows_from_data: bool = False
+    nonlinear: bool = False
+    batch: bool = False
+    engines: tuple[str, ...] = ("exact",)
+    commands: frozenset[str] = COMMANDS
+    why_not: tuple[tuple[str, str], ...] = ()
+
+    def __post_init__(self) -> None:
+        unknown = set(self.commands) - COMMANDS
+        if unknown:
+            raise ValueError(f"unknown commands {sorted(unknown)}; expected some of {sorted(COMMANDS)}")
+        if self.exact_analysis and not self.fixed_gains:
+            raise ValueError("an exact analysis needs fixed gains")
+
+
+@runtime_checkable
+class Scenario(Protocol):
+    """A scenario: settings, a model, a simulation, and the answers the rest of kalcal asks of it."""
+
+    NAME: ClassVar[str]  #: what the registry and summary.json call it
+    SUMMARY: ClassVar[str]  #: one line for --help and the docs
+
+    @property
+    def capabilities(self) -> Capabilities:
+        """What it has (a model file's depend on its content)."""
+        ...
+
+    def problem(self, form: str = "joseph", residual_pairs: bool = True) -> Any:
+        """The verification problem (:class:`~kalcal.montecarlo.problem.Problem`): its filter against its truth.
+
+        ``residual_pairs=False`` skips E[r_k r_j^T] over all pairs (and so the whiteness check)."""
+        ...
+
+    def model_error_cause(self) -> str:
+        """A sentence naming what makes the truth depart from the filter's model ("" for none), for check details."""
+        ...
+
+    def check_settings(self, command: str) -> None:
+        """Refuse (a one-line SettingError) a setting that ``command`` cannot honour."""
+        ...
+
+    def error_sources(self) -> list[Any]:
+        """The error budget's independent sources (:class:`~kalcal.core.sources.Source`) of the exact analysis."""
+        ...
+
+    def noise_settings(self) -> dict[str, Callable[[float], Any]]:
+        """The truth's noise settings, each as factor -> the scenario with that setting's std times ``factor``
+        (the filter's settings held): what the sensitivity scales."""
+        ...
+
+    def default_long_run(self, max_updates: int) -> float:
+        """The long-run study's horizon (s) when none is given (0: none), within ``max_updates`` updates."""
+        ...
+
+    def truth_is_filter(self) -> bool:
+        """Whether its settings make the truth the filter's own model, where no exact analysis says so."""
+        ...
+
+    def simulate(self, seed: int) -> Any:
+        """One realization drawn with ``seed``, as logs (:class:`kalcal.jobs.simulate.Simulation`)."""
+        ...
+
+
+def require(scenario: Any, command: str, *, engine: str | None = None) -> None:
+    """Refuse ``command`` (and ``engine``) where ``scenario`` lacks it: one line naming the scenario and why."""
+    caps = scenario.capabilities
+    name = getattr(scenario, "label", None) or scenario.NAME
+    if command not in caps.commands:
+        reason = dict(caps.why_not).get(command, f"{name} has no {command}")
+        raise KalcalError(f"{name}: {reason}")
+    if engine is not None and engine not in caps.engines:
+        raise KalcalError(f"--engine: {engine!r} is not available for {name}; use {' or '.join(caps.engines)}")
