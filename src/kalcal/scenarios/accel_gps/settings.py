@@ -567,7 +567,7 @@ class AccelGpsScenario:
         m0 = np.diag([values.position0_std**2, values.velocity0_std**2, values.bias_std**2])
         if self.has_scale:
             # s is constant; its column of Phi depends on the acceleration of each step, so it is zero
-            # here and the interval transitions add it (kalcal.simulation.exact.accel_gps_truth)
+            # here and the interval transitions add it (kalcal.scenarios.accel_gps.truth.accel_gps_truth)
             phi = np.pad(phi, ((0, 1), (0, 1)))
             phi[3, 3] = 1.0
             gamma = np.pad(gamma, ((0, 1), (0, 0)))
