@@ -1,1 +1,1 @@
-"""Run a filter over logged data and return estimates with their uncertainty."""
+"""What every scenario's log calibration shares: innovation diagnostics, windowed stability, plausibility, unit slips, noise from a static log."""

@@ -1,1 +1,1 @@
-"""Pure filter functions over a model and data."""
+"""Scenario-free filters on core's steps, batched over realizations: gain schedules, integration, the regression filter, the log filter, the steady state."""

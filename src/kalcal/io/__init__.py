@@ -1,1 +1,1 @@
-"""Readers of sensor logs and writers of results."""
+"""Input and output: log readers (CSV, Parquet, ROS bags, PX4 ULog) with validation, result writers, and an output folder written as one set."""

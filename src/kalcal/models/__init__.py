@@ -1,1 +1,1 @@
-"""What a system is: immutable descriptions, no algorithms."""
+"""The settings layer every scenario's settings go through: TOML and --set parsing, conversion, range rules, error wording."""
