@@ -55,6 +55,9 @@ def test_every_compiled_covariance_update_is_the_one_function():
         ("kalcal.scenarios.scale_bias.kernels", "_filter_tile"),
         ("kalcal.scenarios.scale_bias.likelihood", "_diffuse_filter"),
     }
+    # the information filter's diffuse start, compiled once (core.kernels.diffuse_start), run by the likelihood
+    starters = {key for key, kernel in found.items() if kernels.diffuse_start in _callees(kernel)}
+    assert starters == {("kalcal.scenarios.scale_bias.likelihood", "_diffuse_filter")}
     # the fixed-gain block kernel applies its gain schedule: no covariance update in it
     assert not any(
         kernels.covariance_update in _callees(kernel) for (name, _), kernel in found.items() if name == "kalcal.montecarlo.kernels"
