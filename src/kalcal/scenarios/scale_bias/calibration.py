@@ -52,7 +52,8 @@ from kalcal.filters.regression import run_regression_filter
 from kalcal.scenarios.scale_bias.filter import filter_scale_bias, regressors
 from kalcal.scenarios.scale_bias.settings import STATE_NAMES, ScaleBiasScenario
 from kalcal.scenarios.scale_bias.theta import scale_bias_from_theta, scale_bias_jacobian
-from kalcal.stats.distributions import chi2_isf, chi2_ppf, chi2_sf  # scipy.stats's values, without its import
+from kalcal.stats.bounds import chi2_mean_bounds
+from kalcal.stats.distributions import chi2_ppf, chi2_sf
 
 #: the mean NIS is tested two-sided at this confidence (a consistent log fails with probability 1 - it)
 NIS_CONFIDENCE = 0.99
@@ -140,8 +141,8 @@ class ScaleBiasCalibration:
 
     def nis_bounds(self, confidence: float = NIS_CONFIDENCE) -> tuple[float, float]:
         """Two-sided bounds of the mean NIS of the samples used, chi-square(K) / K, at ``confidence``."""
-        k, tail = self.samples_used, (1.0 - confidence) / 2
-        return float(chi2_ppf(tail, k) / k), float(chi2_isf(tail, k) / k)
+        k = self.samples_used
+        return chi2_mean_bounds(confidence, 1, k, k)
 
     @property
     def consistent(self) -> bool:
