@@ -58,10 +58,9 @@ def test_every_compiled_covariance_update_is_the_one_function():
     # the information filter's diffuse start, compiled once (core.kernels.diffuse_start), run by the likelihood
     starters = {key for key, kernel in found.items() if kernels.diffuse_start in _callees(kernel)}
     assert starters == {("kalcal.scenarios.scale_bias.likelihood", "_diffuse_filter")}
-    # the fixed-gain block kernel applies its gain schedule: no covariance update in it
-    assert not any(
-        kernels.covariance_update in _callees(kernel) for (name, _), kernel in found.items() if name == "kalcal.montecarlo.kernels"
-    )
+    # the fixed-gain block kernel applies its gain schedule: its module was walked (so the set above,
+    # which leaves it out, says that no covariance update is in it)
+    assert any(name == "kalcal.montecarlo.kernels" for name, _ in found)
 
 
 def _stamp_line(callees: set[str]) -> str:
