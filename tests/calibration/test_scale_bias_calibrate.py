@@ -98,3 +98,18 @@ def test_a_sensor_that_does_not_follow_the_reference_is_a_data_error():
         calibrate_scale_bias(scenario, samples.time, samples.reference[0], -samples.sensor[0], source="log.csv")
     with pytest.raises(DataError, match="log.csv: no sample has both"):
         calibrate_scale_bias(scenario, samples.time, np.full(300, np.nan), samples.sensor[0], source="log.csv")
+
+
+def test_nis_bounds_are_the_packages_chi_square_mean_bounds(monkeypatch):
+    """The mean NIS's bounds come from kalcal.stats.bounds, the one place of the package's chi-square bounds:
+    the calibration's answer is chi2_mean_bounds's, whatever that returns."""
+    from kalcal.scenarios.scale_bias import calibration
+    from kalcal.stats.bounds import chi2_mean_bounds
+
+    result = calibration.ScaleBiasCalibration(
+        time=np.arange(3.0), theta=np.zeros((3, 2)), covariance=np.zeros((3, 2, 2)), residual=np.zeros(3),
+        innovation_var=np.ones(3), used=np.array([False, True, True]),
+    )
+    assert result.nis_bounds(0.99) == chi2_mean_bounds(0.99, 1, 2, 2)
+    monkeypatch.setattr(calibration, "chi2_mean_bounds", lambda confidence, comparisons, dof, count: (dof, count + confidence))
+    assert result.nis_bounds(0.99) == (2, 2.99)

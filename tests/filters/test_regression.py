@@ -74,31 +74,55 @@ def test_scenario_filter_equals_least_squares_on_a_simulated_log():
     assert_close(run.cov, cov, atol=cov_atol(cov, 1e-9), what="P")
 
 
+def _note_by_hand(x, cov, y, h, r):
+    """The note's eqs. (14)-(18) for one scalar measurement, written out here (not by the package):
+    r = y - h x, S = h P h^T + R, K = P h^T / S, P^+ = P - K (h P), x^+ = x + K r, for one series."""
+    ph = cov @ h
+    s = h @ ph + r
+    k = ph / s
+    residual = y - h @ x
+    return x + k * residual, cov - np.outer(k, ph), residual, s, k
+
+
 @pytest.mark.parametrize("drift", [0.0, 3e-3])
-def test_note_form_agrees_with_joseph_and_standard(drift):
+def test_note_form_is_the_notes_equations_and_agrees_with_joseph_and_standard(drift):
     y, h, x0, cov0, r = _problem(seed=1, n=4, k=200)
     q = drift**2 * np.eye(2)
     runs = {form: run_regression_filter(y, h, x0, cov0, r, q, form) for form in ("joseph", "standard", "note")}
     joseph = runs["joseph"]
     scale = np.sqrt(np.diagonal(joseph.cov, axis1=-2, axis2=-1))
-    for form in ("standard", "note"):
-        assert_close(runs[form].posterior, joseph.posterior, atol=1e-10 * scale, what=f"{form} theta")
-        assert_close(runs[form].cov, joseph.cov, atol=cov_atol(joseph.cov, 1e-10), what=f"{form} P")
-        np.testing.assert_allclose(runs[form].innovation_var, joseph.innovation_var, rtol=1e-12)
-        np.testing.assert_allclose(runs[form].residual, joseph.residual, rtol=0, atol=1e-10 * np.sqrt(r))
+    # the standard form against the Joseph form: two updates, equal in exact arithmetic
+    assert_close(runs["standard"].posterior, joseph.posterior, atol=1e-10 * scale, what="standard theta")
+    assert_close(runs["standard"].cov, joseph.cov, atol=cov_atol(joseph.cov, 1e-10), what="standard P")
+    np.testing.assert_allclose(runs["standard"].innovation_var, joseph.innovation_var, rtol=1e-12)
+    np.testing.assert_allclose(runs["standard"].residual, joseph.residual, rtol=0, atol=1e-10 * np.sqrt(r))
+    # the note form against its equations written out by hand, series by series
+    note = runs["note"]
+    for i in range(y.shape[0]):
+        x, cov = x0, cov0
+        for k in range(y.shape[1]):
+            cov = cov + q  # (12): P^- = P^+ + Q
+            x, cov, residual, s, _ = _note_by_hand(x, cov, y[i, k], h[i, k], r)
+            np.testing.assert_allclose(note.posterior[i, k], x, rtol=1e-12, atol=1e-12 * scale[i, k].max())
+            assert_close(note.cov[i, k], cov, atol=cov_atol(cov, 1e-10), what=f"note P, series {i}, step {k}")
+            assert note.residual[i, k] == pytest.approx(residual, rel=1e-12, abs=1e-12 * np.sqrt(r))
+            assert note.innovation_var[i, k] == pytest.approx(s, rel=1e-12)
 
 
-def test_note_update_is_kalman_update_in_standard_form():
+def test_note_update_is_the_notes_equations_and_the_kalman_update():
     rng = np.random.default_rng(7)
     a = rng.standard_normal((5, 2, 2))
     cov = a @ np.swapaxes(a, 1, 2) + np.eye(2)
     x, h, y = rng.standard_normal((5, 2)), rng.standard_normal((5, 2)), rng.standard_normal(5)
     note = note_update(x, cov, y, h, 0.3)
+    for i in range(5):
+        want_x, want_cov, residual, s, gain = _note_by_hand(x[i], cov[i], y[i], h[i], 0.3)
+        np.testing.assert_allclose(note.x[i], want_x, rtol=1e-13)
+        np.testing.assert_allclose(note.cov[i], want_cov, rtol=1e-12, atol=1e-15)
+        assert note.residual[i] == pytest.approx(residual, rel=1e-13)
+        assert note.innovation_var[i] == pytest.approx(s, rel=1e-14)
+        np.testing.assert_allclose(note.gain[i], gain, rtol=1e-13)
     ref = update(x, cov, y[:, None], h[:, None, :], np.array([[0.3]]), "standard")
-    np.testing.assert_allclose(note.x, ref.x, rtol=1e-13)
-    np.testing.assert_allclose(note.cov, ref.cov, rtol=1e-12, atol=1e-15)
-    np.testing.assert_allclose(note.innovation_var, ref.innovation_cov[:, 0, 0], rtol=1e-14)
-    np.testing.assert_allclose(note.gain, ref.gain[:, :, 0], rtol=1e-13)
     joseph = scalar_update(x, cov, y, h, 0.3, "joseph")
     np.testing.assert_allclose(joseph.cov, ref.cov, rtol=1e-12, atol=1e-15)
 

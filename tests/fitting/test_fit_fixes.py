@@ -11,7 +11,7 @@ import pytest
 
 import kalcal
 from kalcal.scenarios.accel_gps.fit import _used
-from kalcal.stats.nis import gate_excess
+from kalcal.stats.nis import GATE_EXCESS_ALPHA, gate_excess
 
 ROVER = Path(__file__).resolve().parents[2] / "examples" / "rover-like.toml"
 
@@ -49,6 +49,20 @@ def test_a_fixed_rejected_set_is_left_out_like_missing_fixes_in_the_fast_and_the
     assert held > fast.loglik(values)  # three fewer terms, each a log-density below 0 here
     gated = fast.calibrate(values, gate=0.99)  # the gate's own set, held fixed, gives the gate's likelihood
     assert fast.loglik(values, rejected=gated.rejected) == pytest.approx(fast.loglik(values, gate=0.99), rel=1e-12)
+
+
+@pytest.mark.parametrize(("gated", "gate"), [(50, 0.99), (1000, 0.999), (100_000, 0.99)])
+def test_a_gates_excess_is_the_binomial_upper_tail(gated, gate):
+    """The rule's limit u is Binomial(gated, 1 - gate)'s upper GATE_EXCESS_ALPHA quantile: P(X > u) <= alpha
+    < P(X > u - 1) (so settings that describe the fixes are told otherwise with probability at most alpha,
+    and no smaller limit holds that), u rejections pass and u + 1 do not."""
+    from scipy import stats
+
+    share = 1.0 - gate
+    limit = int(stats.binom.isf(GATE_EXCESS_ALPHA, gated, share))
+    assert stats.binom.sf(limit, gated, share) <= GATE_EXCESS_ALPHA < stats.binom.sf(limit - 1, gated, share)
+    assert gate_excess(limit, gated, gate) == ""
+    assert gate_excess(limit + 1, gated, gate) != ""
 
 
 def test_a_gate_that_rejects_far_more_than_its_share_makes_the_fit_inadequate_and_calibrate_warns(tmp_path):

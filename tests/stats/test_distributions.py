@@ -1,5 +1,6 @@
 """The checks' normal and chi-square functions equal scipy.stats's to the bit, edges included."""
 
+import ast
 
 import numpy as np
 import pytest
@@ -28,30 +29,83 @@ def test_the_calibration_gates_are_the_quantiles_they_were():
         assert distributions.normal_ppf(0.5 + confidence / 2) == special.ndtri(0.5 + confidence / 2)
 
 
+#: scipy.special's functions behind the normal, chi-square and t quantiles and tails
+_SPECIAL = {"ndtri", "ndtr", "chdtri", "chdtr", "chdtrc", "gammaincinv", "gammaincc", "stdtr", "bdtr", "bdtrc", "bdtri"}
+#: a distribution's quantile or tail, as scipy.stats's distributions name them
+_TAILS = {"ppf", "isf", "cdf", "sf", "logcdf", "logsf"}
+
+
+def own_quantile_calls(source: str) -> list[str]:
+    """Where a module's code (docstrings aside: the syntax tree) computes a quantile, a tail or a binomial
+    test itself: scipy.special's functions for them, ``<anything>.<dist>.(ppf|isf|cdf|sf)`` of any
+    distribution, ``binomtest``, or any import of scipy.stats (kalcal.stats.distributions alone imports it)."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Attribute):
+            if node.attr in _SPECIAL | {"binomtest", "binom_test"}:
+                found.append(f"{node.lineno}: .{node.attr}")
+            elif node.attr in _TAILS and isinstance(node.value, (ast.Attribute, ast.Name)):
+                owner = node.value.attr if isinstance(node.value, ast.Attribute) else node.value.id
+                if owner not in {"self", "cls"} and not owner.startswith("_"):
+                    found.append(f"{node.lineno}: {owner}.{node.attr}")
+        elif isinstance(node, ast.Name) and node.id in {"binomtest"}:
+            found.append(f"{node.lineno}: {node.id}")
+        elif isinstance(node, ast.ImportFrom):
+            names = {alias.name for alias in node.names}
+            if node.module == "scipy.stats" or node.module and node.module.startswith("scipy.stats."):
+                found.append(f"{node.lineno}: from {node.module} import {sorted(names)}")
+            elif node.module == "scipy" and "stats" in names:
+                found.append(f"{node.lineno}: from scipy import stats")
+            elif node.module == "scipy.special" and names & _SPECIAL:
+                found.append(f"{node.lineno}: from scipy.special import {sorted(names & _SPECIAL)}")
+        elif isinstance(node, ast.Import) and any(a.name == "scipy.stats" or a.name.startswith("scipy.stats.") for a in node.names):
+            found.append(f"{node.lineno}: import scipy.stats")
+    return found
+
+
 def test_no_module_computes_its_own_quantile():
-    # every normal and chi-square quantile and tail of the package comes from kalcal.stats.distributions:
-    # no other module's code (docstrings aside: the syntax tree) calls scipy's for them
-    import ast
+    # every quantile, tail and binomial test of the package comes from kalcal.stats.distributions
     from pathlib import Path
 
     import kalcal
 
-    own = {"ndtri", "ndtr", "chdtri", "chdtr", "chdtrc", "gammaincinv", "gammaincc", "stdtr"}
     package = Path(kalcal.__file__).resolve().parent
-    found = []
-    for path in sorted(package.rglob("*.py")):
-        if path.name == "distributions.py":
-            continue
-        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-            if isinstance(node, ast.Attribute) and (
-                node.attr in own or (node.attr in {"ppf", "isf", "cdf", "sf"} and getattr(node.value, "attr", "") in {"norm", "chi2"})
-            ):
-                found.append(f"{path.relative_to(package)}:{node.lineno}: .{node.attr}")
-            elif isinstance(node, ast.ImportFrom) and node.module in {"scipy.special", "scipy.stats"}:
-                names = {alias.name for alias in node.names}
-                if names & (own | {"norm", "chi2"}):
-                    found.append(f"{path.relative_to(package)}:{node.lineno}: from {node.module} import {sorted(names)}")
+    found = [
+        f"{path.relative_to(package)}:{where}"
+        for path in sorted(package.rglob("*.py"))
+        if path.relative_to(package).as_posix() != "stats/distributions.py"
+        for where in own_quantile_calls(path.read_text(encoding="utf-8"))
+    ]
     assert not found, found
+
+
+@pytest.mark.parametrize(
+    "source",
+    [
+        "from scipy import stats\nx = stats.binom.ppf(0.1, 10, 0.5)\n",
+        "def f():\n    from scipy import stats\n    return stats.binomtest(3, 10, 0.5).pvalue\n",
+        "import scipy.stats\nx = scipy.stats.binom.isf(0.1, 10, 0.5)\n",
+        "from scipy.stats import poisson\nx = poisson.sf(3, 1.0)\n",
+        "from scipy.stats import binomtest\n",
+        "import scipy.special as sp\nx = sp.bdtrc(3, 10, 0.5)\n",
+        "from scipy.special import ndtri\n",
+        "x = some.norm.cdf(1.0)\n",
+        "x = gamma.ppf(0.5, 2.0)\n",
+    ],
+)
+def test_the_walk_catches_each_own_quantile(source):
+    assert own_quantile_calls(source)
+
+
+def test_the_walk_leaves_the_packages_own_calls_alone():
+    assert not own_quantile_calls("from kalcal.stats.distributions import binom_ppf, chi2_isf\nx = binom_ppf(0.1, 10, 0.5)\n")
+
+
+def test_binomial_functions_are_scipy_stats():
+    assert distributions.binom_ppf(0.005, 1000, 0.001) == stats.binom.ppf(0.005, 1000, 0.001)
+    assert distributions.binom_isf(0.005, 1000, 0.001) == stats.binom.isf(0.005, 1000, 0.001)
+    assert distributions.binom_test(7, 1000, 0.001) == stats.binomtest(7, 1000, 0.001).pvalue
+    assert distributions.binom_test(0, 0, 0.001) == 1.0
 
 
 @pytest.mark.parametrize("dof", DOFS)

@@ -23,6 +23,11 @@ likelihood in ~30 ns a sample (~16 ns before).
 The fixed-gain block kernel (:mod:`kalcal.montecarlo.kernels`) does not call it: it applies gains computed
 before any data and has no covariance to update.
 
+:func:`diffuse_start` is the compiled twin of :func:`kalcal.core.diffuse.diffuse_start`, the information
+filter's start for a diffuse state (Y = P^{-1} predicted and updated until it is nonsingular, then
+P = Y^{-1}): the one compiled information update, which the compiled diffuse likelihood runs before its
+covariance updates (tests/core/test_diffuse.py holds it to the reference).
+
 :func:`measured` is the compiled twin of :func:`kalcal.core.missing.measured`, the one
 missing-measurement rule: a measurement with a non-finite component (or a non-finite entry of its H) is
 not used, and the step is a prediction only (the caller keeps P = M). The update itself assumes finite
@@ -263,3 +268,119 @@ def _scalar_update(cov, h, r, joseph, gain, s, ph, a, ap, acc):
                 mid = 0.5 * (cov[u, v, j] + cov[v, u, j])
                 cov[u, v, j] = mid
                 cov[v, u, j] = mid
+
+
+@numba.njit(cache=True, nogil=True)
+def _eliminate(a, b):
+    """Solve A X = B in place by Gaussian elimination with partial pivoting, for a small d x d A.
+
+    ``b`` (d, n) becomes X and ``a`` is destroyed; returns det(A) (0.0 for a singular A, X then not
+    to be used). A few dozen flops for d = 2 and no allocation: the diffuse start solves with it once
+    a sample, where LAPACK's call would cost more than the sample."""
+    d, n = a.shape[0], b.shape[1]
+    det = 1.0
+    for c in range(d):
+        pivot = c
+        for i in range(c + 1, d):
+            if abs(a[i, c]) > abs(a[pivot, c]):
+                pivot = i
+        if pivot != c:
+            det = -det
+            for j in range(d):
+                a[c, j], a[pivot, j] = a[pivot, j], a[c, j]
+            for j in range(n):
+                b[c, j], b[pivot, j] = b[pivot, j], b[c, j]
+        det *= a[c, c]
+        if a[c, c] == 0.0:
+            return 0.0
+        for i in range(c + 1, d):
+            f = a[i, c] / a[c, c]
+            for j in range(c, d):
+                a[i, j] -= f * a[c, j]
+            for j in range(n):
+                b[i, j] -= f * b[c, j]
+    for c in range(d - 1, -1, -1):
+        for j in range(n):
+            acc = b[c, j]
+            for i in range(c + 1, d):
+                acc -= a[c, i] * b[i, j]
+            b[c, j] = acc / a[c, c]
+    return det
+
+
+@numba.njit(cache=True, nogil=True)
+def diffuse_start(y, h, r, q, rcond, x, cov):
+    """The information filter's start from a diffuse state, until the measurements determine it.
+
+    The compiled twin of :func:`kalcal.core.diffuse.diffuse_start` (the numpy reference; the equations
+    are in :mod:`kalcal.core.diffuse`), held to it by tests/core/test_diffuse.py: Y^- = (I + Q Y)^{-1} Y,
+    y^- = (I + Q Y)^{-1} y (by a solve), Y += h_k^T h_k / R, y += h_k^T v_k / R, a missing measurement a
+    prediction only (:func:`measured`), until det(Y) > rcond trace(Y)^d.
+
+    Parameters
+    ----------
+    y : ndarray, shape (K,)
+    h : ndarray, shape (K, d)
+    r : float
+    q : ndarray, shape (d, d)
+    rcond : float
+    x : ndarray, shape (d,)
+        Output: x_m^+ = P_m y_m (untouched when the state is never determined).
+    cov : ndarray, shape (d, d)
+        Output: P_m^+ = Y_m^{-1}, symmetric (untouched when the state is never determined).
+
+    Returns
+    -------
+    int
+        m, the samples the start took; 0 when the measurements never determine the state.
+    """
+    n, d = h.shape
+    info, vector = np.zeros((d, d)), np.zeros(d)
+    a, b = np.empty((d, d)), np.empty((d, d + 1))
+    value = np.empty(1)
+    drift = False
+    for i in range(d):
+        for j in range(d):
+            if q[i, j] != 0.0:
+                drift = True
+    for k in range(n):
+        if drift:  # a = I + Q Y, b = [Y | y]: (I + Q Y)^{-1} [Y | y] by one elimination
+            for i in range(d):
+                for j in range(d):
+                    acc = 1.0 if i == j else 0.0
+                    for c in range(d):
+                        acc += q[i, c] * info[c, j]
+                    a[i, j] = acc
+                    b[i, j] = info[i, j]
+                b[i, d] = vector[i]
+            _eliminate(a, b)
+            for i in range(d):
+                for j in range(d):
+                    info[i, j] = 0.5 * (b[i, j] + b[j, i])
+                vector[i] = b[i, d]
+        value[0] = y[k]
+        if not measured(value, h[k : k + 1]):  # the one missing-measurement rule: a prediction only
+            continue
+        for i in range(d):
+            for j in range(d):
+                info[i, j] += h[k, i] * h[k, j] / r
+            vector[i] += h[k, i] * y[k] / r
+        trace = 0.0
+        for i in range(d):
+            trace += info[i, i]
+            for j in range(d):
+                a[i, j] = info[i, j]
+                b[i, j] = 1.0 if i == j else 0.0
+            b[i, d] = 0.0
+        det = _eliminate(a, b)  # b[:, :d] becomes Y^{-1}
+        if det > rcond * trace**d:
+            for i in range(d):
+                for j in range(d):
+                    cov[i, j] = 0.5 * (b[i, j] + b[j, i])
+            for i in range(d):
+                acc = 0.0
+                for j in range(d):
+                    acc += cov[i, j] * vector[j]
+                x[i] = acc
+            return k + 1
+    return 0

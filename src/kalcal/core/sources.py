@@ -108,7 +108,7 @@ def model_process(model: LinearGaussianModel) -> list[tuple[str, np.ndarray, flo
 
 
 def model_sources(model: LinearGaussianModel, state_names: Sequence[str], measurement_names: Sequence[str]) -> list[Source]:
-    """The sources of a truth given as a linear Gaussian model (a model file's truth)."""
+    """The sources of a truth given as a linear Gaussian model (a truth written as the model itself)."""
     return covariance_sources(model.m0, model.v, model_process(model), state_names, measurement_names)
 
 

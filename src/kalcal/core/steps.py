@@ -30,8 +30,8 @@ the likelihood); :func:`summed_nis` is its sum over realizations that share S, f
 The compiled paths that compute a NIS are held to :func:`nis`: the sequential filter's gate
 (tests/filters/test_sequential.py), the data-dependent (regression) block kernel
 (tests/montecarlo/test_kernel_steps.py), the fixed-gain block kernels through :func:`summed_nis`
-(tests/montecarlo/test_engine.py) and the compiled diffuse likelihood (in tests/fitting, against a
-numpy filter of a wide prior).
+(tests/montecarlo/test_engine.py) and the compiled diffuse likelihood (in tests/fitting, step by step
+against the diffuse start of :mod:`kalcal.core.diffuse` and the regression filter).
 
 The covariance pass (:func:`covariance_pass`) runs the covariance halves of these steps without data
 over a time-invariant model's update intervals (:func:`interval_transition`), in any of the three forms.
@@ -327,7 +327,7 @@ def covariance_pass(
 
     P_{-1} is the prior covariance M0 at sample 0. Phi_k is Phi^m for a time-invariant model, or
     ``transitions[k]`` (K, d, d) when the caller gives the transition of each interval explicitly (a
-    transition that depends on a known input, such as an accelerometer scale factor's column; the
+    transition that depends on a known input, such as a column of a sensor reading; the
     process noise Q_m must not depend on it). ``form="sqrt"`` carries L with P = L L^T instead
     (:func:`~kalcal.core.sqrt_form.sqrt_predict`, :func:`~kalcal.core.sqrt_form.sqrt_gain_and_factor`,
     the interval noise by :func:`~kalcal.core.sqrt_form.interval_noise_factor`); the schedule holds the

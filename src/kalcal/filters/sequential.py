@@ -19,7 +19,7 @@ test the compiled :func:`kalcal.core.kernels.measured`; tests/filters/test_seque
 to the reference steps fix by fix.
 """
 
-# numba cache stamp: kalcal.core.kernels a06579bff82c7382
+# numba cache stamp: kalcal.core.kernels 8b932ca498b00ecc
 
 from __future__ import annotations
 

@@ -24,7 +24,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from kalcal.core.steps import nis as normalized_square
-from kalcal.stats.distributions import chi2_isf, chi2_ppf  # scipy.stats's values, without its import
+from kalcal.stats.distributions import binom_isf, binom_ppf, binom_test, chi2_isf, chi2_ppf
 
 #: the tail whose share is tested: above the chi-square(p) 99.9% quantile
 TAIL = 0.001
@@ -78,12 +78,10 @@ def quantile(tail: float) -> str:
 def lower_side_fixes(tail: float = TAIL, alpha: float = ALPHA) -> int:
     """The fewest fixes at which the check's lower bound is 1 or more (7,601 at the defaults): below them
     only the upper side can fail."""
-    from scipy import stats  # the binomial's quantiles: scipy.stats, imported by the fits that judge the tail
-
     fixes = int(np.ceil(-np.log(alpha / 2) / tail))  # (1 - tail)^K < alpha / 2 from about K = -log(alpha / 2) / tail
-    while stats.binom.ppf(alpha / 2, fixes - 1, tail) >= 1:
+    while binom_ppf(alpha / 2, fixes - 1, tail) >= 1:
         fixes -= 1
-    while stats.binom.ppf(alpha / 2, fixes, tail) < 1:
+    while binom_ppf(alpha / 2, fixes, tail) < 1:
         fixes += 1
     return fixes
 
@@ -117,13 +115,11 @@ def nis_tail(normalized: np.ndarray, *, tail: float = TAIL, alpha: float = ALPHA
     normalized : ndarray, shape (K, p)
         The fixes' normalized innovations L_k^{-1} r_k (dimensionless).
     """
-    from scipy import stats  # the binomial's quantiles and test: imported by the fits that judge the tail
-
     fixes, p = normalized.shape
     nis = normalized_square(normalized)
     threshold = float(chi2_isf(tail, p))
     count = int(np.count_nonzero(nis > threshold))
-    lower = int(stats.binom.ppf(alpha / 2, fixes, tail))
-    upper = int(stats.binom.isf(alpha / 2, fixes, tail))
-    pvalue = float(stats.binomtest(count, fixes, tail).pvalue) if fixes else 1.0
+    lower = int(binom_ppf(alpha / 2, fixes, tail))
+    upper = int(binom_isf(alpha / 2, fixes, tail))
+    pvalue = binom_test(count, fixes, tail)
     return NisTail(fixes, threshold, tail, count, fixes * tail, lower, upper, alpha, pvalue, lower <= count <= upper)

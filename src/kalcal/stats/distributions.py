@@ -7,6 +7,11 @@ for valid arguments, so the values are the same to the bit (tests/stats/test_dis
 holds them to scipy.stats), with scipy.stats's answers at the edges: a probability outside [0, 1] or a
 non-positive dof gives NaN. No module of kalcal computes such a quantile or tail itself: the bounds
 (:mod:`kalcal.stats.bounds`), the power, the calibration's and the fits' gates and intervals call these.
+
+The binomial's quantiles and exact test (:func:`binom_ppf`, :func:`binom_isf`, :func:`binom_test`: the
+count of NIS above a quantile, a gate's rejections) are scipy.stats's own: they import it on their first
+call, so that only the checks that count pay for it (tests/stats/test_distributions.py holds the package
+to this module for every ``scipy.stats.<distribution>`` quantile and tail).
 """
 
 from __future__ import annotations
@@ -15,6 +20,9 @@ import numpy as np
 from scipy import special
 
 __all__ = [
+    "binom_isf",
+    "binom_ppf",
+    "binom_test",
     "chi2_cdf",
     "chi2_isf",
     "chi2_ppf",
@@ -97,3 +105,25 @@ def t_sf(x, dof):
     arguments); NaN for a non-positive dof."""
     x = np.asarray(x, dtype=float)
     return special.stdtr(_dof(dof), -x)
+
+
+def binom_ppf(p, trials, share):
+    """The smallest count k with P(X <= k) >= p for X ~ Binomial(trials, share) (scipy.stats.binom.ppf)."""
+    from scipy import stats  # on first use only: see the module's docstring
+
+    return stats.binom.ppf(p, trials, share)
+
+
+def binom_isf(q, trials, share):
+    """The smallest count k with P(X > k) <= q for X ~ Binomial(trials, share) (scipy.stats.binom.isf)."""
+    from scipy import stats
+
+    return stats.binom.isf(q, trials, share)
+
+
+def binom_test(count: int, trials: int, share: float) -> float:
+    """The exact two-sided p-value of ``count`` successes in ``trials`` against Binomial(trials, share)
+    (scipy.stats.binomtest's); 1.0 where there are no trials."""
+    from scipy import stats
+
+    return float(stats.binomtest(int(count), int(trials), share).pvalue) if trials else 1.0

@@ -45,13 +45,15 @@ from kalcal.scenarios.scale_bias.observability import (  # noqa: F401 (DIFFUSE_R
     UNOBSERVABLE_RATIO,
     data_only_information,
 )
+from kalcal.core.diffuse import diffuse_start as core_diffuse_start
 from kalcal.core.steps import nis
 from kalcal.errors import DataError
 from kalcal.filters.regression import run_regression_filter
 from kalcal.scenarios.scale_bias.filter import filter_scale_bias, regressors
 from kalcal.scenarios.scale_bias.settings import STATE_NAMES, ScaleBiasScenario
 from kalcal.scenarios.scale_bias.theta import scale_bias_from_theta, scale_bias_jacobian
-from kalcal.stats.distributions import chi2_isf, chi2_ppf, chi2_sf  # scipy.stats's values, without its import
+from kalcal.stats.bounds import chi2_mean_bounds
+from kalcal.stats.distributions import chi2_ppf, chi2_sf
 
 #: the mean NIS is tested two-sided at this confidence (a consistent log fails with probability 1 - it)
 NIS_CONFIDENCE = 0.99
@@ -139,8 +141,8 @@ class ScaleBiasCalibration:
 
     def nis_bounds(self, confidence: float = NIS_CONFIDENCE) -> tuple[float, float]:
         """Two-sided bounds of the mean NIS of the samples used, chi-square(K) / K, at ``confidence``."""
-        k, tail = self.samples_used, (1.0 - confidence) / 2
-        return float(chi2_ppf(tail, k) / k), float(chi2_isf(tail, k) / k)
+        k = self.samples_used
+        return chi2_mean_bounds(confidence, 1, k, k)
 
     @property
     def consistent(self) -> bool:
@@ -236,27 +238,19 @@ class ScaleBiasCalibration:
 def diffuse_start(scenario: ScaleBiasScenario, reference: np.ndarray, sensor: np.ndarray):
     """The filter from a diffuse prior, in information form, until theta is determined.
 
-    Y = P^{-1} and y = P^{-1} x start at 0; each sample is predicted, Y^- = (I + Q Y)^{-1} Y, y^- = (I + Q Y)^{-1} y,
-    and updated, Y += h h^T / R, y += h v / R (h = [z, 1]), until det(Y) > DIFFUSE_RCOND trace(Y)^2.
+    The information filter's start of :func:`kalcal.core.diffuse.diffuse_start` with h_k = [z_k, 1], the
+    filter's R and Q: Y^- = (I + Q Y)^{-1} Y, Y += h h^T / R, until det(Y) > DIFFUSE_RCOND trace(Y)^2; a
+    sample with a missing reference or sensor value is a prediction only.
 
     Returns
     -------
     (m, x, P) : the number of samples taken, x_m^+ and P_m^+ = Y^{-1}; None when the log never determines
     theta (a sensor that reads one value).
     """
-    q, r = scenario.filter_process_noise(), scenario.filter_noise_variance()
-    info, vector = np.zeros((2, 2)), np.zeros(2)
-    for k, (v, z) in enumerate(zip(reference, sensor)):
-        if np.any(q):
-            gain = np.linalg.inv(np.eye(2) + q @ info)
-            info, vector = gain @ info, gain @ vector
-        if np.isfinite(v) and np.isfinite(z):
-            h = np.array([z, 1.0])
-            info, vector = info + np.outer(h, h) / r, vector + h * v / r
-            if np.linalg.det(info) > DIFFUSE_RCOND * np.trace(info) ** 2:
-                cov = np.linalg.inv(info)
-                return k + 1, cov @ vector, 0.5 * (cov + cov.T)
-    return None
+    start = core_diffuse_start(
+        reference, regressors(sensor), scenario.filter_noise_variance(), scenario.filter_process_noise(), DIFFUSE_RCOND
+    )
+    return None if start is None else tuple(start)
 
 
 def _diffuse_run(scenario: ScaleBiasScenario, reference: np.ndarray, sensor: np.ndarray, source: str):

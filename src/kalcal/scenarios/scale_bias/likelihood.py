@@ -2,11 +2,11 @@
 
 The filter of :mod:`kalcal.filters.regression` (reference_k = theta1 sensor_k + theta2 + w_k, w_k ~ N(0, R),
 theta a random walk with Q = q^2 I per sample) starts here from a **diffuse** prior on theta: no
-information at all (P_0^{-1} = 0), the limit of N(m, kappa I) as kappa -> infinity. It runs in information
-form (Y = P^{-1}, y = P^{-1} x; the prediction Y^- = (I + q^2 Y)^{-1} Y, y^- = (I + q^2 Y)^{-1} y, the update
-Y += h h^T / R, y += h v / R) until Y is nonsingular, which the first two samples with different sensor
-readings make it, then as the covariance filter (Joseph form). The log-likelihood is the conditional
-(diffuse) one: the prediction-error decomposition over the samples after that start,
+information at all (P_0^{-1} = 0), the limit of N(m, kappa I) as kappa -> infinity. It runs the
+information filter's start of :mod:`kalcal.core.diffuse` (compiled: :func:`kalcal.core.kernels.diffuse_start`)
+until Y = P^{-1} is nonsingular, which the first two samples with different sensor readings make it,
+then as the covariance filter (Joseph form). The log-likelihood is the conditional (diffuse) one: the
+prediction-error decomposition over the samples after that start,
 
     log L = -1/2 sum_k (log 2 pi S_k + r_k^2 / S_k),
 
@@ -15,77 +15,81 @@ diffuse prior only R = sigma_eta^2 + theta1^2 sigma_nu^2 (the combined measureme
 sigma_eta and sigma_nu apart are not identifiable from one log. A sample with a NaN is a prediction only
 (the compiled :func:`kalcal.core.kernels.measured`); after the start, each update is the package's one
 compiled covariance update, :func:`kalcal.core.kernels.covariance_update`, on a tile of one realization.
+The compiled path is held step by step (P, r_k, S_k and log L) to the numpy reference, the diffuse start
+then :func:`kalcal.filters.regression.run_regression_filter` then
+:func:`kalcal.core.likelihood.innovation_loglik` (tests/fitting/test_scale_bias_likelihood_steps.py).
 """
 
-# numba cache stamp: kalcal.core.kernels a06579bff82c7382
+# numba cache stamp: kalcal.core.kernels 8b932ca498b00ecc
 
 from __future__ import annotations
 
 import numba
 import numpy as np
 
-from kalcal.core.kernels import covariance_update, measured, update_work
-
-
-#: the information matrix counts as nonsingular once det(Y) exceeds this share of trace(Y)^2
-DIFFUSE_RCOND = 1e-12
+from kalcal.core.diffuse import DIFFUSE_RCOND
+from kalcal.core.kernels import covariance_update, diffuse_start, measured, update_work
 
 
 @numba.njit(cache=True, nogil=True)
-def _diffuse_filter(reference, sensor, r, q2, normalized):
-    """log L, the number of samples in it, and (into ``normalized``) r_k / sqrt(S_k) (NaN elsewhere)."""
-    y11 = y12 = y22 = 0.0  # Y = P^-1 while diffuse
-    i1 = i2 = 0.0  # y = P^-1 x
+def _diffuse_filter(reference, sensor, r, q2, normalized, record, covs, residual, innovation_var):
+    """log L, the number of samples in it, and (into ``normalized``) r_k / sqrt(S_k) (NaN elsewhere).
+
+    With ``record``, P_k^+ (from the start's last sample on), r_k and S_k go into ``covs`` (K, 2, 2),
+    ``residual`` and ``innovation_var`` (K,) (NaN where there is none), for the step-by-step test; without
+    it those may be empty."""
+    n = reference.size
+    for k in range(n):
+        normalized[k] = np.nan
+    if record:
+        for k in range(n):
+            residual[k] = innovation_var[k] = np.nan
+            for i in range(2):
+                for j in range(2):
+                    covs[k, i, j] = np.nan
+    rows = np.empty((n, 2))  # h_k = [z_k, 1]
+    for k in range(n):
+        rows[k, 0], rows[k, 1] = sensor[k], 1.0
+    q = np.zeros((2, 2))
+    q[0, 0] = q[1, 1] = q2
+    x, start_cov = np.empty(2), np.empty((2, 2))
+    start = diffuse_start(reference, rows, r, q, DIFFUSE_RCOND, x, start_cov)
+    if start == 0:  # theta never determined: no sample has an innovation
+        return 0.0, 0
     # after the diffuse start: P as a tile of one realization, for the one compiled covariance update
-    cov = np.zeros((2, 2, 1))
-    row = np.ones((1, 2, 1))  # h = [z, 1]
+    cov = np.empty((2, 2, 1))
+    for i in range(2):
+        for j in range(2):
+            cov[i, j, 0] = start_cov[i, j]
+            if record:
+                covs[start - 1, i, j] = start_cov[i, j]
+    row = np.ones((1, 2, 1))
     noise = np.full((1, 1), r)
     gain, s, work = np.empty((1, 2, 1)), np.empty((1, 1, 1)), update_work(2, 1, 1)
     v_k = np.empty(1)  # the measurement v_k (its regressor is row)
-    x1 = x2 = 0.0
-    diffuse = True
+    x1, x2 = x[0], x[1]
     loglik, used = 0.0, 0
     log2pi = np.log(2.0 * np.pi)
-    for k in range(reference.size):
-        normalized[k] = np.nan
+    for k in range(start, n):
         v, z = reference[k], sensor[k]
-        # the prediction: P^- = P^+ + Q, or in information form Y^- = (I + Q Y)^-1 Y
-        if diffuse:
-            if q2 > 0.0:
-                a11, a12, a21, a22 = 1.0 + q2 * y11, q2 * y12, q2 * y12, 1.0 + q2 * y22
-                det = a11 * a22 - a12 * a21
-                m11, m12, m21, m22 = a22 / det, -a12 / det, -a21 / det, a11 / det
-                y11, y12, y22 = m11 * y11 + m12 * y12, m11 * y12 + m12 * y22, m21 * y12 + m22 * y22
-                i1, i2 = m11 * i1 + m12 * i2, m21 * i1 + m22 * i2
-        else:
-            cov[0, 0, 0] += q2
-            cov[1, 1, 0] += q2
+        cov[0, 0, 0] += q2  # the prediction: P^- = P^+ + Q
+        cov[1, 1, 0] += q2
         v_k[0], row[0, 0, 0] = v, z
-        if not measured(v_k, row[:, :, 0]):  # the one missing-measurement rule: a prediction only
-            continue
-        if diffuse:
-            y11 += z * z / r
-            y12 += z / r
-            y22 += 1.0 / r
-            i1 += z * v / r
-            i2 += v / r
-            det = y11 * y22 - y12 * y12
-            trace = y11 + y22
-            if det > DIFFUSE_RCOND * trace * trace:
-                cov[0, 0, 0], cov[1, 1, 0] = y22 / det, y11 / det
-                cov[0, 1, 0] = cov[1, 0, 0] = -y12 / det
-                x1 = cov[0, 0, 0] * i1 + cov[0, 1, 0] * i2
-                x2 = cov[0, 1, 0] * i1 + cov[1, 1, 0] * i2
-                diffuse = False
-            continue
-        # S = h P h^T + R, K = P h^T / S and the Joseph-form P^+: the one compiled covariance update
-        e = v - (x1 * z + x2)
-        covariance_update(cov, row, noise, True, gain, s, work)
-        x1 += gain[0, 0, 0] * e
-        x2 += gain[0, 1, 0] * e
-        loglik -= 0.5 * (log2pi + np.log(s[0, 0, 0]) + e * e / s[0, 0, 0])
-        normalized[k] = e / np.sqrt(s[0, 0, 0])
-        used += 1
+        if measured(v_k, row[:, :, 0]):  # else the one missing-measurement rule: a prediction only
+            # S = h P h^T + R, K = P h^T / S and the Joseph-form P^+: the one compiled covariance update
+            e = v - (x1 * z + x2)
+            covariance_update(cov, row, noise, True, gain, s, work)
+            x1 += gain[0, 0, 0] * e
+            x2 += gain[0, 1, 0] * e
+            loglik -= 0.5 * (log2pi + np.log(s[0, 0, 0]) + e * e / s[0, 0, 0])
+            normalized[k] = e / np.sqrt(s[0, 0, 0])
+            used += 1
+            if record:
+                residual[k], innovation_var[k] = e, s[0, 0, 0]
+        if record:
+            for i in range(2):
+                for j in range(2):
+                    covs[k, i, j] = cov[i, j, 0]
     return loglik, used
 
 
@@ -114,5 +118,29 @@ def diffuse_loglik(reference: np.ndarray, sensor: np.ndarray, noise_std: float, 
     reference = np.ascontiguousarray(reference, dtype=float)
     sensor = np.ascontiguousarray(sensor, dtype=float)
     normalized = np.empty(reference.size)
-    loglik, used = _diffuse_filter(reference, sensor, float(noise_std) ** 2, float(drift_std) ** 2, normalized)
+    empty = np.empty(0)
+    loglik, used = _diffuse_filter(
+        reference, sensor, float(noise_std) ** 2, float(drift_std) ** 2, normalized, False, np.empty((0, 2, 2)), empty, empty
+    )
     return float(loglik), int(used), normalized
+
+
+def diffuse_filter_steps(reference: np.ndarray, sensor: np.ndarray, noise_std: float, drift_std: float) -> dict:
+    """The compiled path of :func:`diffuse_loglik` step by step, for its test against the numpy reference.
+
+    Returns
+    -------
+    dict
+        ``loglik``, ``samples``, ``normalized`` as :func:`diffuse_loglik`; ``cov`` P_k^+ (K, 2, 2) from the
+        start's last sample on (NaN before), ``residual`` r_k and ``innovation_var`` S_k (K,) (NaN where
+        the sample has no innovation).
+    """
+    reference = np.ascontiguousarray(reference, dtype=float)
+    sensor = np.ascontiguousarray(sensor, dtype=float)
+    n = reference.size
+    normalized, covs, residual, innovation = np.empty(n), np.empty((n, 2, 2)), np.empty(n), np.empty(n)
+    loglik, used = _diffuse_filter(
+        reference, sensor, float(noise_std) ** 2, float(drift_std) ** 2, normalized, True, covs, residual, innovation
+    )
+    return {"loglik": float(loglik), "samples": int(used), "normalized": normalized, "cov": covs,
+            "residual": residual, "innovation_var": innovation}

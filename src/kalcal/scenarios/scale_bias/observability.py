@@ -16,13 +16,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from kalcal.core.diffuse import DIFFUSE_RCOND
 from kalcal.scenarios.scale_bias.filter import regressors
 
 #: a final sigma above this share of the no-data sigma (near it) means the log did not excite the parameter
 UNOBSERVABLE_RATIO = 0.9
-#: the information matrix counts as nonsingular once det(Y) exceeds this share of trace(Y)^2 (and, for
-#: the data-only judgement, once its smallest eigenvalue exceeds this share of its largest)
-DIFFUSE_RCOND = 1e-12
+#: DIFFUSE_RCOND (the diffuse start's, kalcal.core.diffuse): the information matrix counts as nonsingular
+#: once det(Y) exceeds this share of trace(Y)^2 (and, for the data-only judgement, once its smallest
+#: eigenvalue exceeds this share of its largest)
 #: a data-only sigma above this many no-data sigmas: the log tells the parameter less than the prior does.
 #: sqrt(0.9^2 / (1 - 0.9^2)) = 2.06, where a posterior of independent prior and data sigmas reaches
 #: UNOBSERVABLE_RATIO of the prior's
