@@ -1,5 +1,6 @@
-"""A fit's files made in memory and written as one set: fit.json, filter.toml, fit.png (and a scenario's own,
-such as Kalibr's imu.yaml), and the options of ``kalcal fit`` named once (:class:`FitOptions`).
+"""A fit's files made in memory and written as one set, and the options of ``kalcal fit`` named once (:class:`FitOptions`).
+
+The files are fit.json, filter.toml, fit.png and a scenario's own, such as Kalibr's imu.yaml.
 
 Each scenario's ``fit(logs, options)`` reads its logs and fits (``kalcal.scenarios.<name>``); what is
 common to every fit, its files, is here."""

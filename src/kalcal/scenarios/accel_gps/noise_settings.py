@@ -1,5 +1,6 @@
-"""The accel-gps ``[filter]`` settings that ``kalcal noise`` writes from an identified noise: rate-free
-densities, their per-sample values at the log's rate, and filter.toml's text."""
+"""The accel-gps ``[filter]`` settings that ``kalcal noise`` writes from an identified noise.
+
+Rate-free densities, their per-sample values at the log's rate, and filter.toml's text."""
 
 from __future__ import annotations
 
