@@ -19,7 +19,7 @@ from pathlib import Path
 
 import matplotlib
 
-import kalcal.jobs.report as report
+import kalcal.reporting.render as report
 
 
 def main() -> None:

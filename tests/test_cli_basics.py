@@ -132,7 +132,7 @@ def test_simulate_and_calibrate_close_with_one_line_naming_what_they_wrote(tmp_p
 
 
 def test_values_written_as_null_are_named_in_one_line(tmp_path, monkeypatch):
-    import kalcal.jobs.verify as job
+    import kalcal.api.verification as job
 
     real = job.write_json
 
@@ -203,7 +203,7 @@ def test_a_run_whose_arrays_would_not_fit_is_refused_before_it_runs(tmp_path, mo
     def no_run(*args, **kwargs):
         raise AssertionError("the Monte Carlo ran")
 
-    monkeypatch.setattr("kalcal.jobs.verify.run_monte_carlo", no_run)
+    monkeypatch.setattr("kalcal.api.verification.run_monte_carlo", no_run)
     base = ["verify", "-n", "1000", "--out", str(tmp_path), "--no-report", "--set", "scenario.duration=2"]
     result = runner.invoke(app, [*base, *args])
     assert result.exit_code == 2, result.output
@@ -212,7 +212,7 @@ def test_a_run_whose_arrays_would_not_fit_is_refused_before_it_runs(tmp_path, mo
 
 
 def test_the_default_runs_fit():
-    from kalcal.jobs.verify import MAX_UPDATES, check_arguments, run_length
+    from kalcal.api.verification import MAX_UPDATES, check_arguments, run_length
     from kalcal.scenarios import build_scenario
 
     scenario = build_scenario("accel-gps")
@@ -274,7 +274,7 @@ def test_importing_kalcal_main_runs_nothing():
 
 
 def test_verify_help_names_the_fewest_realizations():
-    from kalcal.jobs.verify import MIN_REALIZATIONS
+    from kalcal.api.verification import MIN_REALIZATIONS
 
     result = runner.invoke(app, ["verify", "-h"])
     assert result.exit_code == 0

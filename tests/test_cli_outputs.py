@@ -106,7 +106,7 @@ def test_a_run_that_fails_in_the_middle_leaves_the_previous_set_byte_identical(p
     def broken_writer(path, document):
         raise RuntimeError("the summary writer failed")  # after stats.nc is written, before the page
 
-    monkeypatch.setattr("kalcal.jobs.verify.write_json", broken_writer)
+    monkeypatch.setattr("kalcal.api.verification.write_json", broken_writer)
     result = _invoke("verify", *SMALL, "--seed", "7", "--long-run", "0", "--out", out, catch=True)
     assert isinstance(result.exception, RuntimeError) and "summary writer" in str(result.exception)
     assert _tree(out) == before
@@ -300,7 +300,7 @@ def test_a_checkpoint_in_the_folder_is_never_part_of_a_set(tmp_path):
 def test_the_jobs_return_the_final_paths(tmp_path):
     """The Python jobs write through the same staging: what they return is where the files now are."""
     import kalcal
-    from kalcal.jobs.verify import verify
+    from kalcal.api.verification import verify
     from kalcal.scenarios import build_scenario
 
     scenario = build_scenario("accel-gps", None, ["scenario.duration=2"])
@@ -379,7 +379,7 @@ def test_a_file_where_kalcal_writes_a_folder_is_refused_before_the_run(tmp_path,
     def no_monte_carlo(*args, **kwargs):
         raise AssertionError("the Monte Carlo ran")
 
-    monkeypatch.setattr("kalcal.jobs.verify.run_monte_carlo", no_monte_carlo)
+    monkeypatch.setattr("kalcal.api.verification.run_monte_carlo", no_monte_carlo)
     result = _invoke("verify", *SMALL, "--out", out)
     _one_line_error(result, f"--out {out}: figures is a file where kalcal writes a folder")
     assert _tree(out) == {"figures": b"mine"}

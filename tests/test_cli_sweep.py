@@ -39,13 +39,13 @@ def test_sweep_needs_exactly_one_list(tmp_path):
 def test_a_bad_value_is_refused_before_any_cell_runs_or_cluster_starts(tmp_path, monkeypatch):
     """The second value's run would not fit (too many updates): refused in one line before the first
     value's Monte Carlo or a Dask cluster, with no folder left."""
-    import kalcal.jobs.verify
+    import kalcal.api.verification
     import kalcal.montecarlo.distributed
 
     def must_not_run(*args, **kwargs):
         raise AssertionError("a cell ran before the values were checked")
 
-    monkeypatch.setattr(kalcal.jobs.verify, "run_monte_carlo", must_not_run)
+    monkeypatch.setattr(kalcal.api.verification, "run_monte_carlo", must_not_run)
     monkeypatch.setattr(kalcal.montecarlo.distributed, "dask_client", must_not_run)
     out = tmp_path / "sw"
     result = runner.invoke(app, ["sweep", "-n", "200", "--out", str(out), "--set", "scenario.duration=10,500"])

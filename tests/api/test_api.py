@@ -139,7 +139,7 @@ def test_editing_the_estimates_frame_changes_neither_the_result_nor_its_files(lo
     bias = result.estimates["bias"].to_numpy().copy()
     result.estimates.loc[:, "bias"] = 99.0
     assert (result.estimates["bias"] == 99.0).all()  # the one frame, edited
-    np.testing.assert_array_equal(result.calibration.columns["bias"], bias)
+    np.testing.assert_array_equal(result.columns["bias"], bias)
     written = pd.read_csv(result.save(tmp_path / "cal")["estimates.csv"])
     np.testing.assert_array_equal(written["bias"].to_numpy(), bias)
 

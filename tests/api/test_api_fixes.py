@@ -185,17 +185,17 @@ def test_report_redraws_a_saved_verification_and_the_cli_calls_it(tmp_path, monk
 def test_calibrate_cli_names_the_files_the_call_wrote(tmp_path, monkeypatch):
     from typer.testing import CliRunner
 
-    from kalcal.api.results import CalibrationResult
     from kalcal.cli import app
+    from kalcal.results.calibration import CalibrationResult
 
     sim = tmp_path / "sim"
     kalcal.simulate("accel-gps", seed=0, settings={"scenario.duration": 10}, out=sim)
-    original = CalibrationResult.from_calibration.__func__
+    original = CalibrationResult.with_paths
 
-    def fewer(cls, calibration, paths=None):
-        return original(cls, calibration, {k: v for k, v in (paths or {}).items() if k != "calibration.png"})
+    def fewer(self, paths):
+        return original(self, {k: v for k, v in paths.items() if k != "calibration.png"})
 
-    monkeypatch.setattr(CalibrationResult, "from_calibration", classmethod(fewer))
+    monkeypatch.setattr(CalibrationResult, "with_paths", fewer)
     out = tmp_path / "cal"
     done = CliRunner().invoke(app, ["calibrate", "accel-gps", "--imu", str(sim / "imu.csv"), "--gps", str(sim / "gps.csv"),
                                     "--out", str(out)])

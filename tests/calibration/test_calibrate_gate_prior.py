@@ -11,7 +11,7 @@ from typer.testing import CliRunner
 
 from kalcal.scenarios.accel_gps.calibration import calibrate_accel_gps, prior_conflict
 from kalcal.cli import app
-from kalcal.jobs.calibrate import compute_accel_gps_calibration
+from kalcal.scenarios.accel_gps.calibrate import compute_accel_gps_calibration
 from kalcal.scenarios import build_scenario
 from kalcal.scenarios.accel_gps.sampled import sample_accel_gps_logs
 

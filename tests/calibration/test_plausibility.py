@@ -19,7 +19,7 @@ from kalcal.calibration.diagnostics import innovation_diagnostics
 from kalcal.calibration.noise import identify_noise
 from kalcal.scenarios.scale_bias.calibration import UNOBSERVABLE_RATIO, calibrate_scale_bias
 from kalcal.errors import DataError
-from kalcal.jobs.calibrate import stated_rates
+from kalcal.scenarios.accel_gps.calibrate import stated_rates
 from kalcal.scenarios import build_scenario
 from kalcal.scenarios.accel_gps.sampled import sample_accel_gps_logs
 from kalcal.scenarios.scale_bias.simulation import sample_scale_bias
@@ -688,7 +688,7 @@ def _calibration_summary(scenario, logs):
     """summary.json of ``calibrate accel-gps`` on the logs (as DataFrames), without the sigma over settings."""
     import pandas as pd
 
-    from kalcal.jobs.calibrate import compute_accel_gps_calibration
+    from kalcal.scenarios.accel_gps.calibrate import compute_accel_gps_calibration
 
     imu_time, accel, fix_time, position, velocity = logs
     imu = pd.DataFrame({"time": imu_time, "accel": accel})
@@ -736,7 +736,7 @@ def test_the_untrusted_warning_beside_unobservable_gives_no_noise_advice():
     quotes the bare numbers (mean NIS against its bounds, the Ljung-Box p-value) there, and the verdict
     with its advice where nothing is unobservable."""
     from kalcal.calibration.diagnostics import innovation_diagnostics
-    from kalcal.jobs.calibrate_warnings import untrusted_warning
+    from kalcal.calibration.warnings import untrusted_warning
 
     normalized = 3.0 * np.random.default_rng(0).standard_normal((150, 2))
     diagnostics = innovation_diagnostics(normalized).as_dict()

@@ -11,7 +11,7 @@ import pytest
 
 from kalcal.calibration import diagnostics, ljung_box
 from kalcal.calibration.diagnostics import innovation_diagnostics, whiteness_null
-from kalcal.jobs.calibrate import compute_accel_gps_calibration
+from kalcal.scenarios.accel_gps.calibrate import compute_accel_gps_calibration
 from kalcal.scenarios import build_scenario
 from kalcal.scenarios.accel_gps.sampled import sample_accel_gps_logs
 

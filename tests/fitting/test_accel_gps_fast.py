@@ -163,7 +163,7 @@ def test_a_latency_is_recovered_within_its_interval_and_calibrate_with_the_fitte
     assert written["filter"]["gps_latency"] == pytest.approx(latency.value, rel=1e-5)
     assert written["truth"]["gps_latency"] == 0.0 and "bias_std" not in written["filter"]
     calibration = kalcal.calibrate("accel-gps", imu=imu, gps=gps, config=tmp_path / "filter.toml")
-    summary = calibration.calibration.summary
+    summary = calibration.summary
     assert summary["settings"]["filter"]["gps_latency"] == pytest.approx(latency.value, rel=1e-5)
     assert summary["prior"]["bias"] == "diffuse"  # the fit's prior: filter.toml does not set filter.bias_std
     truth = kalcal.simulate("accel-gps", seed=21, settings={"scenario.duration": 60}).logs["truth"].bias.iloc[-1]

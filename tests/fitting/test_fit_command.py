@@ -92,7 +92,7 @@ def test_filter_toml_goes_through_config_of_calibrate_and_verify_with_the_fitted
     assert config["scenario"]["imu_rate"] == 200.0 and config["scenario"]["gps_rate"] == 5.0
     assert "# gps_position_std: fitted, interval [" in text
     calibration = kalcal.calibrate("accel-gps", imu=imu, gps=gps, config=out / "filter.toml")
-    settings = calibration.calibration.summary["settings"]
+    settings = calibration.summary["settings"]
     assert settings["filter"]["gps_position_std"] == config["filter"]["gps_position_std"]
     # the loop closed: the fitted filter verified by Monte Carlo against the fitted settings as the truth
     verification = kalcal.verify("accel-gps", config=out / "filter.toml", n=1000, seed=1, long_run=0,

@@ -11,7 +11,7 @@ from typer.testing import CliRunner
 
 import kalcal
 from kalcal.cli import app
-from kalcal.jobs.verify import MAX_UPDATES, check_arguments, default_long_run
+from kalcal.api.verification import MAX_UPDATES, check_arguments, default_long_run
 from kalcal.scenarios import build_scenario
 
 ROVER = Path(__file__).resolve().parents[2] / "examples" / "rover-like.toml"

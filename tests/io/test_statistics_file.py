@@ -9,7 +9,7 @@ from kalcal.analysis.dataset import analysis_dataset
 from kalcal.analysis.fixed_gain import analyze_scenario
 from kalcal.errors import DataError
 from kalcal.io.statistics import read_statistics, write_statistics
-from kalcal.jobs.verify import compute_verification
+from kalcal.api.verification import compute_verification
 from kalcal.scenarios import build_scenario
 
 SHORT = ["scenario.duration=2"]

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from kalcal.jobs.verify import verify
+from kalcal.api.verification import verify
 from kalcal.scenarios.model_file.model import load_model_file
 from kalcal.montecarlo.scenarios import build_problem
 from tests._helpers import assert_close, bonferroni_k

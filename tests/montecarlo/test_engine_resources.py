@@ -15,7 +15,7 @@ import tracemalloc
 import pytest
 
 from kalcal.errors import ConfigError
-from kalcal.jobs.verify import ANNOUNCE_SECONDS, MAX_RUN_SECONDS, duration_text, run_estimate_check
+from kalcal.api.verification import ANNOUNCE_SECONDS, MAX_RUN_SECONDS, duration_text, run_estimate_check
 from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
 from kalcal.models.config import apply_settings
 from kalcal.montecarlo.engine import (

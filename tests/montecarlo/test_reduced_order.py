@@ -15,7 +15,7 @@ import scipy.linalg
 import scipy.stats
 
 from kalcal.core.model import LinearGaussianModel
-from kalcal.jobs.verify import verify
+from kalcal.api.verification import verify
 from kalcal.scenarios.model_file.model import parse_model
 from kalcal.scenarios.model_file.truth import MODEL_KEYS, MappedTruthModel
 from kalcal.montecarlo.accumulators import MomentSums

@@ -16,7 +16,7 @@ import pytest
 
 from kalcal.errors import ConfigError
 from kalcal.scenarios.scale_bias.filter import filter_scale_bias
-from kalcal.jobs.verify import verify
+from kalcal.api.verification import verify
 from kalcal.scenarios import build_scenario
 from kalcal.montecarlo.accumulators import MomentSums
 from kalcal.scenarios.scale_bias.problem import ScaleBiasProblem, eiv_mean_error, mean_regressor_signal

@@ -3,8 +3,8 @@
 import pytest
 
 from kalcal.io.statistics import read_statistics
-from kalcal.jobs.report import draw_realization
-from kalcal.jobs.verify import verify
+from kalcal.reporting.render import draw_realization
+from kalcal.api.verification import verify
 from kalcal.scenarios import build_scenario
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.plots.realization import RealizationData

@@ -38,7 +38,7 @@ RUNS: dict[str, tuple[str, dict]] = {
 
 def run(name: str, out: Path) -> xr.Dataset:
     """Run ``RUNS[name]`` with N realizations and seed SEED into ``out``; its ``stats.nc``, loaded."""
-    from kalcal.jobs.verify import verify
+    from kalcal.api.verification import verify
     from kalcal.scenarios.model_file.model import load_model_file
     from kalcal.scenarios import build_scenario
 

@@ -12,7 +12,7 @@ import shutil
 
 import pytest
 
-from kalcal.jobs.verify import verify
+from kalcal.api.verification import verify
 from kalcal.scenarios import build_scenario
 
 N = 5000

@@ -6,8 +6,8 @@ import sys
 
 import pytest
 
-from kalcal.jobs import report as report_job
-from kalcal.jobs.verify import verify
+from kalcal.reporting import render as report_job
+from kalcal.api.verification import verify
 from kalcal.scenarios import build_scenario
 
 RUN_FILES = ("summary.json", "stats.nc", "stats_long.nc", ".kalcal-manifest.json")

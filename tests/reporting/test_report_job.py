@@ -7,7 +7,7 @@ import pytest
 
 from kalcal.errors import ConfigError, DataError
 from kalcal.io.statistics import read_statistics
-from kalcal.jobs.report import draw_realization, render_report, settings_assignments
+from kalcal.reporting.render import draw_realization, render_report, settings_assignments
 from kalcal.scenarios import build_scenario
 from kalcal.montecarlo.engine import block_sizes, run_block
 from kalcal.montecarlo.scenarios import build_problem
@@ -153,7 +153,7 @@ class _Stop(Exception):
 def test_the_run_numbers_are_checked_once_per_page(copy_run, monkeypatch, job):
     """N, the seed and the shown realization are read from the summary and checked once, before the
     statistics, and handed to the drawing (stopped here before its figures)."""
-    from kalcal.jobs import report as report_job
+    from kalcal.reporting import render as report_job
 
     calls = []
     real = report_job._run_numbers

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kalcal.jobs.report import draw_realization
+from kalcal.reporting.render import draw_realization
 from kalcal.scenarios.model_file.model import parse_model
 from kalcal.scenarios import build_scenario
 from kalcal.montecarlo.engine import realization

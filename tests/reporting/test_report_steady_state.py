@@ -14,13 +14,13 @@ import re
 import numpy as np
 import pytest
 
-import kalcal.jobs.report as report_job
+import kalcal.reporting.render as report_job
 from kalcal.core.model import LinearGaussianModel
 from kalcal.core.steps import covariance_pass
 from kalcal.errors import ConfigError
 from kalcal.filters.steady_state import SteadyStateView, convergence, steady_state
-from kalcal.jobs.report import render_report
-from kalcal.jobs.verify import verify
+from kalcal.reporting.render import render_report
+from kalcal.api.verification import verify
 from kalcal.scenarios import build_scenario
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.plots.steady_state import plot_steady_state

@@ -10,7 +10,7 @@ import re
 import numpy as np
 import xarray as xr
 
-from kalcal.jobs.report import render_report
+from kalcal.reporting.render import render_report
 from kalcal.scenarios import build_scenario
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.reporting.html import png_size

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from kalcal.jobs.verify import compute_verification, scale_bias_truth_equals
+from kalcal.api.verification import compute_verification, scale_bias_truth_equals
 from kalcal.scenarios.model_file.model import load_model_file
 from kalcal.scenarios import build_scenario
 from kalcal.stats.results import EXPLAINED_BY_TEXT, as_false_alarm

@@ -13,7 +13,7 @@ from kalcal.analysis.fixed_gain import analyze_problem, analyze_scenario
 from kalcal.stats.suite import check_families, power_rows, problem_power
 from kalcal.stats.power import DETECTION_POWER, MIN_N, N_CAP, detection_n, power_line, verdict_power
 from kalcal.stats.sensitivity import detected_error, sensitivity, sensitivity_text
-from kalcal.jobs.verify import MIN_REALIZATIONS
+from kalcal.api.verification import MIN_REALIZATIONS
 from kalcal.scenarios.model_file.model import load_model_file, parse_model
 from kalcal.scenarios import build_scenario
 from kalcal.montecarlo.accumulators import ensemble_statistics
@@ -178,7 +178,7 @@ def test_verification_power_is_null_with_its_reason_for_scale_bias():
     rows, reason = problem_power(problem, 1000, 0.99)
     assert rows is None and "gains depend on the data" in reason
     assert power_line(rows, 1000, reason).startswith("power: not computed (no exact analysis")
-    from kalcal.jobs.verify import power_summary
+    from kalcal.api.verification import power_summary
 
     assert power_summary(problem, 1000, 0.99) == {"power": None, "power_reason": reason}  # summary.json's keys
 

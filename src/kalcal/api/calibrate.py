@@ -6,7 +6,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from kalcal.api.results import CalibrationResult
+from kalcal.results.calibration import CalibrationResult
 
 
 def calibrate(
@@ -65,62 +65,31 @@ def calibrate(
     Returns
     -------
     CalibrationResult
+        The scenario's own (``AccelGpsCalibrationResult``, ``ScaleBiasCalibrationResult``), made by its
+        ``calibrate(logs, options)``.
     """
     from kalcal.api._scenario import resolve
     from kalcal.api.model import flat_settings
-    from kalcal.errors import KalcalError
+    from kalcal.results.calibration import CalibrateOptions
+    from kalcal.scenarios import log_defaults
 
-    if scenario == "scale-bias":
-        if form != "joseph" or smooth or gate is not None:
-            option = "--form" if form != "joseph" else "--smooth" if smooth else "--gate"
-            raise KalcalError(f"{option}: not available for scale-bias (accel-gps only)")
-        model = resolve("scale-bias", settings, config)
-        if data is None:
-            raise KalcalError("--data: required for scale-bias (a log with a reference and a sensor column)")
-        if imu is not None or gps is not None:
-            raise KalcalError("--imu/--gps: not used by scale-bias (it reads --data)")
-        from kalcal.scenarios.scale_bias.job import compute_scale_bias_calibration
-
-        def compute():
-            return compute_scale_bias_calibration(
-                model, data, reference=reference, sensor=sensor, prior=prior, windows=windows
-            )
-
-        command = "calibrate scale-bias"
-    else:
-        model = resolve(scenario, settings, config, defaults={"scenario.integration": "trapezoid"})
-        missing = [name for name, value in (("--imu", imu), ("--gps", gps)) if value is None]
-        if missing:
-            raise KalcalError(f"{' and '.join(missing)}: required for {scenario}")
-        if data is not None:
-            raise KalcalError(f"--data: not used by {scenario} (it reads --imu and --gps)")
-        if prior is not None:
-            raise KalcalError("--prior: not available for accel-gps (scale-bias only)")
-        if on_gap not in ("continue", "stop"):
-            raise KalcalError(f"--on-gap: expected continue or stop, got {on_gap!r}")
-        from kalcal.jobs.calibrate import compute_accel_gps_calibration
-
-        # the options a `kalcal fit` of the same logs repeats, named in a warning's next step
-        fit_options = [*(["--config", str(config)] if config is not None else []),
-                       *(word for key, value in flat_settings(settings).items() for word in ("--set", f"{key}={value}"))]
-
-        def compute():
-            return compute_accel_gps_calibration(
-                model, imu, gps, imu_columns=imu_columns, gps_columns=gps_columns, init=init,
-                max_imu_gap=max_imu_gap, stop_on_gap=on_gap == "stop", form=form, smooth=smooth, gate=gate,
-                windows=windows, settings_sigma=settings_sigma, fit_options=fit_options,
-            )
-
-        command = "calibrate accel-gps"
-    if out is None:
-        return CalibrationResult.from_calibration(compute())
-    from kalcal.io.outputs import inputs_of, run_outputs
-    from kalcal.jobs.calibrate import OUTPUT_NAMES, save_calibration
-
-    files = [value for value in (imu, gps, data) if isinstance(value, (str, Path))]
-    with run_outputs(out, command, names=OUTPUT_NAMES[command], protect=[*files, *inputs_of(model)]) as staging:
-        calibration = compute()
-        paths = save_calibration(calibration, staging)
-    return CalibrationResult.from_calibration(
-        calibration, {name: Path(out) / Path(path).relative_to(staging) for name, path in paths.items()}
+    model = resolve(scenario, settings, config, defaults=log_defaults(scenario))
+    # the options a `kalcal fit` of the same logs repeats, named in a warning's next step
+    fit_options = (*(["--config", str(config)] if config is not None else []),
+                   *(word for key, value in flat_settings(settings).items() for word in ("--set", f"{key}={value}")))
+    options = CalibrateOptions(
+        imu_columns=imu_columns, gps_columns=gps_columns, init=init, max_imu_gap=max_imu_gap, on_gap=on_gap, form=form,
+        smooth=smooth, gate=gate, settings_sigma=settings_sigma, reference=reference, sensor=sensor, prior=prior,
+        windows=windows, fit_options=fit_options,
     )
+    logs = {"imu": imu, "gps": gps, "data": data}
+    if out is None:
+        return model.calibrate(logs, options)
+    from kalcal.io.outputs import inputs_of, run_outputs
+
+    names = model.output_names("calibrate")
+    files = [value for value in logs.values() if isinstance(value, (str, Path))]
+    with run_outputs(out, f"calibrate {model.NAME}", names=names, protect=[*files, *inputs_of(model)]) as staging:
+        result = model.calibrate(logs, options)
+        paths = result.save(staging)
+    return result.with_paths({name: Path(out) / Path(path).relative_to(staging) for name, path in paths.items()})

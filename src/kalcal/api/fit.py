@@ -75,47 +75,24 @@ def fit(
     """
     from kalcal.api._scenario import resolve
     from kalcal.errors import KalcalError
+    from kalcal.fitting.run import FitOptions
+    from kalcal.scenarios import log_defaults
 
     if not 0.0 < confidence < 1.0:
         raise KalcalError(f"confidence=: expected a number in (0, 1), got {confidence!r}")  # kalcal fit has no --confidence
-    keys = _free(free)
-    if scenario == "scale-bias":
-        if gate is not None:
-            raise KalcalError("--gate: not available for scale-bias (accel-gps only)")
-        if data is None:
-            raise KalcalError("--data: required for scale-bias (a log with a reference and a sensor column)")
-        if imu is not None or gps is not None:
-            raise KalcalError("--imu/--gps: not used by scale-bias (it reads --data)")
-        model = resolve("scale-bias", settings, config)
-    else:
-        model = resolve(scenario, settings, config, defaults={"scenario.integration": "trapezoid"})
-        missing = [name for name, value in (("--imu", imu), ("--gps", gps)) if value is None]
-        if missing:
-            raise KalcalError(f"{' and '.join(missing)}: required for {scenario}")
-        if data is not None:
-            raise KalcalError(f"--data: not used by {scenario} (it reads --imu and --gps)")
-    if scenario == "scale-bias":
-        from kalcal.jobs.fit import compute_scale_bias_fit
-
-        def compute():
-            return compute_scale_bias_fit(model, data, free=keys, reference=reference, sensor=sensor,
-                                          profile=profile, confidence=confidence)
-    else:
-        from kalcal.jobs.fit import compute_accel_gps_fit
-
-        def compute():
-            return compute_accel_gps_fit(model, imu, gps, free=keys, imu_columns=imu_columns, gps_columns=gps_columns,
-                                         init=init, profile=profile, gate=gate, confidence=confidence)
+    options = FitOptions(free=_free(free), profile=profile, confidence=confidence, imu_columns=imu_columns,
+                         gps_columns=gps_columns, init=init, gate=gate, reference=reference, sensor=sensor)
+    model = resolve(scenario, settings, config, defaults=log_defaults(scenario))
+    logs = {"imu": imu, "gps": gps, "data": data}
     if out is None:
-        run = compute()
+        run = model.fit(logs, options)
         return dataclasses.replace(run.result, run=run)  # what save() writes
+    from kalcal.fitting.run import save_fit
     from kalcal.io.outputs import inputs_of, run_outputs
-    from kalcal.jobs.fit import output_names, save_fit
 
-    command = "fit scale-bias" if scenario == "scale-bias" else "fit accel-gps"
-    names = output_names(command)
-    files = [value for value in (imu, gps, data) if isinstance(value, (str, Path))]
-    with run_outputs(out, command, names=names, protect=[*files, *inputs_of(model)]) as staging:
-        run = compute()
+    names = model.output_names("fit")
+    files = [value for value in logs.values() if isinstance(value, (str, Path))]
+    with run_outputs(out, f"fit {model.NAME}", names=names, protect=[*files, *inputs_of(model)]) as staging:
+        run = model.fit(logs, options)
         save_fit(run, staging)
     return dataclasses.replace(run.result, paths={name: Path(out) / name for name in names}, run=run)

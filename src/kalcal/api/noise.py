@@ -25,7 +25,7 @@ def noise(
     imu : DataFrame or path
         The static log: time [s], accel [m/s^2] (CSV, also .csv.gz/.bz2/.xz/.zst, Parquet or a DataFrame),
         or a ROS 1/2 bag's ``sensor_msgs/msg/Imu`` topic or a PX4 ULog's ``sensor_combined``, read as
-        three axes (:func:`kalcal.jobs.noise.compute_noise`).
+        three axes (:func:`kalcal.calibration.noise_run.compute_noise`).
     imu_columns : str, optional
         Map roles to columns, ``"time=t,accel=ax"``.
     confidence : float
@@ -49,7 +49,7 @@ def noise(
 
     if imu is None:
         raise KalcalError("--imu: required (a static accelerometer log: time [s], accel [m/s^2])")
-    from kalcal.jobs.noise import compute_noise, output_names, save_noise
+    from kalcal.calibration.noise_run import compute_noise, output_names, save_noise
 
     if out is None:
         return NoiseResult.from_run(compute_noise(imu, imu_columns=imu_columns, confidence=confidence, strict=strict, topic=topic, axis=axis))

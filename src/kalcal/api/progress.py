@@ -25,11 +25,11 @@ def progress_callback(progress, title: str) -> Iterator:
 def progress_bar(title: str, console):
     """A rich progress bar on ``console``: returns (context manager, callback ``(stage, done, total)``).
 
-    The bar shows the stage, its count of units and its time (:mod:`kalcal.jobs.progress`).
+    The bar shows the stage, its count of units and its time (:mod:`kalcal.montecarlo.progress`).
     """
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-    from kalcal.jobs.progress import STAGES
+    from kalcal.montecarlo.progress import STAGES
 
     bar = Progress(
         TextColumn("{task.description}", markup=False),

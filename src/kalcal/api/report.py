@@ -35,7 +35,7 @@ def report(
         The folder is not a finished verification run, or ``realization`` is out of range.
     """
     directory = Path(directory)
-    from kalcal.jobs.report import FIGURE_DIR, render_report
+    from kalcal.reporting.render import FIGURE_DIR, render_report
 
     with progress_callback(progress, str(directory)) as update:
         page = render_report(directory, realization=realization, progress=update)

@@ -64,7 +64,7 @@ class VerificationResult:
 
     @classmethod
     def from_run(cls, run, paths: dict | None = None) -> VerificationResult:
-        """The result of a :class:`kalcal.jobs.verify.Verification`."""
+        """The result of a :class:`kalcal.api.verification.Verification`."""
         return cls(
             run.summary["verdict"],
             list(run.checks),
@@ -100,7 +100,7 @@ class VerificationResult:
         """Write ``summary.json``, ``stats.nc`` (``stats_long.nc``) and, with ``report``, ``report.html``
         and ``figures/`` into ``out``, as ``kalcal verify --out`` does (one set: whole or not at all,
         docs/outputs.md); returns the files by key."""
-        from kalcal.jobs.verify import save_verification
+        from kalcal.api.verification import save_verification
 
         saved = save_verification(
             self.run, out, report=report, realization=realization, checkpoint=self.run.checkpoint, scenario=self.run.scenario
@@ -139,202 +139,6 @@ class VerificationResult:
             "<table><thead><tr><th>check</th><th>statistic</th><th>lower</th><th>upper</th><th>p-value</th><th>result</th>"
             f"</tr></thead><tbody>{rows}</tbody></table></div>"
         )
-
-
-@dataclass(frozen=True, repr=False, eq=False)
-class CalibrationResult:
-    """What :func:`kalcal.calibrate` estimated, at the last fix (accel-gps) or sample (scale-bias).
-
-    Attributes
-    ----------
-    scenario : str
-        ``"accel-gps"`` or ``"scale-bias"``.
-    bias, bias_std : float
-        The sensor bias and its 1-sigma (m/s^2 for accel-gps; the log's unit for scale-bias).
-    scale, scale_std : float or None
-        The scale error and its 1-sigma (dimensionless): scale-bias, and accel-gps with a scale state.
-    covariance : ndarray
-        The final state covariance, over ``covariance_states`` (accel-gps: position, velocity, bias[,
-        scale]; scale-bias: theta1, theta2).
-    estimates : pandas.DataFrame
-        ``estimates.csv``: one row per fix or sample, states, their 1-sigma and (accel-gps) the NIS and
-        normalized innovations; made when first read (a calibration from Parquet loads pandas only then).
-    diagnostics : dict
-        accel-gps: the innovation diagnostics (``consistent``, ``verdict``, ...); scale-bias: the mean
-        NIS, its bounds, ``consistent`` and the observability ratios.
-    warnings : list of dict
-        ``{"code", "message"}`` each, empty when none.
-    sigma_trusted : bool
-        False when the diagnostics say inconsistent or the windows are not stable: ``bias_std`` is then
-        not to be used (a ``sigma-untrusted`` warning names the next step).
-    settings_sigma : SettingsSigma or None
-        accel-gps: the bias's sigma over the noise settings the log cannot reject, beside ``bias_std``
-        (:class:`kalcal.scenarios.accel_gps.settings_sigma.SettingsSigma`: ``bias_std``, ``ratio``,
-        ``at``, ...); None when not computed.
-    scale_sigma_trusted : bool or None
-        Whether ``scale_std`` is to be used: False where the diagnostics or windows disown the sigmas or
-        (accel-gps) the scale is unobservable, its sigma then the prior's; None without a scale.
-    """
-
-    scenario: str
-    bias: float
-    bias_std: float
-    scale: float | None
-    scale_std: float | None
-    covariance: np.ndarray
-    covariance_states: tuple
-    diagnostics: dict
-    warnings: list
-    calibration: Any = field(repr=False, compare=False)
-    paths: dict = field(default_factory=dict)
-    sigma_trusted: bool = True
-    settings_sigma: Any = None
-    scale_sigma_trusted: bool | None = None
-
-    @classmethod
-    def from_calibration(cls, calibration, paths: dict | None = None) -> CalibrationResult:
-        """The result of a :class:`kalcal.jobs.calibrate.Calibration`."""
-        s = calibration.summary
-        if s["scenario"] == "scale-bias":
-            scale, scale_std = s["scale_error"], s["scale_error_std"]
-            covariance, states = s["theta_covariance"], s["theta_states"]
-            diagnostics = {key: s[key] for key in ("mean_nis", "nis_bounds", "consistent", "observability")}
-        else:
-            scale, scale_std = s.get("scale"), s.get("scale_std")
-            covariance, states, diagnostics = s["covariance"], s["covariance_states"], s["diagnostics"]
-        return cls(
-            s["scenario"],
-            float(s["bias"]),
-            float(s["bias_std"]),
-            None if scale is None else float(scale),
-            None if scale_std is None else float(scale_std),
-            np.asarray(covariance, dtype=float),
-            tuple(states),
-            diagnostics,
-            list(s["warnings"]),
-            calibration,
-            dict(paths or {}),
-            sigma_trusted=bool(s.get("sigma_trusted", s.get("consistent", True))),
-            settings_sigma=_settings_sigma(s.get("settings_sigma")),
-            scale_sigma_trusted=None if scale is None else bool(s.get("scale_sigma_trusted", s.get("sigma_trusted", True))),
-        )
-
-    def to_dict(self) -> dict[str, Any]:
-        """``summary.json`` as ``json.load`` reads it."""
-        from kalcal.io.results import json_document
-
-        return json_document(self.calibration.summary)
-
-    @property
-    def estimates(self) -> pd.DataFrame:
-        """``estimates.csv`` as a DataFrame: made (and pandas loaded) when first read, a copy of the
-        calibration's columns (editing it changes neither this result nor what :meth:`save` writes)."""
-        return self.calibration.estimates
-
-    @property
-    def stability(self) -> dict | None:
-        """``summary.json``'s ``stability``: the windows' estimates, the chi-square test and its verdict."""
-        return self.calibration.summary.get("stability")
-
-    def save(self, out: str | Path) -> dict[str, Path]:
-        """Write ``estimates.csv``, ``summary.json`` and (accel-gps) ``calibration.png`` into ``out``, as
-        ``kalcal calibrate --out`` does (one set); returns the files by name."""
-        from kalcal.jobs.calibrate import save_calibration
-
-        return save_calibration(self.calibration, out)
-
-    @property
-    def params(self) -> pd.Series:
-        """The estimates: ``bias`` and, where estimated, ``scale`` (:attr:`bias`, :attr:`scale`)."""
-        import pandas as pd
-
-        return pd.Series({name: value for name, (value, _, _) in self._estimates().items()}, dtype=float, name="estimate")
-
-    @property
-    def bse(self) -> pd.Series:
-        """Their 1-sigma from the final covariance (:attr:`bias_std`, :attr:`scale_std`), same index."""
-        import pandas as pd
-
-        return pd.Series({name: sigma for name, (_, sigma, _) in self._estimates().items()}, dtype=float, name="bse")
-
-    def conf_int(self, alpha: float | None = None, level: float | None = None) -> pd.DataFrame:
-        """estimate +- z sigma at ``level`` (or ``1 - alpha``; default 0.95), z the normal quantile of
-        (1 + level) / 2: the filter's Gaussian posterior at the last fix or sample. Columns ``lower`` and
-        ``upper``, one row per estimate (:attr:`params`' index).
-
-        A sigma the diagnostics disown (:attr:`sigma_trusted`, :attr:`scale_sigma_trusted` False) gives an
-        interval that is not to be used: a ``UserWarning`` names the estimates (and the next step is in
-        :attr:`warnings`). accel-gps's :attr:`settings_sigma` (the bias's sigma over the noise settings the
-        log cannot reject) is not in these intervals.
-        """
-        import warnings
-
-        import pandas as pd
-
-        from kalcal.api._display import level_of
-        from kalcal.stats.distributions import normal_isf
-
-        confidence = level_of(alpha, level, 0.95)
-        z = float(normal_isf((1.0 - confidence) / 2.0))
-        estimates = self._estimates()
-        untrusted = [name for name, (_, _, trusted) in estimates.items() if not trusted]
-        if untrusted:
-            warnings.warn(f"conf_int: the sigma of {', '.join(untrusted)} is not trusted (the diagnostics or the "
-                          "windows disown it): the interval is not to be used; see the result's warnings", stacklevel=2)
-        rows = {name: (value - z * sigma, value + z * sigma) for name, (value, sigma, _) in estimates.items()}
-        return pd.DataFrame.from_dict(rows, orient="index", columns=["lower", "upper"])
-
-    def _estimates(self) -> dict[str, tuple[float, float, bool]]:
-        """Per estimate: value, 1-sigma and whether the sigma is trusted."""
-        rows = {"bias": (self.bias, self.bias_std, bool(self.sigma_trusted))}
-        if self.scale is not None:
-            rows["scale"] = (self.scale, np.nan if self.scale_std is None else self.scale_std, bool(self.scale_sigma_trusted))
-        return rows
-
-    def _repr_html_(self) -> str:
-        from kalcal.api._display import html_facts, html_table
-
-        ci = self._conf_int_quiet()
-        rows = [[name, value, sigma, ci.loc[name, "lower"], ci.loc[name, "upper"], "yes" if trusted else "NO"]
-                for name, (value, sigma, trusted) in self._estimates().items()]
-        facts = html_facts(f"kalcal calibrate {self.scenario}", [
-            ("consistent", self.diagnostics.get("consistent")), ("warnings", len(self.warnings)),
-        ] + ([] if self.settings_sigma is None else [("bias sigma over the settings", self.settings_sigma.bias_std)]))
-        table = html_table(["estimate", "value", "sigma", "[0.025", "0.975]", "sigma trusted"], rows)
-        notes = "".join(f"<li>{html.escape(str(w.get('code', '')))}: {html.escape(str(w.get('message', '')))}</li>"
-                        for w in self.warnings)
-        return f"<div>{facts}{table}" + (f"<ul>{notes}</ul>" if notes else "") + "</div>"
-
-    def _conf_int_quiet(self, level: float = 0.95) -> pd.DataFrame:
-        """:meth:`conf_int` without its warning (the HTML table says whether each sigma is trusted)."""
-        import warnings
-
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", UserWarning)
-            return self.conf_int(level=level)
-
-    def __repr__(self) -> str:
-        scale = "" if self.scale is None else f", scale={self.scale:.6g} ± {self.scale_std:.3g}"
-        if self.scale is not None and self.scale_sigma_trusted is False:
-            scale += " (sigma NOT trusted)"
-        trust = "" if self.sigma_trusted else " (sigma NOT trusted)"
-        over = "" if self.settings_sigma is None else f", over the settings ± {self.settings_sigma.bias_std:.3g}"
-        return (f"CalibrationResult({self.scenario}: bias={self.bias:.6g} ± {self.bias_std:.3g}{trust}{over}{scale}, "
-                f"warnings={len(self.warnings)})")
-
-
-def _settings_sigma(document: dict | None):
-    """summary.json's ``settings_sigma`` as a SettingsSigma (None stays None)."""
-    if document is None:
-        return None
-    from kalcal.scenarios.accel_gps.settings_sigma import SettingsSigma
-
-    return SettingsSigma(
-        bias_std=float(document["bias_std"]), conditional_bias_std=float(document["conditional_bias_std"]),
-        ratio=float(document["ratio"]), factor=float(document["factor"]), confidence=float(document["confidence"]),
-        free=tuple(document["free"]), at=dict(document["at"]), fitted=dict(document["fitted"]),
-        filter_rejected=bool(document["filter_rejected"]),
-    )
 
 
 @dataclass(frozen=True, repr=False, eq=False)
@@ -380,7 +184,7 @@ class NoiseResult:
 
     @classmethod
     def from_run(cls, run, paths: dict | None = None) -> NoiseResult:
-        """The result of a :class:`kalcal.jobs.noise.NoiseRun`."""
+        """The result of a :class:`kalcal.calibration.noise_run.NoiseRun`."""
         from kalcal.calibration.kalibr import axes_kalibr_values, kalibr_values
 
         r = run.identification
@@ -409,7 +213,7 @@ class NoiseResult:
         """Write ``summary.json``, ``allan.csv``, ``allan.png``, ``filter.toml`` and (unless ``kalibr`` is
         False) the Kalibr ``imu.yaml`` into ``out``, as ``kalcal noise --out`` does (one set); returns the
         files by key (summary, allan, plot, filter, kalibr)."""
-        from kalcal.jobs.noise import save_noise
+        from kalcal.calibration.noise_run import save_noise
 
         return save_noise(self.run, out, kalibr=kalibr)["files"]
 
@@ -420,7 +224,7 @@ class NoiseResult:
         return kalibr_yaml(self.run.identification, rostopic=rostopic)
 
     def _repr_html_(self) -> str:
-        from kalcal.api._display import html_facts, html_table
+        from kalcal.results._display import html_facts, html_table
 
         names = ("velocity_random_walk", "bias_instability", "rate_random_walk", "accel_noise_std", "bias_walk_std")
         rows = []
@@ -442,40 +246,3 @@ class NoiseResult:
             f"NoiseResult(N={show(self.velocity_random_walk)}, B={show(self.bias_instability)}, "
             f"K={show(self.rate_random_walk)}, rate={self.rate:.6g} Hz)"
         )
-
-
-@dataclass(frozen=True, repr=False, eq=False)
-class SimulationResult:
-    """What :func:`kalcal.simulate` drew: the logs as DataFrames (``imu``, ``gps``, ``truth`` for accel-gps;
-    ``data`` for scale-bias) and, for scale-bias, ``truth`` (``truth.json``: the drawn scale error and bias)."""
-
-    scenario: str
-    logs: dict
-    truth: dict | None
-    simulation: Any = field(repr=False, compare=False)
-    paths: dict = field(default_factory=dict)
-
-    @classmethod
-    def from_simulation(cls, simulation, paths: dict | None = None) -> SimulationResult:
-        """The result of a :class:`kalcal.jobs.simulate.Simulation`."""
-        truth = simulation.documents.get("truth")
-        return cls(simulation.command.removeprefix("simulate "), dict(simulation.logs), truth, simulation, dict(paths or {}))
-
-    def save(self, out: str | Path) -> dict[str, Path]:
-        """Write the logs (CSV) and ``truth.json`` into ``out``, as ``kalcal simulate --out`` does (one set)."""
-        from kalcal.jobs.simulate import save_simulation
-
-        return save_simulation(self.simulation, out)
-
-    def __repr__(self) -> str:
-        return f"SimulationResult({self.scenario}: {', '.join(f'{k} ({len(v)} rows)' for k, v in self.logs.items())})"
-
-    def _repr_html_(self) -> str:
-        from kalcal.api._display import html_facts, html_table
-
-        logs = html_table(["log", "rows", "columns"], [[name, len(frame), ", ".join(map(str, frame.columns))]
-                                                       for name, frame in self.logs.items()])
-        truth = "" if not self.truth else html_table(
-            ["truth", "value"], [[key, value] for key, value in self.truth.items() if not isinstance(value, (dict, list))]
-        )
-        return f"<div>{html_facts(f'kalcal simulate {self.scenario}', [])}{logs}{truth}</div>"

@@ -6,7 +6,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from kalcal.api.results import SimulationResult
+from kalcal.results.simulation import SimulationResult
 
 
 def simulate(
@@ -25,17 +25,13 @@ def simulate(
     ``settings`` takes ``--set``'s keys; ``out`` also writes the files, as ``kalcal simulate --out``.
     """
     from kalcal.api._scenario import resolve
-    from kalcal.jobs.simulate import OUTPUT_NAMES, compute_simulation, save_simulation
 
     model = resolve(scenario, settings, config)
     if out is None:
-        return SimulationResult.from_simulation(compute_simulation(model, seed))
+        return model.simulate(seed)
     from kalcal.io.outputs import inputs_of, run_outputs
 
-    command = f"simulate {model.NAME}"
-    with run_outputs(out, command, names=OUTPUT_NAMES[command], protect=inputs_of(model)) as staging:
-        simulation = compute_simulation(model, seed)
-        paths = save_simulation(simulation, staging)
-    return SimulationResult.from_simulation(
-        simulation, {key: Path(out) / Path(path).relative_to(staging) for key, path in paths.items()}
-    )
+    with run_outputs(out, f"simulate {model.NAME}", names=model.output_names("simulate"), protect=inputs_of(model)) as staging:
+        simulation = model.simulate(seed)
+        paths = simulation.save(staging)
+    return simulation.with_paths({key: Path(out) / Path(path).relative_to(staging) for key, path in paths.items()})

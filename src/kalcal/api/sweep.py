@@ -1,12 +1,91 @@
-"""``kalcal.sweep``: a verification per value of one setting, written with the tuning curve."""
+"""``kalcal.sweep``: a verification per value of one setting, written with the tuning curve.
+
+The sweep's result (:class:`SweepResult`) is the object the run made: its table, each value's summary as
+written and folder, and the sweep's own files.
+"""
 
 from __future__ import annotations
 
+import html
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from kalcal.api.sweep_result import SweepResult
+import pandas as pd
+
+from kalcal.api.verification import check_arguments, verify
+from kalcal.errors import ConfigError
+from kalcal.io.outputs import writes_outputs
+from kalcal.io.results import json_document, write_json
+from kalcal.models.config import apply_settings
+
+
+@dataclass(frozen=True, repr=False, eq=False)
+class SweepResult:
+    """What :func:`kalcal.sweep` found, one verification per value of ``key``.
+
+    Attributes
+    ----------
+    key : str
+        The swept setting (``"filter.accel_noise_std"``).
+    values : list of str
+        Its values, in the order run.
+    table : pandas.DataFrame
+        ``sweep.csv``: one row per value with every check's statistic, bounds and verdict.
+    summaries : list of dict
+        Each value's ``summary.json`` as ``json.load`` reads it (as written), in the order of ``values``.
+    runs : list of Path
+        Each value's run folder (``out/key=value``), in the order of ``values``.
+    paths : dict
+        The sweep's own files: ``table`` (sweep.csv), ``summary`` (sweep.json), ``figure`` (sweep.png).
+    """
+
+    key: str
+    values: list
+    table: pd.DataFrame
+    summaries: list
+    runs: list
+    paths: dict
+
+    def save(self, out: str | Path) -> dict[str, Path]:
+        """Write the sweep's files into ``out`` as ``kalcal sweep --out`` does (one set: ``sweep.csv``,
+        ``sweep.json``, ``sweep.png`` and each value's run folder ``key=value`` as its own set inside it),
+        copied from the folder the sweep wrote (a sweep always writes, :func:`kalcal.sweep`); returns the
+        sweep's own files by key (table, summary, figure), as :attr:`paths`."""
+        import shutil
+
+        from kalcal.errors import KalcalError
+        from kalcal.io.manifest import MANIFEST, read_manifest
+        from kalcal.io.outputs import run_outputs
+        from kalcal.api.verification import OUTPUT_NAMES as RUN_NAMES
+
+        out = Path(out)
+        if any(Path(path).parent.resolve() == out.resolve() for path in self.paths.values()):
+            return dict(self.paths)  # the set is there already: saving it again changes nothing
+        runs = []
+        for run in self.runs:
+            manifest = read_manifest(run)
+            if manifest is None or not manifest.complete:
+                raise KalcalError(f"save: {run}: the run's folder is missing or incomplete; run the sweep again")
+            runs.append((Path(run), [name for name in manifest.files if Path(name).name != MANIFEST]))
+        with run_outputs(out, "sweep", names=OUTPUT_NAMES) as staging:
+            for path in self.paths.values():
+                shutil.copy2(path, staging / Path(path).name)
+            for run, files in runs:
+                with run_outputs(staging / run.name, "verify", names=RUN_NAMES) as inner:
+                    for name in files:
+                        (inner / name).parent.mkdir(parents=True, exist_ok=True)
+                        shutil.copy2(run / name, inner / name)
+        return {key: out / Path(path).name for key, path in self.paths.items()}
+
+    def __repr__(self) -> str:
+        verdicts = ", ".join(f"{v}: {s['verdict']}" for v, s in zip(self.values, self.summaries))
+        return f"SweepResult({self.key}: {verdicts})"
+
+    def _repr_html_(self) -> str:
+        # pandas escapes the cells (to_html's escape=True)
+        return f"<div><b>kalcal sweep</b> {html.escape(self.key)}{self.table.to_html(index=False, escape=True)}</div>"
 
 
 def sweep(
@@ -40,8 +119,6 @@ def sweep(
         raise KalcalError(f"sweep: give a setting and at least two values (got {key!r} with {len(values)})")
     if threads is not None and threads < 1:
         raise KalcalError(f"--threads: expected a positive number, got {threads}")
-    from kalcal.jobs.sweep import sweep as run_sweep
-    from kalcal.jobs.sweep import sweep_cells
     from kalcal.montecarlo.distributed import dask_client
 
     model = resolve(scenario, settings, config)
@@ -49,13 +126,93 @@ def sweep(
     options = dict(engine=engine, workers=threads, long_run=0)
     if client is None and (workers is not None or scheduler is not None):
         with dask_client(workers, scheduler) as client:
-            return SweepResult.from_sweep(run_sweep(model, key, values, n, seed, out, client=client, **options), values)
-    return SweepResult.from_sweep(run_sweep(model, key, values, n, seed, out, client=client, **options), values)
+            return run_sweep(model, key, values, n, seed, out, client=client, **options)
+    return run_sweep(model, key, values, n, seed, out, client=client, **options)
 
 
 def sweep_settings(assignments: Sequence[str]) -> tuple[str, list[str], dict[str, str]]:
     """``--set`` assignments (``key=v1,v2,...`` among them) as the swept key, its values and the fixed settings."""
-    from kalcal.jobs.sweep import split_sweep
     from kalcal.models.settings import parse_assignments
 
     return split_sweep(parse_assignments(assignments))
+
+
+def split_sweep(assignments: dict[str, str]) -> tuple[str, list[str], dict[str, str]]:
+    """Find the one ``key=v1,v2,...`` among ``--set`` assignments; the others stay fixed."""
+    swept = {key: value for key, value in assignments.items() if "," in value}
+    if len(swept) != 1:
+        raise ConfigError(
+            "sweep: give exactly one --set with a comma-separated list of values, e.g. "
+            f"filter.accel_noise_std=0.01,0.02 (got {len(swept)})"
+        )
+    key, values = next(iter(swept.items()))
+    values_list = [v.strip() for v in values.split(",") if v.strip()]
+    if len(values_list) < 2:
+        raise ConfigError(f"--set {key}={values}: a sweep needs at least two values")
+    return key, values_list, {k: v for k, v in assignments.items() if k != key}
+
+
+#: the files of a sweep: its table and curve, and each value's run in a folder ``key=value``
+OUTPUT_NAMES = (
+    "sweep.csv",
+    "sweep.json",
+    "sweep.png",
+    *(f"*=*/{name}" for name in ("summary.json", "stats.nc", "stats_long.nc")),
+)
+
+
+#: the options of :func:`~kalcal.api.verification.verify` that :func:`~kalcal.api.verification.check_arguments` checks
+_CHECKED = ("engine", "confidence", "long_run", "batch_size", "form")
+
+
+def sweep_cells(scenario, key: str, values: list[str], n: int, **verify_options: Any) -> list:
+    """The scenario of every value, each checked as :func:`~kalcal.api.verification.verify` would check it,
+    so that a bad value is refused before the first run (and, from the CLI, before any cluster starts)."""
+    cells = [apply_settings(scenario, {key: value}) for value in values]
+    options = {name: verify_options[name] for name in _CHECKED if name in verify_options}
+    for cell in cells:
+        check_arguments(cell, n, **options)
+    return cells
+
+
+@writes_outputs("sweep", names=OUTPUT_NAMES)
+def run_sweep(scenario, key: str, values: list[str], n: int, seed: int, out: str | Path, **verify_options: Any) -> SweepResult:
+    """Verify ``scenario`` with ``key`` set to each value; write ``sweep.csv``, ``sweep.json``, the tuning
+    curve ``sweep.png`` and one run directory ``key=value`` per value, all as one set of outputs.
+
+    Every value uses the same seed, so the curves compare filters on the same realizations.
+    """
+    out = Path(out)
+    cells = sweep_cells(scenario, key, values, n, **verify_options)
+    rows, runs, summaries = [], [], []
+    for value, cell in zip(values, cells):
+        run_dir = out / f"{key}={value}"
+        outcome = verify(cell, n, seed, run_dir, **verify_options)
+        runs.append(run_dir)
+        summaries.append(outcome.summary)
+        row: dict[str, Any] = {key: float(value) if _is_number(value) else value, "verdict": outcome.summary["verdict"]}
+        for check in outcome.checks:
+            row[f"{check.name}_statistic"] = check.statistic
+            row[f"{check.name}_lower"] = check.lower
+            row[f"{check.name}_upper"] = check.upper
+            row[f"{check.name}_passed"] = check.passed
+        rows.append(row)
+    table = pd.DataFrame(rows)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {"table": out / "sweep.csv"}
+    table.to_csv(paths["table"], index=False)
+    paths["summary"] = write_json(
+        out / "sweep.json", {"key": key, "values": values, "realizations": n, "seed": seed, "rows": rows}
+    )
+    from kalcal.plots.sweep import plot_sweep
+
+    paths["figure"] = plot_sweep(table, key, out / "sweep.png")
+    return SweepResult(key, list(values), table, [json_document(summary) for summary in summaries], runs, paths)
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True

@@ -61,7 +61,7 @@ def verify(
         A local Dask cluster of ``workers`` processes, an existing cluster's address, or a Dask client.
     progress : bool or callable
         True: a progress bar on stderr; a callable: ``progress(stage, done, total)``
-        (:mod:`kalcal.jobs.progress`); False: silence.
+        (:mod:`kalcal.montecarlo.progress`); False: silence.
     out : path, optional
         Also write the run's files there, as ``kalcal verify --out`` (the folder is checked before the
         run starts); ``report`` draws the page and figures, showing realization ``realization``.
@@ -85,7 +85,7 @@ def verify(
     """
     from kalcal.api._scenario import resolve
     from kalcal.errors import KalcalError
-    from kalcal.jobs.verify import check_arguments
+    from kalcal.api.verification import check_arguments
     from kalcal.montecarlo.distributed import dask_client
 
     model = resolve(scenario, settings, config, engine=engine, long_run=long_run, models=True)
@@ -110,8 +110,8 @@ def _run(model, n, seed, options, cluster, update, out, report, realization) -> 
     import dataclasses
 
     from kalcal.io.outputs import inputs_of, run_outputs
-    from kalcal.jobs.verify import compute_verification
-    from kalcal.jobs.verify import OUTPUT_NAMES, save_verification
+    from kalcal.api.verification import compute_verification
+    from kalcal.api.verification import OUTPUT_NAMES, save_verification
 
     if out is None:
         with cluster() as client:

@@ -94,7 +94,7 @@ def user_errors() -> Iterator[None]:
 def _progress_bar(title: str):
     """A rich progress bar on a terminal, nothing otherwise: returns (context manager, callback or None).
 
-    The callback is a job's ``progress(stage, done, total)`` (:mod:`kalcal.jobs.progress`): the bar shows
+    The callback is a job's ``progress(stage, done, total)`` (:mod:`kalcal.montecarlo.progress`): the bar shows
     the stage, its count of units and its time.
     """
     if not _error_console().is_terminal:

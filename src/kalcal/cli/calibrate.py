@@ -109,79 +109,31 @@ def calibrate(
             settings_sigma=settings_sigma,
             out=out,
         )
-    summary = result.calibration.summary
-    if scenario == "scale-bias":
-        _print_scale_bias(summary, out, result.paths, strict)
-        return
-    table = _common._table(f"kalcal calibrate {scenario}: {summary['fixes_used']} fixes", f"t = {summary['time']:g} s")
+    summary = result.summary
+    title, caption = result.title()
+    table = _common._table(title, caption)
     table.add_column("quantity")
     table.add_column("estimate", justify="right")
     table.add_column("1-sigma", justify="right")
     table.add_column("unit")
-    trusted = summary.get("sigma_trusted", True)
-    for name in ("bias", "scale", "position", "velocity"):
-        if name in summary:
-            sigma = f"{summary[name + '_std']:.3g}"
-            # the scale's sigma has its own trust (an unobservable scale leaves the bias's standing)
-            shown = summary.get("scale_sigma_trusted", trusted) if name == "scale" else trusted
-            table.add_row(name, f"{summary[name]:.6g}", sigma if shown else f"[bold red]{sigma} NOT trusted[/bold red]",
-                          summary["units"][name])
-    over = summary.get("settings_sigma")
-    if over:
-        # the bias sigma that carries the noise settings' uncertainty, beside the conditional one
-        table.add_row("bias, over the settings", "", f"{over['bias_std']:.3g}", f"{summary['units']['bias']} "
-                      f"({over['ratio']:.3g}x)")
+    for name, value, sigma, trusted, unit in result.table():
+        shown = f"{sigma:.3g}"
+        table.add_row(name, f"{value:.6g}", shown if trusted else f"[bold red]{shown} NOT trusted[/bold red]", unit)
+    for row in getattr(result, "extra_rows", lambda: [])():
+        table.add_row(*row)
     console = _common.console
     console.print(table)
-    if "smoothed" in summary:
-        smoothed = summary["smoothed"]
-        console.print(
-            f"smoothed (RTS) at the first fix, t = {smoothed['time']:g} s: bias {smoothed['bias']:.6g} ± "
-            f"{smoothed['bias_std']:.3g} m/s^2, position {smoothed['position']:.6g} ± {smoothed['position_std']:.3g} m",
-            markup=False,
-        )
-    if summary.get("gate") is not None:
-        rows = summary["rejected_rows"]
-        shown = ", ".join(map(str, rows[:20])) + (f", ... ({len(rows) - 20} more)" if len(rows) > 20 else "")
-        console.print(
-            f"gate at {summary['gate']:g}: {len(rows)} fix(es) rejected" + (f" (GPS rows {shown})" if rows else ""),
-            markup=False,
-        )
-    prior = summary["prior"]
-    console.print(f"bias prior: {prior['bias']} ({prior['bias_std']:.3g} m/s^2)", markup=False)
+    for text, _ in result.lines():
+        console.print(text, markup=False)
     _common._print_warnings(summary)
-    diagnostics = summary["diagnostics"]
-    style = "green" if diagnostics["consistent"] else "bold red"
-    console.print(f"diagnostics: [{style}]{escape(diagnostics['verdict'])}[/{style}]")
+    diagnostics = getattr(result, "diagnostics_line", lambda: None)()
+    if diagnostics is not None:
+        style = "green" if diagnostics[1] else "bold red"
+        console.print(f"diagnostics: [{style}]{escape(diagnostics[0])}[/{style}]")
     _print_stability(summary)
     _common._note_nonfinite(result.paths["summary.json"])
     _common.print_wrote(Path(out), list(result.paths.values()))
-    if strict and (summary["warnings"] or not diagnostics["consistent"]):
-        raise typer.Exit(1)
-
-
-def _print_scale_bias(summary: dict, out: Path, paths: dict[str, Path], strict: bool) -> None:
-    """``kalcal calibrate scale-bias``'s table: the scale error and bias of a sensor against a reference."""
-    unit = summary["units"]["bias"]
-    trusted = summary.get("sigma_trusted", True)
-    table = _common._table(f"kalcal calibrate scale-bias: {summary['samples_used']} samples", f"t = {summary['time']:g} s")
-    table.add_column("quantity")
-    table.add_column("estimate", justify="right")
-    table.add_column("1-sigma", justify="right")
-    table.add_column("unit")
-    for name, value, std, unit_ in (
-        ("scale_error", summary["scale_error"], summary["scale_error_std"], "1"),
-        ("bias", summary["bias"], summary["bias_std"], unit),
-        ("theta1", summary["theta"][0], summary["theta_std"][0], "1"),
-        ("theta2", summary["theta"][1], summary["theta_std"][1], unit),
-    ):
-        table.add_row(name, f"{value:.6g}", f"{std:.3g}" if trusted else f"[bold red]{std:.3g} NOT trusted[/bold red]", unit_)
-    _common.console.print(table)
-    _common._print_warnings(summary)
-    _print_stability(summary)
-    _common._note_nonfinite(paths["summary.json"])
-    _common.print_wrote(Path(out), list(paths.values()))
-    if strict and summary["warnings"]:
+    if strict and result.strict_failed():
         raise typer.Exit(1)
 
 

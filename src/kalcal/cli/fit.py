@@ -61,8 +61,6 @@ def fit(
     calibrate and verify; the noise as rate-free densities), fit.png and, for accel-gps, Kalibr's imu.yaml. `kalcal verify --config DIR/filter.toml` checks the fitted filter.
     """
     from kalcal.api.fit import fit as run_fit
-    from kalcal.scenarios.accel_gps.latency_scan import unresolved
-
     with user_errors():
         result = run_fit(
             scenario, imu=imu, gps=gps, data=data, settings=settings_of(set_), config=config, free=free,
@@ -71,7 +69,7 @@ def fit(
         )
     console = _common.console
     table = _common._table(
-        f"kalcal fit {scenario}: {result.fixes} {'samples' if scenario == 'scale-bias' else 'fixes'}",
+        f"kalcal fit {scenario}: {result.fixes} {result.nobs_name}",
         f"log L = {result.loglik:.6g}",
         f"{result.interval_method} intervals",
     )
@@ -80,7 +78,7 @@ def fit(
     for name, p in result.parameters.items():
         if p.trades_off:
             estimate, interval = "unidentified", f"trades off with {', '.join(p.trades_off)}: fitted point kept"
-        elif unresolved(p):  # a latency held at its input (kalcal.scenarios.accel_gps.latency_scan)
+        elif p.held:  # a latency the fit could not resolve, held at its input
             estimate, interval = "not resolved", "input kept"
         elif not p.identified:
             estimate, interval = "unidentified", "input kept"

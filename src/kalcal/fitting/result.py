@@ -136,7 +136,7 @@ class FitResult:
         The parameters the search maximized log L over (k in the AIC; a latency held at its input is not
         one); None for a result not made by a search (then the parameters not held).
     run : FitRun or None
-        What :meth:`save` writes (:class:`kalcal.jobs.fit.FitRun`): set by :func:`kalcal.fit`.
+        What :meth:`save` writes (:class:`kalcal.fitting.run.FitRun`): set by :func:`kalcal.fit`.
     """
 
     scenario: str
@@ -160,6 +160,8 @@ class FitResult:
     paths: dict[str, Any] = field(default_factory=dict)
     df_model: int | None = None
     run: Any = field(default=None, compare=False)
+    #: what one observation of the likelihood is, for the CLI's title (``fixes``; scale-bias's ``samples``)
+    nobs_name: str = "fixes"
 
     def __post_init__(self) -> None:
         if self.interval_method not in INTERVAL_METHODS:
@@ -212,7 +214,7 @@ class FitResult:
         """
         import pandas as pd
 
-        from kalcal.api._display import level_of, same_level
+        from kalcal.results._display import level_of, same_level
         from kalcal.errors import KalcalError
 
         confidence = level_of(alpha, level, self.confidence)
@@ -258,7 +260,7 @@ class FitResult:
     def summary(self) -> str:
         """The fit as a text table, as statsmodels' ``summary()``: log L, AIC, BIC, observations, then per
         setting the estimate, standard error, interval at the fit's level and unit, then the notes."""
-        from kalcal.api._display import fmt, text_table
+        from kalcal.results._display import fmt, text_table
 
         level = self.confidence
         tail = (1.0 - level) / 2.0
@@ -304,7 +306,7 @@ class FitResult:
     def _repr_html_(self) -> str:
         import html
 
-        from kalcal.api._display import html_facts, html_table
+        from kalcal.results._display import html_facts, html_table
 
         tail = (1.0 - self.confidence) / 2.0
         facts = html_facts(f"kalcal fit {self.scenario}", [
@@ -323,7 +325,7 @@ class FitResult:
 
         if self.run is None:
             raise KalcalError("save: this FitResult holds no files to write (only kalcal.fit's results do)")
-        from kalcal.jobs.fit import save_fit
+        from kalcal.fitting.run import save_fit
 
         return save_fit(self.run, out)
 

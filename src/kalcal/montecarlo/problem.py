@@ -30,6 +30,14 @@ Sampler = Callable[[np.random.Generator, int], tuple[np.ndarray, np.ndarray]]
 BlockSums = Callable[..., None]
 
 
+#: Most filter updates one realization may have, in the run and in its long run (2000: 400 s at the
+#: accel-gps default 5 Hz GPS; the default run has 150, the 120 s long run 600). A block of 4096
+#: realizations holds its draws and residuals per update (about 0.2 MB per update and thread) and the
+#: run keeps E[r_k r_j^T] over every pair of updates, (K p)^2 numbers: 128 MB per copy at K = 2000, p = 2.
+#: Beyond it the arrays would not fit a usual machine, so the run is refused before it starts.
+MAX_UPDATES = 2000
+
+
 @dataclass(frozen=True)
 class ProblemInfo:
     """Names, units and times that label the statistics."""

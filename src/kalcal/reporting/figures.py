@@ -27,8 +27,6 @@ from kalcal.reporting.theory import SIGMA_EXACT, SIGMA_EXACT_TITLE, sigma_exact_
 if TYPE_CHECKING:
     import xarray as xr
 
-#: the scenario of the source report, whose figure numbers the page quotes
-REPORT_SCENARIO = "accel-gps"
 #: figures of the source report, by file stem
 REPORT_NUMBERS = {
     "state_bias": "5.1",
@@ -256,7 +254,7 @@ def render_figures(
     figure_dir: str | Path,
     long_dataset: xr.Dataset | None = None,
     *,
-    scenario: str = REPORT_SCENARIO,
+    source_report: bool = True,
     steady: SteadyStateView | None = None,
     progress: Callable[[int, int], None] | None = None,
     exact_cov: np.ndarray | None = None,
@@ -277,8 +275,9 @@ def render_figures(
         so it holds only this page's figures; a PNG already in a folder given here is left as it is.
     long_dataset : xarray.Dataset, optional
         ``stats_long.nc`` of the same run, for figure 5.8.
-    scenario : str
-        The run's scenario: figures carry the source report's numbers only for ``REPORT_SCENARIO``.
+    source_report : bool
+        Whether the run's scenario is the source report's
+        (:attr:`~kalcal.scenarios.protocol.Scenario.SOURCE_REPORT`): only then do figures carry its numbers.
     steady : SteadyStateView, optional
         The filter's steady state, drawn against P_k (or a note saying why there is none).
     progress : callable, optional
@@ -294,7 +293,8 @@ def render_figures(
     skipped : list of SkippedFigure
     """
     specs = _realization_specs(data) + _statistics_specs(dataset, long_dataset, steady, exact_cov)
-    return _draw_specs(specs, figure_dir, scenario, progress), _skipped(dataset, long_dataset, scenario, steady, exact_cov, exact_reason)
+    return (_draw_specs(specs, figure_dir, source_report, progress),
+            _skipped(dataset, long_dataset, source_report, steady, exact_cov, exact_reason))
 
 
 def _statistics_specs(dataset, long_dataset, steady: SteadyStateView | None, exact_cov) -> list[_Spec]:
@@ -304,11 +304,11 @@ def _statistics_specs(dataset, long_dataset, steady: SteadyStateView | None, exa
     return specs
 
 
-def _draw_specs(specs: list[_Spec], figure_dir: str | Path, scenario: str, progress) -> list[FigureEntry]:
+def _draw_specs(specs: list[_Spec], figure_dir: str | Path, source_report: bool, progress) -> list[FigureEntry]:
     """Draw ``specs`` into ``figure_dir`` (created); their entries in page order."""
     figure_dir = Path(figure_dir)
     figure_dir.mkdir(parents=True, exist_ok=True)
-    numbers = REPORT_NUMBERS if scenario == REPORT_SCENARIO else {}
+    numbers = REPORT_NUMBERS if source_report else {}
     paths = []
     for done, spec in enumerate(specs, start=1):
         paths.append(spec.draw(figure_dir / f"{spec.key}.png"))
@@ -321,9 +321,9 @@ def _draw_specs(specs: list[_Spec], figure_dir: str | Path, scenario: str, progr
     return page_order(figures)
 
 
-def _skipped(dataset, long_dataset, scenario: str, steady: SteadyStateView | None, exact_cov, exact_reason) -> list[SkippedFigure]:
+def _skipped(dataset, long_dataset, source_report: bool, steady: SteadyStateView | None, exact_cov, exact_reason) -> list[SkippedFigure]:
     """The figures a page leaves out, and why, in page order."""
-    numbers = REPORT_NUMBERS if scenario == REPORT_SCENARIO else {}
+    numbers = REPORT_NUMBERS if source_report else {}
     skipped = []
     if long_dataset is None:
         skipped.append(

@@ -28,6 +28,7 @@ MODEL_FILE = "model-file"
 
 __all__ = [
     "MODEL_FILE", "SCENARIOS", "build_scenario", "is_model_file", "load_model_file", "scenario_class", "scenario_names",
+    "log_defaults", "noise_filter", "scenario_of_summary", "settings_assignments",
 ]
 
 
@@ -93,3 +94,41 @@ def build_scenario(
     # a job given the scenario never removes or replaces the config it was read from
     files = {str(config): from_file} if config is not None else None  # the file's own, overridden ones too
     return mark_inputs(apply_settings(scenario, settings, sources, files), config)
+
+
+def settings_assignments(settings: Mapping[str, Mapping[str, Any]]) -> list[str]:
+    """``{"truth": {"bias_std": 0.1, "x": None}}`` -> ``["truth.bias_std=0.1"]`` (None: left at its default)."""
+    return [
+        f"{section}.{key}={value}"
+        for section, values in settings.items()
+        for key, value in values.items()
+        if value is not None
+    ]
+
+
+def scenario_of_summary(name: str, settings: Mapping[str, Mapping[str, Any]]):
+    """The scenario a run's ``summary.json`` was made with, from its ``scenario`` and ``settings``: a model
+    file's from its matrices (its settings are sections model, filter and truth), a built-in's by its name
+    with those settings assigned."""
+    from kalcal.scenarios.model_file.model import CustomModelScenario, is_custom_settings
+
+    if is_custom_settings(settings):  # a model file's run: its matrices are the settings
+        return CustomModelScenario.from_settings(settings)
+    return build_scenario(name, None, settings_assignments(settings))
+
+
+def log_defaults(scenario: Any) -> dict[str, Any]:
+    """The settings a command on logged data starts from for ``scenario`` (a built-in's name or a built
+    scenario): its class's ``LOG_DEFAULTS`` (accel-gps: the trapezoid), {} for anything else."""
+    cls = scenario_class(str(scenario)) if isinstance(scenario, (str, Path)) and str(scenario) in _BUILT_IN else type(scenario)
+    return dict(getattr(cls, "LOG_DEFAULTS", {}))
+
+
+#: the module of the scenario whose ``[filter]`` settings ``kalcal noise`` writes (an accelerometer's
+#: densities: accel-gps's filter), with ``filter_settings``, ``per_sample_settings`` and ``filter_toml``
+_NOISE_FILTER = "kalcal.scenarios.accel_gps.noise_settings"
+
+
+def noise_filter():
+    """The module that turns an identified accelerometer noise into a scenario's ``[filter]`` settings."""
+    return importlib.import_module(_NOISE_FILTER)

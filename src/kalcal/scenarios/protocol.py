@@ -68,6 +68,9 @@ class Scenario(Protocol):
 
     NAME: ClassVar[str]  #: what the registry and summary.json call it
     SUMMARY: ClassVar[str]  #: one line for --help and the docs
+    #: whether the source report studied this scenario: the page quotes its figure numbers and summary.json
+    #: gives E[r_k r_j^T] at its pair of times only then (elsewhere they would name another study's numbers)
+    SOURCE_REPORT: ClassVar[bool]
 
     @property
     def capabilities(self) -> Capabilities:
@@ -106,7 +109,27 @@ class Scenario(Protocol):
         ...
 
     def simulate(self, seed: int) -> Any:
-        """One realization drawn with ``seed``, as logs (:class:`kalcal.jobs.simulate.Simulation`)."""
+        """One realization drawn with ``seed``, as logs (:class:`kalcal.results.simulation.SimulationResult`)."""
+        ...
+
+    #: the settings a command on logged data (calibrate, fit) starts from, before the user's
+    LOG_DEFAULTS: ClassVar[dict[str, Any]]
+
+    def output_names(self, command: str) -> tuple[str, ...]:
+        """The files ``command`` (``"simulate"``, ``"calibrate"``, ``"fit"``) writes, for its staged set."""
+        ...
+
+    def calibrate(self, logs: dict[str, Any], options: Any) -> Any:
+        """The calibration of ``logs`` (the scenario's own: ``imu`` and ``gps``, or ``data``; paths or
+        DataFrames; a log it does not read, or one missing, refused in one line) with ``options``
+        (:class:`~kalcal.results.calibration.CalibrateOptions`): a
+        :class:`~kalcal.results.calibration.CalibrationResult` (or the scenario's subclass of it)."""
+        ...
+
+    def fit(self, logs: dict[str, Any], options: Any) -> Any:
+        """The noise settings fitted to ``logs`` by maximum likelihood with ``options``
+        (:class:`~kalcal.fitting.run.FitOptions`): a :class:`~kalcal.fitting.result.FitResult` whose ``run``
+        holds the files it writes."""
         ...
 
 

@@ -47,7 +47,7 @@ import dataclasses
 import math
 import weakref
 from dataclasses import dataclass, field, fields
-from typing import ClassVar, Literal
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 
@@ -376,6 +376,8 @@ class AccelGpsScenario:
 
     NAME: ClassVar[str] = "accel-gps"
     SUMMARY: ClassVar[str] = "an accelerometer's bias (and scale) estimated with GPS position and velocity fixes"
+    #: the source report studied this scenario: its figure numbers and its residual pair are this one's
+    SOURCE_REPORT: ClassVar[bool] = True
     capabilities: ClassVar[Capabilities] = Capabilities(
         exact_analysis=True, fixed_gains=True, engines=("exact", "sampled")
     )
@@ -426,10 +428,32 @@ class AccelGpsScenario:
         return False
 
     def simulate(self, seed: int):
-        """The accelerometer and GPS logs of one realization (:func:`kalcal.jobs.simulate.compute_accel_gps_simulation`)."""
-        from kalcal.jobs.simulate import compute_accel_gps_simulation
+        """The accelerometer and GPS logs of one realization (:func:`kalcal.scenarios.accel_gps.simulate.compute_accel_gps_simulation`)."""
+        from kalcal.scenarios.accel_gps.simulate import compute_accel_gps_simulation
 
         return compute_accel_gps_simulation(self, seed)
+
+    #: what a command on logged data starts from: the trapezoid's exact discretization of the logged motion
+    LOG_DEFAULTS: ClassVar[dict[str, Any]] = {"scenario.integration": "trapezoid"}
+
+    def output_names(self, command: str) -> tuple[str, ...]:
+        """The files ``command`` (simulate, calibrate, fit) writes."""
+        from kalcal.scenarios.accel_gps import calibrate, fit_run, simulate
+
+        return {"simulate": simulate.OUTPUT_NAMES, "calibrate": calibrate.AccelGpsCalibrationResult.OUTPUT_NAMES,
+                "fit": fit_run.OUTPUT_NAMES}[command]
+
+    def calibrate(self, logs, options):
+        """The calibration of ``logs`` (``imu``, ``gps``) with ``options`` (:class:`~kalcal.results.calibration.CalibrateOptions`)."""
+        from kalcal.scenarios.accel_gps.calibrate import calibrate_logs
+
+        return calibrate_logs(self, logs, options)
+
+    def fit(self, logs, options):
+        """The noise settings fitted to ``logs`` (``imu``, ``gps``) with ``options`` (:class:`~kalcal.fitting.run.FitOptions`)."""
+        from kalcal.scenarios.accel_gps.fit_run import fit_logs
+
+        return fit_logs(self, logs, options)
 
     def __post_init__(self) -> None:
         # ``truth`` as given (a density, or an unset per-sample value) is kept for the settings layer

@@ -128,6 +128,7 @@ class CustomModelScenario:
 
     NAME: ClassVar[str] = "custom"
     SUMMARY: ClassVar[str] = "a linear Gaussian model read from a TOML file (docs/custom-models.md)"
+    SOURCE_REPORT: ClassVar[bool] = False
     capabilities: ClassVar[Capabilities] = Capabilities(
         exact_analysis=True, fixed_gains=True, commands=frozenset({"verify", "analyze", "report"})
     )
@@ -174,6 +175,24 @@ class CustomModelScenario:
         from kalcal.errors import KalcalError
 
         raise KalcalError(f"{self.model.name}: kalcal simulate writes the built-in scenarios' logs, not a model file's")
+
+    LOG_DEFAULTS: ClassVar[dict[str, Any]] = {}
+
+    def output_names(self, command: str) -> tuple[str, ...]:
+        from kalcal.scenarios.protocol import require
+
+        require(self, command)
+        return ()
+
+    def calibrate(self, logs, options):
+        from kalcal.scenarios.protocol import require
+
+        require(self, "calibrate")
+
+    def fit(self, logs, options):
+        from kalcal.scenarios.protocol import require
+
+        require(self, "fit")
 
     model: CustomModelInfo
     filter: LinearGaussianModel

@@ -95,6 +95,7 @@ def fit_scale_bias(
         scenario.NAME,
         fit,
         fixes=samples,
+        nobs_name="samples",
         adequate=adequate,
         adequacy=adequacy,
         diagnostics=diagnostics.as_dict(),

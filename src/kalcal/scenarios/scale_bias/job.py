@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import shlex
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -12,11 +13,13 @@ from kalcal.scenarios.scale_bias.calibration import UNOBSERVABLE_RATIO, calibrat
 from kalcal.calibration.windows import check_windows, scale_bias_stability
 from kalcal.errors import DataError
 from kalcal.io.logs import is_frame, numeric_columns, read_table, require_increasing, source_name
-from kalcal.io.outputs import mark_inputs, writes_outputs
-from kalcal.jobs.calibrate import Calibration
-from kalcal.jobs.calibrate_warnings import untrusted_warning
-from kalcal.jobs.simulate import OUTPUT_NAMES as SIMULATION_NAMES
-from kalcal.jobs.simulate import Simulation, save_simulation
+from kalcal.io.outputs import mark_inputs
+from kalcal.calibration.warnings import untrusted_warning
+from kalcal.results.calibration import CalibrationResult
+from kalcal.results.simulation import SimulationResult
+from kalcal.fitting.run import FitRun, filter_toml
+from kalcal.fitting.run import document as fit_document
+from kalcal.montecarlo.problem import MAX_UPDATES
 from kalcal.models.config import section_values
 from kalcal.scenarios.scale_bias.settings import STATE_NAMES, ScaleBiasScenario
 from kalcal.scenarios.scale_bias.theta import scale_bias_from_theta
@@ -26,14 +29,13 @@ if TYPE_CHECKING:  # for the annotations; pandas is imported where a DataFrame i
     import pandas as pd
 
 
-@writes_outputs("simulate scale-bias", names=SIMULATION_NAMES["simulate scale-bias"])
 def simulate_scale_bias(scenario: ScaleBiasScenario, seed: int, out: str | Path) -> dict[str, Path]:
     """Write ``data.csv`` and ``truth.json`` for one realization drawn with ``seed``
     (:func:`compute_scale_bias_simulation`)."""
-    return save_simulation(compute_scale_bias_simulation(scenario, seed), out)
+    return compute_scale_bias_simulation(scenario, seed).save(out)
 
 
-def compute_scale_bias_simulation(scenario: ScaleBiasScenario, seed: int) -> Simulation:
+def compute_scale_bias_simulation(scenario: ScaleBiasScenario, seed: int) -> SimulationResult:
     """One realization drawn with ``seed``, in memory.
 
     data: time [s], reference [signal unit], sensor [signal unit], one row per sample.
@@ -63,7 +65,7 @@ def compute_scale_bias_simulation(scenario: ScaleBiasScenario, seed: int) -> Sim
             {"scale_error_path": a, "bias_path": b, "theta1_path": theta[:, 0], "theta2_path": theta[:, 1]}
         )
     truth["settings"] = section_values(scenario)
-    return Simulation("simulate scale-bias", {"data": data}, {"truth": truth})
+    return SimulationResult(scenario.NAME, {"data": data}, truth, ("data.csv", "truth.json"))
 
 
 #: the filter settings that give a prior of a and b
@@ -89,7 +91,7 @@ def compute_scale_bias_calibration(
     sensor: str = "sensor",
     prior: str | None = None,
     windows: int = 2,
-) -> Calibration:
+) -> ScaleBiasCalibrationResult:
     """Calibrate from a log (CSV or Parquet, or a DataFrame) with a reference and a sensor column; nothing is written.
 
     A ``time`` column [s] is used when the log has one (it must increase); otherwise sample k = 1..K is
@@ -191,5 +193,101 @@ def compute_scale_bias_calibration(
         "warnings": warnings,
         "units": {"time": "s", "theta1": "1", "theta2": unit, "scale_error": "1", "bias": unit},
     }
-    calibration = Calibration("calibrate scale-bias", estimates, summary)
+    calibration = ScaleBiasCalibrationResult(
+        scenario.NAME, summary["bias"], summary["bias_std"], summary["scale_error"], summary["scale_error_std"],
+        np.asarray(summary["theta_covariance"], dtype=float), tuple(STATE_NAMES),
+        {key: summary[key] for key in ("mean_nis", "nis_bounds", "consistent", "observability")}, warnings, summary,
+        estimates, sigma_trusted=summary["sigma_trusted"], scale_sigma_trusted=summary["sigma_trusted"],
+    )
     return calibration if is_frame(source) else mark_inputs(calibration, source)
+
+
+@dataclass(frozen=True, repr=False, eq=False)
+class ScaleBiasCalibrationResult(CalibrationResult):
+    """A scale-bias calibration: the base's scale (the scale error a) and bias b, with theta = (a, b)'s
+    covariance as ``covariance`` (over theta1, theta2) and the mean NIS, its bounds, ``consistent`` and the
+    observability ratios as ``diagnostics``."""
+
+    def table(self) -> list[tuple[str, float, float, bool, str]]:
+        s = self.summary
+        unit, trusted = s["units"]["bias"], s.get("sigma_trusted", True)
+        return [("scale_error", s["scale_error"], s["scale_error_std"], trusted, "1"),
+                ("bias", s["bias"], s["bias_std"], trusted, unit),
+                ("theta1", s["theta"][0], s["theta_std"][0], trusted, "1"),
+                ("theta2", s["theta"][1], s["theta_std"][1], trusted, unit)]
+
+    def title(self) -> tuple[str, str]:
+        return f"kalcal calibrate {self.scenario}: {self.summary['samples_used']} samples", f"t = {self.summary['time']:g} s"
+
+
+
+def _data_of(scenario: ScaleBiasScenario, logs: dict[str, Any]):
+    """The log of ``logs`` (``data``); a missing one, or accel-gps's logs, refused in one line."""
+    from kalcal.errors import KalcalError
+
+    if logs.get("data") is None:
+        raise KalcalError("--data: required for scale-bias (a log with a reference and a sensor column)")
+    if logs.get("imu") is not None or logs.get("gps") is not None:
+        raise KalcalError("--imu/--gps: not used by scale-bias (it reads --data)")
+    return logs["data"]
+
+
+def calibrate_logs(scenario: ScaleBiasScenario, logs: dict[str, Any], options) -> ScaleBiasCalibrationResult:
+    """:meth:`ScaleBiasScenario.calibrate`: the options checked, then :func:`compute_scale_bias_calibration`."""
+    options.refuse_unless(scenario.NAME, ("reference", "sensor", "prior", "windows", "settings_sigma", "imu_columns",
+                                          "gps_columns", "init", "max_imu_gap", "on_gap"), "accel-gps")
+    data = _data_of(scenario, logs)
+    return compute_scale_bias_calibration(scenario, data, reference=options.reference, sensor=options.sensor,
+                                          prior=options.prior, windows=options.windows)
+
+
+def compute_scale_bias_fit(
+    scenario,
+    data_path,
+    *,
+    free: list[str] | None = None,
+    reference: str = "reference",
+    sensor: str = "sensor",
+    profile: bool = False,
+    confidence: float = 0.95,
+) -> FitRun:
+    """Fit a scale-bias log (a reference and a sensor column, optionally ``time`` [s]); nothing is written."""
+    from kalcal.scenarios.scale_bias.fit import fit_scale_bias
+
+    frame = read_table(data_path, "data", columns=(reference, sensor))
+    name = source_name(data_path, "data", frame)
+    if reference == sensor:
+        raise DataError(f"{name}: --reference and --sensor name the same column {reference!r}")
+    columns = numeric_columns(frame, name, {"reference": reference, "sensor": sensor}, allow_nan=("reference", "sensor"))
+    if "time" in frame.columns and "time" not in (reference, sensor):
+        time = numeric_columns(frame, name, ("time",))["time"]
+        require_increasing(time, name)
+        rate = float(1.0 / np.median(np.diff(time))) if time.size > 1 else None
+    else:
+        time, rate = np.arange(1, len(frame) + 1) / scenario.scenario.rate, None
+    if np.count_nonzero(np.isfinite(columns["reference"]) & np.isfinite(columns["sensor"])) < 3:
+        raise DataError(f"{name}: needs at least three samples with both a reference and a sensor value")
+    result = fit_scale_bias(scenario, time, columns["reference"], columns["sensor"], free=free, profile=profile,
+                            confidence=confidence, rate=rate, max_updates=MAX_UPDATES)
+    header = [
+        f"kalcal fit scale-bias: noise settings fitted by maximum likelihood to {name}",
+        f"({result.fixes} samples in the likelihood, log L = {result.loglik:.6g}, {result.interval_method} intervals).",
+        "`kalcal verify scale-bias --config` on this file runs the fitted filter against these settings as the truth,",
+        "over [scenario] duration and the scenario's excitation, not the log's.",
+    ]
+    if not result.adequate:
+        header.append(f"NOT ADEQUATE: {result.adequacy}")
+    document = fit_document(result, "fit scale-bias", {"data": name}, list(free or result.parameters))
+    run = FitRun("fit scale-bias", result, document, filter_toml(result, header))
+    return run if is_frame(data_path) else mark_inputs(run, data_path)
+
+
+def fit_logs(scenario: ScaleBiasScenario, logs: dict[str, Any], options) -> FitRun:
+    """:meth:`ScaleBiasScenario.fit`: the log checked, then :func:`compute_scale_bias_fit`."""
+    from kalcal.errors import KalcalError
+
+    if options.gate is not None:
+        raise KalcalError("--gate: not available for scale-bias (accel-gps only)")
+    data = _data_of(scenario, logs)
+    return compute_scale_bias_fit(scenario, data, free=options.free, reference=options.reference, sensor=options.sensor,
+                                  profile=options.profile, confidence=options.confidence)

@@ -45,7 +45,7 @@ enough that the data, not the prior, decide the final estimate (final sigma of t
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import ClassVar, Literal, NamedTuple
+from typing import Any, ClassVar, Literal, NamedTuple
 
 import numpy as np
 
@@ -222,6 +222,7 @@ class ScaleBiasScenario:
 
     NAME: ClassVar[str] = "scale-bias"
     SUMMARY: ClassVar[str] = "a sensor's scale and bias estimated against a reference reading (the regressors are data)"
+    SOURCE_REPORT: ClassVar[bool] = False
     capabilities: ClassVar[Capabilities] = Capabilities(
         exact_analysis=False,
         fixed_gains=False,
@@ -284,6 +285,28 @@ class ScaleBiasScenario:
         from kalcal.scenarios.scale_bias.job import compute_scale_bias_simulation
 
         return compute_scale_bias_simulation(self, seed)
+
+    LOG_DEFAULTS: ClassVar[dict[str, Any]] = {}
+
+    def output_names(self, command: str) -> tuple[str, ...]:
+        """The files ``command`` (simulate, calibrate, fit) writes."""
+        from kalcal.fitting.run import OUTPUT_NAMES as FIT_NAMES
+        from kalcal.scenarios.scale_bias.job import ScaleBiasCalibrationResult
+
+        return {"simulate": ("data.csv", "truth.json"), "calibrate": ScaleBiasCalibrationResult.OUTPUT_NAMES,
+                "fit": FIT_NAMES}[command]
+
+    def calibrate(self, logs, options):
+        """The calibration of ``logs`` (``data``) with ``options`` (:class:`~kalcal.results.calibration.CalibrateOptions`)."""
+        from kalcal.scenarios.scale_bias.job import calibrate_logs
+
+        return calibrate_logs(self, logs, options)
+
+    def fit(self, logs, options):
+        """The noise settings fitted to ``logs`` (``data``) with ``options`` (:class:`~kalcal.fitting.run.FitOptions`)."""
+        from kalcal.scenarios.scale_bias.job import fit_logs
+
+        return fit_logs(self, logs, options)
 
     def __post_init__(self) -> None:
         # Unset filter settings come from the truth, whose zero stds are legal there (a known parameter) but

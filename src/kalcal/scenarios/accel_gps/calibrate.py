@@ -1,9 +1,8 @@
-"""``kalcal calibrate accel-gps``: read logs, run the filter (in memory), write estimates and a summary."""
+"""``kalcal calibrate accel-gps``: read the logs, run the filter, and the typed result it makes (:class:`AccelGpsCalibrationResult`)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
 from pathlib import Path
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
@@ -14,9 +13,9 @@ from kalcal.calibration.plausibility import CalibrationWarning
 from kalcal.calibration.windows import accel_gps_stability, check_windows
 from kalcal.io.logs import check_gnss_columns, is_frame, numeric_columns, parse_column_map, read_table, require_increasing, source_name
 from kalcal.stats.nis import gate_excess
-from kalcal.io.outputs import mark_inputs, writes_outputs
-from kalcal.io.results import write_csv, write_json
-from kalcal.jobs.calibrate_warnings import fit_command, fit_extra, settings_warning, sigma_note, untrusted_warning
+from kalcal.io.outputs import mark_inputs
+from kalcal.calibration.warnings import settings_warning, sigma_note, untrusted_warning
+from kalcal.results.calibration import CalibrationResult
 from kalcal.scenarios.accel_gps.settings import AccelGpsScenario, AccelGpsSettings
 from kalcal.models.config import section_values
 
@@ -38,66 +37,6 @@ def stated_rates(scenario: AccelGpsScenario) -> dict[str, float]:
     }
 
 
-@dataclass(frozen=True)
-class Calibration:
-    """A calibration computed in memory, nothing written yet.
-
-    Attributes
-    ----------
-    command : str
-        The command whose outputs these are (``"calibrate accel-gps"``, ``"calibrate scale-bias"``).
-    columns : dict of str to ndarray
-        ``estimates.csv``'s columns, each of shape (rows,): one row per fix (accel-gps) or sample
-        (scale-bias), SI units.
-    summary : dict
-        ``summary.json``'s content.
-    """
-
-    command: str
-    columns: dict[str, np.ndarray]
-    summary: dict[str, Any]
-
-    @cached_property
-    def estimates(self) -> pd.DataFrame:
-        """``estimates.csv`` as a DataFrame, made when first read (pandas is loaded then): a copy of
-        ``columns``, which :func:`save_calibration` writes."""
-        import pandas as pd
-
-        return pd.DataFrame(self.columns, copy=True)
-
-
-#: the files of a calibration of each scenario
-OUTPUT_NAMES = {
-    "calibrate accel-gps": ("estimates.csv", "summary.json", "calibration.png"),
-    "calibrate scale-bias": ("estimates.csv", "summary.json"),
-}
-
-
-def save_calibration(calibration: Calibration, out: str | Path) -> dict[str, Path]:
-    """Write ``estimates.csv``, ``summary.json`` and (accel-gps) ``calibration.png`` into ``out`` as one set
-    (:mod:`kalcal.io.outputs`); returns the files by name. The logs it was read from are never removed."""
-    names = OUTPUT_NAMES[calibration.command]
-
-    @writes_outputs(calibration.command, names=names)
-    def write(calibration: Calibration, out: Path) -> dict[str, Path]:
-        out = Path(out)
-        paths = {}
-        paths["estimates.csv"] = write_csv(out / "estimates.csv", calibration.columns)
-        paths["summary.json"] = write_json(out / "summary.json", calibration.summary)
-        if "calibration.png" in names:
-            from kalcal.plots.calibration import plot_calibration
-
-            columns = calibration.columns
-            normalized = np.column_stack([columns["innovation_position"], columns["innovation_velocity"]])
-            paths["calibration.png"] = plot_calibration(
-                columns["time"], columns["bias"], columns["bias_std"], normalized, out / "calibration.png",
-                note=sigma_note(calibration.summary),
-            )
-        return paths
-
-    return write(calibration, out)
-
-
 def compute_accel_gps_calibration(
     scenario: AccelGpsScenario,
     imu_path: str | Path | pd.DataFrame,
@@ -114,11 +53,11 @@ def compute_accel_gps_calibration(
     gate: float | None = None,
     settings_sigma: bool = True,
     fit_options: Sequence[str] = (),
-) -> Calibration:
+) -> AccelGpsCalibrationResult:
     """Calibrate from an accelerometer log (time [s], accel [m/s^2]) and a GPS log (time [s], position [m],
     velocity [m/s], optionally position_std [m] and velocity_std [m/s] per fix): files or DataFrames.
 
-    Nothing is written: :func:`save_calibration` writes ``estimates.csv`` (one row per fix used),
+    Nothing is written: the result's ``save(out)`` writes ``estimates.csv`` (one row per fix used),
     ``summary.json`` and ``calibration.png``. Column names are mapped with ``"role=column,..."``. ``form`` is the filter's
     update form (joseph, standard or sqrt); ``smooth`` adds the RTS-smoothed states and their 1-sigma
     (``smoothed_position``, ..., ``smoothed_bias_std``) to ``estimates.csv`` and a ``smoothed`` object to
@@ -329,7 +268,92 @@ def compute_accel_gps_calibration(
         summary["smoothed"] = _smoothed_summary(smoothed, std, scenario.state_names)
     # the log files (not DataFrames) are the run's inputs: a folder's set never removes them
     files = [p for p in (imu_source, gps_source) if not is_frame(p)]
-    return mark_inputs(Calibration("calibrate accel-gps", estimates, summary), *files)
+    result = AccelGpsCalibrationResult(
+        scenario.NAME, summary["bias"], summary["bias_std"], summary.get("scale"), summary.get("scale_std"),
+        np.asarray(summary["covariance"], dtype=float), tuple(summary["covariance_states"]), summary["diagnostics"],
+        summary["warnings"], summary, estimates, sigma_trusted=summary["sigma_trusted"], settings_sigma=over,
+        scale_sigma_trusted=summary.get("scale_sigma_trusted"),
+    )
+    return mark_inputs(result, *files)
+
+
+@dataclass(frozen=True, repr=False, eq=False)
+class AccelGpsCalibrationResult(CalibrationResult):
+    """An accel-gps calibration: the base's estimates (bias, and the scale with a scale state) with the
+    position and velocity, the bias's sigma over the noise settings (``settings_sigma``), and
+    ``calibration.png`` among its files.
+
+    ``settings_sigma`` is a :class:`~kalcal.scenarios.accel_gps.settings_sigma.SettingsSigma` (``bias_std``,
+    ``ratio``, ``at``, ...) or None when not computed.
+    """
+
+    OUTPUT_NAMES = ("estimates.csv", "summary.json", "calibration.png")
+
+    def _save_more(self, out: Path) -> dict[str, Path]:
+        from kalcal.plots.calibration import plot_calibration
+
+        columns = self.columns
+        normalized = np.column_stack([columns["innovation_position"], columns["innovation_velocity"]])
+        path = plot_calibration(columns["time"], columns["bias"], columns["bias_std"], normalized,
+                                out / "calibration.png", note=sigma_note(self.summary))
+        return {"calibration.png": path}
+
+    def table(self) -> list[tuple[str, float, float, bool, str]]:
+        s = self.summary
+        trusted = s.get("sigma_trusted", True)
+        # the scale's sigma has its own trust (an unobservable scale leaves the bias's standing)
+        return [(name, s[name], s[name + "_std"], s.get("scale_sigma_trusted", trusted) if name == "scale" else trusted,
+                 s["units"][name]) for name in ("bias", "scale", "position", "velocity") if name in s]
+
+    def title(self) -> tuple[str, str]:
+        return f"kalcal calibrate {self.scenario}: {self.summary['fixes_used']} fixes", f"t = {self.summary['time']:g} s"
+
+    def extra_rows(self) -> list[tuple[str, str, str, str]]:
+        """Rows the CLI adds below the table: the bias sigma over the settings, beside the conditional one."""
+        over = self.summary.get("settings_sigma")
+        if not over:
+            return []
+        return [("bias, over the settings", "", f"{over['bias_std']:.3g}", f"{self.summary['units']['bias']} ({over['ratio']:.3g}x)")]
+
+    def lines(self) -> list[tuple[str, bool | None]]:
+        s, out = self.summary, []
+        if "smoothed" in s:
+            smoothed = s["smoothed"]
+            out.append((f"smoothed (RTS) at the first fix, t = {smoothed['time']:g} s: bias {smoothed['bias']:.6g} ± "
+                        f"{smoothed['bias_std']:.3g} m/s^2, position {smoothed['position']:.6g} ± {smoothed['position_std']:.3g} m", None))
+        if s.get("gate") is not None:
+            rows = s["rejected_rows"]
+            shown = ", ".join(map(str, rows[:20])) + (f", ... ({len(rows) - 20} more)" if len(rows) > 20 else "")
+            out.append((f"gate at {s['gate']:g}: {len(rows)} fix(es) rejected" + (f" (GPS rows {shown})" if rows else ""), None))
+        prior = s["prior"]
+        out.append((f"bias prior: {prior['bias']} ({prior['bias_std']:.3g} m/s^2)", None))
+        return out
+
+    def diagnostics_line(self) -> tuple[str, bool] | None:
+        """The innovation diagnostics' verdict and whether it is consistent."""
+        return self.diagnostics["verdict"], bool(self.diagnostics["consistent"])
+
+    def strict_failed(self) -> bool:
+        return bool(self.warnings) or not self.diagnostics["consistent"]
+
+
+def fit_command(imu: str, gps: str, extra: Sequence[str] = ()) -> str:
+    """The ``kalcal fit accel-gps`` command line for the same logs and arguments (``extra``: the options
+    beyond the logs, already spelled as on the command line), quoted where a word needs it."""
+    import shlex
+
+    return " ".join(["kalcal", "fit", "accel-gps", "--imu", shlex.quote(imu), "--gps", shlex.quote(gps),
+                     *(shlex.quote(word) for word in extra), "--out", "fit"])
+
+
+def fit_extra(imu_columns, gps_columns, init: str, gate, options: Sequence[str]) -> list[str]:
+    """The options of ``kalcal fit accel-gps`` that repeat this calibration's: columns, start, gate, config."""
+    extra = [*(["--imu-columns", imu_columns] if imu_columns else []), *(["--gps-columns", gps_columns] if gps_columns else [])]
+    if init != "first-fix":
+        extra += ["--init", init]
+    if gate is not None:
+        extra += ["--gate", f"{gate:g}"]
+    return extra + list(options)
 
 
 def _prior_kind(result, scenario: AccelGpsScenario) -> str:
@@ -351,3 +375,31 @@ def _smoothed_summary(smoothed, filter_std, names: tuple[str, ...]) -> dict[str,
     summary["covariance_states"] = list(names)
     summary["mean_std_ratio"] = {name: float(np.mean(std[:, i] / filter_std[:, i])) for i, name in enumerate(names)}
     return summary
+
+
+def _logs_of(scenario, logs: dict[str, Any]) -> tuple[Any, Any]:
+    """The accelerometer and GPS logs of ``logs``; a missing one, or ``data``, refused in one line."""
+    from kalcal.errors import KalcalError
+
+    missing = [f"--{name}" for name in ("imu", "gps") if logs.get(name) is None]
+    if missing:
+        raise KalcalError(f"{' and '.join(missing)}: required for {scenario.NAME}")
+    if logs.get("data") is not None:
+        raise KalcalError(f"--data: not used by {scenario.NAME} (it reads --imu and --gps)")
+    return logs["imu"], logs["gps"]
+
+
+def calibrate_logs(scenario: AccelGpsScenario, logs: dict[str, Any], options) -> AccelGpsCalibrationResult:
+    """:meth:`AccelGpsScenario.calibrate`: the options checked, then :func:`compute_accel_gps_calibration`."""
+    from kalcal.errors import KalcalError
+
+    imu, gps = _logs_of(scenario, logs)
+    options.refuse_unless(scenario.NAME, ("imu_columns", "gps_columns", "init", "max_imu_gap", "on_gap", "form",
+                                          "smooth", "gate", "settings_sigma", "windows"), "scale-bias")
+    if options.on_gap not in ("continue", "stop"):
+        raise KalcalError(f"--on-gap: expected continue or stop, got {options.on_gap!r}")
+    return compute_accel_gps_calibration(
+        scenario, imu, gps, imu_columns=options.imu_columns, gps_columns=options.gps_columns, init=options.init,
+        max_imu_gap=options.max_imu_gap, stop_on_gap=options.on_gap == "stop", form=options.form, smooth=options.smooth,
+        gate=options.gate, windows=options.windows, settings_sigma=options.settings_sigma, fit_options=options.fit_options,
+    )

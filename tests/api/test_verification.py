@@ -9,7 +9,7 @@ import xarray as xr
 from typer.testing import CliRunner
 
 from kalcal.cli import app
-from kalcal.jobs.verify import verify
+from kalcal.api.verification import verify
 from kalcal.scenarios import build_scenario
 from kalcal.stats.bounds import normal_bound
 

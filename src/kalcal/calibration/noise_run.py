@@ -20,73 +20,9 @@ from kalcal.errors import DataError
 from kalcal.io.logs import numeric_columns, parse_column_map, read_table, require_increasing, source_name, topic_of
 from kalcal.io.outputs import final_path, inputs_of, mark_inputs, run_outputs
 from kalcal.io.results import write_json
-from kalcal.scenarios.accel_gps.settings import AccelGpsFilter, per_sample
+from kalcal.scenarios import noise_filter
 
 IMU_ROLES = ("time", "accel")
-#: each accel-gps ``filter.`` density the identification gives, the identified value it is (N, K), and
-#: the per-sample value it gives at the log's rate (written in a comment and in summary.json only: a
-#: per-sample value holds at one rate, a density at every rate)
-FILTER_KEYS = {
-    "accel_noise_density": ("velocity_random_walk", "accel_noise_std"),
-    "bias_walk_density": ("rate_random_walk", "bias_walk_std"),
-}
-
-
-def filter_settings(result: NoiseIdentification) -> dict[str, float]:
-    """The ``[filter]`` settings the identification gives: the density of each identified noise whose key
-    accel-gps accepts (``accel_noise_density`` = N, ``bias_walk_density`` = K)."""
-    accepted = {f.name for f in dataclasses.fields(AccelGpsFilter)}
-    values = {key: getattr(result, name).value for key, (name, _) in FILTER_KEYS.items()}
-    # A TOML number written with 6 significant digits, read back as the same float.
-    return {key: float(f"{value:.6g}") for key, value in values.items() if value is not None and key in accepted}
-
-
-def per_sample_settings(result: NoiseIdentification, settings: dict[str, float]) -> dict[str, Any]:
-    """summary.json's ``per_sample``: each written density's per-sample value at the log's rate (m/s^2),
-    what ``calibrate`` uses on a log at that rate (at another it converts the density anew)."""
-    values = {FILTER_KEYS[key][1]: per_sample(FILTER_KEYS[key][1], value, result.rate) for key, value in settings.items()}
-    return {
-        "rate": result.rate,
-        "unit": "m/s^2",
-        **values,
-        "note": (
-            f"per sample at this log's {result.rate:.6g} Hz, from the densities in [filter]: accel_noise_std = N sqrt(rate), "
-            "bias_walk_std = K / sqrt(rate); calibrate converts the densities at each log's own rate"
-        ),
-    }
-
-
-def filter_toml(result: NoiseIdentification, settings: dict[str, float], source: str) -> str:
-    """A TOML snippet for ``kalcal calibrate accel-gps --config``: ``[filter]`` with the densities in
-    ``settings``, commented with their per-sample values at the log's rate."""
-    rate = result.rate
-    lines = [
-        f"# kalcal noise: accelerometer noise identified from {source}",
-        f"# ({result.samples} samples at {rate:.6g} Hz, {result.duration:.6g} s). [filter] holds rate-free densities:",
-        "# calibrate converts them at each log's own rate f (accel_noise_std = N sqrt(f), bias_walk_std = K / sqrt(f)),",
-        "# assuming each sample averages over its period (docs/noise.md: a log decimated without averaging).",
-    ]
-    vrw, rrw = result.velocity_random_walk, result.rate_random_walk
-    if vrw.identified:
-        lines.append(f"# N = {vrw.value:.6g} {vrw.unit} (velocity random walk)")
-    if result.bias_instability.identified:
-        b = result.bias_instability
-        lines.append(f"# B = {b.value:.6g} {b.unit} (bias instability; no filter setting of its own)")
-    if rrw.identified:
-        lines.append(f"# K = {rrw.value:.6g} {rrw.unit} (rate random walk)")
-    for key, (name, sample_name) in FILTER_KEYS.items():
-        if key in settings:
-            value = per_sample(sample_name, settings[key], rate)
-            lines.append(f"# {key}: {sample_name} = {value:.6g} m/s^2 per sample at {rate:.6g} Hz (this log's rate)")
-        else:
-            parameter = getattr(result, name)
-            why = parameter.note if not parameter.identified else "the accel-gps filter has no such setting"
-            lines.append(f"# {key}: not written ({why})")
-    lines += ["", "[filter]"]
-    lines += [f"{key} = {value!r}" for key, value in settings.items()]
-    return "\n".join(lines) + "\n"
-
-
 #: the files of ``kalcal noise`` (and :data:`KALIBR_NAME` unless it is left out)
 OUTPUT_NAMES = ("summary.json", "allan.csv", "allan.png", "filter.toml")
 #: the Kalibr noise file, written beside filter.toml by default
@@ -260,7 +196,7 @@ def _axis_summary(result: NoiseIdentification, settings: dict[str, float]) -> di
         "std": {"value": result.std, "unit": "m/s^2", "note": "of the samples about their mean"},
         **{parameter.name: parameter.as_dict() for parameter in result.parameters},
         "filter": settings,
-        "per_sample": per_sample_settings(result, settings),
+        "per_sample": noise_filter().per_sample_settings(result, settings),
         "notes": [
             f"{p.name}: {p.note}"
             for p in (result.velocity_random_walk, result.bias_instability, result.rate_random_walk)
@@ -332,7 +268,7 @@ def compute_noise(
     rostopic = (topic or topic_of(imu_map)) if log_format_of(source) == "rosbag" else None
     if axes is None:
         result = results["accel"]
-        settings = filter_settings(result)
+        settings = noise_filter().filter_settings(result)
         axis_summary = _axis_summary(result, settings)
         summary = {
             "imu": str(imu_path),
@@ -347,20 +283,20 @@ def compute_noise(
             **axis_summary,
             "warnings": [warning.as_dict() for warning in warnings],
         }
-        filter_text = flagged + filter_toml(result, settings, str(imu_path))
+        filter_text = flagged + noise_filter().filter_toml(result, settings, str(imu_path))
         run = NoiseRun(result, summary, filter_text, _allan_frame(result.curve), title, topic=rostopic)
     else:
         first = results[axes[0]]
         blocks = {}
         for role, result in results.items():
-            blocks[role] = {"column": imu_map[role], **_axis_summary(result, filter_settings(result))}
+            blocks[role] = {"column": imu_map[role], **_axis_summary(result, noise_filter().filter_settings(result))}
         selected = results[axis] if axis else None
         notes = [f"axis {role}: {note}" for role, block in blocks.items() for note in block["notes"]]
         if axis is None:
             notes.append("filter.toml not written: the filter is of one axis, select it with --axis x, y or z")
             filter_text = None
         else:
-            filter_text = flagged + filter_toml(selected, blocks[axis]["filter"], f"{imu_path}, axis {axis} ({imu_map[axis]})")
+            filter_text = flagged + noise_filter().filter_toml(selected, blocks[axis]["filter"], f"{imu_path}, axis {axis} ({imu_map[axis]})")
         summary = {
             "imu": str(imu_path),
             "topic": topic,

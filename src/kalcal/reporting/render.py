@@ -28,9 +28,8 @@ from kalcal.io.manifest import require_complete
 from kalcal.io.outputs import run_outputs
 from kalcal.io.results import SCHEMA_VERSION
 from kalcal.io.statistics import read_statistics
-from kalcal.jobs.progress import JobProgress, stage
-from kalcal.scenarios.model_file.model import CustomModelScenario, is_custom_settings
-from kalcal.scenarios import build_scenario
+from kalcal.montecarlo.progress import JobProgress, stage
+from kalcal.scenarios import scenario_of_summary, settings_assignments  # noqa: F401 (settings_assignments: this module's name for it)
 from kalcal.models.settings import SettingError
 from kalcal.montecarlo.engine import BLOCK_SIZE, block_generator, block_sizes, realization
 from kalcal.montecarlo.problem import FixedGainProblem
@@ -85,16 +84,6 @@ def check_summary(summary: Any, path: Path) -> dict[str, Any]:
     return summary
 
 
-def settings_assignments(settings: Mapping[str, Mapping[str, Any]]) -> list[str]:
-    """``{"truth": {"bias_std": 0.1, "x": None}}`` -> ``["truth.bias_std=0.1"]`` (None: left at its default)."""
-    return [
-        f"{section}.{key}={value}"
-        for section, values in settings.items()
-        for key, value in values.items()
-        if value is not None
-    ]
-
-
 def _realization_index(realization: Any, count: int) -> int:
     try:
         index = operator.index(realization)
@@ -123,9 +112,7 @@ def saved_scenario(summary: Mapping[str, Any], summary_path: Path):
     """The scenario a run's ``summary.json`` was drawn from: a model file's from its matrices, a built-in's
     from its settings; their errors located in ``summary_path``."""
     try:
-        if is_custom_settings(summary["settings"]):  # a model file's run: its matrices are the settings
-            return CustomModelScenario.from_settings(summary["settings"])
-        return build_scenario(str(summary["scenario"]), None, settings_assignments(summary["settings"]))
+        return scenario_of_summary(str(summary["scenario"]), summary["settings"])
     except SettingError as exc:  # the settings layer's wording, located in the summary
         raise exc.located(source=str(summary_path)) from None
     except ConfigError as exc:
@@ -174,7 +161,7 @@ def render_report(out: str | Path, *, realization: int = 0, progress: JobProgres
         Which realization of the ensemble (0-based, below the run's N) the single-run figures show.
     progress : callable, optional
         ``progress(stage, done, total)``: ``"figures"`` after each figure, ``"report"`` once the page is
-        written (see :mod:`kalcal.jobs.progress`).
+        written (see :mod:`kalcal.montecarlo.progress`).
 
     Returns
     -------
@@ -281,7 +268,7 @@ def _draw_page(
         f"{FIGURE_DIR}/ out of it first",
     ) as staging:
         shown = _realization_data(problem, scenario, seed, index, count, str(summary["engine"]))
-        options = dict(scenario=str(summary["scenario"]), steady=steady, exact_cov=exact.error_cov, exact_reason=exact.reason)
+        options = dict(source_report=bool(scenario.SOURCE_REPORT), steady=steady, exact_cov=exact.error_cov, exact_reason=exact.reason)
         from kalcal.reporting.figures import render_figures
 
         figures, skipped = render_figures(dataset, shown, staging / FIGURE_DIR, long_dataset,

@@ -4,9 +4,9 @@ import json
 
 import pytest
 
-from kalcal.jobs.progress import STAGES, VERIFY_ORDER, stage
-from kalcal.jobs.report import render_report
-from kalcal.jobs.verify import verify
+from kalcal.montecarlo.progress import STAGES, VERIFY_ORDER, stage
+from kalcal.reporting.render import render_report
+from kalcal.api.verification import verify
 from kalcal.scenarios import build_scenario
 
 
@@ -80,7 +80,7 @@ def test_an_infinite_statistic_is_written_as_null_and_counted_under_its_field(tm
     import dataclasses
     import math
 
-    import kalcal.jobs.verify as job
+    import kalcal.api.verification as job
 
     real = job.run_checks
 

@@ -24,11 +24,11 @@ from kalcal.core.steps import check_form
 from kalcal.io.outputs import writes_outputs
 from kalcal.io.results import json_document, write_json
 from kalcal.io.statistics import write_statistics
-from kalcal.jobs.progress import JobProgress, stage
+from kalcal.montecarlo.progress import JobProgress, stage
 from kalcal.models.config import apply_settings, section_values
 from kalcal.montecarlo.accumulators import EnsembleStatistics, ensemble_statistics
 from kalcal.montecarlo.engine import BLOCK_SIZE, run_monte_carlo
-from kalcal.montecarlo.problem import check_engine
+from kalcal.montecarlo.problem import MAX_UPDATES, check_engine
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.stats.results import CheckResult
 from kalcal.stats.suite import run_checks, verdict
@@ -45,12 +45,6 @@ LONG_RUN_REALIZATIONS = 50_000
 MIN_REALIZATIONS = 100
 
 
-#: Most filter updates one realization may have, in the run and in its long run (2000: 400 s at the
-#: accel-gps default 5 Hz GPS; the default run has 150, the 120 s long run 600). A block of 4096
-#: realizations holds its draws and residuals per update (about 0.2 MB per update and thread) and the
-#: run keeps E[r_k r_j^T] over every pair of updates, (K p)^2 numbers: 128 MB per copy at K = 2000, p = 2.
-#: Beyond it the arrays would not fit a usual machine, so the run is refused before it starts.
-MAX_UPDATES = 2000
 
 
 def default_long_run(scenario) -> float:
@@ -208,11 +202,12 @@ def run_estimate_check(
     return check
 
 
-def report_residual_pair(statistics: EnsembleStatistics, info) -> dict[str, Any] | None:
-    """E[r_k r_j^T] at the source report's pair (accel-gps, t_k = 23.8 s, t_j = 5.8 s), or None where the
-    run has no update at one of those times (another GPS rate or a shorter run), no pairs were kept, or
-    the scenario is not the report's: the nearest updates would be another pair under the report's name."""
-    if info.scenario != "accel-gps" or statistics.residual_second_moment is None:
+def report_residual_pair(statistics: EnsembleStatistics, info, scenario) -> dict[str, Any] | None:
+    """E[r_k r_j^T] at the source report's pair (t_k = 23.8 s, t_j = 5.8 s), or None where the run has no
+    update at one of those times (another GPS rate or a shorter run), no pairs were kept, or the scenario
+    is not the report's (:attr:`~kalcal.scenarios.protocol.Scenario.SOURCE_REPORT`): the nearest updates
+    would be another pair under the report's name."""
+    if not scenario.SOURCE_REPORT or statistics.residual_second_moment is None:
         return None
     times = np.asarray(info.update_times)
     if not all(np.any(np.abs(times - t) <= 1e-6) for t in REPORT_RESIDUAL_PAIR):
@@ -414,7 +409,7 @@ def compute_verification(
             "exact_error_covariance": exact.error_cov[-1] if exact.available else None,
             "exact_mean_error": exact.mean_error[-1] if exact.available else None,
         },
-        "residual_correlation": report_residual_pair(statistics, info),
+        "residual_correlation": report_residual_pair(statistics, info, scenario),
         "model_error": {
             "cause": cause,
             "max_expected_mean_error_sigma": float(
@@ -503,7 +498,7 @@ def _save(run: Verification, out: Path, *, report: bool, realization: int, progr
     if done is not None:  # the summary's content is complete: it is written once, after the page
         done(files, files)
     if report:
-        from kalcal.jobs import report as report_job  # the page joins this run's set of outputs
+        from kalcal.reporting import render as report_job  # the page joins this run's set of outputs
 
         drawing = time.perf_counter()
         # the page is drawn from the summary as it will be written (and as a redraw reads it) and from the
@@ -553,14 +548,14 @@ def verify(
     whole blocks); ``checkpoint`` resumes from and saves to a file. None of them changes the numbers.
     ``form`` is the filter's update form (joseph, standard or sqrt; see :mod:`kalcal.core.steps`).
     ``progress(stage, done, total)`` hears of every stage: ``"monte carlo"`` and ``"long run"`` in
-    realizations, ``"statistics"`` in files (see :mod:`kalcal.jobs.progress`).
+    realizations, ``"statistics"`` in files (see :mod:`kalcal.montecarlo.progress`).
     ``report`` also draws ``out/figures/`` and ``out/report.html`` (showing realization ``realization``).
     ``summary.json``'s ``timing`` holds ``total_s`` (s, up to summary.json), ``report_s`` (drawing the
     figures and page; None without a report) and ``wall_s`` (the whole job, report included).
     The files are put in ``out`` together when the run ends, replacing the previous run's set there
     (:mod:`kalcal.io.outputs`); a run that fails or is interrupted leaves ``out`` as it was.
     Half a second into the Monte Carlo its wall time is estimated from the rate measured so far
-    (:func:`~kalcal.jobs.verify.run_estimate_check`): a run predicted beyond ``max_run_s`` (s;
+    (:func:`~kalcal.api.verification.run_estimate_check`): a run predicted beyond ``max_run_s`` (s;
     default 24 h, None for no limit) without a ``checkpoint``, or whose sums would not fit in the memory
     available, is refused with a ConfigError; ``notes(text)`` hears the estimate of a run of a minute or more.
     """

@@ -4,9 +4,9 @@ for the long-run study's own Monte Carlo."""
 import json
 import time
 
-from kalcal.jobs import report as report_job
-from kalcal.jobs import verify as save_job
-from kalcal.jobs.verify import verify
+from kalcal.reporting import render as report_job
+from kalcal.api import verification as save_job
+from kalcal.api.verification import verify
 from kalcal.scenarios import build_scenario
 
 PAUSE = 0.5  # s added to drawing the report

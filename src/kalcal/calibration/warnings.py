@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any
 
 from kalcal.calibration.plausibility import CalibrationWarning
@@ -26,15 +26,6 @@ def sigma_note(summary: Mapping[str, Any]) -> str:
         # the bias's sigma stands, the scale's is the prior's (the scale unobservable)
         notes.append(f"scale {summary['scale']:.3g} ± {summary['scale_std']:.2g}: sigma NOT trusted (scale unobservable)")
     return "; ".join(notes)
-
-
-def fit_command(imu: str, gps: str, extra: Sequence[str] = ()) -> str:
-    """The ``kalcal fit accel-gps`` command line for the same logs and arguments (``extra``: the options
-    beyond the logs, already spelled as on the command line), quoted where a word needs it."""
-    import shlex
-
-    return " ".join(["kalcal", "fit", "accel-gps", "--imu", shlex.quote(imu), "--gps", shlex.quote(gps),
-                     *(shlex.quote(word) for word in extra), "--out", "fit"])
 
 
 def untrusted_warning(diagnostics: Mapping[str, Any], stability: Mapping[str, Any], bias_std: float, unit: str,
@@ -95,16 +86,6 @@ def _bare_verdict(diagnostics: Mapping[str, Any]) -> str:
     text = f"mean NIS {diagnostics['mean_nis']:.3g} against [{diagnostics['nis_lower']:.3g}, {diagnostics['nis_upper']:.3g}]"
     pvalues = [p for p in diagnostics.get("ljung_box_pvalue", []) if p == p]  # NaN: not testable
     return text + (f", Ljung-Box p = {min(pvalues):.2g}" if pvalues else "")
-
-
-def fit_extra(imu_columns, gps_columns, init: str, gate, options: Sequence[str]) -> list[str]:
-    """The options of ``kalcal fit accel-gps`` that repeat this calibration's: columns, start, gate, config."""
-    extra = [*(["--imu-columns", imu_columns] if imu_columns else []), *(["--gps-columns", gps_columns] if gps_columns else [])]
-    if init != "first-fix":
-        extra += ["--init", init]
-    if gate is not None:
-        extra += ["--gate", f"{gate:g}"]
-    return extra + list(options)
 
 
 def settings_warning(over) -> CalibrationWarning:
