@@ -27,6 +27,10 @@ VARIANTS = {
     "trapezoid": {"scenario.integration": "trapezoid"},
     "discrete truth": {"scenario.truth": "discrete"},
     "prior mean offset": {"filter.position0_mean": 3.0},
+    # one fix noise per interval instead of two (the kernel's draws and its measurement rows)
+    "velocity-only fixes": {"scenario.gps_fixes": "velocity"},
+    "velocity-only fixes, scale factor, trapezoid": {"scenario.gps_fixes": "velocity", "truth.scale_std": 1e-3,
+                                                     "scenario.integration": "trapezoid"},
     "other rates": {"scenario.imu_rate": 100.0, "scenario.gps_rate": 10.0, "truth.bias_correlation_time": 5.0,
                     "scenario.integration": "trapezoid"},
 }

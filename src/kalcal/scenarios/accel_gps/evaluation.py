@@ -41,6 +41,8 @@ UNITS: dict[str, str] = {
 }
 _POSITIVE = ("filter.accel_noise_std", "filter.gps_position_std", "filter.gps_velocity_std", "filter.bias_std",
              "filter.position0_std", "filter.velocity0_std", "log.position_std_multiplier", "log.velocity_std_multiplier")
+#: the keys of the position fix alone: a log of velocity-only fixes has none of them
+POSITION_FIX_KEYS = frozenset({"filter.gps_position_std", "log.position_std_multiplier"})
 _NONNEGATIVE = ("filter.bias_walk_std", "filter.bias_correlation_time", "filter.scale_std")
 #: the bias's prior 1-sigma that stands for "diffuse", m/s^2 (100 g: no accelerometer's bias comes near;
 #: its effect on the estimates after the first fix is of order (sigma_1 / 1000)^2, sigma_1 the bias's
@@ -55,6 +57,8 @@ def resolve(log: AccelGpsLog, values: Mapping[str, Any]) -> dict[str, float]:
     for key, value in values.items():
         if key not in UNITS:
             raise SettingError(key, f"a setting of the accel-gps likelihood ({', '.join(UNITS)})", "an unknown key")
+        if key in POSITION_FIX_KEYS and 0 not in log.fix_states:
+            raise SettingError(key, 'a setting the fixes use (velocity-only fixes, scenario.gps_fixes = "velocity", have no position)', show(value))
         if key not in resolved:
             raise SettingError(key, "a multiplier of a per-fix std column that the GPS log has", "a log without that column")
         number = to_float(key, value)
@@ -71,9 +75,9 @@ class FilterInputs(NamedTuple):
 
     phis: np.ndarray  #: (K, d, d)
     qs: np.ndarray  #: (K, d, d)
-    h: np.ndarray  #: (2, d)
-    vs: np.ndarray  #: (K, 2, 2)
-    dz: np.ndarray  #: (K, 2)
+    h: np.ndarray  #: (p, d): p = 2 (position, velocity) or 1 (velocity-only fixes)
+    vs: np.ndarray  #: (K, p, p)
+    dz: np.ndarray  #: (K, p)
     x0: np.ndarray  #: (d,)
     m0: np.ndarray  #: (d, d)
     nominal_p: np.ndarray  #: p_c at each fix's stamp (where the state is estimated), m, (K,)
@@ -122,17 +126,24 @@ def build_inputs(log: AccelGpsLog, v: Mapping[str, float], overridden=()) -> Fil
         q_walk, q_markov = q_walk + d_walk, q_markov + d_markov
     qs = v["filter.accel_noise_std"] ** 2 * sources[0] + v["filter.bias_walk_std"] ** 2 * q_walk + v["filter.bias_std"] ** 2 * q_markov
     nominal_p, nominal_v, stamp_p, stamp_v = log.nominal(lat)
-    dz = np.stack([log.z_position - nominal_p, log.z_velocity - nominal_v], axis=1)
-    std_p = log.fix_std("position", v.get("log.position_std_multiplier", 1.0), v["filter.gps_position_std"])
+    rows = list(log.fix_states)  # the components the fixes measure: [0, 1], or [1] for velocity alone
+    velocity_only = 0 not in rows
+    dz = np.stack([log.z_position - nominal_p, log.z_velocity - nominal_v], axis=1)[:, rows]
+    # a velocity-only log has no position std: a placeholder for the row that is dropped
+    std_p = 1.0 if velocity_only else log.fix_std("position", v.get("log.position_std_multiplier", 1.0), v["filter.gps_position_std"])
     std_v = log.fix_std("velocity", v.get("log.velocity_std_multiplier", 1.0), v["filter.gps_velocity_std"])
     vs = np.zeros((dz.shape[0], 2, 2))
     vs[:, 0, 0], vs[:, 1, 1] = std_p**2, std_v**2
+    vs = vs[:, rows][:, :, rows]
     diffuse = log.prior == "diffuse" and tau == 0 and "filter.bias_std" not in overridden
     bias0 = DIFFUSE_BIAS_STD if diffuse else v["filter.bias_std"]
     h, phi_lat = latency_map(lat)
+    h = h[rows]
     if log.init == "first-fix":
+        # a velocity-only first fix gives no position: the position starts from the prior's 1-sigma
         first = log.first_std(v.get("log.position_std_multiplier", 1.0), v.get("log.velocity_std_multiplier", 1.0),
-                              v["filter.gps_position_std"], v["filter.gps_velocity_std"])
+                              v["filter.position0_std"] if velocity_only else v["filter.gps_position_std"],
+                              v["filter.gps_velocity_std"])
         m0 = np.diag([first[0] ** 2, first[1] ** 2, bias0**2])
         if lat != 0.0:  # the first fix describes t_0 - L; the filter starts at t_0
             m0 = phi_lat @ m0 @ phi_lat.T

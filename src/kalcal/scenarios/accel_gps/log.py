@@ -101,11 +101,18 @@ class AccelGpsLog:
         """K, the fixes used."""
         return int(self.fix_times.size)
 
+    @property
+    def fix_states(self) -> tuple[int, ...]:
+        """The error-state components each fix measures: (0, 1), or (1,) with velocity-only fixes."""
+        return self.scenario.fix_states
+
     def available_keys(self) -> list[str]:
-        """The keys :meth:`loglik` accepts for this log."""
+        """The keys :meth:`loglik` accepts for this log (with velocity-only fixes, none of the position
+        fix's: nothing of the filter depends on them)."""
         return [
             key for key in evaluation.UNITS
-            if not key.startswith("log.") or self.has_column[key.split(".")[1].split("_")[0]]
+            if (not key.startswith("log.") or self.has_column[key.split(".")[1].split("_")[0]])
+            and not (key in evaluation.POSITION_FIX_KEYS and 0 not in self.fix_states)
         ]  # fmt: skip
 
     def settings_value(self, key: str) -> float:
@@ -174,7 +181,7 @@ class AccelGpsLog:
             run, _ = evaluation.run_filter(inputs._replace(dz=np.where(mask[:, None], np.nan, inputs.dz)), form, None)
             residual = np.where(mask[:, None], inputs.dz - run.prior_state @ inputs.h.T, run.residual)
             return resolved, inputs, run._replace(residual=residual), mask.copy()
-        run, rejected = evaluation.run_filter(inputs, form, evaluation.gate_threshold(gate))
+        run, rejected = evaluation.run_filter(inputs, form, evaluation.gate_threshold(gate, len(self.fix_states)))
         return resolved, inputs, run, rejected
 
     def loglik(self, values: Mapping[str, Any] = {}, *, gate: float | None = None, rejected: np.ndarray | None = None) -> float:  # noqa: B006 (read only)
@@ -249,7 +256,24 @@ def prepare_accel_gps_log(
 
     ``prior``: "scenario", "diffuse" or "auto" (the module docstring). Raises DataError for a log that
     cannot be used or is implausible, naming the log, the row or rate, and the value.
+
+    With ``scenario.gps_fixes = "velocity"`` ``gps_position`` may be None (or anything: it is not read)
+    and ``position_std`` is ignored; the checks that need positions (their limit, their unit, velocity
+    against the positions' differences) are skipped, and a ``velocity-only-fixes`` warning says so;
+    ``init="first-fix"`` starts the position at the filter's prior (``filter.position0_mean``, 1-sigma
+    ``position0_std``), since no fix gives one.
     """
+    velocity_only = 0 not in scenario.fix_states
+    notes = []
+    if velocity_only:
+        gps_position = np.full(np.shape(gps_time), np.nan)
+        position_std = None
+        notes.append(CalibrationWarning(
+            "velocity-only-fixes",
+            f"{source}: velocity-only fixes (scenario.gps_fixes = \"velocity\"): no position column is read, the "
+            "checks on positions (their limit and unit, velocity against their differences) are skipped, and the "
+            "position is the prior's (filter.position0_mean, position0_std) plus the integrated velocity",
+        ))  # fmt: skip
     if init not in INITS:
         raise DataError(f"--init: expected one of {', '.join(INITS)}, got {init!r}")
     if prior not in PRIORS:
@@ -262,7 +286,7 @@ def prepare_accel_gps_log(
     _checked_times(imu_time, gps_time, imu_source, source)
     steps = np.diff(imu_time)
     check_plausible(
-        imu_time, accel, gps_time, gps_position, gps_velocity, position_std, velocity_std,
+        imu_time, accel, gps_time, None if velocity_only else gps_position, gps_velocity, position_std, velocity_std,
         source, imu_source, imu_rate, gps_rate, dict(columns or {}),
     )  # fmt: skip
     period = float(np.median(steps))
@@ -297,7 +321,7 @@ def prepare_accel_gps_log(
     if velocity_std is None:
         nan_std_v = np.zeros(gps_time.size, dtype=bool)
 
-    finite = np.isfinite(gps_position) & np.isfinite(gps_velocity) & np.isfinite(gps_time)
+    finite = (velocity_only | np.isfinite(gps_position)) & np.isfinite(gps_velocity) & np.isfinite(gps_time)
     inside = (gps_time >= imu_time[0]) & (gps_time <= imu_time[-1])
     usable = np.flatnonzero(finite & inside)
     if np.count_nonzero(inside) == 0:
@@ -319,12 +343,13 @@ def prepare_accel_gps_log(
             f"{usable.size} ({np.count_nonzero(~finite)} with a NaN field, {np.count_nonzero(finite & ~inside)} outside "
             f"the log){why}"
         )
-    slips = unit_slips(imu_time, accel, usable, gps_time, gps_position, gps_velocity, source, imu_source, dict(columns or {}))
+    slips = unit_slips(imu_time, accel, usable, gps_time, gps_position, gps_velocity, source, imu_source, dict(columns or {}),
+                       positions=not velocity_only)
     warnings = slips + fix_warnings(
         usable, gps_time, gps_position, gps_velocity, fix_std_p, fix_std_v, nan_std_p, nan_std_v,
-        settings, source, dict(columns or {}),
+        settings, source, dict(columns or {}), positions=not velocity_only,
     )  # fmt: skip
-    warnings = [*rate_warnings, *warnings]
+    warnings = [*notes, *rate_warnings, *warnings]
     default_std = {
         "position_std": int(np.count_nonzero(nan_std_p[usable])),
         "velocity_std": int(np.count_nonzero(nan_std_v[usable])),
@@ -333,7 +358,8 @@ def prepare_accel_gps_log(
     if init == "first-fix":
         first, usable = usable[0], usable[1:]
         start_time = float(gps_time[first])
-        anchor = (float(gps_position[first]), float(gps_velocity[first]))
+        # no position in a velocity-only fix: the prior's mean (its 1-sigma is position0_std, build_inputs)
+        anchor = (settings.position0_mean if velocity_only else float(gps_position[first]), float(gps_velocity[first]))
         first_data = (start_time, *anchor)
         first_column = (float(column_p[first]), float(column_v[first]))
     else:

@@ -40,14 +40,15 @@ def check_plausible(
 
 def fix_warnings(
     usable, gps_time, position, velocity, std_p, std_v, nan_std_p, nan_std_v, settings, source: str,
-    columns: dict[str, str],
+    columns: dict[str, str], positions: bool = True,
 ) -> list[CalibrationWarning]:
-    """What the fixes used need said: per-fix stds that were NaN, velocities that disagree with positions."""
+    """What the fixes used need said: per-fix stds that were NaN, velocities that disagree with positions
+    (``positions=False``, velocity-only fixes: the velocity column's NaN stds only)."""
     warnings = []
     for role, nan, default in (
         ("position_std", nan_std_p, settings.gps_position_std),
         ("velocity_std", nan_std_v, settings.gps_velocity_std),
-    ):
+    )[0 if positions else 1 :]:
         count = int(np.count_nonzero(nan[usable]))
         if count:
             warnings.append(
@@ -57,6 +58,8 @@ def fix_warnings(
                     f"took the filter's setting {default:g}",
                 )
             )
+    if not positions:
+        return warnings
     mismatch = plausibility.velocity_consistency(
         gps_time[usable], position[usable], velocity[usable], std_p[usable], std_v[usable], source,
         (columns.get("position", "position"), columns.get("velocity", "velocity"), columns.get("time", "time")),
@@ -65,13 +68,15 @@ def fix_warnings(
 
 
 def unit_slips(
-    imu_time, accel, usable, gps_time, position, velocity, source: str, imu_source: str, columns: dict[str, str]
+    imu_time, accel, usable, gps_time, position, velocity, source: str, imu_source: str, columns: dict[str, str],
+    positions: bool = True,
 ) -> list[CalibrationWarning]:
     """Unit slips that still give a number, over the usable fixes: positions in mm or ft, an accelerometer
     in g, a GPS log wholly in mm or ft (DataError naming the unit), gravity left in the accelerometer (a
-    warning)."""
+    warning). ``positions=False`` (velocity-only fixes): the positions' units are not checked."""
     time, position, velocity = (np.asarray(a, dtype=float)[usable] for a in (gps_time, position, velocity))
-    slips.position_units(time, position, velocity, source, columns.get("position", "position"))
+    if positions:
+        slips.position_units(time, position, velocity, source, columns.get("position", "position"))
     gravity = slips.accelerometer_units(
         imu_time, accel, time, velocity, imu_source, columns.get("accel", "accel"), gps_source=source
     )

@@ -20,17 +20,18 @@ from kalcal.core.steps import UpdateForm, interval_transition
 from kalcal.models.settings import SettingError, show
 from kalcal.montecarlo.problem import FixedGainProblem, ProblemInfo
 from kalcal.scenarios.accel_gps.sampled import sample_accel_gps_errors
-from kalcal.scenarios.accel_gps.settings import MEASUREMENT_NAMES, MEASUREMENT_UNITS, AccelGpsScenario
+from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
 from kalcal.scenarios.accel_gps.truth import accel_gps_process_noise, accel_gps_transitions, accel_gps_truth
 
 
 def sampled_normals_per_realization(scenario: AccelGpsScenario) -> int:
-    """Normals the per-sample engine draws: p0, v0, b, sample 0 (and s); per interval m samples and 2 fix
-    noises (and m bias-noise draws when the bias drifts). See :mod:`kalcal.scenarios.accel_gps.sampled`."""
+    """Normals the per-sample engine draws: p0, v0, b, sample 0 (and s); per interval m samples and a
+    noise per fix component (2, or 1 with velocity-only fixes), and m bias-noise draws when the bias
+    drifts. See :mod:`kalcal.scenarios.accel_gps.sampled`."""
     s = scenario.scenario
     m = s.steps_per_update
     drifts = scenario.truth.bias_step_variance(s.sample_period) > 0
-    return 4 + int(scenario.has_scale) + s.n_updates * (m + 2 + (m if drifts else 0))
+    return 4 + int(scenario.has_scale) + s.n_updates * (m + len(scenario.fix_states) + (m if drifts else 0))
 
 
 def accel_gps_filter_transitions(scenario: AccelGpsScenario, filter_model: LinearGaussianModel) -> np.ndarray:
@@ -59,8 +60,8 @@ def accel_gps_problem(
         update_times=s.update_times(),
         state_names=scenario.state_names,
         state_units=scenario.state_units,
-        measurement_names=MEASUREMENT_NAMES,
-        measurement_units=MEASUREMENT_UNITS,
+        measurement_names=scenario.measurement_names,
+        measurement_units=scenario.measurement_units,
     )
     truth = accel_gps_truth(scenario)
     filter_model = scenario.filter_model()
@@ -110,10 +111,9 @@ def accel_gps_model_error_cause(scenario: AccelGpsScenario) -> str:
 
 def accel_gps_sources(scenario: AccelGpsScenario) -> list[Source]:
     """prior:position, prior:velocity, prior:bias (, prior:scale), process:accel (, process:bias),
-    measurement:position, measurement:velocity."""
+    measurement:position (absent with velocity-only fixes), measurement:velocity."""
     model = scenario.truth_model()
-    measurement_names = ("position", "velocity")
-    return covariance_sources(model.m0, model.v, accel_gps_process_noise(scenario), scenario.state_names, measurement_names)
+    return covariance_sources(model.m0, model.v, accel_gps_process_noise(scenario), scenario.state_names, scenario.measurement_names)
 
 
 def noise_settings(scenario: AccelGpsScenario) -> dict[str, Callable[[float], AccelGpsScenario]]:

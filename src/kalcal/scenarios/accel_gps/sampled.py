@@ -5,8 +5,9 @@ same realizations for the same generator state:
 
 1. ``(n, 4)``: standard normals for p0, v0, b and the noise of accelerometer sample 0 (``(n, 5)`` with a
    scale-factor error s last);
-2. for each GPS interval k = 0..K-1, ``(n, m + 2)``: the noise of samples k m + 1 .. (k + 1) m, then the
-   position and velocity noise of fix k; and, when the bias has noise of its own (a random walk or
+2. for each GPS interval k = 0..K-1, ``(n, m + p)``: the noise of samples k m + 1 .. (k + 1) m, then the
+   noise of each component fix k measures, p = 2 (position, velocity) or, with ``scenario.gps_fixes =
+   "velocity"``, p = 1 (velocity alone: no position noise is drawn); and, when the bias has noise of its own (a random walk or
    Gauss-Markov), ``(n, m)`` more: the bias noise of steps k m .. (k + 1) m - 1;
 3. only in a log with GNSS outliers (``truth.gps_outlier_rate`` and ``gps_outlier_std`` > 0), after all
    the above: ``(n, K)`` uniforms (fix k is an outlier when its uniform is below the rate), then ``(n, K)``
@@ -37,7 +38,7 @@ class AccelGpsLogs:
     bias: np.ndarray  #: true b at every sample, m/s^2, (n, J + 1) (constant unless it drifts)
     scale: np.ndarray  #: true scale-factor error s, dimensionless, (n,) (zero without one)
     fix_index: np.ndarray  #: sample index of each fix, (K,)
-    gps_position: np.ndarray  #: m, (n, K)
+    gps_position: np.ndarray  #: m, (n, K); NaN with velocity-only fixes (the receiver reports none)
     gps_velocity: np.ndarray  #: m/s, (n, K)
     gps_outlier_error: np.ndarray | None = None  #: gross error in each fix's position, m, 0 if none, (n, K)
     gps_latency: float = 0.0  #: the fixes' stamp minus the time they describe, s
@@ -119,11 +120,12 @@ def sample_accel_gps_logs(scenario: AccelGpsScenario, rng: np.random.Generator, 
     noise[:, 0] = noise0
     bias = np.empty((n, s.n_samples + 1))
     bias[:, 0] = bias0
-    gps_noise = np.empty((n, n_updates, 2))
+    rows = scenario.fix_states
+    gps_noise = np.full((n, n_updates, 2), np.nan)  # a component the receiver does not report stays NaN
     for k in range(n_updates):
-        draw = rng.standard_normal((n, m + 2))
+        draw = rng.standard_normal((n, m + len(rows)))
         noise[:, k * m + 1 : (k + 1) * m + 1] = t.accel_noise_std * draw[:, :m]
-        gps_noise[:, k] = draw[:, m:]
+        gps_noise[:, k, list(rows)] = draw[:, m:]
         bias[:, k * m : (k + 1) * m + 1] = _bias_path(scenario, bias[:, k * m], _bias_draw(scenario, rng, n, m))
     true_accel = scenario.true_accel(times)
     motion = deterministic_motion(scenario, times, true_accel)
@@ -165,8 +167,9 @@ def sample_accel_gps_errors(
     -------
     states : ndarray, shape (n, K, d)
         dx = [p - p_c, v - v_c, b] at each fix (and s, with a scale-factor error).
-    measurements : ndarray, shape (n, K, 2)
-        dz = [gps_position - p_c, gps_velocity - v_c] at each fix.
+    measurements : ndarray, shape (n, K, p)
+        dz = [gps_position - p_c, gps_velocity - v_c] at each fix (p = 2), or [gps_velocity - v_c] with
+        velocity-only fixes (p = 1).
     """
     s, t = scenario.scenario, scenario.truth
     m, n_updates, dt = s.steps_per_update, s.n_updates, s.sample_period
@@ -182,12 +185,13 @@ def sample_accel_gps_errors(
     nominal = np.empty((n, 2))
     nominal[:, 0], nominal[:, 1] = pc0, vc0
     states = np.empty((n, n_updates, d))
-    measurements = np.empty((n, n_updates, 2))
+    rows = list(scenario.fix_states)
+    measurements = np.empty((n, n_updates, len(rows)))
     block = np.empty((n, m + 1))
     block[:, 0] = noise
-    gps_std = np.array([t.gps_position_std, t.gps_velocity_std])
+    gps_std = scenario.fix_stds(t)
     for k in range(n_updates):
-        draw = rng.standard_normal((n, m + 2))
+        draw = rng.standard_normal((n, m + len(rows)))
         block[:, 1:] = t.accel_noise_std * draw[:, :m]
         bias = _bias_path(scenario, bias_now, _bias_draw(scenario, rng, n, m))
         bias_now = bias[:, -1]
@@ -201,6 +205,6 @@ def sample_accel_gps_errors(
         states[:, k, 2] = bias_now
         if d == 4:
             states[:, k, 3] = scale
-        measurements[:, k] = states[:, k, :2] + gps_std * draw[:, m:]
+        measurements[:, k] = states[:, k, rows] + gps_std * draw[:, m:]
         block[:, 0] = block[:, m]
     return states, measurements

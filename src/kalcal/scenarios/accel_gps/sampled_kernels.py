@@ -1,10 +1,10 @@
 """The sampled engine's block kernel: simulate every accelerometer sample, filter and sum, in one compiled pass.
 
 :func:`kalcal.scenarios.accel_gps.sampled.sample_accel_gps_errors` (numpy) makes some fifteen passes over each GPS
-interval's (n, m + 2) draws: scaling, the measured samples, their integration as a matrix product, the
+interval's (n, m + p) draws: scaling, the measured samples, their integration as a matrix product, the
 error states and the fixes, each with its own temporary. :func:`sampled_block_moments` draws the same
 normals from the block's generator in the same order (:mod:`kalcal.scenarios.accel_gps.sampled`'s stream: the
-interval's (n, m + 2) samples and fix noises, then its (n, m) bias-noise draws when the bias drifts,
+interval's (n, m + p) samples and fix noises, then its (n, m) bias-noise draws when the bias drifts,
 through :func:`~kalcal.montecarlo.kernels.standard_normals`, so that realization i's draws and the
 generator's final state are numpy's), integrates each realization's samples as it reads them, and hands
 the interval's error states and measurements, structure of arrays, to the fixed-gain filter step and
@@ -37,7 +37,7 @@ def _integrate_interval(k, samples, walk_draws, carry, bias, scale, nominal, tru
                         decay, walk, interval):
     """Integrate interval k's m + 1 measured samples of every realization into the nominal, in place.
 
-    samples (n, m + 2): this interval's draws (samples k m + 1 .. (k + 1) m, then the fix noises);
+    samples (n, m + p): this interval's draws (samples k m + 1 .. (k + 1) m, then the fix noises);
     walk_draws (n, m) the bias noise, or (0, 0) for a constant bias; carry (n,) the noise of sample k m,
     left as that of sample (k + 1) m; bias (n,) b at sample k m, left at (k + 1) m; scale (n,) s;
     nominal (2, n) p_c, v_c at the interval's start, left at its end; true_accel (J + 1,) a(t_j);
@@ -72,7 +72,7 @@ def _integrate_interval(k, samples, walk_draws, carry, bias, scale, nominal, tru
 @numba.njit(nogil=True, cache=True, fastmath=FAST)
 def sampled_block_moments(
     rng, p0, v0, bias0, noise0, scale, true_accel, weights, fix_times, motion, nominal0, accel_std, gps_std,
-    decay, walk, drifts, interval, phis, h, gains, x0, sums,
+    decay, walk, drifts, interval, phis, h, gains, x0, sums, fix_states,
 ):
     """Simulate the accelerometer/GPS truth sample by sample and filter it, in one pass.
 
@@ -80,10 +80,11 @@ def sampled_block_moments(
     which give p0, v0, bias0 (b at sample 0), noise0 (sample 0's noise) and scale (s, zero without
     one), each (n,); true_accel (J + 1,) m/s^2; weights (m + 1, 2); fix_times (K,) s; motion (K, 2) the
     deterministic position and velocity at each fix; nominal0 (2,) p_c(0), v_c(0); accel_std m/s^2;
-    gps_std (2,) m, m/s; the bias b_{j+1} = decay b_j + walk xi_j, with its draws only when ``drifts``;
+    fix_states (p,) the state each fix component measures ([0, 1], or [1] for velocity alone) and
+    gps_std (p,) its noise's 1-sigma (m or m/s), drawn after the interval's m samples; the bias b_{j+1} = decay b_j + walk xi_j, with its draws only when ``drifts``;
     interval m dt, s.
     The error states are [p - p_c, v - v_c, b] (and s when the filter has d = 4 states). Filter: phis
-    (K, d, d), h (2, d), gains (K, d, 2), x0 (d,); sums: the block's
+    (K, d, d), h (p, d), gains (K, d, p), x0 (d,); sums: the block's
     :class:`~kalcal.montecarlo.accumulators.SumBuffers`, added to.
     """
     n = p0.shape[0]
@@ -91,7 +92,7 @@ def sampled_block_moments(
     m = weights.shape[0] - 1
     d = x0.shape[0]
     p = h.shape[0]
-    samples = np.empty((n, m + 2))
+    samples = np.empty((n, m + p))
     walk_draws = np.empty((n, m) if drifts else (0, 0))
     carry = noise0.copy()
     bias = bias0.copy()
@@ -112,8 +113,8 @@ def sampled_block_moments(
             state[0, i] = p0[i] + v0[i] * fix_times[k] + motion[k, 0] - nominal[0, i]
             state[1, i] = v0[i] + motion[k, 1] - nominal[1, i]
             state[2, i] = bias[i]
-            z[0, i] = state[0, i] + gps_std[0] * samples[i, m]
-            z[1, i] = state[1, i] + gps_std[1] * samples[i, m + 1]
+            for r in range(p):
+                z[r, i] = state[fix_states[r], i] + gps_std[r] * samples[i, m + r]
         if d == 4:
             for i in range(n):
                 state[3, i] = scale[i]
@@ -125,7 +126,7 @@ def accel_gps_block_sums(scenario: AccelGpsScenario, rng: np.random.Generator, n
     """Add n sampled realizations of ``scenario`` into ``sums`` through :func:`sampled_block_moments`.
 
     Consumes ``rng`` exactly as :func:`~kalcal.scenarios.accel_gps.sampled.sample_accel_gps_errors` does (same
-    draws, same order, same final state). phis (K, d, d), h (2, d), gains (K, d, 2), x0 (d,): the filter.
+    draws, same order, same final state). phis (K, d, d), h (p, d), gains (K, d, p), x0 (d,): the filter.
     """
     s, t = scenario.scenario, scenario.truth
     dt = s.sample_period
@@ -138,6 +139,7 @@ def accel_gps_block_sums(scenario: AccelGpsScenario, rng: np.random.Generator, n
         np.ascontiguousarray(interval_weights(s.integration, dt, s.steps_per_update)),
         fix_times, np.ascontiguousarray(deterministic_motion(scenario, fix_times, true_accel)),
         np.array(scenario.nominal_start(), dtype=float), t.accel_noise_std,
-        np.array([t.gps_position_std, t.gps_velocity_std]), t.bias_decay(dt), float(np.sqrt(walk_variance)),
+        scenario.fix_stds(t), t.bias_decay(dt), float(np.sqrt(walk_variance)),
         walk_variance > 0, s.steps_per_update * dt, phis, h, gains, x0, sums,
+        np.array(scenario.fix_states, dtype=np.int64),
     )

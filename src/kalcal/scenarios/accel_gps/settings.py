@@ -58,6 +58,11 @@ from kalcal.scenarios.protocol import Capabilities
 
 TruthKind = Literal["analytic", "discrete"]
 IntegrationScheme = Literal["euler", "trapezoid"]
+GpsFixes = Literal["position+velocity", "velocity"]
+
+#: the error-state components each kind of GPS fix measures (the rows of H): position and velocity, or
+#: velocity alone (a receiver with no usable position)
+FIX_STATES: dict[str, tuple[int, ...]] = {"position+velocity": (0, 1), "velocity": (1,)}
 
 #: each per-sample noise setting, its rate-free density and the power of the rate that converts the
 #: density to it: the white noise averaged over a sample period dt = 1 / f has the std N sqrt(f)
@@ -130,7 +135,10 @@ class AccelGpsSettings:
 
     duration : s; imu_rate, gps_rate : Hz (imu_rate / gps_rate must be a whole number of samples);
     truth : "analytic" (closed-form p(t), v(t)) or "discrete" (no deterministic model error);
-    integration : "euler" (the report's rectangle rule) or "trapezoid".
+    integration : "euler" (the report's rectangle rule) or "trapezoid";
+    gps_fixes : what each GPS fix reports, "position+velocity" (the report) or "velocity" (a receiver
+    with no usable position: H = [0 1 0], V = gps_velocity_std^2, and the truth draws only the velocity
+    fix's noise). A choice of both the truth and the filter, like the scheme: the sensor has it.
     """
 
     duration: float = 30.0
@@ -138,8 +146,11 @@ class AccelGpsSettings:
     gps_rate: float = 5.0
     truth: TruthKind = "analytic"
     integration: IntegrationScheme = "euler"
+    gps_fixes: GpsFixes = "position+velocity"
 
     def __post_init__(self) -> None:
+        if self.gps_fixes not in FIX_STATES:
+            raise SettingError("scenario.gps_fixes", f"one of {', '.join(FIX_STATES)}", show(self.gps_fixes))
         require_positive("scenario", duration=self.duration, imu_rate=self.imu_rate, gps_rate=self.gps_rate)
         ratio = self.imu_rate / self.gps_rate
         require_whole(
@@ -487,6 +498,24 @@ class AccelGpsScenario:
         return SCALE_STATE_UNITS if self.has_scale else STATE_UNITS
 
     @property
+    def fix_states(self) -> tuple[int, ...]:
+        """The error-state components a GPS fix measures, in H's row order (:data:`FIX_STATES`)."""
+        return FIX_STATES[self.scenario.gps_fixes]
+
+    @property
+    def measurement_names(self) -> tuple[str, ...]:
+        """``("position", "velocity")``, or ``("velocity",)`` with velocity-only fixes."""
+        return tuple(MEASUREMENT_NAMES[i] for i in self.fix_states)
+
+    @property
+    def measurement_units(self) -> tuple[str, ...]:
+        return tuple(MEASUREMENT_UNITS[i] for i in self.fix_states)
+
+    def fix_stds(self, values: AccelGpsTruth) -> np.ndarray:
+        """The fix noise's 1-sigma of each measured component under ``values`` (m, m/s), shape (p,)."""
+        return np.array([values.gps_position_std, values.gps_velocity_std])[list(self.fix_states)]
+
+    @property
     def state_labels(self) -> tuple[str, ...]:
         """What each state is: ``δp = p − p_c``, ``δv = v − v_c`` (error states of the nominal), ``b`` (, ``s``)."""
         return SCALE_STATE_LABELS if self.has_scale else STATE_LABELS
@@ -587,7 +616,8 @@ class AccelGpsScenario:
             # with the trapezoid rule also on dp and dv of that step)
             gamma = np.hstack([gamma, bias_input[:, None]])
             w = np.diag([values.accel_noise_std**2, float(bias_noise)])
-        h = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+        # the rows of the components a fix measures: [[1 0 0], [0 1 0]], or [[0 1 0]] for velocity alone
+        h = np.eye(3)[list(self.fix_states)]
         m0 = np.diag([values.position0_std**2, values.velocity0_std**2, values.bias_std**2])
         if self.has_scale:
             # s is constant; its column of Phi depends on the acceleration of each step, so it is zero
@@ -603,7 +633,7 @@ class AccelGpsScenario:
             gamma=gamma,
             h=h,
             w=w,
-            v=np.diag([values.gps_position_std**2, values.gps_velocity_std**2]),
+            v=np.diag(self.fix_stds(values) ** 2),
             x0=x0,
             m0=m0,
             steps_per_update=self.scenario.steps_per_update,

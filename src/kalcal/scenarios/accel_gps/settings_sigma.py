@@ -128,7 +128,7 @@ def settings_free(log) -> list[str]:
     """The noise settings of the filter's model: the accelerometer's, each GPS std (a multiplier of a
     per-fix std column where the log has one), and the bias walk's where the filter has a walk."""
     free = ["filter.accel_noise_std"]
-    for kind in ("position", "velocity"):
+    for kind in [("position", "velocity")[i] for i in log.fix_states]:
         free.append(f"log.{kind}_std_multiplier" if log.has_column[kind] else f"filter.gps_{kind}_std")
     if log.settings_value("filter.bias_walk_std") > 0:
         free.append("filter.bias_walk_std")
