@@ -127,7 +127,7 @@ def test_simulate_and_calibrate_close_with_one_line_naming_what_they_wrote(tmp_p
     assert result.output.strip().splitlines()[-1] == f"wrote {data}/: data.csv, truth.json"
     result = runner.invoke(app, ["calibrate", "scale-bias", "--data", str(data / "data.csv"), "--out", str(fit)])
     assert result.exit_code == 0, result.output
-    assert result.output.strip().splitlines()[-1] == f"wrote {fit}/: estimates.csv, summary.json"
+    assert result.output.strip().splitlines()[-1] == f"wrote {fit}/: estimates.csv, summary.json, correction.json"
     assert not any(line.startswith("note:") for line in result.output.splitlines())  # nothing written as null
 
 

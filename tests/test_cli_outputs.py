@@ -175,7 +175,7 @@ def test_simulate_and_calibrate_reruns_replace_the_whole_set_and_keep_user_files
     first = _inodes(sb_cal)
     _ok("calibrate", "scale-bias", "--data", sb / "data.csv", "--set", "filter.bias_std=0.2", "--out", sb_cal)
     assert _files_from(first, sb_cal) == []
-    assert sorted(_tree(sb_cal)) == sorted([MANIFEST, "estimates.csv", "summary.json"])
+    assert sorted(_tree(sb_cal)) == sorted([MANIFEST, "correction.json", "estimates.csv", "summary.json"])
 
 
 def test_another_commands_folder_is_refused_and_left_whole(tmp_path):

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from kalcal.scenarios.scale_bias.calibration import UNOBSERVABLE_RATIO, calibrate_scale_bias
+from kalcal.scenarios.scale_bias.correction import ScaleBiasCorrection
 from kalcal.calibration.windows import check_windows, scale_bias_stability
 from kalcal.errors import DataError
 from kalcal.io.logs import is_frame, numeric_columns, read_table, require_increasing, source_name
@@ -96,9 +97,10 @@ def compute_scale_bias_calibration(
 
     A ``time`` column [s] is used when the log has one (it must increase); otherwise sample k = 1..K is
     put at k / ``scenario.rate``. Empty cells in the two signal columns are skipped samples. Writes
-    ``estimates.csv`` (time, theta1, theta2, theta1_std, theta2_std after each sample) and
-    ``summary.json``. ``summary["observability"]`` holds each theta's final sigma
-    over its no-data sigma and the parameters above ``UNOBSERVABLE_RATIO`` (0.9), which ``warnings`` (a
+    ``estimates.csv`` (time, theta1, theta2, theta1_std, theta2_std after each sample), ``summary.json``
+    and ``correction.json`` (the result's ``correction``: reference = theta1 * sensor + theta2 at the last
+    sample, :mod:`kalcal.scenarios.scale_bias.correction`) when saved. ``summary["observability"]`` holds
+    each theta's final sigma over its no-data sigma and the parameters above ``UNOBSERVABLE_RATIO`` (0.9), which ``warnings`` (a
     list of ``{"code", "message"}``, empty when none) then names; ``nis_bounds`` holds the mean NIS's 99%
     bounds and ``consistent`` whether it lies within them (a ``noise-inconsistent`` warning when not). A
     reference or sensor value beyond ``SIGNAL_LIMIT`` (1e12 in the log's unit) is refused (DataError).
@@ -193,11 +195,20 @@ def compute_scale_bias_calibration(
         "warnings": warnings,
         "units": {"time": "s", "theta1": "1", "theta2": unit, "scale_error": "1", "bias": unit},
     }
+    noise = scenario.filter_noise_variance()
+    correction = ScaleBiasCorrection(
+        theta=np.array(result.theta[-1], dtype=float), covariance=np.array(result.covariance[-1], dtype=float),
+        measurement_noise_variance=noise, sensor_noise_variance=noise - scenario.filter_settings.reference_noise_std**2,
+        process_noise=scenario.filter_process_noise(), time=summary["time"], unit=unit,
+        sigma_trusted=summary["sigma_trusted"], sigma_untrusted_because=summary.get("sigma_untrusted_because"),
+        data=summary["data"], columns={"reference": reference, "sensor": sensor},
+    )
     calibration = ScaleBiasCalibrationResult(
         scenario.NAME, summary["bias"], summary["bias_std"], summary["scale_error"], summary["scale_error_std"],
         np.asarray(summary["theta_covariance"], dtype=float), tuple(STATE_NAMES),
         {key: summary[key] for key in ("mean_nis", "nis_bounds", "consistent", "observability")}, warnings, summary,
         estimates, sigma_trusted=summary["sigma_trusted"], scale_sigma_trusted=summary["sigma_trusted"],
+        correction=correction,
     )
     return calibration if is_frame(source) else mark_inputs(calibration, source)
 
@@ -206,7 +217,19 @@ def compute_scale_bias_calibration(
 class ScaleBiasCalibrationResult(CalibrationResult):
     """A scale-bias calibration: the base's scale (the scale error a) and bias b, with theta = (a, b)'s
     covariance as ``covariance`` (over theta1, theta2) and the mean NIS, its bounds, ``consistent`` and the
-    observability ratios as ``diagnostics``."""
+    observability ratios as ``diagnostics``; ``correction`` (a
+    :class:`~kalcal.scenarios.scale_bias.correction.ScaleBiasCorrection`) is the map reference = theta1 *
+    sensor + theta2 at the last sample with its sigma per reading (``apply(z)``), written as
+    ``correction.json`` beside the base's files."""
+
+    correction: ScaleBiasCorrection | None = None
+
+    OUTPUT_NAMES = ("estimates.csv", "summary.json", "correction.json")
+
+    def _save_more(self, out: Path) -> dict[str, Path]:
+        if self.correction is None:  # a result made without one (never by the calibration) has no file to write
+            raise ValueError("correction: the result holds no correction to write as correction.json")
+        return {"correction.json": self.correction.save(Path(out) / "correction.json")}
 
     def table(self) -> list[tuple[str, float, float, bool, str]]:
         s = self.summary
