@@ -147,3 +147,163 @@ def test_an_unknown_kind_of_fix_is_refused_in_one_line_with_status_2():
     assert ran.returncode == 2
     lines = ran.stderr.strip().splitlines()
     assert len(lines) == 1 and "scenario.gps_fixes" in lines[0] and "velocity" in lines[0], ran.stderr
+
+
+# --- kalcal calibrate and kalcal fit on a velocity-only log -------------------------------------------------
+
+
+def _kalcal(*args) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "kalcal", *map(str, args)], capture_output=True, text=True, timeout=600)
+
+
+@pytest.fixture(scope="module")
+def velocity_logs(tmp_path_factory):
+    """A simulated velocity-only log (its position column empty) and the same log with no position column,
+    with the truth's bias at the last fix."""
+    import pandas as pd
+
+    root = tmp_path_factory.mktemp("velocity")
+    ran = _kalcal("simulate", "accel-gps", "--set", "scenario.gps_fixes=velocity", "--seed", "1", "--out", root / "sim")
+    assert ran.returncode == 0, ran.stderr
+    gps = pd.read_csv(root / "sim" / "gps.csv")
+    assert list(gps.columns) == ["time", "position", "velocity"] and gps["position"].isna().all()
+    gps.drop(columns="position").to_csv(root / "no_position.csv", index=False)
+    truth = pd.read_csv(root / "sim" / "truth.csv")
+    bias = float(np.interp(gps["time"].iloc[-1], truth["time"], truth["bias"]))
+    return {"imu": root / "sim" / "imu.csv", "nan": root / "sim" / "gps.csv", "none": root / "no_position.csv",
+            "bias": bias, "root": root}
+
+
+def _bias_and_diagnostics_hold(summary: dict, bias: float) -> None:
+    """The bias within 3.29 of its sigma (two-sided 1e-3 for z = (b_hat - b) / sigma ~ N(0, 1)); the
+    diagnostics consistent, their mean NIS within chi2(K)'s two-sided bounds at the NIS test's share
+    (1 - 0.99) / 2 of one component (with two, the bounds would be chi2(2K)'s, about 2)."""
+    from scipy.stats import norm
+
+    z = (summary["bias"] - bias) / summary["bias_std"]
+    assert abs(z) <= norm.isf(1e-3 / 2), z
+    d = summary["diagnostics"]
+    share = (1 - d["confidence"]) / 2
+    fixes = d["fixes"]
+    low, high = chi2.ppf([share / 2, 1 - share / 2], fixes) / fixes
+    assert d["nis_lower"] == pytest.approx(low, rel=1e-9) and d["nis_upper"] == pytest.approx(high, rel=1e-9)
+    assert low <= d["mean_nis"] <= high and d["consistent"], d["verdict"]
+    assert len(d["ljung_box_statistic"]) == 1  # the velocity's series alone
+    # nothing measures the position: its sigma never falls below its prior's (the filter's, unset: the truth's)
+    settings = summary["settings"]
+    assert summary["position_std"] >= (settings["filter"]["position0_std"] or settings["truth"]["position0_std"])
+
+
+@pytest.mark.parametrize("log", ["nan", "none"])
+def test_calibrate_takes_a_velocity_only_log_with_or_without_a_position_column(velocity_logs, tmp_path, log):
+    import pandas as pd
+
+    ran = _kalcal("calibrate", "accel-gps", "--imu", velocity_logs["imu"], "--gps", velocity_logs[log],
+                  "--set", "scenario.gps_fixes=velocity", "--out", tmp_path)
+    assert ran.returncode == 0, ran.stderr[-3000:]
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["settings"]["scenario"]["gps_fixes"] == "velocity"
+    assert [w["code"] for w in summary["warnings"]] == ["velocity-only-fixes"]
+    _bias_and_diagnostics_hold(summary, velocity_logs["bias"])
+    # estimates.csv keeps its columns: the position innovation, which a velocity fix has not, is NaN
+    estimates = pd.read_csv(tmp_path / "estimates.csv")
+    assert list(estimates.columns) == ["time", "position", "velocity", "bias", "position_std", "velocity_std", "bias_std",
+                                       "nis", "innovation_position", "innovation_velocity"]
+    assert estimates["innovation_position"].isna().all() and estimates["innovation_velocity"].notna().all()
+    # one component: each fix's NIS is its velocity innovation squared
+    np.testing.assert_allclose(estimates["nis"], estimates["innovation_velocity"] ** 2, rtol=1e-12)
+    assert (tmp_path / "calibration.png").stat().st_size > 0
+
+
+def test_both_velocity_only_logs_calibrate_alike(velocity_logs, tmp_path):
+    """The position column is not read: with it empty or absent, the same numbers."""
+    sums = []
+    for log in ("nan", "none"):
+        ran = _kalcal("calibrate", "accel-gps", "--imu", velocity_logs["imu"], "--gps", velocity_logs[log], "--set",
+                      "scenario.gps_fixes=velocity", "--out", tmp_path / log, "--no-settings-sigma")
+        assert ran.returncode == 0, ran.stderr[-3000:]
+        sums.append(json.loads((tmp_path / log / "summary.json").read_text()))
+    for key in ("bias", "bias_std", "velocity", "fixes_used"):
+        assert sums[0][key] == sums[1][key], key
+    assert sums[0]["diagnostics"]["mean_nis"] == sums[1]["diagnostics"]["mean_nis"]
+
+
+@pytest.mark.parametrize("command", ["calibrate", "fit"])
+@pytest.mark.parametrize("log", ["nan", "none"])
+def test_a_velocity_only_log_under_the_default_fixes_is_refused_naming_the_position_column(velocity_logs, tmp_path, command, log):
+    ran = _kalcal(command, "accel-gps", "--imu", velocity_logs["imu"], "--gps", velocity_logs[log], "--out", tmp_path)
+    assert ran.returncode == 2
+    lines = ran.stderr.strip().splitlines()
+    assert len(lines) == 1 and "'position'" in lines[0] and "scenario.gps_fixes=velocity" in lines[0], ran.stderr
+    assert str(velocity_logs[log].name) in lines[0]
+
+
+def test_fit_on_a_velocity_only_log_goes_back_into_calibrate(velocity_logs, tmp_path):
+    """The fit leaves the position fix's std out of its defaults, writes the kind of fix in filter.toml's
+    [scenario], and calibrate --config takes the file as it is (no --set), to the bias within its sigma."""
+    import tomllib
+
+    ran = _kalcal("fit", "accel-gps", "--imu", velocity_logs["imu"], "--gps", velocity_logs["none"],
+                  "--set", "scenario.gps_fixes=velocity", "--out", tmp_path / "fit")
+    assert ran.returncode == 0, ran.stderr[-3000:]
+    document = json.loads((tmp_path / "fit" / "fit.json").read_text())
+    assert document["free"] == ["filter.accel_noise_density", "filter.bias_walk_density", "filter.gps_velocity_std"]
+    assert document["adequate"], document["adequacy"]
+    config = tomllib.loads((tmp_path / "fit" / "filter.toml").read_text())
+    assert config["scenario"]["gps_fixes"] == "velocity"
+    # the fitted velocity noise within its interval of the simulation's 0.04 m/s
+    interval = document["parameters"]["filter.gps_velocity_std"]
+    assert interval["ci_low"] <= AccelGpsScenario().truth.gps_velocity_std <= interval["ci_high"], interval
+    ran = _kalcal("calibrate", "accel-gps", "--imu", velocity_logs["imu"], "--gps", velocity_logs["none"],
+                  "--config", tmp_path / "fit" / "filter.toml", "--out", tmp_path / "cal")
+    assert ran.returncode == 0, ran.stderr[-3000:]
+    summary = json.loads((tmp_path / "cal" / "summary.json").read_text())
+    assert summary["settings"]["scenario"]["gps_fixes"] == "velocity"
+    assert summary["settings"]["filter"]["gps_velocity_std"] == config["filter"]["gps_velocity_std"]
+    _bias_and_diagnostics_hold(summary, velocity_logs["bias"])
+
+
+def test_the_api_fit_s_settings_go_back_into_calibrate(velocity_logs, tmp_path, monkeypatch):
+    """... and calibration.png draws the velocity's innovations alone."""
+    import kalcal
+    import kalcal.plots.calibration as plots
+
+    fit = kalcal.fit("accel-gps", imu=velocity_logs["imu"], gps=velocity_logs["none"], settings=VELOCITY)
+    assert fit.settings["scenario"]["gps_fixes"] == "velocity"
+    result = kalcal.calibrate("accel-gps", imu=velocity_logs["imu"], gps=velocity_logs["none"], settings=fit.settings,
+                              settings_sigma=False)
+    _bias_and_diagnostics_hold(result.summary, velocity_logs["bias"])
+    drawn = {}
+    plot = plots.plot_calibration
+    monkeypatch.setattr(plots, "plot_calibration", lambda *a, **k: drawn.update(normalized=a[3], names=k["names"]) or plot(*a, **k))
+    result.save(tmp_path / "cal")
+    assert drawn["names"] == ("velocity",) and drawn["normalized"].shape == (result.summary["fixes_used"], 1)
+    assert np.all(np.isfinite(drawn["normalized"]))
+
+
+@pytest.mark.parametrize("key", ["filter.gps_position_std", "log.position_std_multiplier"])
+def test_fit_refuses_the_position_fix_s_settings_on_a_velocity_only_log(velocity_logs, tmp_path, key):
+    ran = _kalcal("fit", "accel-gps", "--imu", velocity_logs["imu"], "--gps", velocity_logs["none"],
+                  "--set", "scenario.gps_fixes=velocity", "--free", key, "--out", tmp_path)
+    assert ran.returncode == 2
+    lines = ran.stderr.strip().splitlines()
+    assert len(lines) == 1 and key in lines[0] and "velocity-only" in lines[0], ran.stderr
+
+
+def test_a_topic_without_the_velocity_field_is_refused_in_one_line_under_velocity_only_fixes():
+    """A GPS topic read from a bag or ULog (a frame naming its source) with no velocity field: its name,
+    the field asked for and how to name one; its position field is not asked for."""
+    import pandas as pd
+
+    from kalcal.errors import DataError
+    from kalcal.scenarios.accel_gps.calibrate import GPS_ROLES, read_gps_log
+
+    frame = pd.DataFrame({"time": [0.0, 0.2], "/odom.pose.pose.position.x": [0.0, 1.0]})
+    frame.attrs["source"] = "run.bag topic /odom"
+    columns = {**{role: role for role in GPS_ROLES}, "velocity": "/odom.twist.twist.linear.x"}
+    with pytest.raises(DataError, match=r"run\.bag topic /odom: has no velocity '/odom\.twist\.twist\.linear\.x'.*TOPIC\.FIELD") as raised:
+        read_gps_log(_scenario(), frame, columns)
+    assert "\n" not in str(raised.value) and "position" not in str(raised.value)
+    frame["/odom.twist.twist.linear.x"] = [1.0, 1.0]
+    name, gps = read_gps_log(_scenario(), frame, columns)
+    assert name == "run.bag topic /odom" and gps["position"] is None and list(gps["velocity"]) == [1.0, 1.0]

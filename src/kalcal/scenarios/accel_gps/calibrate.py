@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from kalcal.calibration.plausibility import CalibrationWarning
+from kalcal.errors import DataError
 from kalcal.calibration.windows import accel_gps_stability, check_windows
 from kalcal.io.logs import check_gnss_columns, is_frame, numeric_columns, parse_column_map, read_table, require_increasing, source_name
 from kalcal.stats.nis import gate_excess
@@ -68,8 +69,12 @@ def compute_accel_gps_calibration(
     list of ``{"code", "message"}`` (empty when none), and ``fixes_default_std`` counts the fixes used whose
     ``position_std`` / ``velocity_std`` was NaN and took the filter's setting.
 
+    With ``scenario.gps_fixes = "velocity"`` the GPS log needs no position column (neither it nor
+    ``position_std`` is read, :func:`read_gps_log`); ``estimates.csv``'s ``innovation_position`` is then NaN
+    in every row (a velocity fix has no position innovation) and the diagnostics test the velocity's alone.
+
     ``gate`` (a confidence such as 0.999, None for none) rejects the fixes whose NIS under their prior
-    exceeds chi2.ppf(gate, 2): ``fixes_rejected`` counts them and ``rejected_rows`` lists their 1-based
+    exceeds chi2.ppf(gate, p), p = 2 (1 with velocity-only fixes): ``fixes_rejected`` counts them and ``rejected_rows`` lists their 1-based
     GPS rows. The bias's prior is diffuse unless ``filter.bias_std`` is given (a Gauss-Markov bias keeps
     its stationary std): ``prior`` says which, and a ``prior-conflict`` warning says when the estimate lies
     too far from a given prior (:func:`~kalcal.scenarios.accel_gps.calibration.prior_conflict`). The diagnostics
@@ -103,19 +108,10 @@ def compute_accel_gps_calibration(
     gps_map = parse_column_map(gps_columns, GPS_ROLES, "--gps-columns")
     imu_source, gps_source = imu_path, gps_path
     imu_frame = read_table(imu_path, "imu", columns=imu_map)
-    gps_frame = read_table(gps_path, "gps", columns={role: gps_map[role] for role in ("time", "position", "velocity")})
-    imu_path, gps_path = source_name(imu_path, "imu", imu_frame), source_name(gps_path, "gps", gps_frame)
-    check_gnss_columns(gps_frame, gps_path, gps_map)
+    imu_path = source_name(imu_path, "imu", imu_frame)
     imu = numeric_columns(imu_frame, imu_path, imu_map)
-    optional = [role for role in ("position_std", "velocity_std") if gps_map[role] in gps_frame.columns]
-    gps = numeric_columns(
-        gps_frame,
-        gps_path,
-        {role: gps_map[role] for role in ("time", "position", "velocity", *optional)},
-        allow_nan=("position", "velocity", *optional),
-    )
     require_increasing(imu["time"], imu_path, imu_map["time"])
-    require_increasing(gps["time"], gps_path, gps_map["time"])
+    gps_path, gps = read_gps_log(scenario, gps_path, gps_map)
     logs = (imu["time"], imu["accel"], gps["time"], gps["position"], gps["velocity"])
     stds = {"position_std": gps.get("position_std"), "velocity_std": gps.get("velocity_std")}
     options = dict(
@@ -152,13 +148,16 @@ def compute_accel_gps_calibration(
         **({"scale": result.error_state[:, 3]} if scenario.has_scale else {}),
         **{f"{name}_std": std[:, i] for i, name in enumerate(scenario.state_names)},
         "nis": result.nis,
-        "innovation_position": normalized[:, 0],
-        "innovation_velocity": normalized[:, 1],
+        # a column per measured component; a velocity-only fix has no position innovation: NaN in its column,
+        # so that estimates.csv keeps its columns whatever the fixes report
+        **{f"innovation_{name}": normalized[:, scenario.measurement_names.index(name)]
+           if name in scenario.measurement_names else np.full(result.time.size, np.nan)
+           for name in ("position", "velocity")},
         **smoothed_columns,
     }
     used = ~result.rejected
     used[: result.skip] = False
-    diagnostics = innovation_diagnostics(normalized[used])
+    diagnostics = innovation_diagnostics(normalized[used], names=scenario.measurement_names)
     warnings = list(result.warnings)
     # what the log alone tells of the bias (and scale): an unobservable one is the prior's, and beside it
     # neither a prior conflict nor the noise settings are a cause; one the log determines less sharply
@@ -293,9 +292,11 @@ class AccelGpsCalibrationResult(CalibrationResult):
         from kalcal.plots.calibration import plot_calibration
 
         columns = self.columns
-        normalized = np.column_stack([columns["innovation_position"], columns["innovation_velocity"]])
+        # the components the fixes measured (a velocity-only log's position column is NaN: not drawn)
+        names = measurement_names(self.summary)
+        normalized = np.column_stack([columns[f"innovation_{name}"] for name in names])
         path = plot_calibration(columns["time"], columns["bias"], columns["bias_std"], normalized,
-                                out / "calibration.png", note=sigma_note(self.summary))
+                                out / "calibration.png", names=names, note=sigma_note(self.summary))
         return {"calibration.png": path}
 
     def table(self) -> list[tuple[str, float, float, bool, str]]:
@@ -335,6 +336,50 @@ class AccelGpsCalibrationResult(CalibrationResult):
 
     def strict_failed(self) -> bool:
         return bool(self.warnings) or not self.diagnostics["consistent"]
+
+
+def measurement_names(summary: dict[str, Any]) -> tuple[str, ...]:
+    """The components a calibration's fixes measured, from its summary's settings: ("position",
+    "velocity"), or ("velocity",) with ``scenario.gps_fixes = "velocity"``."""
+    velocity_only = summary.get("settings", {}).get("scenario", {}).get("gps_fixes") == "velocity"
+    return ("velocity",) if velocity_only else ("position", "velocity")
+
+
+def read_gps_log(scenario: AccelGpsScenario, gps_path: str | Path | pd.DataFrame,
+                 gps_map: dict[str, str]) -> tuple[str, dict[str, np.ndarray | None]]:
+    """The GPS log's name in messages and its float columns by role (time, position, velocity and the std
+    columns it has), for calibrate and fit alike; times checked to increase.
+
+    With ``scenario.gps_fixes = "velocity"`` neither the position column nor ``position_std`` is read (a
+    log may lack them, or hold anything there): ``position`` is None. With position fixes (the default)
+    a log without a position column, or with no position in any row, is refused in one line naming the
+    column and the setting for a log of velocity alone.
+    """
+    velocity_only = 0 not in scenario.fix_states
+    fixed = ("time", "velocity") if velocity_only else ("time", "position", "velocity")
+    frame = read_table(gps_path, "gps", columns={role: gps_map[role] for role in fixed})
+    name = source_name(gps_path, "gps", frame)
+    hint = "for a log of velocity fixes alone, --set scenario.gps_fixes=velocity"
+    if velocity_only:
+        if "source" in frame.attrs and gps_map["velocity"] not in frame.columns:  # a topic (a table's: below)
+            raise DataError(f"{name}: has no velocity {gps_map['velocity']!r}: velocity-only fixes take velocity "
+                            "[m/s] along the axis of motion, named as TOPIC.FIELD in --gps-columns")
+    else:
+        check_gnss_columns(frame, name, gps_map)  # a topic's, with what accel-gps takes from a receiver
+        if gps_map["position"] not in frame.columns and gps_map["velocity"] in frame.columns:
+            raise DataError(f"{name}: missing column {gps_map['position']!r} for position (columns: "
+                            f"{', '.join(map(str, frame.columns))}): position fixes need it; {hint}")
+    stds = ("velocity_std",) if velocity_only else ("position_std", "velocity_std")
+    optional = [role for role in stds if gps_map[role] in frame.columns]
+    gps: dict[str, np.ndarray | None] = dict(numeric_columns(
+        frame, name, {role: gps_map[role] for role in (*fixed, *optional)}, allow_nan=(*fixed[1:], *optional)
+    ))  # fmt: skip
+    if not velocity_only and not np.any(np.isfinite(gps["position"])) and np.any(np.isfinite(gps["velocity"])):
+        raise DataError(f"{name}: column {gps_map['position']!r}: no position in any row (all empty or NaN): position "
+                        f"fixes need it; {hint}")
+    require_increasing(gps["time"], name, gps_map["time"])
+    gps.setdefault("position", None)
+    return name, gps
 
 
 def fit_command(imu: str, gps: str, extra: Sequence[str] = ()) -> str:

@@ -27,6 +27,7 @@ from kalcal.calibration.diagnostics import innovation_diagnostics
 from kalcal.stats.nis import gate_excess
 from kalcal.errors import KalcalError
 from kalcal.scenarios.accel_gps import latency_scan
+from kalcal.scenarios.accel_gps.evaluation import POSITION_FIX_KEYS
 from kalcal.scenarios.accel_gps.fit_settings import filter_toml
 from kalcal.fitting.mle import Free, maximize
 from kalcal.fitting.nis_tail import nis_tail, not_applicable
@@ -130,10 +131,14 @@ def rate_free(free: Sequence[str]) -> tuple[list[str], list[str]]:
     return keys, notes
 
 
-def default_free(position_std: bool = False, velocity_std: bool = False) -> list[str]:
-    """:data:`DEFAULT_FREE`, with a multiplier on each per-fix std column the GPS log has instead of its constant."""
+def default_free(position_std: bool = False, velocity_std: bool = False, *, positions: bool = True) -> list[str]:
+    """:data:`DEFAULT_FREE`, with a multiplier on each per-fix std column the GPS log has instead of its
+    constant; without ``filter.gps_position_std`` where the fixes have no position (``positions=False``,
+    velocity-only fixes: nothing of the likelihood depends on it, so it has no estimate)."""
     free = list(DEFAULT_FREE)
-    if position_std:
+    if not positions:
+        free.remove("filter.gps_position_std")
+    elif position_std:
         free[free.index("filter.gps_position_std")] = "log.position_std_multiplier"
     if velocity_std:
         free[free.index("filter.gps_velocity_std")] = "log.velocity_std_multiplier"
@@ -213,7 +218,7 @@ def fit_accel_gps(
                                                profile, confidence, notes)
     chosen = fitted_point(fit)  # a ridge's members at the fitted point, so that adequacy is judged on the ridge
     used = _used(calibration)
-    diagnostics = innovation_diagnostics(calibration.normalized_innovations[used])
+    diagnostics = innovation_diagnostics(calibration.normalized_innovations[used], names=scenario.measurement_names)
     # the fit forces the mean NIS to p; the NIS tail's share it does not. A gate cuts that tail off
     tail = nis_tail(calibration.normalized_innovations[used]) if gate is None else None
     adequate = bool(diagnostics.consistent) and (tail is None or tail.passed)
@@ -362,10 +367,15 @@ def log_rates(imu_time: np.ndarray, gps_time: np.ndarray) -> tuple[float, float]
     return float(1.0 / np.median(np.diff(imu_time))), float(1.0 / np.median(np.diff(gps_time)))
 
 
-def check_free(free: Sequence[str], *, position_std: bool, velocity_std: bool) -> None:
-    """Refuse a key that the accel-gps filter has no setting for, or a multiplier of a column the log lacks."""
+def check_free(free: Sequence[str], *, position_std: bool, velocity_std: bool, positions: bool = True) -> None:
+    """Refuse a key that the accel-gps filter has no setting for, a multiplier of a column the log lacks, or,
+    with velocity-only fixes (``positions=False``), a setting of the position fix (the likelihood does not
+    depend on it: a flat direction, no estimate)."""
     accepted = {f"filter.{f.name}" for f in dataclasses.fields(AccelGpsFilter)} - {"filter.position0_mean", "filter.velocity0_mean"}
     for key in rate_free(free)[0]:
+        if not positions and key in POSITION_FIX_KEYS:
+            raise KalcalError(f'--free: {key} is a setting of the position fix, which velocity-only fixes '
+                              '(scenario.gps_fixes = "velocity") do not have: the likelihood does not depend on it')
         if key == "log.position_std_multiplier" and not position_std or key == "log.velocity_std_multiplier" and not velocity_std:
             raise KalcalError(f"--free: {key} needs the GPS log's {key.split('.')[1].removesuffix('_multiplier')} column")
         if key not in accepted and not key.startswith("log.") or key.startswith("log.") and not key.endswith("_std_multiplier"):

@@ -89,11 +89,14 @@ class ReferenceAccelGpsLog:
             return loglik_of(self.calibrate(values, gate=gate))
         rows = self.calibrate({}).fix_rows[np.asarray(rejected, dtype=bool)] - 1
         imu_time, accel, gps_time, gps_position, gps_velocity = self.arrays
-        position = np.array(gps_position, dtype=float)
-        position[rows] = np.nan
+        # a NaN in a field the fixes measure makes them missing: the position, or with velocity-only fixes
+        # (no position read) the velocity
+        velocity_only = 0 not in self.scenario.fix_states
+        position, velocity = (None if velocity_only else np.array(gps_position, dtype=float)), np.array(gps_velocity, dtype=float)
+        (velocity if velocity_only else position)[rows] = np.nan
         held = ReferenceAccelGpsLog.__new__(ReferenceAccelGpsLog)
         held.scenario, held.columns, held.options = self.scenario, self.columns, self.options
-        held.arrays = (imu_time, accel, gps_time, position, gps_velocity)
+        held.arrays = (imu_time, accel, gps_time, position, velocity)
         return loglik_of(held.calibrate(values))
 
 

@@ -9,10 +9,10 @@ import numpy as np
 from kalcal.errors import KalcalError
 from kalcal.fitting.run import KALIBR_NAME, OUTPUT_NAMES as FIT_NAMES, FitRun, filter_toml
 from kalcal.fitting.run import document as fit_document
-from kalcal.io.logs import check_gnss_columns, is_frame, numeric_columns, parse_column_map, read_table, require_increasing, source_name
+from kalcal.io.logs import is_frame, numeric_columns, parse_column_map, read_table, require_increasing, source_name
 from kalcal.io.outputs import mark_inputs
 from kalcal.montecarlo.problem import MAX_UPDATES
-from kalcal.scenarios.accel_gps.calibrate import GPS_ROLES, IMU_ROLES, _logs_of, stated_rates
+from kalcal.scenarios.accel_gps.calibrate import GPS_ROLES, IMU_ROLES, _logs_of, read_gps_log, stated_rates
 
 #: the files of an accel-gps fit: the Kalibr noise file too
 OUTPUT_NAMES = (*FIT_NAMES, KALIBR_NAME)
@@ -50,20 +50,15 @@ def compute_accel_gps_fit(
     gps_map = parse_column_map(gps_columns, GPS_ROLES, "--gps-columns")
     sources = (imu_path, gps_path)
     imu_frame = read_table(imu_path, "imu", columns=imu_map)
-    gps_frame = read_table(gps_path, "gps", columns={role: gps_map[role] for role in ("time", "position", "velocity")})
-    imu_name, gps_name = source_name(imu_path, "imu", imu_frame), source_name(gps_path, "gps", gps_frame)
-    check_gnss_columns(gps_frame, gps_name, gps_map)
+    imu_name = source_name(imu_path, "imu", imu_frame)
     imu = numeric_columns(imu_frame, imu_name, imu_map)
-    optional = [role for role in ("position_std", "velocity_std") if gps_map[role] in gps_frame.columns]
-    gps = numeric_columns(
-        gps_frame, gps_name, {role: gps_map[role] for role in ("time", "position", "velocity", *optional)},
-        allow_nan=("position", "velocity", *optional),
-    )
     require_increasing(imu["time"], imu_name, imu_map["time"])
-    require_increasing(gps["time"], gps_name, gps_map["time"])
+    # calibrate's reading: with velocity-only fixes no position column (gps["position"] is None)
+    gps_name, gps = read_gps_log(scenario, gps_path, gps_map)
     has = {role: role in gps for role in ("position_std", "velocity_std")}
-    free = default_free(has["position_std"], has["velocity_std"]) if not free else list(free)
-    check_free(free, position_std=has["position_std"], velocity_std=has["velocity_std"])
+    positions = 0 in scenario.fix_states
+    free = default_free(has["position_std"], has["velocity_std"], positions=positions) if not free else list(free)
+    check_free(free, position_std=has["position_std"], velocity_std=has["velocity_std"], positions=positions)
     log = prepare(
         scenario, imu["time"], imu["accel"], gps["time"], gps["position"], gps["velocity"],
         position_std=gps.get("position_std"), velocity_std=gps.get("velocity_std"), init=init, prior="auto",

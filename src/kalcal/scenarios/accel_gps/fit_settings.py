@@ -101,7 +101,8 @@ def name_of(key: str) -> str:
 def rates_section(scenario, rates, max_updates=None) -> tuple[dict[str, Any], str]:
     """[scenario]: the log's rates (the GPS rate made a whole divisor of the accelerometer's), the
     scenario's duration made a whole number of GPS intervals, at most ``max_updates`` of them (the most a
-    verification's realization holds), its integration and truth kind; and the comment on a shortened
+    verification's realization holds), its integration and truth kind, ``gps_fixes`` where the fixes are
+    velocity-only; and the comment on a shortened
     duration ("" when it was not shortened)."""
     s = scenario.scenario
     imu_rate, gps_rate = rates if rates is not None else (s.imu_rate, s.gps_rate)
@@ -123,4 +124,8 @@ def rates_section(scenario, rates, max_updates=None) -> tuple[dict[str, Any], st
         "integration": s.integration,
         "truth": s.truth,
     }
+    if s.gps_fixes != "position+velocity":
+        # the model the settings were fitted under, so that calibrate and verify --config run it; the
+        # default's file is left as it was
+        section["gps_fixes"] = s.gps_fixes
     return section, comment
