@@ -19,6 +19,7 @@ NON_DEFAULT = {
     "scenario.gps_rate": 4.0,
     "scenario.truth": "discrete",
     "scenario.integration": "trapezoid",
+    "scenario.gps_fixes": "velocity",
     "truth.accel_amplitude": 5.0,
     "truth.accel_frequency": 0.2,
     "truth.accel_noise_std": 0.03,
