@@ -10,7 +10,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from kalcal.scenarios.scale_bias.calibration import UNOBSERVABLE_RATIO, calibrate_scale_bias
-from kalcal.calibration.windows import check_windows, scale_bias_stability
+from kalcal.calibration.windows import check_windows
+from kalcal.scenarios.scale_bias.windows import scale_bias_stability
 from kalcal.errors import DataError
 from kalcal.io.logs import is_frame, numeric_columns, read_table, require_increasing, source_name
 from kalcal.io.outputs import mark_inputs
@@ -109,7 +110,7 @@ def compute_scale_bias_calibration(
     ``filter.bias``, ``filter.bias_std``, else "diffuse": a log's prior is never silently the simulated
     study's. ``summary["prior"]`` says which, and why.
     ``windows`` splits the log into that many runs of samples for the stability test
-    (:mod:`kalcal.calibration.windows`; 1: none), ``summary["stability"]``.
+    (:mod:`kalcal.scenarios.scale_bias.windows`; 1: none), ``summary["stability"]``.
     """
     windows = check_windows(windows)
     frame = read_table(data_path, "data", columns=(reference, sensor))
