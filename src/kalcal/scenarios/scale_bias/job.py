@@ -18,8 +18,8 @@ from kalcal.io.outputs import mark_inputs
 from kalcal.calibration.warnings import untrusted_warning
 from kalcal.results.calibration import CalibrationResult
 from kalcal.results.simulation import SimulationResult
-from kalcal.fitting.run import FitRun, filter_toml
-from kalcal.fitting.run import document as fit_document
+from kalcal.fitting.result import FitResult
+from kalcal.fitting.run import filter_toml, for_command
 from kalcal.montecarlo.problem import MAX_UPDATES
 from kalcal.models.config import section_values
 from kalcal.scenarios.scale_bias.settings import STATE_NAMES, ScaleBiasScenario
@@ -251,7 +251,7 @@ def compute_scale_bias_fit(
     sensor: str = "sensor",
     profile: bool = False,
     confidence: float = 0.95,
-) -> FitRun:
+) -> FitResult:
     """Fit a scale-bias log (a reference and a sensor column, optionally ``time`` [s]); nothing is written."""
     from kalcal.scenarios.scale_bias.fit import fit_scale_bias
 
@@ -278,12 +278,11 @@ def compute_scale_bias_fit(
     ]
     if not result.adequate:
         header.append(f"NOT ADEQUATE: {result.adequacy}")
-    document = fit_document(result, "fit scale-bias", {"data": name}, list(free or result.parameters))
-    run = FitRun("fit scale-bias", result, document, filter_toml(result, header))
+    run = for_command(result, "fit scale-bias", {"data": name}, list(free or result.parameters), filter_toml(result, header))
     return run if is_frame(data_path) else mark_inputs(run, data_path)
 
 
-def fit_logs(scenario: ScaleBiasScenario, logs: dict[str, Any], options) -> FitRun:
+def fit_logs(scenario: ScaleBiasScenario, logs: dict[str, Any], options) -> FitResult:
     """:meth:`ScaleBiasScenario.fit`: the log checked, then :func:`compute_scale_bias_fit`."""
     from kalcal.errors import KalcalError
 
