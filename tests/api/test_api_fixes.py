@@ -68,8 +68,8 @@ def test_a_loaded_model_takes_settings_and_refusals_as_its_file_does():
     path = Path(__file__).parents[2] / "examples" / "constant_velocity.toml"
     model = kalcal.load_model(path)
     result = kalcal.verify(model, n=300, settings={"filter.w": [[0.01]]})
-    assert result.run.scenario.filter.w.tolist() == [[0.01]]
-    assert result.run.scenario.truth.w.tolist() == kalcal.verify(path, n=300).run.scenario.truth.w.tolist()
+    assert result.scenario.filter.w.tolist() == [[0.01]]
+    assert result.scenario.truth.w.tolist() == kalcal.verify(path, n=300).scenario.truth.w.tolist()
     assert result.to_dict()["final"] == kalcal.verify(path, n=300, settings={"filter.w": [[0.01]]}).to_dict()["final"]
     with pytest.raises(kalcal.KalcalError, match=r"^--long-run: not available for a model file \(.*constant_velocity.toml\)"):
         kalcal.verify(model, n=300, long_run=100)

@@ -199,7 +199,7 @@ def test_each_html_repr_holds_the_headline_numbers_and_escapes_text(inputs, fitt
     assert f">{calibration.scale:.4g}<" in page
 
     noise = kalcal.noise(inputs["static"])
-    page = dataclasses.replace(noise, warnings=[{"code": "moving", "message": "<script>"}])._repr_html_()
+    page = dataclasses.replace(noise, raw_summary={**noise.raw_summary, "warnings": [{"code": "moving", "message": "<script>"}]})._repr_html_()
     _escaped(page)
     assert f">{noise.velocity_random_walk.value:.4g}<" in page and f">{noise.accel_noise_std.value:.4g}<" in page
 

@@ -14,7 +14,9 @@ from scipy import stats
 from kalcal.scenarios.accel_gps.calibration import calibrate_accel_gps
 from kalcal.scenarios.scale_bias.calibration import calibrate_scale_bias
 from kalcal.calibration.stability import LEVEL, difference_statistic, time_windows, weighted_mean_statistic
-from kalcal.calibration.windows import accel_gps_stability, check_windows, scale_bias_stability
+from kalcal.calibration.windows import check_windows
+from kalcal.scenarios.accel_gps.windows import accel_gps_stability
+from kalcal.scenarios.scale_bias.windows import scale_bias_stability
 from kalcal.errors import ConfigError
 from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
 from kalcal.models.config import apply_settings

@@ -22,7 +22,7 @@ def run():
 
 def _datasets(run):
     analysis = analyze_scenario(build_scenario("accel-gps", assignments=["scenario.duration=6"]))
-    return {"stats": run.dataset, "stats_long": run.long_dataset, "analysis": analysis_dataset(analysis, {"form": "joseph"})}
+    return {"stats": run.statistics, "stats_long": run.long_statistics, "analysis": analysis_dataset(analysis, {"form": "joseph"})}
 
 
 @pytest.mark.parametrize("name", ["stats", "stats_long", "analysis"])
@@ -49,7 +49,7 @@ def test_a_cut_or_corrupt_file_is_one_data_error(run, tmp_path):
     from scipy.io import netcdf_file
 
     whole = tmp_path / "whole.nc"
-    write_statistics(whole, run.dataset)
+    write_statistics(whole, run.statistics)
     data = whole.read_bytes()
     cut = tmp_path / "cut.nc"
     for end in [*range(0, 5000, 7), len(data) // 2, len(data) - 64]:  # the header is 3-5 kB; the last bytes may be padding

@@ -113,7 +113,7 @@ def test_verify_with_the_sqrt_form_gives_the_joseph_statistics(tmp_path):
     joseph = verify(scenario, 300, 5, tmp_path / "joseph", long_run=0)
     sqrt = verify(scenario, 300, 5, tmp_path / "sqrt", long_run=0, form="sqrt")
     assert sqrt.summary["form"] == "sqrt" and joseph.summary["form"] == "joseph"
-    a, b = joseph.statistics, sqrt.statistics
+    a, b = joseph.ensemble, sqrt.ensemble
     assert_close(b.filter_cov, a.filter_cov, atol=cov_atol(a.filter_cov, 1e-9), what="filter covariance")
     assert_close(b.error_cov, a.error_cov, atol=cov_atol(a.error_cov, 1e-9), what="ensemble covariance")
     assert [t["passed"] for t in sqrt.summary["tests"]] == [t["passed"] for t in joseph.summary["tests"]]

@@ -24,18 +24,16 @@ def resolve(
     and the TOML ``config`` applied; a model (file or :class:`Model`) refuses the sampled engine and a
     long run as ``kalcal verify`` does. Only with ``models`` (verify) is a model file or Model taken; elsewhere
     a name goes to the registry, which says that model files work with verify."""
-    from kalcal.scenarios.model_file.model import is_model_file, load_model_file
-    from kalcal.scenarios import build_scenario
-
-    from kalcal.scenarios.model_file.model import CustomModelScenario
+    from kalcal.scenarios import build_scenario, is_model_file, load_model_file, model_file_fields
 
     assignments = assignments_of(settings)
     inputs: tuple[str, ...] = ()
-    if isinstance(scenario, CustomModelScenario) and models:
+    fields = model_file_fields(scenario) if models else None
+    if fields is not None:
         # a built model (kalcal.load_model) goes the way of its file: --set's assignments, the same refusals
         from kalcal.io.outputs import inputs_of
 
-        inputs, scenario = inputs_of(scenario), model_of(scenario)
+        inputs, scenario = inputs_of(scenario), Model(**fields)
     is_model = isinstance(scenario, Model) or (isinstance(scenario, (str, Path)) and is_model_file(str(scenario)))
     if models and is_model:
         where = scenario.source if isinstance(scenario, Model) else str(scenario)
@@ -62,16 +60,3 @@ def resolve(
         return apply_settings(scenario, merged)
     return scenario  # a scenario built already (kalcal.load_model, build_scenario)
 
-
-def model_of(scenario) -> Model:
-    """The :class:`Model` of a built custom scenario, its source the file it was read from."""
-    f, t, info = scenario.filter, scenario.truth, scenario.model
-    keys = ("phi", "gamma", "h", "w", "v", "x0", "m0")
-    truth = {key: getattr(t, key).tolist() for key in scenario.differing()}
-    return Model(
-        **{key: getattr(f, key).tolist() for key in keys},
-        steps_per_update=int(f.steps_per_update), updates=int(info.updates), sample_period=float(f.sample_period),
-        truth=truth or None, name=info.name, state_names=list(info.state_names), state_units=list(info.state_units),
-        measurement_names=list(info.measurement_names), measurement_units=list(info.measurement_units),
-        source=info.file,
-    )

@@ -85,14 +85,14 @@ def fit(
     model = resolve(scenario, settings, config, defaults=log_defaults(scenario))
     logs = {"imu": imu, "gps": gps, "data": data}
     if out is None:
-        run = model.fit(logs, options)
-        return dataclasses.replace(run.result, run=run)  # what save() writes
+        return model.fit(logs, options)  # the FitResult the scenario's fit made; its save() writes its files
     from kalcal.fitting.run import save_fit
-    from kalcal.io.outputs import inputs_of, run_outputs
+    from kalcal.io.outputs import inputs_of, mark_inputs, run_outputs
 
     names = model.output_names("fit")
     files = [value for value in logs.values() if isinstance(value, (str, Path))]
     with run_outputs(out, f"fit {model.NAME}", names=names, protect=[*files, *inputs_of(model)]) as staging:
-        run = model.fit(logs, options)
-        save_fit(run, staging)
-    return dataclasses.replace(run.result, paths={name: Path(out) / name for name in names}, run=run)
+        result = model.fit(logs, options)
+        save_fit(result, staging)
+    # the result as saved, still knowing the logs it was read from (a later save never removes them)
+    return mark_inputs(dataclasses.replace(result, paths={name: Path(out) / name for name in names}), *inputs_of(result))

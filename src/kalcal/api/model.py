@@ -97,9 +97,9 @@ class Model:
     def scenario(self, settings: Mapping[str, Any] | None = None):
         """The validated scenario (a :class:`~kalcal.scenarios.model_file.model.CustomModelScenario`), with ``settings``
         (``{"filter.w": [[0.01]], ...}``, the keys ``--set`` takes for a model file) applied."""
-        from kalcal.scenarios.model_file.model import parse_model
+        from kalcal.scenarios import parse_model_file
 
-        return parse_model(self.document(), self.source, assignments_of(settings))
+        return parse_model_file(self.document(), self.source, assignments_of(settings))
 
     def save(self, path: str | Path) -> Path:
         """Write the model file (TOML) that :func:`load_model` reads back."""
@@ -145,6 +145,6 @@ def assignments_of(settings: Mapping[str, Any] | None) -> list[str]:
 
 def load_model(path: str | Path, settings: Mapping[str, Any] | None = None):
     """Read and validate a model file (``kalcal verify MODEL.toml``): the scenario :func:`kalcal.verify` takes."""
-    from kalcal.scenarios.model_file.model import load_model_file
+    from kalcal.scenarios import load_model_file
 
     return load_model_file(path, assignments_of(settings))

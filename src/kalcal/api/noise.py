@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
-from kalcal.api.results import NoiseResult
+from kalcal.results.noise import NoiseResult
 
 
 def noise(
@@ -52,11 +53,14 @@ def noise(
     from kalcal.calibration.noise_run import compute_noise, output_names, save_noise
 
     if out is None:
-        return NoiseResult.from_run(compute_noise(imu, imu_columns=imu_columns, confidence=confidence, strict=strict, topic=topic, axis=axis))
+        return compute_noise(imu, imu_columns=imu_columns, confidence=confidence, strict=strict, topic=topic, axis=axis)
     from kalcal.io.outputs import run_outputs
 
     protect = [imu] if isinstance(imu, (str, Path)) else []
     with run_outputs(out, "noise", names=output_names(kalibr), protect=protect) as staging:
         run = compute_noise(imu, imu_columns=imu_columns, confidence=confidence, strict=strict, topic=topic, axis=axis)
         summary = save_noise(run, staging, kalibr=kalibr)
-    return NoiseResult.from_run(run, summary["files"])
+    from kalcal.io.outputs import inputs_of, mark_inputs
+
+    # the result as saved, still knowing the log it was read from (a later save never removes it)
+    return mark_inputs(dataclasses.replace(run, paths=summary["files"]), *inputs_of(run))

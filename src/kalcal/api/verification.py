@@ -7,16 +7,13 @@ computed in memory (:func:`compute_verification`), and its writing into its fold
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
-from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
-
-if TYPE_CHECKING:
-    import xarray as xr
 
 from kalcal import __version__
 from kalcal.errors import ConfigError
@@ -30,12 +27,12 @@ from kalcal.montecarlo.accumulators import EnsembleStatistics, ensemble_statisti
 from kalcal.montecarlo.engine import BLOCK_SIZE, run_monte_carlo
 from kalcal.montecarlo.problem import MAX_UPDATES, check_engine
 from kalcal.montecarlo.scenarios import build_problem
-from kalcal.stats.results import CheckResult
 from kalcal.stats.suite import run_checks, verdict
 from kalcal.stats.whiteness import REPORT_RESIDUAL_PAIR, residual_pair
 from kalcal.stats.dataset import statistics_dataset
 from kalcal.stats.results import as_false_alarm
-from kalcal.stats.self_check import SelfCheck, exact_prediction, self_check
+from kalcal.results.verification import VerificationResult
+from kalcal.stats.self_check import exact_prediction, self_check
 
 ENGINES = ("exact", "sampled")
 #: Realizations of that study at most (the report used 5 x 10^4).
@@ -257,55 +254,6 @@ def equals_filter(scenario, analysis) -> bool:
     return scenario.truth_is_filter()
 
 
-@dataclass(frozen=True)
-class VerifyOutcome:
-    """What a verification run produced (and wrote: ``paths``)."""
-
-    summary: dict[str, Any]
-    statistics: EnsembleStatistics
-    checks: list[CheckResult]
-    dataset: xr.Dataset
-    paths: dict[str, Path]
-
-
-@dataclass(frozen=True)
-class Verification:
-    """A verification computed in memory, nothing written yet (:func:`compute_verification`).
-
-    Attributes
-    ----------
-    scenario : scenario object
-        What was verified (it carries the files it was read from, which :func:`save_verification` keeps).
-    summary : dict
-        ``summary.json``'s content; its ``timing`` covers the computation (``total_s`` = ``wall_s`` =
-        ``compute_s``, ``report_s`` None) until :func:`save_verification` adds the writing.
-    statistics : EnsembleStatistics
-        The per-update ensemble statistics of the run.
-    checks : list of CheckResult
-        The statistical checks, in the summary's order.
-    dataset : xarray.Dataset
-        ``stats.nc``'s content.
-    long_dataset : xarray.Dataset or None
-        ``stats_long.nc``'s content, None without a long run.
-    checkpoint : Path or None
-        The run's checkpoint file (an input: never removed by the outputs).
-    compute_s : float
-        Seconds the computation took (s).
-    self_check : SelfCheck or None
-        The ensemble against the exact analysis (``summary.json``'s ``self_check``), apart from the verdict.
-    """
-
-    scenario: Any
-    summary: dict[str, Any]
-    statistics: EnsembleStatistics
-    checks: list[CheckResult]
-    dataset: xr.Dataset
-    long_dataset: xr.Dataset | None
-    checkpoint: Path | None
-    compute_s: float
-    self_check: SelfCheck | None = None
-
-
 def compute_verification(
     scenario,
     n: int,
@@ -323,8 +271,9 @@ def compute_verification(
     form: str = "joseph",
     notes=None,
     max_run_s: float | None = MAX_RUN_SECONDS,
-) -> Verification:
-    """Run n realizations and check the filter, in memory (the options are :func:`verify`'s).
+) -> VerificationResult:
+    """Run n realizations and check the filter, in memory (the options are :func:`verify`'s): the
+    :class:`~kalcal.results.verification.VerificationResult` it makes, nothing written.
 
     ``progress`` hears of ``"monte carlo"``, ``"long run"`` and ``"statistics"``: the statistics stage
     counts the files' contents as they are built (``stats.nc``, then ``stats_long.nc``), and
@@ -435,7 +384,7 @@ def compute_verification(
     }
     compute_s = time.perf_counter() - started
     summary["timing"].update(total_s=compute_s, report_s=None, wall_s=compute_s)
-    return Verification(
+    return VerificationResult(
         scenario,
         summary,
         statistics,
@@ -448,21 +397,13 @@ def compute_verification(
     )
 
 
-@dataclass(frozen=True)
-class SavedVerification:
-    """What :func:`save_verification` wrote: the files by key, and ``summary.json``'s content as written."""
-
-    paths: dict[str, Path]
-    summary: dict[str, Any]
-
-
 #: the files a verification run (with its report) may write, relative to its folder
 OUTPUT_NAMES = ("summary.json", "stats.nc", "stats_long.nc", "report.html", "figures/*.png")
 
 
 @writes_outputs("verify", names=OUTPUT_NAMES, inputs=("checkpoint",))
 def save_verification(
-    run: Verification,
+    run: VerificationResult,
     out: str | Path,
     *,
     report: bool = False,
@@ -470,26 +411,27 @@ def save_verification(
     progress: JobProgress | None = None,
     checkpoint: str | Path | None = None,
     scenario=None,
-) -> SavedVerification:
+) -> VerificationResult:
     """Write a computed verification into ``out`` as one set: ``stats.nc``, ``stats_long.nc`` (with a long
     run), ``summary.json`` and, with ``report``, ``figures/`` and ``report.html`` (realization
     ``realization``). ``checkpoint`` and the files ``scenario`` was read from are never removed.
 
     ``summary.json``'s ``timing``: ``total_s`` is the computation plus writing the statistics files (s),
     ``report_s`` drawing the figures and page (None without a report), ``wall_s`` both. The page is drawn
-    from the summary as it will be written, and ``summary.json`` written once, last.
+    from the summary as it will be written, and ``summary.json`` written once, last. Returns the result
+    as saved: its ``raw_summary`` as written (the timing covering the writing) and ``paths`` the files by key.
     """
     del checkpoint, scenario  # protected by the decorator (and the run's own, below)
     return _save(run, Path(out), report=report, realization=realization, progress=progress)
 
 
-def _save(run: Verification, out: Path, *, report: bool, realization: int, progress) -> SavedVerification:
+def _save(run: VerificationResult, out: Path, *, report: bool, realization: int, progress) -> VerificationResult:
     writing = time.perf_counter()
-    files = 2 if run.long_dataset is None else 3
-    paths = {"stats": write_statistics(out / "stats.nc", run.dataset)}
-    if run.long_dataset is not None:
-        paths["stats_long"] = write_statistics(out / "stats_long.nc", run.long_dataset)
-    summary = {**run.summary, "timing": dict(run.summary["timing"])}
+    files = 2 if run.long_statistics is None else 3
+    paths = {"stats": write_statistics(out / "stats.nc", run.statistics)}
+    if run.long_statistics is not None:
+        paths["stats_long"] = write_statistics(out / "stats_long.nc", run.long_statistics)
+    summary = {**run.raw_summary, "timing": dict(run.raw_summary["timing"])}
     timing = summary["timing"]
     elapsed = run.compute_s + (time.perf_counter() - writing)
     timing.update(total_s=elapsed, report_s=None, wall_s=elapsed)  # no report drawn (yet)
@@ -504,7 +446,7 @@ def _save(run: Verification, out: Path, *, report: bool, realization: int, progr
         # the page is drawn from the summary as it will be written (and as a redraw reads it) and from the
         # statistics in memory, not read back from the files just written: the same bytes as a redraw
         paths["report"] = report_job.draw_report(
-            out, json_document(summary), run.dataset, run.long_dataset, realization=realization, progress=progress
+            out, json_document(summary), run.statistics, run.long_statistics, realization=realization, progress=progress
         )
         paths["figures"] = out / report_job.FIGURE_DIR
         # the whole job's time, the report included, goes into the staged summary before the set is
@@ -512,7 +454,7 @@ def _save(run: Verification, out: Path, *, report: bool, realization: int, progr
         timing["report_s"] = time.perf_counter() - drawing
         timing["wall_s"] = run.compute_s + (time.perf_counter() - writing)
     write_json(paths["summary"], summary)
-    return SavedVerification(paths, summary)
+    return dataclasses.replace(run, raw_summary=summary, paths=paths)
 
 
 @writes_outputs("verify", names=OUTPUT_NAMES, inputs=("checkpoint",))
@@ -536,7 +478,7 @@ def verify(
     realization: int = 0,
     notes=None,
     max_run_s: float | None = MAX_RUN_SECONDS,
-) -> VerifyOutcome:
+) -> VerificationResult:
     """Run n realizations, check the filter, write ``out/summary.json`` and ``out/stats.nc``:
     :func:`compute_verification` then :func:`save_verification`, with the folder checked first.
 
@@ -576,5 +518,4 @@ def verify(
         notes=notes,
         max_run_s=max_run_s,
     )
-    saved = save_verification(run, out, report=report, realization=realization, progress=progress)
-    return VerifyOutcome(saved.summary, run.statistics, run.checks, run.dataset, saved.paths)
+    return save_verification(run, out, report=report, realization=realization, progress=progress)

@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from kalcal.api.progress import progress_callback
-from kalcal.api.results import VerificationResult
+from kalcal.results.verification import VerificationResult
 
 
 def verify(
@@ -115,14 +115,14 @@ def _run(model, n, seed, options, cluster, update, out, report, realization) -> 
 
     if out is None:
         with cluster() as client:
-            return VerificationResult.from_run(compute_verification(model, n, seed, client=client, progress=update, **options))
+            return compute_verification(model, n, seed, client=client, progress=update, **options)
     # the folder is checked and locked before a Dask cluster starts or the run begins, and the run's files
     # are put in place as one set
     protect = [options["checkpoint"], *inputs_of(model)]
     with run_outputs(out, "verify", names=OUTPUT_NAMES, protect=protect) as staging:
         with cluster() as client:
-            run = compute_verification(model, n, seed, client=client, progress=update, **options)
-        saved = save_verification(run, staging, report=report, realization=realization, progress=update)
+            result = compute_verification(model, n, seed, client=client, progress=update, **options)
+        saved = save_verification(result, staging, report=report, realization=realization, progress=update)
     final = {key: Path(out) / Path(path).relative_to(staging) for key, path in saved.paths.items()}
     # the summary as written: its timing covers the writing too
-    return VerificationResult.from_run(dataclasses.replace(run, summary=saved.summary), final)
+    return dataclasses.replace(saved, paths=final)

@@ -6,8 +6,6 @@ converted by ``calibrate`` at each log's own rate) and Kalibr's imu.yaml.
 
 from __future__ import annotations
 
-import dataclasses
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -20,6 +18,7 @@ from kalcal.errors import DataError
 from kalcal.io.logs import numeric_columns, parse_column_map, read_table, require_increasing, source_name, topic_of
 from kalcal.io.outputs import final_path, inputs_of, mark_inputs, run_outputs
 from kalcal.io.results import write_json
+from kalcal.results.noise import NoiseResult
 from kalcal.scenarios import noise_filter
 
 IMU_ROLES = ("time", "accel")
@@ -34,41 +33,7 @@ def output_names(kalibr: bool = True) -> tuple[str, ...]:
     return (*OUTPUT_NAMES, KALIBR_NAME) if kalibr else OUTPUT_NAMES
 
 
-@dataclass(frozen=True)
-class NoiseRun:
-    """A noise identification computed in memory, nothing written yet (:func:`compute_noise`).
-
-    Attributes
-    ----------
-    identification : NoiseIdentification or None
-        N, B, K and the per-sample values with their intervals, and the Allan curve: of the log's one
-        column, or of the axis ``--axis`` selects in a three-axis log (None when none is selected).
-    summary : dict
-        ``summary.json``'s content but its ``files`` (where :func:`save_noise` writes them).
-    filter_text : str or None
-        ``filter.toml``: the ``[filter]`` settings for ``kalcal calibrate accel-gps --config`` (None, and
-        no filter.toml, for a three-axis log without a selected axis: the filter is of one axis).
-    allan : pandas.DataFrame
-        ``allan.csv``: tau [s], adev and its bounds [m/s^2], edf, noise type (and ``axis`` for three axes).
-    title : str
-        The Allan plot's title.
-    axes : dict
-        ``{"x": NoiseIdentification, "y": ..., "z": ...}`` for a three-axis log (a bag's or ULog's
-        accelerometer), empty for one column.
-    topic : str or None
-        The Kalibr ``rostopic`` (the bag's topic), None for the default.
-    """
-
-    identification: NoiseIdentification | None
-    summary: dict[str, Any]
-    filter_text: str | None
-    allan: pd.DataFrame
-    title: str
-    axes: dict[str, NoiseIdentification] = dataclasses.field(default_factory=dict)
-    topic: str | None = None
-
-
-def save_noise(run: NoiseRun, out: str | Path, *, kalibr: bool = True) -> dict[str, Any]:
+def save_noise(run: NoiseResult, out: str | Path, *, kalibr: bool = True) -> dict[str, Any]:
     """Write ``summary.json``, ``allan.csv``, ``allan.png``, ``filter.toml`` (where the run has one) and,
     unless ``kalibr`` is False, the Kalibr ``imu.yaml`` (:mod:`kalcal.calibration.kalibr`) into ``out`` as
     one set; returns the summary as written (its ``files`` name where the files are once the set is in
@@ -77,7 +42,7 @@ def save_noise(run: NoiseRun, out: str | Path, *, kalibr: bool = True) -> dict[s
         return _write_noise(run, staging, kalibr)
 
 
-def _write_noise(run: NoiseRun, out: Path, kalibr: bool) -> dict[str, Any]:
+def _write_noise(run: NoiseResult, out: Path, kalibr: bool) -> dict[str, Any]:
     out = Path(out)
     paths = {
         "summary": out / "summary.json",
@@ -89,7 +54,7 @@ def _write_noise(run: NoiseRun, out: Path, kalibr: bool) -> dict[str, Any]:
     from kalcal.plots.allan import plot_allan, plot_allan_axes
 
     if run.axes:
-        plot_allan_axes(run.axes, paths["plot"], title=run.title, selected=run.summary.get("axis"))
+        plot_allan_axes(run.axes, paths["plot"], title=run.title, selected=run.raw_summary.get("axis"))
     else:
         plot_allan(run.identification, paths["plot"], title=run.title)
     run.allan.to_csv(paths["allan"], index=False)
@@ -104,7 +69,7 @@ def _write_noise(run: NoiseRun, out: Path, kalibr: bool) -> dict[str, Any]:
         rostopic = run.topic or "/imu0"
         text = axes_kalibr_yaml(run.axes, rostopic) if run.axes else kalibr_yaml(run.identification, rostopic)
         paths["kalibr"].write_text(text)
-    summary = dict(run.summary)
+    summary = dict(run.raw_summary)
     warnings = summary.pop("warnings")
     summary["files"] = {name: str(final_path(path)) for name, path in paths.items()}
     summary["warnings"] = warnings
@@ -224,9 +189,10 @@ def compute_noise(
     strict: bool = False,
     topic: str | None = None,
     axis: str | None = None,
-) -> NoiseRun:
+) -> NoiseResult:
     """Identify the noise of a static accelerometer log (time [s], accel [m/s^2]; CSV, Parquet, a
-    DataFrame, a ROS bag's ``sensor_msgs/msg/Imu`` topic or a ULog's ``sensor_combined``), in memory.
+    DataFrame, a ROS bag's ``sensor_msgs/msg/Imu`` topic or a ULog's ``sensor_combined``), in memory: the
+    :class:`~kalcal.results.noise.NoiseResult` it makes.
 
     :func:`save_noise` writes ``summary.json``, ``allan.csv`` (tau [s], adev and its bounds [m/s^2], edf,
     noise type), ``allan.png``, ``filter.toml`` and Kalibr's ``imu.yaml``. The log must be evenly sampled
@@ -284,7 +250,7 @@ def compute_noise(
             "warnings": [warning.as_dict() for warning in warnings],
         }
         filter_text = flagged + noise_filter().filter_toml(result, settings, str(imu_path))
-        run = NoiseRun(result, summary, filter_text, _allan_frame(result.curve), title, topic=rostopic)
+        run = NoiseResult(result, summary, filter_text, _allan_frame(result.curve), title, topic=rostopic)
     else:
         first = results[axes[0]]
         blocks = {}
@@ -315,5 +281,5 @@ def compute_noise(
         }
         allan = pd.concat([_allan_frame(r.curve).assign(axis=role) for role, r in results.items()], ignore_index=True)
         allan = allan[["axis", *[c for c in allan.columns if c != "axis"]]]
-        run = NoiseRun(selected, summary, filter_text, allan, title, axes=results, topic=rostopic)
+        run = NoiseResult(selected, summary, filter_text, allan, title, axes=results, topic=rostopic)
     return run if isinstance(source, pd.DataFrame) else mark_inputs(run, source)  # a save never removes the log

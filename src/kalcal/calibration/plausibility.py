@@ -34,7 +34,7 @@ a ratio of 1e-3, 1e-6, 1e-9, 60 or 3600 there names times in ms, us, ns, minutes
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -55,9 +55,6 @@ HINT_MARGIN = 2.0
 MIN_RATE_SAMPLES = 4
 #: a rate the user set (scenario.imu_rate / gps_rate) and the log's may differ by at most this factor
 RATE_FACTOR = 2.0
-#: a per-sample noise setting written for a rate this close (relative) to the log's is taken as written
-#: for it: its std is then off by at most half as much (0.5%)
-NOISE_RATE_TOLERANCE = 0.01
 #: physical limits of the magnitude of each quantity, in its SI unit
 LIMITS = {"accel": 1e4, "position": 1e9, "velocity": 1e5, "time": 1e11}
 UNITS = {"accel": "m/s^2", "position": "m", "velocity": "m/s", "time": "s"}
@@ -157,66 +154,6 @@ def check_rate(
             f"{_unit_hint(rate, expected / RATE_FACTOR, expected * RATE_FACTOR, expected, inside=1.0)}"
         )
     return rate
-
-
-def noise_rate_warnings(
-    per_sample: Mapping[str, tuple[float, str | None]], recorded: Mapping[str, float | None], rate: float, source: str
-) -> list[CalibrationWarning]:
-    """Warnings for noise settings given per sample (``filter.accel_noise_std``, ``filter.bias_walk_std``
-    or the truth's they fall back to), applied as they stand at a log's rate.
-
-    A per-sample std holds at one rate only (:func:`kalcal.scenarios.accel_gps.settings.per_sample`): the white
-    noise's is N sqrt(f), the bias walk's step K / sqrt(f). Applied at a log's rate ``rate`` when written
-    for ``recorded`` Hz, the white noise's std is sqrt(recorded / rate) of the right one (0.71 for 100 Hz
-    settings on a 200 Hz log) and the walk's sqrt(rate / recorded): a warning naming both rates
-    (``noise-rate-mismatch``) where they differ by more than :data:`NOISE_RATE_TOLERANCE`. Where no rate is
-    recorded (a filter.toml of ``kalcal noise`` from before the densities names it in a comment only), a
-    warning that the rate cannot be checked (``noise-rate-unknown``) for a value read from a file; a value
-    given with ``--set`` or in code is taken as given for the log at hand. A file's value has a recorded
-    rate only where the same file gives ``scenario.imu_rate``: ``--set scenario.imu_rate=...`` does not
-    make an old file's rate known, and replacing a file's rate there does not make it unknown (the file's own
-    rate is kept apart, :func:`kalcal.models.config.file_settings`). Both name the density to give instead.
-
-    Parameters
-    ----------
-    per_sample : mapping of str to (float, str or None)
-        The settings given per sample, by key, m/s^2, and the file each was read from
-        (:meth:`AccelGpsScenario.per_sample_settings`).
-    recorded : mapping of str to float or None
-        The rate recorded for each, by key, Hz (None where none is).
-    rate : float
-        The log's median accelerometer rate, Hz.
-    source : str
-        The accelerometer log, quoted.
-    """
-    from kalcal.scenarios.accel_gps.settings import DENSITIES, DENSITY_UNITS, density_of
-
-    warnings = []
-    for key, (value, file) in per_sample.items():
-        at = recorded.get(key)
-        section, name = key.split(".", 1)
-        density_key = f"{section}.{DENSITIES[name][0]}"
-        unit = DENSITY_UNITS[DENSITIES[name][0]]
-        where = f"{file}: " if file else ""
-        if at is None and file is not None:
-            warnings.append(CalibrationWarning(
-                "noise-rate-unknown",
-                f"{where}{key} = {value:.6g} m/s^2 is a per-sample value and no rate is recorded for it "
-                f"(its file gives no scenario.imu_rate; a filter.toml of kalcal noise from before the densities names "
-                f"its rate in a comment only): it is applied per sample at {source}'s {rate:.6g} Hz, which "
-                f"cannot be checked. Give {density_key} (rate-free, {unit}) instead",
-            ))
-        elif at is not None and abs(rate / at - 1) > NOISE_RATE_TOLERANCE:
-            density = density_of(name, value, at)
-            ratio = value / (density * rate ** DENSITIES[name][1])
-            warnings.append(CalibrationWarning(
-                "noise-rate-mismatch",
-                f"{where}{key} = {value:.6g} m/s^2 per sample was written for {at:.6g} Hz "
-                f"(scenario.imu_rate), but {source} samples at {rate:.6g} Hz: applied as it stands it is "
-                f"{ratio:.3g} times the std the same noise has per sample at {rate:.6g} Hz. Give "
-                f"{density_key} = {density:.6g} {unit} (rate-free) instead",
-            ))
-    return warnings
 
 
 def check_imu_faster(imu_rate: float, gps_rate: float, imu_source: str) -> None:

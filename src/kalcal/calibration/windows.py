@@ -1,36 +1,19 @@
-"""The calibrations' filters run on K windows of one log, each from its own prior, and their stability test.
+"""The scenario-free part of the calibrations' stability test: the number of windows and the diffuse prior.
 
-Windows. accel-gps: K spans of equal length over the fixes' times (within the accelerometer log), each
-with the accelerometer samples that cover it; scale-bias: K runs of consecutive samples of equal count.
-
-Each window's prior (so that no window inherits another's posterior and the K errors are independent):
-
-* accel-gps: the window starts at its own first fix, as ``--init first-fix``, whatever ``--init`` the whole
-  run used: position and velocity from that fix with the GPS noise as their covariance. The bias (and the
-  scale factor) get a diffuse prior, mean 0 and std ``DIFFUSE`` sqrt(K) times the whole log's final
-  sigma: at most 1e-6 of a window's information comes from it, so the window's estimate is its data's.
-  A Gauss-Markov bias keeps the model's stationary std ``bias_std`` as its prior (the model says that is
-  the bias's spread at any time, and its dynamics depend on it).
-* scale-bias: theta's prior mean stays the filter's; its covariance is made diffuse the same way
-  (``filter.scale_error_std`` and ``filter.bias_std`` widened so that each theta's prior std is at least
-  ``DIFFUSE`` sqrt(K) times the whole log's final sigma).
-
-The rest of the filter (noise, drift, update form) is the whole run's.
+Each scenario runs its filter on K windows of one log, each from its own prior, so that no window
+inherits another's posterior and the K errors are independent (accel-gps:
+:mod:`kalcal.scenarios.accel_gps.windows`, scale-bias: :mod:`kalcal.scenarios.scale_bias.windows`); the
+windows' estimates are compared by :mod:`kalcal.calibration.stability`. What is the same for every
+scenario is here: ``--windows`` checked (:func:`check_windows`), and the width of a window's diffuse
+prior, :data:`DIFFUSE` sqrt(K) times the whole log's final sigma, so that at most 1e-6 of a window's
+information comes from it and the window's estimate is its data's.
 """
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 
-from kalcal.scenarios.accel_gps.result import AccelGpsCalibration
-from kalcal.scenarios.scale_bias.calibration import ScaleBiasCalibration, calibrate_scale_bias
-from kalcal.calibration.stability import Stability, Window, compare_windows, time_windows, untested
-from kalcal.errors import ConfigError, DataError
-from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
-from kalcal.scenarios.accel_gps.discretization import bias_discretization
-from kalcal.scenarios.scale_bias.settings import STATE_NAMES, ScaleBiasScenario
+from kalcal.errors import ConfigError
 
 #: a window's diffuse prior std, over sqrt(K) times the whole log's final sigma
 DIFFUSE = 1e3
@@ -41,140 +24,3 @@ def check_windows(windows) -> int:
     if isinstance(windows, bool) or not isinstance(windows, (int, np.integer)) or windows < 1:
         raise ConfigError(f"--windows: expected a whole number of windows (>= 1; 1 turns the test off), got {windows!r}")
     return int(windows)
-
-
-def _accel_gps_model(scenario: AccelGpsScenario) -> str:
-    f = scenario.filter_settings
-    if f.bias_correlation_time > 0:
-        return "Gauss-Markov"
-    return "random walk" if f.bias_walk_std > 0 else "constant"
-
-
-def accel_gps_stability(
-    scenario: AccelGpsScenario,
-    whole: AccelGpsCalibration,
-    imu_time: np.ndarray,
-    accel: np.ndarray,
-    gps_time: np.ndarray,
-    gps_position: np.ndarray,
-    gps_velocity: np.ndarray,
-    windows: int = 2,
-    *,
-    position_std: np.ndarray | None = None,
-    velocity_std: np.ndarray | None = None,
-    **options,
-) -> Stability:
-    """The stability of the bias (and scale) of an accel-gps log across ``windows`` windows.
-
-    ``whole`` is the calibration of the whole log (its final sigma sets the diffuse priors); the logs
-    and ``options`` (``form``, ``max_imu_gap``, ``source``, ...) are those given to
-    :func:`~kalcal.scenarios.accel_gps.calibration.calibrate_accel_gps` for it; ``init`` is always "first-fix".
-    A window the filter cannot run on (too few fixes) leaves the test not run, its sentence saying why.
-    """
-    # the accel-gps filter (and numba, under it) only for an accel-gps log: scale-bias runs import this module too
-    from kalcal.scenarios.accel_gps.calibration import calibrate_accel_gps
-
-    count = check_windows(windows)
-    # the noise per sample at the log's own rate, as the whole log's calibration took it
-    scenario = scenario.at_rate(1.0 / float(np.median(np.diff(np.asarray(imu_time, dtype=float)))))
-    names = ("bias", "scale") if scenario.has_scale else ("bias",)
-    units = ("m/s^2", "1")[: len(names)]
-    model = _accel_gps_model(scenario)
-    widths = DIFFUSE * np.sqrt(count) * whole.std[-1, 2 : 2 + len(names)]
-    changes = {"scale_std": float(widths[1])} if scenario.has_scale else {}
-    if model == "Gauss-Markov":
-        prior = "each window from its own first fix; the bias's stationary std as its prior"
-    else:
-        prior = "each window from its own first fix; the bias diffuse"
-        changes["bias_std"] = float(widths[0])
-    if scenario.has_scale:
-        prior += ", the scale factor diffuse"
-    if count == 1:
-        return untested(names, units, (), model, prior, "one window (--windows 1)")
-    window_scenario = dataclasses.replace(scenario, filter=dataclasses.replace(scenario.filter, **changes))
-    imu_time, gps_time = np.asarray(imu_time, float), np.asarray(gps_time, float)
-    finite = gps_time[np.isfinite(gps_time)]
-    start, end = max(finite.min(), imu_time[0]), min(finite.max(), imu_time[-1])
-    arrays = [np.asarray(a, float) if a is not None else None for a in (gps_position, gps_velocity, position_std, velocity_std)]
-    found: list[Window] = []
-    for i, rows in enumerate(time_windows(gps_time, count, start, end)):
-        where = f"window {i + 1} of {count}"
-        if rows.size < 3:
-            return untested(names, units, found, model, prior, f"{where} has {rows.size} fix(es), fewer than 3")
-        first, last = gps_time[rows[0]], gps_time[rows[-1]]
-        lo = max(int(np.searchsorted(imu_time, first, side="right")) - 2, 0)
-        hi = min(int(np.searchsorted(imu_time, last, side="left")) + 2, imu_time.size)
-        position, velocity, p_std, v_std = (None if a is None else a[rows] for a in arrays)
-        try:
-            result = calibrate_accel_gps(
-                window_scenario, imu_time[lo:hi], np.asarray(accel, float)[lo:hi], gps_time[rows], position, velocity,
-                position_std=p_std, velocity_std=v_std, init="first-fix", stop_on_gap=False, **options,
-            )  # fmt: skip
-        except (DataError, np.linalg.LinAlgError) as exc:
-            return untested(names, units, found, model, prior, f"{where} (t {first:.6g} to {last:.6g} s): {exc}")
-        d = len(names)
-        found.append(
-            Window(float(result.start_time), float(result.time[-1]), int(result.time.size) + 1,
-                   result.error_state[-1, 2 : 2 + d].copy(), result.covariance[-1, 2 : 2 + d, 2 : 2 + d].copy())
-        )  # fmt: skip
-    transitions = drift = None
-    if model != "constant":
-        period = float(np.median(np.diff(imu_time)))
-        spans = np.diff([w.end for w in found])
-        decay, variance = bias_discretization(scenario.filter_settings, spans, period)
-        d = len(names)
-        transitions = np.broadcast_to(np.eye(d), (count - 1, d, d)).copy()
-        drift = np.zeros((count - 1, d, d))
-        transitions[:, 0, 0], drift[:, 0, 0] = decay, variance
-    return compare_windows(found, names, units, model=model, prior=prior, transitions=transitions, drift=drift)
-
-
-def scale_bias_stability(
-    scenario: ScaleBiasScenario,
-    whole: ScaleBiasCalibration,
-    time: np.ndarray,
-    reference: np.ndarray,
-    sensor: np.ndarray,
-    windows: int = 2,
-    **options,
-) -> Stability:
-    """The stability of theta = [theta1, theta2] of a scale-bias log across ``windows`` runs of samples.
-
-    ``whole`` is the calibration of the whole log; ``options`` (``source``, ``columns``) those given to
-    :func:`~kalcal.scenarios.scale_bias.calibration.calibrate_scale_bias` for it.
-    """
-    count = check_windows(windows)
-    units = scenario.state_units
-    q = scenario.filter_settings.parameter_drift_std
-    model = "random walk" if q > 0 else "constant"
-    prior = "each window from theta's prior mean with a diffuse covariance"
-    if count == 1:
-        return untested(STATE_NAMES, units, (), model, prior, "one window (--windows 1)")
-    f = scenario.filter_settings
-    gain = 1.0 - f.scale_error
-    widths = DIFFUSE * np.sqrt(count) * whole.std[-1]
-    widened = dataclasses.replace(
-        scenario.filter,
-        scale_error_std=max(f.scale_error_std, float(widths[0]) * gain**2),
-        bias_std=max(f.bias_std, float(widths[1]) * gain),
-    )
-    window_scenario = dataclasses.replace(scenario, filter=widened)
-    time, reference, sensor = (np.asarray(a, float) for a in (time, reference, sensor))
-    found: list[Window] = []
-    ends = []
-    for i, rows in enumerate(np.array_split(np.arange(time.size), count)):
-        where = f"window {i + 1} of {count}"
-        if rows.size < 2:
-            return untested(STATE_NAMES, units, found, model, prior, f"{where} has {rows.size} sample(s), fewer than 2")
-        try:
-            result = calibrate_scale_bias(window_scenario, time[rows], reference[rows], sensor[rows], **options)
-        except DataError as exc:
-            return untested(STATE_NAMES, units, found, model, prior, f"{where} (t {time[rows[0]]:.6g} to {time[rows[-1]]:.6g} s): {exc}")
-        found.append(Window(float(time[rows[0]]), float(time[rows[-1]]), result.samples_used,
-                            result.theta[-1].copy(), result.covariance[-1].copy()))  # fmt: skip
-        ends.append(rows[-1])
-    drift = None
-    if model != "constant":
-        # Q per sample: between two windows' last samples the walk adds (samples between) Q
-        drift = np.diff(ends)[:, None, None] * scenario.filter_process_noise()[None]
-    return compare_windows(found, STATE_NAMES, units, model=model, prior=prior, drift=drift)

@@ -119,14 +119,14 @@ def calibrate(
     for name, value, sigma, trusted, unit in result.table():
         shown = f"{sigma:.3g}"
         table.add_row(name, f"{value:.6g}", shown if trusted else f"[bold red]{shown} NOT trusted[/bold red]", unit)
-    for row in getattr(result, "extra_rows", lambda: [])():
+    for row in result.extra_rows():
         table.add_row(*row)
     console = _common.console
     console.print(table)
     for text, _ in result.lines():
         console.print(text, markup=False)
     _common._print_warnings(summary)
-    diagnostics = getattr(result, "diagnostics_line", lambda: None)()
+    diagnostics = result.diagnostics_line()
     if diagnostics is not None:
         style = "green" if diagnostics[1] else "bold red"
         console.print(f"diagnostics: [{style}]{escape(diagnostics[0])}[/{style}]")

@@ -61,7 +61,7 @@ def noise(
         if imu is None:
             raise KalcalError("--imu: required (a static accelerometer log: time [s], accel [m/s^2])")
         result = run_noise(imu, imu_columns=imu_columns, strict=strict, out=out, kalibr=kalibr, topic=topic, axis=axis)
-    summary = {**result.run.summary, "files": result.paths}
+    summary = {**result.raw_summary, "files": result.paths}
     blocks = summary["axes"] if "axes" in summary else {None: summary}
     table = _common._table(
         f"kalcal noise: {summary['samples']:,} samples at {summary['rate']['value']:.6g} Hz"

@@ -76,7 +76,7 @@ def verify(
                 command=shlex.join(["kalcal", *sys.argv[1:]]),
                 notes=_common.print_note,
             )
-    summary = result.run.summary
+    summary = result.raw_summary
     _common._print_checks(summary)
     from kalcal.reporting.text import scope_statement
 

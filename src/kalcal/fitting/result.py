@@ -135,8 +135,20 @@ class FitResult:
     df_model : int or None
         The parameters the search maximized log L over (k in the AIC; a latency held at its input is not
         one); None for a result not made by a search (then the parameters not held).
-    run : FitRun or None
-        What :meth:`save` writes (:class:`kalcal.fitting.run.FitRun`): set by :func:`kalcal.fit`.
+    command : str
+        The command that made it (``"fit accel-gps"``); "" for a result not made by ``kalcal fit``, which
+        has no files to save. With it, fit.json (:meth:`to_dict`) holds ``command``, ``inputs``, ``free``
+        and ``settings`` too.
+    inputs : dict
+        The logs it read, by role (fit.json's ``inputs``).
+    free : list of str or None
+        The settings fitted (fit.json's ``free``).
+    filter_text : str or None
+        filter.toml, loadable by ``--config`` of calibrate and verify.
+    kalibr_text : str or None
+        imu.yaml, the fitted noise densities in Kalibr's form, where the scenario's noise has one.
+    linear : tuple of str
+        The fitted settings drawn on a linear axis in fit.png (the others on a log axis).
     """
 
     scenario: str
@@ -159,7 +171,12 @@ class FitResult:
     #: the files written, by name, when the fit was given a folder (``kalcal.fit(..., out=...)``)
     paths: dict[str, Any] = field(default_factory=dict)
     df_model: int | None = None
-    run: Any = field(default=None, compare=False)
+    command: str = ""
+    inputs: dict[str, str] = field(default_factory=dict)
+    free: list[str] | None = None
+    filter_text: str | None = field(default=None, repr=False)
+    kalibr_text: str | None = field(default=None, repr=False)
+    linear: tuple[str, ...] = ()
     #: what one observation of the likelihood is, for the CLI's title (``fixes``; scale-bias's ``samples``)
     nobs_name: str = "fixes"
 
@@ -323,11 +340,11 @@ class FitResult:
         ``kalcal fit --out`` does (one set: whole or not at all, docs/outputs.md); returns the files by name."""
         from kalcal.errors import KalcalError
 
-        if self.run is None:
+        if not self.command:
             raise KalcalError("save: this FitResult holds no files to write (only kalcal.fit's results do)")
         from kalcal.fitting.run import save_fit
 
-        return save_fit(self.run, out)
+        return save_fit(self, out)
 
     def to_dict(self) -> dict[str, Any]:
         """fit.json's content (``schema_version`` is added by the writer, :func:`kalcal.io.results.write_json`)."""
@@ -349,6 +366,8 @@ class FitResult:
         }
         if self.rejected_fixes is not None:
             document["rejected_fixes"] = {"count": len(self.rejected_fixes), "rows": list(self.rejected_fixes)}
+        if self.command:  # what the command adds: fit.json's provenance and filter.toml's settings
+            document.update(command=self.command, inputs=dict(self.inputs), free=list(self.free or []), settings=self.settings)
         return document
 
 

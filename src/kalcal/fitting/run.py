@@ -1,12 +1,14 @@
-"""A fit's files made in memory and written as one set, and the options of ``kalcal fit`` named once (:class:`FitOptions`).
+"""A fit's files written as one set, and the options of ``kalcal fit`` named once (:class:`FitOptions`).
 
 The files are fit.json, filter.toml, fit.png and a scenario's own, such as Kalibr's imu.yaml.
 
-Each scenario's ``fit(logs, options)`` reads its logs and fits (``kalcal.scenarios.<name>``); what is
-common to every fit, its files, is here."""
+Each scenario's ``fit(logs, options)`` reads its logs and fits (``kalcal.scenarios.<name>``), and returns
+the :class:`~kalcal.fitting.result.FitResult` it made, completed by :func:`for_command` with what its
+files need; what is common to every fit, its files, is here."""
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -50,39 +52,6 @@ class FitOptions:
     sensor: str = "sensor"
 
 
-@dataclass(frozen=True)
-class FitRun:
-    """A fit computed in memory, nothing written yet.
-
-    Attributes
-    ----------
-    command : str
-        ``"fit accel-gps"`` or ``"fit scale-bias"``.
-    result : FitResult
-    document : dict
-        fit.json's content.
-    filter_text : str
-        filter.toml, loadable by ``--config`` of calibrate and verify.
-    kalibr_text : str or None
-        imu.yaml, the fitted noise densities in Kalibr's form (:func:`kalcal.calibration.kalibr.fit_kalibr_yaml`),
-        where the scenario's noise has one.
-    linear : tuple of str
-        The fitted settings drawn on a linear axis in fit.png (the others on a log axis).
-    """
-
-    command: str
-    result: FitResult
-    document: dict[str, Any]
-    filter_text: str
-    kalibr_text: str | None = None
-    linear: tuple[str, ...] = ()
-
-    @property
-    def output_names(self) -> tuple[str, ...]:
-        """The files it writes."""
-        return OUTPUT_NAMES if self.kalibr_text is None else (*OUTPUT_NAMES, KALIBR_NAME)
-
-
 def _toml_value(value: Any) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
@@ -112,24 +81,43 @@ def filter_toml(result: FitResult, header: list[str]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def document(result: FitResult, command: str, sources: dict[str, str], free: list[str]) -> dict[str, Any]:
-    return {**result.to_dict(), "command": command, "inputs": sources, "free": free, "settings": result.settings}
+def for_command(
+    result: FitResult,
+    command: str,
+    inputs: dict[str, str],
+    free: list[str],
+    filter_text: str,
+    kalibr_text: str | None = None,
+    linear: tuple[str, ...] = (),
+) -> FitResult:
+    """``result`` as the command ``command`` (``"fit accel-gps"``) made it: with the logs it read
+    (``inputs``, fit.json's ``inputs``), the settings it fitted (``free``), filter.toml's text
+    (:func:`filter_toml`), imu.yaml's (where the scenario's noise has one) and the settings drawn on a
+    linear axis in fit.png: the fields that its ``to_dict()`` (fit.json) and ``save(out)`` use."""
+    return dataclasses.replace(result, command=command, inputs=dict(inputs), free=list(free), filter_text=filter_text,
+                               kalibr_text=kalibr_text, linear=tuple(linear))
 
 
-def save_fit(run: FitRun, out: str | Path) -> dict[str, Path]:
+def output_names(result: FitResult) -> tuple[str, ...]:
+    """The files ``result`` writes: :data:`OUTPUT_NAMES`, and :data:`KALIBR_NAME` where it has imu.yaml's text."""
+    return OUTPUT_NAMES if result.kalibr_text is None else (*OUTPUT_NAMES, KALIBR_NAME)
+
+
+def save_fit(result: FitResult, out: str | Path) -> dict[str, Path]:
     """Write ``fit.json``, ``filter.toml``, ``fit.png`` and, for accel-gps, ``imu.yaml`` into ``out`` as one
     set (:mod:`kalcal.io.outputs`); returns the files by name (where they are once the set is in place)."""
     out = Path(out)
-    names = run.output_names
-    with run_outputs(out, run.command, names=names, protect=inputs_of(run)) as staging:
+    names = output_names(result)
+    with run_outputs(out, result.command, names=names, protect=inputs_of(result)) as staging:
         staging.mkdir(parents=True, exist_ok=True)
         from kalcal.fitting.mle import drop_of
         from kalcal.plots.fit import plot_fit
 
-        write_json(staging / "fit.json", run.document)
-        (staging / "filter.toml").write_text(run.filter_text)
-        if run.kalibr_text is not None:
-            (staging / KALIBR_NAME).write_text(run.kalibr_text)
-        plot_fit(run.result.curves, run.document["parameters"], staging / "fit.png",
-                 method=run.result.interval_method, drop=drop_of(run.result.confidence), linear=tuple(run.linear))
+        document = result.to_dict()
+        write_json(staging / "fit.json", document)
+        (staging / "filter.toml").write_text(result.filter_text)
+        if result.kalibr_text is not None:
+            (staging / KALIBR_NAME).write_text(result.kalibr_text)
+        plot_fit(result.curves, document["parameters"], staging / "fit.png",
+                 method=result.interval_method, drop=drop_of(result.confidence), linear=tuple(result.linear))
     return {name: out / name for name in names}

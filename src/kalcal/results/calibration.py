@@ -207,9 +207,18 @@ class CalibrationResult:
         """The CLI table's title (what the estimates rest on) and caption (when)."""
         return f"kalcal calibrate {self.scenario}", f"t = {self.summary['time']:g} s"
 
+    def extra_rows(self) -> list[tuple[str, str, str, str]]:
+        """Rows the CLI adds below the table, each (quantity, estimate, 1-sigma, unit) as text; none here."""
+        return []
+
     def lines(self) -> list[tuple[str, bool | None]]:
         """The CLI's lines after the table, each (text, verdict): True green, False red, None plain."""
         return []
+
+    def diagnostics_line(self) -> tuple[str, bool] | None:
+        """The innovation diagnostics' verdict in words and whether it is consistent, for the CLI; None where
+        the calibration has none to state."""
+        return None
 
     def strict_failed(self) -> bool:
         """Whether ``--strict`` exits with status 1: a warning raised."""

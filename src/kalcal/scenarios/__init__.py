@@ -6,7 +6,8 @@ through the :class:`~kalcal.scenarios.protocol.Scenario` protocol, never by its 
 (tests/scenarios/test_scenario_boundary.py walks every module for that). This module is the only way in:
 the built-in names (:func:`scenario_names`, for ``--help`` without importing numpy: the classes load on
 first use), the classes (``SCENARIOS``), a scenario built from defaults, a TOML file and overrides
-(:func:`build_scenario`), and a model file (:func:`is_model_file`, :func:`load_model_file`).
+(:func:`build_scenario`), and a model file (:func:`is_model_file`, :func:`load_model_file`,
+:func:`parse_model_file`, and back to its fields, :func:`model_file_fields`).
 """
 
 from __future__ import annotations
@@ -27,7 +28,8 @@ MODEL_FILE = "model-file"
 """What a model file (a linear Gaussian model in TOML, docs/custom-models.md) is called where a scenario's name is asked."""
 
 __all__ = [
-    "MODEL_FILE", "SCENARIOS", "build_scenario", "is_model_file", "load_model_file", "scenario_class", "scenario_names",
+    "MODEL_FILE", "SCENARIOS", "build_scenario", "is_model_file", "load_model_file", "model_file_fields", "parse_model_file",
+    "scenario_class", "scenario_names",
     "log_defaults", "noise_filter", "scenario_of_summary", "settings_assignments",
 ]
 
@@ -62,6 +64,22 @@ def load_model_file(*args, **kwargs):
     from kalcal.scenarios.model_file.model import load_model_file as load
 
     return load(*args, **kwargs)
+
+
+def parse_model_file(text: str, source: str, assignments: Iterable[str] = ()):
+    """The model-file scenario of a model file's text (:func:`kalcal.scenarios.model_file.model.parse_model`);
+    ``source`` names the file in errors and outputs."""
+    from kalcal.scenarios.model_file.model import parse_model
+
+    return parse_model(text, source, assignments)
+
+
+def model_file_fields(scenario: Any) -> dict[str, Any] | None:
+    """The model file's fields of a built model-file scenario (the keyword arguments of :class:`kalcal.Model`,
+    :func:`kalcal.scenarios.model_file.model.model_fields`); None for any other scenario or object."""
+    from kalcal.scenarios.model_file.model import CustomModelScenario, model_fields
+
+    return model_fields(scenario) if isinstance(scenario, CustomModelScenario) else None
 
 
 def build_scenario(

@@ -128,8 +128,9 @@ class Scenario(Protocol):
 
     def fit(self, logs: dict[str, Any], options: Any) -> Any:
         """The noise settings fitted to ``logs`` by maximum likelihood with ``options``
-        (:class:`~kalcal.fitting.run.FitOptions`): a :class:`~kalcal.fitting.result.FitResult` whose ``run``
-        holds the files it writes."""
+        (:class:`~kalcal.fitting.run.FitOptions`): the :class:`~kalcal.fitting.result.FitResult` it made,
+        with what its files need (:func:`~kalcal.fitting.run.for_command`): ``to_dict()`` is fit.json and
+        ``save(out)`` writes the set."""
         ...
 
 

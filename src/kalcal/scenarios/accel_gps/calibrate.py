@@ -11,7 +11,8 @@ import numpy as np
 
 from kalcal.calibration.plausibility import CalibrationWarning
 from kalcal.errors import DataError
-from kalcal.calibration.windows import accel_gps_stability, check_windows
+from kalcal.calibration.windows import check_windows
+from kalcal.scenarios.accel_gps.windows import accel_gps_stability
 from kalcal.io.logs import check_gnss_columns, is_frame, numeric_columns, parse_column_map, read_table, require_increasing, source_name
 from kalcal.stats.nis import gate_excess
 from kalcal.io.outputs import mark_inputs
@@ -63,7 +64,7 @@ def compute_accel_gps_calibration(
     update form (joseph, standard or sqrt); ``smooth`` adds the RTS-smoothed states and their 1-sigma
     (``smoothed_position``, ..., ``smoothed_bias_std``) to ``estimates.csv`` and a ``smoothed`` object to
     ``summary.json``. ``windows`` splits the log into that many windows for the stability test
-    (:mod:`kalcal.calibration.windows`; 1: none), ``summary["stability"]``.
+    (:mod:`kalcal.scenarios.accel_gps.windows`; 1: none), ``summary["stability"]``.
 
     Implausible logs are refused (:mod:`kalcal.calibration.plausibility`); the summary's ``warnings`` is a
     list of ``{"code", "message"}`` (empty when none), and ``fixes_default_std`` counts the fixes used whose

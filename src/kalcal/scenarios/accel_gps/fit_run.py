@@ -7,8 +7,8 @@ from typing import Any
 import numpy as np
 
 from kalcal.errors import KalcalError
-from kalcal.fitting.run import KALIBR_NAME, OUTPUT_NAMES as FIT_NAMES, FitRun, filter_toml
-from kalcal.fitting.run import document as fit_document
+from kalcal.fitting.result import FitResult
+from kalcal.fitting.run import KALIBR_NAME, OUTPUT_NAMES as FIT_NAMES, filter_toml, for_command
 from kalcal.io.logs import is_frame, numeric_columns, parse_column_map, read_table, require_increasing, source_name
 from kalcal.io.outputs import mark_inputs
 from kalcal.montecarlo.problem import MAX_UPDATES
@@ -31,8 +31,8 @@ def compute_accel_gps_fit(
     gate: float | None = None,
     confidence: float = 0.95,
     prepare=None,
-) -> FitRun:
-    """Fit an accel-gps log (files or DataFrames, as ``calibrate``); nothing is written (:func:`save_fit`).
+) -> FitResult:
+    """Fit an accel-gps log (files or DataFrames, as ``calibrate``); nothing is written (its ``save(out)``).
 
     ``prepare(scenario, imu_time, accel, gps_time, gps_position, gps_velocity, **options)`` builds the
     log-likelihood (default: :func:`kalcal.scenarios.accel_gps.log.prepare_accel_gps_log`, O(fixes) per
@@ -83,18 +83,18 @@ def compute_accel_gps_fit(
                       f"the same --gate {gate:g}")
     if not result.adequate:
         header.append(f"NOT ADEQUATE: {result.adequacy}")
-    document = fit_document(result, "fit accel-gps", {"imu": imu_name, "gps": gps_name, "init": init}, free)
     from kalcal.calibration.kalibr import fit_kalibr_yaml
 
     kalibr = fit_kalibr_yaml(result, str(imu_name), result.extra["per_sample"]["rate"])
     from kalcal.scenarios.accel_gps.fit import LINEAR
 
-    run = FitRun("fit accel-gps", result, document, filter_toml(result, header), kalibr, tuple(LINEAR))
+    inputs = {"imu": imu_name, "gps": gps_name, "init": init}
+    run = for_command(result, "fit accel-gps", inputs, free, filter_toml(result, header), kalibr, tuple(LINEAR))
     files = [p for p in sources if not is_frame(p)]
     return mark_inputs(run, *files)
 
 
-def fit_logs(scenario, logs: dict[str, Any], options) -> FitRun:
+def fit_logs(scenario, logs: dict[str, Any], options) -> FitResult:
     """:meth:`AccelGpsScenario.fit`: the logs checked, then :func:`compute_accel_gps_fit`."""
     imu, gps = _logs_of(scenario, logs)
     if options.reference != "reference" or options.sensor != "sensor":

@@ -41,7 +41,8 @@ from kalcal.scenarios.accel_gps import evaluation
 from kalcal.scenarios.accel_gps.log_checks import check_plausible, fix_warnings, unit_slips
 from kalcal.scenarios.accel_gps.result import AccelGpsCalibration, ImuGap
 from kalcal.scenarios.accel_gps.interval_model import composed_sources, scale_parameters
-from kalcal.calibration.plausibility import CalibrationWarning, noise_rate_warnings
+from kalcal.calibration.plausibility import CalibrationWarning
+from kalcal.scenarios.accel_gps.log_checks import noise_rate_warnings
 from kalcal.core.likelihood import innovation_loglik
 from kalcal.core.steps import UpdateForm, check_form
 from kalcal.errors import DataError

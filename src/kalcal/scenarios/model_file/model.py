@@ -301,6 +301,23 @@ def load_model_file(
     return mark_inputs(build_model(document, str(path), assignments), path)  # a job given it never removes the file
 
 
+def model_fields(scenario: CustomModelScenario) -> dict[str, Any]:
+    """A built model-file scenario as the fields of the model file it was read from (the keyword arguments
+    of :class:`kalcal.Model`): the filter's matrices, the truth's where they differ, the labels, and the
+    file as its source. Built again (``kalcal.Model(**fields).scenario(settings)``) it is the same scenario
+    with ``settings`` applied as ``--set`` applies them to the file."""
+    f, t, info = scenario.filter, scenario.truth, scenario.model
+    keys = ("phi", "gamma", "h", "w", "v", "x0", "m0")
+    truth = {key: getattr(t, key).tolist() for key in scenario.differing()}
+    return dict(
+        **{key: getattr(f, key).tolist() for key in keys},
+        steps_per_update=int(f.steps_per_update), updates=int(info.updates), sample_period=float(f.sample_period),
+        truth=truth or None, name=info.name, state_names=list(info.state_names), state_units=list(info.state_units),
+        measurement_names=list(info.measurement_names), measurement_units=list(info.measurement_units),
+        source=info.file,
+    )
+
+
 def parse_model(text: str, source: str, assignments: Iterable[str] = ()) -> CustomModelScenario:
     """A model file's text -> the validated scenario; ``source`` names the file in errors and outputs."""
     return build_model(parse_toml(text, source), source, assignments)

@@ -11,15 +11,16 @@ import numpy as np
 
 from kalcal.scenarios.scale_bias.calibration import UNOBSERVABLE_RATIO, calibrate_scale_bias
 from kalcal.scenarios.scale_bias.correction import ScaleBiasCorrection
-from kalcal.calibration.windows import check_windows, scale_bias_stability
+from kalcal.calibration.windows import check_windows
+from kalcal.scenarios.scale_bias.windows import scale_bias_stability
 from kalcal.errors import DataError
 from kalcal.io.logs import is_frame, numeric_columns, read_table, require_increasing, source_name
 from kalcal.io.outputs import mark_inputs
 from kalcal.calibration.warnings import untrusted_warning
 from kalcal.results.calibration import CalibrationResult
 from kalcal.results.simulation import SimulationResult
-from kalcal.fitting.run import FitRun, filter_toml
-from kalcal.fitting.run import document as fit_document
+from kalcal.fitting.result import FitResult
+from kalcal.fitting.run import filter_toml, for_command
 from kalcal.montecarlo.problem import MAX_UPDATES
 from kalcal.models.config import section_values
 from kalcal.scenarios.scale_bias.settings import STATE_NAMES, ScaleBiasScenario
@@ -111,7 +112,7 @@ def compute_scale_bias_calibration(
     ``filter.bias``, ``filter.bias_std``, else "diffuse": a log's prior is never silently the simulated
     study's. ``summary["prior"]`` says which, and why.
     ``windows`` splits the log into that many runs of samples for the stability test
-    (:mod:`kalcal.calibration.windows`; 1: none), ``summary["stability"]``.
+    (:mod:`kalcal.scenarios.scale_bias.windows`; 1: none), ``summary["stability"]``.
     """
     windows = check_windows(windows)
     frame = read_table(data_path, "data", columns=(reference, sensor))
@@ -273,7 +274,7 @@ def compute_scale_bias_fit(
     sensor: str = "sensor",
     profile: bool = False,
     confidence: float = 0.95,
-) -> FitRun:
+) -> FitResult:
     """Fit a scale-bias log (a reference and a sensor column, optionally ``time`` [s]); nothing is written."""
     from kalcal.scenarios.scale_bias.fit import fit_scale_bias
 
@@ -300,12 +301,11 @@ def compute_scale_bias_fit(
     ]
     if not result.adequate:
         header.append(f"NOT ADEQUATE: {result.adequacy}")
-    document = fit_document(result, "fit scale-bias", {"data": name}, list(free or result.parameters))
-    run = FitRun("fit scale-bias", result, document, filter_toml(result, header))
+    run = for_command(result, "fit scale-bias", {"data": name}, list(free or result.parameters), filter_toml(result, header))
     return run if is_frame(data_path) else mark_inputs(run, data_path)
 
 
-def fit_logs(scenario: ScaleBiasScenario, logs: dict[str, Any], options) -> FitRun:
+def fit_logs(scenario: ScaleBiasScenario, logs: dict[str, Any], options) -> FitResult:
     """:meth:`ScaleBiasScenario.fit`: the log checked, then :func:`compute_scale_bias_fit`."""
     from kalcal.errors import KalcalError
 
