@@ -87,14 +87,6 @@ class CalibrateOptions:
             raise KalcalError(f"{option}: not available for {scenario} ({owner} only)")
 
 
-def _fmt(value: Any) -> str:
-    if value is None:
-        return "—"
-    if isinstance(value, (float, np.floating)):
-        return f"{float(value):.4g}"
-    return str(value)
-
-
 @dataclass(frozen=True, repr=False, eq=False)
 class CalibrationResult:
     """What :func:`kalcal.calibrate` estimated, at the last fix (accel-gps) or sample (scale-bias).

@@ -9,15 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-
-def _fmt(value: Any) -> str:
-    if value is None:
-        return "—"
-    if isinstance(value, (float, np.floating)):
-        return f"{float(value):.4g}"
-    return str(value)
+from kalcal.results._display import fmt
 
 
 @dataclass(frozen=True, repr=False, eq=False)
@@ -128,8 +120,8 @@ class VerificationResult:
         s = self.raw_summary
         rows = "".join(
             "<tr>"
-            f"<td>{html.escape(c.name)}</td><td>{_fmt(c.statistic)}</td><td>{_fmt(c.lower)}</td><td>{_fmt(c.upper)}</td>"
-            f"<td>{_fmt(c.pvalue)}</td><td style='color:{'green' if c.passed else 'red'}'>{'pass' if c.passed else 'FAIL'}</td>"
+            f"<td>{html.escape(c.name)}</td><td>{fmt(c.statistic)}</td><td>{fmt(c.lower)}</td><td>{fmt(c.upper)}</td>"
+            f"<td>{fmt(c.pvalue)}</td><td style='color:{'green' if c.passed else 'red'}'>{'pass' if c.passed else 'FAIL'}</td>"
             "</tr>"
             for c in self.checks
         )
