@@ -1,5 +1,6 @@
 """The page in a real browser: headless Chromium loads it offline, every figure decodes, and the answer
-leads: the verdict's sentence and the first figure lie inside the first 1,200 pixels at 1,400 px width.
+leads: the verdict's sentence and every lead figure (image and title) lie inside the first 1,200 pixels
+at 1,400 px width.
 
 Skipped when no ``chromium`` is on PATH (Debian's ``chromium`` package provides it), except under CI
 (``CI=true``), where ``.ci/run`` installs it: there a missing browser is an error, not a skip.
@@ -88,8 +89,9 @@ def test_page_renders_in_headless_chromium_with_no_broken_image(chromium, report
     assert all(width == 900 for width in report["widths"])
 
 
-#: where the verdict's sentence and the page's first figure lie, in CSS pixels from the page's top, once
-#: every image has loaded (their width and height attributes fix the layout before they decode)
+#: where the verdict's sentence, the page's first figure and each lead figure (its image and its caption's
+#: title, the whole ``<figure>``) lie, in CSS pixels from the page's top, once every image has loaded
+#: (their width and height attributes fix the layout before they decode)
 LAYOUT = """<script>
 window.addEventListener("load", function () {
   function box(element) {
@@ -98,29 +100,56 @@ window.addEventListener("load", function () {
     return {top: r.top + window.scrollY, bottom: r.bottom + window.scrollY, left: r.left, right: r.right};
   }
   var image = document.querySelector("figure img");
+  var lead = Array.prototype.slice.call(document.querySelectorAll(".lead-figures figure")).map(function (f) {
+    var img = f.querySelector("img");
+    return {file: img.getAttribute("data-file"), loaded: img.complete && img.naturalWidth > 0,
+            figure: box(f), image: box(img)};
+  });
   var out = document.createElement("pre");
   out.id = "kalcal-layout";
   out.textContent = JSON.stringify({width: window.innerWidth, verdict: box(document.querySelector("#answer .verdict")),
                                     figure: box(image), file: image && image.getAttribute("data-file"),
-                                    loaded: image && image.complete && image.naturalWidth > 0});
+                                    loaded: image && image.complete && image.naturalWidth > 0, lead: lead});
   document.body.appendChild(out);
 });
 </script>
 """
-#: the first screen: the answer and its first figure lie inside it, at the page's width
+#: the first screen: the answer and every lead figure lie inside it, at the page's width
 FIRST_SCREEN_PX, PAGE_WIDTH_PX = 1200, 1400
 
 
-def _assert_first_screen(chromium, page, tmp_path, first_figure):
+#: the figures that lead each page: the default run's failures root in the model error (its figures first),
+#: the passing run's lead is the fill (mean error, covariance, innovations)
+DEFAULT_LEAD = ["mean_error.png", "model_error.png", "nees.png", "nis.png"]
+PASSING_LEAD = ["mean_error.png", "nees.png", "nis.png", "variance_diagonal.png"]
+
+
+def _lead_files(page):
+    """The file names of the figures in the page's lead row, read from its HTML."""
+    source = page.read_text(encoding="utf-8")
+    row = source[source.index('<div class="lead-figures">') : source.index("<nav>")]
+    return re.findall(r'data-file="figures/([\w.]+)"', row)
+
+
+def _inside_first_screen(what, box):
+    assert 0 <= box["top"] < box["bottom"] <= FIRST_SCREEN_PX, (what, box)
+    assert 0 <= box["left"] < box["right"] <= PAGE_WIDTH_PX, (what, box)
+
+
+def _assert_first_screen(chromium, page, tmp_path, lead_figures):
+    """The verdict and each of ``lead_figures`` (file names, in the page's order) inside the first screen."""
     layout = _run_in_chromium(chromium, page, LAYOUT, "kalcal-layout", tmp_path, f"{PAGE_WIDTH_PX},{FIRST_SCREEN_PX}")
     assert layout["width"] == PAGE_WIDTH_PX
     assert layout["verdict"] is not None, "no verdict sentence on the page"
     assert layout["figure"] is not None and layout["loaded"], "no figure on the page"
-    assert layout["file"] == f"figures/{first_figure}"
-    for what in ("verdict", "figure"):
-        box = layout[what]
-        assert 0 <= box["top"] < box["bottom"] <= FIRST_SCREEN_PX, (what, box)
-        assert 0 <= box["left"] < box["right"] <= PAGE_WIDTH_PX, (what, box)
+    assert layout["file"] == f"figures/{lead_figures[0]}"
+    _inside_first_screen("verdict", layout["verdict"])
+    _inside_first_screen("figure", layout["figure"])
+    assert [f["file"] for f in layout["lead"]] == [f"figures/{name}" for name in lead_figures]
+    for figure in layout["lead"]:
+        assert figure["loaded"], figure["file"]
+        _inside_first_screen(figure["file"], figure["figure"])  # the <figure> holds its image and title
+        assert figure["figure"]["top"] <= figure["image"]["top"] < figure["image"]["bottom"] <= figure["figure"]["bottom"]
     return layout
 
 
@@ -144,13 +173,15 @@ def passing_report(tmp_path_factory):
 @needs_chromium
 def test_the_default_runs_answer_and_first_figure_are_on_the_first_screen(chromium, default_report, tmp_path):
     assert 'class="answer fail"' in default_report.read_text(encoding="utf-8")
-    _assert_first_screen(chromium, default_report, tmp_path, "mean_error.png")
+    layout = _assert_first_screen(chromium, default_report, tmp_path, DEFAULT_LEAD)
+    print({f["file"]: (round(f["figure"]["top"]), round(f["figure"]["bottom"])) for f in layout["lead"]})
 
 
 @needs_chromium
 def test_a_passing_runs_answer_and_first_figure_are_on_the_first_screen(chromium, passing_report, tmp_path):
     assert 'class="answer pass"' in passing_report.read_text(encoding="utf-8")
-    _assert_first_screen(chromium, passing_report, tmp_path, "mean_error.png")
+    layout = _assert_first_screen(chromium, passing_report, tmp_path, PASSING_LEAD)
+    print({f["file"]: (round(f["figure"]["top"]), round(f["figure"]["bottom"])) for f in layout["lead"]})
 
 
 @pytest.mark.slow
@@ -160,7 +191,9 @@ def test_the_full_default_runs_answer_is_on_the_first_screen(chromium, tmp_path)
     kalcal.verify(out=tmp_path / "run", report=True)
     page = tmp_path / "run" / "report.html"
     assert "(4 of 5 checks fail)" in page.read_text(encoding="utf-8")
-    _assert_first_screen(chromium, page, tmp_path, "mean_error.png")
+    lead = _lead_files(page)
+    assert lead[:2] == ["mean_error.png", "model_error.png"] and len(lead) == 4, lead
+    _assert_first_screen(chromium, page, tmp_path, lead)
 
 
 @pytest.mark.parametrize("ci, outcome", [("true", "1 error"), ("", "1 skipped")])

@@ -128,24 +128,36 @@ def _figure_label(entry: FigureEntry) -> str:
 
 
 def lead_section(figures: list[FigureEntry], figure_dir_name: str) -> str:
-    """The figures that show the answer, side by side under it (empty without any)."""
+    """The figures that show the answer, in one row under it (empty without any).
+
+    Up to four fit one row of the first screen, each with its caption folded under its title, so the row's
+    height is the tallest image plus a title; a click on an image shows it full size over the page (the
+    page's CSS on the figure as the link's target: no script, and the page stays one file).
+    """
     if not figures:
         return ""
-    return '<div class="lead-figures">' + "".join(_figure(f, figure_dir_name) for f in figures) + "</div>"
+    return '<div class="lead-figures">' + "".join(_figure(f, figure_dir_name, lead=True) for f in figures) + "</div>"
 
 
-def _figure(entry: FigureEntry, figure_dir_name: str) -> str:
+def _figure(entry: FigureEntry, figure_dir_name: str, lead: bool = False) -> str:
+    """A figure with its PNG embedded; a ``lead`` one links to itself (enlarged) and folds its caption."""
     data = entry.path.read_bytes()
     width, height = png_size(data)
     uri = "data:image/png;base64," + base64.b64encode(data).decode("ascii")
     number = f"Figure {entry.number}. " if entry.number else ""
     file = f"{figure_dir_name}/{entry.path.name}"
-    return (
-        f'<figure id="fig-{esc(entry.key)}"><img src="{uri}" width="{width}" height="{height}" '
-        f'alt="{esc(entry.title)}" data-file="{esc(file)}">'
-        f"<figcaption><strong>{esc(number)}{esc(entry.title)}.</strong> {esc(entry.caption)} "
-        f'<span class="file">{esc(file)}</span></figcaption></figure>'
+    image = (
+        f'<img src="{uri}" width="{width}" height="{height}" alt="{esc(entry.title)}" data-file="{esc(file)}">'
     )
+    title = f"<strong>{esc(number)}{esc(entry.title)}.</strong>"
+    caption = f'{esc(entry.caption)} <span class="file">{esc(file)}</span>'
+    if lead:
+        return (
+            f'<figure id="fig-{esc(entry.key)}"><a href="#fig-{esc(entry.key)}" title="enlarge">{image}</a>'
+            f"<figcaption><details><summary>{title}</summary>{caption}</details></figcaption>"
+            '<a class="close" href="#answer">close</a></figure>'
+        )
+    return f'<figure id="fig-{esc(entry.key)}">{image}<figcaption>{title} {caption}</figcaption></figure>'
 
 
 def _skipped(entry: SkippedFigure) -> str:
