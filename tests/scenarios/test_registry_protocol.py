@@ -1,0 +1,35 @@
+"""Every scenario kalcal can build answers the Scenario protocol: the registry's built-in classes and a
+model file's scenario (built from a file, so not in the registry's name-to-class table)."""
+
+from pathlib import Path
+
+import pytest
+
+from kalcal.scenarios import SCENARIOS, load_model_file
+from kalcal.scenarios.protocol import Capabilities, Scenario
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+#: the example model files (examples/ also holds settings files, which are not scenarios)
+MODEL_FILES = ("constant_velocity.toml", "constant_velocity_mistuned.toml", "accel_gps_colored_gps.toml")
+
+
+def _scenarios():
+    built_in = [(name, cls()) for name, cls in SCENARIOS.items()]
+    files = [(name, load_model_file(EXAMPLES / name)) for name in MODEL_FILES]
+    return built_in + files
+
+
+@pytest.mark.parametrize("name, scenario", _scenarios(), ids=lambda v: v if isinstance(v, str) else "")
+def test_each_scenario_answers_the_protocol(name, scenario):
+    assert isinstance(scenario, Scenario), name
+    assert isinstance(scenario.capabilities, Capabilities)
+    assert scenario.capabilities.exact_analysis == bool(scenario.error_sources())
+    assert isinstance(scenario.NAME, str) and scenario.NAME
+    for command in ("simulate", "calibrate", "fit"):
+        names = scenario.output_names(command) if command in scenario.capabilities.commands else None
+        assert names is None or all(isinstance(n, str) for n in names)
+
+
+def test_the_model_files_are_covered():
+    """The parametrized test above reaches the model-file scenario, not only the registry's classes."""
+    assert any(not isinstance(s, tuple(SCENARIOS.values())) for _, s in _scenarios())
