@@ -20,6 +20,7 @@ from typer.testing import CliRunner
 
 import kalcal
 from kalcal.cli import app
+from kalcal.results._display import fmt
 
 RESULTS = ["VerificationResult", "AnalysisResult", "CalibrationResult", "NoiseResult", "SimulationResult", "SweepResult",
            "FitResult"]
@@ -79,11 +80,45 @@ def _keys(value, prefix=""):
     return set()
 
 
-def test_every_public_result_saves_and_draws_html():
-    for name in RESULTS:
-        result = getattr(kalcal, name)
-        assert callable(getattr(result, "save", None)), name
-        assert callable(getattr(result, "_repr_html_", None)), name
+#: per command: the public result class its API call returns, and what its HTML repr must show beyond its
+#: title: the rows of its table by their first cell
+HTML = {
+    "simulate": ("SimulationResult", lambda r: [f"<td>{name}</td>" for name in r.logs]),
+    "calibrate": ("CalibrationResult", lambda r: ["<td>bias</td>", "<td>scale</td>", f"<td>{fmt(r.bias)}</td>"]),
+    "noise": ("NoiseResult", lambda r: ["<td>velocity_random_walk</td>"]),
+    "fit": ("FitResult", lambda r: [f"<td>{name}</td>" for name in r.params.index]),
+    "analyze": ("AnalysisResult", lambda r: ["<td>position</td>", "<td>velocity</td>"]),
+    "verify": ("VerificationResult", lambda r: [f"verdict <b>{r.to_dict()['verdict'].upper()}</b>"]
+               + [f"<td>{t['name']}</td>" for t in r.to_dict()["tests"]]),
+    "sweep": ("SweepResult", lambda r: ["filter.sensor_noise_std", "0.01", "0.02", "verdict"]),
+}
+
+
+def test_every_public_result_is_made_by_a_command_checked_here():
+    assert sorted(name for name, _ in HTML.values()) == sorted(RESULTS) and set(HTML) == set(COMMANDS)
+
+
+@pytest.mark.parametrize("command", sorted(HTML))
+def test_every_public_result_saves_and_draws_html(command, inputs, tmp_path):
+    """save() writes every file it names, each non-empty and each JSON file a document; _repr_html_() draws
+    the command's title and its table, balanced, with the rows of the result it holds."""
+    name, rows = HTML[command]
+    result = COMMANDS[command][1](inputs, tmp_path / "first")
+    assert isinstance(result, getattr(kalcal, name)), (command, type(result))
+    saved = {key: _path(value) for key, value in result.save(tmp_path / "saved").items()}
+    assert saved
+    for key, path in saved.items():
+        assert path.is_file() and path.stat().st_size > 0, (key, path)
+        assert (tmp_path / "saved") in path.parents, path
+        if path.suffix == ".json":
+            assert isinstance(json.loads(path.read_text()), dict), path
+    page = result._repr_html_()
+    assert isinstance(page, str) and page.startswith("<div>") and page.endswith("</div>")
+    title = "kalcal sweep" if command == "sweep" else f"kalcal {command}"
+    assert f"<b>{title}" in page
+    assert page.count("<table") == page.count("</table>") >= 1
+    missing = [row for row in rows(result) if row not in page]
+    assert not missing, (command, missing)
 
 
 @pytest.mark.parametrize("command", sorted(COMMANDS))
@@ -142,10 +177,20 @@ def test_a_fit_s_settings_go_straight_back_into_calibrate_and_verify(inputs, fit
     for name, value in fitted.params.items():
         section, key = name.split(".")
         assert used[section][key] == fitted.settings[section][key] == pytest.approx(value, rel=1e-5), name
-    # every setting as given (the truth's densities are shown resolved to its per-sample std, as from a file)
+    # every setting as given, except the truth's densities: the calibration shows them resolved to the
+    # per-sample std at the accelerometer's rate, as from a file (density None; glossary: white noise std =
+    # density x sqrt(rate), a random walk's std = density / sqrt(rate))
+    rate = used["scenario"]["imu_rate"]
+    resolved = {"accel_noise_density": ("accel_noise_std", lambda d: d * math.sqrt(rate)),
+                "bias_walk_density": ("bias_walk_std", lambda d: d / math.sqrt(rate))}
     for section, values in fitted.settings.items():
         for key, value in values.items():
-            assert used[section][key] in (value, None), f"{section}.{key}"
+            if section == "truth" and key in resolved:
+                std_key, to_std = resolved[key]
+                assert used[section][key] is None, f"{section}.{key}"
+                assert used[section][std_key] == pytest.approx(to_std(value), rel=1e-12, abs=1e-15), f"{section}.{key}"
+            else:
+                assert used[section][key] == value, f"{section}.{key}"
     # what the fit's filter.toml runs, to the last bit
     fitted.save(tmp_path / "fit")
     from_file = kalcal.calibrate("accel-gps", imu=inputs["imu"], gps=inputs["gps"], config=tmp_path / "fit" / "filter.toml")

@@ -2,7 +2,8 @@
 
 The file against the summary it sits beside; ``apply(z)`` against the closed form h P h^T (+ R), h = [z, 1];
 its intervals against the truth over simulated logs: with the diffuse prior and Q = 0 theta's error is
-N(0, P) (the regression's, up to an errors-in-variables bias of 2e-6 in theta1), so a 95% interval covers
+N(0, P) (the regression's, up to an errors-in-variables bias of 2e-6 in theta1), so a 95% interval (the
+line's, a new reference reading's, and the quantity psi's, h P h^T + theta1^2 sigma_nu^2) covers
 its target in Binomial(M, 0.95) of M logs and the squared normalized errors sum to chi-square(M), held
 here to two-sided bounds at a family-wise 1e-3; the CLI
 writes the file in the run's set, and the API's ``save()`` the same bytes.
@@ -148,6 +149,28 @@ def test_untrusted_sigma_is_in_the_file_and_warns_on_apply(logged, tmp_path):
         result.correction.apply(1.0)
 
 
+def test_the_quantity_s_sigma_is_the_line_s_plus_the_sensor_s_noise_through_theta1(logged):
+    """docs/scale-bias.md: psi's sigma about c(z) is sqrt(h P h^T + sensor_noise_variance), the sensor part
+    of R being theta1^2 sigma_nu^2 (theta1 at the filter's prior mean): written out from correction.json's
+    numbers and the settings, it lies between the line's sigma and the prediction's, and R less it is the
+    reference's own sigma_eta^2."""
+    _, cal, _ = logged
+    correction = json.loads((cal / "correction.json").read_text())
+    scenario = build_scenario("scale-bias")
+    f = scenario.filter_settings
+    theta1 = float(scenario.filter_prior().mean[0])
+    assert correction["sensor_noise_variance"] == pytest.approx(theta1**2 * f.sensor_noise_std**2, rel=1e-12)
+    assert correction["measurement_noise_variance"] - correction["sensor_noise_variance"] == pytest.approx(
+        f.reference_noise_std**2, rel=1e-12)
+    cov = np.array(correction["theta_covariance"])
+    for z in (-7.5, 0.0, 2.5, 40.0):
+        h = np.array([z, 1.0])
+        line = h @ cov @ h
+        psi = line + theta1**2 * f.sensor_noise_std**2
+        assert psi == pytest.approx(line + correction["sensor_noise_variance"], rel=1e-12)
+        assert line < psi < line + correction["measurement_noise_variance"]
+
+
 def _coverage(realizations: int, seed: int):
     """Over ``realizations`` simulated logs (each calibrated from the diffuse prior, a log's default), whether
     a new reading's 95% intervals cover their targets: the line interval the true map theta1 z + theta2,
@@ -159,8 +182,8 @@ def _coverage(realizations: int, seed: int):
     rng = np.random.default_rng(seed)
     samples = sample_scale_bias(scenario, rng, realizations)
     truth = scenario.truth
-    covered = np.zeros((realizations, 3), dtype=bool)
-    squares = np.zeros((realizations, 2))
+    covered = np.zeros((realizations, 4), dtype=bool)
+    squares = np.zeros((realizations, 3))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # a log the diagnostics flag (1% of them) still counts
         for i in range(realizations):
@@ -172,14 +195,18 @@ def _coverage(realizations: int, seed: int):
             reference = theta[0] * clean + theta[1] + truth.reference_noise_std * rng.standard_normal()
             value, line = correction.apply(z)
             _, prediction = correction.apply(z, prediction=True)
-            errors = np.array([value - (theta[0] * z + theta[1]), value - reference])
-            squares[i] = (errors / [line, prediction]) ** 2
-            covered[i] = (*(np.abs(errors) <= Z95 * np.array([line, prediction])), abs(errors[1]) <= Z95 * line)
+            # the quantity psi itself: the line's variance plus the sensor's noise through theta1
+            quantity = np.sqrt(line**2 + correction.sensor_noise_variance)
+            errors = np.array([value - (theta[0] * z + theta[1]), value - reference, value - (theta[0] * clean + theta[1])])
+            sigmas = np.array([line, prediction, quantity])
+            squares[i] = (errors / sigmas) ** 2
+            covered[i] = (*(np.abs(errors) <= Z95 * sigmas), abs(errors[1]) <= Z95 * line)
     return covered.sum(axis=0), squares.sum(axis=0)
 
 
-#: two coverages and two sums of squares, each two-sided, held to FAMILY_ALPHA together
-TESTS = 4
+#: three coverages (line, prediction, the quantity psi) and three sums of squares, each two-sided, held to
+#: FAMILY_ALPHA together
+TESTS = 6
 
 
 def _binomial_bounds(realizations: int) -> tuple[float, float]:
@@ -193,10 +220,11 @@ def _chi2_bounds(realizations: int) -> tuple[float, float]:
 
 
 def _assert_coverage(realizations: int, seed: int) -> None:
-    (line, prediction, wrong), squares = _coverage(realizations, seed)
+    (line, prediction, quantity, wrong), squares = _coverage(realizations, seed)
     low, high = _binomial_bounds(realizations)
     assert low <= line <= high, (line, low, high, realizations)
     assert low <= prediction <= high, (prediction, low, high, realizations)
+    assert low <= quantity <= high, (quantity, low, high, realizations)
     # each (error / sigma)^2 is chi-square(1), their sum over independent logs chi-square(M): sharper than
     # the coverage on the sigma's size at every z (it tells an h P h^T without its cross term, which the
     # coverage at one level averaged over z does not)

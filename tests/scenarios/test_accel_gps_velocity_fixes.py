@@ -307,3 +307,23 @@ def test_a_topic_without_the_velocity_field_is_refused_in_one_line_under_velocit
     frame["/odom.twist.twist.linear.x"] = [1.0, 1.0]
     name, gps = read_gps_log(_scenario(), frame, columns)
     assert name == "run.bag topic /odom" and gps["position"] is None and list(gps["velocity"]) == [1.0, 1.0]
+
+
+@pytest.mark.parametrize("fixes", ["velocity", "position+velocity"])
+def test_verify_with_the_euler_scheme_against_the_analytic_truth_fails_through_the_model_error(fixes):
+    """docs/accel-gps.md: with the report's Euler scheme against the analytic truth the model error fails
+    the checks with velocity-only fixes as it does with position fixes: mean_error fails, explained by the
+    model error the summary names (the Euler scheme's), and every other failure by the mean error."""
+    import kalcal
+
+    result = kalcal.verify("accel-gps", n=4096, seed=0, long_run=0, settings={"scenario.gps_fixes": fixes})
+    summary = result.to_dict()
+    assert summary["settings"]["scenario"]["gps_fixes"] == fixes
+    assert summary["settings"]["scenario"]["integration"] == "euler" and summary["settings"]["scenario"]["truth"] == "analytic"
+    assert summary["verdict"] == "fail"
+    assert "euler integration" in summary["model_error"]["cause"]
+    tests = {t["name"]: t for t in summary["tests"]}
+    assert not tests["mean_error"]["passed"] and tests["mean_error"]["cause"]["explained_by"] == "model_error"
+    for name, test in tests.items():
+        if not test["passed"]:
+            assert test["cause"]["explained_by"] in ("model_error", "mean_error"), (name, test["cause"])
