@@ -17,11 +17,15 @@ import ast
 from pathlib import Path
 
 import kalcal
-from kalcal.scenarios import MODEL_FILE, scenario_names
+from kalcal.scenarios import MODEL_FILE, SCENARIOS as REGISTERED, scenario_names
+from kalcal.scenarios.model_file.model import CustomModelScenario
 
 ROOT = Path(kalcal.__file__).parent
 SCENARIOS = ROOT / "scenarios"
-NAMES = frozenset({*scenario_names(), MODEL_FILE})
+# each scenario's own NAME (the model file's is "custom"), the registry's names and what a model file is called
+NAMES = frozenset({*scenario_names(), *(cls.NAME for cls in REGISTERED.values()), CustomModelScenario.NAME, MODEL_FILE})
+#: the registry's constants that hold a scenario's name: a comparison with one is a comparison with the name
+NAME_CONSTANTS = {"MODEL_FILE": MODEL_FILE}
 # kalcal/__init__.py re-exports the public names; the registry is the scenarios package itself (not walked)
 IMPORT_ALLOWED = {"kalcal"}
 
@@ -58,24 +62,48 @@ def violations(source: str, module: str, classes: frozenset[str] = frozenset(), 
     classes = classes or scenario_classes()
     tree = ast.parse(source)
     # a module-level constant holding a scenario's name is compared by its name
-    constants = {
-        target.id
-        for node in tree.body
-        if isinstance(node, ast.Assign) and _string(node.value) in names
-        for target in node.targets
-        if isinstance(target, ast.Name)
-    }
+    # a constant holding a scenario's name (in the module, a function or a class), and the registry's, are
+    # compared by the name they hold
+    constants = dict(NAME_CONSTANTS) if names == NAMES else {}
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.Assign, ast.AnnAssign)) and node.value is not None and _string(node.value) in names:
+            for target in node.targets if isinstance(node, ast.Assign) else [node.target]:
+                key = target.id if isinstance(target, ast.Name) else target.attr if isinstance(target, ast.Attribute) else None
+                if key:
+                    constants[key] = _string(node.value)
+
+    def named(item: ast.AST) -> str | None:
+        value = _string(item)
+        if value in names:
+            return value
+        key = item.id if isinstance(item, ast.Name) else item.attr if isinstance(item, ast.Attribute) else None
+        return constants.get(key) if key else None
+
     found = set()
     for node in ast.walk(tree):
         if isinstance(node, ast.Compare):
             for operand in (node.left, *node.comparators):
                 items = operand.elts if isinstance(operand, (ast.Tuple, ast.List, ast.Set)) else [operand]
                 for item in items:
-                    value = _string(item)
-                    if value in names:
-                        found.add((module, "compare", value))
-                    elif isinstance(item, ast.Name) and item.id in constants:
-                        found.add((module, "compare", next(_string(n.value) for n in tree.body if isinstance(n, ast.Assign) and any(isinstance(t, ast.Name) and t.id == item.id for t in n.targets))))
+                    if named(item):
+                        found.add((module, "compare", named(item)))
+                    elif _string(item) in classes:  # type(x).__name__ == "AccelGpsScenario"
+                        found.add((module, "isinstance", _string(item)))
+        elif isinstance(node, ast.MatchValue) and named(node.value):  # match scenario.NAME: case "accel-gps"
+            found.add((module, "compare", named(node.value)))
+        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr in ("startswith", "endswith") and node.args:
+            prefix = _string(node.args[0])  # a part of a name: "accel" asks for accel-gps
+            for name in sorted(names):
+                if prefix and (name.startswith(prefix) if node.func.attr == "startswith" else name.endswith(prefix)):
+                    found.add((module, "compare", name))
+        elif isinstance(node, ast.Call) and _call_name(node) in ("import_module", "__import__") and node.args and _string(node.args[0]):
+            package = _scenario_package(_string(node.args[0]))
+            if package and module not in IMPORT_ALLOWED:
+                found.add((module, "import", package))
+        elif isinstance(node, ast.Call) and _call_name(node) == "dict" and node.keywords:  # dict(accel_gps=1)
+            for keyword in node.keywords:
+                if keyword.arg and keyword.arg.replace("_", "-") in names:
+                    found.add((module, "compare", keyword.arg.replace("_", "-")))
         elif isinstance(node, ast.Dict):
             for key in node.keys:
                 if key is not None and _string(key) in names:
@@ -87,6 +115,17 @@ def violations(source: str, module: str, classes: frozenset[str] = frozenset(), 
                     name = kind.id if isinstance(kind, ast.Name) else kind.attr if isinstance(kind, ast.Attribute) else None
                     if name in classes:
                         found.add((module, "isinstance", name))
+                    elif isinstance(kind, ast.Call) and _call_name(kind) == "scenario_class":  # the registry's class
+                        found.add((module, "isinstance", f"scenario_class({named(kind.args[0]) if kind.args else ''})"))
+        elif isinstance(node, ast.ImportFrom) and node.level > 0 and module not in IMPORT_ALLOWED:
+            # from ..scenarios.accel_gps import x (or from ..scenarios import accel_gps): resolved from the module
+            base = module.split(".")[: -node.level] or ["kalcal"]
+            target = ".".join([*base, *(node.module.split(".") if node.module else [])])
+            package = _scenario_package(target) or next(
+                (_scenario_package(f"{target}.{a.name}") for a in node.names if target.endswith("scenarios") and (SCENARIOS / a.name).is_dir()), None
+            )
+            if package:
+                found.add((module, "import", package))
         elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0 and module not in IMPORT_ALLOWED:
             package = _scenario_package(node.module)
             if package is None and node.module == "kalcal.scenarios":
@@ -100,6 +139,10 @@ def violations(source: str, module: str, classes: frozenset[str] = frozenset(), 
                 if package:
                     found.add((module, "import", package))
     return found
+
+
+def _call_name(node: ast.Call) -> str | None:
+    return node.func.id if isinstance(node.func, ast.Name) else node.func.attr if isinstance(node.func, ast.Attribute) else None
 
 
 def _modules() -> dict[str, str]:
@@ -187,3 +230,30 @@ def test_the_registry_names_each_class_by_its_own_name_and_each_answers_the_prot
         scenario = cls()
         assert isinstance(scenario, Scenario) and isinstance(scenario.capabilities, Capabilities)
         assert scenario.capabilities.exact_analysis == bool(scenario.error_sources())
+
+
+#: each way of asking that a walker might miss, with what it must find (module "kalcal.reporting.m": a
+#: relative import resolves from there)
+PROBES = {
+    "the registry's MODEL_FILE": ("from kalcal.scenarios import MODEL_FILE\nif scenario.NAME == MODEL_FILE: pass", ("compare", "model-file")),
+    "the model file's NAME": ("if scenario.NAME == 'custom': pass", ("compare", "custom")),
+    "match/case": ("match scenario.NAME:\n    case 'accel-gps':\n        pass", ("compare", "accel-gps")),
+    "a class's name": ("if type(s).__name__ == 'AccelGpsScenario': pass", ("isinstance", "AccelGpsScenario")),
+    "startswith": ("if s.NAME.startswith('accel'): pass", ("compare", "accel-gps")),
+    "a local constant": ("def f(s):\n    A = 'accel-gps'\n    return s.NAME == A", ("compare", "accel-gps")),
+    "a class constant": ("class C:\n    A = 'scale-bias'\n    def f(self, s):\n        return s.NAME == self.A", ("compare", "scale-bias")),
+    "a relative import": ("from ..scenarios.accel_gps import settings", ("import", "kalcal.scenarios.accel_gps")),
+    "a relative import of the package": ("from ..scenarios import scale_bias", ("import", "kalcal.scenarios.scale_bias")),
+    "import_module": ("import importlib\nm = importlib.import_module('kalcal.scenarios.accel_gps.settings')", ("import", "kalcal.scenarios.accel_gps")),
+    "dict(keywords)": ("T = dict(accel_gps=1)", ("compare", "accel-gps")),
+    "the registry's class": ("from kalcal.scenarios import scenario_class\nisinstance(s, scenario_class('accel-gps'))", ("isinstance", "scenario_class(accel-gps)")),
+}
+
+
+def test_each_probe_is_caught_alone():
+    module = "kalcal.reporting.m"
+    for what, (source, (kind, name)) in PROBES.items():
+        assert violations(source, module) == {(module, kind, name)}, what
+    # and what is no question: a relative import of the registry or the protocol, an unrelated prefix
+    assert violations("from ..scenarios import build_scenario\nfrom ..scenarios.protocol import require\n"
+                      "x.startswith('note')\nimportlib.import_module('kalcal.scenarios.protocol')", module) == set()

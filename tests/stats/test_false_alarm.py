@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from kalcal.api.verification import compute_verification, scale_bias_truth_equals
+from kalcal.api.verification import compute_verification
 from kalcal.scenarios.model_file.model import load_model_file
 from kalcal.scenarios import build_scenario
 from kalcal.stats.results import EXPLAINED_BY_TEXT, as_false_alarm
@@ -50,7 +50,7 @@ def test_a_model_file_whose_truth_equals_its_filter_names_a_failure_a_false_alar
 
 def test_a_scale_bias_run_whose_truth_equals_its_filter_names_a_failure_a_false_alarm():
     scenario = build_scenario("scale-bias", None, SCALE_BIAS_EQUAL)
-    assert scale_bias_truth_equals(scenario)
+    assert scenario.truth_is_filter()
     _assert_false_alarms(_failed(compute_verification(scenario, 100, 242)))  # nis, p = 0.0067
 
 
@@ -65,7 +65,7 @@ def test_a_scale_bias_run_whose_truth_equals_its_filter_names_a_failure_a_false_
     ],
 )
 def test_a_scale_bias_filter_that_differs_from_its_truth_is_not_equal(settings):
-    assert not scale_bias_truth_equals(build_scenario("scale-bias", None, settings))
+    assert not build_scenario("scale-bias", None, settings).truth_is_filter()
 
 
 def test_a_mistuned_filter_keeps_its_cause():

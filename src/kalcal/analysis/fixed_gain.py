@@ -73,6 +73,8 @@ def analyze_problem(
     budget : bool
         Also the error budget (False: an empty one, for callers that need only the moments).
     """
+    # a question about the problem object (the arrays below are FixedGainProblem's), not the scenario's:
+    # a scenario without an exact analysis is refused before, by its capabilities
     if not isinstance(problem, FixedGainProblem):
         raise KalcalError(f"{problem.info.scenario}: no exact covariance analysis (its gains depend on the data)")
     truth = truth_arrays(problem.truth)

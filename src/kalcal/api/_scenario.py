@@ -15,14 +15,12 @@ def resolve(
     settings: Mapping[str, Any] | None,
     config: str | Path | None,
     *,
-    engine: str = "exact",
-    long_run: float | None = None,
     defaults: Mapping[str, Any] | None = None,
     models: bool = False,
 ):
     """The scenario object of ``scenario`` with ``settings`` (``{"section.key": value}``, ``--set``'s keys)
-    and the TOML ``config`` applied; a model (file or :class:`Model`) refuses the sampled engine and a
-    long run as ``kalcal verify`` does. Only with ``models`` (verify) is a model file or Model taken; elsewhere
+    and the TOML ``config`` applied (what the scenario cannot do, an engine or a long run, its capabilities
+    refuse: :func:`kalcal.scenarios.protocol.require`). Only with ``models`` (verify) is a model file or Model taken; elsewhere
     a name goes to the registry, which says that model files work with verify."""
     from kalcal.scenarios import build_scenario, is_model_file, load_model_file, model_file_fields
 
@@ -36,11 +34,7 @@ def resolve(
         inputs, scenario = inputs_of(scenario), Model(**fields)
     is_model = isinstance(scenario, Model) or (isinstance(scenario, (str, Path)) and is_model_file(str(scenario)))
     if models and is_model:
-        where = scenario.source if isinstance(scenario, Model) else str(scenario)
-        if engine == "sampled":
-            raise KalcalError(f"--engine: 'sampled' is not available for a model file ({where}); use the exact engine")
-        if long_run:
-            raise KalcalError(f"--long-run: not available for a model file ({where}); set updates in the file instead")
+        # its engines and whether it has a long run are its capabilities, refused by verify's check_arguments
         if isinstance(scenario, Model):
             if config is not None:
                 raise KalcalError("config: not used with a Model; give its settings to Model or settings=")

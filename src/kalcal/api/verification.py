@@ -25,8 +25,9 @@ from kalcal.montecarlo.progress import JobProgress, stage
 from kalcal.models.config import apply_settings, section_values
 from kalcal.montecarlo.accumulators import EnsembleStatistics, ensemble_statistics
 from kalcal.montecarlo.engine import BLOCK_SIZE, run_monte_carlo
-from kalcal.montecarlo.problem import MAX_UPDATES, check_engine
+from kalcal.montecarlo.problem import MAX_UPDATES
 from kalcal.montecarlo.scenarios import build_problem
+from kalcal.scenarios.protocol import require
 from kalcal.stats.suite import run_checks, verdict
 from kalcal.stats.whiteness import REPORT_RESIDUAL_PAIR, residual_pair
 from kalcal.stats.dataset import statistics_dataset
@@ -53,14 +54,8 @@ def default_long_run(scenario) -> float:
 
 def run_length(scenario) -> tuple[int, float]:
     """(K, t_K): the filter updates of one realization and the last update's time (s), from the settings
-    alone (no arrays are built)."""
-    settings = scenario.scenario if hasattr(scenario, "scenario") else None
-    if hasattr(settings, "n_updates"):  # accel-gps
-        return settings.n_updates, settings.n_updates * settings.steps_per_update * settings.sample_period
-    if hasattr(settings, "n_samples"):  # scale-bias: one update per sample
-        return settings.n_samples, settings.n_samples / settings.rate
-    count = int(scenario.model.updates)  # a model file: t_k = k * update_period
-    return count, count * float(scenario.filter.update_period)
+    alone (no arrays are built): :meth:`~kalcal.scenarios.protocol.Scenario.run_length`."""
+    return scenario.run_length()
 
 
 def _require_fits(count: int, what: str) -> None:
@@ -103,9 +98,11 @@ def check_arguments(
     if batch_size is not None and batch_size < 1:
         raise ConfigError(f"--batch-size: expected a positive number of realizations, got {batch_size}")
     check_form(form, "--form")
+    # an engine the scenario lacks, or a long run where its length is no setting (a model file's updates)
+    require(scenario, "verify", engine=engine, long_run=bool(long_run))
     scenario.check_settings("verify")  # accel-gps: the truth's log-only GNSS faults
     count, horizon = run_length(scenario)
-    _require_fits(count, "model.updates" if hasattr(scenario, "model") else "scenario.duration")
+    _require_fits(count, "scenario.duration" if scenario.capabilities.long_run else "model.updates")
     if long_run and long_run <= horizon:
         raise ConfigError(
             f"--long-run: {long_run:g} s is not longer than the run itself ({horizon:g} s); give more, or 0 for none"
@@ -212,13 +209,13 @@ def report_residual_pair(statistics: EnsembleStatistics, info, scenario) -> dict
     return residual_pair(statistics, info, *REPORT_RESIDUAL_PAIR)
 
 
-def exact_analysis(problem):
-    """The exact analysis of a fixed-gain problem (the pairs kept, no budget), which both the self-check
-    and the power use; None for any other problem (each of them then says why)."""
+def exact_analysis(scenario, problem):
+    """The exact analysis of ``problem`` (the pairs kept, no budget), which both the self-check and the
+    power use, where ``scenario`` has one (:attr:`~kalcal.scenarios.protocol.Capabilities.exact_analysis`);
+    None for any other (each of them then says why)."""
     from kalcal.analysis.fixed_gain import analyze_problem
-    from kalcal.montecarlo.problem import FixedGainProblem
 
-    return analyze_problem(problem, budget=False) if isinstance(problem, FixedGainProblem) else None
+    return analyze_problem(problem, budget=False) if scenario.capabilities.exact_analysis else None
 
 
 def power_summary(problem, n: int, confidence: float, analysis=None) -> dict[str, Any]:
@@ -238,16 +235,9 @@ def truth_equals(analysis) -> bool | None:
     return None if analysis is None else truth_equals_filter(analysis)
 
 
-def scale_bias_truth_equals(scenario) -> bool:
-    """Whether a scale-bias scenario's filter is its truth's own model: the same Gaussian prior of theta,
-    the same process noise and the same measurement noise variance, with nothing the model lacks (no
-    sensor noise in the regressor, the excitation not theta's: its model error's cause is none)."""
-    return scenario.truth_is_filter()
-
-
 def equals_filter(scenario, analysis) -> bool:
     """Whether the run's truth equals its filter: from the exact analysis where there is one, from the
-    settings for scale-bias (:meth:`~kalcal.scenarios.protocol.Scenario.truth_is_filter`). Then every
+    settings where there is none (:meth:`~kalcal.scenarios.protocol.Scenario.truth_is_filter`). Then every
     failed check is a false alarm at its stated rate."""
     if analysis is not None:
         return bool(truth_equals(analysis))
@@ -284,7 +274,6 @@ def compute_verification(
     )
     started = time.perf_counter()
     problem, cause = build_problem(scenario, form)
-    check_engine(problem, engine, "--engine")
     settings = section_values(scenario)
     run = run_monte_carlo(
         problem,
@@ -310,7 +299,7 @@ def compute_verification(
     expected = problem.expected_mean_error()
     checks = run_checks(statistics, problem.info, confidence, expected, cause)
     info = problem.info
-    analysis = exact_analysis(problem)  # the same filter against the same truth, without sampling
+    analysis = exact_analysis(scenario, problem)  # the same filter against the same truth, without sampling
     exact = exact_prediction(problem, analysis)
     if equals_filter(scenario, analysis):  # a failure is a false alarm at its stated rate, never a cause
         checks = [as_false_alarm(check) for check in checks]

@@ -88,7 +88,7 @@ def verify(
     from kalcal.api.verification import check_arguments
     from kalcal.montecarlo.distributed import dask_client
 
-    model = resolve(scenario, settings, config, engine=engine, long_run=long_run, models=True)
+    model = resolve(scenario, settings, config, models=True)
     if threads is not None and threads < 1:
         raise KalcalError(f"--threads: expected a positive number, got {threads}")
     check_arguments(model, n, engine=engine, confidence=confidence, long_run=long_run, batch_size=batch_size, form=form)

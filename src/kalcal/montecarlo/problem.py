@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -48,6 +48,18 @@ class ProblemInfo:
     state_units: tuple[str, ...]
     measurement_names: tuple[str, ...]
     measurement_units: tuple[str, ...]
+    #: the capabilities of the scenario it was built from (:class:`~kalcal.scenarios.protocol.Capabilities`):
+    #: what the checks, the power and the report ask of it (an exact analysis, the same P in every
+    #: realization); None for a problem built by hand, which those then refuse
+    capabilities: Any = None
+
+
+def capabilities_of(problem) -> Any:
+    """The capabilities of the scenario ``problem`` was built from (its ``info.capabilities``)."""
+    caps = problem.info.capabilities
+    if caps is None:
+        raise TypeError(f"{problem.info.scenario}: a problem built without its scenario's capabilities")
+    return caps
 
 
 class Problem(Protocol):

@@ -32,7 +32,7 @@ from kalcal.montecarlo.progress import JobProgress, stage
 from kalcal.scenarios import scenario_of_summary, settings_assignments  # noqa: F401 (settings_assignments: this module's name for it)
 from kalcal.models.settings import SettingError
 from kalcal.montecarlo.engine import BLOCK_SIZE, block_generator, block_sizes, realization
-from kalcal.montecarlo.problem import FixedGainProblem
+from kalcal.montecarlo.problem import FixedGainProblem, capabilities_of
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.plots.realization_data import RealizationData
 from kalcal.reporting.html import build_page, write_page
@@ -105,6 +105,8 @@ class ShownRealization(NamedTuple):
 def through_kernel(problem, engine: str) -> bool:
     """Whether :func:`draw_realization` redraws through the Monte Carlo's compiled block (the exact engine of
     a fixed-gain problem) rather than through numpy."""
+    # a question about the problem object (the compiled kernel that traces one realization is
+    # FixedGainProblem's own method), not about the scenario
     return engine == "exact" and isinstance(problem, FixedGainProblem)
 
 
@@ -139,7 +141,7 @@ def draw_realization(problem, seed: int, index: int, n: int, engine: str) -> Sho
     rng, size = block_generator(seed, block), block_sizes(n, BLOCK_SIZE)[block]
     if hasattr(problem, "shown_realization"):  # scale-bias: the block drawn, this series filtered alone
         return ShownRealization(*problem.shown_realization(rng, size, offset))
-    if not isinstance(problem, FixedGainProblem):  # data-dependent gains: each realization's own P
+    if not capabilities_of(problem).fixed_gains:  # data-dependent gains: each realization's own P
         one = realization(problem, seed, index, n, engine)
         return ShownRealization(one.error[0], one.estimate[0], one.filter_cov[0])
     if through_kernel(problem, engine):

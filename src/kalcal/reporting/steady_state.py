@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from kalcal.filters.steady_state import SteadyStateView, model_steady_state_view, no_steady_state
-from kalcal.montecarlo.problem import FixedGainProblem
+from kalcal.montecarlo.problem import capabilities_of
 
 
 #: why a fixed-gain problem with a transition per interval has no steady state
@@ -27,7 +27,7 @@ def steady_state_view(problem) -> SteadyStateView:
     """The steady state of a verification problem's filter, with the time-varying P_k beside it."""
     info = problem.info
     names, units = tuple(info.state_names), tuple(info.state_units)
-    if not isinstance(problem, FixedGainProblem):
+    if not capabilities_of(problem).fixed_gains:
         # a problem says why its own filter is not time-invariant (scale-bias: its measurement row)
         reason = getattr(problem, "NOT_TIME_INVARIANT", "its gains depend on the data, so the filter is not time-invariant")
         return no_steady_state(reason, names, units)

@@ -15,7 +15,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, ClassVar, Protocol, runtime_checkable
 
-from kalcal.errors import KalcalError
+from kalcal.errors import ConfigError
 
 COMMANDS = frozenset({"verify", "analyze", "sweep", "simulate", "calibrate", "fit", "report"})
 
@@ -39,10 +39,14 @@ class Capabilities:
         One final estimate per realization: only the final-time checks apply.
     engines : tuple of str
         The Monte Carlo engines it has, the default first.
+    long_run : bool
+        Whether its run's length is a setting (``scenario.duration``), so that a long-run study can extend it.
     commands : frozenset of str
         The commands it supports, of :data:`COMMANDS`.
-    why_not : dict of str to str
+    why_not : tuple of (str, str)
         For a command it lacks, why (the refusal's reason); a command absent here is refused as unsupported.
+        ``"--engine"`` and ``"--long-run"`` give the reason for an engine it lacks and for a long run
+        where ``long_run`` is False.
     """
 
     exact_analysis: bool
@@ -51,11 +55,13 @@ class Capabilities:
     nonlinear: bool = False
     batch: bool = False
     engines: tuple[str, ...] = ("exact",)
+    long_run: bool = True
     commands: frozenset[str] = COMMANDS
     why_not: tuple[tuple[str, str], ...] = ()
 
     def __post_init__(self) -> None:
         unknown = set(self.commands) - COMMANDS
+        unknown |= {key for key, _ in self.why_not} - COMMANDS - {"--engine", "--long-run"}
         if unknown:
             raise ValueError(f"unknown commands {sorted(unknown)}; expected some of {sorted(COMMANDS)}")
         if self.exact_analysis and not self.fixed_gains:
@@ -74,7 +80,8 @@ class Scenario(Protocol):
 
     @property
     def capabilities(self) -> Capabilities:
-        """What it has (a model file's depend on its content)."""
+        """What it has: a class's own constant for a built-in, a property of the instance for a model file
+        (its commands and engines, and the reasons it names, depend on its content and its file)."""
         ...
 
     def problem(self, form: str = "joseph", residual_pairs: bool = True) -> Any:
@@ -102,6 +109,11 @@ class Scenario(Protocol):
 
     def default_long_run(self, max_updates: int) -> float:
         """The long-run study's horizon (s) when none is given (0: none), within ``max_updates`` updates."""
+        ...
+
+    def run_length(self) -> tuple[int, float]:
+        """(K, t_K): the filter updates of one realization and the last update's time (s), from the settings
+        alone (no arrays are built): what a verification sizes its arrays and its long run by."""
         ...
 
     def truth_is_filter(self) -> bool:
@@ -134,12 +146,15 @@ class Scenario(Protocol):
         ...
 
 
-def require(scenario: Any, command: str, *, engine: str | None = None) -> None:
-    """Refuse ``command`` (and ``engine``) where ``scenario`` lacks it: one line naming the scenario and why."""
+def require(scenario: Any, command: str, *, engine: str | None = None, long_run: bool = False) -> None:
+    """Refuse ``command`` (and ``engine``, and a long run where ``long_run``) where ``scenario`` lacks it:
+    one line naming the scenario and why (a :class:`~kalcal.errors.ConfigError`, exit status 2)."""
     caps = scenario.capabilities
     name = getattr(scenario, "label", None) or scenario.NAME
+    why = dict(caps.why_not)
     if command not in caps.commands:
-        reason = dict(caps.why_not).get(command, f"{name} has no {command}")
-        raise KalcalError(f"{name}: {reason}")
+        raise ConfigError(f"{name}: {why.get(command, f'{name} has no {command}')}")
     if engine is not None and engine not in caps.engines:
-        raise KalcalError(f"--engine: {engine!r} is not available for {name}; use {' or '.join(caps.engines)}")
+        raise ConfigError(f"--engine: {engine!r} is not available for {name}; {why.get('--engine', 'use ' + ' or '.join(caps.engines))}")
+    if long_run and not caps.long_run:
+        raise ConfigError(f"--long-run: not available for {name}; {why.get('--long-run', 'its run has no duration setting')}")

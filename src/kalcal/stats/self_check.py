@@ -38,7 +38,7 @@ import numpy as np
 from kalcal.analysis.fixed_gain import analyze_problem
 from kalcal.stats.power import product_variance
 from kalcal.montecarlo.accumulators import EnsembleStatistics
-from kalcal.montecarlo.problem import FixedGainProblem, ProblemInfo
+from kalcal.montecarlo.problem import ProblemInfo, capabilities_of
 from kalcal.stats.bounds import chi2_bounds_at, normal_bound_at
 from kalcal.stats.distributions import normal_isf
 from kalcal.stats.results import CheckPart, chi2_two_sided_pvalues, family_pvalue, normal_family_pvalue
@@ -101,12 +101,12 @@ def exact_prediction(problem, analysis=None) -> ExactPrediction:
     ``analysis``, the problem's :class:`~kalcal.analysis.fixed_gain.CovarianceAnalysis` where the caller
     already has it (verify computes one for the check's power too), is used instead of a new one.
 
-    Every :class:`FixedGainProblem` has one, for both of its engines: the per-sample engine ("sampled")
+    Every scenario with an exact analysis (its capabilities) has one, for both of its engines: the per-sample engine ("sampled")
     simulates the truth whose law the update-rate engine ("exact") samples (tests/simulation/test_exact.py),
     so the one analysis predicts both. Other problems (scale-bias: its gains hold the noisy readings)
     get a reason instead.
     """
-    if not isinstance(problem, FixedGainProblem):
+    if not capabilities_of(problem).exact_analysis:
         return ExactPrediction(
             None,
             None,

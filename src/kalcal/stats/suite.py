@@ -149,9 +149,9 @@ def problem_power(problem, n: int, confidence: float, analysis=None) -> tuple[li
     where the caller already has it, with the pairs); any other (scale-bias: gains that depend on the
     data) gets None and the reason."""
     from kalcal.analysis.fixed_gain import analyze_problem
-    from kalcal.montecarlo.problem import FixedGainProblem
+    from kalcal.montecarlo.problem import capabilities_of
 
-    if not isinstance(problem, FixedGainProblem):
+    if not capabilities_of(problem).exact_analysis:
         return None, "no exact analysis: the filter's gains depend on the data"
     if analysis is None:
         analysis = analyze_problem(problem, budget=False)

@@ -62,6 +62,7 @@ def accel_gps_problem(
         state_units=scenario.state_units,
         measurement_names=scenario.measurement_names,
         measurement_units=scenario.measurement_units,
+        capabilities=scenario.capabilities,
     )
     truth = accel_gps_truth(scenario)
     filter_model = scenario.filter_model()

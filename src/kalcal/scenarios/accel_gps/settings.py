@@ -434,6 +434,11 @@ class AccelGpsScenario:
         faster GPS is not refused by a study the user did not ask for."""
         return min(self.LONG_RUN_SECONDS, max_updates / self.scenario.gps_rate)
 
+    def run_length(self) -> tuple[int, float]:
+        """One update per GPS fix: t_K = K steps_per_update sample_period."""
+        s = self.scenario
+        return s.n_updates, s.n_updates * s.steps_per_update * s.sample_period
+
     def truth_is_filter(self) -> bool:
         """False: its exact analysis says whether the truth equals the filter."""
         return False

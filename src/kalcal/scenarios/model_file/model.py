@@ -129,9 +129,25 @@ class CustomModelScenario:
     NAME: ClassVar[str] = "custom"
     SUMMARY: ClassVar[str] = "a linear Gaussian model read from a TOML file (docs/custom-models.md)"
     SOURCE_REPORT: ClassVar[bool] = False
-    capabilities: ClassVar[Capabilities] = Capabilities(
-        exact_analysis=True, fixed_gains=True, commands=frozenset({"verify", "analyze", "report"})
-    )
+
+    @property
+    def label(self) -> str:
+        """What its refusals call it: the file it was read from."""
+        return f"a model file ({self.model.file})"
+
+    @property
+    def capabilities(self) -> Capabilities:
+        """A linear Gaussian filter with gains fixed before any data, sampled at the update rate only (no
+        per-sample engine: the file has no samples between updates) for the updates the file sets. A
+        property, not a class constant: what it has depends on the file it was read from."""
+        return Capabilities(
+            exact_analysis=True,
+            fixed_gains=True,
+            engines=("exact",),
+            long_run=False,
+            commands=frozenset({"verify", "analyze", "report"}),
+            why_not=(("--engine", "use the exact engine"), ("--long-run", "set updates in the file instead")),
+        )
 
     # The Scenario protocol (kalcal.scenarios.protocol): each answer from this package's modules, imported
     # where asked because they import this one.
@@ -166,6 +182,11 @@ class CustomModelScenario:
     def default_long_run(self, max_updates: int) -> float:
         """0: a model file sets its own updates."""
         return 0.0
+
+    def run_length(self) -> tuple[int, float]:
+        """The file's updates: t_k = k update_period."""
+        count = int(self.model.updates)
+        return count, count * float(self.filter.update_period)
 
     def truth_is_filter(self) -> bool:
         """False: its exact analysis says whether the truth equals the filter."""

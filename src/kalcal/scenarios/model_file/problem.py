@@ -27,6 +27,7 @@ def custom_problem(
         state_units=m.state_units,
         measurement_names=m.measurement_names,
         measurement_units=m.measurement_units,
+        capabilities=scenario.capabilities,
     )
     try:
         return FixedGainProblem(

@@ -39,6 +39,7 @@ def problem_info(scenario: ScaleBiasScenario) -> ProblemInfo:
         state_units=scenario.state_units,
         measurement_names=MEASUREMENT_NAMES,
         measurement_units=(unit,),
+        capabilities=scenario.capabilities,
     )
 
 

@@ -265,6 +265,11 @@ class ScaleBiasScenario:
         """0: no long-run study."""
         return 0.0
 
+    def run_length(self) -> tuple[int, float]:
+        """One update per sample: t_K = K / rate."""
+        s = self.scenario
+        return s.n_samples, s.n_samples / s.rate
+
     def truth_is_filter(self) -> bool:
         """Whether the filter is the truth's own model: the same Gaussian prior of theta, the same process
         noise and measurement noise variance, with nothing the model lacks (no sensor noise in the
