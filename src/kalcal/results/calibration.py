@@ -1,10 +1,12 @@
 """The result of ``kalcal.calibrate``: the estimates at the last fix or sample, their files, their intervals.
 
 :class:`CalibrationResult` holds what every scenario's calibration has (the bias, its sigma, the final
-covariance, the diagnostics' verdict, the warnings, ``summary.json``'s content and ``estimates.csv``'s
-columns); a scenario whose calibration has more subclasses it in its own package
-(``kalcal.scenarios.<name>.result``). Each is the object the calibration made: ``to_dict()`` and
-``save(out)`` serialize it, last.
+covariance, the diagnostics' verdict, the stability test, the warnings and ``estimates.csv``'s columns);
+each scenario subclasses it beside its calibration, with the fields only it has
+(:class:`kalcal.scenarios.accel_gps.calibrate.AccelGpsCalibrationResult`,
+:class:`kalcal.scenarios.scale_bias.job.ScaleBiasCalibrationResult`). Each is the object the calibration
+made; ``summary.json`` is generated from its fields (:attr:`~CalibrationResult.summary`, ``to_dict()``)
+and ``save(out)`` writes it, last.
 """
 
 from __future__ import annotations
@@ -110,6 +112,15 @@ class CalibrationResult:
         NIS, its bounds, ``consistent`` and the observability ratios.
     warnings : list of dict
         ``{"code", "message"}`` each, empty when none.
+    columns : dict of str to ndarray
+        ``estimates.csv``'s columns, each (K,) for the K fixes or samples.
+    time : float
+        s, the last fix's or sample's time: the time the estimates refer to.
+    units : dict of str to str
+        The unit of each quantity of :meth:`table` (and ``time``), as ``summary.json``'s ``units``.
+    stability_test : Stability
+        The windows' stability test (:class:`kalcal.calibration.stability.Stability`);
+        :attr:`stability` is its ``summary.json`` form.
     sigma_trusted : bool
         False when the diagnostics say inconsistent or the windows are not stable: ``bias_std`` is then
         not to be used (a ``sigma-untrusted`` warning names the next step).
@@ -131,8 +142,10 @@ class CalibrationResult:
     covariance_states: tuple
     diagnostics: dict
     warnings: list
-    summary: dict = field(repr=False, compare=False)
     columns: dict = field(repr=False, compare=False)
+    time: float
+    units: dict
+    stability_test: Any
     paths: dict = field(default_factory=dict)
     sigma_trusted: bool = True
     settings_sigma: Any = None
@@ -150,6 +163,16 @@ class CalibrationResult:
         """The same result, with where its files were written."""
         return dataclasses.replace(self, paths=dict(paths))
 
+    @cached_property
+    def summary(self) -> dict[str, Any]:
+        """``summary.json``'s content, generated from the fields when first read (arrays as arrays:
+        :meth:`to_dict` is the document as ``json.load`` reads it)."""
+        return self._summary()
+
+    def _summary(self) -> dict[str, Any]:
+        """``summary.json`` from the fields: each scenario's subclass writes its own keys, in its order."""
+        raise NotImplementedError(f"{type(self).__name__}: no summary.json for this result")
+
     def to_dict(self) -> dict[str, Any]:
         """``summary.json`` as ``json.load`` reads it."""
         from kalcal.io.results import json_document
@@ -165,9 +188,10 @@ class CalibrationResult:
         return pd.DataFrame(self.columns, copy=True)
 
     @property
-    def stability(self) -> dict | None:
-        """``summary.json``'s ``stability``: the windows' estimates, the chi-square test and its verdict."""
-        return self.summary.get("stability")
+    def stability(self) -> dict:
+        """``summary.json``'s ``stability``: the windows' estimates, the chi-square test and its verdict
+        (:attr:`stability_test` as a document)."""
+        return self.stability_test.as_dict()
 
     def save(self, out: str | Path) -> dict[str, Path]:
         """Write ``estimates.csv``, ``summary.json`` and the scenario's own files (:attr:`OUTPUT_NAMES`) into
@@ -192,12 +216,12 @@ class CalibrationResult:
 
     def table(self) -> list[tuple[str, float, float, bool, str]]:
         """The CLI's table: (quantity, estimate, 1-sigma, whether the sigma is trusted, unit) per row."""
-        return [(name, value, sigma, trusted, self.summary["units"].get(name, ""))
+        return [(name, value, sigma, trusted, self.units.get(name, ""))
                 for name, (value, sigma, trusted) in self._estimates().items()]
 
     def title(self) -> str:
         """The CLI table's title (what the estimates rest on) and caption (when)."""
-        return f"kalcal calibrate {self.scenario}", f"t = {self.summary['time']:g} s"
+        return f"kalcal calibrate {self.scenario}", f"t = {self.time:g} s"
 
     def extra_rows(self) -> list[tuple[str, str, str, str]]:
         """Rows the CLI adds below the table, each (quantity, estimate, 1-sigma, unit) as text; none here."""

@@ -24,6 +24,8 @@ from kalcal.models.config import section_values
 if TYPE_CHECKING:  # for the annotations; pandas is imported where a DataFrame is made
     import pandas as pd
 
+    from kalcal.scenarios.accel_gps.result import AccelGpsCalibration
+
 IMU_ROLES = ("time", "accel")
 GPS_ROLES = ("time", "position", "velocity", "position_std", "velocity_std")
 
@@ -220,115 +222,194 @@ def compute_accel_gps_calibration(
         over = sigma_over_settings(log, result, gate=gate)
         if over.warns:
             warnings.append(settings_warning(over))
-    summary = {
-        "scenario": scenario.NAME,
-        "settings": section_values(scenario),
-        "imu": str(imu_path),
-        "gps": str(gps_path),
-        "init": result.init,
-        "form": result.form,
-        "start_time": result.start_time,
-        "fixes_used": int(result.time.size),
-        "fixes_skipped_nan": result.skipped_nan,
-        "fixes_skipped_outside": result.skipped_outside,
-        "fixes_default_std": result.default_std,
-        "imu_gaps": [gap.__dict__ for gap in result.gaps],
-        "gate": gate,
-        "fixes_rejected": int(result.rejected_rows.size),
-        "rejected_rows": [int(row) for row in result.rejected_rows],
-        "prior": {
-            "bias": _prior_kind(result, scenario),
-            "bias_std": result.bias_prior_std,
-            "likelihood_skip": result.skip,
-        },
-        "time": float(result.time[-1]),
-        "bias": float(result.bias[-1]),
-        "bias_std": float(std[-1, 2]),
-        "sigma_trusted": untrusted is None,
-        **({"sigma_untrusted_because": untrusted[0]} if untrusted is not None else {}),
-        "settings_sigma": None if over is None else over.as_dict(),
-        "position": float(result.position[-1]),
-        "position_std": float(std[-1, 0]),
-        "velocity": float(result.velocity[-1]),
-        "velocity_std": float(std[-1, 1]),
-        "covariance": result.covariance[-1],
-        "covariance_states": list(scenario.state_names),
-        "diagnostics": diagnostics.as_dict(),
-        "stability": stability.as_dict(),
-        "observability": observability,
-        "warnings": [warning.as_dict() for warning in warnings],
-        "units": {"time": "s", **dict(zip(scenario.state_names, scenario.state_units))},
-    }
-    if scenario.has_scale:
-        summary["scale"], summary["scale_std"] = float(result.error_state[-1, 3]), float(std[-1, 3])
-        # the scale's sigma stands on the same diagnostics and windows as the bias's, and on the scale's
-        # own observability
-        summary["scale_sigma_trusted"] = untrusted is None and "scale" not in names
-    if smoothed is not None:
-        summary["smoothed"] = _smoothed_summary(smoothed, std, scenario.state_names)
+    final = std[-1]
     # the log files (not DataFrames) are the run's inputs: a folder's set never removes them
     files = [p for p in (imu_source, gps_source) if not is_frame(p)]
-    result = AccelGpsCalibrationResult(
-        scenario.NAME, summary["bias"], summary["bias_std"], summary.get("scale"), summary.get("scale_std"),
-        np.asarray(summary["covariance"], dtype=float), tuple(summary["covariance_states"]), summary["diagnostics"],
-        summary["warnings"], summary, estimates, sigma_trusted=summary["sigma_trusted"], settings_sigma=over,
-        scale_sigma_trusted=summary.get("scale_sigma_trusted"),
+    calibration = AccelGpsCalibrationResult(
+        scenario=scenario.NAME,
+        bias=float(result.bias[-1]),
+        bias_std=float(final[2]),
+        # the scale's sigma stands on the same diagnostics and windows as the bias's, and on the scale's own
+        # observability
+        scale=float(result.error_state[-1, 3]) if scenario.has_scale else None,
+        scale_std=float(final[3]) if scenario.has_scale else None,
+        scale_sigma_trusted=(untrusted is None and "scale" not in names) if scenario.has_scale else None,
+        covariance=result.covariance[-1],
+        covariance_states=tuple(scenario.state_names),
+        diagnostics=diagnostics.as_dict(),
+        warnings=[warning.as_dict() for warning in warnings],
+        columns=estimates,
+        time=float(result.time[-1]),
+        units={"time": "s", **dict(zip(scenario.state_names, scenario.state_units))},
+        stability_test=stability,
+        sigma_trusted=untrusted is None,
+        sigma_untrusted_because=None if untrusted is None else untrusted[0],
+        settings_sigma=over,
+        run=result,
+        smoothed=smoothed,
+        settings=section_values(scenario),
+        imu=str(imu_path),
+        gps=str(gps_path),
+        gate=gate,
+        prior_kind=_prior_kind(result, scenario),
+        observability=observability,
     )
-    return mark_inputs(result, *files)
+    return mark_inputs(calibration, *files)
 
 
-@dataclass(frozen=True, repr=False, eq=False)
+@dataclass(frozen=True, repr=False, eq=False, kw_only=True)
 class AccelGpsCalibrationResult(CalibrationResult):
     """An accel-gps calibration: the base's estimates (bias, and the scale with a scale state) with the
-    position and velocity, the bias's sigma over the noise settings (``settings_sigma``), and
-    ``calibration.png`` among its files.
+    filter's run they come from, the position and velocity, the bias's sigma over the noise settings
+    (``settings_sigma``), the observability, and ``calibration.png`` among its files.
+
+    Attributes
+    ----------
+    run : AccelGpsCalibration
+        The filter's estimates, covariances and innovations at each of the K fixes used, and what it
+        skipped, rejected and started from (:class:`kalcal.scenarios.accel_gps.result.AccelGpsCalibration`).
+    smoothed : AccelGpsCalibration or None
+        The RTS-smoothed states at each fix (``--smooth``); None without.
+    settings : dict
+        The settings the calibration ran with, by section (``summary.json``'s ``settings``).
+    imu, gps : str
+        The logs' names.
+    gate : float or None
+        The innovation gate's confidence; None for none.
+    prior_kind : {"diffuse", "stationary", "filter.bias_std"}
+        Where the bias's prior came from.
+    observability : dict
+        What the log alone tells of the bias (and scale)
+        (:func:`kalcal.scenarios.accel_gps.observability.summary_block`).
+    sigma_untrusted_because : str or None
+        Why the bias's sigma is not to be used; None when :attr:`sigma_trusted`.
 
     ``settings_sigma`` is a :class:`~kalcal.scenarios.accel_gps.settings_sigma.SettingsSigma` (``bias_std``,
     ``ratio``, ``at``, ...) or None when not computed.
     """
 
+    run: AccelGpsCalibration
+    settings: dict
+    imu: str
+    gps: str
+    gate: float | None
+    prior_kind: str
+    observability: dict
+    smoothed: AccelGpsCalibration | None = None
+    sigma_untrusted_because: str | None = None
+
     OUTPUT_NAMES = ("estimates.csv", "summary.json", "calibration.png")
+
+    @property
+    def position(self) -> float:
+        """p at the last fix, m."""
+        return float(self.run.position[-1])
+
+    @property
+    def velocity(self) -> float:
+        """v at the last fix, m/s."""
+        return float(self.run.velocity[-1])
+
+    @property
+    def position_std(self) -> float:
+        """The position's 1-sigma at the last fix, m."""
+        return float(self.run.std[-1, 0])
+
+    @property
+    def velocity_std(self) -> float:
+        """The velocity's 1-sigma at the last fix, m/s."""
+        return float(self.run.std[-1, 1])
+
+    @property
+    def measurement_names(self) -> tuple[str, ...]:
+        """The components the fixes measured: ("position", "velocity"), or ("velocity",) with
+        ``scenario.gps_fixes = "velocity"``."""
+        return measurement_names({"settings": self.settings})
+
+    def _summary(self) -> dict[str, Any]:
+        run = self.run
+        summary = {
+            "scenario": self.scenario,
+            "settings": self.settings,
+            "imu": self.imu,
+            "gps": self.gps,
+            "init": run.init,
+            "form": run.form,
+            "start_time": run.start_time,
+            "fixes_used": int(run.time.size),
+            "fixes_skipped_nan": run.skipped_nan,
+            "fixes_skipped_outside": run.skipped_outside,
+            "fixes_default_std": run.default_std,
+            "imu_gaps": [gap.__dict__ for gap in run.gaps],
+            "gate": self.gate,
+            "fixes_rejected": int(run.rejected_rows.size),
+            "rejected_rows": [int(row) for row in run.rejected_rows],
+            "prior": {"bias": self.prior_kind, "bias_std": run.bias_prior_std, "likelihood_skip": run.skip},
+            "time": self.time,
+            "bias": self.bias,
+            "bias_std": self.bias_std,
+            "sigma_trusted": self.sigma_trusted,
+            **({"sigma_untrusted_because": self.sigma_untrusted_because} if self.sigma_untrusted_because is not None else {}),
+            "settings_sigma": None if self.settings_sigma is None else self.settings_sigma.as_dict(),
+            "position": self.position,
+            "position_std": self.position_std,
+            "velocity": self.velocity,
+            "velocity_std": self.velocity_std,
+            "covariance": self.covariance,
+            "covariance_states": list(self.covariance_states),
+            "diagnostics": self.diagnostics,
+            "stability": self.stability,
+            "observability": self.observability,
+            "warnings": self.warnings,
+            "units": self.units,
+        }
+        if self.scale is not None:
+            summary["scale"], summary["scale_std"] = self.scale, self.scale_std
+            summary["scale_sigma_trusted"] = self.scale_sigma_trusted
+        if self.smoothed is not None:
+            summary["smoothed"] = _smoothed_summary(self.smoothed, run.std, self.covariance_states)
+        return summary
 
     def _save_more(self, out: Path) -> dict[str, Path]:
         from kalcal.plots.calibration import plot_calibration
 
         columns = self.columns
         # the components the fixes measured (a velocity-only log's position column is NaN: not drawn)
-        names = measurement_names(self.summary)
+        names = self.measurement_names
         normalized = np.column_stack([columns[f"innovation_{name}"] for name in names])
         path = plot_calibration(columns["time"], columns["bias"], columns["bias_std"], normalized,
                                 out / "calibration.png", names=names, note=sigma_note(self.summary))
         return {"calibration.png": path}
 
     def table(self) -> list[tuple[str, float, float, bool, str]]:
-        s = self.summary
-        trusted = s.get("sigma_trusted", True)
-        # the scale's sigma has its own trust (an unobservable scale leaves the bias's standing)
-        return [(name, s[name], s[name + "_std"], s.get("scale_sigma_trusted", trusted) if name == "scale" else trusted,
-                 s["units"][name]) for name in ("bias", "scale", "position", "velocity") if name in s]
+        rows = [("bias", self.bias, self.bias_std, self.sigma_trusted)]
+        if self.scale is not None:  # the scale's sigma has its own trust (an unobservable scale leaves the bias's standing)
+            rows.append(("scale", self.scale, self.scale_std, self.scale_sigma_trusted))
+        rows += [("position", self.position, self.position_std, self.sigma_trusted),
+                 ("velocity", self.velocity, self.velocity_std, self.sigma_trusted)]
+        return [(name, value, sigma, trusted, self.units[name]) for name, value, sigma, trusted in rows]
 
     def title(self) -> tuple[str, str]:
-        return f"kalcal calibrate {self.scenario}: {self.summary['fixes_used']} fixes", f"t = {self.summary['time']:g} s"
+        return f"kalcal calibrate {self.scenario}: {self.run.time.size} fixes", f"t = {self.time:g} s"
 
     def extra_rows(self) -> list[tuple[str, str, str, str]]:
         """Rows the CLI adds below the table: the bias sigma over the settings, beside the conditional one."""
-        over = self.summary.get("settings_sigma")
-        if not over:
+        over = self.settings_sigma
+        if over is None:
             return []
-        return [("bias, over the settings", "", f"{over['bias_std']:.3g}", f"{self.summary['units']['bias']} ({over['ratio']:.3g}x)")]
+        return [("bias, over the settings", "", f"{over.bias_std:.3g}", f"{self.units['bias']} ({over.ratio:.3g}x)")]
 
     def lines(self) -> list[tuple[str, bool | None]]:
-        s, out = self.summary, []
-        if "smoothed" in s:
-            smoothed = s["smoothed"]
-            out.append((f"smoothed (RTS) at the first fix, t = {smoothed['time']:g} s: bias {smoothed['bias']:.6g} ± "
-                        f"{smoothed['bias_std']:.3g} m/s^2, position {smoothed['position']:.6g} ± {smoothed['position_std']:.3g} m", None))
-        if s.get("gate") is not None:
-            rows = s["rejected_rows"]
+        out = []
+        if self.smoothed is not None:  # at the first fix, where smoothing gains most
+            smoothed, std = self.smoothed, self.smoothed.std
+            out.append((f"smoothed (RTS) at the first fix, t = {smoothed.time[0]:g} s: bias {smoothed.bias[0]:.6g} ± "
+                        f"{std[0, 2]:.3g} m/s^2, position {smoothed.position[0]:.6g} ± {std[0, 0]:.3g} m", None))
+        if self.gate is not None:
+            rows = [int(row) for row in self.run.rejected_rows]
             shown = ", ".join(map(str, rows[:20])) + (f", ... ({len(rows) - 20} more)" if len(rows) > 20 else "")
-            out.append((f"gate at {s['gate']:g}: {len(rows)} fix(es) rejected" + (f" (GPS rows {shown})" if rows else ""), None))
-        prior = s["prior"]
-        out.append((f"bias prior: {prior['bias']} ({prior['bias_std']:.3g} m/s^2)", None))
+            out.append((f"gate at {self.gate:g}: {len(rows)} fix(es) rejected" + (f" (GPS rows {shown})" if rows else ""), None))
+        out.append((f"bias prior: {self.prior_kind} ({self.run.bias_prior_std:.3g} m/s^2)", None))
         return out
 
     def diagnostics_line(self) -> tuple[str, bool] | None:

@@ -1,4 +1,5 @@
-"""The result of an accelerometer/GPS calibration: the filter's estimates at each fix and what it skipped."""
+"""The filter's run over an accelerometer/GPS log: its estimates at each fix and what it skipped (the typed
+part of :class:`kalcal.scenarios.accel_gps.calibrate.AccelGpsCalibrationResult`, its ``run``)."""
 
 from __future__ import annotations
 
@@ -23,7 +24,8 @@ class ImuGap:
 
 @dataclass(frozen=True)
 class AccelGpsCalibration:
-    """The filter's estimates at each of the K fixes used."""
+    """The filter's estimates at each of the K fixes used: an accel-gps calibration's ``run``, from which its
+    result's last-fix estimates and ``summary.json`` are read."""
 
     time: np.ndarray  #: fix times, s, (K,)
     position: np.ndarray  #: p_c + dp, m, (K,)

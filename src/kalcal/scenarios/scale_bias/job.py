@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from kalcal.scenarios.scale_bias.calibration import UNOBSERVABLE_RATIO, calibrate_scale_bias
+from kalcal.scenarios.scale_bias.calibration import UNOBSERVABLE_RATIO, ScaleBiasCalibration, calibrate_scale_bias
 from kalcal.scenarios.scale_bias.correction import ScaleBiasCorrection
 from kalcal.calibration.windows import check_windows
 from kalcal.scenarios.scale_bias.windows import scale_bias_stability
@@ -156,76 +156,128 @@ def compute_scale_bias_calibration(
                                   f"{' and '.join(unobservable)} unobservable ({result.unobservable_cause()})" if unobservable else None)
     if untrusted is not None:
         warnings.append(untrusted[1].as_dict())
-    summary = {
-        "scenario": scenario.NAME,
-        "settings": section_values(scenario),
-        "data": str(data_path),
-        "columns": {"reference": reference, "sensor": sensor, "time": time_source},
-        "samples": int(result.time.size),
-        "samples_used": result.samples_used,
-        "time": float(result.time[-1]),
-        "theta": result.theta[-1],
-        "theta_covariance": result.covariance[-1],
-        "theta_states": list(STATE_NAMES),
-        "theta_std": std[-1],
-        "scale_error": a,
-        "scale_error_std": float(np.sqrt(ab_cov[0, 0])),
-        "bias": b,
-        "bias_std": float(np.sqrt(ab_cov[1, 1])),
-        "sigma_trusted": untrusted is None,
-        **({"sigma_untrusted_because": untrusted[0]} if untrusted is not None else {}),
-        "scale_bias_correlation": float(ab_cov[0, 1] / np.sqrt(ab_cov[0, 0] * ab_cov[1, 1])),
-        "mean_nis": result.mean_nis,
-        "nis_bounds": list(result.nis_bounds()),
-        "consistent": result.consistent,
-        "observability": {
-            "std_ratio": dict(zip(STATE_NAMES, result.std_ratio.tolist())),
-            "threshold": UNOBSERVABLE_RATIO,
-            "unobservable": result.unobservable(),
-            "cause": result.unobservable_cause(),
-            # what the log alone tells (the judgement's grounds): its information's reciprocal condition and
-            # each parameter's data-only sigma, with the noise settings and with the log's own residual scatter
-            "data_only": {
-                key: result.data_only[key]
-                for key in ("rcond", "singular", "theta", "std", "empirical_std", "tracks", "weaker_than_prior")
-            },
-            "note": "final sigma / sigma with no data; the judgement rests on the data-only information (cause)",
+    observability = {
+        "std_ratio": dict(zip(STATE_NAMES, result.std_ratio.tolist())),
+        "threshold": UNOBSERVABLE_RATIO,
+        "unobservable": result.unobservable(),
+        "cause": result.unobservable_cause(),
+        # what the log alone tells (the judgement's grounds): its information's reciprocal condition and
+        # each parameter's data-only sigma, with the noise settings and with the log's own residual scatter
+        "data_only": {
+            key: result.data_only[key]
+            for key in ("rcond", "singular", "theta", "std", "empirical_std", "tracks", "weaker_than_prior")
         },
-        "prior": {"kind": prior, "note": why, "start_samples": result.start_samples, "conflict": result.conflict},
-        "stability": stability.as_dict(),
-        "warnings": warnings,
-        "units": {"time": "s", "theta1": "1", "theta2": unit, "scale_error": "1", "bias": unit},
+        "note": "final sigma / sigma with no data; the judgement rests on the data-only information (cause)",
     }
+    because = None if untrusted is None else untrusted[0]
     noise = scenario.filter_noise_variance()
     correction = ScaleBiasCorrection(
         theta=np.array(result.theta[-1], dtype=float), covariance=np.array(result.covariance[-1], dtype=float),
         measurement_noise_variance=noise, sensor_noise_variance=noise - scenario.filter_settings.reference_noise_std**2,
-        process_noise=scenario.filter_process_noise(), time=summary["time"], unit=unit,
-        sigma_trusted=summary["sigma_trusted"], sigma_untrusted_because=summary.get("sigma_untrusted_because"),
-        data=summary["data"], columns={"reference": reference, "sensor": sensor},
+        process_noise=scenario.filter_process_noise(), time=float(result.time[-1]), unit=unit,
+        sigma_trusted=untrusted is None, sigma_untrusted_because=because,
+        data=str(data_path), columns={"reference": reference, "sensor": sensor},
     )
     calibration = ScaleBiasCalibrationResult(
-        scenario.NAME, summary["bias"], summary["bias_std"], summary["scale_error"], summary["scale_error_std"],
-        np.asarray(summary["theta_covariance"], dtype=float), tuple(STATE_NAMES),
-        {key: summary[key] for key in ("mean_nis", "nis_bounds", "consistent", "observability")}, warnings, summary,
-        estimates, sigma_trusted=summary["sigma_trusted"], scale_sigma_trusted=summary["sigma_trusted"],
-        correction=correction,
+        scenario=scenario.NAME, bias=b, bias_std=float(np.sqrt(ab_cov[1, 1])), scale=a,
+        scale_std=float(np.sqrt(ab_cov[0, 0])), covariance=result.covariance[-1], covariance_states=tuple(STATE_NAMES),
+        diagnostics={"mean_nis": result.mean_nis, "nis_bounds": list(result.nis_bounds()), "consistent": result.consistent,
+                     "observability": observability},
+        warnings=warnings, columns=estimates, time=float(result.time[-1]),
+        units={"time": "s", "theta1": "1", "theta2": unit, "scale_error": "1", "bias": unit},
+        stability_test=stability, sigma_trusted=untrusted is None, scale_sigma_trusted=untrusted is None,
+        sigma_untrusted_because=because, run=result, scale_bias_covariance=ab_cov, settings=section_values(scenario),
+        data=str(data_path), columns_read={"reference": reference, "sensor": sensor, "time": time_source},
+        prior_kind=prior, prior_note=why, correction=correction,
     )
     return calibration if is_frame(source) else mark_inputs(calibration, source)
 
 
-@dataclass(frozen=True, repr=False, eq=False)
+@dataclass(frozen=True, repr=False, eq=False, kw_only=True)
 class ScaleBiasCalibrationResult(CalibrationResult):
-    """A scale-bias calibration: the base's scale (the scale error a) and bias b, with theta = (a, b)'s
-    covariance as ``covariance`` (over theta1, theta2) and the mean NIS, its bounds, ``consistent`` and the
-    observability ratios as ``diagnostics``; ``correction`` (a
-    :class:`~kalcal.scenarios.scale_bias.correction.ScaleBiasCorrection`) is the map reference = theta1 *
-    sensor + theta2 at the last sample with its sigma per reading (``apply(z)``), written as
-    ``correction.json`` beside the base's files."""
+    """A scale-bias calibration: the base's scale (the scale error a) and bias b, with theta's covariance as
+    ``covariance`` (over theta1, theta2) and the mean NIS, its bounds, ``consistent`` and the
+    observability as ``diagnostics``; ``correction`` is the map reference = theta1 * sensor + theta2 at
+    the last sample with its sigma per reading (``apply(z)``), written as ``correction.json`` beside the
+    base's files.
 
+    Attributes
+    ----------
+    run : ScaleBiasCalibration
+        The filter's theta and covariance after each of the K samples, its innovations, prior and data-only
+        information (:class:`kalcal.scenarios.scale_bias.calibration.ScaleBiasCalibration`).
+    scale_bias_covariance : ndarray, shape (2, 2)
+        The covariance of (a, b) from theta's (delta method), units [1, unit; unit, unit^2].
+    settings : dict
+        The settings the calibration ran with, by section (``summary.json``'s ``settings``).
+    data : str
+        The log's name.
+    columns_read : dict
+        The log's ``reference`` and ``sensor`` columns and where ``time`` came from, in words.
+    prior_kind : {"diffuse", "settings"}
+    prior_note : str
+        Why that prior.
+    sigma_untrusted_because : str or None
+        Why the sigmas are not to be used; None when :attr:`sigma_trusted`.
+    correction : ScaleBiasCorrection or None
+        :class:`~kalcal.scenarios.scale_bias.correction.ScaleBiasCorrection`; None only in a result not made
+        by the calibration (then :meth:`save` refuses).
+    """
+
+    run: ScaleBiasCalibration
+    scale_bias_covariance: np.ndarray
+    settings: dict
+    data: str
+    columns_read: dict
+    prior_kind: str
+    prior_note: str
+    sigma_untrusted_because: str | None = None
     correction: ScaleBiasCorrection | None = None
 
     OUTPUT_NAMES = ("estimates.csv", "summary.json", "correction.json")
+
+    @property
+    def theta(self) -> np.ndarray:
+        """[theta1 (1), theta2 (signal unit)] at the last sample, (2,)."""
+        return self.run.theta[-1]
+
+    @property
+    def theta_std(self) -> np.ndarray:
+        """Their 1-sigma, (2,)."""
+        return self.run.std[-1]
+
+    def _summary(self) -> dict[str, Any]:
+        run, ab_cov = self.run, self.scale_bias_covariance
+        diagnostics = self.diagnostics
+        return {
+            "scenario": self.scenario,
+            "settings": self.settings,
+            "data": self.data,
+            "columns": self.columns_read,
+            "samples": int(run.time.size),
+            "samples_used": run.samples_used,
+            "time": self.time,
+            "theta": self.theta,
+            "theta_covariance": self.covariance,
+            "theta_states": list(self.covariance_states),
+            "theta_std": self.theta_std,
+            "scale_error": self.scale,
+            "scale_error_std": self.scale_std,
+            "bias": self.bias,
+            "bias_std": self.bias_std,
+            "sigma_trusted": self.sigma_trusted,
+            **({"sigma_untrusted_because": self.sigma_untrusted_because} if self.sigma_untrusted_because is not None else {}),
+            "scale_bias_correlation": float(ab_cov[0, 1] / np.sqrt(ab_cov[0, 0] * ab_cov[1, 1])),
+            "mean_nis": diagnostics["mean_nis"],
+            "nis_bounds": diagnostics["nis_bounds"],
+            "consistent": diagnostics["consistent"],
+            "observability": diagnostics["observability"],
+            "prior": {"kind": self.prior_kind, "note": self.prior_note, "start_samples": run.start_samples,
+                      "conflict": run.conflict},
+            "stability": self.stability,
+            "warnings": self.warnings,
+            "units": self.units,
+        }
 
     def _save_more(self, out: Path) -> dict[str, Path]:
         if self.correction is None:  # a result made without one (never by the calibration) has no file to write
@@ -233,16 +285,14 @@ class ScaleBiasCalibrationResult(CalibrationResult):
         return {"correction.json": self.correction.save(Path(out) / "correction.json")}
 
     def table(self) -> list[tuple[str, float, float, bool, str]]:
-        s = self.summary
-        unit, trusted = s["units"]["bias"], s.get("sigma_trusted", True)
-        return [("scale_error", s["scale_error"], s["scale_error_std"], trusted, "1"),
-                ("bias", s["bias"], s["bias_std"], trusted, unit),
-                ("theta1", s["theta"][0], s["theta_std"][0], trusted, "1"),
-                ("theta2", s["theta"][1], s["theta_std"][1], trusted, unit)]
+        unit, trusted = self.units["bias"], self.sigma_trusted
+        return [("scale_error", self.scale, self.scale_std, trusted, "1"),
+                ("bias", self.bias, self.bias_std, trusted, unit),
+                ("theta1", self.theta[0], self.theta_std[0], trusted, "1"),
+                ("theta2", self.theta[1], self.theta_std[1], trusted, unit)]
 
     def title(self) -> tuple[str, str]:
-        return f"kalcal calibrate {self.scenario}: {self.summary['samples_used']} samples", f"t = {self.summary['time']:g} s"
-
+        return f"kalcal calibrate {self.scenario}: {self.run.samples_used} samples", f"t = {self.time:g} s"
 
 
 def _data_of(scenario: ScaleBiasScenario, logs: dict[str, Any]):
