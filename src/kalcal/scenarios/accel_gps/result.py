@@ -1,5 +1,7 @@
-"""The filter's run over an accelerometer/GPS log: its estimates at each fix and what it skipped (the typed
-part of :class:`kalcal.scenarios.accel_gps.calibrate.AccelGpsCalibrationResult`, its ``run``)."""
+"""The filter's run over an accelerometer/GPS log: its estimates at each fix and what it skipped.
+
+It is the typed part of :class:`kalcal.scenarios.accel_gps.calibrate.AccelGpsCalibrationResult` (its ``run``).
+"""
 
 from __future__ import annotations
 
