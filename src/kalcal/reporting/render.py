@@ -270,7 +270,7 @@ def _draw_page(
         f"{FIGURE_DIR}/ out of it first",
     ) as staging:
         shown = _realization_data(problem, scenario, seed, index, count, str(summary["engine"]))
-        options = dict(source_report=bool(scenario.SOURCE_REPORT), steady=steady, exact_cov=exact.error_cov, exact_reason=exact.reason)
+        options = dict(source_report=scenario.source_report(), steady=steady, exact_cov=exact.error_cov, exact_reason=exact.reason)
         from kalcal.reporting.figures import render_figures
 
         figures, skipped = render_figures(dataset, shown, staging / FIGURE_DIR, long_dataset,

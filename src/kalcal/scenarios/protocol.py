@@ -74,9 +74,13 @@ class Scenario(Protocol):
 
     NAME: ClassVar[str]  #: what the registry and summary.json call it
     SUMMARY: ClassVar[str]  #: one line for --help and the docs
-    #: whether the source report studied this scenario: the page quotes its figure numbers and summary.json
-    #: gives E[r_k r_j^T] at its pair of times only then (elsewhere they would name another study's numbers)
-    SOURCE_REPORT: ClassVar[bool]
+
+    def source_report(self) -> bool:
+        """Whether these settings are the source report's setup: the page quotes its figure numbers and
+        summary.json gives E[r_k r_j^T] at its pair of times only then (elsewhere they would name another
+        study's numbers). A question of the settings, not of the scenario's class: a run of the report's
+        scenario with another scheme or other fixes is not the report's study."""
+        ...
 
     @property
     def capabilities(self) -> Capabilities:

@@ -128,7 +128,10 @@ class CustomModelScenario:
 
     NAME: ClassVar[str] = "custom"
     SUMMARY: ClassVar[str] = "a linear Gaussian model read from a TOML file (docs/custom-models.md)"
-    SOURCE_REPORT: ClassVar[bool] = False
+
+    def source_report(self) -> bool:
+        """False: the source report studied the accelerometer/GPS setup alone."""
+        return False
 
     @property
     def label(self) -> str:

@@ -222,7 +222,10 @@ class ScaleBiasScenario:
 
     NAME: ClassVar[str] = "scale-bias"
     SUMMARY: ClassVar[str] = "a sensor's scale and bias estimated against a reference reading (the regressors are data)"
-    SOURCE_REPORT: ClassVar[bool] = False
+
+    def source_report(self) -> bool:
+        """False: the source report studied the accelerometer/GPS setup alone."""
+        return False
     capabilities: ClassVar[Capabilities] = Capabilities(
         exact_analysis=False,
         fixed_gains=False,
