@@ -28,6 +28,10 @@ def test_each_scenario_answers_the_protocol(name, scenario):
     for command in ("simulate", "calibrate", "fit"):
         names = scenario.output_names(command) if command in scenario.capabilities.commands else None
         assert names is None or all(isinstance(n, str) for n in names)
+    assert isinstance(scenario.source_report(), bool)
+    labels = scenario.state_labels  # one per filter state, or None: the problem's names say it
+    d = len(scenario.problem(residual_pairs=False).info.state_names)
+    assert labels is None or (len(labels) == d and all(isinstance(label, str) and label for label in labels))
 
 
 def test_the_model_files_are_covered():

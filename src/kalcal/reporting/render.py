@@ -269,7 +269,7 @@ def _realization_data(problem, scenario, seed: int, index: int, count: int, engi
         filter_cov=one.filter_cov,
         state_names=tuple(problem.info.state_names),
         state_units=tuple(problem.info.state_units),
-        state_labels=getattr(scenario, "state_labels", None),  # accel-gps: its error states δp, δv
+        state_labels=scenario.state_labels,
     )
 
 

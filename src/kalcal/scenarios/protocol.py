@@ -75,6 +75,12 @@ class Scenario(Protocol):
     NAME: ClassVar[str]  #: what the registry and summary.json call it
     SUMMARY: ClassVar[str]  #: one line for --help and the docs
 
+    @property
+    def state_labels(self) -> tuple[str, ...] | None:
+        """What each of the filter's states is, for the realization figures' titles (accel-gps: its error
+        states ``δp = p − p_c``, ...), length d; None where the problem's state names say it."""
+        ...
+
     def source_report(self) -> bool:
         """Whether these settings are the source report's setup: the page quotes its figure numbers and
         summary.json gives E[r_k r_j^T] at its pair of times only then (elsewhere they would name another

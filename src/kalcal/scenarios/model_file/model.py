@@ -129,6 +129,11 @@ class CustomModelScenario:
     NAME: ClassVar[str] = "custom"
     SUMMARY: ClassVar[str] = "a linear Gaussian model read from a TOML file (docs/custom-models.md)"
 
+    @property
+    def state_labels(self) -> None:
+        """None: its state names say what each state is."""
+        return None
+
     def source_report(self) -> bool:
         """False: the source report studied the accelerometer/GPS setup alone."""
         return False

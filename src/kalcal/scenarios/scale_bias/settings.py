@@ -223,6 +223,11 @@ class ScaleBiasScenario:
     NAME: ClassVar[str] = "scale-bias"
     SUMMARY: ClassVar[str] = "a sensor's scale and bias estimated against a reference reading (the regressors are data)"
 
+    @property
+    def state_labels(self) -> None:
+        """None: its state names say what each state is."""
+        return None
+
     def source_report(self) -> bool:
         """False: the source report studied the accelerometer/GPS setup alone."""
         return False
