@@ -1,6 +1,7 @@
 """Every scenario kalcal can build answers the Scenario protocol: the registry's built-in classes and a
 model file's scenario (built from a file, so not in the registry's name-to-class table)."""
 
+import dataclasses
 from pathlib import Path
 
 import pytest
@@ -29,6 +30,8 @@ def test_each_scenario_answers_the_protocol(name, scenario):
         names = scenario.output_names(command) if command in scenario.capabilities.commands else None
         assert names is None or all(isinstance(n, str) for n in names)
     assert isinstance(scenario.source_report(), bool)
+    for section in dataclasses.fields(scenario):  # what apply_settings changes: the section as given
+        assert type(scenario.given_section(section.name)) is type(getattr(scenario, section.name))
     labels = scenario.state_labels  # one per filter state, or None: the problem's names say it
     d = len(scenario.problem(residual_pairs=False).info.state_names)
     assert labels is None or (len(labels) == d and all(isinstance(label, str) and label for label in labels))

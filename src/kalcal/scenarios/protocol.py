@@ -75,6 +75,13 @@ class Scenario(Protocol):
     NAME: ClassVar[str]  #: what the registry and summary.json call it
     SUMMARY: ClassVar[str]  #: one line for --help and the docs
 
+    def given_section(self, name: str) -> Any:
+        """The settings section ``name`` as given, for the settings layer to change and replace
+        (:func:`kalcal.models.config.apply_settings`): the field itself where the scenario keeps no other
+        (``getattr(self, name)``); accel-gps's ``truth`` as given (a density, an unset value), beside the
+        field that holds it resolved per sample at the run's rate, so that a changed rate converts it anew."""
+        ...
+
     @property
     def state_labels(self) -> tuple[str, ...] | None:
         """What each of the filter's states is, for the realization figures' titles (accel-gps: its error
