@@ -40,3 +40,22 @@ def test_each_scenario_answers_the_protocol(name, scenario):
 def test_the_model_files_are_covered():
     """The parametrized test above reaches the model-file scenario, not only the registry's classes."""
     assert any(not isinstance(s, tuple(SCENARIOS.values())) for _, s in _scenarios())
+
+
+def test_the_noise_filter_is_values_and_text_from_the_registry():
+    """kalcal noise asks the registry for the [filter] it writes and gets values and text, not a scenario's
+    module: the densities, their per-sample values at the log's rate, filter.toml naming its source."""
+    import numpy as np
+
+    from kalcal.calibration.noise import identify_noise
+    from kalcal.scenarios import NoiseFilter, noise_filter
+
+    rate = 100.0
+    result = identify_noise(np.random.default_rng(0).normal(0.05, 0.02, 20_000), rate)
+    written = noise_filter(result, "imu.csv")
+    assert isinstance(written, NoiseFilter)
+    assert written.settings["accel_noise_density"] > 0
+    # per sample at the log's rate: accel_noise_std = N sqrt(rate)
+    assert written.per_sample["rate"] == rate
+    assert written.per_sample["accel_noise_std"] == pytest.approx(written.settings["accel_noise_density"] * np.sqrt(rate), rel=1e-12)
+    assert "imu.csv" in written.toml and "[filter]" in written.toml
