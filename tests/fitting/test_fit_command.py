@@ -161,3 +161,25 @@ def test_the_noise_is_fitted_and_written_as_densities_with_per_sample_values_at_
 
     scenario = build_scenario("accel-gps", out / "filter.toml")
     assert scenario.filter_settings.accel_noise_std == pytest.approx(per_sample["accel_noise_std"]["value"], rel=1e-6)
+
+
+def test_the_per_sample_row_comes_from_the_fit_not_the_cli():
+    """The CLI prints under a fitted setting what the fit derived from it (FitResult.derived): the
+    density's per-sample std at the log's rate, its interval mapped, its unit naming the rate; the CLI
+    itself maps no scenario's settings to other names or units (its options' help texts aside)."""
+    from pathlib import Path
+
+    import kalcal.cli.fit as cli_fit
+    from kalcal.fitting.result import FitParameter
+    from kalcal.scenarios.accel_gps.fit import per_sample_parameters
+
+    source = Path(cli_fit.__file__).read_text(encoding="utf-8")
+    assert '"filter.accel_noise_density":' not in source and "per sample" not in source
+    density = FitParameter("filter.accel_noise_density", 0.002, 0.0015, 0.003, "m/s^2/sqrt(Hz)", 0.001)
+    per_sample = {"rate": 400.0, "accel_noise_std": {"value": 0.04, "ci_low": 0.03, "ci_high": 0.06},
+                  "bias_walk_std": {"value": 0.0, "ci_low": None, "ci_high": None}}
+    derived = per_sample_parameters({density.name: density}, per_sample)
+    assert set(derived) == {"filter.accel_noise_density"}  # only the settings fitted
+    shown = derived["filter.accel_noise_density"]
+    assert (shown.name, shown.value, shown.ci_low, shown.ci_high) == ("accel_noise_std", 0.04, 0.03, 0.06)
+    assert shown.unit == "m/s^2 per sample at 400 Hz" and shown.identified

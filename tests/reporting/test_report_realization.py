@@ -77,3 +77,23 @@ def test_index_outside_the_ensemble():
     for traced in (100, -2):  # the compiled block itself reads the index unchecked
         with pytest.raises(ValueError, match=rf"\[-1, 100\), got {traced}"):
             problem._exact_block(block_generator(3, 0), 100, sums, traced)
+
+
+def test_every_problem_shows_its_realization_through_the_protocol():
+    """The report asks each problem for its realization (no test of what kind of problem it is): the member
+    is the Problem protocol's, both problem classes have it with its signature, and an engine a problem
+    lacks is refused as run_block refuses it."""
+    import inspect
+
+    from kalcal.errors import ConfigError
+    from kalcal.montecarlo.engine import block_generator
+    from kalcal.montecarlo.problem import Problem
+    from kalcal.scenarios.scale_bias.problem import ScaleBiasProblem
+
+    assert "shown_realization" in Problem.__dict__
+    want = list(inspect.signature(Problem.shown_realization).parameters)
+    for cls in (FixedGainProblem, ScaleBiasProblem):
+        assert list(inspect.signature(cls.shown_realization).parameters) == want
+    problem, _ = build_problem(build_scenario("scale-bias", None, []))
+    with pytest.raises(ConfigError, match="'sampled' is not available"):
+        problem.shown_realization(block_generator(3, 0), 100, 5, "sampled")

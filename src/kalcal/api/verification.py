@@ -199,9 +199,9 @@ def run_estimate_check(
 def report_residual_pair(statistics: EnsembleStatistics, info, scenario) -> dict[str, Any] | None:
     """E[r_k r_j^T] at the source report's pair (t_k = 23.8 s, t_j = 5.8 s), or None where the run has no
     update at one of those times (another GPS rate or a shorter run), no pairs were kept, or the scenario
-    is not the report's (:attr:`~kalcal.scenarios.protocol.Scenario.SOURCE_REPORT`): the nearest updates
+    are not the report's setup (:meth:`~kalcal.scenarios.protocol.Scenario.source_report`): the nearest updates
     would be another pair under the report's name."""
-    if not scenario.SOURCE_REPORT or statistics.residual_second_moment is None:
+    if not scenario.source_report() or statistics.residual_second_moment is None:
         return None
     times = np.asarray(info.update_times)
     if not all(np.any(np.abs(times - t) <= 1e-6) for t in REPORT_RESIDUAL_PAIR):

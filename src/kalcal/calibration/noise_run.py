@@ -19,7 +19,7 @@ from kalcal.io.logs import numeric_columns, parse_column_map, read_table, requir
 from kalcal.io.outputs import final_path, inputs_of, mark_inputs, run_outputs
 from kalcal.io.results import write_json
 from kalcal.results.noise import NoiseResult
-from kalcal.scenarios import noise_filter
+from kalcal.scenarios import NoiseFilter, noise_filter
 
 IMU_ROLES = ("time", "accel")
 #: the files of ``kalcal noise`` (and :data:`KALIBR_NAME` unless it is left out)
@@ -153,15 +153,15 @@ def _allan_frame(curve) -> pd.DataFrame:
     )
 
 
-def _axis_summary(result: NoiseIdentification, settings: dict[str, float]) -> dict[str, Any]:
+def _axis_summary(result: NoiseIdentification, written: NoiseFilter) -> dict[str, Any]:
     """The keys of summary.json that describe one accelerometer column's identification."""
     curve = result.curve
     return {
         "mean": {"value": result.mean, "unit": "m/s^2", "note": "constant bias plus any gravity component"},
         "std": {"value": result.std, "unit": "m/s^2", "note": "of the samples about their mean"},
         **{parameter.name: parameter.as_dict() for parameter in result.parameters},
-        "filter": settings,
-        "per_sample": noise_filter().per_sample_settings(result, settings),
+        "filter": written.settings,
+        "per_sample": written.per_sample,
         "notes": [
             f"{p.name}: {p.note}"
             for p in (result.velocity_random_walk, result.bias_instability, result.rate_random_walk)
@@ -234,8 +234,8 @@ def compute_noise(
     rostopic = (topic or topic_of(imu_map)) if log_format_of(source) == "rosbag" else None
     if axes is None:
         result = results["accel"]
-        settings = noise_filter().filter_settings(result)
-        axis_summary = _axis_summary(result, settings)
+        written = noise_filter(result, str(imu_path))
+        axis_summary = _axis_summary(result, written)
         summary = {
             "imu": str(imu_path),
             "columns": imu_map,
@@ -249,20 +249,21 @@ def compute_noise(
             **axis_summary,
             "warnings": [warning.as_dict() for warning in warnings],
         }
-        filter_text = flagged + noise_filter().filter_toml(result, settings, str(imu_path))
+        filter_text = flagged + written.toml
         run = NoiseResult(result, summary, filter_text, _allan_frame(result.curve), title, topic=rostopic)
     else:
         first = results[axes[0]]
-        blocks = {}
+        blocks, written = {}, {}
         for role, result in results.items():
-            blocks[role] = {"column": imu_map[role], **_axis_summary(result, noise_filter().filter_settings(result))}
+            written[role] = noise_filter(result, f"{imu_path}, axis {role} ({imu_map[role]})")
+            blocks[role] = {"column": imu_map[role], **_axis_summary(result, written[role])}
         selected = results[axis] if axis else None
         notes = [f"axis {role}: {note}" for role, block in blocks.items() for note in block["notes"]]
         if axis is None:
             notes.append("filter.toml not written: the filter is of one axis, select it with --axis x, y or z")
             filter_text = None
         else:
-            filter_text = flagged + noise_filter().filter_toml(selected, blocks[axis]["filter"], f"{imu_path}, axis {axis} ({imu_map[axis]})")
+            filter_text = flagged + written[axis].toml
         summary = {
             "imu": str(imu_path),
             "topic": topic,

@@ -9,17 +9,16 @@ from kalcal.cli import _common
 from kalcal.cli._common import ConfigOpt, ScenarioArg, SetOpt, escape, settings_of, user_errors
 
 
-def _per_sample_row(result, name: str, p) -> tuple[str, str, str, str] | None:
-    """The row under a fitted noise density: its per-sample value at the log's rate (fit.json's per_sample)."""
-    per_sample = result.extra.get("per_sample") if isinstance(result.extra, dict) else None
-    key = {"filter.accel_noise_density": "accel_noise_std", "filter.bias_walk_density": "bias_walk_std"}.get(name)
-    if not per_sample or key is None or not p.identified or p.trades_off:
+def _derived_row(result, name: str, p) -> tuple[str, str, str, str] | None:
+    """The row under a fitted setting: the same estimate in the form the scenario also gives it
+    (:attr:`~kalcal.fitting.result.FitResult.derived`; accel-gps: a density's per-sample std at the log's rate)."""
+    shown = result.derived.get(name)
+    if shown is None or not p.identified or p.trades_off:
         return None
-    entry, rate = per_sample[key], per_sample["rate"]
-    low, high = entry["ci_low"], entry["ci_high"]
+    low, high = shown.ci_low, shown.ci_high
     interval = f"[0, {'—' if high is None else f'{high:.4g}'}]" if p.at_bound else (
         f"[{'—' if low is None else f'{low:.4g}'}, {'—' if high is None else f'{high:.4g}'}]")
-    return f"  = {key}", f"{entry['value']:.4g}", interval, f"m/s^2 per sample at {rate:.4g} Hz"
+    return f"  = {shown.name}", f"{shown.value:.4g}", interval, shown.unit
 
 
 def fit(
@@ -88,7 +87,7 @@ def fit(
             low = "—" if p.ci_low is None else f"{p.ci_low:.4g}"
             interval = f"[0, {high}], consistent with 0" if p.at_bound else f"[{low}, {high}]"
         table.add_row(escape(name), estimate, interval, escape(p.unit))
-        sample = _per_sample_row(result, name, p)
+        sample = _derived_row(result, name, p)
         if sample is not None:
             table.add_row(*sample)
     console.print(table)

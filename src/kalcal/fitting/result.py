@@ -149,6 +149,10 @@ class FitResult:
         imu.yaml, the fitted noise densities in Kalibr's form, where the scenario's noise has one.
     linear : tuple of str
         The fitted settings drawn on a linear axis in fit.png (the others on a log axis).
+    derived : dict of str to FitParameter
+        By fitted setting, the same estimate in another form, shown under it (accel-gps: a density's
+        per-sample std at the log's rate, its unit saying which rate); its interval maps the setting's
+        own. Not in fit.json's parameters (the scenario's part of fit.json holds them).
     """
 
     scenario: str
@@ -179,6 +183,7 @@ class FitResult:
     linear: tuple[str, ...] = ()
     #: what one observation of the likelihood is, for the CLI's title (``fixes``; scale-bias's ``samples``)
     nobs_name: str = "fixes"
+    derived: dict[str, FitParameter] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.interval_method not in INTERVAL_METHODS:

@@ -147,9 +147,9 @@ def setting_files(scenario: Any) -> dict[str, str]:
 
 
 def _given(scenario: Any, section: str) -> Any:
-    """A section as given, where the scenario keeps it apart from the one it resolved (``given_section``)."""
-    given = getattr(scenario, "given_section", None)
-    return given(section) if given is not None else getattr(scenario, section)
+    """A section as given, where the scenario keeps it apart from the one it resolved
+    (:meth:`~kalcal.scenarios.protocol.Scenario.given_section`)."""
+    return scenario.given_section(section)
 
 
 def given_keys(scenario: Any) -> frozenset[str]:

@@ -80,6 +80,13 @@ class Problem(Protocol):
     def expected_mean_error(self) -> np.ndarray:
         """E[e_k] implied by the truth's means and deterministic model error, (K, d)."""
 
+    def shown_realization(
+        self, rng: np.random.Generator, n: int, index: int, engine: str
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Realization ``index`` of a block of n drawn from ``rng`` with ``engine``, as ``run_block`` draws
+        it: its error and estimate (K, d), in the states' units, and the filter's own P_k (K, d, d). What the
+        report's realization figures show; each problem takes its cheapest way to it."""
+
 
 def check_engine(problem: Problem, engine: str, option: str = "") -> None:
     """Raise ConfigError (a ValueError), naming the problem's engines, unless ``engine`` is one of
@@ -229,6 +236,24 @@ class FixedGainProblem:
         sums = SumBuffers.zeros(self.truth.n_updates, self.filter_model.state_dim, self.filter_model.measurement_dim, n, False)
         error, estimate = self._exact_block(rng, n, sums, index)
         return error, estimate
+
+    def shown_realization(
+        self, rng: np.random.Generator, n: int, index: int, engine: str
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Realization ``index`` of a block of n: error, estimate (K, d) and P_k (K, d, d), the same in
+        every realization here. The exact engine runs the block through the compiled kernel
+        (:meth:`traced_realization`: ``run_block``'s values to rounding); the sampled engine draws the block
+        and filters it through numpy (``run_block``'s values bit for bit, without the statistics the
+        figures do not show: whitened errors and innovations, NEES and NIS)."""
+        if not 0 <= index < n:
+            raise ValueError(f"realization index must lie in [0, {n}), got {index}")
+        cov = np.array(self.schedule.posterior_cov)
+        if engine == "exact":
+            return (*self.traced_realization(rng, n, index), cov)
+        states, measurements = self.sample(rng, n, engine)
+        run = self.filter(measurements)
+        state = states[index]
+        return state - run.posterior[index], run.posterior[index], cov
 
     def block_sums(self, rng: np.random.Generator, n: int, engine: str) -> MomentSums:
         """The moment sums of n realizations through the compiled kernels (same draws as ``run_block``)."""

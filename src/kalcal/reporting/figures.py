@@ -276,8 +276,8 @@ def render_figures(
     long_dataset : xarray.Dataset, optional
         ``stats_long.nc`` of the same run, for figure 5.8.
     source_report : bool
-        Whether the run's scenario is the source report's
-        (:attr:`~kalcal.scenarios.protocol.Scenario.SOURCE_REPORT`): only then do figures carry its numbers.
+        Whether the run's settings are the source report's setup
+        (:meth:`~kalcal.scenarios.protocol.Scenario.source_report`): only then do figures carry its numbers.
     steady : SteadyStateView, optional
         The filter's steady state, drawn against P_k (or a note saying why there is none).
     progress : callable, optional

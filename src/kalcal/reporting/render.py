@@ -31,8 +31,7 @@ from kalcal.io.statistics import read_statistics
 from kalcal.montecarlo.progress import JobProgress, stage
 from kalcal.scenarios import scenario_of_summary, settings_assignments  # noqa: F401 (settings_assignments: this module's name for it)
 from kalcal.models.settings import SettingError
-from kalcal.montecarlo.engine import BLOCK_SIZE, block_generator, block_sizes, realization
-from kalcal.montecarlo.problem import FixedGainProblem, capabilities_of
+from kalcal.montecarlo.engine import BLOCK_SIZE, block_generator, block_sizes
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.plots.realization_data import RealizationData
 from kalcal.reporting.html import build_page, write_page
@@ -102,14 +101,6 @@ class ShownRealization(NamedTuple):
     filter_cov: np.ndarray  #: the filter's own P_k, (K, d, d)
 
 
-def through_kernel(problem, engine: str) -> bool:
-    """Whether :func:`draw_realization` redraws through the Monte Carlo's compiled block (the exact engine of
-    a fixed-gain problem) rather than through numpy."""
-    # a question about the problem object (the compiled kernel that traces one realization is
-    # FixedGainProblem's own method), not about the scenario
-    return engine == "exact" and isinstance(problem, FixedGainProblem)
-
-
 def saved_scenario(summary: Mapping[str, Any], summary_path: Path):
     """The scenario a run's ``summary.json`` was drawn from: a model file's from its matrices, a built-in's
     from its settings; their errors located in ``summary_path``."""
@@ -124,32 +115,16 @@ def saved_scenario(summary: Mapping[str, Any], summary_path: Path):
 def draw_realization(problem, seed: int, index: int, n: int, engine: str) -> ShownRealization:
     """Realization ``index`` of the n-realization ensemble drawn with ``seed``: its error, estimate and P.
 
-    Its block is drawn and filtered whole (the draws of a block are interleaved across its realizations).
-    The exact engine of a fixed-gain problem runs the block through the Monte Carlo's compiled kernel,
-    which keeps this realization's error and estimate as it goes (:meth:`FixedGainProblem.traced_realization`,
-    a fraction of numpy's time once the kernel is loaded): the values of
-    :func:`kalcal.montecarlo.engine.realization` to rounding. The sampled engine's are its values bit for
-    bit, through numpy, without the statistics the figures do not show (the whitened errors and
-    innovations, NEES and NIS of every realization of the block). Scale-bias (data-dependent gains, each
-    realization its own P) draws the block and filters this series alone
-    (:meth:`ScaleBiasProblem.shown_realization`): the engine's values bit for bit; any other problem
-    calls :func:`~kalcal.montecarlo.engine.realization` itself.
+    Its block is drawn whole (the draws of a block are interleaved across its realizations) and the
+    problem gives this realization its cheapest way (:meth:`~kalcal.montecarlo.problem.Problem.shown_realization`:
+    a fixed-gain problem's exact engine through the Monte Carlo's compiled kernel, to rounding; its sampled
+    engine through numpy, bit for bit; a problem with data-dependent gains filters this series alone).
     """
     if not 0 <= index < n:
         raise ValueError(f"realization index must lie in [0, {n}), got {index}")
     block, offset = divmod(index, BLOCK_SIZE)
     rng, size = block_generator(seed, block), block_sizes(n, BLOCK_SIZE)[block]
-    if hasattr(problem, "shown_realization"):  # scale-bias: the block drawn, this series filtered alone
-        return ShownRealization(*problem.shown_realization(rng, size, offset))
-    if not capabilities_of(problem).fixed_gains:  # data-dependent gains: each realization's own P
-        one = realization(problem, seed, index, n, engine)
-        return ShownRealization(one.error[0], one.estimate[0], one.filter_cov[0])
-    if through_kernel(problem, engine):
-        return ShownRealization(*problem.traced_realization(rng, size, offset), np.array(problem.schedule.posterior_cov))
-    states, measurements = problem.sample(rng, size, engine)
-    run = problem.filter(measurements)
-    state = states[offset]
-    return ShownRealization(state - run.posterior[offset], run.posterior[offset], np.array(problem.schedule.posterior_cov))
+    return ShownRealization(*problem.shown_realization(rng, size, offset, engine))
 
 
 def render_report(out: str | Path, *, realization: int = 0, progress: JobProgress | None = None) -> Path:
@@ -270,7 +245,7 @@ def _draw_page(
         f"{FIGURE_DIR}/ out of it first",
     ) as staging:
         shown = _realization_data(problem, scenario, seed, index, count, str(summary["engine"]))
-        options = dict(source_report=bool(scenario.SOURCE_REPORT), steady=steady, exact_cov=exact.error_cov, exact_reason=exact.reason)
+        options = dict(source_report=scenario.source_report(), steady=steady, exact_cov=exact.error_cov, exact_reason=exact.reason)
         from kalcal.reporting.figures import render_figures
 
         figures, skipped = render_figures(dataset, shown, staging / FIGURE_DIR, long_dataset,
@@ -294,7 +269,7 @@ def _realization_data(problem, scenario, seed: int, index: int, count: int, engi
         filter_cov=one.filter_cov,
         state_names=tuple(problem.info.state_names),
         state_units=tuple(problem.info.state_units),
-        state_labels=getattr(scenario, "state_labels", None),  # accel-gps: its error states δp, δv
+        state_labels=scenario.state_labels,
     )
 
 

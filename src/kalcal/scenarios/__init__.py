@@ -15,7 +15,7 @@ from __future__ import annotations
 import importlib
 from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 # name -> (module, class) of each built-in scenario, imported on first use: --help lists the names
 # without loading numpy, and a scenario's modules may import this registry without a cycle
@@ -30,7 +30,7 @@ MODEL_FILE = "model-file"
 __all__ = [
     "MODEL_FILE", "SCENARIOS", "build_scenario", "is_model_file", "load_model_file", "model_file_fields", "parse_model_file",
     "scenario_class", "scenario_names",
-    "log_defaults", "noise_filter", "scenario_of_summary", "settings_assignments",
+    "log_defaults", "NoiseFilter", "noise_filter", "scenario_of_summary", "settings_assignments",
 ]
 
 
@@ -147,6 +147,18 @@ def log_defaults(scenario: Any) -> dict[str, Any]:
 _NOISE_FILTER = "kalcal.scenarios.accel_gps.noise_settings"
 
 
-def noise_filter():
-    """The module that turns an identified accelerometer noise into a scenario's ``[filter]`` settings."""
-    return importlib.import_module(_NOISE_FILTER)
+class NoiseFilter(NamedTuple):
+    """What ``kalcal noise`` writes of one identified accelerometer noise: a scenario's ``[filter]``."""
+
+    settings: dict[str, float]  #: summary.json's ``filter``: the densities written, by key
+    per_sample: dict[str, Any]  #: summary.json's ``per_sample``: their per-sample values at the log's rate
+    toml: str  #: filter.toml's text, for ``kalcal calibrate accel-gps --config``
+
+
+def noise_filter(result: Any, source: str) -> NoiseFilter:
+    """The ``[filter]`` settings of the accelerometer noise identified in ``result``
+    (:class:`~kalcal.calibration.noise.NoiseIdentification`), read from ``source`` (what filter.toml's
+    header names: the log, and the axis of a 3-axis one), as values and text."""
+    module = importlib.import_module(_NOISE_FILTER)
+    settings = module.filter_settings(result)
+    return NoiseFilter(settings, module.per_sample_settings(result, settings), module.filter_toml(result, settings, source))

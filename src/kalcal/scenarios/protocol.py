@@ -74,9 +74,26 @@ class Scenario(Protocol):
 
     NAME: ClassVar[str]  #: what the registry and summary.json call it
     SUMMARY: ClassVar[str]  #: one line for --help and the docs
-    #: whether the source report studied this scenario: the page quotes its figure numbers and summary.json
-    #: gives E[r_k r_j^T] at its pair of times only then (elsewhere they would name another study's numbers)
-    SOURCE_REPORT: ClassVar[bool]
+
+    def given_section(self, name: str) -> Any:
+        """The settings section ``name`` as given, for the settings layer to change and replace
+        (:func:`kalcal.models.config.apply_settings`): the field itself where the scenario keeps no other
+        (``getattr(self, name)``); accel-gps's ``truth`` as given (a density, an unset value), beside the
+        field that holds it resolved per sample at the run's rate, so that a changed rate converts it anew."""
+        ...
+
+    @property
+    def state_labels(self) -> tuple[str, ...] | None:
+        """What each of the filter's states is, for the realization figures' titles (accel-gps: its error
+        states ``δp = p − p_c``, ...), length d; None where the problem's state names say it."""
+        ...
+
+    def source_report(self) -> bool:
+        """Whether these settings are the source report's setup: the page quotes its figure numbers and
+        summary.json gives E[r_k r_j^T] at its pair of times only then (elsewhere they would name another
+        study's numbers). A question of the settings, not of the scenario's class: a run of the report's
+        scenario with another scheme or other fixes is not the report's study."""
+        ...
 
     @property
     def capabilities(self) -> Capabilities:

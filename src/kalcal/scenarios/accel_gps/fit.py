@@ -31,7 +31,7 @@ from kalcal.scenarios.accel_gps.evaluation import POSITION_FIX_KEYS
 from kalcal.scenarios.accel_gps.fit_settings import filter_toml
 from kalcal.fitting.mle import Free, maximize
 from kalcal.fitting.nis_tail import nis_tail, not_applicable
-from kalcal.fitting.result import FitResult, fitted_point
+from kalcal.fitting.result import FitParameter, FitResult, fitted_point
 from kalcal.scenarios.accel_gps.settings import DENSITIES, DENSITY_UNITS, AccelGpsFilter, AccelGpsScenario, density_of, per_sample
 
 DEFAULT_FREE = ("filter.accel_noise_density", "filter.bias_walk_density", "filter.gps_position_std", "filter.gps_velocity_std")
@@ -257,7 +257,27 @@ def fit_accel_gps(
         comments=comments,
         confidence=confidence,
         extra={"bias": float(calibration.bias[-1]), "bias_std": float(calibration.std[-1, 2]), "per_sample": per_sample_values},
+        derived=per_sample_parameters(fit.parameters, per_sample_values),
     )
+
+
+def per_sample_parameters(parameters: Mapping[str, FitParameter], per_sample_values: Mapping[str, Any]) -> dict[str, FitParameter]:
+    """Each fitted density's per-sample std at the log's rate (fit.json's ``per_sample``), by the density's
+    setting, for display under it (:attr:`~kalcal.fitting.result.FitResult.derived`): m/s^2 per sample at
+    that rate, its interval the density's mapped, identified and at its bound as the density is."""
+    rate = per_sample_values["rate"]
+    derived = {}
+    for name, (density, _) in DENSITIES.items():
+        p = parameters.get(f"filter.{density}")
+        if p is None:
+            continue
+        entry = per_sample_values[name]
+        derived[f"filter.{density}"] = FitParameter(
+            name=name, value=entry["value"], ci_low=entry["ci_low"], ci_high=entry["ci_high"],
+            unit=f"m/s^2 per sample at {rate:.4g} Hz", start=entry["value"], identified=p.identified,
+            at_bound=p.at_bound, trades_off=p.trades_off, held=p.held,
+        )
+    return derived
 
 
 #: refits with the gate's rejected set held fixed before the fit gives up on a stable set

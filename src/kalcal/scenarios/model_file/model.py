@@ -128,7 +128,19 @@ class CustomModelScenario:
 
     NAME: ClassVar[str] = "custom"
     SUMMARY: ClassVar[str] = "a linear Gaussian model read from a TOML file (docs/custom-models.md)"
-    SOURCE_REPORT: ClassVar[bool] = False
+
+    def given_section(self, name: str) -> Any:
+        """The section ``name`` itself: every section is kept as given."""
+        return getattr(self, name)
+
+    @property
+    def state_labels(self) -> None:
+        """None: its state names say what each state is."""
+        return None
+
+    def source_report(self) -> bool:
+        """False: the source report studied the accelerometer/GPS setup alone."""
+        return False
 
     @property
     def label(self) -> str:

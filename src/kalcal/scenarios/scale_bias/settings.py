@@ -222,7 +222,19 @@ class ScaleBiasScenario:
 
     NAME: ClassVar[str] = "scale-bias"
     SUMMARY: ClassVar[str] = "a sensor's scale and bias estimated against a reference reading (the regressors are data)"
-    SOURCE_REPORT: ClassVar[bool] = False
+
+    def given_section(self, name: str) -> Any:
+        """The section ``name`` itself: every section is kept as given."""
+        return getattr(self, name)
+
+    @property
+    def state_labels(self) -> None:
+        """None: its state names say what each state is."""
+        return None
+
+    def source_report(self) -> bool:
+        """False: the source report studied the accelerometer/GPS setup alone."""
+        return False
     capabilities: ClassVar[Capabilities] = Capabilities(
         exact_analysis=False,
         fixed_gains=False,
