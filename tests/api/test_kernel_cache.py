@@ -1,5 +1,8 @@
-"""A verify run loads its compiled kernels from numba's cache: the second run on a machine compiles nothing;
-and every kernel in kalcal's source, whichever command runs it, is compiled with ``cache=True``."""
+"""Compiled kernels load from numba's cache: a second run compiles nothing, and every kernel has ``cache=True``.
+
+The run verifies both scenarios, calibrates with a gate and fits scale-bias, so every caller of the one
+compiled covariance update (the scale-bias tile, the log filter, the likelihood and its diffuse start) loads.
+"""
 
 from __future__ import annotations
 
@@ -12,8 +15,15 @@ from pathlib import Path
 import kalcal
 
 RUN = (
-    "import kalcal\n"
+    "import kalcal, sys\n"
     "kalcal.verify('accel-gps', n=200, seed=1, settings={'scenario.duration': 2}, long_run=4.0, threads=1)\n"
+    # every caller of the one compiled covariance update: the scale-bias Monte Carlo tile, the log filter
+    # (calibrate with a gate) and the scale-bias likelihood with its diffuse start (fit)
+    "kalcal.verify('scale-bias', n=200, seed=1, threads=1)\n"
+    "logs = kalcal.simulate('accel-gps', seed=1, settings={'scenario.duration': 5}).save(sys.argv[1] + '/ag')\n"
+    "kalcal.calibrate('accel-gps', imu=logs['imu'], gps=logs['gps'], gate=0.999, settings_sigma=False)\n"
+    "data = kalcal.simulate('scale-bias', seed=1).save(sys.argv[1] + '/sb')['data']\n"
+    "kalcal.fit('scale-bias', data=data)\n"
     # a kernel without cache=True would compile on every run without a word in the cache's log
     "import sys\n"
     "from numba.core.dispatcher import Dispatcher\n"
@@ -23,20 +33,23 @@ RUN = (
 )
 
 
-def _cache_log() -> str:
+def _cache_log(folder: Path) -> str:
     env = {**os.environ, "NUMBA_DEBUG_CACHE": "1"}
-    done = subprocess.run([sys.executable, "-c", RUN], capture_output=True, text=True, timeout=600, env=env)
+    done = subprocess.run([sys.executable, "-c", RUN, str(folder)], capture_output=True, text=True, timeout=600, env=env)
     assert done.returncode == 0, done.stderr
     return done.stdout + done.stderr
 
 
-def test_the_second_run_loads_every_kernel_from_the_cache():
-    _cache_log()  # compiles what the cache lacks (nothing, once the machine has run it)
-    log = _cache_log()
+def test_the_second_run_loads_every_kernel_from_the_cache(tmp_path):
+    _cache_log(tmp_path / "first")  # compiles what the cache lacks (nothing, once the machine has run it)
+    log = _cache_log(tmp_path / "second")
     assert "data loaded" in log
     counted = next(line for line in log.splitlines() if line.startswith("kernels "))
     assert counted.endswith("uncached []") and not counted.startswith("kernels 0 "), counted
     assert "data saved" not in log and "index saved" not in log, log
+    loaded = [line for line in log.splitlines() if "data loaded" in line]
+    for kernel in ("sequential._run", "kernels.regression_block_moments", "likelihood._diffuse_filter"):
+        assert any(kernel in line for line in loaded), (kernel, loaded)
 
 
 #: numba's compiling entry points; a kernel made by any of them without ``cache=True`` compiles anew in
