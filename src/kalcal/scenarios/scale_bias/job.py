@@ -85,6 +85,21 @@ def resolve_prior(scenario: ScaleBiasScenario, prior: str | None) -> tuple[str, 
     return "diffuse", "no prior given (filter.scale_error, filter.bias and their stds unset): theta from the log alone"
 
 
+def read_data(scenario, data_path, reference: str, sensor: str) -> tuple[str, dict[str, np.ndarray], np.ndarray, bool]:
+    """The log's name, its reference and sensor columns (NaN: a skipped sample), its times [s] and whether
+    they are the log's own ``time`` column (which must increase) rather than sample k at k / ``scenario.rate``."""
+    frame = read_table(data_path, "data", columns=(reference, sensor))
+    name = source_name(data_path, "data", frame)
+    if reference == sensor:
+        raise DataError(f"{name}: --reference and --sensor name the same column {reference!r}")
+    columns = numeric_columns(frame, name, {"reference": reference, "sensor": sensor}, allow_nan=("reference", "sensor"))
+    if "time" in frame.columns and "time" not in (reference, sensor):
+        time = numeric_columns(frame, name, ("time",))["time"]
+        require_increasing(time, name)
+        return name, columns, time, True
+    return name, columns, np.arange(1, len(frame) + 1) / scenario.scenario.rate, False
+
+
 def compute_scale_bias_calibration(
     scenario: ScaleBiasScenario,
     data_path: str | Path | pd.DataFrame,
@@ -115,19 +130,9 @@ def compute_scale_bias_calibration(
     (:mod:`kalcal.scenarios.scale_bias.windows`; 1: none), ``summary["stability"]``.
     """
     windows = check_windows(windows)
-    frame = read_table(data_path, "data", columns=(reference, sensor))
     source = data_path
-    data_path = source_name(data_path, "data", frame)
-    if reference == sensor:
-        raise DataError(f"{data_path}: --reference and --sensor name the same column {reference!r}")
-    columns = numeric_columns(frame, data_path, {"reference": reference, "sensor": sensor}, allow_nan=("reference", "sensor"))
-    if "time" in frame.columns and "time" not in (reference, sensor):
-        time = numeric_columns(frame, data_path, ("time",))["time"]
-        require_increasing(time, data_path)
-        time_source = "column 'time'"
-    else:
-        time = np.arange(1, len(frame) + 1) / scenario.scenario.rate
-        time_source = f"row number / scenario.rate ({scenario.scenario.rate:g} Hz)"
+    data_path, columns, time, timed = read_data(scenario, source, reference, sensor)
+    time_source = "column 'time'" if timed else f"row number / scenario.rate ({scenario.scenario.rate:g} Hz)"
     prior, why = resolve_prior(scenario, prior)
     options = {"source": str(data_path), "columns": (reference, sensor)}
     result = calibrate_scale_bias(
@@ -328,17 +333,8 @@ def compute_scale_bias_fit(
     """Fit a scale-bias log (a reference and a sensor column, optionally ``time`` [s]); nothing is written."""
     from kalcal.scenarios.scale_bias.fit import fit_scale_bias
 
-    frame = read_table(data_path, "data", columns=(reference, sensor))
-    name = source_name(data_path, "data", frame)
-    if reference == sensor:
-        raise DataError(f"{name}: --reference and --sensor name the same column {reference!r}")
-    columns = numeric_columns(frame, name, {"reference": reference, "sensor": sensor}, allow_nan=("reference", "sensor"))
-    if "time" in frame.columns and "time" not in (reference, sensor):
-        time = numeric_columns(frame, name, ("time",))["time"]
-        require_increasing(time, name)
-        rate = float(1.0 / np.median(np.diff(time))) if time.size > 1 else None
-    else:
-        time, rate = np.arange(1, len(frame) + 1) / scenario.scenario.rate, None
+    name, columns, time, timed = read_data(scenario, data_path, reference, sensor)
+    rate = float(1.0 / np.median(np.diff(time))) if timed and time.size > 1 else None
     if np.count_nonzero(np.isfinite(columns["reference"]) & np.isfinite(columns["sensor"])) < 3:
         raise DataError(f"{name}: needs at least three samples with both a reference and a sensor value")
     result = fit_scale_bias(scenario, time, columns["reference"], columns["sensor"], free=free, profile=profile,
