@@ -12,7 +12,6 @@ from scipy import stats
 
 from kalcal.io.results import to_jsonable
 from kalcal.montecarlo.accumulators import EnsembleStatistics
-from kalcal.montecarlo.problem import ProblemInfo
 from kalcal.stats.bounds import verdict_false_alarm_bound
 from kalcal.stats.covariance import check_covariance
 from kalcal.stats.mean_error import check_mean_error
@@ -21,16 +20,11 @@ from kalcal.stats.results import Cause, CheckPart, CheckResult
 from kalcal.stats.whiteness import check_residual_whiteness
 from kalcal.stats.results import family_pvalue, normal_family_pvalue
 
+from . import _null_ensembles as null
+
 
 def _info(n_updates, d, p=1):
-    return ProblemInfo(
-        "synthetic",
-        np.arange(1, n_updates + 1, dtype=float),
-        tuple(f"x{i}" for i in range(d)),
-        ("m",) * d,
-        tuple(f"z{a}" for a in range(p)),
-        ("m",) * p,
-    )
+    return null.info(n_updates, d, p)
 
 
 def _stats(n, error_cov, filter_cov, mean_error=None, **extra):
