@@ -29,15 +29,6 @@ if TYPE_CHECKING:
 
 #: the message type of an IMU's samples
 IMU_TYPE = "sensor_msgs/msg/Imu"
-#: file suffixes of a ROS 2 bag's storage (a bag folder holds one beside its metadata.yaml)
-ROS2_SUFFIXES = (".db3", ".mcap")
-
-
-def is_bag(path: Path) -> bool:
-    """Whether ``path`` names a bag by its form: ``.bag``, ``.db3``, ``.mcap`` or a folder with metadata.yaml."""
-    return path.suffix.lower() in (".bag", *ROS2_SUFFIXES) or (path.is_dir() and (path / "metadata.yaml").is_file())
-
-
 def _first_line(exc: BaseException) -> str:
     text = str(exc).strip()
     return text.splitlines()[0] if text else type(exc).__name__

@@ -31,12 +31,6 @@ if TYPE_CHECKING:  # for the annotations; pandas is imported where a DataFrame i
     import pandas as pd
 
 
-def simulate_scale_bias(scenario: ScaleBiasScenario, seed: int, out: str | Path) -> dict[str, Path]:
-    """Write ``data.csv`` and ``truth.json`` for one realization drawn with ``seed``
-    (:func:`compute_scale_bias_simulation`)."""
-    return compute_scale_bias_simulation(scenario, seed).save(out)
-
-
 def compute_scale_bias_simulation(scenario: ScaleBiasScenario, seed: int) -> SimulationResult:
     """One realization drawn with ``seed``, in memory.
 
