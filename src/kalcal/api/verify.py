@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from kalcal.api.progress import progress_callback
+from kalcal.api.verification import MAX_RUN_SECONDS
 from kalcal.results.verification import VerificationResult
 
 
@@ -34,7 +35,7 @@ def verify(
     realization: int = 0,
     command: str = "",
     notes: Callable[[str], None] | None = None,
-    max_run_s: float | None = 24 * 3600.0,
+    max_run_s: float | None = MAX_RUN_SECONDS,
 ) -> VerificationResult:
     """Verify a filter with a Monte Carlo: mean error, covariance, orthogonality, whiteness, NIS.
 
