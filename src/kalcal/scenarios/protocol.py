@@ -163,6 +163,27 @@ class Scenario(Protocol):
         ...
 
 
+class ScenarioDefaults:
+    """The protocol's answers for a scenario with nothing of its own to say: every section kept as given,
+    its state names as labels, not the source report's setup, no log defaults. A scenario inherits this and
+    overrides what differs (accel-gps overrides all four)."""
+
+    LOG_DEFAULTS: ClassVar[dict[str, Any]] = {}
+
+    def given_section(self, name: str) -> Any:
+        """The section ``name`` itself: every section is kept as given."""
+        return getattr(self, name)
+
+    @property
+    def state_labels(self) -> None:
+        """None: its state names say what each state is."""
+        return None
+
+    def source_report(self) -> bool:
+        """False: the source report studied the accelerometer/GPS setup alone."""
+        return False
+
+
 def require(scenario: Any, command: str, *, engine: str | None = None, long_run: bool = False) -> None:
     """Refuse ``command`` (and ``engine``, and a long run where ``long_run``) where ``scenario`` lacks it:
     one line naming the scenario and why (a :class:`~kalcal.errors.ConfigError`, exit status 2)."""

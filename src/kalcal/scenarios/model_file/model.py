@@ -49,7 +49,7 @@ import numpy as np
 
 from kalcal.core.model import LinearGaussianModel
 from kalcal.scenarios import scenario_names
-from kalcal.scenarios.protocol import Capabilities
+from kalcal.scenarios.protocol import Capabilities, ScenarioDefaults
 from kalcal.scenarios.model_file.truth import MAP_KEYS, MODEL_KEYS, MappedTruthModel, mapped_truth, truth_from_settings
 from kalcal.models.settings import (
     SettingError,
@@ -112,7 +112,7 @@ class CustomModelInfo:
 
 
 @dataclass(frozen=True)
-class CustomModelScenario:
+class CustomModelScenario(ScenarioDefaults):
     """A user's linear Gaussian model: the filter's model, the truth's, and the labels.
 
     Attributes
@@ -128,19 +128,6 @@ class CustomModelScenario:
 
     NAME: ClassVar[str] = "custom"
     SUMMARY: ClassVar[str] = "a linear Gaussian model read from a TOML file (docs/custom-models.md)"
-
-    def given_section(self, name: str) -> Any:
-        """The section ``name`` itself: every section is kept as given."""
-        return getattr(self, name)
-
-    @property
-    def state_labels(self) -> None:
-        """None: its state names say what each state is."""
-        return None
-
-    def source_report(self) -> bool:
-        """False: the source report studied the accelerometer/GPS setup alone."""
-        return False
 
     @property
     def label(self) -> str:
@@ -208,8 +195,6 @@ class CustomModelScenario:
         from kalcal.errors import KalcalError
 
         raise KalcalError(f"{self.model.name}: kalcal simulate writes the built-in scenarios' logs, not a model file's")
-
-    LOG_DEFAULTS: ClassVar[dict[str, Any]] = {}
 
     def output_names(self, command: str) -> tuple[str, ...]:
         from kalcal.scenarios.protocol import require

@@ -45,11 +45,11 @@ enough that the data, not the prior, decide the final estimate (final sigma of t
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Literal, NamedTuple
+from typing import ClassVar, Literal, NamedTuple
 
 import numpy as np
 
-from kalcal.scenarios.protocol import COMMANDS, Capabilities
+from kalcal.scenarios.protocol import COMMANDS, Capabilities, ScenarioDefaults
 from kalcal.scenarios.scale_bias.theta import ThetaPrior, theta_prior
 from kalcal.models.settings import (
     SettingError,
@@ -213,7 +213,7 @@ class FilterValues(NamedTuple):
 
 
 @dataclass(frozen=True)
-class ScaleBiasScenario:
+class ScaleBiasScenario(ScenarioDefaults):
     """The whole two-sensor study: timing, truth and filter settings."""
 
     scenario: ScaleBiasSettings = field(default_factory=ScaleBiasSettings)
@@ -223,18 +223,6 @@ class ScaleBiasScenario:
     NAME: ClassVar[str] = "scale-bias"
     SUMMARY: ClassVar[str] = "a sensor's scale and bias estimated against a reference reading (the regressors are data)"
 
-    def given_section(self, name: str) -> Any:
-        """The section ``name`` itself: every section is kept as given."""
-        return getattr(self, name)
-
-    @property
-    def state_labels(self) -> None:
-        """None: its state names say what each state is."""
-        return None
-
-    def source_report(self) -> bool:
-        """False: the source report studied the accelerometer/GPS setup alone."""
-        return False
     capabilities: ClassVar[Capabilities] = Capabilities(
         exact_analysis=False,
         fixed_gains=False,
@@ -302,8 +290,6 @@ class ScaleBiasScenario:
         from kalcal.scenarios.scale_bias.job import compute_scale_bias_simulation
 
         return compute_scale_bias_simulation(self, seed)
-
-    LOG_DEFAULTS: ClassVar[dict[str, Any]] = {}
 
     def output_names(self, command: str) -> tuple[str, ...]:
         """The files ``command`` (simulate, calibrate, fit) writes."""
