@@ -8,6 +8,14 @@
 - :mod:`kalcal.core.missing`: a missing measurement is a prediction only, one wrapper for every form.
 - :mod:`kalcal.core.smoother`: the RTS smoother over a filter's run.
 - :mod:`kalcal.core.likelihood`: the prediction-error decomposition of a filter's innovations.
+- :mod:`kalcal.core.timevarying`: :class:`~kalcal.core.timevarying.TimeVaryingModel`, a model whose rows, noise
+  and inputs change per step (a model with data).
+- :mod:`kalcal.core.timevarying_filter`: its filter (:func:`~kalcal.core.timevarying_filter.filter_model`, a
+  :class:`~kalcal.core.timevarying_filter.TimeVaryingRun`; the numpy
+  :func:`~kalcal.core.timevarying_filter.reference_filter`), the exact diffuse initialization, the conditional
+  log-likelihood (:func:`~kalcal.core.timevarying_filter.loglik`, compiled) and the RTS smoother over it
+  (:func:`~kalcal.core.timevarying_filter.smooth`); :mod:`kalcal.core.timevarying_kernels` is its compiled
+  part.
 - :mod:`kalcal.core.lincov`: the exact moments of a fixed-gain filter against its linear truth.
 - :mod:`kalcal.core.sources`, :mod:`kalcal.core.budget`: the truth's independent noise sources, and the
   error budget, each source's exact share of the true error covariance.
