@@ -102,3 +102,20 @@ def test_wrong_shape_of_data_is_refused():
     model, z = _model(50, diffuse=False)
     with pytest.raises(ValueError, match="z: expected shape"):
         filter_model(model, z[:, :1])
+
+
+def test_three_correlated_components_likelihood_is_the_joint_decomposition():
+    """p = 3 correlated components (the batched Cholesky path of the decorrelation; p = 2 takes a closed
+    form, held by the test above): the univariate terms sum to the joint decomposition."""
+    rng = np.random.default_rng(3)
+    n = 300
+    h = rng.standard_normal((n, 3, 2))
+    root = rng.standard_normal((n, 3, 3))
+    v = root @ np.swapaxes(root, 1, 2) + np.eye(3)
+    model = TimeVaryingModel(phi=[[0.9, 0.1], [0.0, 0.95]], gamma=np.eye(2), w=np.diag([0.1, 0.2]), b=np.zeros((2, 0)),
+                             x0=[0.0, 0.0], m0=np.eye(2), h=h, v=v, u=np.zeros((n, 0)), diffuse=[False, False],
+                             sample_period=1.0, times=np.arange(n, dtype=float))  # fmt: skip
+    z = rng.standard_normal((n, 3)) * 2.0
+    run = filter_model(model, z)
+    assert run.loglik == pytest.approx(innovation_loglik(run.residual, run.innovation_cov), rel=1e-12)
+    _same(run.state, reference_filter(model, z).state, 1e-12, "state")
