@@ -25,7 +25,7 @@ per component, with M_inf = P_inf h^T, M_* = P_* h^T, F_inf = h P_inf h^T, F_* =
 - F_inf = 0: the ordinary update of P_* (P_inf is unchanged), and an ordinary term of the likelihood.
 
 The diffuse period ends with the row whose posterior has P_inf = 0 (statsmodels' rule: its squared
-Frobenius norm below ``DIFFUSE_TOL``; F_inf counts as 0 below ``DIFFUSE_TOL`` times h P_inf-scale).
+Frobenius norm at most ``DIFFUSE_TOL``; F_inf counts as 0 at most ``DIFFUSE_TOL`` |h*|^2 max(1, max diag P_inf)).
 A state whose P_inf diagonal is nonzero has no finite mean or variance: the run's state, prior_state, cov
 and prior_cov are NaN in its entries (rows and columns) there; residual, innovation_cov and nis are NaN
 on rows whose prior is not proper.
@@ -64,7 +64,7 @@ from kalcal.linalg import symmetrize
 __all__ = ["DIFFUSE_TOL", "TimeVaryingRun", "Whitened", "filter_model", "loglik", "reference_filter", "smooth", "whiten"]
 
 #: the diffuse period ends once |P_inf|_F^2 <= DIFFUSE_TOL (P_inf starts as a 0/1 matrix); F_inf counts as
-#: 0 below DIFFUSE_TOL |h*|^2 max(diag P_inf) (rounding after a rank reduction is ~1e-16 of that scale)
+#: 0 below DIFFUSE_TOL |h*|^2 max(1, max diag P_inf) (rounding after a rank reduction is ~1e-16 of that scale)
 DIFFUSE_TOL = 1e-10
 _LOG_2PI = float(np.log(2.0 * np.pi))
 _ONE = np.ones((1, 1))
