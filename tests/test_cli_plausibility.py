@@ -318,7 +318,7 @@ def test_accel_gps_scale_without_acceleration_is_unobservable_and_strict_exits_1
     # (it was printed unmarked, "scale 0.000100755 ± 0.01", with only summary.json saying so)
     scale_row = next(line for line in result.output.splitlines() if line.lstrip("│┃ ").startswith("scale"))
     assert "NOT trusted" in scale_row, result.output
-    from kalcal.calibration.warnings import sigma_note
+    from kalcal.scenarios.accel_gps.calibrate import sigma_note
 
     assert "scale" in sigma_note(summary) and "NOT trusted" in sigma_note(summary)
     api = kalcal.calibrate("accel-gps", imu=tmp_path / "imu.csv", gps=tmp_path / "gps.csv",

@@ -262,3 +262,39 @@ def test_each_html_repr_holds_the_headline_numbers_and_escapes_text(inputs, fitt
     sweep = kalcal.sweep("scale-bias", "filter.sensor_noise_std", ["0.01", "0.02"], n=100, out=tmp_path / "sw")
     table = sweep.table.assign(verdict=["<script>", "pass"])
     _escaped(dataclasses.replace(sweep, key="<script>", table=table)._repr_html_())
+
+
+def test_sweep_and_simulation_to_dict_are_their_documents(tmp_path):
+    """A sweep's to_dict() is sweep.json as written; a simulation's names each log's rows and columns and
+    its truth (truth.json's content)."""
+    import json
+
+    sweep = kalcal.sweep("scale-bias", "filter.sensor_noise_std", ["0.01", "0.02"], n=100, seed=3, out=tmp_path / "sw")
+    written = json.loads((tmp_path / "sw" / "sweep.json").read_text(encoding="utf-8"))
+    assert sweep.to_dict() == written
+    assert written["key"] == "filter.sensor_noise_std" and written["realizations"] == 100 and written["seed"] == 3
+    assert [str(row[written["key"]]) for row in written["rows"]] == ["0.01", "0.02"]
+
+    sim = kalcal.simulate("scale-bias", seed=2, settings={"scenario.duration": 5}, out=tmp_path / "sim")
+    document = sim.to_dict()
+    assert document["scenario"] == "scale-bias"
+    assert document["logs"]["data"] == {"rows": len(sim.logs["data"]), "columns": list(map(str, sim.logs["data"].columns))}
+    truth = json.loads((tmp_path / "sim" / "truth.json").read_text(encoding="utf-8"))
+    assert document["truth"] == {k: v for k, v in truth.items() if k not in ("schema_version", "nonfinite")}  # the file's envelope aside
+
+
+def test_noise_conf_int_is_the_stored_intervals_at_their_level():
+    import numpy as np
+    import pandas as pd
+
+    rate, n = 100.0, 60_000
+    accel = np.random.default_rng(0).normal(0.05, 0.02, n)
+    result = kalcal.noise(pd.DataFrame({"time": np.arange(n) / rate, "accel": accel}))
+    table = result.conf_int()
+    assert list(table.index) == list(result.PARAMETERS) and result.confidence == 0.95
+    p = result.velocity_random_walk
+    assert (table.loc["velocity_random_walk", "lower"], table.loc["velocity_random_walk", "upper"]) == (p.low, p.high)
+    assert p.low < p.value < p.high
+    assert result.conf_int(level=0.95).equals(table)
+    with pytest.raises(ValueError, match="computed at 0.95"):
+        result.conf_int(level=0.9)  # another level would need the curve's bounds at it: refused, not rescaled

@@ -12,7 +12,7 @@ from kalcal.scenarios.accel_gps.calibration import calibrate_accel_gps
 from kalcal.core.steps import covariance_pass
 from kalcal.errors import DataError
 from kalcal.filters.gains import run_with_gains
-from kalcal.filters.mechanization import integrate
+from kalcal.scenarios.accel_gps.mechanization import integrate
 from kalcal.scenarios import build_scenario
 from kalcal.scenarios.accel_gps.sampled import sample_accel_gps_logs
 from tests._helpers import assert_close, cov_atol

@@ -10,7 +10,7 @@ from kalcal.scenarios.accel_gps.calibration import calibrate_accel_gps, prepare_
 from kalcal.scenarios.accel_gps.evaluation import DIFFUSE_BIAS_STD, latency_map
 from kalcal.core.likelihood import innovation_loglik
 from kalcal.errors import ConfigError
-from kalcal.filters.mechanization import integrate
+from kalcal.scenarios.accel_gps.mechanization import integrate
 from kalcal.scenarios import build_scenario
 from kalcal.scenarios.accel_gps.sampled import sample_accel_gps_logs
 

@@ -23,7 +23,7 @@ from kalcal.scenarios.accel_gps.smoothing import smooth_calibration
 from kalcal.cli import app
 from kalcal.core.steps import interval_transition
 from kalcal.errors import ConfigError, DataError
-from kalcal.filters.mechanization import integrate
+from kalcal.scenarios.accel_gps.mechanization import integrate
 from kalcal.filters.sequential import sequential_filter
 from kalcal.scenarios.accel_gps.discretization import error_transition
 from kalcal.scenarios import build_scenario

@@ -13,7 +13,8 @@ import warnings
 import numpy as np
 import pytest
 
-from kalcal.calibration import plausibility, unit_slips
+from kalcal.calibration import plausibility
+from kalcal.scenarios.accel_gps import log_checks, unit_slips
 from kalcal.scenarios.accel_gps.calibration import calibrate_accel_gps
 from kalcal.calibration.diagnostics import innovation_diagnostics
 from kalcal.calibration.noise import identify_noise
@@ -75,14 +76,14 @@ def test_velocity_check_statistic_of_genuine_logs_is_near_its_expectation(name):
     for seed in range(8):
         _, _, time, position, velocity = _logs(scenario, seed)
         ones = np.ones(time.size)
-        original = plausibility.VELOCITY_Z
+        original = log_checks.VELOCITY_Z
         try:
-            plausibility.VELOCITY_Z = 0.0  # report the statistic whatever its value
-            warning = plausibility.velocity_consistency(
+            log_checks.VELOCITY_Z = 0.0  # report the statistic whatever its value
+            warning = log_checks.velocity_consistency(
                 time, position, velocity, scenario.truth.gps_position_std * ones, scenario.truth.gps_velocity_std * ones, "g"
             )
         finally:
-            plausibility.VELOCITY_Z = original
+            log_checks.VELOCITY_Z = original
         z = float(warning.message.split("median |difference| ")[1].split(" ")[0])
         assert 0.3 < z < 1.2, f"{name}, seed {seed}: median |z| = {z}"
 
@@ -156,7 +157,7 @@ def test_times_in_milliseconds_in_both_logs_of_a_fast_imu_are_refused():
     with pytest.raises(DataError, match=r"gps.csv: column 'time': .*= 0.001\): are the times of both logs in milliseconds"):
         _calibrate(scenario, imu_time * 1e3, accel, fix_time * 1e3, position, velocity)
     with pytest.raises(DataError, match=r"are the times of both logs in minutes"):
-        plausibility.velocity_consistency(
+        log_checks.velocity_consistency(
             fix_time / 60, position, velocity, np.ones(fix_time.size), np.full(fix_time.size, 0.04), "gps.csv"
         )
 
@@ -177,7 +178,7 @@ def test_accelerometer_slower_than_the_fixes_is_refused():
     scenario = _scenario()
     imu_time, accel, fix_time, position, velocity = _logs(scenario)
     with pytest.raises(DataError, match=r"accelerometer sample rate 0.2 Hz is below the GPS fix rate 5 Hz"):
-        plausibility.check_imu_faster(0.2, 5.0, "imu.csv")
+        log_checks.check_imu_faster(0.2, 5.0, "imu.csv")
     slow = imu_time[::200] * 1.0  # 1 Hz samples, rows of a 200 Hz log
     with pytest.raises(DataError, match=r"accelerometer sample rate 1 Hz is below the GPS fix rate 5 Hz"):
         _calibrate(scenario, slow, accel[::200], fix_time, position, velocity)

@@ -169,7 +169,7 @@ def test_a_rover_like_log_with_the_default_filter_marks_its_sigma_untrusted_ever
 
 def test_the_figure_title_says_the_sigma_is_not_trusted(tmp_path, monkeypatch):
     """The figure's title carries the note the job gives it."""
-    from kalcal.calibration.warnings import sigma_note
+    from kalcal.scenarios.accel_gps.calibrate import sigma_note
 
     note = sigma_note({"sigma_trusted": False, "sigma_untrusted_because": "the diagnostics say inconsistent"})
     assert note.startswith("sigma NOT trusted")

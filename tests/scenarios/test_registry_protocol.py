@@ -30,6 +30,8 @@ def test_each_scenario_answers_the_protocol(name, scenario):
         names = scenario.output_names(command) if command in scenario.capabilities.commands else None
         assert names is None or all(isinstance(n, str) for n in names)
     assert isinstance(scenario.source_report(), bool)
+    pair = scenario.residual_pair_times()  # the report's pair of times, for its setup alone
+    assert pair is None if not scenario.source_report() else (len(pair) == 2 and all(isinstance(t, float) for t in pair))
     for section in dataclasses.fields(scenario):  # what apply_settings changes: the section as given
         assert type(scenario.given_section(section.name)) is type(getattr(scenario, section.name))
     labels = scenario.state_labels  # one per filter state, or None: the problem's names say it

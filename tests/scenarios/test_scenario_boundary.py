@@ -257,3 +257,114 @@ def test_each_probe_is_caught_alone():
     # and what is no question: a relative import of the registry or the protocol, an unrelated prefix
     assert violations("from ..scenarios import build_scenario\nfrom ..scenarios.protocol import require\n"
                       "x.startswith('note')\nimportlib.import_module('kalcal.scenarios.protocol')", module) == set()
+
+
+# --- a shared module that is one scenario's own -------------------------------------------------------------
+# A module outside kalcal/scenarios/ is that scenario's own, and belongs in its folder, when it speaks that
+# scenario's language (a string, not a docstring, naming a setting key SECTION.FIELD that only that scenario
+# has, such as scenario.integration or filter.gps_position_std) and only that scenario's package imports it.
+# Either alone is no verdict: a shared help text may quote one scenario's key as an example, and a general
+# algorithm (a smoother, a regression filter) may have one caller today.
+
+
+def own_keys() -> dict[str, frozenset[str]]:
+    """Each registered scenario's setting keys ``section.field`` whose field no other registered scenario has."""
+    import dataclasses
+
+    def keys(cls) -> set[tuple[str, str]]:
+        scenario = cls()
+        return {(section.name, f.name) for section in dataclasses.fields(scenario)
+                if dataclasses.is_dataclass(getattr(scenario, section.name))
+                for f in dataclasses.fields(getattr(scenario, section.name))}
+
+    every = {name: keys(cls) for name, cls in REGISTERED.items()}
+    return {
+        name: frozenset(f"{s}.{f}" for s, f in own
+                        if f not in {g for other, theirs in every.items() if other != name for _, g in theirs})
+        for name, own in every.items()
+    }
+
+
+def spoken_keys(source: str, keys: frozenset[str]) -> set[str]:
+    """The keys of ``keys`` that a string of ``source`` names (docstrings, which explain, aside)."""
+    import re
+
+    tree = ast.parse(source)
+    docs = {id(node.body[0].value) for node in ast.walk(tree)
+            if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef))
+            and node.body and isinstance(node.body[0], ast.Expr) and _string(node.body[0].value) is not None}
+    return {key for node in ast.walk(tree) if _string(node) is not None and id(node) not in docs
+            for key in keys if re.search(rf"(?<![\w.]){re.escape(key)}(?!\w)", node.value)}
+
+
+def importers(modules: dict[str, str]) -> dict[str, set[str]]:
+    """Each module of the package (``modules``: every one, the scenarios' included) and those that import it,
+    anywhere in their code (an import inside a function counts)."""
+    found: dict[str, set[str]] = {name: set() for name in modules}
+    for name, source in modules.items():
+        for node in ast.walk(ast.parse(source)):
+            if isinstance(node, ast.ImportFrom):
+                base = name.split(".")[: -node.level] if node.level else []
+                target = ".".join([*base, *(node.module.split(".") if node.module else [])])
+                targets = [f"{target}.{a.name}" for a in node.names if f"{target}.{a.name}" in found] or [target]
+            elif isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            else:
+                continue
+            for target in targets:
+                if target in found and target != name:
+                    found[target].add(name)
+    return found
+
+
+def _all_modules() -> dict[str, str]:
+    out = {}
+    for path in sorted(ROOT.rglob("*.py")):
+        parts = list(path.relative_to(ROOT.parent).with_suffix("").parts)
+        if parts[-1] == "__init__":
+            parts.pop()
+        out[".".join(parts)] = path.read_text(encoding="utf-8")
+    return out
+
+
+def one_scenarios_modules(modules: dict[str, str], keys: dict[str, frozenset[str]]) -> set[tuple[str, str, str]]:
+    """(module, scenario, a key it names) for each module outside the scenarios that names only one
+    scenario's keys and is imported by that scenario's package alone."""
+    users = importers(modules)
+    found = set()
+    for name, source in modules.items():
+        if _scenario_package(name) or not users[name]:
+            continue
+        packages = {_scenario_package(user) for user in users[name]}
+        for scenario, own in keys.items():
+            spoken = spoken_keys(source, own)
+            package = f"kalcal.scenarios.{scenario.replace('-', '_')}"
+            if spoken and packages == {package}:
+                found.add((name, scenario, min(spoken)))
+    return found
+
+
+def test_no_shared_module_is_one_scenarios_own():
+    keys = own_keys()
+    assert "scenario.integration" in keys["accel-gps"] and "filter.gps_position_std" in keys["accel-gps"]
+    assert "truth.signal_frequency" in keys["scale-bias"] and not keys["accel-gps"] & keys["scale-bias"]
+    found = one_scenarios_modules(_all_modules(), keys)
+    assert not found, "shared modules that are one scenario's own (move them into its folder):\n" + "\n".join(map(str, sorted(found)))
+
+
+def test_the_one_scenario_walker_catches_a_module_that_speaks_and_serves_one_scenario():
+    keys = {"accel-gps": frozenset({"scenario.integration"}), "scale-bias": frozenset({"truth.signal_frequency"})}
+    own = '"""Mentions scenario.integration in a docstring only."""\ndef f(s):\n    raise ValueError("scenario.integration: bad")\n'
+    modules = {
+        "kalcal.filters.m": own,
+        "kalcal.scenarios.accel_gps.log": "from kalcal.filters.m import f\n",
+        "kalcal.filters.shared": own.replace("f(s)", "g(s)"),  # used by a shared module too: not one scenario's
+        "kalcal.api.x": "from kalcal.filters import shared\n",
+        "kalcal.scenarios.accel_gps.sampled": "def h():\n    from kalcal.filters.shared import g\n",
+        "kalcal.filters.plain": '"""scenario.integration in the docstring alone."""\n',  # explains, does not speak
+        "kalcal.scenarios.accel_gps.truth": "from kalcal.filters import plain\n",
+    }
+    assert one_scenarios_modules(modules, keys) == {("kalcal.filters.m", "accel-gps", "scenario.integration")}
+    # the module as it was before it moved into accel-gps's folder is caught
+    legacy = (ROOT / "scenarios" / "accel_gps" / "mechanization.py").read_text(encoding="utf-8")
+    assert spoken_keys(legacy, keys["accel-gps"]) == {"scenario.integration"}

@@ -30,6 +30,12 @@ def test_only_the_reports_setup_is_the_reports(assignments, expected):
 
 def test_other_scenarios_are_never_the_reports():
     assert build_scenario("scale-bias", None, []).source_report() is False
+    assert build_scenario("scale-bias", None, []).residual_pair_times() is None
+
+
+def test_the_residual_pair_is_the_reports_for_its_setup_alone():
+    assert build_scenario("accel-gps", None, []).residual_pair_times() == (23.8, 5.8)
+    assert build_scenario("accel-gps", None, ["scenario.integration=trapezoid"]).residual_pair_times() is None
 
 
 @pytest.mark.parametrize("assignments, numbered", [([], True), (["scenario.integration=trapezoid"], False)])

@@ -14,7 +14,7 @@ import pytest
 
 from kalcal.core.model import LinearGaussianModel
 from kalcal.core.steps import interval_transition
-from kalcal.filters.mechanization import interval_weights
+from kalcal.scenarios.accel_gps.mechanization import interval_weights
 from kalcal.scenarios import build_scenario
 from kalcal.scenarios.accel_gps.truth import accel_gps_model_error, accel_gps_truth
 from kalcal.simulation.exact import sample_exact, truth_from_model

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from kalcal.filters.mechanization import integrate
+from kalcal.scenarios.accel_gps.mechanization import integrate
 from kalcal.scenarios import build_scenario
 from kalcal.scenarios.accel_gps.sampled import sample_accel_gps_errors, sample_accel_gps_logs
 

@@ -47,6 +47,14 @@ class SweepResult:
     summaries: list
     runs: list
     paths: dict
+    realizations: int | None = None  #: per value
+    seed: int | None = None
+
+    def to_dict(self) -> dict:
+        """``sweep.json`` as ``json.load`` reads it: ``key``, ``values``, ``realizations``, ``seed`` and ``rows``
+        (``sweep.csv``'s rows, each check's statistic, bounds and verdict per value)."""
+        return json_document({"key": self.key, "values": list(self.values), "realizations": self.realizations,
+                              "seed": self.seed, "rows": self.table.to_dict("records")})
 
     def save(self, out: str | Path) -> dict[str, Path]:
         """Write the sweep's files into ``out`` as ``kalcal sweep --out`` does (one set: ``sweep.csv``,
@@ -201,13 +209,13 @@ def run_sweep(scenario, key: str, values: list[str], n: int, seed: int, out: str
     out.mkdir(parents=True, exist_ok=True)
     paths = {"table": out / "sweep.csv"}
     table.to_csv(paths["table"], index=False)
-    paths["summary"] = write_json(
-        out / "sweep.json", {"key": key, "values": values, "realizations": n, "seed": seed, "rows": rows}
-    )
+    result = SweepResult(key, list(values), table, [json_document(summary) for summary in summaries], runs, paths,
+                         realizations=n, seed=seed)
+    paths["summary"] = write_json(out / "sweep.json", result.to_dict())  # the document its to_dict() gives
     from kalcal.plots.sweep import plot_sweep
 
     paths["figure"] = plot_sweep(table, key, out / "sweep.png")
-    return SweepResult(key, list(values), table, [json_document(summary) for summary in summaries], runs, paths)
+    return result
 
 
 def _is_number(text: str) -> bool:

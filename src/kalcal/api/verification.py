@@ -29,7 +29,7 @@ from kalcal.montecarlo.problem import MAX_UPDATES
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.scenarios.protocol import require
 from kalcal.stats.suite import run_checks, verdict
-from kalcal.stats.whiteness import REPORT_RESIDUAL_PAIR, residual_pair
+from kalcal.stats.whiteness import residual_pair
 from kalcal.stats.dataset import statistics_dataset
 from kalcal.stats.results import as_false_alarm
 from kalcal.results.verification import VerificationResult
@@ -197,16 +197,17 @@ def run_estimate_check(
 
 
 def report_residual_pair(statistics: EnsembleStatistics, info, scenario) -> dict[str, Any] | None:
-    """E[r_k r_j^T] at the source report's pair (t_k = 23.8 s, t_j = 5.8 s), or None where the run has no
-    update at one of those times (another GPS rate or a shorter run), no pairs were kept, or the scenario
-    are not the report's setup (:meth:`~kalcal.scenarios.protocol.Scenario.source_report`): the nearest updates
-    would be another pair under the report's name."""
-    if not scenario.source_report() or statistics.residual_second_moment is None:
+    """E[r_k r_j^T] at the scenario's pair of times (:meth:`~kalcal.scenarios.protocol.Scenario.residual_pair_times`:
+    accel-gps's is the source report's, t_k = 23.8 s, t_j = 5.8 s, for its setup alone), or None where it
+    names none, the run has no update at one of those times (another GPS rate or a shorter run), or no
+    pairs were kept: the nearest updates would be another pair under the report's name."""
+    pair = scenario.residual_pair_times()
+    if pair is None or statistics.residual_second_moment is None:
         return None
     times = np.asarray(info.update_times)
-    if not all(np.any(np.abs(times - t) <= 1e-6) for t in REPORT_RESIDUAL_PAIR):
+    if not all(np.any(np.abs(times - t) <= 1e-6) for t in pair):
         return None
-    return residual_pair(statistics, info, *REPORT_RESIDUAL_PAIR)
+    return residual_pair(statistics, info, *pair)
 
 
 def exact_analysis(scenario, problem):

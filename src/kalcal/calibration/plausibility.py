@@ -14,7 +14,6 @@ quantity                        plausible                why
 accelerometer sample rate       1 Hz .. 100 kHz          the median sample interval; an IMU below
                                                          1 Hz or above 100 kHz is a unit slip
 GNSS fix rate                   0.01 Hz .. 100 Hz        one fix per 100 s .. a 100 Hz receiver
-accelerometer rate vs GNSS      at least the fix rate    the accelerometer is the fast sensor
 a rate the user set             within a factor of 2     ``scenario.imu_rate`` / ``gps_rate``
 abs(acceleration)               <= 1e4 m/s^2             about 1000 g, beyond any navigation or
                                                          high-g MEMS accelerometer (a few hundred g)
@@ -27,14 +26,15 @@ Rates are median intervals, checked for logs of at least four samples; a bound i
 relative :data:`RATE_MARGIN`, for the rounding of times such as k / 100). A rate outside its range names
 the time unit that would bring it well inside (times in ms, us or ns, or in minutes or hours): only a rate
 more than a factor :data:`HINT_BEYOND` beyond its range, and only a unit that puts it more than a factor
-:data:`HINT_MARGIN` inside (a unit slip moves a rate by 60 or more; a rate just beyond a bound is not one). The
-velocity fixes are compared with the positions' finite differences, see :func:`velocity_consistency`;
-a ratio of 1e-3, 1e-6, 1e-9, 60 or 3600 there names times in ms, us, ns, minutes or hours in both logs.
+:data:`HINT_MARGIN` inside (a unit slip moves a rate by 60 or more; a rate just beyond a bound is not one).
+
+What holds between one scenario's logs (accel-gps: the accelerometer faster than the fixes, the velocity
+fixes against the positions, unit slips fitted across the two logs) is that scenario's
+(:mod:`kalcal.scenarios.accel_gps.log_checks`); this module holds what any sensor's log must pass.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -60,14 +60,6 @@ LIMITS = {"accel": 1e4, "position": 1e9, "velocity": 1e5, "time": 1e11}
 UNITS = {"accel": "m/s^2", "position": "m", "velocity": "m/s", "time": "s"}
 #: times in these units instead of s give a rate this many times too low (first) or too high (last)
 TIME_UNITS = (("milliseconds", 1e3), ("microseconds", 1e6), ("nanoseconds", 1e9), ("minutes", 1 / 60), ("hours", 1 / 3600))
-#: velocity units whose factor to m/s the fitted ratio is tested against: v [m/s] = factor * v [unit]
-VELOCITY_UNITS = (("km/h", 1 / 3.6), ("mph", 0.44704), ("knots", 1852 / 3600))
-#: a fitted ratio within this relative distance of a unit's factor names that unit
-UNIT_TOLERANCE = 0.02
-#: median |z| of velocity minus finite difference above which the fixes disagree grossly (0.67 expected)
-VELOCITY_Z = 5.0
-#: pairs of fixes farther apart than this many median fix intervals are not compared (an outage)
-PAIR_SPAN = 1.5
 
 
 @dataclass(frozen=True)
@@ -93,7 +85,7 @@ def _within(rate: float, low: float, high: float) -> bool:
     return low * (1 - RATE_MARGIN) <= rate <= high * (1 + RATE_MARGIN)
 
 
-def _unit_hint(rate: float, low: float, high: float, typical: float, inside: float = HINT_MARGIN) -> str:
+def unit_hint(rate: float, low: float, high: float, typical: float, inside: float = HINT_MARGIN) -> str:
     """': are the times in X?' for the time unit that brings ``rate`` well into [low, high] nearest ``typical``;
     empty unless ``rate`` is more than :data:`HINT_BEYOND` beyond the range and a unit puts it into
     [low * inside, high / inside]."""
@@ -145,25 +137,15 @@ def check_rate(
     if not _within(rate, low, high):
         raise DataError(
             f"{source}: column {column!r}: {name} {rate:.6g} Hz (median step {1 / rate:.6g} s) is implausible "
-            f"(expected {low:g} Hz to {high:g} Hz){_unit_hint(rate, low, high, typical)}"
+            f"(expected {low:g} Hz to {high:g} Hz){unit_hint(rate, low, high, typical)}"
         )
     if expected is not None and not _within(rate, expected / RATE_FACTOR, expected * RATE_FACTOR):
         raise DataError(
             f"{source}: column {column!r}: {name} {rate:.6g} Hz differs from {setting or 'the set rate'} = "
             f"{expected:g} Hz by more than a factor {RATE_FACTOR:g}"
-            f"{_unit_hint(rate, expected / RATE_FACTOR, expected * RATE_FACTOR, expected, inside=1.0)}"
+            f"{unit_hint(rate, expected / RATE_FACTOR, expected * RATE_FACTOR, expected, inside=1.0)}"
         )
     return rate
-
-
-def check_imu_faster(imu_rate: float, gps_rate: float, imu_source: str) -> None:
-    """Refuse an accelerometer that samples less often than the GPS fixes (its times likely in ms)."""
-    if np.isfinite(gps_rate) and imu_rate < gps_rate * (1 - RATE_MARGIN):
-        low, high = max(IMU_RATE_RANGE[0], gps_rate), IMU_RATE_RANGE[1]
-        raise DataError(
-            f"{imu_source}: accelerometer sample rate {imu_rate:.6g} Hz is below the GPS fix rate {gps_rate:.6g} Hz "
-            f"(the accelerometer is the fast sensor){_unit_hint(imu_rate, low, high, 200.0)}"
-        )
 
 
 def check_limit(
@@ -200,96 +182,3 @@ def check_limit(
             f"{where}: {float(values[row]):.6g} {unit} is beyond the physical limit of {limit:g} {unit} for "
             f"{quantity} (a corrupt sample, or not in {unit}?)"
         )
-
-
-def velocity_consistency(
-    time: np.ndarray,
-    position: np.ndarray,
-    velocity: np.ndarray,
-    position_std: np.ndarray,
-    velocity_std: np.ndarray,
-    source: str,
-    columns: Sequence[str] = ("position", "velocity"),
-) -> CalibrationWarning | None:
-    """Compare the velocity fixes with the positions' finite differences, on the scale of the stated noise.
-
-    For consecutive usable fixes i, i + 1 (at most :data:`PAIR_SPAN` median intervals apart),
-    d_i = (p_{i+1} - p_i) / dt_i - (v_i + v_{i+1}) / 2, whose standard deviation from the stated noise is
-    s_i = sqrt(sigma_p,i^2 + sigma_p,i+1^2) / dt_i (+) sqrt(sigma_v,i^2 + sigma_v,i+1^2) / 2 (+) m_i (in
-    quadrature), m_i = |v_{j+1} - 2 v_j + v_{j-1}| / 12 (the larger at j = i, i + 1) for the trapezoid's own
-    error, dt^2 jerk / 12, under motion. For consistent fixes
-    z_i = d_i / s_i has a median |z| of about 0.67 (less when the position noise is correlated in time).
-    When the median |z| exceeds :data:`VELOCITY_Z` the fixes disagree grossly: the ratio
-    c = sum(f_i vbar_i) / sum(vbar_i^2) of the finite differences f_i to the mean velocities vbar_i is
-    fitted, and a c within :data:`UNIT_TOLERANCE` of a time unit's ratio (1e-3, 1e-6, 1e-9 for times in
-    ms, us, ns in both logs; 60, 3600 for minutes, hours) or of a velocity unit's factor (1/3.6 for km/h,
-    0.447 for mph, 0.514 for knots, or their inverses) is an error naming the unit; any other gross disagreement is a
-    warning (the noise settings far too small, or the two not of the same antenna).
-
-    Parameters
-    ----------
-    time, position, velocity, position_std, velocity_std : ndarray, shape (F,)
-        The usable fixes (finite), s, m, m/s, m, m/s.
-    source : str
-        The GPS log, quoted in the error or warning.
-    columns : (str, str) or (str, str, str)
-        The log's position, velocity (and time) columns, quoted.
-
-    Returns
-    -------
-    CalibrationWarning or None
-
-    Raises
-    ------
-    DataError
-        When the ratio points to a unit (of time or of velocity).
-    """
-    time, position, velocity = (np.asarray(a, dtype=float) for a in (time, position, velocity))
-    if time.size < 4:
-        return None
-    dt = np.diff(time)
-    pairs = dt <= PAIR_SPAN * np.median(dt)
-    if np.count_nonzero(pairs) < 3:
-        return None
-    sp2, sv2 = np.asarray(position_std, dtype=float) ** 2, np.asarray(velocity_std, dtype=float) ** 2
-    finite_difference = np.diff(position)[pairs] / dt[pairs]
-    mean_velocity = 0.5 * (velocity[1:] + velocity[:-1])[pairs]
-    # The motion's share: the trapezoid's error dt^2 jerk / 12, with dt^2 jerk read off the velocities'
-    # second difference at either end of the pair (the larger).
-    second = np.abs(np.diff(velocity, 2))
-    motion = np.maximum(np.concatenate([[0.0], second]), np.concatenate([second, [0.0]]))[pairs] / 12.0
-    scale = np.sqrt(
-        (sp2[1:] + sp2[:-1])[pairs] / dt[pairs] ** 2 + 0.25 * (sv2[1:] + sv2[:-1])[pairs] + motion**2
-    )
-    z = (finite_difference - mean_velocity) / scale
-    median_z = float(np.median(np.abs(z)))
-    if not median_z > VELOCITY_Z:
-        return None
-    p_column, v_column = columns[:2]
-    energy = float(np.sum(mean_velocity**2))
-    ratio = float(np.sum(finite_difference * mean_velocity) / energy) if energy > 0 else float("nan")
-    detail = (
-        f"the velocity fixes disagree with the positions' finite differences (median |difference| "
-        f"{median_z:.3g} times its standard deviation from the stated noise, about 0.67 expected; "
-        f"finite difference / velocity = {ratio:.4g})"
-    )
-    for unit, factor in TIME_UNITS:
-        # times in ``unit`` in both logs: dt reads ``factor`` times too long, the finite differences as much too small
-        if abs(ratio * factor - 1) <= UNIT_TOLERANCE:
-            t_column = columns[2] if len(columns) > 2 else "time"
-            raise DataError(
-                f"{source}: column {t_column!r}: {detail}: are the times of both logs in {unit} instead of seconds?"
-            )
-    for unit, factor in VELOCITY_UNITS:
-        if abs(ratio / factor - 1) <= UNIT_TOLERANCE:
-            raise DataError(f"{source}: column {v_column!r}: {detail}: is the velocity in {unit} instead of m/s?")
-        if abs(ratio * factor - 1) <= UNIT_TOLERANCE:
-            raise DataError(
-                f"{source}: column {v_column!r}: {detail}: the velocity looks {1 / factor:.4g} times too small "
-                f"(converted from {unit} to m/s twice?)"
-            )
-    return CalibrationWarning(
-        "velocity-position-mismatch",
-        f"{source}: columns {p_column!r} and {v_column!r}: {detail}: are both in SI units (m, m/s) and is the "
-        "GPS noise setting right?",
-    )

@@ -1,4 +1,4 @@
-"""What a calibration must say beside its sigma: not trusted (and the fit to run next), or dependent on the settings."""
+"""What a calibration must say beside its sigma when it is not to be trusted, and the fit or the prior to change next."""
 
 from __future__ import annotations
 
@@ -7,25 +7,8 @@ from typing import Any
 
 from kalcal.calibration.plausibility import CalibrationWarning
 
-#: the warning that the headline sigma is not to be trusted, and the one that it depends on the settings
-UNTRUSTED, SETTINGS_DEPENDENT = "sigma-untrusted", "sigma-depends-on-settings"
-
-
-def sigma_note(summary: Mapping[str, Any]) -> str:
-    """What must stand beside the bias sigma wherever it is shown ("" when nothing): untrusted when the
-    diagnostics say inconsistent or the windows not stable; else, where it was computed, the sigma over the
-    noise settings the log cannot reject, and the scale's sigma marked where ``scale_sigma_trusted`` is
-    false."""
-    if summary.get("sigma_trusted") is False:
-        return "sigma NOT trusted: " + summary.get("sigma_untrusted_because", "the diagnostics disown it")
-    notes = []
-    over = summary.get("settings_sigma")
-    if over:
-        notes.append(f"over the settings the log cannot reject: ± {over['bias_std']:.2g} ({over['ratio']:.3g}x)")
-    if summary.get("scale_sigma_trusted") is False:
-        # the bias's sigma stands, the scale's is the prior's (the scale unobservable)
-        notes.append(f"scale {summary['scale']:.3g} ± {summary['scale_std']:.2g}: sigma NOT trusted (scale unobservable)")
-    return "; ".join(notes)
+#: the warning that the headline sigma is not to be trusted
+UNTRUSTED = "sigma-untrusted"
 
 
 def untrusted_warning(diagnostics: Mapping[str, Any], stability: Mapping[str, Any], bias_std: float, unit: str,
@@ -86,16 +69,3 @@ def _bare_verdict(diagnostics: Mapping[str, Any]) -> str:
     text = f"mean NIS {diagnostics['mean_nis']:.3g} against [{diagnostics['nis_lower']:.3g}, {diagnostics['nis_upper']:.3g}]"
     pvalues = [p for p in diagnostics.get("ljung_box_pvalue", []) if p == p]  # NaN: not testable
     return text + (f", Ljung-Box p = {min(pvalues):.2g}" if pvalues else "")
-
-
-def settings_warning(over) -> CalibrationWarning:
-    """The ``sigma-depends-on-settings`` warning: the sigma over the settings the log cannot reject is more
-    than the factor times the conditional one."""
-    at = ", ".join(f"{key} {value:.3g}" for key, value in over.at.items())
-    return CalibrationWarning(
-        SETTINGS_DEPENDENT,
-        f"the bias 1-sigma {over.conditional_bias_std:.3g} m/s^2 holds only if the noise settings are right: over "
-        f"the settings this log cannot reject (log L within the {over.confidence:g} region) it reaches "
-        f"{over.bias_std:.3g} m/s^2, {over.ratio:.3g} times as large (at {at}); report that one, or pin the settings "
-        "down with a longer or livelier log (`kalcal fit`)",
-    )

@@ -1,1 +1,1 @@
-"""Scenario-free filters on core's steps, batched over realizations: gain schedules, integration, the regression filter, the log filter, the steady state."""
+"""Scenario-free filters on core's steps, batched over realizations: gain schedules, the regression filter, the log filter, the steady state."""

@@ -107,6 +107,7 @@ def read_table(
     *,
     topic: str | None = None,
     columns: Mapping[str, str] | Sequence[str] = (),
+    topic_hint: str = "",
 ) -> pd.DataFrame:
     """Read a log; refuse missing, unreadable or empty files.
 
@@ -121,6 +122,9 @@ def read_table(
     columns : mapping or sequence
         The columns the caller will take (``{role: column}`` or names): a bag's or ULog's topic is read off
         their ``TOPIC.FIELD`` names when ``topic`` is not given.
+    topic_hint : str
+        For a bag or ULog read with no topic named: what the caller takes of a topic, said after the topics
+        (a scenario's own words, such as which message types its GPS log may be).
 
     Returns a DataFrame, its column names stripped; a topic's has ``attrs["source"]`` (``FILE topic
     TOPIC``, :func:`source_name`). A DataFrame is taken as the file's content (a copy, with the same
@@ -140,7 +144,7 @@ def read_table(
         ending = "".join(path.suffixes[-2:]) if path.suffix.lower() in (".gz", ".bz2", ".xz", ".zst") else path.suffix
         raise DataError(f"{path}: unknown file type {ending!r} (expected {FORMAT_NAMES})")
     if kind in TOPIC_FORMATS:
-        return _read_topic(path, kind, topic or topic_of(columns, path), role)
+        return _read_topic(path, kind, topic or topic_of(columns, path), topic_hint)
     if topic is not None:
         raise DataError(f"{path}: --topic {topic}: applies to a ROS bag or a ULog, not a {kind} file")
     if not path.is_file():
@@ -165,29 +169,9 @@ def read_table(
     return frame
 
 
-#: what accel-gps takes of a GNSS receiver in a bag or ULog, said where a GPS topic lacks it
-GNSS_SUPPORTED = (
-    "accel-gps takes position [m] and velocity [m/s] along the axis of motion, named as TOPIC.FIELD in "
-    "--gps-columns, e.g. position=/odom.pose.pose.position.x,velocity=/odom.twist.twist.linear.x "
-    "(nav_msgs/Odometry) or position=vehicle_local_position.x,velocity=vehicle_local_position.vx (ULog); "
-    "sensor_msgs/NavSatFix and vehicle_gps_position (latitude/longitude) are not taken: convert them to "
-    "metres along the axis first"
-)
-
-
-def check_gnss_columns(frame: pd.DataFrame, name: str, columns: Mapping[str, str]) -> None:
-    """For a GPS log read from a bag or ULog topic: refuse, in one line saying what accel-gps takes
-    (:data:`GNSS_SUPPORTED`), a topic without the position or velocity column asked for."""
-    if "source" not in frame.attrs:
-        return  # a table's missing column is numeric_columns' message
-    missing = [f"{role} {columns[role]!r}" for role in ("position", "velocity") if columns[role] not in frame.columns]
-    if missing:
-        kind = frame.attrs.get("type")
-        raise DataError(f"{name}{f' ({kind})' if kind else ''}: has no {' or '.join(missing)}: {GNSS_SUPPORTED}")
-
-
-def _read_topic(path: Path, kind: str, topic: str | None, role: str = "log") -> pd.DataFrame:
-    """One topic of a bag or ULog (:mod:`kalcal.io.rosbag`, :mod:`kalcal.io.ulog`)."""
+def _read_topic(path: Path, kind: str, topic: str | None, topic_hint: str = "") -> pd.DataFrame:
+    """One topic of a bag or ULog (:mod:`kalcal.io.rosbag`, :mod:`kalcal.io.ulog`); ``topic_hint`` ends the
+    message that asks for a topic (what the caller takes of one)."""
     if not path.exists():
         raise DataError(f"{path}: no such file")
     what = "a ROS bag" if kind == "rosbag" else "a ULog"
@@ -201,7 +185,7 @@ def _read_topic(path: Path, kind: str, topic: str | None, role: str = "log") -> 
         raise DataError(
             f"{path}: {what} holds topics: name the columns as TOPIC.FIELD "
             f"(e.g. /imu.linear_acceleration.x, sensor_combined.accelerometer_m_s2[0]) or give the topic (topics: {listing})"
-            + (f"; {GNSS_SUPPORTED}" if role == "gps" else "")
+            + (f"; {topic_hint}" if topic_hint else "")
         )
     if kind == "rosbag":
         from kalcal.io.rosbag import read_bag

@@ -111,6 +111,37 @@ class NoiseResult:
         """``summary.json``'s ``warnings``: ``{"code", "message"}`` each."""
         return list(self.raw_summary["warnings"])
 
+    #: the parameters :meth:`conf_int` gives, in its rows' order
+    PARAMETERS = ("velocity_random_walk", "bias_instability", "rate_random_walk", "accel_noise_std", "bias_walk_std")
+
+    @property
+    def confidence(self) -> float | None:
+        """The two-sided level of every stored interval (None without a selected axis)."""
+        return None if self.identification is None else float(self.velocity_random_walk.confidence)
+
+    def conf_int(self, level: float | None = None) -> pd.DataFrame:
+        """The Allan parameters' intervals, one row per parameter (:data:`PARAMETERS`), columns ``lower``,
+        ``upper`` (NaN where the curve does not show the parameter: its ``upper_bound`` in the summary
+        bounds it instead) and ``unit``.
+
+        ``level`` defaults to the stored one (``confidence`` of :func:`kalcal.noise`). The intervals are read
+        off the Allan curve's own chi-square bounds at that level, through the regions chosen at it, so
+        another level is refused (ValueError) rather than rescaled: identify again with
+        ``kalcal.noise(..., confidence=level)``.
+        """
+        import pandas as pd
+
+        if self.identification is None:
+            raise ValueError("conf_int: a three-axis log with no selected axis has no intervals (give axis=)")
+        stored = self.confidence
+        if level is not None and abs(level - stored) > 1e-12:
+            raise ValueError(f"conf_int: level {level!r}: the intervals were computed at {stored:g}; identify again "
+                             f"with confidence={level!r} for that level")
+        nan = float("nan")
+        rows = {name: (nan if p.low is None else p.low, nan if p.high is None else p.high, p.unit)
+                for name in self.PARAMETERS for p in [getattr(self, name)]}
+        return pd.DataFrame.from_dict(rows, orient="index", columns=["lower", "upper", "unit"])
+
     def to_dict(self) -> dict[str, Any]:
         """``summary.json`` as ``json.load`` reads it, but for ``files`` (which only a save knows)."""
         from kalcal.io.results import json_document

@@ -28,6 +28,17 @@ class SimulationResult:
         """The same result, with where its files were written."""
         return dataclasses.replace(self, paths=dict(paths))
 
+    def to_dict(self) -> dict:
+        """What the simulation wrote beside its logs, as ``json.load`` reads it: ``scenario``, each log's
+        ``rows`` and ``columns`` by name, and ``truth`` (``truth.json``'s content, None where there is none)."""
+        from kalcal.io.results import json_document
+
+        return json_document({
+            "scenario": self.scenario,
+            "logs": {name: {"rows": len(frame), "columns": [str(c) for c in frame.columns]} for name, frame in self.logs.items()},
+            "truth": self.truth,
+        })
+
     def save(self, out: str | Path) -> dict[str, Path]:
         """Write each log as ``NAME.csv`` and ``truth`` (where there is one) as ``truth.json`` into ``out``, as
         ``kalcal simulate --out`` does (one set); returns the files by name (``imu``, ``truth``, ...)."""

@@ -95,6 +95,11 @@ class Scenario(Protocol):
         scenario with another scheme or other fixes is not the report's study."""
         ...
 
+    def residual_pair_times(self) -> tuple[float, float] | None:
+        """(t_k, t_j), s: the pair of update times at which summary.json gives E[r_k r_j^T] (the source
+        report's pair, for its setup alone: :meth:`source_report`); None where the scenario quotes none."""
+        ...
+
     @property
     def capabilities(self) -> Capabilities:
         """What it has: a class's own constant for a built-in, a property of the instance for a model file
@@ -165,8 +170,8 @@ class Scenario(Protocol):
 
 class ScenarioDefaults:
     """The protocol's answers for a scenario with nothing of its own to say: every section kept as given,
-    its state names as labels, not the source report's setup, no log defaults. A scenario inherits this and
-    overrides what differs (accel-gps overrides all four)."""
+    its state names as labels, not the source report's setup (nor its residual pair), no log defaults. A
+    scenario inherits this and overrides what differs (accel-gps overrides all five)."""
 
     LOG_DEFAULTS: ClassVar[dict[str, Any]] = {}
 
@@ -182,6 +187,10 @@ class ScenarioDefaults:
     def source_report(self) -> bool:
         """False: the source report studied the accelerometer/GPS setup alone."""
         return False
+
+    def residual_pair_times(self) -> None:
+        """None: no pair of times is quoted from another study."""
+        return None
 
 
 def require(scenario: Any, command: str, *, engine: str | None = None, long_run: bool = False) -> None:

@@ -81,7 +81,6 @@ from kalcal.stats.results import (
 
 __all__ = [
     "RANK_RTOL",
-    "REPORT_RESIDUAL_PAIR",
     "Portmanteau",
     "check_residual_whiteness",
     "portmanteau",
@@ -91,8 +90,6 @@ __all__ = [
 
 #: an eigenvalue of S_k at most this times the largest of that update is a direction without power
 RANK_RTOL = 1e-9
-#: where the source report quotes E[r_k r_j^T]
-REPORT_RESIDUAL_PAIR = (23.8, 5.8)
 
 
 class Portmanteau(NamedTuple):

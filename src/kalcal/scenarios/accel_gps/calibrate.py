@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -13,10 +13,10 @@ from kalcal.calibration.plausibility import CalibrationWarning
 from kalcal.errors import DataError
 from kalcal.calibration.windows import check_windows
 from kalcal.scenarios.accel_gps.windows import accel_gps_stability
-from kalcal.io.logs import check_gnss_columns, is_frame, numeric_columns, parse_column_map, read_table, require_increasing, source_name
+from kalcal.io.logs import is_frame, numeric_columns, parse_column_map, read_table, require_increasing, source_name
 from kalcal.stats.nis import gate_excess
 from kalcal.io.outputs import mark_inputs
-from kalcal.calibration.warnings import settings_warning, sigma_note, untrusted_warning
+from kalcal.calibration.warnings import untrusted_warning
 from kalcal.results.calibration import CalibrationResult
 from kalcal.scenarios.accel_gps.settings import AccelGpsScenario, AccelGpsSettings
 from kalcal.models.config import section_values
@@ -110,10 +110,7 @@ def compute_accel_gps_calibration(
     imu_map = parse_column_map(imu_columns, IMU_ROLES, "--imu-columns")
     gps_map = parse_column_map(gps_columns, GPS_ROLES, "--gps-columns")
     imu_source, gps_source = imu_path, gps_path
-    imu_frame = read_table(imu_path, "imu", columns=imu_map)
-    imu_path = source_name(imu_path, "imu", imu_frame)
-    imu = numeric_columns(imu_frame, imu_path, imu_map)
-    require_increasing(imu["time"], imu_path, imu_map["time"])
+    imu_path, imu = read_imu_log(imu_path, imu_map)
     gps_path, gps = read_gps_log(scenario, gps_path, gps_map)
     logs = (imu["time"], imu["accel"], gps["time"], gps["position"], gps["velocity"])
     stds = {"position_std": gps.get("position_std"), "velocity_std": gps.get("velocity_std")}
@@ -217,7 +214,7 @@ def compute_accel_gps_calibration(
         warnings.append(untrusted[1])
     over = None
     if settings_sigma:
-        from kalcal.scenarios.accel_gps.settings_sigma import settings_sigma as sigma_over_settings
+        from kalcal.scenarios.accel_gps.settings_sigma import settings_sigma as sigma_over_settings, settings_warning
 
         over = sigma_over_settings(log, result, gate=gate)
         if over.warns:
@@ -420,11 +417,59 @@ class AccelGpsCalibrationResult(CalibrationResult):
         return bool(self.warnings) or not self.diagnostics["consistent"]
 
 
+def sigma_note(summary: Mapping[str, Any]) -> str:
+    """What must stand beside the bias sigma wherever it is shown ("" when nothing): untrusted when the
+    diagnostics say inconsistent or the windows not stable; else, where it was computed, the sigma over the
+    noise settings the log cannot reject, and the scale's sigma marked where ``scale_sigma_trusted`` is
+    false."""
+    if summary.get("sigma_trusted") is False:
+        return "sigma NOT trusted: " + summary.get("sigma_untrusted_because", "the diagnostics disown it")
+    notes = []
+    over = summary.get("settings_sigma")
+    if over:
+        notes.append(f"over the settings the log cannot reject: ± {over['bias_std']:.2g} ({over['ratio']:.3g}x)")
+    if summary.get("scale_sigma_trusted") is False:
+        # the bias's sigma stands, the scale's is the prior's (the scale unobservable)
+        notes.append(f"scale {summary['scale']:.3g} ± {summary['scale_std']:.2g}: sigma NOT trusted (scale unobservable)")
+    return "; ".join(notes)
+
+
 def measurement_names(summary: dict[str, Any]) -> tuple[str, ...]:
     """The components a calibration's fixes measured, from its summary's settings: ("position",
     "velocity"), or ("velocity",) with ``scenario.gps_fixes = "velocity"``."""
     velocity_only = summary.get("settings", {}).get("scenario", {}).get("gps_fixes") == "velocity"
     return ("velocity",) if velocity_only else ("position", "velocity")
+
+
+def read_imu_log(imu_path: str | Path | pd.DataFrame, imu_map: dict[str, str]) -> tuple[str, dict[str, np.ndarray]]:
+    """The accelerometer log's name in messages and its float columns by role (``time``, ``accel``), for
+    calibrate and fit alike; times checked to increase."""
+    frame = read_table(imu_path, "imu", columns=imu_map)
+    name = source_name(imu_path, "imu", frame)
+    imu = numeric_columns(frame, name, imu_map)
+    require_increasing(imu["time"], name, imu_map["time"])
+    return name, imu
+
+
+#: what accel-gps takes of a GNSS receiver in a bag or ULog, said where a GPS topic lacks it
+GNSS_SUPPORTED = (
+    "accel-gps takes position [m] and velocity [m/s] along the axis of motion, named as TOPIC.FIELD in "
+    "--gps-columns, e.g. position=/odom.pose.pose.position.x,velocity=/odom.twist.twist.linear.x "
+    "(nav_msgs/Odometry) or position=vehicle_local_position.x,velocity=vehicle_local_position.vx (ULog); "
+    "sensor_msgs/NavSatFix and vehicle_gps_position (latitude/longitude) are not taken: convert them to "
+    "metres along the axis first"
+)
+
+
+def check_gnss_columns(frame: pd.DataFrame, name: str, columns: Mapping[str, str]) -> None:
+    """For a GPS log read from a bag or ULog topic: refuse, in one line saying what accel-gps takes
+    (:data:`GNSS_SUPPORTED`), a topic without the position or velocity column asked for."""
+    if "source" not in frame.attrs:
+        return  # a table's missing column is numeric_columns' message
+    missing = [f"{role} {columns[role]!r}" for role in ("position", "velocity") if columns[role] not in frame.columns]
+    if missing:
+        kind = frame.attrs.get("type")
+        raise DataError(f"{name}{f' ({kind})' if kind else ''}: has no {' or '.join(missing)}: {GNSS_SUPPORTED}")
 
 
 def read_gps_log(scenario: AccelGpsScenario, gps_path: str | Path | pd.DataFrame,
@@ -439,7 +484,7 @@ def read_gps_log(scenario: AccelGpsScenario, gps_path: str | Path | pd.DataFrame
     """
     velocity_only = 0 not in scenario.fix_states
     fixed = ("time", "velocity") if velocity_only else ("time", "position", "velocity")
-    frame = read_table(gps_path, "gps", columns={role: gps_map[role] for role in fixed})
+    frame = read_table(gps_path, "gps", columns={role: gps_map[role] for role in fixed}, topic_hint=GNSS_SUPPORTED)
     name = source_name(gps_path, "gps", frame)
     hint = "for a log of velocity fixes alone, --set scenario.gps_fixes=velocity"
     if velocity_only:

@@ -8,7 +8,7 @@ Estimates: p = p_c + dp, v = v_c + dv, b.
 Real logs, as they are:
 
 * **Fixes between samples.** The nominal is carried to the exact fix time by a partial step
-  (:func:`~kalcal.filters.mechanization.partial_step`) and the covariance with it.
+  (:func:`~kalcal.scenarios.accel_gps.mechanization.partial_step`) and the covariance with it.
 * **Irregular or dropped samples.** Each step uses its own dt; its noise enters through Gamma(dt), so the
   process noise scales with the step. A step longer than ``max_imu_gap`` sample periods is a gap: it is
   reported, and the run stops if asked to.

@@ -9,10 +9,10 @@ import numpy as np
 from kalcal.errors import KalcalError
 from kalcal.fitting.result import FitResult
 from kalcal.fitting.run import KALIBR_NAME, OUTPUT_NAMES as FIT_NAMES, filter_toml, for_command
-from kalcal.io.logs import is_frame, numeric_columns, parse_column_map, read_table, require_increasing, source_name
+from kalcal.io.logs import is_frame, parse_column_map
 from kalcal.io.outputs import mark_inputs
 from kalcal.montecarlo.problem import MAX_UPDATES
-from kalcal.scenarios.accel_gps.calibrate import GPS_ROLES, IMU_ROLES, _logs_of, read_gps_log, stated_rates
+from kalcal.scenarios.accel_gps.calibrate import GPS_ROLES, IMU_ROLES, _logs_of, read_gps_log, read_imu_log, stated_rates
 
 #: the files of an accel-gps fit: the Kalibr noise file too
 OUTPUT_NAMES = (*FIT_NAMES, KALIBR_NAME)
@@ -49,10 +49,7 @@ def compute_accel_gps_fit(
     imu_map = parse_column_map(imu_columns, IMU_ROLES, "--imu-columns")
     gps_map = parse_column_map(gps_columns, GPS_ROLES, "--gps-columns")
     sources = (imu_path, gps_path)
-    imu_frame = read_table(imu_path, "imu", columns=imu_map)
-    imu_name = source_name(imu_path, "imu", imu_frame)
-    imu = numeric_columns(imu_frame, imu_name, imu_map)
-    require_increasing(imu["time"], imu_name, imu_map["time"])
+    imu_name, imu = read_imu_log(imu_path, imu_map)
     # calibrate's reading: with velocity-only fixes no position column (gps["position"] is None)
     gps_name, gps = read_gps_log(scenario, gps_path, gps_map)
     has = {role: role in gps for role in ("position_std", "velocity_std")}

@@ -46,7 +46,7 @@ from kalcal.scenarios.accel_gps.log_checks import noise_rate_warnings
 from kalcal.core.likelihood import innovation_loglik
 from kalcal.core.steps import UpdateForm, check_form
 from kalcal.errors import DataError
-from kalcal.filters.mechanization import integrate, partial_step
+from kalcal.scenarios.accel_gps.mechanization import integrate, partial_step
 from kalcal.linalg import symmetrize
 from kalcal.scenarios.accel_gps.settings import AccelGpsScenario, AccelGpsTruth
 

@@ -1,16 +1,38 @@
-"""What an accelerometer log and a GPS log must pass before filtering, and what their fixes need said."""
+"""What an accelerometer log and a GPS log must pass before filtering, and what their fixes need said.
+
+Each log alone passes the checks every sensor's log does (:mod:`kalcal.calibration.plausibility`: rates,
+physical limits); what holds between the two is accel-gps's own and is here: the accelerometer samples
+faster than the fixes (:func:`check_imu_faster`), the velocity fixes agree with the positions' finite
+differences (:func:`velocity_consistency`), and the unit slips that only a fit across the logs names
+(:mod:`kalcal.scenarios.accel_gps.unit_slips`).
+"""
 
 from __future__ import annotations
 
 import numpy as np
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
-from kalcal.calibration import plausibility, unit_slips as slips
+from kalcal.calibration import plausibility
 from kalcal.calibration.plausibility import CalibrationWarning
+from kalcal.errors import DataError
+from kalcal.scenarios.accel_gps import unit_slips as slips
 from kalcal.scenarios.accel_gps.settings import DENSITIES, DENSITY_UNITS, density_of
 
-__all__ = ["NOISE_RATE_TOLERANCE", "check_plausible", "fix_warnings", "noise_rate_warnings", "unit_slips"]
+__all__ = [
+    "NOISE_RATE_TOLERANCE", "check_imu_faster", "check_plausible", "fix_warnings", "noise_rate_warnings",
+    "unit_slips", "velocity_consistency",
+]
+
+#: velocity units whose factor to m/s the fitted ratio is tested against: v [m/s] = factor * v [unit]
+VELOCITY_UNITS = (("km/h", 1 / 3.6), ("mph", 0.44704), ("knots", 1852 / 3600))
+#: a fitted ratio within this relative distance of a unit's factor names that unit
+UNIT_TOLERANCE = 0.02
+#: median |z| of velocity minus finite difference above which the fixes disagree grossly (0.67 expected)
+VELOCITY_Z = 5.0
+#: pairs of fixes farther apart than this many median fix intervals are not compared (an outage)
+PAIR_SPAN = 1.5
+
 
 #: a per-sample noise setting written for a rate this close (relative) to the log's is taken as written
 #: for it: its std is then off by at most half as much (0.5%)
@@ -31,7 +53,7 @@ def check_plausible(
         imu_time, "accelerometer", imu_source, name("imu_time", "time"), expected=imu_rate, setting="scenario.imu_rate"
     )
     fix_rate = plausibility.check_rate(gps_time, "gnss", source, name("time"), expected=gps_rate, setting="scenario.gps_rate")
-    plausibility.check_imu_faster(rate, fix_rate, imu_source)
+    check_imu_faster(rate, fix_rate, imu_source)
     checks = [
         (imu_time, "time", imu_source, name("imu_time", "time")),
         (accel, "accel", imu_source, name("accel")),
@@ -67,7 +89,7 @@ def fix_warnings(
             )
     if not positions:
         return warnings
-    mismatch = plausibility.velocity_consistency(
+    mismatch = velocity_consistency(
         gps_time[usable], position[usable], velocity[usable], std_p[usable], std_v[usable], source,
         (columns.get("position", "position"), columns.get("velocity", "velocity"), columns.get("time", "time")),
     )
@@ -146,3 +168,106 @@ def noise_rate_warnings(
                 f"{density_key} = {density:.6g} {unit} (rate-free) instead",
             ))
     return warnings
+
+
+def check_imu_faster(imu_rate: float, gps_rate: float, imu_source: str) -> None:
+    """Refuse an accelerometer that samples less often than the GPS fixes (its times likely in ms)."""
+    if np.isfinite(gps_rate) and imu_rate < gps_rate * (1 - plausibility.RATE_MARGIN):
+        low, high = max(plausibility.IMU_RATE_RANGE[0], gps_rate), plausibility.IMU_RATE_RANGE[1]
+        raise DataError(
+            f"{imu_source}: accelerometer sample rate {imu_rate:.6g} Hz is below the GPS fix rate {gps_rate:.6g} Hz "
+            f"(the accelerometer is the fast sensor){plausibility.unit_hint(imu_rate, low, high, 200.0)}"
+        )
+
+
+def velocity_consistency(
+    time: np.ndarray,
+    position: np.ndarray,
+    velocity: np.ndarray,
+    position_std: np.ndarray,
+    velocity_std: np.ndarray,
+    source: str,
+    columns: Sequence[str] = ("position", "velocity"),
+) -> CalibrationWarning | None:
+    """Compare the velocity fixes with the positions' finite differences, on the scale of the stated noise.
+
+    For consecutive usable fixes i, i + 1 (at most :data:`PAIR_SPAN` median intervals apart),
+    d_i = (p_{i+1} - p_i) / dt_i - (v_i + v_{i+1}) / 2, whose standard deviation from the stated noise is
+    s_i = sqrt(sigma_p,i^2 + sigma_p,i+1^2) / dt_i (+) sqrt(sigma_v,i^2 + sigma_v,i+1^2) / 2 (+) m_i (in
+    quadrature), m_i = |v_{j+1} - 2 v_j + v_{j-1}| / 12 (the larger at j = i, i + 1) for the trapezoid's own
+    error, dt^2 jerk / 12, under motion. For consistent fixes
+    z_i = d_i / s_i has a median |z| of about 0.67 (less when the position noise is correlated in time).
+    When the median |z| exceeds :data:`VELOCITY_Z` the fixes disagree grossly: the ratio
+    c = sum(f_i vbar_i) / sum(vbar_i^2) of the finite differences f_i to the mean velocities vbar_i is
+    fitted, and a c within :data:`UNIT_TOLERANCE` of a time unit's ratio (1e-3, 1e-6, 1e-9 for times in
+    ms, us, ns in both logs; 60, 3600 for minutes, hours) or of a velocity unit's factor (1/3.6 for km/h,
+    0.447 for mph, 0.514 for knots, or their inverses) is an error naming the unit; any other gross disagreement is a
+    warning (the noise settings far too small, or the two not of the same antenna).
+
+    Parameters
+    ----------
+    time, position, velocity, position_std, velocity_std : ndarray, shape (F,)
+        The usable fixes (finite), s, m, m/s, m, m/s.
+    source : str
+        The GPS log, quoted in the error or warning.
+    columns : (str, str) or (str, str, str)
+        The log's position, velocity (and time) columns, quoted.
+
+    Returns
+    -------
+    CalibrationWarning or None
+
+    Raises
+    ------
+    DataError
+        When the ratio points to a unit (of time or of velocity).
+    """
+    time, position, velocity = (np.asarray(a, dtype=float) for a in (time, position, velocity))
+    if time.size < 4:
+        return None
+    dt = np.diff(time)
+    pairs = dt <= PAIR_SPAN * np.median(dt)
+    if np.count_nonzero(pairs) < 3:
+        return None
+    sp2, sv2 = np.asarray(position_std, dtype=float) ** 2, np.asarray(velocity_std, dtype=float) ** 2
+    finite_difference = np.diff(position)[pairs] / dt[pairs]
+    mean_velocity = 0.5 * (velocity[1:] + velocity[:-1])[pairs]
+    # The motion's share: the trapezoid's error dt^2 jerk / 12, with dt^2 jerk read off the velocities'
+    # second difference at either end of the pair (the larger).
+    second = np.abs(np.diff(velocity, 2))
+    motion = np.maximum(np.concatenate([[0.0], second]), np.concatenate([second, [0.0]]))[pairs] / 12.0
+    scale = np.sqrt(
+        (sp2[1:] + sp2[:-1])[pairs] / dt[pairs] ** 2 + 0.25 * (sv2[1:] + sv2[:-1])[pairs] + motion**2
+    )
+    z = (finite_difference - mean_velocity) / scale
+    median_z = float(np.median(np.abs(z)))
+    if not median_z > VELOCITY_Z:
+        return None
+    p_column, v_column = columns[:2]
+    energy = float(np.sum(mean_velocity**2))
+    ratio = float(np.sum(finite_difference * mean_velocity) / energy) if energy > 0 else float("nan")
+    detail = (
+        f"the velocity fixes disagree with the positions' finite differences (median |difference| "
+        f"{median_z:.3g} times its standard deviation from the stated noise, about 0.67 expected; "
+        f"finite difference / velocity = {ratio:.4g})"
+    )
+    for unit, factor in plausibility.TIME_UNITS:
+        # times in ``unit`` in both logs: dt reads ``factor`` times too long, the finite differences as much too small
+        if abs(ratio * factor - 1) <= UNIT_TOLERANCE:
+            t_column = columns[2] if len(columns) > 2 else "time"
+            raise DataError(
+                f"{source}: column {t_column!r}: {detail}: are the times of both logs in {unit} instead of seconds?"
+            )
+    for unit, factor in VELOCITY_UNITS:
+        if abs(ratio / factor - 1) <= UNIT_TOLERANCE:
+            raise DataError(f"{source}: column {v_column!r}: {detail}: is the velocity in {unit} instead of m/s?")
+        if abs(ratio * factor - 1) <= UNIT_TOLERANCE:
+            raise DataError(
+                f"{source}: column {v_column!r}: {detail}: the velocity looks {1 / factor:.4g} times too small "
+                f"(converted from {unit} to m/s twice?)"
+            )
+    return CalibrationWarning(
+        "velocity-position-mismatch",
+        f"{source}: columns {p_column!r} and {v_column!r}: {detail}: are both in SI units (m, m/s) and is the "
+        "GPS noise setting right?",
+    )

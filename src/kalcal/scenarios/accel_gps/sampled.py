@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kalcal.filters.mechanization import integrate, interval_weights
+from kalcal.scenarios.accel_gps.mechanization import integrate, interval_weights
 from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
 
 
@@ -161,7 +161,7 @@ def sample_accel_gps_errors(
 
     Same draws as :func:`sample_accel_gps_logs`, streamed one GPS interval at a time so that memory is
     O(n m), not O(n J). Each interval integrates its m accelerometer samples with the scenario's scheme
-    (written as the linear map of :func:`~kalcal.filters.mechanization.interval_weights`).
+    (written as the linear map of :func:`~kalcal.scenarios.accel_gps.mechanization.interval_weights`).
 
     Returns
     -------

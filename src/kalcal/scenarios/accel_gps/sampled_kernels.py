@@ -24,7 +24,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from kalcal.filters.mechanization import interval_weights
+from kalcal.scenarios.accel_gps.mechanization import interval_weights
 from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
 from kalcal.montecarlo.accumulators import SumBuffers
 from kalcal.montecarlo.kernels import _filter_and_accumulate, _filter_buffers, standard_normals
@@ -41,7 +41,7 @@ def _integrate_interval(k, samples, walk_draws, carry, bias, scale, nominal, tru
     walk_draws (n, m) the bias noise, or (0, 0) for a constant bias; carry (n,) the noise of sample k m,
     left as that of sample (k + 1) m; bias (n,) b at sample k m, left at (k + 1) m; scale (n,) s;
     nominal (2, n) p_c, v_c at the interval's start, left at its end; true_accel (J + 1,) a(t_j);
-    weights (m + 1, 2) of :func:`~kalcal.filters.mechanization.interval_weights`; accel_std, m/s^2;
+    weights (m + 1, 2) of :func:`~kalcal.scenarios.accel_gps.mechanization.interval_weights`; accel_std, m/s^2;
     b_{j+1} = decay b_j + walk xi_j; interval m dt, s.
     """
     n = samples.shape[0]

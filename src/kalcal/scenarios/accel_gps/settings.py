@@ -79,6 +79,8 @@ DENSITY_UNITS = {"accel_noise_density": "m/s^2/sqrt(Hz)", "bias_walk_density": "
 DEFAULT_ACCEL_NOISE_STD = 0.02
 DEFAULT_NOISE_RATE = 200.0
 DEFAULT_ACCEL_NOISE_DENSITY = DEFAULT_ACCEL_NOISE_STD / math.sqrt(DEFAULT_NOISE_RATE)
+#: the pair of update times (t_k, t_j), s, at which the source report quotes E[r_k r_j^T]
+REPORT_RESIDUAL_PAIR = (23.8, 5.8)
 #: a log's rate within this relative distance of scenario.imu_rate keeps the built-in noise per sample as
 #: it stands (the same 1% as a recorded rate's warning, kalcal.calibration.plausibility)
 DEFAULT_NOISE_RATE_TOLERANCE = 0.01
@@ -456,6 +458,11 @@ class AccelGpsScenario:
             and truth.scale_std == 0
             and all(section.bias_walk_std == 0 and section.bias_correlation_time == 0 for section in (truth, filter_))
         )
+
+    def residual_pair_times(self) -> tuple[float, float] | None:
+        """The source report's pair of times (:data:`REPORT_RESIDUAL_PAIR`) for its setup
+        (:meth:`source_report`); None for other settings, whose E[r_k r_j^T] there is no number of the report."""
+        return REPORT_RESIDUAL_PAIR if self.source_report() else None
 
     def simulate(self, seed: int):
         """The accelerometer and GPS logs of one realization (:func:`kalcal.scenarios.accel_gps.simulate.compute_accel_gps_simulation`)."""

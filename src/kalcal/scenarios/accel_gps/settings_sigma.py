@@ -43,12 +43,18 @@ from typing import Any
 
 import numpy as np
 
+from kalcal.calibration.plausibility import CalibrationWarning
 from kalcal.scenarios.accel_gps import evaluation
 
-__all__ = ["CONFIDENCE", "WARN_FACTOR", "SettingsSigma", "error_variance_terms", "settings_free", "settings_sigma"]
+__all__ = [
+    "CONFIDENCE", "SETTINGS_DEPENDENT", "WARN_FACTOR", "SettingsSigma", "error_variance_terms", "settings_free",
+    "settings_sigma", "settings_warning",
+]
 
 #: the confidence of the region of settings the log cannot reject (``kalcal fit``'s intervals' own)
 CONFIDENCE = 0.95
+#: the code of the warning that the bias sigma depends on the noise settings
+SETTINGS_DEPENDENT = "sigma-depends-on-settings"
 #: a settings sigma more than this many times the conditional one is a warning. On the default 30 s
 #: scenario with the right settings the ratio is 4.7 (median), 7.2 (90%) and at most 11.0 over 100
 #: simulated logs (seeds 100-199), because that log cannot pin the accelerometer noise down; with 10 times
@@ -268,4 +274,17 @@ def settings_sigma(log, calibration, *, gate: float | None = None, confidence: f
         at=at(best["u"]) if largest >= conditional else {key: float(resolved[key]) for key in free},
         fitted={key: float(fit.values[key]) for key in free},
         filter_rejected=bool(loglik({}) < level),
+    )
+
+
+def settings_warning(over: SettingsSigma) -> CalibrationWarning:
+    """The ``sigma-depends-on-settings`` warning: the sigma over the settings the log cannot reject is more
+    than the factor times the conditional one."""
+    at = ", ".join(f"{key} {value:.3g}" for key, value in over.at.items())
+    return CalibrationWarning(
+        SETTINGS_DEPENDENT,
+        f"the bias 1-sigma {over.conditional_bias_std:.3g} m/s^2 holds only if the noise settings are right: over "
+        f"the settings this log cannot reject (log L within the {over.confidence:g} region) it reaches "
+        f"{over.bias_std:.3g} m/s^2, {over.ratio:.3g} times as large (at {at}); report that one, or pin the settings "
+        "down with a longer or livelier log (`kalcal fit`)",
     )

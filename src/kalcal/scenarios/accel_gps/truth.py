@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from kalcal.core.steps import interval_transition
-from kalcal.filters.mechanization import integrate, interval_weights
+from kalcal.scenarios.accel_gps.mechanization import integrate, interval_weights
 from kalcal.linalg import psd_factor
 from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
 from kalcal.simulation.exact import UpdateRateTruth, truth_from_model

@@ -1,4 +1,4 @@
-"""Integration of accelerometer samples into a nominal position and velocity (the strapdown step).
+"""accel-gps's integration of accelerometer samples into a nominal position and velocity (the strapdown step).
 
 Schemes, for samples a_j at t_j with step dt_j = t_{j+1} - t_j::
 

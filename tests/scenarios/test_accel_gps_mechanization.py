@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from kalcal.errors import ConfigError
-from kalcal.filters.mechanization import integrate, interval_weights
+from kalcal.scenarios.accel_gps.mechanization import integrate, interval_weights
 from tests._helpers import assert_close
 
 
@@ -141,7 +141,7 @@ def test_unknown_scheme_is_config_error():
 @pytest.mark.parametrize("scheme", ["euler", "trapezoid"])
 def test_partial_step_cut_anywhere_matches_the_whole_step(scheme):
     """A step cut at tau and continued by the line's remainder ends where the whole step ends."""
-    from kalcal.filters.mechanization import partial_step
+    from kalcal.scenarios.accel_gps.mechanization import partial_step
 
     a0, a1, dt, p0, v0 = 0.7, -1.3, 0.005, 12.0, 3.0
     p_whole, v_whole = integrate(np.array([a0, a1]), dt, p0, v0, scheme)

@@ -1,12 +1,12 @@
-"""Unit slips that still give a number: acceleration in g or with gravity left in, GPS in mm or ft.
+"""accel-gps's unit slips that still give a number: acceleration in g or with gravity left in, GPS in mm or ft.
 
 The slips named: an accelerometer in g or with gravity left in, positions in mm or ft, and a GPS log
 wholly in mm or ft.
 
 The checks of :mod:`kalcal.calibration.plausibility` let these through: each value is within its physical
 limit and the velocity fixes agree with the positions. Two fits over the usable fixes name them, as the
-velocity check names km/h: an error naming the likely unit, or, for gravity, a
-:class:`~kalcal.calibration.plausibility.CalibrationWarning`.
+velocity check (:func:`~kalcal.scenarios.accel_gps.log_checks.velocity_consistency`) names km/h: an error
+naming the likely unit, or, for gravity, a :class:`~kalcal.calibration.plausibility.CalibrationWarning`.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ POSITION_UNITS = (("millimetres", 1000.0), ("feet", 1 / 0.3048))
 #: that many times the integrated accelerometer (the position fit, velocity against position, sees 1)
 GPS_UNITS = (("millimetres (and mm/s)", 1000.0), ("feet (and ft/s)", 1 / 0.3048))
 #: a fitted ratio within this relative distance of a unit's factor names that unit: wider than
-#: :data:`~kalcal.calibration.plausibility.UNIT_TOLERANCE`, for an integral of noisy samples is fitted, not a difference of fixes
+#: :data:`~kalcal.scenarios.accel_gps.log_checks.UNIT_TOLERANCE`, for an integral of noisy samples is fitted, not a difference of fixes
 SLIP_TOLERANCE = 0.05
 #: ... and only when it lies this many standard errors from 1 (what SI units give) and from 0 (what a log
 #: without motion gives): the fits' residuals are not white (the bias drifts, the integrals carry the
