@@ -470,11 +470,11 @@ def finite_difference_jacobians(model: NonlinearModel) -> tuple[Callable, Callab
     return f_jacobian, h_jacobian
 
 
-# -- the model file ------------------------------------------------------------------------------------------
+# -- the Python file ------------------------------------------------------------------------------------------
 
 
 class NonlinearModels(NamedTuple):
-    """The truth's and the filter's model read from a Python model file (the same object where it defines MODEL)."""
+    """The truth's and the filter's model read from a Python file (the same object where it defines MODEL)."""
 
     truth: NonlinearModel
     filter: NonlinearModel
@@ -482,11 +482,10 @@ class NonlinearModels(NamedTuple):
 
 
 def load_nonlinear_model(path: str | Path) -> NonlinearModels:
-    """Read a model file written in Python: a module defining ``MODEL``, or ``truth`` and ``filter``.
+    """Read a model written as a Python file: a module defining ``MODEL``, or ``truth`` and ``filter``.
 
     Each must be a :class:`NonlinearModel`. ``MODEL`` serves as both truth and filter; ``truth`` and
-    ``filter`` are the simulation's and the estimator's models (the filter's may differ, as in a TOML model
-    file). The module runs as Python code: load only files you trust.
+    ``filter`` are the simulation's and the estimator's models (the filter's may differ from the truth's). The module runs as Python code: load only files you trust.
 
     Raises
     ------
@@ -497,8 +496,8 @@ def load_nonlinear_model(path: str | Path) -> NonlinearModels:
     source = str(path)
     file = Path(path)
     if not file.is_file():
-        raise ConfigError(f"{source}: no such model file")
-    name = f"kalcal_model_file_{abs(hash(str(file.resolve())))}"
+        raise ConfigError(f"{source}: no such file")
+    name = f"kalcal_nonlinear_model_{abs(hash(str(file.resolve())))}"
     spec = importlib.util.spec_from_file_location(name, file)
     if spec is None or spec.loader is None:
         raise ConfigError(f"{source}: not a Python module (expected a .py file)")
@@ -509,7 +508,7 @@ def load_nonlinear_model(path: str | Path) -> NonlinearModels:
     except Exception as error:
         sys.modules.pop(name, None)
         detail = str(error).splitlines()[0] if str(error) else ""
-        raise ConfigError(f"{source}: the model file failed to run: {type(error).__name__}: {detail}") from error
+        raise ConfigError(f"{source}: the module failed to run: {type(error).__name__}: {detail}") from error
 
     def get(attribute: str) -> NonlinearModel:
         value = getattr(module, attribute)
@@ -524,7 +523,7 @@ def load_nonlinear_model(path: str | Path) -> NonlinearModels:
     if missing:
         raise ConfigError(
             f"{source}: defines neither MODEL nor {' and '.join(missing) if len(missing) == 2 else missing[0]} "
-            f"(a nonlinear model file defines MODEL = NonlinearModel(...), or truth and filter)"
+            f"(a nonlinear model defines MODEL = NonlinearModel(...), or truth and filter)"
         )
     return NonlinearModels(get("truth"), get("filter"), source)
 
