@@ -3,7 +3,7 @@
 States (4): px, py (m), vx, vy (m/s) in a plane; measurements (2): the range (m) and the bearing (rad,
 counter-clockwise from the x axis) from the beacon, whose position (m) is the update's data. One
 measurement a second, K = 100 updates. The track runs from (200, 100) m towards (100, 200) m, so that the
-bearing stays within (0.4, 1.2) rad, far from the +-pi cut of arctan2: the filters subtract bearings
+bearing stays within (-0.5, 2.5) rad (500 simulated tracks), far from the +-pi cut of arctan2: the filters subtract bearings
 without wrapping them.
 
 Read by ``kalcal.core.nonlinear.load_nonlinear_model("examples/range_bearing.py")``: it defines ``MODEL``.

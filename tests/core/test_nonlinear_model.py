@@ -113,3 +113,12 @@ def test_the_loader_refuses_in_one_line_naming_the_file(tmp_path, text, message)
 def test_the_loader_refuses_a_missing_file(tmp_path):
     with pytest.raises(ConfigError, match="no such file"):
         load_nonlinear_model(tmp_path / "absent.py")
+
+
+def test_the_examples_bearings_stay_far_from_the_arctan2_cut():
+    """docs/nonlinear.md: the example's bearings stay within (-0.5, 2.5) rad, so no wrap is needed."""
+    from tests.core._nonlinear_models import simulate
+
+    model = range_bearing()
+    _, z = simulate(model, 500, 100, np.random.default_rng(4), np.zeros(2))
+    assert -0.5 < z[..., 1].min() and z[..., 1].max() < 2.5
