@@ -14,13 +14,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import scipy.optimize
+import statsmodels.api as sm
+from statsmodels.tsa.statespace.initialization import Initialization
+from statsmodels.tsa.statespace.mlemodel import MLEModel
 
-sm = pytest.importorskip("statsmodels.api")
-from statsmodels.tsa.statespace.initialization import Initialization  # noqa: E402
-from statsmodels.tsa.statespace.mlemodel import MLEModel  # noqa: E402
-
-from kalcal.core.timevarying import TimeVaryingModel  # noqa: E402
-from kalcal.core.timevarying_filter import filter_model, loglik, reference_filter, smooth  # noqa: E402
+from kalcal.core.timevarying import TimeVaryingModel
+from kalcal.core.timevarying_filter import filter_model, loglik, reference_filter, smooth
 
 RTOL = 1e-8
 LOG_2PI = np.log(2.0 * np.pi)
