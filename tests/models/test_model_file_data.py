@@ -403,3 +403,22 @@ measurements = ["/imu.linear_acceleration.x"]
     slow = text.replace("sample_period = 0.01", "sample_period = 0.02")
     with pytest.raises(DataError, match=rf"^{bag} topic /imu: row 2, column 'time': time step 0.01 s from row 1 is off"):
         parse_model(slow, SOURCE).bind(bag)
+
+
+def test_the_docs_seed_003_file_is_the_one_tested_here():
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[2] / "docs" / "custom-models.md").read_text(encoding="utf-8")
+    block = next(b for b in text.split("```toml")[1:] if "scale-bias-file" in b).split("```")[0]
+    _same(parse_model(block, SOURCE), parse_model(SCALE_BIAS, SOURCE))
+
+
+def test_a_truth_h_may_name_columns_and_is_bound_from_its_own():
+    text = _text(truth={"h": '[["gain", 0.0], [0.0, 1.0]]'})
+    scenario = parse_model(text, SOURCE)
+    assert scenario.truth.h_columns == (("gain", ""), ("", "")) and scenario.filter.h_columns == ()
+    assert scenario.differing() == ("h",)
+    frame = _log().assign(gain=np.linspace(0.9, 1.1, 5))
+    bound = scenario.bind(frame)
+    np.testing.assert_array_equal(bound.truth.h[:, 0, 0], frame["gain"].to_numpy())
+    np.testing.assert_array_equal(bound.filter.h[:, 0, 0], 1.0)
