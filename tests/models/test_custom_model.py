@@ -93,7 +93,9 @@ def test_a_truth_table_overrides_only_what_it_sets():
 def test_settings_round_trip_through_json():
     scenario = parse_model(_text(table={"v": "[[2.0, 0.5], [0.5, 1.0]]"}, sample_period="0.01"), SOURCE)
     settings = json.loads(json.dumps(to_jsonable(section_values(scenario))))
-    assert is_custom_settings(settings) and set(settings["filter"]) == {*MODEL_KEYS, "steps_per_update", "sample_period"}
+    assert is_custom_settings(settings) and set(settings["filter"]) == {
+        *MODEL_KEYS, "steps_per_update", "sample_period", "b", "h_columns", "diffuse"
+    }
     rebuilt = CustomModelScenario.from_settings(settings)
     assert rebuilt.model == scenario.model
     _same_model(rebuilt.filter, scenario.filter)
@@ -132,7 +134,11 @@ def test_bad_set_is_one_line(assignment, fragment):
 
 
 def test_an_unknown_set_key_lists_the_known_ones():
-    known = "model.{name, updates, state_names, state_units, measurement_names, measurement_units}; filter.{phi, gamma, h, w, v, x0, m0, steps_per_update, sample_period}; truth.{phi, gamma, h, w, v, x0, m0}"
+    known = (
+        "model.{name, updates, state_names, state_units, measurement_names, measurement_units}; "
+        "filter.{phi, gamma, h, w, v, x0, m0, b, diffuse, steps_per_update, sample_period}; "
+        "truth.{phi, gamma, h, w, v, x0, m0, b}; data.{time, measurements, inputs, stds, step_tolerance}"
+    )
     assert _error(_text(), ["filter.q=1"]) == f"filter.q: expected a model file's setting ({known}), got an unknown setting"
 
 
@@ -224,9 +230,9 @@ def test_a_missing_key_is_named(key):
 
 def test_unknown_keys_are_named():
     assert _error(_text(q="[[1.0]]")).startswith(f"{SOURCE}: q: expected a model file's key (name, sample_period,")
-    assert _error(_text(q="[[1.0]]")).endswith("or a [truth] table), got an unknown key")
+    assert _error(_text(q="[[1.0]]")).endswith("a [truth] or a [data] table), got an unknown key")
     assert _error(_text(table={"updates": "3"})) == (
-        f"{SOURCE}: truth.updates: expected a matrix of [truth] (phi, gamma, h, w, v, x0, m0), got an unknown key"
+        f"{SOURCE}: truth.updates: expected a matrix of [truth] (phi, gamma, h, w, v, x0, m0, b), got an unknown key"
     )
 
 

@@ -62,7 +62,7 @@ def test_a_truth_with_a_map_has_its_own_dimension():
     truth = scenario.truth
     assert isinstance(truth, MappedTruthModel)
     assert (truth.state_dim, truth.measurement_dim, truth.error_dim) == (2, 1, 1)
-    assert (scenario.filter.state_dim, type(scenario.filter)) == (1, LinearGaussianModel)
+    assert scenario.filter.state_dim == 1 and not isinstance(scenario.filter, MappedTruthModel)
     np.testing.assert_array_equal(scenario.truth_map, [[1.0, 0.0]])
     np.testing.assert_array_equal(truth.phi, [[1.0, 0.0], [0.0, 0.9]])
     assert truth.state_names == ("x", "g")
@@ -72,8 +72,8 @@ def test_a_truth_with_a_map_has_its_own_dimension():
 
 def test_a_truth_without_a_map_is_unchanged():
     scenario = load_model_file(EXAMPLES / "constant_velocity_mistuned.toml")
-    assert type(scenario.truth) is LinearGaussianModel and scenario.truth_map is None
-    assert set(section_values(scenario)["truth"]) == {*MODEL_KEYS, "steps_per_update", "sample_period"}
+    assert not isinstance(scenario.truth, MappedTruthModel) and scenario.truth_map is None
+    assert set(section_values(scenario)["truth"]) == {*MODEL_KEYS, "steps_per_update", "sample_period", "b", "h_columns", "diffuse"}
 
 
 def test_the_summary_settings_keep_the_map_and_rebuild_the_scenario():
@@ -128,7 +128,7 @@ def test_set_truth_map_and_state_names():
         ({"gamma": "[[1.0]]"}, "truth.gamma: expected 2 rows to match phi, got shape (1, 1)"),
         ({"h": "[[1.0, 1.0], [0.0, 1.0]]", "v": "[[1.0, 0.0], [0.0, 1.0]]"}, "truth.h: expected shape (1, 2) (a row per measurement of the filter, a column per truth state), got (2, 2)"),
         ({"m0": "[[4.0, 0.0], [0.0, -1.0]]"}, "truth.m0: expected a positive semi-definite covariance, got [[4.0, 0.0], [0.0, -1.0]] (eigenvalue -1)"),
-        ({"q": "[[1.0]]"}, "truth.q: expected a key of a [truth] with a map (map, state_names, phi, gamma, h, w, v, x0, m0), got an unknown key"),
+        ({"q": "[[1.0]]"}, "truth.q: expected a key of a [truth] with a map (map, state_names, phi, gamma, h, w, v, x0, m0, b), got an unknown key"),
     ],
     ids=["missing", "rows", "columns", "flat", "string", "nan", "boolean", "names-count", "names-type", "gamma", "h-rows", "m0", "unknown"],
 )

@@ -45,16 +45,25 @@ class Model:
     phi, gamma, h, w, v, m0 : array_like
         (d, d) transition per step, (d, q) process-noise input, (p, d) measurement matrix, (q, q)
         process-noise covariance per step, (p, p) measurement-noise covariance, (d, d) prior covariance.
+        An entry of h may be a string: the data column that gives it row by row (needs ``data``).
     x0 : array_like
         (d,) prior mean at step 0.
-    steps_per_update : int
-        Model steps between two measurement updates.
-    updates : int
-        Measurement updates to verify.
+    steps_per_update : int, optional
+        Model steps between two measurement updates (required without ``data``; with it, beside ``updates``).
+    updates : int, optional
+        Measurement updates to verify (required without ``data``: the run of the model without a log).
     sample_period : float
         Seconds per model step (default 1).
     truth : mapping, optional
-        Where the world departs from the filter: any of phi, gamma, h, w, v, x0, m0 (the ``[truth]`` table).
+        Where the world departs from the filter: any of phi, gamma, h, w, v, x0, m0, b (the ``[truth]`` table;
+        with ``map``, a truth with states of its own).
+    b : array_like, optional
+        (d, m) known-input matrix: x_{j+1} = Phi x_j + B u_j + Gamma w_j, u_j the ``data`` table's inputs.
+    diffuse : sequence of str, optional
+        State names started without prior information (their rows and columns of m0 zero).
+    data : mapping, optional
+        The ``[data]`` table: ``measurements`` (p column names), ``inputs`` (m, beside b), ``time``,
+        ``stds`` and ``step_tolerance`` (docs/custom-models.md).
     name, state_names, state_units, measurement_names, measurement_units : optional
         The labels (defaults as in a model file: the name ``"model"``, x1..xd, z1..zp, no units).
 
@@ -70,10 +79,13 @@ class Model:
     v: Any
     x0: Any
     m0: Any
-    steps_per_update: int
-    updates: int
+    steps_per_update: int | None = None
+    updates: int | None = None
     sample_period: float = 1.0
     truth: Mapping[str, Any] | None = None
+    b: Any = None
+    diffuse: Sequence[str] | None = None
+    data: Mapping[str, Any] | None = None
     name: str | None = None
     state_names: Sequence[str] | None = None
     state_units: Sequence[str] | None = None
@@ -84,14 +96,16 @@ class Model:
     def document(self) -> str:
         """The model as the text of a model file (TOML)."""
         lines = [f"name = {_toml(self.name or 'model')}"]
-        for key in ("sample_period", "steps_per_update", "updates", *ARRAY_KEYS):
-            lines.append(f"{key} = {_toml(getattr(self, key))}")
-        for key in ("state_names", "state_units", "measurement_names", "measurement_units"):
+        for key in ("sample_period", "steps_per_update", "updates", *ARRAY_KEYS, "b"):
+            if getattr(self, key) is not None or key in ARRAY_KEYS:  # a missing matrix is the file's error
+                lines.append(f"{key} = {_toml(getattr(self, key))}")
+        for key in ("diffuse", "state_names", "state_units", "measurement_names", "measurement_units"):
             if getattr(self, key) is not None:
                 lines.append(f"{key} = {_toml(list(getattr(self, key)))}")
-        if self.truth is not None:
-            lines.append("[truth]")
-            lines += [f"{key} = {_toml(value)}" for key, value in dict(self.truth).items()]
+        for table, values in (("truth", self.truth), ("data", self.data)):
+            if values is not None:
+                lines.append(f"[{table}]")
+                lines += [f"{key} = {_toml(value)}" for key, value in dict(values).items()]
         return "\n".join(lines) + "\n"
 
     def scenario(self, settings: Mapping[str, Any] | None = None):

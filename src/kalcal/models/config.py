@@ -159,5 +159,10 @@ def given_keys(scenario: Any) -> frozenset[str]:
 
 
 def section_values(scenario: Any) -> dict[str, dict[str, Any]]:
-    """The scenario as ``{section: {key: value}}``, for summaries and reports."""
-    return {f.name: dataclasses.asdict(getattr(scenario, f.name)) for f in dataclasses.fields(scenario)}
+    """The scenario as ``{section: {key: value}}``, for summaries and reports; a section the scenario does
+    not have (None: a model file without a [data] table) is left out."""
+    return {
+        f.name: dataclasses.asdict(getattr(scenario, f.name))
+        for f in dataclasses.fields(scenario)
+        if getattr(scenario, f.name) is not None
+    }

@@ -49,6 +49,8 @@ import numpy as np
 
 from kalcal.core.model import LinearGaussianModel
 from kalcal.scenarios import scenario_names
+from kalcal.scenarios.model_file.data import DATA_KEYS, DataTable, data_table
+from kalcal.scenarios.model_file.linear import FileModel, split_h
 from kalcal.scenarios.protocol import Capabilities, ScenarioDefaults
 from kalcal.scenarios.model_file.truth import MAP_KEYS, MODEL_KEYS, MappedTruthModel, mapped_truth, truth_from_settings
 from kalcal.models.settings import (
@@ -69,15 +71,22 @@ from kalcal.models.settings import (
     unknown,
 )
 
-_REQUIRED = ("steps_per_update", "updates", *MODEL_KEYS)
+#: required in every file; steps_per_update and updates too in a file without [data]
+_REQUIRED = MODEL_KEYS
+_TIMING = ("steps_per_update", "updates")
 _NAME_KEYS = ("state_names", "state_units", "measurement_names", "measurement_units")
-_TOP_KEYS = ("name", "sample_period", *_REQUIRED, *_NAME_KEYS)
+#: what a model file adds to the time-invariant model: known inputs and the states started diffuse
+_FILE_KEYS = ("b", "diffuse")
+_TOP_KEYS = ("name", "sample_period", *_TIMING, *MODEL_KEYS, *_FILE_KEYS, *_NAME_KEYS)
 #: ``--set`` keys by section, as the run's summary.json lists the settings.
 _SET_KEYS = {
     "model": ("name", "updates", *_NAME_KEYS),
-    "filter": (*MODEL_KEYS, "steps_per_update", "sample_period"),
-    "truth": MODEL_KEYS,
+    "filter": (*MODEL_KEYS, *_FILE_KEYS, "steps_per_update", "sample_period"),
+    "truth": (*MODEL_KEYS, "b"),
+    "data": DATA_KEYS,
 }
+#: the keys of a [truth] table over the filter's states
+_TRUTH_KEYS = (*MODEL_KEYS, "b")
 #: ``--set`` keys of a truth with its own states, beside those its section lists (truth.map, truth.state_names)
 _TRUTH_MAP_SET_KEYS = tuple(f"truth.{key}" for key in MAP_KEYS)
 _RESERVED_NAMES = scenario_names()
@@ -89,8 +98,9 @@ def is_model_file(scenario: str) -> bool:
 
 
 def is_custom_settings(settings: Mapping[str, Any]) -> bool:
-    """Whether a summary's ``settings`` are those of a custom model (sections model, filter, truth)."""
-    return set(settings) == {"model", "filter", "truth"}
+    """Whether a summary's ``settings`` are those of a custom model (sections model, filter, truth, and
+    data for a file with a [data] table)."""
+    return set(settings) in ({"model", "filter", "truth"}, {"model", "filter", "truth", "data"})
 
 
 @dataclass(frozen=True)
@@ -98,13 +108,14 @@ class CustomModelInfo:
     """What labels a custom model's results (section ``model``).
 
     name : the scenario's name in outputs; file : the model file as given (for the record);
-    updates : K, measurement updates to verify; state_names, state_units : length d;
+    updates : K, measurement updates to verify (None: a file with [data] that does not set it, whose
+    model is only run over a log); state_names, state_units : length d;
     measurement_names, measurement_units : length p. Units are SI labels ("" for none).
     """
 
     name: str
     file: str
-    updates: int
+    updates: int | None
     state_names: tuple[str, ...]
     state_units: tuple[str, ...]
     measurement_names: tuple[str, ...]
@@ -118,12 +129,15 @@ class CustomModelScenario(ScenarioDefaults):
     Attributes
     ----------
     model : CustomModelInfo
-    filter : LinearGaussianModel
-        What the filter believes (the file's top-level matrices).
-    truth : LinearGaussianModel or MappedTruthModel
+    filter : FileModel
+        What the filter believes (the file's top-level matrices, its known-input matrix b, the entries
+        of h that name data columns, its diffuse states).
+    truth : FileModel or MappedTruthModel
         What the world does: the ``[truth]`` table over the filter's matrices (same d, p,
         steps_per_update and sample_period as the filter), or, with a ``map``, a model of its own n
         states (:mod:`kalcal.scenarios.model_file.truth`; same p and timing, map of shape (d, n)).
+    data : DataTable or None
+        The file's ``[data]`` table: how a log's columns feed the model (:mod:`kalcal.scenarios.model_file.data`).
     """
 
     NAME: ClassVar[str] = "custom"
@@ -138,15 +152,52 @@ class CustomModelScenario(ScenarioDefaults):
     def capabilities(self) -> Capabilities:
         """A linear Gaussian filter with gains fixed before any data, sampled at the update rate only (no
         per-sample engine: the file has no samples between updates) for the updates the file sets. A
-        property, not a class constant: what it has depends on the file it was read from."""
+        property, not a class constant: what it has depends on the file it was read from (a file whose
+        model needs a log, or that sets no updates, has no verify or analyze: :meth:`without_log`)."""
+        why = self.without_log()
+        commands = {"report"} if why else {"verify", "analyze", "report"}
+        refusals = (("verify", why), ("analyze", why)) if why else ()
         return Capabilities(
             exact_analysis=True,
             fixed_gains=True,
             engines=("exact",),
             long_run=False,
-            commands=frozenset({"verify", "analyze", "report"}),
-            why_not=(("--engine", "use the exact engine"), ("--long-run", "set updates in the file instead")),
+            commands=frozenset(commands),
+            why_not=(("--engine", "use the exact engine"), ("--long-run", "set updates in the file instead"), *refusals),
         )
+
+    def without_log(self) -> str:
+        """Why the file's model cannot be verified or analyzed without a log ("" when it can), in words
+        that follow ``FILE:``: the rows of h, the stds or the truth's inputs come from a log, the filter
+        starts diffuse, or the file sets no updates."""
+        f, t, data = self.filter, self.truth, self.data
+        columns = tuple(dict.fromkeys((*f.data_columns, *t.data_columns)))
+        if columns:
+            return (
+                f"its h names data columns ({', '.join(columns)}): its rows come from a log, so it is not verified "
+                "without one (--data LOG)"
+            )
+        if data is not None and any(data.stds):
+            stds = ", ".join(c for c in data.stds if c)
+            return f"its measurement stds come from data columns ({stds}): it is not verified without a log (--data LOG)"
+        if f.diffuse:
+            if "m0" not in self.differing():
+                return (
+                    f"its filter starts diffuse in {', '.join(f.diffuse)}: a proper [truth] m0 (the world's prior, "
+                    "positive on those states) is needed to verify it"
+                )
+            return (
+                f"its filter starts diffuse in {', '.join(f.diffuse)}: the exact engine's fixed-gain filter has no "
+                "diffuse start (give the filter a proper m0 to verify it)"
+            )
+        if not _inputs_cancel(self):
+            return (
+                "its truth's inputs (b) differ from the filter's, so the filter's error depends on the inputs u: "
+                "it is not verified without a log (--data LOG); with the truth's b equal to the filter's it does not"
+            )
+        if self.model.updates is None:
+            return "it sets no updates (the model file's updates and steps_per_update say how long to verify it without a log)"
+        return ""
 
     # The Scenario protocol (kalcal.scenarios.protocol): each answer from this package's modules, imported
     # where asked because they import this one.
@@ -164,7 +215,8 @@ class CustomModelScenario(ScenarioDefaults):
         return custom_model_error_cause(self)
 
     def check_settings(self, command: str) -> None:
-        """Nothing to refuse: the file was checked when it was read."""
+        """Nothing to refuse: the file was checked when it was read (what needs a log is refused by its
+        capabilities)."""
 
     def error_sources(self) -> list:
         """The truth's prior, process and measurement blocks."""
@@ -184,7 +236,7 @@ class CustomModelScenario(ScenarioDefaults):
 
     def run_length(self) -> tuple[int, float]:
         """The file's updates: t_k = k update_period."""
-        count = int(self.model.updates)
+        count = int(self.model.updates or 0)
         return count, count * float(self.filter.update_period)
 
     def truth_is_filter(self) -> bool:
@@ -213,11 +265,16 @@ class CustomModelScenario(ScenarioDefaults):
         require(self, "fit")
 
     model: CustomModelInfo
-    filter: LinearGaussianModel
-    truth: LinearGaussianModel
+    filter: FileModel
+    truth: FileModel
+    data: DataTable | None = None
 
     def __post_init__(self) -> None:
         f, t, info = self.filter, self.truth, self.model
+        if not isinstance(f, FileModel):  # a LinearGaussianModel given in Python: no inputs, no data
+            object.__setattr__(self, "filter", f := _file_model(f))
+        if not isinstance(t, FileModel):
+            object.__setattr__(self, "truth", t := _file_model(t))
         d, p = f.state_dim, f.measurement_dim
         if isinstance(t, MappedTruthModel):
             t.check_fits(d, p)
@@ -227,7 +284,24 @@ class CustomModelScenario(ScenarioDefaults):
         if (t.steps_per_update, t.sample_period) != timing:
             expected = f"the filter's steps_per_update and sample_period {timing}"
             raise SettingError("truth.steps_per_update", expected, str((t.steps_per_update, t.sample_period)))
-        to_positive_integer("updates", info.updates)
+        if info.updates is not None or self.data is None:
+            to_positive_integer("updates", info.updates)
+        if t.input_dim != f.input_dim:
+            expected = f"{f.input_dim} column{'s' if f.input_dim != 1 else ''} like the filter's b"
+            raise SettingError("truth.b", expected, f"shape {t.b.shape}")
+        if t.diffuse:
+            raise SettingError("truth.diffuse", "no diffuse states (the world's prior is proper)", show(list(t.diffuse)))
+        columns = tuple(dict.fromkeys((*f.data_columns, *t.data_columns)))
+        if columns and self.data is None:
+            expected = "a [data] table beside an h that names data columns (the log's columns feed the model)"
+            raise SettingError("data", expected, f"none (h names {', '.join(columns)})")
+        if f.input_dim and self.data is None:
+            raise SettingError("data.inputs", f"{f.input_dim} column names beside b (the known inputs)", "no [data] table")
+        if self.data is not None:
+            if len(self.data.measurements) != p:
+                raise SettingError("data.measurements", f"{p} column names, one per row of h", show(list(self.data.measurements)))
+            if len(self.data.inputs) != f.input_dim:
+                raise SettingError("data.inputs", f"{f.input_dim} column names, one per column of b", show(list(self.data.inputs)))
         if not info.name.strip():
             raise SettingError("name", "a non-empty name", show(info.name))
         if info.name in _RESERVED_NAMES:
@@ -238,11 +312,27 @@ class CustomModelScenario(ScenarioDefaults):
             ("measurement_names", p, "measurement"), ("measurement_units", p, "measurement"),
         ):  # fmt: skip
             to_labels(key, list(getattr(info, key)), count, of)
+        _check_diffuse(f, info.state_names)
 
     @property
     def update_times(self) -> np.ndarray:
-        """t_k = k * steps_per_update * sample_period for k = 1..K, s, shape (K,)."""
-        return np.arange(1, self.model.updates + 1) * self.filter.update_period
+        """t_k = k * steps_per_update * sample_period for k = 1..K, s, shape (K,) (empty without updates)."""
+        return np.arange(1, (self.model.updates or 0) + 1) * self.filter.update_period
+
+    def bind(self, log, *, topic: str | None = None):
+        """The file over one log (a path :mod:`kalcal.io.logs` reads, or a DataFrame): its filter's (and
+        truth's) :class:`~kalcal.core.timevarying.TimeVaryingModel`, z and the times
+        (:func:`kalcal.scenarios.model_file.data.bind`)."""
+        from kalcal.scenarios.model_file.data import bind
+
+        return bind(self, log, topic=topic)
+
+    def step_grid(self):
+        """The file's (filter, truth) as TimeVaryingModels without a log: ``updates`` updates on the step grid
+        (:func:`kalcal.scenarios.model_file.data.step_grid`)."""
+        from kalcal.scenarios.model_file.data import step_grid
+
+        return step_grid(self)
 
     @property
     def truth_map(self) -> np.ndarray | None:
@@ -250,24 +340,63 @@ class CustomModelScenario(ScenarioDefaults):
         return self.truth.map if isinstance(self.truth, MappedTruthModel) else None
 
     def differing(self) -> tuple[str, ...]:
-        """The matrices in which the truth departs from the filter, in MODEL_KEYS order."""
-        return tuple(k for k in MODEL_KEYS if not np.array_equal(getattr(self.filter, k), getattr(self.truth, k)))
+        """The matrices in which the truth departs from the filter, in MODEL_KEYS order (h where its numbers
+        or the columns it names differ), then b."""
+        f, t = self.filter, self.truth
+
+        def differs(key: str) -> bool:
+            a, b = getattr(f, key), getattr(t, key)
+            return not np.array_equal(a, b, equal_nan=a.shape == b.shape) or (key == "h" and f.h_columns != t.h_columns)
+
+        return tuple(k for k in (*MODEL_KEYS, "b") if differs(k))
 
     @classmethod
     def from_settings(cls, settings: Mapping[str, Mapping[str, Any]]) -> CustomModelScenario:
-        """Rebuild the scenario from a summary's ``settings`` (sections model, filter, truth)."""
+        """Rebuild the scenario from a summary's ``settings`` (sections model, filter, truth, and data
+        where the file had a [data] table)."""
         try:
             info = dict(settings["model"])
             for key in _NAME_KEYS:
                 info[key] = tuple(info[key])
+            data = settings.get("data")
             return cls(
                 CustomModelInfo(**info),
-                LinearGaussianModel(**settings["filter"]),
+                FileModel(**settings["filter"]),
                 truth_from_settings(settings["truth"]),
+                None if data is None else DataTable(**data),
             )
         except (KeyError, TypeError) as exc:
             expected = "complete custom model settings (model, filter, truth)"
             raise SettingError("settings", expected, f"{type(exc).__name__} {exc}") from None
+
+
+def _file_model(model: LinearGaussianModel) -> FileModel:
+    """A LinearGaussianModel as a FileModel without inputs, data columns or diffuse states."""
+    import dataclasses
+
+    return FileModel(**{field.name: getattr(model, field.name) for field in dataclasses.fields(LinearGaussianModel)})
+
+
+def _check_diffuse(f: FileModel, names: tuple[str, ...]) -> None:
+    """Diffuse states are named states, each once, whose rows and columns of m0 are zero (nothing dropped
+    silently: a prior variance the file gives a diffuse state is an error)."""
+    for name in f.diffuse:
+        if name not in names:
+            raise SettingError("diffuse", f"state names (of {', '.join(names)})", show(name))
+    if len(set(f.diffuse)) != len(f.diffuse):
+        raise SettingError("diffuse", "each state once", show(list(f.diffuse)))
+    flags = np.array([name in f.diffuse for name in names], dtype=bool)
+    if np.any(f.m0[flags]) or np.any(f.m0[:, flags]):
+        expected = f"zero rows and columns for the diffuse states ({', '.join(f.diffuse)}: no prior information)"
+        raise SettingError("m0", expected, show(f.m0))
+
+
+def _inputs_cancel(scenario: CustomModelScenario) -> bool:
+    """Whether the known inputs move the truth's filter-state part as they move the filter: B = map B_t (or
+    B_t = B without a map), so that the error e = map x - xhat does not depend on u."""
+    f, t = scenario.filter, scenario.truth
+    moved = t.b if scenario.truth_map is None else scenario.truth_map @ t.b
+    return moved.shape == f.b.shape and np.allclose(moved, f.b, rtol=0.0, atol=1e-12 * max(1.0, float(np.max(np.abs(f.b), initial=0.0))))
 
 
 def _check_same_shapes(f: LinearGaussianModel, t: LinearGaussianModel) -> None:
@@ -325,15 +454,51 @@ def model_fields(scenario: CustomModelScenario) -> dict[str, Any]:
     file as its source. Built again (``kalcal.Model(**fields).scenario(settings)``) it is the same scenario
     with ``settings`` applied as ``--set`` applies them to the file."""
     f, t, info = scenario.filter, scenario.truth, scenario.model
-    keys = ("phi", "gamma", "h", "w", "v", "x0", "m0")
-    truth = {key: getattr(t, key).tolist() for key in scenario.differing()}
+
+    def value(model: FileModel, key: str) -> Any:
+        return _file_h(model) if key == "h" else getattr(model, key).tolist()
+
+    mapped = isinstance(t, MappedTruthModel)
+    # a truth with a map holds all its matrices (and its b where it has inputs), else those that differ
+    keys = (*MODEL_KEYS, *(("b",) if t.input_dim else ())) if mapped else scenario.differing()
+    truth = {key: value(t, key) for key in keys}
+    if mapped:
+        truth["map"] = t.map.tolist()
+        if t.state_names is not None:
+            truth["state_names"] = list(t.state_names)
+    data = scenario.data
     return dict(
-        **{key: getattr(f, key).tolist() for key in keys},
-        steps_per_update=int(f.steps_per_update), updates=int(info.updates), sample_period=float(f.sample_period),
-        truth=truth or None, name=info.name, state_names=list(info.state_names), state_units=list(info.state_units),
+        **{key: value(f, key) for key in MODEL_KEYS},
+        steps_per_update=int(f.steps_per_update), updates=None if info.updates is None else int(info.updates),
+        sample_period=float(f.sample_period), truth=truth or None, name=info.name,
+        state_names=list(info.state_names), state_units=list(info.state_units),
         measurement_names=list(info.measurement_names), measurement_units=list(info.measurement_units),
-        source=info.file,
-    )
+        b=f.b.tolist() if f.input_dim else None, diffuse=list(f.diffuse) or None,
+        data=None if data is None else _data_fields(data), source=info.file,
+    )  # fmt: skip
+
+
+def _file_h(model: FileModel) -> list[list[Any]]:
+    """h as the file writes it: numbers, and the name of each data column it takes."""
+    rows = model.h.tolist()
+    for i, row in enumerate(model.h_columns):
+        for k, name in enumerate(row):
+            if name:
+                rows[i][k] = name
+    return rows
+
+
+def _data_fields(data: DataTable) -> dict[str, Any]:
+    """A [data] table as the file writes it: the keys it sets (time and stds only where given)."""
+    fields: dict[str, Any] = {"measurements": list(data.measurements)}
+    if data.time:
+        fields["time"] = data.time
+    if data.inputs:
+        fields["inputs"] = list(data.inputs)
+    if data.stds:
+        fields["stds"] = list(data.stds)
+    fields["step_tolerance"] = data.step_tolerance
+    return fields
 
 
 def parse_model(text: str, source: str, assignments: Iterable[str] = ()) -> CustomModelScenario:
@@ -366,11 +531,12 @@ def _apply_overrides(document: dict[str, Any], overrides: Mapping[str, str], sou
             known = "; ".join(f"{s}.{{{', '.join(keys)}}}" for s, keys in _SET_KEYS.items())
             raise unknown(key, f"a model file's setting ({known})", "setting")
         value = toml_value(key, text, bare_string=key == "model.name")  # a bare name needs no quotes
-        if section == "truth":
-            _truth_table(document, source)[name] = value
+        if section in ("truth", "data"):
+            table = _truth_table(document, source) if section == "truth" else _data_table(document, source)
+            table[name] = value
             origins[key] = key
             continue
-        if section == "filter" and name in MODEL_KEYS and name in document:
+        if section == "filter" and name in _TRUTH_KEYS and name in document:
             file_values.setdefault(name, document[name])
         document[name] = value
         origins[name] = key
@@ -392,58 +558,82 @@ def _truth_table(document: dict[str, Any], source: str) -> dict[str, Any]:
     return table
 
 
+def _data_table(document: dict[str, Any], source: str) -> dict[str, Any]:
+    """The document's ``[data]`` table, created empty where the file has none."""
+    table = document.setdefault("data", {})
+    if not isinstance(table, dict):
+        raise SettingError("data", "a [data] table", type_name(table), source)
+    return table
+
+
 def _array(key: str, value: Any) -> np.ndarray:
     return to_vector(key, value) if key.endswith("x0") else to_matrix(key, value)
 
 
-def _truth_over_filter(
-    truth: Mapping[str, Any], arrays: Mapping[str, np.ndarray], steps: int, period: float
-) -> LinearGaussianModel:
-    """A ``[truth]`` table without a map: its matrices over the filter's (``arrays``)."""
-    truth_arrays = {key: _array(f"truth.{key}", truth[key]) if key in truth else arrays[key] for key in MODEL_KEYS}
+def _truth_over_filter(truth: Mapping[str, Any], f: FileModel, arrays: Mapping[str, np.ndarray]) -> FileModel:
+    """A ``[truth]`` table without a map: its matrices over the filter's (``arrays``, as the file gives
+    them, and f's b and the columns its h names)."""
+    h, columns = split_h("truth.h", truth["h"]) if "h" in truth else (arrays["h"], f.h_columns)
+    truth_arrays = {
+        key: _array(f"truth.{key}", h if key == "h" else truth[key]) if key in truth else arrays[key] for key in MODEL_KEYS
+    }
+    b = to_matrix("truth.b", truth["b"]) if "b" in truth else f.b
     try:
-        return LinearGaussianModel(**truth_arrays, steps_per_update=steps, sample_period=period)
+        return FileModel(
+            **truth_arrays, steps_per_update=f.steps_per_update, sample_period=f.sample_period, b=b, h_columns=columns
+        )
     except SettingError as exc:
         got = exc.got
-        if exc.key in MODEL_KEYS and exc.key not in truth:
+        if exc.key in _TRUTH_KEYS and exc.key not in truth:
             got += f" ([truth] does not set {exc.key}, so it is the filter's)"
         raise exc.located(key=f"truth.{exc.key}", got=got) from None
 
 
 def _build(document: dict[str, Any], source: str) -> CustomModelScenario:
     for key in document:
-        if key not in _TOP_KEYS and key != "truth":
-            raise unknown(key, f"a model file's key ({', '.join(_TOP_KEYS)} or a [truth] table)")
+        if key not in _TOP_KEYS and key not in ("truth", "data"):
+            raise unknown(key, f"a model file's key ({', '.join(_TOP_KEYS)}, a [truth] or a [data] table)")
     truth = document.get("truth", {})
     if not isinstance(truth, dict):
         raise SettingError("truth", "a [truth] table of matrices", type_name(truth))
     for key in truth:
-        if key in MODEL_KEYS or (key in MAP_KEYS and "map" in truth):
+        if key in _TRUTH_KEYS or (key in MAP_KEYS and "map" in truth):
             continue
         if "map" in truth:
-            raise unknown(f"truth.{key}", f"a key of a [truth] with a map ({', '.join((*MAP_KEYS, *MODEL_KEYS))})")
+            raise unknown(f"truth.{key}", f"a key of a [truth] with a map ({', '.join((*MAP_KEYS, *_TRUTH_KEYS))})")
         if key != "state_names":
-            raise unknown(f"truth.{key}", f"a matrix of [truth] ({', '.join(MODEL_KEYS)})")
+            raise unknown(f"truth.{key}", f"a matrix of [truth] ({', '.join(_TRUTH_KEYS)})")
     if "state_names" in truth and "map" not in truth:
         expected = "a map beside it (state_names names the states of a truth with its own dimension)"
         raise SettingError("truth.state_names", expected, "no truth.map")
-    for key in _REQUIRED:
+    has_data = "data" in document
+    # steps_per_update and updates say how to run the model without a log: with [data] a log can say it
+    for key in (*_TIMING, *_REQUIRED) if not has_data else _REQUIRED:
         if key not in document:
             raise missing(key, _EXPECTED.get(key, "a matrix"))
+    if "updates" in document and "steps_per_update" not in document:
+        expected = "a positive integer beside updates (the model steps between two of them)"
+        raise SettingError("steps_per_update", expected, "nothing")
 
-    steps = to_positive_integer("steps_per_update", document["steps_per_update"])
-    updates = to_positive_integer("updates", document["updates"])
+    steps = to_positive_integer("steps_per_update", document.get("steps_per_update", 1))
+    updates = to_positive_integer("updates", document["updates"]) if "updates" in document else None
     period = to_positive_number("sample_period", document.get("sample_period", 1.0), "a positive number of seconds")
     name = to_string("name", document.get("name", Path(source).stem))
 
-    arrays = {key: _array(key, document[key]) for key in MODEL_KEYS}
-    filter_model = LinearGaussianModel(**arrays, steps_per_update=steps, sample_period=period)
+    h, columns = split_h("h", document["h"])
+    arrays = {key: _array(key, h if key == "h" else document[key]) for key in MODEL_KEYS}
+    b = to_matrix("b", document["b"]) if "b" in document else None
+    diffuse = to_labels("diffuse", document["diffuse"]) if "diffuse" in document else ()
+    filter_model = FileModel(
+        **arrays, steps_per_update=steps, sample_period=period, b=b, h_columns=columns, diffuse=diffuse
+    )
     if "map" in truth:
         truth_model = mapped_truth(truth, steps, period)
     else:
-        truth_model = _truth_over_filter(truth, arrays, steps, period)
+        truth_model = _truth_over_filter(truth, filter_model, arrays)
 
     d, p = filter_model.state_dim, filter_model.measurement_dim
+    data = data_table(document["data"], d, p, filter_model.input_dim) if has_data else None
     labels = {
         "state_names": tuple(f"x{i + 1}" for i in range(d)),
         "state_units": ("",) * d,
@@ -454,4 +644,4 @@ def _build(document: dict[str, Any], source: str) -> CustomModelScenario:
         if key in document:
             labels[key] = to_labels(key, document[key])
     info = CustomModelInfo(name=name, file=source, updates=updates, **labels)
-    return CustomModelScenario(info, filter_model, truth_model)
+    return CustomModelScenario(info, filter_model, truth_model, data)

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from kalcal.core.model import LinearGaussianModel
+from kalcal.scenarios.model_file.linear import FileModel, split_h
 from kalcal.models.settings import SettingError, show, to_labels, to_matrix, to_vector
 
 #: The model's arrays, in the order of LinearGaussianModel; all but x0 are matrices.
@@ -32,13 +33,14 @@ MAP_KEYS = ("map", "state_names")
 
 
 @dataclass(frozen=True)
-class MappedTruthModel(LinearGaussianModel):
+class MappedTruthModel(FileModel):
     """A truth with n states of its own, of which the filter's d states are a linear map.
 
     Attributes
     ----------
-    phi, gamma, h, w, v, x0, m0, steps_per_update, sample_period
-        As in :class:`~kalcal.core.model.LinearGaussianModel`, in the truth's dimension n (h is (p, n)).
+    phi, gamma, h, w, v, x0, m0, steps_per_update, sample_period, b, h_columns
+        As in :class:`~kalcal.scenarios.model_file.linear.FileModel`, in the truth's dimension n (h is
+        (p, n), b is (n, m)).
     map : ndarray, shape (d, n)
         M: the filter's states are M x_truth, so the filter's error is e = M x_truth - xhat.
     state_names : tuple of str, length n, or None
@@ -95,21 +97,26 @@ def mapped_truth(table: Mapping[str, Any], steps_per_update: int, sample_period:
             "and takes nothing from the filter)"
         )
         raise SettingError("truth.map", expected, f"no {', '.join(absent)}")
+    h, h_columns = split_h("truth.h", table["h"])
     arrays = {
-        key: (to_vector if key == "x0" else to_matrix)(f"truth.{key}", table[key]) for key in MODEL_KEYS
+        key: (to_vector if key == "x0" else to_matrix)(f"truth.{key}", h if key == "h" else table[key])
+        for key in MODEL_KEYS
     }
     error_map = to_matrix("truth.map", table["map"])
     names = to_labels("truth.state_names", table["state_names"]) if "state_names" in table else None
+    b = to_matrix("truth.b", table["b"]) if "b" in table else None  # its own (n, m): none is no inputs
     try:
         return MappedTruthModel(
-            **arrays, steps_per_update=steps_per_update, sample_period=sample_period, map=error_map, state_names=names
+            **arrays, steps_per_update=steps_per_update, sample_period=sample_period, map=error_map, state_names=names,
+            b=b, h_columns=h_columns,
         )
     except SettingError as exc:
         raise exc.located(key=f"truth.{exc.key}") from None
 
 
-def truth_from_settings(values: Mapping[str, Any]) -> LinearGaussianModel:
-    """A summary's ``truth`` section -> the truth's model: a :class:`MappedTruthModel` when it holds a map."""
+def truth_from_settings(values: Mapping[str, Any]) -> FileModel:
+    """A summary's ``truth`` section -> the truth's model: a :class:`MappedTruthModel` when it holds a map
+    (a summary written before the inputs and the data-named rows of h has neither: none, then)."""
     if "map" in values:
         return MappedTruthModel(**values)
-    return LinearGaussianModel(**values)
+    return FileModel(**values)
