@@ -53,5 +53,35 @@ def main(n: int) -> None:
               f"{seconds / (n * n_updates) * 1e9:.0f} ns per update per realization")
 
 
+
+
+def bench_verify(n: int) -> None:
+    """The EKF Monte Carlo of the range-bearing example, every statistic included (the checks' sums, the
+    effect sizes' and the Cramér–Rao bound's), then the checks and effect sizes: wall time and this
+    process's peak RSS (run once per N in its own process: ``python bench_nonlinear.py verify N``)."""
+    import resource
+    import time as _time
+
+    from kalcal.montecarlo.accumulators import ensemble_statistics
+    from kalcal.montecarlo.engine import run_monte_carlo
+    from kalcal.scenarios import load_code_model
+    from kalcal.stats.suite import run_checks
+
+    problem = load_code_model(str(Path(__file__).resolve().parents[1] / "examples" / "range_bearing.py")).problem()
+    start = _time.perf_counter()
+    run = run_monte_carlo(problem, n, 0)
+    checks = run_checks(ensemble_statistics(run.sums), problem.info, 0.99)
+    effects = problem.effect_sizes(run.sums, 0.99)
+    wall = _time.perf_counter() - start
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(f"EKF verify, K = 100, N = {n}: {wall:.1f} s ({run.workers} threads), peak RSS {rss:.0f} MB; "
+          f"exact checks {[c.name for c in checks if not c.passed]} failed; tolerance verdict "
+          f"{'pass' if effects.within_tolerance() else 'fail'}")
+    print("dynamax comparison: not run (dynamax is not installed in this environment)")
+
+
 if __name__ == "__main__":
-    main(int(sys.argv[1]) if len(sys.argv) > 1 else 100_000)
+    if len(sys.argv) > 1 and sys.argv[1] == "verify":
+        bench_verify(int(sys.argv[2]) if len(sys.argv) > 2 else 100_000)
+    else:
+        main(int(sys.argv[1]) if len(sys.argv) > 1 else 100_000)

@@ -58,3 +58,5 @@ MODEL = NonlinearModel(
     measurement_units=("m", "rad"),
     data_dim=2,
 )
+
+DATA = BEACON  #: the data of every update: the beacon's position (m), shared by all updates

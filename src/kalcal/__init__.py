@@ -25,6 +25,7 @@ _EXPORTS = {
     "AnalysisResult": "kalcal.api.analyze",
     "report": "kalcal.api.report",
     "Model": "kalcal.api.model",
+    "NonlinearModel": "kalcal.core.nonlinear",
     "load_model": "kalcal.api.model",
     "VerificationResult": "kalcal.results.verification",
     "CalibrationResult": "kalcal.results.calibration",

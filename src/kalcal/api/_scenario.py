@@ -25,6 +25,10 @@ def resolve(
     from kalcal.scenarios import build_scenario, is_model_file, load_model_file, model_file_fields
 
     assignments = assignments_of(settings)
+    if models and _is_code(scenario):
+        from kalcal.scenarios import load_code_model
+
+        return load_code_model(scenario, assignments, config)
     inputs: tuple[str, ...] = ()
     fields = model_file_fields(scenario) if models else None
     if fields is not None:
@@ -54,3 +58,16 @@ def resolve(
         return apply_settings(scenario, merged)
     return scenario  # a scenario built already (kalcal.load_model, build_scenario)
 
+
+
+def _is_code(scenario: Any) -> bool:
+    """A model written as code: a ``.py`` path, a NonlinearModel, or a (truth, filter) pair of them."""
+    from kalcal.scenarios import is_code_model
+
+    if is_code_model(scenario):
+        return True
+    from kalcal.core.nonlinear import NonlinearModel
+
+    return isinstance(scenario, NonlinearModel) or (
+        isinstance(scenario, tuple) and len(scenario) == 2 and all(isinstance(m, NonlinearModel) for m in scenario)
+    )

@@ -245,6 +245,42 @@ def equals_filter(scenario, analysis) -> bool:
     return scenario.truth_is_filter()
 
 
+def problem_effects(problem, sums, confidence: float):
+    """The run's effect sizes and Cramér–Rao bound (:class:`kalcal.stats.effects.EffectSizes`), for a
+    problem that keeps their sums (``effect_sizes``); None for any other."""
+    method = getattr(problem, "effect_sizes", None)
+    if method is None or sums.effect is None:
+        return None
+    return method(sums, confidence)
+
+
+def with_effects(check, effects):
+    """``check`` with the effect sizes that stand beside it and its tolerance verdict."""
+    mine = effects.of_check(check.name)
+    if not mine:
+        return check
+    return dataclasses.replace(check, effect_sizes=mine, within_tolerance=all(e.within_tolerance for e in mine))
+
+
+def effects_summary(effects, info, confidence: float) -> dict[str, Any]:
+    """``summary.json``'s ``effect_sizes`` and ``cramer_rao`` (both None where the run kept none)."""
+    if effects is None:
+        return {"effect_sizes": None, "cramer_rao": None}
+    bound = effects.cramer_rao
+    crb = None
+    if bound is not None:
+        crb = {
+            "note": "a lower bound: every unbiased estimator's mean squared error is at least it",
+            "available": bound.available,
+            "method": bound.reason,
+            "final": bound.per_state(info.state_names, info.state_units, confidence),
+            "bound_diagonal": None if bound.bound is None else np.diagonal(bound.bound, axis1=1, axis2=2).tolist(),
+            "mse": bound.mse.tolist(),
+            "mse_se": bound.mse_se.tolist(),
+        }
+    return {"effect_sizes": effects.as_dict(), "cramer_rao": crb}
+
+
 def compute_verification(
     scenario,
     n: int,
@@ -304,6 +340,9 @@ def compute_verification(
     exact = exact_prediction(problem, analysis)
     if equals_filter(scenario, analysis):  # a failure is a false alarm at its stated rate, never a cause
         checks = [as_false_alarm(check) for check in checks]
+    effects = problem_effects(problem, run.sums, confidence)
+    if effects is not None:
+        checks = [with_effects(check, effects) for check in checks]
     bench = self_check(statistics, exact, confidence, info)
     attrs = {"scenario": info.scenario, "seed": seed, "engine": engine, "confidence": confidence}
     dataset = statistics_dataset(statistics, info, expected, attrs)
@@ -349,6 +388,7 @@ def compute_verification(
             "exact_mean_error": exact.mean_error[-1] if exact.available else None,
         },
         "residual_correlation": report_residual_pair(statistics, info, scenario),
+        **effects_summary(effects, info, confidence),
         "model_error": {
             "cause": cause,
             "max_expected_mean_error_sigma": float(

@@ -45,7 +45,7 @@ import sys
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Literal, NamedTuple
+from typing import Any, Callable, Literal, NamedTuple
 
 import numpy as np
 
@@ -480,6 +480,7 @@ class NonlinearModels(NamedTuple):
     truth: NonlinearModel
     filter: NonlinearModel
     source: str  #: the file's path
+    module: Any = None  #: the module the file defines (its DATA, INPUTS, N_UPDATES), None for objects
 
 
 def load_nonlinear_model(path: str | Path) -> NonlinearModels:
@@ -519,12 +520,12 @@ def load_nonlinear_model(path: str | Path) -> NonlinearModels:
 
     if hasattr(module, "MODEL"):
         model = get("MODEL")
-        return NonlinearModels(model, model, source)
+        return NonlinearModels(model, model, source, module)
     missing = [attribute for attribute in ("truth", "filter") if not hasattr(module, attribute)]
     if missing:
         raise ConfigError(
             f"{source}: defines neither MODEL nor {' and '.join(missing) if len(missing) == 2 else missing[0]} "
             f"(a nonlinear model defines MODEL = NonlinearModel(...), or truth and filter)"
         )
-    return NonlinearModels(get("truth"), get("filter"), source)
+    return NonlinearModels(get("truth"), get("filter"), source, module)
 

@@ -170,6 +170,9 @@ class MomentSums:
     whitened_error: np.ndarray | None = None
     whitened_outer: np.ndarray | None = None  #: sum eps_k eps_k^T, (K, d, d); None where P_k is shared
     whitened_estimate: np.ndarray | None = None  #: sum eps_k xhat_k^T, (K, d, d); None where P_k is shared
+    #: the effect sizes' sums (:class:`kalcal.stats.effects.EffectLayout` lays them out), flat so that they
+    #: merge, checkpoint and travel as every other sum; None for a problem that keeps none
+    effect: np.ndarray | None = None
 
     @classmethod
     def from_block(cls, block: BlockResult) -> MomentSums:

@@ -40,7 +40,7 @@ from kalcal.reporting.markup import esc, table
 from kalcal.reporting.run_tables import final_table, reproduce_section, settings_section, timing_section
 from kalcal.reporting.text import confidence_statement, scope_statement
 from kalcal.reporting.theory import power_section, self_check_section
-from kalcal.reporting.verdicts import answer_section, checks_table, failures_section, verdicts_section
+from kalcal.reporting.verdicts import answer_section, checks_table, effects_section, failures_section, verdicts_section
 from kalcal.stats.text import fmt
 
 GROUPS = (
@@ -337,6 +337,7 @@ def build_page(
     sections = (
         ("failures", "failures", failures_section(summary, answer)),
         ("verdicts", "verdicts", verdicts_section(summary)),
+        ("effects", "effect sizes", effects_section(summary)),
         ("power", "power", power_section(summary)),
         ("scenario", "settings", settings_section(summary)),
         ("", "", final_table(summary)),

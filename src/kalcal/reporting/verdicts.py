@@ -109,3 +109,46 @@ def verdicts_section(summary: Mapping[str, Any]) -> str:
         '<h2 id="verdicts">Verdicts</h2><details><summary>Statistic, bounds, levels and detail of each check'
         "</summary>" + table(("check", "statistic", "bounds", "passed", "detail"), rows) + "</details>"
     )
+
+
+def effects_section(summary: Mapping[str, Any]) -> str:
+    """The effect sizes beside the exact verdicts, with their intervals and tolerance verdicts, and the
+    Cramér–Rao bound per state (a lower bound); nothing for a run that kept none."""
+    effects = summary.get("effect_sizes")
+    if not effects:
+        return ""
+    rows = []
+    for e in effects["overall"]:
+        state = "pass" if e["within_tolerance"] else "fail"
+        name = e["name"] + (f" [{e['element']}]" if e["element"] else "")
+        rows.append(
+            f'<tr class="{state}"><td><code>{esc(name)}</code></td><td class="num">{esc(fmt(e["value"]))}</td>'
+            f'<td class="num">[{esc(fmt(e["lower"]))}, {esc(fmt(e["upper"]))}]</td><td class="num">{esc(fmt(e["null"]))}</td>'
+            f'<td class="num">[{esc(fmt(e["tolerance_lower"]))}, {esc(fmt(e["tolerance_upper"]))}]</td>'
+            f'<td class="{state}">{"within" if e["within_tolerance"] else "OUTSIDE"}</td></tr>'
+        )
+    conf = effects["overall"][0]["confidence"] if effects["overall"] else summary.get("confidence")
+    html = (
+        '<h2 id="effects">Effect sizes</h2>'
+        f"<p>How far the filter departs from its model, beside the exact verdicts: each interval at confidence "
+        f"{esc(fmt(conf))}; the tolerance verdict ({esc(effects['verdict'])}) passes when the whole interval lies in the band "
+        f"(tolerance {esc(fmt(effects['tolerance']))}: P within that fraction of the mean squared error).</p>"
+        + table(("effect", "value", "interval", "null", "tolerance band", "tolerance verdict"), rows)
+    )
+    crb = summary.get("cramer_rao")
+    if crb:
+        if crb["available"]:
+            rows = [
+                f'<tr><td>{esc(r["state"])}</td><td class="num">{esc(fmt(r["lower_bound"]))}</td>'
+                f'<td class="num">{esc(fmt(r["mse"]))} &plusmn; {esc(fmt(r["mse_se"]))}</td>'
+                f'<td class="num">{esc(fmt(r["efficiency"]))}</td><td>{esc(r["unit"])}</td></tr>'
+                for r in crb["final"]
+            ]
+            html += (
+                f"<p>Posterior Cramér–Rao bound at the last update ({esc(crb['method'])}): a lower bound on any "
+                "unbiased estimator's mean squared error, against the ensemble's MSE with its Monte Carlo standard error.</p>"
+                + table(("state", "lower bound", "MSE", "bound / MSE", "unit"), rows)
+            )
+        else:
+            html += f"<p>No Cramér–Rao bound: {esc(crb['method'])}.</p>"
+    return html

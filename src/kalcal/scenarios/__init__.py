@@ -28,7 +28,7 @@ MODEL_FILE = "model-file"
 """What a model file (a linear Gaussian model in TOML, docs/custom-models.md) is called where a scenario's name is asked."""
 
 __all__ = [
-    "MODEL_FILE", "SCENARIOS", "build_scenario", "is_model_file", "load_model_file", "model_file_fields", "parse_model_file",
+    "MODEL_FILE", "SCENARIOS", "build_scenario", "is_code_model", "load_code_model", "is_model_file", "load_model_file", "model_file_fields", "parse_model_file",
     "scenario_class", "scenario_names",
     "log_defaults", "NoiseFilter", "noise_filter", "scenario_of_summary", "settings_assignments",
 ]
@@ -57,6 +57,32 @@ def is_model_file(scenario: str) -> bool:
     from kalcal.scenarios.model_file.model import is_model_file as is_file
 
     return is_file(scenario)
+
+
+def is_code_model(scenario: Any) -> bool:
+    """Whether ``scenario`` names a model written as code (a path ending in ``.py``: docs/nonlinear.md)."""
+    return isinstance(scenario, (str, Path)) and str(scenario).lower().endswith(".py")
+
+
+def load_code_model(scenario: Any, assignments: Iterable[str] = (), config: str | Path | None = None):
+    """The nonlinear scenario of a model written as code: a ``.py`` path, a :class:`kalcal.NonlinearModel`
+    (truth and filter) or a ``(truth, filter)`` pair, with ``section.key=value`` assignments applied
+    (``filter.kind``, ``scenario.updates``, ``checks.tolerance``, ...)."""
+    from kalcal.core.nonlinear import NonlinearModel
+    from kalcal.models.config import apply_settings, load_toml
+    from kalcal.models.settings import parse_assignments
+    from kalcal.scenarios.nonlinear.settings import NonlinearModelSection, NonlinearScenario, register_models
+
+    if isinstance(scenario, NonlinearModel):
+        file = register_models(scenario, scenario)
+    elif isinstance(scenario, tuple) and len(scenario) == 2 and all(isinstance(m, NonlinearModel) for m in scenario):
+        file = register_models(*scenario)
+    else:
+        file = str(scenario)
+    built = NonlinearScenario(model=NonlinearModelSection(file))
+    settings = dict(load_toml(config)) if config is not None else {}
+    settings.update(parse_assignments(assignments))
+    return apply_settings(built, settings) if settings else built
 
 
 def load_model_file(*args, **kwargs):
@@ -132,6 +158,11 @@ def scenario_of_summary(name: str, settings: Mapping[str, Mapping[str, Any]]):
 
     if is_custom_settings(settings):  # a model file's run: its matrices are the settings
         return CustomModelScenario.from_settings(settings)
+    if set(settings) == {"model", "filter", "scenario", "checks"} and is_code_model(settings["model"].get("file", "")) or (
+        str(name).startswith("nonlinear (")
+    ):  # a model written as code: its file and settings
+        rest = {key: value for key, value in settings.items() if key != "model"}
+        return load_code_model(settings["model"]["file"], settings_assignments(rest))
     return build_scenario(name, None, settings_assignments(settings))
 
 

@@ -179,6 +179,11 @@ class CheckResult:
     cause: Cause = NO_CAUSE
     parts: tuple[CheckPart, ...] = field(default_factory=tuple)
     measured: str | None = None
+    #: the effect sizes beside the exact verdict, with their intervals and tolerance verdicts
+    #: (:mod:`kalcal.stats.effects`); empty where the run kept none
+    effect_sizes: tuple = field(default_factory=tuple)
+    #: the tolerance verdict: every effect's interval inside its band; None where there are none
+    within_tolerance: bool | None = None
 
     def __post_init__(self):
         _check_invariant("check", self.name, self.pvalue, 1.0 - self.confidence, self.passed)
@@ -195,6 +200,7 @@ class CheckResult:
         """The entry of ``summary.json``'s ``tests`` list (``parts`` as a list of dicts)."""
         document = asdict(self)
         document["parts"] = [part.as_dict() for part in self.parts]
+        document["effect_sizes"] = [effect.as_dict() for effect in self.effect_sizes]
         return document
 
 

@@ -101,12 +101,46 @@ def run_checks(
     """Every check, in a fixed order."""
     if not 0.0 < confidence < 1.0:
         raise ValueError(f"confidence must lie in (0, 1), got {confidence!r}")
+    if info.capabilities is not None and info.capabilities.batch:
+        return final_time_checks(s, info, confidence, expected_mean_error, model_error_cause)
     return [
         check_mean_error(s, info, confidence, expected_mean_error, model_error_cause),
         check_covariance(s, info, confidence),
         check_orthogonality(s, info, confidence),
         check_residual_whiteness(s, info, confidence),
         check_nis(s, info, confidence),
+    ]
+
+
+def final_time_checks(
+    s: EnsembleStatistics,
+    info: ProblemInfo,
+    confidence: float = DEFAULT_CONFIDENCE,
+    expected_mean_error: np.ndarray | None = None,
+    model_error_cause: str = "",
+) -> list[CheckResult]:
+    """The checks of a batch estimator (``Capabilities.batch``: one final estimate per realization): the
+    mean error, covariance, orthogonality and NIS at the final update alone. There is no sequence of
+    innovations to be white, and the earlier updates are not estimates the estimator gives, so
+    residual_whiteness is left out and the families have m for K = 1."""
+    import dataclasses
+
+    last = slice(-1, None)
+
+    def final(value):
+        return value[last] if isinstance(value, np.ndarray) and value.ndim >= 1 and value.shape[0] == s.mean_error.shape[0] else value
+
+    one = dataclasses.replace(
+        s, **{f.name: final(getattr(s, f.name)) for f in dataclasses.fields(s) if f.name not in ("count", "residual_second_moment")},
+        residual_second_moment=None,
+    )
+    info_one = dataclasses.replace(info, update_times=np.asarray(info.update_times)[last])
+    expected = None if expected_mean_error is None else np.asarray(expected_mean_error)[last]
+    return [
+        check_mean_error(one, info_one, confidence, expected, model_error_cause),
+        check_covariance(one, info_one, confidence),
+        check_orthogonality(one, info_one, confidence),
+        check_nis(one, info_one, confidence),
     ]
 
 

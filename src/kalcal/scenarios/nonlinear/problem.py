@@ -1,0 +1,210 @@
+"""A nonlinear model's filter against its truth as a verification problem (the engine's Problem protocol).
+
+Each block of n realizations draws, from the block's generator, x_0 ~ N(x0, P0) then per update the
+process and measurement noises, all as (n, d) and (n, p) arrays (one call of f and h per update for the
+whole block), so a given seed gives the same realizations whatever the workers. The filter (EKF, IEKF or
+UKF, :func:`kalcal.core.nonlinear_run.run_nonlinear_filter`) runs on the whole block; as each update ends
+its errors, each realization's own P_k and S_k, NEES, NIS and the whitened errors and innovations are
+added into the block's sums (nothing of size n K is kept: memory flat in N and in K), with the effect
+sizes' sums (:mod:`kalcal.stats.effects`) and the Cramér–Rao bound's expectations at the true states.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from kalcal.core.nonlinear_run import run_nonlinear_filter
+from kalcal.core.ukf import UnscentedSettings
+from kalcal.montecarlo.accumulators import BlockResult, MomentSums, SumBuffers, whiten
+from kalcal.montecarlo.problem import ProblemInfo, check_engine
+from kalcal.scenarios.nonlinear.settings import NonlinearScenario
+from kalcal.stats.effects import EffectAccumulator, EffectLayout
+
+
+def _factor(cov: np.ndarray) -> np.ndarray:
+    """A square root C C^T = cov of a positive semidefinite covariance (Cholesky, or by eigenvalues where
+    it is singular: a zero Q of static parameters)."""
+    try:
+        return np.linalg.cholesky(cov)
+    except np.linalg.LinAlgError:
+        w, v = np.linalg.eigh(cov)
+        return v * np.sqrt(np.clip(w, 0.0, None))
+
+
+def _per_update(value: np.ndarray | None, k: int) -> np.ndarray | None:
+    """Update k's row of a shared (size,) or per-update (K, size) array."""
+    if value is None:
+        return None
+    return value if value.ndim == 1 else value[k]
+
+
+@dataclass(frozen=True)
+class NonlinearProblem:
+    """The scenario's filter against its truth (engine "exact": the truth at the update times)."""
+
+    scenario: NonlinearScenario
+    residual_pairs: bool = True
+    info: ProblemInfo = field(init=False)
+    engines: tuple[str, ...] = field(init=False, default=("exact",))
+
+    NOT_TIME_INVARIANT = "its model is nonlinear: the gains depend on the state, and there is no algebraic Riccati equation"
+
+    def __post_init__(self) -> None:
+        s = self.scenario
+        m = s.loaded.filter
+        k = s.n_updates
+        info = ProblemInfo(
+            scenario=f"nonlinear ({s.filter.kind}, {s.model.file})",
+            update_times=np.arange(1, k + 1) * float(m.dt),
+            state_names=m.state_names,
+            state_units=m.state_units,
+            measurement_names=m.measurement_names,
+            measurement_units=m.measurement_units,
+            capabilities=s.capabilities,
+        )
+        object.__setattr__(self, "info", info)
+
+    @property
+    def layout(self) -> EffectLayout:
+        m = self.scenario.loaded.filter
+        return EffectLayout(self.scenario.n_updates, m.state_dim, m.measurement_dim)
+
+    def normals_per_realization(self, engine: str) -> int:
+        m = self.scenario.loaded.truth
+        return m.state_dim + self.scenario.n_updates * (m.state_dim + m.measurement_dim)
+
+    def expected_mean_error(self) -> np.ndarray:
+        """Zeros: no deterministic model error is predicted for a model written as code."""
+        return np.zeros((self.scenario.n_updates, self.scenario.loaded.filter.state_dim))
+
+    # -- the truth ---------------------------------------------------------------------------------
+
+    def _simulate(self, rng: np.random.Generator, n: int):
+        """The block's true states (K, n, d) and measurements (n, K, p), and x_0 (n, d)."""
+        loaded = self.scenario.loaded
+        t = loaded.truth
+        d, p, k_count = t.state_dim, t.measurement_dim, self.scenario.n_updates
+        x = t.x0 + rng.standard_normal((n, d)) @ _factor(t.p0).T
+        noise = rng.standard_normal((k_count, n, d + p))
+        q_factor, r_factor = _factor(t.q), _factor(t.r)
+        states = np.empty((k_count, n, d))
+        z = np.empty((n, k_count, p))
+        x0 = x
+        for k in range(k_count):
+            x = t.transition(x, _per_update(loaded.inputs, k)) + noise[k, :, :d] @ q_factor.T
+            states[k] = x
+            z[:, k] = t.measure(x, _per_update(loaded.data, k)) + noise[k, :, d:] @ r_factor.T
+        return x0, states, z
+
+    def _run(self, z: np.ndarray, on_update, keep: bool):
+        s, loaded = self.scenario, self.scenario.loaded
+        f = s.filter
+        k_count = s.n_updates
+
+        def rows(value):
+            if value is None:
+                return None
+            return np.broadcast_to(value, (k_count, value.shape[-1])) if value.ndim == 1 else value
+
+        return run_nonlinear_filter(
+            loaded.filter, z, method=f.kind, u=rows(loaded.inputs), data=rows(loaded.data),
+            unscented=UnscentedSettings(f.alpha, f.beta, f.kappa), max_iterations=f.max_iterations,
+            on_update=on_update, keep=keep,
+        )
+
+    # -- the engine's protocol ----------------------------------------------------------------------
+
+    def run_block(self, rng: np.random.Generator, n: int, engine: str) -> BlockResult:
+        """The block's realizations filtered and kept whole (n, K, ...): the numpy oracle of :meth:`block_sums`."""
+        check_engine(self, engine)
+        _, states, z = self._simulate(rng, n)
+        run = self._run(z, None, True)
+        error = states.transpose(1, 0, 2) - run.x
+        eps = whiten(run.cov, error)
+        u = whiten(run.innovation_cov, run.residual)
+        return BlockResult(
+            error=error,
+            estimate=run.x,
+            residual=run.residual,
+            nees=np.einsum("nki,nki->nk", eps, eps),
+            nis=np.einsum("nka,nka->nk", u, u),
+            filter_cov_sum=run.cov.sum(axis=0),
+            filter_cov=run.cov,
+            normalized_residual=u,
+        )
+
+    def shown_realization(self, rng: np.random.Generator, n: int, index: int, engine: str = "exact"):
+        """Realization ``index`` of a block of n: its error, estimate (K, d) and own P_k (K, d, d)."""
+        if not 0 <= index < n:
+            raise ValueError(f"realization index must lie in [0, {n}), got {index}")
+        check_engine(self, engine)
+        _, states, z = self._simulate(rng, n)
+        one = slice(index, index + 1)
+        run = self._run(z[one], None, True)
+        return states[:, index] - run.x[0], run.x[0], run.cov[0]
+
+    def block_sums(self, rng: np.random.Generator, n: int, engine: str) -> MomentSums:
+        """The moment sums and the effect sums of n realizations, added update by update."""
+        check_engine(self, engine)
+        s, loaded = self.scenario, self.scenario.loaded
+        t = loaded.truth
+        d, p, k_count = t.state_dim, t.measurement_dim, s.n_updates
+        x0, states, z = self._simulate(rng, n)
+        sums = SumBuffers.zeros(k_count, d, p, n, self.residual_pairs, own_cov=True)
+        layout = self.layout
+        flat = layout.zeros()
+        effects = EffectAccumulator(layout, flat, n)
+        normalized = np.zeros((k_count, p))
+        q = np.asarray(t.q, dtype=float)
+        q_inv = np.linalg.inv(q) if np.linalg.matrix_rank(q) == d else None  # d x d once per block
+        r_chol = np.linalg.cholesky(t.r)
+
+        def on_update(k: int, result) -> None:
+            x_true = states[k]
+            e = x_true - result.x
+            cov = result.cov
+            eps = whiten(cov, e)
+            u = whiten(result.innovation_cov, result.residual)
+            nees_k = np.einsum("ni,ni->n", eps, eps)
+            nis_k = np.einsum("na,na->n", u, u)
+            sums.error[k] += e.sum(0)
+            sums.error_outer[k] += e.T @ e
+            sums.estimate[k] += result.x.sum(0)
+            sums.estimate_outer[k] += result.x.T @ result.x
+            sums.error_estimate[k] += e.T @ result.x
+            sums.nees[k] += nees_k.sum()
+            sums.nis[k] += nis_k.sum()
+            sums.residual[k] += result.residual.sum(0)
+            sums.residual_own[k] += result.residual.T @ result.residual
+            sums.filter_cov[k] += cov.sum(0)
+            sums.whitened_error[k] += eps.sum(0)
+            sums.whitened_outer[k] += eps.T @ eps
+            sums.whitened_estimate[k] += eps.T @ result.x
+            normalized[k] += u.sum(0)
+            if self.residual_pairs:
+                sums.residuals[k * p:(k + 1) * p] = u.T
+            effects.update(k, e, cov, nees_k, nis_k, u)
+            # the Cramér–Rao bound's expectations, at the truth's own states with the truth's Jacobians
+            previous = x0 if k == 0 else states[k - 1]
+            jf = t.transition_jacobian(previous, _per_update(loaded.inputs, k))
+            jh = t.measurement_jacobian(x_true, _per_update(loaded.data, k))
+            wh = np.linalg.solve(r_chol, jh)  # R^-1/2 H, (n, p, d): a triangular solve, no inverse
+            ftqf = np.einsum("nai,ab,nbj->ij", jf, q_inv, jf) if q_inv is not None else np.zeros((d, d))
+            effects.truth(k, jf.sum(0), ftqf, np.einsum("nai,naj->ij", wh, wh))
+
+        self._run(z, on_update, False)
+        effects.finish()
+        out = MomentSums.from_buffers(n, sums, normalized_residual=normalized)
+        out.effect = flat
+        return out
+
+    def effect_sizes(self, sums: MomentSums, confidence: float):
+        """The run's effect sizes, tolerance verdicts (``checks.tolerance``) and the truth's Cramér–Rao bound."""
+        from kalcal.stats.effects import effect_sizes
+
+        t = self.scenario.loaded.truth
+        return effect_sizes(
+            self.layout, sums.effect, sums, self.info.state_names, confidence, self.scenario.checks.tolerance, (t.q, t.r, t.p0)
+        )
