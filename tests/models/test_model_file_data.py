@@ -373,7 +373,6 @@ def test_a_file_without_data_is_not_bound():
 
 
 def test_binding_a_ros_bag_topic(tmp_path):
-    pytest.importorskip("rosbags")
     from tests._logfiles import write_imu_bag
 
     stamps = 1_700_000_000_000_000_000 + np.arange(6) * 10_000_000  # 100 Hz
