@@ -1,5 +1,4 @@
-"""A model file's filter or truth: the time-invariant model, its known inputs, the rows of h taken from data,
-and the states it starts without prior information.
+"""A model file's filter or truth: its matrices, known inputs, rows of h taken from data and diffuse states.
 
 A :class:`FileModel` is a :class:`~kalcal.core.model.LinearGaussianModel` with what a model file adds::
 
