@@ -355,7 +355,7 @@ def fit_model_file(
             f"{int(run.conditioned.sum())} measurement(s) conditioned on; an exact diffuse llf (statsmodels') is it "
             f"plus diffuse_term ({run.diffuse_term:.6g} at the estimate), a constant in w and v"
         )
-    if rows < int(np.count_nonzero(np.any(run.measured, axis=1))):
+    if rows < int(np.count_nonzero(np.any(np.isfinite(run.residual), axis=1))):  # rows with a partial measurement
         notes.append(
             f"the innovation diagnostics use the {rows} rows with every component measured and a proper prior"
         )
@@ -367,7 +367,7 @@ def fit_model_file(
     header = [
         f"kalcal fit: {', '.join(keys)} fitted by maximum likelihood to {bound.source}",
         f"({counted} measurements in the likelihood, log L = {fit.loglik:.6g}, {fit.interval_method} intervals).",
-        *(f"{p.name}: {p.note if not p.identified else 'fitted, ' + interval_text(p)}" for p in fit.parameters.values()),
+        *(f"{p.name}: {p.note if not p.identified else 'fitted, ' + interval_text(p)}".rstrip() for p in fit.parameters.values()),
         "`kalcal calibrate` and `kalcal verify` take this file as it is.",
     ]
     if not adequate:
