@@ -171,3 +171,24 @@ def test_profile_and_default_keys():
     assert list(result.parameters) == ["filter.w", "filter.v"] and result.interval_method == "profile"
     for p in result.parameters.values():
         assert p.ci_low < p.value < p.ci_high and p.se is None
+
+
+# model.toml's truth: a matrix the file's [truth] sets apart from its filter stays; the others follow the
+# fitted filter; fit.settings say the same (filter, and truth where it follows). A kalcal.Model fits too.
+def test_model_toml_truth_follows_the_filter_where_the_file_let_it(tmp_path):
+    from kalcal.api.model import Model
+
+    model = Model(phi=[[0.5]], gamma=[[1.0]], h=[[1.0]], w=[[2.0]], v=[[3.0]], x0=[0.0], m0=[[4.0]],
+                  truth={"v": [[5.0]]}, data={"measurements": ["y"]})  # fmt: skip
+    result = kalcal.fit(model, data=_ar1_log(), free="filter.w,filter.v", out=tmp_path / "fit")
+    fitted = load_model_file(tmp_path / "fit" / "model.toml")
+    assert fitted.truth.v[0, 0] == 5.0 and fitted.filter.v[0, 0] == result.value("filter.v")
+    assert fitted.truth.w[0, 0] == fitted.filter.w[0, 0] == result.value("filter.w")
+    assert result.settings["filter"]["w"] == [[result.value("filter.w")]]
+    assert set(result.settings["truth"]) == {"phi", "w"}  # v: the file's truth has its own
+
+
+def test_phi_outside_its_bounds_is_refused():
+    scenario = parse_model(AR1.replace("phi = [[0.5]]", "phi = [[1.5]]"), "ar1.toml")
+    with pytest.raises(ConfigError, match=r"outside the bounds \[-1, 1\]"):
+        free_entries(scenario, ["filter.phi"])
