@@ -235,6 +235,7 @@ measurements = ["infl"]
     assert _referee(ours, keys, theirs, mod, [False, True, True]) == [0, 1, 2]
     assert ours.parameters["filter.phi"].scale == "linear"
     assert 0.9 < ours.value("filter.phi") < 0.95  # inflation is persistent (statsmodels: 0.932)
+    assert any("diffuse_term may depend on phi" in note for note in ours.notes)
 
 
 # The same with phi fixed at 0.8 on both sides: the two variances free.

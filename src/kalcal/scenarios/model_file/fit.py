@@ -355,6 +355,12 @@ def fit_model_file(
             f"{int(run.conditioned.sum())} measurement(s) conditioned on; an exact diffuse llf (statsmodels') is it "
             f"plus diffuse_term ({run.diffuse_term:.6g} at the estimate), a constant in w and v"
         )
+    if scenario.filter.diffuse and any(e.matrix == "phi" for e in entries):
+        notes.append(
+            "phi is free and states start diffuse: diffuse_term may depend on phi (never on w or v), so the maximizer "
+            "of phi under the conditional likelihood may differ from an exact diffuse likelihood's (it does not where "
+            "the conditioned measurements see the diffuse states before any step, as in an AR(1) plus noise)"
+        )
     if rows < int(np.count_nonzero(np.any(np.isfinite(run.residual), axis=1))):  # rows with a partial measurement
         notes.append(
             f"the innovation diagnostics use the {rows} rows with every component measured and a proper prior"
