@@ -1,11 +1,20 @@
 """`kalcal fit accel-gps` of a long log as a ratio to one `kalcal calibrate` of it: one hour at 200 Hz / 5 Hz.
 
-    python benchmarks/bench_fit.py
+    python benchmarks/bench_fit.py               (both parts)
+    python benchmarks/bench_fit.py --model-file  (the model file's part alone)
 
 Each command runs whole, in its own child process (`python -m kalcal ...`: start-up, reading the CSV
 logs, the work and the output files), on the log of benchmarks/bench_calibrate.py. Prints the seconds of
 `calibrate`, of `fit` with the default free settings and intervals (the goal: at most 5 times
 `calibrate`), and of `fit --profile` apart (profile intervals re-maximize the others at each point).
+
+Then a model file (:func:`model_file_part`): a local linear trend (level and slope random walks, exact diffuse)
+on 10^4 simulated updates, three variances free (``filter.v,filter.w.1,filter.w.2``): the seconds of
+``kalcal fit MODEL.toml`` against one ``kalcal calibrate MODEL.toml`` of the same log (goal: within 5x),
+whole commands in child processes. Where ``calibrate`` of a model file is refused (this build lacks it),
+its stand-in is a child process that does calibrate's work without its outputs: read the file, bind the
+log (:func:`kalcal.scenarios.model_file.data.bind`) and run one ``filter_model``; it is said so in the
+output. In-process the same two are timed warm (no start-up, compiled kernels cached).
 """
 
 from __future__ import annotations
@@ -46,5 +55,80 @@ def main() -> None:
         print(f"  fit --profile                  {profile:8.2f} s   {profile / calibrate:5.2f} x calibrate", flush=True)
 
 
+MODEL_FILE = """
+name = "llt"
+phi = [[1.0, 1.0], [0.0, 1.0]]
+gamma = [[1.0, 0.0], [0.0, 1.0]]
+h = [[1.0, 0.0]]
+w = [[0.1, 0.0], [0.0, 0.001]]
+v = [[1.0]]
+x0 = [0.0, 0.0]
+m0 = [[0.0, 0.0], [0.0, 0.0]]
+diffuse = ["level", "slope"]
+state_names = ["level", "slope"]
+[data]
+time = "time"
+measurements = ["z"]
+"""
+
+#: stands in for `kalcal calibrate MODEL.toml` where this build refuses it: the file read, bound, filtered
+PROXY = (
+    "import sys; from kalcal.scenarios.model_file.model import load_model_file; "
+    "from kalcal.scenarios.model_file.data import bind; from kalcal.core.timevarying_filter import filter_model; "
+    "s = load_model_file(sys.argv[1]); b = bind(s, sys.argv[2]); filter_model(b.filter, b.z)"
+)
+
+
+def model_file_part(updates: int = 10_000, seed: int = 0) -> None:
+    """`kalcal fit MODEL.toml` of 10^4 updates, 3 free variances, against one calibrate of it (module docstring)."""
+    import numpy as np
+    import pandas as pd
+
+    from kalcal.core.timevarying_filter import filter_model
+    from kalcal.scenarios.model_file.data import bind
+    from kalcal.scenarios.model_file.fit import fit_model_file
+    from kalcal.scenarios.model_file.model import load_model_file
+
+    print(f"model file: local linear trend, {updates} updates, free filter.v,filter.w.1,filter.w.2", flush=True)
+    rng = np.random.default_rng(seed)
+    slope = np.cumsum(rng.normal(scale=np.sqrt(0.004), size=updates))
+    level = np.cumsum(slope + rng.normal(scale=np.sqrt(0.05), size=updates))
+    z = level + rng.normal(scale=np.sqrt(2.0), size=updates)
+    free = "filter.v,filter.w.1,filter.w.2"
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        model, log = tmp / "llt.toml", tmp / "log.csv"
+        model.write_text(MODEL_FILE)
+        pd.DataFrame({"time": np.arange(updates, dtype=float), "z": z}).to_csv(log, index=False)
+        refused = subprocess.run([sys.executable, "-m", "kalcal", "calibrate", str(model), "--data", str(log), "--out",
+                                  str(tmp / "warm")], capture_output=True, text=True).returncode != 0  # fmt: skip
+        if refused:
+            start = time.perf_counter()
+            subprocess.run([sys.executable, "-c", PROXY, str(model), str(log)], check=True, capture_output=True)
+            calibrate, what = time.perf_counter() - start, "calibrate stand-in (read, bind, one filter_model)"
+        else:
+            calibrate, what = timed("calibrate", str(model), "--data", str(log), "--out", str(tmp / "cal")), "calibrate"
+        print(f"  {what:48s} {calibrate:8.2f} s", flush=True)
+        fit = timed("fit", str(model), "--data", str(log), "--free", free, "--out", str(tmp / "fit"))
+        print(f"  {'fit':48s} {fit:8.2f} s   {fit / calibrate:5.2f} x (goal <= {GOAL:g} x)", flush=True)
+        scenario = load_model_file(model)
+        bound = bind(scenario, log)
+        filter_model(bound.filter, bound.z)  # compiled once
+        start = time.perf_counter()
+        bound = bind(scenario, log)
+        filter_model(bound.filter, bound.z)
+        once = time.perf_counter() - start
+        start = time.perf_counter()
+        result = fit_model_file(scenario, log, free=free.split(","))
+        search = time.perf_counter() - start
+        print(f"  in process, warm: bind + filter_model {once * 1e3:8.1f} ms; fit {search:6.2f} s "
+              f"({search / once:6.1f} x: the search, the Hessian and the curves evaluate log L about a hundred times)",
+              flush=True)
+        print("  estimates: " + ", ".join(f"{k} = {p.value:.4g}" for k, p in result.parameters.items())
+              + " (simulated: v 2, w.1 0.05, w.2 0.004)", flush=True)
+
+
 if __name__ == "__main__":
-    main()
+    if "--model-file" not in sys.argv:
+        main()
+    model_file_part()

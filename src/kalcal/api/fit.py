@@ -46,17 +46,19 @@ def fit(
     sensor: str = "sensor",
     out: str | Path | None = None,
 ) -> FitResult:
-    """Fit the noise settings of a filter to one log: accel-gps (``imu``, ``gps``) or scale-bias (``data``).
+    """Fit the noise settings of a filter to one log: accel-gps (``imu``, ``gps``), scale-bias (``data``) or a
+    model file (``data``, laid out as its ``[data]`` table says).
 
     Parameters
     ----------
-    scenario : {"accel-gps", "scale-bias"}
+    scenario : {"accel-gps", "scale-bias"}, a model file's path (``.toml``) or a :class:`kalcal.Model`
     imu, gps, data, settings, config, init, imu_columns, gps_columns, reference, sensor
         As :func:`kalcal.calibrate`.
     free : str or list of str, optional
         The settings to fit (``"filter.accel_noise_density,filter.bias_walk_density"``; a per-sample key is fitted as its density); default: accel-gps the
         accelerometer noise, bias walk and GPS noise (a multiplier on each per-fix std column the GPS log
-        has), scale-bias the combined measurement noise and the drift.
+        has), scale-bias the combined measurement noise and the drift, a model file every positive diagonal
+        entry of w and v (its keys: ``filter.w``, ``filter.v.2``, ``filter.phi.1.1``, docs/custom-models.md).
     profile : bool
         Intervals from the profile likelihood instead of the observed information.
     gate : float, optional
@@ -64,7 +66,8 @@ def fit(
     confidence : float
         Of the intervals (0.95).
     out : path, optional
-        Also write fit.json, filter.toml and fit.png there, as ``kalcal fit --out`` (one set).
+        Also write fit.json, filter.toml (a model file's: model.toml, the file with the fitted values) and
+        fit.png there, as ``kalcal fit --out`` (one set).
 
     Returns
     -------
@@ -82,7 +85,7 @@ def fit(
         raise KalcalError(f"confidence=: expected a number in (0, 1), got {confidence!r}")  # kalcal fit has no --confidence
     options = FitOptions(free=_free(free), profile=profile, confidence=confidence, imu_columns=imu_columns,
                          gps_columns=gps_columns, init=init, gate=gate, reference=reference, sensor=sensor)
-    model = resolve(scenario, settings, config, defaults=log_defaults(scenario))
+    model = resolve(scenario, settings, config, defaults=log_defaults(scenario), models=True)  # a model file too
     logs = {"imu": imu, "gps": gps, "data": data}
     if out is None:
         return model.fit(logs, options)  # the FitResult the scenario's fit made; its save() writes its files

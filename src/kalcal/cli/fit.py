@@ -31,11 +31,11 @@ def fit(
         typer.Option("--gps", help="accel-gps: GPS log: time [s], position [m], velocity [m/s] (position_std, velocity_std)."),
     ] = None,
     data: Annotated[
-        Optional[Path], typer.Option("--data", help="scale-bias: log of a reference and a sensor column (time [s] optional).")
+        Optional[Path], typer.Option("--data", help="scale-bias: log of a reference and a sensor column (time [s] optional); a model file: the log its [data] table lays out.")
     ] = None,
     free: Annotated[
         Optional[str],
-        typer.Option("--free", help="Settings to fit, KEY,KEY... (e.g. filter.accel_noise_density,filter.bias_walk_density)."),
+        typer.Option("--free", help="Settings to fit, KEY,KEY... (e.g. filter.accel_noise_density,filter.bias_walk_density; a model file's filter.w, filter.v.2, filter.phi.1.1)."),
     ] = None,
     profile: Annotated[
         bool, typer.Option("--profile", help="Intervals from the profile likelihood instead of the observed information.")
@@ -50,11 +50,11 @@ def fit(
     sensor: Annotated[str, typer.Option("--sensor", help="scale-bias: the sensor's column.")] = "sensor",
     imu_columns: Annotated[Optional[str], typer.Option("--imu-columns", help="accel-gps: map roles to columns.")] = None,
     gps_columns: Annotated[Optional[str], typer.Option("--gps-columns", help="accel-gps: map roles to columns.")] = None,
-    out: Annotated[Path, typer.Option("--out", help="Directory for fit.json, filter.toml and fit.png.")] = Path("kalcal-fit"),
+    out: Annotated[Path, typer.Option("--out", help="Directory for fit.json, filter.toml (a model file's: model.toml) and fit.png.")] = Path("kalcal-fit"),
     set_: SetOpt = None,
     config: ConfigOpt = None,
 ) -> None:
-    """Fit noise settings to a log by maximum likelihood: accel-gps (--imu, --gps) or scale-bias (--data).
+    """Fit noise settings to a log by maximum likelihood: accel-gps (--imu, --gps), scale-bias or a model file (--data).
 
     Writes fit.json (estimates, 95% intervals, log L, AIC, adequacy), filter.toml (for --config of
     calibrate and verify; the noise as rate-free densities), fit.png and, for accel-gps, Kalibr's imu.yaml. `kalcal verify --config DIR/filter.toml` checks the fitted filter.

@@ -144,7 +144,8 @@ class FitResult:
     free : list of str or None
         The settings fitted (fit.json's ``free``).
     filter_text : str or None
-        filter.toml, loadable by ``--config`` of calibrate and verify.
+        filter.toml, loadable by ``--config`` of calibrate and verify (a model file's fit: model.toml, the
+        file with the fitted values, which they take in place of the original).
     kalibr_text : str or None
         imu.yaml, the fitted noise densities in Kalibr's form, where the scenario's noise has one.
     linear : tuple of str
@@ -184,6 +185,8 @@ class FitResult:
     #: what one observation of the likelihood is, for the CLI's title (``fixes``; scale-bias's ``samples``)
     nobs_name: str = "fixes"
     derived: dict[str, FitParameter] = field(default_factory=dict)
+    #: the name ``filter_text`` is written under (a model file's fit writes the fitted file, model.toml)
+    filter_name: str = "filter.toml"
 
     def __post_init__(self) -> None:
         if self.interval_method not in INTERVAL_METHODS:
@@ -341,7 +344,7 @@ class FitResult:
         return f"<div>{facts}<br>{verdict}{table}</div>"
 
     def save(self, out: str | Path) -> dict[str, Path]:
-        """Write ``fit.json``, ``filter.toml``, ``fit.png`` and (accel-gps) ``imu.yaml`` into ``out``, as
+        """Write ``fit.json``, ``filter.toml`` (a model file's: ``model.toml``), ``fit.png`` and (accel-gps) ``imu.yaml`` into ``out``, as
         ``kalcal fit --out`` does (one set: whole or not at all, docs/outputs.md); returns the files by name."""
         from kalcal.errors import KalcalError
 

@@ -99,8 +99,10 @@ def for_command(
 
 
 def output_names(result: FitResult) -> tuple[str, ...]:
-    """The files ``result`` writes: :data:`OUTPUT_NAMES`, and :data:`KALIBR_NAME` where it has imu.yaml's text."""
-    return OUTPUT_NAMES if result.kalibr_text is None else (*OUTPUT_NAMES, KALIBR_NAME)
+    """The files ``result`` writes: :data:`OUTPUT_NAMES` (filter.toml under the result's ``filter_name``), and
+    :data:`KALIBR_NAME` where it has imu.yaml's text."""
+    names = tuple(result.filter_name if name == "filter.toml" else name for name in OUTPUT_NAMES)
+    return names if result.kalibr_text is None else (*names, KALIBR_NAME)
 
 
 def save_fit(result: FitResult, out: str | Path) -> dict[str, Path]:
@@ -115,7 +117,7 @@ def save_fit(result: FitResult, out: str | Path) -> dict[str, Path]:
 
         document = result.to_dict()
         write_json(staging / "fit.json", document)
-        (staging / "filter.toml").write_text(result.filter_text)
+        (staging / result.filter_name).write_text(result.filter_text)
         if result.kalibr_text is not None:
             (staging / KALIBR_NAME).write_text(result.kalibr_text)
         plot_fit(result.curves, document["parameters"], staging / "fit.png",

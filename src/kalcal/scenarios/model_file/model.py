@@ -157,6 +157,11 @@ class CustomModelScenario(ScenarioDefaults):
         why = self.without_log()
         commands = {"report"} if why else {"verify", "analyze", "report"}
         refusals = (("verify", why), ("analyze", why)) if why else ()
+        from kalcal.scenarios.model_file.fit import fit_refusal
+
+        why_fit = fit_refusal(self)  # fit needs a [data] table (the log's layout)
+        commands |= set() if why_fit else {"fit"}
+        refusals += (("fit", why_fit),) if why_fit else ()
         return Capabilities(
             exact_analysis=True,
             fixed_gains=True,
@@ -252,6 +257,10 @@ class CustomModelScenario(ScenarioDefaults):
         from kalcal.scenarios.protocol import require
 
         require(self, command)
+        if command == "fit":
+            from kalcal.scenarios.model_file.fit import OUTPUT_NAMES
+
+            return OUTPUT_NAMES
         return ()
 
     def calibrate(self, logs, options):
@@ -260,9 +269,13 @@ class CustomModelScenario(ScenarioDefaults):
         require(self, "calibrate")
 
     def fit(self, logs, options):
+        """The file's w, v (and phi) entries fitted to ``logs`` (``data``) with ``options``
+        (:class:`~kalcal.fitting.run.FitOptions`): :func:`kalcal.scenarios.model_file.fit.fit_logs`."""
+        from kalcal.scenarios.model_file.fit import fit_logs
         from kalcal.scenarios.protocol import require
 
         require(self, "fit")
+        return fit_logs(self, logs, options)
 
     model: CustomModelInfo
     filter: FileModel
