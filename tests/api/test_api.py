@@ -13,6 +13,8 @@ import yaml
 from typer.testing import CliRunner
 
 import kalcal
+from kalcal.calibration.diagnostics import InnovationDiagnostics
+from kalcal.calibration.plausibility import CalibrationWarning
 from kalcal.cli import app
 from kalcal.stats.results import CheckResult
 
@@ -122,7 +124,11 @@ def test_calibrate_takes_dataframes_and_gives_the_files_numbers(logs, tmp_path):
     assert isinstance(result.bias, float) and result.bias_std > 0
     assert result.covariance.shape == (3, 3) and result.covariance_states == ("position", "velocity", "bias")
     assert list(result.estimates.columns[:4]) == ["time", "position", "velocity", "bias"]
-    assert isinstance(result.diagnostics["consistent"], bool) and isinstance(result.warnings, list)
+    assert isinstance(result.diagnostics, InnovationDiagnostics) and isinstance(result.diagnostics.consistent, bool)
+    assert isinstance(result.warnings, tuple) and all(isinstance(w, CalibrationWarning) for w in result.warnings)
+    written = result.to_dict()["diagnostics"]
+    assert set(written) == set(result.diagnostics.to_dict()) and (written["consistent"], written["verdict"]) == (result.diagnostics.consistent, result.diagnostics.verdict)
+    assert result.to_dict()["warnings"] == [{"code": w.code, "message": w.message} for w in result.warnings]
     from_files = kalcal.calibrate("accel-gps", imu=folder / "imu.csv", gps=folder / "gps.csv")
     assert from_files.bias == result.bias and from_files.bias_std == result.bias_std
     assert result.to_dict()["imu"] == "<imu DataFrame>"
@@ -156,7 +162,7 @@ def test_scale_bias_calibrates_from_a_dataframe(tmp_path):
     assert CliRunner().invoke(app, ["simulate", "scale-bias", "--out", str(tmp_path / "sb")]).exit_code == 0
     result = kalcal.calibrate("scale-bias", data=pd.read_csv(tmp_path / "sb" / "data.csv"))
     assert result.scenario == "scale-bias" and result.scale is not None and result.bias_std > 0
-    assert "consistent" in result.diagnostics
+    assert isinstance(result.diagnostics.consistent, bool) and result.diagnostics.verdict.startswith("mean NIS ")
 
 
 @pytest.fixture(scope="module")

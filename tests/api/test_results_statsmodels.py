@@ -19,6 +19,7 @@ from scipy import stats
 from typer.testing import CliRunner
 
 import kalcal
+from kalcal.calibration.plausibility import CalibrationWarning
 from kalcal.cli import app
 from kalcal.results._display import fmt
 
@@ -100,8 +101,10 @@ def test_every_public_result_is_made_by_a_command_checked_here():
 
 @pytest.mark.parametrize("command", sorted(HTML))
 def test_every_public_result_saves_and_draws_html(command, inputs, tmp_path):
-    """save() writes every file it names, each non-empty and each JSON file a document; _repr_html_() draws
-    the command's title and its table, balanced, with the rows of the result it holds."""
+    """Every command's result has to_dict(), save() and _repr_html_(): save() writes every file it names, each
+    non-empty and each JSON file a document; to_dict() is the document save() writes as summary.json (fit.json),
+    key for key; _repr_html_() draws the command's title and its table, balanced, with the rows of the result
+    it holds."""
     name, rows = HTML[command]
     result = COMMANDS[command][1](inputs, tmp_path / "first")
     assert isinstance(result, getattr(kalcal, name)), (command, type(result))
@@ -112,6 +115,13 @@ def test_every_public_result_saves_and_draws_html(command, inputs, tmp_path):
         assert (tmp_path / "saved") in path.parents, path
         if path.suffix == ".json":
             assert isinstance(json.loads(path.read_text()), dict), path
+    document = result.to_dict()  # the command's summary.json (fit.json for a fit), its keys as written
+    assert isinstance(document, dict) and document
+    written = [path for path in saved.values() if path.name in ("summary.json", "fit.json")]
+    if written:
+        # the writer adds schema_version and nonfinite; noise's save adds the files it wrote (``files``)
+        on_disk = set(json.loads(written[0].read_text())) - {"schema_version", "nonfinite", "files"}
+        assert on_disk == set(document) - {"schema_version", "nonfinite"}, command
     page = result._repr_html_()
     assert isinstance(page, str) and page.startswith("<div>") and page.endswith("</div>")
     title = "kalcal sweep" if command == "sweep" else f"kalcal {command}"
@@ -238,7 +248,7 @@ def _escaped(page: str) -> None:
 
 def test_each_html_repr_holds_the_headline_numbers_and_escapes_text(inputs, fitted, tmp_path):
     calibration = kalcal.calibrate("scale-bias", data=inputs["data"])
-    page = dataclasses.replace(calibration, warnings=[{"code": "x", "message": "<script>"}])._repr_html_()
+    page = dataclasses.replace(calibration, warnings=(CalibrationWarning("x", "<script>"),))._repr_html_()
     _escaped(page)
     assert f">{calibration.bias:.4g}<" in page and f">{calibration.bias_std:.4g}<" in page
     assert f">{calibration.scale:.4g}<" in page

@@ -191,5 +191,5 @@ def test_a_consistent_calibration_keeps_its_sigma_trusted():
     """A log whose filter is the truth (seed 0, default scenario): trusted, no sigma-untrusted warning."""
     sim = kalcal.simulate("accel-gps", seed=0)
     result = kalcal.calibrate("accel-gps", imu=sim.logs["imu"], gps=sim.logs["gps"])
-    assert result.diagnostics["consistent"] and result.sigma_trusted
-    assert "sigma-untrusted" not in [w["code"] for w in result.warnings]
+    assert result.diagnostics.consistent and result.sigma_trusted
+    assert "sigma-untrusted" not in [w.code for w in result.warnings]

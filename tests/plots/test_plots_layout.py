@@ -169,3 +169,28 @@ def test_the_same_run_in_two_processes_writes_the_same_figures_and_statistics_by
     assert sorted(name for name in second if name.endswith(".png") or name == "stats.nc") == compared
     differing = [name for name in compared if first[name] != second[name]]
     assert not differing, differing
+
+
+def test_a_figure_is_drawn_once_and_laid_out_as_constrained_layout_would(plots_run, tmp_path, monkeypatch):
+    """save() runs the constrained layout once and draws once: savefig with the engine attached draws twice
+    (a draw with rendering disabled for the layout, then the real one). The bytes are those of savefig with
+    the engine attached."""
+    from matplotlib.figure import Figure
+
+    def figure():
+        fig, axes = _common.new_figure(2, 2)
+        for ax in axes.ravel():
+            ax.plot([0.0, 1.0, 2.0], [1e-3, 3e-3, 2e-3], label="curve")
+            ax.set_ylabel(_common.label("velocity variance", "(m/s)^2"))
+        _common.legend_below(fig, axes[0])
+        fig.suptitle("a title")
+        return fig
+
+    reference = tmp_path / "reference.png"
+    figure().savefig(reference, format="png", dpi=_common.DPI, metadata={"Software": None})
+    draws = []
+    original = Figure.draw
+    monkeypatch.setattr(Figure, "draw", lambda self, renderer: (draws.append(renderer), original(self, renderer))[1])
+    saved = _common.save(figure(), tmp_path / "saved.png")
+    assert len(draws) == 1
+    assert saved.read_bytes() == reference.read_bytes()

@@ -100,10 +100,13 @@ class InnovationDiagnostics:
                 f"consistent={self.consistent} disagrees with pvalue {self.pvalue!r} at confidence {self.confidence!r}"
             )
 
-    def as_dict(self) -> dict:
+    def to_dict(self) -> dict:
+        """``summary.json``'s ``diagnostics``: the fields, ``parts`` as a list of documents."""
         document = asdict(self)
         document["parts"] = [part.as_dict() for part in self.parts]
         return document
+
+    as_dict = to_dict
 
 
 def monte_carlo_pvalue_text(pvalue: float, draws: int) -> str:

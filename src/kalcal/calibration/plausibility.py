@@ -35,7 +35,7 @@ fixes against the positions, unit slips fitted across the two logs) is that scen
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -64,13 +64,22 @@ TIME_UNITS = (("milliseconds", 1e3), ("microseconds", 1e6), ("nanoseconds", 1e9)
 
 @dataclass(frozen=True)
 class CalibrationWarning:
-    """Something a calibration's user must know: a short stable ``code`` and a one-line ``message``."""
+    """Something a calibration's user must know: a short stable ``code`` and a one-line ``message``.
+
+    ``next_step`` is the command or change the message names as the next step, where it names one (the
+    ``sigma-untrusted`` warning's fit); it is part of ``message`` and is not written apart: ``summary.json``'s
+    ``warnings`` hold ``{"code", "message"}`` each (:meth:`to_dict`).
+    """
 
     code: str
     message: str
+    next_step: str | None = field(default=None, compare=False)
 
-    def as_dict(self) -> dict[str, str]:
-        return asdict(self)
+    def to_dict(self) -> dict[str, str]:
+        """``{"code", "message"}``, as ``summary.json``'s ``warnings`` hold it."""
+        return {"code": self.code, "message": self.message}
+
+    as_dict = to_dict
 
 
 def median_rate(time: np.ndarray) -> float:

@@ -42,6 +42,7 @@ def untrusted_warning(diagnostics: Mapping[str, Any], stability: Mapping[str, An
             UNTRUSTED,
             f"the bias 1-sigma {bias_std:.3g} {unit} is NOT trusted: {because}. No noise setting mends this: "
             "calibrate on a log that excites what is unobservable",
+            next_step="calibrate on a log that excites what is unobservable",
         )
     if prior:
         settings = " and ".join(f"{key} = {value:.3g}" for key, value in prior.items())
@@ -51,12 +52,14 @@ def untrusted_warning(diagnostics: Mapping[str, Any], stability: Mapping[str, An
             f"({settings}), which this log contradicts (prior-conflict), not the noise settings. Next: give a "
             f"looser {' and '.join(prior)} or leave {'them' if len(prior) > 1 else 'it'} unset (a diffuse prior) "
             "and calibrate again; a fit that keeps this prior would inflate the noise settings to absorb it",
+            next_step=f"give a looser {' and '.join(prior)} or leave it unset, and calibrate again",
         )
     return because, CalibrationWarning(
         UNTRUSTED,
         f"the bias 1-sigma {bias_std:.3g} {unit} is NOT trusted: it holds only for a model and noise settings that "
         f"fit the log, and {because}. Next: fit the settings to this log, `{next_step}`, then calibrate again "
         "with --config fit/filter.toml (and free more of the model where the fit says it is not adequate)",
+        next_step=next_step,
     )
 
 

@@ -70,9 +70,18 @@ def new_figure(rows: int = 1, cols: int = 1, *, height: int | None = None, share
 
 
 def save(figure: Figure, path: str | Path) -> Path:
-    """Write ``figure`` as a PNG of exactly its pixel size, with no software or time metadata."""
+    """Write ``figure`` as a PNG of exactly its pixel size, with no software or time metadata, drawn once:
+    its layout engine (constrained layout) is run first and then detached, so the figure is laid out as
+    drawn and then frozen (a figure is saved once)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    engine = figure.get_layout_engine()
+    if engine is not None:
+        # savefig with a layout engine draws the figure twice (a draw with rendering disabled that runs the
+        # layout, then the real one): the layout is run here once, through the engine's own execute, and the
+        # engine then let go, so that savefig draws once. The positions are the engine's: the same bytes.
+        engine.execute(figure)
+        figure.set_layout_engine(None)
     figure.savefig(path, format="png", dpi=DPI, metadata={"Software": None})
     return path
 

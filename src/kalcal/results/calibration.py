@@ -16,12 +16,26 @@ import html
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
 import numpy as np
 
 if TYPE_CHECKING:
     import pandas as pd
+
+    from kalcal.calibration.plausibility import CalibrationWarning
+
+
+class Diagnostics(Protocol):
+    """What every calibration's innovation diagnostics have: whether the filter is consistent with the log,
+    the verdict in words and ``summary.json``'s form of them."""
+
+    consistent: bool
+
+    @property
+    def verdict(self) -> str: ...
+
+    def to_dict(self) -> dict[str, Any]: ...
 
 
 @dataclass(frozen=True)
@@ -107,11 +121,16 @@ class CalibrationResult:
     estimates : pandas.DataFrame
         ``estimates.csv``: one row per fix or sample, states, their 1-sigma and (accel-gps) the NIS and
         normalized innovations; made when first read (a calibration from Parquet loads pandas only then).
-    diagnostics : dict
-        accel-gps: the innovation diagnostics (``consistent``, ``verdict``, ...); scale-bias: the mean
-        NIS, its bounds, ``consistent`` and the observability ratios.
-    warnings : list of dict
-        ``{"code", "message"}`` each, empty when none.
+    diagnostics : Diagnostics
+        The innovation diagnostics as the calibration computed them, each with ``consistent``, ``verdict``
+        and ``to_dict()`` (``summary.json``'s form): accel-gps's
+        :class:`~kalcal.calibration.diagnostics.InnovationDiagnostics` (the mean NIS and Ljung-Box tests),
+        scale-bias's :class:`~kalcal.scenarios.scale_bias.job.ScaleBiasDiagnostics` (the mean NIS, its
+        bounds and the observability).
+    warnings : tuple of CalibrationWarning
+        Each with ``code``, ``message`` and, where the message names one, ``next_step``
+        (:class:`~kalcal.calibration.plausibility.CalibrationWarning`); ``to_dict()`` is ``summary.json``'s
+        ``{"code", "message"}``. Empty when none.
     columns : dict of str to ndarray
         ``estimates.csv``'s columns, each (K,) for the K fixes or samples.
     time : float
@@ -140,8 +159,8 @@ class CalibrationResult:
     scale_std: float | None
     covariance: np.ndarray
     covariance_states: tuple
-    diagnostics: dict
-    warnings: list
+    diagnostics: Diagnostics
+    warnings: tuple[CalibrationWarning, ...]
     columns: dict = field(repr=False, compare=False)
     time: float
     units: dict
@@ -295,11 +314,10 @@ class CalibrationResult:
         rows = [[name, value, sigma, ci.loc[name, "lower"], ci.loc[name, "upper"], "yes" if trusted else "NO"]
                 for name, (value, sigma, trusted) in self._estimates().items()]
         facts = html_facts(f"kalcal calibrate {self.scenario}", [
-            ("consistent", self.diagnostics.get("consistent")), ("warnings", len(self.warnings)),
+            ("consistent", self.diagnostics.consistent), ("warnings", len(self.warnings)),
         ] + ([] if self.settings_sigma is None else [("bias sigma over the settings", self.settings_sigma.bias_std)]))
         table = html_table(["estimate", "value", "sigma", "[0.025", "0.975]", "sigma trusted"], rows)
-        notes = "".join(f"<li>{html.escape(str(w.get('code', '')))}: {html.escape(str(w.get('message', '')))}</li>"
-                        for w in self.warnings)
+        notes = "".join(f"<li>{html.escape(w.code)}: {html.escape(w.message)}</li>" for w in self.warnings)
         return f"<div>{facts}{table}" + (f"<ul>{notes}</ul>" if notes else "") + "</div>"
 
     def _conf_int_quiet(self, level: float = 0.95) -> pd.DataFrame:

@@ -69,7 +69,8 @@ def compute_accel_gps_calibration(
     (:mod:`kalcal.scenarios.accel_gps.windows`; 1: none), ``summary["stability"]``.
 
     Implausible logs are refused (:mod:`kalcal.calibration.plausibility`); the summary's ``warnings`` is a
-    list of ``{"code", "message"}`` (empty when none), and ``fixes_default_std`` counts the fixes used whose
+    tuple of :class:`~kalcal.calibration.plausibility.CalibrationWarning` (``summary.json``'s: ``{"code",
+    "message"}`` each; empty when none), and ``fixes_default_std`` counts the fixes used whose
     ``position_std`` / ``velocity_std`` was NaN and took the filter's setting.
 
     With ``scenario.gps_fixes = "velocity"`` the GPS log needs no position column (neither it nor
@@ -233,8 +234,8 @@ def compute_accel_gps_calibration(
         scale_sigma_trusted=(untrusted is None and "scale" not in names) if scenario.has_scale else None,
         covariance=result.covariance[-1],
         covariance_states=tuple(scenario.state_names),
-        diagnostics=diagnostics.as_dict(),
-        warnings=[warning.as_dict() for warning in warnings],
+        diagnostics=diagnostics,
+        warnings=tuple(warnings),
         columns=estimates,
         time=float(result.time[-1]),
         units={"time": "s", **dict(zip(scenario.state_names, scenario.state_units))},
@@ -354,10 +355,10 @@ class AccelGpsCalibrationResult(CalibrationResult):
             "velocity_std": self.velocity_std,
             "covariance": self.covariance,
             "covariance_states": list(self.covariance_states),
-            "diagnostics": self.diagnostics,
+            "diagnostics": self.diagnostics.to_dict(),
             "stability": self.stability,
             "observability": self.observability,
-            "warnings": self.warnings,
+            "warnings": [warning.to_dict() for warning in self.warnings],
             "units": self.units,
         }
         if self.scale is not None:
@@ -411,10 +412,10 @@ class AccelGpsCalibrationResult(CalibrationResult):
 
     def diagnostics_line(self) -> tuple[str, bool] | None:
         """The innovation diagnostics' verdict and whether it is consistent."""
-        return self.diagnostics["verdict"], bool(self.diagnostics["consistent"])
+        return self.diagnostics.verdict, bool(self.diagnostics.consistent)
 
     def strict_failed(self) -> bool:
-        return bool(self.warnings) or not self.diagnostics["consistent"]
+        return bool(self.warnings) or not self.diagnostics.consistent
 
 
 def sigma_note(summary: Mapping[str, Any]) -> str:

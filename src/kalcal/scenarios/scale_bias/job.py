@@ -111,8 +111,10 @@ def compute_scale_bias_calibration(
     and ``correction.json`` (the result's ``correction``: reference = theta1 * sensor + theta2 at the last
     sample, :mod:`kalcal.scenarios.scale_bias.correction`) when saved. ``summary["observability"]`` holds
     each theta's final sigma over its no-data sigma and the parameters above ``UNOBSERVABLE_RATIO`` (0.9), which ``warnings`` (a
-    list of ``{"code", "message"}``, empty when none) then names; ``nis_bounds`` holds the mean NIS's 99%
-    bounds and ``consistent`` whether it lies within them (a ``noise-inconsistent`` warning when not). A
+    tuple of :class:`~kalcal.calibration.plausibility.CalibrationWarning`, ``{"code", "message"}`` each in
+    summary.json, empty when none) then names; ``diagnostics`` (:class:`ScaleBiasDiagnostics`) holds the mean
+    NIS, its 99% bounds and ``consistent`` whether it lies within them (a ``noise-inconsistent`` warning when
+    not). A
     reference or sensor value beyond ``SIGNAL_LIMIT`` (1e12 in the log's unit) is refused (DataError).
 
     ``prior`` is "diffuse" (no information on theta: the log's own estimate) or "settings" (the filter's
@@ -143,18 +145,12 @@ def compute_scale_bias_calibration(
     }
     a, b, ab_cov = result.scale_bias()
     unit = scenario.scenario.unit
-    warnings = [warning.as_dict() for warning in result.warnings(str(data_path))]
+    warnings = list(result.warnings(str(data_path)))
     # the sigmas hold only for a filter the log agrees with: when the NIS or the windows disown it, say so
     # and name the next step, a fit of the noise settings to the same log
     extra = [*(["--reference", reference] if reference != "reference" else []), *(["--sensor", sensor] if sensor != "sensor" else [])]
     fit = " ".join(["kalcal", "fit", "scale-bias", "--data", shlex.quote(str(data_path)), *map(shlex.quote, extra), "--out", "fit"])
     unobservable = result.unobservable()  # an unobservable parameter untrusts the sigma with no noise advice
-    untrusted = untrusted_warning({"consistent": result.consistent, "verdict": f"mean NIS {result.mean_nis:.3g} outside "
-                                   f"[{result.nis_bounds()[0]:.3g}, {result.nis_bounds()[1]:.3g}]"},
-                                  stability.as_dict(), float(np.sqrt(ab_cov[1, 1])), unit, fit,
-                                  f"{' and '.join(unobservable)} unobservable ({result.unobservable_cause()})" if unobservable else None)
-    if untrusted is not None:
-        warnings.append(untrusted[1].as_dict())
     observability = {
         "std_ratio": dict(zip(STATE_NAMES, result.std_ratio.tolist())),
         "threshold": UNOBSERVABLE_RATIO,
@@ -168,6 +164,13 @@ def compute_scale_bias_calibration(
         },
         "note": "final sigma / sigma with no data; the judgement rests on the data-only information (cause)",
     }
+    diagnostics = ScaleBiasDiagnostics(mean_nis=float(result.mean_nis), nis_bounds=tuple(result.nis_bounds()),
+                                       consistent=bool(result.consistent), observability=observability)
+    untrusted = untrusted_warning({"consistent": diagnostics.consistent, "verdict": diagnostics.verdict},
+                                  stability.as_dict(), float(np.sqrt(ab_cov[1, 1])), unit, fit,
+                                  f"{' and '.join(unobservable)} unobservable ({result.unobservable_cause()})" if unobservable else None)
+    if untrusted is not None:
+        warnings.append(untrusted[1])
     because = None if untrusted is None else untrusted[0]
     noise = scenario.filter_noise_variance()
     correction = ScaleBiasCorrection(
@@ -180,9 +183,7 @@ def compute_scale_bias_calibration(
     calibration = ScaleBiasCalibrationResult(
         scenario=scenario.NAME, bias=b, bias_std=float(np.sqrt(ab_cov[1, 1])), scale=a,
         scale_std=float(np.sqrt(ab_cov[0, 0])), covariance=result.covariance[-1], covariance_states=tuple(STATE_NAMES),
-        diagnostics={"mean_nis": result.mean_nis, "nis_bounds": list(result.nis_bounds()), "consistent": result.consistent,
-                     "observability": observability},
-        warnings=warnings, columns=estimates, time=float(result.time[-1]),
+        diagnostics=diagnostics, warnings=tuple(warnings), columns=estimates, time=float(result.time[-1]),
         units={"time": "s", "theta1": "1", "theta2": unit, "scale_error": "1", "bias": unit},
         stability_test=stability, sigma_trusted=untrusted is None, scale_sigma_trusted=untrusted is None,
         sigma_untrusted_because=because, run=result, scale_bias_covariance=ab_cov, settings=section_values(scenario),
@@ -190,6 +191,43 @@ def compute_scale_bias_calibration(
         prior_kind=prior, prior_note=why, correction=correction,
     )
     return calibration if is_frame(source) else mark_inputs(calibration, source)
+
+
+@dataclass(frozen=True)
+class ScaleBiasDiagnostics:
+    """A scale-bias calibration's innovation diagnostics: the mean NIS against its bounds, and what the
+    log alone tells of theta.
+
+    Attributes
+    ----------
+    mean_nis : float
+        The mean normalized innovation squared over the samples used (dimensionless; 1 for a filter the
+        log agrees with).
+    nis_bounds : tuple of float
+        Its two-sided 99% bounds (:meth:`kalcal.scenarios.scale_bias.calibration.ScaleBiasCalibration.nis_bounds`).
+    consistent : bool
+        Whether ``mean_nis`` lies within ``nis_bounds``.
+    observability : dict
+        Each theta's final sigma over its no-data sigma (``std_ratio``), the ``threshold``, the
+        ``unobservable`` ones, their ``cause`` and the ``data_only`` grounds.
+    """
+
+    mean_nis: float
+    nis_bounds: tuple[float, float]
+    consistent: bool
+    observability: dict
+
+    @property
+    def verdict(self) -> str:
+        """The mean NIS against its bounds, in words."""
+        low, high = self.nis_bounds
+        return f"mean NIS {self.mean_nis:.3g} {'within' if self.consistent else 'outside'} [{low:.3g}, {high:.3g}]"
+
+    def to_dict(self) -> dict[str, Any]:
+        """``summary.json``'s keys (at its top level): ``mean_nis``, ``nis_bounds``, ``consistent``,
+        ``observability``."""
+        return {"mean_nis": self.mean_nis, "nis_bounds": list(self.nis_bounds), "consistent": self.consistent,
+                "observability": self.observability}
 
 
 @dataclass(frozen=True, repr=False, eq=False, kw_only=True)
@@ -267,14 +305,11 @@ class ScaleBiasCalibrationResult(CalibrationResult):
             "sigma_trusted": self.sigma_trusted,
             **({"sigma_untrusted_because": self.sigma_untrusted_because} if self.sigma_untrusted_because is not None else {}),
             "scale_bias_correlation": float(ab_cov[0, 1] / np.sqrt(ab_cov[0, 0] * ab_cov[1, 1])),
-            "mean_nis": diagnostics["mean_nis"],
-            "nis_bounds": diagnostics["nis_bounds"],
-            "consistent": diagnostics["consistent"],
-            "observability": diagnostics["observability"],
+            **diagnostics.to_dict(),
             "prior": {"kind": self.prior_kind, "note": self.prior_note, "start_samples": run.start_samples,
                       "conflict": run.conflict},
             "stability": self.stability,
-            "warnings": self.warnings,
+            "warnings": [warning.to_dict() for warning in self.warnings],
             "units": self.units,
         }
 
