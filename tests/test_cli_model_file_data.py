@@ -131,3 +131,54 @@ def test_a_built_in_refuses_a_log_to_simulate(tmp_path):
     _, given = _files(tmp_path)
     _one_line_error(_invoke("simulate", "scale-bias", "--data", given, "--out", tmp_path / "sim"),
                     "--data: not used by simulate scale-bias (it draws its own logs)")
+
+
+def _docs() -> str:
+    from pathlib import Path
+
+    return (Path(__file__).resolve().parents[1] / "docs" / "custom-models.md").read_text(encoding="utf-8")
+
+
+def test_the_docs_worked_example_runs_as_written(tmp_path, monkeypatch):
+    import shlex
+
+    text = _docs()
+    seed003 = next(b for b in text.split("```toml")[1:] if "scale-bias-file" in b).split("```")[0]
+    commands = next(b for b in text.split("```sh")[1:] if "seed003.toml" in b).split("```")[0]
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "seed003.toml").write_text(seed003)
+    diffuse_log(300).to_csv(tmp_path / "given.csv", index=False)
+    for line in commands.strip().splitlines():
+        words = shlex.split(line)
+        assert words[0] == "kalcal"
+        result = _invoke(*words[1:])
+        assert result.exit_code == 0, result.output
+    estimates = pd.read_csv(tmp_path / "cal" / "estimates.csv")
+    summary = json.loads((tmp_path / "cal" / "summary.json").read_text())
+    # the claims of the worked example: row 0 determines the bias alone, the scale from row 1
+    assert np.isnan(estimates.loc[0, "scale"]) and np.isfinite(estimates.loc[0, "bias"])
+    assert np.isfinite(estimates.loc[1, "scale"]) and summary["proper_from"]["row"] == 1
+    assert {"scale_smoothed", "bias_smoothed_std"} <= set(estimates.columns)
+    truth = pd.read_csv(tmp_path / "sim" / "data.csv")[["scale_true", "bias_true"]].iloc[-1].to_numpy()
+    for name, value in zip(("scale", "bias"), truth):  # at 4 sigma: a false alarm of 6e-5 a state
+        assert abs(summary["estimate"][name] - value) < 4 * summary["std"][name]
+    # the messages the docs quote
+    no_truth = _invoke("simulate", "seed003.toml", "--data", "given.csv", "--out", "sim2")
+    _one_line_error(no_truth, "seed003.toml: its filter starts diffuse in scale, bias and it has no [truth] m0: give "
+                              "[truth] m0 (the world's proper prior) to simulate it")
+    assert "`seed003.toml: its filter starts diffuse in scale, bias and it has\nno [truth] m0" in text
+    _one_line_error(_invoke("calibrate", "seed003.toml", "--data", "given.csv", "--gate", 0.99, "--out", "c2"),
+                    "--gate: not available for a model file (seed003.toml) (accel-gps only)")
+
+
+def test_the_docs_python_calls(tmp_path, monkeypatch):
+    import kalcal
+
+    monkeypatch.chdir(tmp_path)
+    seed003 = next(b for b in _docs().split("```toml")[1:] if "scale-bias-file" in b).split("```")[0]
+    (tmp_path / "seed003.toml").write_text(seed003)
+    frame = kalcal.simulate("seed003.toml", seed=1, data=diffuse_log(),
+                            settings={"truth.x0": [1.02, 0.3], "truth.m0": [[0.0004, 0.0], [0.0, 0.01]]}).logs["data"]
+    result = kalcal.calibrate("seed003.toml", data=frame, smooth=True)
+    assert list(result.params.index) == ["scale", "bias"] and list(result.conf_int().index) == ["scale", "bias"]
+    np.testing.assert_array_equal(result.bse.to_numpy(), result.estimate_std)
