@@ -101,9 +101,13 @@ def test_bad_input_is_one_line_and_status_2(tmp_path, args, message):
     assert len(lines) == 1 and lines[0].startswith("kalcal: error: ") and message in lines[0], result.stderr
 
 
-def test_other_commands_point_model_files_to_verify(tmp_path):
-    result = _invoke("simulate", EXAMPLE, "--out", tmp_path)
-    assert result.exit_code == 2 and "a model file (.toml) works with kalcal verify" in result.stderr
+def test_simulate_and_calibrate_refuse_a_model_file_without_data_saying_why(tmp_path):
+    # a model file reaches a log through its [data] table: without one, simulate and calibrate say so
+    for command in (["simulate"], ["calibrate", "--data", str(tmp_path / "log.csv")]):
+        result = _invoke(command[0], EXAMPLE, *command[1:], "--out", tmp_path / "out")
+        lines = result.stderr.strip().splitlines()
+        assert result.exit_code == 2 and len(lines) == 1, result.stderr
+        assert f"a model file ({EXAMPLE}): it has no [data] table" in lines[0], result.stderr
 
 
 def test_a_model_file_with_too_many_updates_is_refused_by_name(tmp_path):

@@ -32,17 +32,20 @@ def calibrate(
     settings_sigma: bool = True,
     out: str | Path | None = None,
 ) -> CalibrationResult:
-    """Calibrate from logged data: accel-gps (``imu``, ``gps``) or scale-bias (``data``).
+    """Calibrate from logged data: accel-gps (``imu``, ``gps``), scale-bias (``data``) or a model file (``data``).
 
     Parameters
     ----------
-    scenario : {"accel-gps", "scale-bias"}
+    scenario : {"accel-gps", "scale-bias"}, a model file's path (``.toml``) or a :class:`kalcal.Model`
+        A model file with a ``[data]`` table takes ``data``, ``smooth`` and ``windows``
+        (:mod:`kalcal.scenarios.model_file.calibrate`: every state's estimate, the log-likelihood).
     imu, gps : DataFrame or path
         accel-gps: the accelerometer log (time [s], accel [m/s^2]) and the GPS log (time [s], position
         [m], velocity [m/s], optionally position_std [m], velocity_std [m/s]); CSV, Parquet or DataFrames
         (named ``<imu DataFrame>``, ``<gps DataFrame>`` in errors), checked as the files are.
     data : DataFrame or path
-        scale-bias: a log with a ``reference`` and a ``sensor`` column (and optionally ``time`` [s]).
+        scale-bias: a log with a ``reference`` and a ``sensor`` column (and optionally ``time`` [s]); a model
+        file: a log in its ``[data]`` layout.
     settings : dict, optional
         ``{"section.key": value}``, the keys of ``--set``; ``config`` a TOML file of them.
         A section's table, ``{"filter": {"key": value}}``, is its dotted keys, as in TOML: a fit's
@@ -73,7 +76,8 @@ def calibrate(
     from kalcal.results.calibration import CalibrateOptions
     from kalcal.scenarios import log_defaults
 
-    model = resolve(scenario, settings, config, defaults=log_defaults(scenario))
+    # a model file (or kalcal.Model) is taken as verify takes it; a built-in starts from its log defaults
+    model = resolve(scenario, settings, config, defaults=log_defaults(scenario), models=True)
     # the options a `kalcal fit` of the same logs repeats, named in a warning's next step
     fit_options = (*(["--config", str(config)] if config is not None else []),
                    *(word for key, value in flat_settings(settings).items() for word in ("--set", f"{key}={value}")))

@@ -15,6 +15,7 @@ def simulate(
     settings: Mapping[str, Any] | None = None,
     *,
     config: str | Path | None = None,
+    data=None,
     out: str | Path | None = None,
 ) -> SimulationResult:
     """Simulate one realization drawn with ``seed``.
@@ -22,16 +23,23 @@ def simulate(
     accel-gps: ``logs["imu"]`` (time [s], accel [m/s^2]), ``logs["gps"]`` (time [s], position [m],
     velocity [m/s]) and ``logs["truth"]`` (time, position, velocity, accel, bias at the samples);
     scale-bias: ``logs["data"]`` (time, reference, sensor) and ``truth`` (the drawn scale error, bias, ...).
+    A model file (``MODEL.toml``, a :class:`kalcal.Model`) with a ``[data]`` table: ``logs["data"]``, a log in
+    the file's layout over the rows of ``data`` (a path or DataFrame: its times, inputs, data columns and
+    stds kept, the measurements drawn where it has them, the true states as ``<state>_true``) and ``truth``
+    (truth.json; :mod:`kalcal.scenarios.model_file.simulate`); the built-ins refuse a ``data``.
     ``settings`` takes ``--set``'s keys; ``out`` also writes the files, as ``kalcal simulate --out``.
     """
     from kalcal.api._scenario import resolve
 
-    model = resolve(scenario, settings, config)
+    model = resolve(scenario, settings, config, models=True)
+    logs = {"data": data}
     if out is None:
-        return model.simulate(seed)
+        return model.simulate(seed, logs)
     from kalcal.io.outputs import inputs_of, run_outputs
 
-    with run_outputs(out, f"simulate {model.NAME}", names=model.output_names("simulate"), protect=inputs_of(model)) as staging:
-        simulation = model.simulate(seed)
+    names = model.output_names("simulate")
+    protect = [*([data] if isinstance(data, (str, Path)) else []), *inputs_of(model)]
+    with run_outputs(out, f"simulate {model.NAME}", names=names, protect=protect) as staging:
+        simulation = model.simulate(seed, logs)
         paths = simulation.save(staging)
     return simulation.with_paths({key: Path(out) / Path(path).relative_to(staging) for key, path in paths.items()})

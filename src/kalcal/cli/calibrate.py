@@ -20,7 +20,7 @@ def calibrate(
     ] = None,
     data: Annotated[
         Optional[Path],
-        typer.Option("--data", help="scale-bias: log (CSV, Parquet, ROS bag, ULog) of a reference and a sensor column (time [s] optional)."),
+        typer.Option("--data", help="scale-bias: log (CSV, Parquet, ROS bag, ULog) of a reference and a sensor column (time [s] optional); a model file: a log in its [data] layout."),
     ] = None,
     reference: Annotated[str, typer.Option("--reference", help="scale-bias: the reference's column.")] = "reference",
     sensor: Annotated[str, typer.Option("--sensor", help="scale-bias: the sensor's column.")] = "sensor",
@@ -49,7 +49,7 @@ def calibrate(
         str, typer.Option("--form", help="accel-gps: the filter's update form, joseph (default), standard or sqrt.")
     ] = "joseph",
     smooth: Annotated[
-        bool, typer.Option("--smooth", help="accel-gps: add RTS-smoothed states and their 1-sigma to the outputs.")
+        bool, typer.Option("--smooth", help="accel-gps, a model file: add RTS-smoothed states and their 1-sigma to the outputs.")
     ] = False,
     windows: Annotated[
         int,
@@ -78,7 +78,7 @@ def calibrate(
     set_: SetOpt = None,
     config: ConfigOpt = None,
 ) -> None:
-    """Calibrate from logged data: accel-gps (--imu, --gps) or scale-bias (--data).
+    """Calibrate from logged data: accel-gps (--imu, --gps), scale-bias (--data) or a model file (MODEL.toml --data LOG).
 
     Units are SI: time in s, position in m, velocity in m/s, acceleration and bias in m/s^2. accel-gps
     accepts irregular accelerometer samples, fixes between samples, outages and NaN fields in fixes

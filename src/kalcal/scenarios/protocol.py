@@ -142,8 +142,12 @@ class Scenario(Protocol):
         """Whether its settings make the truth the filter's own model, where no exact analysis says so."""
         ...
 
-    def simulate(self, seed: int) -> Any:
-        """One realization drawn with ``seed``, as logs (:class:`kalcal.results.simulation.SimulationResult`)."""
+    def simulate(self, seed: int, logs: dict[str, Any] | None = None) -> Any:
+        """One realization drawn with ``seed``, as logs (:class:`kalcal.results.simulation.SimulationResult`).
+
+        ``logs`` (``{"data": path or DataFrame}``, as :meth:`calibrate` takes them) is for a scenario whose
+        simulation keeps a given log's rows (a model file: its times, inputs and data columns); a scenario
+        that draws its own logs refuses a given one in one line (:func:`refuse_logs`)."""
         ...
 
     #: the settings a command on logged data (calibrate, fit) starts from, before the user's
@@ -205,3 +209,12 @@ def require(scenario: Any, command: str, *, engine: str | None = None, long_run:
         raise ConfigError(f"--engine: {engine!r} is not available for {name}; {why.get('--engine', 'use ' + ' or '.join(caps.engines))}")
     if long_run and not caps.long_run:
         raise ConfigError(f"--long-run: not available for {name}; {why.get('--long-run', 'its run has no duration setting')}")
+
+
+def refuse_logs(scenario: Any, logs: dict[str, Any] | None, command: str = "simulate") -> None:
+    """Refuse, in one line, a log given to ``command`` of a scenario that draws its own (a built-in's
+    simulate): the first log given, by its option (a :class:`~kalcal.errors.ConfigError`, exit status 2)."""
+    given = [name for name, value in (logs or {}).items() if value is not None]
+    if given:
+        name = getattr(scenario, "label", None) or scenario.NAME
+        raise ConfigError(f"--{given[0]}: not used by {command} {name} (it draws its own logs)")

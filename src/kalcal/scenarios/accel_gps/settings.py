@@ -464,10 +464,13 @@ class AccelGpsScenario:
         (:meth:`source_report`); None for other settings, whose E[r_k r_j^T] there is no number of the report."""
         return REPORT_RESIDUAL_PAIR if self.source_report() else None
 
-    def simulate(self, seed: int):
+    def simulate(self, seed: int, logs=None):
         """The accelerometer and GPS logs of one realization (:func:`kalcal.scenarios.accel_gps.simulate.compute_accel_gps_simulation`)."""
         from kalcal.scenarios.accel_gps.simulate import compute_accel_gps_simulation
 
+        from kalcal.scenarios.protocol import refuse_logs
+
+        refuse_logs(self, logs)  # its logs are drawn, none is read
         return compute_accel_gps_simulation(self, seed)
 
     #: what a command on logged data starts from: the trapezoid's exact discretization of the logged motion

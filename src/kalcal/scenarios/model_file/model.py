@@ -162,6 +162,14 @@ class CustomModelScenario(ScenarioDefaults):
         why_fit = fit_refusal(self)  # fit needs a [data] table (the log's layout)
         commands |= set() if why_fit else {"fit"}
         refusals += (("fit", why_fit),) if why_fit else ()
+        if self.data is not None:  # a log's columns reach the model through its [data] table
+            commands |= {"calibrate", "simulate"}
+        else:
+            no_data = (
+                "it has no [data] table, which says which columns of a log are its time, measurements and inputs "
+                "(docs/custom-models.md)"
+            )
+            refusals = (*refusals, ("calibrate", no_data), ("simulate", no_data))
         return Capabilities(
             exact_analysis=True,
             fixed_gains=True,
@@ -248,12 +256,16 @@ class CustomModelScenario(ScenarioDefaults):
         """False: its exact analysis says whether the truth equals the filter."""
         return False
 
-    def simulate(self, seed: int):
-        from kalcal.errors import KalcalError
+    def simulate(self, seed: int, logs=None):
+        """A log in the file's [data] layout over the rows of ``logs["data"]``, its measurements drawn with
+        ``seed`` (:func:`kalcal.scenarios.model_file.simulate.simulate_logs`)."""
+        from kalcal.scenarios.model_file.simulate import simulate_logs
 
-        raise KalcalError(f"{self.model.name}: kalcal simulate writes the built-in scenarios' logs, not a model file's")
+        return simulate_logs(self, seed, logs)
 
     def output_names(self, command: str) -> tuple[str, ...]:
+        """The files ``command`` writes (simulate: data.csv, truth.json; calibrate: estimates.csv, summary.json;
+        fit: fit.json, fit.png, model.toml)."""
         from kalcal.scenarios.protocol import require
 
         require(self, command)
@@ -261,12 +273,21 @@ class CustomModelScenario(ScenarioDefaults):
             from kalcal.scenarios.model_file.fit import OUTPUT_NAMES
 
             return OUTPUT_NAMES
+        if command == "simulate":
+            from kalcal.scenarios.model_file.simulate import OUTPUT_NAMES
+
+            return OUTPUT_NAMES
+        if command == "calibrate":
+            from kalcal.scenarios.model_file.calibrate import OUTPUT_NAMES
+
+            return OUTPUT_NAMES
         return ()
 
     def calibrate(self, logs, options):
-        from kalcal.scenarios.protocol import require
+        """The filter (and smoother) over ``logs["data"]`` (:func:`kalcal.scenarios.model_file.calibrate.calibrate_logs`)."""
+        from kalcal.scenarios.model_file.calibrate import calibrate_logs
 
-        require(self, "calibrate")
+        return calibrate_logs(self, logs, options)
 
     def fit(self, logs, options):
         """The file's w, v (and phi) entries fitted to ``logs`` (``data``) with ``options``

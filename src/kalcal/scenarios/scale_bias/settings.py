@@ -285,10 +285,13 @@ class ScaleBiasScenario(ScenarioDefaults):
             and noise == self.filter_noise_variance()
         )
 
-    def simulate(self, seed: int):
+    def simulate(self, seed: int, logs=None):
         """The sensor and reference log of one realization (:func:`kalcal.scenarios.scale_bias.job.compute_scale_bias_simulation`)."""
         from kalcal.scenarios.scale_bias.job import compute_scale_bias_simulation
 
+        from kalcal.scenarios.protocol import refuse_logs
+
+        refuse_logs(self, logs)  # its logs are drawn, none is read
         return compute_scale_bias_simulation(self, seed)
 
     def output_names(self, command: str) -> tuple[str, ...]:
