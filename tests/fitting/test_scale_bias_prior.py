@@ -31,7 +31,7 @@ def test_a_log_without_a_prior_is_calibrated_from_a_diffuse_one_and_one_with_a_p
 def test_a_prior_far_from_the_data_is_reported_as_a_conflict():
     sim = kalcal.simulate("scale-bias", seed=3)
     result = kalcal.calibrate("scale-bias", data=sim.logs["data"], settings={"filter.bias": 2.0, "filter.bias_std": 0.05})
-    codes = [w["code"] for w in result.warnings]
+    codes = [w.code for w in result.warnings]
     assert "prior-conflict" in codes and result.summary["prior"]["conflict"]["conflict"]
 
 
