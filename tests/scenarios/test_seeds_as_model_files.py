@@ -141,6 +141,7 @@ def test_seed000_file_is_the_builtin_filter_nominal_plus_error(accel_gps):
     np.testing.assert_allclose(run.innovation_cov[rows], builtin.innovation_cov, rtol=0, atol=EXACT)
     assert log.skip == 0 and run.proper_from == 0
     assert abs(run.loglik - log.loglik()) < EXACT
+    assert run.loglik == pytest.approx(21.30210781, abs=5e-9)  # docs/custom-models.md's number
     # the equality is no accident of a flat likelihood: the built-in's default prior (0.1 m/s^2) is another filter
     _, tight = _builtin_log(imu, gps, {"filter.bias_std": 0.1})
     assert abs(tight.loglik() - run.loglik) > 1e-3
@@ -155,6 +156,7 @@ def test_seed000_diffuse_conventions_and_their_constant(accel_gps):
     _, first = _file_run(SEED000, table.iloc[:41])  # rows 0..40: up to and with the first fix
     # the built-in's likelihood is log p(fixes 2.. | fix 1) under the finite prior: the file's, less fix 1's terms
     assert abs(auto.loglik() - (full.loglik - first.loglik)) < EXACT
+    assert auto.loglik() == pytest.approx(30.75720918, abs=5e-9)
     diffuse_sets = ["filter.m0=[[100.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.0]]", 'filter.diffuse=["bias"]']
     _, exact = _file_run(SEED000, table, diffuse_sets)
     _, exact_first = _file_run(SEED000, table.iloc[:41], diffuse_sets)
@@ -163,12 +165,13 @@ def test_seed000_diffuse_conventions_and_their_constant(accel_gps):
     assert exact.proper_from == 40 and exact.conditioned.sum() == 1 and exact.conditioned[40, 0]
     # the 1000 m/s^2 prior is nearly, not exactly, diffuse: log p(fixes 2.. | fix 1) moves by 1.3e-5 nats
     rest = exact.loglik - exact_first.loglik
-    assert 1e-6 < abs(auto.loglik() - rest) < 1e-4
+    assert auto.loglik() - rest == pytest.approx(1.3e-5, rel=0.05)
     # the constant: a proper prior of variance kappa on the bias gives log L_kappa = llf - 1/2 log kappa + O(1/kappa),
     # llf = loglik + diffuse_term the exact diffuse (statsmodels') likelihood; at kappa = 1e6 the O(1/kappa)
     # and the rounding are 2e-9, while a wrong constant (1/2 log 2 pi = 0.92, or 1/2 log F_inf) is off by > 0.1
     assert abs(full.loglik + 0.5 * np.log(1e6) - (exact.loglik + exact.diffuse_term)) < 1e-8
     assert abs(exact.diffuse_term + 0.5 * np.log(2 * np.pi * 0.02**2)) < 1e-9  # F_inf = (dt^2 / 2 * 40^2)^2 / 1 m^2
+    assert exact.diffuse_term == pytest.approx(2.993, abs=5e-4)
 
 
 def test_seed000_fit_agrees_with_the_builtin_fit(accel_gps):
@@ -191,6 +194,10 @@ def test_seed000_fit_agrees_with_the_builtin_fit(accel_gps):
     mine, theirs = fitted.parameters["filter.w.1"], builtin.parameters["filter.accel_noise_density"]
     assert mine.at_bound and theirs.at_bound
     assert abs(np.log(mine.ci_high) - 2 * np.log(theirs.ci_high * np.sqrt(rate))) < 2 * 2e-4 + 1e-6
+    # docs/custom-models.md's table
+    assert [round(fitted.parameters[k].value, n) for k, n in (("filter.v.1", 5), ("filter.v.2", 8))] == [1.14722, 1.5489e-3]
+    assert round(mine.ci_high, 5) == 0.03945 and round(theirs.ci_high, 6) == 0.014045
+    assert round(fitted.loglik, 7) == round(builtin.loglik, 7) == 23.3022729
 
 
 # -- seed 003 -----------------------------------------------------------------------------------------------------
@@ -234,6 +241,7 @@ def test_seed003_file_is_the_builtin_diffuse_calibration(scale_bias):
                                        np.sqrt(scenario.filter_noise_variance()), 0.0)
     assert samples == int(np.count_nonzero(run.measured & ~run.conditioned)) == 298
     assert abs(run.loglik - value) < EXACT
+    assert value == pytest.approx(49.50673624, abs=5e-9)
 
 
 def test_seed003_proper_prior_variant_is_the_builtin_settings_prior(scale_bias):
@@ -273,5 +281,37 @@ def test_seed003_fit_agrees_with_the_builtin_fit(scale_bias):
     mine, theirs = fitted.parameters["filter.v"], builtin.parameters["filter.reference_noise_std"]
     assert abs(np.log(mine.value) - 2 * np.log(theirs.value)) < SEARCHES * mine.se
     assert mine.se == pytest.approx(2 * theirs.se, rel=0.05)
+    assert round(mine.value, 7) == 0.0400559 and round(theirs.value, 6) == 0.20014
+    assert round(fitted.loglik, 7) == round(builtin.loglik, 7) == 49.5068609
     for end in ("ci_low", "ci_high"):
         assert abs(np.log(getattr(mine, end)) - 2 * np.log(getattr(theirs, end))) < SEARCHES * mine.se
+
+
+def test_seed003_with_drift_the_file_prior_carries_the_first_step(scale_bias):
+    """The built-in predicts P^- = P_0 + Q before its first sample; a file's prior is at row 0, before row 0's
+    measurement, so a drifting theta's file gives m0 = P_0 + Q (and w = q^2 I per sample)."""
+    q = 0.01
+    scenario, builtin = _scale_bias_builtin(scale_bias, {"filter.parameter_drift_std": q}, prior="settings")
+    prior = scenario.filter_prior()
+    m0 = (prior.cov + q**2 * np.eye(2)).tolist()
+    sets = [*_proper_sets()[:2], f"filter.m0={m0}", f"filter.w=[[{q**2!r}, 0.0], [0.0, {q**2!r}]]"]
+    _, run = _file_run(SEED003, scale_bias, sets)
+    _same_run(run, builtin, 0)
+    _, without = _file_run(SEED003, scale_bias, [*_proper_sets()[:2], f"filter.m0={prior.cov.tolist()}", sets[-1]])
+    assert abs(without.state[0] - builtin.theta[0]).max() > 1e-6  # the step is not negligible: the prior must carry it
+
+
+def test_seed000_equals_what_kalcal_calibrate_accel_gps_runs_with_init_prior_and_bias_std_1000(accel_gps):
+    """The command line of docs/custom-models.md: `--init prior --set scenario.integration=euler --set
+    filter.bias_std=1000` is the filter above (a log's calibration defaults to the trapezoid scheme, another model)."""
+    imu, gps, table = accel_gps
+    euler = {"scenario.integration": "euler", "filter.bias_std": 1000.0}
+    result = kalcal.calibrate("accel-gps", imu=imu, gps=gps, settings=euler, init="prior", windows=1, settings_sigma=False)
+    bound, run = _file_run(SEED000, table)
+    rows = np.flatnonzero(np.all(np.isfinite(bound.z), axis=1))
+    for i, name in enumerate(("position", "velocity", "bias")):
+        np.testing.assert_allclose(run.state[rows, i], result.columns[name], rtol=0, atol=EXACT)
+        np.testing.assert_allclose(np.sqrt(run.cov[rows, i, i]), result.columns[f"{name}_std"], rtol=0, atol=EXACT)
+    trapezoid = kalcal.calibrate("accel-gps", imu=imu, gps=gps, settings={"filter.bias_std": 1000.0}, init="prior",
+                                 windows=1, settings_sigma=False)
+    assert np.abs(trapezoid.columns["position"] - run.state[rows, 0]).max() > 1e-3  # the default scheme is not the file
