@@ -81,7 +81,7 @@ def analyze_problem(
     schedule = problem.schedule
     filt = FilterArrays(schedule.transitions, problem.filter_model.h, schedule.gain, problem.filter_model.x0)
     error_map = getattr(problem.truth, "error_map", None)
-    if sources is None:
+    if sources is None and budget:  # the moments alone need no sources
         d_t = truth.transitions.shape[-1]
         names = problem.info.state_names if error_map is None else tuple(f"x{i + 1}" for i in range(d_t))
         sources = factor_sources(
