@@ -39,7 +39,7 @@ def truth_arrays(truth: UpdateRateTruth) -> TruthArrays:
     """The exact engine's truth with covariances in place of factors (M0 = F0 F0^T, Q = L L^T, R = G G^T)."""
     return TruthArrays(
         transitions=np.asarray(truth.transitions, dtype=float),
-        process_cov=truth.noise_factor @ truth.noise_factor.T,
+        process_cov=truth.noise_factor @ np.swapaxes(truth.noise_factor, -1, -2),  # Q_k per update where L_k is
         boundary_in=truth.boundary_in,
         boundary_out=truth.boundary_out,
         boundary_var=1.0,
@@ -47,7 +47,7 @@ def truth_arrays(truth: UpdateRateTruth) -> TruthArrays:
         x0_mean=truth.x0_mean,
         prior_cov=truth.x0_factor @ truth.x0_factor.T,
         h=truth.h,
-        measurement_cov=truth.measurement_factor @ truth.measurement_factor.T,
+        measurement_cov=truth.measurement_factor @ np.swapaxes(truth.measurement_factor, -1, -2),
     )
 
 
@@ -81,7 +81,7 @@ def analyze_problem(
     schedule = problem.schedule
     filt = FilterArrays(schedule.transitions, problem.filter_model.h, schedule.gain, problem.filter_model.x0)
     error_map = getattr(problem.truth, "error_map", None)
-    if sources is None:
+    if sources is None and budget:  # the moments alone need no sources
         d_t = truth.transitions.shape[-1]
         names = problem.info.state_names if error_map is None else tuple(f"x{i + 1}" for i in range(d_t))
         sources = factor_sources(

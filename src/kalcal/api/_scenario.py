@@ -71,3 +71,19 @@ def _is_code(scenario: Any) -> bool:
     return isinstance(scenario, NonlinearModel) or (
         isinstance(scenario, tuple) and len(scenario) == 2 and all(isinstance(m, NonlinearModel) for m in scenario)
     )
+
+
+def with_data(scenario: Any, data: str | Path | None, command: str) -> Any:
+    """The resolved ``scenario`` over the log ``data`` (``--data LOG``) where one is given: a model file with
+    a [data] table only (:func:`kalcal.scenarios.model_file.over_log.over_log`), else refused in one line."""
+    if data is None:
+        return scenario
+    from kalcal.scenarios.model_file.model import CustomModelScenario
+
+    if not isinstance(scenario, CustomModelScenario):
+        raise KalcalError(
+            f"--data: {command} runs a log through a model file's [data] table; the built-in scenarios simulate their own data"
+        )
+    from kalcal.scenarios.model_file.over_log import over_log
+
+    return over_log(scenario, data)

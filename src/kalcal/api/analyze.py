@@ -123,6 +123,7 @@ def analyze(
     form: str = "joseph",
     out: str | Path | None = None,
     command: str = "",
+    data: str | Path | None = None,
 ) -> AnalysisResult:
     """The exact covariance analysis of the filter's gains against the truth: no sampling.
 
@@ -147,20 +148,23 @@ def analyze(
         Also write ``analysis.json``, ``analysis.nc`` and ``figures/`` there, as ``kalcal analyze --out``.
     command : str
         What ``analysis.json`` records as the command.
+    data : path, optional
+        A log for a model file with a ``[data]`` table (``--data LOG``): the analysis of the gains that the
+        log's rows give (per-update H_k, V_k, Phi_k, Q_k), as ``kalcal.verify(..., data=)`` runs them.
 
     Raises
     ------
     KalcalError
         Bad input, or scale-bias (its gains depend on the noisy readings: no exact analysis exists).
     """
-    from kalcal.api._scenario import resolve
+    from kalcal.api._scenario import resolve, with_data
     from kalcal.errors import KalcalError
     from kalcal.core.steps import check_form
 
     if isinstance(n, bool) or not isinstance(n, int) or n < 1:
         raise KalcalError(f"-n: expected a positive number of realizations, got {n!r}")
     check_form(form, "--form")
-    model = resolve(scenario, settings, config, models=True)
+    model = with_data(resolve(scenario, settings, config, models=True), data, "analyze")
     if out is None:
         return _compute(model, n, form, command)
     from dataclasses import replace

@@ -36,6 +36,7 @@ def verify(
     command: str = "",
     notes: Callable[[str], None] | None = None,
     max_run_s: float | None = MAX_RUN_SECONDS,
+    data: str | Path | None = None,
 ) -> VerificationResult:
     """Verify a filter with a Monte Carlo: mean error, covariance, orthogonality, whiteness, NIS.
 
@@ -71,6 +72,11 @@ def verify(
     notes : callable, optional
         ``notes(text)`` hears what the run's user should know while it runs: the estimated wall time of a
         Monte Carlo of a minute or more, and each event of a Dask cluster's own log (a worker restarted).
+    data : path, optional
+        A log for a model file with a ``[data]`` table (``--data LOG``): its rows give H_k, V_k and the
+        update rows, the gains are computed once from them (the same in every realization), the truth is
+        simulated over those rows (:mod:`kalcal.scenarios.model_file.logged`). With the truth's b equal
+        to the filter's the error does not depend on the inputs u, which are not read.
     max_run_s : float, optional
         A run estimated (half a second in) to take longer than this (s; default 24 h) is refused unless it
         saves a ``checkpoint``; None: no limit.
@@ -84,12 +90,12 @@ def verify(
     KalcalError
         Any bad input (a ValueError), with one line naming the setting and the value.
     """
-    from kalcal.api._scenario import resolve
+    from kalcal.api._scenario import resolve, with_data
     from kalcal.errors import KalcalError
     from kalcal.api.verification import check_arguments
     from kalcal.montecarlo.distributed import dask_client
 
-    model = resolve(scenario, settings, config, models=True)
+    model = with_data(resolve(scenario, settings, config, models=True), data, "verify")
     if threads is not None and threads < 1:
         raise KalcalError(f"--threads: expected a positive number, got {threads}")
     check_arguments(model, n, engine=engine, confidence=confidence, long_run=long_run, batch_size=batch_size, form=form)

@@ -2,7 +2,7 @@
 
 import sys
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Optional
 
 import typer
 
@@ -19,6 +19,10 @@ def analyze(
         "kalcal-analysis"
     ),
     form: Annotated[str, typer.Option("--form", help="The filter's update form: joseph (default), standard or sqrt.")] = "joseph",
+    data: Annotated[
+        Optional[Path],
+        typer.Option("--data", help="A log for a model file's [data] table: the gains from its rows, the same in every realization."),
+    ] = None,
     set_: SetOpt = None,
     config: ConfigOpt = None,
 ) -> None:
@@ -32,7 +36,7 @@ def analyze(
 
     with user_errors():
         result = run_analyze(
-            scenario, settings_of(set_), n, config=config, form=form, out=out, command=shlex.join(["kalcal", *sys.argv[1:]])
+            scenario, settings_of(set_), n, config=config, form=form, out=out, command=shlex.join(["kalcal", *sys.argv[1:]]), data=data
         )
     final = result.final
     table = _common._table(

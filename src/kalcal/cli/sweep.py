@@ -20,6 +20,7 @@ def sweep(
     threads: Annotated[Optional[int], typer.Option("--threads", help="Local threads (default: all cores).")] = None,
     workers: Annotated[Optional[int], typer.Option("--workers", help="Local Dask cluster of this many processes.")] = None,
     scheduler: Annotated[Optional[str], typer.Option("--scheduler", help="Existing Dask cluster address.")] = None,
+    data: Annotated[Optional[Path], typer.Option("--data", help="Refused: a sweep over a log is not built.")] = None,
     set_: SetOpt = None,
     config: ConfigOpt = None,
 ) -> None:
@@ -28,6 +29,11 @@ def sweep(
     from kalcal.api.sweep import sweep_settings
 
     with user_errors():
+        if data is not None:
+            from kalcal.errors import KalcalError
+            from kalcal.scenarios.model_file.over_log import NO_SWEEP
+
+            raise KalcalError(f"--data: {NO_SWEEP}")
         key, values, fixed = sweep_settings(set_ or ())
         result = run_sweep(
             scenario, key, values, n, seed, out, fixed, config=config, engine=engine, threads=threads,

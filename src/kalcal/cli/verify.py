@@ -44,6 +44,10 @@ def verify(
     ] = "joseph",
     no_report: Annotated[bool, typer.Option("--no-report", help="Do not draw the figures and report.html.")] = False,
     realization: Annotated[int, typer.Option("--realization", help="Realization shown in the single-run figures.")] = 0,
+    data: Annotated[
+        Optional[Path],
+        typer.Option("--data", help="A log for a model file's [data] table: the gains from its rows, the same in every realization."),
+    ] = None,
     set_: SetOpt = None,
     config: ConfigOpt = None,
 ) -> None:
@@ -75,6 +79,7 @@ def verify(
                 realization=realization,
                 command=shlex.join(["kalcal", *sys.argv[1:]]),
                 notes=_common.print_note,
+                data=data,
             )
     summary = result.raw_summary
     _common._print_checks(summary)

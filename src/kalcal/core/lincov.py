@@ -35,15 +35,16 @@ class TruthArrays:
     """The truth of the module docstring as explicit arrays. d_t states, p measurements, K updates."""
 
     transitions: np.ndarray  #: A_k, (K, d_t, d_t)
-    process_cov: np.ndarray  #: Q, the interval's noise apart from the boundary sample, (d_t, d_t)
+    #: Q, the interval's noise apart from the boundary sample, (d_t, d_t), or Q_k per update (K, d_t, d_t)
+    process_cov: np.ndarray
     boundary_in: np.ndarray  #: b_in, (d_t,)
     boundary_out: np.ndarray  #: b_out, (d_t,)
     boundary_var: float  #: s_u, variance of the shared boundary sample (1, or 0 to switch it off)
     model_error: np.ndarray  #: D_k, (K, d_t)
     x0_mean: np.ndarray  #: (d_t,)
     prior_cov: np.ndarray  #: M0, (d_t, d_t)
-    h: np.ndarray  #: H_t, (p, d_t)
-    measurement_cov: np.ndarray  #: R, (p, p)
+    h: np.ndarray  #: H_t, (p, d_t), or H_t,k per update (K, p, d_t)
+    measurement_cov: np.ndarray  #: R, (p, p), or R_k per update (K, p, p)
 
     @property
     def shares_boundary(self) -> bool:
@@ -56,7 +57,7 @@ class FilterArrays:
     """A fixed-gain filter. d_f states, p measurements, K updates."""
 
     transitions: np.ndarray  #: Phi_k, (K, d_f, d_f)
-    h: np.ndarray  #: H_f, (p, d_f)
+    h: np.ndarray  #: H_f, (p, d_f), or H_f,k per update (K, p, d_f)
     gain: np.ndarray  #: K_k, (K, d_f, p)
     x0: np.ndarray  #: xhat_{-1}, (d_f,)
 
@@ -82,7 +83,7 @@ class _Recursion:
     t: np.ndarray  #: (K, n, n)
     b: np.ndarray  #: (K, n, n_in)
     r: np.ndarray  #: (K, p, n)
-    bz: np.ndarray  #: (p, n_in)
+    bz: np.ndarray  #: (K, p, n_in)
     project: np.ndarray  #: P_M = M E_y, (d_f, d_s)
     d_s: int
 
@@ -99,8 +100,8 @@ def _recursion(truth: TruthArrays, filt: FilterArrays, error_map: np.ndarray | N
     """
     a = np.asarray(truth.transitions, dtype=float)
     n_updates, d_t, _ = a.shape
-    d_f = filt.h.shape[1]
-    p = truth.h.shape[0]
+    d_f = filt.h.shape[-1]
+    p = truth.h.shape[-2]
     c = int(truth.shares_boundary)
     d_s = d_t + c
     m = np.eye(d_t) if error_map is None else np.asarray(error_map, dtype=float)
@@ -108,7 +109,7 @@ def _recursion(truth: TruthArrays, filt: FilterArrays, error_map: np.ndarray | N
         raise ValueError(f"error_map: expected shape {(d_f, d_t)}, got {m.shape}")
     e_y = np.eye(d_t, d_s)
     project = m @ e_y
-    ht = truth.h @ e_y  # (p, d_s)
+    ht = truth.h @ e_y  # (p, d_s), or (K, p, d_s) for rows that change from update to update
     # s_{k+1} = F_k s_k + N [q; u_{k+1}]
     f = np.zeros((n_updates, d_s, d_s))
     f[:, :d_t, :d_t] = a
@@ -130,24 +131,26 @@ def _recursion(truth: TruthArrays, filt: FilterArrays, error_map: np.ndarray | N
     b[:, d_s:, d_s:] = -gain
     h_phi = filt.h @ phi  # (K, p, d_f)
     r = np.concatenate([ht @ f - h_phi @ project, h_phi], axis=-1)
-    bz = np.hstack([ht @ noise, np.eye(p)])
+    bz = np.concatenate([np.broadcast_to(ht @ noise, (n_updates, p, d_s)), np.broadcast_to(np.eye(p), (n_updates, p, p))], axis=-1)
     return _Recursion(t, b, r, bz, project, d_s)
 
 
 def _input_cov(truth: TruthArrays) -> np.ndarray:
-    """Covariance of the interval's inputs [q; u_{k+1}; eta_k]."""
-    d_t = truth.transitions.shape[-1]
+    """Covariance of each interval's inputs [q; u_{k+1}; eta_k], (K, n_in, n_in) (Q and R may change from
+    update to update)."""
+    n_updates, d_t = truth.transitions.shape[0], truth.transitions.shape[-1]
     c = int(truth.shares_boundary)
     blocks = [np.asarray(truth.process_cov, dtype=float)]
     if c:
         blocks.append(np.array([[float(truth.boundary_var)]]))
     blocks.append(np.asarray(truth.measurement_cov, dtype=float))
-    size = d_t + c + truth.h.shape[0]
-    cov = np.zeros((size, size))
+    size = d_t + c + truth.h.shape[-2]
+    cov = np.zeros((n_updates, size, size))
     at = 0
     for block in blocks:
-        cov[at : at + block.shape[0], at : at + block.shape[0]] = block
-        at += block.shape[0]
+        width = block.shape[-1]
+        cov[:, at : at + width, at : at + width] = block
+        at += width
     return cov
 
 
@@ -167,13 +170,13 @@ def _initial(truth: TruthArrays, filt: FilterArrays, rec: _Recursion) -> tuple[n
 
 
 def _covariances(rec: _Recursion, initial: np.ndarray, sigma: np.ndarray) -> np.ndarray:
-    """Cov(e~_k) for a stack of S initial covariances (S, n, n) and input covariances (S, n_in, n_in)."""
+    """Cov(e~_k) for a stack of S initial covariances (S, n, n) and input covariances (S, K, n_in, n_in)."""
     n_updates, d_s = rec.t.shape[0], rec.d_s
     out = np.empty((initial.shape[0], n_updates, rec.project.shape[0], rec.project.shape[0]))
     cov = initial
     for k in range(n_updates):
         t = rec.t[k]
-        cov = symmetrize(t @ cov @ t.T + rec.b[k] @ sigma @ rec.b[k].T)
+        cov = symmetrize(t @ cov @ t.T + rec.b[k] @ sigma[:, k] @ rec.b[k].T)
         out[:, k] = cov[:, d_s:, d_s:]
     return out
 
@@ -224,9 +227,10 @@ def propagate(
     mean, cov = _initial(truth, filt, rec)
     sigma = _input_cov(truth)
     n_updates, p, n = rec.r.shape
-    d_s, d_f = rec.d_s, filt.h.shape[1]
+    d_s, d_f = rec.d_s, filt.h.shape[-1]
     m_d = np.asarray(truth.model_error) @ rec.project[:, : truth.transitions.shape[-1]].T  # M D_k, (K, d_f)
-    hd = np.asarray(truth.model_error) @ truth.h.T  # H_t D_k, (K, p)
+    h_t, model_error = np.asarray(truth.h), np.asarray(truth.model_error)
+    hd = model_error @ h_t.T if h_t.ndim == 2 else np.einsum("kij,kj->ki", h_t, model_error)  # H_t D_k, (K, p)
     mean_error = np.empty((n_updates, d_f))
     error_cov = np.empty((n_updates, d_f, d_f))
     mean_estimate = np.empty((n_updates, d_f))
@@ -237,19 +241,19 @@ def propagate(
     cross = np.zeros((n, n_updates * p))  # Cov(J_k, r_j) for j <= k, column block j
     pair_cov = np.zeros((n_updates, p, n_updates, p)) if pairs else None
     for k in range(n_updates):
-        t, b, r = rec.t[k], rec.b[k], rec.r[k]
+        t, b, r, bz, sig = rec.t[k], rec.b[k], rec.r[k], rec.bz[k], sigma[k]
         mean_residual[k] = r @ mean + hd[k]
-        residual_cov[k] = symmetrize(r @ cov @ r.T + rec.bz @ sigma @ rec.bz.T)
+        residual_cov[k] = symmetrize(r @ cov @ r.T + bz @ sig @ bz.T)
         if pairs:
             if k:
                 pair_cov[k, :, :k, :] = (r @ cross[:, : k * p]).reshape(p, k, p)
                 cross[:, : k * p] = t @ cross[:, : k * p]
-            cross[:, k * p : (k + 1) * p] = t @ cov @ r.T + b @ sigma @ rec.bz.T
+            cross[:, k * p : (k + 1) * p] = t @ cov @ r.T + b @ sig @ bz.T
             pair_cov[k, :, k, :] = residual_cov[k]
         # the jump: -K_k H_t D_k enters e~ (the error's own share M D_k is added when it is read out)
         mean = t @ mean
         mean[d_s:] -= filt.gain[k] @ hd[k]
-        cov = symmetrize(t @ cov @ t.T + b @ sigma @ b.T)
+        cov = symmetrize(t @ cov @ t.T + b @ sig @ b.T)
         mean_error[k] = mean[d_s:] + m_d[k]
         error_cov[k] = cov[d_s:, d_s:]
         mean_estimate[k] = rec.project @ mean[:d_s] + m_d[k] - mean_error[k]

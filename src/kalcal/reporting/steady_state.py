@@ -31,6 +31,8 @@ def steady_state_view(problem) -> SteadyStateView:
         # a problem says why its own filter is not time-invariant (scale-bias: its measurement row)
         reason = getattr(problem, "NOT_TIME_INVARIANT", "its gains depend on the data, so the filter is not time-invariant")
         return no_steady_state(reason, names, units)
+    if getattr(problem, "NOT_STEADY", None):  # a filter over a log says why its own model is not time-invariant
+        return no_steady_state(problem.NOT_STEADY, names, units)
     if getattr(problem, "filter_transitions", None) is not None:
         return no_steady_state(VARYING_TRANSITION, names, units)
     return model_steady_state_view(

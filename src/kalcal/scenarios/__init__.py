@@ -156,6 +156,10 @@ def scenario_of_summary(name: str, settings: Mapping[str, Mapping[str, Any]]):
     with those settings assigned."""
     from kalcal.scenarios.model_file.model import CustomModelScenario, is_custom_settings
 
+    from kalcal.scenarios.model_file.over_log import LoggedModelScenario, settings_have_log
+
+    if settings_have_log(settings):  # a model file's run over a log: read again from its recorded path
+        return LoggedModelScenario.from_settings(settings)
     if is_custom_settings(settings):  # a model file's run: its matrices are the settings
         return CustomModelScenario.from_settings(settings)
     if set(settings) == {"model", "filter", "scenario", "checks"} and is_code_model(settings["model"].get("file", "")) or (

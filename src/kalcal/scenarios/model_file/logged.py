@@ -1,0 +1,415 @@
+"""A model file verified over a log (``verify MODEL.toml --data LOG``): the log's rows give the gains, once.
+
+The log says where the filter updates and what it measures there; the Monte Carlo draws the states and
+the measurements, so the log's own measured values are never used, only which components are measured.
+From the bound model (:func:`kalcal.scenarios.model_file.data.bind`), update k (k = 0..K-1) is the k-th
+row j_k with a measured component; between two updates (and from the prior at row 0 to the first)
+the model steps s_k = j_k - j_{k-1} rows (j_{-1} = 0, so a measurement at row 0 has s_0 = 0)::
+
+    x_{j_k} = Phi_k x_{j_{k-1}} + noise ~ N(0, Q_k),    Phi_k = Phi^{s_k},
+    Q_k = sum_{i<s_k} Phi^i Gamma W Gamma^T (Phi^i)^T         (:func:`kalcal.core.steps.interval_transition`)
+    z_k = H_{j_k} x_{j_k} + v_k,   v_k ~ N(0, V_{j_k})         (the rows and stds the log gives)
+
+These are the same in every realization, so the gains K_k are computed once (:func:`covariance_pass`, the
+steps of :mod:`kalcal.core.steps`), the exact analysis (:mod:`kalcal.core.lincov`, with per-update H, Q
+and R) still applies, and the compiled block kernel
+(:func:`kalcal.scenarios.model_file.logged_kernels.logged_block_moments`) samples, filters and sums in one
+pass, as the time-invariant one does.
+
+Known inputs. x_{j+1} = Phi x_j + B u_j + Gamma w_j in the truth and in the filter: with the truth's b
+equal to the filter's (or its map times its b equal to the filter's), the input moves the truth and the
+filter's prediction alike, so the error e = x - xhat, the innovations and every statistic of the checks
+do not depend on u. The inputs are therefore not read (u = 0: the estimates are those of the input-free
+model, the errors are those of any u). A truth whose b differs makes the error depend on u: refused.
+
+Stated limits, each refused in one line: a measured pattern (which components) that changes from one
+update row to another (the fixed-gain engine holds p measurements at every update; a constant pattern
+that leaves a component out is verified on the components measured); a diffuse filter (the fixed-gain
+filter has no diffuse start: give it a proper m0); a log without a measured row.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import hashlib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from kalcal.core.sources import Source
+from kalcal.core.sqrt_form import cholesky_factor, gram, sqrt_gain_and_factor, sqrt_predict
+from kalcal.core.steps import GainSchedule, UpdateForm, check_form, gain_and_covariance, interval_transition, predict_covariance
+from kalcal.core.timevarying import TimeVaryingModel, measured_components
+from kalcal.errors import ConfigError, DataError
+from kalcal.linalg import psd_factor
+from kalcal.montecarlo.accumulators import SumBuffers
+from kalcal.montecarlo.problem import FixedGainProblem, ProblemInfo, _inverse_spd
+from kalcal.simulation.exact import UpdateRateTruth
+from kalcal.linalg import whitener
+
+__all__ = ["LogRecord", "LoggedFilter", "LoggedTruth", "LoggedGainProblem", "logged_arrays", "covariance_pass_over"]
+
+#: why a filter over a log has no steady state (the report's steady-state section)
+NOT_STEADY = "the filter's rows, noise or update spacing come from a log and change from update to update"
+
+
+@dataclass(frozen=True)
+class LogRecord:
+    """The log a model file is verified over (settings section ``log``): its path as resolved when the run
+    read it, its SHA-256 (so that a rebuild reads the same bytes or says it cannot) and a bag's topic."""
+
+    path: str
+    sha256: str
+    topic: str = ""
+
+
+def record_log(log: str | Path, topic: str | None = None) -> LogRecord:
+    """The :class:`LogRecord` of a log file (its absolute path and digest)."""
+    path = Path(log)
+    if not path.is_file():
+        raise DataError(f"--data: {path}: no such file")
+    digest = hashlib.sha256(path.read_bytes()).hexdigest()
+    return LogRecord(str(path.resolve()), digest, topic or "")
+
+
+def check_record(record: LogRecord) -> None:
+    """Refuse, in one line, a recorded log that is gone or whose bytes changed since the run read it."""
+    path = Path(record.path)
+    if not path.is_file():
+        raise DataError(f"log.path: {record.path}: no such file (the run's log must be where it was to rebuild the run)")
+    digest = hashlib.sha256(path.read_bytes()).hexdigest()
+    if digest != record.sha256:
+        raise DataError(f"log.sha256: {record.path} has changed since the run read it (sha256 {digest[:12]}..., recorded {record.sha256[:12]}...)")
+
+
+@dataclass(frozen=True)
+class LoggedFilter:
+    """The filter's per-update model over a log. K updates, d states, p measured components.
+
+    transitions Phi_k (K, d, d), process_cov Q_k (K, d, d), h H_k (K, p, d), v V_k (K, p, p); x0 (d,) and
+    m0 (d, d), its prior at row 0; steps s_k (K,) the rows of each interval.
+    """
+
+    transitions: np.ndarray
+    process_cov: np.ndarray
+    h: np.ndarray
+    v: np.ndarray
+    x0: np.ndarray
+    m0: np.ndarray
+    steps: np.ndarray
+
+    @property
+    def state_dim(self) -> int:
+        return self.transitions.shape[-1]
+
+    @property
+    def measurement_dim(self) -> int:
+        return self.h.shape[-2]
+
+
+@dataclass(frozen=True)
+class LoggedTruth(UpdateRateTruth):
+    """The exact update-rate truth with per-update noise factor L_k (K, n, r), rows H_k (K, p, n) and
+    measurement factor G_k (K, p, p) (:class:`~kalcal.simulation.exact.UpdateRateTruth` holds one of each).
+    No shared boundary sample and no deterministic model error (D_k = 0)."""
+
+    @property
+    def normals_per_realization(self) -> int:
+        return self.x0_factor.shape[1] + self.n_updates * (self.noise_factor.shape[-1] + self.h.shape[-2])
+
+
+def covariance_pass_over(filt: LoggedFilter, form: UpdateForm = "joseph") -> GainSchedule:
+    """The Riccati recursion over per-update matrices: M_k = Phi_k P_{k-1} Phi_k^T + Q_k, then the update
+    with H_k and V_k, in any of the three forms, by the steps of :mod:`kalcal.core.steps` and
+    :mod:`kalcal.core.sqrt_form` (those of :func:`~kalcal.core.steps.covariance_pass`, which a
+    time-invariant model's constant arrays reproduce bit for bit). P_{-1} is m0, the prior at row 0."""
+    check_form(form)
+    n_updates, d, p = filt.transitions.shape[0], filt.state_dim, filt.measurement_dim
+    prior = np.empty((n_updates, d, d))
+    posterior = np.empty((n_updates, d, d))
+    gains = np.empty((n_updates, d, p))
+    innovation = np.empty((n_updates, p, p))
+    if form == "sqrt":
+        chol = cholesky_factor(filt.m0)
+        factors: dict[bytes, np.ndarray] = {}
+        for k in range(n_updates):
+            key = filt.process_cov[k].tobytes()
+            if key not in factors:
+                factors[key] = cholesky_factor(filt.process_cov[k])
+            _, chol = sqrt_predict(np.zeros(d), chol, filt.transitions[k], factors[key])
+            prior[k] = gram(chol)
+            gains[k], chol, s_chol = sqrt_gain_and_factor(chol, filt.h[k], cholesky_factor(filt.v[k]))
+            posterior[k], innovation[k] = gram(chol), gram(s_chol)
+    else:
+        cov = filt.m0
+        for k in range(n_updates):
+            cov = predict_covariance(cov, filt.transitions[k], filt.process_cov[k])
+            prior[k] = cov
+            gains[k], cov, innovation[k] = gain_and_covariance(cov, filt.h[k], filt.v[k], form)
+            posterior[k] = cov
+    first_phi = filt.transitions[0] if n_updates else np.eye(d)
+    first_q = filt.process_cov[0] if n_updates else np.zeros((d, d))
+    return GainSchedule(prior, posterior, gains, innovation, first_phi, first_q, np.ascontiguousarray(filt.transitions))
+
+
+class LoggedArrays(NamedTuple):
+    """What a log gives the verification: the filter's and truth's per-update models, the update rows."""
+
+    filter: LoggedFilter
+    truth: LoggedTruth
+    rows: np.ndarray  #: j_k, the log's 0-based row of each update, (K,)
+    times: np.ndarray  #: the log's time of each update, s, (K,)
+    components: np.ndarray  #: the measured components (indices into h's rows), (p',)
+
+
+def _intervals(model: TimeVaryingModel, steps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Phi^s and Q_s of each interval of s steps (each distinct s computed once)."""
+    cache: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    d = model.state_dim
+    phis, qs = np.empty((steps.size, d, d)), np.empty((steps.size, d, d))
+    for k, s in enumerate(steps.tolist()):
+        if s not in cache:
+            cache[s] = interval_transition(model.phi, model.gamma, model.w, s)
+        phis[k], qs[k] = cache[s]
+    return phis, qs
+
+
+def logged_arrays(scenario, bound) -> LoggedArrays:
+    """A model file bound to a log (:class:`~kalcal.scenarios.model_file.data.BoundModel`) as the
+    verification's per-update arrays.
+
+    Raises
+    ------
+    ConfigError
+        One line naming the file (and the log's row where it is a row's fault): no measured row, a measured
+        pattern that changes between update rows, a diffuse filter, a truth whose b differs from the filter's.
+    """
+    from kalcal.scenarios.model_file.model import _inputs_cancel
+
+    file = scenario.model.file
+    f, t = bound.filter, bound.truth if bound.truth is not None else bound.filter
+    if np.any(f.diffuse):
+        raise ConfigError(
+            f"{file}: its filter starts diffuse in {', '.join(scenario.filter.diffuse)}: the fixed-gain filter has no "
+            "diffuse start, so it is not verified (give the filter a proper m0, and the world's in [truth])"
+        )
+    if not _inputs_cancel(scenario):
+        raise ConfigError(
+            f"{file}: its truth's b differs from the filter's, so the filter's error depends on the inputs u: a "
+            "verification over a log holds only a truth whose b is the filter's (then the error does not depend on u)"
+        )
+    measured = measured_components(f, bound.z) & np.all(np.isfinite(t.h), axis=2)
+    updates = np.flatnonzero(np.any(measured, axis=1))
+    if updates.size == 0:
+        raise DataError(f"{bound.source}: no row measures any component ({', '.join(bound.table.measurements)}): nothing to verify")
+    pattern = measured[updates[0]]
+    changed = np.flatnonzero(np.any(measured[updates] != pattern, axis=1))
+    if changed.size:
+        j = int(updates[changed[0]])
+        names = bound.measurement_names
+
+        def listed(mask: np.ndarray) -> str:
+            return ", ".join(n for n, m in zip(names, mask) if m)
+
+        raise DataError(
+            f"{bound.source}: row {j + 1} measures ({listed(measured[j])}) where row {updates[0] + 1} measures "
+            f"({listed(pattern)}): the fixed-gain verification needs the same components at every update row"
+        )
+    components = np.flatnonzero(pattern)
+    steps = np.diff(updates, prepend=0)
+    phis, qs = _intervals(f, steps)
+    h = f.h[updates][:, components]
+    v = f.v[updates][:, components][:, :, components]
+    filt = LoggedFilter(phis, qs, h, v, f.x0.copy(), f.m0.copy(), steps)
+    if t is f:
+        t_phis, t_qs, t_h, t_v = phis, qs, h, v
+    else:
+        t_phis, t_qs = _intervals(t, steps)
+        t_h = t.h[updates][:, components]
+        t_v = t.v[updates][:, components][:, :, components]
+    factors = [psd_factor(q) for q in t_qs]
+    rank = max(fac.shape[1] for fac in factors)
+    noise = np.zeros((updates.size, t.state_dim, rank))  # the draws per update are constant: zero columns pad
+    for k, fac in enumerate(factors):
+        noise[k, :, : fac.shape[1]] = fac
+    truth = LoggedTruth(
+        transitions=np.ascontiguousarray(t_phis),
+        noise_factor=noise,
+        boundary_in=np.zeros(t.state_dim),
+        boundary_out=np.zeros(t.state_dim),
+        model_error=np.zeros((updates.size, t.state_dim)),
+        x0_mean=t.x0.copy(),
+        x0_factor=psd_factor(t.m0),
+        h=np.ascontiguousarray(t_h),
+        measurement_factor=np.linalg.cholesky(t_v),
+        error_map=bound.truth_map,
+    )
+    return LoggedArrays(filt, truth, updates, np.asarray(bound.times)[updates], components)
+
+
+class _Run(NamedTuple):
+    posterior: np.ndarray
+    residual: np.ndarray
+
+
+@dataclass(frozen=True)
+class LoggedGainProblem(FixedGainProblem):
+    """:class:`~kalcal.montecarlo.problem.FixedGainProblem` over a log: per-update Phi_k, Q_k, H_k, V_k.
+
+    ``filter_model`` is a :class:`LoggedFilter`, ``truth`` a :class:`LoggedTruth`; the exact engine alone.
+    Its moment sums, realizations shown and statistics are the parent's, through the compiled kernel
+    :func:`~kalcal.scenarios.model_file.logged_kernels.logged_block_moments` and the numpy reference
+    (:meth:`sample`, :meth:`filter`) that tests hold it to.
+    """
+
+    NOT_STEADY = NOT_STEADY
+
+    def __post_init__(self) -> None:
+        d, p = self.filter_model.state_dim, self.filter_model.measurement_dim
+        if (self.truth.error_dim, self.truth.h.shape[-2]) != (d, p):
+            raise ValueError(f"truth: expected {d} filter states and {p} measurements")
+        schedule = covariance_pass_over(self.filter_model, self.form)
+        object.__setattr__(self, "schedule", schedule)
+        object.__setattr__(self, "_state_whitener", whitener(schedule.posterior_cov))
+        object.__setattr__(self, "_innovation_whitener", whitener(schedule.innovation_cov))
+        object.__setattr__(self, "_state_inverse", _inverse_spd(schedule.posterior_cov))
+
+    @property
+    def engines(self) -> tuple[str, ...]:
+        return ("exact",)
+
+    def sample(self, rng: np.random.Generator, n: int, engine: str = "exact") -> tuple[np.ndarray, np.ndarray]:
+        """States (n, K, n_t) and measurements (n, K, p), drawn as the kernel draws them: (d0, n) for the
+        prior, then (r + p, n) per update."""
+        from kalcal.montecarlo.problem import check_engine
+
+        check_engine(self, engine)
+        truth = self.truth
+        d0 = truth.x0_factor.shape[1]
+        n_updates, n_t, r = truth.noise_factor.shape
+        p = truth.h.shape[-2]
+        y = (truth.x0_mean[:, None] + truth.x0_factor @ rng.standard_normal((d0, n))).T
+        states, measurements = np.empty((n, n_updates, n_t)), np.empty((n, n_updates, p))
+        for k in range(n_updates):
+            step = rng.standard_normal((r + p, n)).T
+            y = y @ truth.transitions[k].T + step[:, :r] @ truth.noise_factor[k].T
+            states[:, k] = y
+            measurements[:, k] = y @ truth.h[k].T + step[:, r:] @ truth.measurement_factor[k].T
+        return states, measurements
+
+    def filter(self, measurements: np.ndarray) -> _Run:
+        """The fixed-gain filter over measurements (n, K, p), per-update H_k: posterior and residual."""
+        sched, filt = self.schedule, self.filter_model
+        n, n_updates, _ = measurements.shape
+        x = np.broadcast_to(filt.x0, (n, filt.state_dim))
+        posterior = np.empty((n, n_updates, filt.state_dim))
+        residual = np.empty_like(measurements)
+        for k in range(n_updates):
+            xbar = x @ sched.transitions[k].T
+            residual[:, k] = measurements[:, k] - xbar @ filt.h[k].T
+            x = xbar + residual[:, k] @ sched.gain[k].T
+            posterior[:, k] = x
+        return _Run(posterior, residual)
+
+    def _gains(self) -> tuple:
+        return np.ascontiguousarray(self.schedule.transitions), np.ascontiguousarray(self.filter_model.h), self.schedule.gain, self.filter_model.x0
+
+    def _exact_block(self, rng: np.random.Generator, n: int, sums: SumBuffers, traced: int = -1) -> np.ndarray:
+        from kalcal.scenarios.model_file import logged_kernels
+
+        if not -1 <= traced < n:
+            raise ValueError(f"traced realization must lie in [-1, {n}), got {traced}")
+        truth = self.truth
+        d0 = truth.x0_factor.shape[1]
+        first = rng.standard_normal((d0, n))
+        trace = np.zeros((2, truth.n_updates, self.filter_model.state_dim) if traced >= 0 else (0, 0, 0))
+        logged_kernels.logged_block_moments(
+            truth.x0_mean[:, None] + truth.x0_factor @ first,
+            rng,
+            truth.transitions,
+            np.ascontiguousarray(truth.noise_factor),
+            truth.h,
+            np.ascontiguousarray(truth.measurement_factor),
+            *self._gains(),
+            sums,
+            np.empty((0, 0)) if truth.error_map is None else np.ascontiguousarray(truth.error_map),
+            traced,
+            trace,
+        )
+        return trace
+
+    def expected_mean_error(self) -> np.ndarray:
+        """M E[x_k] - E[xhat_k], (K, d): the filter's response to the truth's mean trajectory."""
+        truth = self.truth
+        mean = np.empty((truth.n_updates, truth.state_dim))
+        y = truth.x0_mean
+        for k in range(truth.n_updates):
+            y = truth.transitions[k] @ y
+            mean[k] = y
+        run = self.filter(np.einsum("kij,kj->ki", truth.h, mean)[None])
+        if truth.error_map is not None:
+            mean = mean @ truth.error_map.T
+        return mean - run.posterior[0]
+
+
+def logged_problem(scenario, form: UpdateForm = "joseph", residual_pairs: bool = True) -> LoggedGainProblem:
+    """A model file's filter against its truth over the scenario's log (``scenario.arrays``)."""
+    arrays = scenario.arrays
+    m = scenario.model
+    info = ProblemInfo(
+        scenario=m.name,
+        update_times=arrays.times,
+        state_names=m.state_names,
+        state_units=m.state_units,
+        measurement_names=tuple(m.measurement_names[i] for i in arrays.components),
+        measurement_units=tuple(m.measurement_units[i] for i in arrays.components),
+        capabilities=scenario.capabilities,
+    )
+    try:
+        return LoggedGainProblem(info=info, filter_model=arrays.filter, truth=arrays.truth, form=form, residual_pairs=residual_pairs)
+    except np.linalg.LinAlgError:
+        raise ConfigError(
+            f"{m.file}: the filter's covariance P_k is singular at some update of the log (give the unobserved "
+            "states prior variance in m0 or process noise through gamma and w)"
+        ) from None
+
+
+def logged_sources(scenario) -> list[Source]:
+    """The error budget's sources over a log, per update (shares of shape (K, ., .)): the truth's prior by
+    the blocks of m0, its process noise by the blocks of w (each block's Q_k over the interval's s_k
+    steps, so the shares sum to Q_k), each measured component's block of V_k (the blocks of v: a std
+    column scales a component, never links two)."""
+    from kalcal.core.sources import blocks, covariance_sources
+
+    arrays = scenario.arrays
+    truth, model = arrays.truth, scenario.truth
+    names = getattr(model, "state_names", None) or scenario.model.state_names
+    if truth.state_dim != len(names):
+        names = tuple(f"x{i + 1}" for i in range(truth.state_dim))
+    process = []
+    for index in blocks(model.w):
+        cache: dict[int, np.ndarray] = {}
+        gamma, w = model.gamma[:, index], model.w[np.ix_(index, index)]
+        share = np.empty((truth.n_updates, truth.state_dim, truth.state_dim))
+        for k, s in enumerate(arrays.filter.steps.tolist()):
+            if s not in cache:
+                cache[s] = interval_transition(model.phi, gamma, w, s)[1]
+            share[k] = cache[s]
+        process.append(("+".join(f"w{i + 1}" for i in index), share, 0.0))
+    r = truth.measurement_factor @ np.swapaxes(truth.measurement_factor, -1, -2)
+    sources = covariance_sources(
+        model.m0, r[0], process, names, tuple(scenario.model.measurement_names[i] for i in arrays.components)
+    )
+    out = []
+    for source in sources:
+        zero_q = np.zeros((truth.n_updates, truth.state_dim, truth.state_dim))
+        if source.kind == "measurement":
+            block = source.measurement_cov != 0  # the block of R_0, which every R_k shares
+            out.append(dataclasses.replace(source, process_cov=zero_q, measurement_cov=np.where(block, r, 0.0)))
+        else:
+            zero_r = np.zeros_like(r)
+            out.append(dataclasses.replace(source, process_cov=source.process_cov if source.kind == "process" else zero_q, measurement_cov=zero_r))
+    return out
