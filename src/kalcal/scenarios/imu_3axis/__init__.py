@@ -1,0 +1,2 @@
+"""The 3-axis accelerometer from static poses: scale factors, misalignment and biases, with intervals
+(procedure (a), six known faces; procedure (b), unknown poses by maximum likelihood)."""
