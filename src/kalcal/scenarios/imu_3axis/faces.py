@@ -172,6 +172,12 @@ def calibrate_faces(samples: dict[str, np.ndarray], gravity: float, tilt_bound: 
     return FaceCalibration(values, cov, tilt, means, mean_cov, counts, whiteness(ordered), gravity, tilt_bound)
 
 
+def correction_of(means: np.ndarray, gravity: float, reading: np.ndarray) -> np.ndarray:
+    """The corrected reading M^-1 (a_m - b) (3,) of one reading (3,) with M and b from the faces' ``means``."""
+    values = estimate(means, gravity)
+    return np.linalg.solve(values["M"], np.asarray(reading, dtype=float) - values["b"])
+
+
 def labels() -> list[str]:
     """:func:`flat`'s entries' names."""
     return ([f"M_{a}{c}" for a in AXES for c in AXES] + [f"bias_{a}" for a in AXES] + [f"scale_{a}" for a in AXES]
