@@ -98,15 +98,15 @@ def detect_poses(readings: np.ndarray, rate: float, settings) -> list[tuple[int,
 
 def name_faces(segments: dict[str, np.ndarray], face_angle: float) -> dict[str, str]:
     """A detected pose's face name where its mean reading lies within ``face_angle`` (rad) of an axis's +-
-    direction (one pose per face: the closest)."""
-    best: dict[str, tuple[float, str]] = {}
+    direction (one pose per face: the longest, whose mean is the most precise)."""
+    best: dict[str, tuple[int, str]] = {}
     for name, samples in segments.items():
         mean = samples.mean(axis=0)
         direction = mean / np.linalg.norm(mean)
         for face in FACES:
             angle = float(np.arccos(np.clip(direction @ face_up(face), -1, 1)))
-            if angle <= face_angle and (face not in best or angle < best[face][0]):
-                best[face] = (angle, name)
+            if angle <= face_angle and (face not in best or samples.shape[0] > best[face][0]):
+                best[face] = (samples.shape[0], name)
     return {pose: face for face, (_, pose) in best.items()}
 
 
