@@ -1,5 +1,6 @@
-"""Procedure (a), six known faces: the full M (9) and b (3) by linear least squares from the faces' means,
-with a noise interval and the faces' tilt carried as a stated worst-case systematic term.
+"""Procedure (a), six known faces: M and b by linear least squares, a noise interval and a worst-case tilt term.
+
+The full M (9) and b (3) come from the faces' means; the faces' tilt is carried as a stated systematic term.
 
 With face i's nominal up direction n_i (+-e_j) the model ā_i = g M n_i + b is linear in (M, b); for the six
 faces the least-squares solution is closed: column j of M is (ā_jp - ā_ja) / (2 g) and b the mean of the six
@@ -20,8 +21,8 @@ both sides, to the noise interval (estimate +- (z sigma + worst case)). What a t
 moves a face's reading across the axes by about g delta (first order) and along it by g (1 - cos delta)
 (second order). M's off-diagonal entries (the misalignment) and the biases of the other axes take the first
 order (|dM_kj| <= about delta for a worst-case tilt of both faces of axis j; |db_k| <= about (4/6) g delta
-from the four faces across axis k); the scales (M's row norms) and the diagonal take the second order only
-(about delta^2 / 2).
+from the four faces across axis k); M's diagonal takes the second order only (about
+delta^2 / 2); the scales (M's row norms) take that and the first order times the misalignment.
 """
 
 from __future__ import annotations

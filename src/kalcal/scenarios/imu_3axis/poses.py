@@ -1,5 +1,6 @@
-"""Procedure (b), unknown poses: the 9 parameters (:data:`~.model.PARAM_NAMES`) by batch maximum likelihood
-from the poses' means, intervals from the information and by the parametric bootstrap.
+"""Procedure (b), unknown poses: the 9 parameters by maximum likelihood, intervals from the information and a bootstrap.
+
+The parameters are :data:`~.model.PARAM_NAMES`, estimated from the poses' means.
 
 Only |f_i| = g is known of pose i, so the magnitude equations |M^-1 (ā_i - b)| = g carry the information.
 Their Gaussian maximum likelihood is solved in its exact form: each pose's 2 tilt angles (tangent
