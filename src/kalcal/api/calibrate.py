@@ -30,13 +30,15 @@ def calibrate(
     windows: int = 2,
     gate: float | None = None,
     settings_sigma: bool = True,
+    poses: str | Path | None = None,
     out: str | Path | None = None,
 ) -> CalibrationResult:
-    """Calibrate from logged data: accel-gps (``imu``, ``gps``), scale-bias (``data``) or a model file (``data``).
+    """Calibrate from logged data: accel-gps (``imu``, ``gps``), scale-bias (``data``), imu-3axis (``imu``,
+    ``poses``) or a model file (``data``).
 
     Parameters
     ----------
-    scenario : {"accel-gps", "scale-bias"}, a model file's path (``.toml``) or a :class:`kalcal.Model`
+    scenario : {"accel-gps", "scale-bias", "imu-3axis"}, a model file's path (``.toml``) or a :class:`kalcal.Model`
         A model file with a ``[data]`` table takes ``data``, ``smooth`` and ``windows``
         (:mod:`kalcal.scenarios.model_file.calibrate`: every state's estimate, the log-likelihood).
     imu, gps : DataFrame or path
@@ -62,6 +64,10 @@ def calibrate(
         accel-gps: also compute the bias's sigma over the noise settings the log cannot reject
         (``CalibrationResult.settings_sigma``; on by default, about the time of a ``kalcal fit`` of the
         log: 0.2-0.9 s on a 30 s log, where the calibration alone takes 0.01 s).
+    poses : path, optional
+        imu-3axis: a JSON of the static poses' sample ranges (imucal's region list, ``{"x_p": {"start": i,
+        "end": j}, ...}``; the six face names select procedure (a), other names procedure (b)); without it
+        a static detector finds the poses (docs/imu-3axis.md).
     out : path, optional
         Also write the files there, as ``kalcal calibrate --out`` (the folder is checked first).
 
@@ -84,7 +90,7 @@ def calibrate(
     options = CalibrateOptions(
         imu_columns=imu_columns, gps_columns=gps_columns, init=init, max_imu_gap=max_imu_gap, on_gap=on_gap, form=form,
         smooth=smooth, gate=gate, settings_sigma=settings_sigma, reference=reference, sensor=sensor, prior=prior,
-        windows=windows, fit_options=fit_options,
+        windows=windows, poses=poses, fit_options=fit_options,
     )
     logs = {"imu": imu, "gps": gps, "data": data}
     if out is None:
@@ -92,7 +98,7 @@ def calibrate(
     from kalcal.io.outputs import inputs_of, run_outputs
 
     names = model.output_names("calibrate")
-    files = [value for value in logs.values() if isinstance(value, (str, Path))]
+    files = [value for value in (*logs.values(), poses) if isinstance(value, (str, Path))]
     with run_outputs(out, f"calibrate {model.NAME}", names=names, protect=[*files, *inputs_of(model)]) as staging:
         result = model.calibrate(logs, options)
         paths = result.save(staging)

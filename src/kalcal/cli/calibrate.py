@@ -29,7 +29,11 @@ def calibrate(
         typer.Option("--prior", help="scale-bias: diffuse (theta from the log alone) or settings (the filter's prior of a, b)."),
     ] = None,
     imu_columns: Annotated[
-        Optional[str], typer.Option("--imu-columns", help="accel-gps: map roles to columns, e.g. time=t,accel=ax.")
+        Optional[str], typer.Option("--imu-columns", help="accel-gps: map roles to columns, e.g. time=t,accel=ax; imu-3axis: the three axes' columns, e.g. ax,ay,az (default acc_x,acc_y,acc_z).")
+    ] = None,
+    poses: Annotated[
+        Optional[Path],
+        typer.Option("--poses", help="imu-3axis: JSON of static poses' sample ranges {\"x_p\": {\"start\": i, \"end\": j}, ...}; face names: procedure (a), others (b); without it a static detector finds them."),
     ] = None,
     gps_columns: Annotated[
         Optional[str],
@@ -78,7 +82,8 @@ def calibrate(
     set_: SetOpt = None,
     config: ConfigOpt = None,
 ) -> None:
-    """Calibrate from logged data: accel-gps (--imu, --gps), scale-bias (--data) or a model file (MODEL.toml --data LOG).
+    """Calibrate from logged data: accel-gps (--imu, --gps), scale-bias (--data), imu-3axis (--imu, --poses) or a
+    model file (MODEL.toml --data LOG).
 
     Units are SI: time in s, position in m, velocity in m/s, acceleration and bias in m/s^2. accel-gps
     accepts irregular accelerometer samples, fixes between samples, outages and NaN fields in fixes
@@ -107,6 +112,7 @@ def calibrate(
             windows=windows,
             gate=gate,
             settings_sigma=settings_sigma,
+            poses=poses,
             out=out,
         )
     summary = result.summary

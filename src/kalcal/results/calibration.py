@@ -66,6 +66,8 @@ class CalibrateOptions:
         scale-bias's prior of theta.
     windows : int
         Windows of the stability test (1: none).
+    poses : str, path or None
+        A JSON of static poses' sample ranges, ``{"x_p": {"start": i, "end": j}, ...}`` (imu-3axis).
     fit_options : tuple of str
         The command line's other options (``--config FILE``, ``--set k=v``), repeated in a next step's
         ``kalcal fit`` command.
@@ -84,6 +86,7 @@ class CalibrateOptions:
     sensor: str = "sensor"
     prior: str | None = None
     windows: int = 2
+    poses: str | Path | None = field(default=None, metadata={"owner": "imu-3axis"})
     fit_options: tuple[str, ...] = ()
 
     def given(self, *names: str) -> list[str]:
@@ -100,6 +103,8 @@ class CalibrateOptions:
         other = self.given(*names)
         if other:
             option = "--" + other[0].replace("_", "-")
+            # an option of one scenario alone names it in its field's metadata; the rest are the owner's
+            owner = {f.name: f.metadata.get("owner", owner) for f in dataclasses.fields(self)}[other[0]]
             raise KalcalError(f"{option}: not available for {scenario} ({owner} only)")
 
 

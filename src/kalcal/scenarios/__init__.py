@@ -22,6 +22,7 @@ from typing import Any, NamedTuple
 _BUILT_IN: dict[str, tuple[str, str]] = {
     "accel-gps": ("kalcal.scenarios.accel_gps.settings", "AccelGpsScenario"),
     "scale-bias": ("kalcal.scenarios.scale_bias.settings", "ScaleBiasScenario"),
+    "imu-3axis": ("kalcal.scenarios.imu_3axis.settings", "Imu3AxisScenario"),
 }
 
 MODEL_FILE = "model-file"

@@ -1,0 +1,188 @@
+"""Procedure (a), six known faces: M and b by linear least squares, a noise interval and a worst-case tilt term.
+
+The full M (9) and b (3) come from the faces' means; the faces' tilt is carried as a stated systematic term.
+
+With face i's nominal up direction n_i (+-e_j) the model ā_i = g M n_i + b is linear in (M, b); for the six
+faces the least-squares solution is closed: column j of M is (ā_jp - ā_ja) / (2 g) and b the mean of the six
+means (each axis's pair cancels M's columns in the sum).
+
+**Noise.** A face's mean has covariance C_i / n_i, C_i the sample covariance of its n_i samples: this
+assumes the samples are white (independent). :func:`whiteness` tests that assumption by batch means (the
+variance of the means of ``BATCHES`` equal batches of a face against C_i / batch length, pooled over the
+faces and axes as a chi-square); a colored noise (a low-pass filter in the sensor) makes the white interval
+too narrow, and the calibration warns.
+
+**Tilt.** A face set on a surface tilted by up to ``tilt_bound`` from its nominal orientation has a true up
+direction f_i / g anywhere in the spherical cap of that half-angle around n_i: its mean moves by
+g M (f_i / g - n_i). Every estimate is (to first order, and exactly for M and b) a linear functional of the
+six means, so its tilt error is the sum over the faces of that functional of the moves; the **worst case**
+over each face's cap is exact for a linear functional (:func:`cap_worst_case`), and the interval adds it, on
+both sides, to the noise interval (estimate +- (z sigma + worst case)). What a tilt does: a tilt of delta
+moves a face's reading across the axes by about g delta (first order) and along it by g (1 - cos delta)
+(second order). M's off-diagonal entries (the misalignment) and the biases of the other axes take the first
+order (|dM_kj| <= about delta for a worst-case tilt of both faces of axis j; |db_k| <= about (4/6) g delta
+from the four faces across axis k); M's diagonal takes the second order only (about
+delta^2 / 2); the scales (M's row norms) take that and the first order times the misalignment.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from kalcal.scenarios.imu_3axis.model import AXES, FACES, face_up, params_of
+
+#: the faces' order in the arrays here
+FACE_ORDER = ("x_p", "x_a", "y_p", "y_a", "z_p", "z_a")
+#: equal batches per face in the whiteness test
+BATCHES = 8
+#: fewest samples a face needs (its covariance and the batches of the whiteness test)
+MIN_SAMPLES = 2 * BATCHES
+
+
+def estimate(means: np.ndarray, gravity: float) -> dict[str, np.ndarray]:
+    """The least-squares M (3, 3) and b (3,), m/s^2, of the six faces' means (6, 3) in :data:`FACE_ORDER`,
+    with the derived scale (row norms of M, (3,)), misalignment (3 angles, rad, :mod:`.model`) and M M^T."""
+    means = np.asarray(means, dtype=float)
+    up = np.array([face_up(name) for name in FACE_ORDER])  # (6, 3)
+    # the normal equations of a_i = M (g n_i) + b over the six faces: G G^T is diagonal, solved in closed form
+    design = np.column_stack([gravity * up, np.ones(6)])  # (6, 4)
+    solution = np.linalg.lstsq(design, means, rcond=None)[0]  # (4, 3): [M^T; b^T]
+    M, b = solution[:3].T, solution[3]
+    params = params_of(M, b)
+    return {"M": M, "b": b, "scale": params[:3], "misalignment": params[3:6], "MMT": M @ M.T}
+
+
+def flat(values: dict[str, np.ndarray]) -> np.ndarray:
+    """M (9, row-major), b (3), scale (3), misalignment (3), M M^T (9) as one vector (27,)."""
+    return np.concatenate([values[key].ravel() for key in ("M", "b", "scale", "misalignment", "MMT")])
+
+
+def gradient(function, means: np.ndarray, step: float = 1e-5) -> np.ndarray:
+    """d function(means) / d means, (k, 6, 3), by central differences (the functions are smooth: M and b are
+    linear, the rest differentiable near any sensor matrix, so the step's error is of order step^2)."""
+    means = np.asarray(means, dtype=float)
+    base = function(means)
+    grad = np.empty((base.size, *means.shape))
+    for index in np.ndindex(means.shape):
+        up, down = means.copy(), means.copy()
+        up[index] += step
+        down[index] -= step
+        grad[(slice(None), *index)] = (function(up) - function(down)) / (2 * step)
+    return grad
+
+
+def cap_worst_case(weights: np.ndarray, nominal: np.ndarray, bound: float) -> np.ndarray:
+    """The worst-case |sum_i w_i . (u_i - n_i)| over unit vectors u_i each within ``bound`` (rad) of n_i.
+
+    weights (k, m, 3), nominal (m, 3): per functional, the larger of the sums of each term's largest rise and
+    of its largest fall (faces tilt independently, so each face takes its own worst direction). For a
+    vector w at angle alpha from n, w . u ranges over |w| cos(max(alpha - bound, 0)) down to
+    |w| cos(min(alpha + bound, pi)) on the cap.
+    """
+    norm = np.linalg.norm(weights, axis=-1)
+    along = np.einsum("kmi,mi->km", weights, nominal)
+    alpha = np.arccos(np.clip(along / np.where(norm > 0, norm, 1.0), -1.0, 1.0))
+    rise = norm * np.cos(np.maximum(alpha - bound, 0.0)) - along
+    fall = along - norm * np.cos(np.minimum(alpha + bound, np.pi))
+    return np.maximum(rise.sum(axis=-1), fall.sum(axis=-1))
+
+
+def propagate(grad: np.ndarray, mean_cov: np.ndarray, M: np.ndarray, gravity: float, bound: float,
+              nominal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The covariance (k, k) of functionals with gradient ``grad`` (k, m, 3) of the poses' means, whose
+    covariances are ``mean_cov`` (m, 3, 3), and each one's worst-case tilt term (k,): a pose's mean moves by
+    g M (u_i - n_i), so its weight on the up direction is g M^T grad_i."""
+    cov = np.einsum("kmi,mij,lmj->kl", grad, mean_cov, grad)
+    weights = gravity * np.einsum("ij,kmi->kmj", M, grad)
+    return cov, cap_worst_case(weights, nominal, bound)
+
+
+@dataclass(frozen=True)
+class FaceCalibration:
+    """Procedure (a)'s answer.
+
+    Attributes
+    ----------
+    values : dict
+        ``M`` (3, 3), ``b`` (3,) m/s^2, ``scale`` (3,), ``misalignment`` (3,) rad, ``MMT`` (3, 3).
+    covariance : ndarray (27, 27)
+        The noise covariance of :func:`flat`'s vector (white samples assumed).
+    tilt : ndarray (27,)
+        The worst-case tilt term of each, in its unit.
+    means, mean_cov : ndarray (6, 3), (6, 3, 3)
+        The faces' means, m/s^2, and their covariances, (m/s^2)^2, in :data:`FACE_ORDER`.
+    samples : ndarray (6,)
+        Samples per face.
+    whiteness : dict
+        The batch-means test of the white assumption (:func:`whiteness`).
+    """
+
+    values: dict
+    covariance: np.ndarray
+    tilt: np.ndarray
+    means: np.ndarray
+    mean_cov: np.ndarray
+    samples: np.ndarray
+    whiteness: dict
+    gravity: float
+    tilt_bound: float
+
+    def std(self) -> np.ndarray:
+        """The noise 1-sigma of :func:`flat`'s vector (27,)."""
+        return np.sqrt(np.diag(self.covariance))
+
+    def residuals(self) -> np.ndarray:
+        """Each face's mean minus the fitted g M n_i + b (6, 3), m/s^2."""
+        up = np.array([face_up(name) for name in FACE_ORDER])
+        return self.means - (self.gravity * up @ self.values["M"].T + self.values["b"])
+
+
+def whiteness(samples: list[np.ndarray], level: float = 0.01) -> dict:
+    """The batch-means test of white samples: for each face and axis, (B - 1) s_B^2 L / s^2 ~ chi2(B - 1)
+    under white noise (s_B^2 the variance of the B batch means of length L, s^2 the sample variance),
+    summed over the faces and axes; the upper-tail p-value and the pooled variance ratio (1 for white
+    noise; the factor the white variance of a mean is too small by, for colored noise)."""
+    from scipy import stats
+
+    total, dof = 0.0, 0
+    for face in samples:
+        length = face.shape[0] // BATCHES
+        batches = face[: length * BATCHES].reshape(BATCHES, length, 3).mean(axis=1)
+        ratio = batches.var(axis=0, ddof=1) * length / face.var(axis=0, ddof=1)
+        total += float(np.sum((BATCHES - 1) * ratio))
+        dof += (BATCHES - 1) * 3
+    p = float(stats.chi2.sf(total, dof))
+    return {"test": f"batch means, {BATCHES} batches per face and axis, chi-square with {dof} degrees of freedom",
+            "variance_ratio": total / dof, "p_value": p, "level": level, "white": p >= level,
+            "assumption": "each face's samples are independent (white noise): the variance of a mean is the sample variance / n"}
+
+
+def calibrate_faces(samples: dict[str, np.ndarray], gravity: float, tilt_bound: float) -> FaceCalibration:
+    """Procedure (a) from each face's samples ``{name: (n_i, 3)}`` (m/s^2, all six of :data:`FACE_ORDER`),
+    g (m/s^2) and the tilt bound (rad)."""
+    ordered = [np.asarray(samples[name], dtype=float) for name in FACE_ORDER]
+    means = np.array([face.mean(axis=0) for face in ordered])
+    counts = np.array([face.shape[0] for face in ordered])
+    mean_cov = np.array([np.cov(face, rowvar=False) / face.shape[0] for face in ordered])
+    values = estimate(means, gravity)
+    grad = gradient(lambda m: flat(estimate(m, gravity)), means)
+    nominal = np.array([face_up(name) for name in FACE_ORDER])
+    cov, tilt = propagate(grad, mean_cov, values["M"], gravity, tilt_bound, nominal)
+    return FaceCalibration(values, cov, tilt, means, mean_cov, counts, whiteness(ordered), gravity, tilt_bound)
+
+
+def correction_of(means: np.ndarray, gravity: float, reading: np.ndarray) -> np.ndarray:
+    """The corrected reading M^-1 (a_m - b) (3,) of one reading (3,) with M and b from the faces' ``means``."""
+    values = estimate(means, gravity)
+    return np.linalg.solve(values["M"], np.asarray(reading, dtype=float) - values["b"])
+
+
+def labels() -> list[str]:
+    """:func:`flat`'s entries' names."""
+    return ([f"M_{a}{c}" for a in AXES for c in AXES] + [f"bias_{a}" for a in AXES] + [f"scale_{a}" for a in AXES]
+            + ["misalignment_yx", "misalignment_zx", "misalignment_zy"] + [f"MMT_{a}{c}" for a in AXES for c in AXES])
+
+
+assert set(FACE_ORDER) == set(FACES)

@@ -1,0 +1,266 @@
+"""imu-3axis: the pose model, procedure (a) (six faces) and (b) (unknown poses) recovering a simulated sensor
+within their intervals at the stated rate, the refusals, the CLI, and the real six-face session against imucal."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from kalcal.errors import DataError
+from kalcal.scenarios.imu_3axis import faces as F
+from kalcal.scenarios.imu_3axis import model as m
+from kalcal.scenarios.imu_3axis.poses import fit_poses
+
+G = m.STANDARD_GRAVITY
+DATA = Path(__file__).resolve().parents[1] / "data" / "imucal"
+LOG, POSES = DATA / "example_ferraris_session.csv", DATA / "example_ferraris_session_list.json"
+TRUE = np.array([1.01, 0.99, 1.02, 0.01, -0.02, 0.015, 0.1, -0.2, 0.05])  # scales, angles (rad), biases (m/s^2)
+Z95 = stats.norm.isf(0.025)
+
+
+def binomial_bounds(n: int, p: float, alpha: float) -> tuple[int, int]:
+    """Misses of n intervals of miss rate p: the two-sided (1 - alpha) range of a binomial count."""
+    return int(stats.binom.ppf(alpha / 2, n, p)), int(stats.binom.isf(alpha / 2, n, p))
+
+
+def face_samples(rng, M, b, n=400, sigma=0.02, tilt=0.0):
+    """Six faces' white samples (n, 3) each; each face's true up direction uniform in a cap of ``tilt`` rad."""
+    out = {}
+    for name in F.FACE_ORDER:
+        n_up = m.face_up(name)
+        d = m.pose_data(n_up)
+        up = m.up_direction(m.random_tilts(rng, 1, tilt), d[None]) if tilt > 0 else n_up[None]
+        out[name] = G * up @ M.T + b + sigma * rng.standard_normal((n, 3))
+    return out
+
+
+def test_h_is_M_f_plus_b_and_x_up_reads_plus_g():
+    """h(params, no tilt) = M g n + b, and an ideal sensor with x up reads +g on x (the sign convention)."""
+    M = m.sensor_matrix(TRUE)
+    ups = np.array([m.face_up(f) for f in F.FACE_ORDER])
+    x = np.hstack([np.tile(TRUE, (6, 1)), np.zeros((6, 2))])
+    np.testing.assert_allclose(m.h(x, m.pose_data(ups)), G * ups @ M.T + TRUE[6:], rtol=0, atol=1e-12)
+    ideal = np.r_[1, 1, 1, 0, 0, 0, 0, 0, 0, 0, 0.0]
+    np.testing.assert_allclose(m.h(ideal[None], m.pose_data(m.face_up("x_p"))[None])[0], [G, 0, 0], atol=1e-12)
+    np.testing.assert_allclose(m.params_of(M, TRUE[6:]), TRUE, atol=1e-14)
+    # a tilt d moves the up direction by arctan(|d|)
+    d = m.pose_data(np.array([0, 0, 1.0]))
+    up = m.up_direction(np.array([[np.tan(0.1), 0.0]]), d[None])[0]
+    assert np.isclose(np.arccos(up @ [0, 0, 1.0]), 0.1)
+
+
+def test_faces_recover_M_and_b_at_the_stated_rate_without_tilt():
+    """No tilt, bound 0: each of M's 9 entries and b's 3 misses its 95% noise interval at 5%, the count over
+    300 seeds within its binomial range (two-sided, 0.01 / 12 per parameter, Bonferroni)."""
+    M, b = m.sensor_matrix(TRUE), TRUE[6:]
+    truth = np.r_[M.ravel(), b]
+    seeds = 300
+    misses = np.zeros(12, dtype=int)
+    for seed in range(seeds):
+        run = F.calibrate_faces(face_samples(np.random.default_rng(seed), M, b), G, 0.0)
+        est, std = F.flat(run.values)[:12], run.std()[:12]
+        misses += np.abs(est - truth) > Z95 * std
+        assert np.all(run.tilt[:12] < 1e-12)
+    low, high = binomial_bounds(seeds, 0.05, 0.01 / 12)
+    assert np.all((misses >= low) & (misses <= high)), (misses, low, high)
+
+
+def test_faces_with_tilt_stay_within_the_worst_case_interval():
+    """Faces tilted uniformly within 1 deg, bound 1 deg: the worst-case term keeps every interval at or above
+    95% (misses of each of the 12 at most the binomial upper bound of a 5% rate, 0.01 / 12), and the tilt
+    moves M's off-diagonal entries and the biases by more than the noise alone allows (the term is needed)."""
+    M, b = m.sensor_matrix(TRUE), TRUE[6:]
+    truth = np.r_[M.ravel(), b]
+    seeds, bound = 200, np.radians(1.0)
+    misses = np.zeros(12, dtype=int)
+    noise_only = np.zeros(12, dtype=int)
+    for seed in range(seeds):
+        run = F.calibrate_faces(face_samples(np.random.default_rng(seed), M, b, tilt=bound), G, bound)
+        err = np.abs(F.flat(run.values)[:12] - truth)
+        misses += err > Z95 * run.std()[:12] + run.tilt[:12]
+        noise_only += err > Z95 * run.std()[:12]
+    assert np.all(misses <= binomial_bounds(seeds, 0.05, 0.01 / 12)[1]), misses
+    off_diagonal_and_bias = [1, 2, 3, 5, 6, 7, 9, 10, 11]
+    assert np.all(noise_only[off_diagonal_and_bias] > binomial_bounds(seeds, 0.05, 0.01 / 12)[1]), noise_only
+
+
+def test_cap_worst_case_is_attained_and_not_exceeded():
+    """The worst case of w . (u - n) over a cap: no random direction in the cap exceeds it; the boundary attains it."""
+    rng = np.random.default_rng(3)
+    w, n, bound = rng.standard_normal(3), np.array([0, 0, 1.0]), 0.05
+    worst = F.cap_worst_case(w[None, None], n[None], bound)[0]
+    d = m.pose_data(n)
+    ups = m.up_direction(m.random_tilts(rng, 20000, bound), np.tile(d, (20000, 1)))
+    values = np.abs((ups - n) @ w)
+    assert values.max() <= worst + 1e-12
+    assert values.max() > 0.98 * worst
+
+
+def test_whiteness_holds_its_level_on_white_noise_and_catches_colored_noise():
+    """The batch-means test rejects white samples at its 1% level (count over 300 seeds within the binomial
+    range, 0.001 two-sided) and an AR(1) noise with coefficient 0.8 (variance of a mean 9x the white one) always."""
+    seeds = 300
+    rejected = sum(not F.whiteness(list(np.random.default_rng(s).standard_normal((6, 400, 3))))["white"] for s in range(seeds))
+    low, high = binomial_bounds(seeds, 0.01, 0.001)
+    assert low <= rejected <= high
+    rng = np.random.default_rng(0)
+    colored = []
+    for _ in range(6):
+        e = rng.standard_normal((400, 3))
+        x = np.empty_like(e)
+        x[0] = e[0]
+        for k in range(1, 400):
+            x[k] = 0.8 * x[k - 1] + e[k]
+        colored.append(x)
+    assert not F.whiteness(colored)["white"]
+
+
+def pose_means(rng, n=12, sigma=0.004):
+    up = rng.standard_normal((n, 3))
+    up /= np.linalg.norm(up, axis=1, keepdims=True)
+    M = m.sensor_matrix(TRUE)
+    cov = np.tile(np.eye(3) * sigma**2, (n, 1, 1))
+    return G * up @ M.T + TRUE[6:] + sigma * rng.standard_normal((n, 3)), cov
+
+
+@pytest.mark.parametrize("seeds", [40, pytest.param(150, marks=pytest.mark.slow)])
+def test_poses_recover_the_nine_parameters_at_the_stated_rate(seeds):
+    """12 random poses: each of the 9 misses its 95% information interval at 5%, over the seeds within the
+    binomial range (0.01 / 9 two-sided); the fit's chi-square p-value rejects at 1% no more than the binomial bound allows."""
+    misses = np.zeros(9, dtype=int)
+    rejected = 0
+    for seed in range(seeds):
+        run = fit_poses(*pose_means(np.random.default_rng(seed)), G)
+        misses += np.abs(run.theta - TRUE) > Z95 * run.std()
+        rejected += run.p_value < 0.01
+    low, high = binomial_bounds(seeds, 0.05, 0.01 / 9)
+    assert np.all((misses >= low) & (misses <= high)), (misses, low, high)
+    assert rejected <= binomial_bounds(seeds, 0.01, 0.01)[1]
+
+
+@pytest.mark.parametrize("replicates", [50, pytest.param(200, marks=pytest.mark.slow)])
+def test_bootstrap_agrees_with_the_information(replicates):
+    """B replicates: each bootstrap std within five of its own standard errors, 5 / sqrt(2 B) (a std from B
+    Gaussian draws has a relative standard error of about 1 / sqrt(2 B)), of the information's."""
+    run = fit_poses(*pose_means(np.random.default_rng(7)), G, bootstrap=replicates, seed=1)
+    ratio = run.bootstrap.std(axis=0, ddof=1) / run.std()
+    assert np.all(np.abs(ratio - 1) < 5 / np.sqrt(2 * replicates)), ratio
+
+
+def test_poses_refusals():
+    """Fewer than 9 poses, and poses in one hemisphere's cap, are refused in one line with the number."""
+    means, cov = pose_means(np.random.default_rng(0), n=8)
+    with pytest.raises(DataError, match="8 poses; procedure \\(b\\) needs at least 9"):
+        fit_poses(means, cov, G)
+    rng = np.random.default_rng(1)
+    up = rng.standard_normal((12, 3))
+    up[:, 2] = np.abs(up[:, 2]) + 2.0
+    up /= np.linalg.norm(up, axis=1, keepdims=True)
+    means = G * up @ m.sensor_matrix(TRUE).T + TRUE[6:]
+    with pytest.raises(DataError, match="do not span the sphere: the information's condition number is .* > 1e\\+08") as info:
+        fit_poses(means, np.tile(np.eye(3) * 1e-5, (12, 1, 1)), G)
+    assert "\n" not in str(info.value)
+
+
+# --- the CLI and the real session ---------------------------------------------------------------------------
+
+def kalcal(*args, cwd):
+    return subprocess.run([sys.executable, "-m", "kalcal", *map(str, args)], capture_output=True, text=True, cwd=cwd)
+
+
+def test_cli_real_session_procedure_a(tmp_path):
+    out = tmp_path / "cal"
+    done = kalcal("calibrate", "imu-3axis", "--imu", LOG, "--poses", POSES, "--out", out, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["procedure"] == "a" and len(summary["bias"]) == 3 and np.shape(summary["M"]) == (3, 3)
+    assert summary["correction"]["formula"] == "a = M^-1 (a_m - b)"
+    assert np.allclose(summary["scale"], np.linalg.norm(summary["M"], axis=1))
+    assert "x_rot" in " ".join(summary["notes"]) and set(summary["poses"]) == set(F.FACE_ORDER)
+    assert (out / "residuals.png").stat().st_size > 0
+
+
+def test_x_p_corrected_reads_plus_g_within_its_interval():
+    """The sign: the x_p face's mean corrected is +g on x (and 0 across) within the correction's interval."""
+    from kalcal import calibrate
+
+    result = calibrate("imu-3axis", imu=LOG, poses=POSES)
+    s, e = result.regions["x_p"]
+    import pandas as pd
+
+    reading = pd.read_csv(LOG)[["acc_x", "acc_y", "acc_z"]].to_numpy()[s:e].mean(axis=0)
+    corrected, half = result.correction_interval(reading)
+    assert corrected[0, 0] > 0
+    assert np.all(np.abs(corrected[0] - [G, 0, 0]) <= half[0]), (corrected, half)
+
+
+@pytest.mark.parametrize("case, expected", [
+    ("g-unit", "likely in g"),
+    ("missing-face", "missing z_a"),
+    ("few-poses", "at least 9"),
+    ("bad-columns", "--imu-columns"),
+    ("short", "needs at least 16"),
+])
+def test_cli_refuses_in_one_line_with_status_2(tmp_path, case, expected):
+    import pandas as pd
+
+    frame = pd.read_csv(LOG)
+    regions = json.loads(POSES.read_text())
+    args = []
+    if case == "g-unit":
+        frame[["acc_x", "acc_y", "acc_z"]] /= G
+    elif case == "missing-face":
+        regions.pop("z_a")
+    elif case == "few-poses":
+        regions = {f"p{k}": regions[name] for k, name in enumerate(F.FACE_ORDER)}
+    elif case == "bad-columns":
+        args = ["--imu-columns", "acc_x,acc_y"]
+    elif case == "short":
+        regions["x_p"] = {"start": 540, "end": 550}
+    frame.to_csv(tmp_path / "log.csv", index=False)
+    (tmp_path / "poses.json").write_text(json.dumps(regions))
+    done = kalcal("calibrate", "imu-3axis", "--imu", "log.csv", "--poses", "poses.json", *args, "--out", "o", cwd=tmp_path)
+    assert done.returncode == 2, (done.stdout, done.stderr)
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and expected in lines[0], done.stderr
+
+
+def test_real_session_against_imucal():
+    """imucal's FerrarisCalibration (grav = our g) on the same faces, compared in b and the rotation-invariant M M^T.
+
+    Tolerance, stated before comparing. Both take a face's mean as the plain mean of the same slice
+    [start, end) of samples, and both M's are (ā_p - ā_a) / (2 g) column by column (imucal writes it K R,
+    scale times a rotation-like matrix; ours keeps M whole): M M^T must agree to rounding, 1e-12. The biases
+    differ by construction: imucal takes b_k from the pair of faces of axis k alone, (ā_kp + ā_ka)_k / 2; ours is
+    the mean of all six faces (least squares). Their difference d = b_ours - b_imucal is a linear functional
+    of the face means, zero for untilted faces; its tolerance is the noise interval of d at 99.9% (z sigma_d,
+    white samples) plus the worst case of the faces' tilt within the 1 deg bound on d.
+    """
+    import pandas as pd
+    from imucal import FerrarisCalibration, ferraris_regions_from_section_list
+
+    data = pd.read_csv(LOG)
+    sections = pd.DataFrame(json.loads(POSES.read_text())).T
+    regions = ferraris_regions_from_section_list(data, sections)
+    theirs = FerrarisCalibration(grav=G).compute(regions, sampling_rate_hz=204.8, from_acc_unit="m/s^2", from_gyr_unit="deg/s")
+    M_theirs = theirs.K_a @ theirs.R_a
+    acc = data[["acc_x", "acc_y", "acc_z"]].to_numpy()
+    regions_json = json.loads(POSES.read_text())
+    ours = F.calibrate_faces({f: acc[regions_json[f]["start"]: regions_json[f]["end"]] for f in F.FACE_ORDER}, G, np.radians(1.0))
+    np.testing.assert_allclose(ours.values["MMT"], M_theirs @ M_theirs.T, rtol=0, atol=1e-12)
+
+    def difference(means):
+        b_imucal = np.array([(means[2 * k, k] + means[2 * k + 1, k]) / 2 for k in range(3)])
+        return F.estimate(means, G)["b"] - b_imucal
+
+    grad = F.gradient(difference, ours.means)
+    nominal = np.array([m.face_up(f) for f in F.FACE_ORDER])
+    cov, tilt = F.propagate(grad, ours.mean_cov, ours.values["M"], G, np.radians(1.0), nominal)
+    tolerance = stats.norm.isf(0.0005) * np.sqrt(np.diag(cov)) + tilt
+    d = ours.values["b"] - theirs.b_a
+    assert np.all(np.abs(d) <= tolerance), (d, tolerance)
+    np.testing.assert_allclose(difference(ours.means), d, atol=1e-12)
