@@ -149,7 +149,7 @@ def test_as_dict_holds_pvalue_cause_and_parts():
     document = json.loads(json.dumps(to_jsonable(check.as_dict())))
     assert set(document) == {
         "name", "statistic", "pvalue", "lower", "upper", "confidence", "comparisons", "passed", "detail", "cause",
-        "parts", "measured",
+        "parts", "measured", "effect_sizes", "within_tolerance", "tolerance_outcome",
     }
     assert document["detail"] == f"{document['measured']}. {document['cause']['reason']}"
     assert document["cause"]["reason"] not in document["measured"]

@@ -259,7 +259,11 @@ def with_effects(check, effects):
     mine = effects.of_check(check.name)
     if not mine:
         return check
-    return dataclasses.replace(check, effect_sizes=mine, within_tolerance=all(e.within_tolerance for e in mine))
+    from kalcal.stats.effects import overall_outcome
+
+    return dataclasses.replace(
+        check, effect_sizes=mine, within_tolerance=all(e.within_tolerance for e in mine), tolerance_outcome=overall_outcome(mine)
+    )
 
 
 def effects_summary(effects, info, confidence: float) -> dict[str, Any]:
@@ -343,6 +347,8 @@ def compute_verification(
     effects = problem_effects(problem, run.sums, confidence)
     if effects is not None:
         checks = [with_effects(check, effects) for check in checks]
+    simulated = getattr(problem, "simulated_power", None)
+    simulated = None if simulated is None else simulated(n, seed, confidence, workers)
     bench = self_check(statistics, exact, confidence, info)
     attrs = {"scenario": info.scenario, "seed": seed, "engine": engine, "confidence": confidence}
     dataset = statistics_dataset(statistics, info, expected, attrs)
@@ -389,6 +395,8 @@ def compute_verification(
         },
         "residual_correlation": report_residual_pair(statistics, info, scenario),
         **effects_summary(effects, info, confidence),
+        # the checks' power against named alternatives, by simulation (None where not asked for)
+        "power_by_simulation": None if simulated is None else simulated.as_dict(),
         "model_error": {
             "cause": cause,
             "max_expected_mean_error_sigma": float(

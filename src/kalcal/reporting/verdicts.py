@@ -118,22 +118,30 @@ def effects_section(summary: Mapping[str, Any]) -> str:
     if not effects:
         return ""
     rows = []
+    shown = {"within": ("pass", "within"), "outside": ("fail", "OUTSIDE"), "undecided": ("undecided", "undecided")}
     for e in effects["overall"]:
-        state = "pass" if e["within_tolerance"] else "fail"
+        outcome = e.get("outcome", "within" if e["within_tolerance"] else "outside")
+        state, text = shown[outcome]
+        if outcome == "undecided":
+            more = e.get("realizations_to_decide")
+            text += f" (about {more:,} realizations would decide)" if more else " (the estimate lies on the edge)"
         name = e["name"] + (f" [{e['element']}]" if e["element"] else "")
         rows.append(
             f'<tr class="{state}"><td><code>{esc(name)}</code></td><td class="num">{esc(fmt(e["value"]))}</td>'
             f'<td class="num">[{esc(fmt(e["lower"]))}, {esc(fmt(e["upper"]))}]</td><td class="num">{esc(fmt(e["null"]))}</td>'
             f'<td class="num">[{esc(fmt(e["tolerance_lower"]))}, {esc(fmt(e["tolerance_upper"]))}]</td>'
-            f'<td class="{state}">{"within" if e["within_tolerance"] else "OUTSIDE"}</td></tr>'
+            f'<td class="{state}">{esc(text)}</td></tr>'
         )
     conf = effects["overall"][0]["confidence"] if effects["overall"] else summary.get("confidence")
     html = (
         '<h2 id="effects">Effect sizes</h2>'
         f"<p>How far the filter departs from its model, beside the exact verdicts: each interval at confidence "
-        f"{esc(fmt(conf))}; the tolerance verdict ({esc(effects['verdict'])}) passes when the whole interval lies in the band "
-        f"(tolerance {esc(fmt(effects['tolerance']))}: P within that fraction of the mean squared error).</p>"
-        + table(("effect", "value", "interval", "null", "tolerance band", "tolerance verdict"), rows)
+        f"{esc(fmt(conf))}; the tolerance verdict ({esc(effects['verdict'])}) passes when every interval lies in its band "
+        f"(tolerance {esc(fmt(effects['tolerance']))}: P within that fraction of the mean squared error), fails when "
+        "one lies wholly outside, and is undecided when one straddles an edge: the run is then too short to say, "
+        "and the realizations that would decide are those at which the interval (its half-width falling as "
+        "1/sqrt(N)) clears the nearest edge if the estimate stays where it is.</p>"
+        + table(("effect", "value", "interval", "null", "tolerance band", "tolerance outcome"), rows)
     )
     crb = summary.get("cramer_rao")
     if crb:
@@ -151,4 +159,31 @@ def effects_section(summary: Mapping[str, Any]) -> str:
             )
         else:
             html += f"<p>No Cramér–Rao bound: {esc(crb['method'])}.</p>"
-    return html
+    return html + simulated_power_section(summary)
+
+
+def _rate(count, rate, lower, upper) -> str:
+    return "" if count is None else f"{count} ({fmt(rate)}; [{fmt(lower)}, {fmt(upper)}])"
+
+
+def simulated_power_section(summary: Mapping[str, Any]) -> str:
+    """Each check's rejection rate under each named alternative, by simulation, with its binomial interval
+    (:mod:`kalcal.scenarios.nonlinear.power`); nothing where the run asked for none."""
+    power = summary.get("power_by_simulation")
+    if not power:
+        return ""
+    rows = [
+        f'<tr><td>{esc(r["alternative"])}</td><td><code>{esc(r["check"])}</code></td>'
+        f'<td class="num">{esc(_rate(r["exact_rejections"], r["exact_rate"], r["exact_lower"], r["exact_upper"]))}</td>'
+        f'<td class="num">{esc(_rate(r["tolerance_rejections"], r["tolerance_rate"], r["tolerance_lower"], r["tolerance_upper"]))}</td>'
+        f'<td class="num">{esc("" if r["tolerance_undecided"] is None else str(r["tolerance_undecided"]))}</td></tr>'
+        for r in power["rows"]
+    ]
+    named = "; ".join(f"{name}: {text}" for name, text in power["alternatives"].items())
+    return (
+        '<h3 id="simulated-power">Power by simulation</h3>'
+        f"<p>Rejections of each check over {power['runs']} repeated runs of {power['realizations']:,} realizations "
+        f"per alternative, by simulation (not an exact power), with the rate and its Clopper–Pearson interval at "
+        f"{esc(fmt(power['confidence']))}. {esc(named)}.</p>"
+        + table(("alternative", "check", "exact rejections", "tolerance rejections (outside)", "tolerance undecided"), rows)
+    )

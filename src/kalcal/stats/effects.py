@@ -2,8 +2,19 @@
 
 At N = 10^5 an exact test fails for any filter whose P is an approximation (an EKF of a nonlinear model):
 the exact verdict says *whether* P is wrong, not *by how much*. Beside each check's exact verdict this
-module gives the size of the departure with its confidence interval, and a **tolerance verdict**: passed
-when the whole interval lies inside the tolerance band (a setting, ``checks.tolerance``, default 0.1).
+module gives the size of the departure with its confidence interval, and a **tolerance outcome** against
+the tolerance band (a setting, ``checks.tolerance``, default 0.1), one of three:
+
+- ``within``: the whole interval lies inside the band (the effect is within tolerance at the run's
+  confidence);
+- ``outside``: the interval and the band are disjoint (the effect is out of tolerance);
+- ``undecided``: the interval straddles an edge of the band: the run is too short to say. The
+  realizations that would decide are reported: the interval's half-width w scales as 1/sqrt(N), so if the
+  estimate stays where it is, N' = N (w / |value - edge|)^2 realizations shrink the interval to the nearest
+  edge (None where the estimate lies on an edge).
+
+The run's tolerance verdict is ``pass`` when every effect is within, ``fail`` when any is outside, else
+``undecided``.
 
 Effect sizes (N realizations, K updates, d states, p measurements; P_k and S_k each realization's own):
 
@@ -51,6 +62,7 @@ from scipy import stats as sps
 
 __all__ = [
     "DEFAULT_TOLERANCE",
+    "TOLERANCE_OUTCOMES",
     "CramerRaoBound",
     "EffectAccumulator",
     "EffectLayout",
@@ -58,10 +70,34 @@ __all__ = [
     "EffectSizes",
     "cramer_rao_bound",
     "effect_sizes",
+    "overall_outcome",
+    "realizations_to_decide",
     "tolerance_band",
+    "tolerance_outcome",
 ]
 
 DEFAULT_TOLERANCE = 0.1
+#: a tolerance outcome: the interval inside the band, disjoint from it, or straddling an edge
+TOLERANCE_OUTCOMES: tuple[str, ...] = ("within", "outside", "undecided")
+
+
+def tolerance_outcome(lower: float, upper: float, band: tuple[float, float]) -> str:
+    """``within`` (the interval inside the band), ``outside`` (disjoint from it) or ``undecided``."""
+    if band[0] <= lower and upper <= band[1]:
+        return "within"
+    if upper < band[0] or lower > band[1]:
+        return "outside"
+    return "undecided"
+
+
+def realizations_to_decide(value: float, half_width: float, band: tuple[float, float], n: int) -> int | None:
+    """The realizations N' at which an interval of half-width ``half_width`` at ``n`` (scaling as
+    1/sqrt(N)) around ``value`` no longer straddles the band's nearest edge: N (w / distance)^2, rounded
+    up; None where the value lies on an edge (no N decides it)."""
+    distance = min(abs(value - band[0]), abs(value - band[1]))
+    if distance <= 0.0 or not np.isfinite(half_width):
+        return None
+    return int(np.ceil(n * (half_width / distance) ** 2))
 
 
 def tolerance_band(kind: str, tolerance: float) -> tuple[float, float]:
@@ -201,8 +237,16 @@ class EffectSize:
     tolerance_lower, tolerance_upper : float
         The tolerance band.
     within_tolerance : bool
-        The tolerance verdict: the whole interval inside the band.
+        The whole interval inside the band (``outcome == "within"``).
     confidence : float
+    outcome : str
+        The tolerance outcome: ``within``, ``outside`` or ``undecided`` (module docstring).
+    realizations : int or None
+        N, the realizations the interval is of.
+    realizations_to_decide : int or None
+        For an undecided outcome, the realizations N' = N (w / |value - edge|)^2 at which the interval
+        (half-width w at N, scaling as 1/sqrt(N)) would clear the nearest edge if the estimate stayed
+        where it is; None for a decided outcome or an estimate on an edge.
     """
 
     name: str
@@ -215,16 +259,32 @@ class EffectSize:
     tolerance_upper: float
     within_tolerance: bool
     confidence: float
+    outcome: str = "within"
+    realizations: int | None = None
+    realizations_to_decide: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.outcome not in TOLERANCE_OUTCOMES:
+            raise ValueError(f"outcome must be one of {', '.join(TOLERANCE_OUTCOMES)}, got {self.outcome!r}")
+        if self.within_tolerance != (self.outcome == "within"):
+            raise ValueError(f"effect {self.name!r}: within_tolerance {self.within_tolerance} against outcome {self.outcome!r}")
 
     def as_dict(self) -> dict:
         return asdict(self)
 
 
-def _make(name, element, value, se, null, kind, tolerance, confidence) -> EffectSize:
+def _make(name, element, value, se, null, kind, tolerance, confidence, n=None) -> EffectSize:
     zq = float(sps.norm.isf((1.0 - confidence) / 2.0))
     lo, hi = float(value - zq * se), float(value + zq * se)
     band = tolerance_band(kind, tolerance)
-    return EffectSize(name, element, float(value), lo, hi, null, band[0], band[1], bool(band[0] <= lo and hi <= band[1]), confidence)
+    outcome = tolerance_outcome(lo, hi, band)
+    decide = None
+    if outcome == "undecided" and n is not None:
+        decide = realizations_to_decide(float(value), float(zq * se), band, int(n))
+    return EffectSize(
+        name, element, float(value), lo, hi, null, band[0], band[1], outcome == "within", confidence,
+        outcome, None if n is None else int(n), decide,
+    )
 
 
 def _mean_se(total: float | np.ndarray, squares, n: int):
@@ -369,14 +429,27 @@ class EffectSizes:
     def within_tolerance(self) -> bool:
         return all(e.within_tolerance for e in self.overall)
 
+    def verdict(self) -> str:
+        """``pass`` (every effect within), ``fail`` (any outside) or ``undecided`` (module docstring)."""
+        return overall_outcome(self.overall)
+
     def as_dict(self, names=None, units=None, confidence: float = 0.99) -> dict[str, Any]:
         out: dict[str, Any] = {
             "tolerance": self.tolerance,
-            "verdict": "pass" if self.within_tolerance() else "fail",
+            "verdict": self.verdict(),
             "overall": [e.as_dict() for e in self.overall],
             "per_update": {key: value.tolist() for key, value in self.per_update.items()},
         }
         return out
+
+
+def overall_outcome(effects) -> str:
+    """The tolerance verdict of several effects: ``fail`` if any is outside, ``pass`` if all are within,
+    else ``undecided``."""
+    outcomes = [e.outcome for e in effects]
+    if "outside" in outcomes:
+        return "fail"
+    return "pass" if all(o == "within" for o in outcomes) else "undecided"
 
 
 def effect_sizes(
@@ -398,19 +471,19 @@ def effect_sizes(
     zq = float(sps.norm.isf((1.0 - confidence) / 2.0))
     overall = []
     m, se = _mean_se(v("nees_avg")[0], v("nees_avg")[1], n)
-    overall.append(_make("nees_per_dim", None, m / d, se / d, 1.0, "ratio", tolerance, confidence))
+    overall.append(_make("nees_per_dim", None, m / d, se / d, 1.0, "ratio", tolerance, confidence, n))
     sa, sb, saa, sbb, sab = v("pooled")
     ratio, rse = _ratio_se(sa, sb, saa, sbb, sab, n)
     for i, name in enumerate(state_names):
-        overall.append(_make("variance_ratio", name, ratio[i], rse[i], 1.0, "ratio", tolerance, confidence))
+        overall.append(_make("variance_ratio", name, ratio[i], rse[i], 1.0, "ratio", tolerance, confidence, n))
     zm, zse = _mean_se(v("zbar")[0], v("zbar")[1], n)
     for i, name in enumerate(state_names):
-        overall.append(_make("bias_sigma", name, zm[i], zse[i], 0.0, "shift", tolerance, confidence))
+        overall.append(_make("bias_sigma", name, zm[i], zse[i], 0.0, "shift", tolerance, confidence, n))
     if layout.n_updates > 1:
         lm, lse = _mean_se(v("lag1")[0], v("lag1")[1], n)
-        overall.append(_make("whiteness_lag1", None, lm, lse, 0.0, "shift", tolerance, confidence))
+        overall.append(_make("whiteness_lag1", None, lm, lse, 0.0, "shift", tolerance, confidence, n))
     m, se = _mean_se(v("nis_avg")[0], v("nis_avg")[1], n)
-    overall.append(_make("nis_per_dim", None, m / p, se / p, 1.0, "ratio", tolerance, confidence))
+    overall.append(_make("nis_per_dim", None, m / p, se / p, 1.0, "ratio", tolerance, confidence, n))
 
     def band(value, se):
         return np.stack([value, value - zq * se, value + zq * se], axis=-1)

@@ -182,8 +182,11 @@ class CheckResult:
     #: the effect sizes beside the exact verdict, with their intervals and tolerance verdicts
     #: (:mod:`kalcal.stats.effects`); empty where the run kept none
     effect_sizes: tuple = field(default_factory=tuple)
-    #: the tolerance verdict: every effect's interval inside its band; None where there are none
+    #: every effect's interval inside its band; None where there are none
     within_tolerance: bool | None = None
+    #: the tolerance verdict of those effects: ``pass``, ``fail`` (one outside its band) or ``undecided``
+    #: (:func:`kalcal.stats.effects.overall_outcome`); None where there are none
+    tolerance_outcome: str | None = None
 
     def __post_init__(self):
         _check_invariant("check", self.name, self.pvalue, 1.0 - self.confidence, self.passed)

@@ -200,6 +200,16 @@ class NonlinearProblem:
         out.effect = flat
         return out
 
+    def simulated_power(self, n: int, seed: int, confidence: float, workers: int | None = None):
+        """The checks' power by simulation against the named alternatives (``checks.power_runs`` runs each,
+        :mod:`kalcal.scenarios.nonlinear.power`); None where the setting is 0."""
+        runs = self.scenario.checks.power_runs
+        if not runs:
+            return None
+        from kalcal.scenarios.nonlinear.power import simulated_power
+
+        return simulated_power(self.scenario, n, seed, confidence, runs, workers)
+
     def effect_sizes(self, sums: MomentSums, confidence: float):
         """The run's effect sizes, tolerance verdicts (``checks.tolerance``) and the truth's Cramér–Rao bound."""
         from kalcal.stats.effects import effect_sizes

@@ -8,7 +8,9 @@ Settings (``--set section.key=value``):
   points), ``filter.max_iterations`` (the IEKF's);
 - ``scenario.updates``: K (0: the file's ``N_UPDATES``, else 100);
 - ``checks.tolerance``: the tolerance verdicts' band (default 0.1: "P within +-10 % of the mean squared
-  error", :mod:`kalcal.stats.effects`).
+  error", :mod:`kalcal.stats.effects`);
+- ``checks.power_runs``: R, the repeated runs per named alternative of the power by simulation
+  (:mod:`kalcal.scenarios.nonlinear.power`; default 0: none, for it costs 4 R runs of N realizations).
 
 The file may define ``DATA``: the data of h, shape (k,) shared by every update or (K, k); and ``INPUTS``,
 u, shape (m,) or (K, m).
@@ -70,13 +72,16 @@ class NonlinearRunSection:
 
 @dataclass(frozen=True)
 class ChecksSection:
-    """Section ``checks``: the tolerance verdicts' band."""
+    """Section ``checks``: the tolerance verdicts' band and the power by simulation's repeated runs."""
 
     tolerance: float = 0.1
+    power_runs: int = 0  #: R per alternative; 0: no power by simulation
 
     def __post_init__(self) -> None:
         if not 0.0 < self.tolerance < 1.0:
             raise SettingError("checks.tolerance", "a number in (0, 1)", show(self.tolerance))
+        if isinstance(self.power_runs, bool) or not isinstance(self.power_runs, int) or self.power_runs < 0:
+            raise SettingError("checks.power_runs", "a non-negative integer (0: no power by simulation)", show(self.power_runs))
 
 
 def is_code_model(scenario: Any) -> bool:
