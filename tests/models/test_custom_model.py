@@ -256,7 +256,7 @@ def test_unknown_keys_are_named():
         ({"sample_period": "-0.1"}, "sample_period: expected a positive number of seconds, got -0.1"),
         ({"sample_period": '"fast"'}, "sample_period: expected a positive number of seconds, got 'fast'"),
         ({"name": "3"}, "name: expected a string, got 3"),
-        ({"name": '"accel-gps"'}, "name: expected a name other than a built-in scenario's (accel-gps, scale-bias), got 'accel-gps'"),
+        ({"name": '"accel-gps"'}, "name: expected a name other than a built-in scenario's (accel-gps, scale-bias, imu-3axis), got 'accel-gps'"),
         ({"state_names": '["a", "b"]'}, "state_names: expected 3 entries (one per state), got 2: ['a', 'b']"),
         ({"measurement_units": "[1, 2]"}, "measurement_units: expected an array of strings, got [1, 2]"),
         ({"truth": "3"}, "truth: expected a [truth] table of matrices, got int"),
