@@ -290,7 +290,7 @@ def test_simulate_bad_setting_is_exit_status_2(tmp_path):
 def test_unknown_scenario_is_exit_status_2(tmp_path):
     result = _invoke("simulate", "nope", "--out", tmp_path)
     assert result.exit_code == 2
-    assert "SCENARIO: expected one of accel-gps, scale-bias, got 'nope'" in result.stderr
+    assert "SCENARIO: expected one of accel-gps, scale-bias, imu-3axis, got 'nope'" in result.stderr
 
 
 # --------------------------------------------------------------------------------------------------

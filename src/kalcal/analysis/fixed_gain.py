@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from kalcal.capabilities import require
 from kalcal.core.budget import BudgetTerm, error_budget
 from kalcal.core.lincov import FilterArrays, Moments, TruthArrays, mean_normalized_square, propagate
 from kalcal.core.sources import Source, factor_sources
@@ -18,7 +19,6 @@ from kalcal.core.steps import UpdateForm
 from kalcal.errors import KalcalError
 from kalcal.linalg import whitener
 from kalcal.montecarlo.problem import FixedGainProblem, ProblemInfo
-from kalcal.scenarios.protocol import require
 from kalcal.simulation.exact import UpdateRateTruth
 
 

@@ -75,15 +75,8 @@ def _is_code(scenario: Any) -> bool:
 
 def with_data(scenario: Any, data: str | Path | None, command: str) -> Any:
     """The resolved ``scenario`` over the log ``data`` (``--data LOG``) where one is given: a model file with
-    a [data] table only (:func:`kalcal.scenarios.model_file.over_log.over_log`), else refused in one line."""
+    a [data] table only (its ``over_log``, :mod:`kalcal.scenarios.model_file.over_log`), else refused in one
+    line (the protocol's default, :meth:`kalcal.scenarios.protocol.ScenarioDefaults.over_log`)."""
     if data is None:
         return scenario
-    from kalcal.scenarios.model_file.model import CustomModelScenario
-
-    if not isinstance(scenario, CustomModelScenario):
-        raise KalcalError(
-            f"--data: {command} runs a log through a model file's [data] table; the built-in scenarios simulate their own data"
-        )
-    from kalcal.scenarios.model_file.over_log import over_log
-
-    return over_log(scenario, data)
+    return scenario.over_log(data, command)

@@ -29,11 +29,11 @@ def sweep(
     from kalcal.api.sweep import sweep_settings
 
     with user_errors():
-        if data is not None:
-            from kalcal.errors import KalcalError
-            from kalcal.scenarios.model_file.over_log import NO_SWEEP
+        if data is not None:  # the scenario over the log says whether it sweeps (a model file's does not yet)
+            from kalcal.api._scenario import resolve, with_data
+            from kalcal.capabilities import require
 
-            raise KalcalError(f"--data: {NO_SWEEP}")
+            require(with_data(resolve(scenario, None, config, models=True), data, "sweep"), "sweep")
         key, values, fixed = sweep_settings(set_ or ())
         result = run_sweep(
             scenario, key, values, n, seed, out, fixed, config=config, engine=engine, threads=threads,

@@ -12,60 +12,12 @@ and why (:func:`require`).
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any, ClassVar, Protocol, runtime_checkable
 
+from kalcal.capabilities import COMMANDS, Capabilities, require
 from kalcal.errors import ConfigError
 
-COMMANDS = frozenset({"verify", "analyze", "sweep", "simulate", "calibrate", "fit", "report"})
-
-
-@dataclass(frozen=True)
-class Capabilities:
-    """What a scenario has, asked where kalcal's behaviour depends on it.
-
-    Attributes
-    ----------
-    exact_analysis : bool
-        A linear Gaussian truth filtered with gains fixed before any data: ``kalcal analyze``, the exact
-        prediction of the ensemble (self-check) and the checks' power by analysis apply.
-    fixed_gains : bool
-        P_k and the gains are the same in every realization (one whitening for the whole ensemble).
-    rows_from_data : bool
-        The measurement rows H_k are taken from data (the regressors), so each realization has its own P_k.
-    nonlinear : bool
-        f and h are code (EKF/IEKF/UKF): effect sizes and shape checks stand in for exact moments.
-    batch : bool
-        One final estimate per realization: only the final-time checks apply.
-    engines : tuple of str
-        The Monte Carlo engines it has, the default first.
-    long_run : bool
-        Whether its run's length is a setting (``scenario.duration``), so that a long-run study can extend it.
-    commands : frozenset of str
-        The commands it supports, of :data:`COMMANDS`.
-    why_not : tuple of (str, str)
-        For a command it lacks, why (the refusal's reason); a command absent here is refused as unsupported.
-        ``"--engine"`` and ``"--long-run"`` give the reason for an engine it lacks and for a long run
-        where ``long_run`` is False.
-    """
-
-    exact_analysis: bool
-    fixed_gains: bool
-    rows_from_data: bool = False
-    nonlinear: bool = False
-    batch: bool = False
-    engines: tuple[str, ...] = ("exact",)
-    long_run: bool = True
-    commands: frozenset[str] = COMMANDS
-    why_not: tuple[tuple[str, str], ...] = ()
-
-    def __post_init__(self) -> None:
-        unknown = set(self.commands) - COMMANDS
-        unknown |= {key for key, _ in self.why_not} - COMMANDS - {"--engine", "--long-run"}
-        if unknown:
-            raise ValueError(f"unknown commands {sorted(unknown)}; expected some of {sorted(COMMANDS)}")
-        if self.exact_analysis and not self.fixed_gains:
-            raise ValueError("an exact analysis needs fixed gains")
+__all__ = ["COMMANDS", "Capabilities", "Scenario", "ScenarioDefaults", "refuse_logs", "require"]
 
 
 @runtime_checkable
@@ -150,6 +102,11 @@ class Scenario(Protocol):
         that draws its own logs refuses a given one in one line (:func:`refuse_logs`)."""
         ...
 
+    def over_log(self, data: Any, command: str) -> Any:
+        """The scenario verified over the log ``data`` (``--data LOG``: a model file's rows from a log), or a
+        one-line refusal for one that simulates its own data."""
+        ...
+
     #: the settings a command on logged data (calibrate, fit) starts from, before the user's
     LOG_DEFAULTS: ClassVar[dict[str, Any]]
 
@@ -174,8 +131,9 @@ class Scenario(Protocol):
 
 class ScenarioDefaults:
     """The protocol's answers for a scenario with nothing of its own to say: every section kept as given,
-    its state names as labels, not the source report's setup (nor its residual pair), no log defaults. A
-    scenario inherits this and overrides what differs (accel-gps overrides all five)."""
+    its state names as labels, not the source report's setup (nor its residual pair), no log defaults, no
+    verification over a log. A scenario inherits this and overrides what differs (accel-gps the first five,
+    the model file the last)."""
 
     LOG_DEFAULTS: ClassVar[dict[str, Any]] = {}
 
@@ -196,19 +154,12 @@ class ScenarioDefaults:
         """None: no pair of times is quoted from another study."""
         return None
 
-
-def require(scenario: Any, command: str, *, engine: str | None = None, long_run: bool = False) -> None:
-    """Refuse ``command`` (and ``engine``, and a long run where ``long_run``) where ``scenario`` lacks it:
-    one line naming the scenario and why (a :class:`~kalcal.errors.ConfigError`, exit status 2)."""
-    caps = scenario.capabilities
-    name = getattr(scenario, "label", None) or scenario.NAME
-    why = dict(caps.why_not)
-    if command not in caps.commands:
-        raise ConfigError(f"{name}: {why.get(command, f'{name} has no {command}')}")
-    if engine is not None and engine not in caps.engines:
-        raise ConfigError(f"--engine: {engine!r} is not available for {name}; {why.get('--engine', 'use ' + ' or '.join(caps.engines))}")
-    if long_run and not caps.long_run:
-        raise ConfigError(f"--long-run: not available for {name}; {why.get('--long-run', 'its run has no duration setting')}")
+    def over_log(self, data: Any, command: str) -> Any:
+        """Refused: only a model file's [data] table binds a verification to a log (``--data LOG``); the
+        built-in scenarios and models written as code simulate their own data."""
+        raise ConfigError(
+            f"--data: {command} runs a log through a model file's [data] table; the built-in scenarios simulate their own data"
+        )
 
 
 def refuse_logs(scenario: Any, logs: dict[str, Any] | None, command: str = "simulate") -> None:

@@ -127,3 +127,16 @@ def binom_test(count: int, trials: int, share: float) -> float:
     from scipy import stats
 
     return float(stats.binomtest(int(count), int(trials), share).pvalue) if trials else 1.0
+
+
+def binom_interval(count: int, trials: int, confidence: float) -> tuple[float, float]:
+    """The exact (Clopper–Pearson) two-sided interval of a binomial proportion ``count / trials`` at
+    ``confidence``, from the beta distribution's quantiles (0 and 1 at the ends); (0, 1) without trials."""
+    from scipy import stats
+
+    if not trials:
+        return 0.0, 1.0
+    alpha = 1.0 - confidence
+    lower = 0.0 if count == 0 else float(stats.beta.ppf(alpha / 2.0, count, trials - count + 1))
+    upper = 1.0 if count == trials else float(stats.beta.isf(alpha / 2.0, count + 1, trials - count))
+    return lower, upper

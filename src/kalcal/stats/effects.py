@@ -58,7 +58,8 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy import stats as sps
+
+from kalcal.stats.distributions import normal_isf
 
 __all__ = [
     "DEFAULT_TOLERANCE",
@@ -274,7 +275,7 @@ class EffectSize:
 
 
 def _make(name, element, value, se, null, kind, tolerance, confidence, n=None) -> EffectSize:
-    zq = float(sps.norm.isf((1.0 - confidence) / 2.0))
+    zq = float(normal_isf((1.0 - confidence) / 2.0))
     lo, hi = float(value - zq * se), float(value + zq * se)
     band = tolerance_band(kind, tolerance)
     outcome = tolerance_outcome(lo, hi, band)
@@ -332,7 +333,7 @@ class CramerRaoBound:
         """summary.json's ``cramer_rao``: per state at the final update, the bound as a lower bound, the
         MSE with its standard error, their ratio, and whether the MSE lies below the bound beyond its
         Monte Carlo error (a contradiction of the bound: a bug or an estimator that is not unbiased)."""
-        zq = float(sps.norm.isf((1.0 - confidence) / 2.0))
+        zq = float(normal_isf((1.0 - confidence) / 2.0))
         rows = []
         for i, name in enumerate(names):
             mse, se = float(self.mse[-1, i]), float(self.mse_se[-1, i])
@@ -468,7 +469,7 @@ def effect_sizes(
     if n < 2:
         raise ValueError(f"need at least two realizations for effect sizes, got {n}")
     v = lambda name: layout.view(flat, name)  # noqa: E731
-    zq = float(sps.norm.isf((1.0 - confidence) / 2.0))
+    zq = float(normal_isf((1.0 - confidence) / 2.0))
     overall = []
     m, se = _mean_se(v("nees_avg")[0], v("nees_avg")[1], n)
     overall.append(_make("nees_per_dim", None, m / d, se / d, 1.0, "ratio", tolerance, confidence, n))

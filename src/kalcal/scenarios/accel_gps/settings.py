@@ -54,7 +54,7 @@ import numpy as np
 from kalcal.core.model import LinearGaussianModel
 from kalcal.scenarios.accel_gps.discretization import bias_discretization, error_transition
 from kalcal.models.settings import SettingError, require_nonnegative, require_positive, require_whole, show
-from kalcal.scenarios.protocol import Capabilities
+from kalcal.scenarios.protocol import Capabilities, ScenarioDefaults
 
 TruthKind = Literal["analytic", "discrete"]
 IntegrationScheme = Literal["euler", "trapezoid"]
@@ -380,8 +380,9 @@ def _given_of(truth: AccelGpsTruth) -> AccelGpsTruth:
 
 
 @dataclass(frozen=True)
-class AccelGpsScenario:
-    """The whole accelerometer/GPS study: timing, truth and filter settings."""
+class AccelGpsScenario(ScenarioDefaults):
+    """The whole accelerometer/GPS study: timing, truth and filter settings (the protocol's defaults that it
+    does not override: :class:`~kalcal.scenarios.protocol.ScenarioDefaults`)."""
 
     scenario: AccelGpsSettings = field(default_factory=AccelGpsSettings)
     truth: AccelGpsTruth = field(default_factory=AccelGpsTruth)

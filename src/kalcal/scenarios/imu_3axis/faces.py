@@ -144,7 +144,7 @@ def whiteness(samples: list[np.ndarray], level: float = 0.01) -> dict:
     under white noise (s_B^2 the variance of the B batch means of length L, s^2 the sample variance),
     summed over the faces and axes; the upper-tail p-value and the pooled variance ratio (1 for white
     noise; the factor the white variance of a mean is too small by, for colored noise)."""
-    from scipy import stats
+    from kalcal.stats.distributions import chi2_sf
 
     total, dof = 0.0, 0
     for face in samples:
@@ -153,7 +153,7 @@ def whiteness(samples: list[np.ndarray], level: float = 0.01) -> dict:
         ratio = batches.var(axis=0, ddof=1) * length / face.var(axis=0, ddof=1)
         total += float(np.sum((BATCHES - 1) * ratio))
         dof += (BATCHES - 1) * 3
-    p = float(stats.chi2.sf(total, dof))
+    p = float(chi2_sf(total, dof))
     return {"test": f"batch means, {BATCHES} batches per face and axis, chi-square with {dof} degrees of freedom",
             "variance_ratio": total / dof, "p_value": p, "level": level, "white": p >= level,
             "assumption": "each face's samples are independent (white noise): the variance of a mean is the sample variance / n"}

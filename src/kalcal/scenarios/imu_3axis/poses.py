@@ -140,7 +140,7 @@ def fit_poses(means: np.ndarray, mean_cov: np.ndarray, gravity: float, *, max_co
     one line naming ``source``) fewer than 9 poses or a layout whose information's condition number exceeds
     ``max_condition``. ``bootstrap`` replicates (B; 0: none) simulate the means from the fit (the fitted
     poses and the means' covariances) and refit, with the generator seeded by ``seed``."""
-    from scipy import stats
+    from kalcal.stats.distributions import chi2_sf
 
     means, mean_cov = np.asarray(means, dtype=float), np.asarray(mean_cov, dtype=float)
     n = means.shape[0]
@@ -160,7 +160,7 @@ def fit_poses(means: np.ndarray, mean_cov: np.ndarray, gravity: float, *, max_co
     covariance = cho_solve(cho_factor(info), np.eye(9))
     chi2 = float(2 * solution.cost)
     dof = n - 9
-    p_value = float(stats.chi2.sf(chi2, dof)) if dof > 0 else float("nan")
+    p_value = float(chi2_sf(chi2, dof)) if dof > 0 else float("nan")
     residuals = means - h(problem.x(solution.x), problem.data, gravity)
     replicates = np.empty((0, 9))
     if bootstrap > 0:

@@ -35,7 +35,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import stats as sps
 
 __all__ = ["ALTERNATIVES", "PowerRow", "SimulatedPower", "alternative_models", "clopper_pearson", "simulated_power"]
 
@@ -56,10 +55,9 @@ DESCRIPTIONS = {
 
 def clopper_pearson(count: int, trials: int, confidence: float) -> tuple[float, float]:
     """The exact (Clopper–Pearson) two-sided interval of a binomial proportion count / trials."""
-    alpha = 1.0 - confidence
-    lower = 0.0 if count == 0 else float(sps.beta.ppf(alpha / 2.0, count, trials - count + 1))
-    upper = 1.0 if count == trials else float(sps.beta.isf(alpha / 2.0, count + 1, trials - count))
-    return lower, upper
+    from kalcal.stats.distributions import binom_interval
+
+    return binom_interval(count, trials, confidence)
 
 
 def alternative_models(filter_model, name: str):
