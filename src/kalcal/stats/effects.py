@@ -47,7 +47,14 @@ Gaussian noises, x_k = f(x_{k-1}) + w_k, z_k = h(x_k) + v_k::
 F = df/dx at x_{k-1}, H = dh/dx at x_k, the expectations over the truth's own states (the same Monte
 Carlo). It applies where Q is positive definite. For static parameters (Q = 0 and f(x) = x, so F = I at
 every sampled state) J_k = J_0 + sum_{j<=k} E[H_j^T R^-1 H_j]. Any other singular Q has no bound here
-(said so, never a number). The bound is of the *truth's* model: every unbiased estimator's mean squared
+(said so, never a number). **Static parameters with renewed nuisance states** (``renewed``: states that f
+sets to a constant at every update, with their own block of Q and no cross terms, so that each update
+draws them afresh: a static pose's tilts) have the bound of the static parameters theta (the other
+states) with every update's nuisance eta_k marginalized: the expected information of (theta, eta_1..eta_K)
+is block-arrowhead, and the theta-block of its inverse is (J_0 + sum_j [A_j - C_j D_j^-1 C_j^T])^-1 with
+A_j, C_j the theta-theta and theta-eta blocks of E[H_j^T R^-1 H_j] and D_j = Q_eta^-1 + its eta-eta block
+(the Schur complement of the expected information, not the expectation of a Schur complement). The bound
+is of the *truth's* model: every unbiased estimator's mean squared
 error is at least J_k^-1, so the ensemble's E[e_ik^2] is reported against (J_k^-1)_ii as a lower bound with
 the MSE's own Monte Carlo standard error.
 """
@@ -118,10 +125,16 @@ class EffectLayout:
     n_updates: int
     d: int
     p: int
+    #: the truth's updates and states of the bound's sums (f, F^T Q^-1 F, H^T R^-1 H); 0: n_updates and d.
+    #: They differ where the checks see fewer states than the truth has (nuisance states left out) or a
+    #: batch estimator reports one final estimate of K updates
+    truth_updates: int = 0
+    truth_d: int = 0
 
     @property
     def slices(self) -> dict[str, tuple[slice, tuple[int, ...]]]:
         k, d = self.n_updates, self.d
+        kt, dt = self.truth_updates or k, self.truth_d or d
         shapes = {
             "nees_sq": (k,),  # sum NEES_k^2
             "nees_avg": (2,),  # sum of a realization's mean NEES over k, and of its square
@@ -134,9 +147,9 @@ class EffectLayout:
             "z2": (k, d),
             "zbar": (2, d),  # a realization's mean over k of e/sqrt(P_ii): sum and sum of squares
             "lag1": (2,),  # a realization's mean of u_k^T u_{k+1} / p: sum and sum of squares
-            "f": (k, d, d),  # sum F_k at the true x_{k-1} (the truth's Jacobian)
-            "ftqf": (k, d, d),  # sum F^T Q^-1 F
-            "htrh": (k, d, d),  # sum H_k^T R^-1 H_k at the true x_k
+            "f": (kt, dt, dt),  # sum F_k at the true x_{k-1} (the truth's Jacobian)
+            "ftqf": (kt, dt, dt),  # sum F^T Q^-1 F
+            "htrh": (kt, dt, dt),  # sum H_k^T R^-1 H_k at the true x_k
         }
         out, start = {}, 0
         for name, shape in shapes.items():
@@ -352,11 +365,16 @@ class CramerRaoBound:
         return rows
 
 
-def cramer_rao_bound(layout: EffectLayout, flat: np.ndarray, error_outer: np.ndarray, n: int, q, r, p0) -> CramerRaoBound:
-    """The bound J_k^-1 from the run's sums (module docstring), with the MSE and its Monte Carlo error."""
+def cramer_rao_bound(
+    layout: EffectLayout, flat: np.ndarray, error_outer: np.ndarray, n: int, q, r, p0, renewed: tuple[int, ...] = ()
+) -> CramerRaoBound:
+    """The bound J_k^-1 from the run's sums (module docstring), with the MSE and its Monte Carlo error;
+    ``renewed``: the truth's states renewed at every update (nuisance), whose bound is of the others alone."""
     mse = np.diagonal(error_outer, axis1=1, axis2=2) / n
     mse_se = np.sqrt(np.maximum(layout.view(flat, "e4") / n - mse**2, 0.0) * n / (n - 1) / n)
     q = np.asarray(q, dtype=float)
+    if renewed:
+        return _renewed_bound(layout, flat, n, q, np.asarray(p0, dtype=float), tuple(renewed), mse, mse_se)
     d = layout.d
     mean_f = layout.view(flat, "f") / n
     ftqf = layout.view(flat, "ftqf") / n
@@ -384,6 +402,33 @@ def cramer_rao_bound(layout: EffectLayout, flat: np.ndarray, error_outer: np.nda
             j = q_inv + htrh[k] - d12.T @ np.linalg.solve(j + ftqf[k], d12)
             j = 0.5 * (j + j.T)
             bounds[k] = _spd_inverse(j)
+    return CramerRaoBound(True, reason, bounds, mse, mse_se)
+
+
+def _renewed_bound(layout, flat, n, q, p0, renewed, mse, mse_se) -> CramerRaoBound:
+    """The static parameters' bound with each update's nuisance states marginalized (module docstring)."""
+    d = layout.truth_d or layout.d
+    eta = np.asarray(renewed)
+    theta = np.setdiff1d(np.arange(d), eta)
+    mean_f = layout.view(flat, "f") / n
+    htrh = layout.view(flat, "htrh") / n
+    static = mean_f[:, theta[:, None], theta]
+    # the parameters keep their value (F = I on them, no leak into or out of the nuisance states), the
+    # nuisance states are drawn afresh (F = 0 on them) with their own block of Q and none of the parameters'
+    if not (np.allclose(static, np.eye(theta.size), rtol=0.0, atol=1e-12) and np.allclose(mean_f[:, :, eta], 0.0, atol=1e-12)
+            and np.allclose(mean_f[:, eta[:, None], theta], 0.0, atol=1e-12) and not np.any(q[theta[:, None], theta])
+            and not np.any(q[theta[:, None], eta])):
+        return CramerRaoBound(False, "renewed states with a transition that does not keep the others static: no bound given here", None, mse, mse_se)
+    q_eta_inv = _spd_inverse(q[eta[:, None], eta])
+    j = _spd_inverse(p0[theta[:, None], theta])  # J_0 of the parameters alone
+    bounds = np.empty((htrh.shape[0], theta.size, theta.size))
+    for k in range(htrh.shape[0]):
+        a, c = htrh[k][theta[:, None], theta], htrh[k][theta[:, None], eta]
+        block = q_eta_inv + htrh[k][eta[:, None], eta]
+        j = j + a - c @ np.linalg.solve(block, c.T)  # the update's nuisance marginalized by a solve
+        j = 0.5 * (j + j.T)
+        bounds[k] = _spd_inverse(j)
+    reason = "static with renewed nuisance states: J_k = J_0 + sum_j (A_j - C_j D_j^-1 C_j^T), the parameters' block"
     return CramerRaoBound(True, reason, bounds, mse, mse_se)
 
 
@@ -461,10 +506,11 @@ def effect_sizes(
     confidence: float,
     tolerance: float = DEFAULT_TOLERANCE,
     crb: tuple | None = None,
+    renewed: tuple[int, ...] = (),
 ) -> EffectSizes:
     """The effect sizes of a run from its :class:`~kalcal.montecarlo.accumulators.MomentSums` ``sums`` (count,
     nees, nis, error_outer, filter_cov) and its flat effect sums; ``crb`` = (Q, R, P0) of the truth for the
-    Cramér–Rao bound (None: none)."""
+    Cramér–Rao bound (None: none); ``renewed`` the truth's renewed nuisance states (:func:`cramer_rao_bound`)."""
     n, d, p = sums.count, layout.d, layout.p
     if n < 2:
         raise ValueError(f"need at least two realizations for effect sizes, got {n}")
@@ -495,5 +541,5 @@ def effect_sizes(
     kr, kse = _ratio_se(e2, pii, v("e4"), v("p2"), v("e2p"), n)
     bm, bse = _mean_se(v("z"), v("z2"), n)
     per_update = {"nees_per_dim": band(nm / d, nse / d), "variance_ratio": band(kr, kse), "bias_sigma": band(bm, bse)}
-    bound = None if crb is None else cramer_rao_bound(layout, flat, sums.error_outer, n, *crb)
+    bound = None if crb is None else cramer_rao_bound(layout, flat, sums.error_outer, n, *crb, renewed=renewed)
     return EffectSizes(tuple(overall), per_update, tolerance, bound)

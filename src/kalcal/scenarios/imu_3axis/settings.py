@@ -30,6 +30,8 @@ from typing import ClassVar
 from kalcal.models.settings import SettingError, require_nonnegative, require_positive, show
 from kalcal.scenarios.protocol import Capabilities, ScenarioDefaults
 from kalcal.scenarios.imu_3axis.model import STANDARD_GRAVITY
+from kalcal.scenarios.imu_3axis.verify import EstimatorSection, TruthSection
+from kalcal.scenarios.nonlinear.settings import ChecksSection
 
 
 @dataclass(frozen=True)
@@ -62,31 +64,94 @@ class Imu3AxisSettings:
 
 @dataclass(frozen=True)
 class Imu3AxisScenario(ScenarioDefaults):
-    """A 3-axis accelerometer's M (scale factors and misalignment) and b from static poses."""
+    """A 3-axis accelerometer's M (scale factors and misalignment) and b from static poses.
+
+    ``calibrate`` reads section ``scenario``; ``verify`` (procedure (b) on the nonlinear bench,
+    :mod:`~kalcal.scenarios.imu_3axis.verify`) reads ``truth`` (the poses, their noise, the tilts and
+    the prior), ``filter`` (the estimator: ``ekf``, ``iekf``, ``ukf`` or ``batch``), ``checks`` (the
+    tolerance band) and ``scenario.gravity`` and ``scenario.max_condition``.
+    """
 
     scenario: Imu3AxisSettings = field(default_factory=Imu3AxisSettings)
+    truth: TruthSection = field(default_factory=TruthSection)
+    filter: EstimatorSection = field(default_factory=EstimatorSection)
+    checks: ChecksSection = field(default_factory=ChecksSection)
 
     NAME: ClassVar[str] = "imu-3axis"
     SUMMARY: ClassVar[str] = "a 3-axis accelerometer's scale factors, misalignment and biases from static poses"
 
     capabilities: ClassVar[Capabilities] = Capabilities(
-        exact_analysis=False, fixed_gains=False, nonlinear=True, batch=True, engines=("nonlinear",), long_run=False,
-        commands=frozenset({"calibrate"}),
-        why_not=tuple((command, "imu-3axis calibrates logged static poses (kalcal calibrate imu-3axis); its Monte Carlo is not built yet")
-                      for command in ("verify", "analyze", "sweep", "simulate", "fit", "report")),
+        exact_analysis=False, fixed_gains=False, nonlinear=True, engines=("exact",), long_run=False,
+        commands=frozenset({"calibrate", "verify", "report"}),
+        why_not=(
+            ("analyze", "no exact analysis: the estimators' P is a linearization's, only a Monte Carlo tells its error; use kalcal verify imu-3axis"),
+            ("sweep", "no sweep of imu-3axis; run kalcal verify imu-3axis with --set truth.poses=... or truth.noise=..."),
+            ("simulate", "imu-3axis has no log simulation (kalcal verify imu-3axis simulates the poses' means)"),
+            ("fit", "imu-3axis has no noise fit (kalcal calibrate imu-3axis)"),
+            ("--engine", "use the exact engine (the poses' means are simulated directly)"),
+            ("--long-run", "set truth.poses instead"),
+        ),
     )
 
-    def problem(self, form: str = "joseph", residual_pairs: bool = True):
-        """None yet: the Monte Carlo of procedure (b) is not built (``verify`` is refused)."""
-        from kalcal.errors import ConfigError
+    # -- verify: procedure (b) on the nonlinear bench ---------------------------------------------------
 
-        raise ConfigError("imu-3axis: no verification problem yet (kalcal calibrate imu-3axis only)")
+    @property
+    def label(self) -> str:
+        return f"imu-3axis ({self.filter.kind}, {self.truth.poses} poses)"
+
+    @property
+    def loaded(self):
+        """The 11-state pose model (truth and estimators alike) and the poses' data, as the nonlinear
+        problem reads a model written as code."""
+        from kalcal.scenarios.imu_3axis.verify import pose_model
+        from kalcal.scenarios.nonlinear.settings import Loaded
+
+        model, data = pose_model(self.truth, float(self.scenario.gravity))
+        return Loaded(model, model, self.label, data.shape[0], data, None)
+
+    @property
+    def n_updates(self) -> int:
+        """K: one update per pose."""
+        return int(self.loaded.n_updates)
+
+    @property
+    def problem_hooks(self):
+        """The checks on the 9 parameters, the tilts renewed at every pose, the batch ML where chosen."""
+        from kalcal.scenarios.imu_3axis.verify import PARAMS, TILTS, batch_estimator
+        from kalcal.scenarios.nonlinear.problem import ProblemHooks
+
+        batch = None
+        if self.filter.kind == "batch":
+            loaded = self.loaded
+            batch = batch_estimator(loaded.filter, loaded.data, self.filter.max_iterations)
+        return ProblemHooks(label="imu-3axis", checked=PARAMS, renewed=TILTS, batch=batch)
+
+    def problem(self, form: str = "joseph", residual_pairs: bool = True):
+        """Procedure (b)'s estimator against its truth (:mod:`kalcal.scenarios.imu_3axis.verify`)."""
+        from kalcal.errors import ConfigError
+        from kalcal.scenarios.nonlinear.problem import NonlinearProblem
+
+        if form != "joseph":
+            raise ConfigError(f"--form: {form!r} is not available for imu-3axis (its EKF updates in Joseph form)")
+        self.check_settings("verify")
+        return NonlinearProblem(self, residual_pairs=residual_pairs)
 
     def model_error_cause(self) -> str:
         return ""
 
     def check_settings(self, command: str) -> None:
-        """Nothing to refuse: every setting holds in calibrate."""
+        """verify: the layout spans the sphere (procedure (b)'s condition), the batch ML has P - 9 >= 1
+        residual degrees of freedom for its NIS check, and no power by simulation (not built here)."""
+        if command != "verify":
+            return
+        from kalcal.scenarios.imu_3axis.verify import check_layout
+
+        check_layout(self.truth, float(self.scenario.gravity), float(self.scenario.max_condition))
+        if self.filter.kind == "batch" and self.n_updates < 10:
+            raise SettingError("truth.poses", "at least 10 poses for filter.kind=batch (its NIS check needs P - 9 >= 1 residual "
+                               "degrees of freedom)", show(self.n_updates))
+        if self.checks.power_runs:
+            raise SettingError("checks.power_runs", "0: imu-3axis has no power by simulation", show(self.checks.power_runs))
 
     def error_sources(self) -> list:
         return []
@@ -98,8 +163,9 @@ class Imu3AxisScenario(ScenarioDefaults):
         return 0.0
 
     def run_length(self) -> tuple[int, float]:
-        """Not a time series: one update per pose; none without a log."""
-        return 0, 0.0
+        """verify: one update per pose, a pose per second of a nominal clock (the updates' times are pose numbers)."""
+        k = self.n_updates
+        return k, float(k)
 
     def truth_is_filter(self) -> bool:
         return False
@@ -112,7 +178,9 @@ class Imu3AxisScenario(ScenarioDefaults):
     def output_names(self, command: str) -> tuple[str, ...]:
         from kalcal.scenarios.imu_3axis.job import Imu3AxisCalibrationResult
 
-        return {"calibrate": Imu3AxisCalibrationResult.OUTPUT_NAMES}[command]
+        if command == "calibrate":
+            return Imu3AxisCalibrationResult.OUTPUT_NAMES
+        return ()
 
     def calibrate(self, logs, options):
         """The calibration of ``logs["imu"]`` with ``options`` (``imu_columns``, ``poses``)."""

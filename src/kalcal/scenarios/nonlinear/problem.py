@@ -7,15 +7,23 @@ UKF, :func:`kalcal.core.nonlinear_run.run_nonlinear_filter`) runs on the whole b
 its errors, each realization's own P_k and S_k, NEES, NIS and the whitened errors and innovations are
 added into the block's sums (nothing of size n K is kept: memory flat in N and in K), with the effect
 sizes' sums (:mod:`kalcal.stats.effects`) and the Cramér–Rao bound's expectations at the true states.
+
+**Hooks** for a scenario built on this problem (:class:`ProblemHooks`, the scenario's ``problem_hooks``;
+a static-pose calibration uses them): the states the checks are on (the others are nuisance: a pose's tilts),
+the states the truth renews at every update (their Cramér–Rao bound is marginalized, update by update),
+and a batch estimator that gives one final estimate per realization in place of the filter (its checks
+are the final-time ones, :func:`kalcal.stats.suite.final_time_checks`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
+from typing import Any, Callable
 
 import numpy as np
 
-from kalcal.core.nonlinear_run import run_nonlinear_filter
+from kalcal.core.nonlinear_run import FilterRun, run_nonlinear_filter
 from kalcal.core.ukf import UnscentedSettings
 from kalcal.montecarlo.accumulators import BlockResult, MomentSums, SumBuffers, whiten
 from kalcal.montecarlo.problem import ProblemInfo, check_engine
@@ -41,10 +49,50 @@ def _per_update(value: np.ndarray | None, k: int) -> np.ndarray | None:
 
 
 @dataclass(frozen=True)
+class BatchEstimator:
+    """One final estimate per realization in place of a filter: ``estimate(z)`` takes the block's
+    measurements z (n, K, p) and returns its x (n, d) and cov (n, d, d) in the checked states' order, and a
+    residual r (n, q) with its covariance S (n, q, q) under the estimator's own model (the NIS check's)."""
+
+    estimate: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
+    residual_names: tuple[str, ...]
+    residual_units: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class ProblemHooks:
+    """What a scenario built on :class:`NonlinearProblem` changes in it (all optional).
+
+    Attributes
+    ----------
+    label : str or None
+        The problem's name (``info.scenario``), where not ``nonlinear (KIND, FILE)``.
+    checked : tuple of int or None
+        The states the checks, effect sizes and bound are on (None: all); the others are nuisance states.
+    renewed : tuple of int
+        The truth's states renewed at every update (:func:`kalcal.stats.effects.cramer_rao_bound`).
+    batch : BatchEstimator or None
+        The estimator in place of the filter: one final estimate per realization, checked at the final time.
+    """
+
+    label: str | None = None
+    checked: tuple[int, ...] | None = None
+    renewed: tuple[int, ...] = ()
+    batch: BatchEstimator | None = None
+
+
+class _Batched:
+    """One batch estimate as the filter's per-update result (the fields ``on_update`` reads)."""
+
+    def __init__(self, x, cov, residual, innovation_cov):
+        self.x, self.cov, self.residual, self.innovation_cov = x, cov, residual, innovation_cov
+
+
+@dataclass(frozen=True)
 class NonlinearProblem:
     """The scenario's filter against its truth (engine "exact": the truth at the update times)."""
 
-    scenario: NonlinearScenario
+    scenario: Any  #: a NonlinearScenario, or a scenario with its attributes and ``problem_hooks``
     residual_pairs: bool = True
     info: ProblemInfo = field(init=False)
     engines: tuple[str, ...] = field(init=False, default=("exact",))
@@ -54,22 +102,48 @@ class NonlinearProblem:
     def __post_init__(self) -> None:
         s = self.scenario
         m = s.loaded.filter
-        k = s.n_updates
+        hooks = self.hooks
+        names, units = self._checked(np.asarray(m.state_names)), self._checked(np.asarray(m.state_units))
+        times = np.arange(1, s.n_updates + 1) * float(m.dt)
+        if hooks.batch is not None:  # one final estimate: one reported update, at the last one's time
+            times = times[-1:]
         info = ProblemInfo(
-            scenario=f"nonlinear ({s.filter.kind}, {s.model.file})",
-            update_times=np.arange(1, k + 1) * float(m.dt),
-            state_names=m.state_names,
-            state_units=m.state_units,
-            measurement_names=m.measurement_names,
-            measurement_units=m.measurement_units,
-            capabilities=s.capabilities,
+            scenario=hooks.label or f"nonlinear ({s.filter.kind}, {s.model.file})",
+            update_times=times,
+            state_names=tuple(str(v) for v in names),
+            state_units=tuple(str(v) for v in units),
+            measurement_names=hooks.batch.residual_names if hooks.batch is not None else m.measurement_names,
+            measurement_units=hooks.batch.residual_units if hooks.batch is not None else m.measurement_units,
+            # a batch estimator's checks are the final-time ones: the capability follows the estimator
+            capabilities=dataclasses.replace(s.capabilities, batch=hooks.batch is not None),
         )
         object.__setattr__(self, "info", info)
 
     @property
+    def hooks(self) -> ProblemHooks:
+        return getattr(self.scenario, "problem_hooks", None) or ProblemHooks()
+
+    def _checked(self, value: np.ndarray, axes: int = 1) -> np.ndarray:
+        """The checked states of a state array's last ``axes`` axes (all of it without the hook)."""
+        idx = self.hooks.checked
+        if idx is None:
+            return value
+        idx = np.asarray(idx)
+        if axes == 1:
+            return value[..., idx]
+        return value[..., idx[:, None], idx]
+
+    @property
+    def reported_updates(self) -> int:
+        return len(self.info.update_times)
+
+    @property
     def layout(self) -> EffectLayout:
         m = self.scenario.loaded.filter
-        return EffectLayout(self.scenario.n_updates, m.state_dim, m.measurement_dim)
+        return EffectLayout(
+            self.reported_updates, len(self.info.state_names), len(self.info.measurement_names),
+            truth_updates=self.scenario.n_updates, truth_d=m.state_dim,
+        )
 
     def normals_per_realization(self, engine: str) -> int:
         m = self.scenario.loaded.truth
@@ -77,7 +151,7 @@ class NonlinearProblem:
 
     def expected_mean_error(self) -> np.ndarray:
         """Zeros: no deterministic model error is predicted for a model written as code."""
-        return np.zeros((self.scenario.n_updates, self.scenario.loaded.filter.state_dim))
+        return np.zeros((self.reported_updates, len(self.info.state_names)))
 
     # -- the truth ---------------------------------------------------------------------------------
 
@@ -102,6 +176,14 @@ class NonlinearProblem:
         s, loaded = self.scenario, self.scenario.loaded
         f = s.filter
         k_count = s.n_updates
+        batch = self.hooks.batch
+        if batch is not None:
+            result = _Batched(*batch.estimate(z))
+            if on_update is not None:
+                on_update(0, result)
+            if not keep:
+                return None
+            return FilterRun(result.x[:, None], result.cov[:, None], result.residual[:, None], result.innovation_cov[:, None])
 
         def rows(value):
             if value is None:
@@ -120,8 +202,8 @@ class NonlinearProblem:
         """The block's realizations filtered and kept whole (n, K, ...): the numpy oracle of :meth:`block_sums`."""
         check_engine(self, engine)
         _, states, z = self._simulate(rng, n)
-        run = self._run(z, None, True)
-        error = states.transpose(1, 0, 2) - run.x
+        run = self._reported(self._run(z, None, True))
+        error = self._checked(self._true_reported(states)).transpose(1, 0, 2) - run.x
         eps = whiten(run.cov, error)
         u = whiten(run.innovation_cov, run.residual)
         return BlockResult(
@@ -142,29 +224,44 @@ class NonlinearProblem:
         check_engine(self, engine)
         _, states, z = self._simulate(rng, n)
         one = slice(index, index + 1)
-        run = self._run(z[one], None, True)
-        return states[:, index] - run.x[0], run.x[0], run.cov[0]
+        run = self._reported(self._run(z[one], None, True))
+        return self._checked(self._true_reported(states))[:, index] - run.x[0], run.x[0], run.cov[0]
+
+    def _true_reported(self, states: np.ndarray) -> np.ndarray:
+        """The true states (K', n, d) at the reported updates: all K, or the last for a batch estimator."""
+        return states[-1:] if self.hooks.batch is not None else states
+
+    def _reported(self, run: FilterRun) -> FilterRun:
+        """A run's checked states (the filter's own order; a batch estimator's are already so)."""
+        if self.hooks.batch is not None or self.hooks.checked is None:
+            return run
+        return FilterRun(self._checked(run.x), self._checked(run.cov, 2), run.residual, run.innovation_cov)
 
     def block_sums(self, rng: np.random.Generator, n: int, engine: str) -> MomentSums:
         """The moment sums and the effect sums of n realizations, added update by update."""
         check_engine(self, engine)
         s, loaded = self.scenario, self.scenario.loaded
         t = loaded.truth
-        d, p, k_count = t.state_dim, t.measurement_dim, s.n_updates
+        d_truth, k_truth = t.state_dim, s.n_updates
+        layout = self.layout
+        d, p, k_count = layout.d, layout.p, layout.n_updates
         x0, states, z = self._simulate(rng, n)
         sums = SumBuffers.zeros(k_count, d, p, n, self.residual_pairs, own_cov=True)
-        layout = self.layout
         flat = layout.zeros()
         effects = EffectAccumulator(layout, flat, n)
         normalized = np.zeros((k_count, p))
         q = np.asarray(t.q, dtype=float)
-        q_inv = np.linalg.inv(q) if np.linalg.matrix_rank(q) == d else None  # d x d once per block
+        q_inv = np.linalg.inv(q) if np.linalg.matrix_rank(q) == d_truth else None  # d x d once per block
         r_chol = np.linalg.cholesky(t.r)
+        reported = self._true_reported(states)
+        batch = self.hooks.batch is not None
 
         def on_update(k: int, result) -> None:
-            x_true = states[k]
+            x_true = self._checked(reported[k])
+            x_hat = result.x if batch else self._checked(result.x)
+            cov = result.cov if batch else self._checked(result.cov, 2)
+            result = _Batched(x_hat, cov, result.residual, result.innovation_cov)
             e = x_true - result.x
-            cov = result.cov
             eps = whiten(cov, e)
             u = whiten(result.innovation_cov, result.residual)
             nees_k = np.einsum("ni,ni->n", eps, eps)
@@ -186,15 +283,17 @@ class NonlinearProblem:
             if self.residual_pairs:
                 sums.residuals[k * p:(k + 1) * p] = u.T
             effects.update(k, e, cov, nees_k, nis_k, u)
-            # the Cramér–Rao bound's expectations, at the truth's own states with the truth's Jacobians
-            previous = x0 if k == 0 else states[k - 1]
-            jf = t.transition_jacobian(previous, _per_update(loaded.inputs, k))
-            jh = t.measurement_jacobian(x_true, _per_update(loaded.data, k))
-            wh = np.linalg.solve(r_chol, jh)  # R^-1/2 H, (n, p, d): a triangular solve, no inverse
-            ftqf = np.einsum("nai,ab,nbj->ij", jf, q_inv, jf) if q_inv is not None else np.zeros((d, d))
-            effects.truth(k, jf.sum(0), ftqf, np.einsum("nai,naj->ij", wh, wh))
 
         self._run(z, on_update, False)
+        # the Cramér–Rao bound's expectations, at the truth's own states with the truth's Jacobians, at
+        # every update of the truth (a batch estimator's one reported update included all of them)
+        for k in range(k_truth):
+            previous = x0 if k == 0 else states[k - 1]
+            jf = t.transition_jacobian(previous, _per_update(loaded.inputs, k))
+            jh = t.measurement_jacobian(states[k], _per_update(loaded.data, k))
+            wh = np.linalg.solve(r_chol, jh)  # R^-1/2 H, (n, p, d): a triangular solve, no inverse
+            ftqf = np.einsum("nai,ab,nbj->ij", jf, q_inv, jf) if q_inv is not None else np.zeros((d_truth, d_truth))
+            effects.truth(k, jf.sum(0), ftqf, np.einsum("nai,naj->ij", wh, wh))
         effects.finish()
         out = MomentSums.from_buffers(n, sums, normalized_residual=normalized)
         out.effect = flat
@@ -216,5 +315,6 @@ class NonlinearProblem:
 
         t = self.scenario.loaded.truth
         return effect_sizes(
-            self.layout, sums.effect, sums, self.info.state_names, confidence, self.scenario.checks.tolerance, (t.q, t.r, t.p0)
+            self.layout, sums.effect, sums, self.info.state_names, confidence, self.scenario.checks.tolerance, (t.q, t.r, t.p0),
+            renewed=self.hooks.renewed,
         )
