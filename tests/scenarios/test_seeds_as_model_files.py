@@ -374,3 +374,38 @@ def test_kalcal_calibrate_of_the_seed003_file_is_kalcal_calibrate_scale_bias(tmp
         np.testing.assert_allclose(mine[column], theirs[column], rtol=0, atol=EXACT, err_msg=column)
     summary = json.loads((tmp_path / "file" / "summary.json").read_text())
     assert summary["loglik"] == pytest.approx(49.50673624, abs=5e-9)  # the built-in's diffuse_loglik, above
+
+
+def test_verify_of_the_seed003_file_over_the_builtins_regressors_agrees_with_kalcal_verify_scale_bias(tmp_path):
+    """`kalcal verify scale-bias` at truth.sensor_noise_std = 0 (and a fixed scale, bias and no drift in the
+    truth, so that its sensor readings, the regressors h_k = [sensor_k, 1], are the same in every realization:
+    the built-in's signal, deterministic) against the seed 003 file over a log of those readings (its proper-prior
+    variant, v = 0.2^2, the truth's theta the built-in's, m0 = 0). "Agrees" means: the same filter, so the
+    same P_k at the last update to rounding (1e-9 relative), and the same true error covariance, which the
+    file's exact analysis gives and each side's ensemble estimates: the errors are linear in the reference's
+    Gaussian noise, so each diagonal entry's sample variance has standard error sqrt(2/(n-1)) of it; each
+    side lies within 4.5 of them (a false alarm below 1e-5 per entry, fixed seeds)."""
+    import warnings
+
+    settings = {"truth.sensor_noise_std": 0.0, "truth.scale_error_std": 0.0, "truth.bias_std": 0.0,
+                "truth.parameter_drift_std": 0.0, "filter.scale_error_std": 0.02, "filter.bias_std": 0.1}
+    logs = [kalcal.simulate("scale-bias", seed, settings=settings).logs["data"] for seed in (1, 2)]
+    np.testing.assert_array_equal(logs[0]["sensor"], logs[1]["sensor"])  # the regressors do not depend on the draw
+    logs[0].to_csv(tmp_path / "regressors.csv", index=False)
+    n = 4000
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        builtin = kalcal.verify("scale-bias", n, seed=1, settings=settings)
+        sets = dict(s.split("=", 1) for s in _proper_sets())
+        sets |= {"filter.v": "[[0.04000000000000001]]", "truth.m0": "[[0.0, 0.0], [0.0, 0.0]]",
+                 "truth.x0": f"[{1 / 0.99!r}, {0.05 / 0.99!r}]"}  # theta(a, b) at the built-in truth's a, b
+        mine = kalcal.verify(str(SEED003), n, seed=2, settings=sets, data=tmp_path / "regressors.csv")
+    theirs, ours = builtin.raw_summary["final"], mine.raw_summary["final"]
+    assert theirs["time"] == ours["time"] == 30.0
+    np.testing.assert_allclose(np.array(ours["filter_covariance"]), np.array(theirs["filter_covariance"]), rtol=1e-9)
+    exact = np.diag(np.array(ours["exact_error_covariance"]))
+    bound = 4.5 * np.sqrt(2.0 / (n - 1)) * exact
+    for side in (theirs, ours):
+        assert np.all(np.abs(np.diag(np.array(side["ensemble_covariance"])) - exact) < bound)
+    # the filter believes a prior spread the truth lacks: its P_k exceeds the true covariance, which both see
+    assert np.all(np.diag(np.array(ours["filter_covariance"])) > exact)
