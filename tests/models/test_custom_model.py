@@ -93,9 +93,8 @@ def test_a_truth_table_overrides_only_what_it_sets():
 def test_settings_round_trip_through_json():
     scenario = parse_model(_text(table={"v": "[[2.0, 0.5], [0.5, 1.0]]"}, sample_period="0.01"), SOURCE)
     settings = json.loads(json.dumps(to_jsonable(section_values(scenario))))
-    assert is_custom_settings(settings) and set(settings["filter"]) == {
-        *MODEL_KEYS, "steps_per_update", "sample_period", "b", "h_columns", "diffuse"
-    }
+    # a file without inputs, data-named rows or diffuse states keeps the section of a time-invariant model
+    assert is_custom_settings(settings) and set(settings["filter"]) == {*MODEL_KEYS, "steps_per_update", "sample_period"}
     rebuilt = CustomModelScenario.from_settings(settings)
     assert rebuilt.model == scenario.model
     _same_model(rebuilt.filter, scenario.filter)

@@ -73,7 +73,7 @@ def test_a_truth_with_a_map_has_its_own_dimension():
 def test_a_truth_without_a_map_is_unchanged():
     scenario = load_model_file(EXAMPLES / "constant_velocity_mistuned.toml")
     assert not isinstance(scenario.truth, MappedTruthModel) and scenario.truth_map is None
-    assert set(section_values(scenario)["truth"]) == {*MODEL_KEYS, "steps_per_update", "sample_period", "b", "h_columns", "diffuse"}
+    assert set(section_values(scenario)["truth"]) == {*MODEL_KEYS, "steps_per_update", "sample_period"}
 
 
 def test_the_summary_settings_keep_the_map_and_rebuild_the_scenario():

@@ -421,3 +421,33 @@ def test_a_truth_h_may_name_columns_and_is_bound_from_its_own():
     bound = scenario.bind(frame)
     np.testing.assert_array_equal(bound.truth.h[:, 0, 0], frame["gain"].to_numpy())
     np.testing.assert_array_equal(bound.filter.h[:, 0, 0], 1.0)
+
+
+# --- summary keys of a file without the new features -------------------------------------------------------------
+
+
+def test_a_summary_leaves_out_empty_inputs_columns_and_diffuse_and_rebuilds_both_forms():
+    """A file without inputs, data-named rows of h or diffuse states writes the keys a time-invariant model
+    wrote before they existed, so an old run's checkpoint fingerprint is unchanged; the old form and the form
+    with the keys (as such runs wrote them for a while) both rebuild the same scenario."""
+    import dataclasses
+
+    from kalcal.core.model import LinearGaussianModel
+    from kalcal.montecarlo.checkpoint import fingerprint
+
+    old_keys = {f.name for f in dataclasses.fields(LinearGaussianModel)}
+    scenario = parse_model(_text(data=None, truth={"w": "[[0.09]]"}, b=None, steps_per_update="1", updates="5"), SOURCE)
+    settings = json.loads(json.dumps(to_jsonable(section_values(scenario))))
+    assert set(settings["filter"]) == set(settings["truth"]) == old_keys
+    # the fingerprint a checkpoint carries is that of the settings a LinearGaussianModel's fields give
+    old = {section: (to_jsonable(dataclasses.asdict(LinearGaussianModel(**{k: getattr(getattr(scenario, section), k) for k in old_keys})))
+                     if section in ("filter", "truth") else value) for section, value in settings.items()}
+    assert fingerprint({"settings": settings}) == fingerprint({"settings": json.loads(json.dumps(old))})
+    with_keys = {**settings, **{s: {**settings[s], "b": [[]] * 2, "h_columns": [], "diffuse": []} for s in ("filter", "truth")}}
+    for form in (settings, with_keys):
+        _same(CustomModelScenario.from_settings(form), scenario)
+    # a file with them keeps them (and only those it has)
+    inputs = parse_model(_text(truth={"b": "[[0.0], [0.2]]", "w": "[[0.09]]"}), SOURCE)
+    sections = section_values(inputs)
+    assert "b" in sections["filter"] and "b" in sections["truth"] and "diffuse" not in sections["filter"]
+    assert {"h_columns", "diffuse"} <= set(section_values(parse_model(SCALE_BIAS, SOURCE))["filter"])

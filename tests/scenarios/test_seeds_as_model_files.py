@@ -20,6 +20,7 @@ likelihood within 2 sqrt(2 GAIN) se of each other (a variance's ln is twice its 
 from __future__ import annotations
 
 import importlib.util
+import json
 import re
 from pathlib import Path
 
@@ -315,3 +316,96 @@ def test_seed000_equals_what_kalcal_calibrate_accel_gps_runs_with_init_prior_and
     trapezoid = kalcal.calibrate("accel-gps", imu=imu, gps=gps, settings={"filter.bias_std": 1000.0}, init="prior",
                                  windows=1, settings_sigma=False)
     assert np.abs(trapezoid.columns["position"] - run.state[rows, 0]).max() > 1e-3  # the default scheme is not the file
+
+
+# -- through the command line: the same commands a user runs -------------------------------------------------------
+
+
+def _cli(*args):
+    from typer.testing import CliRunner
+
+    from kalcal.cli import app
+
+    result = CliRunner().invoke(app, [str(a) for a in args], catch_exceptions=False)
+    assert result.exit_code == 0, result.output
+    return result
+
+
+def test_kalcal_calibrate_of_the_seed000_file_is_kalcal_calibrate_accel_gps_as_the_file_states_it(tmp_path, accel_gps):
+    """`kalcal calibrate examples/accel_gps_seed000.toml --data LOG` and `kalcal calibrate accel-gps --imu --gps
+    --init prior --set scenario.integration=euler --set filter.bias_std=1000`: every estimate, 1-sigma,
+    innovation and NIS at the fixes to 1e-9, read back from the two runs' estimates.csv (written with every digit)."""
+    imu, gps, table = accel_gps
+    for name, frame in (("imu", imu), ("gps", gps), ("seed000", table)):
+        frame.to_csv(tmp_path / f"{name}.csv", index=False)
+    _cli("calibrate", SEED000, "--data", tmp_path / "seed000.csv", "--out", tmp_path / "file")
+    _cli("calibrate", "accel-gps", "--imu", tmp_path / "imu.csv", "--gps", tmp_path / "gps.csv", "--init", "prior",
+         "--set", "scenario.integration=euler", "--set", "filter.bias_std=1000", "--out", tmp_path / "builtin")
+    mine = pd.read_csv(tmp_path / "file" / "estimates.csv")
+    theirs = pd.read_csv(tmp_path / "builtin" / "estimates.csv")
+    fixes = mine[mine["position_innovation"].notna()].reset_index(drop=True)
+    assert len(fixes) == len(theirs) == 150
+    np.testing.assert_array_equal(fixes["time"], theirs["time"])
+    for column in ("position", "velocity", "bias", "position_std", "velocity_std", "bias_std", "nis"):
+        np.testing.assert_allclose(fixes[column], theirs[column], rtol=0, atol=EXACT, err_msg=column)
+    # the built-in writes the innovations whitened by the Cholesky factor of S_k, whose first component is the
+    # position's innovation over its std (the second mixes in the correlation, which estimates.csv does not hold:
+    # the raw innovations and S_k are equal above, test_seed000_file_is_the_builtin_filter_nominal_plus_error)
+    normalized = fixes["position_innovation"] / fixes["position_innovation_std"]
+    np.testing.assert_allclose(normalized, theirs["innovation_position"], rtol=0, atol=EXACT)
+    summary = json.loads((tmp_path / "file" / "summary.json").read_text())
+    assert summary["estimate"]["bias"] == pytest.approx(theirs["bias"].iloc[-1], rel=0, abs=EXACT)
+    assert summary["loglik"] == pytest.approx(21.30210781, abs=5e-9)  # the built-in's, test_seed000_file_is_...
+
+
+def test_kalcal_calibrate_of_the_seed003_file_is_kalcal_calibrate_scale_bias(tmp_path, scale_bias):
+    """`kalcal calibrate examples/scale_bias_seed003.toml --data LOG` and `kalcal calibrate scale-bias --data LOG`
+    (a log with no prior given runs the diffuse start): theta and its 1-sigmas at every row to 1e-9, the rows
+    before the two starts are determined NaN on both sides."""
+    scale_bias.to_csv(tmp_path / "data.csv", index=False)
+    _cli("calibrate", SEED003, "--data", tmp_path / "data.csv", "--out", tmp_path / "file")
+    _cli("calibrate", "scale-bias", "--data", tmp_path / "data.csv", "--out", tmp_path / "builtin")
+    mine = pd.read_csv(tmp_path / "file" / "estimates.csv")
+    theirs = pd.read_csv(tmp_path / "builtin" / "estimates.csv")
+    assert len(mine) == len(theirs) == 300
+    np.testing.assert_array_equal(mine["time"], theirs["time"])
+    for column in ("theta1", "theta2", "theta1_std", "theta2_std"):
+        np.testing.assert_array_equal(mine[column].isna(), theirs[column].isna(), err_msg=column)
+        np.testing.assert_allclose(mine[column], theirs[column], rtol=0, atol=EXACT, err_msg=column)
+    summary = json.loads((tmp_path / "file" / "summary.json").read_text())
+    assert summary["loglik"] == pytest.approx(49.50673624, abs=5e-9)  # the built-in's diffuse_loglik, above
+
+
+def test_verify_of_the_seed003_file_over_the_builtins_regressors_agrees_with_kalcal_verify_scale_bias(tmp_path):
+    """`kalcal verify scale-bias` at truth.sensor_noise_std = 0 (and a fixed scale, bias and no drift in the
+    truth, so that its sensor readings, the regressors h_k = [sensor_k, 1], are the same in every realization:
+    the built-in's signal, deterministic) against the seed 003 file over a log of those readings (its proper-prior
+    variant, v = 0.2^2, the truth's theta the built-in's, m0 = 0). "Agrees" means: the same filter, so the
+    same P_k at the last update to rounding (1e-9 relative), and the same true error covariance, which the
+    file's exact analysis gives and each side's ensemble estimates: the errors are linear in the reference's
+    Gaussian noise, so each diagonal entry's sample variance has standard error sqrt(2/(n-1)) of it; each
+    side lies within 4.5 of them (a false alarm below 1e-5 per entry, fixed seeds)."""
+    import warnings
+
+    settings = {"truth.sensor_noise_std": 0.0, "truth.scale_error_std": 0.0, "truth.bias_std": 0.0,
+                "truth.parameter_drift_std": 0.0, "filter.scale_error_std": 0.02, "filter.bias_std": 0.1}
+    logs = [kalcal.simulate("scale-bias", seed, settings=settings).logs["data"] for seed in (1, 2)]
+    np.testing.assert_array_equal(logs[0]["sensor"], logs[1]["sensor"])  # the regressors do not depend on the draw
+    logs[0].to_csv(tmp_path / "regressors.csv", index=False)
+    n = 4000
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        builtin = kalcal.verify("scale-bias", n, seed=1, settings=settings)
+        sets = dict(s.split("=", 1) for s in _proper_sets())
+        sets |= {"filter.v": "[[0.04000000000000001]]", "truth.m0": "[[0.0, 0.0], [0.0, 0.0]]",
+                 "truth.x0": f"[{1 / 0.99!r}, {0.05 / 0.99!r}]"}  # theta(a, b) at the built-in truth's a, b
+        mine = kalcal.verify(str(SEED003), n, seed=2, settings=sets, data=tmp_path / "regressors.csv")
+    theirs, ours = builtin.raw_summary["final"], mine.raw_summary["final"]
+    assert theirs["time"] == ours["time"] == 30.0
+    np.testing.assert_allclose(np.array(ours["filter_covariance"]), np.array(theirs["filter_covariance"]), rtol=1e-9)
+    exact = np.diag(np.array(ours["exact_error_covariance"]))
+    bound = 4.5 * np.sqrt(2.0 / (n - 1)) * exact
+    for side in (theirs, ours):
+        assert np.all(np.abs(np.diag(np.array(side["ensemble_covariance"])) - exact) < bound)
+    # the filter believes a prior spread the truth lacks: its P_k exceeds the true covariance, which both see
+    assert np.all(np.diag(np.array(ours["filter_covariance"])) > exact)

@@ -73,10 +73,34 @@ def _is_code(scenario: Any) -> bool:
     )
 
 
-def with_data(scenario: Any, data: str | Path | None, command: str) -> Any:
-    """The resolved ``scenario`` over the log ``data`` (``--data LOG``) where one is given: a model file with
-    a [data] table only (its ``over_log``, :mod:`kalcal.scenarios.model_file.over_log`), else refused in one
-    line (the protocol's default, :meth:`kalcal.scenarios.protocol.ScenarioDefaults.over_log`)."""
+def with_data(scenario: Any, data: str | Path | None, command: str, topic: str | None = None) -> Any:
+    """The resolved ``scenario`` over the log ``data`` (``--data LOG``, ``--topic`` its bag's or ULog's
+    topic) where one is given: a model file with a [data] table only (its ``over_log``,
+    :mod:`kalcal.scenarios.model_file.over_log`), else refused in one line (the protocol's default,
+    :meth:`kalcal.scenarios.protocol.ScenarioDefaults.over_log`)."""
+    with_topic(scenario, {"data": data}, topic)
     if data is None:
         return scenario
-    return scenario.over_log(data, command)
+    return scenario.over_log(data, command) if topic is None else scenario.over_log(data, command, topic=topic)
+
+
+def with_topic(scenario: Any, logs: dict[str, Any], topic: str | None) -> dict[str, Any]:
+    """``logs`` with ``topic`` (``--topic``: which topic of ``--data``'s ROS bag or ULog a model file's
+    [data] table reads) under ``"topic"``; ``logs`` as they are without one.
+
+    Raises
+    ------
+    KalcalError
+        One line: a topic without ``--data``, or for a built-in scenario (which names a topic by its
+        columns' ``TOPIC.FIELD`` names, or reads the only one a bag has).
+    """
+    if topic is None:
+        return logs
+    if logs.get("data") is None:
+        raise KalcalError(f"--topic: {topic!r} names a topic of --data's ROS bag or ULog, and no --data is given")
+    if getattr(scenario, "NAME", "") != "custom":
+        raise KalcalError(
+            f"--topic: read by a model file's [data] table only; {getattr(scenario, 'NAME', scenario)} names a "
+            "topic by its columns (TOPIC.FIELD)"
+        )
+    return {**logs, "topic": topic}

@@ -124,6 +124,7 @@ def analyze(
     out: str | Path | None = None,
     command: str = "",
     data: str | Path | None = None,
+    topic: str | None = None,
 ) -> AnalysisResult:
     """The exact covariance analysis of the filter's gains against the truth: no sampling.
 
@@ -151,6 +152,8 @@ def analyze(
     data : path, optional
         A log for a model file with a ``[data]`` table (``--data LOG``): the analysis of the gains that the
         log's rows give (per-update H_k, V_k, Phi_k, Q_k), as ``kalcal.verify(..., data=)`` runs them.
+    topic : str, optional
+        ``data`` a ROS bag or ULog: the topic the file's [data] table reads (``--topic``).
 
     Raises
     ------
@@ -164,7 +167,7 @@ def analyze(
     if isinstance(n, bool) or not isinstance(n, int) or n < 1:
         raise KalcalError(f"-n: expected a positive number of realizations, got {n!r}")
     check_form(form, "--form")
-    model = with_data(resolve(scenario, settings, config, models=True), data, "analyze")
+    model = with_data(resolve(scenario, settings, config, models=True), data, "analyze", topic)
     if out is None:
         return _compute(model, n, form, command)
     from dataclasses import replace

@@ -32,6 +32,7 @@ def calibrate(
     settings_sigma: bool = True,
     poses: str | Path | None = None,
     out: str | Path | None = None,
+    topic: str | None = None,
 ) -> CalibrationResult:
     """Calibrate from logged data: accel-gps (``imu``, ``gps``), scale-bias (``data``), imu-3axis (``imu``,
     ``poses``) or a model file (``data``).
@@ -70,6 +71,9 @@ def calibrate(
         a static detector finds the poses (docs/imu-3axis.md).
     out : path, optional
         Also write the files there, as ``kalcal calibrate --out`` (the folder is checked first).
+    topic : str, optional
+        A model file's ``--data`` that is a ROS bag or ULog: the topic its [data] table reads (``--topic``;
+        default: the one its ``TOPIC.FIELD`` column names name). Refused for a built-in scenario.
 
     Returns
     -------
@@ -92,13 +96,15 @@ def calibrate(
         smooth=smooth, gate=gate, settings_sigma=settings_sigma, reference=reference, sensor=sensor, prior=prior,
         windows=windows, poses=poses, fit_options=fit_options,
     )
-    logs = {"imu": imu, "gps": gps, "data": data}
+    from kalcal.api._scenario import with_topic
+
+    logs = with_topic(model, {"imu": imu, "gps": gps, "data": data}, topic)
     if out is None:
         return model.calibrate(logs, options)
     from kalcal.io.outputs import inputs_of, run_outputs
 
     names = model.output_names("calibrate")
-    files = [value for value in (*logs.values(), poses) if isinstance(value, (str, Path))]
+    files = [value for key, value in (*logs.items(), ("poses", poses)) if key != "topic" and isinstance(value, (str, Path))]
     with run_outputs(out, f"calibrate {model.NAME}", names=names, protect=[*files, *inputs_of(model)]) as staging:
         result = model.calibrate(logs, options)
         paths = result.save(staging)

@@ -45,6 +45,7 @@ def fit(
     reference: str = "reference",
     sensor: str = "sensor",
     out: str | Path | None = None,
+    topic: str | None = None,
 ) -> FitResult:
     """Fit the noise settings of a filter to one log: accel-gps (``imu``, ``gps``), scale-bias (``data``) or a
     model file (``data``, laid out as its ``[data]`` table says).
@@ -68,6 +69,9 @@ def fit(
     out : path, optional
         Also write fit.json, filter.toml (a model file's: model.toml, the file with the fitted values) and
         fit.png there, as ``kalcal fit --out`` (one set).
+    topic : str, optional
+        A model file's ``--data`` that is a ROS bag or ULog: the topic its [data] table reads (``--topic``;
+        default: the one its ``TOPIC.FIELD`` column names name). Refused for a built-in scenario.
 
     Returns
     -------
@@ -86,14 +90,16 @@ def fit(
     options = FitOptions(free=_free(free), profile=profile, confidence=confidence, imu_columns=imu_columns,
                          gps_columns=gps_columns, init=init, gate=gate, reference=reference, sensor=sensor)
     model = resolve(scenario, settings, config, defaults=log_defaults(scenario), models=True)  # a model file too
-    logs = {"imu": imu, "gps": gps, "data": data}
+    from kalcal.api._scenario import with_topic
+
+    logs = with_topic(model, {"imu": imu, "gps": gps, "data": data}, topic)
     if out is None:
         return model.fit(logs, options)  # the FitResult the scenario's fit made; its save() writes its files
     from kalcal.fitting.run import save_fit
     from kalcal.io.outputs import inputs_of, mark_inputs, run_outputs
 
     names = model.output_names("fit")
-    files = [value for value in logs.values() if isinstance(value, (str, Path))]
+    files = [value for key, value in logs.items() if key != "topic" and isinstance(value, (str, Path))]
     with run_outputs(out, f"fit {model.NAME}", names=names, protect=[*files, *inputs_of(model)]) as staging:
         result = model.fit(logs, options)
         save_fit(result, staging)

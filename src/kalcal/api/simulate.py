@@ -17,6 +17,7 @@ def simulate(
     config: str | Path | None = None,
     data=None,
     out: str | Path | None = None,
+    topic: str | None = None,
 ) -> SimulationResult:
     """Simulate one realization drawn with ``seed``.
 
@@ -27,12 +28,15 @@ def simulate(
     the file's layout over the rows of ``data`` (a path or DataFrame: its times, inputs, data columns and
     stds kept, the measurements drawn where it has them, the true states as ``<state>_true``) and ``truth``
     (truth.json; :mod:`kalcal.scenarios.model_file.simulate`); the built-ins refuse a ``data``.
-    ``settings`` takes ``--set``'s keys; ``out`` also writes the files, as ``kalcal simulate --out``.
+    ``settings`` takes ``--set``'s keys; ``out`` also writes the files, as ``kalcal simulate --out``;
+    ``topic`` (a model file's ``data`` that is a ROS bag or ULog) the topic its [data] table reads.
     """
     from kalcal.api._scenario import resolve
 
     model = resolve(scenario, settings, config, models=True)
-    logs = {"data": data}
+    from kalcal.api._scenario import with_topic
+
+    logs = with_topic(model, {"data": data}, topic)
     if out is None:
         return model.simulate(seed, logs)
     from kalcal.io.outputs import inputs_of, run_outputs

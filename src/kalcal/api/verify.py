@@ -37,6 +37,7 @@ def verify(
     notes: Callable[[str], None] | None = None,
     max_run_s: float | None = MAX_RUN_SECONDS,
     data: str | Path | None = None,
+    topic: str | None = None,
 ) -> VerificationResult:
     """Verify a filter with a Monte Carlo: mean error, covariance, orthogonality, whiteness, NIS.
 
@@ -77,6 +78,8 @@ def verify(
         update rows, the gains are computed once from them (the same in every realization), the truth is
         simulated over those rows (:mod:`kalcal.scenarios.model_file.logged`). With the truth's b equal
         to the filter's the error does not depend on the inputs u, which are not read.
+    topic : str, optional
+        ``data`` a ROS bag or ULog: the topic the file's [data] table reads (``--topic``).
     max_run_s : float, optional
         A run estimated (half a second in) to take longer than this (s; default 24 h) is refused unless it
         saves a ``checkpoint``; None: no limit.
@@ -95,7 +98,7 @@ def verify(
     from kalcal.api.verification import check_arguments
     from kalcal.montecarlo.distributed import dask_client
 
-    model = with_data(resolve(scenario, settings, config, models=True), data, "verify")
+    model = with_data(resolve(scenario, settings, config, models=True), data, "verify", topic)
     if threads is not None and threads < 1:
         raise KalcalError(f"--threads: expected a positive number, got {threads}")
     check_arguments(model, n, engine=engine, confidence=confidence, long_run=long_run, batch_size=batch_size, form=form)

@@ -57,6 +57,10 @@ SetOpt = Annotated[
     typer.Option("--set", help="Override a setting, section.key=value (repeatable), e.g. truth.bias_std=0.2."),
 ]
 ConfigOpt = Annotated[Optional[Path], typer.Option("--config", help="TOML file of [scenario], [truth], [filter] settings.")]
+TopicOpt = Annotated[
+    Optional[str],
+    typer.Option("--topic", help="A model file's --data that is a ROS bag or ULog: the topic its [data] table reads (default: the one its TOPIC.FIELD columns name)."),
+]
 
 
 def settings_of(assignments: list[str] | None) -> dict[str, str]:

@@ -7,7 +7,7 @@ from typing import Annotated, Optional
 import typer
 
 from kalcal.cli import _common
-from kalcal.cli._common import ConfigOpt, SetOpt, settings_of, user_errors
+from kalcal.cli._common import ConfigOpt, TopicOpt, SetOpt, settings_of, user_errors
 
 
 def analyze(
@@ -25,6 +25,7 @@ def analyze(
     ] = None,
     set_: SetOpt = None,
     config: ConfigOpt = None,
+    topic: TopicOpt = None,
 ) -> None:
     """Exact covariance analysis, no sampling: the true error covariance of the filter's gains and its budget by source."""
     import shlex
@@ -36,7 +37,7 @@ def analyze(
 
     with user_errors():
         result = run_analyze(
-            scenario, settings_of(set_), n, config=config, form=form, out=out, command=shlex.join(["kalcal", *sys.argv[1:]]), data=data
+            scenario, settings_of(set_), n, config=config, form=form, out=out, command=shlex.join(["kalcal", *sys.argv[1:]]), data=data, topic=topic
         )
     final = result.final
     table = _common._table(

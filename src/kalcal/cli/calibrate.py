@@ -6,7 +6,7 @@ from typing import Annotated, Optional
 import typer
 
 from kalcal.cli import _common
-from kalcal.cli._common import ConfigOpt, ScenarioArg, SetOpt, escape, settings_of, user_errors
+from kalcal.cli._common import ConfigOpt, TopicOpt, ScenarioArg, SetOpt, escape, settings_of, user_errors
 
 
 def calibrate(
@@ -81,6 +81,7 @@ def calibrate(
     ] = False,
     set_: SetOpt = None,
     config: ConfigOpt = None,
+    topic: TopicOpt = None,
 ) -> None:
     """Calibrate from logged data: accel-gps (--imu, --gps), scale-bias (--data), imu-3axis (--imu, --poses) or a
     model file (MODEL.toml --data LOG).
@@ -96,7 +97,7 @@ def calibrate(
             scenario,
             imu=imu,
             gps=gps,
-            data=data,
+            data=data, topic=topic,
             settings=settings_of(set_),
             config=config,
             reference=reference,

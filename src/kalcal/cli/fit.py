@@ -6,7 +6,7 @@ from typing import Annotated, Optional
 import typer
 
 from kalcal.cli import _common
-from kalcal.cli._common import ConfigOpt, ScenarioArg, SetOpt, escape, settings_of, user_errors
+from kalcal.cli._common import ConfigOpt, TopicOpt, ScenarioArg, SetOpt, escape, settings_of, user_errors
 
 
 def _derived_row(result, name: str, p) -> tuple[str, str, str, str] | None:
@@ -53,6 +53,7 @@ def fit(
     out: Annotated[Path, typer.Option("--out", help="Directory for fit.json, filter.toml (a model file's: model.toml) and fit.png.")] = Path("kalcal-fit"),
     set_: SetOpt = None,
     config: ConfigOpt = None,
+    topic: TopicOpt = None,
 ) -> None:
     """Fit noise settings to a log by maximum likelihood: accel-gps (--imu, --gps), scale-bias or a model file (--data).
 
@@ -62,7 +63,7 @@ def fit(
     from kalcal.api.fit import fit as run_fit
     with user_errors():
         result = run_fit(
-            scenario, imu=imu, gps=gps, data=data, settings=settings_of(set_), config=config, free=free,
+            scenario, imu=imu, gps=gps, data=data, topic=topic, settings=settings_of(set_), config=config, free=free,
             profile=profile, gate=gate, init=init, reference=reference, sensor=sensor, imu_columns=imu_columns,
             gps_columns=gps_columns, out=out,
         )

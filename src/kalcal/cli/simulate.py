@@ -6,7 +6,7 @@ from typing import Annotated, Optional
 import typer
 
 from kalcal.cli import _common
-from kalcal.cli._common import ConfigOpt, ScenarioArg, SetOpt, settings_of, user_errors
+from kalcal.cli._common import ConfigOpt, TopicOpt, ScenarioArg, SetOpt, settings_of, user_errors
 
 
 def simulate(
@@ -19,6 +19,7 @@ def simulate(
     ] = None,
     set_: SetOpt = None,
     config: ConfigOpt = None,
+    topic: TopicOpt = None,
 ) -> None:
     """Simulate one realization and write it as recorded logs.
 
@@ -29,6 +30,6 @@ def simulate(
     from kalcal.api.simulate import simulate as run_simulate
 
     with user_errors():
-        paths = run_simulate(scenario, seed, settings_of(set_), config=config, data=data, out=out).paths
+        paths = run_simulate(scenario, seed, settings_of(set_), config=config, data=data, topic=topic, out=out).paths
     _common._note_nonfinite(*(path for path in paths.values() if Path(path).suffix == ".json"))
     _common.print_wrote(Path(out), paths.values())

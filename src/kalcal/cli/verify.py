@@ -7,7 +7,7 @@ from typing import Annotated, Optional
 import typer
 
 from kalcal.cli import _common
-from kalcal.cli._common import SCENARIO_NAMES, ConfigOpt, SetOpt, settings_of, user_errors
+from kalcal.cli._common import SCENARIO_NAMES, ConfigOpt, TopicOpt, SetOpt, settings_of, user_errors
 
 
 def verify(
@@ -50,6 +50,7 @@ def verify(
     ] = None,
     set_: SetOpt = None,
     config: ConfigOpt = None,
+    topic: TopicOpt = None,
 ) -> None:
     """Verify the filter with a Monte Carlo: mean error, covariance, orthogonality, whiteness, NIS."""
     import shlex
@@ -79,7 +80,7 @@ def verify(
                 realization=realization,
                 command=shlex.join(["kalcal", *sys.argv[1:]]),
                 notes=_common.print_note,
-                data=data,
+                data=data, topic=topic,
             )
     summary = result.raw_summary
     _common._print_checks(summary)

@@ -162,7 +162,13 @@ def section_values(scenario: Any) -> dict[str, dict[str, Any]]:
     """The scenario as ``{section: {key: value}}``, for summaries and reports; a section the scenario does
     not have (None: a model file without a [data] table) is left out."""
     return {
-        f.name: dataclasses.asdict(getattr(scenario, f.name))
-        for f in dataclasses.fields(scenario)
-        if getattr(scenario, f.name) is not None
+        f.name: _section(getattr(scenario, f.name)) for f in dataclasses.fields(scenario) if getattr(scenario, f.name) is not None
     }
+
+
+def _section(value: Any) -> dict[str, Any]:
+    """One section's ``{key: value}``: the section's own ``section_dict()`` where it has one (a section may
+    leave out keys at their defaults, so that a summary's keys, and a checkpoint's fingerprint of them,
+    stay those of the runs written before the keys existed), else every field."""
+    own = getattr(value, "section_dict", None)
+    return own() if callable(own) else dataclasses.asdict(value)

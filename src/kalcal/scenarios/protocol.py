@@ -102,9 +102,9 @@ class Scenario(Protocol):
         that draws its own logs refuses a given one in one line (:func:`refuse_logs`)."""
         ...
 
-    def over_log(self, data: Any, command: str) -> Any:
-        """The scenario verified over the log ``data`` (``--data LOG``: a model file's rows from a log), or a
-        one-line refusal for one that simulates its own data."""
+    def over_log(self, data: Any, command: str, topic: str | None = None) -> Any:
+        """The scenario verified over the log ``data`` (``--data LOG``: a model file's rows from a log;
+        ``topic``: a bag's or ULog's topic), or a one-line refusal for one that simulates its own data."""
         ...
 
     #: the settings a command on logged data (calibrate, fit) starts from, before the user's
@@ -154,7 +154,7 @@ class ScenarioDefaults:
         """None: no pair of times is quoted from another study."""
         return None
 
-    def over_log(self, data: Any, command: str) -> Any:
+    def over_log(self, data: Any, command: str, topic: str | None = None) -> Any:
         """Refused: only a model file's [data] table binds a verification to a log (``--data LOG``); the
         built-in scenarios and models written as code simulate their own data."""
         raise ConfigError(

@@ -19,6 +19,10 @@ inputs of row j (it drives row j -> j + 1).
 
 :func:`step_grid` is the same container for a file read without a log: K updates on the step grid
 (J = K m + 1 rows, row 0 the prior, measured at rows m, 2m, ..., Km), the model ``verify`` checks.
+
+A bag's or ULog's topic: the file's columns name it (``/imu.linear_acceleration.x``), or, where the topic
+is given (``--topic /imu``), they may name its fields alone (``linear_acceleration.x``), so that one file
+reads any topic of its message type (two IMUs of one bag, each with ``--topic``): :func:`read_log`.
 """
 
 from __future__ import annotations
@@ -187,6 +191,33 @@ def _truth_differs(scenario: CustomModelScenario) -> bool:
     return bool(scenario.differing()) or not np.array_equal(f.b, t.b) or f.h_columns != t.h_columns
 
 
+def read_log(log: str | Path | pd.DataFrame, topic: str | None, columns: tuple[str, ...]) -> pd.DataFrame:
+    """The log as :func:`kalcal.io.logs.read_table` reads it; with ``topic`` given, each ``TOPIC.FIELD``
+    column of that topic is also under ``FIELD`` (where the log has no column of that name), so that a
+    file's columns may name a field without its topic.
+
+    Raises
+    ------
+    DataError
+        read_table's one line (a topic for a CSV, Parquet or DataFrame log is refused there).
+    """
+    from kalcal.io.logs import read_table
+
+    if topic is None:
+        return read_table(log, "data", columns=columns)
+    # the topic is given: a column naming a field alone is not a TOPIC.FIELD naming another topic
+    frame = read_table(log, "data", topic=topic)
+    prefix = f"{topic}."
+    fields = {c[len(prefix):]: c for c in frame.columns if c.startswith(prefix) and c[len(prefix):] not in frame.columns}
+    wanted = {field: frame[column] for field, column in fields.items() if field in columns}
+    if not wanted:
+        return frame
+    attrs = dict(frame.attrs)
+    frame = frame.assign(**wanted)
+    frame.attrs.update(attrs)
+    return frame
+
+
 def bind(scenario: CustomModelScenario, log: str | Path | pd.DataFrame, *, topic: str | None = None) -> BoundModel:
     """The model file ``scenario`` over one log: its models row by row, z and the times.
 
@@ -217,7 +248,7 @@ def bind(scenario: CustomModelScenario, log: str | Path | pd.DataFrame, *, topic
     f, t = scenario.filter, scenario.truth
     named = tuple(dict.fromkeys((*f.data_columns, *t.data_columns)))
     wanted = tuple(dict.fromkeys((*table.columns, *named)))
-    frame = read_table(log, "data", topic=topic, columns=wanted)
+    frame = read_log(log, topic, wanted)
     name = source_name(log, "data", frame)
     nan_ok = (*table.measurements, *(s for s in table.stds if s), *named)
     values = numeric_columns(frame, name, wanted, allow_nan=[c for c in nan_ok if c not in (table.time, *table.inputs)])

@@ -293,6 +293,7 @@ def fit_model_file(
     free: Sequence[str] | None = None,
     profile: bool = False,
     confidence: float = 0.95,
+    topic: str | None = None,
 ) -> FitResult:
     """Maximum-likelihood entries of a model file's w, v and phi on one log, with intervals and the fitted
     filter's innovation diagnostics (module docstring).
@@ -307,6 +308,8 @@ def fit_model_file(
         Keys (module docstring); default :func:`default_free`.
     profile, confidence
         As :func:`kalcal.fitting.mle.maximize`.
+    topic : str, optional
+        A bag's or ULog's topic.
 
     Returns
     -------
@@ -323,7 +326,7 @@ def fit_model_file(
     if not keys:
         raise ConfigError(f"{scenario.model.file}: no positive diagonal entry of w or v to fit: name the keys with --free")
     entries = free_entries(scenario, keys)
-    bound = bind(scenario, log)
+    bound = bind(scenario, log, topic=topic)
     like = BoundLikelihood(scenario, bound, entries)
     parameters = []
     for e in entries:
@@ -413,5 +416,6 @@ def fit_logs(scenario: CustomModelScenario, logs: Mapping[str, Any], options) ->
     log = logs.get("data")
     if log is None:
         raise KalcalError(f"--data: required for {scenario.model.file} (a log laid out as its [data] table says)")
-    result = fit_model_file(scenario, log, free=options.free, profile=options.profile, confidence=options.confidence)
+    result = fit_model_file(scenario, log, free=options.free, profile=options.profile, confidence=options.confidence,
+                            topic=logs.get("topic"))
     return result if is_frame(log) else mark_inputs(result, log)

@@ -73,6 +73,19 @@ class FileModel(LinearGaussianModel):
         object.__setattr__(self, "h_columns", columns)
         object.__setattr__(self, "diffuse", tuple(str(name) for name in self.diffuse))
 
+    def section_dict(self) -> dict[str, Any]:
+        """The model as a summary's ``filter`` or ``truth`` section: every field, less ``b``, ``h_columns`` and
+        ``diffuse`` where they are empty (no inputs, no entry of h from data, no diffuse state), so that a
+        file without them keeps the section a time-invariant model wrote before they existed (and a
+        checkpoint of its run still resumes); the constructor's defaults rebuild them."""
+        import dataclasses
+
+        values = dataclasses.asdict(self)
+        for key, empty in (("b", self.input_dim == 0), ("h_columns", not self.h_columns), ("diffuse", not self.diffuse)):
+            if empty:
+                del values[key]
+        return values
+
     @property
     def input_dim(self) -> int:
         """m, the number of known inputs."""

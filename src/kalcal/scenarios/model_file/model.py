@@ -256,12 +256,13 @@ class CustomModelScenario(ScenarioDefaults):
         """False: its exact analysis says whether the truth equals the filter."""
         return False
 
-    def over_log(self, data, command: str):
-        """The file over the log ``data`` (``--data LOG``): its rows, stds and update rows from the log, the
-        gains the same in every realization (:func:`kalcal.scenarios.model_file.over_log.over_log`)."""
+    def over_log(self, data, command: str, topic: str | None = None):
+        """The file over the log ``data`` (``--data LOG``, a bag's or ULog's ``topic``): its rows, stds and
+        update rows from the log, the gains the same in every realization
+        (:func:`kalcal.scenarios.model_file.over_log.over_log`)."""
         from kalcal.scenarios.model_file.over_log import over_log
 
-        return over_log(self, data)
+        return over_log(self, data, topic)
 
     def simulate(self, seed: int, logs=None):
         """A log in the file's [data] layout over the rows of ``logs["data"]``, its measurements drawn with

@@ -111,7 +111,8 @@ def simulate_model_file(scenario: CustomModelScenario, log: Any, seed: int, *, t
     """
     import pandas as pd
 
-    from kalcal.io.logs import numeric_columns, read_table
+    from kalcal.io.logs import numeric_columns
+    from kalcal.scenarios.model_file.data import read_log
     from kalcal.models.config import section_values
     from kalcal.results.simulation import SimulationResult
 
@@ -133,7 +134,7 @@ def simulate_model_file(scenario: CustomModelScenario, log: Any, seed: int, *, t
         if column in read or drawn.count(column) > 1:
             raise ConfigError(f"{info.file}: the simulated log would hold the column {column!r} twice (a measurement "
                               "column that is also read as a time, input, std or h column, or a state's true column)")
-    frame = read_table(log, "data", topic=topic, columns=(*table.columns, *named))
+    frame = read_log(log, topic, (*table.columns, *named))
     values = numeric_columns(frame, bound.source, copied, allow_nan=copied)  # checked by bind already
     x, z = draw(truth, np.random.default_rng(seed))
     z[~np.isfinite(bound.z)] = np.nan  # the given log's missing pattern
@@ -177,4 +178,4 @@ def simulate_logs(scenario: CustomModelScenario, seed: int, logs: dict[str, Any]
             f"--data: required to simulate {scenario.label} (a log whose times, inputs and data columns the "
             "simulated log keeps)"
         )
-    return simulate_model_file(scenario, logs["data"], seed)
+    return simulate_model_file(scenario, logs["data"], seed, topic=logs.get("topic"))
