@@ -400,10 +400,16 @@ def bootstrap_lines(result: FitResult) -> list[str]:
             rows.append([name, "—", "—", "—", "not applicable: " + b.reason])
             continue
         interval = f"[{b.ci_low:.4g}, {b.ci_high:.4g}]" if b.applicable else "not applicable"
-        rows.append([name, interval, fmt(b.se, 4), f"{b.bias:.3g} +- {b.bias_se:.2g}", b.reason])
+        rows.append([name, interval, fmt(b.se, 4), f"{b.bias:.3g} +- {b.bias_se:.2g}", bootstrap_note(b)])
     head = (f"parametric bootstrap: {boot.replicates} logs simulated from the fit and refitted, seed {boot.seed}, "
             f"{boot.failed} refit(s) not converged")
     return [head, *text_table(["setting", f"{boot.confidence:.0%} percentile", "boot se", "bias", "note"], rows)]
+
+
+def bootstrap_note(b) -> str:
+    """A bootstrap entry's note: why not applicable, and how many refits ended at an end of the search range."""
+    ends = f"{b.at_range_end} refit(s) at an end of the search range" if b.at_range_end else ""
+    return "; ".join(text for text in (b.reason, ends) if text)
 
 
 def _nan(value: float | None) -> float:

@@ -98,7 +98,8 @@ def fit_scale_bias(
 
     def draw(rng):
         simulated = draw_log(rng, reference, sensor, chosen[NOISE], chosen[DRIFT])
-        return lambda values: diffuse_loglik(simulated, sensor, *(({**fixed, **values})[key] for key in (NOISE, DRIFT)))[0]
+        # a setting not refitted (unidentified) stays where the log was drawn from
+        return lambda values: diffuse_loglik(simulated, sensor, *(({**chosen, **values})[key] for key in (NOISE, DRIFT)))[0]
 
     boot = bootstrap_fit(options, draw, parameters, fit)
     notes = [IDENTIFIABILITY, "theta has a diffuse prior: the likelihood is the conditional one, after the first samples that determine theta"]
