@@ -51,6 +51,8 @@ from kalcal.stats.distributions import chi2_ppf, normal_isf  # scipy.stats's val
 LINEAR_STEPS = 1000.0
 #: a curve point whose log L exceeds the maximum found by more than this marks the search not converged
 BEATEN = 1e-4
+#: a bootstrap refit's relative change of -log L that stops its search (:func:`point_estimate`)
+REFIT_FTOL = 1e-10
 #: what an evaluation that fails (a setting the model refuses, a singular S_k) counts as: far below any fit
 FAILED = -1e300
 
@@ -357,7 +359,9 @@ def point_estimate(loglik: Callable[[Mapping[str, float]], float], free: Sequenc
     high = objective.u_of(np.array([p.upper for p in free], dtype=float))
     u0 = np.clip(objective.u_of(np.array([p.start for p in free], dtype=float)), low, high)
     f = lambda u: -objective.loglik_at(u)  # noqa: E731
-    result = minimize(f, u0, low, high)
+    # stops when an iteration changes log L by about 1e-10 of itself (1e-6 at log L ~ 1e4): the estimate is
+    # then within ~1e-3 of its standard error, far below a bootstrap's Monte Carlo error, in fewer iterations
+    result = minimize(f, u0, low, high, ftol=REFIT_FTOL)
     u_hat = np.asarray(result.x, dtype=float)
     converged = bool(result.success) or stationary(f, u_hat, low, high, [], None)
     return dict(zip(names, objective.values(u_hat).tolist())), -float(result.fun), converged
