@@ -2,6 +2,7 @@
 
     python benchmarks/bench_fit.py               (both parts)
     python benchmarks/bench_fit.py --model-file  (the model file's part alone)
+    python benchmarks/bench_fit.py --bootstrap   (the bootstrap's part alone)
 
 Each command runs whole, in its own child process (`python -m kalcal ...`: start-up, reading the CSV
 logs, the work and the output files), on the log of benchmarks/bench_calibrate.py. Prints the seconds of
@@ -15,6 +16,10 @@ whole commands in child processes. Where ``calibrate`` of a model file is refuse
 its stand-in is a child process that does calibrate's work without its outputs: read the file, bind the
 log (:func:`kalcal.scenarios.model_file.data.bind`) and run one ``filter_model``; it is said so in the
 output. In-process the same two are timed warm (no start-up, compiled kernels cached).
+
+Then the parametric bootstrap (:func:`bootstrap_part`): ``kalcal.fit(..., bootstrap=200)`` of a 10-minute
+scale-bias log at 10 Hz (6000 samples, two settings free) against one fit of it (its intervals and curves),
+both in-process and warm, on the threads this process may use (goal: within 100x).
 """
 
 from __future__ import annotations
@@ -128,7 +133,39 @@ def model_file_part(updates: int = 10_000, seed: int = 0) -> None:
               + " (simulated: v 2, w.1 0.05, w.2 0.004)", flush=True)
 
 
+def bootstrap_part(replicates: int = 200, seed: int = 0) -> None:
+    """``kalcal.fit(scale-bias, bootstrap=replicates)`` of a 10-minute log against one fit of it (module docstring)."""
+    import numpy as np
+    import pandas as pd
+
+    import kalcal
+    from kalcal.cpus import usable_cpus
+
+    rng = np.random.default_rng(seed)
+    samples = 6000  # 10 minutes at 10 Hz
+    sensor = 3.0 * np.sin(np.arange(samples) / 50.0) + 0.1 * rng.standard_normal(samples)
+    theta = np.array([1.02, 0.1]) + np.cumsum(1e-3 * rng.standard_normal((samples, 2)), axis=0)
+    reference = theta[:, 0] * sensor + theta[:, 1] + 0.05 * rng.standard_normal(samples)
+    log = pd.DataFrame({"time": np.arange(samples) / 10.0, "reference": reference, "sensor": sensor})
+    kalcal.fit("scale-bias", data=log)  # compiled kernels loaded once
+    start = time.perf_counter()
+    kalcal.fit("scale-bias", data=log)
+    once = time.perf_counter() - start
+    start = time.perf_counter()
+    result = kalcal.fit("scale-bias", data=log, bootstrap=replicates, seed=seed)
+    boot = time.perf_counter() - start
+    print(f"kalcal fit --bootstrap {replicates}: scale-bias, 10 minutes at 10 Hz ({samples} samples), 2 settings free, "
+          f"{usable_cpus()} thread(s), in-process and warm", flush=True)
+    print(f"  fit                    {once:8.2f} s", flush=True)
+    print(f"  fit --bootstrap {replicates:<5d}  {boot:8.2f} s   {boot / once:6.1f} x fit (goal <= 100 x); "
+          f"{result.bootstrap.failed} refit(s) not converged", flush=True)
+
+
 if __name__ == "__main__":
+    if "--bootstrap" in sys.argv:
+        bootstrap_part()
+        sys.exit(0)
     if "--model-file" not in sys.argv:
         main()
     model_file_part()
+    bootstrap_part()

@@ -46,6 +46,12 @@ def fit(
     sensor: str = "sensor",
     out: str | Path | None = None,
     topic: str | None = None,
+    bootstrap: int = 0,
+    seed: int = 0,
+    threads: int | None = None,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    client=None,
 ) -> FitResult:
     """Fit the noise settings of a filter to one log: accel-gps (``imu``, ``gps``), scale-bias (``data``) or a
     model file (``data``, laid out as its ``[data]`` table says).
@@ -66,6 +72,19 @@ def fit(
         accel-gps: the chi-square innovation gate's confidence, as ``calibrate``'s (off by default).
     confidence : float
         Of the intervals (0.95).
+    bootstrap : int
+        B > 1: a parametric bootstrap (:mod:`kalcal.fitting.bootstrap`): B logs simulated from the fitted
+        model with the log's length, sampling, missing measurements and inputs, each refitted (a point
+        estimate from the fitted point); per setting the percentile interval, the bootstrap standard error
+        and the estimator's bias, in the result's ``bootstrap``, fit.json and fit-bootstrap.png. 0: none.
+    seed : int
+        The bootstrap's root seed: the same seed gives the same intervals, whatever ``threads``,
+        ``workers`` or ``client``.
+    threads : int, optional
+        The bootstrap's local threads (default: all cores).
+    workers, scheduler, client
+        Run the bootstrap's replicates on a local Dask cluster of ``workers`` processes, an existing
+        cluster's address, or a Dask client.
     out : path, optional
         Also write fit.json, filter.toml (a model file's: model.toml, the file with the fitted values) and
         fit.png there, as ``kalcal fit --out`` (one set).
@@ -85,23 +104,39 @@ def fit(
     from kalcal.fitting.run import FitOptions
     from kalcal.scenarios import log_defaults
 
+    if isinstance(bootstrap, bool) or int(bootstrap) != bootstrap or bootstrap < 0 or bootstrap == 1:
+        raise KalcalError(f"--bootstrap: expected 0 (none) or a whole number of replicates >= 2, got {bootstrap!r}")
+    if threads is not None and threads < 1:
+        raise KalcalError(f"--threads: expected a positive number, got {threads}")
     if not 0.0 < confidence < 1.0:
         raise KalcalError(f"confidence=: expected a number in (0, 1), got {confidence!r}")  # kalcal fit has no --confidence
+    import contextlib
+
+    from kalcal.montecarlo.distributed import dask_client
+
     options = FitOptions(free=_free(free), profile=profile, confidence=confidence, imu_columns=imu_columns,
-                         gps_columns=gps_columns, init=init, gate=gate, reference=reference, sensor=sensor)
+                         gps_columns=gps_columns, init=init, gate=gate, reference=reference, sensor=sensor,
+                         bootstrap=int(bootstrap), seed=int(seed), threads=threads)
     model = resolve(scenario, settings, config, defaults=log_defaults(scenario), models=True)  # a model file too
     from kalcal.api._scenario import with_topic
 
     logs = with_topic(model, {"imu": imu, "gps": gps, "data": data}, topic)
+    cluster = (dask_client(workers, scheduler) if bootstrap and client is None and (workers is not None or scheduler is not None)
+               else contextlib.nullcontext(client))
     if out is None:
-        return model.fit(logs, options)  # the FitResult the scenario's fit made; its save() writes its files
+        with cluster as used:
+            # the FitResult the scenario's fit made; its save() writes its files
+            return model.fit(logs, dataclasses.replace(options, client=used))
     from kalcal.fitting.run import save_fit
     from kalcal.io.outputs import inputs_of, mark_inputs, run_outputs
 
-    names = model.output_names("fit")
+    from kalcal.fitting.run import BOOTSTRAP_NAME
+
+    names = (*model.output_names("fit"), *((BOOTSTRAP_NAME,) if bootstrap else ()))
     files = [value for key, value in logs.items() if key != "topic" and isinstance(value, (str, Path))]
     with run_outputs(out, f"fit {model.NAME}", names=names, protect=[*files, *inputs_of(model)]) as staging:
-        result = model.fit(logs, options)
+        with cluster as used:
+            result = model.fit(logs, dataclasses.replace(options, client=used))
         save_fit(result, staging)
     # the result as saved, still knowing the logs it was read from (a later save never removes them)
     return mark_inputs(dataclasses.replace(result, paths={name: Path(out) / name for name in names}), *inputs_of(result))

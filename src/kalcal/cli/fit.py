@@ -21,6 +21,33 @@ def _derived_row(result, name: str, p) -> tuple[str, str, str, str] | None:
     return f"  = {shown.name}", f"{shown.value:.4g}", interval, shown.unit
 
 
+def _bootstrap_table(result):
+    """The bootstrap beside the likelihood intervals: per setting the likelihood interval, the percentile
+    interval, the bootstrap standard error and the bias (+- its Monte Carlo error), or "not applicable" and why."""
+    from kalcal.fitting.result import bootstrap_note
+
+    boot = result.bootstrap
+    table = _common._table(
+        f"parametric bootstrap: {boot.replicates} logs simulated from the fit and refitted (seed {boot.seed})",
+        f"{boot.failed} refit(s) not converged",
+        f"{boot.seconds:.3g} s",
+    )
+    for column in ("setting", f"{result.interval_method}", f"{boot.confidence:.0%} percentile", "boot se", "bias", "note"):
+        table.add_column(column, justify="left" if column in ("setting", "note") else "right")
+    for name, b in boot.parameters.items():
+        p = result.parameters[name]
+        likelihood = ("—" if p.value is None else
+                      f"[{0 if p.at_bound else '—' if p.ci_low is None else f'{p.ci_low:.4g}'}, "
+                      f"{'—' if p.ci_high is None else f'{p.ci_high:.4g}'}]")
+        if b.se is None:
+            table.add_row(escape(name), likelihood, "not applicable", "—", "—", escape(b.reason))
+            continue
+        interval = f"[{b.ci_low:.4g}, {b.ci_high:.4g}]" if b.applicable else "not applicable"
+        table.add_row(escape(name), likelihood, interval, f"{b.se:.3g}", f"{b.bias:.3g} ± {b.bias_se:.2g}",
+                      escape(bootstrap_note(b)))
+    return table
+
+
 def fit(
     scenario: ScenarioArg,
     imu: Annotated[
@@ -50,6 +77,17 @@ def fit(
     sensor: Annotated[str, typer.Option("--sensor", help="scale-bias: the sensor's column.")] = "sensor",
     imu_columns: Annotated[Optional[str], typer.Option("--imu-columns", help="accel-gps: map roles to columns.")] = None,
     gps_columns: Annotated[Optional[str], typer.Option("--gps-columns", help="accel-gps: map roles to columns.")] = None,
+    bootstrap: Annotated[
+        int, typer.Option("--bootstrap", help="B >= 2: also a parametric bootstrap of B logs simulated from the fit and refitted (percentile intervals, bootstrap se, bias; fit-bootstrap.png).")
+    ] = 0,
+    seed: Annotated[int, typer.Option("--seed", help="The bootstrap's root seed; the same seed gives the same intervals.")] = 0,
+    threads: Annotated[Optional[int], typer.Option("--threads", help="The bootstrap's local threads (default: all cores).")] = None,
+    workers: Annotated[
+        Optional[int], typer.Option("--workers", help="Run the bootstrap on a local Dask cluster of this many processes.")
+    ] = None,
+    scheduler: Annotated[
+        Optional[str], typer.Option("--scheduler", help="Run the bootstrap on an existing Dask cluster (e.g. tcp://host:8786).")
+    ] = None,
     out: Annotated[Path, typer.Option("--out", help="Directory for fit.json, filter.toml (a model file's: model.toml) and fit.png.")] = Path("kalcal-fit"),
     set_: SetOpt = None,
     config: ConfigOpt = None,
@@ -65,7 +103,8 @@ def fit(
         result = run_fit(
             scenario, imu=imu, gps=gps, data=data, topic=topic, settings=settings_of(set_), config=config, free=free,
             profile=profile, gate=gate, init=init, reference=reference, sensor=sensor, imu_columns=imu_columns,
-            gps_columns=gps_columns, out=out,
+            gps_columns=gps_columns, out=out, bootstrap=bootstrap, seed=seed, threads=threads, workers=workers,
+            scheduler=scheduler,
         )
     console = _common.console
     table = _common._table(
@@ -92,6 +131,8 @@ def fit(
         if sample is not None:
             table.add_row(*sample)
     console.print(table)
+    if result.bootstrap is not None:
+        console.print(_bootstrap_table(result))
     if result.rejected_fixes is not None:
         rows = ", ".join(str(row) for row in result.rejected_fixes[:10]) + (", ..." if len(result.rejected_fixes) > 10 else "")
         console.print(f"gate {gate:g}: {len(result.rejected_fixes)} fix(es) rejected" + (f" (GPS rows {rows})" if rows else ""),

@@ -154,6 +154,10 @@ class FitResult:
         By fitted setting, the same estimate in another form, shown under it (accel-gps: a density's
         per-sample std at the log's rate, its unit saying which rate); its interval maps the setting's
         own. Not in fit.json's parameters (the scenario's part of fit.json holds them).
+    bootstrap : BootstrapResult or None
+        The parametric bootstrap (``kalcal fit --bootstrap B``, :mod:`kalcal.fitting.bootstrap`): per setting
+        the percentile interval, bootstrap standard error and bias, beside the likelihood intervals
+        (fit.json's ``bootstrap``); None without one.
     """
 
     scenario: str
@@ -187,6 +191,7 @@ class FitResult:
     derived: dict[str, FitParameter] = field(default_factory=dict)
     #: the name ``filter_text`` is written under (a model file's fit writes the fitted file, model.toml)
     filter_name: str = "filter.toml"
+    bootstrap: Any = None
 
     def __post_init__(self) -> None:
         if self.interval_method not in INTERVAL_METHODS:
@@ -310,6 +315,8 @@ class FitResult:
         lines.append(f"{'adequate' if self.adequate else 'NOT ADEQUATE'}: {self.adequacy}")
         notes = [f"{name}: {p.note}" for name, p in self.parameters.items() if p.note] + list(self.notes)
         lines += [f"[{i}] {note}" for i, note in enumerate(notes, 1)]
+        if self.bootstrap is not None:
+            lines += ["", *bootstrap_lines(self)]
         return "\n".join(lines)
 
     def _rows(self) -> list[tuple[str, list[Any]]]:
@@ -372,11 +379,37 @@ class FitResult:
             **self.extra,
             "curves": self.curves,
         }
+        if self.bootstrap is not None:
+            document["bootstrap"] = self.bootstrap.as_dict()
         if self.rejected_fixes is not None:
             document["rejected_fixes"] = {"count": len(self.rejected_fixes), "rows": list(self.rejected_fixes)}
         if self.command:  # what the command adds: fit.json's provenance and filter.toml's settings
             document.update(command=self.command, inputs=dict(self.inputs), free=list(self.free or []), settings=self.settings)
         return document
+
+
+def bootstrap_lines(result: FitResult) -> list[str]:
+    """The bootstrap's table for :meth:`FitResult.summary`: per setting the percentile interval, bootstrap
+    standard error and bias (+- its Monte Carlo error), or "not applicable" and why."""
+    from kalcal.results._display import fmt, text_table
+
+    boot = result.bootstrap
+    rows = []
+    for name, b in boot.parameters.items():
+        if not b.applicable and b.se is None:
+            rows.append([name, "—", "—", "—", "not applicable: " + b.reason])
+            continue
+        interval = f"[{b.ci_low:.4g}, {b.ci_high:.4g}]" if b.applicable else "not applicable"
+        rows.append([name, interval, fmt(b.se, 4), f"{b.bias:.3g} +- {b.bias_se:.2g}", bootstrap_note(b)])
+    head = (f"parametric bootstrap: {boot.replicates} logs simulated from the fit and refitted, seed {boot.seed}, "
+            f"{boot.failed} refit(s) not converged")
+    return [head, *text_table(["setting", f"{boot.confidence:.0%} percentile", "boot se", "bias", "note"], rows)]
+
+
+def bootstrap_note(b) -> str:
+    """A bootstrap entry's note: why not applicable, and how many refits ended at an end of the search range."""
+    ends = f"{b.at_range_end} refit(s) at an end of the search range" if b.at_range_end else ""
+    return "; ".join(text for text in (b.reason, ends) if text)
 
 
 def _nan(value: float | None) -> float:

@@ -21,6 +21,8 @@ from kalcal.io.results import write_json
 OUTPUT_NAMES = ("fit.json", "filter.toml", "fit.png")
 #: ... and where a fit gives the Kalibr noise file too, as ``kalcal noise`` writes it
 KALIBR_NAME = "imu.yaml"
+#: ... and with ``--bootstrap B``, each setting's bootstrap distribution with its likelihood interval on it
+BOOTSTRAP_NAME = "fit-bootstrap.png"
 
 
 @dataclass(frozen=True)
@@ -39,6 +41,14 @@ class FitOptions:
         accel-gps: as ``calibrate``'s.
     reference, sensor : str
         scale-bias: the log's columns.
+    bootstrap : int
+        B, the parametric bootstrap's replicates (:mod:`kalcal.fitting.bootstrap`); 0: none.
+    seed : int
+        The bootstrap's root seed (the Monte Carlo engine's SeedSequence scheme).
+    threads : int or None
+        The bootstrap's local threads (default: the CPUs this process may use).
+    client : dask.distributed.Client or None
+        Run the bootstrap's replicates as Dask tasks instead.
     """
 
     free: list[str] | None = None
@@ -50,6 +60,10 @@ class FitOptions:
     gate: float | None = None
     reference: str = "reference"
     sensor: str = "sensor"
+    bootstrap: int = 0
+    seed: int = 0
+    threads: int | None = None
+    client: Any = None
 
 
 def _toml_value(value: Any) -> str:
@@ -102,12 +116,13 @@ def output_names(result: FitResult) -> tuple[str, ...]:
     """The files ``result`` writes: :data:`OUTPUT_NAMES` (filter.toml under the result's ``filter_name``), and
     :data:`KALIBR_NAME` where it has imu.yaml's text."""
     names = tuple(result.filter_name if name == "filter.toml" else name for name in OUTPUT_NAMES)
-    return names if result.kalibr_text is None else (*names, KALIBR_NAME)
+    names = names if result.kalibr_text is None else (*names, KALIBR_NAME)
+    return names if result.bootstrap is None else (*names, BOOTSTRAP_NAME)
 
 
 def save_fit(result: FitResult, out: str | Path) -> dict[str, Path]:
-    """Write ``fit.json``, ``filter.toml``, ``fit.png`` and, for accel-gps, ``imu.yaml`` into ``out`` as one
-    set (:mod:`kalcal.io.outputs`); returns the files by name (where they are once the set is in place)."""
+    """Write ``fit.json``, ``filter.toml``, ``fit.png``, for accel-gps ``imu.yaml`` and with a bootstrap
+    ``fit-bootstrap.png`` into ``out`` as one set (:mod:`kalcal.io.outputs`); returns the files by name (where they are once the set is in place)."""
     out = Path(out)
     names = output_names(result)
     with run_outputs(out, result.command, names=names, protect=inputs_of(result)) as staging:
@@ -122,4 +137,8 @@ def save_fit(result: FitResult, out: str | Path) -> dict[str, Path]:
             (staging / KALIBR_NAME).write_text(result.kalibr_text)
         plot_fit(result.curves, document["parameters"], staging / "fit.png",
                  method=result.interval_method, drop=drop_of(result.confidence), linear=tuple(result.linear))
+        if result.bootstrap is not None:
+            from kalcal.plots.fit import plot_bootstrap
+
+            plot_bootstrap(result, staging / BOOTSTRAP_NAME)
     return {name: out / name for name in names}

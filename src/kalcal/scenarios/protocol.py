@@ -125,7 +125,14 @@ class Scenario(Protocol):
         """The noise settings fitted to ``logs`` by maximum likelihood with ``options``
         (:class:`~kalcal.fitting.run.FitOptions`): the :class:`~kalcal.fitting.result.FitResult` it made,
         with what its files need (:func:`~kalcal.fitting.run.for_command`): ``to_dict()`` is fit.json and
-        ``save(out)`` writes the set."""
+        ``save(out)`` writes the set.
+
+        With ``options.bootstrap`` = B > 0 the scenario's own part of the parametric bootstrap is its hook
+        ``draw(rng)``: one log simulated from its fitted model with the given log's length, sampling, missing
+        measurements and inputs, returned as that log's log-likelihood of the settings; it hands the hook,
+        its search's parameters and its search to :func:`kalcal.fitting.bootstrap.bootstrap_fit`, which
+        seeds, refits and summarizes, and puts the result in the FitResult's ``bootstrap``. A scenario that
+        cannot simulate its log refuses ``--bootstrap`` in one line."""
         ...
 
 

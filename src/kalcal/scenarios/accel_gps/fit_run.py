@@ -96,6 +96,9 @@ def fit_logs(scenario, logs: dict[str, Any], options) -> FitResult:
     imu, gps = _logs_of(scenario, logs)
     if options.reference != "reference" or options.sensor != "sensor":
         raise KalcalError("--reference/--sensor: not used by accel-gps (scale-bias only)")
+    if options.bootstrap:  # refused before the logs are read: nothing is fitted for a bootstrap it cannot run
+        raise KalcalError("--bootstrap: not available for accel-gps (its fixes are not yet simulated over a given "
+                          "accelerometer log); scale-bias and model files have it")
     return compute_accel_gps_fit(scenario, imu, gps, free=options.free, imu_columns=options.imu_columns,
                                  gps_columns=options.gps_columns, init=options.init, profile=options.profile,
                                  gate=options.gate, confidence=options.confidence)

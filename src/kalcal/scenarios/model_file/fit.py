@@ -294,6 +294,7 @@ def fit_model_file(
     profile: bool = False,
     confidence: float = 0.95,
     topic: str | None = None,
+    options=None,
 ) -> FitResult:
     """Maximum-likelihood entries of a model file's w, v and phi on one log, with intervals and the fitted
     filter's innovation diagnostics (module docstring).
@@ -310,6 +311,9 @@ def fit_model_file(
         As :func:`kalcal.fitting.mle.maximize`.
     topic : str, optional
         A bag's or ULog's topic.
+    options : FitOptions, optional
+        Its ``bootstrap`` (B), ``seed``, ``threads`` and ``client``: the parametric bootstrap
+        (:mod:`kalcal.fitting.bootstrap`) over logs drawn by :func:`draw_log`.
 
     Returns
     -------
@@ -337,6 +341,15 @@ def fit_model_file(
             parameters.append(Free(e.key, start, PHI_BOUNDS[0], PHI_BOUNDS[1], _unit(scenario, e), scale="linear"))
     fit = maximize(like, parameters, profile=profile, confidence=confidence)
     chosen = fitted_point(fit)
+    from kalcal.fitting.bootstrap import bootstrap_fit
+
+    fitted = like.model_at(chosen)
+
+    def draw(rng):
+        z = draw_log(fitted, bound.z, rng)
+        return lambda values: loglik(like.model_at({**chosen, **values}), z)
+
+    boot = bootstrap_fit(options, draw, parameters, fit)
     run = filter_model(like.model_at(chosen), bound.z)
     normalized, rows = _normalized(run)
     names = bound.measurement_names
@@ -384,12 +397,34 @@ def fit_model_file(
     result = FitResult.from_search(
         scenario.model.name, fit, fixes=counted, nobs_name="measurements", adequate=adequate, adequacy=adequacy,
         diagnostics=diagnostics.as_dict(), notes=notes, settings=settings, confidence=confidence,
-        extra={"diffuse_term": float(run.diffuse_term), "model_file": scenario.model.file},
+        extra={"diffuse_term": float(run.diffuse_term), "model_file": scenario.model.file}, bootstrap=boot,
     )  # fmt: skip
     linear = tuple(key for key, p in result.parameters.items() if p.scale == "linear")
     result = for_command(result, f"fit {scenario.model.file}", {"data": bound.source}, keys,
                          model_text(scenario, matrices, header), linear=linear)
     return dataclasses.replace(result, filter_name=MODEL_NAME)
+
+
+def draw_log(fitted: TimeVaryingModel, z: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Measurements drawn from the fitted filter model over the bound log's rows (its inputs, h rows and std
+    columns are the model's), NaN where the log has none (its missing pattern), shape (J, p)
+    (:func:`kalcal.scenarios.model_file.simulate.draw`).
+
+    A state that starts diffuse starts at its x0 exactly: the conditional likelihood the fit maximizes does
+    not depend on a diffuse state's first value (it conditions on the measurements that determine it)."""
+    from kalcal.scenarios.model_file.simulate import draw
+
+    if fitted.diffuse.any():
+        proper = object.__new__(TimeVaryingModel)
+        fields = dict(fitted.__dict__)
+        keep = ~np.asarray(fitted.diffuse, dtype=bool)
+        fields.update(m0=_frozen(fitted.m0 * keep[:, None] * keep[None, :]), diffuse=_frozen(np.zeros_like(keep)))
+        for name, value in fields.items():
+            object.__setattr__(proper, name, value)
+        fitted = proper
+    _, simulated = draw(fitted, rng)
+    simulated[~np.isfinite(z)] = np.nan
+    return simulated
 
 
 def _normalized(run) -> tuple[np.ndarray, int]:
@@ -417,5 +452,5 @@ def fit_logs(scenario: CustomModelScenario, logs: Mapping[str, Any], options) ->
     if log is None:
         raise KalcalError(f"--data: required for {scenario.model.file} (a log laid out as its [data] table says)")
     result = fit_model_file(scenario, log, free=options.free, profile=options.profile, confidence=options.confidence,
-                            topic=logs.get("topic"))
+                            topic=logs.get("topic"), options=options)
     return result if is_frame(log) else mark_inputs(result, log)

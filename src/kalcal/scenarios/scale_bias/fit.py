@@ -43,6 +43,7 @@ def fit_scale_bias(
     confidence: float = 0.95,
     rate: float | None = None,
     max_updates: int | None = None,
+    options=None,
 ) -> FitResult:
     """Maximum-likelihood sigma_w and q of a scale-bias log, with intervals and the fitted filter's diagnostics.
 
@@ -63,6 +64,9 @@ def fit_scale_bias(
         The log's sample rate, Hz, for filter.toml's [scenario] (default ``scenario.rate``).
     max_updates : int, optional
         The most samples filter.toml's [scenario] duration may hold (verify's limit per realization).
+    options : FitOptions, optional
+        Its ``bootstrap`` (B), ``seed``, ``threads`` and ``client``: the parametric bootstrap
+        (:mod:`kalcal.fitting.bootstrap`) over logs drawn by :func:`draw_log`.
     """
     free = list(FREE_KEYS if free is None else free)
     unknown = [key for key in free if key not in FREE_KEYS]
@@ -90,6 +94,14 @@ def fit_scale_bias(
         "something, e.g. time-correlated reference noise, a nonlinear sensor response, or drift that is not a random walk"
     )
     counted = _samples(scenario, rate, max_updates)
+    from kalcal.fitting.bootstrap import bootstrap_fit
+
+    def draw(rng):
+        simulated = draw_log(rng, reference, sensor, chosen[NOISE], chosen[DRIFT])
+        # a setting not refitted (unidentified) stays where the log was drawn from
+        return lambda values: diffuse_loglik(simulated, sensor, *(({**chosen, **values})[key] for key in (NOISE, DRIFT)))[0]
+
+    boot = bootstrap_fit(options, draw, parameters, fit)
     notes = [IDENTIFIABILITY, "theta has a diffuse prior: the likelihood is the conditional one, after the first samples that determine theta"]
     return FitResult.from_search(
         scenario.NAME,
@@ -103,7 +115,31 @@ def fit_scale_bias(
         settings=_settings(scenario, chosen, counted),
         comments=_comments(fit, scenario, counted),
         confidence=confidence,
+        bootstrap=boot,
     )
+
+
+def draw_log(rng: np.random.Generator, reference: np.ndarray, sensor: np.ndarray, noise_std: float,
+             drift_std: float) -> np.ndarray:
+    """A reference column drawn from the scale-bias model at (sigma_w, q) over the log's own sensor column
+    (the regressor, kept) and missing pattern (NaN where ``reference`` is NaN), shape (K,):
+
+        theta_k = theta_{k-1} + q eps_k (eps_k ~ N(0, I_2)),   reference_k = theta1_k sensor_k + theta2_k + sigma_w e_k.
+
+    theta_0 is the least-squares line of the log (reference on sensor): the diffuse likelihood does not depend
+    on it (any theta_0 gives the same innovations after the diffuse start), it only keeps the simulated column
+    on the log's scale. Draws in a fixed order whatever the missing pattern: (K, 2) drift steps, then (K,) noise.
+    """
+    both = np.isfinite(reference) & np.isfinite(sensor)
+    design = np.column_stack([sensor[both], np.ones(int(both.sum()))])
+    theta0 = np.linalg.lstsq(design, reference[both], rcond=None)[0]
+    steps = rng.standard_normal((reference.size, 2)) * drift_std
+    steps[0] = 0.0  # theta_0 itself at the first sample
+    theta = theta0 + np.cumsum(steps, axis=0)
+    noise = rng.standard_normal(reference.size) * noise_std
+    simulated = theta[:, 0] * np.nan_to_num(sensor) + theta[:, 1] + noise
+    simulated[~np.isfinite(reference)] = np.nan
+    return simulated
 
 
 def _samples(scenario: ScaleBiasScenario, rate: float | None, max_updates: int | None) -> tuple[float, int, int]:

@@ -358,6 +358,7 @@ def compute_scale_bias_fit(
     sensor: str = "sensor",
     profile: bool = False,
     confidence: float = 0.95,
+    options=None,
 ) -> FitResult:
     """Fit a scale-bias log (a reference and a sensor column, optionally ``time`` [s]); nothing is written."""
     from kalcal.scenarios.scale_bias.fit import fit_scale_bias
@@ -367,7 +368,7 @@ def compute_scale_bias_fit(
     if np.count_nonzero(np.isfinite(columns["reference"]) & np.isfinite(columns["sensor"])) < 3:
         raise DataError(f"{name}: needs at least three samples with both a reference and a sensor value")
     result = fit_scale_bias(scenario, time, columns["reference"], columns["sensor"], free=free, profile=profile,
-                            confidence=confidence, rate=rate, max_updates=MAX_UPDATES)
+                            confidence=confidence, rate=rate, max_updates=MAX_UPDATES, options=options)
     header = [
         f"kalcal fit scale-bias: noise settings fitted by maximum likelihood to {name}",
         f"({result.fixes} samples in the likelihood, log L = {result.loglik:.6g}, {result.interval_method} intervals).",
@@ -388,4 +389,4 @@ def fit_logs(scenario: ScaleBiasScenario, logs: dict[str, Any], options) -> FitR
         raise KalcalError("--gate: not available for scale-bias (accel-gps only)")
     data = _data_of(scenario, logs)
     return compute_scale_bias_fit(scenario, data, free=options.free, reference=options.reference, sensor=options.sensor,
-                                  profile=options.profile, confidence=options.confidence)
+                                  profile=options.profile, confidence=options.confidence, options=options)

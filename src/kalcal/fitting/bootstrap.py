@@ -1,0 +1,230 @@
+"""Parametric bootstrap of a maximum-likelihood fit: B logs simulated from the fitted model, each refitted.
+
+For replicate b = 0..B-1 the scenario draws one log from its fitted model with the user's log's length,
+sampling, missing measurements and inputs (``draw(rng)``, the scenario's hook: it returns that log's
+log-likelihood as a function of the settings), and the fit's search refits it as a point estimate only
+(:func:`kalcal.fitting.mle.point_estimate`: L-BFGS-B started at the fitted point, no intervals, curves or
+profiles). From the B estimates theta*_b of each setting:
+
+* the percentile interval [q_{alpha/2}, q_{1-alpha/2}] of theta*_b, alpha = 1 - confidence (Efron);
+* the bootstrap standard error, the sample std of theta*_b (ddof = 1), in the setting's unit;
+* the estimator's bias, mean(theta*_b) - theta_hat, with its own Monte Carlo standard error se / sqrt(B).
+
+A setting whose estimate is at its lower bound ("consistent with 0") or without a limit on one side gets
+no interval: the percentile bootstrap is not consistent when the true value is on the boundary of the
+parameter space (Andrews 2000, Econometrica 68(2) 399-405); the entry says "not applicable" and why. An
+unidentified setting is held at its input in every refit and has no entry either.
+
+Seeds: replicate b draws from the Monte Carlo engine's generator of block b
+(:func:`kalcal.montecarlo.engine.block_generator`, ``SeedSequence(seed, spawn_key=(b,))``), and the
+replicates' estimates are kept in b order, so a seed gives the same intervals whatever runs them: one
+thread, several, or Dask tasks (``client``).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from kalcal.errors import KalcalError
+from kalcal.fitting.mle import Free, point_estimate
+
+#: the reference for "not applicable" at a bound
+ANDREWS = "Andrews 2000: the percentile bootstrap is not consistent when the true value is on the boundary of the parameter space"
+
+#: the scenario's hook: a log drawn with ``rng`` from the fitted model, returned as its log-likelihood
+Draw = Callable[[np.random.Generator], Callable[[Mapping[str, float]], float]]
+
+
+@dataclass(frozen=True)
+class BootstrapParameter:
+    """One setting's bootstrap summary.
+
+    Attributes
+    ----------
+    name : str
+    applicable : bool
+        False where no bootstrap interval is given (``reason`` says why).
+    reason : str
+        Why not applicable ("" otherwise).
+    ci_low, ci_high : float or None
+        The percentile interval at the fit's confidence, in the setting's unit.
+    se : float or None
+        The bootstrap standard error: std of the refits (ddof = 1), the setting's unit.
+    bias : float or None
+        mean(refits) - estimate, the setting's unit: the estimator's bias at the fitted model.
+    bias_se : float or None
+        The Monte Carlo standard error of ``bias``: se / sqrt(B).
+    at_range_end : int
+        Refits that ended at an end of the search range (their value is that end, not a maximum).
+    values : tuple of float
+        The refits' estimates in replicate order (for the figure; in fit.json too).
+    """
+
+    name: str
+    applicable: bool
+    reason: str = ""
+    ci_low: float | None = None
+    ci_high: float | None = None
+    se: float | None = None
+    bias: float | None = None
+    bias_se: float | None = None
+    at_range_end: int = 0
+    values: tuple[float, ...] = ()
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"applicable": self.applicable, "reason": self.reason, "ci_low": self.ci_low, "ci_high": self.ci_high,
+                "se": self.se, "bias": self.bias, "bias_se": self.bias_se, "at_range_end": self.at_range_end,
+                "values": list(self.values)}
+
+
+@dataclass(frozen=True)
+class BootstrapResult:
+    """The parametric bootstrap of one fit (module docstring).
+
+    Attributes
+    ----------
+    replicates : int
+        B, the logs simulated and refitted.
+    seed : int
+        The root seed of the replicates' generators.
+    confidence : float
+        Of the percentile intervals (the fit's).
+    parameters : dict of str to BootstrapParameter
+        By setting, in the fit's order.
+    failed : int
+        Refits whose search did not report convergence (their estimates are kept: the search's last point).
+    seconds : float
+        Wall time of the B simulations and refits.
+    """
+
+    replicates: int
+    seed: int
+    confidence: float
+    parameters: dict[str, BootstrapParameter] = field(default_factory=dict)
+    failed: int = 0
+    seconds: float = 0.0
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"method": "parametric, percentile intervals", "replicates": self.replicates, "seed": self.seed,
+                "confidence": self.confidence, "not_converged": self.failed, "seconds": self.seconds,
+                "parameters": {name: p.as_dict() for name, p in self.parameters.items()}}
+
+
+def _replicate(draw: Draw, free: Sequence[Free], seed: int, index: int) -> tuple[list[float], bool]:
+    """Replicate ``index``: its log drawn from block ``index``'s generator, refitted from the fitted point."""
+    from kalcal.fitting import local_search
+    from kalcal.montecarlo.engine import block_generator
+
+    # the parallelism is across replicates: a refit's gradient runs its evaluations here, one after another
+    local_search._IN_POOL.active = True
+    loglik = draw(block_generator(seed, index))
+    values, _, converged = point_estimate(loglik, free)
+    return [values[p.name] for p in free], converged
+
+
+def parametric_bootstrap(
+    draw: Draw,
+    free: Sequence[Free],
+    fit,
+    replicates: int,
+    *,
+    seed: int = 0,
+    confidence: float = 0.95,
+    threads: int | None = None,
+    client=None,
+    progress: Callable[[int, int], None] | None = None,
+) -> BootstrapResult:
+    """B = ``replicates`` logs drawn by ``draw`` and refitted over ``free`` from ``fit``'s point (module docstring).
+
+    Parameters
+    ----------
+    draw : callable
+        ``draw(rng)`` -> ``loglik(values)``: one log simulated from the fitted model (the values the fit
+        reported; the settings not free as the fit held them), as its log-likelihood.
+    free : sequence of Free
+        The search's parameters (ranges and scales); the refits start at ``fit.values``.
+    fit : MleFit
+        The fit of the user's log: its ``values`` and ``parameters`` (identified, at a bound).
+    replicates : int
+        B >= 2.
+    seed : int
+        Replicate b draws from ``SeedSequence(seed, spawn_key=(b,))``.
+    confidence : float
+        Of the percentile intervals.
+    threads : int, optional
+        Local threads (default: the CPUs this process may use).
+    client : dask.distributed.Client, optional
+        Run the replicates as Dask tasks instead.
+    progress : callable, optional
+        ``progress(done, B)``.
+    """
+    from kalcal.cpus import usable_cpus
+
+    if int(replicates) != replicates or replicates < 2:
+        raise KalcalError(f"--bootstrap: expected a whole number of replicates >= 2, got {replicates!r}")
+    replicates = int(replicates)
+    refit = [replace(p, start=float(np.clip(fit.values[p.name], p.lower, p.upper))) for p in free
+             if fit.parameters[p.name].identified and not fit.parameters[p.name].trades_off
+             and not fit.parameters[p.name].held]
+    started = time.perf_counter()
+    rows: list[tuple[list[float], bool] | None] = [None] * replicates
+    if refit:
+        if client is not None:
+            futures = client.map(_replicate, [draw] * replicates, [refit] * replicates, [seed] * replicates,
+                                 range(replicates), pure=False)
+            for b, future in enumerate(futures):
+                rows[b] = future.result()
+                if progress is not None:
+                    progress(b + 1, replicates)
+        else:
+            workers = max(1, min(replicates, threads or usable_cpus()))
+            with ThreadPoolExecutor(max_workers=workers) as pool:
+                futures = [pool.submit(_replicate, draw, refit, seed, b) for b in range(replicates)]
+                for b, future in enumerate(futures):
+                    rows[b] = future.result()
+                    if progress is not None:
+                        progress(b + 1, replicates)
+    seconds = time.perf_counter() - started
+    estimates = np.array([row[0] for row in rows], dtype=float).reshape(replicates, len(refit))
+    failed = sum(not row[1] for row in rows) if refit else 0
+    parameters = {}
+    column = {p.name: j for j, p in enumerate(refit)}
+    for name, p in fit.parameters.items():
+        if name not in column:
+            why = "trades off with " + ", ".join(p.trades_off) if p.trades_off else "not resolved" if p.held else "unidentified"
+            parameters[name] = BootstrapParameter(name, False, f"{why}: held at its input in every refit")
+            continue
+        spec = refit[column[name]]
+        draws = estimates[:, column[name]]
+        ends = int(np.count_nonzero(np.isclose(draws, spec.lower, rtol=1e-6, atol=0.0)
+                                    | np.isclose(draws, spec.upper, rtol=1e-6, atol=0.0)))
+        se = float(np.std(draws, ddof=1))
+        summary = dict(se=se, bias=float(np.mean(draws) - fit.values[name]), bias_se=se / float(np.sqrt(replicates)),
+                       at_range_end=ends, values=tuple(draws.tolist()))
+        if p.at_bound:
+            reason = f"at its lower bound (consistent with 0): no percentile interval ({ANDREWS})"
+            parameters[name] = BootstrapParameter(name, False, reason, **summary)
+        elif p.ci_low is None or p.ci_high is None:
+            reason = f"no likelihood limit on one side within the search range: no percentile interval ({ANDREWS})"
+            parameters[name] = BootstrapParameter(name, False, reason, **summary)
+        else:
+            tail = (1.0 - confidence) / 2.0
+            low, high = np.quantile(draws, [tail, 1.0 - tail])
+            parameters[name] = BootstrapParameter(name, True, "", float(low), float(high), **summary)
+    return BootstrapResult(replicates, int(seed), float(confidence), parameters, failed, seconds)
+
+
+def bootstrap_fit(options, draw: Draw, free: Sequence[Free], fit) -> BootstrapResult | None:
+    """The bootstrap ``options`` ask for (:class:`~kalcal.fitting.run.FitOptions`: ``bootstrap`` B, ``seed``,
+    ``threads``, ``client``), or None where B is 0: what each scenario's fit calls with its own ``draw``."""
+    replicates = getattr(options, "bootstrap", 0) or 0
+    if not replicates:
+        return None
+    return parametric_bootstrap(draw, free, fit, replicates, seed=options.seed, confidence=options.confidence,
+                                threads=options.threads, client=options.client)
