@@ -52,7 +52,7 @@ def generated_text(truth: NonlinearModel, filter_model: NonlinearModel) -> str:
         prefix = "filt"
     lines += [
         "",
-        "@numba.njit(cache=True, nogil=True)",
+        "@numba.njit(cache=True, nogil=True, error_model='numpy')",
         f"def block({_ARGS}):",
         f"    return ekf_block(truth_f, truth_F, truth_h, truth_H, {prefix}_f, {prefix}_F, {prefix}_h, {prefix}_H,",
         f"                     {_ARGS})",

@@ -34,10 +34,11 @@ import numpy as np
 from kalcal.core.kernels import covariance_update, update_work
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _cholesky_lanes(a, lower, m):
     """lower (q, q, m) with L L^T = a (q, q, m) lane by lane; False where a pivot is not positive."""
     q = a.shape[0]
+    positive = True
     for i in range(q):
         for c in range(i + 1):
             for j in range(m):
@@ -45,15 +46,16 @@ def _cholesky_lanes(a, lower, m):
                 for b in range(c):
                     acc = acc - lower[i, b, j] * lower[c, b, j]
                 if i == c:
-                    if not acc > 0.0:
-                        return False
+                    # no branch out of the lane loop (it would keep the loop from vectorizing): a pivot
+                    # that is not positive (or NaN) gives a NaN root, found after the loop
                     lower[i, i, j] = np.sqrt(acc)
+                    positive = positive and acc > 0.0
                 else:
                     lower[i, c, j] = acc / lower[c, c, j]
-    return True
+    return positive
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _forward_lanes(lower, v, out, m):
     """out (q, m) with L out = v, lane by lane (L (q, q, m) lower triangular)."""
     q = lower.shape[0]
@@ -65,7 +67,7 @@ def _forward_lanes(lower, v, out, m):
             out[i, j] = acc / lower[i, i, j]
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def ekf_block(
     ft, jac_ft, ht, jac_ht, ff, jac_ff, hf, jac_hf,
     first, noise, t_x0, t_p0f, t_qf, t_rf, t_dt, q_inv, has_q_inv, r_chol,
