@@ -88,3 +88,30 @@ def test_filters_and_models_the_kernel_does_not_take_keep_the_numpy_path_and_say
     assert not compiled and "explicit Jacobians" in reason
     # and it runs, on the numpy path
     assert problem.block_sums(block_generator(0, 0), 20, "exact").count == 20
+
+
+class _PlantedNaN:
+    """A generator whose draws are another's, with one measurement noise made NaN (a missing measurement
+    of realization 5 at update 3); its state is the wrapped one's, so a path that restores it redraws the same."""
+
+    def __init__(self, seed):
+        self._rng = block_generator(seed, 0)
+        self.bit_generator = self._rng.bit_generator
+
+    def standard_normal(self, shape):
+        out = self._rng.standard_normal(shape)
+        if len(shape) == 3:
+            out[3, 5, shape[2] - 1] = np.nan
+        return out
+
+
+def test_a_missing_measurement_stops_the_kernel_and_the_block_runs_on_the_numpy_path_from_the_same_draws():
+    problem = load_code_model(str(EXAMPLE), ["scenario.updates=6"]).problem()
+    assert problem.compiled_path[0]
+    assert problem._compiled_block_sums(_PlantedNaN(4), 100) is None  # the kernel stops at the NaN
+    got = problem.block_sums(_PlantedNaN(4), 100, "exact")
+    want = problem.numpy_block_sums(_PlantedNaN(4), 100, "exact")
+    for f in dataclasses.fields(want):
+        a, b = getattr(got, f.name), getattr(want, f.name)
+        assert (a is None and b is None) or np.array_equal(a, b, equal_nan=True), f.name
+    assert np.isnan(want.nis[3])  # the numpy path's own rule for the missing measurement shows in the sums
