@@ -115,3 +115,23 @@ def test_a_missing_measurement_stops_the_kernel_and_the_block_runs_on_the_numpy_
         a, b = getattr(got, f.name), getattr(want, f.name)
         assert (a is None and b is None) or np.array_equal(a, b, equal_nan=True), f.name
     assert np.isnan(want.nis[3])  # the numpy path's own rule for the missing measurement shows in the sums
+
+
+@pytest.mark.slow  # numba types most of the kernel before it meets the failing call: about a minute
+def test_printed_code_numba_cannot_compile_keeps_the_numpy_path_and_says_why(monkeypatch, tmp_path):
+    from kalcal.scenarios.nonlinear import compiled as compiled_module
+
+    printed = compiled_module.model_source
+
+    def broken(model, prefix):  # a function numba does not know, as a model's printed code might call
+        return printed(model, prefix).replace("out[0, j] = float(", "out[0, j] = float(math.fsum(object()) + ")
+
+    monkeypatch.setenv("KALCAL_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(compiled_module, "model_source", broken)
+    model = _linear(3.0)  # a model of its own: no kernel derived for it before
+    problem = load_code_model(model, ["scenario.updates=4"]).problem()
+    assert problem.compiled_path[0]  # printed and imported: numba compiles at the first block
+    got = problem.block_sums(block_generator(9, 0), 50, "exact")
+    compiled, reason = problem.compiled_path
+    assert not compiled and "numba cannot compile" in reason
+    _assert_same_sums(got, problem.numpy_block_sums(block_generator(9, 0), 50, "exact"), rtol=0.0)

@@ -16,7 +16,7 @@ from typing import Callable
 from kalcal.core.nonlinear import NonlinearModel
 from kalcal.core.nonlinear_codegen import compilable, load_generated, model_source
 
-__all__ = ["block_kernel"]
+__all__ = ["block_kernel", "refuse"]
 
 _ARGS = ("first, noise, t_x0, t_p0f, t_qf, t_rf, t_dt, q_inv, has_q_inv, r_chol, "
          "f_x0, f_p0, f_q, f_r, f_dt, inputs, data, sums, normalized, eff, m")
@@ -77,3 +77,8 @@ def block_kernel(truth: NonlinearModel, filter_model: NonlinearModel) -> tuple[C
         out = (load_generated(generated_text(truth, filter_model)).block, "")
     per_truth[filter_model] = out
     return out
+
+
+def refuse(truth: NonlinearModel, filter_model: NonlinearModel, reason: str) -> None:
+    """Mark the pair of models as kept on the numpy path (its printed code did not compile), with why."""
+    _KERNELS.setdefault(truth, weakref.WeakKeyDictionary())[filter_model] = (None, reason)

@@ -222,12 +222,21 @@ class NonlinearProblem:
         kernel, _ = block_kernel(t, fm)
         if t.input_dim != fm.input_dim or t.data_dim != fm.data_dim:
             return None
-        ok = kernel(
-            first, noise, t.x0, _factor(t.p0), _factor(t.q), _factor(t.r), float(t.dt),
-            q_inv, has_q_inv, np.linalg.cholesky(t.r),
-            fm.x0, fm.p0, fm.q, fm.r, float(fm.dt),
-            rows(loaded.inputs, t.input_dim), rows(loaded.data, t.data_dim), sums, normalized, eff, _TILE,
-        )
+        from numba.core.errors import NumbaError
+
+        try:
+            ok = kernel(
+                first, noise, t.x0, _factor(t.p0), _factor(t.q), _factor(t.r), float(t.dt),
+                q_inv, has_q_inv, np.linalg.cholesky(t.r),
+                fm.x0, fm.p0, fm.q, fm.r, float(fm.dt),
+                rows(loaded.inputs, t.input_dim), rows(loaded.data, t.data_dim), sums, normalized, eff, _TILE,
+            )
+        except NumbaError as error:  # printed code numba cannot compile (a function it lacks): numpy path
+            from kalcal.scenarios.nonlinear.compiled import refuse
+
+            refuse(t, fm, f"numba cannot compile the printed f or h ({type(error).__name__}: "
+                          f"{str(error).strip().splitlines()[0] if str(error).strip() else ''})")
+            return None
         if not ok:
             return None
         out = MomentSums.from_buffers(n, sums, normalized_residual=normalized)
