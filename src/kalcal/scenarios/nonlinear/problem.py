@@ -33,8 +33,8 @@ def _factor(cov: np.ndarray) -> np.ndarray:
         return v * np.sqrt(np.clip(w, 0.0, None))
 
 
-#: realizations per tile of the compiled kernel: 64 lanes keep a tile's arrays (d, d, 64) in the first
-#: cache level for d up to 6 and give the vectorized loops over the lanes long runs
+#: realizations per tile of the compiled kernel: long runs for the loops over the lanes while a tile's
+#: arrays stay small (a (d, d, 64) array is 8 KB at d = 4); not tuned against other widths
 _TILE = 64
 
 
