@@ -65,8 +65,9 @@ def bench_verify(n: int, chunk: int = 4096, profile: bool = True) -> None:
     realizations (its vmap returns every filtered mean and covariance: n K (d + d^2) floats, 16 GB at
     N = 10^5 otherwise); its compile is timed apart (one chunk's shape, compiled once). The ratio printed is
     dynamax's filter alone (no statistic, its measurements drawn beforehand and not timed) over kalcal's whole
-    run (simulation, filter and every statistic): above 1, kalcal is faster. Where it is under 10, a profile
-    of kalcal's run (cProfile, top entries by own time) says where the time goes.
+    run (simulation, filter and every statistic), the compiled kernel's compile (or cache load) timed apart
+    as dynamax's is: above 1, kalcal is faster. Where it is under 10, a profile of one block (the draws,
+    the compiled kernel, the pair sums, in CPU seconds) says where the time goes.
     """
     import resource
     import time as _time
@@ -76,54 +77,83 @@ def bench_verify(n: int, chunk: int = 4096, profile: bool = True) -> None:
     from kalcal.scenarios import load_code_model
     from kalcal.stats.suite import run_checks
 
+    from kalcal.montecarlo.engine import block_generator
+
     problem = load_code_model(str(ROOT / "examples" / "range_bearing.py")).problem()
+    compiled, reason = problem.compiled_path
+    # the compiled kernel's printing and numba's compile (or its load from numba's cache), timed apart as
+    # dynamax's compile is
+    start = _time.perf_counter()
+    problem.block_sums(block_generator(0, 0), 64, "exact")
+    setup = _time.perf_counter() - start
+    print(f"kalcal path: {'compiled EKF kernel' if compiled else 'batched numpy (' + reason + ')'}; "
+          f"compile or cache load {setup:.1f} s (apart)")
 
     def kalcal_run():
         run = run_monte_carlo(problem, n, 0)
         checks = run_checks(ensemble_statistics(run.sums), problem.info, 0.99)
         return run, checks, problem.effect_sizes(run.sums, 0.99)
 
-    start = _time.perf_counter()
+    start, cpu = _time.perf_counter(), _time.process_time()
     run, checks, effects = kalcal_run()
-    wall = _time.perf_counter() - start
+    wall, cpu = _time.perf_counter() - start, _time.process_time() - cpu
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    print(f"kalcal EKF verify, K = 100, N = {n}: {wall:.1f} s ({run.workers} threads), peak RSS {rss:.0f} MB; "
-          f"exact checks {[c.name for c in checks if not c.passed]} failed; tolerance verdict {effects.verdict()}")
+    print(f"kalcal EKF verify, K = 100, N = {n}: {wall:.2f} s ({run.workers} threads, {cpu:.2f} s of CPU), "
+          f"peak RSS {rss:.0f} MB; exact checks {[c.name for c in checks if not c.passed]} failed; tolerance "
+          f"verdict {effects.verdict()}")
     if importlib.util.find_spec("dynamax") is None:
         print("dynamax comparison: not run (dynamax is not installed: pip install 'kalcal[bench]')")
         return
-    compile_s, filter_s, agree = _dynamax_ekf(problem, n, chunk)
+    compile_s, filter_s, agree, filter_cpu = _dynamax_ekf(problem, n, chunk)
     ratio = filter_s / wall
     print(f"dynamax extended_kalman_filter, jit(vmap), float64, chunks of {chunk}: compile {compile_s:.1f} s "
-          f"(apart), filter {filter_s:.1f} s for N = {n}; its posterior means against kalcal's EKF on the first "
+          f"(apart), filter {filter_s:.1f} s ({filter_cpu:.1f} s of CPU) for N = {n}; its posterior means against kalcal's EKF on the first "
           f"chunk, largest difference per realization relative to the largest mean: median {agree[0]:.1e}, "
           f"largest {agree[1]:.1e}")
     print(f"ratio dynamax filter / kalcal Monte Carlo with every statistic: {ratio:.2f} "
-          f"({'meets' if ratio >= 10 else 'misses'} the 10x goal)")
+          f"({'meets' if ratio >= 10 else 'misses'} the 10x goal); of CPU seconds "
+          f"(dynamax's filter {filter_cpu:.1f} s, kalcal's run {cpu:.2f} s): {filter_cpu / cpu:.2f}")
     if ratio < 10 and profile:
-        import cProfile
-        import io
-        import pstats
-
-        profiler = cProfile.Profile()
-        from kalcal.montecarlo.engine import block_generator
-
-        # one block of the run, in this thread (the engine's own blocks run on worker threads, which
-        # cProfile does not see): the same work per realization as the run's
-        profiler.enable()
-        problem.block_sums(block_generator(0, 0), chunk, "exact")
-        profiler.disable()
-        text = io.StringIO()
-        pstats.Stats(profiler, stream=text).sort_stats("tottime").print_stats(15)
-        print(f"kalcal's Monte Carlo profiled (cProfile, top 15 by own time): one block of {chunk} realizations, K = 100, "
-              "in this thread")
-        print("\n".join(line for line in text.getvalue().splitlines()[4:] if line.strip()))
+        _profile(problem, chunk)
 
 
-def _dynamax_ekf(problem, n: int, chunk: int) -> tuple[float, float, float]:
+def _profile(problem, chunk: int) -> None:
+    """Where one block's time goes (cProfile does not see into compiled code): the draws, the compiled
+    kernel (truth, EKF, every sum), the pair sums after it, each as CPU seconds of this thread."""
+    import time as _time
+
+    from kalcal.montecarlo.accumulators import ResidualProducts
+    from kalcal.montecarlo.engine import block_generator
+
+    k, d, p = problem.scenario.n_updates, 4, 2
+    best = {}
+    for _ in range(3):
+        rng = block_generator(0, 1)
+        start = _time.thread_time()
+        rng.standard_normal((chunk, d))
+        rng.standard_normal((k, chunk, d + p))
+        draws = _time.thread_time() - start
+        start = _time.thread_time()
+        problem.block_sums(block_generator(0, 1), chunk, "exact")
+        block = _time.thread_time() - start
+        stacked = np.ascontiguousarray(np.random.default_rng(0).standard_normal((k * p, chunk)))
+        start = _time.thread_time()
+        ResidualProducts.upper(stacked)
+        pairs = _time.thread_time() - start
+        for name, value in (("draws", draws), ("block", block), ("pairs", pairs)):
+            best[name] = min(best.get(name, np.inf), value)
+    kernel = best["block"] - best["draws"] - best["pairs"]
+    per = chunk * k
+    print(f"profile of one block of {chunk} realizations, K = {k} (CPU seconds of one thread, best of 3): "
+          f"block {best['block']:.3f} s = draws {best['draws']:.3f} s + compiled kernel {kernel:.3f} s "
+          f"({kernel / per * 1e9:.0f} ns per update per realization) + pair sums (syrk) {best['pairs']:.3f} s")
+
+
+def _dynamax_ekf(problem, n: int, chunk: int) -> tuple[float, float, tuple[float, float], float]:
     """dynamax's EKF of the problem's filter model on n realizations drawn by the problem's truth: seconds
-    to compile, seconds to filter every chunk (measurements drawn beforehand, outside the timing), and the
-    largest relative difference of its filtered means from kalcal's EKF on the first chunk."""
+    to compile, seconds to filter every chunk (measurements drawn beforehand, outside the timing), the
+    median and largest relative difference of its filtered means from kalcal's EKF on the first chunk, and
+    the CPU seconds of the filtering (every thread of the process)."""
     import time as _time
 
     import jax
@@ -161,7 +191,7 @@ def _dynamax_ekf(problem, n: int, chunk: int) -> tuple[float, float, float]:
     compiled = batched.lower(jnp.asarray(chunks[0])).compile()
     compile_s = _time.perf_counter() - start
     first = None
-    start = _time.perf_counter()
+    start, cpu = _time.perf_counter(), _time.process_time()
     for z in chunks:
         if z.shape[0] != chunks[0].shape[0]:  # the last chunk padded to the compiled shape
             z = np.concatenate([z, np.repeat(z[-1:], chunks[0].shape[0] - z.shape[0], axis=0)])
@@ -170,11 +200,11 @@ def _dynamax_ekf(problem, n: int, chunk: int) -> tuple[float, float, float]:
         if first is None:
             first = np.asarray(out.filtered_means)
             assert first.dtype == np.float64, first.dtype
-    filter_s = _time.perf_counter() - start
+    filter_s, filter_cpu = _time.perf_counter() - start, _time.process_time() - cpu
     ours = run_nonlinear_filter(m, chunks[0], data=problem.scenario.loaded.data[None].repeat(chunks[0].shape[1], 0)).x
     scale = np.max(np.abs(ours))
     worst = np.max(np.abs(first - ours), axis=(1, 2)) / scale  # per realization, over its updates and states
-    return compile_s, filter_s, (float(np.median(worst)), float(np.max(worst)))
+    return compile_s, filter_s, (float(np.median(worst)), float(np.max(worst))), filter_cpu
 
 
 if __name__ == "__main__":

@@ -61,6 +61,7 @@ def test_every_compiled_covariance_update_is_the_one_function():
         ("kalcal.scenarios.scale_bias.kernels", "_filter_tile"),
         ("kalcal.scenarios.scale_bias.likelihood", "_diffuse_filter"),
         ("kalcal.core.timevarying_kernels", "run_rows"),
+        ("kalcal.scenarios.nonlinear.kernel", "ekf_block"),
     }
     # the information filter's diffuse start, compiled once (core.kernels.diffuse_start), run by the likelihood
     starters = {key for key, kernel in found.items() if kernels.diffuse_start in _callees(kernel)}

@@ -312,14 +312,22 @@ def _lambdified_jacobian(expressions: np.ndarray, variables, arguments, rows: in
     return jacobian, matrix
 
 
-def symbolic_jacobians(model: NonlinearModel) -> tuple[Callable, Callable]:
-    """F and H by sympy: f and h called once on symbols, differentiated, lambdified to numpy.
+class SymbolicModel(NamedTuple):
+    """f and h of a model called once on sympy symbols: the expressions its Jacobians and its compiled
+    code (:mod:`kalcal.core.nonlinear_codegen`) are derived from."""
 
-    Returns
-    -------
-    f_jacobian : callable, F(x, u, dt) -> (n, d, d)
-    h_jacobian : callable, H(x, data) -> (n, p, d)
-    """
+    x: tuple  #: the state's symbols x0..x{d-1}
+    u: tuple  #: the input's symbols u0..u{m-1} (empty where m = 0)
+    data: tuple  #: the data's symbols data0..data{k-1} (empty where k = 0)
+    dt: Any  #: the time step's symbol
+    f: tuple  #: f's d expressions
+    h: tuple  #: h's p expressions
+
+
+def symbolic_model(model: NonlinearModel) -> SymbolicModel:
+    """f and h called on symbols (once per model, kept); raises where they cannot take symbols."""
+    if "symbolic" in model._cache:
+        return model._cache["symbolic"]
     import sympy
 
     d, p, m, k = model.state_dim, model.measurement_dim, model.input_dim, model.data_dim
@@ -334,8 +342,24 @@ def symbolic_jacobians(model: NonlinearModel) -> tuple[Callable, Callable]:
     h_out = np.asarray(model.h(x_sym, data_sym), dtype=object)
     if f_out.shape != (1, d) or h_out.shape != (1, p):
         raise ConfigError(f"f, h: expected outputs of shapes (1, {d}) and (1, {p}) on symbols, got {f_out.shape}, {h_out.shape}")
-    fill_f, _ = _lambdified_jacobian(f_out[0], xs, (*xs, *us, dt), d, d)
-    fill_h, _ = _lambdified_jacobian(h_out[0], xs, (*xs, *ds), p, d)
+    out = SymbolicModel(tuple(xs), tuple(us), tuple(ds), dt,
+                        tuple(sympy.sympify(e) for e in f_out[0]), tuple(sympy.sympify(e) for e in h_out[0]))
+    model._cache["symbolic"] = out
+    return out
+
+
+def symbolic_jacobians(model: NonlinearModel) -> tuple[Callable, Callable]:
+    """F and H by sympy: f and h called once on symbols, differentiated, lambdified to numpy.
+
+    Returns
+    -------
+    f_jacobian : callable, F(x, u, dt) -> (n, d, d)
+    h_jacobian : callable, H(x, data) -> (n, p, d)
+    """
+    d, p, m, k = model.state_dim, model.measurement_dim, model.input_dim, model.data_dim
+    xs, us, ds, dt, f_out, h_out = symbolic_model(model)
+    fill_f, _ = _lambdified_jacobian(f_out, xs, (*xs, *us, dt), d, d)
+    fill_h, _ = _lambdified_jacobian(h_out, xs, (*xs, *ds), p, d)
 
     def f_jacobian(x, u, step):
         return fill_f([*_columns(x, d), *_columns(u, m), step], x.shape[0])

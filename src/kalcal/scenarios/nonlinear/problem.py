@@ -27,7 +27,6 @@ from kalcal.core.nonlinear_run import FilterRun, run_nonlinear_filter
 from kalcal.core.ukf import UnscentedSettings
 from kalcal.montecarlo.accumulators import BlockResult, MomentSums, SumBuffers, whiten
 from kalcal.montecarlo.problem import ProblemInfo, check_engine
-from kalcal.scenarios.nonlinear.settings import NonlinearScenario
 from kalcal.stats.effects import EffectAccumulator, EffectLayout
 
 
@@ -39,6 +38,21 @@ def _factor(cov: np.ndarray) -> np.ndarray:
     except np.linalg.LinAlgError:
         w, v = np.linalg.eigh(cov)
         return v * np.sqrt(np.clip(w, 0.0, None))
+
+
+#: realizations per tile of the compiled kernel: long runs for the loops over the lanes while a tile's
+#: arrays stay small (a (d, d, 64) array is 8 KB at d = 4); not tuned against other widths
+_TILE = 64
+
+
+def _q_inverse(q: np.ndarray) -> tuple[np.ndarray, bool]:
+    """Q^-1 of the truth's Q (d x d, once per block: the bound's E[F^T Q^-1 F]) where Q has full rank, by a
+    solve against the identity; zeros and False where it is singular (no such expectation)."""
+    q = np.asarray(q, dtype=float)
+    d = q.shape[0]
+    if np.linalg.matrix_rank(q) == d:
+        return np.linalg.solve(q, np.eye(d)), True
+    return np.zeros((d, d)), False
 
 
 def _per_update(value: np.ndarray | None, k: int) -> np.ndarray | None:
@@ -94,6 +108,9 @@ class NonlinearProblem:
 
     scenario: Any  #: a NonlinearScenario, or a scenario with its attributes and ``problem_hooks``
     residual_pairs: bool = True
+    #: run an EKF's blocks in the compiled kernel where the models allow it (:attr:`compiled_path`);
+    #: False: the batched numpy path (the oracle the compiled one is held to)
+    compiled: bool = True
     info: ProblemInfo = field(init=False)
     engines: tuple[str, ...] = field(init=False, default=("exact",))
 
@@ -237,8 +254,92 @@ class NonlinearProblem:
             return run
         return FilterRun(self._checked(run.x), self._checked(run.cov, 2), run.residual, run.innovation_cov)
 
+    @property
+    def compiled_path(self) -> tuple[bool, str]:
+        """Whether :meth:`block_sums` runs the compiled EKF kernel, and why not where it does not.
+
+        The compiled path (:mod:`kalcal.scenarios.nonlinear.kernel`) runs an EKF of models whose f and h
+        sympy can take (the default Jacobians); the IEKF and the UKF, and models with explicit numpy
+        Jacobians, jax's or finite differences, run the batched numpy path.
+        """
+        if not self.compiled:
+            return False, "the numpy path was asked for"
+        hooks = self.hooks
+        if hooks.checked is not None or hooks.renewed or hooks.batch is not None:
+            return False, "a scenario built on this problem (checked, renewed or batch states) runs on the batched numpy path"
+        kind = self.scenario.filter.kind
+        if kind != "ekf":
+            return False, f"the {kind.upper()} runs on the batched numpy path (only the EKF is compiled)"
+        from kalcal.scenarios.nonlinear.compiled import block_kernel
+
+        loaded = self.scenario.loaded
+        kernel, reason = block_kernel(loaded.truth, loaded.filter)
+        return kernel is not None, reason
+
     def block_sums(self, rng: np.random.Generator, n: int, engine: str) -> MomentSums:
-        """The moment sums and the effect sums of n realizations, added update by update."""
+        """The moment sums and the effect sums of n realizations: the compiled EKF kernel where
+        :attr:`compiled_path` allows (the same draws, the same sums to rounding), else :meth:`numpy_block_sums`."""
+        check_engine(self, engine)
+        if self.compiled_path[0]:
+            state = rng.bit_generator.state
+            out = self._compiled_block_sums(rng, n)
+            if out is not None:
+                return out
+            # a missing measurement or a covariance that is not positive definite: the numpy path gives
+            # that case's numbers (or its error) from the same draws
+            rng.bit_generator.state = state
+        return self.numpy_block_sums(rng, n, engine)
+
+    def _compiled_block_sums(self, rng: np.random.Generator, n: int) -> MomentSums | None:
+        from kalcal.scenarios.nonlinear.compiled import block_kernel
+
+        s, loaded = self.scenario, self.scenario.loaded
+        t, fm = loaded.truth, loaded.filter
+        d, p, k_count = t.state_dim, t.measurement_dim, s.n_updates
+        # the numpy path's draws, in its order (_simulate)
+        first = rng.standard_normal((n, d))
+        noise = rng.standard_normal((k_count, n, d + p))
+        sums = SumBuffers.zeros(k_count, d, p, n, self.residual_pairs, own_cov=True)
+        layout = self.layout
+        flat = layout.zeros()
+        names = ("nees_sq", "nees_avg", "nis_avg", "e4", "p2", "e2p", "pooled", "z", "z2", "zbar", "lag1", "f", "ftqf", "htrh")
+        eff = tuple(layout.view(flat, name) for name in names)
+        normalized = np.zeros((k_count, p))
+        q_inv, has_q_inv = _q_inverse(t.q)
+
+        def rows(value, size):
+            if size == 0 or value is None:
+                return np.zeros((k_count, 0))
+            value = np.asarray(value, dtype=float)
+            return np.ascontiguousarray(np.broadcast_to(value, (k_count, size)) if value.ndim == 1 else value)
+
+        kernel, _ = block_kernel(t, fm)
+        if t.input_dim != fm.input_dim or t.data_dim != fm.data_dim:
+            return None
+        from numba.core.errors import NumbaError
+
+        try:
+            ok = kernel(
+                first, noise, t.x0, _factor(t.p0), _factor(t.q), _factor(t.r), float(t.dt),
+                q_inv, has_q_inv, np.linalg.cholesky(t.r),
+                fm.x0, fm.p0, fm.q, fm.r, float(fm.dt),
+                rows(loaded.inputs, t.input_dim), rows(loaded.data, t.data_dim), sums, normalized, eff, _TILE,
+            )
+        except NumbaError as error:  # printed code numba cannot compile (a function it lacks): numpy path
+            from kalcal.scenarios.nonlinear.compiled import refuse
+
+            refuse(t, fm, f"numba cannot compile the printed f or h ({type(error).__name__}: "
+                          f"{str(error).strip().splitlines()[0] if str(error).strip() else ''})")
+            return None
+        if not ok:
+            return None
+        out = MomentSums.from_buffers(n, sums, normalized_residual=normalized)
+        out.effect = flat
+        return out
+
+    def numpy_block_sums(self, rng: np.random.Generator, n: int, engine: str = "exact") -> MomentSums:
+        """The moment sums and the effect sums of n realizations by the batched numpy filter, update by
+        update: the oracle of the compiled kernel, and the path of the models and filters it does not take."""
         check_engine(self, engine)
         s, loaded = self.scenario, self.scenario.loaded
         t = loaded.truth
@@ -250,8 +351,7 @@ class NonlinearProblem:
         flat = layout.zeros()
         effects = EffectAccumulator(layout, flat, n)
         normalized = np.zeros((k_count, p))
-        q = np.asarray(t.q, dtype=float)
-        q_inv = np.linalg.inv(q) if np.linalg.matrix_rank(q) == d_truth else None  # d x d once per block
+        q_inv, has_q_inv = _q_inverse(t.q)
         r_chol = np.linalg.cholesky(t.r)
         reported = self._true_reported(states)
         batch = self.hooks.batch is not None
@@ -292,7 +392,7 @@ class NonlinearProblem:
             jf = t.transition_jacobian(previous, _per_update(loaded.inputs, k))
             jh = t.measurement_jacobian(states[k], _per_update(loaded.data, k))
             wh = np.linalg.solve(r_chol, jh)  # R^-1/2 H, (n, p, d): a triangular solve, no inverse
-            ftqf = np.einsum("nai,ab,nbj->ij", jf, q_inv, jf) if q_inv is not None else np.zeros((d_truth, d_truth))
+            ftqf = np.einsum("nai,ab,nbj->ij", jf, q_inv, jf) if has_q_inv else np.zeros((d_truth, d_truth))
             effects.truth(k, jf.sum(0), ftqf, np.einsum("nai,naj->ij", wh, wh))
         effects.finish()
         out = MomentSums.from_buffers(n, sums, normalized_residual=normalized)

@@ -1,0 +1,413 @@
+"""The EKF Monte Carlo of a nonlinear model, one block fused in compiled code: truth, filter and every sum.
+
+:func:`ekf_block` is the compiled twin of :meth:`kalcal.scenarios.nonlinear.problem.NonlinearProblem.block_sums`
+for the EKF: from the block's normals (drawn by numpy exactly as the numpy path draws them, so a seed gives
+the same realizations on both paths) it simulates the truth with the truth's f and h, runs the filter's EKF
+(predict M = F P F^T + Q; update by the package's one compiled covariance update,
+:func:`kalcal.core.kernels.covariance_update`, Joseph form), and adds each update's errors, P_k, S_k,
+NEES, NIS, whitened errors and innovations, the effect sizes' sums and the Cramér–Rao bound's expectations
+(F, F^T Q^-1 F at the true x_{k-1}, H^T R^-1 H at the true x_k) into the block's sums. Nothing of size
+n K is kept: the block's state is (d, d, n) and the sums of one update are held per lane of a tile,
+reduced at the update's end.
+
+Layout: the block's realizations in tiles of m, structure of arrays (realizations on the last axis, as
+covariance_update takes them), updates outer and tiles inner. A last tile that is not full repeats the
+block's last realization in its spare lanes (finite numbers through every step) and leaves them out of
+every sum.
+
+The model's functions arrive as arguments, printed from its sympy expressions and compiled per model
+(:mod:`kalcal.core.nonlinear_codegen`): this function is inlined into a per-model driver in the generated
+module, whose machine code numba caches (a kernel with function arguments is not cached itself).
+
+It returns False, having stopped, where a measurement or its H is not finite (a missing measurement: the
+numpy path's rule, a prediction only) or a P or S is not positive definite: the caller then runs the
+block on the numpy path from the same draws, which gives that case's numbers (or its error).
+"""
+
+# numba cache stamp: kalcal.core.kernels 8b932ca498b00ecc
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from kalcal.core.kernels import covariance_update, update_work
+
+
+@numba.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _cholesky_lanes(a, lower, m):
+    """lower (q, q, m) with L L^T = a (q, q, m) lane by lane; False where a pivot is not positive."""
+    q = a.shape[0]
+    positive = True
+    for i in range(q):
+        for c in range(i + 1):
+            for j in range(m):
+                acc = a[i, c, j]
+                for b in range(c):
+                    acc = acc - lower[i, b, j] * lower[c, b, j]
+                if i == c:
+                    # no branch out of the lane loop (it would keep the loop from vectorizing): a pivot
+                    # that is not positive (or NaN) gives a NaN root, found after the loop
+                    lower[i, i, j] = np.sqrt(acc)
+                    positive = positive and acc > 0.0
+                else:
+                    lower[i, c, j] = acc / lower[c, c, j]
+    return positive
+
+
+@numba.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _forward_lanes(lower, v, out, m):
+    """out (q, m) with L out = v, lane by lane (L (q, q, m) lower triangular)."""
+    q = lower.shape[0]
+    for i in range(q):
+        for j in range(m):
+            acc = v[i, j]
+            for b in range(i):
+                acc = acc - lower[i, b, j] * out[b, j]
+            out[i, j] = acc / lower[i, i, j]
+
+
+@numba.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def ekf_block(
+    ft, jac_ft, ht, jac_ht, ff, jac_ff, hf, jac_hf,
+    first, noise, t_x0, t_p0f, t_qf, t_rf, t_dt, q_inv, has_q_inv, r_chol,
+    f_x0, f_p0, f_q, f_r, f_dt, inputs, data, sums, normalized, eff, m,
+):
+    """One block's sums (module docstring). K updates, n realizations, d states, p measurements.
+
+    Parameters
+    ----------
+    ft, jac_ft, ht, jac_ht : compiled functions
+        The truth's f, F, h, H (:mod:`kalcal.core.nonlinear_codegen`'s calling convention).
+    ff, jac_ff, hf, jac_hf : compiled functions
+        The filter's.
+    first : ndarray, shape (n, d)
+        The normals of x_0.
+    noise : ndarray, shape (K, n, d + p)
+        The normals of the process (first d) and measurement noises of each update.
+    t_x0, t_p0f, t_qf, t_rf : ndarray
+        The truth's prior mean (d,) and square roots C C^T of P0 (d, d), Q (d, d), R (p, p).
+    t_dt, f_dt : float
+        The truth's and the filter's time steps (s).
+    q_inv : ndarray, shape (d, d)
+        The truth's Q^-1, used where ``has_q_inv`` (Q positive definite).
+    r_chol : ndarray, shape (p, p)
+        The truth's R's lower Cholesky factor.
+    f_x0, f_p0, f_q, f_r : ndarray
+        The filter's prior mean (d,), P0 (d, d), Q (d, d), R (p, p).
+    inputs, data : ndarray, shapes (K, m_in), (K, k)
+        Each update's input and data (zero columns where the model takes none).
+    sums : SumBuffers
+        Added into (own P_k: the whitened sums kept); ``residuals`` (K p, n) receives the normalized
+        innovations where its first axis is not empty.
+    normalized : ndarray, shape (K, p)
+        Sum of the normalized innovations, added into.
+    eff : tuple of ndarray
+        The effect sums' views (:class:`kalcal.stats.effects.EffectLayout`), in its order: nees_sq, nees_avg,
+        nis_avg, e4, p2, e2p, pooled, z, z2, zbar, lag1, f, ftqf, htrh; added into.
+    m : int
+        The tile's width (realizations).
+
+    Returns
+    -------
+    bool
+        True where every update ran; False where a measurement or H was not finite or a P or S not
+        positive definite (the sums are then incomplete and to be discarded).
+    """
+    n, d = first.shape
+    n_updates = noise.shape[0]
+    p = f_r.shape[0]
+    tiles = (n + m - 1) // m
+    nees_sq, nees_avg, nis_avg, e4, p2, e2p, pooled, zsum, z2sum, zbar, lag1, fsum, ftqf, htrh = eff
+    keep_pairs = sums.residuals.shape[0] > 0
+    # the block's state, tile-major so that each tile's arrays are contiguous
+    xt = np.empty((tiles, d, m))
+    xf = np.empty((tiles, d, m))
+    cov = np.empty((tiles, d, d, m))
+    r_nees = np.zeros((tiles, m))
+    r_nis = np.zeros((tiles, m))
+    r_a = np.zeros((tiles, d, m))
+    r_b = np.zeros((tiles, d, m))
+    r_z = np.zeros((tiles, d, m))
+    r_lag = np.zeros((tiles, m))
+    last_u = np.zeros((tiles, p, m))
+    for t in range(tiles):
+        for j in range(m):
+            col = min(t * m + j, n - 1)
+            for a in range(d):
+                acc = 0.0
+                for b in range(d):
+                    acc += first[col, b] * t_p0f[a, b]
+                xt[t, a, j] = t_x0[a] + acc
+                xf[t, a, j] = f_x0[a]
+                for b in range(d):
+                    cov[t, a, b, j] = f_p0[a, b]
+    # one tile's scratch
+    tmp = np.empty((d, m))
+    jf = np.empty((d, d, m))
+    g = np.empty((d, d, m))
+    zt = np.empty((p, m))
+    hz = np.empty((p, m))
+    jh = np.empty((p, d, m))
+    wh = np.empty((p, d, m))
+    big_f = np.empty((d, d, m))
+    fc = np.empty((d, d, m))
+    xbar = np.empty((d, m))
+    big_h = np.empty((p, d, m))
+    res = np.empty((p, m))
+    gain = np.empty((p, d, m))
+    s = np.empty((p, p, m))
+    work = update_work(d, p, m)
+    lp = np.empty((d, d, m))
+    ls = np.empty((p, p, m))
+    e = np.empty((d, m))
+    eps = np.empty((d, m))
+    u = np.empty((p, m))
+    # one update's sums, per lane (reduced over the lanes at the update's end): the offsets of each
+    dd, pp = d * d, p * p
+    o_err = 0
+    o_eo = o_err + d
+    o_est = o_eo + dd
+    o_esto = o_est + d
+    o_ee = o_esto + dd
+    o_nees = o_ee + dd
+    o_nis = o_nees + 1
+    o_res = o_nis + 1
+    o_reso = o_res + p
+    o_fc = o_reso + pp
+    o_we = o_fc + dd
+    o_wo = o_we + d
+    o_wx = o_wo + dd
+    o_nr = o_wx + dd
+    o_nsq = o_nr + p
+    o_e4 = o_nsq + 1
+    o_p2 = o_e4 + d
+    o_e2p = o_p2 + d
+    o_z = o_e2p + d
+    o_z2 = o_z + d
+    o_f = o_z2 + d
+    o_ftqf = o_f + dd
+    o_htrh = o_ftqf + dd
+    width = o_htrh + dd
+    lane = np.empty((width, m))
+    for k in range(n_updates):
+        lane[:, :] = 0.0
+        uk = inputs[k]
+        dk = data[k]
+        for t in range(tiles):
+            mt = min(m, n - t * m)
+            x = xt[t]
+            xh = xf[t]
+            c = cov[t]
+            # the truth: F at x_{k-1} (the bound's), then x_k = f(x_{k-1}) + C_Q w, z_k = h(x_k) + C_R v
+            for j in range(m):
+                jac_ft(x, uk, t_dt, jf, j)
+                ft(x, uk, t_dt, tmp, j)
+            for j in range(m):
+                col = min(t * m + j, n - 1)
+                for a in range(d):
+                    acc = 0.0
+                    for b in range(d):
+                        acc += noise[k, col, b] * t_qf[a, b]
+                    x[a, j] = tmp[a, j] + acc
+            for j in range(m):
+                ht(x, dk, hz, j)
+                jac_ht(x, dk, jh, j)
+            for j in range(m):
+                col = min(t * m + j, n - 1)
+                for a in range(p):
+                    acc = 0.0
+                    for b in range(p):
+                        acc += noise[k, col, d + b] * t_rf[a, b]
+                    zt[a, j] = hz[a, j] + acc
+            # the filter's prediction: xbar = f(xhat), M = F P F^T + Q (symmetrized), into c
+            for j in range(m):
+                jac_ff(xh, uk, f_dt, big_f, j)
+                ff(xh, uk, f_dt, xbar, j)
+            for a in range(d):
+                for b in range(d):
+                    for j in range(m):
+                        fc[a, b, j] = 0.0
+                    for w in range(d):
+                        for j in range(m):
+                            fc[a, b, j] += big_f[a, w, j] * c[w, b, j]
+            for a in range(d):
+                for b in range(a + 1):
+                    for j in range(m):
+                        tmp[0, j] = 0.0
+                    for w in range(d):
+                        for j in range(m):
+                            tmp[0, j] += fc[a, w, j] * big_f[b, w, j]
+                    for j in range(m):
+                        c[a, b, j] = tmp[0, j] + 0.5 * (f_q[a, b] + f_q[b, a])
+                        c[b, a, j] = c[a, b, j]
+            # the update: H at xbar, r = z - h(xbar), then the one compiled covariance update (Joseph)
+            for j in range(m):
+                jac_hf(xbar, dk, big_h, j)
+                hf(xbar, dk, hz, j)
+            for a in range(p):
+                for j in range(m):
+                    res[a, j] = zt[a, j] - hz[a, j]
+            for j in range(mt):
+                for a in range(p):
+                    if not np.isfinite(res[a, j]):
+                        return False
+                    for b in range(d):
+                        if not np.isfinite(big_h[a, b, j]):
+                            return False
+            covariance_update(c, big_h, f_r, True, gain, s, work)
+            for a in range(d):
+                for j in range(m):
+                    acc = xbar[a, j]
+                    for i in range(p):
+                        acc += gain[i, a, j] * res[i, j]
+                    xh[a, j] = acc
+            # the statistics: e = x - xhat, eps = L_P^-1 e, u = L_S^-1 r, each realization's own factors
+            for a in range(d):
+                for j in range(m):
+                    e[a, j] = x[a, j] - xh[a, j]
+            if not _cholesky_lanes(c, lp, mt):
+                return False
+            if not _cholesky_lanes(s, ls, mt):
+                return False
+            _forward_lanes(lp, e, eps, mt)
+            _forward_lanes(ls, res, u, mt)
+            for a in range(d):
+                for j in range(mt):
+                    lane[o_err + a, j] += e[a, j]
+                    lane[o_est + a, j] += xh[a, j]
+                    lane[o_we + a, j] += eps[a, j]
+                for b in range(d):
+                    ab = a * d + b
+                    for j in range(mt):
+                        lane[o_eo + ab, j] += e[a, j] * e[b, j]
+                        lane[o_esto + ab, j] += xh[a, j] * xh[b, j]
+                        lane[o_ee + ab, j] += e[a, j] * xh[b, j]
+                        lane[o_fc + ab, j] += c[a, b, j]
+                        lane[o_wo + ab, j] += eps[a, j] * eps[b, j]
+                        lane[o_wx + ab, j] += eps[a, j] * xh[b, j]
+            for j in range(mt):
+                nees = 0.0
+                for a in range(d):
+                    nees += eps[a, j] * eps[a, j]
+                nis = 0.0
+                lag = 0.0
+                for a in range(p):
+                    nis += u[a, j] * u[a, j]
+                    lag += last_u[t, a, j] * u[a, j]
+                    last_u[t, a, j] = u[a, j]
+                lane[o_nees, j] += nees
+                lane[o_nis, j] += nis
+                lane[o_nsq, j] += nees * nees
+                r_nees[t, j] += nees
+                r_nis[t, j] += nis
+                if k > 0:
+                    r_lag[t, j] += lag
+            for a in range(p):
+                for j in range(mt):
+                    lane[o_res + a, j] += res[a, j]
+                    lane[o_nr + a, j] += u[a, j]
+                for b in range(p):
+                    for j in range(mt):
+                        lane[o_reso + a * p + b, j] += res[a, j] * res[b, j]
+            if keep_pairs:
+                for a in range(p):
+                    for j in range(mt):
+                        sums.residuals[k * p + a, t * m + j] = u[a, j]
+            for a in range(d):
+                for j in range(mt):
+                    pii = c[a, a, j]
+                    e2 = e[a, j] * e[a, j]
+                    zz = e[a, j] / np.sqrt(pii)
+                    lane[o_e4 + a, j] += e2 * e2
+                    lane[o_p2 + a, j] += pii * pii
+                    lane[o_e2p + a, j] += e2 * pii
+                    lane[o_z + a, j] += zz
+                    lane[o_z2 + a, j] += zz * zz
+                    r_a[t, a, j] += e2
+                    r_b[t, a, j] += pii
+                    r_z[t, a, j] += zz
+            # the Cramér–Rao bound's expectations at the truth's states: F, F^T Q^-1 F, (R^-1/2 H)^T (R^-1/2 H)
+            for a in range(d):
+                for b in range(d):
+                    for j in range(mt):
+                        lane[o_f + a * d + b, j] += jf[a, b, j]
+            if has_q_inv:
+                for a in range(d):
+                    for b in range(d):
+                        for j in range(mt):
+                            g[a, b, j] = 0.0
+                        for w in range(d):
+                            for j in range(mt):
+                                g[a, b, j] += q_inv[a, w] * jf[w, b, j]
+                for a in range(d):
+                    for b in range(d):
+                        for w in range(d):
+                            for j in range(mt):
+                                lane[o_ftqf + a * d + b, j] += jf[w, a, j] * g[w, b, j]
+            for i in range(p):
+                for b in range(d):
+                    for j in range(mt):
+                        acc = jh[i, b, j]
+                        for w in range(i):
+                            acc = acc - r_chol[i, w] * wh[w, b, j]
+                        wh[i, b, j] = acc / r_chol[i, i]
+            for a in range(d):
+                for b in range(d):
+                    for i in range(p):
+                        for j in range(mt):
+                            lane[o_htrh + a * d + b, j] += wh[i, a, j] * wh[i, b, j]
+        # the update's sums: the lanes reduced
+        for a in range(d):
+            sums.error[k, a] += lane[o_err + a].sum()
+            sums.estimate[k, a] += lane[o_est + a].sum()
+            sums.whitened_error[k, a] += lane[o_we + a].sum()
+            e4[k, a] += lane[o_e4 + a].sum()
+            p2[k, a] += lane[o_p2 + a].sum()
+            e2p[k, a] += lane[o_e2p + a].sum()
+            zsum[k, a] += lane[o_z + a].sum()
+            z2sum[k, a] += lane[o_z2 + a].sum()
+            for b in range(d):
+                ab = a * d + b
+                sums.error_outer[k, a, b] += lane[o_eo + ab].sum()
+                sums.estimate_outer[k, a, b] += lane[o_esto + ab].sum()
+                sums.error_estimate[k, a, b] += lane[o_ee + ab].sum()
+                sums.filter_cov[k, a, b] += lane[o_fc + ab].sum()
+                sums.whitened_outer[k, a, b] += lane[o_wo + ab].sum()
+                sums.whitened_estimate[k, a, b] += lane[o_wx + ab].sum()
+                fsum[k, a, b] += lane[o_f + ab].sum()
+                ftqf[k, a, b] += lane[o_ftqf + ab].sum()
+                htrh[k, a, b] += lane[o_htrh + ab].sum()
+        sums.nees[k] += lane[o_nees].sum()
+        sums.nis[k] += lane[o_nis].sum()
+        nees_sq[k] += lane[o_nsq].sum()
+        for a in range(p):
+            sums.residual[k, a] += lane[o_res + a].sum()
+            normalized[k, a] += lane[o_nr + a].sum()
+            for b in range(p):
+                sums.residual_own[k, a, b] += lane[o_reso + a * p + b].sum()
+    # the per-realization averages over the updates (EffectAccumulator.finish)
+    for t in range(tiles):
+        mt = min(m, n - t * m)
+        for j in range(mt):
+            avg = r_nees[t, j] / n_updates
+            nees_avg[0] += avg
+            nees_avg[1] += avg * avg
+            avg = r_nis[t, j] / n_updates
+            nis_avg[0] += avg
+            nis_avg[1] += avg * avg
+            for a in range(d):
+                ra, rb = r_a[t, a, j], r_b[t, a, j]
+                pooled[0, a] += ra
+                pooled[1, a] += rb
+                pooled[2, a] += ra * ra
+                pooled[3, a] += rb * rb
+                pooled[4, a] += ra * rb
+                zb = r_z[t, a, j] / n_updates
+                zbar[0, a] += zb
+                zbar[1, a] += zb * zb
+            if n_updates > 1:
+                lag = r_lag[t, j] / ((n_updates - 1) * p)
+                lag1[0] += lag
+                lag1[1] += lag * lag
+    return True
