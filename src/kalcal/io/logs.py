@@ -93,6 +93,66 @@ def _read_csv(path: Path) -> pd.DataFrame:
         raise _EmptyFile from None
 
 
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
+def _compression(path: Path) -> str | None:
+    """``".gz"``, ``".bz2"``, ``".xz"`` or ``".zst"`` for a compressed log, None for another."""
+    suffix = path.suffix.lower()
+    return suffix if suffix in (".gz", ".bz2", ".xz", ".zst") else None
+
+
+def _decompression_errors() -> tuple[type[BaseException], ...]:
+    """What a damaged compressed file raises while read: a truncated stream's EOFError (gzip, bz2, lzma),
+    OSError (gzip.BadGzipFile, bz2's "Invalid data stream"), zlib.error, lzma.LZMAError and, with the
+    package, zstandard.ZstdError."""
+    import lzma
+    import zlib
+
+    errors: tuple[type[BaseException], ...] = (EOFError, OSError, zlib.error, lzma.LZMAError)
+    zstandard = sys.modules.get("zstandard")
+    return errors + ((zstandard.ZstdError,) if zstandard is not None else ())
+
+
+def _check_compressed(path: Path, compressed: str) -> None:
+    """Decompress a file to its end, the output discarded (memory: one chunk): raises what the damaged
+    stream raises (:func:`_decompression_errors`), EOFError for a ``.zst`` whose last frame is cut short."""
+    if compressed != ".zst":
+        import bz2
+        import gzip
+        import lzma
+
+        opener = {".gz": gzip.open, ".bz2": bz2.open, ".xz": lzma.open}[compressed]
+        with opener(path, "rb") as stream:
+            while stream.read(1 << 20):
+                pass
+        return
+    import zstandard
+
+    with open(path, "rb") as handle:
+        decompressor = zstandard.ZstdDecompressor().decompressobj()
+        pending = handle.read(1 << 20)
+        if not pending:
+            return  # an empty file: pandas says so
+        while True:
+            chunk = pending or handle.read(1 << 20)
+            pending = b""
+            if not chunk:
+                break
+            decompressor.decompress(chunk)
+            if decompressor.eof:  # a frame ended: the rest (unused_data) starts the next frame
+                pending = decompressor.unused_data
+                decompressor = zstandard.ZstdDecompressor().decompressobj()
+                if not pending:
+                    pending = handle.read(1 << 20)
+                    if not pending:
+                        return
+        if not decompressor.eof:
+            raise EOFError("the compressed stream ends before its last frame does")
+
+
 def source_name(source: str | Path | pd.DataFrame, role: str, frame: pd.DataFrame | None = None) -> str:
     """How messages name a log: its path, ``FILE topic TOPIC`` for a topic read from a bag or ULog (given
     its ``frame`` from :func:`read_table`), or ``<ROLE DataFrame>`` for a DataFrame (``<imu DataFrame>``)."""
@@ -149,20 +209,27 @@ def read_table(
         raise DataError(f"{path}: --topic {topic}: applies to a ROS bag or a ULog, not a {kind} file")
     if not path.is_file():
         raise DataError(f"{path}: no such file")
-    if path.name.lower().endswith(".zst"):
+    compressed = _compression(path)
+    if compressed == ".zst":
         try:
             import zstandard  # noqa: F401  (pandas' reader of .zst)
         except ImportError:
             raise DataError(f"{path}: reading a .zst file needs the zstandard package (pip install zstandard)") from None
     try:
+        if compressed is not None:
+            # the whole stream first: pandas would parse a damaged stream's garbage (a CSV error, not the
+            # cause) before the checksum at its end, and reads a truncated .zst's first blocks as the whole
+            _check_compressed(path, compressed)
         frame = _read_parquet(path) if kind == "parquet" else _read_csv(path)
     except _EmptyFile:
         raise DataError(f"{path}: file is empty") from None
-    except EOFError as exc:  # a truncated .gz, .bz2 or .xz
-        raise DataError(f"{path}: cannot be read as {kind} ({str(exc).strip() or 'truncated'})") from None
-    except (UnicodeDecodeError, OSError, ValueError) as exc:  # pandas' ParserError and pyarrow's ArrowInvalid too
-        first_line = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise DataError(f"{path}: cannot be read as {kind} ({first_line})") from None
+    except _decompression_errors() as exc:
+        if compressed is None:
+            raise DataError(f"{path}: cannot be read as {kind} ({_first_line(exc)})") from None
+        raise DataError(f"{path}: cannot be read as {compressed} compressed CSV: corrupt or truncated "
+                        f"({_first_line(exc)})") from None
+    except (UnicodeDecodeError, ValueError) as exc:  # pandas' ParserError and pyarrow's ArrowInvalid too
+        raise DataError(f"{path}: cannot be read as {kind} ({_first_line(exc)})") from None
     if len(frame) == 0:
         raise DataError(f"{path}: has a header but no data rows")
     frame.columns = [str(c).strip() for c in frame.columns]
@@ -181,7 +248,9 @@ def _read_topic(path: Path, kind: str, topic: str | None, topic_hint: str = "") 
 
             listing = ", ".join(f"{name} ({msgtype})" for name, (msgtype, _) in bag_topics(path).items())
         else:
-            listing = "e.g. sensor_combined, vehicle_local_position"
+            from kalcal.io.ulog import ulog_topics
+
+            listing = ", ".join(f"{name} ({count} messages)" for name, count in ulog_topics(path).items())
         raise DataError(
             f"{path}: {what} holds topics: name the columns as TOPIC.FIELD "
             f"(e.g. /imu.linear_acceleration.x, sensor_combined.accelerometer_m_s2[0]) or give the topic (topics: {listing})"
