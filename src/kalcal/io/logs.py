@@ -342,3 +342,65 @@ def parse_column_map(text: str | None, roles: tuple[str, ...], option: str) -> d
             raise DataError(f"{option}: unknown role {role!r} (roles: {', '.join(roles)})")
         mapping[role] = column
     return mapping
+
+
+#: the float64 seconds of one time unit, as the readers convert whole units (ns for bags, us for ULog)
+_UNIT_SECONDS = {1: 1e-9, 1000: 1e-6}
+
+
+def align_origins(logs: Sequence[tuple[str, np.ndarray, Mapping[str, Any]]]) -> list[np.ndarray]:
+    """The times of logs used together, put on one origin: the earliest of theirs, exactly.
+
+    Parameters
+    ----------
+    logs : sequence of (name, time, attrs)
+        Each log's name in messages, its ``time`` column [s], shape (n,), and its table's ``attrs``: a
+        topic of a bag or ULog has ``time_origin_ns`` (its t = 0 in integer ns on ``time_clock``) and
+        ``time_unit_ns`` (its times are whole units from it); a CSV, Parquet or DataFrame has none, its
+        times being relative to nothing kalcal can know.
+
+    Returns
+    -------
+    list of numpy.ndarray
+        The times [s], each from the earliest origin: a log at a later origin has its whole units from its
+        own origin plus the difference of the origins, converted as its reader converts them, so that it
+        is bit for bit what reading it from the earlier origin gives. Logs without origins are returned
+        as they are (their times are taken to share one axis, as before).
+
+    Raises
+    ------
+    DataError
+        One line, where one log has an absolute origin and another none (a bag's or ULog's topic with a
+        CSV: the two cannot be aligned), or where the origins are on different clocks (a ROS bag's stamps
+        and a ULog's boot clock).
+    """
+    times = [np.asarray(time, dtype=float) for _, time, _ in logs]
+    origins = [attrs.get("time_origin_ns") for _, _, attrs in logs]
+    if all(origin is None for origin in origins):
+        return times
+    if any(origin is None for origin in origins):
+        with_origin = next(name for (name, _, _), o in zip(logs, origins) if o is not None)
+        without = next(name for (name, _, _), o in zip(logs, origins) if o is None)
+        raise DataError(
+            f"{without}: its times have no absolute origin, while {with_origin}'s are from a recorded stamp: the two "
+            "logs cannot be aligned (give both as topics of bags or ULogs, or both as tables on one time axis)")
+    clocks = {attrs.get("time_clock") for _, _, attrs in logs}
+    if len(clocks) > 1:
+        raise DataError(
+            f"{logs[0][0]} and {logs[1][0]}: their times are on different clocks ({' and '.join(sorted(map(str, clocks)))} "
+            "stamps): the two logs cannot be aligned")
+    common = min(int(origin) for origin in origins)
+    aligned = []
+    for (name, _, attrs), time, origin in zip(logs, times, origins):
+        if int(origin) == common:
+            aligned.append(time)
+            continue
+        unit = int(attrs.get("time_unit_ns", 1))
+        scale = _UNIT_SECONDS.get(unit, unit * 1e-9)
+        units = np.rint(time / scale).astype(np.int64)
+        shift = (int(origin) - common) // unit
+        if (int(origin) - common) % unit == 0 and np.array_equal(units.astype(float) * scale, time):
+            aligned.append((units + shift).astype(float) * scale)  # as the reader would have converted them
+        else:  # times changed since they were read: the float difference of the origins
+            aligned.append(time + (int(origin) - common) * 1e-9)
+    return aligned

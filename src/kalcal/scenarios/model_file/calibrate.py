@@ -302,7 +302,9 @@ def calibrate_model_file(
         reasons.append("the windows' estimates disagree (stability: NOT stable)")
     because = " and ".join(reasons) or None
     if because:
-        data = shlex.quote(bound.source) if isinstance(log, (str, Path)) else "LOG"
+        # the log's path as given (a bag's or ULog's: its topic is in the model's TOPIC.FIELD columns), not
+        # bound.source's "FILE topic TOPIC", which names it in messages
+        data = shlex.quote(str(log)) if isinstance(log, (str, Path)) else "LOG"
         fit = f"kalcal fit {shlex.quote(str(info.file))} --data {data} --free KEYS --out fit"
         warnings.append(CalibrationWarning(
             "sigma-untrusted", f"the states' 1-sigmas are NOT trusted: they hold only for a model and noise settings "
