@@ -184,7 +184,7 @@ def test_accel_gps_from_a_bag_says_what_it_takes(tmp_path):
 
 def test_accel_gps_from_one_bag_equals_the_same_samples_from_csv(tmp_path):
     """An IMU topic and an Odometry topic of one bag, named as TOPIC.FIELD, calibrate as the same samples
-    written to CSV do: one time origin for both topics."""
+    written to CSV do: both topics on one time origin."""
     sim = tmp_path / "sim"
     assert _invoke("simulate", "accel-gps", "--out", sim, "--set", "scenario.duration=20").exit_code == 0
     imu, gps = pd.read_csv(sim / "imu.csv"), pd.read_csv(sim / "gps.csv")
@@ -199,6 +199,8 @@ def test_accel_gps_from_one_bag_equals_the_same_samples_from_csv(tmp_path):
         "imu": read_table(bag, columns=["/imu.linear_acceleration.x"])[["time", "/imu.linear_acceleration.x"]].set_axis(["time", "accel"], axis=1),
         "gps": read_table(bag, topic="/odom")[["time", "/odom.pose.pose.position.x", "/odom.twist.twist.linear.x"]].set_axis(["time", "position", "velocity"], axis=1),
     }
+    # each topic's times start at its own first stamp: on one axis (the IMU's first), as the calibration puts them
+    frames["gps"]["time"] = (gps_ns - imu_ns[0]) * 1e-9
     for name, frame in frames.items():
         frame.to_csv(tmp_path / f"{name}.csv", index=False, float_format="%.17g")
     from_csv = _invoke("calibrate", "accel-gps", "--imu", tmp_path / "imu.csv", "--gps", tmp_path / "gps.csv",
