@@ -177,9 +177,24 @@ def test_accel_gps_from_a_bag_says_what_it_takes(tmp_path):
     bag = write_imu_bag(tmp_path / "f.bag", stamps, accel, extra={"/fix": ("sensor_msgs/msg/NavSatFix", [fix])})
     message = _refused("calibrate", "accel-gps", "--imu", bag, "--imu-columns", "accel=/imu.linear_acceleration.x",
                        "--gps", bag, "--gps-columns", "position=/fix.latitude,velocity=/fix.velocity", "--out", tmp_path / "o")
-    assert message.startswith(f"kalcal: error: {bag} topic /fix (sensor_msgs/msg/NavSatFix): has no velocity '/fix.velocity': accel-gps takes position [m] and velocity [m/s]")
+    # refused for what a NavSatFix is (geodetic), not only for the velocity it lacks
+    assert message.startswith(f"kalcal: error: {bag} topic /fix (sensor_msgs/msg/NavSatFix): position '/fix.latitude' is a "
+                              "latitude (degrees, in PX4 also 1e-7 degrees), not a position along the axis of motion in metres: "
+                              "accel-gps takes position [m] and velocity [m/s]")
+    message = _refused("calibrate", "accel-gps", "--imu", bag, "--imu-columns", "accel=/imu.linear_acceleration.x",
+                       "--gps", bag, "--gps-columns", "position=/fix.status.status,velocity=/fix.velocity", "--out", tmp_path / "o")
+    assert "(sensor_msgs/msg/NavSatFix): position '/fix.status.status' is a field of a geodetic fix" in message
     assert "name the columns as TOPIC.FIELD" in _refused(
         "calibrate", "accel-gps", "--imu", bag, "--imu-columns", "accel=/imu.linear_acceleration.x", "--gps", bag, "--out", tmp_path / "o")
+
+
+def test_a_ulog_gps_latitude_is_refused_as_a_position(tmp_path):
+    """vehicle_gps_position.lat (1e-7 degrees) taken as metres would calibrate nonsense: refused, naming it."""
+    message = _refused("calibrate", "accel-gps", "--imu", ULOG, "--imu-columns", "accel=sensor_combined.accelerometer_m_s2[0]",
+                       "--gps", ULOG, "--gps-columns", "position=vehicle_gps_position.lat,velocity=vehicle_gps_position.vel_n_m_s",
+                       "--out", tmp_path / "o")
+    assert message.startswith(f"kalcal: error: {ULOG} topic vehicle_gps_position: position 'vehicle_gps_position.lat' is a latitude")
+    assert not (tmp_path / "o").exists()
 
 
 def test_accel_gps_from_one_bag_equals_the_same_samples_from_csv(tmp_path):

@@ -473,20 +473,41 @@ def read_accel_gps_logs(scenario: AccelGpsScenario, imu_path, gps_path, imu_map:
 GNSS_SUPPORTED = (
     "accel-gps takes position [m] and velocity [m/s] along the axis of motion, named as TOPIC.FIELD in "
     "--gps-columns, e.g. position=/odom.pose.pose.position.x,velocity=/odom.twist.twist.linear.x "
-    "(nav_msgs/Odometry) or position=vehicle_local_position.x,velocity=vehicle_local_position.vx (ULog); "
-    "sensor_msgs/NavSatFix and vehicle_gps_position (latitude/longitude) are not taken: convert them to "
-    "metres along the axis first"
+    "(nav_msgs/Odometry of a GNSS receiver's fixes); sensor_msgs/NavSatFix and a ULog's vehicle_gps_position "
+    "(latitude/longitude) are not taken: convert them to metres along the axis first"
 )
+
+#: message types whose position is geodetic (latitude, longitude in degrees; altitude above a datum)
+GEODETIC_TYPES = ("sensor_msgs/msg/NavSatFix", "gps_common/msg/GPSFix")
+#: fields that are geodetic coordinates, by their last name part (PX4: lat/lon in 1e-7 deg or deg, alt
+#: in mm or m above mean sea level; ROS: latitude/longitude in deg, altitude in m above the ellipsoid)
+GEODETIC_FIELDS = {
+    "lat": "latitude", "lon": "longitude", "alt": "altitude", "latitude": "latitude", "longitude": "longitude",
+    "altitude": "altitude", "latitude_deg": "latitude", "longitude_deg": "longitude", "altitude_msl_m": "altitude",
+    "altitude_ellipsoid_m": "altitude", "alt_ellipsoid": "altitude",
+}
 
 
 def check_gnss_columns(frame: pd.DataFrame, name: str, columns: Mapping[str, str]) -> None:
-    """For a GPS log read from a bag or ULog topic: refuse, in one line saying what accel-gps takes
-    (:data:`GNSS_SUPPORTED`), a topic without the position or velocity column asked for."""
+    """For a GPS log read from a bag or ULog topic: refuse, in one line, a position column that is a
+    geodetic coordinate (a NavSatFix's, a ULog's ``vehicle_gps_position.lat``: degrees, not metres along
+    the axis of motion) and a topic without the position or velocity column asked for, saying what
+    accel-gps takes (:data:`GNSS_SUPPORTED`)."""
     if "source" not in frame.attrs:
         return  # a table's missing column is numeric_columns' message
+    kind = frame.attrs.get("type")
+    column = columns["position"]
+    field = column.split(".", 1)[1] if "." in column else column
+    coordinate = GEODETIC_FIELDS.get(field.rsplit(".", 1)[-1].lower())
+    if kind in GEODETIC_TYPES or coordinate is not None:
+        what = {"latitude": "a latitude (degrees, in PX4 also 1e-7 degrees)", "longitude": "a longitude (degrees, in "
+                "PX4 also 1e-7 degrees)", "altitude": "an altitude (height above a datum)"}.get(
+                    coordinate, "a field of a geodetic fix (latitude, longitude in degrees, altitude)")
+        raise DataError(
+            f"{name}{f' ({kind})' if kind else ''}: position {column!r} is {what}, not a position along the axis "
+            f"of motion in metres: {GNSS_SUPPORTED}")
     missing = [f"{role} {columns[role]!r}" for role in ("position", "velocity") if columns[role] not in frame.columns]
     if missing:
-        kind = frame.attrs.get("type")
         raise DataError(f"{name}{f' ({kind})' if kind else ''}: has no {' or '.join(missing)}: {GNSS_SUPPORTED}")
 
 
