@@ -217,3 +217,27 @@ def test_variable_length_arrays_are_left_out(tmp_path):
     assert list(frame.columns) == ["time", "/arr.layout.data_offset"]
     np.testing.assert_array_equal(frame["/arr.layout.data_offset"], [7.0, 7.0, 7.0])
     assert not frame.isna().any().any()
+
+
+def test_align_origins_puts_topics_on_the_earlier_origin_exactly(tmp_path):
+    """Two topics with origins 1.234567891 s apart: the later one's times equal, bit for bit, reading it
+    from the earlier origin; a table without origin beside a topic, and a bag's stamps beside a ULog's
+    boot clock, are refused in one line."""
+    from kalcal.io.logs import align_origins
+
+    stamps, accel = _signal(200)
+    late = stamps + 1_234_567_891
+    a = read_table(write_imu_bag(tmp_path / "a.bag", stamps, accel), topic="/imu")
+    b = read_table(write_imu_bag(tmp_path / "b.bag", late, accel), topic="/imu")
+    first, second = align_origins([("a", a["time"].to_numpy(), a.attrs), ("b", b["time"].to_numpy(), b.attrs)])
+    np.testing.assert_array_equal(first, a["time"])
+    np.testing.assert_array_equal(second, (late - stamps[0]).astype(float) * 1e-9)
+    ulog = read_table(ULOG, topic="sensor_combined")
+    gps = read_table(ULOG, topic="vehicle_gps_position")
+    same = align_origins([("u", ulog["time"].to_numpy(), ulog.attrs), ("g", gps["time"].to_numpy(), gps.attrs)])
+    np.testing.assert_array_equal(same[1], gps["time"])  # one log, one origin: unchanged
+    assert "different clocks (px4 and ros stamps)" in _error(
+        lambda: align_origins([("a", a["time"].to_numpy(), a.attrs), ("u", ulog["time"].to_numpy(), ulog.attrs)]))
+    assert _error(lambda: align_origins([("a", a["time"].to_numpy(), a.attrs), ("t.csv", np.arange(3.0), {})])).startswith(
+        "t.csv: its times have no absolute origin")
+    np.testing.assert_array_equal(align_origins([("x", np.arange(3.0), {}), ("y", np.arange(2.0), {})])[1], [0.0, 1.0])

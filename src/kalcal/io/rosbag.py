@@ -22,6 +22,7 @@ listed), a topic of another message type than required, a topic without messages
 
 from __future__ import annotations
 
+import keyword
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -107,7 +108,11 @@ def _leaves(fielddefs: Mapping[str, Any], msgtype: str, prefix: str = "") -> lis
     from rosbags.typesys.store import Nodetype
 
     leaves: list[tuple[str, int | None]] = []
-    for name, (node, detail) in fielddefs[msgtype][1]:
+    for field, (node, detail) in fielddefs[msgtype][1]:
+        # the attribute rosbags gives the field (a Python keyword gets a trailing "_", as rosbags' codegen does)
+        name = f"{field}_" if keyword.iskeyword(field) else field
+        if not name.isidentifier():
+            continue  # not an attribute of the message (rosbags' parser admits none such)
         if node == Nodetype.NAME:
             leaves += _leaves(fielddefs, detail, f"{prefix}{name}.")
         elif node == Nodetype.BASE and detail[0] in NUMERIC_BASES:
@@ -119,7 +124,9 @@ def _leaves(fielddefs: Mapping[str, Any], msgtype: str, prefix: str = "") -> lis
 
 def _row_getter(leaves: list[tuple[str, int | None]]) -> Callable[[Any], tuple]:
     """One function of a message giving its numeric leaves as one flat tuple, in the order of ``leaves``
-    (generated once per topic: an attribute path per leaf, no Python loop per field and message)."""
+    (generated once per topic: an attribute path per leaf, no Python loop per field and message). Every
+    part of every path is a Python identifier (:func:`_leaves` keeps no other), so the generated source is
+    attribute access only."""
     items = ", ".join(f"m.{name}" if size is None else f"*m.{name}" for name, size in leaves)
     return eval(f"lambda m: ({items}{',' if len(leaves) == 1 else ''})")  # noqa: S307  (names from the typestore)
 
