@@ -177,14 +177,29 @@ def test_accel_gps_from_a_bag_says_what_it_takes(tmp_path):
     bag = write_imu_bag(tmp_path / "f.bag", stamps, accel, extra={"/fix": ("sensor_msgs/msg/NavSatFix", [fix])})
     message = _refused("calibrate", "accel-gps", "--imu", bag, "--imu-columns", "accel=/imu.linear_acceleration.x",
                        "--gps", bag, "--gps-columns", "position=/fix.latitude,velocity=/fix.velocity", "--out", tmp_path / "o")
-    assert message.startswith(f"kalcal: error: {bag} topic /fix (sensor_msgs/msg/NavSatFix): has no velocity '/fix.velocity': accel-gps takes position [m] and velocity [m/s]")
+    # refused for what a NavSatFix is (geodetic), not only for the velocity it lacks
+    assert message.startswith(f"kalcal: error: {bag} topic /fix (sensor_msgs/msg/NavSatFix): position '/fix.latitude' is a "
+                              "latitude (degrees, in PX4 also 1e-7 degrees), not a position along the axis of motion in metres: "
+                              "accel-gps takes position [m] and velocity [m/s]")
+    message = _refused("calibrate", "accel-gps", "--imu", bag, "--imu-columns", "accel=/imu.linear_acceleration.x",
+                       "--gps", bag, "--gps-columns", "position=/fix.status.status,velocity=/fix.velocity", "--out", tmp_path / "o")
+    assert "(sensor_msgs/msg/NavSatFix): position '/fix.status.status' is a field of a geodetic fix" in message
     assert "name the columns as TOPIC.FIELD" in _refused(
         "calibrate", "accel-gps", "--imu", bag, "--imu-columns", "accel=/imu.linear_acceleration.x", "--gps", bag, "--out", tmp_path / "o")
 
 
+def test_a_ulog_gps_latitude_is_refused_as_a_position(tmp_path):
+    """vehicle_gps_position.lat (1e-7 degrees) taken as metres would calibrate nonsense: refused, naming it."""
+    message = _refused("calibrate", "accel-gps", "--imu", ULOG, "--imu-columns", "accel=sensor_combined.accelerometer_m_s2[0]",
+                       "--gps", ULOG, "--gps-columns", "position=vehicle_gps_position.lat,velocity=vehicle_gps_position.vel_n_m_s",
+                       "--out", tmp_path / "o")
+    assert message.startswith(f"kalcal: error: {ULOG} topic vehicle_gps_position: position 'vehicle_gps_position.lat' is a latitude")
+    assert not (tmp_path / "o").exists()
+
+
 def test_accel_gps_from_one_bag_equals_the_same_samples_from_csv(tmp_path):
     """An IMU topic and an Odometry topic of one bag, named as TOPIC.FIELD, calibrate as the same samples
-    written to CSV do: one time origin for both topics."""
+    written to CSV do: both topics on one time origin."""
     sim = tmp_path / "sim"
     assert _invoke("simulate", "accel-gps", "--out", sim, "--set", "scenario.duration=20").exit_code == 0
     imu, gps = pd.read_csv(sim / "imu.csv"), pd.read_csv(sim / "gps.csv")
@@ -199,6 +214,8 @@ def test_accel_gps_from_one_bag_equals_the_same_samples_from_csv(tmp_path):
         "imu": read_table(bag, columns=["/imu.linear_acceleration.x"])[["time", "/imu.linear_acceleration.x"]].set_axis(["time", "accel"], axis=1),
         "gps": read_table(bag, topic="/odom")[["time", "/odom.pose.pose.position.x", "/odom.twist.twist.linear.x"]].set_axis(["time", "position", "velocity"], axis=1),
     }
+    # each topic's times start at its own first stamp: on one axis (the IMU's first), as the calibration puts them
+    frames["gps"]["time"] = (gps_ns - imu_ns[0]) * 1e-9
     for name, frame in frames.items():
         frame.to_csv(tmp_path / f"{name}.csv", index=False, float_format="%.17g")
     from_csv = _invoke("calibrate", "accel-gps", "--imu", tmp_path / "imu.csv", "--gps", tmp_path / "gps.csv",
@@ -235,3 +252,75 @@ def test_scale_bias_from_a_bag_topic_equals_csv(tmp_path):
     for key in ("theta", "theta_covariance", "scale_error", "bias", "mean_nis", "consistent", "samples_used"):
         assert a[key] == b[key], key
     assert a["data"] == f"{bag} topic /imu"
+
+
+def _drive(tmp_path, *settings, late_fixes: int = 0):
+    """A simulated accel-gps drive (20 s) as a bag's samples: the IMU's and the GPS's stamps [int ns], the
+    accelerometer rows and the Odometry messages of the fixes after the first ``late_fixes``."""
+    sim = tmp_path / "sim"
+    assert _invoke("simulate", "accel-gps", "--out", sim, "--set", "scenario.duration=20", *settings).exit_code == 0
+    imu, gps = pd.read_csv(sim / "imu.csv"), pd.read_csv(sim / "gps.csv").iloc[late_fixes:]
+    imu_ns = ORIGIN_NS + np.round(imu["time"].to_numpy() * 1e9).astype(np.int64)
+    gps_ns = ORIGIN_NS + np.round(gps["time"].to_numpy() * 1e9).astype(np.int64)
+    accel = np.column_stack([imu["accel"], np.zeros(len(imu)), np.zeros(len(imu))])
+    odometry = ("nav_msgs/msg/Odometry", odometry_messages(1, gps_ns, gps["position"], gps["velocity"]), gps_ns)
+    return imu_ns, gps_ns, accel, odometry, gps
+
+
+BAG_COLUMNS = ("--imu-columns", "accel=/imu.linear_acceleration.x", "--gps-columns",
+               "position=/odom.pose.pose.position.x,velocity=/odom.twist.twist.linear.x")
+
+
+def test_two_bags_recorded_from_different_starts_equal_one_bag_and_csv(tmp_path):
+    """The IMU in one bag, the GPS (its first fix 2.2 s after the IMU's first sample) in another recorded
+    from 3 s before its first fix: both on the earlier origin, exactly, so the calibration equals that
+    of one bag holding both topics and that of the same samples written to CSV on one time axis."""
+    imu_ns, gps_ns, accel, odometry, gps = _drive(tmp_path, late_fixes=10)
+    assert gps_ns[0] - imu_ns[0] == 2_200_000_000
+    one = write_imu_bag(tmp_path / "one.bag", imu_ns, accel, extra={"/odom": odometry})
+    imu_bag = write_imu_bag(tmp_path / "imu.bag", imu_ns, accel)
+    start = ("std_msgs/msg/Float64", float64_messages(1, [0.0]), [int(gps_ns[0]) - 3_000_000_000])
+    gps_bag = write_imu_bag(tmp_path / "gps.bag", imu_ns[:0], accel[:0], extra={"/odom": odometry, "/start": start})
+    pd.DataFrame({"time": (imu_ns - imu_ns[0]) * 1e-9, "accel": accel[:, 0]}).to_csv(tmp_path / "imu.csv", index=False, float_format="%.17g")
+    pd.DataFrame({"time": (gps_ns - imu_ns[0]) * 1e-9, "position": gps["position"], "velocity": gps["velocity"]}).to_csv(
+        tmp_path / "gps.csv", index=False, float_format="%.17g")
+    runs = {"one": (one, one, BAG_COLUMNS), "two": (imu_bag, gps_bag, BAG_COLUMNS),
+            "csv": (tmp_path / "imu.csv", tmp_path / "gps.csv", ())}
+    for name, (imu, gps_log, columns) in runs.items():
+        result = _invoke("calibrate", "accel-gps", "--imu", imu, "--gps", gps_log, *columns, "--no-settings-sigma", "--out", tmp_path / name)
+        assert result.exit_code == 0, result.output
+    csv = pd.read_csv(tmp_path / "csv" / "estimates.csv")
+    for name in ("one", "two"):
+        pd.testing.assert_frame_equal(pd.read_csv(tmp_path / name / "estimates.csv"), csv, check_exact=True)
+        for key in ("bias", "bias_std", "fixes_used", "diagnostics"):
+            assert _summary(tmp_path / name)[key] == _summary(tmp_path / "csv")[key], (name, key)
+    # a bag's topic (times from a recorded stamp) with a CSV of relative times: no common origin
+    message = _refused("calibrate", "accel-gps", "--imu", imu_bag, "--imu-columns", "accel=/imu.linear_acceleration.x",
+                       "--gps", tmp_path / "gps.csv", "--no-settings-sigma", "--out", tmp_path / "mixed")
+    assert message == (f"kalcal: error: {tmp_path / 'gps.csv'}: its times have no absolute origin, while {imu_bag} topic /imu's "
+                       "are from a recorded stamp: the two logs cannot be aligned (give both as topics of bags or ULogs, "
+                       "or both as tables on one time axis)")
+
+
+def test_the_suggested_fit_command_runs_as_printed(tmp_path):
+    """A calibration from bags whose GPS is noisier than the filter assumes (4 m against 1 m): the
+    diagnostics say inconsistent and the warning names `kalcal fit accel-gps ...` with the bags' paths
+    and the TOPIC.FIELD columns; that command, run as printed, fits."""
+    import shlex
+
+    imu_ns, gps_ns, accel, odometry, _ = _drive(tmp_path, "--set", "truth.gps_position_std=4")
+    imu_bag = write_imu_bag(tmp_path / "imu.bag", imu_ns, accel)
+    gps_bag = write_imu_bag(tmp_path / "gps bag.bag", imu_ns[:0], accel[:0], extra={"/odom": odometry})
+    result = _invoke("calibrate", "accel-gps", "--imu", imu_bag, "--gps", gps_bag, *BAG_COLUMNS, "--no-settings-sigma",
+                     "--out", tmp_path / "cal")
+    assert result.exit_code == 0, result.output
+    untrusted = [w["message"] for w in _summary(tmp_path / "cal")["warnings"] if w["code"] == "sigma-untrusted"]
+    assert len(untrusted) == 1, _summary(tmp_path / "cal")["warnings"]
+    command = untrusted[0].split("`")[1]
+    words = shlex.split(command)
+    assert words[:3] == ["kalcal", "fit", "accel-gps"] and words[words.index("--gps") + 1] == str(gps_bag)
+    words[words.index("--out") + 1] = str(tmp_path / "fit")
+    fit = _invoke(*words[1:])
+    assert fit.exit_code == 0, fit.output
+    fitted = json.loads((tmp_path / "fit" / "fit.json").read_text())
+    assert (tmp_path / "fit" / "filter.toml").is_file() and str(imu_bag) in json.dumps(fitted)

@@ -31,13 +31,14 @@ def _signal(n: int = 50, seed: int = 3):
 
 @pytest.mark.parametrize("ros, storage, name", [(1, "", "s.bag"), (2, "sqlite3", "s2"), (2, "mcap", "s2m")])
 def test_a_bag_topic_reads_as_written(tmp_path, ros, storage, name):
-    """Header stamps (not receive times) in s from the bag's start, taken in integer ns; float64 samples
-    bit for bit."""
+    """Header stamps (not receive times) in s from the first message's stamp, taken in integer ns; float64
+    samples bit for bit; the origin kept as integer ns."""
     stamps, accel = _signal()
     receive = stamps + 3_000_000 + np.arange(stamps.size) * 7  # recorded 3 ms (and more) after the stamp
     bag = write_imu_bag(tmp_path / name, stamps, accel, ros=ros, storage=storage, receive_ns=receive)
     frame = read_table(bag, "imu", columns={"accel": AXES[0]})
-    np.testing.assert_array_equal(frame["time"].to_numpy(), (stamps - receive[0]).astype(float) * 1e-9)
+    np.testing.assert_array_equal(frame["time"].to_numpy(), (stamps - stamps[0]).astype(float) * 1e-9)
+    assert frame.attrs["time_origin_ns"] == int(stamps[0]) and frame.attrs["time_clock"] == "ros"
     np.testing.assert_array_equal(frame[AXES].to_numpy(), accel)
     assert source_name(bag, "imu", frame) == f"{bag} topic /imu"
     assert frame.attrs["time"].startswith("header stamp")
@@ -100,10 +101,26 @@ def test_ulog_reads_as_pyulog_reads_it():
 def test_bad_ulogs_are_one_line(tmp_path):
     junk = tmp_path / "junk.ulg"
     junk.write_text("not a log\n")
-    assert _error(lambda: read_ulog(junk, "sensor_combined")).startswith(f"{junk}: cannot be read as a ULog (")
+    assert _error(lambda: read_ulog(junk, "sensor_combined")).startswith(f"{junk}: cannot be read as a ULog: truncated or corrupt (")
     cut = tmp_path / "cut.ulg"
     cut.write_bytes(ULOG.read_bytes()[:100])  # cut inside its definitions: no data at all
-    assert _error(lambda: read_ulog(cut, "sensor_combined")) == f"{cut}: no topic sensor_combined (topics: none)"
+    assert _error(lambda: read_ulog(cut, "sensor_combined")) == (
+        f"{cut}: cannot be read as a ULog: truncated or corrupt (no data message after its definitions)")
+
+
+def test_a_ulog_pyulog_finds_corrupt_is_one_line_and_nothing_on_stdout(tmp_path, capsys):
+    """pyulog prints "File corruption detected ..." on stdout: captured, and said in the one line."""
+    cut = tmp_path / "cut.ulg"
+    cut.write_bytes(ULOG.read_bytes()[:30_000])  # cut inside a definition
+    assert _error(lambda: read_ulog(cut, "sensor_combined")) == (
+        f"{cut}: cannot be read as a ULog: truncated or corrupt (File corruption detected while reading file definitions!)")
+    assert capsys.readouterr().out == ""
+
+
+def test_a_ulog_without_topic_lists_its_own_topics():
+    message = _error(lambda: read_table(ULOG, columns={"accel": "accel"}))
+    assert "sensor_combined (1298 messages)" in message and "vehicle_gps_position (32 messages)" in message
+    assert "e.g. sensor_combined, vehicle_local_position" not in message  # the log's topics, not an example
 
 
 @pytest.mark.parametrize("ending, opener", [(".gz", gzip.open), (".bz2", bz2.open), (".xz", lzma.open)])
@@ -117,7 +134,26 @@ def test_compressed_csv_reads_as_the_plain_file(tmp_path, ending, opener):
     pd.testing.assert_frame_equal(read_table(packed), read_table(plain))
     broken = tmp_path / f"broken.csv{ending}"
     broken.write_bytes(packed.read_bytes()[:-12])
-    assert _error(lambda: read_table(broken)).startswith(f"{broken}: cannot be read as csv (")
+    assert _error(lambda: read_table(broken)).startswith(f"{broken}: cannot be read as {ending} compressed CSV: corrupt or truncated (")
+
+
+@pytest.mark.parametrize("ending", [".gz", ".bz2", ".xz", ".zst"])
+@pytest.mark.parametrize("damage", ["junk", "half", "flipped"])
+def test_a_damaged_compressed_csv_is_one_line_naming_the_cause(tmp_path, ending, damage):
+    """Not a compressed stream, cut in half, a byte flipped in the middle: one DataError line saying
+    "corrupt or truncated" (no LZMAError or ZstdError traceback, and a half .zst not "file is empty" nor
+    its first half read as the whole log)."""
+    import zstandard
+
+    frame = pd.DataFrame({"time": np.arange(20_000) / 200.0, "accel": np.random.default_rng(5).normal(9.81, 0.02, 20_000)})
+    text = frame.to_csv(index=False).encode()
+    packed = {".gz": gzip.compress, ".bz2": bz2.compress, ".xz": lzma.compress,
+              ".zst": zstandard.ZstdCompressor().compress}[ending](text)
+    data = {"junk": b"time,accel\n0,1\n" * 4, "half": packed[: len(packed) // 2],
+            "flipped": packed[: len(packed) // 2] + bytes([packed[len(packed) // 2] ^ 0xFF]) + packed[len(packed) // 2 + 1:]}[damage]
+    path = tmp_path / f"log.csv{ending}"
+    path.write_bytes(data)
+    assert _error(lambda: read_table(path)).startswith(f"{path}: cannot be read as {ending} compressed CSV: corrupt or truncated (")
 
 
 def test_zstandard_csv_reads_as_csv(tmp_path):
@@ -151,3 +187,57 @@ def test_a_ulog_topic_of_several_instances_is_topic_colon_n():
     frame = read_table(ULOG, columns=["sensor_accel:1.x"])
     np.testing.assert_array_equal(frame["sensor_accel:1.x"], second.data["x"].astype(float))
     assert len(read_table(ULOG, topic="sensor_accel")) == len(next(d for d in ulog.data_list if d.name == "sensor_accel").data["x"])
+
+
+def test_header_stamps_on_another_clock_than_the_recording_lose_no_precision(tmp_path):
+    """Stamps on a boot clock (100 s after boot), recorded on the wall clock (1.7e9 s): time starts at 0
+    at the first message's stamp and every 5 ms step is exactly the float64 of 5 ms worth of ns (from the
+    bag's earliest receive time instead, time[0] would be -1.7e9 s and the steps off by up to 4e-7 s)."""
+    n = 2000
+    stamps = 100_000_000_000 + np.arange(n, dtype=np.int64) * 5_000_000
+    receive = ORIGIN_NS + np.arange(n, dtype=np.int64) * 5_000_000
+    bag = write_imu_bag(tmp_path / "clock.bag", stamps, np.zeros((n, 3)), receive_ns=receive)
+    frame = read_table(bag, columns=AXES)
+    np.testing.assert_array_equal(frame["time"], np.arange(n, dtype=np.int64) * 5_000_000 * 1e-9)
+    assert frame["time"].iloc[0] == 0.0 and frame.attrs["time_origin_ns"] == 100_000_000_000
+
+
+def test_variable_length_arrays_are_left_out(tmp_path):
+    """A Float64MultiArray whose data changes length: its ``data`` is not a column (no NaN padding); the
+    fixed fields (layout.data_offset) are."""
+    from rosbags.typesys import Stores, get_typestore
+
+    types = get_typestore(Stores.ROS1_NOETIC).types
+    layout = types["std_msgs/msg/MultiArrayLayout"](dim=[], data_offset=7)
+    arrays = [types["std_msgs/msg/Float64MultiArray"](layout=layout, data=np.array(v, dtype=float))
+              for v in ([1.0, 2.0], [3.0, 4.0, 5.0], [6.0])]
+    stamps, accel = _signal(3)
+    bag = write_imu_bag(tmp_path / "v.bag", stamps, accel, extra={"/arr": ("std_msgs/msg/Float64MultiArray", arrays)})
+    frame = read_table(bag, topic="/arr")
+    assert list(frame.columns) == ["time", "/arr.layout.data_offset"]
+    np.testing.assert_array_equal(frame["/arr.layout.data_offset"], [7.0, 7.0, 7.0])
+    assert not frame.isna().any().any()
+
+
+def test_align_origins_puts_topics_on_the_earlier_origin_exactly(tmp_path):
+    """Two topics with origins 1.234567891 s apart: the later one's times equal, bit for bit, reading it
+    from the earlier origin; a table without origin beside a topic, and a bag's stamps beside a ULog's
+    boot clock, are refused in one line."""
+    from kalcal.io.logs import align_origins
+
+    stamps, accel = _signal(200)
+    late = stamps + 1_234_567_891
+    a = read_table(write_imu_bag(tmp_path / "a.bag", stamps, accel), topic="/imu")
+    b = read_table(write_imu_bag(tmp_path / "b.bag", late, accel), topic="/imu")
+    first, second = align_origins([("a", a["time"].to_numpy(), a.attrs), ("b", b["time"].to_numpy(), b.attrs)])
+    np.testing.assert_array_equal(first, a["time"])
+    np.testing.assert_array_equal(second, (late - stamps[0]).astype(float) * 1e-9)
+    ulog = read_table(ULOG, topic="sensor_combined")
+    gps = read_table(ULOG, topic="vehicle_gps_position")
+    same = align_origins([("u", ulog["time"].to_numpy(), ulog.attrs), ("g", gps["time"].to_numpy(), gps.attrs)])
+    np.testing.assert_array_equal(same[1], gps["time"])  # one log, one origin: unchanged
+    assert "different clocks (px4 and ros stamps)" in _error(
+        lambda: align_origins([("a", a["time"].to_numpy(), a.attrs), ("u", ulog["time"].to_numpy(), ulog.attrs)]))
+    assert _error(lambda: align_origins([("a", a["time"].to_numpy(), a.attrs), ("t.csv", np.arange(3.0), {})])).startswith(
+        "t.csv: its times have no absolute origin")
+    np.testing.assert_array_equal(align_origins([("x", np.arange(3.0), {}), ("y", np.arange(2.0), {})])[1], [0.0, 1.0])

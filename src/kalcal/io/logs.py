@@ -93,6 +93,66 @@ def _read_csv(path: Path) -> pd.DataFrame:
         raise _EmptyFile from None
 
 
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
+def _compression(path: Path) -> str | None:
+    """``".gz"``, ``".bz2"``, ``".xz"`` or ``".zst"`` for a compressed log, None for another."""
+    suffix = path.suffix.lower()
+    return suffix if suffix in (".gz", ".bz2", ".xz", ".zst") else None
+
+
+def _decompression_errors() -> tuple[type[BaseException], ...]:
+    """What a damaged compressed file raises while read: a truncated stream's EOFError (gzip, bz2, lzma),
+    OSError (gzip.BadGzipFile, bz2's "Invalid data stream"), zlib.error, lzma.LZMAError and, with the
+    package, zstandard.ZstdError."""
+    import lzma
+    import zlib
+
+    errors: tuple[type[BaseException], ...] = (EOFError, OSError, zlib.error, lzma.LZMAError)
+    zstandard = sys.modules.get("zstandard")
+    return errors + ((zstandard.ZstdError,) if zstandard is not None else ())
+
+
+def _check_compressed(path: Path, compressed: str) -> None:
+    """Decompress a file to its end, the output discarded (memory: one chunk): raises what the damaged
+    stream raises (:func:`_decompression_errors`), EOFError for a ``.zst`` whose last frame is cut short."""
+    if compressed != ".zst":
+        import bz2
+        import gzip
+        import lzma
+
+        opener = {".gz": gzip.open, ".bz2": bz2.open, ".xz": lzma.open}[compressed]
+        with opener(path, "rb") as stream:
+            while stream.read(1 << 20):
+                pass
+        return
+    import zstandard
+
+    with open(path, "rb") as handle:
+        decompressor = zstandard.ZstdDecompressor().decompressobj()
+        pending = handle.read(1 << 20)
+        if not pending:
+            return  # an empty file: pandas says so
+        while True:
+            chunk = pending or handle.read(1 << 20)
+            pending = b""
+            if not chunk:
+                break
+            decompressor.decompress(chunk)
+            if decompressor.eof:  # a frame ended: the rest (unused_data) starts the next frame
+                pending = decompressor.unused_data
+                decompressor = zstandard.ZstdDecompressor().decompressobj()
+                if not pending:
+                    pending = handle.read(1 << 20)
+                    if not pending:
+                        return
+        if not decompressor.eof:
+            raise EOFError("the compressed stream ends before its last frame does")
+
+
 def source_name(source: str | Path | pd.DataFrame, role: str, frame: pd.DataFrame | None = None) -> str:
     """How messages name a log: its path, ``FILE topic TOPIC`` for a topic read from a bag or ULog (given
     its ``frame`` from :func:`read_table`), or ``<ROLE DataFrame>`` for a DataFrame (``<imu DataFrame>``)."""
@@ -149,20 +209,27 @@ def read_table(
         raise DataError(f"{path}: --topic {topic}: applies to a ROS bag or a ULog, not a {kind} file")
     if not path.is_file():
         raise DataError(f"{path}: no such file")
-    if path.name.lower().endswith(".zst"):
+    compressed = _compression(path)
+    if compressed == ".zst":
         try:
             import zstandard  # noqa: F401  (pandas' reader of .zst)
         except ImportError:
             raise DataError(f"{path}: reading a .zst file needs the zstandard package (pip install zstandard)") from None
     try:
+        if compressed is not None:
+            # the whole stream first: pandas would parse a damaged stream's garbage (a CSV error, not the
+            # cause) before the checksum at its end, and reads a truncated .zst's first blocks as the whole
+            _check_compressed(path, compressed)
         frame = _read_parquet(path) if kind == "parquet" else _read_csv(path)
     except _EmptyFile:
         raise DataError(f"{path}: file is empty") from None
-    except EOFError as exc:  # a truncated .gz, .bz2 or .xz
-        raise DataError(f"{path}: cannot be read as {kind} ({str(exc).strip() or 'truncated'})") from None
-    except (UnicodeDecodeError, OSError, ValueError) as exc:  # pandas' ParserError and pyarrow's ArrowInvalid too
-        first_line = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise DataError(f"{path}: cannot be read as {kind} ({first_line})") from None
+    except _decompression_errors() as exc:
+        if compressed is None:
+            raise DataError(f"{path}: cannot be read as {kind} ({_first_line(exc)})") from None
+        raise DataError(f"{path}: cannot be read as {compressed} compressed CSV: corrupt or truncated "
+                        f"({_first_line(exc)})") from None
+    except (UnicodeDecodeError, ValueError) as exc:  # pandas' ParserError and pyarrow's ArrowInvalid too
+        raise DataError(f"{path}: cannot be read as {kind} ({_first_line(exc)})") from None
     if len(frame) == 0:
         raise DataError(f"{path}: has a header but no data rows")
     frame.columns = [str(c).strip() for c in frame.columns]
@@ -181,7 +248,9 @@ def _read_topic(path: Path, kind: str, topic: str | None, topic_hint: str = "") 
 
             listing = ", ".join(f"{name} ({msgtype})" for name, (msgtype, _) in bag_topics(path).items())
         else:
-            listing = "e.g. sensor_combined, vehicle_local_position"
+            from kalcal.io.ulog import ulog_topics
+
+            listing = ", ".join(f"{name} ({count} messages)" for name, count in ulog_topics(path).items())
         raise DataError(
             f"{path}: {what} holds topics: name the columns as TOPIC.FIELD "
             f"(e.g. /imu.linear_acceleration.x, sensor_combined.accelerometer_m_s2[0]) or give the topic (topics: {listing})"
@@ -273,3 +342,65 @@ def parse_column_map(text: str | None, roles: tuple[str, ...], option: str) -> d
             raise DataError(f"{option}: unknown role {role!r} (roles: {', '.join(roles)})")
         mapping[role] = column
     return mapping
+
+
+#: the float64 seconds of one time unit, as the readers convert whole units (ns for bags, us for ULog)
+_UNIT_SECONDS = {1: 1e-9, 1000: 1e-6}
+
+
+def align_origins(logs: Sequence[tuple[str, np.ndarray, Mapping[str, Any]]]) -> list[np.ndarray]:
+    """The times of logs used together, put on one origin: the earliest of theirs, exactly.
+
+    Parameters
+    ----------
+    logs : sequence of (name, time, attrs)
+        Each log's name in messages, its ``time`` column [s], shape (n,), and its table's ``attrs``: a
+        topic of a bag or ULog has ``time_origin_ns`` (its t = 0 in integer ns on ``time_clock``) and
+        ``time_unit_ns`` (its times are whole units from it); a CSV, Parquet or DataFrame has none, its
+        times being relative to nothing kalcal can know.
+
+    Returns
+    -------
+    list of numpy.ndarray
+        The times [s], each from the earliest origin: a log at a later origin has its whole units from its
+        own origin plus the difference of the origins, converted as its reader converts them, so that it
+        is bit for bit what reading it from the earlier origin gives. Logs without origins are returned
+        as they are (their times are taken to share one axis, as before).
+
+    Raises
+    ------
+    DataError
+        One line, where one log has an absolute origin and another none (a bag's or ULog's topic with a
+        CSV: the two cannot be aligned), or where the origins are on different clocks (a ROS bag's stamps
+        and a ULog's boot clock).
+    """
+    times = [np.asarray(time, dtype=float) for _, time, _ in logs]
+    origins = [attrs.get("time_origin_ns") for _, _, attrs in logs]
+    if all(origin is None for origin in origins):
+        return times
+    if any(origin is None for origin in origins):
+        with_origin = next(name for (name, _, _), o in zip(logs, origins) if o is not None)
+        without = next(name for (name, _, _), o in zip(logs, origins) if o is None)
+        raise DataError(
+            f"{without}: its times have no absolute origin, while {with_origin}'s are from a recorded stamp: the two "
+            "logs cannot be aligned (give both as topics of bags or ULogs, or both as tables on one time axis)")
+    clocks = {attrs.get("time_clock") for _, _, attrs in logs}
+    if len(clocks) > 1:
+        raise DataError(
+            f"{logs[0][0]} and {logs[1][0]}: their times are on different clocks ({' and '.join(sorted(map(str, clocks)))} "
+            "stamps): the two logs cannot be aligned")
+    common = min(int(origin) for origin in origins)
+    aligned = []
+    for (name, _, attrs), time, origin in zip(logs, times, origins):
+        if int(origin) == common:
+            aligned.append(time)
+            continue
+        unit = int(attrs.get("time_unit_ns", 1))
+        scale = _UNIT_SECONDS.get(unit, unit * 1e-9)
+        units = np.rint(time / scale).astype(np.int64)
+        shift = (int(origin) - common) // unit
+        if (int(origin) - common) % unit == 0 and np.array_equal(units.astype(float) * scale, time):
+            aligned.append((units + shift).astype(float) * scale)  # as the reader would have converted them
+        else:  # times changed since they were read: the float difference of the origins
+            aligned.append(time + (int(origin) - common) * 1e-9)
+    return aligned

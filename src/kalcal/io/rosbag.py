@@ -2,11 +2,18 @@
 
 The bag is read by ``rosbags`` (pure Python; no ROS install). Each message of the topic is one row; its
 numeric fields, flattened, are float64 columns named ``TOPIC.FIELD`` (``/imu.linear_acceleration.x``; a
-fixed-length array's elements as ``FIELD[i]``, e.g. ``/imu.orientation_covariance[0]``; text and
-variable-length arrays are left out). The ``time`` column is the message's header stamp where it has one
-(else the time the bag recorded it), in float64 s from the bag's start (the earliest receive time in the
-bag, one origin for every topic, so that two topics read from the same bag share their times); the
-difference is taken in integer ns before the conversion, so no precision is lost to an epoch.
+fixed-length array's elements as ``FIELD[i]``, e.g. ``/imu.orientation_covariance[0]``). Text, arrays of
+messages and variable-length arrays (sequences, such as a ``Float64MultiArray``'s ``data``) are left out,
+as the message definition says which a field is: a column of a sequence would change its length from
+message to message. The ``time`` column is the message's header stamp where it has one (else the time
+the bag recorded it) in float64 s from the topic's first message's; the difference is taken in integer
+ns before the conversion, so no precision is lost to an epoch (header stamps on a boot or simulation
+clock recorded on the wall clock included). That origin, in integer ns on the stamps' clock, is
+``attrs["time_origin_ns"]``: where two topics are used together (accel-gps' ``--imu`` and ``--gps``) both
+are put on the earlier one (:func:`kalcal.io.logs.align_origins`), exactly.
+
+The values are collected into one preallocated float64 array of (messages, fields) (the bag's index gives
+the message count): memory is the columns' own size plus a constant, not a Python object per value.
 
 Every problem is a :class:`~kalcal.errors.DataError` of one line naming the file and the topic: a file
 that cannot be read (truncated, not a bag), a topic the bag does not have (the topics it has are
@@ -15,8 +22,8 @@ listed), a topic of another message type than required, a topic without messages
 
 from __future__ import annotations
 
-import operator
-from collections.abc import Callable
+import keyword
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -29,6 +36,8 @@ if TYPE_CHECKING:
 
 #: the message type of an IMU's samples
 IMU_TYPE = "sensor_msgs/msg/Imu"
+
+
 def _first_line(exc: BaseException) -> str:
     text = str(exc).strip()
     return text.splitlines()[0] if text else type(exc).__name__
@@ -85,22 +94,41 @@ def bag_topics(path: str | Path) -> dict[str, tuple[str, int]]:
         bag.close()
 
 
-def _leaves(message: Any) -> list[tuple[str, Callable[[Any], Any], int | None]]:
-    """The numeric leaves of a message: ``(name, getter, length)``, length None for a scalar and the
-    element count of a fixed-length numeric array."""
-    leaves: list[tuple[str, Callable[[Any], Any], int | None]] = []
-    for name in getattr(message, "__dataclass_fields__", {}):
-        if name.startswith("__"):
-            continue
-        value = getattr(message, name)
-        if hasattr(value, "__dataclass_fields__"):
-            leaves += [(f"{name}.{sub}", (lambda get, outer=name: lambda m: get(getattr(m, outer)))(get), n)
-                       for sub, get, n in _leaves(value)]
-        elif isinstance(value, (bool, int, float, np.integer, np.floating)):
-            leaves.append((name, operator.attrgetter(name), None))
-        elif isinstance(value, np.ndarray) and value.ndim == 1 and value.dtype.kind in "biuf":
-            leaves.append((name, operator.attrgetter(name), int(value.size)))
+#: the base types of ROS messages that are numbers (read as float64)
+NUMERIC_BASES = frozenset({
+    "bool", "byte", "char", "octet", "int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64",
+    "float32", "float64",
+})
+
+
+def _leaves(fielddefs: Mapping[str, Any], msgtype: str, prefix: str = "") -> list[tuple[str, int | None]]:
+    """The numeric leaves of a message type, from its definition: ``(dotted name, length)``, length None
+    for a scalar and the element count of a fixed-length numeric array. Sequences (variable-length
+    arrays), text and arrays of messages are left out."""
+    from rosbags.typesys.store import Nodetype
+
+    leaves: list[tuple[str, int | None]] = []
+    for field, (node, detail) in fielddefs[msgtype][1]:
+        # the attribute rosbags gives the field (a Python keyword gets a trailing "_", as rosbags' codegen does)
+        name = f"{field}_" if keyword.iskeyword(field) else field
+        if not name.isidentifier():
+            continue  # not an attribute of the message (rosbags' parser admits none such)
+        if node == Nodetype.NAME:
+            leaves += _leaves(fielddefs, detail, f"{prefix}{name}.")
+        elif node == Nodetype.BASE and detail[0] in NUMERIC_BASES:
+            leaves.append((f"{prefix}{name}", None))
+        elif node == Nodetype.ARRAY and detail[0][0] == Nodetype.BASE and detail[0][1][0] in NUMERIC_BASES:
+            leaves.append((f"{prefix}{name}", int(detail[1])))
     return leaves
+
+
+def _row_getter(leaves: list[tuple[str, int | None]]) -> Callable[[Any], tuple]:
+    """One function of a message giving its numeric leaves as one flat tuple, in the order of ``leaves``
+    (generated once per topic: an attribute path per leaf, no Python loop per field and message). Every
+    part of every path is a Python identifier (:func:`_leaves` keeps no other), so the generated source is
+    attribute access only."""
+    items = ", ".join(f"m.{name}" if size is None else f"*m.{name}" for name, size in leaves)
+    return eval(f"lambda m: ({items}{',' if len(leaves) == 1 else ''})")  # noqa: S307  (names from the typestore)
 
 
 def _stamp_ns(message: Any) -> int | None:
@@ -127,8 +155,10 @@ def read_bag(path: str | Path, topic: str, *, message_type: str | None = None) -
     Returns
     -------
     pandas.DataFrame, shape (messages, 1 + fields)
-        ``time``: the header stamp (else the receive time) in s from the bag's start; ``attrs["source"]``
-        names the file and the topic, ``attrs["time"]`` what the time is.
+        ``time``: the header stamp (else the receive time) in s from the topic's first message's;
+        ``attrs["source"]`` names the file and the topic, ``attrs["time"]`` what the time is,
+        ``attrs["time_origin_ns"]`` the first message's stamp [int ns], ``attrs["time_unit_ns"]`` 1 (the
+        times are whole ns) and ``attrs["time_clock"]`` ``"ros"`` (:func:`kalcal.io.logs.align_origins`).
     """
     import pandas as pd
 
@@ -145,40 +175,49 @@ def read_bag(path: str | Path, topic: str, *, message_type: str | None = None) -
             raise DataError(f"{path}: topic {topic} holds {kind} messages, expected {message_type}")
         if count == 0:
             raise DataError(f"{path}: topic {topic} has no messages")
-        origin = int(bag.reader.start_time)
-        stamps: list[int] = []
-        rows: list[list[float]] = []
-        leaves = None
+        leaves = _leaves(bag.reader.typestore.fielddefs, kind)
+        width = sum(1 if size is None else size for _, size in leaves)
+        row_of = _row_getter(leaves) if leaves else (lambda m: ())
+        # preallocated from the index's count: the values go straight into float64, no Python float each
+        values = np.empty((count, width), dtype=float)
+        stamps = np.empty(count, dtype=np.int64)
         header = True
+        n = 0
         for received, message in bag.messages(topic):
-            if leaves is None:
-                leaves = _leaves(message)
+            if n == 0:
                 header = _stamp_ns(message) is not None
-            stamps.append(_stamp_ns(message) if header else int(received))
-            row: list[float] = []
-            for _, get, size in leaves:
-                value = get(message)
-                if size is None:
-                    row.append(float(value))
-                else:
-                    value = np.asarray(value, dtype=float).ravel()
-                    row.extend(value[:size] if value.size >= size else np.concatenate([value, np.full(size - value.size, np.nan)]))
-            rows.append(row)
+            if n == count:  # more messages than the index said: grow (a bag being written while read)
+                values = np.concatenate([values, np.empty_like(values)])
+                stamps = np.concatenate([stamps, np.empty_like(stamps)])
+                count *= 2
+            stamps[n] = _stamp_ns(message) if header else int(received)
+            try:
+                values[n] = row_of(message)
+            except (TypeError, ValueError) as exc:  # a fixed-length array of another length
+                raise DataError(f"{path} topic {topic}: message {n + 1}: {_first_line(exc)}") from None
+            n += 1
     finally:
         bag.close()
-    if not rows:
+    if n == 0:
         raise DataError(f"{path}: topic {topic} has no messages")
+    values, stamps = values[:n], stamps[:n]
     names = [f"{topic}.{name}" if size is None else f"{topic}.{name}[{i}]"
-             for name, _, size in leaves for i in (range(size) if size is not None else [0])]
-    # The difference in integer ns first: a float64 epoch in ns would round to 256 ns.
-    time = (np.asarray(stamps, dtype=np.int64) - origin).astype(float) * 1e-9
-    frame = pd.DataFrame(np.asarray(rows, dtype=float).reshape(len(rows), len(names)), columns=names)
+             for name, size in leaves for i in (range(size) if size is not None else [0])]
+    # The origin is the first message's stamp, on the stamps' own clock; the difference in integer ns
+    # first, since a float64 epoch in ns would round to 256 ns.
+    origin = int(stamps[0])
+    time = (stamps - origin).astype(float) * 1e-9
+    frame = pd.DataFrame(values, columns=names, copy=False)
     frame.insert(0, "time", time)
     frame.attrs["source"] = f"{path} topic {topic}"
     frame.attrs["type"] = kind
     frame.attrs["time"] = (
-        "header stamp, s from the bag's start" if header else "receive time (no header), s from the bag's start"
+        "header stamp, s from the topic's first message's" if header
+        else "receive time (no header), s from the topic's first message's"
     )
+    frame.attrs["time_origin_ns"] = origin
+    frame.attrs["time_unit_ns"] = 1
+    frame.attrs["time_clock"] = "ros"
     return frame
 
 

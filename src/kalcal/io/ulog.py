@@ -32,15 +32,35 @@ RELATIVE_INVALID = 2**31 - 1
 
 
 def _open(path: Path):
+    """The parsed ULog; a DataError naming the file for one pyulog cannot read, finds corrupt (it says so
+    on stdout, captured here so that the one line on stderr is all that is said) or that ends before its
+    first data message (cut off in its definitions)."""
+    import contextlib
+    import io
+
     from pyulog import ULog
 
     if not path.is_file():
         raise DataError(f"{path}: no such file")
+    said = io.StringIO()
     try:
-        return ULog(str(path))
+        with contextlib.redirect_stdout(said):
+            ulog = ULog(str(path))
     except Exception as exc:  # pyulog raises bare exceptions, struct and OS errors on a damaged file
-        text = str(exc).strip()
-        raise DataError(f"{path}: cannot be read as a ULog ({text.splitlines()[0] if text else type(exc).__name__})") from None
+        text = str(exc).strip() or said.getvalue().strip()
+        raise DataError(f"{path}: cannot be read as a ULog: truncated or corrupt "
+                        f"({text.splitlines()[0] if text else type(exc).__name__})") from None
+    if ulog.file_corruption or not ulog.data_list:
+        text = said.getvalue().strip()
+        why = text.splitlines()[0] if ulog.file_corruption and text else "no data message after its definitions"
+        raise DataError(f"{path}: cannot be read as a ULog: truncated or corrupt ({why})")
+    return ulog
+
+
+def ulog_topics(path: str | Path) -> dict[str, int]:
+    """The topics of a ULog, ``{TOPIC or TOPIC:N: message count}``."""
+    ulog = _open(Path(path))
+    return {_name(d): len(d.data["timestamp"]) for d in sorted(ulog.data_list, key=_name)}
 
 
 def _name(data) -> str:
@@ -53,7 +73,9 @@ def read_ulog(path: str | Path, topic: str) -> pd.DataFrame:
     Returns
     -------
     pandas.DataFrame, shape (messages, 1 + fields)
-        ``attrs["source"]`` names the file and the topic, ``attrs["time"]`` what the time is.
+        ``attrs["source"]`` names the file and the topic, ``attrs["time"]`` what the time is,
+        ``attrs["time_origin_ns"]`` the log's start [int ns on the autopilot's boot clock],
+        ``attrs["time_unit_ns"]`` 1000 (the times are whole us), ``attrs["time_clock"]`` ``"px4"``.
     """
     import pandas as pd
 
@@ -85,4 +107,8 @@ def read_ulog(path: str | Path, topic: str) -> pd.DataFrame:
     frame = pd.DataFrame(columns)
     frame.attrs["source"] = f"{path} topic {topic}"
     frame.attrs["time"] = what
+    # the origin on the autopilot's boot clock (us, whole): kalcal.io.logs.align_origins
+    frame.attrs["time_origin_ns"] = int(ulog.start_timestamp) * 1000
+    frame.attrs["time_unit_ns"] = 1000
+    frame.attrs["time_clock"] = "px4"
     return frame

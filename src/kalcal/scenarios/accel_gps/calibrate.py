@@ -13,7 +13,7 @@ from kalcal.calibration.plausibility import CalibrationWarning
 from kalcal.errors import DataError
 from kalcal.calibration.windows import check_windows
 from kalcal.scenarios.accel_gps.windows import accel_gps_stability
-from kalcal.io.logs import is_frame, numeric_columns, parse_column_map, read_table, require_increasing, source_name
+from kalcal.io.logs import align_origins, is_frame, numeric_columns, parse_column_map, read_table, require_increasing, source_name
 from kalcal.stats.nis import gate_excess
 from kalcal.io.outputs import mark_inputs
 from kalcal.calibration.warnings import untrusted_warning
@@ -111,8 +111,7 @@ def compute_accel_gps_calibration(
     imu_map = parse_column_map(imu_columns, IMU_ROLES, "--imu-columns")
     gps_map = parse_column_map(gps_columns, GPS_ROLES, "--gps-columns")
     imu_source, gps_source = imu_path, gps_path
-    imu_path, imu = read_imu_log(imu_path, imu_map)
-    gps_path, gps = read_gps_log(scenario, gps_path, gps_map)
+    imu_path, imu, gps_path, gps = read_accel_gps_logs(scenario, imu_path, gps_path, imu_map, gps_map)
     logs = (imu["time"], imu["accel"], gps["time"], gps["position"], gps["velocity"])
     stds = {"position_std": gps.get("position_std"), "velocity_std": gps.get("velocity_std")}
     options = dict(
@@ -208,7 +207,7 @@ def compute_accel_gps_calibration(
         conflicting = {f"filter.{name}_std": data_only["prior_settings"][name]
                        for name in ("bias", *(["scale"] if "scale" in observability["prior_tighter"] else []))}
     untrusted = untrusted_warning(diagnostics.as_dict(), stability.as_dict(), float(std[-1, 2]), "m/s^2",
-                                  fit_command(str(imu_path), str(gps_path), fit_extra(imu_columns, gps_columns, init, gate, fit_options)),
+                                  fit_command(_command_word(imu_source, "imu"), _command_word(gps_source, "gps"), fit_extra(imu_columns, gps_columns, init, gate, fit_options)),
                                   f"{' and '.join(names)} unobservable ({observability['cause']})" if bias_unobservable else None,
                                   prior=conflicting)
     if untrusted is not None:
@@ -445,36 +444,82 @@ def measurement_names(summary: dict[str, Any]) -> tuple[str, ...]:
 def read_imu_log(imu_path: str | Path | pd.DataFrame, imu_map: dict[str, str]) -> tuple[str, dict[str, np.ndarray]]:
     """The accelerometer log's name in messages and its float columns by role (``time``, ``accel``), for
     calibrate and fit alike; times checked to increase."""
+    name, imu, _ = _read_imu(imu_path, imu_map)
+    return name, imu
+
+
+def _read_imu(imu_path, imu_map: dict[str, str]) -> tuple[str, dict[str, np.ndarray], dict[str, Any]]:
+    """:func:`read_imu_log` and the table's attrs (a topic's time origin)."""
     frame = read_table(imu_path, "imu", columns=imu_map)
     name = source_name(imu_path, "imu", frame)
     imu = numeric_columns(frame, name, imu_map)
     require_increasing(imu["time"], name, imu_map["time"])
-    return name, imu
+    return name, imu, dict(frame.attrs)
+
+
+def read_accel_gps_logs(scenario: AccelGpsScenario, imu_path, gps_path, imu_map: dict[str, str],
+                        gps_map: dict[str, str]) -> tuple[str, dict[str, np.ndarray], str, dict[str, np.ndarray | None]]:
+    """Both logs of accel-gps (:func:`read_imu_log`, :func:`read_gps_log`) on one time origin: topics of
+    bags or ULogs recorded from different starts are put on the earlier one, exactly
+    (:func:`~kalcal.io.logs.align_origins`); a topic with a table of relative times is refused in one line.
+    Returns ``(imu name, imu columns, gps name, gps columns)``."""
+    imu_name, imu, imu_attrs = _read_imu(imu_path, imu_map)
+    gps_name, gps, gps_attrs = _read_gps(scenario, gps_path, gps_map)
+    imu["time"], gps["time"] = align_origins([(imu_name, imu["time"], imu_attrs), (gps_name, gps["time"], gps_attrs)])
+    return imu_name, imu, gps_name, gps
 
 
 #: what accel-gps takes of a GNSS receiver in a bag or ULog, said where a GPS topic lacks it
 GNSS_SUPPORTED = (
     "accel-gps takes position [m] and velocity [m/s] along the axis of motion, named as TOPIC.FIELD in "
     "--gps-columns, e.g. position=/odom.pose.pose.position.x,velocity=/odom.twist.twist.linear.x "
-    "(nav_msgs/Odometry) or position=vehicle_local_position.x,velocity=vehicle_local_position.vx (ULog); "
-    "sensor_msgs/NavSatFix and vehicle_gps_position (latitude/longitude) are not taken: convert them to "
-    "metres along the axis first"
+    "(nav_msgs/Odometry of a GNSS receiver's fixes); sensor_msgs/NavSatFix and a ULog's vehicle_gps_position "
+    "(latitude/longitude) are not taken: convert them to metres along the axis first"
 )
+
+#: message types whose position is geodetic (latitude, longitude in degrees; altitude above a datum)
+GEODETIC_TYPES = ("sensor_msgs/msg/NavSatFix", "gps_common/msg/GPSFix")
+#: fields that are geodetic coordinates, by their last name part (PX4: lat/lon in 1e-7 deg or deg, alt
+#: in mm or m above mean sea level; ROS: latitude/longitude in deg, altitude in m above the ellipsoid)
+GEODETIC_FIELDS = {
+    "lat": "latitude", "lon": "longitude", "alt": "altitude", "latitude": "latitude", "longitude": "longitude",
+    "altitude": "altitude", "latitude_deg": "latitude", "longitude_deg": "longitude", "altitude_msl_m": "altitude",
+    "altitude_ellipsoid_m": "altitude", "alt_ellipsoid": "altitude",
+}
 
 
 def check_gnss_columns(frame: pd.DataFrame, name: str, columns: Mapping[str, str]) -> None:
-    """For a GPS log read from a bag or ULog topic: refuse, in one line saying what accel-gps takes
-    (:data:`GNSS_SUPPORTED`), a topic without the position or velocity column asked for."""
+    """For a GPS log read from a bag or ULog topic: refuse, in one line, a position column that is a
+    geodetic coordinate (a NavSatFix's, a ULog's ``vehicle_gps_position.lat``: degrees, not metres along
+    the axis of motion) and a topic without the position or velocity column asked for, saying what
+    accel-gps takes (:data:`GNSS_SUPPORTED`)."""
     if "source" not in frame.attrs:
         return  # a table's missing column is numeric_columns' message
+    kind = frame.attrs.get("type")
+    column = columns["position"]
+    field = column.split(".", 1)[1] if "." in column else column
+    coordinate = GEODETIC_FIELDS.get(field.rsplit(".", 1)[-1].lower())
+    if kind in GEODETIC_TYPES or coordinate is not None:
+        what = {"latitude": "a latitude (degrees, in PX4 also 1e-7 degrees)", "longitude": "a longitude (degrees, in "
+                "PX4 also 1e-7 degrees)", "altitude": "an altitude (height above a datum)"}.get(
+                    coordinate, "a field of a geodetic fix (latitude, longitude in degrees, altitude)")
+        raise DataError(
+            f"{name}{f' ({kind})' if kind else ''}: position {column!r} is {what}, not a position along the axis "
+            f"of motion in metres: {GNSS_SUPPORTED}")
     missing = [f"{role} {columns[role]!r}" for role in ("position", "velocity") if columns[role] not in frame.columns]
     if missing:
-        kind = frame.attrs.get("type")
         raise DataError(f"{name}{f' ({kind})' if kind else ''}: has no {' or '.join(missing)}: {GNSS_SUPPORTED}")
 
 
 def read_gps_log(scenario: AccelGpsScenario, gps_path: str | Path | pd.DataFrame,
                  gps_map: dict[str, str]) -> tuple[str, dict[str, np.ndarray | None]]:
+    """The GPS log's name in messages and its float columns by role (:func:`_read_gps`)."""
+    name, gps, _ = _read_gps(scenario, gps_path, gps_map)
+    return name, gps
+
+
+def _read_gps(scenario: AccelGpsScenario, gps_path: str | Path | pd.DataFrame,
+              gps_map: dict[str, str]) -> tuple[str, dict[str, np.ndarray | None], dict[str, Any]]:
     """The GPS log's name in messages and its float columns by role (time, position, velocity and the std
     columns it has), for calibrate and fit alike; times checked to increase.
 
@@ -507,7 +552,13 @@ def read_gps_log(scenario: AccelGpsScenario, gps_path: str | Path | pd.DataFrame
                         f"fixes need it; {hint}")
     require_increasing(gps["time"], name, gps_map["time"])
     gps.setdefault("position", None)
-    return name, gps
+    return name, gps, dict(frame.attrs)
+
+
+def _command_word(log, role: str) -> str:
+    """A log as the command line names it: its path (a bag's or ULog's, whose topic the columns name,
+    not the ``FILE topic TOPIC`` of messages), or ``<ROLE DataFrame>`` for a DataFrame."""
+    return source_name(log, role) if is_frame(log) else str(log)
 
 
 def fit_command(imu: str, gps: str, extra: Sequence[str] = ()) -> str:

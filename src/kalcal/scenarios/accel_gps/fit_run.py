@@ -12,7 +12,7 @@ from kalcal.fitting.run import KALIBR_NAME, OUTPUT_NAMES as FIT_NAMES, filter_to
 from kalcal.io.logs import is_frame, parse_column_map
 from kalcal.io.outputs import mark_inputs
 from kalcal.montecarlo.problem import MAX_UPDATES
-from kalcal.scenarios.accel_gps.calibrate import GPS_ROLES, IMU_ROLES, _logs_of, read_gps_log, read_imu_log, stated_rates
+from kalcal.scenarios.accel_gps.calibrate import GPS_ROLES, IMU_ROLES, _logs_of, read_accel_gps_logs, stated_rates
 
 #: the files of an accel-gps fit: the Kalibr noise file too
 OUTPUT_NAMES = (*FIT_NAMES, KALIBR_NAME)
@@ -49,9 +49,8 @@ def compute_accel_gps_fit(
     imu_map = parse_column_map(imu_columns, IMU_ROLES, "--imu-columns")
     gps_map = parse_column_map(gps_columns, GPS_ROLES, "--gps-columns")
     sources = (imu_path, gps_path)
-    imu_name, imu = read_imu_log(imu_path, imu_map)
-    # calibrate's reading: with velocity-only fixes no position column (gps["position"] is None)
-    gps_name, gps = read_gps_log(scenario, gps_path, gps_map)
+    # calibrate's reading, on one time origin: with velocity-only fixes no position column (gps["position"] is None)
+    imu_name, imu, gps_name, gps = read_accel_gps_logs(scenario, imu_path, gps_path, imu_map, gps_map)
     has = {role: role in gps for role in ("position_std", "velocity_std")}
     positions = 0 in scenario.fix_states
     free = default_free(has["position_std"], has["velocity_std"], positions=positions) if not free else list(free)

@@ -302,12 +302,15 @@ def calibrate_model_file(
         reasons.append("the windows' estimates disagree (stability: NOT stable)")
     because = " and ".join(reasons) or None
     if because:
-        data = shlex.quote(bound.source) if isinstance(log, (str, Path)) else "LOG"
-        fit = f"kalcal fit {shlex.quote(str(info.file))} --data {data} --free KEYS --out fit"
+        # the log's path as given (a bag's or ULog's: its topic is in the model's TOPIC.FIELD columns), not
+        # bound.source's "FILE topic TOPIC", which names it in messages
+        data = shlex.quote(str(log)) if isinstance(log, (str, Path)) else "LOG"
+        # runnable as printed: --free left at its default (w's and v's diagonal), named after it
+        fit = f"kalcal fit {shlex.quote(str(info.file))} --data {data} --out fit"
         warnings.append(CalibrationWarning(
             "sigma-untrusted", f"the states' 1-sigmas are NOT trusted: they hold only for a model and noise settings "
-            f"that fit the log, and {because}. Next: fit the noise settings to this log, `{fit}`, then calibrate "
-            "again with fit/model.toml"))  # fmt: skip
+            f"that fit the log, and {because}. Next: fit the noise settings to this log, `{fit}` (--free KEYS to "
+            "choose others than w's and v's diagonal), then calibrate again with fit/model.toml"))  # fmt: skip
 
     result = ModelFileCalibrationResult(
         scenario=scenario.NAME, bias=float("nan"), bias_std=float("nan"), scale=None, scale_std=None,
