@@ -478,11 +478,14 @@ class AccelGpsScenario(ScenarioDefaults):
     LOG_DEFAULTS: ClassVar[dict[str, Any]] = {"scenario.integration": "trapezoid"}
 
     def output_names(self, command: str) -> tuple[str, ...]:
-        """The files ``command`` (simulate, calibrate, fit) writes."""
+        """The files ``command`` (simulate, calibrate, fit) writes; () for a command whose files are not a
+        scenario's own (verify's, analyze's, sweep's and report's are the same for every scenario)."""
         from kalcal.scenarios.accel_gps import calibrate, fit_run, simulate
+        from kalcal.scenarios.protocol import require
 
+        require(self, command)
         return {"simulate": simulate.OUTPUT_NAMES, "calibrate": calibrate.AccelGpsCalibrationResult.OUTPUT_NAMES,
-                "fit": fit_run.OUTPUT_NAMES}[command]
+                "fit": fit_run.OUTPUT_NAMES}.get(command, ())
 
     def calibrate(self, logs, options):
         """The calibration of ``logs`` (``imu``, ``gps``) with ``options`` (:class:`~kalcal.results.calibration.CalibrateOptions`)."""

@@ -268,7 +268,9 @@ class CustomModelScenario(ScenarioDefaults):
         """A log in the file's [data] layout over the rows of ``logs["data"]``, its measurements drawn with
         ``seed`` (:func:`kalcal.scenarios.model_file.simulate.simulate_logs`)."""
         from kalcal.scenarios.model_file.simulate import simulate_logs
+        from kalcal.scenarios.protocol import require
 
+        require(self, "simulate")  # a file without a [data] table, or one bound to a log, has none
         return simulate_logs(self, seed, logs)
 
     def output_names(self, command: str) -> tuple[str, ...]:
@@ -294,7 +296,9 @@ class CustomModelScenario(ScenarioDefaults):
     def calibrate(self, logs, options):
         """The filter (and smoother) over ``logs["data"]`` (:func:`kalcal.scenarios.model_file.calibrate.calibrate_logs`)."""
         from kalcal.scenarios.model_file.calibrate import calibrate_logs
+        from kalcal.scenarios.protocol import require
 
+        require(self, "calibrate")  # a file without a [data] table, or one bound to a log, has none
         return calibrate_logs(self, logs, options)
 
     def fit(self, logs, options):

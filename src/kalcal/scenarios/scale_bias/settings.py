@@ -295,12 +295,15 @@ class ScaleBiasScenario(ScenarioDefaults):
         return compute_scale_bias_simulation(self, seed)
 
     def output_names(self, command: str) -> tuple[str, ...]:
-        """The files ``command`` (simulate, calibrate, fit) writes."""
+        """The files ``command`` (simulate, calibrate, fit) writes; () for a command whose files are not a
+        scenario's own; a command it lacks (analyze) refused in one line."""
         from kalcal.fitting.run import OUTPUT_NAMES as FIT_NAMES
+        from kalcal.scenarios.protocol import require
         from kalcal.scenarios.scale_bias.job import ScaleBiasCalibrationResult
 
+        require(self, command)
         return {"simulate": ("data.csv", "truth.json"), "calibrate": ScaleBiasCalibrationResult.OUTPUT_NAMES,
-                "fit": FIT_NAMES}[command]
+                "fit": FIT_NAMES}.get(command, ())
 
     def calibrate(self, logs, options):
         """The calibration of ``logs`` (``data``) with ``options`` (:class:`~kalcal.results.calibration.CalibrateOptions`)."""
