@@ -174,3 +174,29 @@ def test_the_noise_filter_is_values_and_text_from_the_registry():
     assert written.per_sample["rate"] == rate
     assert written.per_sample["accel_noise_std"] == pytest.approx(written.settings["accel_noise_density"] * np.sqrt(rate), rel=1e-12)
     assert "imu.csv" in written.toml and "[filter]" in written.toml
+
+
+def test_a_calibrate_option_is_refused_naming_the_scenarios_that_take_it(monkeypatch):
+    """Who takes an option is each class's CALIBRATE_OPTIONS, asked of the registry, not a name written in
+    shared code: a made-up taker of --poses appears in the refusal."""
+    from kalcal.results.calibration import CalibrateOptions
+    from kalcal.scenarios import calibrate_option_takers, scenario_class
+
+    assert calibrate_option_takers("poses") == ["imu-3axis"]
+    assert calibrate_option_takers("smooth") == ["accel-gps", "a model file"]
+    options = CalibrateOptions(poses="poses.json")
+    message = _one_line_refusal(lambda: options.refuse_unless("accel-gps", scenario_class("accel-gps").CALIBRATE_OPTIONS))
+    assert message == "--poses: not available for accel-gps (imu-3axis only)"
+    cls = scenario_class("scale-bias")
+    monkeypatch.setattr(cls, "CALIBRATE_OPTIONS", (*cls.CALIBRATE_OPTIONS, "poses"))
+    message = _one_line_refusal(lambda: options.refuse_unless("accel-gps", scenario_class("accel-gps").CALIBRATE_OPTIONS))
+    assert message == "--poses: not available for accel-gps (scale-bias and imu-3axis only)"
+
+
+def test_an_unknown_scenario_of_sweep_lists_those_that_have_a_sweep():
+    import kalcal
+    from kalcal.scenarios import scenarios_with
+
+    assert "imu-3axis" not in scenarios_with("sweep") and "accel-gps" in scenarios_with("sweep")
+    message = _one_line_refusal(lambda: kalcal.sweep("X.py", "filter.x", [1, 2], out="unused"))
+    assert f"one of {', '.join(scenarios_with('sweep'))}," in message and "imu-3axis" not in message

@@ -17,6 +17,7 @@ def resolve(
     *,
     defaults: Mapping[str, Any] | None = None,
     models: bool = False,
+    command: str | None = None,
 ):
     """The scenario object of ``scenario`` with ``settings`` (``{"section.key": value}``, ``--set``'s keys)
     and the TOML ``config`` applied (what the scenario cannot do, an engine or a long run, its capabilities
@@ -50,7 +51,7 @@ def resolve(
             return built
         return load_model_file(scenario, assignments, config=config)
     if isinstance(scenario, (str, Path)):
-        return build_scenario(str(scenario), config, assignments, defaults=defaults)
+        return build_scenario(str(scenario), config, assignments, defaults=defaults, command=command)
     if settings or config is not None:
         from kalcal.models.config import apply_settings, load_toml
 

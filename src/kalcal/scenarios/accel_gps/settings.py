@@ -393,6 +393,9 @@ class AccelGpsScenario(ScenarioDefaults):
     capabilities: ClassVar[Capabilities] = Capabilities(
         exact_analysis=True, fixed_gains=True, engines=("exact", "sampled")
     )
+    #: the options of :class:`~kalcal.results.calibration.CalibrateOptions` its calibrate takes
+    CALIBRATE_OPTIONS: ClassVar[tuple[str, ...]] = ("imu_columns", "gps_columns", "init", "max_imu_gap", "on_gap", "form",
+                                                    "smooth", "gate", "settings_sigma", "windows")
     #: the source report's long-run study of the mean error (its figure 5.8), s
     LONG_RUN_SECONDS: ClassVar[float] = 120.0
 

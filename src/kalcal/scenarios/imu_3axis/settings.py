@@ -78,6 +78,8 @@ class Imu3AxisScenario(ScenarioDefaults):
     checks: ChecksSection = field(default_factory=ChecksSection)
 
     NAME: ClassVar[str] = "imu-3axis"
+    #: the options of :class:`~kalcal.results.calibration.CalibrateOptions` its calibrate takes
+    CALIBRATE_OPTIONS: ClassVar[tuple[str, ...]] = ("imu_columns", "poses", "windows", "settings_sigma")
     SUMMARY: ClassVar[str] = "a 3-axis accelerometer's scale factors, misalignment and biases from static poses"
 
     capabilities: ClassVar[Capabilities] = Capabilities(

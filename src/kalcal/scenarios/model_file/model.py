@@ -141,6 +141,8 @@ class CustomModelScenario(ScenarioDefaults):
     """
 
     NAME: ClassVar[str] = "custom"
+    #: the options of :class:`~kalcal.results.calibration.CalibrateOptions` its calibrate takes
+    CALIBRATE_OPTIONS: ClassVar[tuple[str, ...]] = ("smooth", "windows")
     SUMMARY: ClassVar[str] = "a linear Gaussian model read from a TOML file (docs/custom-models.md)"
 
     @property
