@@ -99,7 +99,9 @@ def with_topic(scenario: Any, logs: dict[str, Any], topic: str | None) -> dict[s
         return logs
     if logs.get("data") is None:
         raise KalcalError(f"--topic: {topic!r} names a topic of --data's ROS bag or ULog, and no --data is given")
-    if getattr(scenario, "NAME", "") != "custom":
+    from kalcal.scenarios import model_file_fields
+
+    if model_file_fields(scenario) is None:  # the registry says whether it is a model file, not its name
         raise KalcalError(
             f"--topic: read by a model file's [data] table only; {getattr(scenario, 'NAME', scenario)} names a "
             "topic by its columns (TOPIC.FIELD)"
