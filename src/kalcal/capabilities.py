@@ -27,9 +27,12 @@ class Capabilities:
     fixed_gains : bool
         P_k and the gains are the same in every realization (one whitening for the whole ensemble).
     rows_from_data : bool
-        The measurement rows H_k are taken from data (the regressors), so each realization has its own P_k.
+        The measurement rows H_k are taken from data (the regressors), so each realization has its own P_k:
+        the report says so where it has no exact analysis (:meth:`no_exact_analysis`).
     nonlinear : bool
-        f and h are code (EKF/IEKF/UKF): effect sizes and shape checks stand in for exact moments.
+        f and h are code and the filter an approximation (EKF, IEKF, UKF, a batch ML): its P is a
+        linearization's, so a verification keeps the effect sizes and their tolerance outcomes beside the
+        exact tests (and its power by simulation, where asked), and the report's answer leads with both.
     batch : bool
         One final estimate per realization: only the final-time checks apply.
     engines : tuple of str
@@ -61,6 +64,17 @@ class Capabilities:
             raise ValueError(f"unknown commands {sorted(unknown)}; expected some of {sorted(COMMANDS)}")
         if self.exact_analysis and not self.fixed_gains:
             raise ValueError("an exact analysis needs fixed gains")
+
+    def no_exact_analysis(self) -> str:
+        """Why there is no exact analysis, in words that fit in parentheses ("" where there is one): a
+        nonlinear model's P is a linearization's; rows from data make each realization's gains its own."""
+        if self.exact_analysis:
+            return ""
+        if self.nonlinear:
+            return "its filter's P is a linearization's: the gains depend on the state"
+        if self.rows_from_data:
+            return "its filter's gains depend on the noisy readings: the measurement rows are data, so each realization has its own P"
+        return "its filter's gains depend on the data"
 
 
 def require(scenario: Any, command: str, *, engine: str | None = None, long_run: bool = False) -> None:

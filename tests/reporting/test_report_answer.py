@@ -165,3 +165,76 @@ def test_the_answer_of_a_real_run(settings, kind, words):
     result = answer(summary)
     assert result.kind == kind and words in result.sentence, result.sentence
     assert [line.passed for line in result.checks] == [t["passed"] for t in summary["tests"]]
+
+
+def _effect(name, outcome, decide=None):
+    return {"name": name, "outcome": outcome, "realizations_to_decide": decide}
+
+
+def _tolerant(check, outcome, *effects):
+    return check | {"tolerance_outcome": outcome, "effect_sizes": list(effects)}
+
+
+def _nonlinear_summary(*tests, verdict="undecided", n=20_000):
+    return _summary(*tests, cause="", realizations=n, effect_sizes={"tolerance": 0.1, "verdict": verdict, "overall": []})
+
+
+def test_a_nonlinear_run_says_the_exact_tests_and_the_tolerance_outcomes():
+    """range_bearing.py at N = 20,000: every exact test fails (an EKF's P is a linearization's), while the
+    effects are within the band or undecided; the sentence leads with both, never with the exact tests alone."""
+    tests = [
+        _tolerant(_check("mean_error", False), "pass", _effect("bias_sigma", "within")),
+        _tolerant(_check("covariance", False, direction="overconfident"), "undecided",
+                  _effect("nees_per_dim", "undecided", 2_365_404), _effect("variance_ratio", "undecided", 7_137_005),
+                  _effect("variance_ratio", "within")),
+        _check("orthogonality", False) | {"tolerance_outcome": None, "effect_sizes": []},
+        _tolerant(_check("residual_whiteness", False), "pass", _effect("whiteness_lag1", "within")),
+        _tolerant(_check("nis", False, direction="overconfident"), "undecided", _effect("nis_per_dim", "undecided", 2_622_404)),
+    ]
+    result = answer(_nonlinear_summary(*tests))
+    assert (result.verdict, result.tolerance) == ("fail", "undecided")
+    assert result.sentence.startswith("Fails the exact tests (5 of 5 checks fail), as a nonlinear model's approximate filter")
+    assert "the tolerance verdict (band 0.1) is undecided: mean_error and residual_whiteness within the band" in result.sentence
+    # the slowest undecided effect sets the realizations that decide them all
+    assert "covariance and nis undecided (about 7,137,005 realizations would decide them" in result.sentence
+    assert "this run has 20,000); orthogonality has no effect size" in result.sentence and "orthogonality has no effect size" in result.sentence
+    # the exact tests' causes still follow
+    assert "covariance and nis find the filter overconfident" in result.sentence
+
+
+def test_a_nonlinear_run_outside_its_band_and_one_that_passes():
+    outside = [
+        _tolerant(_check("mean_error", False), "fail", _effect("bias_sigma", "outside")),
+        _tolerant(_check("covariance", False), "pass", _effect("nees_per_dim", "within")),
+    ]
+    result = answer(_nonlinear_summary(*outside, verdict="fail"))
+    assert result.tolerance == "fail"
+    assert "is out of tolerance: covariance within the band; mean_error outside it" in result.sentence
+    passing = [_tolerant(_check("mean_error", True), "pass", _effect("bias_sigma", "within")),
+               _tolerant(_check("nis", True), "pass", _effect("nis_per_dim", "within"))]
+    result = answer(_nonlinear_summary(*passing, verdict="pass"))
+    assert result.kind == "pass" and result.tolerance == "pass"
+    assert result.sentence == (
+        "Passes: all 2 checks lie within their bounds, so this ensemble shows no departure of the filter from its "
+        "own settings; the tolerance verdict (band 0.1) is within tolerance: mean_error and nis within the band."
+    )
+    # a linear run keeps no effect sizes: its sentence is the exact tests' alone
+    assert answer(_summary(_check("mean_error", True))).tolerance is None
+
+
+def test_the_answer_of_a_real_nonlinear_run():
+    """The example model written as code: each check's tolerance outcome is in the sentence, in its words."""
+    from pathlib import Path
+
+    example = Path(__file__).resolve().parents[2] / "examples" / "range_bearing.py"
+    summary = kalcal.verify(str(example), n=4000, seed=0).to_dict()
+    result = answer(summary)
+    assert result.tolerance == summary["effect_sizes"]["verdict"]
+    assert "the tolerance verdict (band 0.1)" in result.sentence
+    words = {"pass": "within the band", "fail": "outside it", "undecided": "undecided"}
+    for test in summary["tests"]:
+        outcome = test["tolerance_outcome"]
+        clause = result.sentence.split("the tolerance verdict", 1)[1].split(". Exact tests:")[0]
+        if outcome is not None:
+            group = [part for part in clause.split("; ") if words[outcome] in part]
+            assert any(test["name"] in part for part in group), (test["name"], outcome, result.sentence)

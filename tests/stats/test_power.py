@@ -176,7 +176,7 @@ def test_portmanteau_detects_the_colored_gps_error_the_pairs_miss():
 def test_verification_power_is_null_with_its_reason_for_scale_bias():
     problem, _ = build_problem(build_scenario("scale-bias"))
     rows, reason = problem_power(problem, 1000, 0.99)
-    assert rows is None and "gains depend on the data" in reason
+    assert rows is None and "gains depend on the noisy readings: the measurement rows are data" in reason
     assert power_line(rows, 1000, reason).startswith("power: not computed (no exact analysis")
     from kalcal.api.verification import power_summary
 

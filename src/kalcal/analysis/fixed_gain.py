@@ -73,9 +73,9 @@ def analyze_problem(
     budget : bool
         Also the error budget (False: an empty one, for callers that need only the moments).
     """
-    # a question about the problem object (the arrays below are FixedGainProblem's), not the scenario's:
+    # a question of the problem protocol (the arrays below are a fixed-gain problem's), not the scenario's:
     # a scenario without an exact analysis is refused before, by its capabilities
-    if not isinstance(problem, FixedGainProblem):
+    if not problem.has_exact_analysis():
         raise KalcalError(f"{problem.info.scenario}: no exact covariance analysis (its gains depend on the data)")
     truth = truth_arrays(problem.truth)
     schedule = problem.schedule

@@ -17,6 +17,7 @@ def resolve(
     *,
     defaults: Mapping[str, Any] | None = None,
     models: bool = False,
+    command: str | None = None,
 ):
     """The scenario object of ``scenario`` with ``settings`` (``{"section.key": value}``, ``--set``'s keys)
     and the TOML ``config`` applied (what the scenario cannot do, an engine or a long run, its capabilities
@@ -50,7 +51,7 @@ def resolve(
             return built
         return load_model_file(scenario, assignments, config=config)
     if isinstance(scenario, (str, Path)):
-        return build_scenario(str(scenario), config, assignments, defaults=defaults)
+        return build_scenario(str(scenario), config, assignments, defaults=defaults, command=command)
     if settings or config is not None:
         from kalcal.models.config import apply_settings, load_toml
 
@@ -98,7 +99,9 @@ def with_topic(scenario: Any, logs: dict[str, Any], topic: str | None) -> dict[s
         return logs
     if logs.get("data") is None:
         raise KalcalError(f"--topic: {topic!r} names a topic of --data's ROS bag or ULog, and no --data is given")
-    if getattr(scenario, "NAME", "") != "custom":
+    from kalcal.scenarios import model_file_fields
+
+    if model_file_fields(scenario) is None:  # the registry says whether it is a model file, not its name
         raise KalcalError(
             f"--topic: read by a model file's [data] table only; {getattr(scenario, 'NAME', scenario)} names a "
             "topic by its columns (TOPIC.FIELD)"

@@ -88,6 +88,9 @@ def calibrate(
 
     # a model file (or kalcal.Model) is taken as verify takes it; a built-in starts from its log defaults
     model = resolve(scenario, settings, config, defaults=log_defaults(scenario), models=True)
+    from kalcal.scenarios.protocol import require
+
+    require(model, "calibrate")  # a command the scenario lacks: one line naming it and why
     # the options a `kalcal fit` of the same logs repeats, named in a warning's next step
     fit_options = (*(["--config", str(config)] if config is not None else []),
                    *(word for key, value in flat_settings(settings).items() for word in ("--set", f"{key}={value}")))

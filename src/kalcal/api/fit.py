@@ -118,6 +118,9 @@ def fit(
                          gps_columns=gps_columns, init=init, gate=gate, reference=reference, sensor=sensor,
                          bootstrap=int(bootstrap), seed=int(seed), threads=threads)
     model = resolve(scenario, settings, config, defaults=log_defaults(scenario), models=True)  # a model file too
+    from kalcal.scenarios.protocol import require
+
+    require(model, "fit")  # a command the scenario lacks: one line naming it and why
     from kalcal.api._scenario import with_topic
 
     logs = with_topic(model, {"imu": imu, "gps": gps, "data": data}, topic)

@@ -34,6 +34,9 @@ def simulate(
     from kalcal.api._scenario import resolve
 
     model = resolve(scenario, settings, config, models=True)
+    from kalcal.scenarios.protocol import require
+
+    require(model, "simulate")  # a command the scenario lacks: one line naming it and why
     from kalcal.api._scenario import with_topic
 
     logs = with_topic(model, {"data": data}, topic)

@@ -129,7 +129,7 @@ def sweep(
         raise KalcalError(f"--threads: expected a positive number, got {threads}")
     from kalcal.montecarlo.distributed import dask_client
 
-    model = resolve(scenario, settings, config)
+    model = resolve(scenario, settings, config, command="sweep")  # an unknown name: the list of those with a sweep
     sweep_cells(model, key, values, n, engine=engine, long_run=0)  # every value checked before any cluster
     options = dict(engine=engine, workers=threads, long_run=0)
     if client is None and (workers is not None or scheduler is not None):

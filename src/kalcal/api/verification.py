@@ -25,7 +25,7 @@ from kalcal.montecarlo.progress import JobProgress, stage
 from kalcal.models.config import apply_settings, section_values
 from kalcal.montecarlo.accumulators import EnsembleStatistics, ensemble_statistics
 from kalcal.montecarlo.engine import BLOCK_SIZE, run_monte_carlo
-from kalcal.montecarlo.problem import MAX_UPDATES
+from kalcal.montecarlo.problem import MAX_UPDATES, capabilities_of
 from kalcal.montecarlo.scenarios import build_problem
 from kalcal.scenarios.protocol import require
 from kalcal.stats.suite import run_checks, verdict
@@ -246,12 +246,13 @@ def equals_filter(scenario, analysis) -> bool:
 
 
 def problem_effects(problem, sums, confidence: float):
-    """The run's effect sizes and Cramér–Rao bound (:class:`kalcal.stats.effects.EffectSizes`), for a
-    problem that keeps their sums (``effect_sizes``); None for any other."""
-    method = getattr(problem, "effect_sizes", None)
-    if method is None or sums.effect is None:
+    """The run's effect sizes and Cramér–Rao bound (:class:`kalcal.stats.effects.EffectSizes`) for a
+    nonlinear model's filter (its capabilities' ``nonlinear``: the exact tests fail for an approximation
+    at a large N, so the tolerance outcomes stand beside them); None for any other, or a run that kept
+    no effect sums."""
+    if not capabilities_of(problem).nonlinear or sums.effect is None:
         return None
-    return method(sums, confidence)
+    return problem.effect_sizes(sums, confidence)
 
 
 def with_effects(check, effects):
@@ -347,8 +348,8 @@ def compute_verification(
     effects = problem_effects(problem, run.sums, confidence)
     if effects is not None:
         checks = [with_effects(check, effects) for check in checks]
-    simulated = getattr(problem, "simulated_power", None)
-    simulated = None if simulated is None else simulated(n, seed, confidence, workers)
+    # the power by simulation of a nonlinear model's filter, where its settings ask for it (no exact analysis gives one)
+    simulated = problem.simulated_power(n, seed, confidence, workers) if capabilities_of(problem).nonlinear else None
     bench = self_check(statistics, exact, confidence, info)
     attrs = {"scenario": info.scenario, "seed": seed, "engine": engine, "confidence": confidence}
     dataset = statistics_dataset(statistics, info, expected, attrs)

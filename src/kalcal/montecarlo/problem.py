@@ -22,6 +22,13 @@ from kalcal.linalg import whitener
 from kalcal.montecarlo.accumulators import BlockResult, MomentSums, SumBuffers
 from kalcal.simulation.exact import UpdateRateTruth, sample_exact
 
+#: why a fixed-gain problem with a transition per interval has no steady state
+VARYING_TRANSITION = (
+    "the filter's transition changes from one update interval to the next (a scale-factor state's column "
+    "carries the measured acceleration), so the model is not time-invariant and there is no algebraic "
+    "Riccati equation"
+)
+
 #: the kernel's error map for a truth over the filter's own states (no map: e = x - xhat, no product)
 _EMPTY_MAP = np.empty((0, 0))
 
@@ -87,6 +94,46 @@ class Problem(Protocol):
         it: its error and estimate (K, d), in the states' units, and the filter's own P_k (K, d, d). What the
         report's realization figures show; each problem takes its cheapest way to it."""
 
+    def has_exact_analysis(self) -> bool:
+        """Whether it holds the arrays of an exact covariance analysis (a truth and gains fixed before any
+        data: :func:`kalcal.analysis.fixed_gain.analyze_problem`)."""
+
+    def steady_state_reason(self) -> str:
+        """Why its filter has no steady state for the report ("" where the DARE applies to its model)."""
+
+    def effect_sizes(self, sums: MomentSums, confidence: float) -> Any:
+        """The run's effect sizes and tolerance outcomes (:class:`kalcal.stats.effects.EffectSizes`) from
+        its sums, for a nonlinear model's filter (its capabilities' ``nonlinear``); None where it keeps none."""
+
+    def simulated_power(self, n: int, seed: int, confidence: float, workers: int | None = None) -> Any:
+        """The checks' power by simulation where its settings ask for it; None for none."""
+
+
+#: why a problem whose gains depend on the data has no steady state, where it says nothing more precise
+DATA_DEPENDENT_GAINS = "its gains depend on the data, so the filter is not time-invariant"
+
+
+class ProblemDefaults:
+    """The :class:`Problem` protocol's answers for a problem with nothing of its own to say: no exact
+    analysis, no steady state where its scenario's gains are not fixed (the generic reason), no effect
+    sizes, no power by simulation. A problem inherits this and overrides what differs."""
+
+    def has_exact_analysis(self) -> bool:
+        """False: only a fixed-gain problem holds the arrays."""
+        return False
+
+    def steady_state_reason(self) -> str:
+        """The generic reason: its gains depend on the data."""
+        return DATA_DEPENDENT_GAINS
+
+    def effect_sizes(self, sums: MomentSums, confidence: float) -> None:
+        """None: it keeps no effect sums."""
+        return None
+
+    def simulated_power(self, n: int, seed: int, confidence: float, workers: int | None = None) -> None:
+        """None: no power by simulation."""
+        return None
+
 
 def check_engine(problem: Problem, engine: str, option: str = "") -> None:
     """Raise ConfigError (a ValueError), naming the problem's engines, unless ``engine`` is one of
@@ -103,7 +150,7 @@ def _inverse_spd(cov: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class FixedGainProblem:
+class FixedGainProblem(ProblemDefaults):
     """A time-invariant filter with precomputed gains against an update-rate truth.
 
     Parameters
@@ -156,6 +203,14 @@ class FixedGainProblem:
     @property
     def engines(self) -> tuple[str, ...]:
         return ("exact", "sampled") if self.sampled is not None else ("exact",)
+
+    def has_exact_analysis(self) -> bool:
+        """True: its truth and gain schedule are the exact analysis's arrays."""
+        return True
+
+    def steady_state_reason(self) -> str:
+        """"" for a time-invariant model; why not where its transition changes from interval to interval."""
+        return VARYING_TRANSITION if self.filter_transitions is not None else ""
 
     def normals_per_realization(self, engine: str) -> int:
         return self.truth.normals_per_realization if engine == "exact" else self.sampled_normals

@@ -16,6 +16,12 @@ Three kinds of answer:
   alarm (the truth equals the filter);
 * ``"unexplained"``: at least one failure is not accounted for; the sentence names those checks and the
   direction they find, where they find one, and the failures that are accounted for.
+
+A run that kept effect sizes (``summary["effect_sizes"]``: a nonlinear model's filter, EKF, IEKF or UKF,
+whose P is an approximation's) is answered twice in the one sentence: the exact tests' verdict, which such
+a filter fails once N is large enough to resolve its approximation, and the tolerance outcomes that then
+decide (:mod:`kalcal.stats.effects`): which checks' effects lie within the band, which outside it, which
+are undecided and the realizations that would decide them (``Answer.tolerance``).
 """
 
 from __future__ import annotations
@@ -98,6 +104,8 @@ class Answer:
     figures : tuple of str
         The keys of the figures that show the answer, most telling first (more than the page may have:
         :func:`lead_figures` keeps those drawn).
+    tolerance : {"pass", "fail", "undecided"} or None
+        The tolerance verdict of a run that kept effect sizes (a nonlinear model's filter); None elsewhere.
     """
 
     verdict: str
@@ -105,6 +113,8 @@ class Answer:
     sentence: str
     checks: tuple[CheckLine, ...]
     figures: tuple[str, ...]
+    #: the run's tolerance verdict (``pass``, ``fail`` or ``undecided``) where it kept effect sizes; None elsewhere
+    tolerance: str | None = None
 
 
 def _names(names: Sequence[str]) -> str:
@@ -157,8 +167,60 @@ def _model_error(summary: Mapping[str, Any]) -> str:
     return cause or UNNAMED_MODEL_ERROR
 
 
+#: a check's tolerance outcome (``tests[].tolerance_outcome``) in the sentence's words
+_TOLERANCE_WORDS = {"pass": "within the band", "fail": "outside it", "undecided": "undecided"}
+
+
+def _tolerance(summary: Mapping[str, Any]) -> str:
+    """What the tolerance outcomes say, for a run that kept effect sizes: the band, then the checks within
+    it, outside it and undecided (with the realizations that would decide the slowest of them), and those
+    that have no effect size."""
+    effects = summary["effect_sizes"]
+    tests = list(summary["tests"])
+    groups: dict[str, list[str]] = {key: [] for key in _TOLERANCE_WORDS}
+    for test in tests:
+        outcome = test.get("tolerance_outcome")
+        if outcome in groups:
+            groups[outcome].append(test["name"])
+    parts = []
+    for outcome, names in groups.items():
+        if not names:
+            continue
+        part = f"{_names(names)} {_TOLERANCE_WORDS[outcome]}"
+        if outcome == "undecided":
+            needed = [int(e["realizations_to_decide"]) for t in tests if t.get("tolerance_outcome") == "undecided"
+                      for e in t.get("effect_sizes") or () if e.get("outcome") == "undecided" and e.get("realizations_to_decide")]
+            n = summary.get("realizations")
+            part += (f" (about {max(needed):,} realizations would decide {'it' if len(names) == 1 else 'them'}, if the "
+                     f"estimates stayed where they are{f'; this run has {int(n):,}' if n else ''})") if needed else (
+                " (an estimate on an edge of the band: no number of realizations decides it)")
+        parts.append(part)
+    without = [t["name"] for t in tests if t.get("tolerance_outcome") is None]
+    if without:
+        parts.append(f"{_names(without)} {'has' if len(without) == 1 else 'have'} no effect size")
+    verdict = {"pass": "within tolerance", "fail": "out of tolerance", "undecided": "undecided"}.get(str(effects.get("verdict")), str(effects.get("verdict")))
+    return f"the tolerance verdict (band {fmt(float(effects['tolerance']))}) is {verdict}: " + "; ".join(parts)
+
+
 def _sentence(summary: Mapping[str, Any], lines: Sequence[CheckLine]) -> tuple[str, str]:
-    """(kind, sentence) of the answer."""
+    """(kind, sentence) of the answer; a run that kept effect sizes says its tolerance outcomes too."""
+    kind, sentence = _exact_sentence(summary, lines)
+    if not summary.get("effect_sizes"):
+        return kind, sentence
+    tolerance = _tolerance(summary)
+    if kind == "pass":
+        return kind, f"{sentence[:-1]}; {tolerance}."
+    # an approximate filter (its P a linearization's or a sigma-point rule's) fails an exact test once N
+    # resolves the approximation, so the tolerance outcomes say whether the departure matters
+    failed = sum(not line.passed for line in lines)
+    lead = (f"Fails the exact tests ({failed} of {len(lines)} checks {'fails' if failed == 1 else 'fail'}), as a nonlinear "
+            f"model's approximate filter is expected to once N resolves its approximation; {tolerance}")
+    rest = sentence.split(": ", 1)[1] if kind == "unexplained" else sentence
+    return kind, f"{lead}. Exact tests: {rest}"
+
+
+def _exact_sentence(summary: Mapping[str, Any], lines: Sequence[CheckLine]) -> tuple[str, str]:
+    """(kind, sentence) of the exact tests' verdict."""
     total = len(lines)
     failed = [line for line in lines if not line.passed]
     if not failed:
@@ -241,6 +303,7 @@ def answer(summary: Mapping[str, Any]) -> Answer:
         sentence=sentence,
         checks=tuple(lines),
         figures=_figures(kind, lines),
+        tolerance=str(summary["effect_sizes"]["verdict"]) if summary.get("effect_sizes") else None,
     )
 
 

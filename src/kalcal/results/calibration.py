@@ -86,7 +86,7 @@ class CalibrateOptions:
     sensor: str = "sensor"
     prior: str | None = None
     windows: int = 2
-    poses: str | Path | None = field(default=None, metadata={"owner": "imu-3axis"})
+    poses: str | Path | None = None
     fit_options: tuple[str, ...] = ()
 
     def given(self, *names: str) -> list[str]:
@@ -94,18 +94,21 @@ class CalibrateOptions:
         defaults = CalibrateOptions()
         return [name for name in names if getattr(self, name) != getattr(defaults, name)]
 
-    def refuse_unless(self, scenario: str, taken: tuple[str, ...], owner: str) -> None:
+    def refuse_unless(self, scenario: str, taken: tuple[str, ...]) -> None:
         """Refuse, in one line naming the first, an option set to other than its default that the scenario
-        ``scenario`` does not take (``owner``: who does, for the message)."""
+        ``scenario`` does not take (``taken``: its class's ``CALIBRATE_OPTIONS``); the message names the
+        scenarios that take it, asked of the registry (:func:`kalcal.scenarios.calibrate_option_takers`)."""
         from kalcal.errors import KalcalError
 
         names = [field.name for field in dataclasses.fields(self) if field.name not in (*taken, "fit_options")]
         other = self.given(*names)
         if other:
+            from kalcal.scenarios import calibrate_option_takers
+
             option = "--" + other[0].replace("_", "-")
-            # an option of one scenario alone names it in its field's metadata; the rest are the owner's
-            owner = {f.name: f.metadata.get("owner", owner) for f in dataclasses.fields(self)}[other[0]]
-            raise KalcalError(f"{option}: not available for {scenario} ({owner} only)")
+            takers = calibrate_option_takers(other[0])
+            who = f" ({' and '.join(takers)} only)" if takers else ""
+            raise KalcalError(f"{option}: not available for {scenario}{who}")
 
 
 @dataclass(frozen=True, repr=False, eq=False)

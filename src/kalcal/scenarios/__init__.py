@@ -30,7 +30,7 @@ MODEL_FILE = "model-file"
 
 __all__ = [
     "MODEL_FILE", "SCENARIOS", "build_scenario", "is_code_model", "load_code_model", "is_model_file", "load_model_file", "model_file_fields", "parse_model_file",
-    "scenario_class", "scenario_names",
+    "calibrate_option_takers", "scenario_class", "scenario_names", "scenarios_with",
     "log_defaults", "NoiseFilter", "noise_filter", "scenario_of_summary", "settings_assignments",
 ]
 
@@ -38,6 +38,11 @@ __all__ = [
 def scenario_names() -> tuple[str, ...]:
     """The built-in scenarios' names, in the order ``--help`` lists them."""
     return tuple(_BUILT_IN)
+
+
+def scenarios_with(command: str) -> tuple[str, ...]:
+    """The built-in scenarios whose capabilities have ``command`` (for a refusal's list of what does)."""
+    return tuple(name for name in _BUILT_IN if command in scenario_class(name).capabilities.commands)
 
 
 def scenario_class(name: str) -> type:
@@ -51,6 +56,16 @@ def __getattr__(name: str) -> Any:
     if name == "SCENARIOS":
         return {key: scenario_class(key) for key in _BUILT_IN}
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def calibrate_option_takers(option: str) -> list[str]:
+    """The scenarios whose ``calibrate`` takes ``option`` (a field of
+    :class:`~kalcal.results.calibration.CalibrateOptions`), by each class's ``CALIBRATE_OPTIONS``: the
+    built-ins by name, then "a model file"; for the refusal of an option a scenario does not take."""
+    from kalcal.scenarios.model_file.model import CustomModelScenario
+
+    takers = [name for name in _BUILT_IN if option in scenario_class(name).CALIBRATE_OPTIONS]
+    return takers + (["a model file"] if option in CustomModelScenario.CALIBRATE_OPTIONS else [])
 
 
 def is_model_file(scenario: str) -> bool:
@@ -114,8 +129,11 @@ def build_scenario(
     config: str | Path | None = None,
     assignments: Iterable[str] = (),
     defaults: Mapping[str, Any] | None = None,
+    command: str | None = None,
 ):
     """The named scenario with ``defaults``, then the TOML file, then ``section.key=value`` applied.
+
+    An unknown name is refused naming the built-ins that have ``command`` (every built-in without one).
 
     An error about a value the file set names the file; one about a ``--set`` value names its key alone.
 
@@ -128,7 +146,8 @@ def build_scenario(
 
     if name not in _BUILT_IN:
         hint = " (a model file (.toml) works with kalcal verify)" if str(name).lower().endswith(".toml") else ""
-        raise SettingError("SCENARIO", f"one of {', '.join(_BUILT_IN)}", f"{show(name)}{hint}")
+        names = scenarios_with(command) if command else tuple(_BUILT_IN)
+        raise SettingError("SCENARIO", f"one of {', '.join(names)}", f"{show(name)}{hint}")
     scenario = scenario_class(name)()
     settings: dict[str, Any] = dict(defaults or {})
     from_file = load_toml(config) if config is not None else {}

@@ -109,6 +109,9 @@ class Scenario(Protocol):
 
     #: the settings a command on logged data (calibrate, fit) starts from, before the user's
     LOG_DEFAULTS: ClassVar[dict[str, Any]]
+    #: the options of :class:`~kalcal.results.calibration.CalibrateOptions` its ``calibrate`` takes (a
+    #: refusal of another names the scenarios that take it, from the registry)
+    CALIBRATE_OPTIONS: ClassVar[tuple[str, ...]]
 
     def output_names(self, command: str) -> tuple[str, ...]:
         """The files ``command`` (``"simulate"``, ``"calibrate"``, ``"fit"``) writes, for its staged set."""
@@ -143,6 +146,8 @@ class ScenarioDefaults:
     the model file the last)."""
 
     LOG_DEFAULTS: ClassVar[dict[str, Any]] = {}
+    #: the options of :class:`~kalcal.results.calibration.CalibrateOptions` its calibrate takes: none
+    CALIBRATE_OPTIONS: ClassVar[tuple[str, ...]] = ()
 
     def given_section(self, name: str) -> Any:
         """The section ``name`` itself: every section is kept as given."""

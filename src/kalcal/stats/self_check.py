@@ -106,11 +106,12 @@ def exact_prediction(problem, analysis=None) -> ExactPrediction:
     so the one analysis predicts both. Other problems (scale-bias: its gains hold the noisy readings)
     get a reason instead.
     """
-    if not capabilities_of(problem).exact_analysis:
+    caps = capabilities_of(problem)
+    if not caps.exact_analysis:
         return ExactPrediction(
             None,
             None,
-            f"{problem.info.scenario}: no exact analysis exists (its filter's gains depend on the noisy readings), "
+            f"{problem.info.scenario}: no exact analysis exists ({caps.no_exact_analysis()}), "
             "so the ensemble is not checked against theory",
         )
     analysis = analyze_problem(problem, pairs=False, budget=False) if analysis is None else analysis

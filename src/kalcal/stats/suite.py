@@ -185,8 +185,9 @@ def problem_power(problem, n: int, confidence: float, analysis=None) -> tuple[li
     from kalcal.analysis.fixed_gain import analyze_problem
     from kalcal.montecarlo.problem import capabilities_of
 
-    if not capabilities_of(problem).exact_analysis:
-        return None, "no exact analysis: the filter's gains depend on the data"
+    caps = capabilities_of(problem)
+    if not caps.exact_analysis:
+        return None, f"no exact analysis: {caps.no_exact_analysis()}"
     if analysis is None:
         analysis = analyze_problem(problem, budget=False)
     return power_rows(analysis, n, confidence), None

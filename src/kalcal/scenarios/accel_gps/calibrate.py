@@ -618,8 +618,7 @@ def calibrate_logs(scenario: AccelGpsScenario, logs: dict[str, Any], options) ->
     from kalcal.errors import KalcalError
 
     imu, gps = _logs_of(scenario, logs)
-    options.refuse_unless(scenario.NAME, ("imu_columns", "gps_columns", "init", "max_imu_gap", "on_gap", "form",
-                                          "smooth", "gate", "settings_sigma", "windows"), "scale-bias")
+    options.refuse_unless(scenario.NAME, scenario.CALIBRATE_OPTIONS)
     if options.on_gap not in ("continue", "stop"):
         raise KalcalError(f"--on-gap: expected continue or stop, got {options.on_gap!r}")
     return compute_accel_gps_calibration(

@@ -393,6 +393,9 @@ class AccelGpsScenario(ScenarioDefaults):
     capabilities: ClassVar[Capabilities] = Capabilities(
         exact_analysis=True, fixed_gains=True, engines=("exact", "sampled")
     )
+    #: the options of :class:`~kalcal.results.calibration.CalibrateOptions` its calibrate takes
+    CALIBRATE_OPTIONS: ClassVar[tuple[str, ...]] = ("imu_columns", "gps_columns", "init", "max_imu_gap", "on_gap", "form",
+                                                    "smooth", "gate", "settings_sigma", "windows")
     #: the source report's long-run study of the mean error (its figure 5.8), s
     LONG_RUN_SECONDS: ClassVar[float] = 120.0
 
@@ -478,11 +481,14 @@ class AccelGpsScenario(ScenarioDefaults):
     LOG_DEFAULTS: ClassVar[dict[str, Any]] = {"scenario.integration": "trapezoid"}
 
     def output_names(self, command: str) -> tuple[str, ...]:
-        """The files ``command`` (simulate, calibrate, fit) writes."""
+        """The files ``command`` (simulate, calibrate, fit) writes; () for a command whose files are not a
+        scenario's own (verify's, analyze's, sweep's and report's are the same for every scenario)."""
         from kalcal.scenarios.accel_gps import calibrate, fit_run, simulate
+        from kalcal.scenarios.protocol import require
 
+        require(self, command)
         return {"simulate": simulate.OUTPUT_NAMES, "calibrate": calibrate.AccelGpsCalibrationResult.OUTPUT_NAMES,
-                "fit": fit_run.OUTPUT_NAMES}[command]
+                "fit": fit_run.OUTPUT_NAMES}.get(command, ())
 
     def calibrate(self, logs, options):
         """The calibration of ``logs`` (``imu``, ``gps``) with ``options`` (:class:`~kalcal.results.calibration.CalibrateOptions`)."""

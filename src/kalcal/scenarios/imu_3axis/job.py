@@ -120,7 +120,7 @@ def _rate(frame, name: str, settings) -> float | None:
 
 def calibrate_logs(scenario, logs: dict[str, Any], options) -> Imu3AxisCalibrationResult:
     """:meth:`Imu3AxisScenario.calibrate`: the options checked, the log read, the poses found, a procedure run."""
-    options.refuse_unless(scenario.NAME, ("imu_columns", "poses", "windows", "settings_sigma"), "accel-gps")
+    options.refuse_unless(scenario.NAME, scenario.CALIBRATE_OPTIONS)
     for role in ("gps", "data"):
         if logs.get(role) is not None:
             raise DataError(f"--{role}: not read by imu-3axis (its log is --imu)")

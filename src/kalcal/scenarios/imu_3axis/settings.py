@@ -78,6 +78,8 @@ class Imu3AxisScenario(ScenarioDefaults):
     checks: ChecksSection = field(default_factory=ChecksSection)
 
     NAME: ClassVar[str] = "imu-3axis"
+    #: the options of :class:`~kalcal.results.calibration.CalibrateOptions` its calibrate takes
+    CALIBRATE_OPTIONS: ClassVar[tuple[str, ...]] = ("imu_columns", "poses", "windows", "settings_sigma")
     SUMMARY: ClassVar[str] = "a 3-axis accelerometer's scale factors, misalignment and biases from static poses"
 
     capabilities: ClassVar[Capabilities] = Capabilities(
@@ -170,17 +172,17 @@ class Imu3AxisScenario(ScenarioDefaults):
     def truth_is_filter(self) -> bool:
         return False
 
-    def simulate(self, seed: int):
-        from kalcal.errors import ConfigError
+    def simulate(self, seed: int, logs=None):
+        from kalcal.scenarios.protocol import require
 
-        raise ConfigError("imu-3axis: no simulate (kalcal calibrate imu-3axis only)")
+        require(self, "simulate")  # refused in one line: it has no log simulation
 
     def output_names(self, command: str) -> tuple[str, ...]:
         from kalcal.scenarios.imu_3axis.job import Imu3AxisCalibrationResult
+        from kalcal.scenarios.protocol import require
 
-        if command == "calibrate":
-            return Imu3AxisCalibrationResult.OUTPUT_NAMES
-        return ()
+        require(self, command)  # a command it lacks (simulate, fit) is refused in one line, not answered ()
+        return Imu3AxisCalibrationResult.OUTPUT_NAMES if command == "calibrate" else ()
 
     def calibrate(self, logs, options):
         """The calibration of ``logs["imu"]`` with ``options`` (``imu_columns``, ``poses``)."""
@@ -189,6 +191,6 @@ class Imu3AxisScenario(ScenarioDefaults):
         return calibrate_logs(self, logs, options)
 
     def fit(self, logs, options):
-        from kalcal.errors import ConfigError
+        from kalcal.scenarios.protocol import require
 
-        raise ConfigError("imu-3axis: no fit (kalcal calibrate imu-3axis only)")
+        require(self, "fit")  # refused in one line: it has no noise fit

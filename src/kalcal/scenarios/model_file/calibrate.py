@@ -68,7 +68,6 @@ __all__ = ["OUTPUT_NAMES", "ModelFileCalibrationResult", "calibrate_logs", "cali
 #: the files a model file's calibration writes
 OUTPUT_NAMES = ("estimates.csv", "summary.json")
 #: the calibrate options a model file takes (the rest belong to the built-in scenarios)
-TAKEN = ("smooth", "windows")
 #: what summary.json says of the likelihood's convention
 LOGLIK_CONVENTION = (
     "conditional: log p(the measured components after the diffuse start | the components that resolve the "
@@ -461,8 +460,6 @@ def calibrate_logs(scenario: CustomModelScenario, logs: dict[str, Any], options)
     from kalcal.scenarios.protocol import require
 
     require(scenario, "calibrate")
-    scale_bias = ("reference", "sensor", "prior")
-    options.refuse_unless(scenario.label, (*TAKEN, *scale_bias), "accel-gps")
-    options.refuse_unless(scenario.label, TAKEN, "scale-bias")
+    options.refuse_unless(scenario.label, scenario.CALIBRATE_OPTIONS)
     data = _data_of(scenario, logs, "calibrate")
     return calibrate_model_file(scenario, data, smooth=options.smooth, windows=options.windows, topic=logs.get("topic"))

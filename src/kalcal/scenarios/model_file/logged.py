@@ -267,6 +267,10 @@ class LoggedGainProblem(FixedGainProblem):
 
     NOT_STEADY = NOT_STEADY
 
+    def steady_state_reason(self) -> str:
+        """Its rows, noise or update spacing change from update to update (:data:`NOT_STEADY`)."""
+        return NOT_STEADY
+
     def __post_init__(self) -> None:
         d, p = self.filter_model.state_dim, self.filter_model.measurement_dim
         if (self.truth.error_dim, self.truth.h.shape[-2]) != (d, p):

@@ -141,6 +141,8 @@ class CustomModelScenario(ScenarioDefaults):
     """
 
     NAME: ClassVar[str] = "custom"
+    #: the options of :class:`~kalcal.results.calibration.CalibrateOptions` its calibrate takes
+    CALIBRATE_OPTIONS: ClassVar[tuple[str, ...]] = ("smooth", "windows")
     SUMMARY: ClassVar[str] = "a linear Gaussian model read from a TOML file (docs/custom-models.md)"
 
     @property
@@ -268,7 +270,9 @@ class CustomModelScenario(ScenarioDefaults):
         """A log in the file's [data] layout over the rows of ``logs["data"]``, its measurements drawn with
         ``seed`` (:func:`kalcal.scenarios.model_file.simulate.simulate_logs`)."""
         from kalcal.scenarios.model_file.simulate import simulate_logs
+        from kalcal.scenarios.protocol import require
 
+        require(self, "simulate")  # a file without a [data] table, or one bound to a log, has none
         return simulate_logs(self, seed, logs)
 
     def output_names(self, command: str) -> tuple[str, ...]:
@@ -294,7 +298,9 @@ class CustomModelScenario(ScenarioDefaults):
     def calibrate(self, logs, options):
         """The filter (and smoother) over ``logs["data"]`` (:func:`kalcal.scenarios.model_file.calibrate.calibrate_logs`)."""
         from kalcal.scenarios.model_file.calibrate import calibrate_logs
+        from kalcal.scenarios.protocol import require
 
+        require(self, "calibrate")  # a file without a [data] table, or one bound to a log, has none
         return calibrate_logs(self, logs, options)
 
     def fit(self, logs, options):

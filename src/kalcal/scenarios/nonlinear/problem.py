@@ -26,7 +26,7 @@ import numpy as np
 from kalcal.core.nonlinear_run import FilterRun, run_nonlinear_filter
 from kalcal.core.ukf import UnscentedSettings
 from kalcal.montecarlo.accumulators import BlockResult, MomentSums, SumBuffers, whiten
-from kalcal.montecarlo.problem import ProblemInfo, check_engine
+from kalcal.montecarlo.problem import ProblemDefaults, ProblemInfo, check_engine
 from kalcal.stats.effects import EffectAccumulator, EffectLayout
 
 
@@ -103,7 +103,7 @@ class _Batched:
 
 
 @dataclass(frozen=True)
-class NonlinearProblem:
+class NonlinearProblem(ProblemDefaults):
     """The scenario's filter against its truth (engine "exact": the truth at the update times)."""
 
     scenario: Any  #: a NonlinearScenario, or a scenario with its attributes and ``problem_hooks``
@@ -115,6 +115,10 @@ class NonlinearProblem:
     engines: tuple[str, ...] = field(init=False, default=("exact",))
 
     NOT_TIME_INVARIANT = "its model is nonlinear: the gains depend on the state, and there is no algebraic Riccati equation"
+
+    def steady_state_reason(self) -> str:
+        """Its gains depend on the state (:attr:`NOT_TIME_INVARIANT`)."""
+        return self.NOT_TIME_INVARIANT
 
     def __post_init__(self) -> None:
         s = self.scenario

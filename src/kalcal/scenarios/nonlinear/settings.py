@@ -211,7 +211,7 @@ class NonlinearScenario(ScenarioDefaults):
         failure is not a false alarm."""
         return False
 
-    def simulate(self, seed: int):
+    def simulate(self, seed: int, logs=None):
         from kalcal.scenarios.protocol import require
 
         require(self, "simulate")

@@ -342,8 +342,7 @@ def _data_of(scenario: ScaleBiasScenario, logs: dict[str, Any]):
 
 def calibrate_logs(scenario: ScaleBiasScenario, logs: dict[str, Any], options) -> ScaleBiasCalibrationResult:
     """:meth:`ScaleBiasScenario.calibrate`: the options checked, then :func:`compute_scale_bias_calibration`."""
-    options.refuse_unless(scenario.NAME, ("reference", "sensor", "prior", "windows", "settings_sigma", "imu_columns",
-                                          "gps_columns", "init", "max_imu_gap", "on_gap"), "accel-gps")
+    options.refuse_unless(scenario.NAME, scenario.CALIBRATE_OPTIONS)
     data = _data_of(scenario, logs)
     return compute_scale_bias_calibration(scenario, data, reference=options.reference, sensor=options.sensor,
                                           prior=options.prior, windows=options.windows)

@@ -25,7 +25,7 @@ from kalcal.core.steps import gain_and_covariance, nis, predict_covariance
 from kalcal.scenarios.scale_bias.filter import filter_scale_bias, regressors
 from kalcal.scenarios.scale_bias.settings import MEASUREMENT_NAMES, STATE_NAMES, ScaleBiasScenario
 from kalcal.montecarlo.accumulators import BlockResult, MomentSums, SumBuffers
-from kalcal.montecarlo.problem import ProblemInfo, check_engine
+from kalcal.montecarlo.problem import ProblemDefaults, ProblemInfo, check_engine
 from kalcal.scenarios.scale_bias.simulation import normals_per_realization, sample_scale_bias
 
 
@@ -133,7 +133,7 @@ def model_error_cause(scenario: ScaleBiasScenario) -> str:
 
 
 @dataclass(frozen=True)
-class ScaleBiasProblem:
+class ScaleBiasProblem(ProblemDefaults):
     """The scale/bias filter against realizations drawn from its scenario (engine "exact" only).
 
     Per-sample simulation is already exact here (every sample is a measurement), so there is no separate
@@ -155,6 +155,10 @@ class ScaleBiasProblem:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "info", problem_info(self.scenario))
+
+    def steady_state_reason(self) -> str:
+        """Its measurement row changes at every sample (:attr:`NOT_TIME_INVARIANT`)."""
+        return self.NOT_TIME_INVARIANT
 
     def normals_per_realization(self, engine: str) -> int:
         return normals_per_realization(self.scenario)

@@ -221,6 +221,10 @@ class ScaleBiasScenario(ScenarioDefaults):
     filter: ScaleBiasFilter = field(default_factory=ScaleBiasFilter)
 
     NAME: ClassVar[str] = "scale-bias"
+    #: the options of :class:`~kalcal.results.calibration.CalibrateOptions` its calibrate takes (accel-gps's
+    #: log options among them, accepted and unused, as they always were)
+    CALIBRATE_OPTIONS: ClassVar[tuple[str, ...]] = ("reference", "sensor", "prior", "windows", "settings_sigma", "imu_columns",
+                                                    "gps_columns", "init", "max_imu_gap", "on_gap")
     SUMMARY: ClassVar[str] = "a sensor's scale and bias estimated against a reference reading (the regressors are data)"
 
     capabilities: ClassVar[Capabilities] = Capabilities(
@@ -295,12 +299,15 @@ class ScaleBiasScenario(ScenarioDefaults):
         return compute_scale_bias_simulation(self, seed)
 
     def output_names(self, command: str) -> tuple[str, ...]:
-        """The files ``command`` (simulate, calibrate, fit) writes."""
+        """The files ``command`` (simulate, calibrate, fit) writes; () for a command whose files are not a
+        scenario's own; a command it lacks (analyze) refused in one line."""
         from kalcal.fitting.run import OUTPUT_NAMES as FIT_NAMES
+        from kalcal.scenarios.protocol import require
         from kalcal.scenarios.scale_bias.job import ScaleBiasCalibrationResult
 
+        require(self, command)
         return {"simulate": ("data.csv", "truth.json"), "calibrate": ScaleBiasCalibrationResult.OUTPUT_NAMES,
-                "fit": FIT_NAMES}[command]
+                "fit": FIT_NAMES}.get(command, ())
 
     def calibrate(self, logs, options):
         """The calibration of ``logs`` (``data``) with ``options`` (:class:`~kalcal.results.calibration.CalibrateOptions`)."""
