@@ -82,3 +82,19 @@ def block_kernel(truth: NonlinearModel, filter_model: NonlinearModel) -> tuple[C
 def refuse(truth: NonlinearModel, filter_model: NonlinearModel, reason: str) -> None:
     """Mark the pair of models as kept on the numpy path (its printed code did not compile), with why."""
     _KERNELS.setdefault(truth, weakref.WeakKeyDictionary())[filter_model] = (None, reason)
+
+
+def run_block(truth: NonlinearModel, filter_model: NonlinearModel, *args) -> bool | None:
+    """Run the pair's compiled block driver on ``args``: its verdict (False: a case it leaves to the numpy
+    path), or None where numba cannot compile the printed f or h (the pair is then kept on the numpy path,
+    :func:`refuse`, with the reason)."""
+    kernel, _ = block_kernel(truth, filter_model)
+    try:
+        return kernel(*args)
+    except Exception as error:
+        if not type(error).__module__.startswith("numba"):  # numba's own errors: printed code it cannot compile
+            raise
+        text = str(error).strip()
+        refuse(truth, filter_model, f"numba cannot compile the printed f or h ({type(error).__name__}: "
+                                    f"{text.splitlines()[0] if text else ''})")
+        return None

@@ -295,8 +295,6 @@ class NonlinearProblem(ProblemDefaults):
         return self.numpy_block_sums(rng, n, engine)
 
     def _compiled_block_sums(self, rng: np.random.Generator, n: int) -> MomentSums | None:
-        from kalcal.scenarios.nonlinear.compiled import block_kernel
-
         s, loaded = self.scenario, self.scenario.loaded
         t, fm = loaded.truth, loaded.filter
         d, p, k_count = t.state_dim, t.measurement_dim, s.n_updates
@@ -317,24 +315,17 @@ class NonlinearProblem(ProblemDefaults):
             value = np.asarray(value, dtype=float)
             return np.ascontiguousarray(np.broadcast_to(value, (k_count, size)) if value.ndim == 1 else value)
 
-        kernel, _ = block_kernel(t, fm)
         if t.input_dim != fm.input_dim or t.data_dim != fm.data_dim:
             return None
-        from numba.core.errors import NumbaError
+        from kalcal.scenarios.nonlinear.compiled import run_block
 
-        try:
-            ok = kernel(
-                first, noise, t.x0, _factor(t.p0), _factor(t.q), _factor(t.r), float(t.dt),
-                q_inv, has_q_inv, np.linalg.cholesky(t.r),
-                fm.x0, fm.p0, fm.q, fm.r, float(fm.dt),
-                rows(loaded.inputs, t.input_dim), rows(loaded.data, t.data_dim), sums, normalized, eff, _TILE,
-            )
-        except NumbaError as error:  # printed code numba cannot compile (a function it lacks): numpy path
-            from kalcal.scenarios.nonlinear.compiled import refuse
-
-            refuse(t, fm, f"numba cannot compile the printed f or h ({type(error).__name__}: "
-                          f"{str(error).strip().splitlines()[0] if str(error).strip() else ''})")
-            return None
+        ok = run_block(
+            t, fm,
+            first, noise, t.x0, _factor(t.p0), _factor(t.q), _factor(t.r), float(t.dt),
+            q_inv, has_q_inv, np.linalg.cholesky(t.r),
+            fm.x0, fm.p0, fm.q, fm.r, float(fm.dt),
+            rows(loaded.inputs, t.input_dim), rows(loaded.data, t.data_dim), sums, normalized, eff, _TILE,
+        )
         if not ok:
             return None
         out = MomentSums.from_buffers(n, sums, normalized_residual=normalized)
