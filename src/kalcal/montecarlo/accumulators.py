@@ -15,14 +15,67 @@ Where every realization shares P_k (fixed gains) the whitened sums follow from t
 (scale-bias) each realization is whitened by its own P_k and the sums keep sum eps, sum eps eps^T and
 sum eps xhat^T: the mean P is no valid reference when P varies (by Jensen's inequality a whitening by it
 is not N(0, I)).
+
+**The shape of NEES and NIS.** Each realization's NEES at update k is chi-square(d) and its NIS
+chi-square(p) under the null, so u = F_chi2(NEES) is U(0, 1). The sums keep, per update, a histogram of
+u on :data:`SHAPE_BINS` equal bins (``nees_histogram``, ``nis_histogram``, counts (K, B)), summed per block
+like every other sum, so that :mod:`kalcal.stats.shape` tests the pooled values against chi-square with
+memory flat in N. A value is binned on the chi-square scale itself, against the quantiles
+F^-1(j / B) (:class:`ShapeGrid`), so no chi-square CDF is evaluated per realization.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
+from functools import lru_cache
 from typing import NamedTuple
 
 import numpy as np
+
+#: equal bins of u = F_chi2(x) in the NEES and NIS histograms (B): the shape check's grid is u = j / B
+SHAPE_BINS = 1024
+#: cells per unit of sqrt(x) in :class:`ShapeGrid`'s look-up table: finer than any bin where the density of
+#: sqrt(x) peaks (at most sqrt(2 / pi) ~ 0.80 for chi(1), so a bin is at least 1 / (0.8 B) ~ 0.0012 wide in
+#: sqrt(x)), so that a value's bin is its cell's first bin or the next
+SHAPE_CELLS_PER_UNIT = 2048
+
+
+class ShapeGrid(NamedTuple):
+    """The bins of a chi-square(dof) value x by u = F(x), on the chi-square scale.
+
+    ``edges`` (B - 1,): the quantiles F^-1(j / B), j = 1 .. B - 1; x falls in bin j when
+    edges[j - 1] <= x < edges[j] (``np.searchsorted(edges, x, side="right")``), that is j / B <= u <
+    (j + 1) / B up to the rounding of the quantiles (about 1e-15 of x). ``cells`` (T,): the bin of the
+    start of each cell of width 1 / :data:`SHAPE_CELLS_PER_UNIT` in sqrt(x), so that a compiled kernel
+    finds a value's bin by one look-up and a step or two (:func:`kalcal.montecarlo.sum_kernels.shape_bin`)
+    instead of a binary search over the B - 1 edges.
+    """
+
+    edges: np.ndarray
+    cells: np.ndarray
+
+
+@lru_cache(maxsize=32)
+def shape_grid(dof: int, bins: int = SHAPE_BINS) -> ShapeGrid:
+    """The :class:`ShapeGrid` of chi-square(``dof``) on ``bins`` equal bins of u (cached: read-only arrays)."""
+    from kalcal.stats.distributions import chi2_ppf
+
+    edges = np.asarray(chi2_ppf(np.arange(1, bins) / bins, dof), dtype=float)
+    top = int(np.ceil(np.sqrt(edges[-1]) * SHAPE_CELLS_PER_UNIT)) + 2
+    starts = (np.arange(top) / SHAPE_CELLS_PER_UNIT) ** 2
+    cells = np.searchsorted(edges, starts, side="right").astype(np.int64)
+    edges.flags.writeable = False
+    cells.flags.writeable = False
+    return ShapeGrid(edges, cells)
+
+
+def shape_histogram(values: np.ndarray, dof: int) -> np.ndarray:
+    """Counts (K, B) of each update's values (n, K) on :func:`shape_grid`'s bins: the numpy definition of
+    the histograms the compiled kernels add into."""
+    edges = shape_grid(dof).edges
+    n_updates = values.shape[1]
+    index = np.searchsorted(edges, values, side="right") + SHAPE_BINS * np.arange(n_updates)
+    return np.bincount(index.ravel(), minlength=n_updates * SHAPE_BINS).reshape(n_updates, SHAPE_BINS).astype(np.int64)
 
 
 class BlockResult(NamedTuple):
@@ -114,6 +167,10 @@ class SumBuffers(NamedTuple):
     whitened_error: np.ndarray
     whitened_outer: np.ndarray  #: sum eps_k eps_k^T, (K, d, d); (0, d, d) where P_k is shared
     whitened_estimate: np.ndarray  #: sum eps_k xhat_k^T, (K, d, d); (0, d, d) where P_k is shared
+    nees_histogram: np.ndarray  #: counts of u = F_chi2(d)(NEES) per update on B bins, int64 (K, B)
+    nis_histogram: np.ndarray  #: counts of u = F_chi2(p)(NIS) per update on B bins, int64 (K, B)
+    nees_grid: ShapeGrid  #: the bins of the NEES (chi-square(d)); read only, not a sum
+    nis_grid: ShapeGrid  #: the bins of the NIS (chi-square(p)); read only, not a sum
 
     @classmethod
     def zeros(
@@ -137,6 +194,10 @@ class SumBuffers(NamedTuple):
             whitened_error=np.zeros((kept, d)),
             whitened_outer=np.zeros((kept, d, d)),
             whitened_estimate=np.zeros((kept, d, d)),
+            nees_histogram=np.zeros((n_updates, SHAPE_BINS), dtype=np.int64),
+            nis_histogram=np.zeros((n_updates, SHAPE_BINS), dtype=np.int64),
+            nees_grid=shape_grid(d),
+            nis_grid=shape_grid(p),
         )
 
 
@@ -170,6 +231,10 @@ class MomentSums:
     whitened_error: np.ndarray | None = None
     whitened_outer: np.ndarray | None = None  #: sum eps_k eps_k^T, (K, d, d); None where P_k is shared
     whitened_estimate: np.ndarray | None = None  #: sum eps_k xhat_k^T, (K, d, d); None where P_k is shared
+    #: counts of u = F_chi2(d)(NEES) on :data:`SHAPE_BINS` equal bins per update, int64 (K, B); None for sums
+    #: that did not keep it
+    nees_histogram: np.ndarray | None = None
+    nis_histogram: np.ndarray | None = None  #: counts of u = F_chi2(p)(NIS) likewise, int64 (K, B)
 
     @classmethod
     def from_block(cls, block: BlockResult) -> MomentSums:
@@ -204,6 +269,8 @@ class MomentSums:
             residual_outer=outer,
             filter_cov=np.asarray(block.filter_cov_sum, dtype=float),
             normalized_residual=None if block.normalized_residual is None else block.normalized_residual.sum(axis=0),
+            nees_histogram=shape_histogram(block.nees, block.error.shape[2]),
+            nis_histogram=shape_histogram(block.nis, p),
             **whitened,
         )
 
@@ -212,6 +279,7 @@ class MomentSums:
         """The sums of ``count`` realizations that a kernel added into ``buffers`` (the pairs by syrk)."""
         sums = buffers._asdict()
         residuals = sums.pop("residuals")
+        del sums["nees_grid"], sums["nis_grid"]
         outer = ResidualProducts.upper(residuals) if residuals.shape[0] else None
         for name in ("whitened_error", "whitened_outer", "whitened_estimate"):
             if not sums[name].shape[0]:  # P_k shared: derived from the raw sums
@@ -273,6 +341,9 @@ class EnsembleStatistics:
     mean_whitened_error: np.ndarray | None = None
     whitened_second_moment: np.ndarray | None = None  #: E[eps_k eps_k^T], (K, d, d), or None as above
     whitened_estimate: np.ndarray | None = None  #: E[eps_k xhat_k^T], (K, d, d), or None as above
+    #: counts of u = F_chi2(d)(NEES) on B equal bins per update, (K, B) (:class:`MomentSums`); None if not kept
+    nees_histogram: np.ndarray | None = None
+    nis_histogram: np.ndarray | None = None  #: counts of u = F_chi2(p)(NIS) likewise, (K, B); None if not kept
 
 
 def ensemble_statistics(sums: MomentSums) -> EnsembleStatistics:
@@ -300,4 +371,6 @@ def ensemble_statistics(sums: MomentSums) -> EnsembleStatistics:
         mean_whitened_error=None if sums.whitened_error is None else sums.whitened_error / n,
         whitened_second_moment=None if sums.whitened_outer is None else sums.whitened_outer / n,
         whitened_estimate=None if sums.whitened_estimate is None else sums.whitened_estimate / n,
+        nees_histogram=sums.nees_histogram,
+        nis_histogram=sums.nis_histogram,
     )

@@ -189,8 +189,16 @@ class FixedGainProblem:
         )
 
     def _gains(self) -> tuple:
-        """The filter's arguments of the compiled kernels: Phi_k (K, d, d), H (p, d), K_k (K, d, p), x0 (d,)."""
-        return np.ascontiguousarray(self.schedule.transitions), self.filter_model.h, self.schedule.gain, self.filter_model.x0
+        """The filter's arguments of the compiled kernels: Phi_k (K, d, d), H (p, d), K_k (K, d, p), x0 (d,),
+        and the whiteners of P_k (K, d, d) and S_k (K, p, p) for each realization's NEES and NIS."""
+        return (
+            np.ascontiguousarray(self.schedule.transitions),
+            self.filter_model.h,
+            self.schedule.gain,
+            self.filter_model.x0,
+            np.ascontiguousarray(self._state_whitener),
+            np.ascontiguousarray(self._innovation_whitener),
+        )
 
     def _exact_block(self, rng: np.random.Generator, n: int, sums: SumBuffers, traced: int = -1) -> np.ndarray:
         """The exact engine's compiled block into ``sums``; the error and estimate (2, K, d) of realization
@@ -223,6 +231,7 @@ class FixedGainProblem:
             _EMPTY_MAP if truth.error_map is None else np.ascontiguousarray(truth.error_map),
             traced,
             trace,
+            int(truth.measurement_dof),
         )
         return trace
 

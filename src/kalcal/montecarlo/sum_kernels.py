@@ -12,6 +12,8 @@ given block on a given machine always gives the same bits, but a different CPU m
 
 from __future__ import annotations
 
+import math
+
 import numba
 
 
@@ -54,6 +56,52 @@ def total(u):
     return acc
 
 
+#: cells per unit of sqrt(x) of a shape grid (:data:`kalcal.montecarlo.accumulators.SHAPE_CELLS_PER_UNIT`)
+_CELLS_PER_UNIT = 2048.0
+
+
+@numba.njit(nogil=True, cache=True)
+def shape_bin(x, edges, cells):
+    """The bin of a chi-square value x on a :class:`~kalcal.montecarlo.accumulators.ShapeGrid`: the number of
+    edges <= x (``np.searchsorted(edges, x, side="right")``, exactly, whatever the rounding of sqrt).
+
+    The cell of sqrt(x) gives the bin of the cell's start; the steps after it correct for the one or two
+    edges that may lie inside the cell (and for a cell taken one off by the rounding of sqrt). Compiled
+    without fast-math: the comparisons decide a count.
+    """
+    top = edges.shape[0]
+    if x != x:  # NaN: last, as searchsorted sorts it
+        return top
+    where = math.sqrt(x) * _CELLS_PER_UNIT if x > 0.0 else 0.0
+    j = cells[int(where)] if where < cells.shape[0] else top  # compared as a float: no overflow for x = inf
+    while j < top and edges[j] <= x:
+        j += 1
+    while j > 0 and edges[j - 1] > x:
+        j -= 1
+    return j
+
+
+@numba.njit(nogil=True, cache=True)
+def add_shape(k, values, edges, cells, histogram):
+    """Count each of the n ``values`` (n,) (NEES or NIS of n realizations at update k) into its bin of
+    ``histogram[k]`` (K, B)."""
+    for i in range(values.shape[0]):
+        histogram[k, shape_bin(values[i], edges, cells)] += 1
+
+
+@numba.njit(nogil=True, cache=True, fastmath=FAST)
+def whitened_squares(out, whitener, vectors, work):
+    """out[i] = |W v_i|^2 for the n columns of ``vectors`` (q, n): each realization's NEES (W the state
+    whitener of a shared P_k, W^T W = P_k^-1) or NIS; ``work`` (q, n) is scratch."""
+    affine(work, whitener, vectors, False)
+    q, n = work.shape
+    for i in range(n):
+        out[i] = 0.0
+    for a in range(q):
+        for i in range(n):
+            out[i] += work[a, i] * work[a, i]
+
+
 @numba.njit(nogil=True, cache=True, fastmath=FAST)
 def accumulate(k, first, error, estimate, residual, nees, nis, cov, white, sums, store=True):
     """Add update k of n realizations into the sums (in place), as ``MomentSums.from_block`` sums them.
@@ -74,7 +122,9 @@ def accumulate(k, first, error, estimate, residual, nees, nis, cov, white, sums,
     nees, nis : ndarray, shape (n,) or (0,)
         Each realization's e^T P^{-1} e and r^T S^{-1} r, with ``cov`` (d, d, n) its P_k; all three empty
         (n = 0) where every realization shares P_k and S_k: the caller then forms the NEES and NIS sums
-        from the second moments and the P sum as n P_k, and this adds nothing to them.
+        from the second moments and the P sum as n P_k, and adds their histograms itself
+        (:func:`add_shape`), and this adds nothing to them. Given, they are also counted into
+        ``sums.nees_histogram`` and ``sums.nis_histogram``.
     white : ndarray, shape (d, n) or (0, n)
         eps_k = L_k^-1 e_k of each realization, by its own P_k = L_k L_k^T, added into the whitened sums
         where ``sums`` keeps them (P_k varies between realizations); empty where P_k is shared.
@@ -110,6 +160,8 @@ def accumulate(k, first, error, estimate, residual, nees, nis, cov, white, sums,
     if own:
         sums.nees[k] += total(nees)
         sums.nis[k] += total(nis)
+        add_shape(k, nees, sums.nees_grid.edges, sums.nees_grid.cells, sums.nees_histogram)
+        add_shape(k, nis, sums.nis_grid.edges, sums.nis_grid.cells, sums.nis_histogram)
     if white.shape[0] and sums.whitened_error.shape[0]:
         for a in range(d):
             sums.whitened_error[k, a] += total(white[a])

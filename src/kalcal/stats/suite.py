@@ -77,6 +77,7 @@ from kalcal.stats.nis import check_nis, nis_power
 from kalcal.stats.orthogonality import check_orthogonality, orthogonality_power
 from kalcal.stats.power import CheckPower, detection_n, power_row
 from kalcal.stats.results import CheckResult
+from kalcal.stats.shape import check_shape
 from kalcal.stats.whiteness import check_residual_whiteness, whiteness_power
 
 __all__ = [
@@ -98,16 +99,20 @@ def run_checks(
     expected_mean_error: np.ndarray | None = None,
     model_error_cause: str = "",
 ) -> list[CheckResult]:
-    """Every check, in a fixed order."""
+    """Every check, in a fixed order: the shape check last, where the sums keep the NEES and NIS
+    histograms (every run of the engine does; statistics built by hand from moments alone have none)."""
     if not 0.0 < confidence < 1.0:
         raise ValueError(f"confidence must lie in (0, 1), got {confidence!r}")
-    return [
+    checks = [
         check_mean_error(s, info, confidence, expected_mean_error, model_error_cause),
         check_covariance(s, info, confidence),
         check_orthogonality(s, info, confidence),
         check_residual_whiteness(s, info, confidence),
         check_nis(s, info, confidence),
     ]
+    if s.nees_histogram is not None and s.nis_histogram is not None:
+        checks.append(check_shape(s, info, confidence))
+    return checks
 
 
 def verdict(checks: list[CheckResult]) -> str:
