@@ -115,3 +115,12 @@ def test_clopper_pearson():
     low, high = clopper_pearson(3, 100, 0.95)
     ref = stats.binomtest(3, 100).proportion_ci(0.95, method="exact")
     assert (low, high) == pytest.approx((ref.low, ref.high))
+
+
+def test_histograms_that_miss_values_are_refused():
+    """A block path that summed the moments without binning its values is a bug, never a pass or a fail."""
+    rng = np.random.default_rng(1)
+    s = _statistics(rng.chisquare(3, size=(100, 4)), rng.chisquare(2, size=(100, 4)), 3, 2)
+    s.nis_histogram = s.nis_histogram * 0
+    with pytest.raises(ValueError, match="nis_histogram"):
+        check_shape(s, INFO, 0.99)

@@ -139,6 +139,10 @@ def check_shape(s: EnsembleStatistics, info: ProblemInfo, confidence: float) -> 
     """
     if s.nees_histogram is None or s.nis_histogram is None:
         raise ValueError("the shape check needs the ensemble's NEES and NIS histograms (MomentSums.nees_histogram)")
+    for name in ("nees_histogram", "nis_histogram"):
+        counted = np.asarray(getattr(s, name)).sum(axis=1)
+        if np.any(counted != s.count):  # a block path that summed the moments without binning its values
+            raise ValueError(f"{name}: each update must count the ensemble's {s.count} values, got {counted.min()} to {counted.max()}")
     alpha = 1.0 - confidence
     share = alpha / len(SHAPE_PARTS)
     d, p = s.mean_error.shape[1], s.mean_residual.shape[1]

@@ -84,7 +84,8 @@ def refuse_log_faults(scenario: AccelGpsScenario) -> None:
     """Raise a one-line SettingError naming the first log-only GNSS fault set in ``scenario.truth``.
 
     ``kalcal simulate`` writes them into logs; the exact truth has no time stamps to shift and no
-    heavy-tailed fix noise, so a verification or analysis of them would verify something else.
+    gross fix errors (Student-t fix noise, ``truth.gps_noise``, is a truth of its own), so a verification or
+    analysis of them would verify something else.
     """
     t = scenario.truth
     for key in ("gps_latency", "gps_outlier_rate"):
