@@ -42,7 +42,8 @@ def test_fixed_gain_kernel_equals_predict_and_update_at_every_step():
     truth = rng.standard_normal((n_updates, d, n))
     z = rng.standard_normal((n_updates, p, n))
     # the shape histograms' whiteners of P_k and S_k: any W serves this test, which reads no histogram
-    whiteners = (np.tile(np.eye(d), (n_updates, 1, 1)), np.tile(np.eye(p), (n_updates, 1, 1)))
+    whiteners = (np.tile(np.eye(d), (n_updates, 1, 1)), np.tile(np.eye(p), (n_updates, 1, 1)),
+                 np.zeros((n_updates, d)), np.zeros((n_updates, p)))
     for i in range(n):
         sums = SumBuffers.zeros(n_updates, d, p, 1, True)
         filter_block_moments(truth[:, :, i:i + 1].copy(), z[:, :, i:i + 1].copy(), phis, h, gains, x0, *whiteners, sums)

@@ -58,9 +58,9 @@ class ShapeGrid(NamedTuple):
 @lru_cache(maxsize=32)
 def shape_grid(dof: int, bins: int = SHAPE_BINS) -> ShapeGrid:
     """The :class:`ShapeGrid` of chi-square(``dof``) on ``bins`` equal bins of u (cached: read-only arrays)."""
-    from kalcal.stats.distributions import chi2_ppf
+    from scipy import special  # chi-square's quantile as kalcal.stats.distributions.chi2_ppf computes it
 
-    edges = np.asarray(chi2_ppf(np.arange(1, bins) / bins, dof), dtype=float)
+    edges = 2.0 * special.gammaincinv(dof / 2.0, np.arange(1, bins) / bins)
     top = int(np.ceil(np.sqrt(edges[-1]) * SHAPE_CELLS_PER_UNIT)) + 2
     starts = (np.arange(top) / SHAPE_CELLS_PER_UNIT) ** 2
     cells = np.searchsorted(edges, starts, side="right").astype(np.int64)
@@ -91,6 +91,10 @@ class BlockResult(NamedTuple):
     #: for data-dependent gains; required, so that a realization's P is never a block mean
     filter_cov: np.ndarray
     normalized_residual: np.ndarray | None = None  #: L_k^{-1} r_k with S_k = L_k L_k^T, (n, K, p), if known
+    #: the values the shape histograms bin, (n, K) each: the NEES and NIS of the error and innovation
+    #: centered on their predicted means (a fixed-gain problem's model error); None: ``nees`` and ``nis``
+    shape_nees: np.ndarray | None = None
+    shape_nis: np.ndarray | None = None
 
 
 def shares_cov(filter_cov: np.ndarray) -> bool:
@@ -269,8 +273,8 @@ class MomentSums:
             residual_outer=outer,
             filter_cov=np.asarray(block.filter_cov_sum, dtype=float),
             normalized_residual=None if block.normalized_residual is None else block.normalized_residual.sum(axis=0),
-            nees_histogram=shape_histogram(block.nees, block.error.shape[2]),
-            nis_histogram=shape_histogram(block.nis, p),
+            nees_histogram=shape_histogram(block.nees if block.shape_nees is None else block.shape_nees, block.error.shape[2]),
+            nis_histogram=shape_histogram(block.nis if block.shape_nis is None else block.shape_nis, p),
             **whitened,
         )
 

@@ -14,7 +14,7 @@ the innovations are formed in their rows of the block's residual buffer, not cop
 both consume the same draws and agree to rounding.
 """
 
-# numba cache stamp: kalcal.montecarlo.sum_kernels d17e4ba22bba31f5
+# numba cache stamp: kalcal.montecarlo.sum_kernels 3a9236f4cced35ec
 
 from __future__ import annotations
 
@@ -39,7 +39,9 @@ def standard_normals(rng, out):
 def _filter_and_accumulate(k, truth, z, x, xbar, residual, phi, h, gains, sums, whiteners, scratch):
     """One update of the fixed-gain filter for every realization, then the moment sums at update k.
 
-    whiteners: (W_P (K, d, d), W_S (K, p, p)), W^T W the inverse of the shared P_k and S_k; scratch:
+    whiteners: (W_P (K, d, d), W_S (K, p, p), c_e (K, d), c_r (K, p)), W^T W the inverse of the shared P_k
+    and S_k, c the predicted means of the error and the innovation (the model error; zero without one),
+    about which each realization's NEES and NIS are binned; scratch:
     (values (n,), work (d, n), work (p, n)), where each realization's NEES and NIS are formed for the
     shape histograms (the only per-realization use of them: their sums follow from the second moments).
 
@@ -68,9 +70,9 @@ def _filter_and_accumulate(k, truth, z, x, xbar, residual, phi, h, gains, sums, 
     shared = np.empty(0)
     accumulate(k, 0, truth, x, residual, shared, shared, np.empty((0, 0, 0)), np.empty((0, n)), sums, not keep)
     values, state_work, innovation_work = scratch
-    whitened_squares(values, whiteners[0][k], truth, state_work)
+    whitened_squares(values, whiteners[0][k], truth, whiteners[2][k], state_work)
     add_shape(k, values, sums.nees_grid.edges, sums.nees_grid.cells, sums.nees_histogram)
-    whitened_squares(values, whiteners[1][k], residual, innovation_work)
+    whitened_squares(values, whiteners[1][k], residual, whiteners[3][k], innovation_work)
     add_shape(k, values, sums.nis_grid.edges, sums.nis_grid.cells, sums.nis_histogram)
 
 
@@ -109,7 +111,8 @@ def _shape_scratch(d, p, n):
 @numba.njit(nogil=True, cache=True, fastmath=FAST)
 def exact_block_moments(
     y0, u0, rng, transitions, noise, boundary_in, model_error, h_truth, measure,
-    phis, h, gains, x0, state_whiteners, innovation_whiteners, sums, error_map, traced, trace, dof,
+    phis, h, gains, x0, state_whiteners, innovation_whiteners, error_centers, residual_centers, sums, error_map,
+    traced, trace, dof,
 ):
     """Sample the exact update-rate truth (:mod:`kalcal.simulation.exact`) and filter it, in one pass.
 
@@ -119,8 +122,9 @@ def exact_block_moments(
     transitions (K, d, d) of the truth over each interval; noise (d, r + c) = [L | b_out]; boundary_in
     (d, c); model_error (K, d); h_truth (p, d); measure (p, p) = G. Filter: phis (K, d_f, d_f) over each
     interval, h (p, d_f), gains (K, d_f, p), x0 (d_f,), state_whiteners (K, d_f, d_f) and
-    innovation_whiteners (K, p, p) with W^T W = P_k^-1 and S_k^-1 (each realization's NEES and NIS for the
-    shape histograms). sums: the block's
+    innovation_whiteners (K, p, p) with W^T W = P_k^-1 and S_k^-1, error_centers (K, d_f) and
+    residual_centers (K, p) the predicted means (each realization's NEES and NIS about them for the shape
+    histograms). sums: the block's
     :class:`~kalcal.montecarlo.accumulators.SumBuffers` (in the filter's d_f), added to. error_map
     (d_f, d): M of a truth with states of its own, whose error is e = M x - xhat; (0, 0) for a truth
     over the filter's states (d_f = d, e = x - xhat, with no product: that path is the one without a map).
@@ -146,7 +150,7 @@ def exact_block_moments(
     previous = np.empty((rc + noise_rows if c else 0, n))  # the last update's (its closing boundary samples)
     x, xbar, residual = _filter_buffers(x0, p, n)
     scratch = _shape_scratch(x0.shape[0], p, n)
-    whiteners = (state_whiteners, innovation_whiteners)
+    whiteners = (state_whiteners, innovation_whiteners, error_centers, residual_centers)
     for k in range(n_updates):
         standard_normals(rng, step)
         affine(y_next, transitions[k], y, False)
@@ -175,7 +179,9 @@ def exact_block_moments(
 
 
 @numba.njit(nogil=True, cache=True, fastmath=FAST)
-def filter_block_moments(states, measurements, phis, h, gains, x0, state_whiteners, innovation_whiteners, sums):
+def filter_block_moments(
+    states, measurements, phis, h, gains, x0, state_whiteners, innovation_whiteners, error_centers, residual_centers, sums
+):
     """Filter given truths and accumulate, for a sampler without a compiled block of its own (the sampled
     engine has one: :func:`kalcal.scenarios.accel_gps.sampled_kernels.sampled_block_moments`).
 
@@ -185,7 +191,7 @@ def filter_block_moments(states, measurements, phis, h, gains, x0, state_whitene
     n_updates, d, n = states.shape
     x, xbar, residual = _filter_buffers(x0, h.shape[0], n)
     scratch = _shape_scratch(d, h.shape[0], n)
-    whiteners = (state_whiteners, innovation_whiteners)
+    whiteners = (state_whiteners, innovation_whiteners, error_centers, residual_centers)
     for k in range(n_updates):
         _filter_and_accumulate(
             k, states[k], measurements[k], x, xbar, residual, phis[k], h, gains, sums, whiteners, scratch

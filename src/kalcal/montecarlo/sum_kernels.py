@@ -90,11 +90,19 @@ def add_shape(k, values, edges, cells, histogram):
 
 
 @numba.njit(nogil=True, cache=True, fastmath=FAST)
-def whitened_squares(out, whitener, vectors, work):
-    """out[i] = |W v_i|^2 for the n columns of ``vectors`` (q, n): each realization's NEES (W the state
-    whitener of a shared P_k, W^T W = P_k^-1) or NIS; ``work`` (q, n) is scratch."""
+def whitened_squares(out, whitener, vectors, center, work):
+    """out[i] = |W (v_i - c)|^2 for the n columns of ``vectors`` (q, n) and a center c (q,): each
+    realization's NEES (W the state whitener of a shared P_k, W^T W = P_k^-1) or NIS about its predicted
+    mean; ``work`` (q, n) is scratch."""
     affine(work, whitener, vectors, False)
     q, n = work.shape
+    for a in range(q):
+        shift = 0.0
+        for b in range(q):
+            shift += whitener[a, b] * center[b]
+        if shift != 0.0:
+            for i in range(n):
+                work[a, i] -= shift
     for i in range(n):
         out[i] = 0.0
     for a in range(q):

@@ -17,7 +17,7 @@ stays the tests' oracle: the sums agree to rounding, not bit for bit, because nu
 interval as one BLAS matrix product, whose order of additions this kernel does not reproduce.
 """
 
-# numba cache stamp: kalcal.montecarlo.kernels 09e00bf5beaa0f2c
+# numba cache stamp: kalcal.montecarlo.kernels a50f658ebd69a203
 
 from __future__ import annotations
 
@@ -72,8 +72,8 @@ def _integrate_interval(k, samples, walk_draws, carry, bias, scale, nominal, tru
 @numba.njit(nogil=True, cache=True, fastmath=FAST)
 def sampled_block_moments(
     rng, p0, v0, bias0, noise0, scale, true_accel, weights, fix_times, motion, nominal0, accel_std, gps_std,
-    decay, walk, drifts, interval, phis, h, gains, x0, state_whiteners, innovation_whiteners, sums, fix_states,
-    dof,
+    decay, walk, drifts, interval, phis, h, gains, x0, state_whiteners, innovation_whiteners, error_centers,
+    residual_centers, sums, fix_states, dof,
 ):
     """Simulate the accelerometer/GPS truth sample by sample and filter it, in one pass.
 
@@ -86,7 +86,8 @@ def sampled_block_moments(
     interval m dt, s.
     The error states are [p - p_c, v - v_c, b] (and s when the filter has d = 4 states). Filter: phis
     (K, d, d), h (p, d), gains (K, d, p), x0 (d,), state_whiteners (K, d, d) and innovation_whiteners
-    (K, p, p) (:func:`~kalcal.montecarlo.kernels.exact_block_moments`'); sums: the block's
+    (K, p, p), error_centers (K, d), residual_centers (K, p)
+    (:func:`~kalcal.montecarlo.kernels.exact_block_moments`'); sums: the block's
     :class:`~kalcal.montecarlo.accumulators.SumBuffers`, added to. dof: nu of Student-t fixes (0: Gaussian),
     whose p nu more normals follow the fix noises in each interval's draws.
     """
@@ -107,7 +108,7 @@ def sampled_block_moments(
     z = np.empty((p, n))
     x, xbar, residual = _filter_buffers(x0, p, n)
     scratch = _shape_scratch(d, p, n)
-    whiteners = (state_whiteners, innovation_whiteners)
+    whiteners = (state_whiteners, innovation_whiteners, error_centers, residual_centers)
     for k in range(n_updates):
         standard_normals(rng, samples)
         if drifts:
@@ -135,12 +136,14 @@ def sampled_block_moments(
 
 def accel_gps_block_sums(scenario: AccelGpsScenario, rng: np.random.Generator, n: int, phis: np.ndarray,
                          h: np.ndarray, gains: np.ndarray, x0: np.ndarray, state_whiteners: np.ndarray,
-                         innovation_whiteners: np.ndarray, sums: SumBuffers) -> None:
+                         innovation_whiteners: np.ndarray, error_centers: np.ndarray, residual_centers: np.ndarray,
+                         sums: SumBuffers) -> None:
     """Add n sampled realizations of ``scenario`` into ``sums`` through :func:`sampled_block_moments`.
 
     Consumes ``rng`` exactly as :func:`~kalcal.scenarios.accel_gps.sampled.sample_accel_gps_errors` does (same
     draws, same order, same final state). phis (K, d, d), h (p, d), gains (K, d, p), x0 (d,): the filter;
-    state_whiteners (K, d, d), innovation_whiteners (K, p, p): W^T W = P_k^-1, S_k^-1.
+    state_whiteners (K, d, d), innovation_whiteners (K, p, p): W^T W = P_k^-1, S_k^-1; error_centers (K, d),
+    residual_centers (K, p): the predicted means the shape histograms' NEES and NIS are taken about.
     """
     s, t = scenario.scenario, scenario.truth
     dt = s.sample_period
@@ -154,6 +157,7 @@ def accel_gps_block_sums(scenario: AccelGpsScenario, rng: np.random.Generator, n
         fix_times, np.ascontiguousarray(deterministic_motion(scenario, fix_times, true_accel)),
         np.array(scenario.nominal_start(), dtype=float), t.accel_noise_std,
         scenario.fix_stds(t), t.bias_decay(dt), float(np.sqrt(walk_variance)),
-        walk_variance > 0, s.steps_per_update * dt, phis, h, gains, x0, state_whiteners, innovation_whiteners, sums,
+        walk_variance > 0, s.steps_per_update * dt, phis, h, gains, x0, state_whiteners, innovation_whiteners,
+        error_centers, residual_centers, sums,
         np.array(scenario.fix_states, dtype=np.int64), t.gps_measurement_dof,
     )
