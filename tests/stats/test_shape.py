@@ -11,7 +11,7 @@ import pytest
 from scipy import stats
 
 from kalcal.montecarlo.accumulators import SHAPE_BINS, shape_grid, shape_histogram
-from kalcal.montecarlo.sum_kernels import shape_bin
+from kalcal.montecarlo.sum_kernels import add_shape, shape_bin
 from kalcal.stats.distributions import binom_isf
 from kalcal.stats.shape import check_shape, clopper_pearson, grid_ks, ks_bound, ks_pvalue
 
@@ -59,8 +59,13 @@ def test_the_compiled_bin_is_numpys_searchsorted(dof):
         rng.chisquare(dof, 20000), grid.edges, np.nextafter(grid.edges, 0), np.nextafter(grid.edges, np.inf),
         [0.0, 1e-300, 1e6, np.inf, np.nan],
     ])
-    compiled = np.array([shape_bin(x, grid.edges, grid.cells) for x in values])
-    np.testing.assert_array_equal(compiled, np.searchsorted(grid.edges, values, side="right"))
+    compiled = np.array([shape_bin(x, grid.bounds, grid.cells) for x in values])
+    expected = np.searchsorted(grid.edges, values, side="right")
+    np.testing.assert_array_equal(compiled, expected)
+    histogram = np.zeros((2, SHAPE_BINS), dtype=np.int64)
+    add_shape(1, values, grid.bounds, grid.cells, histogram)  # the kernels' loop, shape_bin written out
+    np.testing.assert_array_equal(histogram[1], np.bincount(expected, minlength=SHAPE_BINS))
+    assert not histogram[0].any()
 
 
 def test_pvalue_and_bound_agree():

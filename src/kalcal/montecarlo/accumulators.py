@@ -47,12 +47,13 @@ class ShapeGrid(NamedTuple):
     edges[j - 1] <= x < edges[j] (``np.searchsorted(edges, x, side="right")``), that is j / B <= u <
     (j + 1) / B up to the rounding of the quantiles (about 1e-15 of x). ``cells`` (T,): the bin of the
     start of each cell of width 1 / :data:`SHAPE_CELLS_PER_UNIT` in sqrt(x), so that a compiled kernel
-    finds a value's bin by one look-up and a step or two (:func:`kalcal.montecarlo.sum_kernels.shape_bin`)
+    finds a value's bin by one look-up and one comparison (:func:`kalcal.montecarlo.sum_kernels.shape_bin`)
     instead of a binary search over the B - 1 edges.
     """
 
     edges: np.ndarray
     cells: np.ndarray
+    bounds: np.ndarray  #: the edges between -inf and +inf, (B + 1,): bin j is bounds[j] <= x < bounds[j + 1]
 
 
 @lru_cache(maxsize=32)
@@ -64,9 +65,10 @@ def shape_grid(dof: int, bins: int = SHAPE_BINS) -> ShapeGrid:
     top = int(np.ceil(np.sqrt(edges[-1]) * SHAPE_CELLS_PER_UNIT)) + 2
     starts = (np.arange(top) / SHAPE_CELLS_PER_UNIT) ** 2
     cells = np.searchsorted(edges, starts, side="right").astype(np.int64)
-    edges.flags.writeable = False
-    cells.flags.writeable = False
-    return ShapeGrid(edges, cells)
+    bounds = np.concatenate([[-np.inf], edges, [np.inf]])
+    for array in (edges, cells, bounds):
+        array.flags.writeable = False
+    return ShapeGrid(edges, cells, bounds)
 
 
 def shape_histogram(values: np.ndarray, dof: int) -> np.ndarray:

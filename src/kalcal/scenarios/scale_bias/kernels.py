@@ -20,7 +20,7 @@ The filter step itself is compiled without fast-math (each realization's numbers
 machine and in any tile); only the sums over realizations are reassociated.
 """
 
-# numba cache stamp: kalcal.core.kernels 8b932ca498b00ecc, kalcal.montecarlo.sum_kernels 3a9236f4cced35ec
+# numba cache stamp: kalcal.core.kernels 8b932ca498b00ecc, kalcal.montecarlo.sum_kernels 8bac5adc25e24c15
 
 from __future__ import annotations
 
