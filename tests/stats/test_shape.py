@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from kalcal.montecarlo.accumulators import SHAPE_BINS, shape_grid, shape_histogram
-from kalcal.montecarlo.sum_kernels import add_shape, shape_bin
+from kalcal.montecarlo.accumulators import SHAPE_BINS, shape_grid, shape_histogram, shape_points
+from kalcal.montecarlo.sum_kernels import add_shape
 from kalcal.stats.distributions import binom_isf
-from kalcal.stats.shape import check_shape, clopper_pearson, grid_ks, ks_bound, ks_pvalue
+from kalcal.stats.shape import check_shape, clopper_pearson, grid_ks, grid_steps, ks_bound, ks_pvalue
 
 INFO = SimpleNamespace(update_times=np.arange(1.0, 101.0))
 
@@ -31,41 +31,39 @@ def _statistics(nees: np.ndarray, nis: np.ndarray, d: int, p: int) -> SimpleName
 
 
 @pytest.mark.parametrize("dof", [1, 2, 3, 7])
-def test_grid_statistic_never_exceeds_the_full_one_and_misses_it_by_at_most_a_bin(dof):
+def test_grid_statistic_never_exceeds_the_full_one_and_misses_it_by_at_most_a_step(dof):
     rng = np.random.default_rng(dof)
     values = rng.chisquare(dof, size=(2000, 6))
     values[:, 3] *= 1.2  # an alternative too: the inequality holds for any sample
-    grid, _ = grid_ks(shape_histogram(values, dof))
+    grid, _ = grid_ks(shape_histogram(values, dof), dof)
+    step = grid_steps(dof, SHAPE_BINS)
+    assert step < 0.004
     for k in range(values.shape[1]):
         full = stats.kstest(values[:, k], stats.chi2(dof).cdf).statistic
         assert grid[k] <= full + 1e-12
-        assert grid[k] >= full - 1.0 / SHAPE_BINS - 1e-12
+        assert grid[k] >= full - step - 1e-12
 
 
-def test_histogram_bins_are_those_of_u():
-    """A value's bin is floor(B F(x)) but for values within rounding of a bin's edge."""
+def test_histogram_bins_are_equal_in_sqrt_x():
     rng = np.random.default_rng(5)
     values = rng.chisquare(3, size=(20000, 1))
-    u = stats.chi2(3).cdf(values[:, 0])
-    expected = np.bincount(np.floor(u * SHAPE_BINS).astype(int), minlength=SHAPE_BINS)
-    assert np.abs(shape_histogram(values, 3)[0] - expected).sum() <= 2  # an edge's rounding moves a value at most
+    points = np.concatenate([[0.0], shape_points(3), [np.inf]])
+    expected, _ = np.histogram(values[:, 0], bins=points)
+    np.testing.assert_array_equal(shape_histogram(values, 3)[0], expected)
 
 
 @pytest.mark.parametrize("dof", [1, 2, 4, 12])
-def test_the_compiled_bin_is_numpys_searchsorted(dof):
-    grid = shape_grid(dof)
+def test_the_compiled_bins_are_numpys(dof):
     rng = np.random.default_rng(dof)
+    points = shape_points(dof)
     values = np.concatenate([
-        rng.chisquare(dof, 20000), grid.edges, np.nextafter(grid.edges, 0), np.nextafter(grid.edges, np.inf),
-        [0.0, 1e-300, 1e6, np.inf, np.nan],
+        rng.chisquare(dof, 20000), points, np.nextafter(points, 0), np.nextafter(points, np.inf),
+        [0.0, -1.0, 1e-300, 1e6, np.inf, np.nan],
     ])
-    compiled = np.array([shape_bin(x, grid.bounds, grid.cells) for x in values])
-    expected = np.searchsorted(grid.edges, values, side="right")
-    np.testing.assert_array_equal(compiled, expected)
     histogram = np.zeros((2, SHAPE_BINS), dtype=np.int64)
-    add_shape(1, values, grid.bounds, grid.cells, histogram)  # the kernels' loop, shape_bin written out
-    np.testing.assert_array_equal(histogram[1], np.bincount(expected, minlength=SHAPE_BINS))
-    assert not histogram[0].any()
+    add_shape(1, values, shape_grid(dof).scale, histogram)
+    np.testing.assert_array_equal(histogram[1], shape_histogram(values[:, None], dof)[0])
+    assert not histogram[0].any() and histogram[1].sum() == values.size
 
 
 def test_pvalue_and_bound_agree():

@@ -18,65 +18,59 @@ is not N(0, I)).
 
 **The shape of NEES and NIS.** Each realization's NEES at update k is chi-square(d) and its NIS
 chi-square(p) under the null, so u = F_chi2(NEES) is U(0, 1). The sums keep, per update, a histogram of
-u on :data:`SHAPE_BINS` equal bins (``nees_histogram``, ``nis_histogram``, counts (K, B)), summed per block
-like every other sum, so that :mod:`kalcal.stats.shape` tests the pooled values against chi-square with
-memory flat in N. A value is binned on the chi-square scale itself, against the quantiles
-F^-1(j / B) (:class:`ShapeGrid`), so no chi-square CDF is evaluated per realization.
+each value on :data:`SHAPE_BINS` bins equal in sqrt(x) (``nees_histogram``, ``nis_histogram``, counts
+(K, B)), summed per block like every other sum, so that :mod:`kalcal.stats.shape` tests the pooled values
+against chi-square with memory flat in N (:class:`ShapeGrid`: no chi-square function is evaluated per
+realization, nor any here).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
-from functools import lru_cache
 from typing import NamedTuple
 
 import numpy as np
 
-#: equal bins of u = F_chi2(x) in the NEES and NIS histograms (B): the shape check's grid is u = j / B
-SHAPE_BINS = 1024
-#: cells per unit of sqrt(x) in :class:`ShapeGrid`'s look-up table: finer than any bin where the density of
-#: sqrt(x) peaks (at most sqrt(2 / pi) ~ 0.80 for chi(1), so a bin is at least 1 / (0.8 B) ~ 0.0012 wide in
-#: sqrt(x)), so that a value's bin is its cell's first bin or the next
-SHAPE_CELLS_PER_UNIT = 2048
+#: bins of each update's NEES and NIS histograms (B): equal in sqrt(x), over [0, sqrt(dof) + SHAPE_SPAN]
+SHAPE_BINS = 2048
+#: the histograms' span in sqrt(x) past sqrt(dof): chi(dof) = sqrt(chi-square(dof)) lies beyond sqrt(dof) + 6
+#: with probability below 1e-9 for every dof (its spread is about 0.7); values beyond fall in the last bin
+SHAPE_SPAN = 6.0
 
 
 class ShapeGrid(NamedTuple):
-    """The bins of a chi-square(dof) value x by u = F(x), on the chi-square scale.
+    """The bins of a chi-square(dof) value x: bin j = min(floor(sqrt(x) ``scale``), B - 1) (0 for x <= 0),
+    so that bin j holds (j / scale)^2 <= x < ((j + 1) / scale)^2, the last bin everything above.
 
-    ``edges`` (B - 1,): the quantiles F^-1(j / B), j = 1 .. B - 1; x falls in bin j when
-    edges[j - 1] <= x < edges[j] (``np.searchsorted(edges, x, side="right")``), that is j / B <= u <
-    (j + 1) / B up to the rounding of the quantiles (about 1e-15 of x). ``cells`` (T,): the bin of the
-    start of each cell of width 1 / :data:`SHAPE_CELLS_PER_UNIT` in sqrt(x), so that a compiled kernel
-    finds a value's bin by one look-up and one comparison (:func:`kalcal.montecarlo.sum_kernels.shape_bin`)
-    instead of a binary search over the B - 1 edges.
+    Equal bins of sqrt(x), not of u = F(x): binning needs no chi-square quantile (numpy and the compiled
+    kernels compute the same floor of the same product, so they bin each value alike), and
+    :mod:`kalcal.stats.shape` compares the counts below x_j = (j / scale)^2 with F(x_j). The steps of u
+    between grid points are at most the density of chi(dof) (below sqrt(2 / pi) ~ 0.80) times
+    1 / scale, about 0.003 at dof 3.
     """
 
-    edges: np.ndarray
-    cells: np.ndarray
-    bounds: np.ndarray  #: the edges between -inf and +inf, (B + 1,): bin j is bounds[j] <= x < bounds[j + 1]
+    scale: float  #: bins per unit of sqrt(x): B / (sqrt(dof) + SHAPE_SPAN)
 
 
-@lru_cache(maxsize=32)
 def shape_grid(dof: int, bins: int = SHAPE_BINS) -> ShapeGrid:
-    """The :class:`ShapeGrid` of chi-square(``dof``) on ``bins`` equal bins of u (cached: read-only arrays)."""
-    from scipy import special  # chi-square's quantile as kalcal.stats.distributions.chi2_ppf computes it
+    """The :class:`ShapeGrid` of chi-square(``dof``) values on ``bins`` bins."""
+    return ShapeGrid(float(bins / (np.sqrt(dof) + SHAPE_SPAN)))
 
-    edges = 2.0 * special.gammaincinv(dof / 2.0, np.arange(1, bins) / bins)
-    top = int(np.ceil(np.sqrt(edges[-1]) * SHAPE_CELLS_PER_UNIT)) + 2
-    starts = (np.arange(top) / SHAPE_CELLS_PER_UNIT) ** 2
-    cells = np.searchsorted(edges, starts, side="right").astype(np.int64)
-    bounds = np.concatenate([[-np.inf], edges, [np.inf]])
-    for array in (edges, cells, bounds):
-        array.flags.writeable = False
-    return ShapeGrid(edges, cells, bounds)
+
+def shape_points(dof: int, bins: int = SHAPE_BINS) -> np.ndarray:
+    """x_j = (j / scale)^2, j = 1 .. B - 1: the grid points whose counts below are known exactly, (B - 1,)."""
+    return (np.arange(1, bins) / shape_grid(dof, bins).scale) ** 2
 
 
 def shape_histogram(values: np.ndarray, dof: int) -> np.ndarray:
     """Counts (K, B) of each update's values (n, K) on :func:`shape_grid`'s bins: the numpy definition of
-    the histograms the compiled kernels add into."""
-    edges = shape_grid(dof).edges
+    the histograms the compiled kernels add into (NaN counted in the last bin)."""
+    scale = shape_grid(dof).scale
     n_updates = values.shape[1]
-    index = np.searchsorted(edges, values, side="right") + SHAPE_BINS * np.arange(n_updates)
+    with np.errstate(invalid="ignore"):
+        where = np.sqrt(np.where(values > 0.0, values, 0.0)) * scale
+        where = np.where(np.isnan(values), SHAPE_BINS - 1.0, np.minimum(where, SHAPE_BINS - 1.0))
+    index = where.astype(np.int64) + SHAPE_BINS * np.arange(n_updates)
     return np.bincount(index.ravel(), minlength=n_updates * SHAPE_BINS).reshape(n_updates, SHAPE_BINS).astype(np.int64)
 
 
@@ -173,8 +167,8 @@ class SumBuffers(NamedTuple):
     whitened_error: np.ndarray
     whitened_outer: np.ndarray  #: sum eps_k eps_k^T, (K, d, d); (0, d, d) where P_k is shared
     whitened_estimate: np.ndarray  #: sum eps_k xhat_k^T, (K, d, d); (0, d, d) where P_k is shared
-    nees_histogram: np.ndarray  #: counts of u = F_chi2(d)(NEES) per update on B bins, int64 (K, B)
-    nis_histogram: np.ndarray  #: counts of u = F_chi2(p)(NIS) per update on B bins, int64 (K, B)
+    nees_histogram: np.ndarray  #: counts of the NEES per update on :func:`shape_grid`'s bins, int64 (K, B)
+    nis_histogram: np.ndarray  #: counts of the NIS likewise, int64 (K, B)
     nees_grid: ShapeGrid  #: the bins of the NEES (chi-square(d)); read only, not a sum
     nis_grid: ShapeGrid  #: the bins of the NIS (chi-square(p)); read only, not a sum
 
@@ -237,10 +231,10 @@ class MomentSums:
     whitened_error: np.ndarray | None = None
     whitened_outer: np.ndarray | None = None  #: sum eps_k eps_k^T, (K, d, d); None where P_k is shared
     whitened_estimate: np.ndarray | None = None  #: sum eps_k xhat_k^T, (K, d, d); None where P_k is shared
-    #: counts of u = F_chi2(d)(NEES) on :data:`SHAPE_BINS` equal bins per update, int64 (K, B); None for sums
-    #: that did not keep it
+    #: counts of the NEES on :func:`shape_grid`'s bins per update, int64 (K, B); None for sums that did not
+    #: keep it
     nees_histogram: np.ndarray | None = None
-    nis_histogram: np.ndarray | None = None  #: counts of u = F_chi2(p)(NIS) likewise, int64 (K, B)
+    nis_histogram: np.ndarray | None = None  #: counts of the NIS likewise, int64 (K, B)
 
     @classmethod
     def from_block(cls, block: BlockResult) -> MomentSums:
@@ -347,9 +341,9 @@ class EnsembleStatistics:
     mean_whitened_error: np.ndarray | None = None
     whitened_second_moment: np.ndarray | None = None  #: E[eps_k eps_k^T], (K, d, d), or None as above
     whitened_estimate: np.ndarray | None = None  #: E[eps_k xhat_k^T], (K, d, d), or None as above
-    #: counts of u = F_chi2(d)(NEES) on B equal bins per update, (K, B) (:class:`MomentSums`); None if not kept
+    #: counts of the NEES on :func:`shape_grid`'s bins per update, (K, B) (:class:`MomentSums`); None if not kept
     nees_histogram: np.ndarray | None = None
-    nis_histogram: np.ndarray | None = None  #: counts of u = F_chi2(p)(NIS) likewise, (K, B); None if not kept
+    nis_histogram: np.ndarray | None = None  #: counts of the NIS likewise, (K, B); None if not kept
 
 
 def ensemble_statistics(sums: MomentSums) -> EnsembleStatistics:

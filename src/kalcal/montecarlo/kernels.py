@@ -14,7 +14,7 @@ the innovations are formed in their rows of the block's residual buffer, not cop
 both consume the same draws and agree to rounding.
 """
 
-# numba cache stamp: kalcal.montecarlo.sum_kernels 8bac5adc25e24c15
+# numba cache stamp: kalcal.montecarlo.sum_kernels 1ed5637ca40b0768
 
 from __future__ import annotations
 
@@ -71,9 +71,9 @@ def _filter_and_accumulate(k, truth, z, x, xbar, residual, phi, h, gains, sums, 
     accumulate(k, 0, truth, x, residual, shared, shared, np.empty((0, 0, 0)), np.empty((0, n)), sums, not keep)
     values, state_work, innovation_work = scratch
     whitened_squares(values, whiteners[0][k], truth, whiteners[2][k], state_work)
-    add_shape(k, values, sums.nees_grid.bounds, sums.nees_grid.cells, sums.nees_histogram)
+    add_shape(k, values, sums.nees_grid.scale, sums.nees_histogram)
     whitened_squares(values, whiteners[1][k], residual, whiteners[3][k], innovation_work)
-    add_shape(k, values, sums.nis_grid.bounds, sums.nis_grid.cells, sums.nis_histogram)
+    add_shape(k, values, sums.nis_grid.scale, sums.nis_histogram)
 
 
 @numba.njit(nogil=True, cache=True)

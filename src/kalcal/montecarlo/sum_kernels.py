@@ -15,7 +15,6 @@ from __future__ import annotations
 import math
 
 import numba
-import numpy as np
 
 
 FAST = {"reassoc", "contract"}  #: the fast-math flags of the reductions over realizations
@@ -57,61 +56,18 @@ def total(u):
     return acc
 
 
-#: cells per unit of sqrt(x) of a shape grid (:data:`kalcal.montecarlo.accumulators.SHAPE_CELLS_PER_UNIT`)
-_CELLS_PER_UNIT = 2048.0
-
-
 @numba.njit(nogil=True, cache=True)
-def _shape_bin_stepped(j, x, bounds):
-    """The bin of x by stepping from j: the rare path of :func:`shape_bin` (NaN, +inf, a cell one off)."""
-    top = bounds.shape[0] - 2
-    if x != x:  # NaN: last, as searchsorted sorts it
-        return top
-    while j < top and bounds[j + 1] <= x:
-        j += 1
-    while j > 0 and bounds[j] > x:
-        j -= 1
-    return j
-
-
-@numba.njit(nogil=True, cache=True)
-def shape_bin(x, bounds, cells):
-    """The bin of a chi-square value x on a :class:`~kalcal.montecarlo.accumulators.ShapeGrid`: the j with
-    bounds[j] <= x < bounds[j + 1] (``np.searchsorted(edges, x, side="right")``, exactly, whatever the
-    rounding of sqrt).
-
-    The cell of sqrt(x) gives the bin of the cell's start, and a cell holds at most one edge, so one
-    comparison, added as a number rather than taken as a branch, finds the bin; the check after it, which
-    fails only for a NaN, a value past the last cell or a cell taken one off by the rounding of sqrt, sends
-    those to :func:`_shape_bin_stepped`. (Measured on one thread: 5 ns a value; a loop of data-dependent
-    steps from the cell, the CPU mispredicting its branches, took 25 ns.) Compiled without fast-math: the
-    comparisons decide a count.
-    """
-    where = math.sqrt(x if x > 0.0 else 0.0) * _CELLS_PER_UNIT  # NaN: 0, caught by the check below
-    j = cells[int(min(where, cells.shape[0] - 1.0))]  # clamped as a float: no overflow for x = inf
-    j += bounds[j + 1] <= x
-    if not (bounds[j] <= x and x < bounds[j + 1]):
-        j = _shape_bin_stepped(min(j, bounds.shape[0] - 2), x, bounds)
-    return j
-
-
-@numba.njit(nogil=True, cache=True)
-def add_shape(k, values, bounds, cells, histogram):
+def add_shape(k, values, scale, histogram):
     """Count each of the n ``values`` (n,) (NEES or NIS of n realizations at update k) into its bin of
-    ``histogram[k]`` (K, B)."""
-    last_cell = cells.shape[0] - 1.0
-    n = values.shape[0]
-    cell = np.empty(n, dtype=np.int64)
-    for i in range(n):  # the cells first, in a loop that vectorizes (3 ns a value in all, against 5 in one loop)
+    ``histogram[k]`` (K, B): min(floor(sqrt(x) scale), B - 1), 0 for x <= 0, B - 1 for NaN
+    (:class:`~kalcal.montecarlo.accumulators.ShapeGrid`; the same floor of the same product as numpy's
+    :func:`~kalcal.montecarlo.accumulators.shape_histogram`). Compiled without fast-math: the bins decide
+    a count."""
+    last = histogram.shape[1] - 1.0
+    for i in range(values.shape[0]):
         x = values[i]
-        cell[i] = int(min(math.sqrt(x if x > 0.0 else 0.0) * _CELLS_PER_UNIT, last_cell))
-    for i in range(n):  # shape_bin, written out: as a call it cost three times as much
-        x = values[i]
-        j = cells[cell[i]]
-        j += bounds[j + 1] <= x
-        if not (bounds[j] <= x and x < bounds[j + 1]):
-            j = _shape_bin_stepped(min(j, bounds.shape[0] - 2), x, bounds)
-        histogram[k, j] += 1
+        where = math.sqrt(x if x > 0.0 else 0.0) * scale
+        histogram[k, int(where if where < last else last) if x == x else int(last)] += 1
 
 
 @numba.njit(nogil=True, cache=True, fastmath=FAST)
@@ -193,8 +149,8 @@ def accumulate(k, first, error, estimate, residual, nees, nis, cov, white, sums,
     if own:
         sums.nees[k] += total(nees)
         sums.nis[k] += total(nis)
-        add_shape(k, nees, sums.nees_grid.bounds, sums.nees_grid.cells, sums.nees_histogram)
-        add_shape(k, nis, sums.nis_grid.bounds, sums.nis_grid.cells, sums.nis_histogram)
+        add_shape(k, nees, sums.nees_grid.scale, sums.nees_histogram)
+        add_shape(k, nis, sums.nis_grid.scale, sums.nis_histogram)
     if white.shape[0] and sums.whitened_error.shape[0]:
         for a in range(d):
             sums.whitened_error[k, a] += total(white[a])

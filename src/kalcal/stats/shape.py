@@ -7,18 +7,19 @@ chi-square(d) and its NIS chi-square(p), and u = F_chi2(NEES) is U(0, 1) (the pr
 transform). :func:`check_shape` tests, at each update, the pooled u of the N realizations against U(0, 1)
 with the Kolmogorov-Smirnov statistic D_k = sup_t |F_N(t) - t|.
 
-**On a grid, memory flat in N.** The Monte Carlo keeps per update a histogram of u on B = 1024 equal bins
-(:class:`kalcal.montecarlo.accumulators.MomentSums`'s ``nees_histogram`` and ``nis_histogram``), summed per
-block. From it the empirical CDF is known exactly at the grid points t_j = j / B (the share of u below
-t_j), so the statistic computed is
+**On a grid, memory flat in N.** The Monte Carlo keeps per update a histogram of each statistic on
+B = 2048 bins equal in sqrt(x) (:class:`kalcal.montecarlo.accumulators.MomentSums`'s ``nees_histogram``
+and ``nis_histogram``; :class:`~kalcal.montecarlo.accumulators.ShapeGrid`), summed per block. From it the
+empirical CDF is known exactly at the grid points x_j = (j / scale)^2 (the share of values below x_j), so
+the statistic computed is
 
-    D_k^grid = max over j = 1 .. B - 1 of |C_k(j) / N - j / B|,   C_k(j) the count in bins 0 .. j - 1,
+    D_k^grid = max over j = 1 .. B - 1 of |C_k(j) / N - F(x_j)|,   C_k(j) the count in bins 0 .. j - 1,
 
-the supremum over a subset of the t of the full statistic: D_k^grid <= D_k for every sample (up to the
-rounding of the quantiles F^-1(j / B) the bins are cut at, about 1e-15 relative). Its p-value is taken
-from the law of the full statistic, P(D_k >= D_k^grid), which is therefore conservative: under the null
-P(p <= a) <= a (valid), at the price of a little power (D_k <= D_k^grid + 1 / B, so the loss is at most a
-shift of 1 / 1024 in D, against a bound of about 1.9 / sqrt(N) at N = 10^4 and K = 150).
+the supremum over a subset of the points of the full statistic (u_j = F(x_j) are points of [0, 1]):
+D_k^grid <= D_k for every sample. Its p-value is taken from the law of the full statistic,
+P(D_k >= D_k^grid), which is therefore conservative: under the null P(p <= a) <= a (valid), at the price
+of a little power (D_k <= D_k^grid + the largest step of u between neighbouring grid points, about 0.003
+at d = 3, against a bound of about 0.019 at N = 10^4 and K = 150: :func:`grid_steps`).
 tests/stats/test_shape.py holds the grid statistic to scipy's full one on the same values and the
 rejection rate of null ensembles to alpha within its binomial bound.
 
@@ -51,6 +52,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy import special
 
+from kalcal.montecarlo.accumulators import shape_points
+from kalcal.stats.distributions import chi2_cdf
 from kalcal.stats.results import Cause, CheckPart, CheckResult, check_result, combined_pvalue, failed_cause, family_pvalue
 
 if TYPE_CHECKING:
@@ -62,6 +65,7 @@ __all__ = [
     "ShapePower",
     "check_shape",
     "grid_ks",
+    "grid_steps",
     "ks_bound",
     "ks_pvalue",
     "shape_power",
@@ -69,30 +73,43 @@ __all__ = [
 
 #: the tests of the shape check, each held to an equal share of its alpha
 SHAPE_PARTS = ("nees", "nis")
-#: the upper tail the detail reports: the share of u above 1 - TAIL_BINS / B (about the 0.99 quantile)
-TAIL_BINS = 10
+#: the upper tail the detail reports: the share of values above the grid point nearest above this u
+TAIL_U = 0.99
 
 
-def grid_ks(histogram: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """D^grid of each update's histogram of u, and the grid point it lies at.
+def grid_u(dof: int, bins: int) -> np.ndarray:
+    """u_j = F_chi2(dof)(x_j) at the histograms' grid points x_j, j = 1 .. B - 1, (B - 1,)."""
+    return chi2_cdf(shape_points(dof, bins), dof)
+
+
+def grid_steps(dof: int, bins: int) -> float:
+    """The largest step of u between neighbouring grid points (0, u_1, ..., u_{B-1}, 1): what the grid
+    statistic can miss of the full one at most."""
+    return float(np.diff(np.concatenate([[0.0], grid_u(dof, bins), [1.0]])).max())
+
+
+def grid_ks(histogram: np.ndarray, dof: int) -> tuple[np.ndarray, np.ndarray]:
+    """D^grid of each update's histogram of chi-square(``dof``) values, and the u = F(x_j) it lies at.
 
     Parameters
     ----------
     histogram : ndarray, shape (K, B)
-        Counts of u on B equal bins of [0, 1], N = the row sums (every row the same N).
+        Counts on :func:`~kalcal.montecarlo.accumulators.shape_grid`'s bins, N = the row sums.
+    dof : int
+        The chi-square's degrees of freedom (d for the NEES, p for the NIS).
 
     Returns
     -------
     statistic : ndarray, shape (K,)
-        max over j = 1 .. B - 1 of |C(j) / N - j / B|, C(j) the count in bins 0 .. j - 1 (NaN for N = 0).
+        max over j = 1 .. B - 1 of |C(j) / N - F(x_j)|, C(j) the count in bins 0 .. j - 1 (NaN for N = 0).
     where : ndarray, shape (K,)
-        The grid point t = j / B of the largest difference.
+        F(x_j) of the largest difference.
     """
     histogram = np.asarray(histogram)
     n_updates, bins = histogram.shape
     count = histogram.sum(axis=1).astype(float)
     below = np.cumsum(histogram, axis=1)[:, :-1].astype(float)  # C(j), j = 1 .. B - 1
-    grid = np.arange(1, bins) / bins
+    grid = grid_u(dof, bins)
     with np.errstate(invalid="ignore", divide="ignore"):
         distance = np.abs(below / count[:, None] - grid)
     j = np.argmax(distance, axis=1)
@@ -114,17 +131,20 @@ def ks_bound(alpha: float, comparisons: int, count: int) -> float:
     return float(special.smirnovi(int(count), alpha / (2.0 * comparisons)))
 
 
-def _part(name: str, histogram: np.ndarray, count: int, alpha: float) -> tuple[CheckPart, int, float, float]:
-    """One part (``nees`` or ``nis``) at its share ``alpha``; with the worst update, its t and its tail share."""
-    n_updates = histogram.shape[0]
-    statistic, where = grid_ks(histogram)
+def _part(name: str, histogram: np.ndarray, dof: int, count: int, alpha: float):
+    """One part (``nees`` or ``nis``) at its share ``alpha``; with the worst update, its u, its upper tail's
+    share and that share's expectation."""
+    n_updates, bins = histogram.shape
+    statistic, where = grid_ks(histogram, dof)
     per_update = ks_pvalue(statistic, count)
     k = int(np.nanargmin(per_update)) if not np.all(np.isnan(per_update)) else 0
     pvalue = family_pvalue(per_update)
     bound = ks_bound(alpha, n_updates, count)
     part = CheckPart(name, float(statistic[k]), pvalue, None, bound, 1.0 - alpha, alpha, n_updates, pvalue >= alpha)
-    tail = float(histogram[k, -TAIL_BINS:].sum() / max(count, 1))
-    return part, k, float(where[k]), tail
+    u = grid_u(dof, bins)
+    j = min(int(np.searchsorted(u, TAIL_U)), bins - 2)  # the first grid point with u_j >= 0.99
+    tail = float(histogram[k, j + 1:].sum() / max(count, 1))
+    return part, k, float(where[k]), tail, float(1.0 - u[j])
 
 
 def check_shape(s: EnsembleStatistics, info: ProblemInfo, confidence: float) -> CheckResult:
@@ -147,16 +167,15 @@ def check_shape(s: EnsembleStatistics, info: ProblemInfo, confidence: float) -> 
     share = alpha / len(SHAPE_PARTS)
     d, p = s.mean_error.shape[1], s.mean_residual.shape[1]
     found = {
-        "nees": _part("nees", s.nees_histogram, s.count, share),
-        "nis": _part("nis", s.nis_histogram, s.count, share),
+        "nees": _part("nees", s.nees_histogram, d, s.count, share),
+        "nis": _part("nis", s.nis_histogram, p, s.count, share),
     }
     parts = tuple(found[name][0] for name in SHAPE_PARTS)
     pvalue = combined_pvalue(parts)
     passed = pvalue >= alpha
     lead = min(SHAPE_PARTS, key=lambda name: (found[name][0].pvalue, SHAPE_PARTS.index(name)))
-    part, k, where, tail = found[lead]
+    part, k, where, tail, expected_tail = found[lead]
     dof = {"nees": d, "nis": p}
-    expected_tail = TAIL_BINS / s.nees_histogram.shape[1]
     measured = (
         f"largest distance of the NEES from chi-square({d}) {found['nees'][0].statistic:.4f} and of the NIS from "
         f"chi-square({p}) {found['nis'][0].statistic:.4f} (bounds {found['nees'][0].upper:.4f}, "

@@ -17,7 +17,7 @@ stays the tests' oracle: the sums agree to rounding, not bit for bit, because nu
 interval as one BLAS matrix product, whose order of additions this kernel does not reproduce.
 """
 
-# numba cache stamp: kalcal.montecarlo.kernels 691afe9ad8b35515
+# numba cache stamp: kalcal.montecarlo.kernels daec5e09513f4163
 
 from __future__ import annotations
 
