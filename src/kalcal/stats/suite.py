@@ -28,7 +28,7 @@ residual_whiteness   max over j < k of the correlation of r_k with r_j     at al
                      N sum_{j<k} ||S_k^-1/2 mean(r_k r_j^T) S_j^-T/2||^2  chi-square(p^2 K (K - 1) / 2), m = 1
 nis                  mean NIS at the update farthest from p                 chi-square(N p) / N, m = K
 shape                Kolmogorov-Smirnov distance of u = F_chi2(NEES) from   at alpha / 2 each: 2 P(D+ >= D),
-                     U(0, 1), and of F_chi2(NIS), on a 1024-point grid      Smirnov's law, m = K per part
+                     U(0, 1), and of F_chi2(NIS), at 2047 grid points       Smirnov's law, m = K per part
 ==================== ===================================================== =====================================
 
 Each t or chi-square comparison's two-sided p-value is shown as the normal |z| with that p-value, so
