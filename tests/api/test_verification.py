@@ -28,7 +28,7 @@ def test_verify_writes_summary_and_statistics(tmp_path):
     for key in ("scenario", "realizations", "seed", "engine", "verdict", "tests", "final", "timing"):
         assert key in summary
     assert summary["realizations"] == 3000 and summary["seed"] == 4 and summary["engine"] == "exact"
-    assert [t["name"] for t in summary["tests"]] == ["mean_error", "covariance", "orthogonality", "residual_whiteness", "nis"]
+    assert [t["name"] for t in summary["tests"]] == ["mean_error", "covariance", "orthogonality", "residual_whiteness", "nis", "shape"]
     for test in summary["tests"]:
         assert set(test) >= {"name", "passed", "statistic", "lower", "upper", "detail", "confidence", "comparisons"}
         # p-values and causes as data, not only in the detail
@@ -38,7 +38,11 @@ def test_verify_writes_summary_and_statistics(tmp_path):
     covariance = summary["tests"][1]
     assert [part["name"] for part in covariance["parts"]] == ["elements", "centered_nees"]
     assert all(part["alpha"] == pytest.approx(0.005) for part in covariance["parts"])
-    assert all(test["parts"] == [] for test in summary["tests"] if test["name"] not in ("covariance", "residual_whiteness"))
+    assert all(test["parts"] == [] for test in summary["tests"] if test["name"] not in ("covariance", "residual_whiteness", "shape"))
+    shape = summary["tests"][5]
+    assert [part["name"] for part in shape["parts"]] == ["nees", "nis"]
+    assert all(part["alpha"] == pytest.approx(0.005) for part in shape["parts"])
+    assert shape["pvalue"] == pytest.approx(min(1.0, 2 * min(part["pvalue"] for part in shape["parts"])))
     whiteness = summary["tests"][3]
     assert [part["name"] for part in whiteness["parts"]] == ["pairs", "portmanteau"]
     assert all(part["alpha"] == pytest.approx(0.005) for part in whiteness["parts"])

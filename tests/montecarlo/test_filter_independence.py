@@ -46,7 +46,11 @@ def _explicit_filter(assignments: list[str]) -> list[str]:
     return [*assignments, *extra]
 
 
-def _perturbed(name: str, value: float | None) -> float:
+def _perturbed(name: str, value: float | None) -> float | str:
+    if name == "gps_noise":  # the law of the fixes' noise: the other one
+        return "student-t" if value == "gaussian" else "gaussian"
+    if name == "gps_noise_dof":  # a whole number of degrees of freedom
+        return value + 2
     if value is None:  # a density the truth was not given: one
         return 3e-3
     return 5.0 if name == "bias_correlation_time" and value == 0 else (2e-4 if value == 0 else 1.7 * value + 0.3)
@@ -82,7 +86,8 @@ def test_accel_gps_filter_ignores_every_truth_setting_it_does_not_share(config, 
             build_scenario("accel-gps", None, [*assignments, "truth.scale_std=1e-3"])
         return
     base = _accel_filter(assignments)
-    moved = _accel_filter([*assignments, f"truth.{name}={_perturbed(name, truth_value)!r}"])
+    value = _perturbed(name, truth_value)
+    moved = _accel_filter([*assignments, f"truth.{name}={value if isinstance(value, str) else repr(value)}"])
     changed = _differing(base, moved)
     has_scale = "filter.scale_std=1e-3" in assignments
     if has_scale and name in SHARED_PROFILE:

@@ -151,7 +151,7 @@ def test_lead_figures_keeps_those_drawn_in_order_up_to_four():
     [
         # the default scenario (Euler against the analytic truth), shorter
         ({"scenario.duration": 6}, "explained", f"Fails only through the known model error of {EULER}"),
-        ({"scenario.duration": 6, "scenario.integration": "trapezoid"}, "pass", "Passes: all 5 checks"),
+        ({"scenario.duration": 6, "scenario.integration": "trapezoid"}, "pass", "Passes: all 6 checks"),
         # a filter whose GPS velocity noise is half the truth's: its covariance and NIS overconfident
         (
             {"scenario.duration": 6, "scenario.integration": "trapezoid", "filter.gps_velocity_std": 0.02},

@@ -67,12 +67,12 @@ def test_failed_check_detail_leads_the_failures_section(report_run):
 
 
 def test_header_states_each_checks_level_and_the_verdicts_bound(report_run):
-    """Five checks at 99% each: a correct filter fails a given one with probability <= 1%, the verdict <= 5%."""
+    """Six checks at 99% each: a correct filter fails a given one with probability <= 1%, the verdict <= 6%."""
     page = html.unescape(report_run[1].read_text(encoding="utf-8"))
     assert "family-wise confidence" not in page
     statement = (
         "each check at 99% confidence (a correct filter fails it with probability at most 1%); a correct filter "
-        "fails at least one of the 5 checks with probability at most 5% (Bonferroni)"
+        "fails at least one of the 6 checks with probability at most 6% (Bonferroni)"
     )
     header = page[page.index("<h1>") : page.index("<nav>")]
     assert statement in header

@@ -236,10 +236,15 @@ def truth_equals(analysis) -> bool | None:
     return None if analysis is None else truth_equals_filter(analysis)
 
 
-def equals_filter(scenario, analysis) -> bool:
+def equals_filter(scenario, analysis, problem=None) -> bool:
     """Whether the run's truth equals its filter: from the exact analysis where there is one, from the
     settings where there is none (:meth:`~kalcal.scenarios.protocol.Scenario.truth_is_filter`). Then every
-    failed check is a false alarm at its stated rate."""
+    failed check is a false alarm at its stated rate. A truth whose measurement noise is not Gaussian
+    (``problem.truth.measurement_dof``: Student-t fixes) never equals the filter: the analysis sees its
+    second moments alone, which are the filter's, and the shape check sees its law, which is not."""
+    truth = getattr(problem, "truth", None)
+    if getattr(truth, "measurement_dof", 0):
+        return False
     if analysis is not None:
         return bool(truth_equals(analysis))
     return scenario.truth_is_filter()
@@ -343,7 +348,7 @@ def compute_verification(
     info = problem.info
     analysis = exact_analysis(scenario, problem)  # the same filter against the same truth, without sampling
     exact = exact_prediction(problem, analysis)
-    if equals_filter(scenario, analysis):  # a failure is a false alarm at its stated rate, never a cause
+    if equals_filter(scenario, analysis, problem):  # a failure is a false alarm at its stated rate, never a cause
         checks = [as_false_alarm(check) for check in checks]
     effects = problem_effects(problem, run.sums, confidence)
     if effects is not None:

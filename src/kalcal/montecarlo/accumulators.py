@@ -15,6 +15,13 @@ Where every realization shares P_k (fixed gains) the whitened sums follow from t
 (scale-bias) each realization is whitened by its own P_k and the sums keep sum eps, sum eps eps^T and
 sum eps xhat^T: the mean P is no valid reference when P varies (by Jensen's inequality a whitening by it
 is not N(0, I)).
+
+**The shape of NEES and NIS.** Each realization's NEES at update k is chi-square(d) and its NIS
+chi-square(p) under the null, so u = F_chi2(NEES) is U(0, 1). The sums keep, per update, a histogram of
+each value on :data:`SHAPE_BINS` bins equal in sqrt(x) (``nees_histogram``, ``nis_histogram``, counts
+(K, B)), summed per block like every other sum, so that :mod:`kalcal.stats.shape` tests the pooled values
+against chi-square with memory flat in N (:class:`ShapeGrid`: no chi-square function is evaluated per
+realization, nor any here).
 """
 
 from __future__ import annotations
@@ -23,6 +30,48 @@ from dataclasses import dataclass, fields
 from typing import NamedTuple
 
 import numpy as np
+
+#: bins of each update's NEES and NIS histograms (B): equal in sqrt(x), over [0, sqrt(dof) + SHAPE_SPAN]
+SHAPE_BINS = 2048
+#: the histograms' span in sqrt(x) past sqrt(dof): chi(dof) = sqrt(chi-square(dof)) lies beyond sqrt(dof) + 6
+#: with probability below 1e-9 for every dof (its spread is about 0.7); values beyond fall in the last bin
+SHAPE_SPAN = 6.0
+
+
+class ShapeGrid(NamedTuple):
+    """The bins of a chi-square(dof) value x: bin j = min(floor(sqrt(x) ``scale``), B - 1) (0 for x <= 0),
+    so that bin j holds (j / scale)^2 <= x < ((j + 1) / scale)^2, the last bin everything above.
+
+    Equal bins of sqrt(x), not of u = F(x): binning needs no chi-square quantile (numpy and the compiled
+    kernels compute the same floor of the same product, so they bin each value alike), and
+    :mod:`kalcal.stats.shape` compares the counts below x_j = (j / scale)^2 with F(x_j). The steps of u
+    between grid points are at most the density of chi(dof) (below sqrt(2 / pi) ~ 0.80) times
+    1 / scale, about 0.003 at dof 3.
+    """
+
+    scale: float  #: bins per unit of sqrt(x): B / (sqrt(dof) + SHAPE_SPAN)
+
+
+def shape_grid(dof: int, bins: int = SHAPE_BINS) -> ShapeGrid:
+    """The :class:`ShapeGrid` of chi-square(``dof``) values on ``bins`` bins."""
+    return ShapeGrid(float(bins / (np.sqrt(dof) + SHAPE_SPAN)))
+
+
+def shape_points(dof: int, bins: int = SHAPE_BINS) -> np.ndarray:
+    """x_j = (j / scale)^2, j = 1 .. B - 1: the grid points whose counts below are known exactly, (B - 1,)."""
+    return (np.arange(1, bins) / shape_grid(dof, bins).scale) ** 2
+
+
+def shape_histogram(values: np.ndarray, dof: int) -> np.ndarray:
+    """Counts (K, B) of each update's values (n, K) on :func:`shape_grid`'s bins: the numpy definition of
+    the histograms the compiled kernels add into (NaN counted in the last bin)."""
+    scale = shape_grid(dof).scale
+    n_updates = values.shape[1]
+    with np.errstate(invalid="ignore"):
+        where = np.sqrt(np.where(values > 0.0, values, 0.0)) * scale
+        where = np.where(np.isnan(values), SHAPE_BINS - 1.0, np.minimum(where, SHAPE_BINS - 1.0))
+    index = where.astype(np.int64) + SHAPE_BINS * np.arange(n_updates)
+    return np.bincount(index.ravel(), minlength=n_updates * SHAPE_BINS).reshape(n_updates, SHAPE_BINS).astype(np.int64)
 
 
 class BlockResult(NamedTuple):
@@ -38,6 +87,10 @@ class BlockResult(NamedTuple):
     #: for data-dependent gains; required, so that a realization's P is never a block mean
     filter_cov: np.ndarray
     normalized_residual: np.ndarray | None = None  #: L_k^{-1} r_k with S_k = L_k L_k^T, (n, K, p), if known
+    #: the values the shape histograms bin, (n, K) each: the NEES and NIS of the error and innovation
+    #: centered on their predicted means (a fixed-gain problem's model error); None: ``nees`` and ``nis``
+    shape_nees: np.ndarray | None = None
+    shape_nis: np.ndarray | None = None
 
 
 def shares_cov(filter_cov: np.ndarray) -> bool:
@@ -114,6 +167,10 @@ class SumBuffers(NamedTuple):
     whitened_error: np.ndarray
     whitened_outer: np.ndarray  #: sum eps_k eps_k^T, (K, d, d); (0, d, d) where P_k is shared
     whitened_estimate: np.ndarray  #: sum eps_k xhat_k^T, (K, d, d); (0, d, d) where P_k is shared
+    nees_histogram: np.ndarray  #: counts of the NEES per update on :func:`shape_grid`'s bins, int64 (K, B)
+    nis_histogram: np.ndarray  #: counts of the NIS likewise, int64 (K, B)
+    nees_grid: ShapeGrid  #: the bins of the NEES (chi-square(d)); read only, not a sum
+    nis_grid: ShapeGrid  #: the bins of the NIS (chi-square(p)); read only, not a sum
 
     @classmethod
     def zeros(
@@ -137,6 +194,10 @@ class SumBuffers(NamedTuple):
             whitened_error=np.zeros((kept, d)),
             whitened_outer=np.zeros((kept, d, d)),
             whitened_estimate=np.zeros((kept, d, d)),
+            nees_histogram=np.zeros((n_updates, SHAPE_BINS), dtype=np.int64),
+            nis_histogram=np.zeros((n_updates, SHAPE_BINS), dtype=np.int64),
+            nees_grid=shape_grid(d),
+            nis_grid=shape_grid(p),
         )
 
 
@@ -173,6 +234,10 @@ class MomentSums:
     #: the effect sizes' sums (:class:`kalcal.stats.effects.EffectLayout` lays them out), flat so that they
     #: merge, checkpoint and travel as every other sum; None for a problem that keeps none
     effect: np.ndarray | None = None
+    #: counts of the NEES on :func:`shape_grid`'s bins per update, int64 (K, B); None for sums that did not
+    #: keep it
+    nees_histogram: np.ndarray | None = None
+    nis_histogram: np.ndarray | None = None  #: counts of the NIS likewise, int64 (K, B)
 
     @classmethod
     def from_block(cls, block: BlockResult) -> MomentSums:
@@ -207,6 +272,8 @@ class MomentSums:
             residual_outer=outer,
             filter_cov=np.asarray(block.filter_cov_sum, dtype=float),
             normalized_residual=None if block.normalized_residual is None else block.normalized_residual.sum(axis=0),
+            nees_histogram=shape_histogram(block.nees if block.shape_nees is None else block.shape_nees, block.error.shape[2]),
+            nis_histogram=shape_histogram(block.nis if block.shape_nis is None else block.shape_nis, p),
             **whitened,
         )
 
@@ -215,6 +282,7 @@ class MomentSums:
         """The sums of ``count`` realizations that a kernel added into ``buffers`` (the pairs by syrk)."""
         sums = buffers._asdict()
         residuals = sums.pop("residuals")
+        del sums["nees_grid"], sums["nis_grid"]
         outer = ResidualProducts.upper(residuals) if residuals.shape[0] else None
         for name in ("whitened_error", "whitened_outer", "whitened_estimate"):
             if not sums[name].shape[0]:  # P_k shared: derived from the raw sums
@@ -276,6 +344,9 @@ class EnsembleStatistics:
     mean_whitened_error: np.ndarray | None = None
     whitened_second_moment: np.ndarray | None = None  #: E[eps_k eps_k^T], (K, d, d), or None as above
     whitened_estimate: np.ndarray | None = None  #: E[eps_k xhat_k^T], (K, d, d), or None as above
+    #: counts of the NEES on :func:`shape_grid`'s bins per update, (K, B) (:class:`MomentSums`); None if not kept
+    nees_histogram: np.ndarray | None = None
+    nis_histogram: np.ndarray | None = None  #: counts of the NIS likewise, (K, B); None if not kept
 
 
 def ensemble_statistics(sums: MomentSums) -> EnsembleStatistics:
@@ -303,4 +374,6 @@ def ensemble_statistics(sums: MomentSums) -> EnsembleStatistics:
         mean_whitened_error=None if sums.whitened_error is None else sums.whitened_error / n,
         whitened_second_moment=None if sums.whitened_outer is None else sums.whitened_outer / n,
         whitened_estimate=None if sums.whitened_estimate is None else sums.whitened_estimate / n,
+        nees_histogram=sums.nees_histogram,
+        nis_histogram=sums.nis_histogram,
     )

@@ -14,14 +14,14 @@ the innovations are formed in their rows of the block's residual buffer, not cop
 both consume the same draws and agree to rounding.
 """
 
-# numba cache stamp: kalcal.montecarlo.sum_kernels 3018497ad2c665be
+# numba cache stamp: kalcal.montecarlo.sum_kernels 1ed5637ca40b0768
 
 from __future__ import annotations
 
 import numba
 import numpy as np
 
-from kalcal.montecarlo.sum_kernels import FAST, accumulate, affine
+from kalcal.montecarlo.sum_kernels import FAST, accumulate, add_shape, affine, whitened_squares
 
 
 @numba.njit(nogil=True, cache=True)
@@ -36,8 +36,14 @@ def standard_normals(rng, out):
 
 
 @numba.njit(nogil=True, cache=True, fastmath=FAST)
-def _filter_and_accumulate(k, truth, z, x, xbar, residual, phi, h, gains, sums):
+def _filter_and_accumulate(k, truth, z, x, xbar, residual, phi, h, gains, sums, whiteners, scratch):
     """One update of the fixed-gain filter for every realization, then the moment sums at update k.
+
+    whiteners: (W_P (K, d, d), W_S (K, p, p), c_e (K, d), c_r (K, p)), W^T W the inverse of the shared P_k
+    and S_k, c the predicted means of the error and the innovation (the model error; zero without one),
+    about which each realization's NEES and NIS are binned; scratch:
+    (values (n,), work (d, n), work (p, n)), where each realization's NEES and NIS are formed for the
+    shape histograms (the only per-realization use of them: their sums follow from the second moments).
 
     truth (d, n): states, overwritten with the errors; z (p, n): measurements; x (d, n): posterior,
     updated in place; residual (p, n): where the innovations are formed when the pairs are not kept (with
@@ -63,6 +69,11 @@ def _filter_and_accumulate(k, truth, z, x, xbar, residual, phi, h, gains, sums):
             truth[a, i] -= x[a, i]
     shared = np.empty(0)
     accumulate(k, 0, truth, x, residual, shared, shared, np.empty((0, 0, 0)), np.empty((0, n)), sums, not keep)
+    values, state_work, innovation_work = scratch
+    whitened_squares(values, whiteners[0][k], truth, whiteners[2][k], state_work)
+    add_shape(k, values, sums.nees_grid.scale, sums.nees_histogram)
+    whitened_squares(values, whiteners[1][k], residual, whiteners[3][k], innovation_work)
+    add_shape(k, values, sums.nis_grid.scale, sums.nis_histogram)
 
 
 @numba.njit(nogil=True, cache=True)
@@ -77,9 +88,31 @@ def _filter_buffers(x0, p, n):
 
 
 @numba.njit(nogil=True, cache=True, fastmath=FAST)
+def student_t(draws, p, dof):
+    """Rows 0 .. p - 1 of ``draws`` (p (1 + dof), n) made unit-variance Student t(dof) in place: row a times
+    sqrt((dof - 2) / chi2_a), chi2_a the sum of squares of rows p + a dof .. p + (a + 1) dof - 1
+    (:func:`kalcal.simulation.exact.student_t_noise`)."""
+    n = draws.shape[1]
+    for a in range(p):
+        for i in range(n):
+            chi2 = 0.0
+            for j in range(dof):
+                w = draws[p + a * dof + j, i]
+                chi2 += w * w
+            draws[a, i] *= np.sqrt((dof - 2) / chi2)
+
+
+@numba.njit(nogil=True, cache=True)
+def _shape_scratch(d, p, n):
+    """The scratch of :func:`_filter_and_accumulate`'s per-realization NEES and NIS: (n,), (d, n), (p, n)."""
+    return np.empty(n), np.empty((d, n)), np.empty((p, n))
+
+
+@numba.njit(nogil=True, cache=True, fastmath=FAST)
 def exact_block_moments(
     y0, u0, rng, transitions, noise, boundary_in, model_error, h_truth, measure,
-    phis, h, gains, x0, sums, error_map, traced, trace,
+    phis, h, gains, x0, state_whiteners, innovation_whiteners, error_centers, residual_centers, sums, error_map,
+    traced, trace, dof,
 ):
     """Sample the exact update-rate truth (:mod:`kalcal.simulation.exact`) and filter it, in one pass.
 
@@ -88,12 +121,17 @@ def exact_block_moments(
     (:func:`standard_normals`: the values and order of ``rng.standard_normal((K, r + c + p, n))``);
     transitions (K, d, d) of the truth over each interval; noise (d, r + c) = [L | b_out]; boundary_in
     (d, c); model_error (K, d); h_truth (p, d); measure (p, p) = G. Filter: phis (K, d_f, d_f) over each
-    interval, h (p, d_f), gains (K, d_f, p), x0 (d_f,). sums: the block's
+    interval, h (p, d_f), gains (K, d_f, p), x0 (d_f,), state_whiteners (K, d_f, d_f) and
+    innovation_whiteners (K, p, p) with W^T W = P_k^-1 and S_k^-1, error_centers (K, d_f) and
+    residual_centers (K, p) the predicted means (each realization's NEES and NIS about them for the shape
+    histograms). sums: the block's
     :class:`~kalcal.montecarlo.accumulators.SumBuffers` (in the filter's d_f), added to. error_map
     (d_f, d): M of a truth with states of its own, whose error is e = M x - xhat; (0, 0) for a truth
     over the filter's states (d_f = d, e = x - xhat, with no product: that path is the one without a map).
     traced: a realization of the block (0 <= traced < n) whose error and estimate at every update are
-    copied into trace (2, K, d_f) as they are formed; -1 (and trace (0, 0, 0)) for none.
+    copied into trace (2, K, d_f) as they are formed; -1 (and trace (0, 0, 0)) for none. dof: the
+    truth's ``measurement_dof`` (0: Gaussian; else each update draws p dof more normals after its p
+    measurement normals, :func:`student_t`).
     """
     d, n = y0.shape
     mapped = error_map.shape[0] > 0
@@ -103,13 +141,16 @@ def exact_block_moments(
     c = boundary_in.shape[1]
     r = rc - c
     p = h.shape[0]
+    noise_rows = p * (1 + dof)
     y = y0.copy()
     y_next = np.empty((d, n))
     state = np.empty((d, n))
     z = np.empty((p, n))
-    step = np.empty((rc + p, n))  # this update's draws
-    previous = np.empty((rc + p if c else 0, n))  # the last update's (its closing boundary samples)
+    step = np.empty((rc + noise_rows, n))  # this update's draws
+    previous = np.empty((rc + noise_rows if c else 0, n))  # the last update's (its closing boundary samples)
     x, xbar, residual = _filter_buffers(x0, p, n)
+    scratch = _shape_scratch(x0.shape[0], p, n)
+    whiteners = (state_whiteners, innovation_whiteners, error_centers, residual_centers)
     for k in range(n_updates):
         standard_normals(rng, step)
         affine(y_next, transitions[k], y, False)
@@ -122,11 +163,13 @@ def exact_block_moments(
             for i in range(n):
                 state[a, i] = y[a, i] + shift
         affine(z, h_truth, state, False)
-        affine(z, measure, step[rc:], True)
+        if dof:
+            student_t(step[rc:], p, dof)
+        affine(z, measure, step[rc:rc + p], True)
         if mapped:
             affine(mapped_state, error_map, state, False)  # the filter's states of the truth: M x
         errors = mapped_state if mapped else state
-        _filter_and_accumulate(k, errors, z, x, xbar, residual, phis[k], h, gains, sums)
+        _filter_and_accumulate(k, errors, z, x, xbar, residual, phis[k], h, gains, sums, whiteners, scratch)
         if traced >= 0:
             for a in range(x.shape[0]):
                 trace[0, k, a] = errors[a, traced]
@@ -136,7 +179,9 @@ def exact_block_moments(
 
 
 @numba.njit(nogil=True, cache=True, fastmath=FAST)
-def filter_block_moments(states, measurements, phis, h, gains, x0, sums):
+def filter_block_moments(
+    states, measurements, phis, h, gains, x0, state_whiteners, innovation_whiteners, error_centers, residual_centers, sums
+):
     """Filter given truths and accumulate, for a sampler without a compiled block of its own (the sampled
     engine has one: :func:`kalcal.scenarios.accel_gps.sampled_kernels.sampled_block_moments`).
 
@@ -145,5 +190,9 @@ def filter_block_moments(states, measurements, phis, h, gains, x0, sums):
     """
     n_updates, d, n = states.shape
     x, xbar, residual = _filter_buffers(x0, h.shape[0], n)
+    scratch = _shape_scratch(d, h.shape[0], n)
+    whiteners = (state_whiteners, innovation_whiteners, error_centers, residual_centers)
     for k in range(n_updates):
-        _filter_and_accumulate(k, states[k], measurements[k], x, xbar, residual, phis[k], h, gains, sums)
+        _filter_and_accumulate(
+            k, states[k], measurements[k], x, xbar, residual, phis[k], h, gains, sums, whiteners, scratch
+        )

@@ -186,6 +186,8 @@ class FixedGainProblem(ProblemDefaults):
     _state_whitener: np.ndarray = field(init=False, repr=False)
     _innovation_whitener: np.ndarray = field(init=False, repr=False)
     _state_inverse: np.ndarray = field(init=False, repr=False)
+    #: the predicted means of the error (K, d) and the innovation (K, p): the shape histograms' centers
+    _centers: tuple = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         d, p = self.filter_model.state_dim, self.filter_model.measurement_dim
@@ -199,6 +201,7 @@ class FixedGainProblem(ProblemDefaults):
         object.__setattr__(self, "_innovation_whitener", whitener(schedule.innovation_cov))
         # sum_i e_i^T P^{-1} e_i = tr(P^{-1} sum_i e_i e_i^T): the NEES sums from the second moments.
         object.__setattr__(self, "_state_inverse", _inverse_spd(schedule.posterior_cov))
+        object.__setattr__(self, "_centers", self._predicted_means())
 
     @property
     def engines(self) -> tuple[str, ...]:
@@ -232,6 +235,8 @@ class FixedGainProblem(ProblemDefaults):
         error = states - run.posterior
         whitened_error = np.einsum("kij,nkj->nki", self._state_whitener, error)
         whitened_residual = np.einsum("kij,nkj->nki", self._innovation_whitener, run.residual)
+        centered_error = np.einsum("kij,nkj->nki", self._state_whitener, error - self._centers[0])
+        centered_residual = np.einsum("kij,nkj->nki", self._innovation_whitener, run.residual - self._centers[1])
         return BlockResult(
             error=error,
             estimate=run.posterior,
@@ -241,11 +246,23 @@ class FixedGainProblem(ProblemDefaults):
             filter_cov_sum=n * self.schedule.posterior_cov,
             normalized_residual=whitened_residual,
             filter_cov=np.broadcast_to(self.schedule.posterior_cov, (n, *self.schedule.posterior_cov.shape)),
+            shape_nees=np.einsum("nki,nki->nk", centered_error, centered_error),
+            shape_nis=np.einsum("nki,nki->nk", centered_residual, centered_residual),
         )
 
     def _gains(self) -> tuple:
-        """The filter's arguments of the compiled kernels: Phi_k (K, d, d), H (p, d), K_k (K, d, p), x0 (d,)."""
-        return np.ascontiguousarray(self.schedule.transitions), self.filter_model.h, self.schedule.gain, self.filter_model.x0
+        """The filter's arguments of the compiled kernels: Phi_k (K, d, d), H (p, d), K_k (K, d, p), x0 (d,),
+        and the whiteners of P_k (K, d, d) and S_k (K, p, p) and the predicted means of e_k (K, d) and r_k
+        (K, p) for each realization's NEES and NIS in the shape histograms."""
+        return (
+            np.ascontiguousarray(self.schedule.transitions),
+            self.filter_model.h,
+            self.schedule.gain,
+            self.filter_model.x0,
+            np.ascontiguousarray(self._state_whitener),
+            np.ascontiguousarray(self._innovation_whitener),
+            *self._centers,
+        )
 
     def _exact_block(self, rng: np.random.Generator, n: int, sums: SumBuffers, traced: int = -1) -> np.ndarray:
         """The exact engine's compiled block into ``sums``; the error and estimate (2, K, d) of realization
@@ -278,6 +295,7 @@ class FixedGainProblem(ProblemDefaults):
             _EMPTY_MAP if truth.error_map is None else np.ascontiguousarray(truth.error_map),
             traced,
             trace,
+            int(truth.measurement_dof),
         )
         return trace
 
@@ -338,6 +356,21 @@ class FixedGainProblem(ProblemDefaults):
             filter_cov=n * self.schedule.posterior_cov,
         )
         return MomentSums.from_buffers(n, shared, np.einsum("kij,kj->ki", self._innovation_whitener, sums.residual))
+
+    def _predicted_means(self) -> tuple[np.ndarray, np.ndarray]:
+        """E[e_k] (K, d) and E[r_k] (K, p) from the truth's mean trajectory (:meth:`expected_mean_error`): the
+        shape check tests each realization's NEES and NIS about them, so that a deterministic model error,
+        which the mean_error check accounts for, does not make the NEES a noncentral chi-square; zero for a
+        truth without one (then nothing is shifted)."""
+        truth = self.truth
+        mean = np.empty((truth.n_updates, truth.state_dim))
+        y = truth.x0_mean
+        for k in range(truth.n_updates):
+            y = truth.transitions[k] @ y
+            mean[k] = y + truth.model_error[k]
+        run = self.filter((mean @ truth.h.T)[None])
+        error = (mean if truth.error_map is None else mean @ truth.error_map.T) - run.posterior[0]
+        return np.ascontiguousarray(error), np.ascontiguousarray(run.residual[0])
 
     def expected_mean_error(self) -> np.ndarray:
         """The filter's response to the truth's mean trajectory: M E[x_k] - E[xhat_k], (K, d).

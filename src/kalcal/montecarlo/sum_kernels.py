@@ -12,6 +12,8 @@ given block on a given machine always gives the same bits, but a different CPU m
 
 from __future__ import annotations
 
+import math
+
 import numba
 
 
@@ -54,6 +56,41 @@ def total(u):
     return acc
 
 
+@numba.njit(nogil=True, cache=True)
+def add_shape(k, values, scale, histogram):
+    """Count each of the n ``values`` (n,) (NEES or NIS of n realizations at update k) into its bin of
+    ``histogram[k]`` (K, B): min(floor(sqrt(x) scale), B - 1), 0 for x <= 0, B - 1 for NaN
+    (:class:`~kalcal.montecarlo.accumulators.ShapeGrid`; the same floor of the same product as numpy's
+    :func:`~kalcal.montecarlo.accumulators.shape_histogram`). Compiled without fast-math: the bins decide
+    a count."""
+    last = histogram.shape[1] - 1.0
+    for i in range(values.shape[0]):
+        x = values[i]
+        where = math.sqrt(x if x > 0.0 else 0.0) * scale
+        histogram[k, int(where if where < last else last) if x == x else int(last)] += 1
+
+
+@numba.njit(nogil=True, cache=True, fastmath=FAST)
+def whitened_squares(out, whitener, vectors, center, work):
+    """out[i] = |W (v_i - c)|^2 for the n columns of ``vectors`` (q, n) and a center c (q,): each
+    realization's NEES (W the state whitener of a shared P_k, W^T W = P_k^-1) or NIS about its predicted
+    mean; ``work`` (q, n) is scratch."""
+    affine(work, whitener, vectors, False)
+    q, n = work.shape
+    for a in range(q):
+        shift = 0.0
+        for b in range(q):
+            shift += whitener[a, b] * center[b]
+        if shift != 0.0:
+            for i in range(n):
+                work[a, i] -= shift
+    for i in range(n):
+        out[i] = 0.0
+    for a in range(q):
+        for i in range(n):
+            out[i] += work[a, i] * work[a, i]
+
+
 @numba.njit(nogil=True, cache=True, fastmath=FAST)
 def accumulate(k, first, error, estimate, residual, nees, nis, cov, white, sums, store=True):
     """Add update k of n realizations into the sums (in place), as ``MomentSums.from_block`` sums them.
@@ -74,7 +111,9 @@ def accumulate(k, first, error, estimate, residual, nees, nis, cov, white, sums,
     nees, nis : ndarray, shape (n,) or (0,)
         Each realization's e^T P^{-1} e and r^T S^{-1} r, with ``cov`` (d, d, n) its P_k; all three empty
         (n = 0) where every realization shares P_k and S_k: the caller then forms the NEES and NIS sums
-        from the second moments and the P sum as n P_k, and this adds nothing to them.
+        from the second moments and the P sum as n P_k, and adds their histograms itself
+        (:func:`add_shape`), and this adds nothing to them. Given, they are also counted into
+        ``sums.nees_histogram`` and ``sums.nis_histogram``.
     white : ndarray, shape (d, n) or (0, n)
         eps_k = L_k^-1 e_k of each realization, by its own P_k = L_k L_k^T, added into the whitened sums
         where ``sums`` keeps them (P_k varies between realizations); empty where P_k is shared.
@@ -110,6 +149,8 @@ def accumulate(k, first, error, estimate, residual, nees, nis, cov, white, sums,
     if own:
         sums.nees[k] += total(nees)
         sums.nis[k] += total(nis)
+        add_shape(k, nees, sums.nees_grid.scale, sums.nees_histogram)
+        add_shape(k, nis, sums.nis_grid.scale, sums.nis_histogram)
     if white.shape[0] and sums.whitened_error.shape[0]:
         for a in range(d):
             sums.whitened_error[k, a] += total(white[a])

@@ -49,6 +49,21 @@ class UpdateRateTruth:
     h: np.ndarray  #: (p, d)
     measurement_factor: np.ndarray  #: G, (p, p)
     error_map: np.ndarray | None = None  #: M, (d_f, d): the filter's states are M x; None: M = I
+    #: nu: 0 for Gaussian measurement noise G w; an integer nu > 2 for G t, each component of t an
+    #: independent Student t(nu) scaled to unit variance, t_a = w_a sqrt((nu - 2) / chi2_a), chi2_a the sum of
+    #: nu more squared standard normals: the same covariance G G^T, heavier tails (:func:`student_t_noise`)
+    measurement_dof: int = 0
+
+    def __post_init__(self) -> None:
+        nu = self.measurement_dof
+        if nu != 0 and (int(nu) != nu or nu <= 2):
+            raise ValueError(f"measurement_dof: expected 0 (Gaussian) or an integer above 2, got {nu!r}")
+
+    @property
+    def measurement_draws(self) -> int:
+        """Standard normals per update of the measurement noise: p (Gaussian) or p (1 + nu) (Student t)."""
+        p = self.h.shape[0]
+        return p * (1 + int(self.measurement_dof))
 
     @property
     def error_dim(self) -> int:
@@ -72,7 +87,7 @@ class UpdateRateTruth:
     def normals_per_realization(self) -> int:
         """Standard normals one realization draws: the cost the engine is measured against."""
         c = int(self.shares_boundary)
-        return self.x0_factor.shape[1] + c + self.n_updates * (self.noise_factor.shape[1] + c + self.h.shape[0])
+        return self.x0_factor.shape[1] + c + self.n_updates * (self.noise_factor.shape[1] + c + self.measurement_draws)
 
 
 def truth_from_model(model: LinearGaussianModel, n_updates: int, model_error: np.ndarray | None = None) -> UpdateRateTruth:
@@ -97,6 +112,15 @@ def truth_from_model(model: LinearGaussianModel, n_updates: int, model_error: np
     )
 
 
+def student_t_noise(draws: np.ndarray, p: int, dof: int) -> np.ndarray:
+    """Unit-variance Student t(dof) noise from standard normals: ``draws`` (..., p (1 + dof)) holds the p
+    numerators w_a, then dof normals per component whose squares sum to chi2_a; returns (..., p),
+    t_a = w_a sqrt((dof - 2) / chi2_a) (Var t(dof) = dof / (dof - 2), so the scaling leaves variance 1).
+    """
+    chi2 = np.square(draws[..., p:]).reshape(*draws.shape[:-1], p, dof).sum(axis=-1)
+    return draws[..., :p] * np.sqrt((dof - 2) / chi2)
+
+
 def sample_exact(truth: UpdateRateTruth, rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Draw n realizations of the states and measurements at every update.
 
@@ -112,7 +136,7 @@ def sample_exact(truth: UpdateRateTruth, rng: np.random.Generator, n: int) -> tu
     c = int(truth.shares_boundary)
     n_updates = truth.n_updates
     first = rng.standard_normal((d0 + c, n)).T
-    draws = rng.standard_normal((n_updates, r + c + p, n)).transpose(0, 2, 1)
+    draws = rng.standard_normal((n_updates, r + c + truth.measurement_draws, n)).transpose(0, 2, 1)
     y = truth.x0_mean + first[:, :d0] @ truth.x0_factor.T
     u = first[:, d0:]  # (n, c): the boundary sample that opens the next interval
     # Stack [L | b_out] so that one product adds the independent noise and the closing boundary sample.
@@ -128,5 +152,8 @@ def sample_exact(truth: UpdateRateTruth, rng: np.random.Generator, n: int) -> tu
         u = step[:, r : r + c]
         x = y + truth.model_error[k]
         states[:, k] = x
-        measurements[:, k] = x @ h_t + step[:, r + c :] @ measure_t
+        noise = step[:, r + c :]
+        if truth.measurement_dof:
+            noise = student_t_noise(noise, p, int(truth.measurement_dof))
+        measurements[:, k] = x @ h_t + noise @ measure_t
     return states, measurements

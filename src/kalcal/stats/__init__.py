@@ -1,6 +1,6 @@
 """Statistical checks of a filter against its Monte Carlo ensemble, one module per check with its bounds and power.
 
-- :mod:`kalcal.stats.suite`: the five checks run in order, the verdict, and their power rows.
+- :mod:`kalcal.stats.suite`: the six checks run in order, the verdict, and their power rows.
 - :mod:`kalcal.stats.mean_error`, :mod:`kalcal.stats.covariance`, :mod:`kalcal.stats.orthogonality`,
   :mod:`kalcal.stats.whiteness`, :mod:`kalcal.stats.nis`: each check, its statistic and its power side by
   side (the NIS module also holds the innovation gate's excess rule).

@@ -2,7 +2,7 @@
 
 One module per check holds the check, its bounds and its power side by side: :mod:`kalcal.stats.mean_error`,
 :mod:`kalcal.stats.covariance`, :mod:`kalcal.stats.orthogonality`, :mod:`kalcal.stats.whiteness`,
-:mod:`kalcal.stats.nis`.
+:mod:`kalcal.stats.nis`, :mod:`kalcal.stats.shape`.
 
 Every check tests one property the theory promises for a correct filter, over all update times (and all
 elements) at once: the family of comparisons is held to alpha = 1 - confidence by a Bonferroni
@@ -27,6 +27,8 @@ residual_whiteness   max over j < k of the correlation of r_k with r_j     at al
                      (uncentered, as a t); and the portmanteau             m = p^2 K (K - 1) / 2; and at alpha / 2:
                      N sum_{j<k} ||S_k^-1/2 mean(r_k r_j^T) S_j^-T/2||^2  chi-square(p^2 K (K - 1) / 2), m = 1
 nis                  mean NIS at the update farthest from p                 chi-square(N p) / N, m = K
+shape                Kolmogorov-Smirnov distance of u = F_chi2(NEES) from   at alpha / 2 each: 2 P(D+ >= D),
+                     U(0, 1), and of F_chi2(NIS), at 2047 grid points       Smirnov's law, m = K per part
 ==================== ===================================================== =====================================
 
 Each t or chi-square comparison's two-sided p-value is shown as the normal |z| with that p-value, so
@@ -60,8 +62,11 @@ their ensemble second moment S_k. The covariance check (:mod:`kalcal.stats.covar
 by ``mean_error``; orthogonality, whiteness and NIS use raw moments, as the source report does, and
 when they fail their cause says whether the mean error accounts for it (the centered statistic passes).
 
-The verdict is over the five checks: a correct filter passes every one with probability at least
-1 - 5 alpha (Bonferroni over the checks; :func:`verdict_false_alarm_bound`).
+The verdict is over the six checks: a correct filter passes every one with probability at least
+1 - 6 alpha (Bonferroni over the checks; :func:`verdict_false_alarm_bound`). The shape check needs the
+sums' NEES and NIS histograms (every run of the engine keeps them); its power is by simulation
+(:func:`kalcal.stats.shape.shape_power`), not in :func:`power_rows`, whose families come from the exact
+analysis of second moments.
 """
 
 from __future__ import annotations
@@ -77,6 +82,7 @@ from kalcal.stats.nis import check_nis, nis_power
 from kalcal.stats.orthogonality import check_orthogonality, orthogonality_power
 from kalcal.stats.power import CheckPower, detection_n, power_row
 from kalcal.stats.results import CheckResult
+from kalcal.stats.shape import check_shape
 from kalcal.stats.whiteness import check_residual_whiteness, whiteness_power
 
 __all__ = [
@@ -98,18 +104,22 @@ def run_checks(
     expected_mean_error: np.ndarray | None = None,
     model_error_cause: str = "",
 ) -> list[CheckResult]:
-    """Every check, in a fixed order."""
+    """Every check, in a fixed order: the shape check last, where the sums keep the NEES and NIS
+    histograms (every run of the engine does; statistics built by hand from moments alone have none)."""
     if not 0.0 < confidence < 1.0:
         raise ValueError(f"confidence must lie in (0, 1), got {confidence!r}")
     if info.capabilities is not None and info.capabilities.batch:
         return final_time_checks(s, info, confidence, expected_mean_error, model_error_cause)
-    return [
+    checks = [
         check_mean_error(s, info, confidence, expected_mean_error, model_error_cause),
         check_covariance(s, info, confidence),
         check_orthogonality(s, info, confidence),
         check_residual_whiteness(s, info, confidence),
         check_nis(s, info, confidence),
     ]
+    if s.nees_histogram is not None and s.nis_histogram is not None:
+        checks.append(check_shape(s, info, confidence))
+    return checks
 
 
 def final_time_checks(

@@ -23,6 +23,7 @@ PART_LABELS = {
     "portmanteau": "portmanteau",
     "nis": "NIS",
     "ljung_box": "Ljung-Box",
+    "nees": "NEES",
 }
 #: the keys of summary.json's ``nonfinite.fields`` that count NaN p-values: of the checks, of their parts
 CHECK_PVALUE_FIELD, PART_PVALUE_FIELD = "tests.pvalue", "tests.parts.pvalue"

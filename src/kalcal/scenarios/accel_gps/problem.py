@@ -26,12 +26,13 @@ from kalcal.scenarios.accel_gps.truth import accel_gps_process_noise, accel_gps_
 
 def sampled_normals_per_realization(scenario: AccelGpsScenario) -> int:
     """Normals the per-sample engine draws: p0, v0, b, sample 0 (and s); per interval m samples and a
-    noise per fix component (2, or 1 with velocity-only fixes), and m bias-noise draws when the bias
+    noise per fix component (2, or 1 with velocity-only fixes; each 1 + nu with Student-t fixes), and m bias-noise draws when the bias
     drifts. See :mod:`kalcal.scenarios.accel_gps.sampled`."""
     s = scenario.scenario
     m = s.steps_per_update
     drifts = scenario.truth.bias_step_variance(s.sample_period) > 0
-    return 4 + int(scenario.has_scale) + s.n_updates * (m + len(scenario.fix_states) + (m if drifts else 0))
+    fix_draws = len(scenario.fix_states) * (1 + scenario.truth.gps_measurement_dof)  # Student t: nu more each
+    return 4 + int(scenario.has_scale) + s.n_updates * (m + fix_draws + (m if drifts else 0))
 
 
 def accel_gps_filter_transitions(scenario: AccelGpsScenario, filter_model: LinearGaussianModel) -> np.ndarray:
@@ -83,7 +84,8 @@ def refuse_log_faults(scenario: AccelGpsScenario) -> None:
     """Raise a one-line SettingError naming the first log-only GNSS fault set in ``scenario.truth``.
 
     ``kalcal simulate`` writes them into logs; the exact truth has no time stamps to shift and no
-    heavy-tailed fix noise, so a verification or analysis of them would verify something else.
+    gross fix errors (Student-t fix noise, ``truth.gps_noise``, is a truth of its own), so a verification or
+    analysis of them would verify something else.
     """
     t = scenario.truth
     for key in ("gps_latency", "gps_outlier_rate"):

@@ -7,7 +7,9 @@ same realizations for the same generator state:
    scale-factor error s last);
 2. for each GPS interval k = 0..K-1, ``(n, m + p)``: the noise of samples k m + 1 .. (k + 1) m, then the
    noise of each component fix k measures, p = 2 (position, velocity) or, with ``scenario.gps_fixes =
-   "velocity"``, p = 1 (velocity alone: no position noise is drawn); and, when the bias has noise of its own (a random walk or
+   "velocity"``, p = 1 (velocity alone: no position noise is drawn), then, with Student-t fixes
+   (``truth.gps_noise = "student-t"``), nu more per component (the columns m + p + a nu ..., whose squares
+   sum to its chi-square(nu): :func:`~kalcal.simulation.exact.student_t_noise`); and, when the bias has noise of its own (a random walk or
    Gauss-Markov), ``(n, m)`` more: the bias noise of steps k m .. (k + 1) m - 1;
 3. only in a log with GNSS outliers (``truth.gps_outlier_rate`` and ``gps_outlier_std`` > 0), after all
    the above: ``(n, K)`` uniforms (fix k is an outlier when its uniform is below the rate), then ``(n, K)``
@@ -24,6 +26,14 @@ import numpy as np
 
 from kalcal.scenarios.accel_gps.mechanization import integrate, interval_weights
 from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
+from kalcal.simulation.exact import student_t_noise
+
+
+def fix_noise(scenario: AccelGpsScenario, draw: np.ndarray, p: int) -> np.ndarray:
+    """The unit-variance noise of an interval's fixes, (n, p), from its draws' columns after the m samples
+    (n, p) or, Student t, (n, p (1 + nu))."""
+    nu = scenario.truth.gps_measurement_dof
+    return student_t_noise(draw, p, nu) if nu else draw
 
 
 @dataclass(frozen=True)
@@ -122,10 +132,11 @@ def sample_accel_gps_logs(scenario: AccelGpsScenario, rng: np.random.Generator, 
     bias[:, 0] = bias0
     rows = scenario.fix_states
     gps_noise = np.full((n, n_updates, 2), np.nan)  # a component the receiver does not report stays NaN
+    fix_draws = len(rows) * (1 + t.gps_measurement_dof)
     for k in range(n_updates):
-        draw = rng.standard_normal((n, m + len(rows)))
+        draw = rng.standard_normal((n, m + fix_draws))
         noise[:, k * m + 1 : (k + 1) * m + 1] = t.accel_noise_std * draw[:, :m]
-        gps_noise[:, k, list(rows)] = draw[:, m:]
+        gps_noise[:, k, list(rows)] = fix_noise(scenario, draw[:, m:], len(rows))
         bias[:, k * m : (k + 1) * m + 1] = _bias_path(scenario, bias[:, k * m], _bias_draw(scenario, rng, n, m))
     true_accel = scenario.true_accel(times)
     motion = deterministic_motion(scenario, times, true_accel)
@@ -190,8 +201,9 @@ def sample_accel_gps_errors(
     block = np.empty((n, m + 1))
     block[:, 0] = noise
     gps_std = scenario.fix_stds(t)
+    fix_draws = len(rows) * (1 + t.gps_measurement_dof)
     for k in range(n_updates):
-        draw = rng.standard_normal((n, m + len(rows)))
+        draw = rng.standard_normal((n, m + fix_draws))
         block[:, 1:] = t.accel_noise_std * draw[:, :m]
         bias = _bias_path(scenario, bias_now, _bias_draw(scenario, rng, n, m))
         bias_now = bias[:, -1]
@@ -205,6 +217,6 @@ def sample_accel_gps_errors(
         states[:, k, 2] = bias_now
         if d == 4:
             states[:, k, 3] = scale
-        measurements[:, k] = states[:, k, rows] + gps_std * draw[:, m:]
+        measurements[:, k] = states[:, k, rows] + gps_std * fix_noise(scenario, draw[:, m:], len(rows))
         block[:, 0] = block[:, m]
     return states, measurements

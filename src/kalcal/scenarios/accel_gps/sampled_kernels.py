@@ -17,7 +17,7 @@ stays the tests' oracle: the sums agree to rounding, not bit for bit, because nu
 interval as one BLAS matrix product, whose order of additions this kernel does not reproduce.
 """
 
-# numba cache stamp: kalcal.montecarlo.kernels 558163becd5e6ffc
+# numba cache stamp: kalcal.montecarlo.kernels daec5e09513f4163
 
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ import numpy as np
 from kalcal.scenarios.accel_gps.mechanization import interval_weights
 from kalcal.scenarios.accel_gps.settings import AccelGpsScenario
 from kalcal.montecarlo.accumulators import SumBuffers
-from kalcal.montecarlo.kernels import _filter_and_accumulate, _filter_buffers, standard_normals
+from kalcal.montecarlo.kernels import _filter_and_accumulate, _filter_buffers, _shape_scratch, standard_normals
 from kalcal.montecarlo.sum_kernels import FAST
 from kalcal.scenarios.accel_gps.sampled import deterministic_motion, initial_draws
 
@@ -72,7 +72,8 @@ def _integrate_interval(k, samples, walk_draws, carry, bias, scale, nominal, tru
 @numba.njit(nogil=True, cache=True, fastmath=FAST)
 def sampled_block_moments(
     rng, p0, v0, bias0, noise0, scale, true_accel, weights, fix_times, motion, nominal0, accel_std, gps_std,
-    decay, walk, drifts, interval, phis, h, gains, x0, sums, fix_states,
+    decay, walk, drifts, interval, phis, h, gains, x0, state_whiteners, innovation_whiteners, error_centers,
+    residual_centers, sums, fix_states, dof,
 ):
     """Simulate the accelerometer/GPS truth sample by sample and filter it, in one pass.
 
@@ -84,15 +85,18 @@ def sampled_block_moments(
     gps_std (p,) its noise's 1-sigma (m or m/s), drawn after the interval's m samples; the bias b_{j+1} = decay b_j + walk xi_j, with its draws only when ``drifts``;
     interval m dt, s.
     The error states are [p - p_c, v - v_c, b] (and s when the filter has d = 4 states). Filter: phis
-    (K, d, d), h (p, d), gains (K, d, p), x0 (d,); sums: the block's
-    :class:`~kalcal.montecarlo.accumulators.SumBuffers`, added to.
+    (K, d, d), h (p, d), gains (K, d, p), x0 (d,), state_whiteners (K, d, d) and innovation_whiteners
+    (K, p, p), error_centers (K, d), residual_centers (K, p)
+    (:func:`~kalcal.montecarlo.kernels.exact_block_moments`'); sums: the block's
+    :class:`~kalcal.montecarlo.accumulators.SumBuffers`, added to. dof: nu of Student-t fixes (0: Gaussian),
+    whose p nu more normals follow the fix noises in each interval's draws.
     """
     n = p0.shape[0]
     n_updates = fix_times.shape[0]
     m = weights.shape[0] - 1
     d = x0.shape[0]
     p = h.shape[0]
-    samples = np.empty((n, m + p))
+    samples = np.empty((n, m + p * (1 + dof)))
     walk_draws = np.empty((n, m) if drifts else (0, 0))
     carry = noise0.copy()
     bias = bias0.copy()
@@ -103,6 +107,8 @@ def sampled_block_moments(
     state = np.empty((d, n))
     z = np.empty((p, n))
     x, xbar, residual = _filter_buffers(x0, p, n)
+    scratch = _shape_scratch(d, p, n)
+    whiteners = (state_whiteners, innovation_whiteners, error_centers, residual_centers)
     for k in range(n_updates):
         standard_normals(rng, samples)
         if drifts:
@@ -114,19 +120,30 @@ def sampled_block_moments(
             state[1, i] = v0[i] + motion[k, 1] - nominal[1, i]
             state[2, i] = bias[i]
             for r in range(p):
-                z[r, i] = state[fix_states[r], i] + gps_std[r] * samples[i, m + r]
+                noise = samples[i, m + r]
+                if dof:  # unit-variance Student t: w sqrt((nu - 2) / chi2), chi2 from the nu normals after the p
+                    chi2 = 0.0
+                    for j in range(dof):
+                        w = samples[i, m + p + r * dof + j]
+                        chi2 += w * w
+                    noise *= np.sqrt((dof - 2) / chi2)
+                z[r, i] = state[fix_states[r], i] + gps_std[r] * noise
         if d == 4:
             for i in range(n):
                 state[3, i] = scale[i]
-        _filter_and_accumulate(k, state, z, x, xbar, residual, phis[k], h, gains, sums)
+        _filter_and_accumulate(k, state, z, x, xbar, residual, phis[k], h, gains, sums, whiteners, scratch)
 
 
 def accel_gps_block_sums(scenario: AccelGpsScenario, rng: np.random.Generator, n: int, phis: np.ndarray,
-                         h: np.ndarray, gains: np.ndarray, x0: np.ndarray, sums: SumBuffers) -> None:
+                         h: np.ndarray, gains: np.ndarray, x0: np.ndarray, state_whiteners: np.ndarray,
+                         innovation_whiteners: np.ndarray, error_centers: np.ndarray, residual_centers: np.ndarray,
+                         sums: SumBuffers) -> None:
     """Add n sampled realizations of ``scenario`` into ``sums`` through :func:`sampled_block_moments`.
 
     Consumes ``rng`` exactly as :func:`~kalcal.scenarios.accel_gps.sampled.sample_accel_gps_errors` does (same
-    draws, same order, same final state). phis (K, d, d), h (p, d), gains (K, d, p), x0 (d,): the filter.
+    draws, same order, same final state). phis (K, d, d), h (p, d), gains (K, d, p), x0 (d,): the filter;
+    state_whiteners (K, d, d), innovation_whiteners (K, p, p): W^T W = P_k^-1, S_k^-1; error_centers (K, d),
+    residual_centers (K, p): the predicted means the shape histograms' NEES and NIS are taken about.
     """
     s, t = scenario.scenario, scenario.truth
     dt = s.sample_period
@@ -140,6 +157,7 @@ def accel_gps_block_sums(scenario: AccelGpsScenario, rng: np.random.Generator, n
         fix_times, np.ascontiguousarray(deterministic_motion(scenario, fix_times, true_accel)),
         np.array(scenario.nominal_start(), dtype=float), t.accel_noise_std,
         scenario.fix_stds(t), t.bias_decay(dt), float(np.sqrt(walk_variance)),
-        walk_variance > 0, s.steps_per_update * dt, phis, h, gains, x0, sums,
-        np.array(scenario.fix_states, dtype=np.int64),
+        walk_variance > 0, s.steps_per_update * dt, phis, h, gains, x0, state_whiteners, innovation_whiteners,
+        error_centers, residual_centers, sums,
+        np.array(scenario.fix_states, dtype=np.int64), t.gps_measurement_dof,
     )

@@ -197,6 +197,10 @@ class AccelGpsSettings:
         return np.arange(self.n_samples + 1) * self.sample_period
 
 
+#: the laws of the GPS fixes' noise (``truth.gps_noise``)
+GPS_NOISES = ("gaussian", "student-t")
+
+
 @dataclass(frozen=True)
 class AccelGpsTruth:
     """The world the sensors see (section ``truth``); SI units, standard deviations per sample or fix."""
@@ -227,6 +231,14 @@ class AccelGpsTruth:
     accel_noise_density: float | None = None
     #: the bias random walk's density K, m/s^3/sqrt(Hz): bias_walk_std = K / sqrt(rate) at each rate
     bias_walk_density: float | None = None
+    #: the law of the GPS fixes' noise: "gaussian", or "student-t": each component of each fix an
+    #: independent Student t with ``gps_noise_dof`` degrees of freedom scaled to unit variance (times
+    #: ``gps_position_std`` / ``gps_velocity_std``), so that the noise's second moments, and so the
+    #: filter's and the exact analysis's, are those of the Gaussian; only its tails are heavier
+    gps_noise: str = "gaussian"
+    #: nu of the Student-t fixes: a whole number above 2 (variance nu / (nu - 2), divided out); each fix
+    #: component draws nu more standard normals for its chi-square(nu)
+    gps_noise_dof: int = 5
 
     SECTION: ClassVar[str] = "truth"
 
@@ -254,6 +266,17 @@ class AccelGpsTruth:
         )
         if not self.gps_outlier_rate <= 1:
             raise SettingError(f"{self.SECTION}.gps_outlier_rate", "a share of the fixes from 0 to 1", show(self.gps_outlier_rate))
+        if self.gps_noise not in GPS_NOISES:
+            raise SettingError(f"{self.SECTION}.gps_noise", f"one of {', '.join(GPS_NOISES)}", show(self.gps_noise))
+        dof = self.gps_noise_dof
+        if isinstance(dof, bool) or not isinstance(dof, (int, float)) or not float(dof).is_integer() or dof <= 2:
+            raise SettingError(f"{self.SECTION}.gps_noise_dof", "a whole number of degrees of freedom above 2", show(dof))
+        object.__setattr__(self, "gps_noise_dof", int(dof))
+
+    @property
+    def gps_measurement_dof(self) -> int:
+        """nu of the fixes' noise for the samplers: 0 for Gaussian fixes, else ``gps_noise_dof``."""
+        return 0 if self.gps_noise == "gaussian" else self.gps_noise_dof
 
     def at_rate(self, rate: float) -> AccelGpsTruth:
         """These settings with every noise per sample at ``rate`` (Hz): a density converted

@@ -83,7 +83,8 @@ def accel_gps_process_noise(scenario: AccelGpsScenario) -> list[tuple[str, np.nd
 def accel_gps_truth(scenario: AccelGpsScenario) -> UpdateRateTruth:
     """The accelerometer/GPS error state at the fixes, exactly in distribution for either scheme.
 
-    The truth model's per-sample Phi and bias-noise input are the scheme's own
+    The fixes' noise is Gaussian or, with ``truth.gps_noise = "student-t"``, unit-variance Student t times
+    the same G (``UpdateRateTruth.measurement_dof``). The truth model's per-sample Phi and bias-noise input are the scheme's own
     (:func:`~kalcal.scenarios.accel_gps.discretization.error_transition`), so a drifting bias composes exactly over an
     interval; the accelerometer noise, which the trapezoid rule shares between steps, by its weights.
     """
@@ -104,4 +105,6 @@ def accel_gps_truth(scenario: AccelGpsScenario) -> UpdateRateTruth:
         x0_factor=base.x0_factor,
         h=base.h,
         measurement_factor=base.measurement_factor,
+        # Student-t fixes keep the covariance G G^T: the analysis (second moments) is still exact for them
+        measurement_dof=scenario.truth.gps_measurement_dof,
     )
