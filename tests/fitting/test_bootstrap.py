@@ -134,3 +134,19 @@ def test_bootstrap_refused_in_one_line(ar1):
 
     with pytest.raises(KalcalError, match="--bootstrap: expected 0"):
         kalcal.fit(ar1, data=_log(60, 1), bootstrap=1)
+
+
+# Dask (a local in-process cluster, as the Monte Carlo's Dask tests start one): the same seed gives the
+# replicates of the threads, so identical intervals, se and bias.
+def test_dask_gives_the_intervals_of_threads(ar1):
+    import distributed
+
+    log = _log(150, 11)
+    threads = _boot(ar1, log, 8, seed=4, threads=2)
+    with (
+        distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None) as cluster,
+        distributed.Client(cluster) as client,
+    ):
+        on_dask = fit_model_file(ar1, log, options=FitOptions(bootstrap=8, seed=4, client=client))
+    assert on_dask.bootstrap.parameters == threads.bootstrap.parameters
+    assert on_dask.bootstrap.parameters["filter.v"].applicable
