@@ -109,23 +109,51 @@ def test_bootstrap_se_agrees_with_the_information_on_a_long_log(ar1):
         assert abs(boot / information - 1.0) < bound, (name, boot, information, bound)
 
 
-# A short log (50 rows) whose w is consistent with 0: w's percentile interval is not applicable (Andrews
-# 2000), and v's observed-information se holds w at its bound (the fit's note says so) while the bootstrap's
-# refits let w vary: the bootstrap se exceeds it by more than 3.29 of its Monte Carlo errors (4.7 here).
-# The log is one of the six of seeds 1..29 whose w is consistent with 0 (seed 14); of the first three of
-# them, seeds 9 and 14 show the excess beyond 3.29 errors and seed 2 by 1.4: the information's shortfall
-# is systematic but of the order of the Monte Carlo error at B = 400 on a single log.
-def test_short_log_at_a_bound(ar1):
-    b = 400
-    result = _boot(ar1, _log(50, 14), b, threads=2)
+#: short logs of 50 rows, seeds fixed before any was looked at; about a fifth have w consistent with 0
+SHORT_SEEDS = range(1000, 1080)
+
+
+def _short_at_bound():
+    """The seeds of :data:`SHORT_SEEDS` whose fitted w is at its bound, in order (found here, not picked)."""
+    return [seed for seed in SHORT_SEEDS
+            if fit_model_file(parse_model(AR1, "ar1.toml"), _log(50, seed), options=FitOptions()).parameters["filter.w"].at_bound]
+
+
+# A short log whose w is consistent with 0 (the first such of the fixed seeds): w's percentile interval is not
+# applicable (Andrews 2000) but its bootstrap se is given, v's is, about its estimate, and fit.json says so.
+def test_short_log_at_a_bound_is_not_applicable(ar1):
+    seed = next(seed for seed in SHORT_SEEDS
+                if fit_model_file(ar1, _log(50, seed), options=FitOptions()).parameters["filter.w"].at_bound)
+    b = 20
+    result = _boot(ar1, _log(50, seed), b, threads=2)
     w, v = result.bootstrap.parameters["filter.w"], result.bootstrap.parameters["filter.v"]
     assert result.parameters["filter.w"].at_bound
     assert not w.applicable and "Andrews 2000" in w.reason and w.ci_low is None and w.se > 0
     assert v.applicable and v.ci_low < result.parameters["filter.v"].value < v.ci_high
-    information = result.bse["filter.v"]
-    assert (v.se - information) / v.se > 3.29 * np.sqrt(1.0 / (2.0 * (b - 1))), (v.se, information)
     document = result.to_dict()["bootstrap"]
     assert document["replicates"] == b and document["parameters"]["filter.w"]["applicable"] is False
+
+
+# Where the information is a poor guide: on short logs whose w is at its bound, v's observed information holds
+# w there (the fit's note says so) and so understates v's spread, which the bootstrap's refits, w free, see.
+# Over every such log of the fixed seeds (15 of 80; mean ratio 1.150, its error 0.026, the bound 0.098), the ratio bootstrap se / information se of v
+# exceeds 1 on average: by more than the one-sided 0.001 quantile of Student's t times its standard error
+# across the logs (which holds each log's Monte Carlo error, B = 100, and the spread between logs). One log
+# alone does not show it: the gap, about 15%, is of the order of one log's Monte Carlo error.
+@pytest.mark.slow
+def test_bootstrap_se_exceeds_the_information_on_short_logs_at_a_bound(ar1):
+    from scipy import stats
+
+    seeds = _short_at_bound()
+    assert len(seeds) >= 5, seeds
+    ratios = []
+    for seed in seeds:
+        result = _boot(ar1, _log(50, seed), 100, seed=seed, threads=2)
+        ratios.append(result.bootstrap.parameters["filter.v"].se / result.bse["filter.v"])
+    ratios = np.array(ratios)
+    error = ratios.std(ddof=1) / np.sqrt(ratios.size)
+    bound = float(stats.t.ppf(0.999, ratios.size - 1)) * error
+    assert ratios.mean() - 1.0 > bound, (ratios.mean(), error, bound, ratios.size)
 
 
 def test_bootstrap_refused_in_one_line(ar1):
@@ -134,3 +162,19 @@ def test_bootstrap_refused_in_one_line(ar1):
 
     with pytest.raises(KalcalError, match="--bootstrap: expected 0"):
         kalcal.fit(ar1, data=_log(60, 1), bootstrap=1)
+
+
+# Dask (a local in-process cluster, as the Monte Carlo's Dask tests start one): the same seed gives the
+# replicates of the threads, so identical intervals, se and bias.
+def test_dask_gives_the_intervals_of_threads(ar1):
+    import distributed
+
+    log = _log(150, 11)
+    threads = _boot(ar1, log, 8, seed=4, threads=2)
+    with (
+        distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None) as cluster,
+        distributed.Client(cluster) as client,
+    ):
+        on_dask = fit_model_file(ar1, log, options=FitOptions(bootstrap=8, seed=4, client=client))
+    assert on_dask.bootstrap.parameters == threads.bootstrap.parameters
+    assert on_dask.bootstrap.parameters["filter.v"].applicable

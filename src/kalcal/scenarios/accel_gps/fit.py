@@ -165,6 +165,7 @@ def fit_accel_gps(
     rates: tuple[float, float] | None = None,
     std_medians: Mapping[str, float] | None = None,
     max_updates: int | None = None,
+    options=None,
 ) -> FitResult:
     """Maximum-likelihood estimates of the ``free`` settings, their intervals and the fitted filter's adequacy.
 
@@ -186,6 +187,11 @@ def fit_accel_gps(
         of a multiplier.
     max_updates : int, optional
         The most GPS intervals filter.toml's [scenario] duration may hold (verify's limit per realization).
+    options : FitOptions, optional
+        Its ``bootstrap`` (B), ``seed``, ``threads`` and ``client``: the parametric bootstrap
+        (:mod:`kalcal.fitting.bootstrap`) over fixes drawn from the fitted filter over the log
+        (:func:`kalcal.scenarios.accel_gps.resample.simulate_fixes`; ``log`` a prepared
+        :class:`~kalcal.scenarios.accel_gps.log.AccelGpsLog`).
     """
     free, notes = rate_free(DEFAULT_FREE if free is None else free)
     # the noise at the log's own rate: the likelihood's per-sample settings, addressed by their densities
@@ -244,6 +250,7 @@ def fit_accel_gps(
             notes.append(f"{key}: the log's {column} column times one fitted multiplier, instead of a constant std")
     rejected = getattr(calibration, "rejected_rows", None)
     settings, comments, per_sample_values = filter_toml(scenario, chosen, fit, rates, std_medians or {}, max_updates, rate=rate)
+    boot = _bootstrap(options, log, chosen, parameters, fit, None if gate is None else mask)
     return FitResult.from_search(
         scenario.NAME,
         fit,
@@ -258,7 +265,32 @@ def fit_accel_gps(
         confidence=confidence,
         extra={"bias": float(calibration.bias[-1]), "bias_std": float(calibration.std[-1, 2]), "per_sample": per_sample_values},
         derived=per_sample_parameters(fit.parameters, per_sample_values),
+        bootstrap=boot,
     )
+
+
+def _bootstrap(options, log: RateFreeLog, chosen: Mapping[str, float], parameters: Sequence[Free], fit, rejected):
+    """The parametric bootstrap ``options`` ask for (None without one): each replicate's fixes drawn from the
+    filter at the fitted point ``chosen`` over the prepared log (:func:`~kalcal.scenarios.accel_gps.resample.simulate_fixes`),
+    refitted over the same fixes as the fit: with a gate, its ``rejected`` set is held out of every refit (the
+    drawn fixes have no gross outliers to gate)."""
+    from kalcal.fitting.bootstrap import bootstrap_fit
+    from kalcal.scenarios.accel_gps.log import AccelGpsLog
+    from kalcal.scenarios.accel_gps.resample import simulate_fixes
+
+    if not getattr(options, "bootstrap", 0):
+        return None
+    if not isinstance(log.log, AccelGpsLog):
+        raise KalcalError("--bootstrap: needs the prepared accel-gps log (kalcal.scenarios.accel_gps.log), not "
+                          f"{type(log.log).__name__}: its fixes are drawn over it")
+    at = log._per_sample(chosen)
+
+    def draw(rng):
+        simulated = RateFreeLog(simulate_fixes(log.log, at, rng), log.rate)
+        # a setting not refitted (unidentified, held) stays where the fixes were drawn from
+        return lambda values: simulated.loglik({**chosen, **values}, rejected=rejected)
+
+    return bootstrap_fit(options, draw, parameters, fit)
 
 
 def per_sample_parameters(parameters: Mapping[str, FitParameter], per_sample_values: Mapping[str, Any]) -> dict[str, FitParameter]:

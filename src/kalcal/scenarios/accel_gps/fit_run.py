@@ -31,12 +31,14 @@ def compute_accel_gps_fit(
     gate: float | None = None,
     confidence: float = 0.95,
     prepare=None,
+    options=None,
 ) -> FitResult:
     """Fit an accel-gps log (files or DataFrames, as ``calibrate``); nothing is written (its ``save(out)``).
 
     ``prepare(scenario, imu_time, accel, gps_time, gps_position, gps_velocity, **options)`` builds the
     log-likelihood (default: :func:`kalcal.scenarios.accel_gps.log.prepare_accel_gps_log`, O(fixes) per
     evaluation; :func:`kalcal.scenarios.accel_gps.fit_reference.prepare_reference_accel_gps_log` is its oracle).
+    ``options`` (:class:`~kalcal.fitting.run.FitOptions`): its bootstrap, seed, threads and client.
     The log's prior is ``calibrate``'s ("auto": a diffuse bias unless ``filter.bias_std`` is given, with
     the conditional likelihood).
     """
@@ -64,7 +66,7 @@ def compute_accel_gps_fit(
     medians = {role: float(np.nanmedian(gps[role])) for role in ("position_std", "velocity_std") if role in gps}
     result = fit_accel_gps(
         log, scenario, free, profile=profile, gate=gate, confidence=confidence,
-        rates=log_rates(imu["time"], gps["time"]), std_medians=medians, max_updates=MAX_UPDATES,
+        rates=log_rates(imu["time"], gps["time"]), std_medians=medians, max_updates=MAX_UPDATES, options=options,
     )
     header = [
         f"kalcal fit accel-gps: noise settings fitted by maximum likelihood to {imu_name} and {gps_name}",
@@ -95,9 +97,6 @@ def fit_logs(scenario, logs: dict[str, Any], options) -> FitResult:
     imu, gps = _logs_of(scenario, logs)
     if options.reference != "reference" or options.sensor != "sensor":
         raise KalcalError("--reference/--sensor: not used by accel-gps (scale-bias only)")
-    if options.bootstrap:  # refused before the logs are read: nothing is fitted for a bootstrap it cannot run
-        raise KalcalError("--bootstrap: not available for accel-gps (its fixes are not yet simulated over a given "
-                          "accelerometer log); scale-bias and model files have it")
     return compute_accel_gps_fit(scenario, imu, gps, free=options.free, imu_columns=options.imu_columns,
                                  gps_columns=options.gps_columns, init=options.init, profile=options.profile,
-                                 gate=options.gate, confidence=options.confidence)
+                                 gate=options.gate, confidence=options.confidence, options=options)
