@@ -51,6 +51,7 @@ from kalcal.core.timevarying_filter import filter_model, loglik
 from kalcal.errors import ConfigError
 from kalcal.fitting.mle import Free, maximize
 from kalcal.fitting.result import FitResult, fitted_point, interval_text
+from kalcal.scenarios.model_file.calibrate import normalized_series
 
 if TYPE_CHECKING:
     from kalcal.scenarios.model_file.data import BoundModel
@@ -351,9 +352,11 @@ def fit_model_file(
 
     boot = bootstrap_fit(options, draw, parameters, fit)
     run = filter_model(like.model_at(chosen), bound.z)
-    normalized, rows = _normalized(run)
-    names = bound.measurement_names
-    diagnostics = innovation_diagnostics(normalized, tuple(names))
+    # the series calibrate tests (one function for both): rows that measure different components are
+    # pooled, component by component, rather than dropped (a log whose rows never measure every
+    # component would otherwise leave nothing to test and a NaN verdict)
+    series, labels, used = normalized_series(run, tuple(bound.measurement_names))
+    diagnostics = innovation_diagnostics(series, labels)
     adequate = diagnostics.consistent
     adequacy = diagnostics.verdict if adequate else (
         f"{diagnostics.verdict}. Even the best settings leave the innovations inconsistent: the model lacks "
@@ -377,9 +380,10 @@ def fit_model_file(
             "of phi under the conditional likelihood may differ from an exact diffuse likelihood's (it does not where "
             "the conditioned measurements see the diffuse states before any step, as in an AR(1) plus noise)"
         )
-    if rows < int(np.count_nonzero(np.any(np.isfinite(run.residual), axis=1))):  # rows with a partial measurement
+    if np.unique(run.measured[used], axis=0).shape[0] > 1:
         notes.append(
-            f"the innovation diagnostics use the {rows} rows with every component measured and a proper prior"
+            f"the innovation diagnostics test the {series.shape[0]} normalized components of the {used.size} measured "
+            "rows after the diffuse period as one series (rows measure different components)"
         )
     matrices = fitted_matrices(scenario, like, chosen)
     settings = {"filter": dict(matrices)}
@@ -396,7 +400,7 @@ def fit_model_file(
         header.append(f"NOT ADEQUATE: {adequacy}")
     result = FitResult.from_search(
         scenario.model.name, fit, fixes=counted, nobs_name="measurements", adequate=adequate, adequacy=adequacy,
-        diagnostics=diagnostics.as_dict(), notes=notes, settings=settings, confidence=confidence,
+        diagnostics={**diagnostics.as_dict(), "series": list(labels), "rows_used": int(used.size)}, notes=notes, settings=settings, confidence=confidence,
         extra={"diffuse_term": float(run.diffuse_term), "model_file": scenario.model.file}, bootstrap=boot,
     )  # fmt: skip
     linear = tuple(key for key, p in result.parameters.items() if p.scale == "linear")
@@ -425,16 +429,6 @@ def draw_log(fitted: TimeVaryingModel, z: np.ndarray, rng: np.random.Generator) 
     _, simulated = draw(fitted, rng)
     simulated[~np.isfinite(z)] = np.nan
     return simulated
-
-
-def _normalized(run) -> tuple[np.ndarray, int]:
-    """L_j^{-1} r_j (S_j = L_j L_j^T) of the rows with every component measured and a proper prior, (K, p)."""
-    full = np.all(run.measured, axis=1) & np.all(np.isfinite(run.residual), axis=1)
-    r, s = run.residual[full], run.innovation_cov[full]
-    if not r.shape[0]:
-        return np.zeros((0, run.residual.shape[1])), 0
-    chol = np.linalg.cholesky(s)
-    return np.linalg.solve(chol, r[:, :, None])[:, :, 0], int(full.sum())
 
 
 def fit_logs(scenario: CustomModelScenario, logs: Mapping[str, Any], options) -> FitResult:
