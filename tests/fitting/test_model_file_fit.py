@@ -239,3 +239,33 @@ def test_fit_diagnostics_pool_rows_that_measure_different_components(tmp_path):
     calibrated = calibrate_model_file(fitted, log)
     assert calibrated.diagnostics["mean_nis"] == pytest.approx(d["mean_nis"], rel=1e-9)
     assert calibrated.diagnostics["series"] == d["series"]
+
+
+AR1_DIFFUSE = AR1.replace("m0 = [[4.0]]", 'm0 = [[0.0]]\ndiffuse = ["x1"]')
+
+
+# A log that gives the likelihood nothing: fit refuses it in one line (exit 2, no model.toml) rather than
+# "0 measurements, log L = 0" with a NaN verdict; calibrate runs the filter and says so in a warning,
+# without offering the fit as the next step.
+@pytest.mark.parametrize(
+    "text, column, words",
+    [
+        (AR1, [1.5], "the log has one row"),
+        (AR1, [np.nan, np.nan, np.nan], "no measurement in its 3 rows"),
+        (AR1_DIFFUSE, [1.0, np.nan, np.nan], "all 1 measurement(s) are conditioned on by the diffuse start of x1"),
+    ],
+)
+def test_a_log_with_nothing_in_the_likelihood_is_refused_by_fit(tmp_path, text, column, words):
+    from kalcal.scenarios.model_file.calibrate import calibrate_model_file
+
+    model = tmp_path / "model.toml"
+    model.write_text(text)
+    pd.DataFrame({"y": column}).to_csv(tmp_path / "log.csv", index=False)
+    result = CliRunner().invoke(app, ["fit", str(model), "--data", str(tmp_path / "log.csv"), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 2, result.output
+    assert words in result.output and len(result.output.strip().splitlines()) == 1
+    assert not (tmp_path / "out").exists()
+    calibrated = calibrate_model_file(parse_model(text, "model.toml"), pd.DataFrame({"y": column}))
+    codes = {w["code"]: w["message"] for w in calibrated.warnings}
+    assert words in codes["nothing-to-fit"] and "kalcal fit" not in codes["sigma-untrusted"]
+    assert calibrated.sigma_trusted is False

@@ -48,7 +48,7 @@ import numpy as np
 from kalcal.calibration.diagnostics import innovation_diagnostics
 from kalcal.core.timevarying import TimeVaryingModel
 from kalcal.core.timevarying_filter import filter_model, loglik
-from kalcal.errors import ConfigError
+from kalcal.errors import ConfigError, DataError
 from kalcal.fitting.mle import Free, maximize
 from kalcal.fitting.result import FitResult, fitted_point, interval_text
 from kalcal.scenarios.model_file.calibrate import normalized_series
@@ -92,6 +92,30 @@ def fit_refusal(scenario: CustomModelScenario) -> str:
     """Why the file cannot be fitted ("" when it can), in words that follow ``FILE:``."""
     if scenario.data is None:
         return "kalcal fit needs a [data] table in the file (which log columns feed the model) to read --data LOG"
+    return ""
+
+
+def likelihood_refusal(scenario: CustomModelScenario, bound: BoundModel, run=None) -> str:
+    """Why the log gives the fit nothing to maximize ("" when it does), in words that follow the log's name.
+
+    Refused: a log of one row (no step: w is not in the likelihood, and one innovation tests nothing) and a
+    log whose likelihood holds no measurement (every measurement empty, or every one conditioned on by the
+    diffuse start). Which components are conditioned on depends on the rows of h and the diffuse states,
+    not on w or v, so the file's own values decide it before the search (``run``: the filter over the
+    bound log at those values, when it has run already)."""
+    rows = int(bound.z.shape[0])
+    if rows < 2:
+        return "the log has one row: no step (w is not in the likelihood) and one innovation: nothing to fit"
+    run = filter_model(bound.filter, bound.z) if run is None else run
+    measured, conditioned = int(np.count_nonzero(run.measured)), int(np.count_nonzero(run.conditioned))
+    if measured == 0:
+        return f"no measurement in its {rows} rows (every measurement cell empty or NaN): nothing in the likelihood"
+    if measured == conditioned:
+        return (
+            f"all {measured} measurement(s) are conditioned on by the diffuse start of "
+            f"{', '.join(scenario.filter.diffuse)}: nothing left in the likelihood (a log that measures beyond "
+            "the diffuse period is needed)"
+        )
     return ""
 
 
@@ -332,6 +356,9 @@ def fit_model_file(
         raise ConfigError(f"{scenario.model.file}: no positive diagonal entry of w or v to fit: name the keys with --free")
     entries = free_entries(scenario, keys)
     bound = bind(scenario, log, topic=topic)
+    refusal = likelihood_refusal(scenario, bound)
+    if refusal:
+        raise DataError(f"{bound.source}: kalcal fit {scenario.model.file}: {refusal}")
     like = BoundLikelihood(scenario, bound, entries)
     parameters = []
     for e in entries:
