@@ -32,7 +32,9 @@ diffuse direction) are not in it; statsmodels' exact diffuse ``llf`` is it plus 
 The search, the intervals, "consistent with 0" and the flatness verdicts are
 :func:`kalcal.fitting.mle.maximize`'s. The outputs: fit.json, fit.png and ``model.toml``, the model file
 with the fitted values written in (its filter's matrices; a ``[truth]`` key the file set apart from its
-filter stays the file's), which ``calibrate`` and ``verify`` take as it is.
+filter stays the file's), which ``calibrate`` takes as it is, and ``verify`` where it takes the file
+(its header says which: a diffuse filter is not verified, a file whose rows come from a log is verified
+with ``--data LOG``).
 """
 
 from __future__ import annotations
@@ -311,6 +313,17 @@ def model_text(scenario: CustomModelScenario, matrices: Mapping[str, list], head
     return "".join(f"# {line}\n" for line in header) + text
 
 
+def _takers(scenario: CustomModelScenario) -> list[str]:
+    """model.toml's line on the commands that take it: the fitted file differs from the file only in phi, w
+    and v, none of which decides whether verify takes it (the rows of h, the std columns, the diffuse
+    states, the truth's inputs and the updates do), so the file's own answer is the fitted file's."""
+    why = scenario.without_log()
+    if not why:
+        return ["`kalcal calibrate`, `kalcal fit` and `kalcal verify` take this file as it is."]
+    return ["`kalcal calibrate` and `kalcal fit` take this file as it is; `kalcal verify` without a log does not:",
+            f"{why}."]
+
+
 def fit_model_file(
     scenario: CustomModelScenario,
     log: Any,
@@ -421,7 +434,7 @@ def fit_model_file(
         f"kalcal fit: {', '.join(keys)} fitted by maximum likelihood to {bound.source}",
         f"({counted} measurements in the likelihood, log L = {fit.loglik:.6g}, {fit.interval_method} intervals).",
         *(f"{p.name}: {p.note if not p.identified else 'fitted, ' + interval_text(p)}".rstrip() for p in fit.parameters.values()),
-        "`kalcal calibrate` and `kalcal verify` take this file as it is.",
+        *_takers(scenario),
     ]
     if not adequate:
         header.append(f"NOT ADEQUATE: {adequacy}")
