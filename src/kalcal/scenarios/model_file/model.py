@@ -25,7 +25,7 @@ The file describes the filter's model (top-level keys) and, optionally, a truth 
 The model is the one of :class:`~kalcal.core.model.LinearGaussianModel`: the first measurement is
 taken after ``steps_per_update`` steps, update k (k = 1..updates) at t_k = k * steps_per_update *
 sample_period. The truth shares the filter's timing and dimensions (d states, p measurements; its
-noise input may have another q), or, with a ``map``, has n states of its own (:mod:`.custom_truth`).
+noise input may have another q), or, with a ``map``, has n states of its own (:mod:`kalcal.scenarios.model_file.truth`).
 
 Every problem is a :class:`~kalcal.models.settings.SettingError` of one line,
 ``FILE: KEY: expected ..., got ...`` (``KEY: expected ..., got ...`` for a value given by ``--set KEY=...``):
