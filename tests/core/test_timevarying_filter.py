@@ -119,3 +119,41 @@ def test_three_correlated_components_likelihood_is_the_joint_decomposition():
     run = filter_model(model, z)
     assert run.loglik == pytest.approx(innovation_loglik(run.residual, run.innovation_cov), rel=1e-12)
     _same(run.state, reference_filter(model, z).state, 1e-12, "state")
+
+
+def _fields(n=4, d=2, m=1):
+    return dict(phi=np.eye(d), gamma=np.eye(d), w=np.eye(d), b=np.ones((d, m)), x0=np.zeros(d), m0=np.eye(d),
+                h=np.ones((n, 1, d)), v=np.ones((n, 1, 1)), u=np.zeros((n, m)), diffuse=np.zeros(d, dtype=bool),
+                sample_period=1.0, times=np.arange(n, dtype=float))  # fmt: skip
+
+
+# b and u take their exact shapes: a (1, 2) b with d = 2 was read as (2, 1), a (2, 2) b with d = 4 as
+# (4, 1), a u of (n * m,) as (n, m); a shape that divides nothing raised a bare ValueError of numpy's.
+@pytest.mark.parametrize(
+    "field, value, d, words",
+    [
+        ("b", np.ones((1, 2)), 2, r"b: expected a matrix of shape \(2, m\)"),
+        ("b", np.ones((2, 2)), 4, r"b: expected a matrix of shape \(4, m\)"),
+        ("b", np.ones(2), 2, r"b: expected a matrix \(2 dimensions\)"),
+        ("b", np.ones((3, 1)), 2, r"b: expected a matrix of shape \(2, m\)"),
+        ("u", np.zeros(4), 2, r"u: expected a matrix \(2 dimensions\)"),
+        ("u", np.zeros((1, 4)), 2, r"u: expected inputs of shape \(4, 1\)"),
+        ("u", np.zeros((3, 1)), 2, r"u: expected inputs of shape \(4, 1\)"),
+        ("b", [[1.0, 2.0], [3.0]], 2, "b: expected a matrix of numbers"),
+    ],
+)
+def test_inputs_of_a_wrong_shape_are_refused_naming_the_field(field, value, d, words):
+    from kalcal.models.settings import SettingError
+
+    fields = _fields(d=d)
+    fields[field] = value
+    with pytest.raises(SettingError, match=words):
+        TimeVaryingModel(**fields)
+
+
+def test_no_inputs_read_as_none_an_empty_list_or_d_by_0():
+    for b, u in ((None, None), ([], []), (np.zeros((2, 0)), np.zeros((4, 0)))):
+        fields = _fields()
+        fields.update(b=b, u=u)
+        model = TimeVaryingModel(**fields)
+        assert model.b.shape == (2, 0) and model.u.shape == (4, 0)

@@ -192,3 +192,96 @@ def test_phi_outside_its_bounds_is_refused():
     scenario = parse_model(AR1.replace("phi = [[0.5]]", "phi = [[1.5]]"), "ar1.toml")
     with pytest.raises(ConfigError, match=r"outside the bounds \[-1, 1\]"):
         free_entries(scenario, ["filter.phi"])
+
+
+#: two position sensors of a constant-velocity model on alternating rows: no row measures both
+ALTERNATING = """
+name = "alternating"
+phi = [[1.0, 1.0], [0.0, 1.0]]
+gamma = [[1.0, 0.0], [0.0, 1.0]]
+h = [[1.0, 0.0], [1.0, 0.0]]
+w = [[0.04, 0.0], [0.0, 0.01]]
+v = [[1.0, 0.0], [0.0, 2.0]]
+x0 = [0.0, 0.0]
+m0 = [[10.0, 0.0], [0.0, 1.0]]
+[data]
+measurements = ["a", "b"]
+"""
+
+
+def _alternating_log(scenario, n=400, seed=3):
+    """The file's own model drawn over n rows (fixed seed), a on even rows and b on odd ones."""
+    from kalcal.scenarios.model_file.simulate import draw
+
+    frame = pd.DataFrame({"a": np.zeros(n), "b": np.zeros(n)})
+    _, z = draw(bind(scenario, frame).filter, np.random.default_rng(seed))
+    z[1::2, 0] = np.nan
+    z[0::2, 1] = np.nan
+    return pd.DataFrame({"a": z[:, 0], "b": z[:, 1]})
+
+
+# A correct model whose rows never measure every component: the fit's diagnostics test the pooled
+# normalized components (the series calibrate tests, from one function), not an empty set of "full"
+# rows whose NaN verdict called the model inadequate and wrote NOT ADEQUATE into model.toml.
+def test_fit_diagnostics_pool_rows_that_measure_different_components(tmp_path):
+    from kalcal.scenarios.model_file.calibrate import calibrate_model_file
+
+    scenario = parse_model(ALTERNATING, "alternating.toml")
+    log = _alternating_log(scenario)
+    result = kalcal.fit(scenario, data=log, free="filter.v.1,filter.v.2", out=tmp_path / "fit")
+    d = result.diagnostics
+    assert np.isfinite(d["mean_nis"]) and d["fixes"] == 400 and d["rows_used"] == 400
+    # the data are the model's own (fixed seed): a 5% test of a correct model, not a tuned bound
+    assert result.adequate is True, result.adequacy
+    assert "NOT ADEQUATE" not in (tmp_path / "fit" / "model.toml").read_text()
+    # the same series as calibrate of the fitted file over the same log
+    fitted = load_model_file(tmp_path / "fit" / "model.toml")
+    calibrated = calibrate_model_file(fitted, log)
+    assert calibrated.diagnostics["mean_nis"] == pytest.approx(d["mean_nis"], rel=1e-9)
+    assert calibrated.diagnostics["series"] == d["series"]
+
+
+AR1_DIFFUSE = AR1.replace("m0 = [[4.0]]", 'm0 = [[0.0]]\ndiffuse = ["x1"]')
+
+
+# A log that gives the likelihood nothing: fit refuses it in one line (exit 2, no model.toml) rather than
+# "0 measurements, log L = 0" with a NaN verdict; calibrate runs the filter and says so in a warning,
+# without offering the fit as the next step.
+@pytest.mark.parametrize(
+    "text, column, words",
+    [
+        (AR1, [1.5], "the log has one row"),
+        (AR1, [np.nan, np.nan, np.nan], "no measurement in its 3 rows"),
+        (AR1_DIFFUSE, [1.0, np.nan, np.nan], "all 1 measurement(s) are conditioned on by the diffuse start of x1"),
+    ],
+)
+def test_a_log_with_nothing_in_the_likelihood_is_refused_by_fit(tmp_path, text, column, words):
+    from kalcal.scenarios.model_file.calibrate import calibrate_model_file
+
+    model = tmp_path / "model.toml"
+    model.write_text(text)
+    pd.DataFrame({"y": column}).to_csv(tmp_path / "log.csv", index=False)
+    result = CliRunner().invoke(app, ["fit", str(model), "--data", str(tmp_path / "log.csv"), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 2, result.output
+    assert words in result.output and len(result.output.strip().splitlines()) == 1
+    assert not (tmp_path / "out").exists()
+    calibrated = calibrate_model_file(parse_model(text, "model.toml"), pd.DataFrame({"y": column}))
+    codes = {w["code"]: w["message"] for w in calibrated.warnings}
+    assert words in codes["nothing-to-fit"] and "kalcal fit" not in codes["sigma-untrusted"]
+    assert calibrated.sigma_trusted is False
+
+
+# model.toml's header says which commands take it, and the claim holds: verify takes a fitted proper
+# filter (test_cli_fit_then_verify_the_fitted_file) and refuses a fitted diffuse one in the words the
+# header quotes.
+def test_model_toml_header_says_verify_refuses_a_diffuse_filter(tmp_path):
+    from kalcal.scenarios.model_file.model import diffuse_refusal
+
+    text = AR1_DIFFUSE.replace("phi = [[0.5]]", "phi = [[1.0]]") + "\n[truth]\nm0 = [[4.0]]\n"
+    kalcal.fit(parse_model(text, "ar1.toml"), data=_ar1_log(), free="filter.w,filter.v", out=tmp_path / "fit")
+    model = tmp_path / "fit" / "model.toml"
+    header = " ".join(line[2:] for line in model.read_text().splitlines() if line.startswith("# "))
+    assert "`kalcal verify` without a log does not" in header and "kalcal verify` take" not in header
+    assert diffuse_refusal(["x1"]) in header
+    result = CliRunner().invoke(app, ["verify", str(model), "-n", "100", "--out", str(tmp_path / "v")])
+    assert result.exit_code == 2 and diffuse_refusal(["x1"]) in " ".join(result.output.split())

@@ -193,18 +193,21 @@ def test_truth_inputs_decide_whether_verify_needs_a_log():
     assert no_updates.without_log().startswith("it sets no updates")
 
 
-def test_a_diffuse_filter_is_verified_only_against_a_proper_truth_prior():
+# One refusal for a diffuse filter, whatever its [truth] says: a proper truth prior used to be asked for
+# and then refused again for the engine's missing diffuse start.
+def test_a_diffuse_filter_is_refused_by_verify_in_one_consistent_message():
     timing = {"steps_per_update": "1", "updates": "3", "b": None, "diffuse": '["x1"]', "m0": "[[0.0, 0.0], [0.0, 1.0]]"}
     data = {"measurements": '["pos", "vel"]'}
-    scenario = parse_model(_text(data=data, **timing), SOURCE)
-    with pytest.raises(ConfigError) as info:
-        require(scenario, "verify")
-    assert str(info.value) == (
-        f"a model file ({SOURCE}): its filter starts diffuse in x1: a proper [truth] m0 (the world's prior, "
-        "positive on those states) is needed to verify it"
+    expected = (
+        f"a model file ({SOURCE}): its filter starts diffuse in x1: kalcal verify and analyze do not take a diffuse "
+        "filter (the exact engine's fixed-gain filter has no diffuse start); calibrate and fit take the file as it "
+        "is. To verify, give the filter a proper m0 on those states (and the world's prior as the [truth] m0)"
     )
-    proper = parse_model(_text(data=data, truth={"m0": "[[25.0, 0.0], [0.0, 1.0]]"}, **timing), SOURCE)
-    assert "the exact engine's fixed-gain filter has no diffuse start" in proper.without_log()
+    for truth in ({}, {"truth": {"m0": "[[25.0, 0.0], [0.0, 1.0]]"}}):
+        scenario = parse_model(_text(data=data, **truth, **timing), SOURCE)
+        with pytest.raises(ConfigError) as info:
+            require(scenario, "verify")
+        assert str(info.value) == expected
 
 
 # --- round trips ------------------------------------------------------------------------------------------

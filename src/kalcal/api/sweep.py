@@ -129,6 +129,7 @@ def sweep(
         raise KalcalError(f"--threads: expected a positive number, got {threads}")
     from kalcal.montecarlo.distributed import dask_client
 
+    _refuse_model_file(scenario)
     model = resolve(scenario, settings, config, command="sweep")  # an unknown name: the list of those with a sweep
     sweep_cells(model, key, values, n, engine=engine, long_run=0)  # every value checked before any cluster
     options = dict(engine=engine, workers=threads, long_run=0)
@@ -171,6 +172,24 @@ OUTPUT_NAMES = (
 
 #: the options of :func:`~kalcal.api.verification.verify` that :func:`~kalcal.api.verification.check_arguments` checks
 _CHECKED = ("engine", "confidence", "long_run", "batch_size", "form")
+
+
+def _refuse_model_file(scenario) -> None:
+    """A model file (or a Model) is not swept: refused in one line saying why (not the registry's list of
+    built-in names). The mathematics allows it for a file verify takes without a log (a verification per
+    value of one of its --set keys), but the sweep's cells are built by the built-in scenarios' settings
+    (scalars), while a model file's settings are matrices re-read through the file's own checks."""
+    from kalcal.api.model import Model
+    from kalcal.errors import KalcalError
+    from kalcal.scenarios import is_model_file
+
+    if isinstance(scenario, Model) or (isinstance(scenario, (str, Path)) and is_model_file(str(scenario))):
+        name = "a Model" if isinstance(scenario, Model) else f"a model file ({scenario})"
+        raise KalcalError(
+            f"sweep: {name} is not swept: the sweep sets one scalar setting of a built-in scenario per value, and a "
+            "model file's settings are matrices read through the file's own checks; run kalcal verify MODEL.toml "
+            "--set KEY=VALUE once per value instead"
+        )
 
 
 def sweep_cells(scenario, key: str, values: list[str], n: int, **verify_options: Any) -> list:

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from kalcal.core.model import _as_matrix, check_covariance
-from kalcal.models.settings import SettingError, show
+from kalcal.models.settings import SettingError, show, type_name
 
 __all__ = ["TimeVaryingModel", "measured_components"]
 
@@ -39,7 +39,8 @@ class TimeVaryingModel:
     w : ndarray, shape (q, q)
         Process-noise covariance per step.
     b : ndarray, shape (d, m)
-        Known-input matrix (m = 0: no inputs).
+        Known-input matrix, exactly this shape (m = 0: no inputs; None or [] read as that). Any other
+        shape is a :class:`~kalcal.models.settings.SettingError` naming ``b``, never reshaped.
     x0 : ndarray, shape (d,)
         Prior mean at row 0 (entries of diffuse states are not used).
     m0 : ndarray, shape (d, d)
@@ -50,7 +51,7 @@ class TimeVaryingModel:
     v : ndarray, shape (J, p, p)
         V_j, the measurement-noise covariance at each step, positive definite.
     u : ndarray, shape (J, m)
-        The known inputs u_j, finite.
+        The known inputs u_j, finite, exactly this shape (a SettingError naming ``u`` otherwise).
     diffuse : ndarray of bool, shape (d,)
         The states with no prior information (a diffuse prior, the limit of an infinite variance).
     sample_period : float
@@ -81,7 +82,11 @@ class TimeVaryingModel:
         if gamma.shape[0] != d:
             raise SettingError("gamma", f"{d} rows to match phi", f"shape {gamma.shape}")
         w = _as_matrix("w", self.w, (gamma.shape[1], gamma.shape[1]))
-        b = np.array(self.b, dtype=float).reshape(d, -1) if np.size(self.b) else np.zeros((d, 0))
+        # exact shapes, never a reshape: a (1, 2) b with d = 2 read as (2, 1) would drive the wrong states
+        # (no inputs: None, [] or a (d, 0) matrix)
+        b = _inputs("b", self.b, d)
+        if b.shape[0] != d:
+            raise SettingError("b", f"a matrix of shape ({d}, m), one row per state", f"shape {b.shape}")
         m0 = _as_matrix("m0", self.m0, (d, d))
         x0 = np.array(self.x0, dtype=float).reshape(-1)
         if x0.shape != (d,):
@@ -93,10 +98,12 @@ class TimeVaryingModel:
         v = np.array(self.v, dtype=float)
         if v.shape != (n, p, p) or not np.all(np.isfinite(v)):
             raise SettingError("v", f"finite covariances per step of shape {(n, p, p)}", f"shape {v.shape}")
-        u = np.array(self.u, dtype=float).reshape(n, -1) if np.size(self.u) else np.zeros((n, 0))
+        u = _inputs("u", self.u, n)
         if u.shape != (n, b.shape[1]):
-            raise SettingError("u", f"inputs of shape {(n, b.shape[1])} to match b", f"shape {u.shape}")
-        if not (np.all(np.isfinite(u)) and np.all(np.isfinite(b))):
+            raise SettingError("u", f"inputs of shape {(n, b.shape[1])}, one row per step to match b", f"shape {u.shape}")
+        if not np.all(np.isfinite(b)):
+            raise SettingError("b", "finite numbers", "a non-finite value")
+        if not np.all(np.isfinite(u)):
             raise SettingError("u", "finite inputs", "a non-finite value")
         diffuse = np.array(self.diffuse, dtype=bool).reshape(-1)
         if diffuse.shape != (d,):
@@ -132,6 +139,22 @@ class TimeVaryingModel:
     def steps(self) -> int:
         """J, the number of rows."""
         return self.h.shape[0]
+
+
+def _inputs(name: str, value, rows: int) -> np.ndarray:
+    """``b`` or ``u`` as a float matrix, its shape as given (the caller checks it); None or an empty
+    value with fewer than 2 dimensions reads as no inputs, (rows, 0)."""
+    if value is None:
+        return np.zeros((rows, 0))
+    try:
+        array = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise SettingError(name, "a matrix of numbers", type_name(value)) from None
+    if array.size == 0 and array.ndim < 2:
+        return np.zeros((rows, 0))
+    if array.ndim != 2:
+        raise SettingError(name, "a matrix (2 dimensions)", f"an array of shape {array.shape}")
+    return array
 
 
 def measured_components(model: TimeVaryingModel, z: np.ndarray) -> np.ndarray:

@@ -292,15 +292,29 @@ def calibrate_model_file(
         warnings.append(CalibrationWarning(
             "measurements-skipped", f"{bound.source}: {skipped} measurement(s) skipped: the data column their row of h "
             "names is empty there"))  # fmt: skip
-    if not used.size:
+    from kalcal.scenarios.model_file.fit import likelihood_refusal
+
+    # a log that gives the likelihood nothing (no measurement, or every one conditioned on by the diffuse
+    # start) or a single row: the filter's estimates stand, but nothing tests the noise settings and
+    # kalcal fit refuses the log, so it is not offered as the next step
+    unfittable = likelihood_refusal(scenario, bound, run)
+    if unfittable:
+        warnings.append(CalibrationWarning("nothing-to-fit", f"{bound.source}: {unfittable} (kalcal fit refuses this log)"))
+    elif not used.size:
         warnings.append(CalibrationWarning("no-innovations", f"{bound.source}: {diagnostics['verdict']}"))
     reasons = []
-    if not diagnostics["consistent"]:
+    if not used.size:
+        reasons.append("the log has no measurement after the diffuse period to test them against")
+    elif not diagnostics["consistent"]:
         reasons.append(f"the diagnostics say inconsistent ({diagnostics['verdict']})")
     if stability.stable is False:
         reasons.append("the windows' estimates disagree (stability: NOT stable)")
     because = " and ".join(reasons) or None
-    if because:
+    if because and unfittable:
+        warnings.append(CalibrationWarning(
+            "sigma-untrusted", f"the states' 1-sigmas are NOT trusted: they hold only for a model and noise settings "
+            f"that fit the log, and {because}"))  # fmt: skip
+    elif because:
         # the log's path as given (a bag's or ULog's: its topic is in the model's TOPIC.FIELD columns), not
         # bound.source's "FILE topic TOPIC", which names it in messages
         data = shlex.quote(str(log)) if isinstance(log, (str, Path)) else "LOG"
@@ -416,6 +430,8 @@ class ModelFileCalibrationResult(CalibrationResult):
         return f"kalcal calibrate {self.name}: {self.run.state.shape[0]} rows, {used} measurements", f"t = {self.time:g} s"
 
     def lines(self) -> list[tuple[str, bool | None]]:
+        if not np.any(self.run.measured & ~self.run.conditioned):
+            return [("log-likelihood 0: no measurement in it (the empty sum, not a fit)", None)]
         if not np.any(self.run.conditioned):
             return [(f"log-likelihood {self.loglik:.10g}", None)]
         return [(f"log-likelihood {self.loglik:.10g} (conditional on the {int(np.count_nonzero(self.run.conditioned))} "

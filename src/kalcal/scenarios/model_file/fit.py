@@ -32,7 +32,9 @@ diffuse direction) are not in it; statsmodels' exact diffuse ``llf`` is it plus 
 The search, the intervals, "consistent with 0" and the flatness verdicts are
 :func:`kalcal.fitting.mle.maximize`'s. The outputs: fit.json, fit.png and ``model.toml``, the model file
 with the fitted values written in (its filter's matrices; a ``[truth]`` key the file set apart from its
-filter stays the file's), which ``calibrate`` and ``verify`` take as it is.
+filter stays the file's), which ``calibrate`` takes as it is, and ``verify`` where it takes the file
+(its header says which: a diffuse filter is not verified, a file whose rows come from a log is verified
+with ``--data LOG``).
 """
 
 from __future__ import annotations
@@ -48,9 +50,10 @@ import numpy as np
 from kalcal.calibration.diagnostics import innovation_diagnostics
 from kalcal.core.timevarying import TimeVaryingModel
 from kalcal.core.timevarying_filter import filter_model, loglik
-from kalcal.errors import ConfigError
+from kalcal.errors import ConfigError, DataError
 from kalcal.fitting.mle import Free, maximize
 from kalcal.fitting.result import FitResult, fitted_point, interval_text
+from kalcal.scenarios.model_file.calibrate import normalized_series
 
 if TYPE_CHECKING:
     from kalcal.scenarios.model_file.data import BoundModel
@@ -91,6 +94,30 @@ def fit_refusal(scenario: CustomModelScenario) -> str:
     """Why the file cannot be fitted ("" when it can), in words that follow ``FILE:``."""
     if scenario.data is None:
         return "kalcal fit needs a [data] table in the file (which log columns feed the model) to read --data LOG"
+    return ""
+
+
+def likelihood_refusal(scenario: CustomModelScenario, bound: BoundModel, run=None) -> str:
+    """Why the log gives the fit nothing to maximize ("" when it does), in words that follow the log's name.
+
+    Refused: a log of one row (no step: w is not in the likelihood, and one innovation tests nothing) and a
+    log whose likelihood holds no measurement (every measurement empty, or every one conditioned on by the
+    diffuse start). Which components are conditioned on depends on the rows of h and the diffuse states,
+    not on w or v, so the file's own values decide it before the search (``run``: the filter over the
+    bound log at those values, when it has run already)."""
+    rows = int(bound.z.shape[0])
+    if rows < 2:
+        return "the log has one row: no step (w is not in the likelihood) and one innovation: nothing to fit"
+    run = filter_model(bound.filter, bound.z) if run is None else run
+    measured, conditioned = int(np.count_nonzero(run.measured)), int(np.count_nonzero(run.conditioned))
+    if measured == 0:
+        return f"no measurement in its {rows} rows (every measurement cell empty or NaN): nothing in the likelihood"
+    if measured == conditioned:
+        return (
+            f"all {measured} measurement(s) are conditioned on by the diffuse start of "
+            f"{', '.join(scenario.filter.diffuse)}: nothing left in the likelihood (a log that measures beyond "
+            "the diffuse period is needed)"
+        )
     return ""
 
 
@@ -286,6 +313,17 @@ def model_text(scenario: CustomModelScenario, matrices: Mapping[str, list], head
     return "".join(f"# {line}\n" for line in header) + text
 
 
+def _takers(scenario: CustomModelScenario) -> list[str]:
+    """model.toml's line on the commands that take it: the fitted file differs from the file only in phi, w
+    and v, none of which decides whether verify takes it (the rows of h, the std columns, the diffuse
+    states, the truth's inputs and the updates do), so the file's own answer is the fitted file's."""
+    why = scenario.without_log()
+    if not why:
+        return ["`kalcal calibrate`, `kalcal fit` and `kalcal verify` take this file as it is."]
+    return ["`kalcal calibrate` and `kalcal fit` take this file as it is; `kalcal verify` without a log does not:",
+            f"{why}."]
+
+
 def fit_model_file(
     scenario: CustomModelScenario,
     log: Any,
@@ -331,6 +369,9 @@ def fit_model_file(
         raise ConfigError(f"{scenario.model.file}: no positive diagonal entry of w or v to fit: name the keys with --free")
     entries = free_entries(scenario, keys)
     bound = bind(scenario, log, topic=topic)
+    refusal = likelihood_refusal(scenario, bound)
+    if refusal:
+        raise DataError(f"{bound.source}: kalcal fit {scenario.model.file}: {refusal}")
     like = BoundLikelihood(scenario, bound, entries)
     parameters = []
     for e in entries:
@@ -351,9 +392,11 @@ def fit_model_file(
 
     boot = bootstrap_fit(options, draw, parameters, fit)
     run = filter_model(like.model_at(chosen), bound.z)
-    normalized, rows = _normalized(run)
-    names = bound.measurement_names
-    diagnostics = innovation_diagnostics(normalized, tuple(names))
+    # the series calibrate tests (one function for both): rows that measure different components are
+    # pooled, component by component, rather than dropped (a log whose rows never measure every
+    # component would otherwise leave nothing to test and a NaN verdict)
+    series, labels, used = normalized_series(run, tuple(bound.measurement_names))
+    diagnostics = innovation_diagnostics(series, labels)
     adequate = diagnostics.consistent
     adequacy = diagnostics.verdict if adequate else (
         f"{diagnostics.verdict}. Even the best settings leave the innovations inconsistent: the model lacks "
@@ -377,9 +420,10 @@ def fit_model_file(
             "of phi under the conditional likelihood may differ from an exact diffuse likelihood's (it does not where "
             "the conditioned measurements see the diffuse states before any step, as in an AR(1) plus noise)"
         )
-    if rows < int(np.count_nonzero(np.any(np.isfinite(run.residual), axis=1))):  # rows with a partial measurement
+    if np.unique(run.measured[used], axis=0).shape[0] > 1:
         notes.append(
-            f"the innovation diagnostics use the {rows} rows with every component measured and a proper prior"
+            f"the innovation diagnostics test the {series.shape[0]} normalized components of the {used.size} measured "
+            "rows after the diffuse period as one series (rows measure different components)"
         )
     matrices = fitted_matrices(scenario, like, chosen)
     settings = {"filter": dict(matrices)}
@@ -390,13 +434,13 @@ def fit_model_file(
         f"kalcal fit: {', '.join(keys)} fitted by maximum likelihood to {bound.source}",
         f"({counted} measurements in the likelihood, log L = {fit.loglik:.6g}, {fit.interval_method} intervals).",
         *(f"{p.name}: {p.note if not p.identified else 'fitted, ' + interval_text(p)}".rstrip() for p in fit.parameters.values()),
-        "`kalcal calibrate` and `kalcal verify` take this file as it is.",
+        *_takers(scenario),
     ]
     if not adequate:
         header.append(f"NOT ADEQUATE: {adequacy}")
     result = FitResult.from_search(
         scenario.model.name, fit, fixes=counted, nobs_name="measurements", adequate=adequate, adequacy=adequacy,
-        diagnostics=diagnostics.as_dict(), notes=notes, settings=settings, confidence=confidence,
+        diagnostics={**diagnostics.as_dict(), "series": list(labels), "rows_used": int(used.size)}, notes=notes, settings=settings, confidence=confidence,
         extra={"diffuse_term": float(run.diffuse_term), "model_file": scenario.model.file}, bootstrap=boot,
     )  # fmt: skip
     linear = tuple(key for key, p in result.parameters.items() if p.scale == "linear")
@@ -425,16 +469,6 @@ def draw_log(fitted: TimeVaryingModel, z: np.ndarray, rng: np.random.Generator) 
     _, simulated = draw(fitted, rng)
     simulated[~np.isfinite(z)] = np.nan
     return simulated
-
-
-def _normalized(run) -> tuple[np.ndarray, int]:
-    """L_j^{-1} r_j (S_j = L_j L_j^T) of the rows with every component measured and a proper prior, (K, p)."""
-    full = np.all(run.measured, axis=1) & np.all(np.isfinite(run.residual), axis=1)
-    r, s = run.residual[full], run.innovation_cov[full]
-    if not r.shape[0]:
-        return np.zeros((0, run.residual.shape[1])), 0
-    chol = np.linalg.cholesky(s)
-    return np.linalg.solve(chol, r[:, :, None])[:, :, 0], int(full.sum())
 
 
 def fit_logs(scenario: CustomModelScenario, logs: Mapping[str, Any], options) -> FitResult:

@@ -187,15 +187,12 @@ def logged_arrays(scenario, bound) -> LoggedArrays:
         One line naming the file (and the log's row where it is a row's fault): no measured row, a measured
         pattern that changes between update rows, a diffuse filter, a truth whose b differs from the filter's.
     """
-    from kalcal.scenarios.model_file.model import _inputs_cancel
+    from kalcal.scenarios.model_file.model import _inputs_cancel, diffuse_refusal
 
     file = scenario.model.file
     f, t = bound.filter, bound.truth if bound.truth is not None else bound.filter
     if np.any(f.diffuse):
-        raise ConfigError(
-            f"{file}: its filter starts diffuse in {', '.join(scenario.filter.diffuse)}: the fixed-gain filter has no "
-            "diffuse start, so it is not verified (give the filter a proper m0, and the world's in [truth])"
-        )
+        raise ConfigError(f"{file}: {diffuse_refusal(scenario.filter.diffuse)}")
     if not _inputs_cancel(scenario):
         raise ConfigError(
             f"{file}: its truth's b differs from the filter's, so the filter's error depends on the inputs u: a "

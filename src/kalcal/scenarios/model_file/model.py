@@ -25,7 +25,7 @@ The file describes the filter's model (top-level keys) and, optionally, a truth 
 The model is the one of :class:`~kalcal.core.model.LinearGaussianModel`: the first measurement is
 taken after ``steps_per_update`` steps, update k (k = 1..updates) at t_k = k * steps_per_update *
 sample_period. The truth shares the filter's timing and dimensions (d states, p measurements; its
-noise input may have another q), or, with a ``map``, has n states of its own (:mod:`.custom_truth`).
+noise input may have another q), or, with a ``map``, has n states of its own (:mod:`kalcal.scenarios.model_file.truth`).
 
 Every problem is a :class:`~kalcal.models.settings.SettingError` of one line,
 ``FILE: KEY: expected ..., got ...`` (``KEY: expected ..., got ...`` for a value given by ``--set KEY=...``):
@@ -73,6 +73,17 @@ from kalcal.models.settings import (
 
 #: required in every file; steps_per_update and updates too in a file without [data]
 _REQUIRED = MODEL_KEYS
+
+
+def diffuse_refusal(states: Iterable[str]) -> str:
+    """Why ``verify`` and ``analyze`` refuse a filter that starts diffuse in ``states``, with or without a log
+    and whatever the file's [truth] says (one message for every path), in words that follow ``FILE:``."""
+    return (
+        f"its filter starts diffuse in {', '.join(states)}: kalcal verify and analyze do not take a diffuse filter "
+        "(the exact engine's fixed-gain filter has no diffuse start); calibrate and fit take the file as it is. To "
+        "verify, give the filter a proper m0 on those states (and the world's prior as the [truth] m0)"
+    )
+
 _TIMING = ("steps_per_update", "updates")
 _NAME_KEYS = ("state_names", "state_units", "measurement_names", "measurement_units")
 #: what a model file adds to the time-invariant model: known inputs and the states started diffuse
@@ -196,15 +207,7 @@ class CustomModelScenario(ScenarioDefaults):
             stds = ", ".join(c for c in data.stds if c)
             return f"its measurement stds come from data columns ({stds}): it is not verified without a log (--data LOG)"
         if f.diffuse:
-            if "m0" not in self.differing():
-                return (
-                    f"its filter starts diffuse in {', '.join(f.diffuse)}: a proper [truth] m0 (the world's prior, "
-                    "positive on those states) is needed to verify it"
-                )
-            return (
-                f"its filter starts diffuse in {', '.join(f.diffuse)}: the exact engine's fixed-gain filter has no "
-                "diffuse start (give the filter a proper m0 to verify it)"
-            )
+            return diffuse_refusal(f.diffuse)
         if not _inputs_cancel(self):
             return (
                 "its truth's inputs (b) differ from the filter's, so the filter's error depends on the inputs u: "
