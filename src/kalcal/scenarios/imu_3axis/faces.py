@@ -186,3 +186,75 @@ def labels() -> list[str]:
 
 
 assert set(FACE_ORDER) == set(FACES)
+
+
+#: the tilt check's family-wise level: how often untilted (or within-bound) faces are refused at most
+TILT_CHECK_ALPHA = 0.01
+
+
+def face_residuals(means: np.ndarray, gravity: float) -> np.ndarray:
+    """Each face's mean minus the fitted g M n_i + b (6, 3), m/s^2, of the six faces' means (6, 3).
+
+    With the closed solution a face's residual is its axis pair's mean (ā_jp + ā_ja) / 2 minus b, the same
+    for both faces of a pair: the residuals hold 9 distinct numbers (6 free: they sum to zero over the pairs)."""
+    values = estimate(means, gravity)
+    up = np.array([face_up(name) for name in FACE_ORDER])
+    return np.asarray(means, dtype=float) - (gravity * up @ values["M"].T + values["b"])
+
+
+def tilt_check(run: "FaceCalibration", alpha: float = TILT_CHECK_ALPHA) -> dict:
+    """Whether the faces' residuals lie within what the tilt bound plus the noise allows.
+
+    The model a_i = g M n_i + b is exact for untilted faces, so the residuals (:func:`face_residuals`) are
+    the tilts' and the noise's alone. Each of the 9 distinct residuals (3 pairs x 3 axes) is a linear
+    functional of the means: it may reach its worst case over the faces' caps (:func:`cap_worst_case`) plus
+    z sigma, z at ``alpha`` two-sided with Bonferroni over the 9 (so faces within the bound are refused at a
+    rate of at most ``alpha``). A residual beyond that means a face sits further from its nominal orientation
+    than the bound, and every interval of procedure (a), which assumes the bound, is wrong.
+
+    Returns a dict: ``within`` (bool), ``pair`` (the two faces of the worst residual: the residuals cannot
+    tell the faces of a pair apart), ``axis``, ``residual`` and ``allowed`` (m/s^2, the worst residual and
+    z sigma + its worst case), ``needed_tilt_deg`` (the smallest common tilt bound, deg, under which every
+    residual would be within its allowance: a lower bound on the tilt the faces carry), ``z``, ``alpha``.
+    """
+    from kalcal.stats.distributions import normal_isf
+
+    g, nominal = run.gravity, np.array([face_up(name) for name in FACE_ORDER])
+    pairs = [0, 2, 4]  # x_p, y_p, z_p: a pair's two faces share their residual
+    residual = face_residuals(run.means, g)[pairs].ravel()  # (9,): pair-major, then axis
+
+    def functional(means):
+        return face_residuals(means, g)[pairs].ravel()
+
+    grad = gradient(functional, run.means)
+    cov, _ = propagate(grad, run.mean_cov, run.values["M"], g, 0.0, nominal)
+    sigma = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    z = float(normal_isf(alpha / (2 * residual.size)))
+    weights = g * np.einsum("ij,kmi->kmj", run.values["M"], grad)
+
+    def allowed(bound: float) -> np.ndarray:
+        return z * sigma + cap_worst_case(weights, nominal, bound)
+
+    excess = np.abs(residual) - allowed(run.tilt_bound)
+    worst = int(np.argmax(excess))
+    # the smallest bound that explains every residual, by bisection (the worst case rises with the bound)
+    low, high = 0.0, np.pi / 2
+    if np.all(np.abs(residual) <= allowed(low)):
+        high = 0.0
+    elif np.any(np.abs(residual) > allowed(high)):
+        low = high
+    for _ in range(60):
+        if high - low < 1e-6:
+            break
+        middle = (low + high) / 2
+        if np.all(np.abs(residual) <= allowed(middle)):
+            high = middle
+        else:
+            low = middle
+    pair = FACE_ORDER[2 * (worst // 3)], FACE_ORDER[2 * (worst // 3) + 1]
+    return {"within": bool(np.all(excess <= 0)), "pair": list(pair), "axis": AXES[worst % 3],
+            "residual": float(residual[worst]), "allowed": float(allowed(run.tilt_bound)[worst]),
+            "needed_tilt_deg": float(np.degrees(high)), "tilt_bound_deg": float(np.degrees(run.tilt_bound)),
+            "z": z, "alpha": alpha,
+            "test": ("each of the 9 distinct face residuals (pair mean minus b) within z sigma plus its worst case over the "
+                     f"faces' tilt caps, z at {alpha:g} two-sided, Bonferroni over 9")}

@@ -173,7 +173,16 @@ def calibrate_logs(scenario, logs: dict[str, Any], options) -> Imu3AxisCalibrati
         if missing:
             raise DataError(f"{poses_source}: procedure (a) needs all six faces; missing {', '.join(missing)}")
         run = face_procedure.calibrate_faces(samples, settings.gravity, np.radians(settings.tilt_bound))
-        result = _faces_result(scenario, run, regions, name, columns, notes)
+        check = face_procedure.tilt_check(run)
+        if not check["within"]:
+            # every interval of procedure (a) assumes the bound: a face beyond it makes them wrong, not just wide
+            raise DataError(
+                f"{poses_source}: faces {'/'.join(check['pair'])}: residual {check['residual']:.3g} m/s^2 on {check['axis']} "
+                f"exceeds the {check['allowed']:.3g} m/s^2 a tilt within scenario.tilt_bound = {check['tilt_bound_deg']:g} deg "
+                f"plus the noise allows: the residuals need a tilt bound of at least {check['needed_tilt_deg']:.2g} deg (a face "
+                "off its nominal orientation, a misnamed face or a moved sensor); raise --set scenario.tilt_bound above "
+                "the fixture's tilt, or record 9 or more poses in general orientations for procedure (b)")
+        result = _faces_result(scenario, run, regions, name, columns, notes, check)
     else:
         if len(samples) < 9:
             raise DataError(f"{poses_source}: {len(samples)} static poses; at least 9 are needed without the six named faces "
@@ -207,7 +216,7 @@ def _stability(why: str):
     return Stability(("bias",), ("m/s^2",), (), "constant", "none", sentence=f"not tested: {why}")
 
 
-def _faces_result(scenario, run, regions, name, columns, notes):
+def _faces_result(scenario, run, regions, name, columns, notes, check):
     labels = face_procedure.labels()
     flat = face_procedure.flat(run.values)
     std, tilt = run.std(), run.tilt
@@ -222,13 +231,15 @@ def _faces_result(scenario, run, regions, name, columns, notes):
     estimates = {label: (float(flat[k]), float(std[k]), float(tilt[k])) for k, label in enumerate(labels)}
     return Imu3AxisCalibrationResult(
         scenario=scenario.NAME, bias=float(run.values["b"][0]), bias_std=float(std[index["bias_x"]]), scale=None, scale_std=None,
-        covariance=run.covariance[np.ix_(keep, keep)], covariance_states=tuple(labels[k] for k in keep), diagnostics={"whiteness": run.whiteness},
+        covariance=run.covariance[np.ix_(keep, keep)], covariance_states=tuple(labels[k] for k in keep), diagnostics={"whiteness": run.whiteness, "tilt_check": check},
         warnings=warnings, columns=_residual_columns(list(regions), residuals), time=float("nan"),
         units=_units(labels), stability_test=_stability("a static-pose calibration has no windows"),
         sigma_trusted=run.whiteness["white"], procedure="a", estimates_table=estimates,
         full_covariance=run.covariance, covariance_labels=tuple(labels), bootstrap_table={},
-        misalignment=run.values["misalignment"], fit={"residual_tilt_note": "the faces' residuals are the tilts' and the noise's; "
-                                                      "a residual beyond the bound's reach means a wrong face or a moved sensor"},
+        misalignment=run.values["misalignment"], fit={"residual_tilt_note": "the faces' residuals are the tilts' and the noise's; each is checked against z sigma "
+                                                      "plus its worst case within the tilt bound (diagnostics.tilt_check), and a "
+                                                      "residual beyond it is refused: a face outside the bound, a wrong face or a moved sensor",
+                                "needed_tilt_deg": check["needed_tilt_deg"]},
         means=run.means, **_common(scenario, run.values["M"], run.values["b"], regions, name, columns, notes, residuals))
 
 
