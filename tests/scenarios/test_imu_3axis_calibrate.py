@@ -107,3 +107,31 @@ def test_cli_refuses_a_face_tilted_beyond_the_bound(tmp_path):
     for k, axis in enumerate("xyz"):
         est = summary["estimates"][f"bias_{axis}"]
         assert est["lower"] <= B_TRUE[k] <= est["upper"], (axis, est)
+
+
+# --- item: what a tilt does to M's diagonal ---------------------------------------------------------------------
+
+@pytest.mark.parametrize("rotation_deg", [0.0, 5.0])
+def test_diagonal_tilt_term_is_first_order_in_the_rows_off_diagonal_part(rotation_deg):
+    """M_kk's worst-case tilt term is |M_k| (cos a_k - cos(a_k + delta)), a_k the angle of row k from axis k: about
+    |M_k,off| delta + M_kk delta^2 / 2. For a unit orthogonal sensor rotated 5 deg about z (the fixture's mounting)
+    the x and y diagonal take the first order, sin(5 deg) delta, over 5x delta^2 / 2; unrotated, delta^2 / 2 only."""
+    c, s = np.cos(np.radians(rotation_deg)), np.sin(np.radians(rotation_deg))
+    M = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
+    delta = np.radians(1.0)
+    samples = {f: np.tile(G * m.face_up(f) @ M.T, (40, 1)) + 1e-6 * np.random.default_rng(0).standard_normal((40, 3))
+               for f in F.FACE_ORDER}
+    run = F.calibrate_faces(samples, G, delta)
+    labels = F.labels()
+    for k, axis in enumerate("xyz"):
+        row = run.values["M"][k]
+        alpha = np.arccos(row[k] / np.linalg.norm(row))
+        stated = np.linalg.norm(row) * (np.cos(alpha) - np.cos(alpha + delta))
+        term = run.tilt[labels.index(f"M_{axis}{axis}")]
+        assert np.isclose(term, stated, rtol=1e-5), (axis, term, stated)
+        first = np.linalg.norm(np.delete(row, k)) * delta + row[k] * delta**2 / 2
+        assert np.isclose(term, first, rtol=0.01), (axis, term, first)
+    if rotation_deg:
+        assert run.tilt[labels.index("M_xx")] > 5 * delta**2 / 2
+    else:
+        assert np.isclose(run.tilt[labels.index("M_xx")], 1 - np.cos(delta), rtol=1e-4)

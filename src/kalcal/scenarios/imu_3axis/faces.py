@@ -21,8 +21,10 @@ both sides, to the noise interval (estimate +- (z sigma + worst case)). What a t
 moves a face's reading across the axes by about g delta (first order) and along it by g (1 - cos delta)
 (second order). M's off-diagonal entries (the misalignment) and the biases of the other axes take the first
 order (|dM_kj| <= about delta for a worst-case tilt of both faces of axis j; |db_k| <= about (4/6) g delta
-from the four faces across axis k); M's diagonal takes the second order only (about
-delta^2 / 2); the scales (M's row norms) take that and the first order times the misalignment.
+from the four faces across axis k); M's diagonal M_kk takes |M_k| (cos a_k - cos(a_k + delta)), a_k the
+angle of row k from axis k: about |M_k,off| delta + M_kk delta^2 / 2, first order through the row's off-diagonal
+entries (the sensor's misalignment and the fixture's mounting rotation), delta^2 / 2 only for a row along its
+axis; the scales (M's row norms) take the same first order through the misalignment.
 """
 
 from __future__ import annotations
