@@ -135,3 +135,34 @@ def test_diagonal_tilt_term_is_first_order_in_the_rows_off_diagonal_part(rotatio
         assert run.tilt[labels.index("M_xx")] > 5 * delta**2 / 2
     else:
         assert np.isclose(run.tilt[labels.index("M_xx")], 1 - np.cos(delta), rtol=1e-4)
+
+
+# --- item: procedure (a)'s misalignment without the mounting rotation --------------------------------------------
+
+def test_faces_misalignment_is_the_sensors_own_and_the_mounting_is_apart(tmp_path):
+    """A unit orthogonal sensor mounted 5 deg about z reported misalignment [5, 0, 0] deg (the mounting); now its
+    misalignment is 0 and the mounting rotation 5 deg about z, each within its 95% noise interval; and a
+    non-orthogonal sensor keeps procedure (b)'s angles whatever its mounting (M = L Q, L from M M^T)."""
+    c, s = np.cos(np.radians(5.0)), np.sin(np.radians(5.0))
+    R = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
+    write_log(tmp_path / "rot.csv", [m.face_up(f) for f in F.FACE_ORDER], M=R, b=np.zeros(3), sigma=0.01)
+    done = kalcal("calibrate", "imu-3axis", "--imu", "rot.csv", "--out", "o", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert summary["procedure"] == "a"
+    for label, truth in [("misalignment_yx", 0.0), ("misalignment_zx", 0.0), ("misalignment_zy", 0.0),
+                         ("mounting_x", 0.0), ("mounting_y", 0.0), ("mounting_z", np.radians(5.0))]:
+        est = summary["estimates"][label]
+        assert abs(est["estimate"] - truth) <= 1.96 * est["std"] + est["tilt"], (label, est)
+    np.testing.assert_allclose(summary["mounting_rotation"], [0, 0, np.radians(5.0)], atol=2e-3)
+    np.testing.assert_allclose(summary["misalignment"], 0.0, atol=2e-3)
+    # exact algebra: any mounting R of the sensor S T leaves the angles and scales as they were
+    rng = np.random.default_rng(2)
+    for _ in range(5):
+        Rm, _ = np.linalg.qr(rng.standard_normal((3, 3)))
+        Rm *= np.sign(np.linalg.det(Rm))
+        M = M_TRUE @ Rm.T
+        means = np.array([G * M @ m.face_up(f) + B_TRUE for f in F.FACE_ORDER])
+        values = F.estimate(means, G)
+        np.testing.assert_allclose(values["misalignment"], TRUE[3:6], atol=1e-12)
+        np.testing.assert_allclose(values["scale"], TRUE[:3], atol=1e-12)

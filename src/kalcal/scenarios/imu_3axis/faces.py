@@ -45,20 +45,41 @@ MIN_SAMPLES = 2 * BATCHES
 
 def estimate(means: np.ndarray, gravity: float) -> dict[str, np.ndarray]:
     """The least-squares M (3, 3) and b (3,), m/s^2, of the six faces' means (6, 3) in :data:`FACE_ORDER`,
-    with the derived scale (row norms of M, (3,)), misalignment (3 angles, rad, :mod:`.model`) and M M^T."""
+    with the derived scale (row norms of M, (3,)), the sensor's own misalignment (3 angles, rad, :mod:`.model`),
+    the fixture's mounting rotation (3, rad) and M M^T.
+
+    M is in the fixture's frame, so it holds the mounting rotation as well as the sensor's own errors. It is
+    split as M = L Q (the LQ decomposition): L lower-triangular with a positive diagonal, the sensor in its own
+    frame (its x axis along x, its y axis in the x-y plane: procedure (b)'s convention, so the two procedures'
+    misalignments compare), and Q orthogonal, the mounting. L is the Cholesky factor of the rotation-invariant
+    M M^T, so the misalignment is the mounting's no matter how the sensor sits in the fixture. ``mounting`` is
+    Q's rotation vector (axis times angle, rad): a_m = L Q f + b, f in the fixture's frame."""
     means = np.asarray(means, dtype=float)
     up = np.array([face_up(name) for name in FACE_ORDER])  # (6, 3)
     # the normal equations of a_i = M (g n_i) + b over the six faces: G G^T is diagonal, solved in closed form
     design = np.column_stack([gravity * up, np.ones(6)])  # (6, 4)
     solution = np.linalg.lstsq(design, means, rcond=None)[0]  # (4, 3): [M^T; b^T]
     M, b = solution[:3].T, solution[3]
-    params = params_of(M, b)
-    return {"M": M, "b": b, "scale": params[:3], "misalignment": params[3:6], "MMT": M @ M.T}
+    MMT = M @ M.T
+    L = np.linalg.cholesky(MMT)
+    params = params_of(L, b)
+    Q = np.linalg.solve(L, M)
+    return {"M": M, "b": b, "scale": params[:3], "misalignment": params[3:6], "mounting": rotation_vector(Q), "MMT": MMT}
+
+
+def rotation_vector(Q: np.ndarray) -> np.ndarray:
+    """The rotation vector (3,), rad (axis times angle), of a rotation matrix Q (3, 3); NaN where det Q < 0
+    (a left-handed M: no rotation maps the fixture onto the sensor)."""
+    if np.linalg.det(Q) <= 0:
+        return np.full(3, np.nan)
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_matrix(Q).as_rotvec()
 
 
 def flat(values: dict[str, np.ndarray]) -> np.ndarray:
-    """M (9, row-major), b (3), scale (3), misalignment (3), M M^T (9) as one vector (27,)."""
-    return np.concatenate([values[key].ravel() for key in ("M", "b", "scale", "misalignment", "MMT")])
+    """M (9, row-major), b (3), scale (3), misalignment (3), mounting (3), M M^T (9) as one vector (30,)."""
+    return np.concatenate([values[key].ravel() for key in ("M", "b", "scale", "misalignment", "mounting", "MMT")])
 
 
 def gradient(function, means: np.ndarray, step: float = 1e-5) -> np.ndarray:
@@ -108,10 +129,11 @@ class FaceCalibration:
     Attributes
     ----------
     values : dict
-        ``M`` (3, 3), ``b`` (3,) m/s^2, ``scale`` (3,), ``misalignment`` (3,) rad, ``MMT`` (3, 3).
-    covariance : ndarray (27, 27)
+        ``M`` (3, 3), ``b`` (3,) m/s^2, ``scale`` (3,), ``misalignment`` (3,) rad (the sensor's own),
+        ``mounting`` (3,) rad (the fixture's rotation vector), ``MMT`` (3, 3).
+    covariance : ndarray (30, 30)
         The noise covariance of :func:`flat`'s vector (white samples assumed).
-    tilt : ndarray (27,)
+    tilt : ndarray (30,)
         The worst-case tilt term of each, in its unit.
     means, mean_cov : ndarray (6, 3), (6, 3, 3)
         The faces' means, m/s^2, and their covariances, (m/s^2)^2, in :data:`FACE_ORDER`.
@@ -132,7 +154,7 @@ class FaceCalibration:
     tilt_bound: float
 
     def std(self) -> np.ndarray:
-        """The noise 1-sigma of :func:`flat`'s vector (27,)."""
+        """The noise 1-sigma of :func:`flat`'s vector (30,)."""
         return np.sqrt(np.diag(self.covariance))
 
     def residuals(self) -> np.ndarray:
@@ -184,7 +206,8 @@ def correction_of(means: np.ndarray, gravity: float, reading: np.ndarray) -> np.
 def labels() -> list[str]:
     """:func:`flat`'s entries' names."""
     return ([f"M_{a}{c}" for a in AXES for c in AXES] + [f"bias_{a}" for a in AXES] + [f"scale_{a}" for a in AXES]
-            + ["misalignment_yx", "misalignment_zx", "misalignment_zy"] + [f"MMT_{a}{c}" for a in AXES for c in AXES])
+            + ["misalignment_yx", "misalignment_zx", "misalignment_zy"] + [f"mounting_{a}" for a in AXES]
+            + [f"MMT_{a}{c}" for a in AXES for c in AXES])
 
 
 assert set(FACE_ORDER) == set(FACES)

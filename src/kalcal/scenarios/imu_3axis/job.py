@@ -239,7 +239,7 @@ def _faces_result(scenario, run, regions, name, columns, notes, check):
         misalignment=run.values["misalignment"], fit={"residual_tilt_note": "the faces' residuals are the tilts' and the noise's; each is checked against z sigma "
                                                       "plus its worst case within the tilt bound (diagnostics.tilt_check), and a "
                                                       "residual beyond it is refused: a face outside the bound, a wrong face or a moved sensor",
-                                "needed_tilt_deg": check["needed_tilt_deg"]},
+                                "needed_tilt_deg": check["needed_tilt_deg"], "mounting_rotation": run.values["mounting"]},
         means=run.means, **_common(scenario, run.values["M"], run.values["b"], regions, name, columns, notes, residuals))
 
 
@@ -293,7 +293,7 @@ def _residual_columns(names: list[str], residuals: np.ndarray) -> dict[str, Any]
 def _units(labels) -> dict[str, str]:
     units = dict(zip(PARAM_NAMES, PARAM_UNITS))
     for label in labels:
-        units.setdefault(label, "m/s^2" if label.startswith("bias") else "rad" if label.startswith("misalignment") else "1")
+        units.setdefault(label, "m/s^2" if label.startswith("bias") else "rad" if label.startswith(("misalignment", "mounting")) else "1")
     return units
 
 
@@ -312,7 +312,9 @@ class Imu3AxisCalibrationResult(CalibrationResult):
     scale_vector : ndarray (3,)
         Each axis's scale factor, the row norms of M.
     misalignment : ndarray (3,)
-        rad: the y axis toward x, the z axis toward x, the z axis toward y (:mod:`.model`).
+        rad: the y axis toward x, the z axis toward x, the z axis toward y (:mod:`.model`), the sensor's own:
+        procedure (a) takes them from M M^T's Cholesky factor, so the fixture's mounting rotation is not in them
+        (summary.json's ``mounting_rotation`` holds it).
     estimates_table : dict
         label -> (estimate, noise 1-sigma, worst-case tilt term) in its unit (:attr:`units`).
     full_covariance : ndarray, labels ``covariance_labels``
@@ -439,6 +441,11 @@ class Imu3AxisCalibrationResult(CalibrationResult):
             "M": self.M,
             "misalignment": self.misalignment,
             "misalignment_names": ["misalignment_yx", "misalignment_zx", "misalignment_zy"],
+            "misalignment_frame": ("the sensor's own: M = L Q, L lower-triangular (the sensor's x axis along x, its y axis in "
+                                   "the x-y plane), Q the mounting rotation; rotation-invariant"
+                                   if self.procedure == "a" else "the sensor's own: M = S T, T lower-triangular"),
+            **({"mounting_rotation": self.fit["mounting_rotation"], "mounting_rotation_unit": "rad, rotation vector of Q "
+                "(a_m = L Q f + b, f in the fixture's frame)"} if self.procedure == "a" else {}),
             "covariance": self.full_covariance,
             "covariance_labels": labels,
             "estimates": {label: {"estimate": v, "std": s, "tilt": t, "lower": float(ci.loc[label, "lower"]),
