@@ -166,3 +166,20 @@ def test_faces_misalignment_is_the_sensors_own_and_the_mounting_is_apart(tmp_pat
         values = F.estimate(means, G)
         np.testing.assert_allclose(values["misalignment"], TRUE[3:6], atol=1e-12)
         np.testing.assert_allclose(values["scale"], TRUE[:3], atol=1e-12)
+
+
+# --- item: the result's bias is the three axes' -------------------------------------------------------------------
+
+def test_result_bias_is_the_three_axes():
+    """``result.bias`` was the float b_x though the docstring said (3,): now b (3,) and bias_std (3,), equal to
+    the estimates table and summary.json's ``bias``, and the CLI's table and repr print them."""
+    from kalcal import calibrate
+    from tests.scenarios.test_imu_3axis import LOG, POSES
+
+    result = calibrate("imu-3axis", imu=LOG, poses=POSES)
+    assert np.shape(result.bias) == (3,) and np.shape(result.bias_std) == (3,)
+    for k, axis in enumerate("xyz"):
+        value, sigma, _ = result.estimates_table[f"bias_{axis}"]
+        assert result.bias[k] == value and result.bias_std[k] == sigma
+    np.testing.assert_array_equal(result.to_dict()["bias"], result.bias)
+    assert "bias=[" in repr(result) and len(result.table()) == 9

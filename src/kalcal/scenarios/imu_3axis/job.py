@@ -230,7 +230,8 @@ def _faces_result(scenario, run, regions, name, columns, notes, check):
             f"p = {run.whiteness['p_value']:.3g}): the noise intervals, which assume white samples, are too narrow")})
     estimates = {label: (float(flat[k]), float(std[k]), float(tilt[k])) for k, label in enumerate(labels)}
     return Imu3AxisCalibrationResult(
-        scenario=scenario.NAME, bias=float(run.values["b"][0]), bias_std=float(std[index["bias_x"]]), scale=None, scale_std=None,
+        scenario=scenario.NAME, bias=np.array(run.values["b"], dtype=float),
+        bias_std=np.array([std[index[f"bias_{a}"]] for a in AXES]), scale=None, scale_std=None,
         covariance=run.covariance[np.ix_(keep, keep)], covariance_states=tuple(labels[k] for k in keep), diagnostics={"whiteness": run.whiteness, "tilt_check": check},
         warnings=warnings, columns=_residual_columns(list(regions), residuals), time=float("nan"),
         units=_units(labels), stability_test=_stability("a static-pose calibration has no windows"),
@@ -276,7 +277,7 @@ def _poses_result(scenario, run, regions, name, columns, notes):
             f"{name}: the poses' fit chi-square {run.chi2:.4g} on {run.dof} degrees of freedom (p = {run.p_value:.3g}): the "
             "model or the poses' noise does not hold (a moving pose, colored noise): the information's intervals are too narrow")})
     return Imu3AxisCalibrationResult(
-        scenario=scenario.NAME, bias=float(b[0]), bias_std=float(std[6]), scale=None, scale_std=None,
+        scenario=scenario.NAME, bias=np.array(b, dtype=float), bias_std=np.array(std[6:9]), scale=None, scale_std=None,
         covariance=run.covariance, covariance_states=PARAM_NAMES,
         diagnostics={"chi2": run.chi2, "dof": run.dof, "p_value": run.p_value, "condition": run.condition, "consistent": trusted},
         warnings=warnings, columns=_residual_columns(list(regions), run.residuals), time=float("nan"),
@@ -305,8 +306,10 @@ class Imu3AxisCalibrationResult(CalibrationResult):
     ----------
     procedure : {"a", "b"}
         (a) six known faces, linear least squares; (b) unknown poses, maximum likelihood.
-    bias : ndarray (3,)
-        b, m/s^2 (the base's ``bias`` field holds b_x; ``bias`` here overrides it with all three).
+    bias, bias_std : ndarray (3,)
+        b and its noise 1-sigma, m/s^2, per axis x, y, z. The base class's scalar fields hold the three axes
+        here (the base class reads them only in the methods this class overrides); procedure (a)'s interval
+        adds the tilt term (:meth:`conf_int`).
     M : ndarray (3, 3)
         The sensor matrix (dimensionless): a_m = M f + b.
     scale_vector : ndarray (3,)
@@ -346,8 +349,7 @@ class Imu3AxisCalibrationResult(CalibrationResult):
 
     @property
     def _bias3(self) -> np.ndarray:
-        labels = ("bias_x", "bias_y", "bias_z")
-        return np.array([self.estimates_table[label][0] for label in labels])
+        return np.asarray(self.bias, dtype=float)
 
     def correct(self, readings: np.ndarray) -> np.ndarray:
         """The corrected specific force a = M^-1 (a_m - b) (n, 3), m/s^2, of readings a_m (n, 3), m/s^2."""
