@@ -183,3 +183,95 @@ def test_result_bias_is_the_three_axes():
         assert result.bias[k] == value and result.bias_std[k] == sigma
     np.testing.assert_array_equal(result.to_dict()["bias"], result.bias)
     assert "bias=[" in repr(result) and len(result.table()) == 9
+
+
+# --- the static detector and procedure (b) through the CLI --------------------------------------------------------
+
+def general_ups(n=12, seed=5):
+    up = np.random.default_rng(seed).standard_normal((n, 3))
+    return up / np.linalg.norm(up, axis=1, keepdims=True)
+
+
+def test_detect_poses_finds_each_static_pose_and_name_faces_names_the_six():
+    """Six faces and three general poses: nine runs, each inside its true static span (the moving window may
+    trim its edges by up to one window) and covering most of it; the six faces named, the three others not."""
+    from kalcal.scenarios import build_scenario
+    from kalcal.scenarios.imu_3axis.job import detect_poses, name_faces
+
+    ups = [m.face_up(f) for f in F.FACE_ORDER] + list(general_ups(3))
+    settings = build_scenario("imu-3axis", None, []).scenario
+    import tempfile, pathlib
+    with tempfile.TemporaryDirectory() as tmp:
+        truth = write_log(pathlib.Path(tmp) / "log.csv", ups)
+        frame = pd.read_csv(pathlib.Path(tmp) / "log.csv")
+    readings = frame[["acc_x", "acc_y", "acc_z"]].to_numpy()
+    runs = detect_poses(readings, RATE, settings)
+    assert len(runs) == len(ups), runs
+    width = int(settings.window * RATE)
+    for (s, e), (ts, te) in zip(runs, truth):
+        assert ts - width <= s and e <= te + width and (e - s) >= (te - ts) - 2 * width, ((s, e), (ts, te))
+    named = name_faces({f"pose_{k}": readings[s:e] for k, (s, e) in enumerate(runs)}, np.radians(settings.face_angle))
+    assert named == {f"pose_{k}": f for k, f in enumerate(F.FACE_ORDER)}
+
+
+def test_cli_detector_six_faces_run_a_and_leave_others_out_else_b(tmp_path):
+    """Without --poses: six faces among nine poses run procedure (a), the three others left out with a note;
+    twelve general poses run procedure (b)."""
+    write_log(tmp_path / "nine.csv", [m.face_up(f) for f in F.FACE_ORDER] + list(general_ups(3)))
+    done = kalcal("calibrate", "imu-3axis", "--imu", "nine.csv", "--out", "a", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    summary = json.loads((tmp_path / "a" / "summary.json").read_text())
+    assert summary["procedure"] == "a" and set(summary["poses"]) == set(F.FACE_ORDER)
+    assert any("3 other poses left out" in note for note in summary["notes"]), summary["notes"]
+    write_log(tmp_path / "twelve.csv", general_ups())
+    done = kalcal("calibrate", "imu-3axis", "--imu", "twelve.csv", "--set", "scenario.bootstrap=50", "--out", "b", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    summary = json.loads((tmp_path / "b" / "summary.json").read_text())
+    assert summary["procedure"] == "b" and len(summary["poses"]) == 12
+    assert any(note.startswith("detected 12 static poses (faces found: ") and "procedure (b)" in note for note in summary["notes"]), summary["notes"]
+
+
+def test_cli_procedure_b_on_twelve_poses(tmp_path):
+    """Twelve general poses through ``--poses``: the 9 parameters each within their interval at the
+    Bonferroni level 0.001 / 9 (one seed: a false failure at most 0.1%), summary.json's bootstrap block
+    per parameter with its std and percentile interval, consistent poses without a warning."""
+    regions = write_log(tmp_path / "log.csv", general_ups(), sigma=0.05, seed=3)
+    (tmp_path / "poses.json").write_text(json.dumps({f"p{k}": {"start": s, "end": e} for k, (s, e) in enumerate(regions)}))
+    done = kalcal("calibrate", "imu-3axis", "--imu", "log.csv", "--poses", "poses.json", "--set", "scenario.bootstrap=50",
+                  "--out", "o", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert summary["procedure"] == "b" and summary["sigma_trusted"] and not summary["warnings"]
+    z = stats.norm.isf(0.001 / 18)
+    for name, truth in zip(m.PARAM_NAMES, TRUE):
+        est = summary["estimates"][name]
+        assert abs(est["estimate"] - truth) <= z * est["std"], (name, est, truth)
+        boot = summary["bootstrap"][name]
+        assert boot["lower"] < est["estimate"] < boot["upper"] and boot["std"] > 0, (name, boot)
+    assert set(summary["bootstrap"]) == set(m.PARAM_NAMES)
+
+
+def test_cli_procedure_b_warns_on_inconsistent_poses_and_refuses_ill_conditioned(tmp_path):
+    """A pose whose reading is shifted by 0.1 m/s^2 (a moved sensor; 30 sigma of its mean) warns
+    ``poses-inconsistent`` and untrusts the sigmas; twelve poses within 15 deg of z up are refused in one line
+    naming the condition number."""
+    ups = general_ups()
+    regions = write_log(tmp_path / "log.csv", ups, sigma=0.05, seed=3)
+    frame = pd.read_csv(tmp_path / "log.csv")
+    s, e = regions[4]
+    frame.loc[s:e - 1, "acc_x"] += 0.1
+    frame.to_csv(tmp_path / "bad.csv", index=False)
+    (tmp_path / "poses.json").write_text(json.dumps({f"p{k}": {"start": s, "end": e} for k, (s, e) in enumerate(regions)}))
+    done = kalcal("calibrate", "imu-3axis", "--imu", "bad.csv", "--poses", "poses.json", "--set", "scenario.bootstrap=0",
+                  "--out", "o", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert [w["code"] for w in summary["warnings"]] == ["poses-inconsistent"] and not summary["sigma_trusted"]
+    rng = np.random.default_rng(1)
+    cap = np.c_[0.25 * rng.uniform(-1, 1, (12, 2)), np.ones(12)]
+    regions = write_log(tmp_path / "cap.csv", cap, sigma=0.05)
+    (tmp_path / "cap.json").write_text(json.dumps({f"p{k}": {"start": s, "end": e} for k, (s, e) in enumerate(regions)}))
+    done = kalcal("calibrate", "imu-3axis", "--imu", "cap.csv", "--poses", "cap.json", "--out", "c", cwd=tmp_path)
+    assert done.returncode == 2, (done.stdout, done.stderr)
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "ill-determined" in lines[0] and "condition number" in lines[0], done.stderr
