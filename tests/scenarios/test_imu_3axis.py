@@ -144,11 +144,15 @@ def test_poses_recover_the_nine_parameters_at_the_stated_rate(seeds):
 
 @pytest.mark.parametrize("replicates", [50, pytest.param(200, marks=pytest.mark.slow)])
 def test_bootstrap_agrees_with_the_information(replicates):
-    """B replicates: each bootstrap std within five of its own standard errors, 5 / sqrt(2 B) (a std from B
-    Gaussian draws has a relative standard error of about 1 / sqrt(2 B)), of the information's."""
+    """B replicates: each bootstrap variance over the information's within the chi-square range of a sample
+    variance of B Gaussian draws, (B - 1) s^2 / sigma^2 ~ chi2(B - 1), two-sided at 0.01 with Bonferroni over
+    the 9 (at B = 50 the std ratio within about 0.65-1.4; the ML is near-linear at this noise, so its
+    replicates are near Gaussian with the information's sigma)."""
     run = fit_poses(*pose_means(np.random.default_rng(7)), G, bootstrap=replicates, seed=1)
     ratio = run.bootstrap.std(axis=0, ddof=1) / run.std()
-    assert np.all(np.abs(ratio - 1) < 5 / np.sqrt(2 * replicates)), ratio
+    dof, alpha = replicates - 1, 0.01 / 9
+    low, high = np.sqrt(stats.chi2.ppf([alpha / 2, 1 - alpha / 2], dof) / dof)
+    assert np.all((ratio > low) & (ratio < high)), (ratio, low, high)
 
 
 def test_poses_refusals():
@@ -161,7 +165,7 @@ def test_poses_refusals():
     up[:, 2] = np.abs(up[:, 2]) + 2.0
     up /= np.linalg.norm(up, axis=1, keepdims=True)
     means = G * up @ m.sensor_matrix(TRUE).T + TRUE[6:]
-    with pytest.raises(DataError, match="do not span the sphere: the information's condition number is .* > 1e\\+08") as info:
+    with pytest.raises(DataError, match="ill-determined: the information's condition number is .* > 1e\\+08") as info:
         fit_poses(means, np.tile(np.eye(3) * 1e-5, (12, 1, 1)), G)
     assert "\n" not in str(info.value)
 

@@ -39,15 +39,20 @@ def final_bias(result):
     return np.asarray(result.summary["effect_sizes"]["per_update"]["bias_sigma"])[-1]
 
 
-def test_near_linear_ekf_passes_every_check_and_batch_its_moments():
+def test_near_linear_ekf_passes_every_check():
     ekf = run("filter.kind=ekf", *NEAR_LINEAR)
     assert ekf.summary["verdict"] == "pass", [(c.name, c.pvalue) for c in ekf.checks]
+
+
+def test_near_linear_batch_passes_its_final_time_checks():
+    """Near-linear, the batch ML's intervals are honest and its verdict is pass (it said fail on its
+    orthogonality check, which tests a property of a posterior mean that an ML ignoring the prior is not)."""
     batch = run("filter.kind=batch", *NEAR_LINEAR)
     found = checks(batch)
-    # the batch ML's final-time checks: no whiteness (one estimate per realization)
-    assert set(found) == {"mean_error", "covariance", "orthogonality", "nis"}
-    for name in ("mean_error", "covariance", "nis"):
-        assert found[name].passed, (name, found[name].pvalue)
+    # the batch ML's final-time checks: no whiteness (one estimate per realization), no orthogonality (an ML
+    # ignoring the prior is no posterior mean: its error correlates with its estimate where the prior is tight)
+    assert set(found) == {"mean_error", "covariance", "nis"}
+    assert batch.summary["verdict"] == "pass", [(c.name, c.pvalue) for c in batch.checks]
 
 
 def test_default_ekf_biased_iekf_and_batch_fare_better():

@@ -21,8 +21,10 @@ both sides, to the noise interval (estimate +- (z sigma + worst case)). What a t
 moves a face's reading across the axes by about g delta (first order) and along it by g (1 - cos delta)
 (second order). M's off-diagonal entries (the misalignment) and the biases of the other axes take the first
 order (|dM_kj| <= about delta for a worst-case tilt of both faces of axis j; |db_k| <= about (4/6) g delta
-from the four faces across axis k); M's diagonal takes the second order only (about
-delta^2 / 2); the scales (M's row norms) take that and the first order times the misalignment.
+from the four faces across axis k); M's diagonal M_kk takes |M_k| (cos a_k - cos(a_k + delta)), a_k the
+angle of row k from axis k: about |M_k,off| delta + M_kk delta^2 / 2, first order through the row's off-diagonal
+entries (the sensor's misalignment and the fixture's mounting rotation), delta^2 / 2 only for a row along its
+axis; the scales (M's row norms) take the same first order through the misalignment.
 """
 
 from __future__ import annotations
@@ -43,20 +45,41 @@ MIN_SAMPLES = 2 * BATCHES
 
 def estimate(means: np.ndarray, gravity: float) -> dict[str, np.ndarray]:
     """The least-squares M (3, 3) and b (3,), m/s^2, of the six faces' means (6, 3) in :data:`FACE_ORDER`,
-    with the derived scale (row norms of M, (3,)), misalignment (3 angles, rad, :mod:`.model`) and M M^T."""
+    with the derived scale (row norms of M, (3,)), the sensor's own misalignment (3 angles, rad, :mod:`.model`),
+    the fixture's mounting rotation (3, rad) and M M^T.
+
+    M is in the fixture's frame, so it holds the mounting rotation as well as the sensor's own errors. It is
+    split as M = L Q (the LQ decomposition): L lower-triangular with a positive diagonal, the sensor in its own
+    frame (its x axis along x, its y axis in the x-y plane: procedure (b)'s convention, so the two procedures'
+    misalignments compare), and Q orthogonal, the mounting. L is the Cholesky factor of the rotation-invariant
+    M M^T, so the misalignment is the mounting's no matter how the sensor sits in the fixture. ``mounting`` is
+    Q's rotation vector (axis times angle, rad): a_m = L Q f + b, f in the fixture's frame."""
     means = np.asarray(means, dtype=float)
     up = np.array([face_up(name) for name in FACE_ORDER])  # (6, 3)
     # the normal equations of a_i = M (g n_i) + b over the six faces: G G^T is diagonal, solved in closed form
     design = np.column_stack([gravity * up, np.ones(6)])  # (6, 4)
     solution = np.linalg.lstsq(design, means, rcond=None)[0]  # (4, 3): [M^T; b^T]
     M, b = solution[:3].T, solution[3]
-    params = params_of(M, b)
-    return {"M": M, "b": b, "scale": params[:3], "misalignment": params[3:6], "MMT": M @ M.T}
+    MMT = M @ M.T
+    L = np.linalg.cholesky(MMT)
+    params = params_of(L, b)
+    Q = np.linalg.solve(L, M)
+    return {"M": M, "b": b, "scale": params[:3], "misalignment": params[3:6], "mounting": rotation_vector(Q), "MMT": MMT}
+
+
+def rotation_vector(Q: np.ndarray) -> np.ndarray:
+    """The rotation vector (3,), rad (axis times angle), of a rotation matrix Q (3, 3); NaN where det Q < 0
+    (a left-handed M: no rotation maps the fixture onto the sensor)."""
+    if np.linalg.det(Q) <= 0:
+        return np.full(3, np.nan)
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_matrix(Q).as_rotvec()
 
 
 def flat(values: dict[str, np.ndarray]) -> np.ndarray:
-    """M (9, row-major), b (3), scale (3), misalignment (3), M M^T (9) as one vector (27,)."""
-    return np.concatenate([values[key].ravel() for key in ("M", "b", "scale", "misalignment", "MMT")])
+    """M (9, row-major), b (3), scale (3), misalignment (3), mounting (3), M M^T (9) as one vector (30,)."""
+    return np.concatenate([values[key].ravel() for key in ("M", "b", "scale", "misalignment", "mounting", "MMT")])
 
 
 def gradient(function, means: np.ndarray, step: float = 1e-5) -> np.ndarray:
@@ -106,10 +129,11 @@ class FaceCalibration:
     Attributes
     ----------
     values : dict
-        ``M`` (3, 3), ``b`` (3,) m/s^2, ``scale`` (3,), ``misalignment`` (3,) rad, ``MMT`` (3, 3).
-    covariance : ndarray (27, 27)
+        ``M`` (3, 3), ``b`` (3,) m/s^2, ``scale`` (3,), ``misalignment`` (3,) rad (the sensor's own),
+        ``mounting`` (3,) rad (the fixture's rotation vector), ``MMT`` (3, 3).
+    covariance : ndarray (30, 30)
         The noise covariance of :func:`flat`'s vector (white samples assumed).
-    tilt : ndarray (27,)
+    tilt : ndarray (30,)
         The worst-case tilt term of each, in its unit.
     means, mean_cov : ndarray (6, 3), (6, 3, 3)
         The faces' means, m/s^2, and their covariances, (m/s^2)^2, in :data:`FACE_ORDER`.
@@ -130,7 +154,7 @@ class FaceCalibration:
     tilt_bound: float
 
     def std(self) -> np.ndarray:
-        """The noise 1-sigma of :func:`flat`'s vector (27,)."""
+        """The noise 1-sigma of :func:`flat`'s vector (30,)."""
         return np.sqrt(np.diag(self.covariance))
 
     def residuals(self) -> np.ndarray:
@@ -182,7 +206,80 @@ def correction_of(means: np.ndarray, gravity: float, reading: np.ndarray) -> np.
 def labels() -> list[str]:
     """:func:`flat`'s entries' names."""
     return ([f"M_{a}{c}" for a in AXES for c in AXES] + [f"bias_{a}" for a in AXES] + [f"scale_{a}" for a in AXES]
-            + ["misalignment_yx", "misalignment_zx", "misalignment_zy"] + [f"MMT_{a}{c}" for a in AXES for c in AXES])
+            + ["misalignment_yx", "misalignment_zx", "misalignment_zy"] + [f"mounting_{a}" for a in AXES]
+            + [f"MMT_{a}{c}" for a in AXES for c in AXES])
 
 
 assert set(FACE_ORDER) == set(FACES)
+
+
+#: the tilt check's family-wise level: how often untilted (or within-bound) faces are refused at most
+TILT_CHECK_ALPHA = 0.01
+
+
+def face_residuals(means: np.ndarray, gravity: float) -> np.ndarray:
+    """Each face's mean minus the fitted g M n_i + b (6, 3), m/s^2, of the six faces' means (6, 3).
+
+    With the closed solution a face's residual is its axis pair's mean (ā_jp + ā_ja) / 2 minus b, the same
+    for both faces of a pair: the residuals hold 9 distinct numbers (6 free: they sum to zero over the pairs)."""
+    values = estimate(means, gravity)
+    up = np.array([face_up(name) for name in FACE_ORDER])
+    return np.asarray(means, dtype=float) - (gravity * up @ values["M"].T + values["b"])
+
+
+def tilt_check(run: "FaceCalibration", alpha: float = TILT_CHECK_ALPHA) -> dict:
+    """Whether the faces' residuals lie within what the tilt bound plus the noise allows.
+
+    The model a_i = g M n_i + b is exact for untilted faces, so the residuals (:func:`face_residuals`) are
+    the tilts' and the noise's alone. Each of the 9 distinct residuals (3 pairs x 3 axes) is a linear
+    functional of the means: it may reach its worst case over the faces' caps (:func:`cap_worst_case`) plus
+    z sigma, z at ``alpha`` two-sided with Bonferroni over the 9 (so faces within the bound are refused at a
+    rate of at most ``alpha``). A residual beyond that means a face sits further from its nominal orientation
+    than the bound, and every interval of procedure (a), which assumes the bound, is wrong.
+
+    Returns a dict: ``within`` (bool), ``pair`` (the two faces of the worst residual: the residuals cannot
+    tell the faces of a pair apart), ``axis``, ``residual`` and ``allowed`` (m/s^2, the worst residual and
+    z sigma + its worst case), ``needed_tilt_deg`` (the smallest common tilt bound, deg, under which every
+    residual would be within its allowance: a lower bound on the tilt the faces carry), ``z``, ``alpha``.
+    """
+    from kalcal.stats.distributions import normal_isf
+
+    g, nominal = run.gravity, np.array([face_up(name) for name in FACE_ORDER])
+    pairs = [0, 2, 4]  # x_p, y_p, z_p: a pair's two faces share their residual
+    residual = face_residuals(run.means, g)[pairs].ravel()  # (9,): pair-major, then axis
+
+    def functional(means):
+        return face_residuals(means, g)[pairs].ravel()
+
+    grad = gradient(functional, run.means)
+    cov, _ = propagate(grad, run.mean_cov, run.values["M"], g, 0.0, nominal)
+    sigma = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    z = float(normal_isf(alpha / (2 * residual.size)))
+    weights = g * np.einsum("ij,kmi->kmj", run.values["M"], grad)
+
+    def allowed(bound: float) -> np.ndarray:
+        return z * sigma + cap_worst_case(weights, nominal, bound)
+
+    excess = np.abs(residual) - allowed(run.tilt_bound)
+    worst = int(np.argmax(excess))
+    # the smallest bound that explains every residual, by bisection (the worst case rises with the bound)
+    low, high = 0.0, np.pi / 2
+    if np.all(np.abs(residual) <= allowed(low)):
+        high = 0.0
+    elif np.any(np.abs(residual) > allowed(high)):
+        low = high
+    for _ in range(60):
+        if high - low < 1e-6:
+            break
+        middle = (low + high) / 2
+        if np.all(np.abs(residual) <= allowed(middle)):
+            high = middle
+        else:
+            low = middle
+    pair = FACE_ORDER[2 * (worst // 3)], FACE_ORDER[2 * (worst // 3) + 1]
+    return {"within": bool(np.all(excess <= 0)), "pair": list(pair), "axis": AXES[worst % 3],
+            "residual": float(residual[worst]), "allowed": float(allowed(run.tilt_bound)[worst]),
+            "needed_tilt_deg": float(np.degrees(high)), "tilt_bound_deg": float(np.degrees(run.tilt_bound)),
+            "z": z, "alpha": alpha,
+            "test": ("each of the 9 distinct face residuals (pair mean minus b) within z sigma plus its worst case over the "
+                     f"faces' tilt caps, z at {alpha:g} two-sided, Bonferroni over 9")}

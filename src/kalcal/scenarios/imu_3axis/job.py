@@ -173,7 +173,16 @@ def calibrate_logs(scenario, logs: dict[str, Any], options) -> Imu3AxisCalibrati
         if missing:
             raise DataError(f"{poses_source}: procedure (a) needs all six faces; missing {', '.join(missing)}")
         run = face_procedure.calibrate_faces(samples, settings.gravity, np.radians(settings.tilt_bound))
-        result = _faces_result(scenario, run, regions, name, columns, notes)
+        check = face_procedure.tilt_check(run)
+        if not check["within"]:
+            # every interval of procedure (a) assumes the bound: a face beyond it makes them wrong, not just wide
+            raise DataError(
+                f"{poses_source}: faces {'/'.join(check['pair'])}: residual {check['residual']:.3g} m/s^2 on {check['axis']} "
+                f"exceeds the {check['allowed']:.3g} m/s^2 a tilt within scenario.tilt_bound = {check['tilt_bound_deg']:g} deg "
+                f"plus the noise allows: the residuals need a tilt bound of at least {check['needed_tilt_deg']:.2g} deg (a face "
+                "off its nominal orientation, a misnamed face or a moved sensor); raise --set scenario.tilt_bound above "
+                "the fixture's tilt, or record 9 or more poses in general orientations for procedure (b)")
+        result = _faces_result(scenario, run, regions, name, columns, notes, check)
     else:
         if len(samples) < 9:
             raise DataError(f"{poses_source}: {len(samples)} static poses; at least 9 are needed without the six named faces "
@@ -207,7 +216,7 @@ def _stability(why: str):
     return Stability(("bias",), ("m/s^2",), (), "constant", "none", sentence=f"not tested: {why}")
 
 
-def _faces_result(scenario, run, regions, name, columns, notes):
+def _faces_result(scenario, run, regions, name, columns, notes, check):
     labels = face_procedure.labels()
     flat = face_procedure.flat(run.values)
     std, tilt = run.std(), run.tilt
@@ -221,14 +230,17 @@ def _faces_result(scenario, run, regions, name, columns, notes):
             f"p = {run.whiteness['p_value']:.3g}): the noise intervals, which assume white samples, are too narrow")})
     estimates = {label: (float(flat[k]), float(std[k]), float(tilt[k])) for k, label in enumerate(labels)}
     return Imu3AxisCalibrationResult(
-        scenario=scenario.NAME, bias=float(run.values["b"][0]), bias_std=float(std[index["bias_x"]]), scale=None, scale_std=None,
-        covariance=run.covariance[np.ix_(keep, keep)], covariance_states=tuple(labels[k] for k in keep), diagnostics={"whiteness": run.whiteness},
+        scenario=scenario.NAME, bias=np.array(run.values["b"], dtype=float),
+        bias_std=np.array([std[index[f"bias_{a}"]] for a in AXES]), scale=None, scale_std=None,
+        covariance=run.covariance[np.ix_(keep, keep)], covariance_states=tuple(labels[k] for k in keep), diagnostics={"whiteness": run.whiteness, "tilt_check": check},
         warnings=warnings, columns=_residual_columns(list(regions), residuals), time=float("nan"),
         units=_units(labels), stability_test=_stability("a static-pose calibration has no windows"),
         sigma_trusted=run.whiteness["white"], procedure="a", estimates_table=estimates,
         full_covariance=run.covariance, covariance_labels=tuple(labels), bootstrap_table={},
-        misalignment=run.values["misalignment"], fit={"residual_tilt_note": "the faces' residuals are the tilts' and the noise's; "
-                                                      "a residual beyond the bound's reach means a wrong face or a moved sensor"},
+        misalignment=run.values["misalignment"], fit={"residual_tilt_note": "the faces' residuals are the tilts' and the noise's; each is checked against z sigma "
+                                                      "plus its worst case within the tilt bound (diagnostics.tilt_check), and a "
+                                                      "residual beyond it is refused: a face outside the bound, a wrong face or a moved sensor",
+                                "needed_tilt_deg": check["needed_tilt_deg"], "mounting_rotation": run.values["mounting"]},
         means=run.means, **_common(scenario, run.values["M"], run.values["b"], regions, name, columns, notes, residuals))
 
 
@@ -265,7 +277,7 @@ def _poses_result(scenario, run, regions, name, columns, notes):
             f"{name}: the poses' fit chi-square {run.chi2:.4g} on {run.dof} degrees of freedom (p = {run.p_value:.3g}): the "
             "model or the poses' noise does not hold (a moving pose, colored noise): the information's intervals are too narrow")})
     return Imu3AxisCalibrationResult(
-        scenario=scenario.NAME, bias=float(b[0]), bias_std=float(std[6]), scale=None, scale_std=None,
+        scenario=scenario.NAME, bias=np.array(b, dtype=float), bias_std=np.array(std[6:9]), scale=None, scale_std=None,
         covariance=run.covariance, covariance_states=PARAM_NAMES,
         diagnostics={"chi2": run.chi2, "dof": run.dof, "p_value": run.p_value, "condition": run.condition, "consistent": trusted},
         warnings=warnings, columns=_residual_columns(list(regions), run.residuals), time=float("nan"),
@@ -282,7 +294,7 @@ def _residual_columns(names: list[str], residuals: np.ndarray) -> dict[str, Any]
 def _units(labels) -> dict[str, str]:
     units = dict(zip(PARAM_NAMES, PARAM_UNITS))
     for label in labels:
-        units.setdefault(label, "m/s^2" if label.startswith("bias") else "rad" if label.startswith("misalignment") else "1")
+        units.setdefault(label, "m/s^2" if label.startswith("bias") else "rad" if label.startswith(("misalignment", "mounting")) else "1")
     return units
 
 
@@ -294,14 +306,18 @@ class Imu3AxisCalibrationResult(CalibrationResult):
     ----------
     procedure : {"a", "b"}
         (a) six known faces, linear least squares; (b) unknown poses, maximum likelihood.
-    bias : ndarray (3,)
-        b, m/s^2 (the base's ``bias`` field holds b_x; ``bias`` here overrides it with all three).
+    bias, bias_std : ndarray (3,)
+        b and its noise 1-sigma, m/s^2, per axis x, y, z. The base class's scalar fields hold the three axes
+        here (the base class reads them only in the methods this class overrides); procedure (a)'s interval
+        adds the tilt term (:meth:`conf_int`).
     M : ndarray (3, 3)
         The sensor matrix (dimensionless): a_m = M f + b.
     scale_vector : ndarray (3,)
         Each axis's scale factor, the row norms of M.
     misalignment : ndarray (3,)
-        rad: the y axis toward x, the z axis toward x, the z axis toward y (:mod:`.model`).
+        rad: the y axis toward x, the z axis toward x, the z axis toward y (:mod:`.model`), the sensor's own:
+        procedure (a) takes them from M M^T's Cholesky factor, so the fixture's mounting rotation is not in them
+        (summary.json's ``mounting_rotation`` holds it).
     estimates_table : dict
         label -> (estimate, noise 1-sigma, worst-case tilt term) in its unit (:attr:`units`).
     full_covariance : ndarray, labels ``covariance_labels``
@@ -333,8 +349,7 @@ class Imu3AxisCalibrationResult(CalibrationResult):
 
     @property
     def _bias3(self) -> np.ndarray:
-        labels = ("bias_x", "bias_y", "bias_z")
-        return np.array([self.estimates_table[label][0] for label in labels])
+        return np.asarray(self.bias, dtype=float)
 
     def correct(self, readings: np.ndarray) -> np.ndarray:
         """The corrected specific force a = M^-1 (a_m - b) (n, 3), m/s^2, of readings a_m (n, 3), m/s^2."""
@@ -428,6 +443,11 @@ class Imu3AxisCalibrationResult(CalibrationResult):
             "M": self.M,
             "misalignment": self.misalignment,
             "misalignment_names": ["misalignment_yx", "misalignment_zx", "misalignment_zy"],
+            "misalignment_frame": ("the sensor's own: M = L Q, L lower-triangular (the sensor's x axis along x, its y axis in "
+                                   "the x-y plane), Q the mounting rotation; rotation-invariant"
+                                   if self.procedure == "a" else "the sensor's own: M = S T, T lower-triangular"),
+            **({"mounting_rotation": self.fit["mounting_rotation"], "mounting_rotation_unit": "rad, rotation vector of Q "
+                "(a_m = L Q f + b, f in the fixture's frame)"} if self.procedure == "a" else {}),
             "covariance": self.full_covariance,
             "covariance_labels": labels,
             "estimates": {label: {"estimate": v, "std": s, "tilt": t, "lower": float(ci.loc[label, "lower"]),

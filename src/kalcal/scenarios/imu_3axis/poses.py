@@ -150,8 +150,10 @@ def fit_poses(means: np.ndarray, mean_cov: np.ndarray, gravity: float, *, max_co
     start = initial(means, gravity)
     cond = condition(parameter_information(problem.jacobian(start)), gravity)
     if not np.isfinite(cond) or cond > max_condition:
-        raise DataError(f"{source}: the {n} poses do not span the sphere: the information's condition number is "
-                        f"{cond:.3g} > {max_condition:.3g} (record poses with each axis up and down and in between)")
+        raise DataError(f"{source}: the {n} poses leave the 9 parameters ill-determined: the information's condition "
+                        f"number is {cond:.3g} > {max_condition:.3g} (scenario.max_condition): poses near the six faces "
+                        "alone, or in one region of the sphere, do not separate the scales, misalignments and biases; "
+                        "add poses in general orientations, between the axes")
     solution = _solve(problem, start)
     theta, tilts = problem.split(solution.x)
     info = parameter_information(problem.jacobian(solution.x))

@@ -177,7 +177,7 @@ def pose_model(truth: TruthSection, gravity: float = STANDARD_GRAVITY):
 
 def check_layout(truth: TruthSection, gravity: float, max_condition: float) -> float:
     """The condition number of the 9 parameters' information at the nominal poses (procedure (b)'s
-    :func:`~.poses.condition`); refuses, in one line, a layout that does not span the sphere."""
+    :func:`~.poses.condition`); refuses, in one line, a layout whose information is ill-conditioned."""
     from kalcal.scenarios.imu_3axis.poses import _Problem, condition, parameter_information
 
     model, data = pose_model(truth, gravity)
@@ -187,7 +187,7 @@ def check_layout(truth: TruthSection, gravity: float, max_condition: float) -> f
     start = np.r_[model.x0[:9], np.zeros(2 * data.shape[0])]
     cond = condition(parameter_information(problem.jacobian(start)), gravity)
     if not np.isfinite(cond) or cond > max_condition:
-        raise SettingError("truth.layout", f"poses that span the sphere (information condition number <= {max_condition:.3g})",
+        raise SettingError("truth.layout", f"poses that determine the 9 parameters (information condition number <= {max_condition:.3g})",
                            f"{truth.layout!r}: condition number {cond:.3g}")
     return cond
 
