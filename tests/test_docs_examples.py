@@ -83,6 +83,20 @@ def _kalcal(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
                           env={**os.environ, "COLUMNS": "80"}, timeout=600)
 
 
+def test_the_readme_lists_every_kind_of_scenario_with_a_command():
+    """Its command list runs each built-in by name, a model file and a model written as code; its
+    scenario list names each."""
+    from kalcal.scenarios import is_code_model, is_model_file, scenario_names
+
+    given = {args[1] for args in _commands(_section("Commands")) if len(args) > 1 and not args[1].startswith("-")}
+    kinds = {name: name in given for name in scenario_names()}
+    kinds["a model file"] = any(is_model_file(arg) for arg in given)
+    kinds["a model written as code"] = any(is_code_model(arg) for arg in given)
+    assert all(kinds.values()), kinds
+    listed = _section("Scenarios")
+    assert all(f"**{name}**" in listed for name in scenario_names()) and "written as code" in listed
+
+
 def test_every_readme_command_names_a_command_and_options_it_has(tmp_path):
     commands = _commands(README.read_text(encoding="utf-8"))
     assert len(commands) >= 15

@@ -30,9 +30,12 @@ class Capabilities:
         The measurement rows H_k are taken from data (the regressors), so each realization has its own P_k:
         the report says so where it has no exact analysis (:meth:`no_exact_analysis`).
     nonlinear : bool
-        f and h are code and the filter an approximation (EKF, IEKF, UKF, a batch ML): its P is a
-        linearization's, so a verification keeps the effect sizes and their tolerance outcomes beside the
-        exact tests (and its power by simulation, where asked), and the report's answer leads with both.
+        The model is nonlinear and its filter an approximation whose P is a linearization's: a model written
+        as code (EKF, IEKF, UKF) and imu-3axis (its EKF, IEKF, UKF or batch ML). It decides why there is
+        no exact analysis (:meth:`no_exact_analysis`), and that a verification asks the problem for its
+        effect sizes, whose tolerance outcomes stand beside the exact tests (which an approximation fails
+        at a large N: :func:`kalcal.api.verification.problem_effects`), and for its power by simulation,
+        which it runs where ``checks.power_runs`` asks (else None).
     batch : bool
         One final estimate per realization: only the final-time checks apply.
     engines : tuple of str

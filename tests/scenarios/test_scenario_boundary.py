@@ -1,10 +1,13 @@
 """Outside kalcal/scenarios/, no module asks which scenario it has: the Scenario protocol answers.
 
 The AST of every module of the package outside :mod:`kalcal.scenarios` is walked for the three ways of
-asking: a comparison with a registered scenario's name (or a table keyed by one), an ``isinstance`` test
-on a class defined in a scenario's package, and an import from a scenario's package (only the registry,
-``kalcal/scenarios/__init__.py``, and ``kalcal/__init__.py``'s public names may import one). The walker is
-itself tested on a small module holding each violation.
+asking: a comparison with a scenario's name (``==``, ``in`` a tuple or a string, a part of one ``in`` it, a
+prefix, or a table keyed by one), an ``isinstance`` test on a class defined in a scenario's package, and a
+way into a scenario's package, by an import or by an attribute chain (``scenarios.scale_bias.settings``;
+only the registry, ``kalcal/scenarios/__init__.py``, and ``kalcal/__init__.py``'s public names may). The
+names are each scenario class's own ``NAME``, read from the AST of ``kalcal/scenarios/*/``, so that a
+scenario outside the registry (a model written as code, a model file) counts. The walker is itself tested
+on small made-up modules, one for each way (``PROBES``).
 
 ``PENDING`` lists what is left to move behind the protocol, each by module, kind and name (no line
 numbers, so that other edits leave it valid); it is empty now. The test fails on any violation not listed,
@@ -18,12 +21,34 @@ from pathlib import Path
 
 import kalcal
 from kalcal.scenarios import MODEL_FILE, SCENARIOS as REGISTERED, scenario_names
-from kalcal.scenarios.model_file.model import CustomModelScenario
 
 ROOT = Path(kalcal.__file__).parent
 SCENARIOS = ROOT / "scenarios"
-# each scenario's own NAME (the model file's is "custom"), the registry's names and what a model file is called
-NAMES = frozenset({*scenario_names(), *(cls.NAME for cls in REGISTERED.values()), CustomModelScenario.NAME, MODEL_FILE})
+
+
+def class_names(root: Path = SCENARIOS) -> frozenset[str]:
+    """Each ``NAME = "..."`` (or ``NAME: ClassVar[str] = "..."``) of a class in a scenario's package under
+    ``root`` (``root/<package>/*.py``), read from the AST without importing: a scenario that is no registry
+    built-in (a model written as code, a model file) has a name too."""
+    found = set()
+    for path in sorted(root.glob("*/**/*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if not isinstance(node, ast.ClassDef):
+                continue
+            for item in node.body:
+                target = item.targets[0] if isinstance(item, ast.Assign) and len(item.targets) == 1 else getattr(item, "target", None)
+                if isinstance(item, (ast.Assign, ast.AnnAssign)) and isinstance(target, ast.Name) and target.id == "NAME" and _string(item.value):
+                    found.add(_string(item.value))
+    return frozenset(found)
+
+
+def _string(node: ast.AST | None) -> str | None:
+    return node.value if isinstance(node, ast.Constant) and isinstance(node.value, str) else None
+
+
+# each scenario class's own NAME (the model file's is "custom", a model written as code's "nonlinear"), the
+# registry's names and what a model file is called
+NAMES = frozenset({*class_names(), *scenario_names(), MODEL_FILE})
 #: the registry's constants that hold a scenario's name: a comparison with one is a comparison with the name
 NAME_CONSTANTS = {"MODEL_FILE": MODEL_FILE}
 # kalcal/__init__.py re-exports the public names; the registry is the scenarios package itself (not walked)
@@ -42,10 +67,6 @@ def scenario_classes() -> frozenset[str]:
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
         if isinstance(node, ast.ClassDef)
     ) - {"Capabilities", "Scenario"}  # the protocol's own types are for everyone
-
-
-def _string(node: ast.AST) -> str | None:
-    return node.value if isinstance(node, ast.Constant) and isinstance(node.value, str) else None
 
 
 def _scenario_package(module: str) -> str | None:
@@ -80,9 +101,23 @@ def violations(source: str, module: str, classes: frozenset[str] = frozenset(), 
         return constants.get(key) if key else None
 
     found = set()
+    aliases = _package_aliases(tree, module)
     for node in ast.walk(tree):
+        if isinstance(node, ast.Attribute) and module not in IMPORT_ALLOWED:
+            # scenarios.scale_bias.settings after `from kalcal import scenarios`: a way in without an import of it
+            chain = _chain(node)
+            if chain and chain[0] in aliases:
+                package = _scenario_package(".".join([*aliases[chain[0]].split("."), *chain[1:]]))
+                if package and (SCENARIOS / package.rsplit(".", 1)[1]).is_dir():
+                    found.add((module, "import", package))
         if isinstance(node, ast.Compare):
-            for operand in (node.left, *node.comparators):
+            operands = (node.left, *node.comparators)
+            for op, needle, haystack in zip(node.ops, operands, operands[1:]):
+                if isinstance(op, (ast.In, ast.NotIn)):
+                    # "accel" in scenario.NAME asks for accel-gps; scenario.NAME in "accel-gps scale-bias" for both
+                    for name in _parts_of(_string(needle), names) | _within(_string(haystack), names):
+                        found.add((module, "compare", name))
+            for operand in operands:
                 items = operand.elts if isinstance(operand, (ast.Tuple, ast.List, ast.Set)) else [operand]
                 for item in items:
                     if named(item):
@@ -139,6 +174,50 @@ def violations(source: str, module: str, classes: frozenset[str] = frozenset(), 
                 if package:
                     found.add((module, "import", package))
     return found
+
+
+def _parts_of(part: str | None, names: frozenset[str]) -> set[str]:
+    """The names of which ``part`` is a proper piece (one word at least: ``"accel"``, ``"-gps"``, not ``"-"``
+    or ``"e"``, which a key's test holds without asking for a scenario)."""
+    if not part or sum(c.isalnum() for c in part) < 3:
+        return set()
+    return {name for name in names if part in name and part != name}
+
+
+def _within(text: str | None, names: frozenset[str]) -> set[str]:
+    """The names that ``text`` (a string a name is looked up in) holds as a word, other than being it."""
+    import re
+
+    if not text:
+        return set()
+    return {name for name in names if text != name and re.search(rf"(?<![\w-]){re.escape(name)}(?![\w-])", text)}
+
+
+def _chain(node: ast.Attribute) -> list[str] | None:
+    """``a.b.c`` as ``["a", "b", "c"]`` (None where it starts at a call or a subscript)."""
+    parts = []
+    while isinstance(node, ast.Attribute):
+        parts.append(node.attr)
+        node = node.value
+    return [node.id, *reversed(parts)] if isinstance(node, ast.Name) else None
+
+
+def _package_aliases(tree: ast.AST, module: str) -> dict[str, str]:
+    """Each local name bound to kalcal or one of its packages (``from kalcal import scenarios``,
+    ``import kalcal.scenarios as s``, ``from .. import scenarios``): the dotted module it stands for."""
+    aliases = {}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.name.split(".")[0] == "kalcal":
+                    aliases[alias.asname or "kalcal"] = alias.name if alias.asname else "kalcal"
+        elif isinstance(node, ast.ImportFrom):
+            base = module.split(".")[: -node.level] if node.level else []
+            target = ".".join([*base, *(node.module.split(".") if node.module else [])])
+            if target.split(".")[0] == "kalcal":
+                for alias in node.names:
+                    aliases[alias.asname or alias.name] = f"{target}.{alias.name}"
+    return aliases
 
 
 def _call_name(node: ast.Call) -> str | None:
@@ -247,6 +326,16 @@ PROBES = {
     "import_module": ("import importlib\nm = importlib.import_module('kalcal.scenarios.accel_gps.settings')", ("import", "kalcal.scenarios.accel_gps")),
     "dict(keywords)": ("T = dict(accel_gps=1)", ("compare", "accel-gps")),
     "the registry's class": ("from kalcal.scenarios import scenario_class\nisinstance(s, scenario_class('accel-gps'))", ("isinstance", "scenario_class(accel-gps)")),
+    "a class's NAME outside the registry": ("if scenario.NAME == 'nonlinear': pass", ("compare", "nonlinear")),
+    "a part of a name in it": ("if 'accel' in scenario.NAME: pass", ("compare", "accel-gps")),
+    "a part of a name not in it": ("if '3axis' not in str(scenario): pass", ("compare", "imu-3axis")),
+    "a name in a tuple": ("if scenario.NAME in ('scale-bias', 'other'): pass", ("compare", "scale-bias")),
+    "a name in a string": ("if scenario.NAME in 'scale-bias or other': pass", ("compare", "scale-bias")),
+    "an attribute chain": ("from kalcal import scenarios\nx = scenarios.scale_bias.settings.ScaleBiasScenario",
+                           ("import", "kalcal.scenarios.scale_bias")),
+    "an attribute chain from a relative import": ("from .. import scenarios as s\nx = s.nonlinear.problem",
+                                                  ("import", "kalcal.scenarios.nonlinear")),
+    "an attribute chain from kalcal": ("import kalcal\nx = kalcal.scenarios.imu_3axis.settings", ("import", "kalcal.scenarios.imu_3axis")),
 }
 
 
@@ -257,6 +346,23 @@ def test_each_probe_is_caught_alone():
     # and what is no question: a relative import of the registry or the protocol, an unrelated prefix
     assert violations("from ..scenarios import build_scenario\nfrom ..scenarios.protocol import require\n"
                       "x.startswith('note')\nimportlib.import_module('kalcal.scenarios.protocol')", module) == set()
+    # nor a key's test that holds a scrap of a name, nor the registry reached through an attribute
+    assert violations("'-' in key or 'e' in key or '.' in key or key in 'abc'\nfrom kalcal import scenarios\n"
+                      "scenarios.build_scenario('x')\nimport kalcal.scenarios.protocol\nkalcal.scenarios.protocol.require", module) == set()
+
+
+def test_names_are_each_scenario_class_s_own_read_without_importing(tmp_path):
+    # a model written as code is no registry built-in, yet its class has a name; so has a model file's
+    assert {"nonlinear", "custom", MODEL_FILE, *scenario_names()} <= NAMES
+    assert {cls.NAME for cls in REGISTERED.values()} <= NAMES
+    # on a made-up tree: a class attribute, annotated or not, in a package's module or a subpackage's;
+    # a module-level NAME or one inside a function is no class's
+    (tmp_path / "a" / "sub").mkdir(parents=True)
+    (tmp_path / "a" / "m.py").write_text("class A:\n    NAME = 'made-up'\nNAME = 'module-level'\n")
+    (tmp_path / "a" / "sub" / "n.py").write_text("from typing import ClassVar\nclass B:\n    NAME: ClassVar[str] = 'deeper'\n"
+                                                 "    def f(self):\n        NAME = 'local'\n")
+    (tmp_path / "registry.py").write_text("class C:\n    NAME = 'not-a-package'\n")
+    assert class_names(tmp_path) == {"made-up", "deeper"}
 
 
 # --- a shared module that is one scenario's own -------------------------------------------------------------

@@ -3,7 +3,7 @@
 Each update k = 0..K-1 is one predict (f over dt, with u_k) and one update with z_k (h with data_k).
 Per update the caller gets the posterior state (n, d), P (n, d, d), the innovation r (n, p) and S
 (n, p, p), batch axis first: through ``on_update(k, result)`` (nothing kept: memory flat in K) and, with
-``keep=True``, stacked in a :class:`FilterRun` as (n, K, ...).
+``keep=True``, stacked in a :class:`NonlinearRun` as (n, K, ...).
 """
 
 from __future__ import annotations
@@ -18,13 +18,13 @@ from kalcal.core.nonlinear import NonlinearModel
 from kalcal.core.ukf import UnscentedSettings, ukf_predict, ukf_update
 from kalcal.errors import ConfigError
 
-__all__ = ["FILTERS", "FilterRun", "run_nonlinear_filter"]
+__all__ = ["FILTERS", "NonlinearRun", "run_nonlinear_filter"]
 
 FILTERS: tuple[str, ...] = ("ekf", "iekf", "ukf")
 
 
 @dataclass(frozen=True)
-class FilterRun:
+class NonlinearRun:
     """A filter's posteriors and innovations at every update, batch axis first."""
 
     x: np.ndarray  #: (n, K, d)
@@ -59,7 +59,7 @@ def run_nonlinear_filter(
     step_tol: float = 1e-10,
     on_update: Callable[[int, object], None] | None = None,
     keep: bool = True,
-) -> FilterRun | None:
+) -> NonlinearRun | None:
     """Filter n realizations' measurements z (n, K, p) from the prior (x0, P0) (the model's by default).
 
     Parameters
@@ -78,11 +78,11 @@ def run_nonlinear_filter(
     on_update : callable(k, result) or None
         Called after each update with its result (an UpdateResult, or IteratedUpdateResult for the IEKF).
     keep : bool
-        Stack every update's result in the returned :class:`FilterRun` (n K (d + d^2 + p + p^2) floats).
+        Stack every update's result in the returned :class:`NonlinearRun` (n K (d + d^2 + p + p^2) floats).
 
     Returns
     -------
-    FilterRun, or None where ``keep`` is False
+    NonlinearRun, or None where ``keep`` is False
     """
     if method not in FILTERS:
         raise ConfigError(f"method: expected one of {', '.join(FILTERS)}, got {method!r}")
@@ -94,7 +94,7 @@ def run_nonlinear_filter(
     x = np.broadcast_to(model.x0 if x0 is None else np.asarray(x0, dtype=float), (n, d)).copy()
     cov = np.broadcast_to(model.p0 if p0 is None else np.asarray(p0, dtype=float), (n, d, d)).copy()
     if keep:
-        run = FilterRun(np.empty((n, n_updates, d)), np.empty((n, n_updates, d, d)),
+        run = NonlinearRun(np.empty((n, n_updates, d)), np.empty((n, n_updates, d, d)),
                         np.empty((n, n_updates, p)), np.empty((n, n_updates, p, p)))
     for k in range(n_updates):
         u_k, data_k = _at(u, k, "u"), _at(data, k, "data")

@@ -95,7 +95,8 @@ class FitResult:
     Attributes
     ----------
     scenario : str
-        ``"accel-gps"`` or ``"scale-bias"``.
+        ``"accel-gps"``, ``"scale-bias"``, or for a model file its model's name (``[model] name``, as
+        fit.json's ``scenario``). imu-3axis and a model written as code have no fit (refused in one line).
     parameters : dict of str to FitParameter
         Keyed by setting name.
     loglik : float

@@ -113,12 +113,15 @@ class CalibrateOptions:
 
 @dataclass(frozen=True, repr=False, eq=False)
 class CalibrationResult:
-    """What :func:`kalcal.calibrate` estimated, at the last fix (accel-gps) or sample (scale-bias).
+    """What :func:`kalcal.calibrate` estimated: at the last fix (accel-gps), sample (scale-bias) or row (a
+    model file), or from the static poses (imu-3axis); each scenario's subclass adds its own fields.
 
     Attributes
     ----------
     scenario : str
-        ``"accel-gps"`` or ``"scale-bias"``.
+        The scenario's ``NAME``: ``"accel-gps"``, ``"scale-bias"``, ``"imu-3axis"``, or ``"custom"`` for a
+        model file (its model's own name is the subclass's ``name``, summary.json's ``model``). A model
+        written as code has no calibration (refused in one line).
     bias, bias_std : float
         The sensor bias and its 1-sigma (m/s^2 for accel-gps; the log's unit for scale-bias).
     scale, scale_std : float or None

@@ -1,13 +1,16 @@
 """The scenarios, one package each, and the one registry of them: names, classes, construction.
 
-Each scenario's package (:mod:`kalcal.scenarios.accel_gps`, :mod:`kalcal.scenarios.scale_bias`,
-:mod:`kalcal.scenarios.model_file`) holds everything that is its own; the rest of kalcal asks a scenario
+Five kinds, each in its package, which holds everything that is its own: three built-ins by name,
+accel-gps (:mod:`kalcal.scenarios.accel_gps`), scale-bias (:mod:`kalcal.scenarios.scale_bias`) and
+imu-3axis (:mod:`kalcal.scenarios.imu_3axis`); a model file (:mod:`kalcal.scenarios.model_file`); and a
+model written as code (:mod:`kalcal.scenarios.nonlinear`). The rest of kalcal asks a scenario
 through the :class:`~kalcal.scenarios.protocol.Scenario` protocol, never by its name or class
 (tests/scenarios/test_scenario_boundary.py walks every module for that). This module is the only way in:
 the built-in names (:func:`scenario_names`, for ``--help`` without importing numpy: the classes load on
 first use), the classes (``SCENARIOS``), a scenario built from defaults, a TOML file and overrides
-(:func:`build_scenario`), and a model file (:func:`is_model_file`, :func:`load_model_file`,
-:func:`parse_model_file`, and back to its fields, :func:`model_file_fields`).
+(:func:`build_scenario`), a model file (:func:`is_model_file`, :func:`load_model_file`,
+:func:`parse_model_file`, and back to its fields, :func:`model_file_fields`), and a model written as code
+(:func:`is_code_model`, :func:`load_code_model`).
 """
 
 from __future__ import annotations

@@ -1,1 +1,1 @@
-"""The model-file scenario: a linear Gaussian model read from a TOML file, and its truth."""
+"""The model-file scenario: a linear Gaussian model read from a TOML file, its truth and Monte Carlo problem (verify, analyze, sweep), and over a log its [data] table names: calibrate, fit, simulate, verify."""

@@ -23,7 +23,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from kalcal.core.nonlinear_run import FilterRun, run_nonlinear_filter
+from kalcal.core.nonlinear_run import NonlinearRun, run_nonlinear_filter
 from kalcal.core.ukf import UnscentedSettings
 from kalcal.montecarlo.accumulators import BlockResult, MomentSums, SumBuffers, whiten
 from kalcal.montecarlo.problem import ProblemDefaults, ProblemInfo, check_engine
@@ -204,7 +204,7 @@ class NonlinearProblem(ProblemDefaults):
                 on_update(0, result)
             if not keep:
                 return None
-            return FilterRun(result.x[:, None], result.cov[:, None], result.residual[:, None], result.innovation_cov[:, None])
+            return NonlinearRun(result.x[:, None], result.cov[:, None], result.residual[:, None], result.innovation_cov[:, None])
 
         def rows(value):
             if value is None:
@@ -252,11 +252,11 @@ class NonlinearProblem(ProblemDefaults):
         """The true states (K', n, d) at the reported updates: all K, or the last for a batch estimator."""
         return states[-1:] if self.hooks.batch is not None else states
 
-    def _reported(self, run: FilterRun) -> FilterRun:
+    def _reported(self, run: NonlinearRun) -> NonlinearRun:
         """A run's checked states (the filter's own order; a batch estimator's are already so)."""
         if self.hooks.batch is not None or self.hooks.checked is None:
             return run
-        return FilterRun(self._checked(run.x), self._checked(run.cov, 2), run.residual, run.innovation_cov)
+        return NonlinearRun(self._checked(run.x), self._checked(run.cov, 2), run.residual, run.innovation_cov)
 
     @property
     def compiled_path(self) -> tuple[bool, str]:
