@@ -44,9 +44,10 @@ def test_near_linear_ekf_passes_every_check_and_batch_its_moments():
     assert ekf.summary["verdict"] == "pass", [(c.name, c.pvalue) for c in ekf.checks]
     batch = run("filter.kind=batch", *NEAR_LINEAR)
     found = checks(batch)
-    # the batch ML's final-time checks: no whiteness (one estimate per realization)
-    assert set(found) == {"mean_error", "covariance", "orthogonality", "nis"}
-    for name in ("mean_error", "covariance", "nis"):
+    # the batch ML's final-time checks: no whiteness (one estimate per realization); the shape of its NEES
+    # (chi-square(9), the checked parameters) and of its NIS (chi-square(P - 9), its own residual's)
+    assert set(found) == {"mean_error", "covariance", "orthogonality", "nis", "shape"}
+    for name in ("mean_error", "covariance", "nis", "shape"):
         assert found[name].passed, (name, found[name].pvalue)
 
 
