@@ -79,7 +79,8 @@ def bench_verify(n: int, chunk: int = 4096, profile: bool = True) -> None:
 
     from kalcal.montecarlo.engine import block_generator
 
-    problem = load_code_model(str(ROOT / "examples" / "range_bearing.py")).problem()
+    # planned as kalcal verify plans it: filter.compiled=auto compiles for a run of n K >= 10^7
+    problem = load_code_model(str(ROOT / "examples" / "range_bearing.py")).problem().plan(n)
     compiled, reason = problem.compiled_path
     # the compiled kernel's printing and numba's compile (or its load from numba's cache), timed apart as
     # dynamax's compile is

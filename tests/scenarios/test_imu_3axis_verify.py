@@ -50,8 +50,9 @@ def test_near_linear_batch_passes_its_final_time_checks():
     batch = run("filter.kind=batch", *NEAR_LINEAR)
     found = checks(batch)
     # the batch ML's final-time checks: no whiteness (one estimate per realization), no orthogonality (an ML
-    # ignoring the prior is no posterior mean: its error correlates with its estimate where the prior is tight)
-    assert set(found) == {"mean_error", "covariance", "nis"}
+    # ignoring the prior is no posterior mean); the shape of its NEES (chi-square(9), the checked parameters)
+    # and of its NIS (chi-square(P - 9), its own residual's)
+    assert set(found) == {"mean_error", "covariance", "nis", "shape"}
     assert batch.summary["verdict"] == "pass", [(c.name, c.pvalue) for c in batch.checks]
 
 

@@ -1,10 +1,16 @@
 """The compiled EKF block kernel of a nonlinear model against the batched numpy path it replaces: the same
-draws, the same block sums to rounding (1e-10 relative), the same sums whatever the workers, and the
-models and filters that keep the numpy path saying why."""
+draws, the same block sums to rounding (1e-10 relative) and the same shape histograms count for count,
+the same sums whatever the workers, and the models and filters that keep the numpy path saying why; and
+``filter.compiled``'s policy (auto: compiled where it is already or the planned run repays the compile).
+
+The tests that run the kernel force it (``filter.compiled=yes``) and keep to two distinct printed
+modules, range-bearing's and the linear pair's: each compiles for about a minute on a cold cache."""
 
 from __future__ import annotations
 
 import dataclasses
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +46,10 @@ def _assert_same_sums(compiled, oracle, rtol=1e-10):
         assert (a is None) == (b is None), f.name
         if b is None:
             continue
+        if f.name.endswith("_histogram"):  # the shape check's counts: equal count for count, every value binned
+            assert np.array_equal(a, b), (f.name, np.abs(a - b).sum())
+            assert np.all(b.sum(axis=1) == oracle.count), f.name
+            continue
         assert a.shape == b.shape, f.name
         assert np.all(np.isfinite(a)), f.name
         scale = np.max(np.abs(b))
@@ -48,7 +58,7 @@ def _assert_same_sums(compiled, oracle, rtol=1e-10):
 
 @pytest.mark.parametrize("n", [300, 64])  # 300: a last tile of 44 realizations in 64 lanes
 def test_range_bearing_compiled_block_sums_equal_the_numpy_path(n):
-    problem = load_code_model(str(EXAMPLE), ["scenario.updates=12"]).problem()
+    problem = load_code_model(str(EXAMPLE), ["scenario.updates=12", "filter.compiled=yes"]).problem()
     assert problem.compiled_path == (True, "")
     compiled = problem.block_sums(block_generator(5, 0), n, "exact")
     oracle = problem.numpy_block_sums(block_generator(5, 0), n, "exact")
@@ -57,7 +67,7 @@ def test_range_bearing_compiled_block_sums_equal_the_numpy_path(n):
 
 def test_linear_model_with_another_truth_compiled_block_sums_equal_the_numpy_path():
     """A filter that believes R x 4 against its truth: two models, two sets of printed functions."""
-    problem = load_code_model((_linear(1.0), _linear(4.0)), ["scenario.updates=7"]).problem()
+    problem = load_code_model((_linear(1.0), _linear(4.0)), ["scenario.updates=7", "filter.compiled=yes"]).problem()
     assert problem.compiled_path[0]
     compiled = problem.block_sums(block_generator(2, 3), 150, "exact")
     oracle = problem.numpy_block_sums(block_generator(2, 3), 150, "exact")
@@ -65,9 +75,9 @@ def test_linear_model_with_another_truth_compiled_block_sums_equal_the_numpy_pat
 
 
 def test_compiled_run_same_seed_same_sums_whatever_the_workers_and_the_numpy_runs():
-    problem = load_code_model(str(EXAMPLE), ["scenario.updates=6"]).problem()
-    numpy_problem = dataclasses.replace(problem, compiled=False)
-    assert numpy_problem.compiled_path == (False, "the numpy path was asked for")
+    problem = load_code_model(str(EXAMPLE), ["scenario.updates=6", "filter.compiled=yes"]).problem()
+    numpy_problem = load_code_model(str(EXAMPLE), ["scenario.updates=6", "filter.compiled=no"]).problem()
+    assert numpy_problem.compiled_path == (False, "the numpy path was asked for (filter.compiled=no)")
     one = run_monte_carlo(problem, 9000, 11, workers=1).sums
     two = run_monte_carlo(problem, 9000, 11, workers=2).sums
     for f in dataclasses.fields(one):
@@ -106,7 +116,7 @@ class _PlantedNaN:
 
 
 def test_a_missing_measurement_stops_the_kernel_and_the_block_runs_on_the_numpy_path_from_the_same_draws():
-    problem = load_code_model(str(EXAMPLE), ["scenario.updates=6"]).problem()
+    problem = load_code_model(str(EXAMPLE), ["scenario.updates=6", "filter.compiled=yes"]).problem()
     assert problem.compiled_path[0]
     assert problem._compiled_block_sums(_PlantedNaN(4), 100) is None  # the kernel stops at the NaN
     got = problem.block_sums(_PlantedNaN(4), 100, "exact")
@@ -129,9 +139,64 @@ def test_printed_code_numba_cannot_compile_keeps_the_numpy_path_and_says_why(mon
     monkeypatch.setenv("KALCAL_CACHE_DIR", str(tmp_path))
     monkeypatch.setattr(compiled_module, "model_source", broken)
     model = _linear(3.0)  # a model of its own: no kernel derived for it before
-    problem = load_code_model(model, ["scenario.updates=4"]).problem()
+    problem = load_code_model(model, ["scenario.updates=4", "filter.compiled=yes"]).problem()
     assert problem.compiled_path[0]  # printed and imported: numba compiles at the first block
     got = problem.block_sums(block_generator(9, 0), 50, "exact")
     compiled, reason = problem.compiled_path
     assert not compiled and "numba cannot compile" in reason
     _assert_same_sums(got, problem.numpy_block_sums(block_generator(9, 0), 50, "exact"), rtol=0.0)
+
+
+def _unseen() -> NonlinearModel:
+    """A model whose printed module no test compiles (its own h): its kernel is compiled nowhere."""
+    m = _linear(1.0)
+    return dataclasses.replace(m, h=lambda x, data: xm.stack([x[:, 0] + 0.25 * x[:, 2], x[:, 1] - 0.5 * x[:, 3]]))
+
+
+def test_auto_compiles_only_a_run_that_repays_the_compile_and_yes_no_force(monkeypatch, tmp_path):
+    """Nothing is compiled here: the decision is read before any block runs."""
+    from kalcal.scenarios.nonlinear.problem import COMPILE_WORTH
+
+    monkeypatch.setenv("KALCAL_CACHE_DIR", str(tmp_path))  # a cache of its own: no machine code in it
+    model = _unseen()
+    problem = load_code_model((model, model), ["scenario.updates=50"]).problem()
+    assert problem.compiled == "auto"  # the default
+    compiled, reason = problem.compiled_path
+    assert not compiled and "filter.compiled=auto" in reason and "not compiled yet" in reason
+    below = problem.plan(COMPILE_WORTH // 50 - 1)  # N K one short of the threshold
+    compiled, reason = below.compiled_path
+    assert not compiled and f"{COMPILE_WORTH // 50 - 1} realizations of 50 updates" in reason
+    at = problem.plan(COMPILE_WORTH // 50)
+    assert at.compiled_path == (True, "")
+    assert at.plan(10).planned == COMPILE_WORTH // 50  # a plan only grows
+    forced = load_code_model((model, model), ["scenario.updates=50", "filter.compiled=yes"]).problem()
+    assert forced.compiled_path == (True, "")
+    kept = load_code_model((model, model), ["scenario.updates=50", "filter.compiled=no"]).problem().plan(10**9)
+    assert kept.compiled_path == (False, "the numpy path was asked for (filter.compiled=no)")
+    # and the numpy path runs the block (no kernel compiled for it)
+    assert problem.block_sums(block_generator(0, 0), 30, "exact").count == 30
+
+
+def test_auto_runs_a_kernel_compiled_in_this_process_or_in_numbas_cache():
+    forced = load_code_model(str(EXAMPLE), ["scenario.updates=5", "filter.compiled=yes"]).problem()
+    forced.block_sums(block_generator(1, 0), 64, "exact")  # compiled (or loaded from the cache) here
+    auto = load_code_model(str(EXAMPLE), ["scenario.updates=5"]).problem()
+    assert auto.planned is None and auto.compiled_path == (True, "")
+    # a new process finds it in numba's cache beside the generated module (KALCAL_CACHE_DIR, inherited)
+    code = (
+        "from kalcal.scenarios import load_code_model; "
+        f"p = load_code_model({str(EXAMPLE)!r}, ['scenario.updates=5']).problem(); print(p.compiled_path)"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "(True, '')"
+
+
+def test_filter_compiled_setting_is_refused_with_its_name(tmp_path):
+    done = subprocess.run(
+        [sys.executable, "-m", "kalcal", "verify", str(EXAMPLE), "-n", "200", "--out", str(tmp_path / "o"),
+         "--set", "filter.compiled=maybe"],
+        capture_output=True, text=True,
+    )
+    assert done.returncode == 2
+    assert len(done.stderr.strip().splitlines()) == 1 and "filter.compiled" in done.stderr

@@ -51,7 +51,8 @@ def test_linear_model_as_code_passes_every_exact_check_and_its_bound_is_the_ricc
     scenario = load_code_model(linear_model(), ["scenario.updates=30"])
     problem, run, effects = _run(scenario, 2000)
     checks = run_checks(ensemble_statistics(run.sums), problem.info, 0.99)
-    assert [c.name for c in checks] == ["mean_error", "covariance", "orthogonality", "residual_whiteness", "nis"]
+    # the shape check too: the Kalman filter's NEES and NIS are exactly chi-square(4) and chi-square(2)
+    assert [c.name for c in checks] == ["mean_error", "covariance", "orthogonality", "residual_whiteness", "nis", "shape"]
     assert all(c.passed for c in checks), [(c.name, c.pvalue) for c in checks]
     # the EKF of a linear model is the Kalman filter: every realization's P_k is the Riccati P_k, and the
     # posterior Cramér–Rao bound of a linear Gaussian model is that P_k
@@ -145,10 +146,16 @@ def test_batch_estimator_gets_the_final_time_checks_only():
     caps = dataclasses.replace(scenario.capabilities, batch=True)
     info = dataclasses.replace(problem.info, capabilities=caps)
     checks = run_checks(ensemble_statistics(run.sums), info, 0.99)
-    assert [c.name for c in checks] == ["mean_error", "covariance", "nis"]  # a batch ML is no posterior mean
+    assert [c.name for c in checks] == ["mean_error", "covariance", "nis", "shape"]  # a batch ML is no posterior mean
     d = 4
     assert checks[0].comparisons == d  # K = 1: one update's d states
     assert checks[2].comparisons == 1
+    assert checks[3].comparisons == 2  # the final update's NEES and NIS histograms
+    parts = {part.name: part for part in checks[3].parts}
+    # each part's bound is the Kolmogorov-Smirnov one of one comparison at alpha / 2 over N = 500 values
+    from kalcal.stats.shape import ks_bound
+
+    assert parts["nees"].upper == parts["nis"].upper == ks_bound(0.005, 1, 500)
 
 
 def _cli(*args, cwd=None):

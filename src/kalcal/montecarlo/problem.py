@@ -108,6 +108,11 @@ class Problem(Protocol):
     def simulated_power(self, n: int, seed: int, confidence: float, workers: int | None = None) -> Any:
         """The checks' power by simulation where its settings ask for it; None for none."""
 
+    def plan(self, n_total: int) -> Problem:
+        """The problem as it should run the ``n_total`` realizations its caller is about to run (one run's N,
+        or all of a series'): a problem whose fastest path costs a setup (a nonlinear model's compiled
+        kernel) weighs it against the run; the problem itself where nothing depends on it."""
+
 
 #: why a problem whose gains depend on the data has no steady state, where it says nothing more precise
 DATA_DEPENDENT_GAINS = "its gains depend on the data, so the filter is not time-invariant"
@@ -116,7 +121,7 @@ DATA_DEPENDENT_GAINS = "its gains depend on the data, so the filter is not time-
 class ProblemDefaults:
     """The :class:`Problem` protocol's answers for a problem with nothing of its own to say: no exact
     analysis, no steady state where its scenario's gains are not fixed (the generic reason), no effect
-    sizes, no power by simulation. A problem inherits this and overrides what differs."""
+    sizes, no power by simulation, no plan. A problem inherits this and overrides what differs."""
 
     def has_exact_analysis(self) -> bool:
         """False: only a fixed-gain problem holds the arrays."""
@@ -133,6 +138,10 @@ class ProblemDefaults:
     def simulated_power(self, n: int, seed: int, confidence: float, workers: int | None = None) -> None:
         """None: no power by simulation."""
         return None
+
+    def plan(self, n_total: int):
+        """Itself: its path does not depend on the run's length."""
+        return self
 
 
 def check_engine(problem: Problem, engine: str, option: str = "") -> None:

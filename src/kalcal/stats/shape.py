@@ -251,6 +251,7 @@ def shape_power(
     from kalcal.montecarlo.engine import run_monte_carlo
 
     rejections = 0
+    problem = problem.plan(n * trials)  # the trials' runs together weigh a path's setup (a compile)
     for seed in range(first_seed, first_seed + trials):
         run = run_monte_carlo(problem, n, seed, engine=engine, workers=workers)
         rejections += not check_shape(ensemble_statistics(run.sums), problem.info, confidence).passed

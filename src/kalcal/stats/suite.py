@@ -130,12 +130,19 @@ def final_time_checks(
     model_error_cause: str = "",
 ) -> list[CheckResult]:
     """The checks of a batch estimator (``Capabilities.batch``: one final estimate per realization): the
-    mean error, covariance and NIS at the final update alone. There is no sequence of innovations to be
-    white, and the earlier updates are not estimates the estimator gives, so residual_whiteness is left out
-    and the families have m for K = 1. Orthogonality is left out too: E[e xhat^T] = 0 holds for a posterior
-    mean (the error is orthogonal to every function of the data), and a batch estimator is a maximum
-    likelihood that ignores the prior, whose error correlates with its estimate wherever the prior is as
-    tight as the fit, while its intervals (mean error, covariance, NIS) are honest."""
+    mean error, covariance, NIS and shape at the final update alone. There is no sequence of innovations to
+    be white, and the earlier updates are not estimates the estimator gives, so residual_whiteness is left
+    out and the families have m for K = 1. Orthogonality is left out too: E[e xhat^T] = 0 holds for a
+    posterior mean (the error is orthogonal to every function of the data), and a batch estimator is a
+    maximum likelihood that ignores the prior, whose error correlates with its estimate wherever the prior is
+    as tight as the fit, while its intervals (mean error, covariance, NIS) are honest.
+
+    The shape check takes its degrees of freedom from the statistics' shapes: the NEES against
+    chi-square(d), d the checked states (``mean_error``'s), and the NIS against chi-square(q), q the
+    estimator's own residual components (``mean_residual``'s: a fit's residual in the left null space of
+    its Jacobian, whitened, has q = measurements - parameters components, each N(0, 1) to first order),
+    as the NIS check holds its mean to q. Left out where the sums keep no histograms (statistics built by
+    hand from moments alone), as in :func:`run_checks`."""
     import dataclasses
 
     last = slice(-1, None)
@@ -149,11 +156,14 @@ def final_time_checks(
     )
     info_one = dataclasses.replace(info, update_times=np.asarray(info.update_times)[last])
     expected = None if expected_mean_error is None else np.asarray(expected_mean_error)[last]
-    return [
+    checks = [
         check_mean_error(one, info_one, confidence, expected, model_error_cause),
         check_covariance(one, info_one, confidence),
         check_nis(one, info_one, confidence),
     ]
+    if one.nees_histogram is not None and one.nis_histogram is not None:
+        checks.append(check_shape(one, info_one, confidence))
+    return checks
 
 
 def verdict(checks: list[CheckResult]) -> str:

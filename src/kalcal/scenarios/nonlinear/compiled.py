@@ -16,7 +16,7 @@ from typing import Callable
 from kalcal.core.nonlinear import NonlinearModel
 from kalcal.core.nonlinear_codegen import compilable, load_generated, model_source
 
-__all__ = ["block_kernel", "refuse"]
+__all__ = ["block_kernel", "is_compiled", "refuse"]
 
 _ARGS = ("first, noise, t_x0, t_p0f, t_qf, t_rf, t_dt, q_inv, has_q_inv, r_chol, "
          "f_x0, f_p0, f_q, f_r, f_dt, inputs, data, sums, normalized, eff, m")
@@ -77,6 +77,21 @@ def block_kernel(truth: NonlinearModel, filter_model: NonlinearModel) -> tuple[C
         out = (load_generated(generated_text(truth, filter_model)).block, "")
     per_truth[filter_model] = out
     return out
+
+
+def is_compiled(kernel) -> bool:
+    """Whether the driver's machine code is at hand without compiling: compiled in this process, or in
+    numba's cache for this CPU (an index of the generated module's source as it is, with an entry for
+    this machine's target). Asked of numba's cache index; where that cannot be read (another numba
+    release), False: the caller then decides as for a kernel not compiled yet."""
+    if kernel.overloads:
+        return True
+    try:
+        index = kernel._cache._cache_file._load_index()
+        target = kernel.targetctx.codegen().magic_tuple()
+        return any(key[1] == target for key in index)
+    except Exception:
+        return False
 
 
 def refuse(truth: NonlinearModel, filter_model: NonlinearModel, reason: str) -> None:

@@ -5,7 +5,7 @@ for the EKF: from the block's normals (drawn by numpy exactly as the numpy path 
 the same realizations on both paths) it simulates the truth with the truth's f and h, runs the filter's EKF
 (predict M = F P F^T + Q; update by the package's one compiled covariance update,
 :func:`kalcal.core.kernels.covariance_update`, Joseph form), and adds each update's errors, P_k, S_k,
-NEES, NIS, whitened errors and innovations, the effect sizes' sums and the Cramér–Rao bound's expectations
+NEES, NIS (and their shape histograms), whitened errors and innovations, the effect sizes' sums and the Cramér–Rao bound's expectations
 (F, F^T Q^-1 F at the true x_{k-1}, H^T R^-1 H at the true x_k) into the block's sums. Nothing of size
 n K is kept: the block's state is (d, d, n) and the sums of one update are held per lane of a tile,
 reduced at the update's end.
@@ -24,7 +24,7 @@ numpy path's rule, a prediction only) or a P or S is not positive definite: the 
 block on the numpy path from the same draws, which gives that case's numbers (or its error).
 """
 
-# numba cache stamp: kalcal.core.kernels 8b932ca498b00ecc
+# numba cache stamp: kalcal.core.kernels 8b932ca498b00ecc, kalcal.montecarlo.sum_kernels 1ed5637ca40b0768
 
 from __future__ import annotations
 
@@ -32,6 +32,7 @@ import numba
 import numpy as np
 
 from kalcal.core.kernels import covariance_update, update_work
+from kalcal.montecarlo.sum_kernels import add_shape
 
 
 @numba.njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -163,6 +164,8 @@ def ekf_block(
     e = np.empty((d, m))
     eps = np.empty((d, m))
     u = np.empty((p, m))
+    tile_nees = np.empty(m)  # the tile's NEES and NIS, binned into the shape histograms
+    tile_nis = np.empty(m)
     # one update's sums, per lane (reduced over the lanes at the update's end): the offsets of each
     dd, pp = d * d, p * p
     o_err = 0
@@ -298,11 +301,17 @@ def ekf_block(
                     last_u[t, a, j] = u[a, j]
                 lane[o_nees, j] += nees
                 lane[o_nis, j] += nis
+                tile_nees[j] = nees
+                tile_nis[j] = nis
                 lane[o_nsq, j] += nees * nees
                 r_nees[t, j] += nees
                 r_nis[t, j] += nis
                 if k > 0:
                     r_lag[t, j] += lag
+            # the shape check's histograms, by the fixed-gain kernels' binning (the same floor of the same
+            # product as numpy's shape_histogram)
+            add_shape(k, tile_nees[:mt], sums.nees_grid.scale, sums.nees_histogram)
+            add_shape(k, tile_nis[:mt], sums.nis_grid.scale, sums.nis_histogram)
             for a in range(p):
                 for j in range(mt):
                     lane[o_res + a, j] += res[a, j]

@@ -25,8 +25,9 @@ import numpy as np
 
 from kalcal.core.nonlinear_run import NonlinearRun, run_nonlinear_filter
 from kalcal.core.ukf import UnscentedSettings
-from kalcal.montecarlo.accumulators import BlockResult, MomentSums, SumBuffers, whiten
+from kalcal.montecarlo.accumulators import BlockResult, MomentSums, SumBuffers, shape_histogram, whiten
 from kalcal.montecarlo.problem import ProblemDefaults, ProblemInfo, check_engine
+from kalcal.scenarios.nonlinear.settings import COMPILED_MODES as SETTINGS_COMPILED_MODES
 from kalcal.stats.effects import EffectAccumulator, EffectLayout
 
 
@@ -39,6 +40,18 @@ def _factor(cov: np.ndarray) -> np.ndarray:
         w, v = np.linalg.eigh(cov)
         return v * np.sqrt(np.clip(w, 0.0, None))
 
+
+#: the run length, N K (realization-updates), from which ``filter.compiled=auto`` compiles a kernel that
+#: is not compiled yet: the compile, about a minute per pair of models (50-80 s on a shared 2-core
+#: machine), against the time the compiled kernel saves over the batched numpy path with every
+#: statistic, about 6 us per realization-update (7 us against 0.8 us, range-bearing, docs/nonlinear.md):
+#: 60 s / 6 us = 10^7, 10^5 realizations of 100 updates (the default 300,000 realizations of 100 updates
+#: compile; 10^4 of them run on the numpy path)
+COMPILE_WORTH = 10_000_000
+
+#: ``filter.compiled``: ``auto`` (compiled where it is already, or where the run repays its compile),
+#: ``yes`` (compile it, for any run), ``no`` (the batched numpy path)
+COMPILED_MODES = SETTINGS_COMPILED_MODES
 
 #: realizations per tile of the compiled kernel: long runs for the loops over the lanes while a tile's
 #: arrays stay small (a (d, d, 64) array is 8 KB at d = 4); not tuned against other widths
@@ -108,9 +121,12 @@ class NonlinearProblem(ProblemDefaults):
 
     scenario: Any  #: a NonlinearScenario, or a scenario with its attributes and ``problem_hooks``
     residual_pairs: bool = True
-    #: run an EKF's blocks in the compiled kernel where the models allow it (:attr:`compiled_path`);
-    #: False: the batched numpy path (the oracle the compiled one is held to)
-    compiled: bool = True
+    #: whether an EKF's blocks run in the compiled kernel where the models allow it (:attr:`compiled_path`):
+    #: one of :data:`COMPILED_MODES` (``no``: the batched numpy path, the oracle the compiled one is held to)
+    compiled: str = "auto"
+    #: the realizations the runs ahead make of this problem (:meth:`plan`), for ``auto``'s decision; None:
+    #: not told (``auto`` then compiles nothing: it runs the kernel only where it is compiled already)
+    planned: int | None = None
     info: ProblemInfo = field(init=False)
     engines: tuple[str, ...] = field(init=False, default=("exact",))
 
@@ -121,6 +137,8 @@ class NonlinearProblem(ProblemDefaults):
         return self.NOT_TIME_INVARIANT
 
     def __post_init__(self) -> None:
+        if self.compiled not in COMPILED_MODES:
+            raise ValueError(f"filter.compiled: one of {', '.join(COMPILED_MODES)}, got {self.compiled!r}")
         s = self.scenario
         m = s.loaded.filter
         hooks = self.hooks
@@ -258,27 +276,51 @@ class NonlinearProblem(ProblemDefaults):
             return run
         return NonlinearRun(self._checked(run.x), self._checked(run.cov, 2), run.residual, run.innovation_cov)
 
+    def plan(self, n_total: int) -> NonlinearProblem:
+        """The problem as it runs the ``n_total`` realizations its caller is about to run (the Problem
+        protocol's; one run's N, or R runs' R N): what ``filter.compiled=auto`` weighs a compile against.
+        A plan only grows (the larger of this one and an earlier one), so that an inner caller's run of
+        part of the work keeps the outer caller's decision."""
+        total = max(int(n_total), self.planned or 0)
+        return self if total == self.planned else dataclasses.replace(self, planned=total)
+
     @property
     def compiled_path(self) -> tuple[bool, str]:
         """Whether :meth:`block_sums` runs the compiled EKF kernel, and why not where it does not.
 
         The compiled path (:mod:`kalcal.scenarios.nonlinear.kernel`) runs an EKF of models whose f and h
         sympy can take (the default Jacobians); the IEKF and the UKF, and models with explicit numpy
-        Jacobians, jax's or finite differences, run the batched numpy path.
+        Jacobians, jax's or finite differences, run the batched numpy path. Of the models it takes, the
+        ``compiled`` setting decides: ``yes`` compiles the kernel (about a minute per pair of models, once:
+        numba caches it), ``no`` keeps the numpy path, and ``auto`` (the default) runs the kernel where it is
+        compiled already (in this process or in numba's cache) or where the planned run, N K realization-
+        updates (:meth:`plan`), is at least :data:`COMPILE_WORTH` (its compile repaid), else the numpy path.
         """
-        if not self.compiled:
-            return False, "the numpy path was asked for"
+        if self.compiled == "no":
+            return False, "the numpy path was asked for (filter.compiled=no)"
         hooks = self.hooks
         if hooks.checked is not None or hooks.renewed or hooks.batch is not None:
             return False, "a scenario built on this problem (checked, renewed or batch states) runs on the batched numpy path"
         kind = self.scenario.filter.kind
         if kind != "ekf":
             return False, f"the {kind.upper()} runs on the batched numpy path (only the EKF is compiled)"
-        from kalcal.scenarios.nonlinear.compiled import block_kernel
+        from kalcal.scenarios.nonlinear.compiled import block_kernel, is_compiled
 
         loaded = self.scenario.loaded
         kernel, reason = block_kernel(loaded.truth, loaded.filter)
-        return kernel is not None, reason
+        if kernel is None:
+            return False, reason
+        if self.compiled == "yes" or is_compiled(kernel):
+            return True, ""
+        work = (self.planned or 0) * self.scenario.n_updates
+        if work >= COMPILE_WORTH:
+            return True, ""
+        planned = "a run of untold length" if not self.planned else (
+            f"{self.planned} realizations of {self.scenario.n_updates} updates ({work:.3g} realization-updates)")
+        return False, (
+            f"filter.compiled=auto: the EKF kernel of these models is not compiled yet, and {planned} is below the "
+            f"{COMPILE_WORTH:.0e} that repay its compile (about a minute); filter.compiled=yes compiles it"
+        )
 
     def block_sums(self, rng: np.random.Generator, n: int, engine: str) -> MomentSums:
         """The moment sums and the effect sums of n realizations: the compiled EKF kernel where
@@ -375,6 +417,10 @@ class NonlinearProblem(ProblemDefaults):
             sums.whitened_outer[k] += eps.T @ eps
             sums.whitened_estimate[k] += eps.T @ result.x
             normalized[k] += u.sum(0)
+            # the shape check's histograms: this update's NEES (chi-square(d), d the checked states) and NIS
+            # (chi-square(p), p the filter's measurements or the batch estimator's residuals) binned
+            sums.nees_histogram[k] += shape_histogram(nees_k[:, None], d)[0]
+            sums.nis_histogram[k] += shape_histogram(nis_k[:, None], p)[0]
             if self.residual_pairs:
                 sums.residuals[k * p:(k + 1) * p] = u.T
             effects.update(k, e, cov, nees_k, nis_k, u)

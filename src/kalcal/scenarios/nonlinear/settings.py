@@ -5,7 +5,9 @@ Settings (``--set section.key=value``):
 - ``model.file``: the Python file (or, for a model given as an object, the name it is registered under);
 - ``filter.kind``: ``ekf`` (default), ``iekf`` or ``ukf`` -- a setting, not a model attribute, so that one
   file verifies all three filters; ``filter.alpha``, ``filter.beta``, ``filter.kappa`` (the UKF's sigma
-  points), ``filter.max_iterations`` (the IEKF's);
+  points), ``filter.max_iterations`` (the IEKF's); ``filter.compiled``: ``auto`` (default), ``yes`` or ``no``,
+  whether an EKF runs in the compiled kernel (:attr:`kalcal.scenarios.nonlinear.problem.NonlinearProblem.compiled_path`:
+  ``auto`` where it is compiled already or the run repays its compile);
 - ``scenario.updates``: K (0: the file's ``N_UPDATES``, else 100);
 - ``checks.tolerance``: the tolerance verdicts' band (default 0.1: "P within +-10 % of the mean squared
   error", :mod:`kalcal.stats.effects`);
@@ -28,6 +30,8 @@ from kalcal.models.settings import SettingError, show
 from kalcal.scenarios.protocol import Capabilities, ScenarioDefaults
 
 FILTER_KINDS = ("ekf", "iekf", "ukf")
+#: filter.compiled's values (kalcal.scenarios.nonlinear.problem.COMPILED_MODES, which imports numpy's filters)
+COMPILED_MODES = ("auto", "yes", "no")
 DEFAULT_UPDATES = 100
 
 #: models given as objects (kalcal.verify(NonlinearModel(...))), by the name model.file holds for them:
@@ -51,10 +55,14 @@ class NonlinearFilterSection:
     beta: float = 2.0
     kappa: float = 0.0
     max_iterations: int = 20
+    #: ``auto``, ``yes`` or ``no``: the EKF's compiled kernel (:data:`COMPILED_MODES`)
+    compiled: str = "auto"
 
     def __post_init__(self) -> None:
         if self.kind not in FILTER_KINDS:
             raise SettingError("filter.kind", f"one of {', '.join(FILTER_KINDS)}", show(self.kind))
+        if self.compiled not in COMPILED_MODES:
+            raise SettingError("filter.compiled", f"one of {', '.join(COMPILED_MODES)}", show(self.compiled))
         if self.max_iterations < 1:
             raise SettingError("filter.max_iterations", "a positive integer", show(self.max_iterations))
 
@@ -184,7 +192,7 @@ class NonlinearScenario(ScenarioDefaults):
 
         if form != "joseph":
             raise ConfigError(f"--form: {form!r} is not available for a model written as code (its EKF updates in Joseph form)")
-        return NonlinearProblem(self, residual_pairs=residual_pairs)
+        return NonlinearProblem(self, residual_pairs=residual_pairs, compiled=self.filter.compiled)
 
     def model_error_cause(self) -> str:
         l = self.loaded
