@@ -31,11 +31,10 @@ filter has no diffuse start: give it a proper m0); a log without a measured row.
 from __future__ import annotations
 
 import dataclasses
-import functools
 import hashlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
@@ -277,6 +276,7 @@ class LoggedGainProblem(FixedGainProblem):
         object.__setattr__(self, "_state_whitener", whitener(schedule.posterior_cov))
         object.__setattr__(self, "_innovation_whitener", whitener(schedule.innovation_cov))
         object.__setattr__(self, "_state_inverse", _inverse_spd(schedule.posterior_cov))
+        object.__setattr__(self, "_centers", self._predicted_means())
 
     @property
     def engines(self) -> tuple[str, ...]:
@@ -316,7 +316,16 @@ class LoggedGainProblem(FixedGainProblem):
         return _Run(posterior, residual)
 
     def _gains(self) -> tuple:
-        return np.ascontiguousarray(self.schedule.transitions), np.ascontiguousarray(self.filter_model.h), self.schedule.gain, self.filter_model.x0
+        """The kernel's filter arguments, as the parent's, with H_k per update (K, p, d)."""
+        return (
+            np.ascontiguousarray(self.schedule.transitions),
+            np.ascontiguousarray(self.filter_model.h),
+            self.schedule.gain,
+            self.filter_model.x0,
+            np.ascontiguousarray(self._state_whitener),
+            np.ascontiguousarray(self._innovation_whitener),
+            *self._centers,
+        )
 
     def _exact_block(self, rng: np.random.Generator, n: int, sums: SumBuffers, traced: int = -1) -> np.ndarray:
         from kalcal.scenarios.model_file import logged_kernels
@@ -342,8 +351,8 @@ class LoggedGainProblem(FixedGainProblem):
         )
         return trace
 
-    def expected_mean_error(self) -> np.ndarray:
-        """M E[x_k] - E[xhat_k], (K, d): the filter's response to the truth's mean trajectory."""
+    def _mean_run(self) -> tuple[np.ndarray, _Run]:
+        """The truth's mean trajectory M E[x_k] (K, d) and the filter's run over its mean measurements."""
         truth = self.truth
         mean = np.empty((truth.n_updates, truth.state_dim))
         y = truth.x0_mean
@@ -353,6 +362,16 @@ class LoggedGainProblem(FixedGainProblem):
         run = self.filter(np.einsum("kij,kj->ki", truth.h, mean)[None])
         if truth.error_map is not None:
             mean = mean @ truth.error_map.T
+        return mean, run
+
+    def _predicted_means(self) -> tuple[np.ndarray, np.ndarray]:
+        """E[e_k] (K, d) and E[r_k] (K, p), the shape histograms' centers (the parent's, with H_k per update)."""
+        mean, run = self._mean_run()
+        return np.ascontiguousarray(mean - run.posterior[0]), np.ascontiguousarray(run.residual[0])
+
+    def expected_mean_error(self) -> np.ndarray:
+        """M E[x_k] - E[xhat_k], (K, d): the filter's response to the truth's mean trajectory."""
+        mean, run = self._mean_run()
         return mean - run.posterior[0]
 
 

@@ -7,25 +7,30 @@ step and sums (:func:`~kalcal.montecarlo.kernels._filter_and_accumulate`), so th
 constant gives the time-invariant kernel's sums to rounding (tests/models/test_model_file_logged.py).
 """
 
-# numba cache stamp: kalcal.montecarlo.kernels 558163becd5e6ffc, kalcal.montecarlo.sum_kernels 3018497ad2c665be
+# numba cache stamp: kalcal.montecarlo.kernels daec5e09513f4163, kalcal.montecarlo.sum_kernels 1ed5637ca40b0768
 
 from __future__ import annotations
 
 import numba
 import numpy as np
 
-from kalcal.montecarlo.kernels import _filter_and_accumulate, _filter_buffers, standard_normals
+from kalcal.montecarlo.kernels import _filter_and_accumulate, _filter_buffers, _shape_scratch, standard_normals
 from kalcal.montecarlo.sum_kernels import FAST, affine
 
 
 @numba.njit(nogil=True, cache=True, fastmath=FAST)
-def logged_block_moments(y0, rng, transitions, noise, h_truth, measure, phis, h, gains, x0, sums, error_map, traced, trace):
+def logged_block_moments(
+    y0, rng, transitions, noise, h_truth, measure, phis, h, gains, x0,
+    state_whiteners, innovation_whiteners, error_centers, residual_centers, sums, error_map, traced, trace,
+):
     """Sample the update-rate truth over a log, filter it with fixed gains and sum, in one pass.
 
     y0 (n_t, n): the truth at row 0; rng: the block's generator past y0's draws, from which update k's
     (r + p, n) standard normals are drawn in turn; transitions (K, n_t, n_t), noise L_k (K, n_t, r),
     h_truth (K, p, n_t), measure G_k (K, p, p). Filter: phis (K, d, d), h (K, p, d), gains (K, d, p),
-    x0 (d,). sums, error_map, traced and trace as in :func:`kalcal.montecarlo.kernels.exact_block_moments`.
+    x0 (d,); the whiteners of P_k and S_k and the predicted means of e_k and r_k, about which each
+    realization's NEES and NIS are binned for the shape check. sums, error_map, traced and trace as in
+    :func:`kalcal.montecarlo.kernels.exact_block_moments`.
     """
     d_t, n = y0.shape
     mapped = error_map.shape[0] > 0
@@ -37,6 +42,8 @@ def logged_block_moments(y0, rng, transitions, noise, h_truth, measure, phis, h,
     z = np.empty((p, n))
     step = np.empty((r + p, n))
     x, xbar, residual = _filter_buffers(x0, p, n)
+    scratch = _shape_scratch(x0.shape[0], p, n)
+    whiteners = (state_whiteners, innovation_whiteners, error_centers, residual_centers)
     for k in range(n_updates):
         standard_normals(rng, step)
         affine(y_next, transitions[k], y, False)
@@ -53,7 +60,7 @@ def logged_block_moments(y0, rng, transitions, noise, h_truth, measure, phis, h,
                 for i in range(n):
                     y_next[a, i] = y[a, i]
             errors = y_next
-        _filter_and_accumulate(k, errors, z, x, xbar, residual, phis[k], h[k], gains, sums)
+        _filter_and_accumulate(k, errors, z, x, xbar, residual, phis[k], h[k], gains, sums, whiteners, scratch)
         if traced >= 0:
             for a in range(x.shape[0]):
                 trace[0, k, a] = errors[a, traced]
