@@ -47,6 +47,8 @@ NON_DEFAULT = {
     "truth.gps_latency": 0.02,
     "truth.gps_outlier_rate": 0.01,
     "truth.gps_outlier_std": 30.0,
+    "truth.gps_noise": "student-t",
+    "truth.gps_noise_dof": 7,
     "filter.gps_latency": 0.015,
 }
 # The rate-free noise settings: each excludes its per-sample key of NON_DEFAULT, so they are tested apart.

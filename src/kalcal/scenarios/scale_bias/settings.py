@@ -221,10 +221,9 @@ class ScaleBiasScenario(ScenarioDefaults):
     filter: ScaleBiasFilter = field(default_factory=ScaleBiasFilter)
 
     NAME: ClassVar[str] = "scale-bias"
-    #: the options of :class:`~kalcal.results.calibration.CalibrateOptions` its calibrate takes (accel-gps's
-    #: log options among them, accepted and unused, as they always were)
-    CALIBRATE_OPTIONS: ClassVar[tuple[str, ...]] = ("reference", "sensor", "prior", "windows", "settings_sigma", "imu_columns",
-                                                    "gps_columns", "init", "max_imu_gap", "on_gap")
+    #: the options of :class:`~kalcal.results.calibration.CalibrateOptions` its calibrate takes; another one
+    #: given (accel-gps's log options) is refused in one line naming who takes it
+    CALIBRATE_OPTIONS: ClassVar[tuple[str, ...]] = ("reference", "sensor", "prior", "windows", "settings_sigma")
     SUMMARY: ClassVar[str] = "a sensor's scale and bias estimated against a reference reading (the regressors are data)"
 
     capabilities: ClassVar[Capabilities] = Capabilities(
