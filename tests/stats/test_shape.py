@@ -127,3 +127,25 @@ def test_histograms_that_miss_values_are_refused():
     s.nis_histogram = s.nis_histogram * 0
     with pytest.raises(ValueError, match="nis_histogram"):
         check_shape(s, INFO, 0.99)
+
+
+@pytest.mark.parametrize("count", [500, 20_000, 20_001, 300_000])
+def test_the_bound_and_the_pvalue_are_one_law_on_both_sides_of_the_exact_count(count):
+    """ks_bound inverts ks_pvalue whether the law is Smirnov's exact one or Massart's bound of it."""
+    from kalcal.stats.shape import ks_bound, ks_pvalue
+
+    bound = ks_bound(0.01, 150, count)
+    np.testing.assert_allclose(ks_pvalue(bound, count), 0.01 / 150, rtol=1e-6)
+
+
+@pytest.mark.parametrize("d", [0.004, 0.008, 0.012, 0.02])
+def test_above_the_exact_count_the_pvalue_is_never_below_the_exact_one(d):
+    """Massart's exp(-2 N d^2) bounds Smirnov's exact one-sided tail from above: the p-value used above
+    EXACT_COUNT values is conservative (checked against the exact law just above the switch)."""
+    from scipy import special
+
+    from kalcal.stats.shape import EXACT_COUNT, ks_pvalue
+
+    count = EXACT_COUNT + 1
+    exact = min(1.0, 2.0 * float(special.smirnov(count, d)))
+    assert float(ks_pvalue(d, count)) >= exact
