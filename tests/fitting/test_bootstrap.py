@@ -178,3 +178,14 @@ def test_dask_gives_the_intervals_of_threads(ar1):
         on_dask = fit_model_file(ar1, log, options=FitOptions(bootstrap=8, seed=4, client=client))
     assert on_dask.bootstrap.parameters == threads.bootstrap.parameters
     assert on_dask.bootstrap.parameters["filter.v"].applicable
+
+
+# A fit whose only free setting is unidentified (w with gamma = 0: the process noise never reaches the state)
+# has nothing to refit: the bootstrap is refused in one line naming the setting, not a crash on empty replicates.
+def test_nothing_to_refit_refused_in_one_line():
+    import kalcal
+    from kalcal.errors import KalcalError
+
+    blind = parse_model(AR1.replace("gamma = [[1.0]]", "gamma = [[0.0]]"), "blind.toml")
+    with pytest.raises(KalcalError, match=r"no free setting is identified.*filter\.w \(unidentified\)"):
+        kalcal.fit(blind, data=_log(60, 1), free="filter.w", bootstrap=40)

@@ -116,6 +116,11 @@ class BootstrapResult:
                 "parameters": {name: p.as_dict() for name, p in self.parameters.items()}}
 
 
+def _held_reason(p) -> str:
+    """Why a setting of the fit is not refitted: it trades off with others, is not resolved, or is unidentified."""
+    return "trades off with " + ", ".join(p.trades_off) if p.trades_off else "not resolved" if p.held else "unidentified"
+
+
 def _replicate(draw: Draw, free: Sequence[Free], seed: int, index: int) -> tuple[list[float], bool]:
     """Replicate ``index``: its log drawn from block ``index``'s generator, refitted from the fitted point."""
     from kalcal.fitting import local_search
@@ -172,33 +177,36 @@ def parametric_bootstrap(
     refit = [replace(p, start=float(np.clip(fit.values[p.name], p.lower, p.upper))) for p in free
              if fit.parameters[p.name].identified and not fit.parameters[p.name].trades_off
              and not fit.parameters[p.name].held]
+    if not refit:
+        # nothing to refit: every replicate would be the fitted point itself, so no setting has a distribution
+        held = ", ".join(f"{name} ({_held_reason(p)})" for name, p in fit.parameters.items())
+        raise KalcalError(f"--bootstrap: no free setting is identified, so there is nothing to refit: {held}")
     started = time.perf_counter()
     rows: list[tuple[list[float], bool] | None] = [None] * replicates
-    if refit:
-        if client is not None:
-            futures = client.map(_replicate, [draw] * replicates, [refit] * replicates, [seed] * replicates,
-                                 range(replicates), pure=False)
+    if client is not None:
+        futures = client.map(_replicate, [draw] * replicates, [refit] * replicates, [seed] * replicates,
+                             range(replicates), pure=False)
+        for b, future in enumerate(futures):
+            rows[b] = future.result()
+            if progress is not None:
+                progress(b + 1, replicates)
+    else:
+        workers = max(1, min(replicates, threads or usable_cpus()))
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            futures = [pool.submit(_replicate, draw, refit, seed, b) for b in range(replicates)]
             for b, future in enumerate(futures):
                 rows[b] = future.result()
                 if progress is not None:
                     progress(b + 1, replicates)
-        else:
-            workers = max(1, min(replicates, threads or usable_cpus()))
-            with ThreadPoolExecutor(max_workers=workers) as pool:
-                futures = [pool.submit(_replicate, draw, refit, seed, b) for b in range(replicates)]
-                for b, future in enumerate(futures):
-                    rows[b] = future.result()
-                    if progress is not None:
-                        progress(b + 1, replicates)
     seconds = time.perf_counter() - started
     estimates = np.array([row[0] for row in rows], dtype=float).reshape(replicates, len(refit))
-    failed = sum(not row[1] for row in rows) if refit else 0
+    failed = sum(not row[1] for row in rows)
     parameters = {}
     column = {p.name: j for j, p in enumerate(refit)}
     for name, p in fit.parameters.items():
         if name not in column:
-            why = "trades off with " + ", ".join(p.trades_off) if p.trades_off else "not resolved" if p.held else "unidentified"
-            parameters[name] = BootstrapParameter(name, False, f"{why}: held at its input in every refit")
+            kept = "the fitted point" if p.trades_off else "its input"
+            parameters[name] = BootstrapParameter(name, False, f"{_held_reason(p)}: held at {kept} in every refit")
             continue
         spec = refit[column[name]]
         draws = estimates[:, column[name]]
