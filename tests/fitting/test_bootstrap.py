@@ -52,43 +52,45 @@ def _log(n: int, seed: int) -> pd.DataFrame:
     return pd.DataFrame({"y": y})
 
 
-def _boot(scenario, log, b, seed=0, threads=1):
-    return fit_model_file(scenario, log, options=FitOptions(bootstrap=b, seed=seed, threads=threads))
+def _boot(scenario, log, b, seed=0, threads=1, confidence=0.95):
+    return fit_model_file(scenario, log, options=FitOptions(bootstrap=b, seed=seed, threads=threads, confidence=confidence))
 
 
 # Same seed, 1 and 2 threads: the same replicates, so identical intervals, se and bias; another seed differs.
+# B = 8, the fewest at 75% (2/(1 - 0.75) - 1 = 7 and over), keeps it fast: what is compared is the replicates.
 def test_same_seed_one_and_two_threads_identical(ar1):
     log = _log(150, 11)
-    one, two = _boot(ar1, log, 8, seed=4, threads=1), _boot(ar1, log, 8, seed=4, threads=2)
+    one, two = _boot(ar1, log, 8, seed=4, threads=1, confidence=0.75), _boot(ar1, log, 8, seed=4, threads=2, confidence=0.75)
     assert one.bootstrap.parameters == two.bootstrap.parameters
     assert one.bootstrap.parameters["filter.v"].applicable
-    other = _boot(ar1, log, 8, seed=5, threads=2)
+    other = _boot(ar1, log, 8, seed=5, threads=2, confidence=0.75)
     assert other.bootstrap.parameters["filter.v"].values != one.bootstrap.parameters["filter.v"].values
 
 
-def _coverage(scenario, logs: int, n: int, b: int):
+def _coverage(scenario, logs: int, n: int, b: int, confidence: float = 0.95):
     """Per setting: how many of ``logs`` simulated logs' percentile intervals hold the truth (a log whose
     interval is not applicable counts as not covering: conservative)."""
     covered = dict.fromkeys(TRUTH, 0)
     for m in range(logs):
-        result = _boot(scenario, _log(n, 1000 + m), b, seed=m, threads=2)
+        result = _boot(scenario, _log(n, 1000 + m), b, seed=m, threads=2, confidence=confidence)
         for name, truth in TRUTH.items():
             p = result.bootstrap.parameters[name]
             covered[name] += bool(p.applicable and p.ci_low <= truth <= p.ci_high)
     return covered
 
 
-def _check_coverage(covered, logs):
-    # covered ~ Binomial(logs, 0.95) at the nominal level: fewer than its 0.001 quantile is a failure
-    floor = int(binom_ppf(0.001, logs, 0.95))
+def _check_coverage(covered, logs, confidence=0.95):
+    # covered ~ Binomial(logs, confidence) at the nominal level: fewer than its 0.001 quantile is a failure
+    floor = int(binom_ppf(0.001, logs, confidence))
     for name, count in covered.items():
         assert count >= floor, f"{name}: {count}/{logs} percentile intervals covered the truth, below {floor}"
 
 
-# The 95% percentile interval covers the truth at its nominal level over simulated logs (small version).
+# The percentile interval covers the truth at its nominal level over simulated logs (small version: 90%
+# with B = 19, the fewest replicates that level allows, to stay fast).
 def test_coverage_small(ar1):
     logs = 10
-    _check_coverage(_coverage(ar1, logs, 120, 19), logs)
+    _check_coverage(_coverage(ar1, logs, 120, 19, confidence=0.9), logs, confidence=0.9)
 
 
 @pytest.mark.slow
@@ -124,8 +126,8 @@ def _short_at_bound():
 def test_short_log_at_a_bound_is_not_applicable(ar1):
     seed = next(seed for seed in SHORT_SEEDS
                 if fit_model_file(ar1, _log(50, seed), options=FitOptions()).parameters["filter.w"].at_bound)
-    b = 20
-    result = _boot(ar1, _log(50, seed), b, threads=2)
+    b = 20  # at 90%: 19 at least
+    result = _boot(ar1, _log(50, seed), b, threads=2, confidence=0.9)
     w, v = result.bootstrap.parameters["filter.w"], result.bootstrap.parameters["filter.v"]
     assert result.parameters["filter.w"].at_bound
     assert not w.applicable and "Andrews 2000" in w.reason and w.ci_low is None and w.se > 0
@@ -161,7 +163,18 @@ def test_bootstrap_refused_in_one_line(ar1):
     import kalcal
 
     with pytest.raises(KalcalError, match="--bootstrap: expected 0"):
-        kalcal.fit(ar1, data=_log(60, 1), bootstrap=1)
+        kalcal.fit(ar1, data=_log(60, 1), bootstrap=-1)
+    # too few replicates for the level: B = 2 would print the range of two refits as a "95%" interval
+    for b, confidence, least in ((1, 0.95, 39), (2, 0.95, 39), (38, 0.95, 39), (18, 0.9, 19)):
+        with pytest.raises(KalcalError, match=f"at least {least} replicates"):
+            kalcal.fit(ar1, data=_log(60, 1), bootstrap=b, confidence=confidence)
+
+
+# B >= 2/(1 - c) - 1: the (B + 1)(1 - c)/2 >= 1 refits beyond each end of the percentile interval.
+def test_minimum_replicates():
+    from kalcal.fitting.bootstrap import minimum_replicates
+
+    assert [minimum_replicates(c) for c in (0.95, 0.9, 0.75, 0.99, 0.5)] == [39, 19, 7, 199, 3]
 
 
 # Dask (a local in-process cluster, as the Monte Carlo's Dask tests start one): the same seed gives the
@@ -170,12 +183,12 @@ def test_dask_gives_the_intervals_of_threads(ar1):
     import distributed
 
     log = _log(150, 11)
-    threads = _boot(ar1, log, 8, seed=4, threads=2)
+    threads = _boot(ar1, log, 8, seed=4, threads=2, confidence=0.75)
     with (
         distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None) as cluster,
         distributed.Client(cluster) as client,
     ):
-        on_dask = fit_model_file(ar1, log, options=FitOptions(bootstrap=8, seed=4, client=client))
+        on_dask = fit_model_file(ar1, log, options=FitOptions(bootstrap=8, seed=4, client=client, confidence=0.75))
     assert on_dask.bootstrap.parameters == threads.bootstrap.parameters
     assert on_dask.bootstrap.parameters["filter.v"].applicable
 

@@ -73,7 +73,7 @@ def fit(
     confidence : float
         Of the intervals (0.95).
     bootstrap : int
-        B > 1: a parametric bootstrap (:mod:`kalcal.fitting.bootstrap`): B logs simulated from the fitted
+        B >= 2/(1 - confidence) - 1 (39 at 95%): a parametric bootstrap (:mod:`kalcal.fitting.bootstrap`): B logs simulated from the fitted
         model with the log's length, sampling, missing measurements and inputs, each refitted (a point
         estimate from the fitted point); per setting the percentile interval, the bootstrap standard error
         and the estimator's bias, in the result's ``bootstrap``, fit.json and fit-bootstrap.png. 0: none.
@@ -104,12 +104,16 @@ def fit(
     from kalcal.fitting.run import FitOptions
     from kalcal.scenarios import log_defaults
 
-    if isinstance(bootstrap, bool) or int(bootstrap) != bootstrap or bootstrap < 0 or bootstrap == 1:
-        raise KalcalError(f"--bootstrap: expected 0 (none) or a whole number of replicates >= 2, got {bootstrap!r}")
-    if threads is not None and threads < 1:
-        raise KalcalError(f"--threads: expected a positive number, got {threads}")
     if not 0.0 < confidence < 1.0:
         raise KalcalError(f"confidence=: expected a number in (0, 1), got {confidence!r}")  # kalcal fit has no --confidence
+    if isinstance(bootstrap, bool) or int(bootstrap) != bootstrap or bootstrap < 0:
+        raise KalcalError(f"--bootstrap: expected 0 (none) or a whole number of replicates, got {bootstrap!r}")
+    if bootstrap:
+        from kalcal.fitting.bootstrap import check_replicates
+
+        check_replicates(bootstrap, confidence)  # before the fit: too few replicates for the interval's level
+    if threads is not None and threads < 1:
+        raise KalcalError(f"--threads: expected a positive number, got {threads}")
     import contextlib
 
     from kalcal.montecarlo.distributed import dask_client

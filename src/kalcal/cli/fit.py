@@ -78,7 +78,7 @@ def fit(
     imu_columns: Annotated[Optional[str], typer.Option("--imu-columns", help="accel-gps: map roles to columns.")] = None,
     gps_columns: Annotated[Optional[str], typer.Option("--gps-columns", help="accel-gps: map roles to columns.")] = None,
     bootstrap: Annotated[
-        int, typer.Option("--bootstrap", help="B >= 2: also a parametric bootstrap of B logs simulated from the fit and refitted (percentile intervals, bootstrap se, bias; fit-bootstrap.png).")
+        int, typer.Option("--bootstrap", help="B >= 39 (the fewest whose 95% percentile interval has refits beyond each end): also a parametric bootstrap of B logs simulated from the fit and refitted (percentile intervals, bootstrap se, bias; fit-bootstrap.png).")
     ] = 0,
     seed: Annotated[int, typer.Option("--seed", help="The bootstrap's root seed; the same seed gives the same intervals.")] = 0,
     threads: Annotated[Optional[int], typer.Option("--threads", help="The bootstrap's local threads (default: all cores).")] = None,

@@ -23,6 +23,7 @@ thread, several, or Dask tasks (``client``).
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -116,6 +117,25 @@ class BootstrapResult:
                 "parameters": {name: p.as_dict() for name, p in self.parameters.items()}}
 
 
+def minimum_replicates(confidence: float) -> int:
+    """The fewest replicates B whose percentile interval at ``confidence`` c has refits beyond each end.
+
+    The c interval's ends are the (1 - c)/2 and (1 + c)/2 quantiles of the B refits; the lower is an order
+    statistic above the smallest refit only where (B + 1)(1 - c)/2 >= 1, i.e. B >= 2/(1 - c) - 1 (39 at 95%,
+    19 at 90%). Fewer, and the "interval" is the sample's range, whatever c says.
+    """
+    # the small allowance keeps 2/(1 - 0.95) - 1, 39.00000000000004 in floating point, at 39
+    return max(2, math.ceil(2.0 / (1.0 - confidence) - 1.0 - 1e-9))
+
+
+def check_replicates(replicates, confidence: float) -> None:
+    """Raise KalcalError, one line, unless ``replicates`` is a whole number >= :func:`minimum_replicates`."""
+    least = minimum_replicates(confidence)
+    if isinstance(replicates, bool) or int(replicates) != replicates or replicates < least:
+        raise KalcalError(f"--bootstrap: a {confidence:.4g} percentile interval needs at least {least} replicates "
+                          f"((B + 1)(1 - c)/2 >= 1, a refit beyond each end), got {replicates!r}")
+
+
 def _held_reason(p) -> str:
     """Why a setting of the fit is not refitted: it trades off with others, is not resolved, or is unidentified."""
     return "trades off with " + ", ".join(p.trades_off) if p.trades_off else "not resolved" if p.held else "unidentified"
@@ -157,7 +177,7 @@ def parametric_bootstrap(
     fit : MleFit
         The fit of the user's log: its ``values`` and ``parameters`` (identified, at a bound).
     replicates : int
-        B >= 2.
+        B >= :func:`minimum_replicates` of ``confidence`` (39 at 95%).
     seed : int
         Replicate b draws from ``SeedSequence(seed, spawn_key=(b,))``.
     confidence : float
@@ -171,8 +191,7 @@ def parametric_bootstrap(
     """
     from kalcal.cpus import usable_cpus
 
-    if int(replicates) != replicates or replicates < 2:
-        raise KalcalError(f"--bootstrap: expected a whole number of replicates >= 2, got {replicates!r}")
+    check_replicates(replicates, confidence)
     replicates = int(replicates)
     refit = [replace(p, start=float(np.clip(fit.values[p.name], p.lower, p.upper))) for p in free
              if fit.parameters[p.name].identified and not fit.parameters[p.name].trades_off
