@@ -202,3 +202,29 @@ def test_nothing_to_refit_refused_in_one_line():
     blind = parse_model(AR1.replace("gamma = [[1.0]]", "gamma = [[0.0]]"), "blind.toml")
     with pytest.raises(KalcalError, match=r"no free setting is identified.*filter\.w \(unidentified\)"):
         kalcal.fit(blind, data=_log(60, 1), free="filter.w", bootstrap=40)
+
+
+# A negative seed (SeedSequence takes none) is one line and exit 2 for fit's bootstrap and for verify alike,
+# before any fit or run; in Python a KalcalError naming --seed, not numpy's ValueError from a worker.
+def test_negative_seed_refused_in_one_line(ar1, tmp_path):
+    import kalcal
+    from typer.testing import CliRunner
+
+    from kalcal.cli import app
+    from kalcal.errors import KalcalError
+    from kalcal.montecarlo.engine import block_generator
+
+    with pytest.raises(KalcalError, match=r"--seed: expected a whole number >= 0, got -1"):
+        kalcal.fit(ar1, data=_log(60, 1), bootstrap=39, seed=-1)
+    with pytest.raises(KalcalError, match=r"--seed: expected a whole number >= 0, got -3"):
+        kalcal.verify("scale-bias", n=1000, seed=-3)
+    with pytest.raises(KalcalError, match=r"--seed"):
+        block_generator(-1, 0)
+    (tmp_path / "ar1.toml").write_text(AR1)
+    _log(60, 1).to_csv(tmp_path / "y.csv", index=False)
+    runner = CliRunner()
+    for args in (["fit", str(tmp_path / "ar1.toml"), "--data", str(tmp_path / "y.csv"), "--bootstrap", "39"],
+                 ["verify", "scale-bias", "-n", "1000"]):
+        done = runner.invoke(app, [*args, "--seed", "-1", "--out", str(tmp_path / "out")])
+        assert done.exit_code == 2, done.output
+        assert "--seed: expected a whole number >= 0, got -1" in done.output and "Traceback" not in done.output

@@ -111,7 +111,10 @@ def fit(
     if bootstrap:
         from kalcal.fitting.bootstrap import check_replicates
 
+        from kalcal.montecarlo.engine import check_seed
+
         check_replicates(bootstrap, confidence)  # before the fit: too few replicates for the interval's level
+        check_seed(seed)
     if threads is not None and threads < 1:
         raise KalcalError(f"--threads: expected a positive number, got {threads}")
     import contextlib
@@ -120,7 +123,7 @@ def fit(
 
     options = FitOptions(free=_free(free), profile=profile, confidence=confidence, imu_columns=imu_columns,
                          gps_columns=gps_columns, init=init, gate=gate, reference=reference, sensor=sensor,
-                         bootstrap=int(bootstrap), seed=int(seed), threads=threads)
+                         bootstrap=int(bootstrap), seed=seed, threads=threads)
     model = resolve(scenario, settings, config, defaults=log_defaults(scenario), models=True)  # a model file too
     from kalcal.scenarios.protocol import require
 

@@ -191,7 +191,10 @@ def parametric_bootstrap(
     """
     from kalcal.cpus import usable_cpus
 
+    from kalcal.montecarlo.engine import check_seed
+
     check_replicates(replicates, confidence)
+    check_seed(seed)
     replicates = int(replicates)
     refit = [replace(p, start=float(np.clip(fit.values[p.name], p.lower, p.upper))) for p in free
              if fit.parameters[p.name].identified and not fit.parameters[p.name].trades_off
