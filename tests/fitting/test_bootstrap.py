@@ -228,3 +228,22 @@ def test_negative_seed_refused_in_one_line(ar1, tmp_path):
         done = runner.invoke(app, [*args, "--seed", "-1", "--out", str(tmp_path / "out")])
         assert done.exit_code == 2, done.output
         assert "--seed: expected a whole number >= 0, got -1" in done.output and "Traceback" not in done.output
+
+
+# A 50-row log (seed 1001 of the fixed list) whose w is interior but two of 39 refits stop at w's search floor
+# (1e-06): the 2.5% quantile rests on order statistics 0 and 1, both that floor, so the lower end is the
+# range, not a quantile: None with the reason; the upper end, a refit's maximum, is kept; the table shows "—".
+def test_an_end_at_the_search_range_is_not_a_quantile(ar1):
+    from kalcal.fitting.result import percentile_text
+
+    result = _boot(ar1, _log(50, 1001), 39, threads=2)
+    w = result.bootstrap.parameters["filter.w"]
+    floor = min(w.values)
+    assert not result.parameters["filter.w"].at_bound and w.applicable
+    assert sorted(w.values)[1] == pytest.approx(floor) and floor < 1e-5, sorted(w.values)[:3]
+    assert w.ci_low is None and w.ci_high > result.parameters["filter.w"].value
+    assert "lower end at the search range's end" in w.reason and w.at_range_end >= 2
+    assert percentile_text(w) == f"[—, {w.ci_high:.4g}]" and "[—, " in result.summary()
+    assert result.to_dict()["bootstrap"]["parameters"]["filter.w"]["ci_low"] is None
+    v = result.bootstrap.parameters["filter.v"]
+    assert v.at_range_end == 0 and v.ci_low is not None and v.ci_high is not None and v.reason == ""

@@ -24,7 +24,7 @@ def _derived_row(result, name: str, p) -> tuple[str, str, str, str] | None:
 def _bootstrap_table(result):
     """The bootstrap beside the likelihood intervals: per setting the likelihood interval, the percentile
     interval, the bootstrap standard error and the bias (+- its Monte Carlo error), or "not applicable" and why."""
-    from kalcal.fitting.result import bootstrap_note
+    from kalcal.fitting.result import bootstrap_note, percentile_text
 
     boot = result.bootstrap
     table = _common._table(
@@ -42,7 +42,7 @@ def _bootstrap_table(result):
         if b.se is None:
             table.add_row(escape(name), likelihood, "not applicable", "—", "—", escape(b.reason))
             continue
-        interval = f"[{b.ci_low:.4g}, {b.ci_high:.4g}]" if b.applicable else "not applicable"
+        interval = percentile_text(b)
         table.add_row(escape(name), likelihood, interval, f"{b.se:.3g}", f"{b.bias:.3g} ± {b.bias_se:.2g}",
                       escape(bootstrap_note(b)))
     return table

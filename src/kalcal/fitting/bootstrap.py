@@ -54,7 +54,8 @@ class BootstrapParameter:
     reason : str
         Why not applicable ("" otherwise).
     ci_low, ci_high : float or None
-        The percentile interval at the fit's confidence, in the setting's unit.
+        The percentile interval at the fit's confidence, in the setting's unit; an end is None (``reason``
+        says so) where its quantile is a refit that stopped at the search range's end.
     se : float or None
         The bootstrap standard error: std of the refits (ddof = 1), the setting's unit.
     bias : float or None
@@ -134,6 +135,12 @@ def check_replicates(replicates, confidence: float) -> None:
     if isinstance(replicates, bool) or int(replicates) != replicates or replicates < least:
         raise KalcalError(f"--bootstrap: a {confidence:.4g} percentile interval needs at least {least} replicates "
                           f"((B + 1)(1 - c)/2 >= 1, a refit beyond each end), got {replicates!r}")
+
+
+def _order_statistics(replicates: int, q: float) -> list[int]:
+    """The (0-based) order statistics of ``replicates`` values that numpy's linear quantile ``q`` rests on."""
+    position = (replicates - 1) * q
+    return sorted({math.floor(position), math.ceil(position)})
 
 
 def _held_reason(p) -> str:
@@ -232,8 +239,9 @@ def parametric_bootstrap(
             continue
         spec = refit[column[name]]
         draws = estimates[:, column[name]]
-        ends = int(np.count_nonzero(np.isclose(draws, spec.lower, rtol=1e-6, atol=0.0)
-                                    | np.isclose(draws, spec.upper, rtol=1e-6, atol=0.0)))
+        at_end = (np.isclose(draws, spec.lower, rtol=1e-6, atol=0.0)
+                  | np.isclose(draws, spec.upper, rtol=1e-6, atol=0.0))
+        ends = int(np.count_nonzero(at_end))
         se = float(np.std(draws, ddof=1))
         summary = dict(se=se, bias=float(np.mean(draws) - fit.values[name]), bias_se=se / float(np.sqrt(replicates)),
                        at_range_end=ends, values=tuple(draws.tolist()))
@@ -246,7 +254,15 @@ def parametric_bootstrap(
         else:
             tail = (1.0 - confidence) / 2.0
             low, high = np.quantile(draws, [tail, 1.0 - tail])
-            parameters[name] = BootstrapParameter(name, True, "", float(low), float(high), **summary)
+            # an end whose quantile rests on a refit stopped at the search range's end is that end, not a quantile
+            order = np.argsort(draws, kind="stable")
+            lost = [side for side, q in (("lower", tail), ("upper", 1.0 - tail))
+                    if at_end[order[_order_statistics(replicates, q)]].any()]
+            reason = "; ".join(
+                f"{side} end at the search range's end ({spec.lower if side == 'lower' else spec.upper:.4g}): its "
+                f"quantile is a refit that stopped there, not a maximum of its likelihood" for side in lost)
+            parameters[name] = BootstrapParameter(name, True, reason, None if "lower" in lost else float(low),
+                                                  None if "upper" in lost else float(high), **summary)
     return BootstrapResult(replicates, int(seed), float(confidence), parameters, failed, seconds)
 
 
