@@ -247,3 +247,23 @@ def test_an_end_at_the_search_range_is_not_a_quantile(ar1):
     assert result.to_dict()["bootstrap"]["parameters"]["filter.w"]["ci_low"] is None
     v = result.bootstrap.parameters["filter.v"]
     assert v.at_range_end == 0 and v.ci_low is not None and v.ci_high is not None and v.reason == ""
+
+
+# --seed, --threads, --workers, --scheduler set the bootstrap's run alone: without --bootstrap they are refused
+# in one line (exit 2), as other options a fit would not use are, instead of being silently ignored.
+def test_bootstrap_options_refused_without_bootstrap(ar1, tmp_path):
+    import kalcal
+    from typer.testing import CliRunner
+
+    from kalcal.cli import app
+    from kalcal.errors import KalcalError
+
+    for option in ({"seed": 3}, {"threads": 2}, {"workers": 2}, {"scheduler": "tcp://127.0.0.1:1"}):
+        with pytest.raises(KalcalError, match=r"--\w+: only with --bootstrap"):
+            kalcal.fit(ar1, data=_log(60, 1), **option)
+    (tmp_path / "ar1.toml").write_text(AR1)
+    _log(60, 1).to_csv(tmp_path / "y.csv", index=False)
+    done = CliRunner().invoke(app, ["fit", str(tmp_path / "ar1.toml"), "--data", str(tmp_path / "y.csv"), "--seed", "0",
+                                    "--threads", "2", "--out", str(tmp_path / "out")])
+    assert done.exit_code == 2 and "--seed, --threads: only with --bootstrap" in done.output, done.output
+    assert not (tmp_path / "out").exists()

@@ -47,7 +47,7 @@ def fit(
     out: str | Path | None = None,
     topic: str | None = None,
     bootstrap: int = 0,
-    seed: int = 0,
+    seed: int | None = None,
     threads: int | None = None,
     workers: int | None = None,
     scheduler: str | None = None,
@@ -77,9 +77,9 @@ def fit(
         model with the log's length, sampling, missing measurements and inputs, each refitted (a point
         estimate from the fitted point); per setting the percentile interval, the bootstrap standard error
         and the estimator's bias, in the result's ``bootstrap``, fit.json and fit-bootstrap.png. 0: none.
-    seed : int
-        The bootstrap's root seed: the same seed gives the same intervals, whatever ``threads``,
-        ``workers`` or ``client``.
+    seed : int, optional
+        The bootstrap's root seed (default 0): the same seed gives the same intervals, whatever ``threads``,
+        ``workers`` or ``client``. Like ``threads``, ``workers`` and ``scheduler``, only with ``bootstrap``.
     threads : int, optional
         The bootstrap's local threads (default: all cores).
     workers, scheduler, client
@@ -108,6 +108,11 @@ def fit(
         raise KalcalError(f"confidence=: expected a number in (0, 1), got {confidence!r}")  # kalcal fit has no --confidence
     if isinstance(bootstrap, bool) or int(bootstrap) != bootstrap or bootstrap < 0:
         raise KalcalError(f"--bootstrap: expected 0 (none) or a whole number of replicates, got {bootstrap!r}")
+    unused = [flag for flag, value in (("--seed", seed), ("--threads", threads), ("--workers", workers),
+                                       ("--scheduler", scheduler)) if value is not None]
+    if unused and not bootstrap:  # each sets the bootstrap's run alone: a fit without one would ignore it
+        raise KalcalError(f"{', '.join(unused)}: only with --bootstrap (the bootstrap's seed and where its refits run)")
+    seed = 0 if seed is None else seed
     if bootstrap:
         from kalcal.fitting.bootstrap import check_replicates
 

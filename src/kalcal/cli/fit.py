@@ -80,7 +80,7 @@ def fit(
     bootstrap: Annotated[
         int, typer.Option("--bootstrap", help="B >= 39 (the fewest whose 95% percentile interval has refits beyond each end): also a parametric bootstrap of B logs simulated from the fit and refitted (percentile intervals, bootstrap se, bias; fit-bootstrap.png).")
     ] = 0,
-    seed: Annotated[int, typer.Option("--seed", help="The bootstrap's root seed; the same seed gives the same intervals.")] = 0,
+    seed: Annotated[Optional[int], typer.Option("--seed", help="The bootstrap's root seed (default 0); the same seed gives the same intervals.")] = None,
     threads: Annotated[Optional[int], typer.Option("--threads", help="The bootstrap's local threads (default: all cores).")] = None,
     workers: Annotated[
         Optional[int], typer.Option("--workers", help="Run the bootstrap on a local Dask cluster of this many processes.")
