@@ -267,3 +267,27 @@ def test_bootstrap_options_refused_without_bootstrap(ar1, tmp_path):
                                     "--threads", "2", "--out", str(tmp_path / "out")])
     assert done.exit_code == 2 and "--seed, --threads: only with --bootstrap" in done.output, done.output
     assert not (tmp_path / "out").exists()
+
+
+# A replicate runs its refit's evaluations one by one on its thread, and leaves the thread's flag as it found
+# it: a Dask worker thread, reused by a later fit, runs that fit's evaluations in parallel again.
+def test_a_replicate_leaves_its_thread_as_it_found_it(ar1):
+    from kalcal.fitting import local_search
+    from kalcal.fitting.bootstrap import _replicate
+    from kalcal.fitting.mle import Free
+
+    seen = []
+
+    def draw(rng):
+        def loglik(values):
+            seen.append(local_search._IN_POOL.active)
+            return -0.5 * (values["filter.w"] - 1.0) ** 2
+        return loglik
+
+    local_search._IN_POOL.active = False
+    try:
+        _replicate(draw, [Free("filter.w", start=2.0, lower=1e-6, upper=1e6)], 0, 0)
+    finally:
+        after = local_search._IN_POOL.active
+        local_search._IN_POOL.active = False
+    assert seen and all(seen) and after is False

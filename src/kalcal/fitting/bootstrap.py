@@ -154,9 +154,14 @@ def _replicate(draw: Draw, free: Sequence[Free], seed: int, index: int) -> tuple
     from kalcal.montecarlo.engine import block_generator
 
     # the parallelism is across replicates: a refit's gradient runs its evaluations here, one after another
+    # (and back as it was after: on a Dask worker's thread, reused by the user's later fits, it would stay set)
+    before = getattr(local_search._IN_POOL, "active", False)
     local_search._IN_POOL.active = True
-    loglik = draw(block_generator(seed, index))
-    values, _, converged = point_estimate(loglik, free)
+    try:
+        loglik = draw(block_generator(seed, index))
+        values, _, converged = point_estimate(loglik, free)
+    finally:
+        local_search._IN_POOL.active = before
     return [values[p.name] for p in free], converged
 
 
