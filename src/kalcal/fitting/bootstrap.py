@@ -10,10 +10,14 @@ profiles). From the B estimates theta*_b of each setting:
 * the bootstrap standard error, the sample std of theta*_b (ddof = 1), in the setting's unit;
 * the estimator's bias, mean(theta*_b) - theta_hat, with its own Monte Carlo standard error se / sqrt(B).
 
-A setting whose estimate is at its lower bound ("consistent with 0") or without a limit on one side gets
-no interval: the percentile bootstrap is not consistent when the true value is on the boundary of the
-parameter space (Andrews 2000, Econometrica 68(2) 399-405); the entry says "not applicable" and why. An
-unidentified setting is held at its input in every refit and has no entry either.
+A setting whose estimate is at its lower bound ("consistent with 0") gets no interval: the percentile
+bootstrap is not consistent when the true value is on the boundary of the parameter space (Andrews 2000,
+Econometrica 68(2) 399-405). One whose likelihood interval has no limit on one side within the search range
+gets none either, for another reason: the range's end is not a boundary of the parameter space, but the log
+does not bound the setting on that side, so refits run to the range's end and a percentile end there would
+be the range, not a quantile. Either entry says "not applicable" and why, and keeps the se, bias and refits.
+A setting that is unidentified or not resolved is held at its input in every refit, one that trades off with
+others at the fitted point: its entry says "not applicable" and why, without se, bias or refits.
 
 Seeds: replicate b draws from the Monte Carlo engine's generator of block b
 (:func:`kalcal.montecarlo.engine.block_generator`, ``SeedSequence(seed, spawn_key=(b,))``), and the
@@ -254,7 +258,8 @@ def parametric_bootstrap(
             reason = f"at its lower bound (consistent with 0): no percentile interval ({ANDREWS})"
             parameters[name] = BootstrapParameter(name, False, reason, **summary)
         elif p.ci_low is None or p.ci_high is None:
-            reason = f"no likelihood limit on one side within the search range: no percentile interval ({ANDREWS})"
+            reason = ("no likelihood limit on one side within the search range: the log does not bound it there, "
+                      "so refits run to the range's end and a percentile end would be the range: no percentile interval")
             parameters[name] = BootstrapParameter(name, False, reason, **summary)
         else:
             tail = (1.0 - confidence) / 2.0
