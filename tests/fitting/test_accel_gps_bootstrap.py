@@ -90,13 +90,14 @@ def test_velocity_only_fixes_are_drawn_without_positions():
     assert np.all(np.isnan(simulate_fixes(log, values, np.random.default_rng(0)).z_position))
 
 
-# kalcal fit accel-gps --bootstrap: the refits are of the same fixes; identical on 1 and 2 threads.
+# kalcal fit accel-gps --bootstrap: the refits are of the same fixes; identical on 1 and 2 threads (B = 6 at 70%,
+# the fewest that level allows: 2/(1 - 0.7) - 1 = 5.7).
 def test_fit_accel_gps_bootstrap_one_and_two_threads_identical():
     sim = kalcal.simulate("accel-gps", seed=4, settings={"scenario.duration": 40})
     imu, gps = sim.logs["imu"], sim.logs["gps"]
     free = "filter.gps_position_std,filter.gps_velocity_std"
-    one = kalcal.fit("accel-gps", imu=imu, gps=gps, free=free, bootstrap=6, seed=2, threads=1)
-    two = kalcal.fit("accel-gps", imu=imu, gps=gps, free=free, bootstrap=6, seed=2, threads=2)
+    one = kalcal.fit("accel-gps", imu=imu, gps=gps, free=free, bootstrap=6, seed=2, threads=1, confidence=0.7)
+    two = kalcal.fit("accel-gps", imu=imu, gps=gps, free=free, bootstrap=6, seed=2, threads=2, confidence=0.7)
     assert one.bootstrap.parameters == two.bootstrap.parameters
     position = one.bootstrap.parameters["filter.gps_position_std"]
     assert position.applicable and position.se > 0 and len(position.values) == 6

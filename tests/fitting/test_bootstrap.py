@@ -52,43 +52,46 @@ def _log(n: int, seed: int) -> pd.DataFrame:
     return pd.DataFrame({"y": y})
 
 
-def _boot(scenario, log, b, seed=0, threads=1):
-    return fit_model_file(scenario, log, options=FitOptions(bootstrap=b, seed=seed, threads=threads))
+def _boot(scenario, log, b, seed=0, threads=1, confidence=0.95):
+    return fit_model_file(scenario, log, options=FitOptions(bootstrap=b, seed=seed, threads=threads, confidence=confidence))
 
 
 # Same seed, 1 and 2 threads: the same replicates, so identical intervals, se and bias; another seed differs.
+# B = 8, the fewest at 75% (2/(1 - 0.75) - 1 = 7 and over), keeps it fast: what is compared is the replicates.
 def test_same_seed_one_and_two_threads_identical(ar1):
     log = _log(150, 11)
-    one, two = _boot(ar1, log, 8, seed=4, threads=1), _boot(ar1, log, 8, seed=4, threads=2)
+    one, two = _boot(ar1, log, 8, seed=4, threads=1, confidence=0.75), _boot(ar1, log, 8, seed=4, threads=2, confidence=0.75)
     assert one.bootstrap.parameters == two.bootstrap.parameters
     assert one.bootstrap.parameters["filter.v"].applicable
-    other = _boot(ar1, log, 8, seed=5, threads=2)
+    other = _boot(ar1, log, 8, seed=5, threads=2, confidence=0.75)
     assert other.bootstrap.parameters["filter.v"].values != one.bootstrap.parameters["filter.v"].values
 
 
-def _coverage(scenario, logs: int, n: int, b: int):
+def _coverage(scenario, logs: int, n: int, b: int, confidence: float = 0.95):
     """Per setting: how many of ``logs`` simulated logs' percentile intervals hold the truth (a log whose
-    interval is not applicable counts as not covering: conservative)."""
+    interval is not applicable, or has an end at the search range's end, counts as not covering: conservative)."""
     covered = dict.fromkeys(TRUTH, 0)
     for m in range(logs):
-        result = _boot(scenario, _log(n, 1000 + m), b, seed=m, threads=2)
+        result = _boot(scenario, _log(n, 1000 + m), b, seed=m, threads=2, confidence=confidence)
         for name, truth in TRUTH.items():
             p = result.bootstrap.parameters[name]
-            covered[name] += bool(p.applicable and p.ci_low <= truth <= p.ci_high)
+            covered[name] += bool(p.applicable and p.ci_low is not None and p.ci_high is not None
+                                  and p.ci_low <= truth <= p.ci_high)
     return covered
 
 
-def _check_coverage(covered, logs):
-    # covered ~ Binomial(logs, 0.95) at the nominal level: fewer than its 0.001 quantile is a failure
-    floor = int(binom_ppf(0.001, logs, 0.95))
+def _check_coverage(covered, logs, confidence=0.95):
+    # covered ~ Binomial(logs, confidence) at the nominal level: fewer than its 0.001 quantile is a failure
+    floor = int(binom_ppf(0.001, logs, confidence))
     for name, count in covered.items():
         assert count >= floor, f"{name}: {count}/{logs} percentile intervals covered the truth, below {floor}"
 
 
-# The 95% percentile interval covers the truth at its nominal level over simulated logs (small version).
+# The percentile interval covers the truth at its nominal level over simulated logs (small version: 90%
+# with B = 19, the fewest replicates that level allows, to stay fast).
 def test_coverage_small(ar1):
     logs = 10
-    _check_coverage(_coverage(ar1, logs, 120, 19), logs)
+    _check_coverage(_coverage(ar1, logs, 120, 19, confidence=0.9), logs, confidence=0.9)
 
 
 @pytest.mark.slow
@@ -99,7 +102,7 @@ def test_coverage(ar1):
 
 # On a long log the bootstrap se and the observed information's (delta method to the variance's unit)
 # agree within the bootstrap se's Monte Carlo error: relative sd sqrt(1 / (2 (B - 1))) for a normal
-# estimator, 3.29 of them (two-sided 0.001); the observed information's own O(1/n) error is far below it.
+# estimator, 3.29 of them (two-sided 0.001); the observed information's own error, O(n^-1/2) relative, is far below it at n = 3000.
 def test_bootstrap_se_agrees_with_the_information_on_a_long_log(ar1):
     b = 60
     result = _boot(ar1, _log(3000, 21), b, threads=2)
@@ -124,8 +127,8 @@ def _short_at_bound():
 def test_short_log_at_a_bound_is_not_applicable(ar1):
     seed = next(seed for seed in SHORT_SEEDS
                 if fit_model_file(ar1, _log(50, seed), options=FitOptions()).parameters["filter.w"].at_bound)
-    b = 20
-    result = _boot(ar1, _log(50, seed), b, threads=2)
+    b = 20  # at 90%: 19 at least
+    result = _boot(ar1, _log(50, seed), b, threads=2, confidence=0.9)
     w, v = result.bootstrap.parameters["filter.w"], result.bootstrap.parameters["filter.v"]
     assert result.parameters["filter.w"].at_bound
     assert not w.applicable and "Andrews 2000" in w.reason and w.ci_low is None and w.se > 0
@@ -161,7 +164,18 @@ def test_bootstrap_refused_in_one_line(ar1):
     import kalcal
 
     with pytest.raises(KalcalError, match="--bootstrap: expected 0"):
-        kalcal.fit(ar1, data=_log(60, 1), bootstrap=1)
+        kalcal.fit(ar1, data=_log(60, 1), bootstrap=-1)
+    # too few replicates for the level: B = 2 would print the range of two refits as a "95%" interval
+    for b, confidence, least in ((1, 0.95, 39), (2, 0.95, 39), (38, 0.95, 39), (18, 0.9, 19)):
+        with pytest.raises(KalcalError, match=f"at least {least} replicates"):
+            kalcal.fit(ar1, data=_log(60, 1), bootstrap=b, confidence=confidence)
+
+
+# B >= 2/(1 - c) - 1: the (B + 1)(1 - c)/2 >= 1 refits beyond each end of the percentile interval.
+def test_minimum_replicates():
+    from kalcal.fitting.bootstrap import minimum_replicates
+
+    assert [minimum_replicates(c) for c in (0.95, 0.9, 0.75, 0.99, 0.5)] == [39, 19, 7, 199, 3]
 
 
 # Dask (a local in-process cluster, as the Monte Carlo's Dask tests start one): the same seed gives the
@@ -170,11 +184,111 @@ def test_dask_gives_the_intervals_of_threads(ar1):
     import distributed
 
     log = _log(150, 11)
-    threads = _boot(ar1, log, 8, seed=4, threads=2)
+    threads = _boot(ar1, log, 8, seed=4, threads=2, confidence=0.75)
     with (
         distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None) as cluster,
         distributed.Client(cluster) as client,
     ):
-        on_dask = fit_model_file(ar1, log, options=FitOptions(bootstrap=8, seed=4, client=client))
+        on_dask = fit_model_file(ar1, log, options=FitOptions(bootstrap=8, seed=4, client=client, confidence=0.75))
     assert on_dask.bootstrap.parameters == threads.bootstrap.parameters
     assert on_dask.bootstrap.parameters["filter.v"].applicable
+
+
+# A fit whose only free setting is unidentified (w with gamma = 0: the process noise never reaches the state)
+# has nothing to refit: the bootstrap is refused in one line naming the setting, not a crash on empty replicates.
+def test_nothing_to_refit_refused_in_one_line():
+    import kalcal
+    from kalcal.errors import KalcalError
+
+    blind = parse_model(AR1.replace("gamma = [[1.0]]", "gamma = [[0.0]]"), "blind.toml")
+    with pytest.raises(KalcalError, match=r"no free setting is identified.*filter\.w \(unidentified\)"):
+        kalcal.fit(blind, data=_log(60, 1), free="filter.w", bootstrap=40)
+
+
+# A negative seed (SeedSequence takes none) is one line and exit 2 for fit's bootstrap and for verify alike,
+# before any fit or run; in Python a KalcalError naming --seed, not numpy's ValueError from a worker.
+def test_negative_seed_refused_in_one_line(ar1, tmp_path):
+    import kalcal
+    from typer.testing import CliRunner
+
+    from kalcal.cli import app
+    from kalcal.errors import KalcalError
+    from kalcal.montecarlo.engine import block_generator
+
+    with pytest.raises(KalcalError, match=r"--seed: expected a whole number >= 0, got -1"):
+        kalcal.fit(ar1, data=_log(60, 1), bootstrap=39, seed=-1)
+    with pytest.raises(KalcalError, match=r"--seed: expected a whole number >= 0, got -3"):
+        kalcal.verify("scale-bias", n=1000, seed=-3)
+    with pytest.raises(KalcalError, match=r"--seed"):
+        block_generator(-1, 0)
+    (tmp_path / "ar1.toml").write_text(AR1)
+    _log(60, 1).to_csv(tmp_path / "y.csv", index=False)
+    runner = CliRunner()
+    for args in (["fit", str(tmp_path / "ar1.toml"), "--data", str(tmp_path / "y.csv"), "--bootstrap", "39"],
+                 ["verify", "scale-bias", "-n", "1000"]):
+        done = runner.invoke(app, [*args, "--seed", "-1", "--out", str(tmp_path / "out")])
+        assert done.exit_code == 2, done.output
+        assert "--seed: expected a whole number >= 0, got -1" in done.output and "Traceback" not in done.output
+
+
+# A 50-row log (seed 1001 of the fixed list) whose w is interior but two of 39 refits stop at w's search floor
+# (1e-06): the 2.5% quantile rests on order statistics 0 and 1, both that floor, so the lower end is the
+# range, not a quantile: None with the reason; the upper end, a refit's maximum, is kept; the table shows "—".
+def test_an_end_at_the_search_range_is_not_a_quantile(ar1):
+    from kalcal.fitting.result import percentile_text
+
+    result = _boot(ar1, _log(50, 1001), 39, threads=2)
+    w = result.bootstrap.parameters["filter.w"]
+    floor = min(w.values)
+    assert not result.parameters["filter.w"].at_bound and w.applicable
+    assert sorted(w.values)[1] == pytest.approx(floor) and floor < 1e-5, sorted(w.values)[:3]
+    assert w.ci_low is None and w.ci_high > result.parameters["filter.w"].value
+    assert "lower end at the search range's end" in w.reason and w.at_range_end >= 2
+    assert percentile_text(w) == f"[—, {w.ci_high:.4g}]" and "[—, " in result.summary()
+    assert result.to_dict()["bootstrap"]["parameters"]["filter.w"]["ci_low"] is None
+    v = result.bootstrap.parameters["filter.v"]
+    assert v.at_range_end == 0 and v.ci_low is not None and v.ci_high is not None and v.reason == ""
+
+
+# --seed, --threads, --workers, --scheduler set the bootstrap's run alone: without --bootstrap they are refused
+# in one line (exit 2), as other options a fit would not use are, instead of being silently ignored.
+def test_bootstrap_options_refused_without_bootstrap(ar1, tmp_path):
+    import kalcal
+    from typer.testing import CliRunner
+
+    from kalcal.cli import app
+    from kalcal.errors import KalcalError
+
+    for option in ({"seed": 3}, {"threads": 2}, {"workers": 2}, {"scheduler": "tcp://127.0.0.1:1"}):
+        with pytest.raises(KalcalError, match=r"--\w+: only with --bootstrap"):
+            kalcal.fit(ar1, data=_log(60, 1), **option)
+    (tmp_path / "ar1.toml").write_text(AR1)
+    _log(60, 1).to_csv(tmp_path / "y.csv", index=False)
+    done = CliRunner().invoke(app, ["fit", str(tmp_path / "ar1.toml"), "--data", str(tmp_path / "y.csv"), "--seed", "0",
+                                    "--threads", "2", "--out", str(tmp_path / "out")])
+    assert done.exit_code == 2 and "--seed, --threads: only with --bootstrap" in done.output, done.output
+    assert not (tmp_path / "out").exists()
+
+
+# A replicate runs its refit's evaluations one by one on its thread, and leaves the thread's flag as it found
+# it: a Dask worker thread, reused by a later fit, runs that fit's evaluations in parallel again.
+def test_a_replicate_leaves_its_thread_as_it_found_it(ar1):
+    from kalcal.fitting import local_search
+    from kalcal.fitting.bootstrap import _replicate
+    from kalcal.fitting.mle import Free
+
+    seen = []
+
+    def draw(rng):
+        def loglik(values):
+            seen.append(local_search._IN_POOL.active)
+            return -0.5 * (values["filter.w"] - 1.0) ** 2
+        return loglik
+
+    local_search._IN_POOL.active = False
+    try:
+        _replicate(draw, [Free("filter.w", start=2.0, lower=1e-6, upper=1e6)], 0, 0)
+    finally:
+        after = local_search._IN_POOL.active
+        local_search._IN_POOL.active = False
+    assert seen and all(seen) and after is False

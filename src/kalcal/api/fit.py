@@ -47,7 +47,7 @@ def fit(
     out: str | Path | None = None,
     topic: str | None = None,
     bootstrap: int = 0,
-    seed: int = 0,
+    seed: int | None = None,
     threads: int | None = None,
     workers: int | None = None,
     scheduler: str | None = None,
@@ -73,13 +73,13 @@ def fit(
     confidence : float
         Of the intervals (0.95).
     bootstrap : int
-        B > 1: a parametric bootstrap (:mod:`kalcal.fitting.bootstrap`): B logs simulated from the fitted
+        B >= 2/(1 - confidence) - 1 (39 at 95%): a parametric bootstrap (:mod:`kalcal.fitting.bootstrap`): B logs simulated from the fitted
         model with the log's length, sampling, missing measurements and inputs, each refitted (a point
         estimate from the fitted point); per setting the percentile interval, the bootstrap standard error
         and the estimator's bias, in the result's ``bootstrap``, fit.json and fit-bootstrap.png. 0: none.
-    seed : int
-        The bootstrap's root seed: the same seed gives the same intervals, whatever ``threads``,
-        ``workers`` or ``client``.
+    seed : int, optional
+        The bootstrap's root seed (default 0): the same seed gives the same intervals, whatever ``threads``,
+        ``workers`` or ``client``. Like ``threads``, ``workers`` and ``scheduler``, only with ``bootstrap``.
     threads : int, optional
         The bootstrap's local threads (default: all cores).
     workers, scheduler, client
@@ -104,19 +104,31 @@ def fit(
     from kalcal.fitting.run import FitOptions
     from kalcal.scenarios import log_defaults
 
-    if isinstance(bootstrap, bool) or int(bootstrap) != bootstrap or bootstrap < 0 or bootstrap == 1:
-        raise KalcalError(f"--bootstrap: expected 0 (none) or a whole number of replicates >= 2, got {bootstrap!r}")
-    if threads is not None and threads < 1:
-        raise KalcalError(f"--threads: expected a positive number, got {threads}")
     if not 0.0 < confidence < 1.0:
         raise KalcalError(f"confidence=: expected a number in (0, 1), got {confidence!r}")  # kalcal fit has no --confidence
+    if isinstance(bootstrap, bool) or int(bootstrap) != bootstrap or bootstrap < 0:
+        raise KalcalError(f"--bootstrap: expected 0 (none) or a whole number of replicates, got {bootstrap!r}")
+    unused = [flag for flag, value in (("--seed", seed), ("--threads", threads), ("--workers", workers),
+                                       ("--scheduler", scheduler)) if value is not None]
+    if unused and not bootstrap:  # each sets the bootstrap's run alone: a fit without one would ignore it
+        raise KalcalError(f"{', '.join(unused)}: only with --bootstrap (the bootstrap's seed and where its refits run)")
+    seed = 0 if seed is None else seed
+    if bootstrap:
+        from kalcal.fitting.bootstrap import check_replicates
+
+        from kalcal.montecarlo.engine import check_seed
+
+        check_replicates(bootstrap, confidence)  # before the fit: too few replicates for the interval's level
+        check_seed(seed)
+    if threads is not None and threads < 1:
+        raise KalcalError(f"--threads: expected a positive number, got {threads}")
     import contextlib
 
     from kalcal.montecarlo.distributed import dask_client
 
     options = FitOptions(free=_free(free), profile=profile, confidence=confidence, imu_columns=imu_columns,
                          gps_columns=gps_columns, init=init, gate=gate, reference=reference, sensor=sensor,
-                         bootstrap=int(bootstrap), seed=int(seed), threads=threads)
+                         bootstrap=int(bootstrap), seed=seed, threads=threads)
     model = resolve(scenario, settings, config, defaults=log_defaults(scenario), models=True)  # a model file too
     from kalcal.scenarios.protocol import require
 

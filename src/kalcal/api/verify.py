@@ -102,6 +102,9 @@ def verify(
     if threads is not None and threads < 1:
         raise KalcalError(f"--threads: expected a positive number, got {threads}")
     check_arguments(model, n, engine=engine, confidence=confidence, long_run=long_run, batch_size=batch_size, form=form)
+    from kalcal.montecarlo.engine import check_seed
+
+    check_seed(seed)  # before a cluster starts or a kernel compiles
     options = dict(
         engine=engine, confidence=confidence, workers=threads, command=command, long_run=long_run,
         batch_size=batch_size, checkpoint=checkpoint, form=form, notes=notes, max_run_s=max_run_s,

@@ -24,7 +24,7 @@ def _derived_row(result, name: str, p) -> tuple[str, str, str, str] | None:
 def _bootstrap_table(result):
     """The bootstrap beside the likelihood intervals: per setting the likelihood interval, the percentile
     interval, the bootstrap standard error and the bias (+- its Monte Carlo error), or "not applicable" and why."""
-    from kalcal.fitting.result import bootstrap_note
+    from kalcal.fitting.result import bootstrap_note, percentile_text
 
     boot = result.bootstrap
     table = _common._table(
@@ -42,7 +42,7 @@ def _bootstrap_table(result):
         if b.se is None:
             table.add_row(escape(name), likelihood, "not applicable", "—", "—", escape(b.reason))
             continue
-        interval = f"[{b.ci_low:.4g}, {b.ci_high:.4g}]" if b.applicable else "not applicable"
+        interval = percentile_text(b)
         table.add_row(escape(name), likelihood, interval, f"{b.se:.3g}", f"{b.bias:.3g} ± {b.bias_se:.2g}",
                       escape(bootstrap_note(b)))
     return table
@@ -78,9 +78,9 @@ def fit(
     imu_columns: Annotated[Optional[str], typer.Option("--imu-columns", help="accel-gps: map roles to columns.")] = None,
     gps_columns: Annotated[Optional[str], typer.Option("--gps-columns", help="accel-gps: map roles to columns.")] = None,
     bootstrap: Annotated[
-        int, typer.Option("--bootstrap", help="B >= 2: also a parametric bootstrap of B logs simulated from the fit and refitted (percentile intervals, bootstrap se, bias; fit-bootstrap.png).")
+        int, typer.Option("--bootstrap", help="B >= 39 (the fewest whose 95% percentile interval has refits beyond each end): also a parametric bootstrap of B logs simulated from the fit and refitted (percentile intervals, bootstrap se, bias; fit-bootstrap.png).")
     ] = 0,
-    seed: Annotated[int, typer.Option("--seed", help="The bootstrap's root seed; the same seed gives the same intervals.")] = 0,
+    seed: Annotated[Optional[int], typer.Option("--seed", help="The bootstrap's root seed (default 0); the same seed gives the same intervals.")] = None,
     threads: Annotated[Optional[int], typer.Option("--threads", help="The bootstrap's local threads (default: all cores).")] = None,
     workers: Annotated[
         Optional[int], typer.Option("--workers", help="Run the bootstrap on a local Dask cluster of this many processes.")

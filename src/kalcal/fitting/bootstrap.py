@@ -10,10 +10,14 @@ profiles). From the B estimates theta*_b of each setting:
 * the bootstrap standard error, the sample std of theta*_b (ddof = 1), in the setting's unit;
 * the estimator's bias, mean(theta*_b) - theta_hat, with its own Monte Carlo standard error se / sqrt(B).
 
-A setting whose estimate is at its lower bound ("consistent with 0") or without a limit on one side gets
-no interval: the percentile bootstrap is not consistent when the true value is on the boundary of the
-parameter space (Andrews 2000, Econometrica 68(2) 399-405); the entry says "not applicable" and why. An
-unidentified setting is held at its input in every refit and has no entry either.
+A setting whose estimate is at its lower bound ("consistent with 0") gets no interval: the percentile
+bootstrap is not consistent when the true value is on the boundary of the parameter space (Andrews 2000,
+Econometrica 68(2) 399-405). One whose likelihood interval has no limit on one side within the search range
+gets none either, for another reason: the range's end is not a boundary of the parameter space, but the log
+does not bound the setting on that side, so refits run to the range's end and a percentile end there would
+be the range, not a quantile. Either entry says "not applicable" and why, and keeps the se, bias and refits.
+A setting that is unidentified or not resolved is held at its input in every refit, one that trades off with
+others at the fitted point: its entry says "not applicable" and why, without se, bias or refits.
 
 Seeds: replicate b draws from the Monte Carlo engine's generator of block b
 (:func:`kalcal.montecarlo.engine.block_generator`, ``SeedSequence(seed, spawn_key=(b,))``), and the
@@ -23,6 +27,7 @@ thread, several, or Dask tasks (``client``).
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -53,7 +58,8 @@ class BootstrapParameter:
     reason : str
         Why not applicable ("" otherwise).
     ci_low, ci_high : float or None
-        The percentile interval at the fit's confidence, in the setting's unit.
+        The percentile interval at the fit's confidence, in the setting's unit; an end is None (``reason``
+        says so) where its quantile is a refit that stopped at the search range's end.
     se : float or None
         The bootstrap standard error: std of the refits (ddof = 1), the setting's unit.
     bias : float or None
@@ -116,15 +122,50 @@ class BootstrapResult:
                 "parameters": {name: p.as_dict() for name, p in self.parameters.items()}}
 
 
+def minimum_replicates(confidence: float) -> int:
+    """The fewest replicates B whose percentile interval at ``confidence`` c has refits beyond each end.
+
+    The c interval's ends are the (1 - c)/2 and (1 + c)/2 quantiles of the B refits; the lower is an order
+    statistic above the smallest refit only where (B + 1)(1 - c)/2 >= 1, i.e. B >= 2/(1 - c) - 1 (39 at 95%,
+    19 at 90%). Fewer, and the "interval" is the sample's range, whatever c says.
+    """
+    # the small allowance keeps 2/(1 - 0.95) - 1, 39.00000000000004 in floating point, at 39
+    return max(2, math.ceil(2.0 / (1.0 - confidence) - 1.0 - 1e-9))
+
+
+def check_replicates(replicates, confidence: float) -> None:
+    """Raise KalcalError, one line, unless ``replicates`` is a whole number >= :func:`minimum_replicates`."""
+    least = minimum_replicates(confidence)
+    if isinstance(replicates, bool) or int(replicates) != replicates or replicates < least:
+        raise KalcalError(f"--bootstrap: a {confidence:.4g} percentile interval needs at least {least} replicates "
+                          f"((B + 1)(1 - c)/2 >= 1, a refit beyond each end), got {replicates!r}")
+
+
+def _order_statistics(replicates: int, q: float) -> list[int]:
+    """The (0-based) order statistics of ``replicates`` values that numpy's linear quantile ``q`` rests on."""
+    position = (replicates - 1) * q
+    return sorted({math.floor(position), math.ceil(position)})
+
+
+def _held_reason(p) -> str:
+    """Why a setting of the fit is not refitted: it trades off with others, is not resolved, or is unidentified."""
+    return "trades off with " + ", ".join(p.trades_off) if p.trades_off else "not resolved" if p.held else "unidentified"
+
+
 def _replicate(draw: Draw, free: Sequence[Free], seed: int, index: int) -> tuple[list[float], bool]:
     """Replicate ``index``: its log drawn from block ``index``'s generator, refitted from the fitted point."""
     from kalcal.fitting import local_search
     from kalcal.montecarlo.engine import block_generator
 
     # the parallelism is across replicates: a refit's gradient runs its evaluations here, one after another
+    # (and back as it was after: on a Dask worker's thread, reused by the user's later fits, it would stay set)
+    before = getattr(local_search._IN_POOL, "active", False)
     local_search._IN_POOL.active = True
-    loglik = draw(block_generator(seed, index))
-    values, _, converged = point_estimate(loglik, free)
+    try:
+        loglik = draw(block_generator(seed, index))
+        values, _, converged = point_estimate(loglik, free)
+    finally:
+        local_search._IN_POOL.active = before
     return [values[p.name] for p in free], converged
 
 
@@ -152,7 +193,7 @@ def parametric_bootstrap(
     fit : MleFit
         The fit of the user's log: its ``values`` and ``parameters`` (identified, at a bound).
     replicates : int
-        B >= 2.
+        B >= :func:`minimum_replicates` of ``confidence`` (39 at 95%).
     seed : int
         Replicate b draws from ``SeedSequence(seed, spawn_key=(b,))``.
     confidence : float
@@ -166,44 +207,50 @@ def parametric_bootstrap(
     """
     from kalcal.cpus import usable_cpus
 
-    if int(replicates) != replicates or replicates < 2:
-        raise KalcalError(f"--bootstrap: expected a whole number of replicates >= 2, got {replicates!r}")
+    from kalcal.montecarlo.engine import check_seed
+
+    check_replicates(replicates, confidence)
+    check_seed(seed)
     replicates = int(replicates)
     refit = [replace(p, start=float(np.clip(fit.values[p.name], p.lower, p.upper))) for p in free
              if fit.parameters[p.name].identified and not fit.parameters[p.name].trades_off
              and not fit.parameters[p.name].held]
+    if not refit:
+        # nothing to refit: every replicate would be the fitted point itself, so no setting has a distribution
+        held = ", ".join(f"{name} ({_held_reason(p)})" for name, p in fit.parameters.items())
+        raise KalcalError(f"--bootstrap: no free setting is identified, so there is nothing to refit: {held}")
     started = time.perf_counter()
     rows: list[tuple[list[float], bool] | None] = [None] * replicates
-    if refit:
-        if client is not None:
-            futures = client.map(_replicate, [draw] * replicates, [refit] * replicates, [seed] * replicates,
-                                 range(replicates), pure=False)
+    if client is not None:
+        futures = client.map(_replicate, [draw] * replicates, [refit] * replicates, [seed] * replicates,
+                             range(replicates), pure=False)
+        for b, future in enumerate(futures):
+            rows[b] = future.result()
+            if progress is not None:
+                progress(b + 1, replicates)
+    else:
+        workers = max(1, min(replicates, threads or usable_cpus()))
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            futures = [pool.submit(_replicate, draw, refit, seed, b) for b in range(replicates)]
             for b, future in enumerate(futures):
                 rows[b] = future.result()
                 if progress is not None:
                     progress(b + 1, replicates)
-        else:
-            workers = max(1, min(replicates, threads or usable_cpus()))
-            with ThreadPoolExecutor(max_workers=workers) as pool:
-                futures = [pool.submit(_replicate, draw, refit, seed, b) for b in range(replicates)]
-                for b, future in enumerate(futures):
-                    rows[b] = future.result()
-                    if progress is not None:
-                        progress(b + 1, replicates)
     seconds = time.perf_counter() - started
     estimates = np.array([row[0] for row in rows], dtype=float).reshape(replicates, len(refit))
-    failed = sum(not row[1] for row in rows) if refit else 0
+    failed = sum(not row[1] for row in rows)
     parameters = {}
     column = {p.name: j for j, p in enumerate(refit)}
     for name, p in fit.parameters.items():
         if name not in column:
-            why = "trades off with " + ", ".join(p.trades_off) if p.trades_off else "not resolved" if p.held else "unidentified"
-            parameters[name] = BootstrapParameter(name, False, f"{why}: held at its input in every refit")
+            kept = "the fitted point" if p.trades_off else "its input"
+            parameters[name] = BootstrapParameter(name, False, f"{_held_reason(p)}: held at {kept} in every refit")
             continue
         spec = refit[column[name]]
         draws = estimates[:, column[name]]
-        ends = int(np.count_nonzero(np.isclose(draws, spec.lower, rtol=1e-6, atol=0.0)
-                                    | np.isclose(draws, spec.upper, rtol=1e-6, atol=0.0)))
+        at_end = (np.isclose(draws, spec.lower, rtol=1e-6, atol=0.0)
+                  | np.isclose(draws, spec.upper, rtol=1e-6, atol=0.0))
+        ends = int(np.count_nonzero(at_end))
         se = float(np.std(draws, ddof=1))
         summary = dict(se=se, bias=float(np.mean(draws) - fit.values[name]), bias_se=se / float(np.sqrt(replicates)),
                        at_range_end=ends, values=tuple(draws.tolist()))
@@ -211,12 +258,21 @@ def parametric_bootstrap(
             reason = f"at its lower bound (consistent with 0): no percentile interval ({ANDREWS})"
             parameters[name] = BootstrapParameter(name, False, reason, **summary)
         elif p.ci_low is None or p.ci_high is None:
-            reason = f"no likelihood limit on one side within the search range: no percentile interval ({ANDREWS})"
+            reason = ("no likelihood limit on one side within the search range: the log does not bound it there, "
+                      "so refits run to the range's end and a percentile end would be the range: no percentile interval")
             parameters[name] = BootstrapParameter(name, False, reason, **summary)
         else:
             tail = (1.0 - confidence) / 2.0
             low, high = np.quantile(draws, [tail, 1.0 - tail])
-            parameters[name] = BootstrapParameter(name, True, "", float(low), float(high), **summary)
+            # an end whose quantile rests on a refit stopped at the search range's end is that end, not a quantile
+            order = np.argsort(draws, kind="stable")
+            lost = [side for side, q in (("lower", tail), ("upper", 1.0 - tail))
+                    if at_end[order[_order_statistics(replicates, q)]].any()]
+            reason = "; ".join(
+                f"{side} end at the search range's end ({spec.lower if side == 'lower' else spec.upper:.4g}): its "
+                f"quantile is a refit that stopped there, not a maximum of its likelihood" for side in lost)
+            parameters[name] = BootstrapParameter(name, True, reason, None if "lower" in lost else float(low),
+                                                  None if "upper" in lost else float(high), **summary)
     return BootstrapResult(replicates, int(seed), float(confidence), parameters, failed, seconds)
 
 

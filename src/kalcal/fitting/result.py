@@ -400,11 +400,18 @@ def bootstrap_lines(result: FitResult) -> list[str]:
         if not b.applicable and b.se is None:
             rows.append([name, "—", "—", "—", "not applicable: " + b.reason])
             continue
-        interval = f"[{b.ci_low:.4g}, {b.ci_high:.4g}]" if b.applicable else "not applicable"
+        interval = percentile_text(b)
         rows.append([name, interval, fmt(b.se, 4), f"{b.bias:.3g} +- {b.bias_se:.2g}", bootstrap_note(b)])
     head = (f"parametric bootstrap: {boot.replicates} logs simulated from the fit and refitted, seed {boot.seed}, "
             f"{boot.failed} refit(s) not converged")
     return [head, *text_table(["setting", f"{boot.confidence:.0%} percentile", "boot se", "bias", "note"], rows)]
+
+
+def percentile_text(b) -> str:
+    """A bootstrap entry's percentile interval, "—" for an end at the search range's end, or "not applicable"."""
+    if not b.applicable:
+        return "not applicable"
+    return "[" + ", ".join("—" if end is None else f"{end:.4g}" for end in (b.ci_low, b.ci_high)) + "]"
 
 
 def bootstrap_note(b) -> str:

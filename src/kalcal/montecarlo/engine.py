@@ -24,6 +24,7 @@ import numpy as np
 from threadpoolctl import ThreadpoolController
 
 from kalcal.cpus import usable_cpus
+from kalcal.errors import ConfigError
 from kalcal.montecarlo.accumulators import MomentSums
 from kalcal.montecarlo.checkpoint import fingerprint
 from kalcal.montecarlo.checkpoint import load as load_checkpoint
@@ -52,8 +53,19 @@ def block_size_of(n: int, block: int, block_size: int = BLOCK_SIZE) -> int:
     return min(block_size, n - block * block_size)
 
 
+def check_seed(seed) -> None:
+    """Raise ConfigError, one line, unless ``seed`` is a whole number >= 0 (what SeedSequence takes).
+
+    Every run drawn from the engine's generators checks it here: verify, sweep and fit's bootstrap alike,
+    before any work (and :func:`block_generator` again, for a caller that did not).
+    """
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ConfigError(f"--seed: expected a whole number >= 0, got {seed!r}")
+
+
 def block_generator(seed: int, block: int) -> np.random.Generator:
     """The generator of block ``block`` (independent streams via SeedSequence spawning)."""
+    check_seed(seed)
     child = np.random.SeedSequence(seed, spawn_key=(block,))
     return np.random.Generator(np.random.SFC64(child))
 
@@ -265,6 +277,7 @@ def run_monte_carlo(
     flight, so the memory a run holds does not depend on N.
     """
     check_engine(problem, engine)
+    check_seed(seed)
     count = block_count(n, block_size)
     digest = fingerprint({"n": n, "seed": seed, "engine": engine, "block_size": block_size, **(checkpoint_key or {})})
     start = time.perf_counter()

@@ -106,7 +106,7 @@ def bootstrap_figure(result):
             left = p.ci_low if p.ci_low is not None and (p.ci_low > 0 or not log_axis) else min(values.min(), p.value or values.min())
             ax.axvspan(left, p.ci_high, color=BAND, alpha=0.22, label=f"{result.interval_method} interval")
         if b.applicable:
-            for end in (b.ci_low, b.ci_high):
+            for end in (end for end in (b.ci_low, b.ci_high) if end is not None):  # None: at the range's end
                 ax.axvline(end, color="tab:red", linestyle="--", linewidth=1.0)
             ax.plot([], [], color="tab:red", linestyle="--", label=f"{boot.confidence:.0%} percentile interval")
             ax.set_title(f"{name}: bias {b.bias:.3g} ± {b.bias_se:.2g}", fontsize=9)
