@@ -199,3 +199,23 @@ def test_sweep_of_a_model_file_is_refused_saying_why(tmp_path):
     lines = result.output.strip().splitlines()
     assert len(lines) == 1 and "is not swept: the sweep sets one scalar setting" in lines[0]
     assert not (tmp_path / "s").exists()
+
+
+def test_an_output_folder_clash_names_the_model_file_that_wrote_it(tmp_path):
+    """The folder records the file, not the name every model file shares: another command (or another file)
+    into it is refused naming the file; the same command again replaces its own outputs."""
+    model, given = _files(tmp_path)
+    out = tmp_path / "out"
+    assert _invoke("calibrate", model, "--data", given, "--out", out).exit_code == 0
+    assert _invoke("calibrate", model, "--data", given, "--out", out).exit_code == 0  # its own outputs
+    expected = f"--out {out}: holds the outputs of `kalcal calibrate a model file ({model})`; choose another folder"
+    _one_line_error(_invoke("simulate", model, "--data", given, "--seed", 1, "--out", out), expected)
+    _one_line_error(_invoke("fit", model, "--data", given, "--out", out), expected)
+    other = tmp_path / "other.toml"
+    other.write_text(TRACKER)
+    _one_line_error(_invoke("calibrate", other, "--data", given, "--out", out), expected)
+    assert "custom" not in expected
+    sim = tmp_path / "sim"
+    assert _invoke("simulate", model, "--data", given, "--seed", 1, "--out", sim).exit_code == 0
+    _one_line_error(_invoke("calibrate", model, "--data", given, "--out", sim),
+                    f"holds the outputs of `kalcal simulate a model file ({model})`")

@@ -150,10 +150,11 @@ def test_the_stated_limits_are_refused_in_one_line(tmp_path, edit, columns, expe
     model = tmp_path / "cv.toml"
     model.write_text(edit(CV_LOG))
     log = _cv_log(tmp_path / "log.csv", **columns)
-    result = _invoke("verify", model, "--data", log, "-n", 300, "--out", tmp_path / "out")
-    assert result.exit_code == 2, result.output
-    lines = result.stderr.strip().splitlines()
-    assert len(lines) == 1 and expected in lines[0], result.stderr
+    for command in (["verify", "-n", 300, "--out", tmp_path / "out"], ["analyze"]):
+        result = _invoke(command[0], model, "--data", log, *command[1:])
+        assert result.exit_code == 2, result.output
+        lines = result.stderr.strip().splitlines()
+        assert len(lines) == 1 and expected in lines[0], result.stderr
 
 
 def test_a_pattern_that_changes_is_refused_naming_its_row(tmp_path):
@@ -176,7 +177,7 @@ def test_a_pattern_that_changes_is_refused_naming_its_row(tmp_path):
     assert problem.info.measurement_names == ("z1",)
 
 
-def test_data_is_refused_for_a_built_in_scenario_and_a_sweep(tmp_path):
+def test_data_is_refused_for_a_built_in_scenario(tmp_path):
     result = _invoke("verify", "accel-gps", "--data", _cv_log(tmp_path / "log.csv"), "-n", 300, "--out", tmp_path / "o")
     assert result.exit_code == 2 and result.stderr.count("\n") == 1 and "--data" in result.stderr
 
@@ -204,3 +205,6 @@ def test_sweep_over_a_log_is_refused_saying_why(tmp_path):
     model.write_text(CV_LOG)
     result = _invoke("sweep", model, "--data", _cv_log(tmp_path / "log.csv"))
     assert result.exit_code == 2 and result.stderr.count("\n") == 1 and "sweep of a model file over a log is not built" in result.stderr
+    # its advice is one that runs: a model file without --data is not swept either
+    assert "sweep the file without --data" not in result.stderr
+    assert "run verify/analyze --data once per setting with --set" in result.stderr

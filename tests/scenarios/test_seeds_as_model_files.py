@@ -381,7 +381,7 @@ def test_verify_of_the_seed003_file_over_the_builtins_regressors_agrees_with_kal
     truth, so that its sensor readings, the regressors h_k = [sensor_k, 1], are the same in every realization:
     the built-in's signal, deterministic) against the seed 003 file over a log of those readings (its proper-prior
     variant, v = 0.2^2, the truth's theta the built-in's, m0 = 0). "Agrees" means: the same filter, so the
-    same P_k at the last update to rounding (1e-9 relative), and the same true error covariance, which the
+    same P_k at every update k to rounding (1e-9 relative), and the same true error covariance, which the
     file's exact analysis gives and each side's ensemble estimates: the errors are linear in the reference's
     Gaussian noise, so each diagonal entry's sample variance has standard error sqrt(2/(n-1)) of it; each
     side lies within 4.5 of them (a false alarm below 1e-5 per entry, fixed seeds)."""
@@ -403,6 +403,9 @@ def test_verify_of_the_seed003_file_over_the_builtins_regressors_agrees_with_kal
     theirs, ours = builtin.raw_summary["final"], mine.raw_summary["final"]
     assert theirs["time"] == ours["time"] == 30.0
     np.testing.assert_allclose(np.array(ours["filter_covariance"]), np.array(theirs["filter_covariance"]), rtol=1e-9)
+    # P_k at every update k, not the last alone: the same filter over the same regressors and times
+    np.testing.assert_allclose(mine.statistics["time"].values, builtin.statistics["time"].values, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(mine.statistics["filter_cov"].values, builtin.statistics["filter_cov"].values, rtol=1e-9)
     exact = np.diag(np.array(ours["exact_error_covariance"]))
     bound = 4.5 * np.sqrt(2.0 / (n - 1)) * exact
     for side in (theirs, ours):

@@ -109,3 +109,27 @@ def with_topic(scenario: Any, logs: dict[str, Any], topic: str | None) -> dict[s
             "topic by its columns (TOPIC.FIELD)"
         )
     return {**logs, "topic": topic}
+
+
+def command_label(verb: str, scenario: Any) -> str:
+    """The command an output folder records (and a clash with another command's folder names): ``verb`` and
+    the built-in scenario's name, or for a model file or a model written as code its label, which names the
+    file (``calibrate a model file (my-model.toml)``), not the internal name all model files share.
+
+    Parameters
+    ----------
+    verb : str
+        The command: ``calibrate``, ``fit`` or ``simulate``.
+    scenario : Scenario
+        The resolved scenario the command runs.
+
+    Returns
+    -------
+    str
+        ``"VERB NAME"`` for a built-in scenario, ``"VERB LABEL"`` for one read from a file.
+    """
+    from kalcal.scenarios import scenario_names
+
+    # a built-in's label carries its settings (imu-3axis's poses): the folder is the name's, as before
+    label = None if scenario.NAME in scenario_names() else getattr(scenario, "label", None)
+    return f"{verb} {label or scenario.NAME}"

@@ -104,11 +104,12 @@ def calibrate(
     logs = with_topic(model, {"imu": imu, "gps": gps, "data": data}, topic)
     if out is None:
         return model.calibrate(logs, options)
+    from kalcal.api._scenario import command_label
     from kalcal.io.outputs import inputs_of, run_outputs
 
     names = model.output_names("calibrate")
     files = [value for key, value in (*logs.items(), ("poses", poses)) if key != "topic" and isinstance(value, (str, Path))]
-    with run_outputs(out, f"calibrate {model.NAME}", names=names, protect=[*files, *inputs_of(model)]) as staging:
+    with run_outputs(out, command_label("calibrate", model), names=names, protect=[*files, *inputs_of(model)]) as staging:
         result = model.calibrate(logs, options)
         paths = result.save(staging)
     return result.with_paths({name: Path(out) / Path(path).relative_to(staging) for name, path in paths.items()})

@@ -133,7 +133,7 @@ def fit(
     from kalcal.scenarios.protocol import require
 
     require(model, "fit")  # a command the scenario lacks: one line naming it and why
-    from kalcal.api._scenario import with_topic
+    from kalcal.api._scenario import command_label, with_topic
 
     logs = with_topic(model, {"imu": imu, "gps": gps, "data": data}, topic)
     cluster = (dask_client(workers, scheduler) if bootstrap and client is None and (workers is not None or scheduler is not None)
@@ -149,7 +149,7 @@ def fit(
 
     names = (*model.output_names("fit"), *((BOOTSTRAP_NAME,) if bootstrap else ()))
     files = [value for key, value in logs.items() if key != "topic" and isinstance(value, (str, Path))]
-    with run_outputs(out, f"fit {model.NAME}", names=names, protect=[*files, *inputs_of(model)]) as staging:
+    with run_outputs(out, command_label("fit", model), names=names, protect=[*files, *inputs_of(model)]) as staging:
         with cluster as used:
             result = model.fit(logs, dataclasses.replace(options, client=used))
         save_fit(result, staging)

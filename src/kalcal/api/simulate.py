@@ -42,11 +42,12 @@ def simulate(
     logs = with_topic(model, {"data": data}, topic)
     if out is None:
         return model.simulate(seed, logs)
+    from kalcal.api._scenario import command_label
     from kalcal.io.outputs import inputs_of, run_outputs
 
     names = model.output_names("simulate")
     protect = [*([data] if isinstance(data, (str, Path)) else []), *inputs_of(model)]
-    with run_outputs(out, f"simulate {model.NAME}", names=names, protect=protect) as staging:
+    with run_outputs(out, command_label("simulate", model), names=names, protect=protect) as staging:
         simulation = model.simulate(seed, logs)
         paths = simulation.save(staging)
     return simulation.with_paths({key: Path(out) / Path(path).relative_to(staging) for key, path in paths.items()})

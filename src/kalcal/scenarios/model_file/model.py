@@ -33,9 +33,12 @@ unknown and missing keys, wrong types, a matrix whose shape does not fit (throug
 own validation), a covariance that is not symmetric positive semi-definite.
 
 In a run's ``summary.json`` the scenario's settings are the sections ``model`` (name, file, updates,
-names, units), ``filter`` and ``truth`` (each model's matrices, steps_per_update, sample_period): enough
-to rebuild the scenario without the file (:meth:`CustomModelScenario.from_settings`), and the keys that
-``--set`` accepts (:func:`load_model_file`).
+names, units), ``filter`` and ``truth`` (each model's matrices, steps_per_update, sample_period, and b,
+h_columns, diffuse where the file has them), ``data`` (the ``[data]`` table, where the file has one) and,
+for a run over a log, ``log`` (the log's resolved path and SHA-256,
+:class:`~kalcal.scenarios.model_file.over_log.LoggedModelScenario`): enough to rebuild the scenario without
+the file (:meth:`CustomModelScenario.from_settings`), and the keys that ``--set`` accepts
+(:func:`load_model_file`).
 """
 
 from __future__ import annotations

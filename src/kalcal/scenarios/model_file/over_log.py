@@ -23,8 +23,8 @@ from kalcal.scenarios.protocol import Capabilities
 
 #: why a sweep of a model file over a log is refused
 NO_SWEEP = (
-    "a sweep of a model file over a log is not built (sweep the file without --data, or run verify/analyze "
-    "--data once per setting with --set)"
+    "a sweep of a model file over a log is not built (a model file is not swept, with or without a log: "
+    "run verify/analyze --data once per setting with --set)"
 )
 
 
