@@ -13,7 +13,8 @@ from scipy import stats as sps
 from kalcal.models.settings import SettingError
 from kalcal.montecarlo.engine import run_monte_carlo
 from kalcal.scenarios import load_code_model
-from kalcal.scenarios.nonlinear.power import ALTERNATIVES, alternative_models, clopper_pearson, simulated_power
+from kalcal.scenarios.nonlinear.power import ALTERNATIVES, alternative_models, simulated_power
+from kalcal.stats.distributions import binom_interval as clopper_pearson
 from kalcal.stats.effects import (
     TOLERANCE_OUTCOMES,
     _make,

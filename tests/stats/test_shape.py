@@ -12,8 +12,9 @@ from scipy import stats
 
 from kalcal.montecarlo.accumulators import SHAPE_BINS, shape_grid, shape_histogram, shape_points
 from kalcal.montecarlo.sum_kernels import add_shape
+from kalcal.stats.distributions import binom_interval as clopper_pearson
 from kalcal.stats.distributions import binom_isf
-from kalcal.stats.shape import check_shape, clopper_pearson, grid_ks, grid_steps, ks_bound, ks_pvalue
+from kalcal.stats.shape import check_shape, grid_ks, grid_steps, ks_bound, ks_pvalue
 
 INFO = SimpleNamespace(update_times=np.arange(1.0, 101.0))
 

@@ -57,7 +57,7 @@ import numpy as np
 from scipy import special
 
 from kalcal.montecarlo.accumulators import shape_points
-from kalcal.stats.distributions import chi2_cdf
+from kalcal.stats.distributions import binom_interval, chi2_cdf
 from kalcal.stats.results import Cause, CheckPart, CheckResult, check_result, combined_pvalue, failed_cause, family_pvalue
 
 if TYPE_CHECKING:
@@ -243,14 +243,6 @@ class ShapePower:
         return self.rejections / self.trials
 
 
-def clopper_pearson(successes: int, trials: int, interval: float) -> tuple[float, float]:
-    """The exact two-sided binomial interval of a rate at level ``interval`` (beta quantiles)."""
-    tail = (1.0 - interval) / 2.0
-    low = 0.0 if successes == 0 else float(special.betaincinv(successes, trials - successes + 1, tail))
-    high = 1.0 if successes == trials else float(special.betaincinv(successes + 1, trials - successes, 1.0 - tail))
-    return low, high
-
-
 def shape_power(
     problem, n: int, confidence: float, trials: int, *, first_seed: int = 0, engine: str = "exact",
     interval: float = 0.99, workers: int | None = None,
@@ -270,5 +262,5 @@ def shape_power(
     for seed in range(first_seed, first_seed + trials):
         run = run_monte_carlo(problem, n, seed, engine=engine, workers=workers)
         rejections += not check_shape(ensemble_statistics(run.sums), problem.info, confidence).passed
-    low, high = clopper_pearson(rejections, trials, interval)
+    low, high = binom_interval(rejections, trials, interval)
     return ShapePower(rejections, trials, n, confidence, first_seed, interval, low, high)

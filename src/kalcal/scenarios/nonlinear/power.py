@@ -36,7 +36,9 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["ALTERNATIVES", "PowerRow", "SimulatedPower", "alternative_models", "clopper_pearson", "simulated_power"]
+from kalcal.stats.distributions import binom_interval
+
+__all__ = ["ALTERNATIVES", "PowerRow", "SimulatedPower", "alternative_models", "simulated_power"]
 
 #: the named alternatives, in the order they are run and reported
 ALTERNATIVES: tuple[str, ...] = ("null", "R x 1.5", "P x 0.8", "bias 0.2 sigma")
@@ -51,13 +53,6 @@ DESCRIPTIONS = {
     "P x 0.8": "the filter's P0 and Q are 0.8 times the truth's (its P below the truth's error covariance)",
     "bias 0.2 sigma": "a constant offset of 0.2 sqrt(R_ii) in the truth's measurement i; the prior mean unchanged",
 }
-
-
-def clopper_pearson(count: int, trials: int, confidence: float) -> tuple[float, float]:
-    """The exact (Clopper–Pearson) two-sided interval of a binomial proportion count / trials."""
-    from kalcal.stats.distributions import binom_interval
-
-    return binom_interval(count, trials, confidence)
 
 
 def alternative_models(filter_model, name: str):
@@ -206,8 +201,8 @@ def simulated_power(scenario, n: int, seed: int, confidence: float, runs: int, w
     rows = []
     for slot in order:
         exact, tol, undecided, has = counts[slot]
-        lo, hi = clopper_pearson(exact, runs, confidence)
-        t_lo, t_hi = clopper_pearson(tol, runs, confidence) if has else (None, None)
+        lo, hi = binom_interval(exact, runs, confidence)
+        t_lo, t_hi = binom_interval(tol, runs, confidence) if has else (None, None)
         rows.append(
             PowerRow(
                 slot[0], slot[1], runs, exact, exact / runs, lo, hi,
