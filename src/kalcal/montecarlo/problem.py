@@ -204,7 +204,11 @@ class FixedGainProblem(ProblemDefaults):
             raise ValueError(
                 f"truth: expected {d} filter states and {p} measurements, got {self.truth.error_dim} and {self.truth.h.shape[0]}"
             )
-        schedule = covariance_pass(self.filter_model, self.truth.n_updates, self.form, self.filter_transitions)
+        self._adopt(covariance_pass(self.filter_model, self.truth.n_updates, self.form, self.filter_transitions))
+
+    def _adopt(self, schedule: GainSchedule) -> None:
+        """Take ``schedule`` as the problem's gains, with what follows from it: the whiteners of P_k and S_k,
+        P_k^{-1} and the shape histograms' centers."""
         object.__setattr__(self, "schedule", schedule)
         object.__setattr__(self, "_state_whitener", whitener(schedule.posterior_cov))
         object.__setattr__(self, "_innovation_whitener", whitener(schedule.innovation_cov))
@@ -371,6 +375,12 @@ class FixedGainProblem(ProblemDefaults):
         shape check tests each realization's NEES and NIS about them, so that a deterministic model error,
         which the mean_error check accounts for, does not make the NEES a noncentral chi-square; zero for a
         truth without one (then nothing is shifted)."""
+        mean, run = self._mean_run()
+        return np.ascontiguousarray(mean - run.posterior[0]), np.ascontiguousarray(run.residual[0])
+
+    def _mean_run(self):
+        """The truth's mean trajectory M E[x_k] (K, d) and the filter's run over its mean measurements
+        H E[x_k] (what :meth:`expected_mean_error` and :meth:`_predicted_means` take their means from)."""
         truth = self.truth
         mean = np.empty((truth.n_updates, truth.state_dim))
         y = truth.x0_mean
@@ -378,8 +388,7 @@ class FixedGainProblem(ProblemDefaults):
             y = truth.transitions[k] @ y
             mean[k] = y + truth.model_error[k]
         run = self.filter((mean @ truth.h.T)[None])
-        error = (mean if truth.error_map is None else mean @ truth.error_map.T) - run.posterior[0]
-        return np.ascontiguousarray(error), np.ascontiguousarray(run.residual[0])
+        return (mean if truth.error_map is None else mean @ truth.error_map.T), run
 
     def expected_mean_error(self) -> np.ndarray:
         """The filter's response to the truth's mean trajectory: M E[x_k] - E[xhat_k], (K, d).
@@ -389,13 +398,5 @@ class FixedGainProblem(ProblemDefaults):
         when the truth's prior mean differs from the filter's, the truth carries deterministic model
         error, or (with a map) the truth's mean dynamics differ from the filter's.
         """
-        truth = self.truth
-        mean = np.empty((truth.n_updates, truth.state_dim))
-        y = truth.x0_mean
-        for k in range(truth.n_updates):
-            y = truth.transitions[k] @ y
-            mean[k] = y + truth.model_error[k]
-        run = self.filter((mean @ truth.h.T)[None])
-        if truth.error_map is not None:
-            mean = mean @ truth.error_map.T
+        mean, run = self._mean_run()
         return mean - run.posterior[0]

@@ -45,9 +45,8 @@ from kalcal.core.timevarying import TimeVaryingModel, measured_components
 from kalcal.errors import ConfigError, DataError
 from kalcal.linalg import psd_factor
 from kalcal.montecarlo.accumulators import SumBuffers
-from kalcal.montecarlo.problem import FixedGainProblem, ProblemInfo, _inverse_spd
+from kalcal.montecarlo.problem import FixedGainProblem, ProblemInfo
 from kalcal.simulation.exact import UpdateRateTruth
-from kalcal.linalg import whitener
 
 __all__ = ["LogRecord", "LoggedFilter", "LoggedTruth", "LoggedGainProblem", "logged_arrays", "covariance_pass_over"]
 
@@ -271,12 +270,7 @@ class LoggedGainProblem(FixedGainProblem):
         d, p = self.filter_model.state_dim, self.filter_model.measurement_dim
         if (self.truth.error_dim, self.truth.h.shape[-2]) != (d, p):
             raise ValueError(f"truth: expected {d} filter states and {p} measurements")
-        schedule = covariance_pass_over(self.filter_model, self.form)
-        object.__setattr__(self, "schedule", schedule)
-        object.__setattr__(self, "_state_whitener", whitener(schedule.posterior_cov))
-        object.__setattr__(self, "_innovation_whitener", whitener(schedule.innovation_cov))
-        object.__setattr__(self, "_state_inverse", _inverse_spd(schedule.posterior_cov))
-        object.__setattr__(self, "_centers", self._predicted_means())
+        self._adopt(covariance_pass_over(self.filter_model, self.form))
 
     @property
     def engines(self) -> tuple[str, ...]:
@@ -352,7 +346,8 @@ class LoggedGainProblem(FixedGainProblem):
         return trace
 
     def _mean_run(self) -> tuple[np.ndarray, _Run]:
-        """The truth's mean trajectory M E[x_k] (K, d) and the filter's run over its mean measurements."""
+        """The truth's mean trajectory M E[x_k] (K, d) and the filter's run over its mean measurements, with
+        H_k per update and no model error (the parent's :meth:`expected_mean_error` and shape centers use it)."""
         truth = self.truth
         mean = np.empty((truth.n_updates, truth.state_dim))
         y = truth.x0_mean
@@ -364,15 +359,6 @@ class LoggedGainProblem(FixedGainProblem):
             mean = mean @ truth.error_map.T
         return mean, run
 
-    def _predicted_means(self) -> tuple[np.ndarray, np.ndarray]:
-        """E[e_k] (K, d) and E[r_k] (K, p), the shape histograms' centers (the parent's, with H_k per update)."""
-        mean, run = self._mean_run()
-        return np.ascontiguousarray(mean - run.posterior[0]), np.ascontiguousarray(run.residual[0])
-
-    def expected_mean_error(self) -> np.ndarray:
-        """M E[x_k] - E[xhat_k], (K, d): the filter's response to the truth's mean trajectory."""
-        mean, run = self._mean_run()
-        return mean - run.posterior[0]
 
 
 def logged_problem(scenario, form: UpdateForm = "joseph", residual_pairs: bool = True) -> LoggedGainProblem:
