@@ -142,8 +142,10 @@ class Scenario(Protocol):
 class ScenarioDefaults:
     """The protocol's answers for a scenario with nothing of its own to say: every section kept as given,
     its state names as labels, not the source report's setup (nor its residual pair), no log defaults, no
-    verification over a log. A scenario inherits this and overrides what differs (accel-gps the first five,
-    the model file the last)."""
+    verification over a log, and, for a scenario without an exact analysis, nothing to refuse, no error
+    sources, no noise settings to scale and no long-run study. A scenario inherits this and overrides what
+    differs (accel-gps its settings' checks and long run; accel-gps and the model file, whose exact analyses
+    they are, their error sources and noise settings)."""
 
     LOG_DEFAULTS: ClassVar[dict[str, Any]] = {}
     #: the options of :class:`~kalcal.results.calibration.CalibrateOptions` its calibrate takes: none
@@ -165,6 +167,21 @@ class ScenarioDefaults:
     def residual_pair_times(self) -> None:
         """None: no pair of times is quoted from another study."""
         return None
+
+    def check_settings(self, command: str) -> None:
+        """Nothing to refuse beyond the sections' own checks."""
+
+    def error_sources(self) -> list:
+        """None: the error budget's sources belong to an exact analysis."""
+        return []
+
+    def noise_settings(self) -> dict:
+        """None to scale: the sensitivity needs an exact analysis."""
+        return {}
+
+    def default_long_run(self, max_updates: int) -> float:
+        """0: no long-run study."""
+        return 0.0
 
     def over_log(self, data: Any, command: str, topic: str | None = None) -> Any:
         """Refused: only a model file's [data] table binds a verification to a log (``--data LOG``); the

@@ -155,15 +155,6 @@ class Imu3AxisScenario(ScenarioDefaults):
         if self.checks.power_runs:
             raise SettingError("checks.power_runs", "0: imu-3axis has no power by simulation", show(self.checks.power_runs))
 
-    def error_sources(self) -> list:
-        return []
-
-    def noise_settings(self) -> dict:
-        return {}
-
-    def default_long_run(self, max_updates: int) -> float:
-        return 0.0
-
     def run_length(self) -> tuple[int, float]:
         """verify: one update per pose, a pose per second of a nominal clock (the updates' times are pose numbers)."""
         k = self.n_updates

@@ -235,10 +235,6 @@ class CustomModelScenario(ScenarioDefaults):
 
         return custom_model_error_cause(self)
 
-    def check_settings(self, command: str) -> None:
-        """Nothing to refuse: the file was checked when it was read (what needs a log is refused by its
-        capabilities)."""
-
     def error_sources(self) -> list:
         """The truth's prior, process and measurement blocks."""
         from kalcal.scenarios.model_file.problem import model_error_sources
@@ -250,10 +246,6 @@ class CustomModelScenario(ScenarioDefaults):
         from kalcal.scenarios.model_file.problem import noise_settings
 
         return noise_settings(self)
-
-    def default_long_run(self, max_updates: int) -> float:
-        """0: a model file sets its own updates."""
-        return 0.0
 
     def run_length(self) -> tuple[int, float]:
         """The file's updates: t_k = k update_period."""

@@ -198,18 +198,6 @@ class NonlinearScenario(ScenarioDefaults):
         l = self.loaded
         return "" if l.truth is l.filter else "the file's truth differing from its filter"
 
-    def check_settings(self, command: str) -> None:
-        """Nothing to refuse beyond the sections' own checks."""
-
-    def error_sources(self) -> list:
-        return []
-
-    def noise_settings(self) -> dict:
-        return {}
-
-    def default_long_run(self, max_updates: int) -> float:
-        return 0.0
-
     def run_length(self) -> tuple[int, float]:
         k = self.n_updates
         return k, k * float(self.loaded.filter.dt)

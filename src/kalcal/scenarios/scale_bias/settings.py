@@ -253,21 +253,6 @@ class ScaleBiasScenario(ScenarioDefaults):
 
         return model_error_cause(self)
 
-    def check_settings(self, command: str) -> None:
-        """Nothing to refuse: every setting holds in every command it has."""
-
-    def error_sources(self) -> list:
-        """None: no exact analysis."""
-        return []
-
-    def noise_settings(self) -> dict:
-        """None to scale: the sensitivity needs an exact analysis."""
-        return {}
-
-    def default_long_run(self, max_updates: int) -> float:
-        """0: no long-run study."""
-        return 0.0
-
     def run_length(self) -> tuple[int, float]:
         """One update per sample: t_K = K / rate."""
         s = self.scenario
