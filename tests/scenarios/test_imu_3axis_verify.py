@@ -8,8 +8,12 @@ sigma and the batch ML passes its exact checks; the bound never exceeds the batc
 Monte Carlo error. The bound's marginalization and the batch ML are held to independent computations.
 """
 
+import re
 import subprocess
 import sys
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -26,7 +30,12 @@ NEAR_LINEAR = ["truth.tilt_spread=0.1", "truth.scale_std=0.001", "truth.misalign
                "truth.noise=0.001"]
 
 
+DOCS = Path(__file__).resolve().parents[2] / "docs" / "imu-3axis.md"
+
+
+@lru_cache(maxsize=None)
 def run(*settings):
+    """One verification at N, SEED (a few seconds), shared by the tests that read the same settings."""
     return compute_verification(build_scenario("imu-3axis", None, list(settings)), N, SEED, workers=1)
 
 
@@ -37,6 +46,124 @@ def checks(result):
 def final_bias(result):
     """The bias in sigma at the last pose (value, lower, upper) per parameter (9, 3)."""
     return np.asarray(result.summary["effect_sizes"]["per_update"]["bias_sigma"])[-1]
+
+
+# --- docs/imu-3axis.md's verify table, row by row, at the N and seed it states ---------------------------------
+
+FILTER_CHECKS = frozenset({"mean_error", "covariance", "orthogonality", "residual_whiteness", "nis", "shape"})
+SCALES = slice(0, 3)
+
+
+@dataclass(frozen=True)
+class Row:
+    """One row of the docs' verify table, its cells as printed, and what the run at N, SEED must show for it.
+
+    The bias cell reads "at most X" (the largest |bias| in sigma over the 9, at the last pose, rounds to at
+    most X; "(name)" names the parameter) or "A-B on the scales" (the 3 scales' biases span A-B at the
+    stated digits); the MSE cell "A-B" is the span of the 9 ratios MSE / bound. ``failed`` are the checks
+    that fail, every other check run passing; ``ran`` the checks run where the row names them;
+    ``outcomes`` the tolerance outcomes the row states."""
+
+    settings_cell: str
+    estimator: str
+    verdict_cell: str
+    bias_cell: str
+    mse_cell: str
+    settings: tuple[str, ...]
+    failed: frozenset = frozenset()
+    ran: frozenset | None = None
+    outcomes: dict = field(default_factory=dict)
+
+    @property
+    def line(self) -> str:
+        return f"| {self.settings_cell} | {self.estimator} | {self.verdict_cell} | {self.bias_cell} | {self.mse_cell} |"
+
+
+NEAR_LINEAR_CELL = ("near-linear: tilt 0.1 deg, scale 0.001, misalignment 0.05 deg, bias 0.01 m/s^2, "
+                    "noise 0.001 m/s^2")
+DEFAULTS_CELL = "defaults (12 poses, tilt 2 deg, noise 0.0035 m/s^2)"
+NINE_POSES = ("truth.poses=9", "truth.noise=0.05")
+UKF_POOLED, UKF_LAST = "9-17", "2.9-4.9"  # the UKF's P over the error's variance: pooled - 1 in %, and at the last pose
+TABLE = [
+    Row(NEAR_LINEAR_CELL, "EKF", "pass", "at most 0.06", "0.96-1.03", ("filter.kind=ekf", *NEAR_LINEAR)),
+    Row("the same", "batch", "pass (mean error, covariance, NIS, shape)", "at most 0.05", "0.97-1.06",
+        ("filter.kind=batch", *NEAR_LINEAR), ran=frozenset({"mean_error", "covariance", "nis", "shape"})),
+    Row(DEFAULTS_CELL, "EKF", "fail: the scales biased", "4.7-4.8 on the scales", "13-37", ("filter.kind=ekf",),
+        failed=FILTER_CHECKS),
+    Row("the same", "IEKF", "fail (every exact check; the mean error's and covariance's tolerance outcomes undecided)",
+        "at most 0.52 (bias_z)", "1.0-1.4", ("filter.kind=iekf",), failed=FILTER_CHECKS,
+        outcomes={"mean_error": "undecided", "covariance": "undecided"}),
+    Row("the same", "UKF", f"fail (all but the mean error: P {UKF_POOLED} % above the error's variance pooled over the poses, "
+        f"{UKF_LAST} times it at the last pose)", "at most 0.03", "15-21",
+        ("filter.kind=ukf",), failed=FILTER_CHECKS - {"mean_error"}),
+    Row("the same", "batch", "pass", "at most 0.05", "0.96-1.06", ("filter.kind=batch",)),
+    Row("9 poses, noise 0.05 m/s^2", "EKF", "fail: the scales biased", "0.26-0.31 on the scales", "1.0-1.2",
+        ("filter.kind=ekf", *NINE_POSES), failed=frozenset({"mean_error", "covariance", "orthogonality", "shape"})),
+]
+
+
+def stated(value: float, text: str) -> float:
+    """``value`` rounded to the digits the docs print ``text`` with."""
+    return round(value, len(text.split(".")[1]) if "." in text else 0)
+
+
+def spans(values, text: str) -> bool:
+    """The docs' "A-B": the smallest of ``values`` rounds to A and the largest to B at A's and B's digits."""
+    low, high = text.split("-")
+    return stated(np.min(values), low) == float(low) and stated(np.max(values), high) == float(high)
+
+
+def table_lines() -> list[str]:
+    lines = DOCS.read_text().splitlines()
+    start = lines.index("| settings | estimator | exact verdict | final bias, sigma | MSE / bound |") + 2
+    end = next(i for i in range(start, len(lines)) if not lines[i].startswith("|"))
+    return lines[start:end]
+
+
+def test_docs_table_is_the_tested_rows():
+    """Every row of the docs' verify table is one of TABLE's, in order: a row changed in the docs alone fails."""
+    assert table_lines() == [row.line for row in TABLE]
+    assert f"measured at N = {N}, seed {SEED}" in DOCS.read_text()
+
+
+@pytest.mark.parametrize("row", TABLE, ids=lambda r: "-".join(r.settings))
+def test_docs_table_row_holds_at_its_seed_and_n(row):
+    result = run(*row.settings)
+    found = checks(result)
+    if row.ran is not None:
+        assert set(found) == row.ran
+    failing = {name for name, c in found.items() if not c.passed}
+    assert failing == set(row.failed & set(found)), [(c.name, c.pvalue) for c in result.checks]
+    assert result.summary["verdict"] == ("fail" if failing else "pass")
+    assert row.verdict_cell.startswith(result.summary["verdict"])
+    for name, outcome in row.outcomes.items():
+        assert found[name].tolerance_outcome == outcome, (name, found[name].tolerance_outcome)
+    bias = final_bias(result)
+    if row.bias_cell.endswith("on the scales"):
+        # the scales' bias in sigma spans the stated range, and each one's interval at the run's confidence
+        # excludes 0 (the verdict cell's "the scales biased")
+        assert spans(bias[SCALES, 0], row.bias_cell.split()[0]), bias[SCALES]
+        assert np.all(bias[SCALES, 1] > 0), bias[SCALES]
+    else:
+        most = re.fullmatch(r"at most ([\d.]+)(?: \((\w+)\))?", row.bias_cell)
+        worst = int(np.argmax(np.abs(bias[:, 0])))
+        assert stated(abs(bias[worst, 0]), most[1]) <= float(most[1]), bias[:, 0]
+        if most[2]:  # the worst named: the bound is attained there
+            assert m.PARAM_NAMES[worst] == most[2] and stated(abs(bias[worst, 0]), most[1]) == float(most[1])
+    ratios = [r["mse"] / r["lower_bound"] for r in result.summary["cramer_rao"]["final"]]
+    assert spans(ratios, row.mse_cell), np.round(ratios, 3)
+
+
+def test_ukf_covariance_too_large_pooled_and_at_the_last_pose():
+    """The UKF row's "P too large": the variance ratio E[e^2] / E[P] per parameter (the effect sizes'), pooled
+    over the 12 poses, is below 1 with its interval (the covariance check fails for P too large, not too
+    small), P exceeding the error's variance by 9-17 %; at the last pose by 2.9-4.9 times."""
+    result = run("filter.kind=ukf")
+    pooled = [e for e in result.summary["effect_sizes"]["overall"] if e["name"] == "variance_ratio"]
+    assert len(pooled) == 9 and all(e["upper"] < 1 for e in pooled), pooled
+    assert spans([100 * (1 / e["value"] - 1) for e in pooled], UKF_POOLED)
+    last = np.asarray(result.summary["effect_sizes"]["per_update"]["variance_ratio"])[-1]
+    assert np.all(last[:, 2] < 1) and spans(1 / last[:, 0], UKF_LAST), last
 
 
 def test_near_linear_ekf_passes_every_check():
@@ -71,8 +198,10 @@ def test_default_ekf_biased_iekf_and_batch_fare_better():
         assert checks(batch)[name].passed, name
 
 
-def test_bound_below_the_batch_mse_within_monte_carlo_error():
-    rows = run("filter.kind=batch").summary["cramer_rao"]["final"]
+@pytest.mark.parametrize("settings", [("filter.kind=batch",), ("filter.kind=batch", *NEAR_LINEAR)], ids=["defaults", "near-linear"])
+def test_bound_below_the_batch_mse_within_monte_carlo_error(settings):
+    """The docs: the bound never exceeds the batch ML's MSE beyond its Monte Carlo error, at either row's settings."""
+    rows = run(*settings).summary["cramer_rao"]["final"]
     assert [r["state"] for r in rows] == list(m.PARAM_NAMES)  # the 9-parameter block, tilts left out
     for r in rows:
         assert r["lower_bound"] > 0
