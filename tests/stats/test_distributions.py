@@ -104,6 +104,8 @@ def test_the_walk_leaves_the_packages_own_calls_alone():
 def test_binomial_functions_are_scipy_stats():
     assert distributions.binom_ppf(0.005, 1000, 0.001) == stats.binom.ppf(0.005, 1000, 0.001)
     assert distributions.binom_isf(0.005, 1000, 0.001) == stats.binom.isf(0.005, 1000, 0.001)
+    assert distributions.binom_cdf(3, 40, 0.15) == stats.binom.cdf(3, 40, 0.15)
+    assert distributions.binom_sf(8, 40, 0.15) == stats.binom.sf(8, 40, 0.15)
     assert distributions.binom_test(7, 1000, 0.001) == stats.binomtest(7, 1000, 0.001).pvalue
     assert distributions.binom_test(0, 0, 0.001) == 1.0
 

@@ -8,10 +8,11 @@ holds them to scipy.stats), with scipy.stats's answers at the edges: a probabili
 non-positive dof gives NaN. No module of kalcal computes such a quantile or tail itself: the bounds
 (:mod:`kalcal.stats.bounds`), the power, the calibration's and the fits' gates and intervals call these.
 
-The binomial's quantiles and exact test (:func:`binom_ppf`, :func:`binom_isf`, :func:`binom_test`: the
-count of NIS above a quantile, a gate's rejections) are scipy.stats's own: they import it on their first
-call, so that only the checks that count pay for it (tests/stats/test_distributions.py holds the package
-to this module for every ``scipy.stats.<distribution>`` quantile and tail).
+The binomial's quantiles, tails and exact test (:func:`binom_ppf`, :func:`binom_isf`, :func:`binom_cdf`,
+:func:`binom_sf`, :func:`binom_test`: the count of NIS above a quantile, a gate's rejections, a count
+check's power) are scipy.stats's own: they import it on their first call, so that only the checks that
+count pay for it (tests/stats/test_distributions.py holds the package to this module for every
+``scipy.stats.<distribution>`` quantile and tail).
 """
 
 from __future__ import annotations
@@ -20,8 +21,10 @@ import numpy as np
 from scipy import special
 
 __all__ = [
+    "binom_cdf",
     "binom_isf",
     "binom_ppf",
+    "binom_sf",
     "binom_test",
     "chi2_cdf",
     "chi2_isf",
@@ -119,6 +122,22 @@ def binom_isf(q, trials, share):
     from scipy import stats
 
     return stats.binom.isf(q, trials, share)
+
+
+def binom_cdf(count, trials, share):
+    """P(X <= count) for X ~ Binomial(trials, share) (scipy.stats.binom.cdf): the chance a count check's
+    lower bound is crossed, for its power."""
+    from scipy import stats
+
+    return stats.binom.cdf(count, trials, share)
+
+
+def binom_sf(count, trials, share):
+    """P(X > count) for X ~ Binomial(trials, share) (scipy.stats.binom.sf): the chance a count check's
+    upper bound is crossed, for its power."""
+    from scipy import stats
+
+    return stats.binom.sf(count, trials, share)
 
 
 def binom_test(count: int, trials: int, share: float) -> float:
