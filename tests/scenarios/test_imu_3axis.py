@@ -243,8 +243,7 @@ def test_poses_recover_the_nine_parameters_at_the_stated_rate(seeds):
     Power, per parameter (binomial, :func:`count_power`): if a parameter's true coverage were 85%, its count
     over 40 seeds fails with probability 0.14 (over 150, 0.88); at 90%, 0.015 (0.24). Any parameter out of
     range fails the test, so its power is at least that. At 40 seeds the range's lower end is 0 misses: it
-    cannot see intervals that are too wide. The 40-seed test catches gross undercoverage only; the slow one
-    catches 85%."""
+    cannot see intervals that are too wide. The 40-seed test catches gross undercoverage only."""
     misses = np.zeros(9, dtype=int)
     rejected = 0
     for seed in range(seeds):
