@@ -191,11 +191,6 @@ def logged_arrays(scenario, bound) -> LoggedArrays:
     f, t = bound.filter, bound.truth if bound.truth is not None else bound.filter
     if np.any(f.diffuse):
         raise ConfigError(f"{file}: {diffuse_refusal(scenario.filter.diffuse)}")
-    if not _inputs_cancel(scenario):
-        raise ConfigError(
-            f"{file}: its truth's b differs from the filter's, so the filter's error depends on the inputs u: a "
-            "verification over a log holds only a truth whose b is the filter's (then the error does not depend on u)"
-        )
     measured = measured_components(f, bound.z) & np.all(np.isfinite(t.h), axis=2)
     updates = np.flatnonzero(np.any(measured, axis=1))
     if updates.size == 0:
@@ -242,7 +237,86 @@ def logged_arrays(scenario, bound) -> LoggedArrays:
         measurement_factor=np.linalg.cholesky(t_v),
         error_map=bound.truth_map,
     )
+    if not _inputs_cancel(scenario):
+        truth = driven_truth(truth, phis, h, _forcing(t, updates), _forcing(f, updates))
     return LoggedArrays(filt, truth, updates, np.asarray(bound.times)[updates], components)
+
+
+def _forcing(model: TimeVaryingModel, rows: np.ndarray) -> np.ndarray:
+    """The inputs' share of each interval, c_k = sum_{j_{k-1} <= j < j_k} Phi^{j_k - 1 - j} B u_j, (K, d):
+    x_{j_k} = Phi^{s_k} x_{j_{k-1}} + c_k + noise (u_j drives row j -> j + 1; j_{-1} = 0)."""
+    drive = model.u @ model.b.T  # B u_j, (J, d)
+    out = np.empty((rows.size, model.state_dim))
+    c, start = np.zeros(model.state_dim), 0
+    for k, end in enumerate(rows.tolist()):
+        c = np.zeros(model.state_dim)
+        for j in range(start, end):  # Horner's scheme over the interval's rows
+            c = model.phi @ c + drive[j]
+        out[k], start = c, end
+    return out
+
+
+def driven_truth(truth: LoggedTruth, phis: np.ndarray, h: np.ndarray, truth_forcing: np.ndarray, filter_forcing: np.ndarray) -> LoggedTruth:
+    """``truth`` with known inputs that move it otherwise than the filter believes, as a truth of n + d + 1
+    states [x; f; 1] whose last state is the constant 1 (no prior variance, no noise).
+
+    The filter with inputs predicts xbar_k = Phi_k xhat_{k-1} + c^f_k. Writing xhat_k = f_k + xhat'_k, with
+    f_k = Phi_k f_{k-1} + c^f_k (f_{-1} = 0) the filter's own response to the inputs, xhat'_k is the
+    input-free filter (the same gains) run on z_k - H_k f_k, so that
+
+        e_k = M x_k - xhat_k = [M, -I, 0] [x_k; f_k; 1] - xhat'_k,
+        r_k = z_k - H_k xbar_k = [H_t,k, -H_k, 0] [x_k; f_k; 1] + v_k - H_k xbar'_k,
+
+    exactly: the truth's x_k = A_k x_{k-1} + c^t_k + noise and f_k are both driven through the constant
+    state's column, the map becomes [M, -I, 0] and the truth's rows [H_t,k, -H_k, 0]. The engine, the
+    kernel and the exact analysis then run unchanged (a truth with its own states), and the error and the
+    innovations get the deterministic offset M g_k - f_k and H_t,k g_k - H_k f_k (g the truth's response to
+    u) in every realization: the mean error the checks test. The draws are the input-free truth's (the
+    added states have zero rows in the prior's and the noise's factors), so a run with the inputs
+    and one without use the same normals. The estimates kept are xhat'_k = xhat_k - f_k: the filter's
+    estimate less its own response to the inputs (the same in the Monte Carlo and the exact analysis).
+
+    Parameters
+    ----------
+    truth : LoggedTruth
+        The input-free truth, n states (its map M (d, n), or none for the filter's d states).
+    phis : ndarray, shape (K, d, d)
+        The filter's Phi_k over each interval.
+    h : ndarray, shape (K, p, d)
+        The filter's H_k.
+    truth_forcing, filter_forcing : ndarray, shapes (K, n) and (K, d)
+        c^t_k and c^f_k, the inputs' share of each interval (:func:`_forcing`), in the states' units.
+    """
+    n_updates, n, r = truth.noise_factor.shape
+    d = phis.shape[-1]
+    size = n + d + 1
+    transitions = np.zeros((n_updates, size, size))
+    transitions[:, :n, :n] = truth.transitions
+    transitions[:, n : n + d, n : n + d] = phis
+    transitions[:, :n, -1] = truth_forcing
+    transitions[:, n : n + d, -1] = filter_forcing
+    transitions[:, -1, -1] = 1.0
+
+    def padded(a: np.ndarray, axis: int) -> np.ndarray:
+        width = [(0, 0)] * a.ndim
+        width[axis] = (0, d + 1)
+        return np.pad(a, width)
+
+    error_map = np.eye(d, n) if truth.error_map is None else truth.error_map
+    x0_mean = padded(truth.x0_mean, 0)
+    x0_mean[-1] = 1.0
+    return LoggedTruth(
+        transitions=transitions,
+        noise_factor=padded(truth.noise_factor, 1),
+        boundary_in=np.zeros(size),
+        boundary_out=np.zeros(size),
+        model_error=np.zeros((n_updates, size)),
+        x0_mean=x0_mean,
+        x0_factor=padded(truth.x0_factor, 0),
+        h=np.ascontiguousarray(np.concatenate([truth.h, -h, np.zeros((*h.shape[:2], 1))], axis=2)),
+        measurement_factor=truth.measurement_factor,
+        error_map=np.hstack([error_map, -np.eye(d), np.zeros((d, 1))]),
+    )
 
 
 class _Run(NamedTuple):
@@ -392,18 +466,19 @@ def logged_sources(scenario) -> list[Source]:
 
     arrays = scenario.arrays
     truth, model = arrays.truth, scenario.truth
+    n = model.state_dim  # the truth's own states: a truth driven by inputs carries d + 1 more, without noise
     names = getattr(model, "state_names", None) or scenario.model.state_names
-    if truth.state_dim != len(names):
-        names = tuple(f"x{i + 1}" for i in range(truth.state_dim))
+    if n != len(names):
+        names = tuple(f"x{i + 1}" for i in range(n))
     process = []
     for index in blocks(model.w):
         cache: dict[int, np.ndarray] = {}
         gamma, w = model.gamma[:, index], model.w[np.ix_(index, index)]
-        share = np.empty((truth.n_updates, truth.state_dim, truth.state_dim))
+        share = np.zeros((truth.n_updates, truth.state_dim, truth.state_dim))
         for k, s in enumerate(arrays.filter.steps.tolist()):
             if s not in cache:
                 cache[s] = interval_transition(model.phi, gamma, w, s)[1]
-            share[k] = cache[s]
+            share[k, :n, :n] = cache[s]
         process.append(("+".join(f"w{i + 1}" for i in index), share, 0.0))
     r = truth.measurement_factor @ np.swapaxes(truth.measurement_factor, -1, -2)
     sources = covariance_sources(
@@ -412,6 +487,9 @@ def logged_sources(scenario) -> list[Source]:
     out = []
     for source in sources:
         zero_q = np.zeros((truth.n_updates, truth.state_dim, truth.state_dim))
+        prior = np.zeros((truth.state_dim, truth.state_dim))
+        prior[:n, :n] = source.prior_cov[:n, :n]
+        source = dataclasses.replace(source, prior_cov=prior)
         if source.kind == "measurement":
             block = source.measurement_cov != 0  # the block of R_0, which every R_k shares
             out.append(dataclasses.replace(source, process_cov=zero_q, measurement_cov=np.where(block, r, 0.0)))
