@@ -220,11 +220,29 @@ def _driven_log(path: Path) -> Path:
     return _cv_log(path, a=a)
 
 
+# a truth of its own, [position, velocity, bias]: the measurement carries a slowly decaying bias the filter
+# does not model, and the input drives the truth's velocity 1.2 times as hard as the filter believes
+TRUTH_MAP = DRIVEN.replace("[data]", """[truth]
+map = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
+phi = [[1.0, 0.1, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.95]]
+gamma = [[0.005, 0.0], [0.1, 0.0], [0.0, 0.3]]
+w = [[0.04, 0.0], [0.0, 1.0]]
+h = [[1.0, 0.0, 1.0]]
+v = [[4.0]]
+x0 = [0.0, 10.0, 0.5]
+m0 = [[25.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+b = [[0.006], [0.12], [0.0]]
+
+[data]""")
+
+
 def _direct_mean_error(scenario, log: Path) -> np.ndarray:
     """E[e_k] by one recursion over the log's rows, written out: the truth's mean x_{j+1} = Phi_t x_j +
     B_t u_j from x0; the filter's xhat_{j+1}^- = Phi xhat_j + B u_j with its own Riccati gains at each
-    measured row, updated by the mean measurement H x_j (the noise has mean zero)."""
+    measured row, updated by the mean measurement H_t x_j (the noise has mean zero); e = M x - xhat."""
     f, t = scenario.filter, scenario.truth
+    error_map = scenario.truth_map if scenario.truth_map is not None else np.eye(2)
+    h_truth = np.nan_to_num(t.h, nan=1.0)  # an h naming the column c, which is 1.0 on every row
     frame = pd.read_csv(log)
     u, measured = frame["a"].to_numpy()[:, None], np.isfinite(frame["z"].to_numpy())
     h = np.array([[1.0, 0.0]])  # the column c is 1.0 on every row
@@ -237,9 +255,9 @@ def _direct_mean_error(scenario, log: Path) -> np.ndarray:
         if measured[j]:
             s = h @ cov @ h.T + f.v
             gain = np.linalg.solve(s, h @ cov).T
-            xhat = xhat + gain @ (h @ x - h @ xhat)
+            xhat = xhat + gain @ (h_truth @ x - h @ xhat)
             cov = (np.eye(2) - gain @ h) @ cov
-            out.append(x - xhat)
+            out.append(error_map @ x - xhat)
     return np.array(out)
 
 
@@ -253,7 +271,7 @@ def test_a_truth_b_equal_to_the_filters_reads_no_input_and_gives_the_input_free_
     assert not np.any(driven.expected_mean_error())
 
 
-@pytest.mark.parametrize("text", [TRUTH_B, TRUTH_PHI], ids=["truth-b", "truth-phi"])
+@pytest.mark.parametrize("text", [TRUTH_B, TRUTH_PHI, TRUTH_MAP], ids=["truth-b", "truth-phi", "truth-map"])
 def test_a_truth_driven_otherwise_gets_the_exact_mean_offset_in_the_monte_carlo(tmp_path, text):
     from kalcal.analysis.fixed_gain import analyze_problem
     from kalcal.stats.bounds import normal_bound
@@ -299,6 +317,10 @@ def test_the_mean_error_check_fails_with_a_bias_when_the_truths_b_is_larger(tmp_
     # and it is the offset the exact analysis predicts: removing it leaves the deviations inside the bound
     assert biased["cause"]["explained_by"] == "model_error", biased["cause"]
     assert "the truth's b differing from the filter's (the known inputs u move the truth" in biased["cause"]["reason"]
+    # the size the docs state: the exact offset peaks at about 30 filter sigma (velocity, near the end)
+    problem = over_log(parse_model(TRUTH_B, "cv.toml"), log).problem()
+    sigma = np.sqrt(np.diagonal(problem.schedule.posterior_cov, axis1=1, axis2=2))
+    assert 29.0 < np.max(np.abs(problem.expected_mean_error()) / sigma) < 31.0
 
 
 @pytest.mark.parametrize(("text", "expected"), [

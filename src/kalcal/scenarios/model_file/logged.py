@@ -16,11 +16,17 @@ and R) still applies, and the compiled block kernel
 (:func:`kalcal.scenarios.model_file.logged_kernels.logged_block_moments`) samples, filters and sums in one
 pass, as the time-invariant one does.
 
-Known inputs. x_{j+1} = Phi x_j + B u_j + Gamma w_j in the truth and in the filter: with the truth's b
-equal to the filter's (or its map times its b equal to the filter's), the input moves the truth and the
-filter's prediction alike, so the error e = x - xhat, the innovations and every statistic of the checks
-do not depend on u. The inputs are therefore not read (u = 0: the estimates are those of the input-free
-model, the errors are those of any u). A truth whose b differs makes the error depend on u: refused.
+Known inputs. x_{j+1} = Phi_t x_j + B_t u_j + Gamma_t w_j in the truth, xhat_{j+1}^- = Phi xhat_j + B u_j
+in the filter's prediction. Where the input moves the truth as the filter believes (M B_t = B,
+M Phi_t = Phi M and H_t = H M, M the truth's map or the identity: a truth with no b, phi or h of its
+own), the error e = M x - xhat, the innovations and every statistic of the checks do not depend on u:
+the inputs are not read (u = 0: the estimates are those of the input-free model, the errors those of
+any u; :func:`kalcal.scenarios.model_file.model._inputs_cancel`). Otherwise the log's u_j, the same in
+every realization, give the error and the innovations a deterministic offset at each update, M g_k - f_k
+and H_t,k g_k - H_k f_k (g the truth's response to u, f the filter's): :func:`driven_truth` carries g and f
+as truth states, so that the kernel, the numpy reference and the exact analysis take the offset
+unchanged; the mean-error check then sees the filter's bias, which the exact analysis predicts. The
+estimates kept are then those less the filter's own response to the inputs (xhat_k - f_k).
 
 Stated limits, each refused in one line: a measured pattern (which components) that changes from one
 update row to another (the fixed-gain engine holds p measurements at every update; a constant pattern
@@ -183,7 +189,7 @@ def logged_arrays(scenario, bound) -> LoggedArrays:
     ------
     ConfigError
         One line naming the file (and the log's row where it is a row's fault): no measured row, a measured
-        pattern that changes between update rows, a diffuse filter, a truth whose b differs from the filter's.
+        pattern that changes between update rows, a diffuse filter.
     """
     from kalcal.scenarios.model_file.model import _inputs_cancel, diffuse_refusal
 
