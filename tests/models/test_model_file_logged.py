@@ -239,7 +239,8 @@ b = [[0.006], [0.12], [0.0]]
 def _direct_mean_error(scenario, log: Path) -> np.ndarray:
     """E[e_k] by one recursion over the log's rows, written out: the truth's mean x_{j+1} = Phi_t x_j +
     B_t u_j from x0; the filter's xhat_{j+1}^- = Phi xhat_j + B u_j with its own Riccati gains at each
-    measured row, updated by the mean measurement H_t x_j (the noise has mean zero); e = M x - xhat."""
+    measured row, updated by the mean measurement H_t x_j (the noise has mean zero); e = M x - xhat.
+    Returns E[e_k] and E[xhat_k], (K, 2) each."""
     f, t = scenario.filter, scenario.truth
     error_map = scenario.truth_map if scenario.truth_map is not None else np.eye(2)
     h_truth = np.nan_to_num(t.h, nan=1.0)  # an h naming the column c, which is 1.0 on every row
@@ -247,7 +248,7 @@ def _direct_mean_error(scenario, log: Path) -> np.ndarray:
     u, measured = frame["a"].to_numpy()[:, None], np.isfinite(frame["z"].to_numpy())
     h = np.array([[1.0, 0.0]])  # the column c is 1.0 on every row
     x, xhat, cov = t.x0.copy(), f.x0.copy(), f.m0.copy()
-    out = []
+    out, estimates = [], []
     for j in range(1, len(frame)):
         x = t.phi @ x + t.b @ u[j - 1]
         xhat = f.phi @ xhat + f.b @ u[j - 1]
@@ -258,7 +259,8 @@ def _direct_mean_error(scenario, log: Path) -> np.ndarray:
             xhat = xhat + gain @ (h_truth @ x - h @ xhat)
             cov = (np.eye(2) - gain @ h) @ cov
             out.append(error_map @ x - xhat)
-    return np.array(out)
+            estimates.append(xhat)
+    return np.array(out), np.array(estimates)
 
 
 def test_a_truth_b_equal_to_the_filters_reads_no_input_and_gives_the_input_free_sums(tmp_path):
@@ -279,12 +281,14 @@ def test_a_truth_driven_otherwise_gets_the_exact_mean_offset_in_the_monte_carlo(
     log = _driven_log(tmp_path / "log.csv")
     scenario = over_log(parse_model(text, "cv.toml"), log)
     problem = scenario.problem()
-    direct = _direct_mean_error(scenario, log)
+    direct, estimate = _direct_mean_error(scenario, log)
     analysis = analyze_problem(problem, scenario.error_sources())
     scale = np.max(np.abs(direct))
     assert scale > 1.0  # the offset matters: metres of position error
     np.testing.assert_allclose(analysis.moments.mean_error, direct, rtol=0, atol=1e-9 * scale)
     np.testing.assert_allclose(problem.expected_mean_error(), direct, rtol=0, atol=1e-9 * scale)
+    # the estimates are the filter's with its inputs (not those less its own response to them)
+    np.testing.assert_allclose(analysis.moments.mean_estimate, estimate, rtol=0, atol=1e-9 * np.max(np.abs(estimate)))
     # the budget still sums to P_true: the offset is a mean, not a variance
     total = sum(term.error_cov for term in analysis.budget)
     np.testing.assert_allclose(total, analysis.moments.error_cov, rtol=1e-9, atol=1e-12)
@@ -294,9 +298,19 @@ def test_a_truth_driven_otherwise_gets_the_exact_mean_offset_in_the_monte_carlo(
     se = np.sqrt(np.diagonal(analysis.moments.error_cov, axis1=1, axis2=2) / n)
     z = (sums.error / n - direct) / se
     assert np.max(np.abs(z)) < normal_bound(0.999, z.size), np.max(np.abs(z))
-    # and the numpy reference draws the same realizations with the offset
+    se_estimate = np.sqrt(np.diagonal(analysis.moments.estimate_cov, axis1=1, axis2=2) / n)
+    z_estimate = (sums.estimate / n - estimate) / se_estimate
+    assert np.max(np.abs(z_estimate)) < normal_bound(0.999, z_estimate.size), np.max(np.abs(z_estimate))
+    # and the numpy reference draws the same realizations with the offset, and the same estimates
     block = problem.run_block(np.random.default_rng(7), 64, "exact")
-    np.testing.assert_allclose(np.einsum("nki->ki", block.error), _sums(problem, 7, 64).error, rtol=1e-9, atol=1e-9)
+    small = _sums(problem, 7, 64)
+    np.testing.assert_allclose(np.einsum("nki->ki", block.error), small.error, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(np.einsum("nki->ki", block.estimate), small.estimate, rtol=1e-9)
+    np.testing.assert_allclose(np.einsum("nki,nkj->kij", block.error, block.estimate), small.error_estimate, rtol=1e-9, atol=1e-6)
+    np.testing.assert_allclose(np.einsum("nki,nkj->kij", block.estimate, block.estimate), small.estimate_outer, rtol=1e-9)
+    error, shown = problem.shown_realization(np.random.default_rng(7), 64, 5, "exact")[:2]
+    np.testing.assert_allclose(shown, block.estimate[5], rtol=1e-9)
+    np.testing.assert_allclose(error, block.error[5], rtol=1e-9, atol=1e-9)
 
 
 def test_the_mean_error_check_fails_with_a_bias_when_the_truths_b_is_larger(tmp_path):

@@ -26,7 +26,8 @@ every realization, give the error and the innovations a deterministic offset at 
 and H_t,k g_k - H_k f_k (g the truth's response to u, f the filter's): :func:`driven_truth` carries g and f
 as truth states, so that the kernel, the numpy reference and the exact analysis take the offset
 unchanged; the mean-error check then sees the filter's bias, which the exact analysis predicts. The
-estimates kept are then those less the filter's own response to the inputs (xhat_k - f_k).
+engine's filter runs without the inputs (its estimates are xhat_k - f_k); :class:`LoggedGainProblem` and
+the exact analysis add f_k back to every estimate they keep.
 
 Stated limits, each refused in one line: a measured pattern (which components) that changes from one
 update row to another (the fixed-gain engine holds p measurements at every update; a constant pattern
@@ -118,7 +119,13 @@ class LoggedFilter:
 class LoggedTruth(UpdateRateTruth):
     """The exact update-rate truth with per-update noise factor L_k (K, n, r), rows H_k (K, p, n) and
     measurement factor G_k (K, p, p) (:class:`~kalcal.simulation.exact.UpdateRateTruth` holds one of each).
-    No shared boundary sample and no deterministic model error (D_k = 0)."""
+    No shared boundary sample and no deterministic model error (D_k = 0).
+
+    ``estimate_offset`` (K, d): for a truth driven by the known inputs otherwise than the filter believes
+    (:func:`driven_truth`), the filter's own response to the inputs f_k, which the kernel's input-free
+    filter leaves out of its estimates and :class:`LoggedGainProblem` adds back (None: nothing to add)."""
+
+    estimate_offset: np.ndarray | None = None
 
     @property
     def normals_per_realization(self) -> int:
@@ -279,8 +286,10 @@ def driven_truth(truth: LoggedTruth, phis: np.ndarray, h: np.ndarray, truth_forc
     innovations get the deterministic offset M g_k - f_k and H_t,k g_k - H_k f_k (g the truth's response to
     u) in every realization: the mean error the checks test. The draws are the input-free truth's (the
     added states have zero rows in the prior's and the noise's factors), so a run with the inputs
-    and one without use the same normals. The estimates kept are xhat'_k = xhat_k - f_k: the filter's
-    estimate less its own response to the inputs (the same in the Monte Carlo and the exact analysis).
+    and one without use the same normals. The engine's filter estimates xhat'_k = xhat_k - f_k: f_k is
+    kept as ``estimate_offset``, which :class:`LoggedGainProblem` adds to its estimates and the exact
+    analysis to its moments of them (:func:`kalcal.analysis.fixed_gain.analyze_problem`), so that both
+    report the filter's own xhat_k.
 
     Parameters
     ----------
@@ -309,6 +318,11 @@ def driven_truth(truth: LoggedTruth, phis: np.ndarray, h: np.ndarray, truth_forc
         return np.pad(a, width)
 
     error_map = np.eye(d, n) if truth.error_map is None else truth.error_map
+    response = np.empty((n_updates, d))  # f_k = Phi_k f_{k-1} + c^f_k, f_{-1} = 0
+    f = np.zeros(d)
+    for k in range(n_updates):
+        f = phis[k] @ f + filter_forcing[k]
+        response[k] = f
     x0_mean = padded(truth.x0_mean, 0)
     x0_mean[-1] = 1.0
     return LoggedTruth(
@@ -322,6 +336,7 @@ def driven_truth(truth: LoggedTruth, phis: np.ndarray, h: np.ndarray, truth_forc
         h=np.ascontiguousarray(np.concatenate([truth.h, -h, np.zeros((*h.shape[:2], 1))], axis=2)),
         measurement_factor=truth.measurement_factor,
         error_map=np.hstack([error_map, -np.eye(d), np.zeros((d, 1))]),
+        estimate_offset=response,
     )
 
 
@@ -388,6 +403,40 @@ class LoggedGainProblem(FixedGainProblem):
             x = xbar + residual[:, k] @ sched.gain[k].T
             posterior[:, k] = x
         return _Run(posterior, residual)
+
+    def run_block(self, rng: np.random.Generator, n: int, engine: str = "exact"):
+        """The parent's block, its estimates those of the filter with its inputs (``truth.estimate_offset``)."""
+        block = super().run_block(rng, n, engine)
+        offset = self.truth.estimate_offset
+        return block if offset is None else block._replace(estimate=block.estimate + offset)
+
+    def shown_realization(self, rng: np.random.Generator, n: int, index: int, engine: str = "exact"):
+        """The parent's realization, its estimate that of the filter with its inputs."""
+        error, estimate, cov = super().shown_realization(rng, n, index, engine)
+        offset = self.truth.estimate_offset
+        return error, estimate if offset is None else estimate + offset, cov
+
+    def block_sums(self, rng: np.random.Generator, n: int, engine: str = "exact"):
+        """The parent's sums, with the estimates' shifted by the filter's own response to the inputs f_k
+        where the truth carries one: sum (xhat' + f) = S + n f, sum (xhat' + f)(xhat' + f)^T = S2 + S f^T +
+        f S^T + n f f^T, sum e (xhat' + f)^T = S_ex + (sum e) f^T (the errors, innovations, NEES, NIS and
+        histograms do not involve the estimate)."""
+        sums = super().block_sums(rng, n, engine)
+        f = self.truth.estimate_offset
+        if f is None:
+            return sums
+        total = sums.estimate
+        outer = total[:, :, None] * f[:, None, :]
+        white = sums.whitened_estimate  # None or empty: every realization shares P_k
+        if white is not None and white.size:
+            white = white + sums.whitened_error[:, :, None] * f[:, None, :]
+        return dataclasses.replace(
+            sums,
+            estimate=total + n * f,
+            estimate_outer=sums.estimate_outer + outer + np.swapaxes(outer, 1, 2) + n * f[:, :, None] * f[:, None, :],
+            error_estimate=sums.error_estimate + sums.error[:, :, None] * f[:, None, :],
+            whitened_estimate=white,
+        )
 
     def _gains(self) -> tuple:
         """The kernel's filter arguments, as the parent's, with H_k per update (K, p, d)."""
