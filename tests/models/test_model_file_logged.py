@@ -142,8 +142,6 @@ def test_the_inputs_are_not_read_where_the_truths_b_is_the_filters(tmp_path):
     [
         (lambda t: t.replace('m0    = [[25.0, 0.0], [0.0, 1.0]]', 'm0 = [[0.0, 0.0], [0.0, 1.0]]\ndiffuse = ["x1"]')
          + '\n[truth]\nm0 = [[25.0, 0.0], [0.0, 1.0]]\n', {}, "no diffuse start"),
-        (lambda t: t.replace("[data]", 'b = [[0.005], [0.1]]\n[truth]\nb = [[0.0], [0.1]]\n[data]\ninputs = ["a"]'),
-         {"a": np.ones(301)}, "depends on the inputs u"),
     ],
 )
 def test_the_stated_limits_are_refused_in_one_line(tmp_path, edit, columns, expected):
@@ -208,3 +206,146 @@ def test_sweep_over_a_log_is_refused_saying_why(tmp_path):
     # its advice is one that runs: a model file without --data is not swept either
     assert "sweep the file without --data" not in result.stderr
     assert "run verify/analyze --data once per setting with --set" in result.stderr
+
+
+# A truth driven by the known input otherwise than the filter believes: the error gets a deterministic
+# offset, which the Monte Carlo and the exact analysis over a log both carry.
+DRIVEN = CV_LOG.replace("[data]", 'b = [[0.005], [0.1]]\n[data]\ninputs = ["a"]')
+TRUTH_B = DRIVEN.replace("[data]", "[truth]\nb = [[0.006], [0.12]]\n\n[data]")  # B_t = 1.2 B
+TRUTH_PHI = DRIVEN.replace("[data]", "[truth]\nphi = [[1.0, 0.1], [0.0, 0.98]]\n\n[data]")  # B_t = B, its own phi
+
+
+def _driven_log(path: Path) -> Path:
+    a = 3.0 + np.random.default_rng(4).normal(0.0, 1.0, 301)  # an acceleration that moves the state, m/s^2
+    return _cv_log(path, a=a)
+
+
+# a truth of its own, [position, velocity, bias]: the measurement carries a slowly decaying bias the filter
+# does not model, and the input drives the truth's velocity 1.2 times as hard as the filter believes
+TRUTH_MAP = DRIVEN.replace("[data]", """[truth]
+map = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
+phi = [[1.0, 0.1, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.95]]
+gamma = [[0.005, 0.0], [0.1, 0.0], [0.0, 0.3]]
+w = [[0.04, 0.0], [0.0, 1.0]]
+h = [[1.0, 0.0, 1.0]]
+v = [[4.0]]
+x0 = [0.0, 10.0, 0.5]
+m0 = [[25.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+b = [[0.006], [0.12], [0.0]]
+
+[data]""")
+
+
+def _direct_mean_error(scenario, log: Path) -> np.ndarray:
+    """E[e_k] by one recursion over the log's rows, written out: the truth's mean x_{j+1} = Phi_t x_j +
+    B_t u_j from x0; the filter's xhat_{j+1}^- = Phi xhat_j + B u_j with its own Riccati gains at each
+    measured row, updated by the mean measurement H_t x_j (the noise has mean zero); e = M x - xhat.
+    Returns E[e_k] and E[xhat_k], (K, 2) each."""
+    f, t = scenario.filter, scenario.truth
+    error_map = scenario.truth_map if scenario.truth_map is not None else np.eye(2)
+    h_truth = np.nan_to_num(t.h, nan=1.0)  # an h naming the column c, which is 1.0 on every row
+    frame = pd.read_csv(log)
+    u, measured = frame["a"].to_numpy()[:, None], np.isfinite(frame["z"].to_numpy())
+    h = np.array([[1.0, 0.0]])  # the column c is 1.0 on every row
+    x, xhat, cov = t.x0.copy(), f.x0.copy(), f.m0.copy()
+    out, estimates = [], []
+    for j in range(1, len(frame)):
+        x = t.phi @ x + t.b @ u[j - 1]
+        xhat = f.phi @ xhat + f.b @ u[j - 1]
+        cov = f.phi @ cov @ f.phi.T + f.gamma @ f.w @ f.gamma.T
+        if measured[j]:
+            s = h @ cov @ h.T + f.v
+            gain = np.linalg.solve(s, h @ cov).T
+            xhat = xhat + gain @ (h_truth @ x - h @ xhat)
+            cov = (np.eye(2) - gain @ h) @ cov
+            out.append(error_map @ x - xhat)
+            estimates.append(xhat)
+    return np.array(out), np.array(estimates)
+
+
+def test_a_truth_b_equal_to_the_filters_reads_no_input_and_gives_the_input_free_sums(tmp_path):
+    driven = over_log(parse_model(DRIVEN, "cv.toml"), _driven_log(tmp_path / "log.csv")).problem()
+    free = over_log(parse_model(CV_LOG, "cv.toml"), _cv_log(tmp_path / "free.csv")).problem()
+    assert driven.truth.state_dim == 2 and driven.truth.error_map is None  # the truth carries no input state
+    a, b = _sums(driven, 2, 300), _sums(free, 2, 300)
+    for name in (f.name for f in dataclasses.fields(MomentSums)):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name  # bit for bit: the file without b
+    assert not np.any(driven.expected_mean_error())
+
+
+@pytest.mark.parametrize("text", [TRUTH_B, TRUTH_PHI, TRUTH_MAP], ids=["truth-b", "truth-phi", "truth-map"])
+def test_a_truth_driven_otherwise_gets_the_exact_mean_offset_in_the_monte_carlo(tmp_path, text):
+    from kalcal.analysis.fixed_gain import analyze_problem
+    from kalcal.stats.bounds import normal_bound
+
+    log = _driven_log(tmp_path / "log.csv")
+    scenario = over_log(parse_model(text, "cv.toml"), log)
+    problem = scenario.problem()
+    direct, estimate = _direct_mean_error(scenario, log)
+    analysis = analyze_problem(problem, scenario.error_sources())
+    scale = np.max(np.abs(direct))
+    assert scale > 1.0  # the offset matters: metres of position error
+    np.testing.assert_allclose(analysis.moments.mean_error, direct, rtol=0, atol=1e-9 * scale)
+    np.testing.assert_allclose(problem.expected_mean_error(), direct, rtol=0, atol=1e-9 * scale)
+    # the estimates are the filter's with its inputs (not those less its own response to them)
+    np.testing.assert_allclose(analysis.moments.mean_estimate, estimate, rtol=0, atol=1e-9 * np.max(np.abs(estimate)))
+    # the budget still sums to P_true: the offset is a mean, not a variance
+    total = sum(term.error_cov for term in analysis.budget)
+    np.testing.assert_allclose(total, analysis.moments.error_cov, rtol=1e-9, atol=1e-12)
+    # the Monte Carlo's mean error at each update against the exact mean: z over K d comparisons
+    n = 4000
+    sums = _sums(problem, 7, n)
+    se = np.sqrt(np.diagonal(analysis.moments.error_cov, axis1=1, axis2=2) / n)
+    z = (sums.error / n - direct) / se
+    assert np.max(np.abs(z)) < normal_bound(0.999, z.size), np.max(np.abs(z))
+    se_estimate = np.sqrt(np.diagonal(analysis.moments.estimate_cov, axis1=1, axis2=2) / n)
+    z_estimate = (sums.estimate / n - estimate) / se_estimate
+    assert np.max(np.abs(z_estimate)) < normal_bound(0.999, z_estimate.size), np.max(np.abs(z_estimate))
+    # and the numpy reference draws the same realizations with the offset, and the same estimates
+    block = problem.run_block(np.random.default_rng(7), 64, "exact")
+    small = _sums(problem, 7, 64)
+    np.testing.assert_allclose(np.einsum("nki->ki", block.error), small.error, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(np.einsum("nki->ki", block.estimate), small.estimate, rtol=1e-9)
+    np.testing.assert_allclose(np.einsum("nki,nkj->kij", block.error, block.estimate), small.error_estimate, rtol=1e-9, atol=1e-6)
+    np.testing.assert_allclose(np.einsum("nki,nkj->kij", block.estimate, block.estimate), small.estimate_outer, rtol=1e-9)
+    error, shown = problem.shown_realization(np.random.default_rng(7), 64, 5, "exact")[:2]
+    np.testing.assert_allclose(shown, block.estimate[5], rtol=1e-9)
+    np.testing.assert_allclose(error, block.error[5], rtol=1e-9, atol=1e-9)
+
+
+def test_the_mean_error_check_fails_with_a_bias_when_the_truths_b_is_larger(tmp_path):
+    import kalcal
+
+    log = _driven_log(tmp_path / "log.csv")
+    verdicts = {}
+    for label, text in (("equal", DRIVEN), ("larger", TRUTH_B)):
+        model = tmp_path / f"{label}.toml"
+        model.write_text(text)
+        summary = kalcal.verify(model, 2000, seed=3, data=log).raw_summary
+        verdicts[label] = {t["name"]: t for t in summary["tests"]}
+        assert summary["self_check"]["agrees"], label  # the Monte Carlo against the exact analysis
+    assert all(t["passed"] for t in verdicts["equal"].values()), [n for n, t in verdicts["equal"].items() if not t["passed"]]
+    biased = verdicts["larger"]["mean_error"]
+    assert not biased["passed"]
+    assert biased["statistic"] > 10 * biased["upper"], biased  # a clear bias, not a marginal one
+    # and it is the offset the exact analysis predicts: removing it leaves the deviations inside the bound
+    assert biased["cause"]["explained_by"] == "model_error", biased["cause"]
+    assert "the truth's b differing from the filter's (the known inputs u move the truth" in biased["cause"]["reason"]
+    # the size the docs state: the exact offset peaks at about 30 filter sigma (velocity, near the end)
+    problem = over_log(parse_model(TRUTH_B, "cv.toml"), log).problem()
+    sigma = np.sqrt(np.diagonal(problem.schedule.posterior_cov, axis1=1, axis2=2))
+    assert 29.0 < np.max(np.abs(problem.expected_mean_error()) / sigma) < 31.0
+
+
+@pytest.mark.parametrize(("text", "expected"), [
+    (TRUTH_B, "its truth's inputs (b) differ from the filter's, so the filter's error depends on the inputs u"),
+    (TRUTH_PHI, "its truth's phi differs from the filter's beside known inputs"),
+], ids=["truth-b", "truth-phi"])
+def test_without_a_log_a_truth_driven_otherwise_is_refused_in_one_line(tmp_path, text, expected):
+    model = tmp_path / "cv.toml"
+    model.write_text(text.replace('h     = [["c", 0.0]]', 'h     = [[1.0, 0.0]]'))  # no row from data
+    for command in (["verify", "-n", 300, "--out", tmp_path / "out"], ["analyze"]):
+        result = _invoke(command[0], model, *command[1:])
+        assert result.exit_code == 2, result.output
+        lines = result.stderr.strip().splitlines()
+        assert len(lines) == 1 and expected in lines[0] and "--data LOG" in lines[0], result.stderr

@@ -7,7 +7,7 @@ model file, with the error budget.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -88,6 +88,16 @@ def analyze_problem(
             truth.prior_cov, truth.process_cov, truth.shares_boundary, truth.measurement_cov, names, problem.info.measurement_names
         )
     moments = propagate(truth, filt, error_map, pairs=pairs)
+    offset = getattr(problem.truth, "estimate_offset", None)
+    if offset is not None:
+        # a filter driven by known inputs that its truth's recursion leaves out (a model file over a log,
+        # :func:`kalcal.scenarios.model_file.logged.driven_truth`): its estimates are the recursion's plus
+        # the deterministic f_k, so E[xhat] and E[e xhat^T] shift; Cov(xhat) and every other moment do not
+        moments = replace(
+            moments,
+            mean_estimate=moments.mean_estimate + offset,
+            error_estimate=moments.error_estimate + moments.mean_error[:, :, None] * offset[:, None, :],
+        )
     return CovarianceAnalysis(
         info=problem.info,
         moments=moments,

@@ -310,7 +310,9 @@ def step_grid(scenario: CustomModelScenario) -> tuple[TimeVaryingModel, TimeVary
     J = K m + 1 rows (m = ``steps_per_update``), row j at j * sample_period; row 0 holds the prior and is
     not measured, rows m, 2m, ..., Km are (H_j = h, V_j = v), the others are not (H_j NaN): the model
     that ``verify``'s fixed-gain filter runs (first fix after m steps). Known inputs are u_j = 0: with a
-    truth whose b is the filter's (or whose map times its b is), the filter's error does not depend on u.
+    truth that the inputs move as the filter believes (no b, phi or h of its own, or, with a map, M B_t = B,
+    M Phi_t = Phi M, H_t = H M), the filter's error does not depend on u; any other truth is refused
+    without a log (:meth:`~kalcal.scenarios.model_file.model.CustomModelScenario.without_log`).
 
     Returns
     -------

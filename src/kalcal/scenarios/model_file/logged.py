@@ -16,11 +16,18 @@ and R) still applies, and the compiled block kernel
 (:func:`kalcal.scenarios.model_file.logged_kernels.logged_block_moments`) samples, filters and sums in one
 pass, as the time-invariant one does.
 
-Known inputs. x_{j+1} = Phi x_j + B u_j + Gamma w_j in the truth and in the filter: with the truth's b
-equal to the filter's (or its map times its b equal to the filter's), the input moves the truth and the
-filter's prediction alike, so the error e = x - xhat, the innovations and every statistic of the checks
-do not depend on u. The inputs are therefore not read (u = 0: the estimates are those of the input-free
-model, the errors are those of any u). A truth whose b differs makes the error depend on u: refused.
+Known inputs. x_{j+1} = Phi_t x_j + B_t u_j + Gamma_t w_j in the truth, xhat_{j+1}^- = Phi xhat_j + B u_j
+in the filter's prediction. Where the input moves the truth as the filter believes (M B_t = B,
+M Phi_t = Phi M and H_t = H M, M the truth's map or the identity: a truth with no b, phi or h of its
+own), the error e = M x - xhat, the innovations and every statistic of the checks do not depend on u:
+the inputs are not read (u = 0: the estimates are those of the input-free model, the errors those of
+any u; :func:`kalcal.scenarios.model_file.model._inputs_cancel`). Otherwise the log's u_j, the same in
+every realization, give the error and the innovations a deterministic offset at each update, M g_k - f_k
+and H_t,k g_k - H_k f_k (g the truth's response to u, f the filter's): :func:`driven_truth` carries g and f
+as truth states, so that the kernel, the numpy reference and the exact analysis take the offset
+unchanged; the mean-error check then sees the filter's bias, which the exact analysis predicts. The
+engine's filter runs without the inputs (its estimates are xhat_k - f_k); :class:`LoggedGainProblem` and
+the exact analysis add f_k back to every estimate they keep.
 
 Stated limits, each refused in one line: a measured pattern (which components) that changes from one
 update row to another (the fixed-gain engine holds p measurements at every update; a constant pattern
@@ -112,7 +119,13 @@ class LoggedFilter:
 class LoggedTruth(UpdateRateTruth):
     """The exact update-rate truth with per-update noise factor L_k (K, n, r), rows H_k (K, p, n) and
     measurement factor G_k (K, p, p) (:class:`~kalcal.simulation.exact.UpdateRateTruth` holds one of each).
-    No shared boundary sample and no deterministic model error (D_k = 0)."""
+    No shared boundary sample and no deterministic model error (D_k = 0).
+
+    ``estimate_offset`` (K, d): for a truth driven by the known inputs otherwise than the filter believes
+    (:func:`driven_truth`), the filter's own response to the inputs f_k, which the kernel's input-free
+    filter leaves out of its estimates and :class:`LoggedGainProblem` adds back (None: nothing to add)."""
+
+    estimate_offset: np.ndarray | None = None
 
     @property
     def normals_per_realization(self) -> int:
@@ -183,7 +196,7 @@ def logged_arrays(scenario, bound) -> LoggedArrays:
     ------
     ConfigError
         One line naming the file (and the log's row where it is a row's fault): no measured row, a measured
-        pattern that changes between update rows, a diffuse filter, a truth whose b differs from the filter's.
+        pattern that changes between update rows, a diffuse filter.
     """
     from kalcal.scenarios.model_file.model import _inputs_cancel, diffuse_refusal
 
@@ -191,11 +204,6 @@ def logged_arrays(scenario, bound) -> LoggedArrays:
     f, t = bound.filter, bound.truth if bound.truth is not None else bound.filter
     if np.any(f.diffuse):
         raise ConfigError(f"{file}: {diffuse_refusal(scenario.filter.diffuse)}")
-    if not _inputs_cancel(scenario):
-        raise ConfigError(
-            f"{file}: its truth's b differs from the filter's, so the filter's error depends on the inputs u: a "
-            "verification over a log holds only a truth whose b is the filter's (then the error does not depend on u)"
-        )
     measured = measured_components(f, bound.z) & np.all(np.isfinite(t.h), axis=2)
     updates = np.flatnonzero(np.any(measured, axis=1))
     if updates.size == 0:
@@ -242,7 +250,94 @@ def logged_arrays(scenario, bound) -> LoggedArrays:
         measurement_factor=np.linalg.cholesky(t_v),
         error_map=bound.truth_map,
     )
+    if not _inputs_cancel(scenario):
+        truth = driven_truth(truth, phis, h, _forcing(t, updates), _forcing(f, updates))
     return LoggedArrays(filt, truth, updates, np.asarray(bound.times)[updates], components)
+
+
+def _forcing(model: TimeVaryingModel, rows: np.ndarray) -> np.ndarray:
+    """The inputs' share of each interval, c_k = sum_{j_{k-1} <= j < j_k} Phi^{j_k - 1 - j} B u_j, (K, d):
+    x_{j_k} = Phi^{s_k} x_{j_{k-1}} + c_k + noise (u_j drives row j -> j + 1; j_{-1} = 0)."""
+    drive = model.u @ model.b.T  # B u_j, (J, d)
+    out = np.empty((rows.size, model.state_dim))
+    c, start = np.zeros(model.state_dim), 0
+    for k, end in enumerate(rows.tolist()):
+        c = np.zeros(model.state_dim)
+        for j in range(start, end):  # Horner's scheme over the interval's rows
+            c = model.phi @ c + drive[j]
+        out[k], start = c, end
+    return out
+
+
+def driven_truth(truth: LoggedTruth, phis: np.ndarray, h: np.ndarray, truth_forcing: np.ndarray, filter_forcing: np.ndarray) -> LoggedTruth:
+    """``truth`` with known inputs that move it otherwise than the filter believes, as a truth of n + d + 1
+    states [x; f; 1] whose last state is the constant 1 (no prior variance, no noise).
+
+    The filter with inputs predicts xbar_k = Phi_k xhat_{k-1} + c^f_k. Writing xhat_k = f_k + xhat'_k, with
+    f_k = Phi_k f_{k-1} + c^f_k (f_{-1} = 0) the filter's own response to the inputs, xhat'_k is the
+    input-free filter (the same gains) run on z_k - H_k f_k, so that
+
+        e_k = M x_k - xhat_k = [M, -I, 0] [x_k; f_k; 1] - xhat'_k,
+        r_k = z_k - H_k xbar_k = [H_t,k, -H_k, 0] [x_k; f_k; 1] + v_k - H_k xbar'_k,
+
+    exactly: the truth's x_k = A_k x_{k-1} + c^t_k + noise and f_k are both driven through the constant
+    state's column, the map becomes [M, -I, 0] and the truth's rows [H_t,k, -H_k, 0]. The engine, the
+    kernel and the exact analysis then run unchanged (a truth with its own states), and the error and the
+    innovations get the deterministic offset M g_k - f_k and H_t,k g_k - H_k f_k (g the truth's response to
+    u) in every realization: the mean error the checks test. The draws are the input-free truth's (the
+    added states have zero rows in the prior's and the noise's factors), so a run with the inputs
+    and one without use the same normals. The engine's filter estimates xhat'_k = xhat_k - f_k: f_k is
+    kept as ``estimate_offset``, which :class:`LoggedGainProblem` adds to its estimates and the exact
+    analysis to its moments of them (:func:`kalcal.analysis.fixed_gain.analyze_problem`), so that both
+    report the filter's own xhat_k.
+
+    Parameters
+    ----------
+    truth : LoggedTruth
+        The input-free truth, n states (its map M (d, n), or none for the filter's d states).
+    phis : ndarray, shape (K, d, d)
+        The filter's Phi_k over each interval.
+    h : ndarray, shape (K, p, d)
+        The filter's H_k.
+    truth_forcing, filter_forcing : ndarray, shapes (K, n) and (K, d)
+        c^t_k and c^f_k, the inputs' share of each interval (:func:`_forcing`), in the states' units.
+    """
+    n_updates, n, r = truth.noise_factor.shape
+    d = phis.shape[-1]
+    size = n + d + 1
+    transitions = np.zeros((n_updates, size, size))
+    transitions[:, :n, :n] = truth.transitions
+    transitions[:, n : n + d, n : n + d] = phis
+    transitions[:, :n, -1] = truth_forcing
+    transitions[:, n : n + d, -1] = filter_forcing
+    transitions[:, -1, -1] = 1.0
+
+    def padded(a: np.ndarray, axis: int) -> np.ndarray:
+        width = [(0, 0)] * a.ndim
+        width[axis] = (0, d + 1)
+        return np.pad(a, width)
+
+    error_map = np.eye(d, n) if truth.error_map is None else truth.error_map
+    response = np.empty((n_updates, d))  # f_k = Phi_k f_{k-1} + c^f_k, f_{-1} = 0
+    f = np.zeros(d)
+    for k in range(n_updates):
+        f = phis[k] @ f + filter_forcing[k]
+        response[k] = f
+    x0_mean = padded(truth.x0_mean, 0)
+    x0_mean[-1] = 1.0
+    return LoggedTruth(
+        transitions=transitions,
+        noise_factor=padded(truth.noise_factor, 1),
+        boundary_in=np.zeros(size),
+        boundary_out=np.zeros(size),
+        model_error=np.zeros((n_updates, size)),
+        x0_mean=x0_mean,
+        x0_factor=padded(truth.x0_factor, 0),
+        h=np.ascontiguousarray(np.concatenate([truth.h, -h, np.zeros((*h.shape[:2], 1))], axis=2)),
+        measurement_factor=truth.measurement_factor,
+        error_map=np.hstack([error_map, -np.eye(d), np.zeros((d, 1))]),
+        estimate_offset=response,
+    )
 
 
 class _Run(NamedTuple):
@@ -308,6 +403,40 @@ class LoggedGainProblem(FixedGainProblem):
             x = xbar + residual[:, k] @ sched.gain[k].T
             posterior[:, k] = x
         return _Run(posterior, residual)
+
+    def run_block(self, rng: np.random.Generator, n: int, engine: str = "exact"):
+        """The parent's block, its estimates those of the filter with its inputs (``truth.estimate_offset``)."""
+        block = super().run_block(rng, n, engine)
+        offset = self.truth.estimate_offset
+        return block if offset is None else block._replace(estimate=block.estimate + offset)
+
+    def shown_realization(self, rng: np.random.Generator, n: int, index: int, engine: str = "exact"):
+        """The parent's realization, its estimate that of the filter with its inputs."""
+        error, estimate, cov = super().shown_realization(rng, n, index, engine)
+        offset = self.truth.estimate_offset
+        return error, estimate if offset is None else estimate + offset, cov
+
+    def block_sums(self, rng: np.random.Generator, n: int, engine: str = "exact"):
+        """The parent's sums, with the estimates' shifted by the filter's own response to the inputs f_k
+        where the truth carries one: sum (xhat' + f) = S + n f, sum (xhat' + f)(xhat' + f)^T = S2 + S f^T +
+        f S^T + n f f^T, sum e (xhat' + f)^T = S_ex + (sum e) f^T (the errors, innovations, NEES, NIS and
+        histograms do not involve the estimate)."""
+        sums = super().block_sums(rng, n, engine)
+        f = self.truth.estimate_offset
+        if f is None:
+            return sums
+        total = sums.estimate
+        outer = total[:, :, None] * f[:, None, :]
+        white = sums.whitened_estimate  # None or empty: every realization shares P_k
+        if white is not None and white.size:
+            white = white + sums.whitened_error[:, :, None] * f[:, None, :]
+        return dataclasses.replace(
+            sums,
+            estimate=total + n * f,
+            estimate_outer=sums.estimate_outer + outer + np.swapaxes(outer, 1, 2) + n * f[:, :, None] * f[:, None, :],
+            error_estimate=sums.error_estimate + sums.error[:, :, None] * f[:, None, :],
+            whitened_estimate=white,
+        )
 
     def _gains(self) -> tuple:
         """The kernel's filter arguments, as the parent's, with H_k per update (K, p, d)."""
@@ -392,18 +521,19 @@ def logged_sources(scenario) -> list[Source]:
 
     arrays = scenario.arrays
     truth, model = arrays.truth, scenario.truth
+    n = model.state_dim  # the truth's own states: a truth driven by inputs carries d + 1 more, without noise
     names = getattr(model, "state_names", None) or scenario.model.state_names
-    if truth.state_dim != len(names):
-        names = tuple(f"x{i + 1}" for i in range(truth.state_dim))
+    if n != len(names):
+        names = tuple(f"x{i + 1}" for i in range(n))
     process = []
     for index in blocks(model.w):
         cache: dict[int, np.ndarray] = {}
         gamma, w = model.gamma[:, index], model.w[np.ix_(index, index)]
-        share = np.empty((truth.n_updates, truth.state_dim, truth.state_dim))
+        share = np.zeros((truth.n_updates, truth.state_dim, truth.state_dim))
         for k, s in enumerate(arrays.filter.steps.tolist()):
             if s not in cache:
                 cache[s] = interval_transition(model.phi, gamma, w, s)[1]
-            share[k] = cache[s]
+            share[k, :n, :n] = cache[s]
         process.append(("+".join(f"w{i + 1}" for i in index), share, 0.0))
     r = truth.measurement_factor @ np.swapaxes(truth.measurement_factor, -1, -2)
     sources = covariance_sources(
@@ -412,6 +542,9 @@ def logged_sources(scenario) -> list[Source]:
     out = []
     for source in sources:
         zero_q = np.zeros((truth.n_updates, truth.state_dim, truth.state_dim))
+        prior = np.zeros((truth.state_dim, truth.state_dim))
+        prior[:n, :n] = source.prior_cov[:n, :n]
+        source = dataclasses.replace(source, prior_cov=prior)
         if source.kind == "measurement":
             block = source.measurement_cov != 0  # the block of R_0, which every R_k shares
             out.append(dataclasses.replace(source, process_cov=zero_q, measurement_cov=np.where(block, r, 0.0)))

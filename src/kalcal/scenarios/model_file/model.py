@@ -211,10 +211,17 @@ class CustomModelScenario(ScenarioDefaults):
             return f"its measurement stds come from data columns ({stds}): it is not verified without a log (--data LOG)"
         if f.diffuse:
             return diffuse_refusal(f.diffuse)
-        if not _inputs_cancel(self):
+        mismatch = _input_mismatch(self)
+        if mismatch == "b":
             return (
                 "its truth's inputs (b) differ from the filter's, so the filter's error depends on the inputs u: "
                 "it is not verified without a log (--data LOG); with the truth's b equal to the filter's it does not"
+            )
+        if mismatch:
+            return (
+                f"its truth's {mismatch} differs from the filter's beside known inputs, so the inputs u move the truth "
+                "otherwise than the filter's prediction and the filter's error depends on u: it is not verified "
+                "without a log (--data LOG)"
             )
         if self.model.updates is None:
             return "it sets no updates (the model file's updates and steps_per_update say how long to verify it without a log)"
@@ -438,11 +445,38 @@ def _check_diffuse(f: FileModel, names: tuple[str, ...]) -> None:
 
 
 def _inputs_cancel(scenario: CustomModelScenario) -> bool:
-    """Whether the known inputs move the truth's filter-state part as they move the filter: B = map B_t (or
-    B_t = B without a map), so that the error e = map x - xhat does not depend on u."""
-    f, t = scenario.filter, scenario.truth
-    moved = t.b if scenario.truth_map is None else scenario.truth_map @ t.b
-    return moved.shape == f.b.shape and np.allclose(moved, f.b, rtol=0.0, atol=1e-12 * max(1.0, float(np.max(np.abs(f.b), initial=0.0))))
+    """Whether the known inputs move the truth's filter-state part as they move the filter, so that the
+    error e = M x - xhat and the innovations do not depend on u (M the truth's map, the identity without one).
+
+    By linearity each is its input-free value plus a deterministic offset: the truth's response to u
+    (g_{j+1} = Phi_t g_j + B_t u_j) mapped, less the filter's response to its own prediction of it
+    (f_{j+1} = Phi f_j + B u_j): M g_j - f_j in the error, H_t g_j - H f_j in the innovation. Both vanish for
+    every u when M B_t = B, M Phi_t = Phi M and H_t = H M (then M g_j = f_j by induction), which is what is
+    checked: without a map, a truth with the filter's b, phi and h (the same data columns in h); with a
+    map, the three products to 1e-12 of the largest entry and no h naming data columns. A file whose
+    filter has no inputs has nothing to cancel. A truth that departs from them (its own b, or its own phi
+    or h while the filter has inputs) makes the error depend on u (:mod:`kalcal.scenarios.model_file.logged`
+    carries the offset over a log)."""
+    return not _input_mismatch(scenario)
+
+
+def _input_mismatch(scenario: CustomModelScenario) -> str:
+    """The first of b, phi and h in which the truth moves with the inputs otherwise than the filter ("" for
+    none: :func:`_inputs_cancel`)."""
+    f, t, m = scenario.filter, scenario.truth, scenario.truth_map
+    if f.input_dim == 0 and t.input_dim == 0:
+        return ""
+    if m is None:
+        return next((k for k in ("b", "phi", "h") if k in scenario.differing()), "")
+
+    def close(a: np.ndarray, b: np.ndarray) -> bool:
+        return a.shape == b.shape and np.allclose(a, b, rtol=0.0, atol=1e-12 * max(1.0, float(np.max(np.abs(b), initial=0.0))))
+
+    if not close(m @ t.b, f.b):
+        return "b"
+    if not close(m @ t.phi, f.phi @ m):
+        return "phi"
+    return "h" if f.h_columns or t.h_columns or not close(t.h, f.h @ m) else ""
 
 
 def _check_same_shapes(f: LinearGaussianModel, t: LinearGaussianModel) -> None:

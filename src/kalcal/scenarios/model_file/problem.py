@@ -46,15 +46,21 @@ def custom_problem(
 
 
 def custom_model_error_cause(scenario: CustomModelScenario) -> str:
-    """The matrices of a model file's truth that can move the filter's mean error (x0, phi, h), or, for a
-    truth with states of its own, that model (when a prior mean is nonzero: else both means stay zero)."""
+    """The matrices of a model file's truth that can move the filter's mean error (x0, phi, h, and b where
+    the known inputs move the truth otherwise than the filter predicts: over a log, a deterministic offset),
+    or, for a truth with states of its own, that model (when a prior mean is nonzero or the inputs move it
+    otherwise: else both means stay zero)."""
+    from kalcal.scenarios.model_file.model import _input_mismatch
+
+    driven = " (the known inputs u move the truth otherwise than the filter predicts)" if _input_mismatch(scenario) else ""
     if scenario.truth_map is not None:
-        if not (np.any(scenario.truth.x0) or np.any(scenario.filter.x0)):
+        if not (np.any(scenario.truth.x0) or np.any(scenario.filter.x0) or driven):
             return ""
         n, d = scenario.truth.state_dim, scenario.filter.state_dim
-        return f"the truth's own {n}-state model (its x0, phi and h, mapped to the filter's {d} state{'s' if d != 1 else ''})"
-    keys = [k for k in scenario.differing() if k in ("x0", "phi", "h")]
-    return f"the truth's {' and '.join(keys)} differing from the filter's" if keys else ""
+        matrices = "x0, phi, h and b" if driven else "x0, phi and h"
+        return f"the truth's own {n}-state model (its {matrices}, mapped to the filter's {d} state{'s' if d != 1 else ''}){driven}"
+    keys = [k for k in scenario.differing() if k in ("x0", "phi", "h", *(("b",) if driven else ()))]
+    return f"the truth's {' and '.join(keys)} differing from the filter's{driven}" if keys else ""
 
 
 def model_error_sources(scenario: CustomModelScenario) -> list[Source]:
