@@ -164,3 +164,16 @@ def test_repr_html_shows_the_bootstrap(at_bound):
     assert f"<td>[{v.ci_low:.4g}, {v.ci_high:.4g}]</td><td>[{b.ci_low:.4g}, {b.ci_high:.4g}]</td>" in page
     w_row = re.search(r"<tr><td>filter\.w</td>.*?</tr>", page.split("parametric bootstrap")[1]).group(0)
     assert "not applicable" in w_row and "Andrews 2000" in w_row
+
+
+# Refits all at one point (a flat direction) still make a panel: one bar, numbered ticks, the interval's lines.
+def test_refits_at_one_point_make_a_panel(interior):
+    from dataclasses import replace
+
+    v = interior.bootstrap.parameters["filter.v"]
+    same = replace(interior, bootstrap=replace(interior.bootstrap, parameters={
+        **interior.bootstrap.parameters, "filter.v": replace(v, values=(1.7,) * len(v.values))}))
+    _, v_ax = _panels(same)
+    assert len(_numbers(v_ax)) >= 2
+    p = interior.parameters["filter.v"]
+    assert _lines(v_ax, "likelihood-interval") == pytest.approx([p.ci_low, p.ci_high], rel=1e-12)

@@ -119,7 +119,11 @@ def bootstrap_figure(result):
         positive = drawn[drawn > 0]
         log_axis = (p.scale == "log" and values.min() > 0 and positive.size > 0
                     and np.log10(positive.max() / positive.min()) >= LOG_AXIS_DECADES)
-        bins = np.geomspace(values.min(), values.max(), 31) if log_axis else 30
+        if values.max() == values.min():  # every refit at one point (a flat direction): one bar about it
+            half = 0.05 * abs(values[0]) or 0.5
+            bins = [values[0] - half, values[0] + half]
+        else:
+            bins = np.geomspace(values.min(), values.max(), 31) if log_axis else 30
         ax.hist(values, bins=bins, color=ESTIMATE, alpha=0.55, label=f"{boot.replicates} bootstrap refits")
         ax.yaxis.set_major_locator(MaxNLocator(integer=True))  # counts of refits
         if p.value is not None:
