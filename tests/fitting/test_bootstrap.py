@@ -69,22 +69,38 @@ def test_same_seed_one_and_two_threads_identical(ar1):
 
 def _coverage(scenario, logs: int, n: int, b: int, confidence: float = 0.95):
     """Per setting: how many of ``logs`` simulated logs' percentile intervals hold the truth (a log whose
-    interval is not applicable, or has an end at the search range's end, counts as not covering: conservative)."""
+    interval is not applicable, or has an end at the search range's end, counts as not covering: conservative),
+    and the misses by kind: "not applicable", "range end" (an end at the search range's end; "+ kept end
+    misses" where the end given is on the wrong side of the truth too), "below", "above" (the truth against the interval)."""
+    from collections import Counter
+
     covered = dict.fromkeys(TRUTH, 0)
+    misses = {name: Counter() for name in TRUTH}
     for m in range(logs):
         result = _boot(scenario, _log(n, 1000 + m), b, seed=m, threads=2, confidence=confidence)
         for name, truth in TRUTH.items():
             p = result.bootstrap.parameters[name]
-            covered[name] += bool(p.applicable and p.ci_low is not None and p.ci_high is not None
-                                  and p.ci_low <= truth <= p.ci_high)
-    return covered
+            if not p.applicable:
+                misses[name]["not applicable"] += 1
+            elif p.ci_low is None or p.ci_high is None:
+                kept = not ((p.ci_low is None or p.ci_low <= truth) and (p.ci_high is None or truth <= p.ci_high))
+                misses[name]["range end" + (" + kept end misses" if kept else "")] += 1
+            elif truth < p.ci_low or truth > p.ci_high:
+                misses[name]["below" if truth < p.ci_low else "above"] += 1
+            else:
+                covered[name] += 1
+    return covered, misses
 
 
-def _check_coverage(covered, logs, confidence=0.95):
+def _check_coverage(coverage, logs, confidence=0.95):
+    covered, misses = coverage
     # covered ~ Binomial(logs, confidence) at the nominal level: fewer than its 0.001 quantile is a failure
     floor = int(binom_ppf(0.001, logs, confidence))
+    # shown with -s: the counts docs/fit.md quotes
+    print(f"coverage at {confidence:g} over {logs} logs: {covered}, floor {floor}; misses {misses}")
     for name, count in covered.items():
-        assert count >= floor, f"{name}: {count}/{logs} percentile intervals covered the truth, below {floor}"
+        assert count >= floor, (f"{name}: {count}/{logs} percentile intervals covered the truth, below {floor}; "
+                                f"misses {dict(misses[name])}")
 
 
 # The percentile interval covers the truth at its nominal level over simulated logs (small version: 90%

@@ -24,7 +24,7 @@ def _derived_row(result, name: str, p) -> tuple[str, str, str, str] | None:
 def _bootstrap_table(result):
     """The bootstrap beside the likelihood intervals: per setting the likelihood interval, the percentile
     interval, the bootstrap standard error and the bias (+- its Monte Carlo error), or "not applicable" and why."""
-    from kalcal.fitting.result import bootstrap_note, percentile_text
+    from kalcal.fitting.result import bootstrap_note, likelihood_text, percentile_text
 
     boot = result.bootstrap
     table = _common._table(
@@ -32,13 +32,10 @@ def _bootstrap_table(result):
         f"{boot.failed} refit(s) not converged",
         f"{boot.seconds:.3g} s",
     )
-    for column in ("setting", f"{result.interval_method}", f"{boot.confidence:.0%} percentile", "boot se", "bias", "note"):
+    for column in ("setting", f"{result.confidence:.0%} {result.interval_method}", f"{boot.confidence:.0%} percentile", "boot se", "bias", "note"):
         table.add_column(column, justify="left" if column in ("setting", "note") else "right")
     for name, b in boot.parameters.items():
-        p = result.parameters[name]
-        likelihood = ("—" if p.value is None else
-                      f"[{0 if p.at_bound else '—' if p.ci_low is None else f'{p.ci_low:.4g}'}, "
-                      f"{'—' if p.ci_high is None else f'{p.ci_high:.4g}'}]")
+        likelihood = likelihood_text(result.parameters[name])
         if b.se is None:
             table.add_row(escape(name), likelihood, "not applicable", "—", "—", escape(b.reason))
             continue

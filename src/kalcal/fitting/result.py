@@ -349,7 +349,11 @@ class FitResult:
         table = html_table(["setting", "estimate", "std err", f"[{tail:.3g}", f"{1 - tail:.3g}]", "unit", "note"],
                            [[name, *row, self.parameters[name].note] for name, row in self._rows()])
         verdict = f"<b>{'adequate' if self.adequate else 'NOT ADEQUATE'}</b>: {html.escape(self.adequacy)}"
-        return f"<div>{facts}<br>{verdict}{table}</div>"
+        boot = ""
+        if self.bootstrap is not None:
+            boot = (f"<br><b>{html.escape(bootstrap_title(self))}</b>"
+                    + html_table(bootstrap_header(self), bootstrap_rows(self)))
+        return f"<div>{facts}<br>{verdict}{table}{boot}</div>"
 
     def save(self, out: str | Path) -> dict[str, Path]:
         """Write ``fit.json``, ``filter.toml`` (a model file's: ``model.toml``), ``fit.png`` and (accel-gps) ``imu.yaml`` into ``out``, as
@@ -389,22 +393,51 @@ class FitResult:
         return document
 
 
-def bootstrap_lines(result: FitResult) -> list[str]:
-    """The bootstrap's table for :meth:`FitResult.summary`: per setting the percentile interval, bootstrap
-    standard error and bias (+- its Monte Carlo error), or "not applicable" and why."""
-    from kalcal.results._display import fmt, text_table
+def bootstrap_rows(result: FitResult) -> list[list[str]]:
+    """Per setting of the bootstrap, beside its likelihood interval (:func:`likelihood_text`): the percentile
+    interval, bootstrap standard error and bias (+- its Monte Carlo error) and the note, or "not applicable"
+    and why: the rows of :meth:`FitResult.summary`'s and ``_repr_html_``'s bootstrap tables."""
+    from kalcal.results._display import fmt
 
-    boot = result.bootstrap
     rows = []
-    for name, b in boot.parameters.items():
+    for name, b in result.bootstrap.parameters.items():
+        likelihood = likelihood_text(result.parameters[name])
         if not b.applicable and b.se is None:
-            rows.append([name, "—", "—", "—", "not applicable: " + b.reason])
+            rows.append([name, likelihood, "—", "—", "—", "not applicable: " + b.reason])
             continue
-        interval = percentile_text(b)
-        rows.append([name, interval, fmt(b.se, 4), f"{b.bias:.3g} +- {b.bias_se:.2g}", bootstrap_note(b)])
-    head = (f"parametric bootstrap: {boot.replicates} logs simulated from the fit and refitted, seed {boot.seed}, "
+        rows.append([name, likelihood, percentile_text(b), fmt(b.se, 4), f"{b.bias:.3g} +- {b.bias_se:.2g}", bootstrap_note(b)])
+    return rows
+
+
+def bootstrap_header(result: FitResult) -> list[str]:
+    """The columns of :func:`bootstrap_rows`: the likelihood interval under the fit's method and level."""
+    boot = result.bootstrap
+    return ["setting", f"{result.confidence:.0%} {result.interval_method}", f"{boot.confidence:.0%} percentile",
+            "boot se", "bias", "note"]
+
+
+def bootstrap_title(result: FitResult) -> str:
+    """The bootstrap table's title: B, the seed and the refits not converged."""
+    boot = result.bootstrap
+    return (f"parametric bootstrap: {boot.replicates} logs simulated from the fit and refitted, seed {boot.seed}, "
             f"{boot.failed} refit(s) not converged")
-    return [head, *text_table(["setting", f"{boot.confidence:.0%} percentile", "boot se", "bias", "note"], rows)]
+
+
+def bootstrap_lines(result: FitResult) -> list[str]:
+    """The bootstrap's table for :meth:`FitResult.summary` (:func:`bootstrap_rows`), under its title."""
+    from kalcal.results._display import text_table
+
+    return [bootstrap_title(result), *text_table(bootstrap_header(result), bootstrap_rows(result))]
+
+
+def likelihood_text(p: FitParameter) -> str:
+    """A setting's likelihood interval as the bootstrap's tables show it beside the percentile one: "[a, b]",
+    "[0, b]" for an estimate consistent with 0, "—" for an end the search range does not reach, "—" alone
+    for a setting without an estimate."""
+    if p.value is None:
+        return "—"
+    low = "0" if p.at_bound else "—" if p.ci_low is None else f"{p.ci_low:.4g}"
+    return f"[{low}, {'—' if p.ci_high is None else f'{p.ci_high:.4g}'}]"
 
 
 def percentile_text(b) -> str:

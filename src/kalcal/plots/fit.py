@@ -77,13 +77,29 @@ def plot_bootstrap(result, path: str | Path) -> Path:
     return save(bootstrap_figure(result), path)
 
 
+#: the fewest decades the drawn values span for a log axis: two, so that at least two decade ticks lie on it,
+#: each labelled with its number; over a narrower span a log axis may hold no decade tick at all (and its
+#: minor ticks' labels overprint each other), so the axis is linear there
+LOG_AXIS_DECADES = 2.0
+
+
 @styled
 def bootstrap_figure(result):
     """One panel per setting of ``result`` (a :class:`~kalcal.fitting.result.FitResult` with its
-    ``bootstrap``): the histogram of the B refits' estimates, the estimate, the likelihood interval
-    shaded (the fit's method, "[0, upper]" for one consistent with 0) and the percentile interval's ends
-    as dashed lines where it applies (the title says "not applicable" where it does not). On a log axis for
-    a setting searched on a log scale, whose estimates are positive."""
+    ``bootstrap``), in its order: the histogram of the B refits' estimates, the estimate, the likelihood
+    interval (the fit's method) shaded with solid lines at its ends (``gid`` "likelihood-interval"; an
+    estimate consistent with 0 has 0 as its lower end, drawn on a linear axis only) and the percentile
+    interval's ends as dashed lines (``gid`` "percentile-interval") where it applies. Where it does not, the
+    title says "not applicable" and why, in short (the reason in full is the table's and fit.json's); a
+    setting held in every refit has no histogram, only its reason.
+
+    The x axis is logarithmic for a setting searched on a log scale whose drawn values (refits, estimate,
+    interval ends) are positive and span :data:`LOG_AXIS_DECADES` decades or more, linear otherwise: either
+    way it carries numbered ticks."""
+    import textwrap
+
+    from matplotlib.ticker import MaxNLocator, NullFormatter
+
     boot = result.bootstrap
     names = list(boot.parameters)
     rows = max(1, (len(names) + 1) // 2)
@@ -94,30 +110,50 @@ def bootstrap_figure(result):
         ax.set_ylabel("refits")
         if not b.values:
             ax.set_title(f"{name}: not applicable", fontsize=9)
-            ax.text(0.5, 0.5, b.reason, ha="center", va="center", wrap=True, fontsize=8, transform=ax.transAxes)
+            ax.text(0.5, 0.5, textwrap.fill(b.reason, 60), ha="center", va="center", fontsize=8, transform=ax.transAxes)
+            ax.set_xticks([])
+            ax.set_yticks([])
             continue
         values = np.asarray(b.values, dtype=float)
-        log_axis = p.scale == "log" and values.min() > 0
-        bins = np.geomspace(values.min(), values.max(), 31) if log_axis and values.max() > values.min() else 30
+        drawn = np.array([x for x in (*values, p.value, p.ci_low, p.ci_high, b.ci_low, b.ci_high) if x is not None])
+        positive = drawn[drawn > 0]
+        log_axis = (p.scale == "log" and values.min() > 0 and positive.size > 0
+                    and np.log10(positive.max() / positive.min()) >= LOG_AXIS_DECADES)
+        if values.max() == values.min():  # every refit at one point (a flat direction): one bar about it
+            half = 0.05 * abs(values[0]) or 0.5
+            bins = [values[0] - half, values[0] + half]
+        else:
+            bins = np.geomspace(values.min(), values.max(), 31) if log_axis else 30
         ax.hist(values, bins=bins, color=ESTIMATE, alpha=0.55, label=f"{boot.replicates} bootstrap refits")
+        ax.yaxis.set_major_locator(MaxNLocator(integer=True))  # counts of refits
         if p.value is not None:
             ax.axvline(p.value, color="black", linewidth=1.2, label="estimate")
+        ends = [end for end in (p.ci_low, p.ci_high) if end is not None and (end > 0 or not log_axis)]
         if p.ci_high is not None:
-            left = p.ci_low if p.ci_low is not None and (p.ci_low > 0 or not log_axis) else min(values.min(), p.value or values.min())
+            # a lower end of 0 (consistent with 0) or none: the band runs from the leftmost thing drawn
+            left = p.ci_low if p.ci_low in ends else min(values.min(), p.value if p.value is not None else values.min())
             ax.axvspan(left, p.ci_high, color=BAND, alpha=0.22, label=f"{result.interval_method} interval")
+        for end in ends:
+            ax.axvline(end, color=BAND, linewidth=1.4, gid="likelihood-interval")
         if b.applicable:
             for end in (end for end in (b.ci_low, b.ci_high) if end is not None):  # None: at the range's end
-                ax.axvline(end, color="tab:red", linestyle="--", linewidth=1.0)
+                ax.axvline(end, color="tab:red", linestyle="--", linewidth=1.0, gid="percentile-interval")
             ax.plot([], [], color="tab:red", linestyle="--", label=f"{boot.confidence:.0%} percentile interval")
-            ax.set_title(f"{name}: bias {b.bias:.3g} ± {b.bias_se:.2g}", fontsize=9)
+            title = f"{name}: bias {b.bias:.3g} ± {b.bias_se:.2g}"
         else:
-            ax.set_title(f"{name}: percentile interval not applicable", fontsize=9)
+            title = f"{name}: percentile interval not applicable"
+        why = _short_reason(b.reason)
+        ax.set_title(title + (f"\n{why}" if why else ""), fontsize=9)
         ax.set_xscale("log" if log_axis else "linear")
-        if log_axis:  # a narrow span of decades: the minor ticks' labels would overprint each other
-            from matplotlib.ticker import NullFormatter
-
+        if log_axis:  # two decades or more: the decades' numbers label it; minor labels would overprint
             ax.xaxis.set_minor_formatter(NullFormatter())
         ax.legend(loc="upper right", fontsize=7)
     for ax in list(axes.flat)[len(names):]:
         ax.set_visible(False)
     return figure
+
+
+def _short_reason(reason: str) -> str:
+    """A bootstrap entry's reason in short, for a panel's title: each "; "-separated part up to its first
+    ": " ("at its lower bound (consistent with 0)", "lower end at the search range's end (1e-06)")."""
+    return "; ".join(part.split(": ", 1)[0] for part in reason.split("; ") if part)
