@@ -24,8 +24,9 @@ model, the errors are those of any u). A truth whose b differs makes the error d
 
 Stated limits, each refused in one line: a measured pattern (which components) that changes from one
 update row to another (the fixed-gain engine holds p measurements at every update; a constant pattern
-that leaves a component out is verified on the components measured); a diffuse filter (the fixed-gain
-filter has no diffuse start: give it a proper m0); a log without a measured row.
+that leaves a component out is verified on the components measured); a log without a measured row. A
+filter that starts diffuse takes the exact diffuse gains over the log's rows and is checked from the end of
+its diffuse period on (:mod:`kalcal.scenarios.model_file.diffuse`).
 """
 
 from __future__ import annotations
@@ -183,14 +184,12 @@ def logged_arrays(scenario, bound) -> LoggedArrays:
     ------
     ConfigError
         One line naming the file (and the log's row where it is a row's fault): no measured row, a measured
-        pattern that changes between update rows, a diffuse filter, a truth whose b differs from the filter's.
+        pattern that changes between update rows, a truth whose b differs from the filter's.
     """
-    from kalcal.scenarios.model_file.model import _inputs_cancel, diffuse_refusal
+    from kalcal.scenarios.model_file.model import _inputs_cancel
 
     file = scenario.model.file
     f, t = bound.filter, bound.truth if bound.truth is not None else bound.filter
-    if np.any(f.diffuse):
-        raise ConfigError(f"{file}: {diffuse_refusal(scenario.filter.diffuse)}")
     if not _inputs_cancel(scenario):
         raise ConfigError(
             f"{file}: its truth's b differs from the filter's, so the filter's error depends on the inputs u: a "
@@ -375,6 +374,10 @@ def logged_problem(scenario, form: UpdateForm = "joseph", residual_pairs: bool =
         capabilities=scenario.capabilities,
     )
     try:
+        if scenario.filter.diffuse:  # the exact diffuse gains, checked after the diffuse period
+            from kalcal.scenarios.model_file.diffuse import diffuse_logged_problem
+
+            return diffuse_logged_problem(scenario, info, arrays, form, residual_pairs)
         return LoggedGainProblem(info=info, filter_model=arrays.filter, truth=arrays.truth, form=form, residual_pairs=residual_pairs)
     except np.linalg.LinAlgError:
         raise ConfigError(
