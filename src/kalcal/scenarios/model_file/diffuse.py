@@ -73,9 +73,9 @@ def not_checked(first: int) -> str:
 def never_ends(states, updates: int) -> str:
     """Why a diffuse filter whose diffuse period does not end within the run is refused (after ``FILE:``)."""
     return (
-        f"its filter starts diffuse in {', '.join(states)} and the {updates} updates of the run never determine "
-        "them (the prior stays infinite in a diffuse direction through the last update), so there is no update to "
-        "check: measure those states, run more updates, or give them a proper m0"
+        f"its filter starts diffuse in {', '.join(states)} and its diffuse period takes all {updates} updates of the "
+        "run (the prior stays infinite in a diffuse direction up to the last update), so no update is left to check: "
+        "measure those states, run more updates, or give them a proper m0"
     )
 
 
