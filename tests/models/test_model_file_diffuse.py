@@ -191,6 +191,8 @@ def test_verify_passes_and_fails_the_covariance_check_when_the_worlds_noise_is_1
     assert [t["name"] for t in good["tests"]] == ["mean_error", "covariance", "residual_whiteness", "nis", "shape"]
     assert "orthogonality" in good["checks_left_out"]
     assert good["final"]["time"] == 60.0
+    page = (tmp_path / "good" / "report.html").read_text()
+    assert "Not checked: the diffuse period, updates 1..2." in page and "<code>orthogonality</code> left out" in page
     # the world's process and measurement noise std 1.5x the filter's (variances 2.25x): the exact analysis
     # gives the covariance check's power at N = 2000; theory, not this seed, says it detects it
     bad = _verify(tmp_path, TREND, "bad", "truth.w=[[0.675, 0.0], [0.0, 0.0225]]", "truth.v=[[3.375]]")
