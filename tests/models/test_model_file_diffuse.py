@@ -245,5 +245,8 @@ def test_verify_over_a_logs_rows_with_a_diffuse_filter(tmp_path):
     model = tmp_path / "logged.toml"
     result = _invoke("analyze", model, "--data", log, "--out", tmp_path / "analysis")
     assert result.exit_code == 0, result.output
+    assert "not checked: the diffuse period, updates 1..2" in result.output
     document = json.loads((tmp_path / "analysis" / "analysis.json").read_text())
     assert document["not_checked"] == "the diffuse period, updates 1..2"
+    assert "orthogonality" in document["checks_left_out"]
+    assert "orthogonality" not in {row["name"] for row in document["power"]}
