@@ -146,6 +146,10 @@ def test_the_gains_are_the_exact_diffuse_filters(text, first):
     model, rows = _time_varying(scenario)
     _gains_against_reference(problem, model, rows, first)
     assert problem.info.update_times.size == scenario.model.updates - first
+    for form in ("standard", "sqrt"):  # the ordinary pass after the period in the run's form: the same P
+        other = scenario.problem(form)
+        np.testing.assert_allclose(other.schedule.posterior_cov, problem.schedule.posterior_cov, rtol=1e-10, atol=1e-14)
+        np.testing.assert_allclose(other.full.schedule.gain, problem.full.schedule.gain, rtol=1e-10, atol=1e-14)
     assert problem.info.not_checked == ("the diffuse period, update 1" if first == 1 else "the diffuse period, updates 1..2")
 
 
@@ -241,6 +245,10 @@ def test_verify_over_a_logs_rows_with_a_diffuse_filter(tmp_path):
     summary = _verify(tmp_path, REGRESSION, "logged", data=log)
     assert summary["verdict"] == "pass" and summary["not_checked"] == "the diffuse period, updates 1..2"
     assert summary["realizations"] == 2000 and "orthogonality" not in [t["name"] for t in summary["tests"]]
+    # the report rebuilds the run from its summary (the log read again from its recorded path)
+    rebuilt = _invoke("report", tmp_path / "logged")
+    assert rebuilt.exit_code == 0, rebuilt.output
+    assert "Not checked: the diffuse period, updates 1..2." in (tmp_path / "logged" / "report.html").read_text()
     # analyze --data says the same
     model = tmp_path / "logged.toml"
     result = _invoke("analyze", model, "--data", log, "--out", tmp_path / "analysis")
