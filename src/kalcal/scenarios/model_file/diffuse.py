@@ -46,9 +46,8 @@ from typing import Any
 import numpy as np
 
 from kalcal.core.steps import GainSchedule, UpdateForm, gain_and_covariance, interval_transition, predict_covariance
-from kalcal.core.timevarying_filter import DIFFUSE_TOL
+from kalcal.core.timevarying_filter import diffuse_step, predict_diffuse
 from kalcal.errors import ConfigError
-from kalcal.linalg import symmetrize
 from kalcal.montecarlo.accumulators import BlockResult, MomentSums
 from kalcal.montecarlo.problem import FixedGainProblem, ProblemDefaults, ProblemInfo
 from kalcal.scenarios.model_file.logged import LoggedGainProblem, covariance_pass_over
@@ -138,8 +137,8 @@ def diffuse_schedule(
     first = n_updates
     for k in range(n_updates):
         cov = predict_covariance(cov, transitions[k], process_cov[k])
-        inf = symmetrize(transitions[k] @ inf @ transitions[k].T)
-        if np.sum(inf * inf) <= DIFFUSE_TOL:
+        inf = predict_diffuse(inf, transitions[k])
+        if inf is None:
             first = k
             break
         # decorrelate the row (z* = L^{-1} z, h* = L^{-1} H) and carry d xhat / d z (d, p) through its
@@ -151,18 +150,11 @@ def diffuse_schedule(
         for i in range(p):
             row = hs[i]
             e = zs[i] - row @ slope  # d e / d z of this component's innovation
-            if inf is not None:
-                m_inf = inf @ row
-                f_inf = row @ m_inf
-                if f_inf > DIFFUSE_TOL * (row @ row) * max(np.max(np.diagonal(inf)), 1.0):
-                    k0 = m_inf / f_inf
-                    slope = slope + np.outer(k0, e)
-                    a = np.eye(d) - np.outer(k0, row)
-                    cov = symmetrize(a @ cov @ a.T + np.outer(k0, k0))  # the kappa^0 term, Joseph form with K0
-                    inf = symmetrize(inf - np.outer(m_inf, m_inf) / f_inf)
-                    if np.sum(inf * inf) <= DIFFUSE_TOL:
-                        inf = None
-                    continue
+            step = None if inf is None else diffuse_step(cov, inf, row)  # the log filter's own step
+            if step is not None:
+                slope = slope + np.outer(step.gain, e)
+                cov, inf = step.cov, step.inf
+                continue
             gain, cov, _ = gain_and_covariance(cov, row[None, :], _ONE, "joseph")
             slope = slope + np.outer(gain[:, 0], e)
         gains[k] = slope
