@@ -153,6 +153,20 @@ def test_the_gains_are_the_exact_diffuse_filters(text, first):
     assert problem.info.not_checked == ("the diffuse period, update 1" if first == 1 else "the diffuse period, updates 1..2")
 
 
+def test_a_diffuse_state_that_the_transition_forgets_leaves_nothing_out():
+    # x2 is diffuse but phi maps it to 0 before the first update: every update is checked, with the
+    # exact diffuse filter's P
+    text = TREND.replace("phi = [[1.0, 1.0], [0.0, 1.0]]", "phi = [[1.0, 0.0], [0.0, 0.0]]").replace(
+        'm0 = [[0.0, 0.0], [0.0, 0.0]]\ndiffuse = ["level", "slope"]', 'm0 = [[4.0, 0.0], [0.0, 0.0]]\ndiffuse = ["slope"]'
+    )
+    scenario = parse_model(text, "model.toml")
+    problem = scenario.problem()
+    assert not isinstance(problem, CheckedWindowProblem) and problem.first == 0 and problem.info.not_checked == ""
+    model, rows = _time_varying(scenario)
+    reference = reference_filter(model, np.where(np.isin(np.arange(model.steps), rows)[:, None], 0.0, np.nan))
+    np.testing.assert_allclose(problem.schedule.posterior_cov, reference.cov[rows], rtol=1e-12, atol=1e-14)
+
+
 @pytest.mark.parametrize("text", [LOCAL_LEVEL, TREND])
 def test_after_the_diffuse_period_the_exact_error_covariance_is_the_filters_whatever_the_worlds_prior(text):
     d = 1 if text is LOCAL_LEVEL else 2

@@ -128,7 +128,7 @@ def diffuse_schedule(
     first : int
         The first update (0-based) whose prior is proper; K when the period does not end within the run.
     cov : ndarray, shape (d, d)
-        P_* after update first - 1 (m0 for first = 0): the proper posterior the ordinary pass starts from.
+        P_* after update first - 1 (m0 for first = 0): the proper posterior the ordinary pass predicts from.
     """
     n_updates, p, d = h.shape
     gains = np.zeros((n_updates, d, p))
@@ -136,11 +136,11 @@ def diffuse_schedule(
     inf: np.ndarray | None = np.diag(np.asarray(diffuse, dtype=float))
     first = n_updates
     for k in range(n_updates):
-        cov = predict_covariance(cov, transitions[k], process_cov[k])
         inf = predict_diffuse(inf, transitions[k])
-        if inf is None:
+        if inf is None:  # Phi_k maps every diffuse direction to zero: update k's prior is proper
             first = k
             break
+        cov = predict_covariance(cov, transitions[k], process_cov[k])
         # decorrelate the row (z* = L^{-1} z, h* = L^{-1} H) and carry d xhat / d z (d, p) through its
         # scalar updates: the composition of affine updates is xbar + G (z - H xbar), G its value at xbar = 0
         lower = np.linalg.cholesky(v[k])
