@@ -272,16 +272,22 @@ def test_a_log_with_nothing_in_the_likelihood_is_refused_by_fit(tmp_path, text, 
 
 
 # model.toml's header says which commands take it, and the claim holds: verify takes a fitted proper
-# filter (test_cli_fit_then_verify_the_fitted_file) and refuses a fitted diffuse one in the words the
-# header quotes.
-def test_model_toml_header_says_verify_refuses_a_diffuse_filter(tmp_path):
-    from kalcal.scenarios.model_file.model import diffuse_refusal
+# filter (test_cli_fit_then_verify_the_fitted_file) and a fitted diffuse one whose [truth] gives the world's
+# m0, and refuses a fitted diffuse one without it in the words the header quotes.
+def test_model_toml_header_says_whether_verify_takes_a_diffuse_filter(tmp_path):
+    from kalcal.scenarios.model_file.diffuse import truth_prior_refusal
 
-    text = AR1_DIFFUSE.replace("phi = [[0.5]]", "phi = [[1.0]]") + "\n[truth]\nm0 = [[4.0]]\n"
-    kalcal.fit(parse_model(text, "ar1.toml"), data=_ar1_log(), free="filter.w,filter.v", out=tmp_path / "fit")
-    model = tmp_path / "fit" / "model.toml"
-    header = " ".join(line[2:] for line in model.read_text().splitlines() if line.startswith("# "))
-    assert "`kalcal verify` without a log does not" in header and "kalcal verify` take" not in header
-    assert diffuse_refusal(["x1"]) in header
-    result = CliRunner().invoke(app, ["verify", str(model), "-n", "100", "--out", str(tmp_path / "v")])
-    assert result.exit_code == 2 and diffuse_refusal(["x1"]) in " ".join(result.output.split())
+    text = AR1_DIFFUSE.replace("phi = [[0.5]]", "phi = [[1.0]]")
+    for name, truth in (("with", "\n[truth]\nm0 = [[4.0]]\n"), ("without", "")):
+        kalcal.fit(parse_model(text + truth, "ar1.toml"), data=_ar1_log(), free="filter.w,filter.v", out=tmp_path / name)
+        model = tmp_path / name / "model.toml"
+        header = " ".join(line[2:] for line in model.read_text().splitlines() if line.startswith("# "))
+        result = CliRunner().invoke(app, ["verify", str(model), "-n", "100", "--out", str(tmp_path / f"v{name}")])
+        if truth:
+            assert "`kalcal calibrate`, `kalcal fit` and `kalcal verify` take this file as it is." in header
+            assert result.exit_code == 0, result.output
+        else:
+            why = truth_prior_refusal(parse_model(model.read_text(), "model.toml"))
+            assert why.startswith("its filter starts diffuse in x1 and it has no [truth] m0") and why in header
+            assert "`kalcal verify` without a log does not" in header and "kalcal verify` take" not in header
+            assert result.exit_code == 2 and why in " ".join(result.output.split())

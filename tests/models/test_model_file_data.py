@@ -193,21 +193,24 @@ def test_truth_inputs_decide_whether_verify_needs_a_log():
     assert no_updates.without_log().startswith("it sets no updates")
 
 
-# One refusal for a diffuse filter, whatever its [truth] says: a proper truth prior used to be asked for
-# and then refused again for the engine's missing diffuse start.
-def test_a_diffuse_filter_is_refused_by_verify_in_one_consistent_message():
+# A diffuse filter is verified where its [truth] gives the world's m0 (tests/models/test_model_file_diffuse.py);
+# without one, the one line that simulate gives too, naming what to add.
+def test_a_diffuse_filter_without_a_truth_m0_is_refused_by_verify_and_verified_with_one():
     timing = {"steps_per_update": "1", "updates": "3", "b": None, "diffuse": '["x1"]', "m0": "[[0.0, 0.0], [0.0, 1.0]]"}
     data = {"measurements": '["pos", "vel"]'}
     expected = (
-        f"a model file ({SOURCE}): its filter starts diffuse in x1: kalcal verify and analyze do not take a diffuse "
-        "filter (the exact engine's fixed-gain filter has no diffuse start); calibrate and fit take the file as it "
-        "is. To verify, give the filter a proper m0 on those states (and the world's prior as the [truth] m0)"
+        f"a model file ({SOURCE}): its filter starts diffuse in x1 and it has no [truth] m0: give [truth] m0 (the "
+        "world's proper prior) to verify or analyze it"
     )
-    for truth in ({}, {"truth": {"m0": "[[25.0, 0.0], [0.0, 1.0]]"}}):
+    for truth in ({}, {"truth": {"w": "[[0.09]]"}}):
         scenario = parse_model(_text(data=data, **truth, **timing), SOURCE)
-        with pytest.raises(ConfigError) as info:
-            require(scenario, "verify")
-        assert str(info.value) == expected
+        for command in ("verify", "analyze"):
+            with pytest.raises(ConfigError) as info:
+                require(scenario, command)
+            assert str(info.value) == expected
+    proper = parse_model(_text(data=data, truth={"m0": "[[25.0, 0.0], [0.0, 1.0]]"}, **timing), SOURCE)
+    require(proper, "verify")
+    require(proper, "analyze")
 
 
 # --- round trips ------------------------------------------------------------------------------------------

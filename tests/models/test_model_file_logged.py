@@ -140,8 +140,10 @@ def test_the_inputs_are_not_read_where_the_truths_b_is_the_filters(tmp_path):
 @pytest.mark.parametrize(
     ("edit", "columns", "expected"),
     [
-        (lambda t: t.replace('m0    = [[25.0, 0.0], [0.0, 1.0]]', 'm0 = [[0.0, 0.0], [0.0, 1.0]]\ndiffuse = ["x1"]')
-         + '\n[truth]\nm0 = [[25.0, 0.0], [0.0, 1.0]]\n', {}, "no diffuse start"),
+        # a diffuse filter is verified over a log (tests/models/test_model_file_diffuse.py) where its [truth]
+        # gives the world's m0; without one the world would start exactly at x0 in the diffuse state
+        (lambda t: t.replace('m0    = [[25.0, 0.0], [0.0, 1.0]]', 'm0 = [[0.0, 0.0], [0.0, 1.0]]\ndiffuse = ["x1"]'),
+         {}, "it has no [truth] m0: give [truth] m0"),
     ],
 )
 def test_the_stated_limits_are_refused_in_one_line(tmp_path, edit, columns, expected):

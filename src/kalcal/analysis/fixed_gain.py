@@ -77,6 +77,9 @@ def analyze_problem(
     # a scenario without an exact analysis is refused before, by its capabilities
     if not problem.has_exact_analysis():
         raise KalcalError(f"{problem.info.scenario}: no exact covariance analysis (its gains depend on the data)")
+    full = getattr(problem, "full", None)
+    if full is not None:  # a run reported over a window of its updates (a diffuse start): all of it, then the window
+        return problem.window_analysis(analyze_problem(full, sources, pairs=pairs, budget=budget))
     truth = truth_arrays(problem.truth)
     schedule = problem.schedule
     filt = FilterArrays(schedule.transitions, problem.filter_model.h, schedule.gain, problem.filter_model.x0)

@@ -184,6 +184,7 @@ def analyze(
 def _compute(model, n: int, form: str, command: str) -> AnalysisResult:
     from kalcal.analysis.dataset import analysis_dataset, budget_summary, final_summary
     from kalcal.analysis.fixed_gain import analyze_scenario
+    from kalcal.api.verification import left_out
     from kalcal.models.config import section_values
 
     start = time.perf_counter()
@@ -196,6 +197,7 @@ def _compute(model, n: int, form: str, command: str) -> AnalysisResult:
         "settings": section_values(model),
         "form": form,
         "realizations": n,
+        **left_out(analysis.info),
         "final": final,
         "budget": budget,
         "power": power,

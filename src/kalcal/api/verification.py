@@ -219,6 +219,18 @@ def exact_analysis(scenario, problem):
     return analyze_problem(problem, budget=False) if scenario.capabilities.exact_analysis else None
 
 
+def left_out(info) -> dict[str, Any]:
+    """``summary.json``'s ``not_checked`` (the updates no check covers, in words: a diffuse filter's diffuse
+    period) and ``checks_left_out`` (check -> why), where the problem leaves something out; nothing else, so
+    that every other run's summary keeps its keys."""
+    out: dict[str, Any] = {}
+    if info.not_checked:
+        out["not_checked"] = info.not_checked
+    if info.no_orthogonality:
+        out["checks_left_out"] = {"orthogonality": info.no_orthogonality}
+    return out
+
+
 def power_summary(problem, n: int, confidence: float, analysis=None) -> dict[str, Any]:
     """``summary.json``'s ``power`` (each check's and part's power at n, from the exact analysis of the same
     problem: :func:`kalcal.stats.suite.problem_power`) and ``power_reason`` (why it is None, where it is)."""
@@ -388,6 +400,7 @@ def compute_verification(
         "confidence": confidence,
         "verdict": verdict(checks),
         "tests": [c.as_dict() for c in checks],
+        **left_out(info),
         "self_check": bench.as_dict(),
         **power_summary(problem, n, confidence, analysis),
         "power_truth_equals_filter": truth_equals(analysis),

@@ -189,6 +189,10 @@ def _print_checks(summary: dict) -> None:
             result,
         )
     _console().print(table)
+    if summary.get("not_checked"):  # a diffuse filter's diffuse period: no check covers it
+        _console().print(f"not checked: {escape(summary['not_checked'])}")
+    for name, why in (summary.get("checks_left_out") or {}).items():
+        _console().print(f"{escape(name)} left out: {escape(why)}")
     for test in summary["tests"]:
         if not test["passed"]:
             _console().print(f"[bold]{test['name']}[/bold]: {escape(test['detail'])}")

@@ -57,6 +57,8 @@ def analyze(
             row["top_source"], f"{100 * row['top_share']:.0f}%",
         )  # fmt: skip
     _common.console.print(table)
+    if result.document.get("not_checked"):  # a diffuse filter's diffuse period: the analysis starts after it
+        _common.console.print(f"not checked: {result.document['not_checked']}", markup=False, soft_wrap=True)
     from kalcal.stats.power import N_CAP, power_line
     from kalcal.stats.sensitivity import sensitivity_text
 

@@ -61,7 +61,10 @@ from kalcal.core.timevarying import TimeVaryingModel, measured_components
 from kalcal.core.timevarying_kernels import run_rows
 from kalcal.linalg import symmetrize
 
-__all__ = ["DIFFUSE_TOL", "TimeVaryingRun", "Whitened", "filter_model", "loglik", "reference_filter", "smooth", "whiten"]
+__all__ = [
+    "DIFFUSE_TOL", "DiffuseStep", "TimeVaryingRun", "Whitened", "diffuse_step", "filter_model", "loglik",
+    "predict_diffuse", "reference_filter", "smooth", "whiten",
+]
 
 #: the diffuse period ends once |P_inf|_F^2 <= DIFFUSE_TOL (P_inf starts as a 0/1 matrix); F_inf counts as
 #: 0 below DIFFUSE_TOL |h*|^2 max(1, max diag P_inf) (rounding after a rank reduction is ~1e-16 of that scale)
@@ -167,9 +170,39 @@ def _predict(state: _State, model: TimeVaryingModel, gq: np.ndarray, bu_prev: np
     state.x = model.phi @ state.x + bu_prev
     state.cov = predict_covariance(state.cov, model.phi, gq)
     if state.inf is not None:
-        state.inf = symmetrize(model.phi @ state.inf @ model.phi.T)
-        if np.sum(state.inf * state.inf) <= DIFFUSE_TOL:
-            state.inf = None
+        state.inf = predict_diffuse(state.inf, model.phi)
+
+
+class DiffuseStep(NamedTuple):
+    """One decorrelated component's exact diffuse update (F_inf > 0)."""
+
+    gain: np.ndarray  #: K0 = P_inf h^T / F_inf, (d,)
+    cov: np.ndarray  #: P_* after it, (d, d)
+    inf: np.ndarray | None  #: P_inf after it, (d, d); None once it counts as 0 (the diffuse period is over)
+    f_inf: float  #: F_inf = h P_inf h^T
+
+
+def diffuse_step(cov: np.ndarray, inf: np.ndarray, h: np.ndarray) -> DiffuseStep | None:
+    """The exact diffuse update of P_* and P_inf by one decorrelated component h (d,) of unit noise, or None
+    where F_inf counts as 0 (then the ordinary update of P_* applies). The one step that the log filter
+    (:func:`reference_filter`) and a diffuse filter's gains computed once
+    (:func:`kalcal.scenarios.model_file.diffuse.diffuse_schedule`) both take."""
+    m_inf = inf @ h
+    f_inf = h @ m_inf
+    if not f_inf > DIFFUSE_TOL * (h @ h) * max(np.max(np.diagonal(inf)), 1.0):
+        return None
+    k0 = m_inf / f_inf
+    a = np.eye(h.size) - np.outer(k0, h)
+    # the kappa^0 term of (P_* + kappa P_inf) updated: Joseph form with the diffuse gain K0
+    cov = symmetrize(a @ cov @ a.T + np.outer(k0, k0))
+    inf = symmetrize(inf - np.outer(m_inf, m_inf) / f_inf)
+    return DiffuseStep(k0, cov, None if np.sum(inf * inf) <= DIFFUSE_TOL else inf, float(f_inf))
+
+
+def predict_diffuse(inf: np.ndarray, phi: np.ndarray) -> np.ndarray | None:
+    """P_inf predicted, Phi P_inf Phi^T; None once it counts as 0 (|P_inf|_F^2 <= DIFFUSE_TOL)."""
+    inf = symmetrize(phi @ inf @ phi.T)
+    return None if np.sum(inf * inf) <= DIFFUSE_TOL else inf
 
 
 def _update_row(state: _State, white: Whitened, j: int, conditioned: np.ndarray) -> None:
@@ -178,17 +211,10 @@ def _update_row(state: _State, white: Whitened, j: int, conditioned: np.ndarray)
         h = white.hs[j, i]
         e = white.zs[j, i] - h @ state.x
         if state.inf is not None:
-            m_inf = state.inf @ h
-            f_inf = h @ m_inf
-            if f_inf > DIFFUSE_TOL * (h @ h) * max(np.max(np.diagonal(state.inf)), 1.0):
-                k0 = m_inf / f_inf
-                state.x = state.x + k0 * e
-                a = np.eye(h.size) - np.outer(k0, h)
-                # the kappa^0 term of (P_* + kappa P_inf) updated: Joseph form with the diffuse gain K0
-                state.cov = symmetrize(a @ state.cov @ a.T + np.outer(k0, k0))
-                state.inf = symmetrize(state.inf - np.outer(m_inf, m_inf) / f_inf)
-                if np.sum(state.inf * state.inf) <= DIFFUSE_TOL:
-                    state.inf = None
+            step = diffuse_step(state.cov, state.inf, h)
+            if step is not None:
+                state.x = state.x + step.gain * e
+                state.cov, state.inf, f_inf = step.cov, step.inf, step.f_inf
                 conditioned[j, white.origin[j, i]] = True
                 # statsmodels' term is -1/2 log(2 pi F_inf) of the component in its own units,
                 # F_inf L_ii^2: the decorrelation's Jacobian belongs to it

@@ -59,6 +59,12 @@ class ProblemInfo:
     #: what the checks, the power and the report ask of it (an exact analysis, the same P in every
     #: realization); None for a problem built by hand, which those then refuse
     capabilities: Any = None
+    #: the updates of the run left out of the checks and statistics, in words ("" for none): a diffuse
+    #: filter's diffuse period (:mod:`kalcal.scenarios.model_file.diffuse`), whose P and S are infinite
+    not_checked: str = ""
+    #: why the orthogonality check is left out ("" where it is made): E[e xhat^T] = 0 holds for a posterior
+    #: mean, and a diffuse filter's estimate ignores the world's prior (:mod:`kalcal.scenarios.model_file.diffuse`)
+    no_orthogonality: str = ""
 
 
 def capabilities_of(problem) -> Any:

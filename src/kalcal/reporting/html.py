@@ -40,7 +40,7 @@ from kalcal.reporting.markup import esc, table
 from kalcal.reporting.run_tables import final_table, reproduce_section, settings_section, timing_section
 from kalcal.reporting.text import confidence_statement, scope_statement
 from kalcal.reporting.theory import power_section, self_check_section
-from kalcal.reporting.verdicts import answer_section, checks_table, effects_section, failures_section, verdicts_section
+from kalcal.reporting.verdicts import answer_section, checks_table, effects_section, failures_section, left_out_note, verdicts_section
 from kalcal.stats.text import fmt
 
 GROUPS = (
@@ -356,7 +356,7 @@ def build_page(
         title=f"kalcal verification report: {summary['scenario']}",
         verdict=answer.verdict,
         answer=Markup(answer_section(answer, scope_statement(summary))),
-        checks=Markup(checks_table(answer)),
+        checks=Markup(checks_table(answer) + left_out_note(summary)),
         lead=Markup(lead_section(lead, figure_dir_name)),
         realizations=fmt(summary["realizations"]),
         engine=summary["engine"],

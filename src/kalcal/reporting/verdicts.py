@@ -53,6 +53,17 @@ def checks_table(answer: Answer) -> str:
     return table(("check", "verdict", "p-value", "cause"), rows, css_class="checks", table_id="checks")
 
 
+def left_out_note(summary: Mapping[str, Any]) -> str:
+    """Below the checks: the updates no check covers and the checks left out, where the run says so
+    (``summary.json``'s ``not_checked`` and ``checks_left_out``: a diffuse filter's diffuse period); "" else."""
+    lines = []
+    if summary.get("not_checked"):
+        lines.append(f"<p>Not checked: {esc(summary['not_checked'])}.</p>")
+    for name, why in (summary.get("checks_left_out") or {}).items():
+        lines.append(f"<p><code>{esc(name)}</code> left out: {esc(why)}.</p>")
+    return "".join(lines)
+
+
 def failures_section(summary: Mapping[str, Any], answer: Answer | None = None) -> str:
     """What failed: each failed check folded under its name and short cause (from ``answer``), and led by
     its likely cause when opened; nothing when every check passed (the answer says so)."""

@@ -33,8 +33,8 @@ The search, the intervals, "consistent with 0" and the flatness verdicts are
 :func:`kalcal.fitting.mle.maximize`'s. The outputs: fit.json, fit.png and ``model.toml``, the model file
 with the fitted values written in (its filter's matrices; a ``[truth]`` key the file set apart from its
 filter stays the file's), which ``calibrate`` takes as it is, and ``verify`` where it takes the file
-(its header says which: a diffuse filter is not verified, a file whose rows come from a log is verified
-with ``--data LOG``).
+(its header says which: a diffuse filter is verified where its [truth] gives the world's m0, a file whose
+rows come from a log is verified with ``--data LOG``).
 """
 
 from __future__ import annotations

@@ -31,8 +31,9 @@ the exact analysis add f_k back to every estimate they keep.
 
 Stated limits, each refused in one line: a measured pattern (which components) that changes from one
 update row to another (the fixed-gain engine holds p measurements at every update; a constant pattern
-that leaves a component out is verified on the components measured); a diffuse filter (the fixed-gain
-filter has no diffuse start: give it a proper m0); a log without a measured row.
+that leaves a component out is verified on the components measured); a log without a measured row. A
+filter that starts diffuse takes the exact diffuse gains over the log's rows and is checked from the end of
+its diffuse period on (:mod:`kalcal.scenarios.model_file.diffuse`).
 """
 
 from __future__ import annotations
@@ -196,14 +197,11 @@ def logged_arrays(scenario, bound) -> LoggedArrays:
     ------
     ConfigError
         One line naming the file (and the log's row where it is a row's fault): no measured row, a measured
-        pattern that changes between update rows, a diffuse filter.
+        pattern that changes between update rows.
     """
-    from kalcal.scenarios.model_file.model import _inputs_cancel, diffuse_refusal
+    from kalcal.scenarios.model_file.model import _inputs_cancel
 
-    file = scenario.model.file
     f, t = bound.filter, bound.truth if bound.truth is not None else bound.filter
-    if np.any(f.diffuse):
-        raise ConfigError(f"{file}: {diffuse_refusal(scenario.filter.diffuse)}")
     measured = measured_components(f, bound.z) & np.all(np.isfinite(t.h), axis=2)
     updates = np.flatnonzero(np.any(measured, axis=1))
     if updates.size == 0:
@@ -504,6 +502,10 @@ def logged_problem(scenario, form: UpdateForm = "joseph", residual_pairs: bool =
         capabilities=scenario.capabilities,
     )
     try:
+        if scenario.filter.diffuse:  # the exact diffuse gains, checked after the diffuse period
+            from kalcal.scenarios.model_file.diffuse import diffuse_logged_problem
+
+            return diffuse_logged_problem(scenario, info, arrays, form, residual_pairs)
         return LoggedGainProblem(info=info, filter_model=arrays.filter, truth=arrays.truth, form=form, residual_pairs=residual_pairs)
     except np.linalg.LinAlgError:
         raise ConfigError(

@@ -78,15 +78,6 @@ from kalcal.models.settings import (
 _REQUIRED = MODEL_KEYS
 
 
-def diffuse_refusal(states: Iterable[str]) -> str:
-    """Why ``verify`` and ``analyze`` refuse a filter that starts diffuse in ``states``, with or without a log
-    and whatever the file's [truth] says (one message for every path), in words that follow ``FILE:``."""
-    return (
-        f"its filter starts diffuse in {', '.join(states)}: kalcal verify and analyze do not take a diffuse filter "
-        "(the exact engine's fixed-gain filter has no diffuse start); calibrate and fit take the file as it is. To "
-        "verify, give the filter a proper m0 on those states (and the world's prior as the [truth] m0)"
-    )
-
 _TIMING = ("steps_per_update", "updates")
 _NAME_KEYS = ("state_names", "state_units", "measurement_names", "measurement_units")
 #: what a model file adds to the time-invariant model: known inputs and the states started diffuse
@@ -197,8 +188,10 @@ class CustomModelScenario(ScenarioDefaults):
 
     def without_log(self) -> str:
         """Why the file's model cannot be verified or analyzed without a log ("" when it can), in words
-        that follow ``FILE:``: the rows of h, the stds or the truth's inputs come from a log, the filter
-        starts diffuse, or the file sets no updates."""
+        that follow ``FILE:``: the rows of h, the stds or the truth's inputs come from a log, or the file
+        sets no updates, or the filter starts diffuse and the [truth] gives no m0 of its own. A filter that
+        starts diffuse is verified from the end of its diffuse period on
+        (:mod:`kalcal.scenarios.model_file.diffuse`)."""
         f, t, data = self.filter, self.truth, self.data
         columns = tuple(dict.fromkeys((*f.data_columns, *t.data_columns)))
         if columns:
@@ -210,7 +203,11 @@ class CustomModelScenario(ScenarioDefaults):
             stds = ", ".join(c for c in data.stds if c)
             return f"its measurement stds come from data columns ({stds}): it is not verified without a log (--data LOG)"
         if f.diffuse:
-            return diffuse_refusal(f.diffuse)
+            from kalcal.scenarios.model_file.diffuse import truth_prior_refusal
+
+            why = truth_prior_refusal(self)
+            if why:
+                return why
         mismatch = _input_mismatch(self)
         if mismatch == "b":
             return (

@@ -30,6 +30,8 @@ def custom_problem(
         capabilities=scenario.capabilities,
     )
     try:
+        if scenario.filter.diffuse:
+            return _diffuse_problem(scenario, info, form, residual_pairs)
         return FixedGainProblem(
             info=info,
             filter_model=scenario.filter,
@@ -43,6 +45,20 @@ def custom_problem(
             f"{m.file}: the filter's covariance P_k is singular at some update (give the unobserved states "
             "prior variance in m0 or process noise through gamma and w)"
         ) from None
+
+
+def _diffuse_problem(scenario: CustomModelScenario, info: ProblemInfo, form: UpdateForm, residual_pairs: bool):
+    """A filter that starts diffuse: the exact diffuse gains, every update run, the checks from the end of the
+    diffuse period on (:mod:`kalcal.scenarios.model_file.diffuse`); refused where the period never ends."""
+    from kalcal.scenarios.model_file.diffuse import DiffuseFixedGainProblem, diffuse_flags, windowed
+
+    flags = diffuse_flags(scenario)
+    f, updates = scenario.filter, scenario.model.updates
+    full = DiffuseFixedGainProblem(
+        info=info, filter_model=dataclasses.replace(f, x0=np.where(flags, 0.0, f.x0)),
+        truth=truth_from_model(scenario.truth, updates), form=form, residual_pairs=residual_pairs, diffuse=flags,
+    )  # fmt: skip
+    return windowed(scenario, full, "", f)
 
 
 def custom_model_error_cause(scenario: CustomModelScenario) -> str:
