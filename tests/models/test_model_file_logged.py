@@ -198,13 +198,3 @@ def test_the_report_rebuilds_from_the_recorded_log_and_refuses_a_changed_one(tmp
     _regression_log(log, count=401)
     refused = _invoke("report", out)
     assert refused.exit_code == 2 and "has changed since the run read it" in refused.stderr, refused.stderr
-
-
-def test_sweep_over_a_log_is_refused_saying_why(tmp_path):
-    model = tmp_path / "cv.toml"
-    model.write_text(CV_LOG)
-    result = _invoke("sweep", model, "--data", _cv_log(tmp_path / "log.csv"))
-    assert result.exit_code == 2 and result.stderr.count("\n") == 1 and "sweep of a model file over a log is not built" in result.stderr
-    # its advice is one that runs: a model file without --data is not swept either
-    assert "sweep the file without --data" not in result.stderr
-    assert "run verify/analyze --data once per setting with --set" in result.stderr
