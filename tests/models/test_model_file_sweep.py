@@ -66,7 +66,7 @@ def test_set_takes_one_number_of_a_matrix():
     assert np.array_equal(one.filter.v, parse_model(CV, "cv.toml", ["filter.v=[[0.5]]"]).filter.v)
     # a diagonal entry of a covariance holds its correlation: C_12 / sqrt(C_11 C_22) = 3 / 5 before and after
     m0 = parse_model(CV, "cv.toml", ["filter.m0.2=16"]).filter.m0
-    assert m0[1, 1] == 16.0 and m0[0, 0] == 25.0
+    assert m0.tolist() == [[25.0, 12.0], [12.0, 16.0]]  # S = diag(1, 4): C_12 = 3 x 4 (docs/custom-models.md)
     assert m0[0, 1] == m0[1, 0] and m0[0, 1] / np.sqrt(m0[0, 0] * m0[1, 1]) == pytest.approx(3.0 / 5.0, rel=1e-15)
     # a truth entry sets the truth's matrix (the file's, which [truth] follows) and leaves the filter's
     truth = parse_model(CV, "cv.toml", ["truth.phi.1.2=0.2", "filter.x0.2=3"])
@@ -118,6 +118,9 @@ def test_each_value_of_a_sweep_is_the_verify_of_that_value_and_report_rebuilds_i
     assert settings["filter"]["m0"] == [[25.0, 6.0], [6.0, 4.0]] and settings["truth"]["m0"] == [[25.0, 3.0], [3.0, 1.0]]
     rebuilt = _invoke("report", result.runs[1])
     assert rebuilt.exit_code == 0, rebuilt.output + rebuilt.stderr
+    # the file read already (kalcal.load_model) sweeps as its path does
+    again = kalcal.sweep(kalcal.load_model(model), "filter.m0.2", [1, 4], n=200, seed=5, out=tmp_path / "loaded")
+    pd.testing.assert_frame_equal(again.table, result.table)
 
 
 def test_sweep_of_a_model_file_over_a_log_end_to_end(tmp_path):
@@ -172,7 +175,8 @@ def test_a_key_that_names_a_matrix_is_refused_naming_its_numbers(tmp_path):
 
 def test_the_timing_over_a_log_and_the_sample_period_are_refused(tmp_path):
     log = _cv_log(tmp_path / "log.csv")
-    assert "the log sets the run's timing" in _refused(tmp_path, CV_LOG, "--data", log, "--set", "model.updates=5,10")
+    for key in ("model.updates=5,10", "filter.steps_per_update=5,10", "filter.sample_period=0.1,0.2"):
+        assert "the log sets the run's timing" in _refused(tmp_path, CV_LOG, "--data", log, "--set", key)
     assert "only relabels the update times" in _refused(tmp_path, CV, "--set", "filter.sample_period=0.1,0.2")
     assert "not a number of the model" in _refused(tmp_path, CV, "--set", "model.name=a,b")
 

@@ -223,18 +223,17 @@ def model_file_cells(
     the log ``data`` where one is given, read and fingerprinted once: every value runs over the same bytes),
     each checked as ``verify`` checks it, so that a bad value is refused before the first run.
 
-    Refused in one line (:func:`kalcal.scenarios.model_file.entries.sweep_refusal`): a key that names a
+    Refused in one line (the scenario's ``sweep_refusal``, :mod:`kalcal.scenarios.model_file.entries`): a key that names a
     matrix of more than one number (the keys of its numbers are named), a key that is no number of the
     model, and the timing keys over a log; and whatever ``verify`` refuses of the file (a diffuse filter).
     """
     from kalcal.api._scenario import resolve, with_data
     from kalcal.capabilities import require
     from kalcal.errors import KalcalError
-    from kalcal.scenarios.model_file.entries import sweep_refusal
 
     fixed = {k: v for k, v in flat_settings(settings).items() if k != key}
     base = with_data(resolve(scenario, fixed, config, models=True), data, "verify", topic)
-    why = sweep_refusal(base, key, over_log=data is not None)
+    why = base.sweep_refusal(key)
     if why:
         raise KalcalError(f"sweep: {key}: {why}")
     require(base, "sweep")  # what verify refuses of the file, in its own words

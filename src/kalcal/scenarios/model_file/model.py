@@ -221,6 +221,13 @@ class CustomModelScenario(ScenarioDefaults):
             return "it sets no updates (the model file's updates and steps_per_update say how long to verify it without a log)"
         return ""
 
+    def sweep_refusal(self, key: str) -> str:
+        """Why ``kalcal sweep`` does not sweep ``key`` of this file ("" when it does: one number of the model,
+        :func:`kalcal.scenarios.model_file.entries.sweep_refusal`), in words that follow ``sweep: KEY:``."""
+        from kalcal.scenarios.model_file.entries import sweep_refusal
+
+        return sweep_refusal(self, key, over_log=getattr(self, "log", None) is not None)
+
     # The Scenario protocol (kalcal.scenarios.protocol): each answer from this package's modules, imported
     # where asked because they import this one.
 
