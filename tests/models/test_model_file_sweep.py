@@ -173,12 +173,14 @@ def test_a_key_that_names_a_matrix_is_refused_naming_its_numbers(tmp_path):
     assert "truth.phi.1.1, truth.phi.1.2, truth.phi.2.1, truth.phi.2.2" in _refused(tmp_path, CV, "--set", "truth.phi=1,2")
 
 
-def test_the_timing_over_a_log_and_the_sample_period_are_refused(tmp_path):
+def test_the_timing_over_a_log_the_sample_period_and_what_is_no_number_are_refused(tmp_path):
     log = _cv_log(tmp_path / "log.csv")
     for key in ("model.updates=5,10", "filter.steps_per_update=5,10", "filter.sample_period=0.1,0.2"):
         assert "the log sets the run's timing" in _refused(tmp_path, CV_LOG, "--data", log, "--set", key)
     assert "only relabels the update times" in _refused(tmp_path, CV, "--set", "filter.sample_period=0.1,0.2")
     assert "not a number of the model" in _refused(tmp_path, CV, "--set", "model.name=a,b")
+    assert "filter.q: expected a model file's setting" in _refused(tmp_path, CV, "--set", "filter.q=1,2")
+    assert "the file has no b (no known inputs)" in _refused(tmp_path, CV, "--set", "filter.b=1,2")
 
 
 def test_a_diffuse_filter_is_refused_as_verify_refuses_it(tmp_path):

@@ -84,7 +84,7 @@ def set_number(key: str, section: str, name: str, value: Any, matrix: Any) -> An
         The matrix has more than one number: the keys of its numbers are named.
     """
     number = to_float(key, value)
-    shape = _shape(key, name, matrix)
+    shape = _shape(key, section, name, matrix)
     if shape not in ((1,), (1, 1)):
         example = "[0.0, 1.0]" if name == "x0" else "[[0.04, 0.0], [0.0, 0.01]]"
         keys = scalar_keys(section, name, shape)
@@ -116,7 +116,7 @@ def set_entry(
         raise ValueError(f"not an entry key: {key!r}")
     section, name, first, second = match.groups()
     matrix = current(document, original, section, name)
-    shape = _shape(key, name, matrix)
+    shape = _shape(key, section, name, matrix)
     number = to_float(key, value)
     keys = scalar_keys(section, name, shape)
 
@@ -165,8 +165,10 @@ def scaled_diagonal(covariance: np.ndarray, i: int, variance: float) -> np.ndarr
     return c
 
 
-def _shape(key: str, name: str, matrix: Any) -> tuple[int, ...]:
+def _shape(key: str, section: str, name: str, matrix: Any) -> tuple[int, ...]:
     """The shape of the document's matrix (rows of numbers, or of numbers and data-column names for h)."""
+    if matrix is None:  # b, where the file has no known inputs
+        raise SettingError(key, f"a {name} in the file to set one of its numbers (or the whole matrix, {section}.{name}=[[...]])", "none")
     if name == "x0":
         return to_vector(key, matrix).shape
     if name == "h" and isinstance(matrix, list) and all(isinstance(row, list) for row in matrix):
@@ -202,6 +204,8 @@ def sweep_refusal(scenario: Any, key: str, *, over_log: bool) -> str:
         shape = np.shape(getattr(model, name))
         if shape in ((1,), (1, 1)):
             return ""
+        if 0 in shape:
+            return f"the file has no {name} (no known inputs): nothing to sweep"
         size = " x ".join(map(str, shape))
         what = "the prior mean" if name == "x0" else f"the {size} matrix {name}"
         return f"names {what}, not one number: sweep one of its numbers, {listed(scalar_keys(section, name, shape))}"
@@ -218,11 +222,17 @@ def sweep_refusal(scenario: Any, key: str, *, over_log: bool) -> str:
         )
     if key in timing:
         return ""
-    known = section in ("model", "filter", "truth", "data")
-    if known:
+    if key in _NOT_NUMBERS or section == "data":
         return (
-            "not a number of the model (names, units, the [data] table's columns, diffuse states and a truth's map are "
-            "not swept); sweep one number of a matrix (filter.KEY, filter.KEY.I, filter.KEY.I.J, truth.likewise), "
+            "not a number of the model (names, units, the [data] table's keys, diffuse states and a truth's map are "
+            "not swept); sweep one number of a matrix (filter.KEY, filter.KEY.I, filter.KEY.I.J, truth.KEY likewise), "
             "filter.steps_per_update or model.updates"
         )
     return ""  # an unknown key: --set refuses it, listing a model file's settings
+
+
+#: the --set keys of a model file that hold no number of the model: labels, diffuse states, a truth's map
+_NOT_NUMBERS = (
+    *(f"model.{key}" for key in ("name", "state_names", "state_units", "measurement_names", "measurement_units")),
+    "filter.diffuse", "truth.map", "truth.state_names",
+)
