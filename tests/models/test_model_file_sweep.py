@@ -154,6 +154,20 @@ def test_sweep_of_a_model_file_without_a_log_from_the_cli(tmp_path):
     assert (out / "sweep.png").stat().st_size > 0 and (out / "sweep.json").is_file()
 
 
+def test_the_documented_sweep_of_the_constant_velocity_example_passes_at_its_own_w_alone(tmp_path):
+    """docs/custom-models.md: the example's truth has w = 0.04; a filter tuned below it is overconfident (NIS
+    above its band), above it underconfident (below its band), each at seed 0 and 20,000 realizations."""
+    from tests.models.test_custom_model import EXAMPLES
+
+    values = ["0.0025", "0.01", "0.04", "0.16"]
+    result = kalcal.sweep(EXAMPLES / "constant_velocity.toml", "filter.w", values, n=20_000, seed=0, out=tmp_path / "sw")
+    table = result.table
+    assert list(table["verdict"]) == ["fail", "fail", "pass", "fail"]
+    nis, lower, upper = (table[f"nis_{part}"].to_numpy() for part in ("statistic", "lower", "upper"))
+    assert np.all(nis[:2] > upper[:2]) and lower[2] <= nis[2] <= upper[2] and nis[3] < lower[3]
+    assert not table["covariance_passed"][:2].any()
+
+
 # --- refused in one line ------------------------------------------------------------------------------
 
 
