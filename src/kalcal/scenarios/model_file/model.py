@@ -483,7 +483,9 @@ def load_model_file(
         ``map`` and ``state_names``) and ``model.KEY`` (name, updates, the names and units). E.g.
         ``filter.w=[[0.01]]``, ``model.updates=60``. ``filter.KEY`` retunes the filter alone: where
         ``[truth]`` does not set KEY, the truth keeps the file's value (so that a sweep of a filter
-        setting holds the world fixed); a truth with a ``map`` takes nothing from the filter.
+        setting holds the world fixed); a truth with a ``map`` takes nothing from the filter. One number
+        of a matrix: ``filter.v=0.5`` (1 x 1), ``filter.w.2=0.1`` (a diagonal entry, its correlations
+        held), ``filter.x0.2=3``, ``truth.phi.1.2=0.2`` (:mod:`kalcal.scenarios.model_file.entries`).
     config : path, optional
         Must be None: a model file holds all its settings (``--config`` is for built-in scenarios).
 
@@ -579,7 +581,7 @@ def _apply_overrides(document: dict[str, Any], overrides: Mapping[str, str], sou
     """Write the overrides into the document; return each overridden document key's ``--set`` key."""
     import copy
 
-    from kalcal.scenarios.model_file.entries import MATRICES, is_entry_key, set_entry, set_number
+    from kalcal.scenarios.model_file.entries import MATRICES, current, is_entry_key, set_entry, set_number
 
     origins: dict[str, str] = {}
     file_values: dict[str, Any] = {}  # the file's values of the filter's retuned matrices
@@ -595,8 +597,6 @@ def _apply_overrides(document: dict[str, Any], overrides: Mapping[str, str], sou
             value = toml_value(key, text, bare_string=key == "model.name")  # a bare name needs no quotes
             if name in MATRICES and section in ("filter", "truth") and isinstance(value, (int, float)) and not isinstance(value, bool):
                 # a number for a 1 x 1 matrix (filter.v=0.5): refused, naming the keys of its numbers, for a larger one
-                from kalcal.scenarios.model_file.entries import current
-
                 value = set_number(key, section, name, value, current(document, original, section, name))
         if section in ("truth", "data"):
             table = _truth_table(document, source) if section == "truth" else _data_table(document, source)
