@@ -184,23 +184,6 @@ def test_the_docs_python_calls(tmp_path, monkeypatch):
     np.testing.assert_array_equal(result.bse.to_numpy(), result.estimate_std)
 
 
-# A sweep of a model file is refused in one line that says why, not with the registry's list of built-in
-# names and a hint that only verify takes model files.
-def test_sweep_of_a_model_file_is_refused_saying_why(tmp_path):
-    from pathlib import Path
-
-    from typer.testing import CliRunner
-
-    from kalcal.cli import app
-
-    model = Path(__file__).resolve().parents[1] / "examples" / "constant_velocity.toml"
-    result = CliRunner().invoke(app, ["sweep", str(model), "--set", "filter.v=0.5,1", "-n", "100", "--out", str(tmp_path / "s")])
-    assert result.exit_code == 2, result.output
-    lines = result.output.strip().splitlines()
-    assert len(lines) == 1 and "is not swept: the sweep sets one scalar setting" in lines[0]
-    assert not (tmp_path / "s").exists()
-
-
 def test_an_output_folder_clash_names_the_model_file_that_wrote_it(tmp_path):
     """The folder records the file, not the name every model file shares: another command (or another file)
     into it is refused naming the file; the same command again replaces its own outputs."""

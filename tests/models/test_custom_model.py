@@ -136,7 +136,8 @@ def test_an_unknown_set_key_lists_the_known_ones():
     known = (
         "model.{name, updates, state_names, state_units, measurement_names, measurement_units}; "
         "filter.{phi, gamma, h, w, v, x0, m0, b, diffuse, steps_per_update, sample_period}; "
-        "truth.{phi, gamma, h, w, v, x0, m0, b}; data.{time, measurements, inputs, stds, step_tolerance}"
+        "truth.{phi, gamma, h, w, v, x0, m0, b}; data.{time, measurements, inputs, stds, step_tolerance}, "
+        "or one number of a matrix: KEY.I, KEY.I.J"
     )
     assert _error(_text(), ["filter.q=1"]) == f"filter.q: expected a model file's setting ({known}), got an unknown setting"
 

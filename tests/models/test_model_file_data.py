@@ -105,7 +105,7 @@ def test_todays_files_keep_verify_and_their_step_grid():
 
     scenario = load_model_file(EXAMPLES / "constant_velocity.toml")
     assert scenario.data is None and scenario.without_log() == ""
-    assert scenario.capabilities.commands == frozenset({"verify", "analyze", "report"})
+    assert scenario.capabilities.commands == frozenset({"verify", "analyze", "sweep", "report"})
     filt, truth = scenario.step_grid()
     m, k = 10, 30
     assert truth is None and filt.steps == k * m + 1

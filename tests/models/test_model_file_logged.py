@@ -200,16 +200,6 @@ def test_the_report_rebuilds_from_the_recorded_log_and_refuses_a_changed_one(tmp
     assert refused.exit_code == 2 and "has changed since the run read it" in refused.stderr, refused.stderr
 
 
-def test_sweep_over_a_log_is_refused_saying_why(tmp_path):
-    model = tmp_path / "cv.toml"
-    model.write_text(CV_LOG)
-    result = _invoke("sweep", model, "--data", _cv_log(tmp_path / "log.csv"))
-    assert result.exit_code == 2 and result.stderr.count("\n") == 1 and "sweep of a model file over a log is not built" in result.stderr
-    # its advice is one that runs: a model file without --data is not swept either
-    assert "sweep the file without --data" not in result.stderr
-    assert "run verify/analyze --data once per setting with --set" in result.stderr
-
-
 # A truth driven by the known input otherwise than the filter believes: the error gets a deterministic
 # offset, which the Monte Carlo and the exact analysis over a log both carry.
 DRIVEN = CV_LOG.replace("[data]", 'b = [[0.005], [0.1]]\n[data]\ninputs = ["a"]')

@@ -21,10 +21,10 @@ def resolve(
 ):
     """The scenario object of ``scenario`` with ``settings`` (``{"section.key": value}``, ``--set``'s keys)
     and the TOML ``config`` applied (what the scenario cannot do, an engine or a long run, its capabilities
-    refuse: :func:`kalcal.scenarios.protocol.require`). With ``models``, which every command's API passes but
-    sweep's, a model file, a :class:`~kalcal.api.model.Model` or a model written as code is taken (what one
-    cannot do, its capabilities refuse); without it (sweep) a name goes to the registry, which refuses any
-    but a built-in that has ``command``."""
+    refuse: :func:`kalcal.scenarios.protocol.require`). With ``models``, which every command's API passes (sweep
+    for a model file), a model file, a :class:`~kalcal.api.model.Model` or a model written as code is taken
+    (what one cannot do, its capabilities refuse); without it (sweep of any other) a name goes to the
+    registry, which refuses any but a built-in that has ``command``."""
     from kalcal.scenarios import build_scenario, is_model_file, load_model_file, model_file_fields
 
     assignments = assignments_of(settings)

@@ -19,6 +19,7 @@ from kalcal.errors import ConfigError
 from kalcal.io.outputs import writes_outputs
 from kalcal.io.results import json_document, write_json
 from kalcal.models.config import apply_settings
+from kalcal.api.model import flat_settings
 
 
 @dataclass(frozen=True, repr=False, eq=False)
@@ -111,13 +112,19 @@ def sweep(
     workers: int | None = None,
     scheduler: str | None = None,
     client=None,
+    data: str | Path | None = None,
+    topic: str | None = None,
 ):
     """Verify ``scenario`` with ``key`` (``"filter.accel_noise_std"``) set to each of ``values``, all with
     the same seed; writes (``out`` is required) ``out/sweep.csv``, ``sweep.json``, ``sweep.png`` and one run folder per value
     (as ``kalcal sweep``). Returns a :class:`kalcal.SweepResult` (``key``, ``values``, ``table``: one row
     per value with every check's statistic, bounds and verdict, ``summaries`` and ``runs``: each value's
-    summary.json and folder, ``paths``: the sweep's own files)."""
-    from kalcal.api._scenario import resolve
+    summary.json and folder, ``paths``: the sweep's own files).
+
+    A model file (a ``.toml`` path, a :class:`kalcal.Model` or a scenario :func:`kalcal.load_model` read)
+    is swept over one number of it (:func:`model_file_cells`): each value's run is the file's ``verify``
+    with ``--set key=value`` (and ``--data data``, the same log for every value, its record in each run)."""
+    from kalcal.api._scenario import resolve, with_data
     from kalcal.errors import KalcalError
 
     if out is None:
@@ -129,14 +136,19 @@ def sweep(
         raise KalcalError(f"--threads: expected a positive number, got {threads}")
     from kalcal.montecarlo.distributed import dask_client
 
-    _refuse_model_file(scenario)
-    model = resolve(scenario, settings, config, command="sweep")  # an unknown name: the list of those with a sweep
-    sweep_cells(model, key, values, n, engine=engine, long_run=0)  # every value checked before any cluster
     options = dict(engine=engine, workers=threads, long_run=0)
+    if _is_model_file(scenario):
+        model, cells = model_file_cells(scenario, key, values, settings, config, data, topic, n, engine=engine)
+    else:
+        if data is not None or topic is not None:  # a built-in over a log: its own one-line refusal
+            with_data(resolve(scenario, None, config, models=True), data, "sweep", topic)
+        # an unknown name: the list of those with a sweep
+        model = resolve(scenario, settings, config, command="sweep")
+        cells = sweep_cells(model, key, values, n, engine=engine, long_run=0)  # every value checked before any cluster
     if client is None and (workers is not None or scheduler is not None):
         with dask_client(workers, scheduler) as client:
-            return run_sweep(model, key, values, n, seed, out, client=client, **options)
-    return run_sweep(model, key, values, n, seed, out, client=client, **options)
+            return run_sweep(model, key, values, n, seed, out, cells=cells, client=client, **options)
+    return run_sweep(model, key, values, n, seed, out, cells=cells, client=client, **options)
 
 
 def sweep_settings(assignments: Sequence[str]) -> tuple[str, list[str], dict[str, str]]:
@@ -148,14 +160,15 @@ def sweep_settings(assignments: Sequence[str]) -> tuple[str, list[str], dict[str
 
 def split_sweep(assignments: dict[str, str]) -> tuple[str, list[str], dict[str, str]]:
     """Find the one ``key=v1,v2,...`` among ``--set`` assignments; the others stay fixed."""
-    swept = {key: value for key, value in assignments.items() if "," in value}
+    # a comma inside brackets is a TOML array's (a model file's matrix, filter.w=[[1, 0], [0, 1]]): held fixed
+    swept = {key: value for key, value in assignments.items() if len(_top_level(value)) > 1}
     if len(swept) != 1:
         raise ConfigError(
             "sweep: give exactly one --set with a comma-separated list of values, e.g. "
             f"filter.accel_noise_std=0.01,0.02 (got {len(swept)})"
         )
     key, values = next(iter(swept.items()))
-    values_list = [v.strip() for v in values.split(",") if v.strip()]
+    values_list = [v.strip() for v in _top_level(values) if v.strip()]
     if len(values_list) < 2:
         raise ConfigError(f"--set {key}={values}: a sweep needs at least two values")
     return key, values_list, {k: v for k, v in assignments.items() if k != key}
@@ -174,22 +187,65 @@ OUTPUT_NAMES = (
 _CHECKED = ("engine", "confidence", "long_run", "batch_size", "form")
 
 
-def _refuse_model_file(scenario) -> None:
-    """A model file (or a Model) is not swept: refused in one line saying why (not the registry's list of
-    built-in names). The mathematics allows it for a file verify takes without a log (a verification per
-    value of one of its --set keys), but the sweep's cells are built by the built-in scenarios' settings
-    (scalars), while a model file's settings are matrices re-read through the file's own checks."""
+def _top_level(value: str) -> list[str]:
+    """``value`` split at its commas outside brackets (``0.1,[[1, 2]]`` -> ``["0.1", "[[1, 2]]"]``)."""
+    parts, depth, start = [], 0, 0
+    for i, char in enumerate(value):
+        depth += {"[": 1, "]": -1}.get(char, 0)
+        if char == "," and depth == 0:
+            parts.append(value[start:i])
+            start = i + 1
+    return [*parts, value[start:]]
+
+
+def _is_model_file(scenario: Any) -> bool:
+    """A model file (``.toml``), a :class:`~kalcal.api.model.Model` or a scenario read from a model file."""
     from kalcal.api.model import Model
-    from kalcal.errors import KalcalError
-    from kalcal.scenarios import is_model_file
+    from kalcal.scenarios import is_model_file, model_file_fields
 
     if isinstance(scenario, Model) or (isinstance(scenario, (str, Path)) and is_model_file(str(scenario))):
-        name = "a Model" if isinstance(scenario, Model) else f"a model file ({scenario})"
-        raise KalcalError(
-            f"sweep: {name} is not swept: the sweep sets one scalar setting of a built-in scenario per value, and a "
-            "model file's settings are matrices read through the file's own checks; run kalcal verify MODEL.toml "
-            "--set KEY=VALUE once per value instead"
-        )
+        return True
+    return model_file_fields(scenario) is not None
+
+
+def model_file_cells(
+    scenario: Any,
+    key: str,
+    values: list[str],
+    settings: Mapping[str, Any] | None,
+    config: str | Path | None,
+    data: str | Path | None,
+    topic: str | None,
+    n: int,
+    **verify_options: Any,
+) -> tuple[Any, list]:
+    """The model file's scenario with the fixed settings, and its scenario of every value: the file with ``settings`` and ``--set key=value`` (over
+    the log ``data`` where one is given, read and fingerprinted once: every value runs over the same bytes),
+    each checked as ``verify`` checks it, so that a bad value is refused before the first run.
+
+    Refused in one line (the scenario's ``sweep_refusal``, :mod:`kalcal.scenarios.model_file.entries`): a key that names a
+    matrix of more than one number (the keys of its numbers are named), a key that is no number of the
+    model, and the timing keys over a log; and whatever ``verify`` refuses of the file (a diffuse filter).
+    """
+    from kalcal.api._scenario import resolve, with_data
+    from kalcal.capabilities import require
+    from kalcal.errors import KalcalError
+
+    fixed = {k: v for k, v in flat_settings(settings).items() if k != key}
+    base = with_data(resolve(scenario, fixed, config, models=True), data, "verify", topic)
+    why = base.sweep_refusal(key)
+    if why:
+        raise KalcalError(f"sweep: {key}: {why}")
+    require(base, "sweep")  # what verify refuses of the file, in its own words
+    if data is not None:
+        data = base.log  # the log's record (path, digest, topic) taken once: every value runs over the same bytes
+    options = {name: verify_options[name] for name in _CHECKED if name in verify_options}
+    cells = []
+    for value in values:
+        cell = with_data(resolve(scenario, {**fixed, key: value}, config, models=True), data, "verify")
+        check_arguments(cell, n, **options)
+        cells.append(cell)
+    return base, cells
 
 
 def sweep_cells(scenario, key: str, values: list[str], n: int, **verify_options: Any) -> list:
@@ -203,14 +259,19 @@ def sweep_cells(scenario, key: str, values: list[str], n: int, **verify_options:
 
 
 @writes_outputs("sweep", names=OUTPUT_NAMES)
-def run_sweep(scenario, key: str, values: list[str], n: int, seed: int, out: str | Path, **verify_options: Any) -> SweepResult:
-    """Verify ``scenario`` with ``key`` set to each value; write ``sweep.csv``, ``sweep.json``, the tuning
-    curve ``sweep.png`` and one run directory ``key=value`` per value, all as one set of outputs.
+def run_sweep(
+    scenario, key: str, values: list[str], n: int, seed: int, out: str | Path, *, cells: list | None = None,
+    **verify_options: Any,
+) -> SweepResult:
+    """Verify ``scenario`` with ``key`` set to each value (``cells``: those scenarios, built and checked
+    already, :func:`sweep_cells`, :func:`model_file_cells`; the files ``scenario`` was read from are
+    protected); write ``sweep.csv``, ``sweep.json``, the tuning curve ``sweep.png`` and one
+    run directory ``key=value`` per value, all as one set of outputs.
 
     Every value uses the same seed, so the curves compare filters on the same realizations.
     """
     out = Path(out)
-    cells = sweep_cells(scenario, key, values, n, **verify_options)
+    cells = sweep_cells(scenario, key, values, n, **verify_options) if cells is None else cells
     rows, runs, summaries = [], [], []
     for value, cell in zip(values, cells):
         run_dir = out / f"{key}={value}"

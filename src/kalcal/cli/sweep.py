@@ -6,7 +6,7 @@ from typing import Annotated, Optional
 import typer
 
 from kalcal.cli import _common
-from kalcal.cli._common import SCENARIO_NAMES, ConfigOpt, SetOpt, user_errors
+from kalcal.cli._common import SCENARIO_NAMES, ConfigOpt, SetOpt, TopicOpt, user_errors
 
 
 def sweep(
@@ -20,24 +20,31 @@ def sweep(
     threads: Annotated[Optional[int], typer.Option("--threads", help="Local threads (default: all cores).")] = None,
     workers: Annotated[Optional[int], typer.Option("--workers", help="Local Dask cluster of this many processes.")] = None,
     scheduler: Annotated[Optional[str], typer.Option("--scheduler", help="Existing Dask cluster address.")] = None,
-    data: Annotated[Optional[Path], typer.Option("--data", help="Refused: a sweep over a log is not built.")] = None,
+    data: Annotated[
+        Optional[Path],
+        typer.Option(
+            "--data",
+            help="A log for a model file's [data] table: every value verified over it, as verify --data (the same "
+            "log for every value, its record in each run).",
+        ),
+    ] = None,
+    topic: TopicOpt = None,
     set_: SetOpt = None,
     config: ConfigOpt = None,
 ) -> None:
-    """Verify once per value of one setting (--set key=v1,v2,...) and draw the tuning curve."""
+    """Verify once per value of one setting (--set key=v1,v2,...) and draw the tuning curve.
+
+    A model file is swept over one number of it (filter.v, filter.w.2, filter.phi.1.2, truth.KEY likewise,
+    filter.steps_per_update, model.updates): each value's run is its verify with --set key=value.
+    """
     from kalcal.api.sweep import sweep as run_sweep
     from kalcal.api.sweep import sweep_settings
 
     with user_errors():
-        if data is not None:  # the scenario over the log says whether it sweeps (a model file's does not yet)
-            from kalcal.api._scenario import resolve, with_data
-            from kalcal.capabilities import require
-
-            require(with_data(resolve(scenario, None, config, models=True), data, "sweep"), "sweep")
         key, values, fixed = sweep_settings(set_ or ())
         result = run_sweep(
             scenario, key, values, n, seed, out, fixed, config=config, engine=engine, threads=threads,
-            workers=workers, scheduler=scheduler,
+            workers=workers, scheduler=scheduler, data=data, topic=topic,
         )
     table = _common._table(f"kalcal sweep {scenario}: {key}", f"{n:,} realizations per value")
     table.add_column(key, justify="right")

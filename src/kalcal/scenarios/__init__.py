@@ -148,7 +148,8 @@ def build_scenario(
     from kalcal.models.settings import SettingError, parse_assignments, show
 
     if name not in _BUILT_IN:
-        hint = " (a model file (.toml) works with kalcal verify)" if str(name).lower().endswith(".toml") else ""
+        # every command (sweep included) reads a .toml as a model file before any name reaches the registry
+        hint = " (a model file, .toml, is given to a command as its SCENARIO, not looked up here)" if str(name).lower().endswith(".toml") else ""
         names = scenarios_with(command) if command else tuple(_BUILT_IN)
         raise SettingError("SCENARIO", f"one of {', '.join(names)}", f"{show(name)}{hint}")
     scenario = scenario_class(name)()

@@ -162,8 +162,9 @@ class CustomModelScenario(ScenarioDefaults):
         property, not a class constant: what it has depends on the file it was read from (a file whose
         model needs a log, or that sets no updates, has no verify or analyze: :meth:`without_log`)."""
         why = self.without_log()
-        commands = {"report"} if why else {"verify", "analyze", "report"}
-        refusals = (("verify", why), ("analyze", why)) if why else ()
+        # a sweep is a verify per value of one number of the file (kalcal.api.sweep.model_file_cells)
+        commands = {"report"} if why else {"verify", "analyze", "sweep", "report"}
+        refusals = (("verify", why), ("analyze", why), ("sweep", why)) if why else ()
         from kalcal.scenarios.model_file.fit import fit_refusal
 
         why_fit = fit_refusal(self)  # fit needs a [data] table (the log's layout)
@@ -223,6 +224,13 @@ class CustomModelScenario(ScenarioDefaults):
         if self.model.updates is None:
             return "it sets no updates (the model file's updates and steps_per_update say how long to verify it without a log)"
         return ""
+
+    def sweep_refusal(self, key: str) -> str:
+        """Why ``kalcal sweep`` does not sweep ``key`` of this file ("" when it does: one number of the model,
+        :func:`kalcal.scenarios.model_file.entries.sweep_refusal`), in words that follow ``sweep: KEY:``."""
+        from kalcal.scenarios.model_file.entries import sweep_refusal
+
+        return sweep_refusal(self, key, over_log=getattr(self, "log", None) is not None)
 
     # The Scenario protocol (kalcal.scenarios.protocol): each answer from this package's modules, imported
     # where asked because they import this one.
@@ -506,7 +514,9 @@ def load_model_file(
         ``map`` and ``state_names``) and ``model.KEY`` (name, updates, the names and units). E.g.
         ``filter.w=[[0.01]]``, ``model.updates=60``. ``filter.KEY`` retunes the filter alone: where
         ``[truth]`` does not set KEY, the truth keeps the file's value (so that a sweep of a filter
-        setting holds the world fixed); a truth with a ``map`` takes nothing from the filter.
+        setting holds the world fixed); a truth with a ``map`` takes nothing from the filter. One number
+        of a matrix: ``filter.v=0.5`` (1 x 1), ``filter.w.2=0.1`` (a diagonal entry, its correlations
+        held), ``filter.x0.2=3``, ``truth.phi.1.2=0.2`` (:mod:`kalcal.scenarios.model_file.entries`).
     config : path, optional
         Must be None: a model file holds all its settings (``--config`` is for built-in scenarios).
 
@@ -600,18 +610,29 @@ def build_model(document: dict[str, Any], source: str, assignments: Iterable[str
 
 def _apply_overrides(document: dict[str, Any], overrides: Mapping[str, str], source: str) -> dict[str, str]:
     """Write the overrides into the document; return each overridden document key's ``--set`` key."""
+    import copy
+
+    from kalcal.scenarios.model_file.entries import MATRICES, current, is_entry_key, set_entry, set_number
+
     origins: dict[str, str] = {}
     file_values: dict[str, Any] = {}  # the file's values of the filter's retuned matrices
+    original = copy.deepcopy(document)  # the truth's entries start from the file's values, not --set's
     for key, text in overrides.items():
         section, _, name = key.partition(".")
-        if name not in _SET_KEYS.get(section, ()) and key not in _TRUTH_MAP_SET_KEYS:
+        if is_entry_key(key):  # one number of a matrix (filter.w.2): the whole matrix with it set
+            section, name, value = set_entry(key, toml_value(key, text), document, original)
+        elif name not in _SET_KEYS.get(section, ()) and key not in _TRUTH_MAP_SET_KEYS:
             known = "; ".join(f"{s}.{{{', '.join(keys)}}}" for s, keys in _SET_KEYS.items())
-            raise unknown(key, f"a model file's setting ({known})", "setting")
-        value = toml_value(key, text, bare_string=key == "model.name")  # a bare name needs no quotes
+            raise unknown(key, f"a model file's setting ({known}, or one number of a matrix: KEY.I, KEY.I.J)", "setting")
+        else:
+            value = toml_value(key, text, bare_string=key == "model.name")  # a bare name needs no quotes
+            if name in MATRICES and section in ("filter", "truth") and isinstance(value, (int, float)) and not isinstance(value, bool):
+                # a number for a 1 x 1 matrix (filter.v=0.5): refused, naming the keys of its numbers, for a larger one
+                value = set_number(key, section, name, value, current(document, original, section, name))
         if section in ("truth", "data"):
             table = _truth_table(document, source) if section == "truth" else _data_table(document, source)
             table[name] = value
-            origins[key] = key
+            origins[f"{section}.{name}"] = key  # an error about truth.w names the --set key (truth.w.2)
             continue
         if section == "filter" and name in _TRUTH_KEYS and name in document:
             file_values.setdefault(name, document[name])

@@ -21,13 +21,6 @@ from kalcal.scenarios.model_file.logged import LogRecord, check_record, record_l
 from kalcal.scenarios.model_file.model import CustomModelScenario
 from kalcal.scenarios.protocol import Capabilities
 
-#: why a sweep of a model file over a log is refused
-NO_SWEEP = (
-    "a sweep of a model file over a log is not built (a model file is not swept, with or without a log: "
-    "run verify/analyze --data once per setting with --set)"
-)
-
-
 @dataclass(frozen=True)
 class LoggedModelScenario(CustomModelScenario):
     """A model file bound to a log for ``verify`` and ``analyze`` (the file's [data] table names the columns).
@@ -69,17 +62,17 @@ class LoggedModelScenario(CustomModelScenario):
 
     @property
     def capabilities(self) -> Capabilities:
-        """The exact engine's fixed gains from the log's rows; verify, analyze and report; no sweep."""
+        """The exact engine's fixed gains from the log's rows; verify, analyze, sweep (a verify per value of one
+        number of the file, over the same log: :func:`kalcal.api.sweep.model_file_cells`) and report."""
         return Capabilities(
             exact_analysis=True,
             fixed_gains=True,
             engines=("exact",),
             long_run=False,
-            commands=frozenset({"verify", "analyze", "report"}),
+            commands=frozenset({"verify", "analyze", "sweep", "report"}),
             why_not=(
                 ("--engine", "use the exact engine"),
                 ("--long-run", "the log sets the run's length"),
-                ("sweep", NO_SWEEP),
                 ("fit", "fit takes the log as --data without verify's binding (kalcal fit MODEL.toml --data LOG)"),
             ),
         )
