@@ -3,7 +3,8 @@
 ``--set`` takes one number of a model file's matrix (``filter.v=0.5``, ``filter.m0.2=16``,
 ``truth.phi.1.2=0.2``); a sweep's run of each value is that verify, bit for bit at the same seed, over the
 same log where one is given, and each run's folder is one ``kalcal report`` rebuilds. A key that names a
-matrix of several numbers, a timing key over a log and a diffuse filter are refused in one line.
+matrix of several numbers and a timing key over a log are refused in one line; a diffuse filter is swept
+where verify takes it (a [truth] m0 given).
 """
 
 from __future__ import annotations
@@ -197,7 +198,16 @@ def test_the_timing_over_a_log_the_sample_period_and_what_is_no_number_are_refus
     assert "the file has no b (no known inputs)" in _refused(tmp_path, CV, "--set", "filter.b=1,2")
 
 
-def test_a_diffuse_filter_is_refused_as_verify_refuses_it(tmp_path):
+def test_a_diffuse_filter_is_swept_as_verify_takes_it(tmp_path):
+    # without a [truth] m0 refused in verify's words; with one, each value's run is that verify's
     diffuse = CV.replace("m0    = [[25.0, 3.0], [3.0, 1.0]]", 'm0 = [[0.0, 0.0], [0.0, 1.0]]\ndiffuse = ["x1"]')
     message = _refused(tmp_path, diffuse, "--set", "filter.v=1,4")
-    assert "starts diffuse in x1: kalcal verify and analyze do not take a diffuse filter" in message
+    assert "starts diffuse in x1 and it has no [truth] m0: give [truth] m0" in message
+    model = tmp_path / "diffuse.toml"
+    model.write_text(diffuse + "\n[truth]\nm0 = [[25.0, 3.0], [3.0, 1.0]]\n")
+    result = kalcal.sweep(model, "filter.v", [1, 4], n=200, seed=5, out=tmp_path / "sw")
+    for value, run in zip(result.values, result.runs):
+        alone = tmp_path / f"alone{value}"
+        kalcal.verify(model, 200, seed=5, settings={"filter.v": value}, out=alone)
+        numbers = _numbers(run / "summary.json")
+        assert numbers == _numbers(alone / "summary.json") and "the diffuse period" in json.dumps(numbers)

@@ -225,7 +225,7 @@ def model_file_cells(
 
     Refused in one line (the scenario's ``sweep_refusal``, :mod:`kalcal.scenarios.model_file.entries`): a key that names a
     matrix of more than one number (the keys of its numbers are named), a key that is no number of the
-    model, and the timing keys over a log; and whatever ``verify`` refuses of the file (a diffuse filter).
+    model, and the timing keys over a log; and whatever ``verify`` refuses of the file (a diffuse filter without a [truth] m0).
     """
     from kalcal.api._scenario import resolve, with_data
     from kalcal.capabilities import require
