@@ -316,6 +316,9 @@ def test_the_mean_error_check_fails_with_a_bias_when_the_truths_b_is_larger(tmp_
         summary = kalcal.verify(model, 2000, seed=3, data=log).raw_summary
         verdicts[label] = {t["name"]: t for t in summary["tests"]}
         assert summary["self_check"]["agrees"], label  # the Monte Carlo against the exact analysis
+        # the run says which: the inputs cancel (not read), or the error carries their offset
+        said = {"equal": "do not depend on u: the inputs are not read", "larger": "the truth's b moves it with the known inputs otherwise"}
+        assert len(summary["notes"]) == 1 and said[label] in summary["notes"][0], summary["notes"]
     assert all(t["passed"] for t in verdicts["equal"].values()), [n for n, t in verdicts["equal"].items() if not t["passed"]]
     biased = verdicts["larger"]["mean_error"]
     assert not biased["passed"]
@@ -341,3 +344,19 @@ def test_without_a_log_a_truth_driven_otherwise_is_refused_in_one_line(tmp_path,
         assert result.exit_code == 2, result.output
         lines = result.stderr.strip().splitlines()
         assert len(lines) == 1 and expected in lines[0] and "--data LOG" in lines[0], result.stderr
+
+
+def test_verify_and_analyze_say_what_the_known_inputs_do_and_a_file_without_them_says_nothing(tmp_path):
+    log = _driven_log(tmp_path / "log.csv")
+    for text, said in ((DRIVEN, "note: the known inputs u move the truth and the filter's prediction alike"),
+                       (TRUTH_B, "note: the truth's b moves it with the known inputs otherwise than the filter")):
+        model = tmp_path / "cv.toml"
+        model.write_text(text)
+        for command in (["verify", "-n", 200, "--out", tmp_path / "out"], ["analyze"]):
+            result = _invoke(command[0], model, "--data", log, *command[1:])
+            assert result.exit_code == 0, result.output + result.stderr
+            assert said in " ".join(result.output.split()), result.output
+    model.write_text(CV_LOG)
+    result = _invoke("verify", model, "--data", _cv_log(tmp_path / "plain.csv"), "-n", 200, "--out", tmp_path / "plain")
+    assert result.exit_code == 0 and "known inputs" not in result.output
+    assert "notes" not in json.loads((tmp_path / "plain" / "summary.json").read_text())

@@ -221,13 +221,16 @@ def exact_analysis(scenario, problem):
 
 def left_out(info) -> dict[str, Any]:
     """``summary.json``'s ``not_checked`` (the updates no check covers, in words: a diffuse filter's diffuse
-    period) and ``checks_left_out`` (check -> why), where the problem leaves something out; nothing else, so
+    period), ``checks_left_out`` (check -> why) and ``notes`` (what the reader should know of the model: a
+    model file's known inputs), where the problem leaves something out; nothing else, so
     that every other run's summary keeps its keys."""
     out: dict[str, Any] = {}
     if info.not_checked:
         out["not_checked"] = info.not_checked
     if info.no_orthogonality:
         out["checks_left_out"] = {"orthogonality": info.no_orthogonality}
+    if info.notes:
+        out["notes"] = list(info.notes)
     return out
 
 

@@ -193,6 +193,8 @@ def _print_checks(summary: dict) -> None:
         _console().print(f"not checked: {escape(summary['not_checked'])}")
     for name, why in (summary.get("checks_left_out") or {}).items():
         _console().print(f"{escape(name)} left out: {escape(why)}")
+    for note in summary.get("notes") or ():  # a model file's known inputs: cancelled or carried
+        _console().print(f"note: {escape(note)}")
     for test in summary["tests"]:
         if not test["passed"]:
             _console().print(f"[bold]{test['name']}[/bold]: {escape(test['detail'])}")

@@ -59,6 +59,8 @@ def analyze(
     _common.console.print(table)
     if result.document.get("not_checked"):  # a diffuse filter's diffuse period: the analysis starts after it
         _common.console.print(f"not checked: {result.document['not_checked']}", markup=False, soft_wrap=True)
+    for note in result.document.get("notes") or ():  # a model file's known inputs: cancelled or carried
+        _common.console.print(f"note: {note}", markup=False, soft_wrap=True)
     from kalcal.stats.power import N_CAP, power_line
     from kalcal.stats.sensitivity import sensitivity_text
 

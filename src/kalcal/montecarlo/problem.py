@@ -65,6 +65,9 @@ class ProblemInfo:
     #: why the orthogonality check is left out ("" where it is made): E[e xhat^T] = 0 holds for a posterior
     #: mean, and a diffuse filter's estimate ignores the world's prior (:mod:`kalcal.scenarios.model_file.diffuse`)
     no_orthogonality: str = ""
+    #: what the run's reader should know of the model, in words (``summary.json``'s ``notes``): a model file's
+    #: known inputs, whose effect on the error the run either cancels or carries (:mod:`kalcal.scenarios.model_file`)
+    notes: tuple[str, ...] = ()
 
 
 def capabilities_of(problem) -> Any:

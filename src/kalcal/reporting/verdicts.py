@@ -55,12 +55,15 @@ def checks_table(answer: Answer) -> str:
 
 def left_out_note(summary: Mapping[str, Any]) -> str:
     """Below the checks: the updates no check covers and the checks left out, where the run says so
-    (``summary.json``'s ``not_checked`` and ``checks_left_out``: a diffuse filter's diffuse period); "" else."""
+    (``summary.json``'s ``not_checked`` and ``checks_left_out``: a diffuse filter's diffuse period), and the
+    run's ``notes`` (a model file's known inputs); "" else."""
     lines = []
     if summary.get("not_checked"):
         lines.append(f"<p>Not checked: {esc(summary['not_checked'])}.</p>")
     for name, why in (summary.get("checks_left_out") or {}).items():
         lines.append(f"<p><code>{esc(name)}</code> left out: {esc(why)}.</p>")
+    for note in summary.get("notes") or ():
+        lines.append(f"<p>Note: {esc(note)}.</p>")
     return "".join(lines)
 
 

@@ -490,6 +490,8 @@ class LoggedGainProblem(FixedGainProblem):
 
 def logged_problem(scenario, form: UpdateForm = "joseph", residual_pairs: bool = True) -> LoggedGainProblem:
     """A model file's filter against its truth over the scenario's log (``scenario.arrays``)."""
+    from kalcal.scenarios.model_file.model import inputs_note
+
     arrays = scenario.arrays
     m = scenario.model
     info = ProblemInfo(
@@ -500,6 +502,7 @@ def logged_problem(scenario, form: UpdateForm = "joseph", residual_pairs: bool =
         measurement_names=tuple(m.measurement_names[i] for i in arrays.components),
         measurement_units=tuple(m.measurement_units[i] for i in arrays.components),
         capabilities=scenario.capabilities,
+        notes=inputs_note(scenario, over_log=True),
     )
     try:
         if scenario.filter.diffuse:  # the exact diffuse gains, checked after the diffuse period

@@ -11,7 +11,7 @@ from kalcal.core.sources import Source, model_sources
 from kalcal.core.steps import UpdateForm
 from kalcal.errors import ConfigError
 from kalcal.montecarlo.problem import FixedGainProblem, ProblemInfo
-from kalcal.scenarios.model_file.model import CustomModelScenario
+from kalcal.scenarios.model_file.model import CustomModelScenario, inputs_note
 from kalcal.simulation.exact import truth_from_model
 
 
@@ -28,6 +28,7 @@ def custom_problem(
         measurement_names=m.measurement_names,
         measurement_units=m.measurement_units,
         capabilities=scenario.capabilities,
+        notes=inputs_note(scenario, over_log=False),
     )
     try:
         if scenario.filter.diffuse:
