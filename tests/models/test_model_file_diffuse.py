@@ -227,7 +227,7 @@ def test_a_diffuse_period_that_takes_the_whole_run_is_refused_in_one_line(tmp_pa
         model = tmp_path / f"{name}.toml"
         model.write_text(text)
         updates = 2 if name == "short" else 30
-        for command in (["verify", "-n", 100, "--out", tmp_path / "out"], ["analyze"]):
+        for command in (["verify", "-n", 100, "--out", tmp_path / "out"], ["analyze", "--out", tmp_path / "analysis"]):
             result = _invoke(command[0], model, *command[1:])
             assert result.exit_code == 2, result.output
             lines = result.stderr.strip().splitlines()

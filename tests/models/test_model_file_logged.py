@@ -126,15 +126,44 @@ def test_changing_rows_pass_every_check_and_the_exact_analysis_agrees(tmp_path):
     np.testing.assert_allclose(total, true_cov, rtol=1e-9, atol=1e-15)
 
 
-def test_the_inputs_are_not_read_where_the_truths_b_is_the_filters(tmp_path):
+#: the sums that hold the estimate (the filter's response to the inputs enters them), the rest free of u
+_ESTIMATE_SUMS = ("estimate", "estimate_outer", "error_estimate", "whitened_estimate")
+
+
+def test_the_errors_do_not_depend_on_u_where_the_truths_b_is_the_filters(tmp_path):
     text = CV_LOG.replace("[data]", 'b = [[0.005], [0.1]]\n[data]\ninputs = ["a"]')
     scenario = parse_model(text, "cv.toml")
     rng = np.random.default_rng(0)
     driven = over_log(scenario, _cv_log(tmp_path / "driven.csv", a=rng.normal(0.0, 5.0, 301))).problem()
     still = over_log(scenario, _cv_log(tmp_path / "still.csv", a=np.zeros(301))).problem()
     a, b = _sums(driven, 2, 300), _sums(still, 2, 300)
-    for name in (f.name for f in dataclasses.fields(MomentSums)):
+    for name in (f.name for f in dataclasses.fields(MomentSums) if f.name not in _ESTIMATE_SUMS):
         assert np.array_equal(getattr(a, name), getattr(b, name)), name  # bit for bit
+    # the estimates are the filter's with its inputs: shifted by its own response f_k, n f_k in the sum
+    f = driven.truth.estimate_offset
+    assert f is not None and np.any(f) and not np.any(still.truth.estimate_offset)
+    np.testing.assert_allclose(a.estimate, b.estimate + 300 * f, rtol=1e-12, atol=1e-9)
+
+
+# Where the truth's prior mean is not the filter's, the mean error is not zero and E[e xhat^T] depends on u:
+# the run whose inputs cancel must give the orthogonality sums of the same file run with its inputs carried
+# as truth states (driven_truth), which holds the filter's estimates with its inputs by construction.
+def test_the_orthogonality_sums_hold_the_inputs_where_the_mean_error_is_not_zero(tmp_path, monkeypatch):
+    from kalcal.scenarios.model_file import model as model_module
+
+    text = DRIVEN.replace("x0    = [0.0, 10.0]", "x0    = [0.0, 0.0]") + "\n"
+    text = text.replace("[data]", "[truth]\nx0 = [0.0, 0.25]\n\n[data]")
+    log = _driven_log(tmp_path / "log.csv")
+    cancelled = over_log(parse_model(text, "cv.toml"), log).problem()
+    assert cancelled.truth.error_map is None  # the inputs cancel: no input state
+    monkeypatch.setattr(model_module, "_inputs_cancel", lambda scenario: False)
+    carried = over_log(parse_model(text, "cv.toml"), log).problem()
+    assert carried.truth.error_map is not None  # the inputs carried as truth states
+    a, b = _sums(cancelled, 5, 400), _sums(carried, 5, 400)
+    scale = np.max(np.abs(b.error_estimate))
+    np.testing.assert_allclose(a.error_estimate, b.error_estimate, rtol=0, atol=1e-9 * scale)
+    np.testing.assert_allclose(a.estimate, b.estimate, rtol=0, atol=1e-9 * np.max(np.abs(b.estimate)))
+    np.testing.assert_allclose(a.error, b.error, rtol=0, atol=1e-9 * np.max(np.abs(b.error)))
 
 
 @pytest.mark.parametrize(
@@ -150,7 +179,7 @@ def test_the_stated_limits_are_refused_in_one_line(tmp_path, edit, columns, expe
     model = tmp_path / "cv.toml"
     model.write_text(edit(CV_LOG))
     log = _cv_log(tmp_path / "log.csv", **columns)
-    for command in (["verify", "-n", 300, "--out", tmp_path / "out"], ["analyze"]):
+    for command in (["verify", "-n", 300, "--out", tmp_path / "out"], ["analyze", "--out", tmp_path / "analysis"]):
         result = _invoke(command[0], model, "--data", log, *command[1:])
         assert result.exit_code == 2, result.output
         lines = result.stderr.strip().splitlines()
@@ -255,12 +284,12 @@ def _direct_mean_error(scenario, log: Path) -> np.ndarray:
     return np.array(out), np.array(estimates)
 
 
-def test_a_truth_b_equal_to_the_filters_reads_no_input_and_gives_the_input_free_sums(tmp_path):
+def test_a_truth_b_equal_to_the_filters_gives_the_input_free_error_sums(tmp_path):
     driven = over_log(parse_model(DRIVEN, "cv.toml"), _driven_log(tmp_path / "log.csv")).problem()
     free = over_log(parse_model(CV_LOG, "cv.toml"), _cv_log(tmp_path / "free.csv")).problem()
     assert driven.truth.state_dim == 2 and driven.truth.error_map is None  # the truth carries no input state
     a, b = _sums(driven, 2, 300), _sums(free, 2, 300)
-    for name in (f.name for f in dataclasses.fields(MomentSums)):
+    for name in (f.name for f in dataclasses.fields(MomentSums) if f.name not in _ESTIMATE_SUMS):
         assert np.array_equal(getattr(a, name), getattr(b, name)), name  # bit for bit: the file without b
     assert not np.any(driven.expected_mean_error())
 
@@ -317,7 +346,7 @@ def test_the_mean_error_check_fails_with_a_bias_when_the_truths_b_is_larger(tmp_
         verdicts[label] = {t["name"]: t for t in summary["tests"]}
         assert summary["self_check"]["agrees"], label  # the Monte Carlo against the exact analysis
         # the run says which: the inputs cancel (not read), or the error carries their offset
-        said = {"equal": "do not depend on u: the inputs are not read", "larger": "the truth's b moves it with the known inputs otherwise"}
+        said = {"equal": "do not depend on u: the log's inputs enter the estimates alone", "larger": "the truth's b moves it with the known inputs otherwise"}
         assert len(summary["notes"]) == 1 and said[label] in summary["notes"][0], summary["notes"]
     assert all(t["passed"] for t in verdicts["equal"].values()), [n for n, t in verdicts["equal"].items() if not t["passed"]]
     biased = verdicts["larger"]["mean_error"]
@@ -339,7 +368,7 @@ def test_the_mean_error_check_fails_with_a_bias_when_the_truths_b_is_larger(tmp_
 def test_without_a_log_a_truth_driven_otherwise_is_refused_in_one_line(tmp_path, text, expected):
     model = tmp_path / "cv.toml"
     model.write_text(text.replace('h     = [["c", 0.0]]', 'h     = [[1.0, 0.0]]'))  # no row from data
-    for command in (["verify", "-n", 300, "--out", tmp_path / "out"], ["analyze"]):
+    for command in (["verify", "-n", 300, "--out", tmp_path / "out"], ["analyze", "--out", tmp_path / "analysis"]):
         result = _invoke(command[0], model, *command[1:])
         assert result.exit_code == 2, result.output
         lines = result.stderr.strip().splitlines()
@@ -352,10 +381,18 @@ def test_verify_and_analyze_say_what_the_known_inputs_do_and_a_file_without_them
                        (TRUTH_B, "note: the truth's b moves it with the known inputs otherwise than the filter")):
         model = tmp_path / "cv.toml"
         model.write_text(text)
-        for command in (["verify", "-n", 200, "--out", tmp_path / "out"], ["analyze"]):
+        for command in (["verify", "-n", 200, "--out", tmp_path / "out"], ["analyze", "--out", tmp_path / "analysis"]):
             result = _invoke(command[0], model, "--data", log, *command[1:])
             assert result.exit_code == 0, result.output + result.stderr
             assert said in " ".join(result.output.split()), result.output
+        # and in the files: summary.json's and analysis.json's notes, the report below its checks
+        written = said.removeprefix("note: ")
+        assert written in json.loads((tmp_path / "analysis" / "analysis.json").read_text())["notes"][0]
+        assert written in json.loads((tmp_path / "out" / "summary.json").read_text())["notes"][0]
+        import html
+
+        report = html.unescape(" ".join((tmp_path / "out" / "report.html").read_text().split()))
+        assert "<p>Note: " + written in report
     model.write_text(CV_LOG)
     result = _invoke("verify", model, "--data", _cv_log(tmp_path / "plain.csv"), "-n", 200, "--out", tmp_path / "plain")
     assert result.exit_code == 0 and "known inputs" not in result.output

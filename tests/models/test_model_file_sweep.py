@@ -211,3 +211,27 @@ def test_a_diffuse_filter_is_swept_as_verify_takes_it(tmp_path):
         kalcal.verify(model, 200, seed=5, settings={"filter.v": value}, out=alone)
         numbers = _numbers(run / "summary.json")
         assert numbers == _numbers(alone / "summary.json") and "the diffuse period" in json.dumps(numbers)
+
+
+def test_a_value_whose_gains_refuse_it_is_named_before_the_first_run(tmp_path):
+    # a local level started diffuse: with h = 0 the level is never measured, so its diffuse period never
+    # ends; the sweep finds it from the value's problem before it runs the first value
+    level = """
+name = "ll"
+sample_period = 1.0
+steps_per_update = 1
+updates = 40
+phi = [[1.0]]
+gamma = [[1.0]]
+h = [[1.0]]
+w = [[0.1]]
+v = [[1.0]]
+x0 = [0.0]
+m0 = [[0.0]]
+diffuse = ["level"]
+state_names = ["level"]
+[truth]
+m0 = [[4.0]]
+"""
+    message = _refused(tmp_path, level, "--set", "filter.h=1,0")  # nothing ran, nothing written (_refused)
+    assert "sweep: filter.h=0: " in message and "diffuse period" in message, message

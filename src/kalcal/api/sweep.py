@@ -221,7 +221,8 @@ def model_file_cells(
 ) -> tuple[Any, list]:
     """The model file's scenario with the fixed settings, and its scenario of every value: the file with ``settings`` and ``--set key=value`` (over
     the log ``data`` where one is given, read and fingerprinted once: every value runs over the same bytes),
-    each checked as ``verify`` checks it, so that a bad value is refused before the first run.
+    each checked as ``verify`` checks it and its problem built (what only the gains show: a diffuse period
+    that never ends, a singular P), so that a bad value is refused, named, before the first run.
 
     Refused in one line (the scenario's ``sweep_refusal``, :mod:`kalcal.scenarios.model_file.entries`): a key that names a
     matrix of more than one number (the keys of its numbers are named), a key that is no number of the
@@ -244,6 +245,10 @@ def model_file_cells(
     for value in values:
         cell = with_data(resolve(scenario, {**fixed, key: value}, config, models=True), data, "verify")
         check_arguments(cell, n, **options)
+        try:  # its problem built once here (the gains: cheap), so that what only it finds is refused now too
+            cell.problem()
+        except KalcalError as error:  # a diffuse period that never ends, a singular P: named with the value
+            raise KalcalError(f"sweep: {key}={value}: {error}") from None
         cells.append(cell)
     return base, cells
 

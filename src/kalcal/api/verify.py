@@ -77,8 +77,8 @@ def verify(
         A log for a model file with a ``[data]`` table (``--data LOG``): its rows give H_k, V_k and the
         update rows, the gains are computed once from them (the same in every realization), the truth is
         simulated over those rows (:mod:`kalcal.scenarios.model_file.logged`). With the truth's b equal
-        to the filter's (and no phi or h of its own) the error does not depend on the inputs u, which are
-        not read; otherwise the log's u give the error a deterministic offset, the filter's bias.
+        to the filter's (and no phi or h of its own) the error does not depend on the inputs u, which
+        enter the estimates alone; otherwise the log's u give the error a deterministic offset, the filter's bias.
     topic : str, optional
         ``data`` a ROS bag or ULog: the topic the file's [data] table reads (``--topic``).
     max_run_s : float, optional

@@ -185,8 +185,7 @@ class DiffuseStep(NamedTuple):
 def diffuse_step(cov: np.ndarray, inf: np.ndarray, h: np.ndarray) -> DiffuseStep | None:
     """The exact diffuse update of P_* and P_inf by one decorrelated component h (d,) of unit noise, or None
     where F_inf counts as 0 (then the ordinary update of P_* applies). The one step that the log filter
-    (:func:`reference_filter`) and a diffuse filter's gains computed once
-    (:func:`kalcal.scenarios.model_file.diffuse.diffuse_schedule`) both take."""
+    (:func:`reference_filter`) and a diffuse filter's gains computed once, for its verification, both take."""
     m_inf = inf @ h
     f_inf = h @ m_inf
     if not f_inf > DIFFUSE_TOL * (h @ h) * max(np.max(np.diagonal(inf)), 1.0):

@@ -19,9 +19,11 @@ pass, as the time-invariant one does.
 Known inputs. x_{j+1} = Phi_t x_j + B_t u_j + Gamma_t w_j in the truth, xhat_{j+1}^- = Phi xhat_j + B u_j
 in the filter's prediction. Where the input moves the truth as the filter believes (M B_t = B,
 M Phi_t = Phi M and H_t = H M, M the truth's map or the identity: a truth with no b, phi or h of its
-own), the error e = M x - xhat, the innovations and every statistic of the checks do not depend on u:
-the inputs are not read (u = 0: the estimates are those of the input-free model, the errors those of
-any u; :func:`kalcal.scenarios.model_file.model._inputs_cancel`). Otherwise the log's u_j, the same in
+own), the error e = M x - xhat and the innovations do not depend on u
+(:func:`kalcal.scenarios.model_file.model._inputs_cancel`): the truth carries no input state, the draws and
+the error and innovation sums are those of any u, and the estimates get the filter's own response to the
+log's inputs f_k (``estimate_offset``), as below, because the orthogonality check's E[e xhat^T] does depend
+on u where the mean error is not zero (a truth whose prior mean is not the filter's). Otherwise the log's u_j, the same in
 every realization, give the error and the innovations a deterministic offset at each update, M g_k - f_k
 and H_t,k g_k - H_k f_k (g the truth's response to u, f the filter's): :func:`driven_truth` carries g and f
 as truth states, so that the kernel, the numpy reference and the exact analysis take the offset
@@ -122,9 +124,10 @@ class LoggedTruth(UpdateRateTruth):
     measurement factor G_k (K, p, p) (:class:`~kalcal.simulation.exact.UpdateRateTruth` holds one of each).
     No shared boundary sample and no deterministic model error (D_k = 0).
 
-    ``estimate_offset`` (K, d): for a truth driven by the known inputs otherwise than the filter believes
-    (:func:`driven_truth`), the filter's own response to the inputs f_k, which the kernel's input-free
-    filter leaves out of its estimates and :class:`LoggedGainProblem` adds back (None: nothing to add)."""
+    ``estimate_offset`` (K, d): for a file with known inputs (a truth driven by them otherwise than the
+    filter believes, :func:`driven_truth`, or as it believes), the filter's own response to the inputs f_k,
+    which the kernel's input-free filter leaves out of its estimates and :class:`LoggedGainProblem` adds
+    back (None: no inputs)."""
 
     estimate_offset: np.ndarray | None = None
 
@@ -250,7 +253,19 @@ def logged_arrays(scenario, bound) -> LoggedArrays:
     )
     if not _inputs_cancel(scenario):
         truth = driven_truth(truth, phis, h, _forcing(t, updates), _forcing(f, updates))
+    elif f.b.size and f.u is not None and f.u.size:  # errors and innovations free of u; the estimates still carry the filter's response to it
+        truth = dataclasses.replace(truth, estimate_offset=_response(phis, _forcing(f, updates)))
     return LoggedArrays(filt, truth, updates, np.asarray(bound.times)[updates], components)
+
+
+def _response(phis: np.ndarray, forcing: np.ndarray) -> np.ndarray:
+    """The filter's own response to the inputs at each update, f_k = Phi_k f_{k-1} + c^f_k (f_{-1} = 0), (K, d)."""
+    response = np.empty_like(forcing)
+    f = np.zeros(forcing.shape[1])
+    for k in range(forcing.shape[0]):
+        f = phis[k] @ f + forcing[k]
+        response[k] = f
+    return response
 
 
 def _forcing(model: TimeVaryingModel, rows: np.ndarray) -> np.ndarray:
@@ -316,11 +331,7 @@ def driven_truth(truth: LoggedTruth, phis: np.ndarray, h: np.ndarray, truth_forc
         return np.pad(a, width)
 
     error_map = np.eye(d, n) if truth.error_map is None else truth.error_map
-    response = np.empty((n_updates, d))  # f_k = Phi_k f_{k-1} + c^f_k, f_{-1} = 0
-    f = np.zeros(d)
-    for k in range(n_updates):
-        f = phis[k] @ f + filter_forcing[k]
-        response[k] = f
+    response = _response(phis, filter_forcing)
     x0_mean = padded(truth.x0_mean, 0)
     x0_mean[-1] = 1.0
     return LoggedTruth(

@@ -467,13 +467,18 @@ def _inputs_cancel(scenario: CustomModelScenario) -> bool:
 
 def inputs_note(scenario: CustomModelScenario, over_log: bool) -> tuple[str, ...]:
     """What a verification says of the file's known inputs (``ProblemInfo.notes``): nothing without inputs;
-    where they cancel (:func:`_inputs_cancel`), that the error does not depend on u, so the inputs are not
-    read; over a log where they do not, that the error carries the inputs' deterministic offset."""
+    where they cancel (:func:`_inputs_cancel`), that the error and innovations do not depend on u (over a
+    log the inputs enter the estimates alone; without one the estimates are those of u = 0); over a log
+    where they do not cancel, that the error carries the inputs' deterministic offset."""
     if scenario.filter.input_dim == 0 and scenario.truth.input_dim == 0:
         return ()
     if _inputs_cancel(scenario):
-        return ("the known inputs u move the truth and the filter's prediction alike, so the filter's error and "
-                "innovations do not depend on u: the inputs are not read (the estimates shown are those of u = 0)",)
+        said = ("the known inputs u move the truth and the filter's prediction alike, so the filter's error and "
+                "innovations do not depend on u")
+        if over_log:
+            return (said + ": the log's inputs enter the estimates alone (the filter's own response to them)",)
+        return (said + "; without a log the inputs are unknown, so the estimates shown, and the orthogonality "
+                "check where the mean error is not zero, are those of u = 0",)
     if over_log:
         return (f"the truth's {_input_mismatch(scenario)} moves it with the known inputs otherwise than the filter "
                 "predicts: the error carries a deterministic offset from the log's inputs, the same in every "
