@@ -30,6 +30,7 @@ import importlib.util
 import os
 import sys
 import tempfile
+import threading
 from pathlib import Path
 
 from kalcal.core.nonlinear import NonlinearModel, symbolic_model
@@ -124,8 +125,19 @@ def cache_dir() -> Path:
     raise OSError("no writable folder for the compiled models' modules (set KALCAL_CACHE_DIR)")
 
 
+#: one import of a generated module at a time: the module is in sys.modules before its body has run, so a
+#: second thread (the Monte Carlo's blocks ask for the kernel at once) would otherwise get it half made
+_LOADING = threading.RLock()
+
+
 def load_generated(text: str):
-    """Write ``text`` as a module named by its digest in :func:`cache_dir` (once) and import it."""
+    """Write ``text`` as a module named by its digest in :func:`cache_dir` (once) and import it (one
+    thread at a time: another thread waits for the module whole)."""
+    with _LOADING:
+        return _load_generated(text)
+
+
+def _load_generated(text: str):
     digest = hashlib.sha256(text.encode()).hexdigest()[:24]
     name = f"kalcal_compiled_{digest}"
     if name in sys.modules:

@@ -9,6 +9,7 @@ differences asked for, or an f or h that sympy cannot take); such a model keeps 
 from __future__ import annotations
 
 import hashlib
+import threading
 import weakref
 from pathlib import Path
 from typing import Callable
@@ -19,10 +20,11 @@ from kalcal.core.nonlinear_codegen import compilable, load_generated, model_sour
 __all__ = ["block_kernel", "is_compiled", "refuse"]
 
 _ARGS = ("first, noise, t_x0, t_p0f, t_qf, t_rf, t_dt, q_inv, has_q_inv, r_chol, "
-         "f_x0, f_p0, f_q, f_r, f_dt, inputs, data, sums, normalized, eff, m")
+         "f_x0, f_p0, f_q, f_r, f_dt, inputs, data, checked, sums, normalized, eff, m")
 
 #: truth model -> {filter model -> (driver or None, reason)}: once per pair of models in a process
 _KERNELS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_DERIVING = threading.RLock()
 
 
 def _kernel_digest() -> str:
@@ -62,7 +64,13 @@ def generated_text(truth: NonlinearModel, filter_model: NonlinearModel) -> str:
 
 
 def block_kernel(truth: NonlinearModel, filter_model: NonlinearModel) -> tuple[Callable | None, str]:
-    """The compiled block driver of the pair of models, or (None, why not); derived once per pair."""
+    """The compiled block driver of the pair of models, or (None, why not); derived once per pair (the
+    Monte Carlo's threads ask at once: one derives it, the others wait for it)."""
+    with _DERIVING:
+        return _block_kernel(truth, filter_model)
+
+
+def _block_kernel(truth: NonlinearModel, filter_model: NonlinearModel) -> tuple[Callable | None, str]:
     per_truth = _KERNELS.setdefault(truth, weakref.WeakKeyDictionary())
     if filter_model in per_truth:
         return per_truth[filter_model]
@@ -96,7 +104,8 @@ def is_compiled(kernel) -> bool:
 
 def refuse(truth: NonlinearModel, filter_model: NonlinearModel, reason: str) -> None:
     """Mark the pair of models as kept on the numpy path (its printed code did not compile), with why."""
-    _KERNELS.setdefault(truth, weakref.WeakKeyDictionary())[filter_model] = (None, reason)
+    with _DERIVING:
+        _KERNELS.setdefault(truth, weakref.WeakKeyDictionary())[filter_model] = (None, reason)
 
 
 def run_block(truth: NonlinearModel, filter_model: NonlinearModel, *args) -> bool | None:

@@ -72,7 +72,7 @@ def _forward_lanes(lower, v, out, m):
 def ekf_block(
     ft, jac_ft, ht, jac_ht, ff, jac_ff, hf, jac_hf,
     first, noise, t_x0, t_p0f, t_qf, t_rf, t_dt, q_inv, has_q_inv, r_chol,
-    f_x0, f_p0, f_q, f_r, f_dt, inputs, data, sums, normalized, eff, m,
+    f_x0, f_p0, f_q, f_r, f_dt, inputs, data, checked, sums, normalized, eff, m,
 ):
     """One block's sums (module docstring). K updates, n realizations, d states, p measurements.
 
@@ -98,8 +98,11 @@ def ekf_block(
         The filter's prior mean (d,), P0 (d, d), Q (d, d), R (p, p).
     inputs, data : ndarray, shapes (K, m_in), (K, k)
         Each update's input and data (zero columns where the model takes none).
+    checked : ndarray of int, shape (c,)
+        The states the checks and effect sizes are on, in the filter's order (all d of them, or a subset:
+        the others are nuisance states, as a static pose's tilts); the bound's sums stay on all d.
     sums : SumBuffers
-        Added into (own P_k: the whitened sums kept); ``residuals`` (K p, n) receives the normalized
+        Added into (its state axes of size c) (own P_k: the whitened sums kept); ``residuals`` (K p, n) receives the normalized
         innovations where its first axis is not empty.
     normalized : ndarray, shape (K, p)
         Sum of the normalized innovations, added into.
@@ -118,6 +121,7 @@ def ekf_block(
     n, d = first.shape
     n_updates = noise.shape[0]
     p = f_r.shape[0]
+    dc = checked.shape[0]
     tiles = (n + m - 1) // m
     nees_sq, nees_avg, nis_avg, e4, p2, e2p, pooled, zsum, z2sum, zbar, lag1, fsum, ftqf, htrh = eff
     keep_pairs = sums.residuals.shape[0] > 0
@@ -127,9 +131,9 @@ def ekf_block(
     cov = np.empty((tiles, d, d, m))
     r_nees = np.zeros((tiles, m))
     r_nis = np.zeros((tiles, m))
-    r_a = np.zeros((tiles, d, m))
-    r_b = np.zeros((tiles, d, m))
-    r_z = np.zeros((tiles, d, m))
+    r_a = np.zeros((tiles, dc, m))
+    r_b = np.zeros((tiles, dc, m))
+    r_z = np.zeros((tiles, dc, m))
     r_lag = np.zeros((tiles, m))
     last_u = np.zeros((tiles, p, m))
     for t in range(tiles):
@@ -159,36 +163,39 @@ def ekf_block(
     gain = np.empty((p, d, m))
     s = np.empty((p, p, m))
     work = update_work(d, p, m)
-    lp = np.empty((d, d, m))
+    cc = np.empty((dc, dc, m))  # the checked states' block of P, their estimate
+    xc = np.empty((dc, m))
+    lp = np.empty((dc, dc, m))
     ls = np.empty((p, p, m))
-    e = np.empty((d, m))
-    eps = np.empty((d, m))
+    e = np.empty((dc, m))
+    eps = np.empty((dc, m))
     u = np.empty((p, m))
     tile_nees = np.empty(m)  # the tile's NEES and NIS, binned into the shape histograms
     tile_nis = np.empty(m)
-    # one update's sums, per lane (reduced over the lanes at the update's end): the offsets of each
-    dd, pp = d * d, p * p
+    # one update's sums, per lane (reduced over the lanes at the update's end): the offsets of each (the
+    # checks' on the c checked states, the bound's on all d)
+    cd, dd, pp = dc * dc, d * d, p * p
     o_err = 0
-    o_eo = o_err + d
-    o_est = o_eo + dd
-    o_esto = o_est + d
-    o_ee = o_esto + dd
-    o_nees = o_ee + dd
+    o_eo = o_err + dc
+    o_est = o_eo + cd
+    o_esto = o_est + dc
+    o_ee = o_esto + cd
+    o_nees = o_ee + cd
     o_nis = o_nees + 1
     o_res = o_nis + 1
     o_reso = o_res + p
     o_fc = o_reso + pp
-    o_we = o_fc + dd
-    o_wo = o_we + d
-    o_wx = o_wo + dd
-    o_nr = o_wx + dd
+    o_we = o_fc + cd
+    o_wo = o_we + dc
+    o_wx = o_wo + cd
+    o_nr = o_wx + cd
     o_nsq = o_nr + p
     o_e4 = o_nsq + 1
-    o_p2 = o_e4 + d
-    o_e2p = o_p2 + d
-    o_z = o_e2p + d
-    o_z2 = o_z + d
-    o_f = o_z2 + d
+    o_p2 = o_e4 + dc
+    o_e2p = o_p2 + dc
+    o_z = o_e2p + dc
+    o_z2 = o_z + dc
+    o_f = o_z2 + dc
     o_ftqf = o_f + dd
     o_htrh = o_ftqf + dd
     width = o_htrh + dd
@@ -265,33 +272,40 @@ def ekf_block(
                     for i in range(p):
                         acc += gain[i, a, j] * res[i, j]
                     xh[a, j] = acc
-            # the statistics: e = x - xhat, eps = L_P^-1 e, u = L_S^-1 r, each realization's own factors
-            for a in range(d):
+            # the statistics on the checked states: e = x - xhat, eps = L_P^-1 e, u = L_S^-1 r, each
+            # realization's own factors (of P's checked block)
+            for a in range(dc):
+                ca = checked[a]
                 for j in range(m):
-                    e[a, j] = x[a, j] - xh[a, j]
-            if not _cholesky_lanes(c, lp, mt):
+                    e[a, j] = x[ca, j] - xh[ca, j]
+                    xc[a, j] = xh[ca, j]
+                for b in range(dc):
+                    cb = checked[b]
+                    for j in range(m):
+                        cc[a, b, j] = c[ca, cb, j]
+            if not _cholesky_lanes(cc, lp, mt):
                 return False
             if not _cholesky_lanes(s, ls, mt):
                 return False
             _forward_lanes(lp, e, eps, mt)
             _forward_lanes(ls, res, u, mt)
-            for a in range(d):
+            for a in range(dc):
                 for j in range(mt):
                     lane[o_err + a, j] += e[a, j]
-                    lane[o_est + a, j] += xh[a, j]
+                    lane[o_est + a, j] += xc[a, j]
                     lane[o_we + a, j] += eps[a, j]
-                for b in range(d):
-                    ab = a * d + b
+                for b in range(dc):
+                    ab = a * dc + b
                     for j in range(mt):
                         lane[o_eo + ab, j] += e[a, j] * e[b, j]
-                        lane[o_esto + ab, j] += xh[a, j] * xh[b, j]
-                        lane[o_ee + ab, j] += e[a, j] * xh[b, j]
-                        lane[o_fc + ab, j] += c[a, b, j]
+                        lane[o_esto + ab, j] += xc[a, j] * xc[b, j]
+                        lane[o_ee + ab, j] += e[a, j] * xc[b, j]
+                        lane[o_fc + ab, j] += cc[a, b, j]
                         lane[o_wo + ab, j] += eps[a, j] * eps[b, j]
-                        lane[o_wx + ab, j] += eps[a, j] * xh[b, j]
+                        lane[o_wx + ab, j] += eps[a, j] * xc[b, j]
             for j in range(mt):
                 nees = 0.0
-                for a in range(d):
+                for a in range(dc):
                     nees += eps[a, j] * eps[a, j]
                 nis = 0.0
                 lag = 0.0
@@ -323,9 +337,9 @@ def ekf_block(
                 for a in range(p):
                     for j in range(mt):
                         sums.residuals[k * p + a, t * m + j] = u[a, j]
-            for a in range(d):
+            for a in range(dc):
                 for j in range(mt):
-                    pii = c[a, a, j]
+                    pii = cc[a, a, j]
                     e2 = e[a, j] * e[a, j]
                     zz = e[a, j] / np.sqrt(pii)
                     lane[o_e4 + a, j] += e2 * e2
@@ -367,7 +381,7 @@ def ekf_block(
                         for j in range(mt):
                             lane[o_htrh + a * d + b, j] += wh[i, a, j] * wh[i, b, j]
         # the update's sums: the lanes reduced
-        for a in range(d):
+        for a in range(dc):
             sums.error[k, a] += lane[o_err + a].sum()
             sums.estimate[k, a] += lane[o_est + a].sum()
             sums.whitened_error[k, a] += lane[o_we + a].sum()
@@ -376,14 +390,17 @@ def ekf_block(
             e2p[k, a] += lane[o_e2p + a].sum()
             zsum[k, a] += lane[o_z + a].sum()
             z2sum[k, a] += lane[o_z2 + a].sum()
-            for b in range(d):
-                ab = a * d + b
+            for b in range(dc):
+                ab = a * dc + b
                 sums.error_outer[k, a, b] += lane[o_eo + ab].sum()
                 sums.estimate_outer[k, a, b] += lane[o_esto + ab].sum()
                 sums.error_estimate[k, a, b] += lane[o_ee + ab].sum()
                 sums.filter_cov[k, a, b] += lane[o_fc + ab].sum()
                 sums.whitened_outer[k, a, b] += lane[o_wo + ab].sum()
                 sums.whitened_estimate[k, a, b] += lane[o_wx + ab].sum()
+        for a in range(d):
+            for b in range(d):
+                ab = a * d + b
                 fsum[k, a, b] += lane[o_f + ab].sum()
                 ftqf[k, a, b] += lane[o_ftqf + ab].sum()
                 htrh[k, a, b] += lane[o_htrh + ab].sum()
@@ -405,7 +422,7 @@ def ekf_block(
             avg = r_nis[t, j] / n_updates
             nis_avg[0] += avg
             nis_avg[1] += avg * avg
-            for a in range(d):
+            for a in range(dc):
                 ra, rb = r_a[t, a, j], r_b[t, a, j]
                 pooled[0, a] += ra
                 pooled[1, a] += rb
