@@ -7,7 +7,7 @@ regression model's fit (tests/core/test_kernel_callers.py names each caller). It
 numpy reference :func:`kalcal.core.steps.gain_and_covariance`, with the same equations::
 
     S = H M H^T + V (symmetrized),   K = M H^T S^{-1},
-    P = (I - K H) M (I - K H)^T + K V K^T   (joseph)   or   P = M - K H M   (standard), symmetrized.
+    P = (I - K H) M (I - K H)^T + K V K^T   (joseph: its lower triangle, mirrored)   or   P = M - K H M   (standard, symmetrized).
 
 It works on a tile of m realizations in structure of arrays (realizations on the last, contiguous axis:
 a covariance is (d, d, m), a measurement matrix (p, d, m)), so that each line of it is a pass over the
@@ -56,12 +56,14 @@ class UpdateWork(NamedTuple):
     a: np.ndarray  #: I - K H, (d, d, m) (Joseph form)
     ap: np.ndarray  #: (I - K H) M, (d, d, m) (Joseph form)
     acc: np.ndarray  #: one row of a tile, (m,)
+    kv: np.ndarray  #: (K V)^T = V K^T, (p, d, m) (Joseph form, p > 1)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def update_work(d, p, m):
     """The scratch :func:`covariance_update` needs, allocated once per tile (not once per update)."""
-    return UpdateWork(np.empty((p, d, m)), np.empty((p, p, m)), np.empty((d, d, m)), np.empty((d, d, m)), np.empty(m))
+    return UpdateWork(np.empty((p, d, m)), np.empty((p, p, m)), np.empty((d, d, m)), np.empty((d, d, m)), np.empty(m),
+                      np.empty((p, d, m)))
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -106,12 +108,17 @@ def covariance_update(cov, h, v, joseph, gain, s, work):
         # the (d, m) rows of the (1, d, m) arrays, views by indexing (a reshape is a call per update)
         _scalar_update(cov, h[0], v[0, 0], joseph, gain[0], s[0, 0], hm[0], a, ap, acc)
     else:
-        _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc)
+        _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, work.kv)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc):
-    """:func:`covariance_update` where p > 1: K by a Cholesky factor of S and two triangular solves."""
+def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, kv):
+    """:func:`covariance_update` where p > 1: K by a Cholesky factor of S and two triangular solves.
+
+    The Joseph form's products in O(d^2 p) and one O(d^3 / 2): (I - K H) M as M - K (H M) (H M is at
+    hand), then the lower triangle of ((I - K H) M) (I - K H)^T + K (V K^T), mirrored (P symmetric by
+    construction), instead of two full d x d x d products: at d = 11, p = 3, about 1,750 multiply-adds
+    per realization in place of 4,100."""
     d, p, m = cov.shape[0], h.shape[0], cov.shape[2]
     for i in range(p):  # H M, as (M H^T)^T
         for u in range(d):
@@ -166,7 +173,7 @@ def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc):
                 for j in range(m):
                     gain[i, u, j] = acc[j] / lower[i, i, j]
     if joseph:
-        for u in range(d):  # A = I - K H
+        for u in range(d):  # A = I - K H, and A M = M - K (H M)
             for w in range(d):
                 eye = 1.0 if u == w else 0.0
                 for j in range(m):
@@ -176,40 +183,47 @@ def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc):
                         acc[j] -= gain[i, u, j] * h[i, w, j]
                 for j in range(m):
                     a[u, w, j] = acc[j]
-        for u in range(d):  # A M
-            for w in range(d):
                 for j in range(m):
-                    acc[j] = 0.0
-                for c in range(d):
+                    acc[j] = cov[u, w, j]
+                for i in range(p):
                     for j in range(m):
-                        acc[j] += a[u, c, j] * cov[c, w, j]
+                        acc[j] -= gain[i, u, j] * hm[i, w, j]
                 for j in range(m):
                     ap[u, w, j] = acc[j]
-        for u in range(d):  # P = A M A^T + K V K^T (M is not needed any more: written in place)
-            for w in range(d):
+        for i in range(p):  # V K^T
+            for u in range(d):
+                for j in range(m):
+                    acc[j] = 0.0
+                for k in range(p):
+                    for j in range(m):
+                        acc[j] += v[i, k] * gain[k, u, j]
+                for j in range(m):
+                    kv[i, u, j] = acc[j]
+        for u in range(d):  # P = (A M) A^T + K (V K^T), its lower triangle, mirrored (M is not needed any more)
+            for w in range(u + 1):
                 for j in range(m):
                     acc[j] = 0.0
                 for c in range(d):
                     for j in range(m):
                         acc[j] += ap[u, c, j] * a[w, c, j]
                 for i in range(p):
-                    for k in range(p):
-                        for j in range(m):
-                            acc[j] += gain[i, u, j] * v[i, k] * gain[k, w, j]
+                    for j in range(m):
+                        acc[j] += gain[i, u, j] * kv[i, w, j]
                 for j in range(m):
                     cov[u, w, j] = acc[j]
+                    cov[w, u, j] = acc[j]
     else:
         for u in range(d):  # P = M - K (H M)
             for w in range(d):
                 for i in range(p):
                     for j in range(m):
                         cov[u, w, j] -= gain[i, u, j] * hm[i, w, j]
-    for u in range(d):
-        for w in range(u + 1, d):
-            for j in range(m):
-                mid = 0.5 * (cov[u, w, j] + cov[w, u, j])
-                cov[u, w, j] = mid
-                cov[w, u, j] = mid
+        for u in range(d):
+            for w in range(u + 1, d):
+                for j in range(m):
+                    mid = 0.5 * (cov[u, w, j] + cov[w, u, j])
+                    cov[u, w, j] = mid
+                    cov[w, u, j] = mid
 
 
 @numba.njit(cache=True, nogil=True, inline="always")

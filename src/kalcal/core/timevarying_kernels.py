@@ -18,7 +18,7 @@ The exact diffuse period (rows whose prior still has an infinite part) runs in n
 few rows in any model whose diffuse states the first measurements determine.
 """
 
-# numba cache stamp: kalcal.core.kernels 8b932ca498b00ecc
+# numba cache stamp: kalcal.core.kernels 2a6a8ab0af18dbf9
 
 from __future__ import annotations
 

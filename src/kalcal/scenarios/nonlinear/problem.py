@@ -289,8 +289,9 @@ class NonlinearProblem(ProblemDefaults):
         """Whether :meth:`block_sums` runs the compiled EKF kernel, and why not where it does not.
 
         The compiled path (:mod:`kalcal.scenarios.nonlinear.kernel`) runs an EKF of models whose f and h
-        sympy can take (the default Jacobians); the IEKF and the UKF, and models with explicit numpy
-        Jacobians, jax's or finite differences, run the batched numpy path. Of the models it takes, the
+        sympy can take (the default Jacobians), its checks on the hooks' checked states where a scenario
+        sets them (imu-3axis: the 9 parameters of 11 states); the IEKF and the UKF, a batch estimator, and
+        models with explicit numpy Jacobians, jax's or finite differences, run the batched numpy path. Of the models it takes, the
         ``compiled`` setting decides: ``yes`` compiles the kernel (about a minute per pair of models, once:
         numba caches it), ``no`` keeps the numpy path, and ``auto`` (the default) runs the kernel where it is
         compiled already (in this process or in numba's cache) or where the planned run, N K realization-
