@@ -18,7 +18,7 @@ The exact diffuse period (rows whose prior still has an infinite part) runs in n
 few rows in any model whose diffuse states the first measurements determine.
 """
 
-# numba cache stamp: kalcal.core.kernels 2a6a8ab0af18dbf9
+# numba cache stamp: kalcal.core.kernels 0b1d8645cdde0632
 
 from __future__ import annotations
 

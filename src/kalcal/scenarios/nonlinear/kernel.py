@@ -25,7 +25,7 @@ numpy path's rule, a prediction only) or a P or S is not positive definite: the 
 block on the numpy path from the same draws, which gives that case's numbers (or its error).
 """
 
-# numba cache stamp: kalcal.core.kernels 2a6a8ab0af18dbf9, kalcal.montecarlo.sum_kernels 1ed5637ca40b0768
+# numba cache stamp: kalcal.core.kernels 0b1d8645cdde0632, kalcal.montecarlo.sum_kernels 1ed5637ca40b0768
 
 from __future__ import annotations
 
@@ -77,6 +77,20 @@ def _forward_lanes(lower, v, out, m, acc):
                 acc[j] = acc[j] - lower[i, b, j] * out[b, j]
         for j in range(m):
             out[i, j] = acc[j] / lower[i, i, j]
+
+
+@numba.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _add_lanes(out, v, m):
+    """out[:m] += v[:m] (rows of the tile's arrays): one store per loop, so that the loop vectorizes."""
+    for j in range(m):
+        out[j] += v[j]
+
+
+@numba.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _add_products(out, a, b, m):
+    """out[:m] += a[:m] * b[:m], one store per loop."""
+    for j in range(m):
+        out[j] += a[j] * b[j]
 
 
 @numba.njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -171,6 +185,21 @@ def ekf_block(
                 xf[t, a, j] = f_x0[a]
                 for b in range(d):
                     cov[t, a, b, j] = f_p0[a, b]
+    # the columns of each row of the truth's noise factors that are not zero, in order
+    q_cols = np.zeros((d, d), dtype=np.int64)
+    q_count = np.zeros(d, dtype=np.int64)
+    for a in range(d):
+        for b in range(d):
+            if t_qf[a, b] != 0.0:
+                q_cols[a, q_count[a]] = b
+                q_count[a] += 1
+    r_cols = np.zeros((p, p), dtype=np.int64)
+    r_count = np.zeros(p, dtype=np.int64)
+    for a in range(p):
+        for b in range(p):
+            if t_rf[a, b] != 0.0:
+                r_cols[a, r_count[a]] = b
+                r_count[a] += 1
     # one tile's scratch (the Jacobians' zeros from the start: the printed F and H write only the others)
     tmp = np.empty((d, m))
     jf = np.zeros((d, d, m))
@@ -195,6 +224,7 @@ def ekf_block(
     eps = np.empty((dc, m))
     u = np.empty((p, m))
     row = np.empty(m)  # a running sum per lane
+    zrow = np.empty((2, m))  # e / sqrt(P_ii) and e^2 of one state
     tile_nees = np.empty(m)  # the tile's NEES and NIS, binned into the shape histograms
     tile_nis = np.empty(m)
     # one update's sums, per lane (reduced over the lanes at the update's end): the offsets of each (the
@@ -244,9 +274,9 @@ def ekf_block(
                 col = min(t * m + j, n - 1)
                 for a in range(d):
                     acc = 0.0
-                    for b in range(d):
-                        if t_qf[a, b] != 0.0:
-                            acc += noise[k, col, b] * t_qf[a, b]
+                    for i in range(q_count[a]):
+                        b = q_cols[a, i]
+                        acc += noise[k, col, b] * t_qf[a, b]
                     x[a, j] = tmp[a, j] + acc
             for j in range(m):
                 hh_t(x, dk, hz, jh, j)
@@ -254,9 +284,9 @@ def ekf_block(
                 col = min(t * m + j, n - 1)
                 for a in range(p):
                     acc = 0.0
-                    for b in range(p):
-                        if t_rf[a, b] != 0.0:
-                            acc += noise[k, col, d + b] * t_rf[a, b]
+                    for i in range(r_count[a]):
+                        b = r_cols[a, i]
+                        acc += noise[k, col, d + b] * t_rf[a, b]
                     zt[a, j] = hz[a, j] + acc
             # the filter's prediction: xbar = f(xhat), M = F P F^T + Q (symmetrized), into c; the products
             # with F's identically zero entries skipped (a kept state's F row is one 1, a renewed one's none)
@@ -279,8 +309,10 @@ def ekf_block(
                         if f_nz[b, w]:
                             for j in range(m):
                                 tmp[0, j] += fc[a, w, j] * big_f[b, w, j]
+                    q_ab = 0.5 * (f_q[a, b] + f_q[b, a])
                     for j in range(m):
-                        c[a, b, j] = tmp[0, j] + 0.5 * (f_q[a, b] + f_q[b, a])
+                        c[a, b, j] = tmp[0, j] + q_ab
+                    for j in range(m):
                         c[b, a, j] = c[a, b, j]
             # the update: H at xbar, r = z - h(xbar), then the one compiled covariance update (Joseph)
             for j in range(m):
@@ -304,10 +336,13 @@ def ekf_block(
                     xh[a, j] = acc
             # the statistics on the checked states: e = x - xhat, eps = L_P^-1 e, u = L_S^-1 r, each
             # realization's own factors (of P's checked block)
+            # (each lane loop below stores into one array row: a loop that stores into several rows of
+            # arrays that may overlap needs more runtime overlap checks than LLVM makes, and runs unvectorized)
             for a in range(dc):
                 ca = checked[a]
                 for j in range(m):
                     e[a, j] = x[ca, j] - xh[ca, j]
+                for j in range(m):
                     xc[a, j] = xh[ca, j]
                 for b in range(dc):
                     cb = checked[b]
@@ -320,70 +355,65 @@ def ekf_block(
             _forward_lanes(lp, e, eps, mt, row)
             _forward_lanes(ls, res, u, mt, row)
             for a in range(dc):
-                for j in range(mt):
-                    lane[o_err + a, j] += e[a, j]
-                    lane[o_est + a, j] += xc[a, j]
-                    lane[o_we + a, j] += eps[a, j]
+                _add_lanes(lane[o_err + a], e[a], mt)
+                _add_lanes(lane[o_est + a], xc[a], mt)
+                _add_lanes(lane[o_we + a], eps[a], mt)
                 for b in range(dc):
                     ab = a * dc + b
-                    for j in range(mt):
-                        lane[o_ee + ab, j] += e[a, j] * xc[b, j]
-                        lane[o_wx + ab, j] += eps[a, j] * xc[b, j]
+                    _add_products(lane[o_ee + ab], e[a], xc[b], mt)
+                    _add_products(lane[o_wx + ab], eps[a], xc[b], mt)
                 # the symmetric sums' lower triangles (their upper ones the same numbers, mirrored below)
                 for b in range(a + 1):
                     ab = a * dc + b
-                    for j in range(mt):
-                        lane[o_eo + ab, j] += e[a, j] * e[b, j]
-                        lane[o_esto + ab, j] += xc[a, j] * xc[b, j]
-                        lane[o_fc + ab, j] += cc[a, b, j]
-                        lane[o_wo + ab, j] += eps[a, j] * eps[b, j]
+                    _add_products(lane[o_eo + ab], e[a], e[b], mt)
+                    _add_products(lane[o_esto + ab], xc[a], xc[b], mt)
+                    _add_lanes(lane[o_fc + ab], cc[a, b], mt)
+                    _add_products(lane[o_wo + ab], eps[a], eps[b], mt)
             for j in range(mt):
-                nees = 0.0
-                for a in range(dc):
-                    nees += eps[a, j] * eps[a, j]
-                nis = 0.0
-                lag = 0.0
+                tile_nees[j] = 0.0
+            for a in range(dc):
+                _add_products(tile_nees, eps[a], eps[a], mt)
+            for j in range(mt):
+                tile_nis[j] = 0.0
+            for a in range(p):
+                _add_products(tile_nis, u[a], u[a], mt)
+            if k > 0:
                 for a in range(p):
-                    nis += u[a, j] * u[a, j]
-                    lag += last_u[t, a, j] * u[a, j]
+                    _add_products(r_lag[t], last_u[t, a], u[a], mt)
+            for a in range(p):
+                for j in range(mt):
                     last_u[t, a, j] = u[a, j]
-                lane[o_nees, j] += nees
-                lane[o_nis, j] += nis
-                tile_nees[j] = nees
-                tile_nis[j] = nis
-                lane[o_nsq, j] += nees * nees
-                r_nees[t, j] += nees
-                r_nis[t, j] += nis
-                if k > 0:
-                    r_lag[t, j] += lag
+            _add_lanes(lane[o_nees], tile_nees, mt)
+            _add_lanes(lane[o_nis], tile_nis, mt)
+            _add_products(lane[o_nsq], tile_nees, tile_nees, mt)
+            _add_lanes(r_nees[t], tile_nees, mt)
+            _add_lanes(r_nis[t], tile_nis, mt)
             # the shape check's histograms, by the fixed-gain kernels' binning (the same floor of the same
             # product as numpy's shape_histogram)
             add_shape(k, tile_nees[:mt], sums.nees_grid.scale, sums.nees_histogram)
             add_shape(k, tile_nis[:mt], sums.nis_grid.scale, sums.nis_histogram)
             for a in range(p):
-                for j in range(mt):
-                    lane[o_res + a, j] += res[a, j]
-                    lane[o_nr + a, j] += u[a, j]
+                _add_lanes(lane[o_res + a], res[a], mt)
+                _add_lanes(lane[o_nr + a], u[a], mt)
                 for b in range(p):
-                    for j in range(mt):
-                        lane[o_reso + a * p + b, j] += res[a, j] * res[b, j]
+                    _add_products(lane[o_reso + a * p + b], res[a], res[b], mt)
             if keep_pairs:
                 for a in range(p):
                     for j in range(mt):
                         sums.residuals[k * p + a, t * m + j] = u[a, j]
             for a in range(dc):
                 for j in range(mt):
-                    pii = cc[a, a, j]
-                    e2 = e[a, j] * e[a, j]
-                    zz = e[a, j] / np.sqrt(pii)
-                    lane[o_e4 + a, j] += e2 * e2
-                    lane[o_p2 + a, j] += pii * pii
-                    lane[o_e2p + a, j] += e2 * pii
-                    lane[o_z + a, j] += zz
-                    lane[o_z2 + a, j] += zz * zz
-                    r_a[t, a, j] += e2
-                    r_b[t, a, j] += pii
-                    r_z[t, a, j] += zz
+                    zrow[0, j] = e[a, j] / np.sqrt(cc[a, a, j])  # e / sqrt(P_ii)
+                for j in range(mt):
+                    zrow[1, j] = e[a, j] * e[a, j]
+                _add_products(lane[o_e4 + a], zrow[1], zrow[1], mt)
+                _add_products(lane[o_p2 + a], cc[a, a], cc[a, a], mt)
+                _add_products(lane[o_e2p + a], zrow[1], cc[a, a], mt)
+                _add_lanes(lane[o_z + a], zrow[0], mt)
+                _add_products(lane[o_z2 + a], zrow[0], zrow[0], mt)
+                _add_lanes(r_a[t, a], zrow[1], mt)
+                _add_lanes(r_b[t, a], cc[a, a], mt)
+                _add_lanes(r_z[t, a], zrow[0], mt)
             # the Cramér–Rao bound's expectations at the truth's states: F, F^T Q^-1 F, (R^-1/2 H)^T (R^-1/2 H)
             for a in range(d):
                 for b in range(d):

@@ -20,7 +20,7 @@ then :func:`kalcal.filters.regression.run_regression_filter` then
 :func:`kalcal.core.likelihood.innovation_loglik` (tests/fitting/test_scale_bias_likelihood_steps.py).
 """
 
-# numba cache stamp: kalcal.core.kernels 2a6a8ab0af18dbf9
+# numba cache stamp: kalcal.core.kernels 0b1d8645cdde0632
 
 from __future__ import annotations
 
