@@ -57,13 +57,17 @@ class UpdateWork(NamedTuple):
     ap: np.ndarray  #: (I - K H) M, (d, d, m) (Joseph form)
     acc: np.ndarray  #: one row of a tile, (m,)
     kv: np.ndarray  #: C^T = ((I - K H) M H^T - K V)^T, (p, d, m) (Joseph form, p > 1)
+    #: where H may be nonzero, bool (p, d): all True from :func:`update_work`; a caller whose H has entries
+    #: that are identically zero (a model's printed Jacobian) sets them False, and the products with them
+    #: (exact zeros: the same sums) are skipped where p > 1
+    h_nz: np.ndarray
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def update_work(d, p, m):
     """The scratch :func:`covariance_update` needs, allocated once per tile (not once per update)."""
     return UpdateWork(np.empty((p, d, m)), np.empty((p, p, m)), np.empty((d, d, m)), np.empty((d, d, m)), np.empty(m),
-                      np.empty((p, d, m)))
+                      np.empty((p, d, m)), np.ones((p, d), dtype=np.bool_))
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -108,11 +112,11 @@ def covariance_update(cov, h, v, joseph, gain, s, work):
         # the (d, m) rows of the (1, d, m) arrays, views by indexing (a reshape is a call per update)
         _scalar_update(cov, h[0], v[0, 0], joseph, gain[0], s[0, 0], hm[0], a, ap, acc)
     else:
-        _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, work.kv)
+        _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, work.kv, work.h_nz)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, kv):
+def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, kv, h_nz):
     """:func:`covariance_update` where p > 1: K by a Cholesky factor of S and two triangular solves.
 
     The Joseph form P = A M A^T + K V K^T (A = I - K H) by products of O(d^2 p) alone: A M as M - K (H M)
@@ -126,8 +130,9 @@ def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, kv):
             for j in range(m):
                 acc[j] = 0.0
             for w in range(d):
-                for j in range(m):
-                    acc[j] += cov[u, w, j] * h[i, w, j]
+                if h_nz[i, w]:
+                    for j in range(m):
+                        acc[j] += cov[u, w, j] * h[i, w, j]
             for j in range(m):
                 hm[i, u, j] = acc[j]
     for i in range(p):  # S = H M H^T + V
@@ -135,8 +140,9 @@ def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, kv):
             for j in range(m):
                 s[i, k, j] = v[i, k]
             for u in range(d):
-                for j in range(m):
-                    s[i, k, j] += hm[i, u, j] * h[k, u, j]
+                if h_nz[k, u]:
+                    for j in range(m):
+                        s[i, k, j] += hm[i, u, j] * h[k, u, j]
     for i in range(p):
         for k in range(i):
             for j in range(m):
@@ -188,8 +194,9 @@ def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, kv):
                 for j in range(m):
                     acc[j] = 0.0
                 for w in range(d):
-                    for j in range(m):
-                        acc[j] += ap[u, w, j] * h[i, w, j]
+                    if h_nz[i, w]:
+                        for j in range(m):
+                            acc[j] += ap[u, w, j] * h[i, w, j]
                 for k in range(p):
                     for j in range(m):
                         acc[j] -= v[k, i] * gain[k, u, j]

@@ -120,12 +120,13 @@ def run_block(truth: NonlinearModel, filter_model: NonlinearModel, *args) -> boo
     kernel, _ = block_kernel(truth, filter_model)
     module = sys.modules[kernel.py_func.__module__]
     filter_nz = getattr(module, "filt_F_nz", module.truth_F_nz)
+    filter_h_nz = getattr(module, "filt_H_nz", module.truth_H_nz)
     # the checked states (the argument ``structure`` arrives as them alone) and the printed patterns of
-    # the truth's F and H and the filter's F, as arrays, in one tuple (numba inlines no function of more
+    # the truth's and the filter's F and H, as arrays, in one tuple (numba inlines no function of more
     # than about 30 arguments)
     *head, checked, sums, normalized, eff, m = args
     structure = (np.array(module.truth_F_nz, dtype=np.bool_), np.array(filter_nz, dtype=np.bool_),
-                 np.array(module.truth_H_nz, dtype=np.bool_), checked)
+                 np.array(module.truth_H_nz, dtype=np.bool_), np.array(filter_h_nz, dtype=np.bool_), checked)
     try:
         return kernel(*head, structure, sums, normalized, eff, m)
     except Exception as error:

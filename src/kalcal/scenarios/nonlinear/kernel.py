@@ -25,7 +25,7 @@ numpy path's rule, a prediction only) or a P or S is not positive definite: the 
 block on the numpy path from the same draws, which gives that case's numbers (or its error).
 """
 
-# numba cache stamp: kalcal.core.kernels 0b1d8645cdde0632, kalcal.montecarlo.sum_kernels 1ed5637ca40b0768
+# numba cache stamp: kalcal.core.kernels 74dbd8a8dc28e025, kalcal.montecarlo.sum_kernels 1ed5637ca40b0768
 
 from __future__ import annotations
 
@@ -123,10 +123,11 @@ def ekf_block(
         The filter's prior mean (d,), P0 (d, d), Q (d, d), R (p, p).
     inputs, data : ndarray, shapes (K, m_in), (K, k)
         Each update's input and data (zero columns where the model takes none).
-    structure : tuple (ft_nz, ff_nz, ht_nz, checked)
+    structure : tuple (ft_nz, ff_nz, ht_nz, hf_nz, checked)
         ft_nz, ff_nz (d, d) bool: where the truth's and the filter's F are not identically zero (the
-        printed F writes only there, :mod:`kalcal.core.nonlinear_codegen`), ht_nz (p, d) bool: the truth's
-        H's: the products with the other entries, exact zeros, are skipped (the same sums). checked (c,) int: the states the checks and
+        printed F writes only there, :mod:`kalcal.core.nonlinear_codegen`), ht_nz, hf_nz (p, d) bool: the
+        truth's and the filter's H's: the products with the other entries, exact zeros, are skipped
+        (the same sums). checked (c,) int: the states the checks and
         effect sizes are on, in the filter's order (all d of them, or a subset: the others are nuisance
         states, as a static pose's tilts); the bound's sums stay on all d.
     sums : SumBuffers
@@ -149,7 +150,7 @@ def ekf_block(
     n, d = first.shape
     n_updates = noise.shape[0]
     p = f_r.shape[0]
-    t_nz, f_nz, h_nz, checked = structure
+    t_nz, f_nz, h_nz, hf_nz, checked = structure
     dc = checked.shape[0]
     # where R^-1/2 H (the bound's whitened truth H, a forward substitution through R's factor) is not
     # identically zero: row i is H's row i and the rows w < i before it that R's factor joins to it
@@ -216,6 +217,7 @@ def ekf_block(
     gain = np.empty((p, d, m))
     s = np.empty((p, p, m))
     work = update_work(d, p, m)
+    work.h_nz[:, :] = hf_nz  # the covariance update skips the filter's H's identically zero entries
     cc = np.empty((dc, dc, m))  # the checked states' block of P, their estimate
     xc = np.empty((dc, m))
     lp = np.empty((dc, dc, m))
