@@ -208,7 +208,7 @@ def ekf_block(
     zt = np.empty((p, m))
     hz = np.empty((p, m))
     jh = np.zeros((p, d, m))
-    wh = np.empty((p, d, m))
+    wh = np.zeros((p, d, m))
     big_f = np.zeros((d, d, m))
     fc = np.empty((d, d, m))
     xbar = np.empty((d, m))
@@ -227,6 +227,7 @@ def ekf_block(
     u = np.empty((p, m))
     row = np.empty(m)  # a running sum per lane
     zrow = np.empty((2, m))  # e / sqrt(P_ii) and e^2 of one state
+    zero_row = np.zeros(m)
     tile_nees = np.empty(m)  # the tile's NEES and NIS, binned into the shape histograms
     tile_nis = np.empty(m)
     # one update's sums, per lane (reduced over the lanes at the update's end): the offsets of each (the
@@ -322,20 +323,24 @@ def ekf_block(
             for a in range(p):
                 for j in range(m):
                     res[a, j] = zt[a, j] - hz[a, j]
+            # a non-finite innovation or H entry (the printed H's identically zero entries are exact
+            # zeros) makes its lane's sum of x * 0 NaN: one vectorized pass, then one test per lane
             for j in range(mt):
-                for a in range(p):
-                    if not np.isfinite(res[a, j]):
-                        return False
-                    for b in range(d):
-                        if not np.isfinite(big_h[a, b, j]):
-                            return False
+                row[j] = 0.0
+            for a in range(p):
+                _add_products(row, res[a], zero_row, mt)
+                for b in range(d):
+                    if hf_nz[a, b]:
+                        _add_products(row, big_h[a, b], zero_row, mt)
+            for j in range(mt):
+                if row[j] != 0.0:
+                    return False
             covariance_update(c, big_h, f_r, True, gain, s, work)
             for a in range(d):
                 for j in range(m):
-                    acc = xbar[a, j]
-                    for i in range(p):
-                        acc += gain[i, a, j] * res[i, j]
-                    xh[a, j] = acc
+                    xh[a, j] = xbar[a, j]
+                for i in range(p):
+                    _add_products(xh[a], gain[i, a], res[i], m)
             # the statistics on the checked states: e = x - xhat, eps = L_P^-1 e, u = L_S^-1 r, each
             # realization's own factors (of P's checked block)
             # (each lane loop below stores into one array row: a loop that stores into several rows of
@@ -437,13 +442,16 @@ def ekf_block(
                             if t_nz[w, a]:
                                 for j in range(mt):
                                     lane[o_ftqf + a * d + b, j] += jf[w, a, j] * g[w, b, j]
-            for i in range(p):
-                for b in range(d):
-                    for j in range(mt):
-                        acc = jh[i, b, j]
+            for i in range(p):  # R^-1/2 H by forward substitution, the lane loops innermost; its
+                for b in range(d):  # identically zero entries stay the zeros they start as
+                    if w_nz[i, b]:
+                        for j in range(mt):
+                            row[j] = jh[i, b, j]
                         for w in range(i):
-                            acc = acc - r_chol[i, w] * wh[w, b, j]
-                        wh[i, b, j] = acc / r_chol[i, i]
+                            for j in range(mt):
+                                row[j] = row[j] - r_chol[i, w] * wh[w, b, j]
+                        for j in range(mt):
+                            wh[i, b, j] = row[j] / r_chol[i, i]
             for a in range(d):  # symmetric: the lower triangle, mirrored below; the products with
                 for b in range(a + 1):  # R^-1/2 H's identically zero entries skipped
                     for i in range(p):
