@@ -71,8 +71,9 @@ def main(n: int, chunk: int = 4096) -> None:
 
 def profile(problem, chunk: int) -> None:
     """Where one block's time goes: the draws, the compiled kernel (truth, EKF, every sum), the pair sums
-    after it, each as CPU seconds of this thread, best of 5."""
+    after it (BLAS on one thread, as the engine runs it), each as CPU seconds of this thread, best of 5."""
     from kalcal.montecarlo.accumulators import ResidualProducts
+    from kalcal.montecarlo.engine import single_threaded_blas
 
     t = problem.scenario.loaded.truth
     k, d, p = problem.scenario.n_updates, t.state_dim, t.measurement_dim
@@ -88,7 +89,8 @@ def profile(problem, chunk: int) -> None:
         block = time.thread_time() - start
         stacked = np.ascontiguousarray(np.random.default_rng(0).standard_normal((k * p, chunk)))
         start = time.thread_time()
-        ResidualProducts.upper(stacked)
+        with single_threaded_blas():  # as the Monte Carlo runs it: BLAS on one thread in each block
+            ResidualProducts.upper(stacked)
         pairs = time.thread_time() - start
         for name, value in (("draws", draws), ("block", block), ("pairs", pairs)):
             best[name] = min(best.get(name, np.inf), value)
