@@ -233,3 +233,35 @@ def test_filter_compiled_setting_is_refused_with_its_name(tmp_path):
     )
     assert done.returncode == 2
     assert len(done.stderr.strip().splitlines()) == 1 and "filter.compiled" in done.stderr
+
+
+@pytest.mark.parametrize("which", ["imu-3axis", "range-bearing"])
+def test_printed_zero_patterns_cover_every_nonzero_jacobian_entry(which):
+    """The printed F and H write only the entries their patterns name and the kernel skips the products
+    with the others: every entry outside a pattern is zero at random states (a pattern that left out a
+    nonzero entry would drop it from the filter), and the pose model's are the few ones they should be."""
+    import ast
+
+    from kalcal.core.nonlinear_codegen import model_source
+
+    if which == "imu-3axis":
+        loaded = build_scenario("imu-3axis", None, []).loaded
+        model, data = loaded.filter, loaded.data[0]
+    else:
+        loaded = load_code_model(str(EXAMPLE), []).loaded
+        model, data = loaded.filter, loaded.data if loaded.data.ndim == 1 else loaded.data[0]
+    text = model_source(model, "m")
+    patterns = {}
+    for line in text.splitlines():
+        if line.startswith(("m_F_nz = ", "m_H_nz = ")):
+            name, value = line.split(" = ")
+            patterns[name] = np.array(ast.literal_eval(value), dtype=bool)
+    rng = np.random.default_rng(3)
+    x = model.x0 + rng.standard_normal((50, model.state_dim)) @ np.linalg.cholesky(model.p0).T
+    jf = np.asarray(model.transition_jacobian(x, None))
+    jh = np.asarray(model.measurement_jacobian(x, data))
+    assert np.all(jf[:, ~patterns["m_F_nz"]] == 0) and np.all(jh[:, ~patterns["m_H_nz"]] == 0)
+    assert np.all(np.any(jf != 0, axis=0)[patterns["m_F_nz"]]) and np.all(np.any(jh != 0, axis=0)[patterns["m_H_nz"]])
+    if which == "imu-3axis":
+        assert np.array_equal(patterns["m_F_nz"], np.diag(np.r_[np.ones(9), 0, 0]).astype(bool))
+        assert patterns["m_H_nz"].sum() == 15  # x: s_x, b_x, 2 tilts; y: + a0; z: + a1, a2

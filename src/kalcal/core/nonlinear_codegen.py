@@ -1,7 +1,7 @@
 """A nonlinear model's f, h and their Jacobians printed as scalar Python code that numba compiles, cached.
 
 From the sympy expressions of f and h (:func:`kalcal.core.nonlinear.symbolic_model`) and their
-derivatives, four functions are printed (common subexpressions shared by sympy's ``cse``, functions of
+derivatives, five functions are printed (common subexpressions shared by sympy's ``cse``, functions of
 :mod:`math`), each for one realization ``j`` of a tile of realizations laid out as structure of arrays
 (realizations on the last axis, as :func:`kalcal.core.kernels.covariance_update` takes them)::
 
