@@ -268,6 +268,7 @@ def cli(*args):
     (["truth.poses=8"], "truth.poses"),
     (["truth.poses=9", "filter.kind=batch"], "at least 10 poses"),
     (["filter.kind=pf"], "filter.kind"),
+    (["filter.compiled=maybe"], "filter.compiled"),
 ])
 def test_refusals_one_line_exit_2(tmp_path, settings, needle):
     args = ["verify", "imu-3axis", "-n", "200", "--out", tmp_path / "out"]

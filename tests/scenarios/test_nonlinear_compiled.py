@@ -3,8 +3,14 @@ draws, the same block sums to rounding (1e-10 relative) and the same shape histo
 the same sums whatever the workers, and the models and filters that keep the numpy path saying why; and
 ``filter.compiled``'s policy (auto: compiled where it is already or the planned run repays the compile).
 
-The tests that run the kernel force it (``filter.compiled=yes``) and keep to two distinct printed
-modules, range-bearing's and the linear pair's: each compiles for about a minute on a cold cache."""
+The tests that run the kernel force it (``filter.compiled=yes``) and keep to three distinct printed
+modules, range-bearing's, the linear pair's and imu-3axis's pose model: each compiles for about a minute
+on a cold cache.
+
+imu-3axis's EKF runs the same kernel with the checks on 9 of its 11 states (the current pose's 2 tilts
+are nuisance states, renewed at each pose by the model's own f and Q: f sets them to the nominal pose,
+Q draws the truth's new tilts and gives the filter's prior, the predict zeroes their cross covariances):
+held to the numpy path the same way."""
 
 from __future__ import annotations
 
@@ -19,7 +25,7 @@ import pytest
 from kalcal.core import xmath as xm
 from kalcal.core.nonlinear import NonlinearModel, load_nonlinear_model
 from kalcal.montecarlo.engine import block_generator, run_monte_carlo
-from kalcal.scenarios import load_code_model
+from kalcal.scenarios import build_scenario, load_code_model
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "examples" / "range_bearing.py"
@@ -72,6 +78,33 @@ def test_linear_model_with_another_truth_compiled_block_sums_equal_the_numpy_pat
     compiled = problem.block_sums(block_generator(2, 3), 150, "exact")
     oracle = problem.numpy_block_sums(block_generator(2, 3), 150, "exact")
     _assert_same_sums(compiled, oracle)
+
+
+@pytest.mark.parametrize("n", [300, 64])
+def test_imu_3axis_compiled_block_sums_equal_the_numpy_path(n):
+    """The checked hook (9 parameters of 11 states) in the kernel: the checks' sums on the 9, the bound's
+    expectations on all 11 (its renewed tilts are marginalized from them afterwards, on either path)."""
+    problem = build_scenario("imu-3axis", None, ["filter.kind=ekf", "filter.compiled=yes"]).problem()
+    assert problem.compiled_path == (True, "")
+    compiled = problem._compiled_block_sums(block_generator(5, 0), n)
+    assert compiled is not None  # the kernel ran (no fallback to the numpy path hides here)
+    oracle = problem.numpy_block_sums(block_generator(5, 0), n, "exact")
+    assert compiled.error.shape == (12, 9) and compiled.effect.shape == oracle.effect.shape
+    _assert_same_sums(compiled, oracle)
+    _assert_same_sums(problem.block_sums(block_generator(5, 0), n, "exact"), oracle)
+
+
+def test_imu_3axis_paths_say_which_runs_and_why():
+    def path(*settings):
+        return build_scenario("imu-3axis", None, list(settings)).problem().compiled_path
+
+    assert path("filter.kind=ekf", "filter.compiled=yes") == (True, "")
+    assert path("filter.kind=ekf", "filter.compiled=no") == (False, "the numpy path was asked for (filter.compiled=no)")
+    compiled, reason = path("filter.kind=batch", "filter.compiled=yes")
+    assert not compiled and "batch estimator" in reason
+    for kind in ("iekf", "ukf"):
+        compiled, reason = path(f"filter.kind={kind}", "filter.compiled=yes")
+        assert not compiled and kind.upper() in reason
 
 
 def test_compiled_run_same_seed_same_sums_whatever_the_workers_and_the_numpy_runs():
@@ -200,3 +233,35 @@ def test_filter_compiled_setting_is_refused_with_its_name(tmp_path):
     )
     assert done.returncode == 2
     assert len(done.stderr.strip().splitlines()) == 1 and "filter.compiled" in done.stderr
+
+
+@pytest.mark.parametrize("which", ["imu-3axis", "range-bearing"])
+def test_printed_zero_patterns_cover_every_nonzero_jacobian_entry(which):
+    """The printed F and H write only the entries their patterns name and the kernel skips the products
+    with the others: every entry outside a pattern is zero at random states (a pattern that left out a
+    nonzero entry would drop it from the filter), and the pose model's are the few ones they should be."""
+    import ast
+
+    from kalcal.core.nonlinear_codegen import model_source
+
+    if which == "imu-3axis":
+        loaded = build_scenario("imu-3axis", None, []).loaded
+        model, data = loaded.filter, loaded.data[0]
+    else:
+        loaded = load_code_model(str(EXAMPLE), []).loaded
+        model, data = loaded.filter, loaded.data if loaded.data.ndim == 1 else loaded.data[0]
+    text = model_source(model, "m")
+    patterns = {}
+    for line in text.splitlines():
+        if line.startswith(("m_F_nz = ", "m_H_nz = ")):
+            name, value = line.split(" = ")
+            patterns[name] = np.array(ast.literal_eval(value), dtype=bool)
+    rng = np.random.default_rng(3)
+    x = model.x0 + rng.standard_normal((50, model.state_dim)) @ np.linalg.cholesky(model.p0).T
+    jf = np.asarray(model.transition_jacobian(x, None))
+    jh = np.asarray(model.measurement_jacobian(x, data))
+    assert np.all(jf[:, ~patterns["m_F_nz"]] == 0) and np.all(jh[:, ~patterns["m_H_nz"]] == 0)
+    assert np.all(np.any(jf != 0, axis=0)[patterns["m_F_nz"]]) and np.all(np.any(jh != 0, axis=0)[patterns["m_H_nz"]])
+    if which == "imu-3axis":
+        assert np.array_equal(patterns["m_F_nz"], np.diag(np.r_[np.ones(9), 0, 0]).astype(bool))
+        assert patterns["m_H_nz"].sum() == 15  # x: s_x, b_x, 2 tilts; y: + a0; z: + a1, a2

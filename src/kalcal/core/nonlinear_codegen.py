@@ -1,7 +1,7 @@
 """A nonlinear model's f, h and their Jacobians printed as scalar Python code that numba compiles, cached.
 
 From the sympy expressions of f and h (:func:`kalcal.core.nonlinear.symbolic_model`) and their
-derivatives, four functions are printed (common subexpressions shared by sympy's ``cse``, functions of
+derivatives, five functions are printed (common subexpressions shared by sympy's ``cse``, functions of
 :mod:`math`), each for one realization ``j`` of a tile of realizations laid out as structure of arrays
 (realizations on the last axis, as :func:`kalcal.core.kernels.covariance_update` takes them)::
 
@@ -9,6 +9,14 @@ derivatives, four functions are printed (common subexpressions shared by sympy's
     F(x, u, dt, out, j)    out (d, d, m)                          out[:, :, j] = df/dx at x[:, j]
     h(x, data, out, j)     data (k,), out (p, m)                  out[:, j] = h(x[:, j], data)
     H(x, data, out, j)     out (p, d, m)                          out[:, :, j] = dh/dx at x[:, j]
+    hH(x, data, out_h, out_H, j)                                  h and H at once, their common
+                                                                  subexpressions (sines, roots) computed once
+
+F and H write only their entries that are not identically zero (sympy's derivative is the number 0
+whatever x, u and data): the caller's arrays hold zeros there from the start. The pattern of those
+entries is printed beside them, ``F_nz`` (d, d) and ``H_nz`` (p, d) tuples of 0/1, so that a kernel (given them as arrays)
+skips the products with a zero factor (a model whose state is kept or renewed, as a static pose's, has
+an F of a few ones): adding an exact zero changes no sum, so the skipped products change no result.
 
 A model's printed functions and the driver of a compiled kernel that calls them are written to a module
 file named by the SHA-256 of its text, in the cache folder (``KALCAL_CACHE_DIR``, else
@@ -30,6 +38,7 @@ import importlib.util
 import os
 import sys
 import tempfile
+import threading
 from pathlib import Path
 
 from kalcal.core.nonlinear import NonlinearModel, symbolic_model
@@ -92,18 +101,30 @@ def model_source(model: NonlinearModel, prefix: str) -> str:
     lines: list[str] = []
     lines += _function(f"{prefix}_f", "x, u, dt, out, j", x_prelude + u_prelude + dt_prelude, list(sym.f),
                        [f"out[{i}, j]" for i in range(d)])
+    f_nz = [[int(f_jac[i, c] != 0) for c in range(d)] for i in range(d)]
+    h_nz = [[int(h_jac[i, c] != 0) for c in range(d)] for i in range(p)]
+    f_entries = [(i, c) for i in range(d) for c in range(d) if f_nz[i][c]]
+    h_entries = [(i, c) for i in range(p) for c in range(d) if h_nz[i][c]]
     lines += [""]
     lines += _function(f"{prefix}_F", "x, u, dt, out, j", x_prelude + u_prelude + dt_prelude,
-                       [f_jac[i, c] for i in range(d) for c in range(d)],
-                       [f"out[{i}, {c}, j]" for i in range(d) for c in range(d)])
+                       [f_jac[i, c] for i, c in f_entries], [f"out[{i}, {c}, j]" for i, c in f_entries])
     lines += [""]
     lines += _function(f"{prefix}_h", "x, data, out, j", x_prelude + data_prelude, list(sym.h),
                        [f"out[{i}, j]" for i in range(p)])
     lines += [""]
     lines += _function(f"{prefix}_H", "x, data, out, j", x_prelude + data_prelude,
-                       [h_jac[i, c] for i in range(p) for c in range(d)],
-                       [f"out[{i}, {c}, j]" for i in range(p) for c in range(d)])
+                       [h_jac[i, c] for i, c in h_entries], [f"out[{i}, {c}, j]" for i, c in h_entries])
+    lines += [""]
+    lines += _function(f"{prefix}_hH", "x, data, out_h, out_H, j", x_prelude + data_prelude,
+                       list(sym.h) + [h_jac[i, c] for i, c in h_entries],
+                       [f"out_h[{i}, j]" for i in range(p)] + [f"out_H[{i}, {c}, j]" for i, c in h_entries])
+    lines += ["", f"{prefix}_F_nz = {_nested_tuple(f_nz)}", f"{prefix}_H_nz = {_nested_tuple(h_nz)}"]
     return "\n".join(lines) + "\n"
+
+
+def _nested_tuple(rows: list[list[int]]) -> str:
+    """A nested tuple's text (the pattern the caller reads from the generated module)."""
+    return "(" + "".join("(" + "".join(f"{v}, " for v in row) + "), " for row in rows) + ")"
 
 
 def cache_dir() -> Path:
@@ -124,8 +145,19 @@ def cache_dir() -> Path:
     raise OSError("no writable folder for the compiled models' modules (set KALCAL_CACHE_DIR)")
 
 
+#: one import of a generated module at a time: the module is in sys.modules before its body has run, so a
+#: second thread (the Monte Carlo's blocks ask for the kernel at once) would otherwise get it half made
+_LOADING = threading.RLock()
+
+
 def load_generated(text: str):
-    """Write ``text`` as a module named by its digest in :func:`cache_dir` (once) and import it."""
+    """Write ``text`` as a module named by its digest in :func:`cache_dir` (once) and import it (one
+    thread at a time: another thread waits for the module whole)."""
+    with _LOADING:
+        return _load_generated(text)
+
+
+def _load_generated(text: str):
     digest = hashlib.sha256(text.encode()).hexdigest()[:24]
     name = f"kalcal_compiled_{digest}"
     if name in sys.modules:

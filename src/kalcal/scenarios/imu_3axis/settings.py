@@ -136,7 +136,7 @@ class Imu3AxisScenario(ScenarioDefaults):
         if form != "joseph":
             raise ConfigError(f"--form: {form!r} is not available for imu-3axis (its EKF updates in Joseph form)")
         self.check_settings("verify")
-        return NonlinearProblem(self, residual_pairs=residual_pairs)
+        return NonlinearProblem(self, residual_pairs=residual_pairs, compiled=self.filter.compiled)
 
     def model_error_cause(self) -> str:
         return ""

@@ -43,6 +43,7 @@ import numpy as np
 from kalcal.models.settings import SettingError, require_nonnegative, require_positive, show
 from kalcal.scenarios.imu_3axis.model import PARAM_NAMES, PARAM_UNITS, STANDARD_GRAVITY, h, pose_data
 from kalcal.scenarios.imu_3axis.poses import MIN_POSES
+from kalcal.scenarios.nonlinear.settings import COMPILED_MODES
 
 #: the states of the filters: the 9 parameters, then the current pose's 2 tilts
 STATE_NAMES = (*PARAM_NAMES, "tilt_1", "tilt_2")
@@ -96,17 +97,22 @@ class TruthSection:
 @dataclass(frozen=True)
 class EstimatorSection:
     """Section ``filter`` of ``verify``: the estimator (``ekf``, ``iekf``, ``ukf`` or ``batch``), the UKF's
-    sigma points (``alpha``, ``beta``, ``kappa``), the IEKF's and the batch fit's ``max_iterations``."""
+    sigma points (``alpha``, ``beta``, ``kappa``), the IEKF's and the batch fit's ``max_iterations``, and
+    ``compiled`` (``auto``, ``yes`` or ``no``): whether the EKF runs in the compiled kernel, as for a model
+    written as code (:attr:`kalcal.scenarios.nonlinear.problem.NonlinearProblem.compiled_path`)."""
 
     kind: str = "ekf"
     alpha: float = 1.0
     beta: float = 2.0
     kappa: float = 0.0
     max_iterations: int = 20
+    compiled: str = "auto"
 
     def __post_init__(self) -> None:
         if self.kind not in ESTIMATORS:
             raise SettingError("filter.kind", f"one of {', '.join(ESTIMATORS)}", show(self.kind))
+        if self.compiled not in COMPILED_MODES:
+            raise SettingError("filter.compiled", f"one of {', '.join(COMPILED_MODES)}", show(self.compiled))
         if isinstance(self.max_iterations, bool) or int(self.max_iterations) != self.max_iterations or self.max_iterations < 1:
             raise SettingError("filter.max_iterations", "a positive integer", show(self.max_iterations))
 
@@ -170,7 +176,6 @@ def pose_model(truth: TruthSection, gravity: float = STANDARD_GRAVITY):
         f=_renew, h=lambda x, data: h(x, data, gravity), q=q, r=sigma**2 * np.eye(3), x0=x0, p0=p0, dt=1.0,
         state_names=STATE_NAMES, state_units=STATE_UNITS, measurement_names=("reading_x", "reading_y", "reading_z"),
         measurement_units=("m/s^2",) * 3, data_dim=9,
-        f_jacobian=lambda x, u, dt: np.broadcast_to(np.diag(np.r_[np.ones(9), 0.0, 0.0]), (x.shape[0], 11, 11)),
     )
     return model, pose_data(ups)
 

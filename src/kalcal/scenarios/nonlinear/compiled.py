@@ -9,9 +9,13 @@ differences asked for, or an f or h that sympy cannot take); such a model keeps 
 from __future__ import annotations
 
 import hashlib
+import sys
+import threading
 import weakref
 from pathlib import Path
 from typing import Callable
+
+import numpy as np
 
 from kalcal.core.nonlinear import NonlinearModel
 from kalcal.core.nonlinear_codegen import compilable, load_generated, model_source
@@ -19,10 +23,11 @@ from kalcal.core.nonlinear_codegen import compilable, load_generated, model_sour
 __all__ = ["block_kernel", "is_compiled", "refuse"]
 
 _ARGS = ("first, noise, t_x0, t_p0f, t_qf, t_rf, t_dt, q_inv, has_q_inv, r_chol, "
-         "f_x0, f_p0, f_q, f_r, f_dt, inputs, data, sums, normalized, eff, m")
+         "f_x0, f_p0, f_q, f_r, f_dt, inputs, data, structure, sums, normalized, eff, m")
 
 #: truth model -> {filter model -> (driver or None, reason)}: once per pair of models in a process
 _KERNELS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_DERIVING = threading.RLock()
 
 
 def _kernel_digest() -> str:
@@ -52,9 +57,11 @@ def generated_text(truth: NonlinearModel, filter_model: NonlinearModel) -> str:
         prefix = "filt"
     lines += [
         "",
-        "@numba.njit(cache=True, nogil=True, error_model='numpy')",
+        # 'contract' alone of the fast-math flags: a multiply and an add may fuse into one rounding (FMA);
+        # no reordering of sums, and NaN and infinity keep their meaning (the kernel's finite checks)
+        "@numba.njit(cache=True, nogil=True, error_model='numpy', fastmath={'contract'})",
         f"def block({_ARGS}):",
-        f"    return ekf_block(truth_f, truth_F, truth_h, truth_H, {prefix}_f, {prefix}_F, {prefix}_h, {prefix}_H,",
+        f"    return ekf_block(truth_f, truth_F, truth_hH, {prefix}_f, {prefix}_F, {prefix}_hH,",
         f"                     {_ARGS})",
         "",
     ]
@@ -62,7 +69,13 @@ def generated_text(truth: NonlinearModel, filter_model: NonlinearModel) -> str:
 
 
 def block_kernel(truth: NonlinearModel, filter_model: NonlinearModel) -> tuple[Callable | None, str]:
-    """The compiled block driver of the pair of models, or (None, why not); derived once per pair."""
+    """The compiled block driver of the pair of models, or (None, why not); derived once per pair (the
+    Monte Carlo's threads ask at once: one derives it, the others wait for it)."""
+    with _DERIVING:
+        return _block_kernel(truth, filter_model)
+
+
+def _block_kernel(truth: NonlinearModel, filter_model: NonlinearModel) -> tuple[Callable | None, str]:
     per_truth = _KERNELS.setdefault(truth, weakref.WeakKeyDictionary())
     if filter_model in per_truth:
         return per_truth[filter_model]
@@ -96,7 +109,8 @@ def is_compiled(kernel) -> bool:
 
 def refuse(truth: NonlinearModel, filter_model: NonlinearModel, reason: str) -> None:
     """Mark the pair of models as kept on the numpy path (its printed code did not compile), with why."""
-    _KERNELS.setdefault(truth, weakref.WeakKeyDictionary())[filter_model] = (None, reason)
+    with _DERIVING:
+        _KERNELS.setdefault(truth, weakref.WeakKeyDictionary())[filter_model] = (None, reason)
 
 
 def run_block(truth: NonlinearModel, filter_model: NonlinearModel, *args) -> bool | None:
@@ -104,8 +118,17 @@ def run_block(truth: NonlinearModel, filter_model: NonlinearModel, *args) -> boo
     path), or None where numba cannot compile the printed f or h (the pair is then kept on the numpy path,
     :func:`refuse`, with the reason)."""
     kernel, _ = block_kernel(truth, filter_model)
+    module = sys.modules[kernel.py_func.__module__]
+    filter_nz = getattr(module, "filt_F_nz", module.truth_F_nz)
+    filter_h_nz = getattr(module, "filt_H_nz", module.truth_H_nz)
+    # the checked states (the argument ``structure`` arrives as them alone) and the printed patterns of
+    # the truth's and the filter's F and H, as arrays, in one tuple (numba inlines no function of more
+    # than about 30 arguments)
+    *head, checked, sums, normalized, eff, m = args
+    structure = (np.array(module.truth_F_nz, dtype=np.bool_), np.array(filter_nz, dtype=np.bool_),
+                 np.array(module.truth_H_nz, dtype=np.bool_), np.array(filter_h_nz, dtype=np.bool_), checked)
     try:
-        return kernel(*args)
+        return kernel(*head, structure, sums, normalized, eff, m)
     except Exception as error:
         if not type(error).__module__.startswith("numba"):  # numba's own errors: printed code it cannot compile
             raise

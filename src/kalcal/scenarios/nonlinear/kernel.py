@@ -6,8 +6,9 @@ the same realizations on both paths) it simulates the truth with the truth's f a
 (predict M = F P F^T + Q; update by the package's one compiled covariance update,
 :func:`kalcal.core.kernels.covariance_update`, Joseph form), and adds each update's errors, P_k, S_k,
 NEES, NIS (and their shape histograms), whitened errors and innovations, the effect sizes' sums and the Cramér–Rao bound's expectations
-(F, F^T Q^-1 F at the true x_{k-1}, H^T R^-1 H at the true x_k) into the block's sums. Nothing of size
-n K is kept: the block's state is (d, d, n) and the sums of one update are held per lane of a tile,
+(F, F^T Q^-1 F at the true x_{k-1}, H^T R^-1 H at the true x_k) into the block's sums: the checks' and
+the effect sizes' on the checked states (all of them, or a scenario's subset: imu-3axis's 9 parameters,
+its pose's tilts nuisance states), the bound's on every state. Nothing of size n K is kept: the block's state is (d, d, n) and the sums of one update are held per lane of a tile,
 reduced at the update's end.
 
 Layout: the block's realizations in tiles of m, structure of arrays (realizations on the last axis, as
@@ -24,7 +25,7 @@ numpy path's rule, a prediction only) or a P or S is not positive definite: the 
 block on the numpy path from the same draws, which gives that case's numbers (or its error).
 """
 
-# numba cache stamp: kalcal.core.kernels 8b932ca498b00ecc, kalcal.montecarlo.sum_kernels 1ed5637ca40b0768
+# numba cache stamp: kalcal.core.kernels 74dbd8a8dc28e025, kalcal.montecarlo.sum_kernels 1ed5637ca40b0768
 
 from __future__ import annotations
 
@@ -36,51 +37,75 @@ from kalcal.montecarlo.sum_kernels import add_shape
 
 
 @numba.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _cholesky_lanes(a, lower, m):
-    """lower (q, q, m) with L L^T = a (q, q, m) lane by lane; False where a pivot is not positive."""
+def _cholesky_lanes(a, lower, m, acc):
+    """lower (q, q, m) with L L^T = a (q, q, m) lane by lane; False where a pivot is not positive.
+
+    Each entry's loop over the lanes is innermost (it vectorizes), ``acc`` (>= m,) its running sum: per
+    lane the same operations in the same order as an entry-by-entry factorization."""
     q = a.shape[0]
-    positive = True
     for i in range(q):
         for c in range(i + 1):
             for j in range(m):
-                acc = a[i, c, j]
-                for b in range(c):
-                    acc = acc - lower[i, b, j] * lower[c, b, j]
-                if i == c:
-                    # no branch out of the lane loop (it would keep the loop from vectorizing): a pivot
-                    # that is not positive (or NaN) gives a NaN root, found after the loop
-                    lower[i, i, j] = np.sqrt(acc)
-                    positive = positive and acc > 0.0
-                else:
-                    lower[i, c, j] = acc / lower[c, c, j]
+                acc[j] = a[i, c, j]
+            for b in range(c):
+                for j in range(m):
+                    acc[j] = acc[j] - lower[i, b, j] * lower[c, b, j]
+            if i == c:
+                # no branch in the lane loop (it would keep the loop from vectorizing): a pivot that is
+                # not positive (or NaN) gives a zero or NaN root, found below
+                for j in range(m):
+                    lower[i, i, j] = np.sqrt(acc[j])
+            else:
+                for j in range(m):
+                    lower[i, c, j] = acc[j] / lower[c, c, j]
+    positive = True
+    for i in range(q):
+        for j in range(m):
+            positive = positive and lower[i, i, j] > 0.0
     return positive
 
 
 @numba.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _forward_lanes(lower, v, out, m):
-    """out (q, m) with L out = v, lane by lane (L (q, q, m) lower triangular)."""
+def _forward_lanes(lower, v, out, m, acc):
+    """out (q, m) with L out = v, lane by lane (L (q, q, m) lower triangular); the lane loops innermost."""
     q = lower.shape[0]
     for i in range(q):
         for j in range(m):
-            acc = v[i, j]
-            for b in range(i):
-                acc = acc - lower[i, b, j] * out[b, j]
-            out[i, j] = acc / lower[i, i, j]
+            acc[j] = v[i, j]
+        for b in range(i):
+            for j in range(m):
+                acc[j] = acc[j] - lower[i, b, j] * out[b, j]
+        for j in range(m):
+            out[i, j] = acc[j] / lower[i, i, j]
+
+
+@numba.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _add_lanes(out, v, m):
+    """out[:m] += v[:m] (rows of the tile's arrays): one store per loop, so that the loop vectorizes."""
+    for j in range(m):
+        out[j] += v[j]
+
+
+@numba.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _add_products(out, a, b, m):
+    """out[:m] += a[:m] * b[:m], one store per loop."""
+    for j in range(m):
+        out[j] += a[j] * b[j]
 
 
 @numba.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def ekf_block(
-    ft, jac_ft, ht, jac_ht, ff, jac_ff, hf, jac_hf,
+    ft, jac_ft, hh_t, ff, jac_ff, hh_f,
     first, noise, t_x0, t_p0f, t_qf, t_rf, t_dt, q_inv, has_q_inv, r_chol,
-    f_x0, f_p0, f_q, f_r, f_dt, inputs, data, sums, normalized, eff, m,
+    f_x0, f_p0, f_q, f_r, f_dt, inputs, data, structure, sums, normalized, eff, m,
 ):
     """One block's sums (module docstring). K updates, n realizations, d states, p measurements.
 
     Parameters
     ----------
-    ft, jac_ft, ht, jac_ht : compiled functions
-        The truth's f, F, h, H (:mod:`kalcal.core.nonlinear_codegen`'s calling convention).
-    ff, jac_ff, hf, jac_hf : compiled functions
+    ft, jac_ft, hh_t : compiled functions
+        The truth's f, F, and h with H at once (:mod:`kalcal.core.nonlinear_codegen`'s calling convention).
+    ff, jac_ff, hh_f : compiled functions
         The filter's.
     first : ndarray, shape (n, d)
         The normals of x_0.
@@ -98,8 +123,15 @@ def ekf_block(
         The filter's prior mean (d,), P0 (d, d), Q (d, d), R (p, p).
     inputs, data : ndarray, shapes (K, m_in), (K, k)
         Each update's input and data (zero columns where the model takes none).
+    structure : tuple (ft_nz, ff_nz, ht_nz, hf_nz, checked)
+        ft_nz, ff_nz (d, d) bool: where the truth's and the filter's F are not identically zero (the
+        printed F writes only there, :mod:`kalcal.core.nonlinear_codegen`), ht_nz, hf_nz (p, d) bool: the
+        truth's and the filter's H's: the products with the other entries, exact zeros, are skipped
+        (the same sums). checked (c,) int: the states the checks and
+        effect sizes are on, in the filter's order (all d of them, or a subset: the others are nuisance
+        states, as a static pose's tilts); the bound's sums stay on all d.
     sums : SumBuffers
-        Added into (own P_k: the whitened sums kept); ``residuals`` (K p, n) receives the normalized
+        Added into (its state axes of size c) (own P_k: the whitened sums kept); ``residuals`` (K p, n) receives the normalized
         innovations where its first axis is not empty.
     normalized : ndarray, shape (K, p)
         Sum of the normalized innovations, added into.
@@ -118,6 +150,17 @@ def ekf_block(
     n, d = first.shape
     n_updates = noise.shape[0]
     p = f_r.shape[0]
+    t_nz, f_nz, h_nz, hf_nz, checked = structure
+    dc = checked.shape[0]
+    # where R^-1/2 H (the bound's whitened truth H, a forward substitution through R's factor) is not
+    # identically zero: row i is H's row i and the rows w < i before it that R's factor joins to it
+    w_nz = np.zeros((p, d), dtype=np.bool_)
+    for i in range(p):
+        for b in range(d):
+            w_nz[i, b] = h_nz[i, b]
+            for w in range(i):
+                if r_chol[i, w] != 0.0 and w_nz[w, b]:
+                    w_nz[i, b] = True
     tiles = (n + m - 1) // m
     nees_sq, nees_avg, nis_avg, e4, p2, e2p, pooled, zsum, z2sum, zbar, lag1, fsum, ftqf, htrh = eff
     keep_pairs = sums.residuals.shape[0] > 0
@@ -127,9 +170,9 @@ def ekf_block(
     cov = np.empty((tiles, d, d, m))
     r_nees = np.zeros((tiles, m))
     r_nis = np.zeros((tiles, m))
-    r_a = np.zeros((tiles, d, m))
-    r_b = np.zeros((tiles, d, m))
-    r_z = np.zeros((tiles, d, m))
+    r_a = np.zeros((tiles, dc, m))
+    r_b = np.zeros((tiles, dc, m))
+    r_z = np.zeros((tiles, dc, m))
     r_lag = np.zeros((tiles, m))
     last_u = np.zeros((tiles, p, m))
     for t in range(tiles):
@@ -143,52 +186,74 @@ def ekf_block(
                 xf[t, a, j] = f_x0[a]
                 for b in range(d):
                     cov[t, a, b, j] = f_p0[a, b]
-    # one tile's scratch
+    # the columns of each row of the truth's noise factors that are not zero, in order
+    q_cols = np.zeros((d, d), dtype=np.int64)
+    q_count = np.zeros(d, dtype=np.int64)
+    for a in range(d):
+        for b in range(d):
+            if t_qf[a, b] != 0.0:
+                q_cols[a, q_count[a]] = b
+                q_count[a] += 1
+    r_cols = np.zeros((p, p), dtype=np.int64)
+    r_count = np.zeros(p, dtype=np.int64)
+    for a in range(p):
+        for b in range(p):
+            if t_rf[a, b] != 0.0:
+                r_cols[a, r_count[a]] = b
+                r_count[a] += 1
+    # one tile's scratch (the Jacobians' zeros from the start: the printed F and H write only the others)
     tmp = np.empty((d, m))
-    jf = np.empty((d, d, m))
+    jf = np.zeros((d, d, m))
     g = np.empty((d, d, m))
     zt = np.empty((p, m))
     hz = np.empty((p, m))
-    jh = np.empty((p, d, m))
-    wh = np.empty((p, d, m))
-    big_f = np.empty((d, d, m))
+    jh = np.zeros((p, d, m))
+    wh = np.zeros((p, d, m))
+    big_f = np.zeros((d, d, m))
     fc = np.empty((d, d, m))
     xbar = np.empty((d, m))
-    big_h = np.empty((p, d, m))
+    big_h = np.zeros((p, d, m))
     res = np.empty((p, m))
     gain = np.empty((p, d, m))
     s = np.empty((p, p, m))
     work = update_work(d, p, m)
-    lp = np.empty((d, d, m))
+    work.h_nz[:, :] = hf_nz  # the covariance update skips the filter's H's identically zero entries
+    cc = np.empty((dc, dc, m))  # the checked states' block of P, their estimate
+    xc = np.empty((dc, m))
+    lp = np.empty((dc, dc, m))
     ls = np.empty((p, p, m))
-    e = np.empty((d, m))
-    eps = np.empty((d, m))
+    e = np.empty((dc, m))
+    eps = np.empty((dc, m))
     u = np.empty((p, m))
+    row = np.empty(m)  # a running sum per lane
+    zrow = np.empty((2, m))  # e / sqrt(P_ii) and e^2 of one state
+    zero_row = np.zeros(m)
     tile_nees = np.empty(m)  # the tile's NEES and NIS, binned into the shape histograms
     tile_nis = np.empty(m)
-    # one update's sums, per lane (reduced over the lanes at the update's end): the offsets of each
-    dd, pp = d * d, p * p
+    # one update's sums, per lane (reduced over the lanes at the update's end): the offsets of each (the
+    # checks' on the c checked states, the bound's on all d)
+    cd, dd, pp = dc * dc, d * d, p * p
     o_err = 0
-    o_eo = o_err + d
-    o_est = o_eo + dd
-    o_esto = o_est + d
-    o_ee = o_esto + dd
-    o_nees = o_ee + dd
+    o_eo = o_err + dc
+    o_est = o_eo + cd
+    o_esto = o_est + dc
+    o_ee = o_esto + cd
+    o_nees = o_ee + cd
     o_nis = o_nees + 1
     o_res = o_nis + 1
     o_reso = o_res + p
     o_fc = o_reso + pp
-    o_we = o_fc + dd
-    o_wo = o_we + d
-    o_wx = o_wo + dd
-    o_nr = o_wx + dd
+    o_we = o_fc + cd
+    o_wo = o_we + dc
+    o_wx = o_wo + cd
+    o_nr = o_wx + cd
     o_nsq = o_nr + p
     o_e4 = o_nsq + 1
-    o_p2 = o_e4 + d
-    o_e2p = o_p2 + d
-    o_z = o_e2p + d
-    o_z2 = o_z + d
-    o_f = o_z2 + d
+    o_p2 = o_e4 + dc
+    o_e2p = o_p2 + dc
+    o_z = o_e2p + dc
+    o_z2 = o_z + dc
+    o_f = o_z2 + dc
     o_ftqf = o_f + dd
     o_htrh = o_ftqf + dd
     width = o_htrh + dd
@@ -206,24 +271,28 @@ def ekf_block(
             for j in range(m):
                 jac_ft(x, uk, t_dt, jf, j)
                 ft(x, uk, t_dt, tmp, j)
+            # (the noise factors' zero entries skipped: a kept state's, as a static parameter's, has a zero
+            # row; the draws are finite, so a skipped product is an exact zero)
             for j in range(m):
                 col = min(t * m + j, n - 1)
                 for a in range(d):
                     acc = 0.0
-                    for b in range(d):
+                    for i in range(q_count[a]):
+                        b = q_cols[a, i]
                         acc += noise[k, col, b] * t_qf[a, b]
                     x[a, j] = tmp[a, j] + acc
             for j in range(m):
-                ht(x, dk, hz, j)
-                jac_ht(x, dk, jh, j)
+                hh_t(x, dk, hz, jh, j)
             for j in range(m):
                 col = min(t * m + j, n - 1)
                 for a in range(p):
                     acc = 0.0
-                    for b in range(p):
+                    for i in range(r_count[a]):
+                        b = r_cols[a, i]
                         acc += noise[k, col, d + b] * t_rf[a, b]
                     zt[a, j] = hz[a, j] + acc
-            # the filter's prediction: xbar = f(xhat), M = F P F^T + Q (symmetrized), into c
+            # the filter's prediction: xbar = f(xhat), M = F P F^T + Q (symmetrized), into c; the products
+            # with F's identically zero entries skipped (a kept state's F row is one 1, a renewed one's none)
             for j in range(m):
                 jac_ff(xh, uk, f_dt, big_f, j)
                 ff(xh, uk, f_dt, xbar, j)
@@ -232,142 +301,165 @@ def ekf_block(
                     for j in range(m):
                         fc[a, b, j] = 0.0
                     for w in range(d):
-                        for j in range(m):
-                            fc[a, b, j] += big_f[a, w, j] * c[w, b, j]
+                        if f_nz[a, w]:
+                            for j in range(m):
+                                fc[a, b, j] += big_f[a, w, j] * c[w, b, j]
             for a in range(d):
                 for b in range(a + 1):
                     for j in range(m):
                         tmp[0, j] = 0.0
                     for w in range(d):
-                        for j in range(m):
-                            tmp[0, j] += fc[a, w, j] * big_f[b, w, j]
+                        if f_nz[b, w]:
+                            for j in range(m):
+                                tmp[0, j] += fc[a, w, j] * big_f[b, w, j]
+                    q_ab = 0.5 * (f_q[a, b] + f_q[b, a])
                     for j in range(m):
-                        c[a, b, j] = tmp[0, j] + 0.5 * (f_q[a, b] + f_q[b, a])
+                        c[a, b, j] = tmp[0, j] + q_ab
+                    for j in range(m):
                         c[b, a, j] = c[a, b, j]
             # the update: H at xbar, r = z - h(xbar), then the one compiled covariance update (Joseph)
             for j in range(m):
-                jac_hf(xbar, dk, big_h, j)
-                hf(xbar, dk, hz, j)
+                hh_f(xbar, dk, hz, big_h, j)
             for a in range(p):
                 for j in range(m):
                     res[a, j] = zt[a, j] - hz[a, j]
+            # a non-finite innovation or H entry (the printed H's identically zero entries are exact
+            # zeros) makes its lane's sum of x * 0 NaN: one vectorized pass, then one test per lane
             for j in range(mt):
-                for a in range(p):
-                    if not np.isfinite(res[a, j]):
-                        return False
-                    for b in range(d):
-                        if not np.isfinite(big_h[a, b, j]):
-                            return False
+                row[j] = 0.0
+            for a in range(p):
+                _add_products(row, res[a], zero_row, mt)
+                for b in range(d):
+                    if hf_nz[a, b]:
+                        _add_products(row, big_h[a, b], zero_row, mt)
+            for j in range(mt):
+                if row[j] != 0.0:
+                    return False
             covariance_update(c, big_h, f_r, True, gain, s, work)
             for a in range(d):
                 for j in range(m):
-                    acc = xbar[a, j]
-                    for i in range(p):
-                        acc += gain[i, a, j] * res[i, j]
-                    xh[a, j] = acc
-            # the statistics: e = x - xhat, eps = L_P^-1 e, u = L_S^-1 r, each realization's own factors
-            for a in range(d):
+                    xh[a, j] = xbar[a, j]
+                for i in range(p):
+                    _add_products(xh[a], gain[i, a], res[i], m)
+            # the statistics on the checked states: e = x - xhat, eps = L_P^-1 e, u = L_S^-1 r, each
+            # realization's own factors (of P's checked block)
+            # (each lane loop below stores into one array row: a loop that stores into several rows of
+            # arrays that may overlap needs more runtime overlap checks than LLVM makes, and runs unvectorized)
+            for a in range(dc):
+                ca = checked[a]
                 for j in range(m):
-                    e[a, j] = x[a, j] - xh[a, j]
-            if not _cholesky_lanes(c, lp, mt):
+                    e[a, j] = x[ca, j] - xh[ca, j]
+                for j in range(m):
+                    xc[a, j] = xh[ca, j]
+                for b in range(dc):
+                    cb = checked[b]
+                    for j in range(m):
+                        cc[a, b, j] = c[ca, cb, j]
+            if not _cholesky_lanes(cc, lp, mt, row):
                 return False
-            if not _cholesky_lanes(s, ls, mt):
+            if not _cholesky_lanes(s, ls, mt, row):
                 return False
-            _forward_lanes(lp, e, eps, mt)
-            _forward_lanes(ls, res, u, mt)
-            for a in range(d):
-                for j in range(mt):
-                    lane[o_err + a, j] += e[a, j]
-                    lane[o_est + a, j] += xh[a, j]
-                    lane[o_we + a, j] += eps[a, j]
-                for b in range(d):
-                    ab = a * d + b
-                    for j in range(mt):
-                        lane[o_eo + ab, j] += e[a, j] * e[b, j]
-                        lane[o_esto + ab, j] += xh[a, j] * xh[b, j]
-                        lane[o_ee + ab, j] += e[a, j] * xh[b, j]
-                        lane[o_fc + ab, j] += c[a, b, j]
-                        lane[o_wo + ab, j] += eps[a, j] * eps[b, j]
-                        lane[o_wx + ab, j] += eps[a, j] * xh[b, j]
+            _forward_lanes(lp, e, eps, mt, row)
+            _forward_lanes(ls, res, u, mt, row)
+            for a in range(dc):
+                _add_lanes(lane[o_err + a], e[a], mt)
+                _add_lanes(lane[o_est + a], xc[a], mt)
+                _add_lanes(lane[o_we + a], eps[a], mt)
+                for b in range(dc):
+                    ab = a * dc + b
+                    _add_products(lane[o_ee + ab], e[a], xc[b], mt)
+                    _add_products(lane[o_wx + ab], eps[a], xc[b], mt)
+                # the symmetric sums' lower triangles (their upper ones the same numbers, mirrored below)
+                for b in range(a + 1):
+                    ab = a * dc + b
+                    _add_products(lane[o_eo + ab], e[a], e[b], mt)
+                    _add_products(lane[o_esto + ab], xc[a], xc[b], mt)
+                    _add_lanes(lane[o_fc + ab], cc[a, b], mt)
+                    _add_products(lane[o_wo + ab], eps[a], eps[b], mt)
             for j in range(mt):
-                nees = 0.0
-                for a in range(d):
-                    nees += eps[a, j] * eps[a, j]
-                nis = 0.0
-                lag = 0.0
+                tile_nees[j] = 0.0
+            for a in range(dc):
+                _add_products(tile_nees, eps[a], eps[a], mt)
+            for j in range(mt):
+                tile_nis[j] = 0.0
+            for a in range(p):
+                _add_products(tile_nis, u[a], u[a], mt)
+            if k > 0:
                 for a in range(p):
-                    nis += u[a, j] * u[a, j]
-                    lag += last_u[t, a, j] * u[a, j]
+                    _add_products(r_lag[t], last_u[t, a], u[a], mt)
+            for a in range(p):
+                for j in range(mt):
                     last_u[t, a, j] = u[a, j]
-                lane[o_nees, j] += nees
-                lane[o_nis, j] += nis
-                tile_nees[j] = nees
-                tile_nis[j] = nis
-                lane[o_nsq, j] += nees * nees
-                r_nees[t, j] += nees
-                r_nis[t, j] += nis
-                if k > 0:
-                    r_lag[t, j] += lag
+            _add_lanes(lane[o_nees], tile_nees, mt)
+            _add_lanes(lane[o_nis], tile_nis, mt)
+            _add_products(lane[o_nsq], tile_nees, tile_nees, mt)
+            _add_lanes(r_nees[t], tile_nees, mt)
+            _add_lanes(r_nis[t], tile_nis, mt)
             # the shape check's histograms, by the fixed-gain kernels' binning (the same floor of the same
             # product as numpy's shape_histogram)
             add_shape(k, tile_nees[:mt], sums.nees_grid.scale, sums.nees_histogram)
             add_shape(k, tile_nis[:mt], sums.nis_grid.scale, sums.nis_histogram)
             for a in range(p):
-                for j in range(mt):
-                    lane[o_res + a, j] += res[a, j]
-                    lane[o_nr + a, j] += u[a, j]
+                _add_lanes(lane[o_res + a], res[a], mt)
+                _add_lanes(lane[o_nr + a], u[a], mt)
                 for b in range(p):
-                    for j in range(mt):
-                        lane[o_reso + a * p + b, j] += res[a, j] * res[b, j]
+                    _add_products(lane[o_reso + a * p + b], res[a], res[b], mt)
             if keep_pairs:
                 for a in range(p):
                     for j in range(mt):
                         sums.residuals[k * p + a, t * m + j] = u[a, j]
-            for a in range(d):
+            for a in range(dc):
                 for j in range(mt):
-                    pii = c[a, a, j]
-                    e2 = e[a, j] * e[a, j]
-                    zz = e[a, j] / np.sqrt(pii)
-                    lane[o_e4 + a, j] += e2 * e2
-                    lane[o_p2 + a, j] += pii * pii
-                    lane[o_e2p + a, j] += e2 * pii
-                    lane[o_z + a, j] += zz
-                    lane[o_z2 + a, j] += zz * zz
-                    r_a[t, a, j] += e2
-                    r_b[t, a, j] += pii
-                    r_z[t, a, j] += zz
+                    zrow[0, j] = e[a, j] / np.sqrt(cc[a, a, j])  # e / sqrt(P_ii)
+                for j in range(mt):
+                    zrow[1, j] = e[a, j] * e[a, j]
+                _add_products(lane[o_e4 + a], zrow[1], zrow[1], mt)
+                _add_products(lane[o_p2 + a], cc[a, a], cc[a, a], mt)
+                _add_products(lane[o_e2p + a], zrow[1], cc[a, a], mt)
+                _add_lanes(lane[o_z + a], zrow[0], mt)
+                _add_products(lane[o_z2 + a], zrow[0], zrow[0], mt)
+                _add_lanes(r_a[t, a], zrow[1], mt)
+                _add_lanes(r_b[t, a], cc[a, a], mt)
+                _add_lanes(r_z[t, a], zrow[0], mt)
             # the Cramér–Rao bound's expectations at the truth's states: F, F^T Q^-1 F, (R^-1/2 H)^T (R^-1/2 H)
             for a in range(d):
                 for b in range(d):
-                    for j in range(mt):
-                        lane[o_f + a * d + b, j] += jf[a, b, j]
+                    if t_nz[a, b]:
+                        for j in range(mt):
+                            lane[o_f + a * d + b, j] += jf[a, b, j]
             if has_q_inv:
                 for a in range(d):
                     for b in range(d):
                         for j in range(mt):
                             g[a, b, j] = 0.0
                         for w in range(d):
-                            for j in range(mt):
-                                g[a, b, j] += q_inv[a, w] * jf[w, b, j]
+                            if t_nz[w, b]:
+                                for j in range(mt):
+                                    g[a, b, j] += q_inv[a, w] * jf[w, b, j]
                 for a in range(d):
                     for b in range(d):
                         for w in range(d):
-                            for j in range(mt):
-                                lane[o_ftqf + a * d + b, j] += jf[w, a, j] * g[w, b, j]
-            for i in range(p):
-                for b in range(d):
-                    for j in range(mt):
-                        acc = jh[i, b, j]
-                        for w in range(i):
-                            acc = acc - r_chol[i, w] * wh[w, b, j]
-                        wh[i, b, j] = acc / r_chol[i, i]
-            for a in range(d):
-                for b in range(d):
-                    for i in range(p):
+                            if t_nz[w, a]:
+                                for j in range(mt):
+                                    lane[o_ftqf + a * d + b, j] += jf[w, a, j] * g[w, b, j]
+            for i in range(p):  # R^-1/2 H by forward substitution, the lane loops innermost; its
+                for b in range(d):  # identically zero entries stay the zeros they start as
+                    if w_nz[i, b]:
                         for j in range(mt):
-                            lane[o_htrh + a * d + b, j] += wh[i, a, j] * wh[i, b, j]
+                            row[j] = jh[i, b, j]
+                        for w in range(i):
+                            for j in range(mt):
+                                row[j] = row[j] - r_chol[i, w] * wh[w, b, j]
+                        for j in range(mt):
+                            wh[i, b, j] = row[j] / r_chol[i, i]
+            for a in range(d):  # symmetric: the lower triangle, mirrored below; the products with
+                for b in range(a + 1):  # R^-1/2 H's identically zero entries skipped
+                    for i in range(p):
+                        if w_nz[i, a] and w_nz[i, b]:
+                            for j in range(mt):
+                                lane[o_htrh + a * d + b, j] += wh[i, a, j] * wh[i, b, j]
         # the update's sums: the lanes reduced
-        for a in range(d):
+        for a in range(dc):
             sums.error[k, a] += lane[o_err + a].sum()
             sums.estimate[k, a] += lane[o_est + a].sum()
             sums.whitened_error[k, a] += lane[o_we + a].sum()
@@ -376,17 +468,21 @@ def ekf_block(
             e2p[k, a] += lane[o_e2p + a].sum()
             zsum[k, a] += lane[o_z + a].sum()
             z2sum[k, a] += lane[o_z2 + a].sum()
+            for b in range(dc):
+                ab = a * dc + b
+                low = max(a, b) * dc + min(a, b)
+                sums.error_outer[k, a, b] += lane[o_eo + low].sum()
+                sums.estimate_outer[k, a, b] += lane[o_esto + low].sum()
+                sums.error_estimate[k, a, b] += lane[o_ee + ab].sum()
+                sums.filter_cov[k, a, b] += lane[o_fc + low].sum()
+                sums.whitened_outer[k, a, b] += lane[o_wo + low].sum()
+                sums.whitened_estimate[k, a, b] += lane[o_wx + ab].sum()
+        for a in range(d):
             for b in range(d):
                 ab = a * d + b
-                sums.error_outer[k, a, b] += lane[o_eo + ab].sum()
-                sums.estimate_outer[k, a, b] += lane[o_esto + ab].sum()
-                sums.error_estimate[k, a, b] += lane[o_ee + ab].sum()
-                sums.filter_cov[k, a, b] += lane[o_fc + ab].sum()
-                sums.whitened_outer[k, a, b] += lane[o_wo + ab].sum()
-                sums.whitened_estimate[k, a, b] += lane[o_wx + ab].sum()
                 fsum[k, a, b] += lane[o_f + ab].sum()
                 ftqf[k, a, b] += lane[o_ftqf + ab].sum()
-                htrh[k, a, b] += lane[o_htrh + ab].sum()
+                htrh[k, a, b] += lane[o_htrh + max(a, b) * d + min(a, b)].sum()
         sums.nees[k] += lane[o_nees].sum()
         sums.nis[k] += lane[o_nis].sum()
         nees_sq[k] += lane[o_nsq].sum()
@@ -405,7 +501,7 @@ def ekf_block(
             avg = r_nis[t, j] / n_updates
             nis_avg[0] += avg
             nis_avg[1] += avg * avg
-            for a in range(d):
+            for a in range(dc):
                 ra, rb = r_a[t, a, j], r_b[t, a, j]
                 pooled[0, a] += ra
                 pooled[1, a] += rb

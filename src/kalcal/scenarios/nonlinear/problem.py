@@ -289,8 +289,9 @@ class NonlinearProblem(ProblemDefaults):
         """Whether :meth:`block_sums` runs the compiled EKF kernel, and why not where it does not.
 
         The compiled path (:mod:`kalcal.scenarios.nonlinear.kernel`) runs an EKF of models whose f and h
-        sympy can take (the default Jacobians); the IEKF and the UKF, and models with explicit numpy
-        Jacobians, jax's or finite differences, run the batched numpy path. Of the models it takes, the
+        sympy can take (the default Jacobians), its checks on the hooks' checked states where a scenario
+        sets them (imu-3axis: the 9 parameters of 11 states); the IEKF and the UKF, a batch estimator, and
+        models with explicit numpy Jacobians, jax's or finite differences, run the batched numpy path. Of the models it takes, the
         ``compiled`` setting decides: ``yes`` compiles the kernel (about a minute per pair of models, once:
         numba caches it), ``no`` keeps the numpy path, and ``auto`` (the default) runs the kernel where it is
         compiled already (in this process or in numba's cache) or where the planned run, N K realization-
@@ -298,9 +299,8 @@ class NonlinearProblem(ProblemDefaults):
         """
         if self.compiled == "no":
             return False, "the numpy path was asked for (filter.compiled=no)"
-        hooks = self.hooks
-        if hooks.checked is not None or hooks.renewed or hooks.batch is not None:
-            return False, "a scenario built on this problem (checked, renewed or batch states) runs on the batched numpy path"
+        if self.hooks.batch is not None:
+            return False, "a batch estimator (one final estimate per realization) runs on the batched numpy path"
         kind = self.scenario.filter.kind
         if kind != "ekf":
             return False, f"the {kind.upper()} runs on the batched numpy path (only the EKF is compiled)"
@@ -340,11 +340,13 @@ class NonlinearProblem(ProblemDefaults):
         s, loaded = self.scenario, self.scenario.loaded
         t, fm = loaded.truth, loaded.filter
         d, p, k_count = t.state_dim, t.measurement_dim, s.n_updates
+        layout = self.layout
+        checked = np.arange(d) if self.hooks.checked is None else np.asarray(self.hooks.checked, dtype=np.int64)
         # the numpy path's draws, in its order (_simulate)
         first = rng.standard_normal((n, d))
         noise = rng.standard_normal((k_count, n, d + p))
-        sums = SumBuffers.zeros(k_count, d, p, n, self.residual_pairs, own_cov=True)
-        layout = self.layout
+        # the checks' sums on the checked states (layout.d of them), the bound's on the truth's d
+        sums = SumBuffers.zeros(k_count, layout.d, p, n, self.residual_pairs, own_cov=True)
         flat = layout.zeros()
         names = ("nees_sq", "nees_avg", "nis_avg", "e4", "p2", "e2p", "pooled", "z", "z2", "zbar", "lag1", "f", "ftqf", "htrh")
         eff = tuple(layout.view(flat, name) for name in names)
@@ -366,7 +368,7 @@ class NonlinearProblem(ProblemDefaults):
             first, noise, t.x0, _factor(t.p0), _factor(t.q), _factor(t.r), float(t.dt),
             q_inv, has_q_inv, np.linalg.cholesky(t.r),
             fm.x0, fm.p0, fm.q, fm.r, float(fm.dt),
-            rows(loaded.inputs, t.input_dim), rows(loaded.data, t.data_dim), sums, normalized, eff, _TILE,
+            rows(loaded.inputs, t.input_dim), rows(loaded.data, t.data_dim), checked, sums, normalized, eff, _TILE,
         )
         if not ok:
             return None
