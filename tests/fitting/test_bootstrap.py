@@ -8,6 +8,8 @@ of the simulation the bootstrap uses.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -257,22 +259,144 @@ def test_negative_seed_refused_in_one_line(ar1, tmp_path):
 
 
 # A 50-row log (seed 1001 of the fixed list) whose w is interior but two of 39 refits stop at w's search floor
-# (1e-06): the 2.5% quantile rests on order statistics 0 and 1, both that floor, so the lower end is the
-# range, not a quantile: None with the reason; the upper end, a refit's maximum, is kept; the table shows "—".
-def test_an_end_at_the_search_range_is_not_a_quantile(ar1):
+# (1e-06, the log scale's stand-in for the bound 0: those refits are consistent with 0): the 2.5% quantile rests
+# on order statistics 0 and 1, both that floor. The estimate is near its bound, where the percentile interval is
+# not valid (Andrews 2000): the entry is not applicable, with no end kept (a kept upper end was a confident
+# wrong number: below the truth 4 times in 11 such 120-row logs), its se, bias and refits kept; v's is not touched.
+def test_refits_at_the_floor_make_the_entry_not_applicable_near_its_bound(ar1):
     from kalcal.fitting.result import percentile_text
 
     result = _boot(ar1, _log(50, 1001), 39, threads=2)
     w = result.bootstrap.parameters["filter.w"]
     floor = min(w.values)
-    assert not result.parameters["filter.w"].at_bound and w.applicable
+    assert not result.parameters["filter.w"].at_bound
     assert sorted(w.values)[1] == pytest.approx(floor) and floor < 1e-5, sorted(w.values)[:3]
-    assert w.ci_low is None and w.ci_high > result.parameters["filter.w"].value
-    assert "lower end at the search range's end" in w.reason and w.at_range_end >= 2
-    assert percentile_text(w) == f"[—, {w.ci_high:.4g}]" and "[—, " in result.summary()
-    assert result.to_dict()["bootstrap"]["parameters"]["filter.w"]["ci_low"] is None
+    assert not w.applicable and w.ci_low is None and w.ci_high is None and w.se > 0 and w.at_range_end >= 2
+    assert w.reason == ("near its bound: refits at the bound (consistent with 0) reach the interval's end; the "
+                        "percentile interval is not valid near a bound (Andrews 2000)")
+    assert percentile_text(w) == "not applicable" and "near its bound" in result.summary()
+    document = result.to_dict()["bootstrap"]["parameters"]["filter.w"]
+    assert document["applicable"] is False and document["ci_low"] is None and document["ci_high"] is None
     v = result.bootstrap.parameters["filter.v"]
     assert v.at_range_end == 0 and v.ci_low is not None and v.ci_high is not None and v.reason == ""
+
+
+def _toy(free, location, spread, *, ci=(0.5, 2.0), estimate=1.0, b=39, at_bound=False):
+    """A bootstrap of one setting over a hand-built draw: replicate b's log-likelihood peaks at m_b, drawn
+    ``location + spread z`` on the search's scale (the log of the value on a log scale), so each refit is m_b
+    clipped to the search range: the refits that reach an end of it are the draws beyond it."""
+    from types import SimpleNamespace
+
+    from kalcal.fitting.bootstrap import parametric_bootstrap
+
+    log_scale = free.scale == "log"
+
+    def draw(rng):
+        peak = location + spread * rng.standard_normal()
+
+        def loglik(values):
+            u = np.log(values[free.name]) if log_scale else values[free.name]
+            return -0.5 * ((u - peak) / 0.1) ** 2
+        return loglik
+
+    parameter = SimpleNamespace(identified=True, trades_off=(), held=False, at_bound=at_bound, ci_low=ci[0], ci_high=ci[1])
+    fit = SimpleNamespace(values={free.name: estimate}, parameters={free.name: parameter})
+    return parametric_bootstrap(draw, [free], fit, b, seed=7, threads=1).parameters[free.name]
+
+
+# A variance's refits past its ceiling (the search's end, no bound: the log scale does not bound it above):
+# the upper end is none, and the interval claims its lower end alone, a one-sided 97.5% lower bound (the
+# reason, the table's cell and note say so). Its floor, where the same share of refits stop: near its bound,
+# not applicable, whatever the other end is. The draws: ln m ~ N(0.5, 0.5) against a ceiling at ln 1 = 0...
+def test_an_end_at_the_ceiling_is_one_sided_and_at_the_floor_near_its_bound():
+    from kalcal.fitting.mle import Free
+    from kalcal.fitting.result import bootstrap_note, percentile_text
+
+    ceiling = _toy(Free("filter.w", 1.0, 1e-3, 1.0), 0.5, 0.5)
+    assert ceiling.applicable and ceiling.ci_high is None and ceiling.ci_low is not None and 0 < ceiling.ci_low < 1.0
+    assert ceiling.at_range_end >= 2
+    assert ceiling.reason.startswith("one-sided 97.5% lower bound: the upper end is at the search range's end (1)")
+    assert "claims only its lower end" in ceiling.reason and "no bound of the parameter space" in ceiling.reason
+    assert percentile_text(ceiling) == f"[{ceiling.ci_low:.4g}, —]" and "one-sided 97.5%" in bootstrap_note(ceiling)
+    # ... and ln m ~ N(-0.5, 0.5) against a floor at ln 1 = 0: the mirror image, at the bound 0's stand-in
+    floor = _toy(Free("filter.w", 1.0, 1.0, 1e3), -0.5, 0.5)
+    assert not floor.applicable and floor.ci_low is None and floor.ci_high is None and floor.at_range_end >= 2
+    assert floor.reason.startswith("near its bound: refits at the bound (consistent with 0)")
+
+
+# A linear setting: refits past both ends of a range that bounds nothing (a latency's search) lose both
+# ends, so no interval (never an "applicable" [—, —]); past both ends of phi's [-1, 1], the bounds of the
+# parameter space, near its bound (naming which). The draws: m ~ N(0, 2), beyond +-1 about 62% of the time.
+def test_both_ends_lost_is_never_applicable_and_phi_bounds_are_bounds():
+    from kalcal.fitting.mle import Free
+
+    free = Free("filter.phi", 0.0, -1.0, 1.0, scale="linear")
+    both = _toy(free, 0.0, 2.0, ci=(-0.5, 0.5), estimate=0.0)
+    assert not both.applicable and both.ci_low is None and both.ci_high is None
+    assert both.reason.startswith("both ends at the search range's ends")
+    bounded = _toy(replace(free, bounded=True), 0.0, 2.0, ci=(-0.5, 0.5), estimate=0.0)
+    assert not bounded.applicable and bounded.reason.startswith("near its bound: refits at the bound (at -1)")
+    # within the range, nothing lost: the percentile interval of the draws, two-sided
+    inside = _toy(free, 0.0, 0.2, ci=(-0.5, 0.5), estimate=0.0)
+    assert inside.applicable and inside.reason == "" and inside.ci_low < 0 < inside.ci_high and inside.at_range_end == 0
+
+
+# A likelihood interval without a limit on one side (the fit's: "no upper limit within the search range"):
+# not applicable, the se and bias kept; on the side of a bound (phi's -1) it is the near-bound case.
+def test_no_likelihood_limit_on_one_side_is_not_applicable():
+    from kalcal.fitting.mle import Free
+
+    open_side = _toy(Free("filter.w", 1.0, 1e-3, 1e3), 0.0, 0.3, ci=(0.5, None))
+    assert not open_side.applicable and open_side.ci_low is None and open_side.ci_high is None and open_side.se > 0
+    assert open_side.reason.startswith("no likelihood limit on one side within the search range")
+    phi = Free("filter.phi", 0.0, -1.0, 1.0, scale="linear", bounded=True)
+    at_minus_one = _toy(phi, 0.0, 0.2, ci=(None, 0.5), estimate=0.0)
+    assert not at_minus_one.applicable and "no likelihood limit on the lower side" in at_minus_one.reason
+    assert "near its bound: refits at the bound (at -1)" in at_minus_one.reason
+
+
+# bias = mean(refits) - estimate, bias_se = se / sqrt(B), se = the refits' std (ddof = 1): from the refits'
+# own values, which are the draws' peaks (the hand-built draw's maximum is its peak, within the search's
+# tolerance), in replicate order.
+def test_bias_and_its_error_are_the_refits():
+    from kalcal.fitting.mle import Free
+    from kalcal.montecarlo.engine import block_generator
+
+    b = 40
+    entry = _toy(Free("filter.w", 1.0, 1e-3, 1e3), 0.2, 0.3, estimate=1.0, b=b)
+    values = np.array(entry.values)
+    peaks = np.exp([0.2 + 0.3 * block_generator(7, i).standard_normal() for i in range(b)])
+    np.testing.assert_allclose(values, peaks, rtol=1e-4)
+    assert entry.se == pytest.approx(values.std(ddof=1), rel=1e-12)
+    assert entry.bias == pytest.approx(values.mean() - 1.0, rel=1e-12)
+    assert entry.bias_se == pytest.approx(values.std(ddof=1) / np.sqrt(b), rel=1e-12)
+    # the draws' mean of exp(0.2 + 0.3 z) is exp(0.2 + 0.045) = 1.278: the bias, 0.278, is resolved by B = 40
+    assert abs(entry.bias - (np.exp(0.245) - 1.0)) < 3.29 * entry.bias_se < entry.bias
+
+
+# ``failed``: the refits whose search does not report convergence. A draw whose log-likelihood has a fine
+# ripple (1e-3 sin(1e7 w)) stops L-BFGS-B's line search; the count is that of the replicates whose own
+# point estimate, run again on the same drawn log, says so: some, not all.
+def test_failed_counts_the_refits_not_converged():
+    from types import SimpleNamespace
+
+    from kalcal.fitting.bootstrap import parametric_bootstrap
+    from kalcal.fitting.mle import Free, point_estimate
+    from kalcal.montecarlo.engine import block_generator
+
+    free = [Free("filter.w", 1.0, 1e-3, 1e3)]
+
+    def draw(rng):
+        rough, peak = rng.random() < 0.5, 0.3 * rng.standard_normal()
+        return lambda values: -(np.log(values["filter.w"]) - peak) ** 2 + (1e-3 * np.sin(1e7 * values["filter.w"]) if rough else 0.0)
+
+    parameter = SimpleNamespace(identified=True, trades_off=(), held=False, at_bound=False, ci_low=0.5, ci_high=2.0)
+    fit = SimpleNamespace(values={"filter.w": 1.0}, parameters={"filter.w": parameter})
+    b = 39
+    result = parametric_bootstrap(draw, free, fit, b, seed=2, threads=2)
+    expected = sum(not point_estimate(draw(block_generator(2, i)), free)[2] for i in range(b))
+    assert 0 < result.failed == expected < b
+    assert result.as_dict()["not_converged"] == expected
 
 
 # --seed, --threads, --workers, --scheduler set the bootstrap's run alone: without --bootstrap they are refused
