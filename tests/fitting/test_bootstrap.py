@@ -69,12 +69,65 @@ def test_same_seed_one_and_two_threads_identical(ar1):
     assert other.bootstrap.parameters["filter.v"].values != one.bootstrap.parameters["filter.v"].values
 
 
+#: the coverage tests' logs put the truth interior: w's standard deviation at the truth, from the exact
+#: likelihood's expected information (:func:`information_sd`), at most 1/INTERIOR_SDS of w, so the bound 0 is
+#: INTERIOR_SDS of the estimator's sds below the truth (fixed before any coverage was run)
+INTERIOR_SDS = 3.0
+#: (logs, confidence, B) of the small coverage test (default suite) and of the slow one
+COVERAGE_SMALL, COVERAGE_SLOW = (30, 0.9, 19), (200, 0.95, 99)
+#: the power of each, as the docstring and docs/fit.md print it: {(logs, true coverage): P(the count falls
+#: below its floor)}, held by test_coverage_power_is_the_stated_one against :func:`coverage_power`
+COVERAGE_POWER = {(30, 0.6): "0.82", (30, 0.7): "0.41", (30, 0.8): "0.061",
+                  (200, 0.85): "0.96", (200, 0.9): "0.35"}
+
+
+def information_sd(n: int) -> np.ndarray:
+    """(sd of w, sd of v) at the truth over :func:`_log`'s n rows: the inverse of the expected information
+    of the exact Gaussian likelihood of the observed rows, y ~ N(0, W A + V I) (A_jk = phi^|j - k| / (1 - phi^2),
+    the stationary AR(1)'s covariance): I_ab = tr(S^-1 dS_a S^-1 dS_b) / 2, dS_w = A, dS_v = I."""
+    from scipy.linalg import cho_factor, cho_solve
+
+    rows = np.flatnonzero(np.isfinite(_log(n, 0)["y"].to_numpy()))  # the missing pattern, every 9th row
+    a = PHI ** np.abs(rows[:, None] - rows[None, :]) / (1 - PHI**2)
+    factor = cho_factor(W * a + V * np.eye(rows.size))
+    solved = [cho_solve(factor, a), cho_solve(factor, np.eye(rows.size))]
+    information = np.array([[0.5 * np.sum(x * y.T) for y in solved] for x in solved])
+    return np.sqrt(np.diag(np.linalg.inv(information)))
+
+
+def interior_rows() -> int:
+    """The shortest log (in tens of rows) whose w is interior by :data:`INTERIOR_SDS` (its sd at most w/3)."""
+    return next(n for n in range(10, 10_000, 10) if information_sd(n)[0] <= W / INTERIOR_SDS)
+
+
+def coverage_floor(logs: int, confidence: float) -> int:
+    """The fewest covering logs the coverage tests accept: the 0.001 quantile of Binomial(logs, confidence)."""
+    return int(binom_ppf(0.001, logs, confidence))
+
+
+def coverage_power(logs: int, confidence: float, true: float) -> float:
+    """The probability that a coverage test over ``logs`` fails where the interval's true coverage is
+    ``true``: P(X < floor), X ~ Binomial(logs, true), floor :func:`coverage_floor`."""
+    from kalcal.stats.distributions import binom_cdf
+
+    return float(binom_cdf(coverage_floor(logs, confidence) - 1, logs, true))
+
+
+def coverage_power_sentence() -> str:
+    """The power as the coverage tests' docstring and docs/fit.md state it, from :data:`COVERAGE_POWER`."""
+    p, small, slow = COVERAGE_POWER, COVERAGE_SMALL[0], COVERAGE_SLOW[0]
+    return (f"if the true coverage were 60%, 70% or 80% (nominal 90%), the small test over {small} logs fails "
+            f"with probability {p[small, 0.6]}, {p[small, 0.7]} or {p[small, 0.8]}; if it were 85% or 90% (nominal "
+            f"95%), the slow test over {slow} logs fails with probability {p[slow, 0.85]} or {p[slow, 0.9]}")
+
+
 def _coverage(scenario, logs: int, n: int, b: int, confidence: float = 0.95):
-    """Per setting: how many of ``logs`` simulated logs' percentile intervals hold the truth, and the misses by
-    kind: "not applicable", "range end" (an interval with an end given as none, which claims only its other
-    end: it misses where that end is on the wrong side of the truth), "below", "above" (the truth against the
-    interval). A log whose interval is not applicable counts as a miss (conservative: it gives no interval);
-    the one-sided intervals covered are counted apart too ("one-sided covered")."""
+    """Per setting: how many of ``logs`` simulated logs' percentile intervals hold the truth, and the misses
+    by kind. A log whose entry is not applicable counts as a miss (conservative: it gives no interval), by its
+    reason's kind ("not applicable: near its bound", "... at its lower bound", ...); an interval with an end
+    given as none (at a search range's end that is no bound) counts by its kept end, a one-sided bound:
+    "one-sided below/above" where that end is on the wrong side of the truth; "below", "above" (the truth
+    against a two-sided interval)."""
     from collections import Counter
 
     covered = dict.fromkeys(TRUTH, 0)
@@ -85,15 +138,14 @@ def _coverage(scenario, logs: int, n: int, b: int, confidence: float = 0.95):
         for name, truth in TRUTH.items():
             p = result.bootstrap.parameters[name]
             if not p.applicable:
-                misses[name]["not applicable"] += 1
+                misses[name]["not applicable: " + p.reason.split(":")[0]] += 1
             elif p.ci_low is None or p.ci_high is None:
-                # an end given as none: the log does not bound the setting on that side within the search range,
-                # and the interval claims nothing there; it covers where its kept end holds the truth
+                # the interval claims only its kept end: it covers where that end holds the truth
                 if (p.ci_low is None or p.ci_low <= truth) and (p.ci_high is None or truth <= p.ci_high):
                     covered[name] += 1
                     one_sided[name] += 1
                 else:
-                    misses[name]["range end"] += 1
+                    misses[name]["one-sided " + ("below" if p.ci_high is not None else "above")] += 1
             elif truth < p.ci_low or truth > p.ci_high:
                 misses[name]["below" if truth < p.ci_low else "above"] += 1
             else:
@@ -106,7 +158,7 @@ def _coverage(scenario, logs: int, n: int, b: int, confidence: float = 0.95):
 def _check_coverage(coverage, logs, confidence=0.95):
     covered, misses = coverage
     # covered ~ Binomial(logs, confidence) at the nominal level: fewer than its 0.001 quantile is a failure
-    floor = int(binom_ppf(0.001, logs, confidence))
+    floor = coverage_floor(logs, confidence)
     # shown with -s: the counts docs/fit.md quotes
     print(f"coverage at {confidence:g} over {logs} logs: {covered}, floor {floor}; misses {misses}")
     for name, count in covered.items():
@@ -114,17 +166,41 @@ def _check_coverage(coverage, logs, confidence=0.95):
                                 f"misses {dict(misses[name])}")
 
 
-# The percentile interval covers the truth at its nominal level over simulated logs (small version: 90%
-# with B = 19, the fewest replicates that level allows, to stay fast).
+# The percentile interval covers the truth at its nominal level over simulated logs with interior truths
+# (interior_rows: w's sd at most a third of w). Small version: 90% with B = 19, the fewest replicates that
+# level allows, to stay fast.
 def test_coverage_small(ar1):
-    logs = 10
-    _check_coverage(_coverage(ar1, logs, 120, 19, confidence=0.9), logs, confidence=0.9)
+    """Power (binomial, :func:`coverage_power`): if the true coverage were 60%, 70% or 80% (nominal 90%), the
+    small test over 30 logs fails with probability 0.82, 0.41 or 0.061; if it were 85% or 90% (nominal 95%),
+    the slow test over 200 logs fails with probability 0.96 or 0.35. Each test's level: below 0.001."""
+    logs, confidence, b = COVERAGE_SMALL
+    _check_coverage(_coverage(ar1, logs, interior_rows(), b, confidence=confidence), logs, confidence=confidence)
 
 
 @pytest.mark.slow
 def test_coverage(ar1):
-    logs = 100
-    _check_coverage(_coverage(ar1, logs, 120, 99), logs)
+    logs, confidence, b = COVERAGE_SLOW
+    _check_coverage(_coverage(ar1, logs, interior_rows(), b, confidence=confidence), logs, confidence=confidence)
+
+
+# The rule fixed before any run: 190 rows, w's sd there 0.330 (at 120 rows, 0.414: the bound 2.4 sds away).
+def test_interior_rule():
+    assert interior_rows() == 190
+    assert information_sd(190)[0] <= W / INTERIOR_SDS < information_sd(180)[0]
+
+
+def test_coverage_power_is_the_stated_one():
+    from pathlib import Path
+
+    for (logs, true), text in COVERAGE_POWER.items():
+        confidence = COVERAGE_SMALL[1] if logs == COVERAGE_SMALL[0] else COVERAGE_SLOW[1]
+        assert round(coverage_power(logs, confidence, true), len(text.split(".")[1])) == float(text), (logs, true)
+    for logs, confidence, _ in (COVERAGE_SMALL, COVERAGE_SLOW):
+        assert coverage_power(logs, confidence, confidence) < 0.001  # the test's level at the nominal coverage
+    flat = lambda text: " ".join(text.split())  # noqa: E731  the docstring and the docs wrap their lines
+    sentence = coverage_power_sentence()
+    assert sentence in flat(test_coverage_small.__doc__)
+    assert sentence in flat((Path(__file__).resolve().parents[2] / "docs" / "fit.md").read_text())
 
 
 # On a long log the bootstrap se and the observed information's (delta method to the variance's unit)
@@ -196,6 +272,34 @@ def test_bootstrap_refused_in_one_line(ar1):
     for b, confidence, least in ((1, 0.95, 39), (2, 0.95, 39), (38, 0.95, 39), (18, 0.9, 19)):
         with pytest.raises(KalcalError, match=f"at least {least} replicates"):
             kalcal.fit(ar1, data=_log(60, 1), bootstrap=b, confidence=confidence)
+
+
+# A B too large (1e20 overflowed the replicate list, 1e12 ran out of memory) or not a number (nan, inf, 40.5,
+# "40"): one line naming --bootstrap, a KalcalError in Python and exit status 2 from the command, before any fit.
+def test_bootstrap_too_large_or_not_a_number_refused_in_one_line(ar1, tmp_path):
+    import kalcal
+    from typer.testing import CliRunner
+
+    from kalcal.cli import app
+    from kalcal.errors import KalcalError
+    from kalcal.fitting.bootstrap import MAX_REPLICATES
+
+    assert MAX_REPLICATES == 100_000  # the number the help texts print
+    for b in (float("nan"), float("inf"), 40.5, "40"):
+        with pytest.raises(KalcalError, match=r"--bootstrap: expected 0 \(none\) or a whole number"):
+            kalcal.fit(ar1, data=_log(60, 1), bootstrap=b)
+    for b in (10**20, 10**12, MAX_REPLICATES + 1):
+        with pytest.raises(KalcalError, match=r"--bootstrap: at most 100000 replicates"):
+            kalcal.fit(ar1, data=_log(60, 1), bootstrap=b)
+    (tmp_path / "ar1.toml").write_text(AR1)
+    _log(60, 1).to_csv(tmp_path / "y.csv", index=False)
+    for b in ("99999999999999999999", "1000000000000"):
+        done = CliRunner().invoke(app, ["fit", str(tmp_path / "ar1.toml"), "--data", str(tmp_path / "y.csv"),
+                                        "--bootstrap", b, "--out", str(tmp_path / "out")])
+        assert done.exit_code == 2, done.output
+        assert f"--bootstrap: at most 100000 replicates" in done.output and "Traceback" not in done.output
+        assert len(done.output.strip().splitlines()) == 1, done.output
+    assert not (tmp_path / "out").exists()
 
 
 # B >= 2/(1 - c) - 1: the (B + 1)(1 - c)/2 >= 1 refits beyond each end of the percentile interval.
