@@ -545,3 +545,101 @@ def test_a_replicate_leaves_its_thread_as_it_found_it(ar1):
         after = local_search._IN_POOL.active
         local_search._IN_POOL.active = False
     assert seen and all(seen) and after is False
+
+
+DRIVEN = """
+name = "driven"
+phi = [[0.9]]
+gamma = [[1.0]]
+b = [[1.0]]
+w = [[0.0]]
+h = [["g"]]
+v = [[1.0]]
+x0 = [{x0}]
+m0 = [[0.0]]
+{diffuse}
+[data]
+measurements = ["y"]
+inputs = ["u"]
+stds = ["s"]
+"""
+
+
+# A model file's bootstrap log (model_file.fit.draw_log, what each replicate refits) holds the user's log's
+# inputs, h column, std column and missing rows. With w = 0 the state is the inputs' response, x_{j+1} =
+# 0.9 x_j + u_j from x0 (a diffuse state too: it starts at x0 exactly, the conditional likelihood not
+# depending on it), so each drawn y_j is g_j x_j + s_j e_j: NaN exactly where the log's y is, and the sum over
+# 20 draws (generators 0-19) and the rows of ((y_j - g_j x_j) / s_j)^2 ~ chi2(20 rows) within its two-sided
+# 0.001 bounds. (One draw's sum, 320 rows, is too weak a check: generator 1's, 235.3, is below its 0.0005
+# quantile, 243.2, as one draw in 2000 is.) Drawn without the inputs (mean 0), the h column (g = 1) or the std
+# column (std 1, not s_j in 0.1-3) it is far outside them.
+@pytest.mark.parametrize("diffuse", [False, True])
+def test_the_model_file_draw_holds_inputs_h_stds_and_missing_rows(diffuse):
+    from kalcal.scenarios.model_file.data import bind
+    from kalcal.scenarios.model_file.fit import draw_log
+    from kalcal.stats.distributions import chi2_isf, chi2_ppf
+
+    x0 = 5.0 if diffuse else 0.0
+    scenario = parse_model(DRIVEN.format(x0=x0, diffuse='diffuse = ["x1"]' if diffuse else ""), "driven.toml")
+    j = np.arange(400)
+    u = 3.0 * np.sin(j / 10.0)
+    g = 1.0 + 0.5 * np.cos(j / 7.0)
+    s = np.where(j % 2 == 0, 0.1, 3.0)
+    y = np.random.default_rng(0).normal(size=j.size)
+    y[3::5] = np.nan
+    bound = bind(scenario, pd.DataFrame({"y": y, "u": u, "g": g, "s": s}))
+    drawn = np.array([draw_log(bound.filter, bound.z, np.random.default_rng(seed))[:, 0] for seed in range(20)])
+    assert all(np.array_equal(np.isnan(row), np.isnan(y)) for row in drawn)
+    x = np.empty(j.size)
+    x[0] = x0
+    for k in range(1, j.size):
+        x[k] = 0.9 * x[k - 1] + u[k - 1]
+    seen = np.isfinite(y)
+    low, high = chi2_ppf(0.0005, drawn.shape[0] * seen.sum()), chi2_isf(0.0005, drawn.shape[0] * seen.sum())
+    statistic = lambda mean, std: float(np.sum(((drawn - mean) / std)[:, seen] ** 2))  # noqa: E731
+    assert low < statistic(g * x, s) < high
+    for mean, std in ((np.zeros_like(x), s), (x, s), (g * x, np.ones_like(s))):  # no inputs, no h column, no stds
+        assert not low < statistic(mean, std) < high
+
+
+def _scale_bias_log(seed: int, duration: float):
+    from kalcal.scenarios import build_scenario
+    from kalcal.scenarios.scale_bias.simulation import sample_scale_bias
+
+    settings = {"scenario.duration": duration, "scenario.drift": "random-walk", "truth.parameter_drift_std": 0.002,
+                "truth.reference_noise_std": 0.3, "truth.sensor_noise_std": 0.0}
+    sc = build_scenario("scale-bias", None, [f"{key}={value}" for key, value in settings.items()])
+    sample = sample_scale_bias(sc, np.random.default_rng(seed), 1)
+    return sc, sample.time, sample.reference[0], sample.sensor[0]
+
+
+# scale-bias's bootstrap (its own draw, scale_bias.fit.draw_log): the same seed on 1 and 2 threads gives the
+# same replicates, so identical entries; another seed, other replicates.
+def test_scale_bias_bootstrap_same_seed_one_and_two_threads_identical():
+    from kalcal.scenarios.scale_bias.fit import fit_scale_bias
+
+    sc, t, reference, sensor = _scale_bias_log(5, 120)
+    one, two, other = (fit_scale_bias(sc, t, reference, sensor,
+                                      options=FitOptions(bootstrap=8, seed=seed, threads=n, confidence=0.75))
+                       for seed, n in ((3, 1), (3, 2), (4, 2)))
+    assert one.bootstrap.parameters == two.bootstrap.parameters
+    assert all(p.values for p in one.bootstrap.parameters.values())
+    assert other.bootstrap.parameters[NOISE_STD].values != one.bootstrap.parameters[NOISE_STD].values
+
+
+NOISE_STD = "filter.reference_noise_std"
+
+
+# On a long scale-bias log (600 s, 6000 samples) the bootstrap se of the noise std and of the drift agree with
+# the observed information's within the bootstrap se's Monte Carlo error (relative sd sqrt(1 / (2 (B - 1)))
+# for a normal estimator, 3.29 of them: two-sided 0.001).
+def test_scale_bias_bootstrap_se_agrees_with_the_information_on_a_long_log():
+    from kalcal.scenarios.scale_bias.fit import fit_scale_bias
+
+    b = 60
+    sc, t, reference, sensor = _scale_bias_log(6, 600)
+    result = fit_scale_bias(sc, t, reference, sensor, options=FitOptions(bootstrap=b, seed=1, threads=2))
+    bound = 3.29 * np.sqrt(1.0 / (2.0 * (b - 1)))
+    for name, entry in result.bootstrap.parameters.items():
+        assert entry.applicable and entry.ci_low is not None and entry.ci_high is not None, (name, entry.reason)
+        assert abs(entry.se / result.bse[name] - 1.0) < bound, (name, entry.se, result.bse[name], bound)
