@@ -17,7 +17,8 @@ that stopped at an end of the search range that stands for a bound of the parame
 setting's floor, the variance's 0: those refits are consistent with 0; either end of a ``bounded`` linear
 range, such as an AR(1) coefficient's [-1, 1]), the estimate is within the estimator's spread of the bound,
 where the percentile interval's ends are not valid (Andrews 2000): on 120-row logs of an AR(1) in noise
-whose refits of w reach its floor, the kept upper end fell below the truth 4 times in 11 (the tests).
+whose refits of w reach its floor, the kept upper end fell below the truth 4 times in 11
+(tests/fitting/test_bootstrap.py, test_short_logs_near_the_bound).
 A percentile end resting on refits stopped at an end of the search range that is NOT a bound (a variance's
 ceiling: the log scale does not bound it above; accel-gps's latency range) is that range's end, not a
 quantile: that end is None and the interval claims only its other end, a one-sided bound at level
