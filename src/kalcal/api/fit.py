@@ -73,7 +73,7 @@ def fit(
     confidence : float
         Of the intervals (0.95).
     bootstrap : int
-        B >= 2/(1 - confidence) - 1 (39 at 95%): a parametric bootstrap (:mod:`kalcal.fitting.bootstrap`): B logs simulated from the fitted
+        B >= 2/(1 - confidence) - 1 (39 at 95%), at most 100000 (``MAX_REPLICATES``): a parametric bootstrap (:mod:`kalcal.fitting.bootstrap`): B logs simulated from the fitted
         model with the log's length, sampling, missing measurements and inputs, each refitted (a point
         estimate from the fitted point); per setting the percentile interval, the bootstrap standard error
         and the estimator's bias, in the result's ``bootstrap``, fit.json and fit-bootstrap.png. 0: none.
@@ -106,7 +106,9 @@ def fit(
 
     if not 0.0 < confidence < 1.0:
         raise KalcalError(f"confidence=: expected a number in (0, 1), got {confidence!r}")  # kalcal fit has no --confidence
-    if isinstance(bootstrap, bool) or int(bootstrap) != bootstrap or bootstrap < 0:
+    from kalcal.fitting.bootstrap import whole_number
+
+    if not whole_number(bootstrap) or bootstrap < 0:  # nan, inf, 40.5, "40": one line, not int()'s error
         raise KalcalError(f"--bootstrap: expected 0 (none) or a whole number of replicates, got {bootstrap!r}")
     unused = [flag for flag, value in (("--seed", seed), ("--threads", threads), ("--workers", workers),
                                        ("--scheduler", scheduler)) if value is not None]

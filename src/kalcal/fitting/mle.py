@@ -60,7 +60,11 @@ FAILED = -1e300
 @dataclass(frozen=True)
 class Free:
     """A free parameter: its name, unit, start and search range [lower, upper] (0 < lower < upper on the
-    log scale; any lower <= start <= upper with ``scale="linear"``)."""
+    log scale; any lower <= start <= upper with ``scale="linear"``).
+
+    ``bounded``: a linear-scale range whose ends are the parameter space's own bounds (an AR(1) coefficient's
+    [-1, 1]), not only where the search stops; a log-scale range's lower end always stands for the bound 0
+    (:func:`kalcal.fitting.bootstrap.boundary_ends`)."""
 
     name: str
     start: float
@@ -68,6 +72,7 @@ class Free:
     upper: float
     unit: str = ""
     scale: str = "log"
+    bounded: bool = False
 
     def __post_init__(self) -> None:
         if self.scale not in ("log", "linear"):

@@ -441,7 +441,8 @@ def likelihood_text(p: FitParameter) -> str:
 
 
 def percentile_text(b) -> str:
-    """A bootstrap entry's percentile interval, "—" for an end at the search range's end, or "not applicable"."""
+    """A bootstrap entry's percentile interval, "—" for an end lost at a search range's end that is no bound
+    (the other end is then a one-sided bound at (1 + c)/2, the note says), or "not applicable"."""
     if not b.applicable:
         return "not applicable"
     return "[" + ", ".join("—" if end is None else f"{end:.4g}" for end in (b.ci_low, b.ci_high)) + "]"

@@ -379,7 +379,9 @@ def fit_model_file(
         if e.scale == "log":
             parameters.append(Free(e.key, start, start / RANGE, start * RANGE, _unit(scenario, e)))
         else:
-            parameters.append(Free(e.key, start, PHI_BOUNDS[0], PHI_BOUNDS[1], _unit(scenario, e), scale="linear"))
+            # [-1, 1] bounds phi itself (stationary to a random walk): refits there are at a bound, as a variance's at 0
+            parameters.append(Free(e.key, start, PHI_BOUNDS[0], PHI_BOUNDS[1], _unit(scenario, e), scale="linear",
+                                   bounded=True))
     fit = maximize(like, parameters, profile=profile, confidence=confidence)
     chosen = fitted_point(fit)
     from kalcal.fitting.bootstrap import bootstrap_fit
