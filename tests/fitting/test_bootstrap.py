@@ -71,7 +71,8 @@ def test_same_seed_one_and_two_threads_identical(ar1):
 
 #: the coverage tests' logs put the truth interior: w's standard deviation at the truth, from the exact
 #: likelihood's expected information (:func:`information_sd`), at most 1/INTERIOR_SDS of w, so the bound 0 is
-#: INTERIOR_SDS of the estimator's sds below the truth (fixed before any coverage was run)
+#: INTERIOR_SDS of the estimator's sds below the truth (a rule apart from the bootstrap's results; its threshold
+#: chosen after 120-row logs, 2.4 sds, had fallen below their floor: docs/fit.md says so)
 INTERIOR_SDS = 3.0
 #: (logs, confidence, B) of the small coverage test (default suite) and of the slow one
 COVERAGE_SMALL, COVERAGE_SLOW = (30, 0.9, 19), (200, 0.95, 99)
@@ -139,9 +140,6 @@ def _coverage(scenario, logs: int, n: int, b: int, confidence: float = 0.95):
             p = result.bootstrap.parameters[name]
             if not p.applicable:
                 misses[name]["not applicable: " + p.reason.split(":")[0]] += 1
-                if p.reason.startswith("near its bound") and np.quantile(p.values, (1 + confidence) / 2) < truth:
-                    # the upper end a one-sided reading would have kept (the rule before: [—, upper]), wrong
-                    misses[name]["(near its bound: upper quantile below the truth)"] += 1
             elif p.ci_low is None or p.ci_high is None:
                 # the interval claims only its kept end: it covers where that end holds the truth
                 if (p.ci_low is None or p.ci_low <= truth) and (p.ci_high is None or truth <= p.ci_high):
@@ -188,9 +186,6 @@ COVERAGE_W_MISSES = {"not applicable: near its bound": 6, "below": 4, "above": 8
 #: logs, not a pass: covering logs per setting, and w's entries not applicable by reason
 SHORT_MEASURED = {"filter.w": 86, "filter.v": 97}
 SHORT_W_NOT_APPLICABLE = {"near its bound": 11, "at its lower bound (consistent with 0)": 2}
-#: of those near its bound, the entries whose refits' (1 + c)/2 quantile (the upper end a one-sided reading
-#: keeps) is below the truth
-SHORT_W_UPPER_BELOW = 4
 
 
 def measured_sentence() -> str:
@@ -222,12 +217,9 @@ def test_short_logs_near_the_bound(ar1):
     assert covered == SHORT_MEASURED
     assert {k.removeprefix("not applicable: "): v for k, v in misses["filter.w"].items()
             if k.startswith("not applicable")} == SHORT_W_NOT_APPLICABLE
-    # why no one-sided interval there: of those 11, the upper end one would have kept is below the truth in 4
-    # (a one-sided 97.5% bound misses ~2.5%: 4 or more of 11 has probability 1.1e-4)
-    assert misses["filter.w"]["(near its bound: upper quantile below the truth)"] == SHORT_W_UPPER_BELOW
 
 
-# The rule fixed before any run: 190 rows, w's sd there 0.330 (at 120 rows, 0.414: the bound 2.4 sds away).
+# The rule: 190 rows, w's sd there 0.330 (at 120 rows, 0.414: the bound 2.4 sds away).
 def test_interior_rule():
     assert interior_rows() == 190
     assert information_sd(190)[0] <= W / INTERIOR_SDS < information_sd(180)[0]
@@ -247,8 +239,6 @@ def test_coverage_power_is_the_stated_one():
     assert sentence in flat(test_coverage_small.__doc__)
     assert sentence in docs
     assert measured_sentence() in docs
-    near = SHORT_W_NOT_APPLICABLE["near its bound"]
-    assert f"(before it, {SHORT_W_UPPER_BELOW} of {near} such logs gave an upper end below the truth)" in docs
 
 
 # On a long log the bootstrap se and the observed information's (delta method to the variance's unit)
@@ -413,8 +403,8 @@ def test_negative_seed_refused_in_one_line(ar1, tmp_path):
 # A 50-row log (seed 1001 of the fixed list) whose w is interior but two of 39 refits stop at w's search floor
 # (1e-06, the log scale's stand-in for the bound 0: those refits are consistent with 0): the 2.5% quantile rests
 # on order statistics 0 and 1, both that floor. The estimate is near its bound, where the percentile interval is
-# not valid (Andrews 2000): the entry is not applicable, with no end kept (a kept upper end was a confident
-# wrong number: below the truth 4 times in 11 such 120-row logs), its se, bias and refits kept; v's is not touched.
+# not valid (Andrews 2000): the entry is not applicable, with no end kept, its se, bias and refits kept; v's is
+# not touched.
 def test_refits_at_the_floor_make_the_entry_not_applicable_near_its_bound(ar1):
     from kalcal.fitting.result import percentile_text
 
@@ -691,3 +681,4 @@ def test_scale_bias_bootstrap_se_agrees_with_the_information_on_a_long_log():
     for name, entry in result.bootstrap.parameters.items():
         assert entry.applicable and entry.ci_low is not None and entry.ci_high is not None, (name, entry.reason)
         assert abs(entry.se / result.bse[name] - 1.0) < bound, (name, entry.se, result.bse[name], bound)
+
