@@ -164,6 +164,8 @@ def calibrate_logs(scenario, logs: dict[str, Any], options) -> Imu3AxisCalibrati
     for key, block in samples.items():
         if not np.all(np.isfinite(block)):
             raise DataError(f"{name}: pose {key!r} holds empty or non-finite readings")
+    # the log's resolution: a pose whose noise lies below it has its mean's variance floored (faces.mean_covariance)
+    step = face_procedure.resolution(readings)
     face_names = [key for key in samples if key in FACES]
     if face_names and len(face_names) < len(samples) and options.poses is not None:
         raise DataError(f"{poses_source}: mixes face names ({', '.join(face_names)}) with other poses: name all six faces "
@@ -172,7 +174,7 @@ def calibrate_logs(scenario, logs: dict[str, Any], options) -> Imu3AxisCalibrati
         missing = [face for face in FACES if face not in samples]
         if missing:
             raise DataError(f"{poses_source}: procedure (a) needs all six faces; missing {', '.join(missing)}")
-        run = face_procedure.calibrate_faces(samples, settings.gravity, np.radians(settings.tilt_bound))
+        run = face_procedure.calibrate_faces(samples, settings.gravity, np.radians(settings.tilt_bound), step=step)
         check = face_procedure.tilt_check(run)
         if not check["within"]:
             # every interval of procedure (a) assumes the bound: a face beyond it makes them wrong, not just wide
@@ -188,10 +190,13 @@ def calibrate_logs(scenario, logs: dict[str, Any], options) -> Imu3AxisCalibrati
             raise DataError(f"{poses_source}: {len(samples)} static poses; at least 9 are needed without the six named faces "
                             "(lower scenario.threshold or scenario.min_duration, or record more poses)")
         means = np.array([block.mean(axis=0) for block in samples.values()])
-        mean_cov = np.array([np.cov(block, rowvar=False) / block.shape[0] for block in samples.values()])
+        pairs = [face_procedure.mean_covariance(block, step) for block in samples.values()]
+        mean_cov = np.array([cov for cov, _ in pairs])
+        quantized = [f"{key} {AXES[k]}" for key, (_, below) in zip(samples, pairs) for k in np.flatnonzero(below)]
         run = fit_poses(means, mean_cov, settings.gravity, max_condition=settings.max_condition,
-                        bootstrap=int(settings.bootstrap), seed=int(settings.seed), source=poses_source)
-        result = _poses_result(scenario, run, regions, name, columns, notes)
+                        bootstrap=int(settings.bootstrap), seed=int(settings.seed), source=poses_source,
+                        names=list(samples))
+        result = _poses_result(scenario, run, regions, name, columns, notes, quantized, step)
     return result if is_frame(source) else mark_inputs(result, source)
 
 
@@ -224,7 +229,9 @@ def _faces_result(scenario, run, regions, name, columns, notes, check):
     keep = [index[f"M_{a}{c}"] for a in AXES for c in AXES] + [index[f"bias_{a}"] for a in AXES]
     residuals = run.residuals()
     warnings = []
-    if not run.whiteness["white"]:
+    if run.whiteness["quantized"]:
+        warnings.append(_quantized_warning(name, run.whiteness["quantized"], run.whiteness["resolution"]))
+    if run.whiteness["white"] is False:
         warnings.append({"code": "colored-noise", "message": (
             f"{name}: the faces' samples are not white (batch-means variance ratio {run.whiteness['variance_ratio']:.3g}, "
             f"p = {run.whiteness['p_value']:.3g}): the noise intervals, which assume white samples, are too narrow")})
@@ -235,7 +242,7 @@ def _faces_result(scenario, run, regions, name, columns, notes, check):
         covariance=run.covariance[np.ix_(keep, keep)], covariance_states=tuple(labels[k] for k in keep), diagnostics={"whiteness": run.whiteness, "tilt_check": check},
         warnings=warnings, columns=_residual_columns(list(regions), residuals), time=float("nan"),
         units=_units(labels), stability_test=_stability("a static-pose calibration has no windows"),
-        sigma_trusted=run.whiteness["white"], procedure="a", estimates_table=estimates,
+        sigma_trusted=run.whiteness["white"] is not False, procedure="a", estimates_table=estimates,
         full_covariance=run.covariance, covariance_labels=tuple(labels), bootstrap_table={},
         misalignment=run.values["misalignment"], fit={"residual_tilt_note": "the faces' residuals are the tilts' and the noise's; each is checked against z sigma "
                                                       "plus its worst case within the tilt bound (diagnostics.tilt_check), and a "
@@ -244,7 +251,16 @@ def _faces_result(scenario, run, regions, name, columns, notes, check):
         means=run.means, **_common(scenario, run.values["M"], run.values["b"], regions, name, columns, notes, residuals))
 
 
-def _poses_result(scenario, run, regions, name, columns, notes):
+def _quantized_warning(name: str, where: list[str], step) -> dict:
+    steps = ", ".join(f"{axis} {value:.3g}" for axis, value in zip(AXES, step))
+    shown = ", ".join(where[:6]) + (f" and {len(where) - 6} more" if len(where) > 6 else "")
+    return {"code": "quantized", "message": (
+        f"{name}: the noise of {len(where)} pose axes ({shown}) lies below the log's resolution (steps {steps} m/s^2): "
+        "the readings are quantized and a static pose's rounding error does not average down; those means' variance is "
+        "floored at step^2/12 (a uniform rounding error), not the samples' variance / n")}
+
+
+def _poses_result(scenario, run, regions, name, columns, notes, quantized=(), resolution=None):
     M, b = sensor_matrix(run.theta), run.theta[6:]
     # the derived quantities' covariance by the delta method (M's entries from the 9 parameters)
     step = 1e-7
@@ -271,6 +287,8 @@ def _poses_result(scenario, run, regions, name, columns, notes):
         boot = {label: {"std": float(s), "lower": float(lo), "upper": float(hi)}
                 for label, s, lo, hi in zip(PARAM_NAMES, run.bootstrap.std(axis=0, ddof=1), low, high)}
     warnings = []
+    if quantized:
+        warnings.append(_quantized_warning(name, list(quantized), resolution))
     trusted = not (run.dof > 0 and run.p_value < 0.01)
     if not trusted:
         warnings.append({"code": "poses-inconsistent", "message": (
@@ -279,7 +297,9 @@ def _poses_result(scenario, run, regions, name, columns, notes):
     return Imu3AxisCalibrationResult(
         scenario=scenario.NAME, bias=np.array(b, dtype=float), bias_std=np.array(std[6:9]), scale=None, scale_std=None,
         covariance=run.covariance, covariance_states=PARAM_NAMES,
-        diagnostics={"chi2": run.chi2, "dof": run.dof, "p_value": run.p_value, "condition": run.condition, "consistent": trusted},
+        diagnostics={"chi2": run.chi2, "dof": run.dof, "p_value": run.p_value, "condition": run.condition, "consistent": trusted,
+                     "quantized": list(quantized),
+                     "resolution": None if resolution is None else [float(v) for v in resolution]},
         warnings=warnings, columns=_residual_columns(list(regions), run.residuals), time=float("nan"),
         units=_units(labels), stability_test=_stability("a static-pose calibration has no windows"), sigma_trusted=trusted,
         procedure="b", estimates_table=estimates, full_covariance=full, covariance_labels=tuple(labels), bootstrap_table=boot,
