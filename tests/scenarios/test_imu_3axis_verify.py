@@ -278,3 +278,44 @@ def test_refusals_one_line_exit_2(tmp_path, settings, needle):
     assert done.returncode == 2, done.stderr
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and needle in lines[0], done.stderr
+
+
+# --- a failed check's cause: the filter's approximation, the truth being its own model ---------------------------
+
+WRONG_CAUSES = ("noise settings too small", "noise settings too large", "heavy-tailed", "prior mean differs from the truth",
+                "departs from the filter model")
+
+
+@pytest.mark.parametrize("kind, words", [("ekf", "EKF's linearization"), ("ukf", "UKF's sigma points"),
+                                         ("iekf", "iterated EKF's linearization")])
+def test_failed_checks_name_the_filters_approximation(kind, words):
+    """The truth is the filter's own pose model: every failed check's cause is the filter's approximation
+    (explained_by "approximation"), never a model error, noise settings or a heavy tail, and the answer's
+    verdict says so; the direction a covariance check found stays in the words."""
+    from kalcal.reporting.answer import answer
+
+    result = run(f"filter.kind={kind}")
+    failed = [c for c in result.checks if not c.passed]
+    assert failed, "the default settings fail some check for every filter kind (docs' table)"
+    for check in failed:
+        assert check.cause.explained_by == "approximation" and words in check.cause.reason, (check.name, check.cause)
+        assert not any(wrong in check.detail for wrong in WRONG_CAUSES), (check.name, check.detail)
+    assert "by how the filter approximates it, not by a model error or its noise settings" in answer(result.summary).sentence
+
+
+def test_approximation_cause_follows_truth_is_filter():
+    """imu-3axis always names its filter's approximation (its truth is the filter's model); a linear scenario
+    none, so its checks' own causes stand."""
+    assert "batch maximum likelihood" in build_scenario("imu-3axis", None, ["filter.kind=batch"]).approximation_cause()
+    assert build_scenario("scale-bias", None, []).approximation_cause() == ""
+
+
+def test_range_bearing_example_truth_is_its_filter_so_its_cause_is_the_linearization():
+    """examples/range_bearing.py's truth is its filter's model (the same object): the same path names the
+    EKF's linearization as the cause of a failed check."""
+    from kalcal.scenarios import load_code_model
+
+    example = Path(__file__).resolve().parents[2] / "examples" / "range_bearing.py"
+    scenario = load_code_model(str(example))
+    assert scenario.loaded.truth is scenario.loaded.filter
+    assert "EKF's linearization" in scenario.approximation_cause()

@@ -31,7 +31,7 @@ from kalcal.scenarios.protocol import require
 from kalcal.stats.suite import run_checks, verdict
 from kalcal.stats.whiteness import residual_pair
 from kalcal.stats.dataset import statistics_dataset
-from kalcal.stats.results import as_false_alarm
+from kalcal.stats.results import as_approximation, as_false_alarm
 from kalcal.results.verification import VerificationResult
 from kalcal.stats.self_check import exact_prediction, self_check
 
@@ -366,6 +366,9 @@ def compute_verification(
     exact = exact_prediction(problem, analysis)
     if equals_filter(scenario, analysis, problem):  # a failure is a false alarm at its stated rate, never a cause
         checks = [as_false_alarm(check) for check in checks]
+    elif approximation := scenario.approximation_cause():
+        # the truth is the filter's own nonlinear model: a failure is its approximation, not a model or noise error
+        checks = [as_approximation(check, approximation) for check in checks]
     effects = problem_effects(problem, run.sums, confidence)
     if effects is not None:
         checks = [with_effects(check, effects) for check in checks]

@@ -141,6 +141,14 @@ class Imu3AxisScenario(ScenarioDefaults):
     def model_error_cause(self) -> str:
         return ""
 
+    def approximation_cause(self) -> str:
+        """The truth is the filter's own pose model (:attr:`loaded`): a failed check is the filter's
+        approximation of it (:data:`~kalcal.scenarios.nonlinear.settings.APPROXIMATIONS`), never a model error
+        or too small noise settings."""
+        from kalcal.scenarios.nonlinear.settings import APPROXIMATIONS
+
+        return APPROXIMATIONS[self.filter.kind]
+
     def check_settings(self, command: str) -> None:
         """verify: the layout spans the sphere (procedure (b)'s condition), the batch ML has P - 9 >= 1
         residual degrees of freedom for its NIS check, and no power by simulation (not built here)."""
