@@ -506,3 +506,54 @@ def test_result_correct_and_its_interval(tmp_path, procedure):
             grad[:, k] = (m.correct(reading, up[:9].reshape(3, 3), up[9:])[0]
                           - m.correct(reading, down[:9].reshape(3, 3), down[9:])[0]) / 2e-6
         np.testing.assert_allclose(h_n, z * np.sqrt(np.einsum("ij,jk,ik->i", grad, cov, grad)), rtol=1e-6)
+
+
+# --- refusals of a fit that did not converge, a singular information, an inverted axis, an empty poses file ------
+
+def _twelve_means():
+    ups = np.random.default_rng(5).standard_normal((12, 3))
+    ups /= np.linalg.norm(ups, axis=1, keepdims=True)
+    return m.h(np.c_[np.tile(TRUE, (12, 1)), np.zeros((12, 2))], m.pose_data(ups), G), np.tile(1e-5 * np.eye(3), (12, 1, 1))
+
+
+def test_fit_poses_refuses_an_unconverged_fit_and_a_singular_information(monkeypatch):
+    import scipy.linalg
+    from types import SimpleNamespace
+
+    from kalcal.scenarios.imu_3axis import poses
+
+    means, cov = _twelve_means()
+    real = poses._solve
+    monkeypatch.setattr(poses, "_solve", lambda problem, start: SimpleNamespace(
+        **{**vars(real(problem, start)), "status": 0, "message": "The maximum number of function evaluations is exceeded."}))
+    with pytest.raises(DataError, match=r"did not converge \(least squares status 0"):
+        fit_poses(means, cov, G)
+    monkeypatch.setattr(poses, "_solve", real)
+
+    def singular(*args, **kwargs):
+        raise scipy.linalg.LinAlgError("not positive definite")
+
+    monkeypatch.setattr(scipy.linalg, "cho_factor", singular)
+    with pytest.raises(DataError, match="information at the fit is singular"):
+        fit_poses(means, cov, G)
+
+
+def test_cli_refuses_an_inverted_axis_and_an_empty_poses_file(tmp_path):
+    """The real session with acc_y * -1: a left-handed M (det < 0) used to give a NaN mounting rotation and
+    192 nulls in summary.json at exit 0; now one line naming axis y, exit 2. An empty poses file: one line
+    saying it holds no poses. (Procedure (b) cannot see an inverted axis: |M^-1 (a - b)| = g is the same for
+    a reflected axis.)"""
+    import pandas as pd
+
+    frame = pd.read_csv(LOG)
+    frame["acc_y"] *= -1
+    frame.to_csv(tmp_path / "flip.csv", index=False)
+    done = kalcal("calibrate", "imu-3axis", "--imu", "flip.csv", "--poses", POSES, "--out", "o", cwd=tmp_path)
+    assert done.returncode == 2, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "left-handed" in lines[0] and "axis y looks inverted" in lines[0], done.stderr
+    (tmp_path / "empty.json").write_text("{}")
+    done = kalcal("calibrate", "imu-3axis", "--imu", LOG, "--poses", "empty.json", "--out", "e", cwd=tmp_path)
+    assert done.returncode == 2, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "no poses (an empty object)" in lines[0], done.stderr

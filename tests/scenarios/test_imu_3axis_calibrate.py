@@ -341,3 +341,60 @@ def test_fit_poses_refuses_a_singular_pose_covariance_naming_it():
     cov[3, 1, 1] = 0.0
     with pytest.raises(DataError, match=r"pose 'p3': its mean's covariance is singular"):
         fit_poses(means, cov, G, names=[f"p{k}" for k in range(12)])
+
+
+# --- the static detector: slow smooth turns, and its refusal ----------------------------------------------------
+
+def smooth_log(ups, turn_s=4.0, still=300, sigma=0.02, seed=0):
+    """A log at RATE Hz: each up direction held ``still`` samples, then a smooth turn of ``turn_s`` s to the next
+    (a great-circle rotation with a cosine speed profile, no shaking: |a| stays at g's scale throughout)."""
+    rng = np.random.default_rng(seed)
+    ups = np.asarray(ups, dtype=float)
+    ups = ups / np.linalg.norm(ups, axis=1, keepdims=True)
+    rows, regions, at = [], [], 0
+    moving = int(turn_s * RATE)
+    for k, up in enumerate(ups):
+        rows.append(G * np.tile(up, (still, 1)) @ M_TRUE.T + B_TRUE + sigma * rng.standard_normal((still, 3)))
+        regions.append((at, at + still))
+        at += still
+        if k == len(ups) - 1:
+            break
+        nxt = ups[k + 1]
+        angle = np.arccos(np.clip(up @ nxt, -1, 1))
+        s = (1 - np.cos(np.pi * (np.arange(moving) + 0.5) / moving)) / 2  # 0 -> 1, smooth at both ends
+        turn = (np.sin((1 - s)[:, None] * angle) * up + np.sin(s[:, None] * angle) * nxt) / np.sin(angle)
+        rows.append(G * turn @ M_TRUE.T + B_TRUE + sigma * rng.standard_normal((moving, 3)))
+        at += moving
+    a = np.vstack(rows)
+    return a, regions
+
+
+def test_detector_ends_a_pose_at_a_slow_smooth_turn():
+    """Twelve poses joined by 4 s smooth turns without shaking (the moving std of |a| saw 5 poses): twelve runs,
+    each covering all but two windows of its true static span; a run may reach a few samples into a turn's
+    slow end, so its mean is held to the pose's true reading within 4.5 sigma / sqrt(n) per axis (Bonferroni
+    0.001 over the 36 means: what the turn adds stays below the noise)."""
+    from kalcal.scenarios import build_scenario
+    from kalcal.scenarios.imu_3axis.job import detect_poses
+
+    settings = build_scenario("imu-3axis", None, []).scenario
+    readings, truth = smooth_log(general_ups())
+    assert np.ptp(np.linalg.norm(readings - B_TRUE, axis=1)) < 1.0  # no shaking: |a| barely moves through a turn
+    runs = detect_poses(readings, RATE, settings)
+    assert len(runs) == 12, runs
+    width = int(settings.window * RATE)
+    z = stats.norm.isf(0.001 / 72)
+    ups = general_ups() / np.linalg.norm(general_ups(), axis=1, keepdims=True)
+    for (s, e), (ts, te), up in zip(runs, truth, ups):
+        assert ts - width <= s and e <= te + width and (e - s) >= (te - ts) - 2 * width, ((s, e), (ts, te))
+        true_reading = G * M_TRUE @ up + B_TRUE
+        assert np.all(np.abs(readings[s:e].mean(axis=0) - true_reading) <= z * 0.02 / np.sqrt(e - s)), (s, e)
+
+
+def test_cli_detector_refuses_too_few_poses_in_one_line(tmp_path):
+    """Five general poses and no --poses: one line, exit 2, naming the count and what the detector needs."""
+    write_log(tmp_path / "five.csv", general_ups(5))
+    done = kalcal("calibrate", "imu-3axis", "--imu", "five.csv", "--out", "o", cwd=tmp_path)
+    assert done.returncode == 2, (done.stdout, done.stderr)
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "5 static poses; at least 9 are needed" in lines[0] and "scenario.min_duration" in lines[0], done.stderr

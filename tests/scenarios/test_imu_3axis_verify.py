@@ -319,3 +319,16 @@ def test_range_bearing_example_truth_is_its_filter_so_its_cause_is_the_lineariza
     scenario = load_code_model(str(example))
     assert scenario.loaded.truth is scenario.loaded.filter
     assert "EKF's linearization" in scenario.approximation_cause()
+
+
+def test_batch_uses_max_iterations_as_set_and_counts_unconverged_fits():
+    """filter.max_iterations = 2 is used (it was raised to 50): every realization's fit stops unconverged, the
+    count is in summary.json and announced; at the default 20 every fit converges."""
+    heard = []
+    few = compute_verification(build_scenario("imu-3axis", None, ["filter.kind=batch", "filter.max_iterations=2"]), 200, SEED,
+                               workers=1, notes=heard.append)
+    assert few.summary["batch_convergence"] == {"unconverged": 200, "realizations": 200, "max_iterations": 2}
+    assert any("did not converge within filter.max_iterations = 2 in 200 of 200" in note for note in heard), heard
+    enough = compute_verification(build_scenario("imu-3axis", None, ["filter.kind=batch"]), 200, SEED, workers=1)
+    assert enough.summary["batch_convergence"] == {"unconverged": 0, "realizations": 200, "max_iterations": 20}
+    assert "batch_convergence" not in run("filter.kind=ekf").summary

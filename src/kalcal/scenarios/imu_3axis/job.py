@@ -58,8 +58,10 @@ def read_poses_file(path: str | Path, n: int) -> tuple[dict[str, tuple[int, int]
         document = json.loads(Path(path).read_text())
     except (OSError, ValueError) as exc:
         raise DataError(f"{path}: not a readable JSON of pose ranges ({exc})") from None
-    if not isinstance(document, dict) or not document:
+    if not isinstance(document, dict):
         raise DataError(f"{path}: expected an object {{name: {{start, end}}}}, got {type(document).__name__}")
+    if not document:
+        raise DataError(f"{path}: no poses (an empty object): name each static pose as {{name: {{\"start\": i, \"end\": j}}}}")
     regions, skipped = {}, []
     for name, region in document.items():
         if str(name).endswith("_rot"):
@@ -76,17 +78,25 @@ def read_poses_file(path: str | Path, n: int) -> tuple[dict[str, tuple[int, int]
 
 
 def detect_poses(readings: np.ndarray, rate: float, settings) -> list[tuple[int, int]]:
-    """The static runs of samples: the moving standard deviation of |a| over ``settings.window`` s below
-    ``settings.threshold`` m/s^2, each run at least ``settings.min_duration`` s; (start, end) sample indices."""
-    norm = np.linalg.norm(readings, axis=1)
+    """The static runs of samples: the moving standard deviation of every axis over ``settings.window`` s
+    below ``settings.threshold`` m/s^2, each run at least ``settings.min_duration`` s; (start, end) sample
+    indices.
+
+    Each axis, not |a|: a smooth turn keeps |a| = g (only its direction changes), so the moving std of |a|
+    stays at the noise's through it and joins the poses on both sides; the axes' readings follow the turn."""
+    readings = np.asarray(readings, dtype=float)
     width = max(int(round(settings.window * rate)), 2)
-    if norm.size < width:
+    if readings.shape[0] < width:
         return []
     kernel = np.ones(width) / width
-    mean = np.convolve(norm, kernel, mode="valid")
-    var = np.maximum(np.convolve(norm**2, kernel, mode="valid") - mean**2, 0.0)
-    still = np.zeros(norm.size, dtype=bool)
-    quiet = np.sqrt(var) < settings.threshold
+    # the windows' variance per axis, centred on each window's mean (less cancellation than E[a^2] - E[a]^2 at g)
+    centred = readings - np.median(readings, axis=0)
+    var = np.zeros(readings.shape[0] - width + 1)
+    for k in range(3):
+        mean = np.convolve(centred[:, k], kernel, mode="valid")
+        var = np.maximum(var, np.convolve(centred[:, k] ** 2, kernel, mode="valid") - mean**2)
+    still = np.zeros(readings.shape[0], dtype=bool)
+    quiet = np.sqrt(np.maximum(var, 0.0)) < settings.threshold
     for offset in np.flatnonzero(quiet):  # a quiet window marks all its samples static
         still[offset: offset + width] = True
     # a sample is static only where every window over it is quiet: trim each run by the window at both ends
@@ -175,6 +185,13 @@ def calibrate_logs(scenario, logs: dict[str, Any], options) -> Imu3AxisCalibrati
         if missing:
             raise DataError(f"{poses_source}: procedure (a) needs all six faces; missing {', '.join(missing)}")
         run = face_procedure.calibrate_faces(samples, settings.gravity, np.radians(settings.tilt_bound), step=step)
+        M = run.values["M"]
+        if np.linalg.det(M) < 0:
+            # no rotation maps the fixture onto a left-handed sensor: the mounting and misalignment are undefined
+            axis = AXES[int(np.argmin(np.diag(M)))]
+            raise DataError(f"{poses_source}: the sensor matrix is left-handed (det M = {np.linalg.det(M):.3g} < 0): axis "
+                            f"{axis} looks inverted (M_{axis}{axis} = {M[AXES.index(axis), AXES.index(axis)]:.3g}); check the "
+                            "log's sign of that axis or the faces' names")
         check = face_procedure.tilt_check(run)
         if not check["within"]:
             # every interval of procedure (a) assumes the bound: a face beyond it makes them wrong, not just wide
@@ -188,7 +205,9 @@ def calibrate_logs(scenario, logs: dict[str, Any], options) -> Imu3AxisCalibrati
     else:
         if len(samples) < 9:
             raise DataError(f"{poses_source}: {len(samples)} static poses; at least 9 are needed without the six named faces "
-                            "(lower scenario.threshold or scenario.min_duration, or record more poses)")
+                            + ("(the detector's runs: every axis's moving std below scenario.threshold for at least "
+                               "scenario.min_duration s; hold each pose still that long, raise scenario.threshold above the "
+                               "noise's std, or give --poses)" if options.poses is None else "(record more poses)"))
         means = np.array([block.mean(axis=0) for block in samples.values()])
         pairs = [face_procedure.mean_covariance(block, step) for block in samples.values()]
         mean_cov = np.array([cov for cov, _ in pairs])

@@ -166,11 +166,21 @@ def fit_poses(means: np.ndarray, mean_cov: np.ndarray, gravity: float, *, max_co
                         "alone, or in one region of the sphere, do not separate the scales, misalignments and biases; "
                         "add poses in general orientations, between the axes")
     solution = _solve(problem, start)
+    if solution.status <= 0 or not np.all(np.isfinite(solution.x)):
+        # 0: the evaluations' limit reached; -1: improper input: no maximum likelihood to give intervals about
+        raise DataError(f"{source}: the fit of the {n} poses did not converge (least squares status {solution.status}: "
+                        f"{solution.message}): check the poses are static and in m/s^2")
     theta, tilts = problem.split(solution.x)
     info = parameter_information(problem.jacobian(solution.x))
-    from scipy.linalg import cho_factor, cho_solve
+    from scipy.linalg import LinAlgError, cho_factor, cho_solve
 
-    covariance = cho_solve(cho_factor(info), np.eye(9))
+    try:
+        covariance = cho_solve(cho_factor(info), np.eye(9))
+    except LinAlgError:
+        raise DataError(f"{source}: the 9 parameters' information at the fit is singular (condition number "
+                        f"{condition(info, gravity):.3g}): the poses leave a direction of them undetermined; add poses in "
+                        "general orientations") from None
+
     chi2 = float(2 * solution.cost)
     dof = n - 9
     p_value = float(chi2_sf(chi2, dof)) if dof > 0 else float("nan")
