@@ -9,6 +9,7 @@ Monte Carlo error. The bound's marginalization and the batch ML are held to inde
 docs/imu-3axis.md's verify table is held row by row (TABLE) to the runs at that N and seed.
 """
 
+import json
 import re
 import subprocess
 import sys
@@ -332,3 +333,32 @@ def test_batch_uses_max_iterations_as_set_and_counts_unconverged_fits():
     enough = compute_verification(build_scenario("imu-3axis", None, ["filter.kind=batch"]), 200, SEED, workers=1)
     assert enough.summary["batch_convergence"] == {"unconverged": 0, "realizations": 200, "max_iterations": 20}
     assert "batch_convergence" not in run("filter.kind=ekf").summary
+
+
+def test_docs_speed_ratios_are_the_printed_runs_range():
+    """docs/imu-3axis.md and benchmarks/README.md state the speed ratio's range (wall and CPU) as the smallest
+    and largest of benchmarks/README.md's table of the compiled path's runs (it said 3.2-5.8 where the runs
+    printed 3.58-5.77)."""
+    bench = (DOCS.parents[1] / "benchmarks" / "README.md").read_text()
+    table = bench[bench.index("| code | kalcal wall (CPU) | dynamax filter wall (CPU) | ratio wall (CPU) |"):]
+    table = table[: table.index("\n\n")]
+    ratios = [tuple(map(float, found.groups())) for row in table.splitlines()[2:]
+              for found in [re.search(r"\| ([\d.]+) \(([\d.]+)\) \| \d+ \| [\d.]+ \|$", row)] if found]
+    assert len(ratios) == 5, table
+    wall, cpu = (f"{min(r[k] for r in ratios):.2f}-{max(r[k] for r in ratios):.2f}" for k in (0, 1))
+    docs = " ".join(DOCS.read_text().split())
+    assert f"The ratio is {wall} in wall time and {cpu} in CPU seconds" in docs, (wall, cpu)
+    assert f"{wall} times in wall time and {cpu} times in CPU seconds" in " ".join(bench.split()), (wall, cpu)
+
+
+def test_refuses_an_ill_conditioned_layout_in_one_line(tmp_path):
+    """Twelve poses within 15 deg of z up leave the 9 parameters ill-determined: verify refuses the layout in one
+    line naming truth.layout and the condition number, exit 2."""
+    rng = np.random.default_rng(1)
+    cap = np.c_[0.25 * rng.uniform(-1, 1, (12, 2)), np.ones(12)]
+    (tmp_path / "cap.json").write_text(json.dumps(cap.tolist()))
+    done = cli("verify", "imu-3axis", "-n", "200", "--set", f"truth.layout={tmp_path / 'cap.json'}", "--set", "truth.poses=12",
+               "--out", tmp_path / "out")
+    assert done.returncode == 2, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "truth.layout" in lines[0] and "condition number" in lines[0], done.stderr
