@@ -395,3 +395,165 @@ def test_real_session_against_imucal():
     d = ours.values["b"] - theirs.b_a
     assert np.all(np.abs(d) <= tolerance), (d, tolerance)
     np.testing.assert_allclose(difference(ours.means), d, atol=1e-12)
+
+
+# --- the correction a = M^-1 (a_m - b), exactly, for both procedures ------------------------------------------
+
+def random_sensor(rng):
+    """A random parameter vector (scales 0.9-1.1, angles within 0.05 rad, biases within 0.5 m/s^2)."""
+    return np.r_[rng.uniform(0.9, 1.1, 3), rng.uniform(-0.05, 0.05, 3), rng.uniform(-0.5, 0.5, 3)]
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_correction_of_each_face_is_g_up_exactly(seed):
+    """No noise, no tilt: every face's reading h(theta, face) corrected with procedure (a)'s M, b (a general M: the
+    sensor under a random mounting rotation) and with procedure (b)'s (the model's M = S T of theta) is g times
+    the face's up direction to 1e-12 m/s^2. M^-T (a_m - b), (a_m - b) alone or M (a_m - b) miss by the misalignment
+    and scale errors, 1e-2 g or more here."""
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(seed)
+    theta = random_sensor(rng)
+    mounting = Rotation.from_rotvec(rng.uniform(-0.1, 0.1, 3)).as_matrix()
+    M_true, b_true = m.sensor_matrix(theta) @ mounting, theta[6:]
+    ups = np.array([m.face_up(f) for f in F.FACE_ORDER])
+    means = G * ups @ M_true.T + b_true
+    values = F.estimate(means, G)
+    np.testing.assert_allclose(m.correct(means, values["M"], values["b"]), G * ups, rtol=0, atol=1e-12)
+    for face, mean, up in zip(F.FACE_ORDER, means, ups):
+        np.testing.assert_allclose(F.correction_of(means, G, mean), G * up, rtol=0, atol=1e-12)
+    # procedure (b)'s correction: its M = S T and b of the 9 parameters invert h at every face
+    readings = m.h(np.c_[np.tile(theta, (6, 1)), np.zeros((6, 2))], m.pose_data(ups), G)
+    np.testing.assert_allclose(m.correct(readings, m.sensor_matrix(theta), theta[6:]), G * ups, rtol=0, atol=1e-12)
+    # and the wrong formulas the face test let pass are far off
+    for wrong in (np.linalg.solve(values["M"].T, (means - values["b"]).T).T, means - values["b"],
+                  (means - values["b"]) @ values["M"].T):
+        assert np.max(np.abs(wrong - G * ups)) > 1e-3 * G
+
+
+def test_procedure_b_fit_of_exact_means_corrects_each_face_to_g_up():
+    """Twelve general poses without noise (means exactly h(theta, pose), each with a 1e-6 (m/s^2)^2 covariance):
+    the fit returns theta, and its M, b correct every face's exact reading to g up within 1e-9 m/s^2 (the
+    least-squares solver's tolerance, 1e-12 relative)."""
+    rng = np.random.default_rng(7)
+    for _ in range(3):
+        theta = random_sensor(rng)
+        ups = rng.standard_normal((12, 3))
+        ups /= np.linalg.norm(ups, axis=1, keepdims=True)
+        means = m.h(np.c_[np.tile(theta, (12, 1)), np.zeros((12, 2))], m.pose_data(ups), G)
+        run = fit_poses(means, np.tile(1e-6 * np.eye(3), (12, 1, 1)), G)
+        np.testing.assert_allclose(run.theta, theta, rtol=0, atol=1e-9)
+        faces = np.array([m.face_up(f) for f in F.FACE_ORDER])
+        readings = m.h(np.c_[np.tile(theta, (6, 1)), np.zeros((6, 2))], m.pose_data(faces), G)
+        np.testing.assert_allclose(m.correct(readings, m.sensor_matrix(run.theta), run.theta[6:]), G * faces, rtol=0, atol=1e-9)
+
+
+def _log_frame(ups, M, b, sigma, rng, still=300, moving=100):
+    """A log at 100 Hz: each up direction held ``still`` samples with white noise ``sigma``, ``moving`` samples of
+    0.5 m/s^2 shaking between; its frame and each pose's (start, end)."""
+    import pandas as pd
+
+    rows, regions, at = [], [], 0
+    for up in ups:
+        rows.append(G * np.tile(up, (still, 1)) @ M.T + b + sigma * rng.standard_normal((still, 3)))
+        regions.append((at, at + still))
+        rows.append(G * np.tile(up, (moving, 1)) @ M.T + b + 0.5 * rng.standard_normal((moving, 3)))
+        at += still + moving
+    a = np.vstack(rows)
+    return pd.DataFrame({"time": np.arange(len(a)) / 100.0, "acc_x": a[:, 0], "acc_y": a[:, 1], "acc_z": a[:, 2]}), regions
+
+
+@pytest.mark.parametrize("procedure", ["a", "b"])
+def test_result_correct_and_its_interval(tmp_path, procedure):
+    """The result's correct is M^-1 (a_m - b) with its own M and bias; an untilted face's true reading corrected
+    is g up within the correction interval's noise half-width (tilt bound 0, Bonferroni 0.001 / 18 over the six
+    faces' three axes, one seed), and that half-width is z sqrt(grad C grad^T) with grad the finite-difference
+    derivative of the correction in (M, b) (the analytic gradient checked)."""
+    from kalcal import calibrate
+
+    rng = np.random.default_rng(11)
+    M_true, b_true = m.sensor_matrix(TRUE), TRUE[6:]
+    faces = np.array([m.face_up(f) for f in F.FACE_ORDER])
+    if procedure == "a":
+        ups, names = faces, list(F.FACE_ORDER)
+    else:
+        ups = rng.standard_normal((12, 3))
+        ups /= np.linalg.norm(ups, axis=1, keepdims=True)
+        names = [f"p{k}" for k in range(12)]
+    frame, regions = _log_frame(ups, M_true, b_true, 0.02, rng)
+    (tmp_path / "poses.json").write_text(json.dumps({n: {"start": s, "end": e} for n, (s, e) in zip(names, regions)}))
+    level = 1 - 0.001 / 18
+    result = calibrate("imu-3axis", imu=frame, poses=tmp_path / "poses.json",
+                       settings={"scenario": {"tilt_bound": 0.0, "bootstrap": 0}})
+    assert result.procedure == procedure
+    readings = G * faces @ M_true.T + b_true
+    corrected = result.correct(readings)
+    np.testing.assert_allclose(corrected, np.linalg.solve(result.M, (readings - result.bias).T).T, rtol=1e-14, atol=1e-12)
+    value, half = result.correction_interval(readings, level=level)
+    np.testing.assert_array_equal(value, corrected)
+    assert np.all(np.abs(corrected - G * faces) <= half), (corrected - G * faces, half)
+    labels = list(result.covariance_labels)
+    keys = [f"M_{a}{c}" for a in "xyz" for c in "xyz"] + [f"bias_{a}" for a in "xyz"]
+    cov = result.full_covariance[np.ix_([labels.index(k) for k in keys], [labels.index(k) for k in keys])]
+    z = stats.norm.isf((1 - level) / 2)
+    base = np.r_[result.M.ravel(), result.bias]
+    for reading, h_n in zip(readings, half):
+        grad = np.empty((3, 12))
+        for k in range(12):
+            up, down = base.copy(), base.copy()
+            up[k] += 1e-6
+            down[k] -= 1e-6
+            grad[:, k] = (m.correct(reading, up[:9].reshape(3, 3), up[9:])[0]
+                          - m.correct(reading, down[:9].reshape(3, 3), down[9:])[0]) / 2e-6
+        np.testing.assert_allclose(h_n, z * np.sqrt(np.einsum("ij,jk,ik->i", grad, cov, grad)), rtol=1e-6)
+
+
+# --- refusals of a fit that did not converge, a singular information, an inverted axis, an empty poses file ------
+
+def _twelve_means():
+    ups = np.random.default_rng(5).standard_normal((12, 3))
+    ups /= np.linalg.norm(ups, axis=1, keepdims=True)
+    return m.h(np.c_[np.tile(TRUE, (12, 1)), np.zeros((12, 2))], m.pose_data(ups), G), np.tile(1e-5 * np.eye(3), (12, 1, 1))
+
+
+def test_fit_poses_refuses_an_unconverged_fit_and_a_singular_information(monkeypatch):
+    import scipy.linalg
+    from types import SimpleNamespace
+
+    from kalcal.scenarios.imu_3axis import poses
+
+    means, cov = _twelve_means()
+    real = poses._solve
+    monkeypatch.setattr(poses, "_solve", lambda problem, start: SimpleNamespace(
+        **{**vars(real(problem, start)), "status": 0, "message": "The maximum number of function evaluations is exceeded."}))
+    with pytest.raises(DataError, match=r"did not converge \(least squares status 0"):
+        fit_poses(means, cov, G)
+    monkeypatch.setattr(poses, "_solve", real)
+
+    def singular(*args, **kwargs):
+        raise scipy.linalg.LinAlgError("not positive definite")
+
+    monkeypatch.setattr(scipy.linalg, "cho_factor", singular)
+    with pytest.raises(DataError, match="information at the fit is singular"):
+        fit_poses(means, cov, G)
+
+
+def test_cli_refuses_an_inverted_axis_and_an_empty_poses_file(tmp_path):
+    """The real session with acc_y * -1: a left-handed M (det < 0) used to give a NaN mounting rotation and
+    192 nulls in summary.json at exit 0; now one line naming axis y, exit 2. An empty poses file: one line
+    saying it holds no poses. (Procedure (b) cannot see an inverted axis: |M^-1 (a - b)| = g is the same for
+    a reflected axis.)"""
+    import pandas as pd
+
+    frame = pd.read_csv(LOG)
+    frame["acc_y"] *= -1
+    frame.to_csv(tmp_path / "flip.csv", index=False)
+    done = kalcal("calibrate", "imu-3axis", "--imu", "flip.csv", "--poses", POSES, "--out", "o", cwd=tmp_path)
+    assert done.returncode == 2, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "left-handed" in lines[0] and "axis y looks inverted" in lines[0], done.stderr
+    (tmp_path / "empty.json").write_text("{}")
+    done = kalcal("calibrate", "imu-3axis", "--imu", LOG, "--poses", "empty.json", "--out", "e", cwd=tmp_path)
+    assert done.returncode == 2, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "no poses (an empty object)" in lines[0], done.stderr

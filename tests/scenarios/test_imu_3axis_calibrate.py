@@ -275,3 +275,126 @@ def test_cli_procedure_b_warns_on_inconsistent_poses_and_refuses_ill_conditioned
     assert done.returncode == 2, (done.stdout, done.stderr)
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and "ill-determined" in lines[0] and "condition number" in lines[0], done.stderr
+
+
+# --- quantized logs: a pose's axis whose noise lies below the log's resolution -----------------------------------
+
+def quantized_log(path, ups, step=0.05, seed=0):
+    """A log of ``ups`` with noise 0.001 m/s^2 rounded to ``step``: most pose axes read one value throughout."""
+    regions = write_log(path, ups, sigma=0.001, seed=seed)
+    frame = pd.read_csv(path)
+    frame[["acc_x", "acc_y", "acc_z"]] = (frame[["acc_x", "acc_y", "acc_z"]] / step).round() * step
+    frame.to_csv(path, index=False)
+    return regions
+
+
+def test_resolution_and_the_floor_of_a_quantized_mean():
+    """The resolution is the smallest step between distinct readings (not the float rounding of k * 0.05); an
+    axis that reads one value has its mean's variance step^2/12, uncorrelated; a continuous noise has none."""
+    rng = np.random.default_rng(0)
+    readings = np.round(rng.normal(0, 1, (500, 3)) / 0.05) * 0.05
+    np.testing.assert_allclose(F.resolution(readings), 0.05, rtol=1e-9)
+    block = np.column_stack([np.full(100, 9.8), rng.normal(0, 1, 100), np.full(100, 0.05)])
+    cov, below = F.mean_covariance(block, np.full(3, 0.05))
+    assert below.tolist() == [True, False, True]
+    assert cov[0, 0] == cov[2, 2] == 0.05**2 / 12 and cov[0, 1] == cov[1, 2] == 0.0
+    assert np.isclose(cov[1, 1], np.var(block[:, 1], ddof=1) / 100, rtol=1e-12)
+    np.linalg.cholesky(cov)  # positive definite
+    continuous = rng.normal(0, 0.02, (400, 3))
+    assert not F.mean_covariance(continuous, F.resolution(continuous))[1].any()
+
+
+def test_cli_quantized_log_procedure_b_and_a(tmp_path):
+    """Readings rounded to 0.05 m/s^2 with noise 0.001: procedure (b) (12 general poses) used to end in a
+    Cholesky traceback; now it exits 0, warns ``quantized`` and each parameter lies within its interval at the
+    Bonferroni level 0.001 / 9 (one seed). Procedure (a) (six faces) warns ``quantized``, not ``colored-noise``
+    with a NaN ratio."""
+    regions = quantized_log(tmp_path / "q.csv", general_ups())
+    (tmp_path / "q.json").write_text(json.dumps({f"p{k}": {"start": s, "end": e} for k, (s, e) in enumerate(regions)}))
+    done = kalcal("calibrate", "imu-3axis", "--imu", "q.csv", "--poses", "q.json", "--set", "scenario.bootstrap=0",
+                  "--out", "b", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    summary = json.loads((tmp_path / "b" / "summary.json").read_text())
+    assert [w["code"] for w in summary["warnings"]] == ["quantized"], summary["warnings"]
+    assert "below the log's resolution" in summary["warnings"][0]["message"]
+    z = stats.norm.isf(0.001 / 18)
+    for name, truth in zip(m.PARAM_NAMES, TRUE):
+        est = summary["estimates"][name]
+        assert abs(est["estimate"] - truth) <= z * est["std"], (name, est, truth)
+    regions = quantized_log(tmp_path / "qf.csv", [m.face_up(f) for f in F.FACE_ORDER])
+    (tmp_path / "qf.json").write_text(json.dumps({f: {"start": s, "end": e} for f, (s, e) in zip(F.FACE_ORDER, regions)}))
+    done = kalcal("calibrate", "imu-3axis", "--imu", "qf.csv", "--poses", "qf.json", "--out", "a", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    summary = json.loads((tmp_path / "a" / "summary.json").read_text())
+    assert [w["code"] for w in summary["warnings"]] == ["quantized"], summary["warnings"]
+    assert "nan" not in done.stderr.lower() and "RuntimeWarning" not in done.stderr, done.stderr
+    assert all(s > 0 for s in (summary["estimates"][f"bias_{a}"]["std"] for a in "xyz"))
+
+
+def test_fit_poses_refuses_a_singular_pose_covariance_naming_it():
+    from kalcal.errors import DataError
+    from kalcal.scenarios.imu_3axis.poses import fit_poses
+
+    ups = general_ups()
+    means = G * ups @ M_TRUE.T + B_TRUE
+    cov = np.tile(np.eye(3) * 1e-6, (12, 1, 1))
+    cov[3, 1, 1] = 0.0
+    with pytest.raises(DataError, match=r"pose 'p3': its mean's covariance is singular"):
+        fit_poses(means, cov, G, names=[f"p{k}" for k in range(12)])
+
+
+# --- the static detector: slow smooth turns, and its refusal ----------------------------------------------------
+
+def smooth_log(ups, turn_s=4.0, still=300, sigma=0.02, seed=0):
+    """A log at RATE Hz: each up direction held ``still`` samples, then a smooth turn of ``turn_s`` s to the next
+    (a great-circle rotation with a cosine speed profile, no shaking: |a| stays at g's scale throughout)."""
+    rng = np.random.default_rng(seed)
+    ups = np.asarray(ups, dtype=float)
+    ups = ups / np.linalg.norm(ups, axis=1, keepdims=True)
+    rows, regions, at = [], [], 0
+    moving = int(turn_s * RATE)
+    for k, up in enumerate(ups):
+        rows.append(G * np.tile(up, (still, 1)) @ M_TRUE.T + B_TRUE + sigma * rng.standard_normal((still, 3)))
+        regions.append((at, at + still))
+        at += still
+        if k == len(ups) - 1:
+            break
+        nxt = ups[k + 1]
+        angle = np.arccos(np.clip(up @ nxt, -1, 1))
+        s = (1 - np.cos(np.pi * (np.arange(moving) + 0.5) / moving)) / 2  # 0 -> 1, smooth at both ends
+        turn = (np.sin((1 - s)[:, None] * angle) * up + np.sin(s[:, None] * angle) * nxt) / np.sin(angle)
+        rows.append(G * turn @ M_TRUE.T + B_TRUE + sigma * rng.standard_normal((moving, 3)))
+        at += moving
+    a = np.vstack(rows)
+    return a, regions
+
+
+def test_detector_ends_a_pose_at_a_slow_smooth_turn():
+    """Twelve poses joined by 4 s smooth turns without shaking (the moving std of |a| saw 5 poses): twelve runs,
+    each covering all but two windows of its true static span; a run may reach a few samples into a turn's
+    slow end, so its mean is held to the pose's true reading within 4.5 sigma / sqrt(n) per axis (Bonferroni
+    0.001 over the 36 means: what the turn adds stays below the noise)."""
+    from kalcal.scenarios import build_scenario
+    from kalcal.scenarios.imu_3axis.job import detect_poses
+
+    settings = build_scenario("imu-3axis", None, []).scenario
+    readings, truth = smooth_log(general_ups())
+    assert np.ptp(np.linalg.norm(readings - B_TRUE, axis=1)) < 1.0  # no shaking: |a| barely moves through a turn
+    runs = detect_poses(readings, RATE, settings)
+    assert len(runs) == 12, runs
+    width = int(settings.window * RATE)
+    z = stats.norm.isf(0.001 / 72)
+    ups = general_ups() / np.linalg.norm(general_ups(), axis=1, keepdims=True)
+    for (s, e), (ts, te), up in zip(runs, truth, ups):
+        assert ts - width <= s and e <= te + width and (e - s) >= (te - ts) - 2 * width, ((s, e), (ts, te))
+        true_reading = G * M_TRUE @ up + B_TRUE
+        assert np.all(np.abs(readings[s:e].mean(axis=0) - true_reading) <= z * 0.02 / np.sqrt(e - s)), (s, e)
+
+
+def test_cli_detector_refuses_too_few_poses_in_one_line(tmp_path):
+    """Five general poses and no --poses: one line, exit 2, naming the count and what the detector needs."""
+    write_log(tmp_path / "five.csv", general_ups(5))
+    done = kalcal("calibrate", "imu-3axis", "--imu", "five.csv", "--out", "o", cwd=tmp_path)
+    assert done.returncode == 2, (done.stdout, done.stderr)
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "5 static poses; at least 9 are needed" in lines[0] and "scenario.min_duration" in lines[0], done.stderr

@@ -31,7 +31,7 @@ from kalcal.scenarios.protocol import require
 from kalcal.stats.suite import run_checks, verdict
 from kalcal.stats.whiteness import residual_pair
 from kalcal.stats.dataset import statistics_dataset
-from kalcal.stats.results import as_false_alarm
+from kalcal.stats.results import as_approximation, as_false_alarm
 from kalcal.results.verification import VerificationResult
 from kalcal.stats.self_check import exact_prediction, self_check
 
@@ -306,6 +306,22 @@ def effects_summary(effects, info, confidence: float) -> dict[str, Any]:
     return {"effect_sizes": effects.as_dict(), "cramer_rao": crb}
 
 
+def batch_convergence(problem, client, notes) -> dict | None:
+    """``summary.json``'s ``batch_convergence`` of an iterative batch estimator: how many realizations' fits
+    did not converge within ``filter.max_iterations`` (announced through ``notes`` where any did); None for
+    a filter, or on Dask, whose worker processes keep their own tally."""
+    batch = getattr(getattr(problem, "hooks", None), "batch", None)
+    tally = getattr(batch, "convergence", None)
+    if tally is None or client is not None:
+        return None
+    unconverged, total = (int(sum(column)) for column in zip(*tally)) if tally else (0, 0)
+    limit = getattr(getattr(problem.scenario, "filter", None), "max_iterations", None)
+    if unconverged and notes is not None:
+        notes(f"the batch fit did not converge within filter.max_iterations = {limit} in {unconverged} of {total} "
+              "realizations: their estimates are the last iterate; raise filter.max_iterations")
+    return {"unconverged": unconverged, "realizations": total, "max_iterations": limit}
+
+
 def compute_verification(
     scenario,
     n: int,
@@ -359,6 +375,7 @@ def compute_verification(
         ),
     )
     statistics = ensemble_statistics(run.sums)
+    convergence = batch_convergence(problem, client, notes)
     expected = problem.expected_mean_error()
     checks = run_checks(statistics, problem.info, confidence, expected, cause)
     info = problem.info
@@ -366,6 +383,9 @@ def compute_verification(
     exact = exact_prediction(problem, analysis)
     if equals_filter(scenario, analysis, problem):  # a failure is a false alarm at its stated rate, never a cause
         checks = [as_false_alarm(check) for check in checks]
+    elif approximation := scenario.approximation_cause():
+        # the truth is the filter's own nonlinear model: a failure is its approximation, not a model or noise error
+        checks = [as_approximation(check, approximation) for check in checks]
     effects = problem_effects(problem, run.sums, confidence)
     if effects is not None:
         checks = [with_effects(check, effects) for check in checks]
@@ -397,6 +417,7 @@ def compute_verification(
         "scenario": info.scenario,
         "settings": settings,
         "realizations": n,
+        **({"batch_convergence": convergence} if convergence is not None else {}),
         "seed": seed,
         "engine": engine,
         "form": form,

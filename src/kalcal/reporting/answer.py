@@ -36,7 +36,7 @@ __all__ = ["Answer", "CheckLine", "answer", "lead_figures"]
 
 #: what a check's failure roots in: the model error, a mean error no model error accounts for, a false
 #: alarm, a direction of the covariance, or nothing identified (None)
-ROOTS = ("model_error", "mean_error", "false_alarm", "overconfident", "underconfident")
+ROOTS = ("model_error", "mean_error", "false_alarm", "approximation", "overconfident", "underconfident")
 #: the figure that shows each check's statistic against its bounds (the covariance check: its centered NEES)
 CHECK_FIGURES = {
     "mean_error": "mean_error",
@@ -134,7 +134,7 @@ def _root(test: Mapping[str, Any], mean_error: Mapping[str, Any] | None) -> str 
             if upstream in ("model_error", "false_alarm"):
                 return upstream
         return "mean_error"
-    if explained in ("model_error", "false_alarm"):
+    if explained in ("model_error", "false_alarm", "approximation"):
         return explained
     return cause.get("direction")  # overconfident, underconfident or None
 
@@ -150,6 +150,8 @@ def _short_cause(test: Mapping[str, Any], root: str | None) -> str:
         return "a nonzero mean error: centered on the means, within its bounds"
     if root == "false_alarm":
         return "a false alarm: the truth equals the filter"
+    if root == "approximation":
+        return "the filter's approximation: the truth is its own model"
     if root in _DIRECTION_SHORT:
         return _DIRECTION_SHORT[root]
     return "not identified (see What failed)"
@@ -242,10 +244,18 @@ def _exact_sentence(summary: Mapping[str, Any], lines: Sequence[CheckLine]) -> t
             f"filter fails each check with probability at most {fmt(100 * (1 - confidence))}%: rerun with another "
             "seed (--seed)."
         )
-    unaccounted = [line for line in failed if line.root not in ("model_error", "false_alarm")]
-    sentence = f"Fails ({count}): {_names([line.name for line in unaccounted])} "
-    sentence += "is" if len(unaccounted) == 1 else "are"
-    sentence += " not accounted for by a known cause"
+    unaccounted = [line for line in failed if line.root not in ("model_error", "false_alarm", "approximation")]
+    approximated = [line.name for line in failed if line.root == "approximation"]
+    if approximated and not unaccounted:
+        sentence = (f"Fails ({count}) through the filter's approximation: the truth is the filter's own model, so "
+                    f"{_names(approximated)} {'fails' if len(approximated) == 1 else 'fail'} by how the filter "
+                    "approximates it, not by a model error or its noise settings")
+    else:
+        sentence = f"Fails ({count}): {_names([line.name for line in unaccounted])} "
+        sentence += "is" if len(unaccounted) == 1 else "are"
+        sentence += " not accounted for by a known cause"
+        if approximated:
+            sentence += f"; {_names(approximated)} through the filter's approximation (the truth is its own model)"
     mean = [line.name for line in unaccounted if line.root == "mean_error"]
     if mean:
         sentence += f" ({_names(mean)} only through a nonzero mean error: see mean_error)"

@@ -72,6 +72,12 @@ class Scenario(Protocol):
         """Refuse (a one-line SettingError) a setting that ``command`` cannot honour."""
         ...
 
+    def approximation_cause(self) -> str:
+        """Where the truth is the filter's own model and the filter approximates it (a nonlinear model's
+        EKF, IEKF, UKF or batch estimator), a phrase naming the approximation, the cause of any failed check
+        ("" otherwise: a failure's cause is the checks' own)."""
+        ...
+
     def error_sources(self) -> list[Any]:
         """The error budget's independent sources (:class:`~kalcal.core.sources.Source`) of the exact analysis."""
         ...
@@ -170,6 +176,10 @@ class ScenarioDefaults:
 
     def check_settings(self, command: str) -> None:
         """Nothing to refuse beyond the sections' own checks."""
+
+    def approximation_cause(self) -> str:
+        """"": the checks' own causes stand (a linear filter, or a truth that is not the filter's model)."""
+        return ""
 
     def error_sources(self) -> list:
         """None: the error budget's sources belong to an exact analysis."""

@@ -37,6 +37,8 @@ EXPLAINED_BY_TEXT = {
     "model_error": "the mean error the filter's model predicts against the truth (the deterministic model error)",
     "mean_error": "the nonzero mean error (centered on the ensemble means this check passes; see mean_error)",
     "false_alarm": "a false alarm: the truth equals the filter, and a correct filter fails a check at its stated rate",
+    "approximation": ("the filter's approximation: the truth is the filter's own model, so neither a model error nor "
+                      "the noise settings account for it, only how the filter approximates the nonlinear model"),
 }
 #: which way a filter's covariance is wrong (each value of ``Cause.direction``), in words
 DIRECTION_TEXT = {
@@ -229,6 +231,25 @@ def as_false_alarm(check: CheckResult) -> CheckResult:
     if check.passed:
         return check
     cause = false_alarm_cause(check.confidence)
+    return replace(check, cause=cause, detail=with_reason(check.measured, cause))
+
+
+def as_approximation(check: CheckResult, approximation: str) -> CheckResult:
+    """A failed check of a run whose truth is the filter's own nonlinear model, its cause named as the
+    filter's ``approximation`` (a phrase: "the EKF's linearization of h about its estimate").
+
+    The checks' own causes assume a linear filter whose failure can only come from its model or its noise
+    settings ("noise settings too small", "heavy-tailed noise", "its model or prior mean differs"); where
+    the truth is the filter's model, those are false. The direction the check found stays in the words (the
+    P too small or too large is a fact of the run), not in ``direction``, whose words name the noise
+    settings. A passed check is returned as it is."""
+    if check.passed:
+        return check
+    found = {"overconfident": "; the filter's P is smaller than the actual spread (overconfident)",
+             "underconfident": "; the filter's P is larger than the actual spread (underconfident)"}.get(check.cause.direction, "")
+    cause = Cause(explained_by="approximation", reason=(
+        f"The truth is the filter's own model, so neither its model nor its noise settings are wrong: the failure is "
+        f"{approximation}{found}"))
     return replace(check, cause=cause, detail=with_reason(check.measured, cause))
 
 

@@ -163,38 +163,98 @@ class FaceCalibration:
         return self.means - (self.gravity * up @ self.values["M"].T + self.values["b"])
 
 
-def whiteness(samples: list[np.ndarray], level: float = 0.01) -> dict:
+def resolution(readings: np.ndarray) -> np.ndarray:
+    """The log's resolution per axis (3,), in the readings' unit: the smallest step between two distinct
+    readings of that axis over the whole log (steps below 1e-9 of the axis's largest |reading| are the
+    floating-point rounding of a scaled integer, not a step); NaN for an axis with one distinct value.
+
+    A float log of a continuous noise has a step far below its noise, so the floor of
+    :func:`mean_covariance` never applies to it."""
+    readings = np.asarray(readings, dtype=float)
+    out = np.full(3, np.nan)
+    for k in range(3):
+        values = np.unique(readings[:, k][np.isfinite(readings[:, k])])
+        steps = np.diff(values)
+        tiny = 1e-9 * max(float(np.max(np.abs(values))) if values.size else 0.0, 1e-300)
+        steps = steps[steps > tiny]
+        if steps.size:
+            out[k] = float(steps.min())
+    return out
+
+
+def mean_covariance(samples: np.ndarray, step: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """A static pose's mean's covariance (3, 3), (m/s^2)^2, of its samples (n, 3), and which axes (3,) bool
+    lie below the log's resolution ``step`` (3,) (:func:`resolution`; None: no floor).
+
+    White samples: the sample covariance / n. Where an axis's sample variance is below step^2 / 12 (the
+    variance of a uniform rounding error over one step, the standard model of a quantizer), the noise does
+    not dither the quantizer: every sample of a static pose rounds the same way, the rounding error is one
+    fixed offset in (-step/2, step/2) and does not average down over the n samples. That axis's mean variance
+    is then step^2 / 12 (not / n), its covariances with the other axes zero: a quantized axis's mean is known
+    to its step, no better, and the covariance stays positive definite where the samples' variance is zero."""
+    samples = np.asarray(samples, dtype=float)
+    cov = np.cov(samples, rowvar=False) / samples.shape[0]
+    below = np.zeros(3, dtype=bool)
+    if step is None:
+        return cov, below
+    step = np.asarray(step, dtype=float)
+    variance = samples.var(axis=0, ddof=1)
+    below = np.isfinite(step) & (variance < step**2 / 12.0)
+    for k in np.flatnonzero(below):
+        cov[k, :] = cov[:, k] = 0.0
+        cov[k, k] = step[k] ** 2 / 12.0
+    return cov, below
+
+
+def whiteness(samples: list[np.ndarray], level: float = 0.01, quantized: np.ndarray | None = None) -> dict:
     """The batch-means test of white samples: for each face and axis, (B - 1) s_B^2 L / s^2 ~ chi2(B - 1)
     under white noise (s_B^2 the variance of the B batch means of length L, s^2 the sample variance),
     summed over the faces and axes; the upper-tail p-value and the pooled variance ratio (1 for white
-    noise; the factor the white variance of a mean is too small by, for colored noise)."""
+    noise; the factor the white variance of a mean is too small by, for colored noise).
+
+    ``quantized`` (faces, 3) bool marks the axes whose noise lies below the log's resolution
+    (:func:`mean_covariance`): the test leaves them out (their sample variance may be zero, the ratio
+    undefined), and ``white`` is None when no axis is left."""
     from kalcal.stats.distributions import chi2_sf
 
     total, dof = 0.0, 0
-    for face in samples:
+    for index, face in enumerate(samples):
+        keep = np.ones(3, dtype=bool) if quantized is None else ~np.asarray(quantized[index], dtype=bool)
+        keep &= face.var(axis=0, ddof=1) > 0
+        if not np.any(keep):
+            continue
         length = face.shape[0] // BATCHES
         batches = face[: length * BATCHES].reshape(BATCHES, length, 3).mean(axis=1)
-        ratio = batches.var(axis=0, ddof=1) * length / face.var(axis=0, ddof=1)
+        ratio = batches.var(axis=0, ddof=1)[keep] * length / face.var(axis=0, ddof=1)[keep]
         total += float(np.sum((BATCHES - 1) * ratio))
-        dof += (BATCHES - 1) * 3
-    p = float(chi2_sf(total, dof))
+        dof += (BATCHES - 1) * int(keep.sum())
+    p = float(chi2_sf(total, dof)) if dof else None  # no axis left to test: no statistic (None, not NaN)
     return {"test": f"batch means, {BATCHES} batches per face and axis, chi-square with {dof} degrees of freedom",
-            "variance_ratio": total / dof, "p_value": p, "level": level, "white": p >= level,
+            "variance_ratio": total / dof if dof else None, "p_value": p, "level": level,
+            "white": (p >= level) if dof else None, "axes_tested": dof // (BATCHES - 1),
             "assumption": "each face's samples are independent (white noise): the variance of a mean is the sample variance / n"}
 
 
-def calibrate_faces(samples: dict[str, np.ndarray], gravity: float, tilt_bound: float) -> FaceCalibration:
+def calibrate_faces(samples: dict[str, np.ndarray], gravity: float, tilt_bound: float,
+                    step: np.ndarray | None = None) -> FaceCalibration:
     """Procedure (a) from each face's samples ``{name: (n_i, 3)}`` (m/s^2, all six of :data:`FACE_ORDER`),
-    g (m/s^2) and the tilt bound (rad)."""
+    g (m/s^2), the tilt bound (rad) and the log's resolution ``step`` (3,), m/s^2 (:func:`resolution`; None:
+    the samples' own): a face's axis whose noise lies below it has its mean's variance floored
+    (:func:`mean_covariance`); ``whiteness["quantized"]`` lists them as ``face axis``."""
     ordered = [np.asarray(samples[name], dtype=float) for name in FACE_ORDER]
     means = np.array([face.mean(axis=0) for face in ordered])
     counts = np.array([face.shape[0] for face in ordered])
-    mean_cov = np.array([np.cov(face, rowvar=False) / face.shape[0] for face in ordered])
+    pairs = [mean_covariance(face, step) for face in ordered]
+    mean_cov = np.array([cov for cov, _ in pairs])
+    quantized = np.array([below for _, below in pairs])
     values = estimate(means, gravity)
     grad = gradient(lambda m: flat(estimate(m, gravity)), means)
     nominal = np.array([face_up(name) for name in FACE_ORDER])
     cov, tilt = propagate(grad, mean_cov, values["M"], gravity, tilt_bound, nominal)
-    return FaceCalibration(values, cov, tilt, means, mean_cov, counts, whiteness(ordered), gravity, tilt_bound)
+    white = whiteness(ordered, quantized=quantized)
+    white["quantized"] = [f"{FACE_ORDER[i]} {AXES[k]}" for i, k in zip(*np.nonzero(quantized))]
+    white["resolution"] = None if step is None else [float(v) for v in np.asarray(step, dtype=float)]
+    return FaceCalibration(values, cov, tilt, means, mean_cov, counts, white, gravity, tilt_bound)
 
 
 def correction_of(means: np.ndarray, gravity: float, reading: np.ndarray) -> np.ndarray:

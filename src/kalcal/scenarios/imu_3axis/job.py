@@ -58,8 +58,10 @@ def read_poses_file(path: str | Path, n: int) -> tuple[dict[str, tuple[int, int]
         document = json.loads(Path(path).read_text())
     except (OSError, ValueError) as exc:
         raise DataError(f"{path}: not a readable JSON of pose ranges ({exc})") from None
-    if not isinstance(document, dict) or not document:
+    if not isinstance(document, dict):
         raise DataError(f"{path}: expected an object {{name: {{start, end}}}}, got {type(document).__name__}")
+    if not document:
+        raise DataError(f"{path}: no poses (an empty object): name each static pose as {{name: {{\"start\": i, \"end\": j}}}}")
     regions, skipped = {}, []
     for name, region in document.items():
         if str(name).endswith("_rot"):
@@ -76,17 +78,25 @@ def read_poses_file(path: str | Path, n: int) -> tuple[dict[str, tuple[int, int]
 
 
 def detect_poses(readings: np.ndarray, rate: float, settings) -> list[tuple[int, int]]:
-    """The static runs of samples: the moving standard deviation of |a| over ``settings.window`` s below
-    ``settings.threshold`` m/s^2, each run at least ``settings.min_duration`` s; (start, end) sample indices."""
-    norm = np.linalg.norm(readings, axis=1)
+    """The static runs of samples: the moving standard deviation of every axis over ``settings.window`` s
+    below ``settings.threshold`` m/s^2, each run at least ``settings.min_duration`` s; (start, end) sample
+    indices.
+
+    Each axis, not |a|: a smooth turn keeps |a| = g (only its direction changes), so the moving std of |a|
+    stays at the noise's through it and joins the poses on both sides; the axes' readings follow the turn."""
+    readings = np.asarray(readings, dtype=float)
     width = max(int(round(settings.window * rate)), 2)
-    if norm.size < width:
+    if readings.shape[0] < width:
         return []
     kernel = np.ones(width) / width
-    mean = np.convolve(norm, kernel, mode="valid")
-    var = np.maximum(np.convolve(norm**2, kernel, mode="valid") - mean**2, 0.0)
-    still = np.zeros(norm.size, dtype=bool)
-    quiet = np.sqrt(var) < settings.threshold
+    # the windows' variance per axis, centred on each window's mean (less cancellation than E[a^2] - E[a]^2 at g)
+    centred = readings - np.median(readings, axis=0)
+    var = np.zeros(readings.shape[0] - width + 1)
+    for k in range(3):
+        mean = np.convolve(centred[:, k], kernel, mode="valid")
+        var = np.maximum(var, np.convolve(centred[:, k] ** 2, kernel, mode="valid") - mean**2)
+    still = np.zeros(readings.shape[0], dtype=bool)
+    quiet = np.sqrt(np.maximum(var, 0.0)) < settings.threshold
     for offset in np.flatnonzero(quiet):  # a quiet window marks all its samples static
         still[offset: offset + width] = True
     # a sample is static only where every window over it is quiet: trim each run by the window at both ends
@@ -164,6 +174,8 @@ def calibrate_logs(scenario, logs: dict[str, Any], options) -> Imu3AxisCalibrati
     for key, block in samples.items():
         if not np.all(np.isfinite(block)):
             raise DataError(f"{name}: pose {key!r} holds empty or non-finite readings")
+    # the log's resolution: a pose whose noise lies below it has its mean's variance floored (faces.mean_covariance)
+    step = face_procedure.resolution(readings)
     face_names = [key for key in samples if key in FACES]
     if face_names and len(face_names) < len(samples) and options.poses is not None:
         raise DataError(f"{poses_source}: mixes face names ({', '.join(face_names)}) with other poses: name all six faces "
@@ -172,7 +184,14 @@ def calibrate_logs(scenario, logs: dict[str, Any], options) -> Imu3AxisCalibrati
         missing = [face for face in FACES if face not in samples]
         if missing:
             raise DataError(f"{poses_source}: procedure (a) needs all six faces; missing {', '.join(missing)}")
-        run = face_procedure.calibrate_faces(samples, settings.gravity, np.radians(settings.tilt_bound))
+        run = face_procedure.calibrate_faces(samples, settings.gravity, np.radians(settings.tilt_bound), step=step)
+        M = run.values["M"]
+        if np.linalg.det(M) < 0:
+            # no rotation maps the fixture onto a left-handed sensor: the mounting and misalignment are undefined
+            axis = AXES[int(np.argmin(np.diag(M)))]
+            raise DataError(f"{poses_source}: the sensor matrix is left-handed (det M = {np.linalg.det(M):.3g} < 0): axis "
+                            f"{axis} looks inverted (M_{axis}{axis} = {M[AXES.index(axis), AXES.index(axis)]:.3g}); check the "
+                            "log's sign of that axis or the faces' names")
         check = face_procedure.tilt_check(run)
         if not check["within"]:
             # every interval of procedure (a) assumes the bound: a face beyond it makes them wrong, not just wide
@@ -186,12 +205,17 @@ def calibrate_logs(scenario, logs: dict[str, Any], options) -> Imu3AxisCalibrati
     else:
         if len(samples) < 9:
             raise DataError(f"{poses_source}: {len(samples)} static poses; at least 9 are needed without the six named faces "
-                            "(lower scenario.threshold or scenario.min_duration, or record more poses)")
+                            + ("(the detector's runs: every axis's moving std below scenario.threshold for at least "
+                               "scenario.min_duration s; hold each pose still that long, raise scenario.threshold above the "
+                               "noise's std, or give --poses)" if options.poses is None else "(record more poses)"))
         means = np.array([block.mean(axis=0) for block in samples.values()])
-        mean_cov = np.array([np.cov(block, rowvar=False) / block.shape[0] for block in samples.values()])
+        pairs = [face_procedure.mean_covariance(block, step) for block in samples.values()]
+        mean_cov = np.array([cov for cov, _ in pairs])
+        quantized = [f"{key} {AXES[k]}" for key, (_, below) in zip(samples, pairs) for k in np.flatnonzero(below)]
         run = fit_poses(means, mean_cov, settings.gravity, max_condition=settings.max_condition,
-                        bootstrap=int(settings.bootstrap), seed=int(settings.seed), source=poses_source)
-        result = _poses_result(scenario, run, regions, name, columns, notes)
+                        bootstrap=int(settings.bootstrap), seed=int(settings.seed), source=poses_source,
+                        names=list(samples))
+        result = _poses_result(scenario, run, regions, name, columns, notes, quantized, step)
     return result if is_frame(source) else mark_inputs(result, source)
 
 
@@ -224,7 +248,9 @@ def _faces_result(scenario, run, regions, name, columns, notes, check):
     keep = [index[f"M_{a}{c}"] for a in AXES for c in AXES] + [index[f"bias_{a}"] for a in AXES]
     residuals = run.residuals()
     warnings = []
-    if not run.whiteness["white"]:
+    if run.whiteness["quantized"]:
+        warnings.append(_quantized_warning(name, run.whiteness["quantized"], run.whiteness["resolution"]))
+    if run.whiteness["white"] is False:
         warnings.append({"code": "colored-noise", "message": (
             f"{name}: the faces' samples are not white (batch-means variance ratio {run.whiteness['variance_ratio']:.3g}, "
             f"p = {run.whiteness['p_value']:.3g}): the noise intervals, which assume white samples, are too narrow")})
@@ -235,7 +261,7 @@ def _faces_result(scenario, run, regions, name, columns, notes, check):
         covariance=run.covariance[np.ix_(keep, keep)], covariance_states=tuple(labels[k] for k in keep), diagnostics={"whiteness": run.whiteness, "tilt_check": check},
         warnings=warnings, columns=_residual_columns(list(regions), residuals), time=float("nan"),
         units=_units(labels), stability_test=_stability("a static-pose calibration has no windows"),
-        sigma_trusted=run.whiteness["white"], procedure="a", estimates_table=estimates,
+        sigma_trusted=run.whiteness["white"] is not False, procedure="a", estimates_table=estimates,
         full_covariance=run.covariance, covariance_labels=tuple(labels), bootstrap_table={},
         misalignment=run.values["misalignment"], fit={"residual_tilt_note": "the faces' residuals are the tilts' and the noise's; each is checked against z sigma "
                                                       "plus its worst case within the tilt bound (diagnostics.tilt_check), and a "
@@ -244,7 +270,16 @@ def _faces_result(scenario, run, regions, name, columns, notes, check):
         means=run.means, **_common(scenario, run.values["M"], run.values["b"], regions, name, columns, notes, residuals))
 
 
-def _poses_result(scenario, run, regions, name, columns, notes):
+def _quantized_warning(name: str, where: list[str], step) -> dict:
+    steps = ", ".join(f"{axis} {value:.3g}" for axis, value in zip(AXES, step))
+    shown = ", ".join(where[:6]) + (f" and {len(where) - 6} more" if len(where) > 6 else "")
+    return {"code": "quantized", "message": (
+        f"{name}: the noise of {len(where)} pose axes ({shown}) lies below the log's resolution (steps {steps} m/s^2): "
+        "the readings are quantized and a static pose's rounding error does not average down; those means' variance is "
+        "floored at step^2/12 (a uniform rounding error), not the samples' variance / n")}
+
+
+def _poses_result(scenario, run, regions, name, columns, notes, quantized=(), resolution=None):
     M, b = sensor_matrix(run.theta), run.theta[6:]
     # the derived quantities' covariance by the delta method (M's entries from the 9 parameters)
     step = 1e-7
@@ -271,6 +306,8 @@ def _poses_result(scenario, run, regions, name, columns, notes):
         boot = {label: {"std": float(s), "lower": float(lo), "upper": float(hi)}
                 for label, s, lo, hi in zip(PARAM_NAMES, run.bootstrap.std(axis=0, ddof=1), low, high)}
     warnings = []
+    if quantized:
+        warnings.append(_quantized_warning(name, list(quantized), resolution))
     trusted = not (run.dof > 0 and run.p_value < 0.01)
     if not trusted:
         warnings.append({"code": "poses-inconsistent", "message": (
@@ -279,7 +316,9 @@ def _poses_result(scenario, run, regions, name, columns, notes):
     return Imu3AxisCalibrationResult(
         scenario=scenario.NAME, bias=np.array(b, dtype=float), bias_std=np.array(std[6:9]), scale=None, scale_std=None,
         covariance=run.covariance, covariance_states=PARAM_NAMES,
-        diagnostics={"chi2": run.chi2, "dof": run.dof, "p_value": run.p_value, "condition": run.condition, "consistent": trusted},
+        diagnostics={"chi2": run.chi2, "dof": run.dof, "p_value": run.p_value, "condition": run.condition, "consistent": trusted,
+                     "quantized": list(quantized),
+                     "resolution": None if resolution is None else [float(v) for v in resolution]},
         warnings=warnings, columns=_residual_columns(list(regions), run.residuals), time=float("nan"),
         units=_units(labels), stability_test=_stability("a static-pose calibration has no windows"), sigma_trusted=trusted,
         procedure="b", estimates_table=estimates, full_covariance=full, covariance_labels=tuple(labels), bootstrap_table=boot,

@@ -44,19 +44,29 @@ def _jacobian():
     return sympy.lambdify((list(x), list(data), g), matrix, "numpy")
 
 
-def _whiteners(mean_cov: np.ndarray) -> np.ndarray:
-    """L_i^-1 (N, 3, 3) of each mean's covariance (Cholesky; a solve against the identity of a triangle)."""
+def _whiteners(mean_cov: np.ndarray, names=None, source: str = "poses") -> np.ndarray:
+    """L_i^-1 (N, 3, 3) of each mean's covariance (Cholesky; a solve against the identity of a triangle);
+    a covariance that is not positive definite is refused (DataError naming the pose), not a traceback."""
     from scipy.linalg import solve_triangular
 
-    chol = np.linalg.cholesky(mean_cov)
-    return np.array([solve_triangular(c, np.eye(3), lower=True) for c in chol])
+    out = np.empty_like(mean_cov)
+    for i, cov in enumerate(mean_cov):
+        try:
+            chol = np.linalg.cholesky(cov)
+        except np.linalg.LinAlgError:
+            pose = names[i] if names is not None else f"number {i + 1}"
+            raise DataError(f"{source}: pose {pose!r}: its mean's covariance is singular (variances "
+                            f"{', '.join(f'{v:.3g}' for v in np.diag(cov))} (m/s^2)^2): an axis whose readings do not vary "
+                            "carries no noise estimate; record a longer pose or a log with a finer resolution") from None
+        out[i] = solve_triangular(chol, np.eye(3), lower=True)
+    return out
 
 
 class _Problem:
-    def __init__(self, means, mean_cov, gravity):
+    def __init__(self, means, mean_cov, gravity, names=None, source="poses"):
         self.means, self.gravity = means, gravity
         self.data = pose_data(means)  # the tilts' origin: each pose's normalized mean reading
-        self.white = _whiteners(mean_cov)
+        self.white = _whiteners(mean_cov, names, source)
         self.n = means.shape[0]
         self.jac = _jacobian()
 
@@ -135,10 +145,11 @@ def _solve(problem: _Problem, start: np.ndarray):
 
 
 def fit_poses(means: np.ndarray, mean_cov: np.ndarray, gravity: float, *, max_condition: float = 1e8,
-              bootstrap: int = 0, seed: int = 0, source: str = "poses") -> PoseCalibration:
+              bootstrap: int = 0, seed: int = 0, source: str = "poses", names=None) -> PoseCalibration:
     """Procedure (b) from the poses' means (N, 3), m/s^2, and their covariances (N, 3, 3); refuses (DataError,
     one line naming ``source``) fewer than 9 poses or a layout whose information's condition number exceeds
-    ``max_condition``. ``bootstrap`` replicates (B; 0: none) simulate the means from the fit (the fitted
+    ``max_condition``, or a pose (named by ``names``, default its number) whose mean's covariance is not
+    positive definite. ``bootstrap`` replicates (B; 0: none) simulate the means from the fit (the fitted
     poses and the means' covariances) and refit, with the generator seeded by ``seed``."""
     from kalcal.stats.distributions import chi2_sf
 
@@ -146,7 +157,7 @@ def fit_poses(means: np.ndarray, mean_cov: np.ndarray, gravity: float, *, max_co
     n = means.shape[0]
     if n < MIN_POSES:
         raise DataError(f"{source}: {n} poses; procedure (b) needs at least {MIN_POSES} (3 equations each for 9 parameters and 2 tilts per pose)")
-    problem = _Problem(means, mean_cov, gravity)
+    problem = _Problem(means, mean_cov, gravity, names, source)
     start = initial(means, gravity)
     cond = condition(parameter_information(problem.jacobian(start)), gravity)
     if not np.isfinite(cond) or cond > max_condition:
@@ -155,11 +166,21 @@ def fit_poses(means: np.ndarray, mean_cov: np.ndarray, gravity: float, *, max_co
                         "alone, or in one region of the sphere, do not separate the scales, misalignments and biases; "
                         "add poses in general orientations, between the axes")
     solution = _solve(problem, start)
+    if solution.status <= 0 or not np.all(np.isfinite(solution.x)):
+        # 0: the evaluations' limit reached; -1: improper input: no maximum likelihood to give intervals about
+        raise DataError(f"{source}: the fit of the {n} poses did not converge (least squares status {solution.status}: "
+                        f"{solution.message}): check the poses are static and in m/s^2")
     theta, tilts = problem.split(solution.x)
     info = parameter_information(problem.jacobian(solution.x))
-    from scipy.linalg import cho_factor, cho_solve
+    from scipy.linalg import LinAlgError, cho_factor, cho_solve
 
-    covariance = cho_solve(cho_factor(info), np.eye(9))
+    try:
+        covariance = cho_solve(cho_factor(info), np.eye(9))
+    except LinAlgError:
+        raise DataError(f"{source}: the 9 parameters' information at the fit is singular (condition number "
+                        f"{condition(info, gravity):.3g}): the poses leave a direction of them undetermined; add poses in "
+                        "general orientations") from None
+
     chi2 = float(2 * solution.cost)
     dof = n - 9
     p_value = float(chi2_sf(chi2, dof)) if dof > 0 else float("nan")

@@ -14,7 +14,7 @@ face_angle           10.0        deg: the detector names a pose a face when its 
 level                0.95        the intervals' confidence
 rate                 0.0         Hz of a log with no ``time`` column (0: read it from ``time``)
 window               0.5         s: the static detector's moving window
-threshold            0.05        m/s^2: the moving standard deviation of |a| below which a sample is static
+threshold            0.05        m/s^2: the moving standard deviation of every axis below which a sample is static
 min_duration         1.0         s: the shortest static pose the detector keeps
 bootstrap            200         procedure (b)'s parametric bootstrap replicates (0: none)
 seed                 0           the bootstrap's seed
@@ -25,6 +25,7 @@ max_condition        1e8         procedure (b) refuses poses whose information's
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import ClassVar
 
 from kalcal.models.settings import SettingError, require_nonnegative, require_positive, show
@@ -116,9 +117,10 @@ class Imu3AxisScenario(ScenarioDefaults):
         """K: one update per pose."""
         return int(self.loaded.n_updates)
 
-    @property
+    @cached_property
     def problem_hooks(self):
-        """The checks on the 9 parameters, the tilts renewed at every pose, the batch ML where chosen."""
+        """The checks on the 9 parameters, the tilts renewed at every pose, the batch ML where chosen (built
+        once per scenario: every problem planned from it shares the batch ML's convergence tally)."""
         from kalcal.scenarios.imu_3axis.verify import PARAMS, TILTS, batch_estimator
         from kalcal.scenarios.nonlinear.problem import ProblemHooks
 
@@ -140,6 +142,14 @@ class Imu3AxisScenario(ScenarioDefaults):
 
     def model_error_cause(self) -> str:
         return ""
+
+    def approximation_cause(self) -> str:
+        """The truth is the filter's own pose model (:attr:`loaded`): a failed check is the filter's
+        approximation of it (:data:`~kalcal.scenarios.nonlinear.settings.APPROXIMATIONS`), never a model error
+        or too small noise settings."""
+        from kalcal.scenarios.nonlinear.settings import APPROXIMATIONS
+
+        return APPROXIMATIONS[self.filter.kind]
 
     def check_settings(self, command: str) -> None:
         """verify: the layout spans the sphere (procedure (b)'s condition), the batch ML has P - 9 >= 1

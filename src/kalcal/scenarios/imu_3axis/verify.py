@@ -293,10 +293,14 @@ def batch_estimator(model, data: np.ndarray, max_iterations: int):
     from kalcal.scenarios.nonlinear.problem import BatchEstimator
 
     dof = data.shape[0] - MIN_POSES
+    tally: list = []  # (unconverged, realizations) per block: list.append is atomic across the threads
 
     def estimate(z):
-        theta, cov, residual, _ = batch_ml(model, data, z, max_iterations=max(int(max_iterations), 50))
+        # filter.max_iterations as set: a realization whose fit has not converged within it is counted
+        # (summary.json's batch_convergence), its estimate the last accepted iterate
+        theta, cov, residual, converged = batch_ml(model, data, z, max_iterations=int(max_iterations))
+        tally.append((int(np.count_nonzero(~converged)), int(converged.size)))
         return theta, cov, residual, np.broadcast_to(np.eye(dof), (z.shape[0], dof, dof))
 
     names = tuple(f"fit_residual_{i + 1}" for i in range(dof))
-    return BatchEstimator(estimate, names, ("1",) * dof)
+    return BatchEstimator(estimate, names, ("1",) * dof, tally)

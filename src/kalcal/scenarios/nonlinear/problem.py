@@ -84,6 +84,10 @@ class BatchEstimator:
     estimate: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
     residual_names: tuple[str, ...]
     residual_units: tuple[str, ...]
+    #: an iterative estimator's tally, (realizations that did not converge, realizations) per call of
+    #: ``estimate`` in this process (the threads' backend; a Dask worker's processes keep their own); None:
+    #: not iterative
+    convergence: list | None = None
 
 
 @dataclass(frozen=True)

@@ -30,6 +30,19 @@ from kalcal.models.settings import SettingError, show
 from kalcal.scenarios.protocol import Capabilities, ScenarioDefaults
 
 FILTER_KINDS = ("ekf", "iekf", "ukf")
+#: what each estimator approximates of a nonlinear model: the cause of a failed check where the truth is
+#: the filter's own model (:meth:`NonlinearScenario.approximation_cause`)
+APPROXIMATIONS = {
+    "ekf": ("the EKF's linearization: it propagates the mean and P through the Jacobians at its estimate, so where "
+            "the model curves within the prior's spread its mean is biased and its P is first order"),
+    "iekf": ("the iterated EKF's linearization: it relinearizes the update at its final iterate, so its P is still "
+             "first order (a Gauss-Newton step's) where the model curves within the spread"),
+    "ukf": ("the UKF's sigma points: its mean and P are the moments of a few points through the model, exact only "
+            "to second order where the model curves within the spread"),
+    "batch": ("the batch maximum likelihood's approximation at the final time: its covariance is the inverse "
+              "information at the estimate (first order, the Cramér–Rao bound's) and its estimate has a second-order "
+              "bias for few measurements"),
+}
 #: filter.compiled's values (kalcal.scenarios.nonlinear.problem.COMPILED_MODES, which imports numpy's filters)
 COMPILED_MODES = ("auto", "yes", "no")
 DEFAULT_UPDATES = 100
@@ -197,6 +210,12 @@ class NonlinearScenario(ScenarioDefaults):
     def model_error_cause(self) -> str:
         l = self.loaded
         return "" if l.truth is l.filter else "the file's truth differing from its filter"
+
+    def approximation_cause(self) -> str:
+        """The filter's approximation (:data:`APPROXIMATIONS`) where the file's truth is its filter's model;
+        "" where they differ (a failure may then be the model error)."""
+        l = self.loaded
+        return APPROXIMATIONS[self.filter.kind] if l.truth is l.filter else ""
 
     def run_length(self) -> tuple[int, float]:
         k = self.n_updates
