@@ -24,7 +24,7 @@ import pytest
 
 from kalcal.core import xmath as xm
 from kalcal.core.nonlinear import NonlinearModel, load_nonlinear_model
-from kalcal.montecarlo.engine import block_generator, run_monte_carlo
+from kalcal.montecarlo.engine import block_count, block_generator, run_monte_carlo
 from kalcal.scenarios import build_scenario, load_code_model
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -66,16 +66,20 @@ def _assert_same_sums(compiled, oracle, rtol=1e-10):
 def test_range_bearing_compiled_block_sums_equal_the_numpy_path(n):
     problem = load_code_model(str(EXAMPLE), ["scenario.updates=12", "filter.compiled=yes"]).problem()
     assert problem.compiled_path == (True, "")
-    compiled = problem.block_sums(block_generator(5, 0), n, "exact")
+    compiled = problem._compiled_block_sums(block_generator(5, 0), n)
+    assert compiled is not None  # the kernel ran (no fallback to the numpy path hides here)
     oracle = problem.numpy_block_sums(block_generator(5, 0), n, "exact")
     _assert_same_sums(compiled, oracle)
+    _assert_same_sums(problem.block_sums(block_generator(5, 0), n, "exact"), oracle)
+    assert (problem.tally.compiled, problem.tally.fallback, problem.tally.numpy) == (1, 0, 0)
 
 
 def test_linear_model_with_another_truth_compiled_block_sums_equal_the_numpy_path():
     """A filter that believes R x 4 against its truth: two models, two sets of printed functions."""
     problem = load_code_model((_linear(1.0), _linear(4.0)), ["scenario.updates=7", "filter.compiled=yes"]).problem()
     assert problem.compiled_path[0]
-    compiled = problem.block_sums(block_generator(2, 3), 150, "exact")
+    compiled = problem._compiled_block_sums(block_generator(2, 3), 150)
+    assert compiled is not None  # the kernel ran
     oracle = problem.numpy_block_sums(block_generator(2, 3), 150, "exact")
     _assert_same_sums(compiled, oracle)
 
@@ -113,10 +117,15 @@ def test_compiled_run_same_seed_same_sums_whatever_the_workers_and_the_numpy_run
     assert numpy_problem.compiled_path == (False, "the numpy path was asked for (filter.compiled=no)")
     one = run_monte_carlo(problem, 9000, 11, workers=1).sums
     two = run_monte_carlo(problem, 9000, 11, workers=2).sums
+    blocks = block_count(9000)
+    # every block of both runs in the kernel: the comparisons below hold the kernel, not the numpy path twice
+    assert (problem.tally.compiled, problem.tally.fallback, problem.tally.numpy) == (2 * blocks, 0, 0)
+    assert blocks > 1
     for f in dataclasses.fields(one):
         a, b = getattr(one, f.name), getattr(two, f.name)
         assert (a is None and b is None) or np.array_equal(a, b), f.name
     _assert_same_sums(one, run_monte_carlo(numpy_problem, 9000, 11, workers=1).sums)
+    assert (numpy_problem.tally.compiled, numpy_problem.tally.numpy) == (0, blocks)
 
 
 def test_filters_and_models_the_kernel_does_not_take_keep_the_numpy_path_and_say_why():
@@ -153,6 +162,7 @@ def test_a_missing_measurement_stops_the_kernel_and_the_block_runs_on_the_numpy_
     assert problem.compiled_path[0]
     assert problem._compiled_block_sums(_PlantedNaN(4), 100) is None  # the kernel stops at the NaN
     got = problem.block_sums(_PlantedNaN(4), 100, "exact")
+    assert (problem.tally.compiled, problem.tally.fallback) == (0, 1)  # counted as the fallback it was
     want = problem.numpy_block_sums(_PlantedNaN(4), 100, "exact")
     for f in dataclasses.fields(want):
         a, b = getattr(got, f.name), getattr(want, f.name)

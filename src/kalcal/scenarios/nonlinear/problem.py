@@ -18,6 +18,7 @@ are the final-time ones, :func:`kalcal.stats.suite.final_time_checks`).
 from __future__ import annotations
 
 import dataclasses
+import threading
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
@@ -75,6 +76,37 @@ def _per_update(value: np.ndarray | None, k: int) -> np.ndarray | None:
     return value if value.ndim == 1 else value[k]
 
 
+class PathTally:
+    """How many blocks of a problem ran on each path in this process, counted as each block ends: ``compiled``
+    (the kernel gave the sums), ``fallback`` (the kernel was asked and stopped: a missing measurement or a
+    covariance that is not positive definite, and the numpy path gave the sums from the same draws) and
+    ``numpy`` (the numpy path was the path). What a run or a benchmark reports as the path that ran, where
+    :attr:`NonlinearProblem.compiled_path` says only the path asked for. Blocks run in another process (a
+    Dask worker) count in that process's copy: a copy starts at zero."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()  # blocks end in several threads at once
+        self.compiled = self.fallback = self.numpy = 0
+
+    def add(self, path: str) -> None:
+        with self._lock:
+            setattr(self, path, getattr(self, path) + 1)
+
+    def __reduce__(self):  # a lock does not pickle; a copy in another process counts its own blocks
+        return PathTally, ()
+
+    def describe(self) -> str:
+        """One line: the blocks by path, e.g. ``compiled EKF kernel (25 blocks)``."""
+        parts = [
+            f"{label} ({count} block{'s' if count != 1 else ''})"
+            for label, count in (("compiled EKF kernel", self.compiled),
+                                 ("numpy path after the kernel stopped", self.fallback),
+                                 ("batched numpy path", self.numpy))
+            if count
+        ]
+        return ", ".join(parts) if parts else "no block run"
+
+
 @dataclass(frozen=True)
 class BatchEstimator:
     """One final estimate per realization in place of a filter: ``estimate(z)`` takes the block's
@@ -129,6 +161,8 @@ class NonlinearProblem(ProblemDefaults):
     planned: int | None = None
     info: ProblemInfo = field(init=False)
     engines: tuple[str, ...] = field(init=False, default=("exact",))
+    #: the blocks this problem ran by path (:class:`PathTally`); a copy (:meth:`plan`) counts its own
+    tally: PathTally = field(init=False, repr=False, compare=False)
 
     NOT_TIME_INVARIANT = "its model is nonlinear: the gains depend on the state, and there is no algebraic Riccati equation"
 
@@ -157,6 +191,7 @@ class NonlinearProblem(ProblemDefaults):
             capabilities=dataclasses.replace(s.capabilities, batch=hooks.batch is not None),
         )
         object.__setattr__(self, "info", info)
+        object.__setattr__(self, "tally", PathTally())
 
     @property
     def hooks(self) -> ProblemHooks:
@@ -330,11 +365,17 @@ class NonlinearProblem(ProblemDefaults):
             state = rng.bit_generator.state
             out = self._compiled_block_sums(rng, n)
             if out is not None:
+                self.tally.add("compiled")
                 return out
             # a missing measurement or a covariance that is not positive definite: the numpy path gives
             # that case's numbers (or its error) from the same draws
             rng.bit_generator.state = state
-        return self.numpy_block_sums(rng, n, engine)
+            out = self.numpy_block_sums(rng, n, engine)
+            self.tally.add("fallback")
+            return out
+        out = self.numpy_block_sums(rng, n, engine)
+        self.tally.add("numpy")
+        return out
 
     def _compiled_block_sums(self, rng: np.random.Generator, n: int) -> MomentSums | None:
         s, loaded = self.scenario, self.scenario.loaded
