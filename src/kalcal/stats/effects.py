@@ -373,6 +373,7 @@ def cramer_rao_bound(
     mse = np.diagonal(error_outer, axis1=1, axis2=2) / n
     mse_se = np.sqrt(np.maximum(layout.view(flat, "e4") / n - mse**2, 0.0) * n / (n - 1) / n)
     q = np.asarray(q, dtype=float)
+    _check_finite_expectations(layout, flat)
     if renewed:
         return _renewed_bound(layout, flat, n, q, np.asarray(p0, dtype=float), tuple(renewed), mse, mse_se)
     d = layout.d
@@ -403,6 +404,23 @@ def cramer_rao_bound(
             j = 0.5 * (j + j.T)
             bounds[k] = _spd_inverse(j)
     return CramerRaoBound(True, reason, bounds, mse, mse_se)
+
+
+def _check_finite_expectations(layout: EffectLayout, flat: np.ndarray) -> None:
+    """Refuse, naming the cause, expectations at the truth's states that are not finite: f, h or their
+    Jacobians NaN or infinite at a state the truth reaches (a square root of a negative number), which
+    would otherwise end in a factorization's error that says nothing of the model."""
+    for name, what in (("f", "E[F]"), ("ftqf", "E[F^T Q^-1 F]"), ("htrh", "E[H^T R^-1 H]")):
+        value = layout.view(flat, name)
+        bad = ~np.all(np.isfinite(value.reshape(value.shape[0], -1)), axis=1)
+        if np.any(bad):
+            from kalcal.errors import ConfigError
+
+            raise ConfigError(
+                f"the Cramér-Rao bound: {what} at the truth's states is not finite from update {int(np.argmax(bad)) + 1}: "
+                f"the model's {'h' if name == 'htrh' else 'f'} or its Jacobian is NaN or infinite at states the truth reaches "
+                "(the model's functions must be finite wherever the truth goes)"
+            )
 
 
 def _renewed_bound(layout, flat, n, q, p0, renewed, mse, mse_se) -> CramerRaoBound:

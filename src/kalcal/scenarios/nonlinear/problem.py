@@ -69,6 +69,37 @@ def _q_inverse(q: np.ndarray) -> tuple[np.ndarray, bool]:
     return np.zeros((d, d)), False
 
 
+def _known_rows(name: str, value, size: int, k_count: int, source: str, field_name: str) -> np.ndarray | None:
+    """u or data as (size,) shared by every update or (K', size) with K' >= K rows, or None where the model
+    takes none: the model's own check of its shape (:func:`kalcal.core.nonlinear._known`), then one row per
+    update; a ConfigError naming the field and the shape otherwise."""
+    from kalcal.core.nonlinear import _known
+    from kalcal.errors import ConfigError
+
+    try:
+        array = _known(name, value, size)
+    except ConfigError as error:
+        raise ConfigError(f"{source}: {field_name}: {error}") from None
+    if array is not None and array.ndim == 2 and array.shape[0] < k_count:
+        raise ConfigError(
+            f"{source}: {field_name}: {name}: {k_count} updates need {k_count} rows of {size} (or one row shared by "
+            f"every update), got shape {array.shape}")
+    return array
+
+
+def _check_truth_finite(value: np.ndarray, name: str, k: int, source: str, states: np.ndarray | None = None) -> None:
+    """A ConfigError naming the function, the update and a state where the truth's f or h (its output
+    ``value``, (n, size)) is NaN or infinite."""
+    bad = ~np.all(np.isfinite(value), axis=1)
+    if np.any(bad):
+        from kalcal.errors import ConfigError
+
+        at = "" if states is None else f", e.g. at x = {np.array2string(states[np.argmax(bad)], precision=4)}"
+        raise ConfigError(
+            f"{source}: the truth's {name} is not finite (NaN or inf) at update {k + 1} for {int(bad.sum())} of "
+            f"{bad.size} realizations{at}: {name} must be finite wherever the truth goes")
+
+
 def _per_update(value: np.ndarray | None, k: int) -> np.ndarray | None:
     """Update k's row of a shared (size,) or per-update (K, size) array."""
     if value is None:
@@ -234,6 +265,9 @@ class NonlinearProblem(ProblemDefaults):
         loaded = self.scenario.loaded
         t = loaded.truth
         d, p, k_count = t.state_dim, t.measurement_dim, self.scenario.n_updates
+        for m in {id(t): t, id(loaded.filter): loaded.filter}.values():  # the checks the compiled path makes
+            _known_rows("u", loaded.inputs, m.input_dim, k_count, loaded.source, "INPUTS")
+            _known_rows("data", loaded.data, m.data_dim, k_count, loaded.source, "DATA")
         x = t.x0 + rng.standard_normal((n, d)) @ _factor(t.p0).T
         noise = rng.standard_normal((k_count, n, d + p))
         q_factor, r_factor = _factor(t.q), _factor(t.r)
@@ -241,9 +275,16 @@ class NonlinearProblem(ProblemDefaults):
         z = np.empty((n, k_count, p))
         x0 = x
         for k in range(k_count):
-            x = t.transition(x, _per_update(loaded.inputs, k)) + noise[k, :, :d] @ q_factor.T
-            states[k] = x
-            z[:, k] = t.measure(x, _per_update(loaded.data, k)) + noise[k, :, d:] @ r_factor.T
+            # the truth's f and h must be finite wherever the truth goes: a NaN there is the model's error,
+            # not a missing measurement (the filter's rule for a NaN in z), and is refused in one line
+            # (numpy's warnings of the same NaN held back: the refusal names it)
+            with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+                x = t.transition(x, _per_update(loaded.inputs, k)) + noise[k, :, :d] @ q_factor.T
+                _check_truth_finite(x, "f", k, loaded.source)
+                states[k] = x
+                hx = t.measure(x, _per_update(loaded.data, k))
+            _check_truth_finite(hx, "h", k, loaded.source, x)
+            z[:, k] = hx + noise[k, :, d:] @ r_factor.T
         return x0, states, z
 
     def _run(self, z: np.ndarray, on_update, keep: bool):
@@ -394,14 +435,16 @@ class NonlinearProblem(ProblemDefaults):
         normalized = np.zeros((k_count, p))
         q_inv, has_q_inv = _q_inverse(t.q)
 
-        def rows(value, size):
-            if size == 0 or value is None:
-                return np.zeros((k_count, 0))
-            value = np.asarray(value, dtype=float)
-            return np.ascontiguousarray(np.broadcast_to(value, (k_count, size)) if value.ndim == 1 else value)
-
         if t.input_dim != fm.input_dim or t.data_dim != fm.data_dim:
             return None
+
+        def rows(name, value, size):
+            # the numpy path's checks (the model's own, then one row per update) before any broadcast
+            if size == 0:
+                return np.zeros((k_count, 0))
+            value = _known_rows(name, value, size, k_count, loaded.source, "DATA" if name == "data" else "INPUTS")
+            return np.ascontiguousarray(np.broadcast_to(value, (k_count, size)) if value.ndim == 1 else value[:k_count])
+
         from kalcal.scenarios.nonlinear.compiled import run_block
 
         ok = run_block(
@@ -409,7 +452,7 @@ class NonlinearProblem(ProblemDefaults):
             first, noise, t.x0, _factor(t.p0), _factor(t.q), _factor(t.r), float(t.dt),
             q_inv, has_q_inv, np.linalg.cholesky(t.r),
             fm.x0, fm.p0, fm.q, fm.r, float(fm.dt),
-            rows(loaded.inputs, t.input_dim), rows(loaded.data, t.data_dim), checked, sums, normalized, eff, _TILE,
+            rows("u", loaded.inputs, t.input_dim), rows("data", loaded.data, t.data_dim), checked, sums, normalized, eff, _TILE,
         )
         if not ok:
             return None
