@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import importlib.util
+import os
 import sys
 import time
 from pathlib import Path
@@ -81,6 +82,8 @@ def bench_verify(n: int, chunk: int = 4096, profile: bool = True) -> None:
 
     # planned as kalcal verify plans it: filter.compiled=auto compiles for a run of n K >= 10^7
     problem = load_code_model(str(ROOT / "examples" / "range_bearing.py")).problem().plan(n)
+    # the machine's load beside every timing: a loaded machine's wall times and ratios are not an idle one's
+    print(f"machine: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} (1 min) at the start")
     compiled, reason = problem.compiled_path
     # the compiled kernel's printing and numba's compile (or its load from numba's cache), timed apart as
     # dynamax's compile is
@@ -117,14 +120,15 @@ def bench_verify(n: int, chunk: int = 4096, profile: bool = True) -> None:
     print(f"ratio dynamax filter / kalcal Monte Carlo with every statistic: {ratio:.2f} "
           f"({'meets' if ratio >= 10 else 'misses'} the 10x goal); of CPU seconds "
           f"(dynamax's filter {filter_cpu:.1f} s, kalcal's run {cpu:.2f} s): {filter_cpu / cpu:.2f}")
+    print(f"load average {os.getloadavg()[0]:.1f} (1 min) at the end")
     if ratio < 10 and profile:
         _profile(problem, chunk)
 
 
 def _profile(problem, chunk: int) -> None:
     """Where one block's time goes (cProfile does not see into compiled code): the draws, the compiled
-    kernel (truth, EKF, every sum), the pair sums after it (BLAS on one thread, as the engine runs it),
-    each as CPU seconds of this thread."""
+    kernel (truth, EKF, every sum), the pair sums after it, each as CPU seconds of this thread, the whole
+    block with BLAS on one thread as the engine runs it (:func:`kalcal.montecarlo.engine.single_threaded_blas`)."""
     import time as _time
 
     from kalcal.montecarlo.accumulators import ResidualProducts
@@ -132,22 +136,25 @@ def _profile(problem, chunk: int) -> None:
 
     k, d, p = problem.scenario.n_updates, 4, 2
     best = {}
-    for _ in range(3):
-        rng = block_generator(0, 1)
-        start = _time.thread_time()
-        rng.standard_normal((chunk, d))
-        rng.standard_normal((k, chunk, d + p))
-        draws = _time.thread_time() - start
-        start = _time.thread_time()
-        problem.block_sums(block_generator(0, 1), chunk, "exact")
-        block = _time.thread_time() - start
-        stacked = np.ascontiguousarray(np.random.default_rng(0).standard_normal((k * p, chunk)))
-        start = _time.thread_time()
-        with single_threaded_blas():  # as the Monte Carlo runs it: BLAS on one thread in each block
+    # the whole profiled block with BLAS on one thread, as the engine runs each block (block_task): the pair
+    # sums inside block_sums would otherwise run on BLAS's threads, and their waits for a loaded core count
+    # as this thread's time and land in the kernel's share
+    with single_threaded_blas():
+        for _ in range(3):
+            rng = block_generator(0, 1)
+            start = _time.thread_time()
+            rng.standard_normal((chunk, d))
+            rng.standard_normal((k, chunk, d + p))
+            draws = _time.thread_time() - start
+            start = _time.thread_time()
+            problem.block_sums(block_generator(0, 1), chunk, "exact")
+            block = _time.thread_time() - start
+            stacked = np.ascontiguousarray(np.random.default_rng(0).standard_normal((k * p, chunk)))
+            start = _time.thread_time()
             ResidualProducts.upper(stacked)
-        pairs = _time.thread_time() - start
-        for name, value in (("draws", draws), ("block", block), ("pairs", pairs)):
-            best[name] = min(best.get(name, np.inf), value)
+            pairs = _time.thread_time() - start
+            for name, value in (("draws", draws), ("block", block), ("pairs", pairs)):
+                best[name] = min(best.get(name, np.inf), value)
     kernel = best["block"] - best["draws"] - best["pairs"]
     per = chunk * k
     print(f"profile of one block of {chunk} realizations, K = {k} (CPU seconds of one thread, best of 3): "
