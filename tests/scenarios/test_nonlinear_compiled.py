@@ -275,3 +275,18 @@ def test_printed_zero_patterns_cover_every_nonzero_jacobian_entry(which):
     if which == "imu-3axis":
         assert np.array_equal(patterns["m_F_nz"], np.diag(np.r_[np.ones(9), 0, 0]).astype(bool))
         assert patterns["m_H_nz"].sum() == 15  # x: s_x, b_x, 2 tilts; y: + a0; z: + a1, a2
+
+
+@pytest.mark.parametrize("compiled", ["yes", "no"])
+def test_memory_is_flat_in_n_not_in_k(compiled):
+    """docs/nonlinear.md's memory: every sum's size is the same whatever the block's n, and the whiteness
+    check's pair sums are (K p)^2 floats, growing with K (as the block's normals (K, n, d + p) do)."""
+
+    def sizes(updates, n):
+        problem = load_code_model(str(EXAMPLE), [f"scenario.updates={updates}", f"filter.compiled={compiled}"]).problem()
+        sums = problem.block_sums(block_generator(0, 0), n, "exact")
+        return {f.name: getattr(sums, f.name).shape for f in dataclasses.fields(sums)
+                if isinstance(getattr(sums, f.name), np.ndarray)}
+
+    assert sizes(6, 40) == sizes(6, 130)  # flat in n
+    assert sizes(6, 40)["residual_outer"] == (12, 12) and sizes(12, 40)["residual_outer"] == (24, 24)

@@ -5,8 +5,11 @@ process and measurement noises, all as (n, d) and (n, p) arrays (one call of f a
 whole block), so a given seed gives the same realizations whatever the workers. The filter (EKF, IEKF or
 UKF, :func:`kalcal.core.nonlinear_run.run_nonlinear_filter`) runs on the whole block; as each update ends
 its errors, each realization's own P_k and S_k, NEES, NIS and the whitened errors and innovations are
-added into the block's sums (nothing of size n K is kept: memory flat in N and in K), with the effect
+added into the block's sums, with the effect
 sizes' sums (:mod:`kalcal.stats.effects`) and the Cramér–Rao bound's expectations at the true states.
+Memory is flat in N (a block of n realizations at a time, its sums merged as it ends) but not in K: per
+block the draws (K, n, d + p) (and, on the numpy path, the truth's states (K, n, d) and measurements
+(n, K, p)), and per run the sums, which grow with K: the residual pair sums as (K p)^2.
 
 **Hooks** for a scenario built on this problem (:class:`ProblemHooks`, the scenario's ``problem_hooks``;
 a static-pose calibration uses them): the states the checks are on (the others are nuisance: a pose's tilts),
