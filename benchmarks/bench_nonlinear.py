@@ -125,6 +125,36 @@ def bench_verify(n: int, chunk: int = 4096, profile: bool = True) -> None:
         _profile(problem, chunk)
 
 
+def bench_paths(chunk: int = 4096) -> None:
+    """One block of the range-bearing example (K = 100) with every statistic on each path, CPU seconds of
+    one thread with BLAS on one thread (as the engine runs a block), best of 5 (compiled) and of 2 (numpy):
+    the saving per realization-update that ``COMPILE_WORTH`` weighs against a compile
+    (``python bench_nonlinear.py paths``)."""
+    import time as _time
+
+    from kalcal.montecarlo.engine import block_generator, single_threaded_blas
+    from kalcal.scenarios import load_code_model
+
+    print(f"machine: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} (1 min) at the start")
+    example = str(ROOT / "examples" / "range_bearing.py")
+    problems = {mode: load_code_model(example, [f"filter.compiled={mode}"]).problem() for mode in ("yes", "no")}
+    problems["yes"].block_sums(block_generator(0, 0), 64, "exact")  # the compile or cache load, apart
+    k = problems["yes"].scenario.n_updates
+    per = {}
+    with single_threaded_blas():
+        for mode, repeats in (("yes", 5), ("no", 2)):
+            best = np.inf
+            for _ in range(repeats):
+                start = _time.thread_time()
+                problems[mode].block_sums(block_generator(0, 1), chunk, "exact")
+                best = min(best, _time.thread_time() - start)
+            per[mode] = best / (chunk * k)
+            print(f"filter.compiled={mode}: one block of {chunk}, K = {k}: {best:.3f} s, "
+                  f"{per[mode] * 1e9:.0f} ns per realization-update; ran on {problems[mode].tally.describe()}")
+    print(f"saved per realization-update {(per['no'] - per['yes']) * 1e6:.2f} us: a 60 s compile repaid at "
+          f"{60.0 / (per['no'] - per['yes']):.2g} realization-updates; load average {os.getloadavg()[0]:.1f} at the end")
+
+
 def _profile(problem, chunk: int) -> None:
     """Where one block's time goes (cProfile does not see into compiled code): the draws, the compiled
     kernel (truth, EKF, every sum), the pair sums after it, each as CPU seconds of this thread, the whole
@@ -221,7 +251,9 @@ def _dynamax_ekf(problem, n: int, chunk: int) -> tuple[float, float, tuple[float
 
 
 if __name__ == "__main__":
-    if len(sys.argv) > 1 and sys.argv[1] == "verify":
+    if len(sys.argv) > 1 and sys.argv[1] == "paths":
+        bench_paths()
+    elif len(sys.argv) > 1 and sys.argv[1] == "verify":
         bench_verify(int(sys.argv[2]) if len(sys.argv) > 2 else 100_000)
     else:
         main(int(sys.argv[1]) if len(sys.argv) > 1 else 100_000)

@@ -46,11 +46,13 @@ def _factor(cov: np.ndarray) -> np.ndarray:
 
 
 #: the run length, N K (realization-updates), from which ``filter.compiled=auto`` compiles a kernel that
-#: is not compiled yet: the compile, about a minute per pair of models (50-80 s on a shared 2-core
-#: machine), against the time the compiled kernel saves over the batched numpy path with every
-#: statistic, about 6 us per realization-update (7 us against 0.8 us, range-bearing, docs/nonlinear.md):
-#: 60 s / 6 us = 10^7, 10^5 realizations of 100 updates (the default 300,000 realizations of 100 updates
-#: compile; 10^4 of them run on the numpy path)
+#: is not compiled yet: the compile, about a minute per pair of models (40-80 s measured), against the
+#: time the compiled kernel saves over the batched numpy path with every statistic, about 2.2 us per
+#: realization-update (2.5 us against 0.24 us for a whole block, range-bearing, K = 100:
+#: ``benchmarks/bench_nonlinear.py paths``). One run of 10^7 saves about 22 s, a third of the compile;
+#: the compile is kept (numba's cache), so the model's later runs start compiled, and about three runs
+#: of that length repay it (one run alone from 2.7 x 10^7). 10^7 is 10^5 realizations of 100 updates
+#: (the default 300,000 realizations of 100 updates compile; 10^4 of them run on the numpy path)
 COMPILE_WORTH = 10_000_000
 
 #: ``filter.compiled``: ``auto`` (compiled where it is already, or where the run repays its compile),
