@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import importlib.util
+import os
 import sys
 import time
 from pathlib import Path
@@ -81,14 +82,18 @@ def bench_verify(n: int, chunk: int = 4096, profile: bool = True) -> None:
 
     # planned as kalcal verify plans it: filter.compiled=auto compiles for a run of n K >= 10^7
     problem = load_code_model(str(ROOT / "examples" / "range_bearing.py")).problem().plan(n)
+    # the machine's load beside every timing: a loaded machine's wall times and ratios are not an idle one's
+    print(f"machine: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} (1 min) at the start")
     compiled, reason = problem.compiled_path
     # the compiled kernel's printing and numba's compile (or its load from numba's cache), timed apart as
     # dynamax's compile is
     start = _time.perf_counter()
     problem.block_sums(block_generator(0, 0), 64, "exact")
     setup = _time.perf_counter() - start
-    print(f"kalcal path: {'compiled EKF kernel' if compiled else 'batched numpy (' + reason + ')'}; "
-          f"compile or cache load {setup:.1f} s (apart)")
+    # the path that ran (the tally of blocks by path), not the one asked for: a kernel that stops at every
+    # block would otherwise be timed as the numpy path under the kernel's name
+    print(f"kalcal path asked: {'compiled EKF kernel' if compiled else 'batched numpy (' + reason + ')'}; "
+          f"first block ran on: {problem.tally.describe()}; compile or cache load {setup:.1f} s (apart)")
 
     def kalcal_run():
         run = run_monte_carlo(problem, n, 0)
@@ -99,6 +104,7 @@ def bench_verify(n: int, chunk: int = 4096, profile: bool = True) -> None:
     run, checks, effects = kalcal_run()
     wall, cpu = _time.perf_counter() - start, _time.process_time() - cpu
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(f"kalcal blocks ran on (setup block included): {problem.tally.describe()}")
     print(f"kalcal EKF verify, K = 100, N = {n}: {wall:.2f} s ({run.workers} threads, {cpu:.2f} s of CPU), "
           f"peak RSS {rss:.0f} MB; exact checks {[c.name for c in checks if not c.passed]} failed; tolerance "
           f"verdict {effects.verdict()}")
@@ -114,14 +120,45 @@ def bench_verify(n: int, chunk: int = 4096, profile: bool = True) -> None:
     print(f"ratio dynamax filter / kalcal Monte Carlo with every statistic: {ratio:.2f} "
           f"({'meets' if ratio >= 10 else 'misses'} the 10x goal); of CPU seconds "
           f"(dynamax's filter {filter_cpu:.1f} s, kalcal's run {cpu:.2f} s): {filter_cpu / cpu:.2f}")
+    print(f"load average {os.getloadavg()[0]:.1f} (1 min) at the end")
     if ratio < 10 and profile:
         _profile(problem, chunk)
 
 
+def bench_paths(chunk: int = 4096) -> None:
+    """One block of the range-bearing example (K = 100) with every statistic on each path, CPU seconds of
+    one thread with BLAS on one thread (as the engine runs a block), best of 5 (compiled) and of 2 (numpy):
+    the saving per realization-update that ``COMPILE_WORTH`` weighs against a compile
+    (``python bench_nonlinear.py paths``)."""
+    import time as _time
+
+    from kalcal.montecarlo.engine import block_generator, single_threaded_blas
+    from kalcal.scenarios import load_code_model
+
+    print(f"machine: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} (1 min) at the start")
+    example = str(ROOT / "examples" / "range_bearing.py")
+    problems = {mode: load_code_model(example, [f"filter.compiled={mode}"]).problem() for mode in ("yes", "no")}
+    problems["yes"].block_sums(block_generator(0, 0), 64, "exact")  # the compile or cache load, apart
+    k = problems["yes"].scenario.n_updates
+    per = {}
+    with single_threaded_blas():
+        for mode, repeats in (("yes", 5), ("no", 2)):
+            best = np.inf
+            for _ in range(repeats):
+                start = _time.thread_time()
+                problems[mode].block_sums(block_generator(0, 1), chunk, "exact")
+                best = min(best, _time.thread_time() - start)
+            per[mode] = best / (chunk * k)
+            print(f"filter.compiled={mode}: one block of {chunk}, K = {k}: {best:.3f} s, "
+                  f"{per[mode] * 1e9:.0f} ns per realization-update; ran on {problems[mode].tally.describe()}")
+    print(f"saved per realization-update {(per['no'] - per['yes']) * 1e6:.2f} us: a 60 s compile repaid at "
+          f"{60.0 / (per['no'] - per['yes']):.2g} realization-updates; load average {os.getloadavg()[0]:.1f} at the end")
+
+
 def _profile(problem, chunk: int) -> None:
     """Where one block's time goes (cProfile does not see into compiled code): the draws, the compiled
-    kernel (truth, EKF, every sum), the pair sums after it (BLAS on one thread, as the engine runs it),
-    each as CPU seconds of this thread."""
+    kernel (truth, EKF, every sum), the pair sums after it, each as CPU seconds of this thread, the whole
+    block with BLAS on one thread as the engine runs it (:func:`kalcal.montecarlo.engine.single_threaded_blas`)."""
     import time as _time
 
     from kalcal.montecarlo.accumulators import ResidualProducts
@@ -129,22 +166,25 @@ def _profile(problem, chunk: int) -> None:
 
     k, d, p = problem.scenario.n_updates, 4, 2
     best = {}
-    for _ in range(3):
-        rng = block_generator(0, 1)
-        start = _time.thread_time()
-        rng.standard_normal((chunk, d))
-        rng.standard_normal((k, chunk, d + p))
-        draws = _time.thread_time() - start
-        start = _time.thread_time()
-        problem.block_sums(block_generator(0, 1), chunk, "exact")
-        block = _time.thread_time() - start
-        stacked = np.ascontiguousarray(np.random.default_rng(0).standard_normal((k * p, chunk)))
-        start = _time.thread_time()
-        with single_threaded_blas():  # as the Monte Carlo runs it: BLAS on one thread in each block
+    # the whole profiled block with BLAS on one thread, as the engine runs each block (block_task): the pair
+    # sums inside block_sums would otherwise run on BLAS's threads, and their waits for a loaded core count
+    # as this thread's time and land in the kernel's share
+    with single_threaded_blas():
+        for _ in range(3):
+            rng = block_generator(0, 1)
+            start = _time.thread_time()
+            rng.standard_normal((chunk, d))
+            rng.standard_normal((k, chunk, d + p))
+            draws = _time.thread_time() - start
+            start = _time.thread_time()
+            problem.block_sums(block_generator(0, 1), chunk, "exact")
+            block = _time.thread_time() - start
+            stacked = np.ascontiguousarray(np.random.default_rng(0).standard_normal((k * p, chunk)))
+            start = _time.thread_time()
             ResidualProducts.upper(stacked)
-        pairs = _time.thread_time() - start
-        for name, value in (("draws", draws), ("block", block), ("pairs", pairs)):
-            best[name] = min(best.get(name, np.inf), value)
+            pairs = _time.thread_time() - start
+            for name, value in (("draws", draws), ("block", block), ("pairs", pairs)):
+                best[name] = min(best.get(name, np.inf), value)
     kernel = best["block"] - best["draws"] - best["pairs"]
     per = chunk * k
     print(f"profile of one block of {chunk} realizations, K = {k} (CPU seconds of one thread, best of 3): "
@@ -211,7 +251,9 @@ def _dynamax_ekf(problem, n: int, chunk: int) -> tuple[float, float, tuple[float
 
 
 if __name__ == "__main__":
-    if len(sys.argv) > 1 and sys.argv[1] == "verify":
+    if len(sys.argv) > 1 and sys.argv[1] == "paths":
+        bench_paths()
+    elif len(sys.argv) > 1 and sys.argv[1] == "verify":
         bench_verify(int(sys.argv[2]) if len(sys.argv) > 2 else 100_000)
     else:
         main(int(sys.argv[1]) if len(sys.argv) > 1 else 100_000)

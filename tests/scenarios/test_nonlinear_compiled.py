@@ -1,11 +1,12 @@
 """The compiled EKF block kernel of a nonlinear model against the batched numpy path it replaces: the same
-draws, the same block sums to rounding (1e-10 relative) and the same shape histograms count for count,
+draws, the same block sums to rounding (1e-10 relative to each sum's largest entry, each quantity of the
+effect sums apart) and the same shape histograms count for count,
 the same sums whatever the workers, and the models and filters that keep the numpy path saying why; and
 ``filter.compiled``'s policy (auto: compiled where it is already or the planned run repays the compile).
 
-The tests that run the kernel force it (``filter.compiled=yes``) and keep to three distinct printed
-modules, range-bearing's, the linear pair's and imu-3axis's pose model: each compiles for about a minute
-on a cold cache.
+The tests that run the kernel force it (``filter.compiled=yes``) and keep to four distinct printed
+modules, range-bearing's, the linear pair's, imu-3axis's pose model and a model with known inputs and a
+correlated R: each compiles for about a minute on a cold cache.
 
 imu-3axis's EKF runs the same kernel with the checks on 9 of its 11 states (the current pose's 2 tilts
 are nuisance states, renewed at each pose by the model's own f and Q: f sets them to the nominal pose,
@@ -24,7 +25,7 @@ import pytest
 
 from kalcal.core import xmath as xm
 from kalcal.core.nonlinear import NonlinearModel, load_nonlinear_model
-from kalcal.montecarlo.engine import block_generator, run_monte_carlo
+from kalcal.montecarlo.engine import block_count, block_generator, run_monte_carlo
 from kalcal.scenarios import build_scenario, load_code_model
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -42,9 +43,21 @@ def _linear(r_scale: float) -> NonlinearModel:
     )
 
 
-def _assert_same_sums(compiled, oracle, rtol=1e-10):
-    """Every field of two MomentSums within rtol of the oracle's largest entry of that field."""
+def _assert_same_sums(compiled, oracle, rtol=1e-10, layout=None):
+    """Every field of two MomentSums within rtol of the oracle's largest entry of that field; the effect
+    sums, a flat array of quantities of different sizes, each quantity within rtol of its own largest entry
+    (``layout``, the problem's :class:`EffectLayout`, names them; required where the sums carry them)."""
+    if oracle.effect is not None:
+        assert layout is not None, "the effect sums' layout, to compare each quantity on its own scale"
+        assert compiled.effect.shape == oracle.effect.shape == (layout.size,)
+        for name in layout.slices:
+            a, b = layout.view(compiled.effect, name), layout.view(oracle.effect, name)
+            assert np.all(np.isfinite(a)), name
+            scale = np.max(np.abs(b))
+            assert np.max(np.abs(a - b)) <= rtol * scale, ("effect", name, np.max(np.abs(a - b)) / scale)
     for f in dataclasses.fields(oracle):
+        if f.name == "effect":
+            continue
         a, b = getattr(compiled, f.name), getattr(oracle, f.name)
         if f.name == "count":
             assert a == b
@@ -66,18 +79,22 @@ def _assert_same_sums(compiled, oracle, rtol=1e-10):
 def test_range_bearing_compiled_block_sums_equal_the_numpy_path(n):
     problem = load_code_model(str(EXAMPLE), ["scenario.updates=12", "filter.compiled=yes"]).problem()
     assert problem.compiled_path == (True, "")
-    compiled = problem.block_sums(block_generator(5, 0), n, "exact")
+    compiled = problem._compiled_block_sums(block_generator(5, 0), n)
+    assert compiled is not None  # the kernel ran (no fallback to the numpy path hides here)
     oracle = problem.numpy_block_sums(block_generator(5, 0), n, "exact")
-    _assert_same_sums(compiled, oracle)
+    _assert_same_sums(compiled, oracle, layout=problem.layout)
+    _assert_same_sums(problem.block_sums(block_generator(5, 0), n, "exact"), oracle, layout=problem.layout)
+    assert (problem.tally.compiled, problem.tally.fallback, problem.tally.numpy) == (1, 0, 0)
 
 
 def test_linear_model_with_another_truth_compiled_block_sums_equal_the_numpy_path():
     """A filter that believes R x 4 against its truth: two models, two sets of printed functions."""
     problem = load_code_model((_linear(1.0), _linear(4.0)), ["scenario.updates=7", "filter.compiled=yes"]).problem()
     assert problem.compiled_path[0]
-    compiled = problem.block_sums(block_generator(2, 3), 150, "exact")
+    compiled = problem._compiled_block_sums(block_generator(2, 3), 150)
+    assert compiled is not None  # the kernel ran
     oracle = problem.numpy_block_sums(block_generator(2, 3), 150, "exact")
-    _assert_same_sums(compiled, oracle)
+    _assert_same_sums(compiled, oracle, layout=problem.layout)
 
 
 @pytest.mark.parametrize("n", [300, 64])
@@ -90,8 +107,48 @@ def test_imu_3axis_compiled_block_sums_equal_the_numpy_path(n):
     assert compiled is not None  # the kernel ran (no fallback to the numpy path hides here)
     oracle = problem.numpy_block_sums(block_generator(5, 0), n, "exact")
     assert compiled.error.shape == (12, 9) and compiled.effect.shape == oracle.effect.shape
-    _assert_same_sums(compiled, oracle)
-    _assert_same_sums(problem.block_sums(block_generator(5, 0), n, "exact"), oracle)
+    _assert_same_sums(compiled, oracle, layout=problem.layout)
+    _assert_same_sums(problem.block_sums(block_generator(5, 0), n, "exact"), oracle, layout=problem.layout)
+
+
+def _inputs_and_correlated_r() -> tuple[NonlinearModel, NonlinearModel, np.ndarray]:
+    """A truth and a filter with known inputs u (accelerations, one row per update) and a correlated R, each
+    measurement of one state (H sparse: R^-1/2 H's zeros are filled by R's correlation, the kernel's
+    ``w_nz`` propagation; R's off-diagonal its ``r_cols``), and the filter's R not the truth's."""
+
+    def f(x, u, dt):
+        return xm.stack([x[:, 0] + dt * x[:, 2] + 0.5 * dt**2 * u[..., 0], x[:, 1] + dt * u[..., 1], x[:, 2] + dt * u[..., 0]])
+
+    def h(x, data):
+        return xm.stack([x[:, 0] + 0.05 * x[:, 0] * x[:, 0], xm.sin(x[:, 1])])
+
+    common = dict(f=f, h=h, q=np.diag([0.01, 0.002, 0.001]), x0=[1.0, 0.3, 0.1], p0=np.diag([1.0, 0.04, 0.01]),
+                  dt=1.0, state_names=("a", "b", "c"), state_units=("m", "rad", "m/s"), measurement_names=("y1", "y2"),
+                  measurement_units=("m", "1"), input_dim=2)
+    truth = NonlinearModel(r=np.array([[1.0, 0.6], [0.6, 1.0]]) * 1.5, **common)
+    belief = NonlinearModel(r=np.array([[1.0, 0.6], [0.6, 1.0]]), **common)
+    inputs = np.random.default_rng(0).normal(0.0, 0.05, (6, 2))
+    return truth, belief, inputs
+
+
+def test_known_inputs_and_a_correlated_r_compiled_block_sums_equal_the_numpy_path():
+    """The kernel's paths for u (per update) and for R's off-diagonal (about a minute's compile on a cold cache)."""
+    from kalcal.scenarios.nonlinear.settings import register_models
+
+    truth, belief, inputs = _inputs_and_correlated_r()
+    problem = load_code_model(register_models(truth, belief, inputs=inputs, n_updates=6), ["filter.compiled=yes"]).problem()
+    assert problem.compiled_path == (True, "")
+    compiled = problem._compiled_block_sums(block_generator(3, 0), 300)
+    assert compiled is not None  # the kernel ran
+    oracle = problem.numpy_block_sums(block_generator(3, 0), 300, "exact")
+    _assert_same_sums(compiled, oracle, layout=problem.layout)
+    # what the comparison holds is there: the inputs move the estimates (the same draws without them give
+    # others), and R's correlation fills H^T R^-1 H's entry of two states no one measurement sees together
+    still = load_code_model(register_models(truth, belief, inputs=np.zeros_like(inputs), n_updates=6),
+                            ["filter.compiled=no"]).problem().numpy_block_sums(block_generator(3, 0), 300, "exact")
+    assert np.max(np.abs(still.estimate - oracle.estimate)) > 1e-3 * np.max(np.abs(oracle.estimate))
+    htrh = problem.layout.view(oracle.effect, "htrh")[0] / 300
+    assert abs(htrh[0, 1]) > 1e-3 * np.max(np.abs(htrh))
 
 
 def test_imu_3axis_paths_say_which_runs_and_why():
@@ -113,10 +170,15 @@ def test_compiled_run_same_seed_same_sums_whatever_the_workers_and_the_numpy_run
     assert numpy_problem.compiled_path == (False, "the numpy path was asked for (filter.compiled=no)")
     one = run_monte_carlo(problem, 9000, 11, workers=1).sums
     two = run_monte_carlo(problem, 9000, 11, workers=2).sums
+    blocks = block_count(9000)
+    # every block of both runs in the kernel: the comparisons below hold the kernel, not the numpy path twice
+    assert (problem.tally.compiled, problem.tally.fallback, problem.tally.numpy) == (2 * blocks, 0, 0)
+    assert blocks > 1
     for f in dataclasses.fields(one):
         a, b = getattr(one, f.name), getattr(two, f.name)
         assert (a is None and b is None) or np.array_equal(a, b), f.name
-    _assert_same_sums(one, run_monte_carlo(numpy_problem, 9000, 11, workers=1).sums)
+    _assert_same_sums(one, run_monte_carlo(numpy_problem, 9000, 11, workers=1).sums, layout=problem.layout)
+    assert (numpy_problem.tally.compiled, numpy_problem.tally.numpy) == (0, blocks)
 
 
 def test_filters_and_models_the_kernel_does_not_take_keep_the_numpy_path_and_say_why():
@@ -153,6 +215,7 @@ def test_a_missing_measurement_stops_the_kernel_and_the_block_runs_on_the_numpy_
     assert problem.compiled_path[0]
     assert problem._compiled_block_sums(_PlantedNaN(4), 100) is None  # the kernel stops at the NaN
     got = problem.block_sums(_PlantedNaN(4), 100, "exact")
+    assert (problem.tally.compiled, problem.tally.fallback) == (0, 1)  # counted as the fallback it was
     want = problem.numpy_block_sums(_PlantedNaN(4), 100, "exact")
     for f in dataclasses.fields(want):
         a, b = getattr(got, f.name), getattr(want, f.name)
@@ -177,7 +240,7 @@ def test_printed_code_numba_cannot_compile_keeps_the_numpy_path_and_says_why(mon
     got = problem.block_sums(block_generator(9, 0), 50, "exact")
     compiled, reason = problem.compiled_path
     assert not compiled and "numba cannot compile" in reason
-    _assert_same_sums(got, problem.numpy_block_sums(block_generator(9, 0), 50, "exact"), rtol=0.0)
+    _assert_same_sums(got, problem.numpy_block_sums(block_generator(9, 0), 50, "exact"), rtol=0.0, layout=problem.layout)
 
 
 def _unseen() -> NonlinearModel:
@@ -265,3 +328,18 @@ def test_printed_zero_patterns_cover_every_nonzero_jacobian_entry(which):
     if which == "imu-3axis":
         assert np.array_equal(patterns["m_F_nz"], np.diag(np.r_[np.ones(9), 0, 0]).astype(bool))
         assert patterns["m_H_nz"].sum() == 15  # x: s_x, b_x, 2 tilts; y: + a0; z: + a1, a2
+
+
+@pytest.mark.parametrize("compiled", ["yes", "no"])
+def test_memory_is_flat_in_n_not_in_k(compiled):
+    """docs/nonlinear.md's memory: every sum's size is the same whatever the block's n, and the whiteness
+    check's pair sums are (K p)^2 floats, growing with K (as the block's normals (K, n, d + p) do)."""
+
+    def sizes(updates, n):
+        problem = load_code_model(str(EXAMPLE), [f"scenario.updates={updates}", f"filter.compiled={compiled}"]).problem()
+        sums = problem.block_sums(block_generator(0, 0), n, "exact")
+        return {f.name: getattr(sums, f.name).shape for f in dataclasses.fields(sums)
+                if isinstance(getattr(sums, f.name), np.ndarray)}
+
+    assert sizes(6, 40) == sizes(6, 130)  # flat in n
+    assert sizes(6, 40)["residual_outer"] == (12, 12) and sizes(12, 40)["residual_outer"] == (24, 24)

@@ -172,10 +172,15 @@ def test_cli_writes_effect_sizes_and_the_bound(tmp_path):
     names = {e["name"] for e in summary["effect_sizes"]["overall"]}
     assert names == {"nees_per_dim", "variance_ratio", "bias_sigma", "whiteness_lag1", "nis_per_dim"}
     assert [r["state"] for r in summary["cramer_rao"]["final"]] == ["px", "py", "vx", "vy"]
+    # the posterior bound holds for every estimator, biased or not, and below_bound's error is the MSE's alone
+    note = summary["cramer_rao"]["note"]
+    assert "unbiased" not in note and "biased or not" in note and "not the bound's own" in note
+    assert all(r["below_bound_error"].startswith("the MSE's Monte Carlo error only") for r in summary["cramer_rao"]["final"])
     covariance = next(t for t in summary["tests"] if t["name"] == "covariance")
     assert covariance["within_tolerance"] in (True, False) and covariance["effect_sizes"]
     page = (out / "report.html").read_text()
     assert "Effect sizes" in page and "Cramér–Rao" in page
+    assert "unbiased estimator" not in page and "biased or not" in page
 
 
 def test_cli_bad_file_is_one_line_exit_2(tmp_path):

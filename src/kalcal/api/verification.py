@@ -295,7 +295,11 @@ def effects_summary(effects, info, confidence: float) -> dict[str, Any]:
     crb = None
     if bound is not None:
         crb = {
-            "note": "a lower bound: every unbiased estimator's mean squared error is at least it",
+            "note": (
+                "a lower bound: the posterior (Bayesian) Cramér-Rao bound, which the mean squared error of every "
+                "estimator, biased or not, is at least where the joint density of states and measurements is "
+                "regular; below_bound counts the MSE's Monte Carlo error, not the bound's own (not computed)"
+            ),
             "available": bound.available,
             "method": bound.reason,
             "final": bound.per_state(info.state_names, info.state_units, confidence),

@@ -2,8 +2,9 @@
 
 Each update k = 0..K-1 is one predict (f over dt, with u_k) and one update with z_k (h with data_k).
 Per update the caller gets the posterior state (n, d), P (n, d, d), the innovation r (n, p) and S
-(n, p, p), batch axis first: through ``on_update(k, result)`` (nothing kept: memory flat in K) and, with
-``keep=True``, stacked in a :class:`NonlinearRun` as (n, K, ...).
+(n, p, p), batch axis first: through ``on_update(k, result)`` (no per-update result kept; the measurements
+z, (n, K, p), are the caller's and grow with K) and, with ``keep=True``, stacked in a :class:`NonlinearRun`
+as (n, K, ...).
 """
 
 from __future__ import annotations

@@ -167,8 +167,10 @@ def effects_section(summary: Mapping[str, Any]) -> str:
                 for r in crb["final"]
             ]
             html += (
-                f"<p>Posterior Cramér–Rao bound at the last update ({esc(crb['method'])}): a lower bound on any "
-                "unbiased estimator's mean squared error, against the ensemble's MSE with its Monte Carlo standard error.</p>"
+                f"<p>Posterior Cramér–Rao bound at the last update ({esc(crb['method'])}): a lower bound on the "
+                "mean squared error of any estimator, biased or not (the posterior bound assumes no unbiasedness), "
+                "against the ensemble's MSE with its Monte Carlo standard error (the bound's own Monte Carlo error "
+                "is not computed).</p>"
                 + table(("state", "lower bound", "MSE", "bound / MSE", "unit"), rows)
             )
         else:

@@ -53,6 +53,10 @@ class VerificationResult:
         The power each check and part had at the run's N under the truth (``summary.json``'s ``power``:
         ``{"name", "part", "power_low", "power_high", "detectable", "detection_n"}``), from the exact
         analysis of the same problem; None where none exists (``summary["power_reason"]`` says why).
+    effect_sizes, cramer_rao, power_by_simulation : typed or None
+        A nonlinear model's run-level effect sizes, Cramér–Rao bound per state and power by simulation
+        (:mod:`kalcal.results.effects`), built from ``summary.json``'s sections of those names; None where
+        the run has none.
     """
 
     scenario: Any = field(repr=False)
@@ -76,6 +80,35 @@ class VerificationResult:
         """``summary.json``'s ``power``: each check's power at the run's N under the truth, None without an
         exact analysis (``summary["power_reason"]`` says why)."""
         return self.raw_summary.get("power")
+
+    @property
+    def effect_sizes(self):
+        """The run's effect sizes over every update, typed (:class:`kalcal.results.effects.RunEffectSizes`,
+        from ``summary.json``'s ``effect_sizes``); None where the run has none (a linear scenario's)."""
+        from kalcal.results.effects import RunEffectSizes
+
+        d = self.raw_summary.get("effect_sizes")
+        return None if d is None else RunEffectSizes.from_summary(d)
+
+    @property
+    def cramer_rao(self):
+        """The posterior Cramér–Rao bound per state against the ensemble's MSE, typed
+        (:class:`kalcal.results.effects.CramerRaoSummary`, from ``summary.json``'s ``cramer_rao``); None
+        where the run has none."""
+        from kalcal.results.effects import CramerRaoSummary
+
+        d = self.raw_summary.get("cramer_rao")
+        return None if d is None else CramerRaoSummary.from_summary(d)
+
+    @property
+    def power_by_simulation(self):
+        """Each check's rejection rate under named alternatives by repeated runs, typed
+        (:class:`kalcal.results.effects.PowerBySimulation`, from ``summary.json``'s
+        ``power_by_simulation``); None where none was run (``checks.power_runs`` = 0)."""
+        from kalcal.results.effects import PowerBySimulation
+
+        d = self.raw_summary.get("power_by_simulation")
+        return None if d is None else PowerBySimulation.from_summary(d)
 
     @property
     def summary(self) -> dict[str, Any]:

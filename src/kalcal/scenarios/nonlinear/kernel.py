@@ -8,8 +8,10 @@ the same realizations on both paths) it simulates the truth with the truth's f a
 NEES, NIS (and their shape histograms), whitened errors and innovations, the effect sizes' sums and the Cramér–Rao bound's expectations
 (F, F^T Q^-1 F at the true x_{k-1}, H^T R^-1 H at the true x_k) into the block's sums: the checks' and
 the effect sizes' on the checked states (all of them, or a scenario's subset: imu-3axis's 9 parameters,
-its pose's tilts nuisance states), the bound's on every state. Nothing of size n K is kept: the block's state is (d, d, n) and the sums of one update are held per lane of a tile,
-reduced at the update's end.
+its pose's tilts nuisance states), the bound's on every state. The kernel's own state is a tile's (d, d, m)
+and the sums of one update held per lane of a tile, reduced at the update's end; but its inputs and
+outputs grow with K: the block's normals (K, n, d + p) and the sums, the residual pair sums (K p)^2 among
+them, so memory is flat in n, not in K.
 
 Layout: the block's realizations in tiles of m, structure of arrays (realizations on the last axis, as
 covariance_update takes them), updates outer and tiles inner. A last tile that is not full repeats the

@@ -5,8 +5,11 @@ process and measurement noises, all as (n, d) and (n, p) arrays (one call of f a
 whole block), so a given seed gives the same realizations whatever the workers. The filter (EKF, IEKF or
 UKF, :func:`kalcal.core.nonlinear_run.run_nonlinear_filter`) runs on the whole block; as each update ends
 its errors, each realization's own P_k and S_k, NEES, NIS and the whitened errors and innovations are
-added into the block's sums (nothing of size n K is kept: memory flat in N and in K), with the effect
+added into the block's sums, with the effect
 sizes' sums (:mod:`kalcal.stats.effects`) and the Cramér–Rao bound's expectations at the true states.
+Memory is flat in N (a block of n realizations at a time, its sums merged as it ends) but not in K: per
+block the draws (K, n, d + p) (and, on the numpy path, the truth's states (K, n, d) and measurements
+(n, K, p)), and per run the sums, which grow with K: the residual pair sums as (K p)^2.
 
 **Hooks** for a scenario built on this problem (:class:`ProblemHooks`, the scenario's ``problem_hooks``;
 a static-pose calibration uses them): the states the checks are on (the others are nuisance: a pose's tilts),
@@ -18,6 +21,7 @@ are the final-time ones, :func:`kalcal.stats.suite.final_time_checks`).
 from __future__ import annotations
 
 import dataclasses
+import threading
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
@@ -42,11 +46,13 @@ def _factor(cov: np.ndarray) -> np.ndarray:
 
 
 #: the run length, N K (realization-updates), from which ``filter.compiled=auto`` compiles a kernel that
-#: is not compiled yet: the compile, about a minute per pair of models (50-80 s on a shared 2-core
-#: machine), against the time the compiled kernel saves over the batched numpy path with every
-#: statistic, about 6 us per realization-update (7 us against 0.8 us, range-bearing, docs/nonlinear.md):
-#: 60 s / 6 us = 10^7, 10^5 realizations of 100 updates (the default 300,000 realizations of 100 updates
-#: compile; 10^4 of them run on the numpy path)
+#: is not compiled yet: the compile, about a minute per pair of models (40-80 s measured), against the
+#: time the compiled kernel saves over the batched numpy path with every statistic, about 2.2 us per
+#: realization-update (2.5 us against 0.24 us for a whole block, range-bearing, K = 100:
+#: ``benchmarks/bench_nonlinear.py paths``). One run of 10^7 saves about 22 s, a third of the compile;
+#: the compile is kept (numba's cache), so the model's later runs start compiled, and about three runs
+#: of that length repay it (one run alone from 2.7 x 10^7). 10^7 is 10^5 realizations of 100 updates
+#: (the default 300,000 realizations of 100 updates compile; 10^4 of them run on the numpy path)
 COMPILE_WORTH = 10_000_000
 
 #: ``filter.compiled``: ``auto`` (compiled where it is already, or where the run repays its compile),
@@ -68,11 +74,73 @@ def _q_inverse(q: np.ndarray) -> tuple[np.ndarray, bool]:
     return np.zeros((d, d)), False
 
 
+def _known_rows(name: str, value, size: int, k_count: int, source: str, field_name: str) -> np.ndarray | None:
+    """u or data as (size,) shared by every update or (K', size) with K' >= K rows, or None where the model
+    takes none: the model's own check of its shape (:func:`kalcal.core.nonlinear._known`), then one row per
+    update; a ConfigError naming the field and the shape otherwise."""
+    from kalcal.core.nonlinear import _known
+    from kalcal.errors import ConfigError
+
+    try:
+        array = _known(name, value, size)
+    except ConfigError as error:
+        raise ConfigError(f"{source}: {field_name}: {error}") from None
+    if array is not None and array.ndim == 2 and array.shape[0] < k_count:
+        raise ConfigError(
+            f"{source}: {field_name}: {name}: {k_count} updates need {k_count} rows of {size} (or one row shared by "
+            f"every update), got shape {array.shape}")
+    return array
+
+
+def _check_truth_finite(value: np.ndarray, name: str, k: int, source: str, states: np.ndarray | None = None) -> None:
+    """A ConfigError naming the function, the update and a state where the truth's f or h (its output
+    ``value``, (n, size)) is NaN or infinite."""
+    bad = ~np.all(np.isfinite(value), axis=1)
+    if np.any(bad):
+        from kalcal.errors import ConfigError
+
+        at = "" if states is None else f", e.g. at x = {np.array2string(states[np.argmax(bad)], precision=4)}"
+        raise ConfigError(
+            f"{source}: the truth's {name} is not finite (NaN or inf) at update {k + 1} for {int(bad.sum())} of "
+            f"{bad.size} realizations{at}: {name} must be finite wherever the truth goes")
+
+
 def _per_update(value: np.ndarray | None, k: int) -> np.ndarray | None:
     """Update k's row of a shared (size,) or per-update (K, size) array."""
     if value is None:
         return None
     return value if value.ndim == 1 else value[k]
+
+
+class PathTally:
+    """How many blocks of a problem ran on each path in this process, counted as each block ends: ``compiled``
+    (the kernel gave the sums), ``fallback`` (the kernel was asked and stopped: a missing measurement or a
+    covariance that is not positive definite, and the numpy path gave the sums from the same draws) and
+    ``numpy`` (the numpy path was the path). What a run or a benchmark reports as the path that ran, where
+    :attr:`NonlinearProblem.compiled_path` says only the path asked for. Blocks run in another process (a
+    Dask worker) count in that process's copy: a copy starts at zero."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()  # blocks end in several threads at once
+        self.compiled = self.fallback = self.numpy = 0
+
+    def add(self, path: str) -> None:
+        with self._lock:
+            setattr(self, path, getattr(self, path) + 1)
+
+    def __reduce__(self):  # a lock does not pickle; a copy in another process counts its own blocks
+        return PathTally, ()
+
+    def describe(self) -> str:
+        """One line: the blocks by path, e.g. ``compiled EKF kernel (25 blocks)``."""
+        parts = [
+            f"{label} ({count} block{'s' if count != 1 else ''})"
+            for label, count in (("compiled EKF kernel", self.compiled),
+                                 ("numpy path after the kernel stopped", self.fallback),
+                                 ("batched numpy path", self.numpy))
+            if count
+        ]
+        return ", ".join(parts) if parts else "no block run"
 
 
 @dataclass(frozen=True)
@@ -133,6 +201,8 @@ class NonlinearProblem(ProblemDefaults):
     planned: int | None = None
     info: ProblemInfo = field(init=False)
     engines: tuple[str, ...] = field(init=False, default=("exact",))
+    #: the blocks this problem ran by path (:class:`PathTally`); a copy (:meth:`plan`) counts its own
+    tally: PathTally = field(init=False, repr=False, compare=False)
 
     NOT_TIME_INVARIANT = "its model is nonlinear: the gains depend on the state, and there is no algebraic Riccati equation"
 
@@ -161,6 +231,7 @@ class NonlinearProblem(ProblemDefaults):
             capabilities=dataclasses.replace(s.capabilities, batch=hooks.batch is not None),
         )
         object.__setattr__(self, "info", info)
+        object.__setattr__(self, "tally", PathTally())
 
     @property
     def hooks(self) -> ProblemHooks:
@@ -203,6 +274,9 @@ class NonlinearProblem(ProblemDefaults):
         loaded = self.scenario.loaded
         t = loaded.truth
         d, p, k_count = t.state_dim, t.measurement_dim, self.scenario.n_updates
+        for m in {id(t): t, id(loaded.filter): loaded.filter}.values():  # the checks the compiled path makes
+            _known_rows("u", loaded.inputs, m.input_dim, k_count, loaded.source, "INPUTS")
+            _known_rows("data", loaded.data, m.data_dim, k_count, loaded.source, "DATA")
         x = t.x0 + rng.standard_normal((n, d)) @ _factor(t.p0).T
         noise = rng.standard_normal((k_count, n, d + p))
         q_factor, r_factor = _factor(t.q), _factor(t.r)
@@ -210,9 +284,16 @@ class NonlinearProblem(ProblemDefaults):
         z = np.empty((n, k_count, p))
         x0 = x
         for k in range(k_count):
-            x = t.transition(x, _per_update(loaded.inputs, k)) + noise[k, :, :d] @ q_factor.T
-            states[k] = x
-            z[:, k] = t.measure(x, _per_update(loaded.data, k)) + noise[k, :, d:] @ r_factor.T
+            # the truth's f and h must be finite wherever the truth goes: a NaN there is the model's error,
+            # not a missing measurement (the filter's rule for a NaN in z), and is refused in one line
+            # (numpy's warnings of the same NaN held back: the refusal names it)
+            with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+                x = t.transition(x, _per_update(loaded.inputs, k)) + noise[k, :, :d] @ q_factor.T
+                _check_truth_finite(x, "f", k, loaded.source)
+                states[k] = x
+                hx = t.measure(x, _per_update(loaded.data, k))
+            _check_truth_finite(hx, "h", k, loaded.source, x)
+            z[:, k] = hx + noise[k, :, d:] @ r_factor.T
         return x0, states, z
 
     def _run(self, z: np.ndarray, on_update, keep: bool):
@@ -334,11 +415,17 @@ class NonlinearProblem(ProblemDefaults):
             state = rng.bit_generator.state
             out = self._compiled_block_sums(rng, n)
             if out is not None:
+                self.tally.add("compiled")
                 return out
             # a missing measurement or a covariance that is not positive definite: the numpy path gives
             # that case's numbers (or its error) from the same draws
             rng.bit_generator.state = state
-        return self.numpy_block_sums(rng, n, engine)
+            out = self.numpy_block_sums(rng, n, engine)
+            self.tally.add("fallback")
+            return out
+        out = self.numpy_block_sums(rng, n, engine)
+        self.tally.add("numpy")
+        return out
 
     def _compiled_block_sums(self, rng: np.random.Generator, n: int) -> MomentSums | None:
         s, loaded = self.scenario, self.scenario.loaded
@@ -357,14 +444,16 @@ class NonlinearProblem(ProblemDefaults):
         normalized = np.zeros((k_count, p))
         q_inv, has_q_inv = _q_inverse(t.q)
 
-        def rows(value, size):
-            if size == 0 or value is None:
-                return np.zeros((k_count, 0))
-            value = np.asarray(value, dtype=float)
-            return np.ascontiguousarray(np.broadcast_to(value, (k_count, size)) if value.ndim == 1 else value)
-
         if t.input_dim != fm.input_dim or t.data_dim != fm.data_dim:
             return None
+
+        def rows(name, value, size):
+            # the numpy path's checks (the model's own, then one row per update) before any broadcast
+            if size == 0:
+                return np.zeros((k_count, 0))
+            value = _known_rows(name, value, size, k_count, loaded.source, "DATA" if name == "data" else "INPUTS")
+            return np.ascontiguousarray(np.broadcast_to(value, (k_count, size)) if value.ndim == 1 else value[:k_count])
+
         from kalcal.scenarios.nonlinear.compiled import run_block
 
         ok = run_block(
@@ -372,7 +461,7 @@ class NonlinearProblem(ProblemDefaults):
             first, noise, t.x0, _factor(t.p0), _factor(t.q), _factor(t.r), float(t.dt),
             q_inv, has_q_inv, np.linalg.cholesky(t.r),
             fm.x0, fm.p0, fm.q, fm.r, float(fm.dt),
-            rows(loaded.inputs, t.input_dim), rows(loaded.data, t.data_dim), checked, sums, normalized, eff, _TILE,
+            rows("u", loaded.inputs, t.input_dim), rows("data", loaded.data, t.data_dim), checked, sums, normalized, eff, _TILE,
         )
         if not ok:
             return None
