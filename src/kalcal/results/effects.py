@@ -9,6 +9,7 @@ summary and its types cannot drift apart unseen); arrays come back as numpy arra
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
@@ -127,6 +128,45 @@ class CramerRaoSummary:
 
 
 @dataclass(frozen=True)
+class PowerRow:
+    """One check's rejection rate under one alternative, by simulation.
+
+    Attributes
+    ----------
+    alternative : str
+    check : str
+    runs : int
+        R, the repeated runs.
+    exact_rejections : int
+        Runs whose exact verdict failed.
+    exact_rate, exact_lower, exact_upper : float
+        The rate and its Clopper–Pearson interval at ``confidence``.
+    tolerance_rejections : int or None
+        Runs whose tolerance verdict failed (an effect wholly outside its band); None for a check with no
+        effect size.
+    tolerance_rate, tolerance_lower, tolerance_upper : float or None
+    tolerance_undecided : int or None
+        Runs whose tolerance verdict was undecided.
+    """
+
+    alternative: str
+    check: str
+    runs: int
+    exact_rejections: int
+    exact_rate: float
+    exact_lower: float
+    exact_upper: float
+    tolerance_rejections: int | None
+    tolerance_rate: float | None
+    tolerance_lower: float | None
+    tolerance_upper: float | None
+    tolerance_undecided: int | None
+
+    def as_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+@dataclass(frozen=True)
 class PowerBySimulation:
     """Each check's rejection rate under named alternatives by repeated runs (``summary.json``'s
     ``power_by_simulation``): an estimate by simulation with Clopper–Pearson intervals, not an exact power.
@@ -143,7 +183,7 @@ class PowerBySimulation:
     alternatives : dict of str to str
         Each alternative's name and what it changes.
     rows : tuple of PowerRow
-        Per alternative and check (:class:`kalcal.scenarios.nonlinear.power.PowerRow`).
+        Per alternative and check (:class:`PowerRow`).
     """
 
     method: str
@@ -156,8 +196,6 @@ class PowerBySimulation:
 
     @classmethod
     def from_summary(cls, d: dict[str, Any]) -> PowerBySimulation:
-        from kalcal.scenarios.nonlinear.power import PowerRow
-
         return cls(
             method=str(d["method"]), note=str(d["note"]), runs=int(d["runs"]), realizations=int(d["realizations"]),
             confidence=float(d["confidence"]), alternatives=dict(d["alternatives"]),

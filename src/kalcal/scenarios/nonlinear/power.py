@@ -36,6 +36,8 @@ from typing import Any
 
 import numpy as np
 
+from kalcal.results.effects import PowerRow
+
 from kalcal.stats.distributions import binom_interval
 
 __all__ = ["ALTERNATIVES", "PowerRow", "SimulatedPower", "alternative_models", "simulated_power"]
@@ -75,45 +77,6 @@ def alternative_models(filter_model, name: str):
         # numpy-only function is attempted)
         return dataclasses.replace(base, h=biased_h, jacobian="auto", f_jacobian=jac.f, h_jacobian=jac.h), base
     raise ValueError(f"alternative must be one of {', '.join(ALTERNATIVES)}, got {name!r}")
-
-
-@dataclass(frozen=True)
-class PowerRow:
-    """One check's rejection rate under one alternative, by simulation.
-
-    Attributes
-    ----------
-    alternative : str
-    check : str
-    runs : int
-        R, the repeated runs.
-    exact_rejections : int
-        Runs whose exact verdict failed.
-    exact_rate, exact_lower, exact_upper : float
-        The rate and its Clopper–Pearson interval at ``confidence``.
-    tolerance_rejections : int or None
-        Runs whose tolerance verdict failed (an effect wholly outside its band); None for a check with no
-        effect size.
-    tolerance_rate, tolerance_lower, tolerance_upper : float or None
-    tolerance_undecided : int or None
-        Runs whose tolerance verdict was undecided.
-    """
-
-    alternative: str
-    check: str
-    runs: int
-    exact_rejections: int
-    exact_rate: float
-    exact_lower: float
-    exact_upper: float
-    tolerance_rejections: int | None
-    tolerance_rate: float | None
-    tolerance_lower: float | None
-    tolerance_upper: float | None
-    tolerance_undecided: int | None
-
-    def as_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
 
 
 @dataclass(frozen=True)
