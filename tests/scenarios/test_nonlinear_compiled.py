@@ -55,8 +55,18 @@ def _assert_same_sums(compiled, oracle, rtol=1e-10, layout=None):
             assert np.all(np.isfinite(a)), name
             scale = np.max(np.abs(b))
             assert np.max(np.abs(a - b)) <= rtol * scale, ("effect", name, np.max(np.abs(a - b)) / scale)
+    # the block's own group for the bound's jackknife: its count, its effect sums (compared above) and
+    # its sum of e^2, the diagonal of error_outer (compared below)
+    assert (compiled.effect_blocks is None) == (oracle.effect_blocks is None)
+    if oracle.effect_blocks is not None:
+        assert len(compiled.effect_blocks) == len(oracle.effect_blocks) == 1
+        (cn, ce, cm), (on, oe, om) = compiled.effect_blocks[0], oracle.effect_blocks[0]
+        assert cn == on == oracle.count
+        assert np.array_equal(ce, compiled.effect) and np.array_equal(oe, oracle.effect)
+        assert np.array_equal(om, np.diagonal(oracle.error_outer, axis1=1, axis2=2))
+        assert np.max(np.abs(cm - om)) <= rtol * np.max(np.abs(om))
     for f in dataclasses.fields(oracle):
-        if f.name == "effect":
+        if f.name in ("effect", "effect_blocks"):
             continue
         a, b = getattr(compiled, f.name), getattr(oracle, f.name)
         if f.name == "count":
