@@ -58,8 +58,11 @@ is of the *truth's* model and posterior (Bayesian, Van Trees's): the mean square
 estimator, biased or not, is at least J_k^-1 where the joint density of states and measurements is regular
 (f and h differentiable where the truth goes); no unbiasedness is assumed, as the classical bound of a
 fixed parameter assumes it. The ensemble's E[e_ik^2] is reported against (J_k^-1)_ii as a lower bound with
-the MSE's own Monte Carlo standard error. The bound's own Monte Carlo error (its expectations are means
-over the same N realizations) is not computed: ``below_bound`` is the MSE's error alone and says so.
+the MSE's own Monte Carlo standard error and the bound's: its expectations are means over the same N
+realizations, and its error is the delete-one-group jackknife over the engine's independent blocks
+(:func:`cramer_rao_bound`), as is the error of MSE - bound that ``below_bound`` counts; where the run kept
+fewer than two groups the bound's error is not available and ``below_bound`` counts the MSE's alone, and
+says so.
 """
 
 from __future__ import annotations
