@@ -139,9 +139,11 @@ def _constructed(bound: float, difference_se) -> CramerRaoBound:
 
 
 def test_below_bound_counts_the_error_of_the_difference():
-    """z = 2.576 at 0.99. MSE 1.0 +- 0.01 against a bound 1.05: below beyond the MSE's error alone
-    (1.0 + 2.576 x 0.01 < 1.05), not beyond the difference's 0.04 (-0.05 + 2.576 x 0.04 > 0); against a
-    bound 1.2, below beyond both (-0.2 + 0.103 < 0)."""
+    """z = 2.576 and t(7) = 3.499 at 0.99 (8 groups). MSE 1.0 +- 0.01 against a bound 1.05: below beyond
+    the MSE's error alone (1.0 + 2.576 x 0.01 < 1.05), not beyond the difference's 0.04 (-0.05 + 3.499 x
+    0.04 > 0); against a bound 1.2, below beyond both (-0.2 + 0.140 < 0). A difference's error of 0.015
+    against the bound 1.05 tells the t quantile from the normal one: -0.05 + 2.576 x 0.015 < 0 but
+    -0.05 + 3.499 x 0.015 > 0, not below (the jackknife's error, from 8 groups, is itself uncertain)."""
     row = _constructed(1.05, 0.04).per_state(("a",), ("m",), 0.99)[0]
     assert row["below_bound"] is False and row["lower_bound_se"] == 0.03 and row["difference_se"] == 0.04
     assert row["below_bound_error"] == BELOW_BOUND_ERROR
@@ -149,3 +151,4 @@ def test_below_bound_counts_the_error_of_the_difference():
     assert alone["below_bound"] is True and alone["lower_bound_se"] is None
     assert alone["below_bound_error"] == BELOW_BOUND_ERROR_MSE_ONLY
     assert _constructed(1.2, 0.04).per_state(("a",), ("m",), 0.99)[0]["below_bound"] is True
+    assert _constructed(1.05, 0.015).per_state(("a",), ("m",), 0.99)[0]["below_bound"] is False

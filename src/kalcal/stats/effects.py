@@ -327,7 +327,8 @@ def _ratio_se(sa, sb, saa, sbb, sab, n):
 #: what ``below_bound`` counts of the Monte Carlo error (each row of :meth:`CramerRaoBound.per_state`)
 BELOW_BOUND_ERROR = (
     "the Monte Carlo error of MSE - bound, both from the same realizations: the delete-one-group jackknife "
-    "over the run's independent blocks (difference_se)"
+    "over the run's G independent groups of blocks (difference_se), at Student's t quantile with G - 1 "
+    "degrees of freedom"
 )
 #: ``below_bound_error`` where the run kept no groups of blocks (one block, or resumed from a checkpoint
 #: without them): the bound's own error is then not available
@@ -378,10 +379,18 @@ class CramerRaoBound:
         own Monte Carlo standard error (``lower_bound_se``), the MSE with its standard error, their ratio,
         and whether the MSE lies below the bound beyond the Monte Carlo error of their difference (a
         contradiction of the bound, which holds for every estimator, biased or not: a bug, or a model
-        outside the bound's regularity conditions). ``below_bound`` is MSE - bound + z se < 0 with se the
-        jackknife's standard error of the difference (``difference_se``), or, where the run kept no groups
-        for the jackknife, the MSE's error alone; each row says which in ``below_bound_error``."""
+        outside the bound's regularity conditions). ``below_bound`` is MSE - bound + t se < 0 with se the
+        jackknife's standard error of the difference (``difference_se``) and t Student's two-sided quantile
+        at ``confidence`` with G - 1 degrees of freedom (G groups), or, where the run kept no groups for the
+        jackknife, z se with the MSE's error alone and the normal quantile; each row says which in
+        ``below_bound_error``."""
         zq = float(normal_isf((1.0 - confidence) / 2.0))
+        if self.groups is not None and self.groups >= 2:
+            # the jackknife's variance has about G - 1 degrees of freedom: Student's t quantile, not the
+            # normal one, which with a few groups would call a bound crossed far more often than stated
+            from scipy.stats import t as student_t
+
+            tq = float(student_t.isf((1.0 - confidence) / 2.0, self.groups - 1))
         rows = []
         for i, name in enumerate(names):
             mse, se = float(self.mse[-1, i]), float(self.mse_se[-1, i])
@@ -399,7 +408,7 @@ class CramerRaoBound:
                     "mse_se": se,
                     "difference_se": diff_se if jack else None,
                     "efficiency": None if bound is None else bound / mse,
-                    "below_bound": None if bound is None else bool(mse - bound + zq * diff_se < 0.0),
+                    "below_bound": None if bound is None else bool(mse - bound + (tq if jack else zq) * diff_se < 0.0),
                     "below_bound_error": BELOW_BOUND_ERROR if jack or bound is None else BELOW_BOUND_ERROR_MSE_ONLY,
                 }
             )
