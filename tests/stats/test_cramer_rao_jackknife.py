@@ -152,3 +152,31 @@ def test_below_bound_counts_the_error_of_the_difference():
     assert alone["below_bound_error"] == BELOW_BOUND_ERROR_MSE_ONLY
     assert _constructed(1.2, 0.04).per_state(("a",), ("m",), 0.99)[0]["below_bound"] is True
     assert _constructed(1.05, 0.015).per_state(("a",), ("m",), 0.99)[0]["below_bound"] is False
+
+
+def test_summary_typed_results_and_report_carry_the_bounds_error(tmp_path, monkeypatch):
+    """9000 realizations are 3 blocks of the engine (4096, 4096, 808): summary.json's rows, the typed
+    results and the report carry the bound's own error, equal to the jackknife's from the same sums."""
+    import shutil
+
+    import kalcal
+
+    shutil.copytree(ROOT / "examples", tmp_path / "examples")
+    monkeypatch.chdir(tmp_path)
+    result = kalcal.verify(
+        "examples/range_bearing.py", n=9000, seed=4, long_run=0, out=tmp_path / "out",
+        settings={"scenario.updates": 10, "checks.power_runs": 0}, report=True,
+    )
+    crb = result.raw_summary["cramer_rao"]
+    assert crb["jackknife_groups"] == 3 and len(crb["bound_diagonal_se"]) == 10
+    for row in crb["final"]:
+        assert row["lower_bound_se"] > 0 and row["difference_se"] > 0 and row["below_bound_error"] == BELOW_BOUND_ERROR
+        assert row["lower_bound_se"] == pytest.approx(crb["bound_diagonal_se"][-1][crb["final"].index(row)], rel=0, abs=0)
+    typed = result.cramer_rao
+    assert typed.jackknife_groups == 3 and typed.state("px").lower_bound_se == crb["final"][0]["lower_bound_se"]
+    np.testing.assert_array_equal(typed.bound_diagonal_se, np.array(crb["bound_diagonal_se"]))
+    page = (tmp_path / "out" / "report.html").read_text()
+    from kalcal.stats.text import fmt
+
+    bound, se = crb["final"][0]["lower_bound"], crb["final"][0]["lower_bound_se"]
+    assert f"{fmt(bound)} &plusmn; {fmt(se)}" in page
