@@ -111,8 +111,9 @@ def test_zero_buffers_and_the_pairs():
     own = SumBuffers.zeros(5, 3, 2, 7, residual_pairs=False, own_cov=True)
     assert own.whitened_error.shape == (5, 3) and own.whitened_estimate.shape == (5, 3, 3)
     # every sum a kernel adds into is a field of MomentSums; the pair sums come from ``residuals`` by syrk, and
-    # ``effect`` (the effect sizes' sums) is added in numpy by the problems whose P is data-dependent
-    kernel_sums = {f.name for f in fields(MomentSums)} - {"count", "residual_outer", "normalized_residual", "effect"}
+    # ``effect`` (the effect sizes' sums) is added in numpy by the problems whose P is data-dependent, and
+    # ``effect_blocks`` (its groups of blocks, for the bound's jackknife) is kept beside it
+    kernel_sums = {f.name for f in fields(MomentSums)} - {"count", "residual_outer", "normalized_residual", "effect", "effect_blocks"}
     assert set(SumBuffers._fields) == kernel_sums | {"residuals", "nees_grid", "nis_grid"}
 
 

@@ -43,6 +43,15 @@ def _linear(r_scale: float) -> NonlinearModel:
     )
 
 
+def _same_groups(a, b, equal_nan=False) -> bool:
+    """Two MomentSums' ``effect_blocks`` equal group for group, bit for bit."""
+    if a is None or b is None:
+        return a is None and b is None
+    return len(a) == len(b) and all(
+        x[0] == y[0] and all(np.array_equal(u, v, equal_nan=equal_nan) for u, v in zip(x[1:], y[1:])) for x, y in zip(a, b)
+    )
+
+
 def _assert_same_sums(compiled, oracle, rtol=1e-10, layout=None):
     """Every field of two MomentSums within rtol of the oracle's largest entry of that field; the effect
     sums, a flat array of quantities of different sizes, each quantity within rtol of its own largest entry
@@ -55,8 +64,24 @@ def _assert_same_sums(compiled, oracle, rtol=1e-10, layout=None):
             assert np.all(np.isfinite(a)), name
             scale = np.max(np.abs(b))
             assert np.max(np.abs(a - b)) <= rtol * scale, ("effect", name, np.max(np.abs(a - b)) / scale)
+    # the block's own group for the bound's jackknife: its count, its effect sums (compared above) and
+    # its sum of e^2, the diagonal of error_outer (compared below)
+    assert (compiled.effect_blocks is None) == (oracle.effect_blocks is None)
+    if oracle.effect_blocks is not None:
+        assert len(compiled.effect_blocks) == len(oracle.effect_blocks)
+        assert sum(g[0] for g in oracle.effect_blocks) == oracle.count
+        if len(oracle.effect_blocks) == 1:  # one block: its group is its own sums
+            assert np.array_equal(compiled.effect_blocks[0][1], compiled.effect)
+            assert np.array_equal(oracle.effect_blocks[0][1], oracle.effect)
+            assert np.array_equal(oracle.effect_blocks[0][2], np.diagonal(oracle.error_outer, axis1=1, axis2=2))
+        for (cn, ce, cm), (on, oe, om) in zip(compiled.effect_blocks, oracle.effect_blocks):
+            assert cn == on
+            assert np.max(np.abs(cm - om)) <= rtol * np.max(np.abs(om))
+            for name in layout.slices:
+                a, b = layout.view(ce, name), layout.view(oe, name)
+                assert np.max(np.abs(a - b)) <= rtol * np.max(np.abs(b)), ("effect_blocks", name)
     for f in dataclasses.fields(oracle):
-        if f.name == "effect":
+        if f.name in ("effect", "effect_blocks"):
             continue
         a, b = getattr(compiled, f.name), getattr(oracle, f.name)
         if f.name == "count":
@@ -176,6 +201,9 @@ def test_compiled_run_same_seed_same_sums_whatever_the_workers_and_the_numpy_run
     assert blocks > 1
     for f in dataclasses.fields(one):
         a, b = getattr(one, f.name), getattr(two, f.name)
+        if f.name == "effect_blocks":  # the bound's jackknife groups, block by block
+            assert _same_groups(a, b), f.name
+            continue
         assert (a is None and b is None) or np.array_equal(a, b), f.name
     _assert_same_sums(one, run_monte_carlo(numpy_problem, 9000, 11, workers=1).sums, layout=problem.layout)
     assert (numpy_problem.tally.compiled, numpy_problem.tally.numpy) == (0, blocks)
@@ -219,6 +247,9 @@ def test_a_missing_measurement_stops_the_kernel_and_the_block_runs_on_the_numpy_
     want = problem.numpy_block_sums(_PlantedNaN(4), 100, "exact")
     for f in dataclasses.fields(want):
         a, b = getattr(got, f.name), getattr(want, f.name)
+        if f.name == "effect_blocks":
+            assert _same_groups(a, b, equal_nan=True), f.name
+            continue
         assert (a is None and b is None) or np.array_equal(a, b, equal_nan=True), f.name
     assert np.isnan(want.nis[3])  # the numpy path's own rule for the missing measurement shows in the sums
 

@@ -298,14 +298,18 @@ def effects_summary(effects, info, confidence: float) -> dict[str, Any]:
             "note": (
                 "a lower bound: the posterior (Bayesian) Cramér-Rao bound, which the mean squared error of every "
                 "estimator, biased or not, is at least where the joint density of states and measurements is "
-                "regular; below_bound counts the MSE's Monte Carlo error, not the bound's own (not computed)"
+                "regular; lower_bound_se is the bound's own Monte Carlo error and below_bound counts the error of "
+                "MSE - bound, both by the delete-one-group jackknife over the run's independent blocks (each row's "
+                "below_bound_error says where the run kept too few groups and counts the MSE's error alone)"
             ),
+            "jackknife_groups": bound.groups,
             "available": bound.available,
             "method": bound.reason,
             "final": bound.per_state(info.state_names, info.state_units, confidence),
             "bound_diagonal": None if bound.bound is None else np.diagonal(bound.bound, axis1=1, axis2=2).tolist(),
             "mse": bound.mse.tolist(),
             "mse_se": bound.mse_se.tolist(),
+            "bound_diagonal_se": None if bound.bound_se is None else bound.bound_se.tolist(),
         }
     return {"effect_sizes": effects.as_dict(), "cramer_rao": crb}
 

@@ -238,6 +238,13 @@ class MomentSums:
     #: keep it
     nees_histogram: np.ndarray | None = None
     nis_histogram: np.ndarray | None = None  #: counts of the NIS likewise, int64 (K, B)
+    #: the effect sums per group of blocks, for the Cramér–Rao bound's own Monte Carlo error (a jackknife
+    #: over the groups, :func:`kalcal.stats.effects.cramer_rao_bound`): ``((count, effect, mse), ...)`` in
+    #: block order, ``effect`` the group's flat effect sums and ``mse`` its sum of e_ik^2, (K, d). Blocks are
+    #: independent (each has its own SeedSequence stream); past :data:`EFFECT_GROUPS_MAX` groups adjacent
+    #: pairs are folded into one (memory flat in N). None where a problem keeps no effect sums or the sums
+    #: came from a checkpoint that did not keep them
+    effect_blocks: tuple | None = None
 
     @classmethod
     def from_block(cls, block: BlockResult) -> MomentSums:
@@ -289,6 +296,14 @@ class MomentSums:
                 sums[name] = None
         return cls(count=count, **sums, residual_outer=outer, normalized_residual=normalized_residual)
 
+    def with_effect(self, flat: np.ndarray) -> MomentSums:
+        """These sums (one block's) with their flat effect sums, kept also as the block's own group of
+        :attr:`effect_blocks` with its count and its sum of e_ik^2 (the diagonal of ``error_outer``)."""
+        self.effect = flat
+        mse = np.diagonal(self.error_outer, axis1=1, axis2=2).copy()
+        self.effect_blocks = ((self.count, flat.copy(), mse),)
+        return self
+
     def merge(self, other: MomentSums) -> MomentSums:
         """The sums of both ensembles (self first, then other: the order fixes the rounding)."""
         def add(a, b):
@@ -296,8 +311,34 @@ class MomentSums:
 
         return MomentSums(
             count=self.count + other.count,
-            **{f.name: add(getattr(self, f.name), getattr(other, f.name)) for f in fields(self) if f.name != "count"},
+            **{f.name: add(getattr(self, f.name), getattr(other, f.name)) for f in fields(self)
+               if f.name not in ("count", "effect_blocks")},
+            effect_blocks=merge_effect_blocks(self.effect_blocks, other.effect_blocks),
         )
+
+
+#: The most groups of blocks :attr:`MomentSums.effect_blocks` keeps: past it adjacent pairs are folded, so
+#: the memory of the jackknife does not grow with N (64 groups: the jackknife's variance estimate has about
+#: 63 degrees of freedom, its standard error a relative error of about 1 / sqrt(2 x 63) = 9 %).
+EFFECT_GROUPS_MAX = 64
+
+
+def merge_effect_blocks(a: tuple | None, b: tuple | None) -> tuple | None:
+    """The groups of both (a's first, then b's, in block order); past :data:`EFFECT_GROUPS_MAX` adjacent pairs
+    folded into one, from the first on. The engine merges in block order whatever its threads or Dask
+    workers, so the groups (and the rounding of their sums) depend only on N, the block size and the seed."""
+    if a is None or b is None:
+        return None
+    groups = list(a) + list(b)
+    while len(groups) > EFFECT_GROUPS_MAX:
+        folded = [
+            (groups[i][0] + groups[i + 1][0], groups[i][1] + groups[i + 1][1], groups[i][2] + groups[i + 1][2])
+            for i in range(0, len(groups) - 1, 2)
+        ]
+        if len(groups) % 2:
+            folded.append(groups[-1])
+        groups = folded
+    return tuple(groups)
 
 
 def _normalized(block: BlockResult) -> np.ndarray:

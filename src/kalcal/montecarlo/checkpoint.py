@@ -40,8 +40,15 @@ def save(path: str | Path, sums: MomentSums, next_block: int, digest: str) -> No
     path.parent.mkdir(parents=True, exist_ok=True)
     arrays = {}
     for field in dataclasses.fields(sums):
+        if field.name == "effect_blocks":
+            continue
         value = getattr(sums, field.name)
         arrays[field.name] = np.array(_NONE) if value is None else np.asarray(value)
+    if sums.effect_blocks is not None:  # the groups as three stacked arrays (no pickles in a checkpoint)
+        counts, effects, mses = zip(*sums.effect_blocks)
+        arrays["effect_blocks_count"] = np.asarray(counts, dtype=np.int64)
+        arrays["effect_blocks_effect"] = np.stack(effects)
+        arrays["effect_blocks_mse"] = np.stack(mses)
     temporary = path.with_name(path.name + ".tmp")
     with temporary.open("wb") as handle:
         np.savez(handle, next_block=next_block, fingerprint=digest, **arrays)
@@ -64,8 +71,17 @@ def load(path: str | Path, digest: str) -> tuple[MomentSums, int] | None:
             next_block = int(data["next_block"])
             values = {}
             for field in dataclasses.fields(MomentSums):
+                if field.name == "effect_blocks":
+                    continue
                 value = data[field.name]
                 values[field.name] = None if value.dtype.kind == "U" and str(value) == _NONE else value
+            # a checkpoint written without the groups resumes without them: the bound's own Monte Carlo
+            # error is then reported as not available
+            if "effect_blocks_count" in data.files:
+                values["effect_blocks"] = tuple(
+                    (int(c), e, m)
+                    for c, e, m in zip(data["effect_blocks_count"], data["effect_blocks_effect"], data["effect_blocks_mse"])
+                )
     except (OSError, ValueError, KeyError) as exc:
         raise ConfigError(f"--checkpoint {path}: not a kalcal checkpoint ({exc})") from None
     if stored != digest:

@@ -216,7 +216,8 @@ Estimate = Callable[[RunEstimate], None]
 
 def _nbytes(sums: MomentSums) -> int:
     """Bytes of a MomentSums' arrays."""
-    return sum(v.nbytes for v in vars(sums).values() if isinstance(v, np.ndarray))
+    groups = sum(a.nbytes for g in sums.effect_blocks or () for a in g[1:])
+    return groups + sum(v.nbytes for v in vars(sums).values() if isinstance(v, np.ndarray))
 
 
 def run_monte_carlo(

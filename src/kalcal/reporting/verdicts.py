@@ -161,7 +161,9 @@ def effects_section(summary: Mapping[str, Any]) -> str:
     if crb:
         if crb["available"]:
             rows = [
-                f'<tr><td>{esc(r["state"])}</td><td class="num">{esc(fmt(r["lower_bound"]))}</td>'
+                f'<tr><td>{esc(r["state"])}</td><td class="num">{esc(fmt(r["lower_bound"]))}'
+                + ("" if r.get("lower_bound_se") is None else f' &plusmn; {esc(fmt(r["lower_bound_se"]))}')
+                + '</td>'
                 f'<td class="num">{esc(fmt(r["mse"]))} &plusmn; {esc(fmt(r["mse_se"]))}</td>'
                 f'<td class="num">{esc(fmt(r["efficiency"]))}</td><td>{esc(r["unit"])}</td></tr>'
                 for r in crb["final"]
@@ -169,8 +171,8 @@ def effects_section(summary: Mapping[str, Any]) -> str:
             html += (
                 f"<p>Posterior Cramér–Rao bound at the last update ({esc(crb['method'])}): a lower bound on the "
                 "mean squared error of any estimator, biased or not (the posterior bound assumes no unbiasedness), "
-                "against the ensemble's MSE with its Monte Carlo standard error (the bound's own Monte Carlo error "
-                "is not computed).</p>"
+                "against the ensemble's MSE; each with its Monte Carlo standard error (the bound's by the "
+                "delete-one-group jackknife over the run's independent blocks, where it kept at least two).</p>"
                 + table(("state", "lower bound", "MSE", "bound / MSE", "unit"), rows)
             )
         else:

@@ -64,12 +64,18 @@ class CramerRaoState:
         The state's name and the unit of its squared error, e.g. ``(m)^2``.
     lower_bound : float or None
         (J_K^-1)_ii, in ``unit``; None where no bound is given.
+    lower_bound_se : float or None
+        The bound's own Monte Carlo standard error (delete-one-group jackknife over the run's independent
+        blocks), in ``unit``; None where no bound is given or the run kept fewer than two groups.
     mse, mse_se : float
         The ensemble's mean squared error and its Monte Carlo standard error, in ``unit``.
+    difference_se : float or None
+        The jackknife's standard error of mse - lower_bound, in ``unit`` (None likewise).
     efficiency : float or None
         lower_bound / mse (at most about 1).
     below_bound : bool or None
-        The MSE below the bound beyond the MSE's Monte Carlo error at the run's confidence.
+        The MSE below the bound beyond the Monte Carlo error of their difference at the run's confidence
+        (``difference_se``; the MSE's error alone where that is None).
     below_bound_error : str
         What of the Monte Carlo error ``below_bound`` counts.
     """
@@ -82,6 +88,8 @@ class CramerRaoState:
     efficiency: float | None
     below_bound: bool | None
     below_bound_error: str
+    lower_bound_se: float | None = None
+    difference_se: float | None = None
 
 
 @dataclass(frozen=True)
@@ -101,6 +109,10 @@ class CramerRaoSummary:
         diag J_k^-1 at every update, states' units squared.
     mse, mse_se : ndarray, shape (K, d)
         The ensemble's MSE and its Monte Carlo standard error at every update.
+    bound_diagonal_se : ndarray, shape (K, d), or None
+        The jackknife's standard error of ``bound_diagonal`` (None where the run kept fewer than two groups).
+    jackknife_groups : int or None
+        The number of independent groups of blocks the jackknife used.
     """
 
     note: str
@@ -110,13 +122,16 @@ class CramerRaoSummary:
     bound_diagonal: np.ndarray | None
     mse: np.ndarray
     mse_se: np.ndarray
+    bound_diagonal_se: np.ndarray | None = None
+    jackknife_groups: int | None = None
 
     @classmethod
     def from_summary(cls, d: dict[str, Any]) -> CramerRaoSummary:
         return cls(
             note=str(d["note"]), available=bool(d["available"]), method=str(d["method"]),
             final=tuple(CramerRaoState(**row) for row in d["final"]), bound_diagonal=_array(d["bound_diagonal"]),
-            mse=_array(d["mse"]), mse_se=_array(d["mse_se"]),
+            mse=_array(d["mse"]), mse_se=_array(d["mse_se"]), bound_diagonal_se=_array(d.get("bound_diagonal_se")),
+            jackknife_groups=d.get("jackknife_groups"),
         )
 
     def state(self, name: str) -> CramerRaoState:

@@ -58,8 +58,11 @@ is of the *truth's* model and posterior (Bayesian, Van Trees's): the mean square
 estimator, biased or not, is at least J_k^-1 where the joint density of states and measurements is regular
 (f and h differentiable where the truth goes); no unbiasedness is assumed, as the classical bound of a
 fixed parameter assumes it. The ensemble's E[e_ik^2] is reported against (J_k^-1)_ii as a lower bound with
-the MSE's own Monte Carlo standard error. The bound's own Monte Carlo error (its expectations are means
-over the same N realizations) is not computed: ``below_bound`` is the MSE's error alone and says so.
+the MSE's own Monte Carlo standard error and the bound's: its expectations are means over the same N
+realizations, and its error is the delete-one-group jackknife over the engine's independent blocks
+(:func:`cramer_rao_bound`), as is the error of MSE - bound that ``below_bound`` counts; where the run kept
+fewer than two groups the bound's error is not available and ``below_bound`` counts the MSE's alone, and
+says so.
 """
 
 from __future__ import annotations
@@ -322,7 +325,17 @@ def _ratio_se(sa, sb, saa, sbb, sab, n):
 
 
 #: what ``below_bound`` counts of the Monte Carlo error (each row of :meth:`CramerRaoBound.per_state`)
-BELOW_BOUND_ERROR = "the MSE's Monte Carlo error only; the bound's own Monte Carlo error is not computed"
+BELOW_BOUND_ERROR = (
+    "the Monte Carlo error of MSE - bound, both from the same realizations: the delete-one-group jackknife "
+    "over the run's G independent groups of blocks (difference_se), at Student's t quantile with G - 1 "
+    "degrees of freedom"
+)
+#: ``below_bound_error`` where the run kept no groups of blocks (one block, or resumed from a checkpoint
+#: without them): the bound's own error is then not available
+BELOW_BOUND_ERROR_MSE_ONLY = (
+    "the MSE's Monte Carlo error only; the bound's own Monte Carlo error is not available "
+    "(fewer than two blocks, or a checkpoint without them)"
+)
 
 
 @dataclass(frozen=True)
@@ -341,6 +354,15 @@ class CramerRaoBound:
         E[e_ik^2], states' units squared.
     mse_se : ndarray, shape (K, d)
         Its Monte Carlo standard error, sqrt(var(e_ik^2) / N).
+    bound_se : ndarray, shape (K, d) or None
+        The Monte Carlo standard error of each state's bound (J_k^-1)_ii, states' units squared: the
+        delete-one-group jackknife over the run's independent blocks (:func:`cramer_rao_bound`). None where
+        the run kept fewer than two groups (one block, or a checkpoint that did not keep them).
+    difference_se : ndarray, shape (d,) or None
+        The same jackknife's standard error of MSE - bound at the final update (states' units squared),
+        which counts the correlation of the two (both are means over the same realizations); None likewise.
+    groups : int or None
+        The number G of groups the jackknife used (None: the run kept none).
     """
 
     available: bool
@@ -348,56 +370,120 @@ class CramerRaoBound:
     bound: np.ndarray | None
     mse: np.ndarray
     mse_se: np.ndarray
+    bound_se: np.ndarray | None = None
+    difference_se: np.ndarray | None = None
+    groups: int | None = None
 
     def per_state(self, names, units, confidence: float) -> list[dict[str, Any]]:
-        """summary.json's ``cramer_rao``: per state at the final update, the bound as a lower bound, the
-        MSE with its standard error, their ratio, and whether the MSE lies below the bound beyond its
-        Monte Carlo error (a contradiction of the bound, which holds for every estimator, biased or not:
-        a bug, or a model outside the bound's regularity conditions). ``below_bound`` counts the MSE's Monte
-        Carlo error only, not the bound's own (not computed: its expectations are means over the same
-        realizations), so a bound within its own error of the MSE can read as below it; each row says so
-        in ``below_bound_error``."""
+        """summary.json's ``cramer_rao``: per state at the final update, the bound as a lower bound with its
+        own Monte Carlo standard error (``lower_bound_se``), the MSE with its standard error, their ratio,
+        and whether the MSE lies below the bound beyond the Monte Carlo error of their difference (a
+        contradiction of the bound, which holds for every estimator, biased or not: a bug, or a model
+        outside the bound's regularity conditions). ``below_bound`` is MSE - bound + t se < 0 with se the
+        jackknife's standard error of the difference (``difference_se``) and t Student's two-sided quantile
+        at ``confidence`` with G - 1 degrees of freedom (G groups), or, where the run kept no groups for the
+        jackknife, z se with the MSE's error alone and the normal quantile; each row says which in
+        ``below_bound_error``."""
         zq = float(normal_isf((1.0 - confidence) / 2.0))
+        if self.groups is not None and self.groups >= 2:
+            # the jackknife's variance has about G - 1 degrees of freedom: Student's t quantile, not the
+            # normal one, which with a few groups would call a bound crossed far more often than stated
+            from scipy.stats import t as student_t
+
+            tq = float(student_t.isf((1.0 - confidence) / 2.0, self.groups - 1))
         rows = []
         for i, name in enumerate(names):
             mse, se = float(self.mse[-1, i]), float(self.mse_se[-1, i])
             bound = float(self.bound[-1, i, i]) if self.available else None
+            bound_se = None if bound is None or self.bound_se is None else float(self.bound_se[-1, i])
+            jack = bound_se is not None and self.difference_se is not None
+            diff_se = float(self.difference_se[i]) if jack else se
             rows.append(
                 {
                     "state": name,
                     "unit": f"({units[i]})^2",
                     "lower_bound": bound,
+                    "lower_bound_se": bound_se,
                     "mse": mse,
                     "mse_se": se,
+                    "difference_se": diff_se if jack else None,
                     "efficiency": None if bound is None else bound / mse,
-                    "below_bound": None if bound is None else bool(mse + zq * se < bound),
-                    "below_bound_error": BELOW_BOUND_ERROR,
+                    "below_bound": None if bound is None else bool(mse - bound + (tq if jack else zq) * diff_se < 0.0),
+                    "below_bound_error": BELOW_BOUND_ERROR if jack or bound is None else BELOW_BOUND_ERROR_MSE_ONLY,
                 }
             )
         return rows
 
 
 def cramer_rao_bound(
-    layout: EffectLayout, flat: np.ndarray, error_outer: np.ndarray, n: int, q, r, p0, renewed: tuple[int, ...] = ()
+    layout: EffectLayout, flat: np.ndarray, error_outer: np.ndarray, n: int, q, r, p0, renewed: tuple[int, ...] = (),
+    groups: tuple | None = None,
 ) -> CramerRaoBound:
     """The bound J_k^-1 from the run's sums (module docstring), with the MSE and its Monte Carlo error;
-    ``renewed``: the truth's states renewed at every update (nuisance), whose bound is of the others alone."""
+    ``renewed``: the truth's states renewed at every update (nuisance), whose bound is of the others alone.
+
+    ``groups`` (:attr:`kalcal.montecarlo.accumulators.MomentSums.effect_blocks`: ``((n_j, flat_j, mse_j),
+    ...)``, independent groups of blocks) gives the bound's own Monte Carlo error by the delete-one-group
+    jackknife: the bound b_(j) from the total sums less group j's (N - n_j realizations), and
+    se = sqrt((G - 1) / G sum_j (b_(j) - mean_j b_(j))^2) over the G groups, per state and update; the
+    difference MSE - bound likewise (both from the same realizations, so their errors are correlated: the
+    jackknife of the difference counts that, a sum of the two variances would not). None where G < 2.
+    Cost: G more bound recursions of K small matrices."""
     mse = np.diagonal(error_outer, axis1=1, axis2=2) / n
     mse_se = np.sqrt(np.maximum(layout.view(flat, "e4") / n - mse**2, 0.0) * n / (n - 1) / n)
     q = np.asarray(q, dtype=float)
+    p0 = np.asarray(p0, dtype=float)
     _check_finite_expectations(layout, flat)
+    available, reason, bounds = _bound_matrices(layout, flat, n, q, p0, tuple(renewed))
+    if not available:
+        return CramerRaoBound(False, reason, None, mse, mse_se)
+    bound_se = difference_se = None
+    if groups is not None and len(groups) >= 2:
+        # the effect sums of the whole run are those of the groups to rounding; the total less one group
+        # is taken from the groups' own sum so that a leave-one-out total is exactly a sum of the others
+        total_flat = sum(g[1] for g in groups)
+        total_mse = sum(g[2] for g in groups)
+        total_n = sum(int(g[0]) for g in groups)
+        diag_b, diag_d = [], []
+        for count, part, part_mse in groups:
+            rest = total_n - int(count)
+            ok, _, b = _bound_matrices(layout, total_flat - part, rest, q, p0, tuple(renewed))
+            if not ok:  # a leave-one-out total outside the recursion's conditions: no error given
+                diag_b = None
+                break
+            bd = np.diagonal(b, axis1=1, axis2=2)
+            diag_b.append(bd)
+            diag_d.append((total_mse - part_mse)[-1] / rest - bd[-1])  # at the final update, as the rows
+        if diag_b is not None:
+            bound_se, difference_se = _jackknife_se(np.stack(diag_b)), _jackknife_se(np.stack(diag_d))
+    return CramerRaoBound(True, reason, bounds, mse, mse_se, bound_se, difference_se, None if groups is None else len(groups))
+
+
+def _jackknife_se(leave_one_out: np.ndarray) -> np.ndarray:
+    """The delete-one-group jackknife's standard error from the G leave-one-out values (axis 0):
+    sqrt((G - 1) / G sum_j (v_j - mean)^2). The groups (the engine's blocks) are independent; all but the
+    last hold the same number of realizations (and, past the cap on groups, one or two blocks each): the
+    delete-a-group jackknife is consistent for a smooth function of means over independent groups, equal
+    or not (Busing, Meijer and van der Leeden 1999), its standard error known to about 1 / sqrt(2 (G - 1))."""
+    g = leave_one_out.shape[0]
+    centred = leave_one_out - leave_one_out.mean(axis=0)
+    return np.sqrt((g - 1) / g * np.sum(centred**2, axis=0))
+
+
+def _bound_matrices(layout: EffectLayout, flat: np.ndarray, n: int, q: np.ndarray, p0: np.ndarray, renewed: tuple[int, ...]):
+    """``(available, reason, J_k^-1 (K, d, d) or None)`` from the effect sums ``flat`` of n realizations."""
     if renewed:
-        return _renewed_bound(layout, flat, n, q, np.asarray(p0, dtype=float), tuple(renewed), mse, mse_se)
+        return _renewed_bound(layout, flat, n, q, p0, renewed)
     d = layout.d
     mean_f = layout.view(flat, "f") / n
     ftqf = layout.view(flat, "ftqf") / n
     htrh = layout.view(flat, "htrh") / n
-    j = np.linalg.inv(np.asarray(p0, dtype=float))  # J_0 = P0^-1 (d x d, once)
+    j = np.linalg.inv(p0)  # J_0 = P0^-1 (d x d, once)
     bounds = np.empty((layout.n_updates, d, d))
     eye = np.eye(d)
     if not np.any(q):
         if not np.allclose(mean_f, eye, rtol=0.0, atol=1e-12):
-            return CramerRaoBound(False, "Q = 0 with a transition other than the identity: no bound given here", None, mse, mse_se)
+            return False, "Q = 0 with a transition other than the identity: no bound given here", None
         reason = "static: Q = 0, J_k = J_0 + sum_j E[H_j^T R^-1 H_j]"
         for k in range(layout.n_updates):
             j = j + htrh[k]
@@ -406,7 +492,7 @@ def cramer_rao_bound(
         try:
             q_chol = np.linalg.cholesky(q)
         except np.linalg.LinAlgError:
-            return CramerRaoBound(False, "Q is singular but not zero: no bound given here", None, mse, mse_se)
+            return False, "Q is singular but not zero: no bound given here", None
         q_inv = _spd_inverse(q, q_chol)
         reason = "tichavsky: J_k = D22 - D21 (J_{k-1} + D11)^-1 D12 (Q positive definite)"
         for k in range(layout.n_updates):
@@ -415,7 +501,7 @@ def cramer_rao_bound(
             j = q_inv + htrh[k] - d12.T @ np.linalg.solve(j + ftqf[k], d12)
             j = 0.5 * (j + j.T)
             bounds[k] = _spd_inverse(j)
-    return CramerRaoBound(True, reason, bounds, mse, mse_se)
+    return True, reason, bounds
 
 
 def _check_finite_expectations(layout: EffectLayout, flat: np.ndarray) -> None:
@@ -435,7 +521,7 @@ def _check_finite_expectations(layout: EffectLayout, flat: np.ndarray) -> None:
             )
 
 
-def _renewed_bound(layout, flat, n, q, p0, renewed, mse, mse_se) -> CramerRaoBound:
+def _renewed_bound(layout, flat, n, q, p0, renewed):
     """The static parameters' bound with each update's nuisance states marginalized (module docstring)."""
     d = layout.truth_d or layout.d
     eta = np.asarray(renewed)
@@ -448,7 +534,7 @@ def _renewed_bound(layout, flat, n, q, p0, renewed, mse, mse_se) -> CramerRaoBou
     if not (np.allclose(static, np.eye(theta.size), rtol=0.0, atol=1e-12) and np.allclose(mean_f[:, :, eta], 0.0, atol=1e-12)
             and np.allclose(mean_f[:, eta[:, None], theta], 0.0, atol=1e-12) and not np.any(q[theta[:, None], theta])
             and not np.any(q[theta[:, None], eta])):
-        return CramerRaoBound(False, "renewed states with a transition that does not keep the others static: no bound given here", None, mse, mse_se)
+        return False, "renewed states with a transition that does not keep the others static: no bound given here", None
     q_eta_inv = _spd_inverse(q[eta[:, None], eta])
     j = _spd_inverse(p0[theta[:, None], theta])  # J_0 of the parameters alone
     bounds = np.empty((htrh.shape[0], theta.size, theta.size))
@@ -459,7 +545,7 @@ def _renewed_bound(layout, flat, n, q, p0, renewed, mse, mse_se) -> CramerRaoBou
         j = 0.5 * (j + j.T)
         bounds[k] = _spd_inverse(j)
     reason = "static with renewed nuisance states: J_k = J_0 + sum_j (A_j - C_j D_j^-1 C_j^T), the parameters' block"
-    return CramerRaoBound(True, reason, bounds, mse, mse_se)
+    return True, reason, bounds
 
 
 def _spd_inverse(a: np.ndarray, chol: np.ndarray | None = None) -> np.ndarray:
@@ -571,5 +657,7 @@ def effect_sizes(
     kr, kse = _ratio_se(e2, pii, v("e4"), v("p2"), v("e2p"), n)
     bm, bse = _mean_se(v("z"), v("z2"), n)
     per_update = {"nees_per_dim": band(nm / d, nse / d), "variance_ratio": band(kr, kse), "bias_sigma": band(bm, bse)}
-    bound = None if crb is None else cramer_rao_bound(layout, flat, sums.error_outer, n, *crb, renewed=renewed)
+    bound = None if crb is None else cramer_rao_bound(
+        layout, flat, sums.error_outer, n, *crb, renewed=renewed, groups=getattr(sums, "effect_blocks", None)
+    )
     return EffectSizes(tuple(overall), per_update, tolerance, bound)

@@ -465,9 +465,7 @@ class NonlinearProblem(ProblemDefaults):
         )
         if not ok:
             return None
-        out = MomentSums.from_buffers(n, sums, normalized_residual=normalized)
-        out.effect = flat
-        return out
+        return MomentSums.from_buffers(n, sums, normalized_residual=normalized).with_effect(flat)
 
     def numpy_block_sums(self, rng: np.random.Generator, n: int, engine: str = "exact") -> MomentSums:
         """The moment sums and the effect sums of n realizations by the batched numpy filter, update by
@@ -531,9 +529,7 @@ class NonlinearProblem(ProblemDefaults):
             ftqf = np.einsum("nai,ab,nbj->ij", jf, q_inv, jf) if has_q_inv else np.zeros((d_truth, d_truth))
             effects.truth(k, jf.sum(0), ftqf, np.einsum("nai,naj->ij", wh, wh))
         effects.finish()
-        out = MomentSums.from_buffers(n, sums, normalized_residual=normalized)
-        out.effect = flat
-        return out
+        return MomentSums.from_buffers(n, sums, normalized_residual=normalized).with_effect(flat)
 
     def simulated_power(self, n: int, seed: int, confidence: float, workers: int | None = None):
         """The checks' power by simulation against the named alternatives (``checks.power_runs`` runs each,
