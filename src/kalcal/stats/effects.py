@@ -461,10 +461,10 @@ def cramer_rao_bound(
 
 def _jackknife_se(leave_one_out: np.ndarray) -> np.ndarray:
     """The delete-one-group jackknife's standard error from the G leave-one-out values (axis 0):
-    sqrt((G - 1) / G sum_j (v_j - mean)^2). The groups (the engine's blocks) are independent; all but the
-    last hold the same number of realizations (and, past the cap on groups, one or two blocks each): the
-    delete-a-group jackknife is consistent for a smooth function of means over independent groups, equal
-    or not (Busing, Meijer and van der Leeden 1999), its standard error known to about 1 / sqrt(2 (G - 1))."""
+    sqrt((G - 1) / G sum_j (v_j - mean)^2). The groups (of the engine's blocks) are independent and all but
+    the last hold the same number of realizations, whatever N (:func:`kalcal.montecarlo.accumulators.merge_effect_blocks`):
+    the delete-a-group jackknife of a smooth function of means over equal groups, its variance known to
+    about G - 1 degrees of freedom."""
     g = leave_one_out.shape[0]
     centred = leave_one_out - leave_one_out.mean(axis=0)
     return np.sqrt((g - 1) / g * np.sum(centred**2, axis=0))
