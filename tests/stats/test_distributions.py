@@ -130,3 +130,15 @@ def test_noncentral_chi2_agrees_with_scipy_stats(dof, nc):
     x = np.array([-1.0, 0.0, 0.5, 3.0, 12.0, 60.0, 800.0, 3000.0])
     np.testing.assert_allclose(distributions.ncx2_cdf(x, dof, nc), stats.ncx2.cdf(x, dof, nc), rtol=1e-9, atol=1e-13)
     np.testing.assert_allclose(distributions.ncx2_sf(x, dof, nc), stats.ncx2.sf(x, dof, nc), rtol=1e-9, atol=1e-13)
+
+
+def test_student_t_tails_equal_scipy_stats():
+    from scipy import stats
+
+    from kalcal.stats.distributions import t_isf, t_sf
+
+    for dof in (1, 2, 5, 30):
+        q = np.array([0.4, 0.05, 0.005, 1e-6])
+        np.testing.assert_allclose(t_isf(q, dof), stats.t.isf(q, dof), rtol=1e-12)
+        np.testing.assert_allclose(t_sf(t_isf(q, dof), dof), q, rtol=1e-10)
+    assert abs(float(t_isf(0.005, 2)) - 9.925) < 1e-3  # the 99% two-sided quantile with 3 groups

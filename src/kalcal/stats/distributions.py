@@ -103,6 +103,13 @@ def ncx2_sf(x, dof, nc):
     return 1.0 - ncx2_cdf(x, dof, nc)
 
 
+def t_isf(q, dof):
+    """The x with P(T > x) = q for T ~ Student t(dof): -scipy.special.stdtrit at q (the distribution's
+    symmetry keeps a small q's precision, as ``scipy.stats.t.isf``); NaN for a non-positive dof."""
+    q = np.asarray(q, dtype=float)
+    return -special.stdtrit(_dof(dof), q)
+
+
 def t_sf(x, dof):
     """P(T > x) for T ~ Student t(dof) (scipy.special.stdtr at -x, as ``scipy.stats.t.sf`` for valid
     arguments); NaN for a non-positive dof."""

@@ -72,7 +72,7 @@ from typing import Any
 
 import numpy as np
 
-from kalcal.stats.distributions import normal_isf
+from kalcal.stats.distributions import normal_isf, t_isf
 
 __all__ = [
     "DEFAULT_TOLERANCE",
@@ -388,9 +388,7 @@ class CramerRaoBound:
         if self.groups is not None and self.groups >= 2:
             # the jackknife's variance has about G - 1 degrees of freedom: Student's t quantile, not the
             # normal one, which with a few groups would call a bound crossed far more often than stated
-            from scipy.stats import t as student_t
-
-            tq = float(student_t.isf((1.0 - confidence) / 2.0, self.groups - 1))
+            tq = float(t_isf((1.0 - confidence) / 2.0, self.groups - 1))
         rows = []
         for i, name in enumerate(names):
             mse, se = float(self.mse[-1, i]), float(self.mse_se[-1, i])
