@@ -16,6 +16,7 @@ import os
 import resource
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -24,6 +25,9 @@ from kalcal.montecarlo.accumulators import ensemble_statistics
 from kalcal.montecarlo.engine import block_generator, run_monte_carlo
 from kalcal.scenarios import build_scenario
 from kalcal.stats.suite import run_checks
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_nonlinear import profile  # noqa: E402  one profile of a block for both nonlinear benchmarks
 
 
 def main(n: int, chunk: int = 4096) -> None:
@@ -67,42 +71,7 @@ def main(n: int, chunk: int = 4096) -> None:
           f"(dynamax's filter {filter_cpu:.2f} s, kalcal's run {cpu:.2f} s): {filter_cpu / cpu:.2f}")
     print(f"load average {os.getloadavg()[0]:.1f} (1 min) at the end")
     if compiled:
-        profile(problem, chunk)
-
-
-def profile(problem, chunk: int) -> None:
-    """Where one block's time goes: the draws, the compiled kernel (truth, EKF, every sum), the pair sums
-    after it, each as CPU seconds of this thread, best of 5, the whole block with BLAS on one thread as the
-    engine runs it."""
-    from kalcal.montecarlo.accumulators import ResidualProducts
-    from kalcal.montecarlo.engine import single_threaded_blas
-
-    t = problem.scenario.loaded.truth
-    k, d, p = problem.scenario.n_updates, t.state_dim, t.measurement_dim
-    best = {}
-    # the whole profiled block with BLAS on one thread, as the engine runs each block (block_task): the pair
-    # sums inside block_sums would otherwise run on BLAS's threads, their waits counted in the kernel's share
-    with single_threaded_blas():
-        for _ in range(5):
-            rng = block_generator(0, 1)
-            start = time.thread_time()
-            rng.standard_normal((chunk, d))
-            rng.standard_normal((k, chunk, d + p))
-            draws = time.thread_time() - start
-            start = time.thread_time()
-            problem.block_sums(block_generator(0, 1), chunk, "exact")
-            block = time.thread_time() - start
-            stacked = np.ascontiguousarray(np.random.default_rng(0).standard_normal((k * p, chunk)))
-            start = time.thread_time()
-            ResidualProducts.upper(stacked)
-            pairs = time.thread_time() - start
-            for name, value in (("draws", draws), ("block", block), ("pairs", pairs)):
-                best[name] = min(best.get(name, np.inf), value)
-    kernel = best["block"] - best["draws"] - best["pairs"]
-    per = chunk * k
-    print(f"profile of one block of {chunk} realizations, K = {k} (CPU seconds of one thread, best of 5): "
-          f"block {best['block']:.4f} s = draws {best['draws']:.4f} s + compiled kernel {kernel:.4f} s "
-          f"({kernel / per * 1e9:.0f} ns per update per realization) + pair sums (syrk) {best['pairs']:.4f} s")
+        profile(problem, chunk, repeats=5)
 
 
 def dynamax_ekf(problem, n: int, chunk: int) -> tuple[float, float, tuple[float, float], float]:

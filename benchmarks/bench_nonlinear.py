@@ -122,7 +122,7 @@ def bench_verify(n: int, chunk: int = 4096, profile: bool = True) -> None:
           f"(dynamax's filter {filter_cpu:.1f} s, kalcal's run {cpu:.2f} s): {filter_cpu / cpu:.2f}")
     print(f"load average {os.getloadavg()[0]:.1f} (1 min) at the end")
     if ratio < 10 and profile:
-        _profile(problem, chunk)
+        profile(problem, chunk)
 
 
 def bench_paths(chunk: int = 4096) -> None:
@@ -155,41 +155,41 @@ def bench_paths(chunk: int = 4096) -> None:
           f"{60.0 / (per['no'] - per['yes']):.2g} realization-updates; load average {os.getloadavg()[0]:.1f} at the end")
 
 
-def _profile(problem, chunk: int) -> None:
-    """Where one block's time goes (cProfile does not see into compiled code): the draws, the compiled
-    kernel (truth, EKF, every sum), the pair sums after it, each as CPU seconds of this thread, the whole
-    block with BLAS on one thread as the engine runs it (:func:`kalcal.montecarlo.engine.single_threaded_blas`)."""
-    import time as _time
-
+def profile(problem, chunk: int, repeats: int = 3) -> None:
+    """Print where one block's CPU time goes (cProfile does not see into compiled code): the draws, the compiled kernel (truth, EKF, every sum), the pair
+    sums after it, each as CPU seconds of this thread, best of ``repeats``, the whole block with BLAS on one
+    thread as the engine runs it (:func:`kalcal.montecarlo.engine.single_threaded_blas`). The state and
+    measurement sizes are the problem's truth's; bench_imu_3axis.py prints its profile with it too."""
     from kalcal.montecarlo.accumulators import ResidualProducts
     from kalcal.montecarlo.engine import block_generator, single_threaded_blas
 
-    k, d, p = problem.scenario.n_updates, 4, 2
+    t = problem.scenario.loaded.truth
+    k, d, p = problem.scenario.n_updates, t.state_dim, t.measurement_dim
     best = {}
     # the whole profiled block with BLAS on one thread, as the engine runs each block (block_task): the pair
     # sums inside block_sums would otherwise run on BLAS's threads, and their waits for a loaded core count
     # as this thread's time and land in the kernel's share
     with single_threaded_blas():
-        for _ in range(3):
+        for _ in range(repeats):
             rng = block_generator(0, 1)
-            start = _time.thread_time()
+            start = time.thread_time()
             rng.standard_normal((chunk, d))
             rng.standard_normal((k, chunk, d + p))
-            draws = _time.thread_time() - start
-            start = _time.thread_time()
+            draws = time.thread_time() - start
+            start = time.thread_time()
             problem.block_sums(block_generator(0, 1), chunk, "exact")
-            block = _time.thread_time() - start
+            block = time.thread_time() - start
             stacked = np.ascontiguousarray(np.random.default_rng(0).standard_normal((k * p, chunk)))
-            start = _time.thread_time()
+            start = time.thread_time()
             ResidualProducts.upper(stacked)
-            pairs = _time.thread_time() - start
+            pairs = time.thread_time() - start
             for name, value in (("draws", draws), ("block", block), ("pairs", pairs)):
                 best[name] = min(best.get(name, np.inf), value)
     kernel = best["block"] - best["draws"] - best["pairs"]
     per = chunk * k
-    print(f"profile of one block of {chunk} realizations, K = {k} (CPU seconds of one thread, best of 3): "
-          f"block {best['block']:.3f} s = draws {best['draws']:.3f} s + compiled kernel {kernel:.3f} s "
-          f"({kernel / per * 1e9:.0f} ns per update per realization) + pair sums (syrk) {best['pairs']:.3f} s")
+    print(f"profile of one block of {chunk} realizations, K = {k} (CPU seconds of one thread, best of {repeats}): "
+          f"block {best['block']:.4f} s = draws {best['draws']:.4f} s + compiled kernel {kernel:.4f} s "
+          f"({kernel / per * 1e9:.0f} ns per update per realization) + pair sums (syrk) {best['pairs']:.4f} s")
 
 
 def _dynamax_ekf(problem, n: int, chunk: int) -> tuple[float, float, tuple[float, float], float]:

@@ -37,7 +37,7 @@ class _Recording:
         self.seen.append(_blas_threads())
 
 
-@pytest.mark.parametrize("bench, profile", [("bench_nonlinear", "_profile"), ("bench_imu_3axis", "profile")])
+@pytest.mark.parametrize("bench, profile", [("bench_nonlinear", "profile"), ("bench_imu_3axis", "profile")])
 def test_a_benchmark_profile_runs_the_whole_block_with_blas_on_one_thread(bench, profile, capsys):
     if not _blas_threads():
         pytest.fail("no BLAS thread pool that threadpoolctl can see: the check cannot be made")
