@@ -127,7 +127,6 @@ def bootstrap_part(replicates: int = 200, seed: int = 0) -> None:
     import pandas as pd
 
     import kalcal
-    from kalcal.cpus import usable_cpus
 
     rng = np.random.default_rng(seed)
     samples = 6000  # 10 minutes at 10 Hz
@@ -135,36 +134,38 @@ def bootstrap_part(replicates: int = 200, seed: int = 0) -> None:
     theta = np.array([1.02, 0.1]) + np.cumsum(1e-3 * rng.standard_normal((samples, 2)), axis=0)
     reference = theta[:, 0] * sensor + theta[:, 1] + 0.05 * rng.standard_normal(samples)
     log = pd.DataFrame({"time": np.arange(samples) / 10.0, "reference": reference, "sensor": sensor})
-    kalcal.fit("scale-bias", data=log)  # compiled kernels loaded once
-    start = time.perf_counter()
-    kalcal.fit("scale-bias", data=log)
-    once = time.perf_counter() - start
-    start = time.perf_counter()
-    result = kalcal.fit("scale-bias", data=log, bootstrap=replicates, seed=seed)
-    boot = time.perf_counter() - start
-    print(f"kalcal fit --bootstrap {replicates}: scale-bias, 10 minutes at 10 Hz ({samples} samples), 2 settings free, "
-          f"{usable_cpus()} thread(s), in-process and warm", flush=True)
-    print(f"  fit                    {once:8.2f} s", flush=True)
-    print(f"  fit --bootstrap {replicates:<5d}  {boot:8.2f} s   {boot / once:6.1f} x fit (goal <= 100 x); "
-          f"{result.bootstrap.failed} refit(s) not converged", flush=True)
+    _bootstrap_against_one_fit(
+        lambda **options: kalcal.fit("scale-bias", data=log, **options), replicates, seed,
+        f"scale-bias, 10 minutes at 10 Hz ({samples} samples)",
+    )
 
 
 def bootstrap_accel_gps_part(replicates: int = 200, seed: int = 0) -> None:
     """``kalcal.fit(accel-gps, bootstrap=replicates)`` of a 10-minute log against one fit of it (module docstring)."""
     import kalcal
-    from kalcal.cpus import usable_cpus
 
     sim = kalcal.simulate("accel-gps", seed=seed, settings={"scenario.duration": 600.0})
     imu, gps = sim.logs["imu"], sim.logs["gps"]
-    kalcal.fit("accel-gps", imu=imu, gps=gps)  # compiled kernels loaded once
+    _bootstrap_against_one_fit(
+        lambda **options: kalcal.fit("accel-gps", imu=imu, gps=gps, **options), replicates, seed,
+        f"accel-gps, 10 minutes ({len(imu)} accelerometer rows, {len(gps)} fixes)",
+    )
+
+
+def _bootstrap_against_one_fit(fit, replicates: int, seed: int, what: str) -> None:
+    """Time ``fit()`` once and ``fit(bootstrap=replicates, seed=seed)`` (both warm: a first fit loads the compiled
+    kernels) and print their ratio against the goal of 100 x."""
+    from kalcal.cpus import usable_cpus
+
+    fit()  # compiled kernels loaded once
     start = time.perf_counter()
-    kalcal.fit("accel-gps", imu=imu, gps=gps)
+    fit()
     once = time.perf_counter() - start
     start = time.perf_counter()
-    result = kalcal.fit("accel-gps", imu=imu, gps=gps, bootstrap=replicates, seed=seed)
+    result = fit(bootstrap=replicates, seed=seed)
     boot = time.perf_counter() - start
-    print(f"kalcal fit --bootstrap {replicates}: accel-gps, 10 minutes ({len(imu)} accelerometer rows, {len(gps)} fixes), "
-          f"{len(result.parameters)} settings free, {usable_cpus()} thread(s), in-process and warm", flush=True)
+    print(f"kalcal fit --bootstrap {replicates}: {what}, {len(result.parameters)} settings free, {usable_cpus()} "
+          "thread(s), in-process and warm", flush=True)
     print(f"  fit                    {once:8.2f} s", flush=True)
     print(f"  fit --bootstrap {replicates:<5d}  {boot:8.2f} s   {boot / once:6.1f} x fit (goal <= 100 x); "
           f"{result.bootstrap.failed} refit(s) not converged", flush=True)
