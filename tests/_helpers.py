@@ -154,3 +154,19 @@ def assert_standard_normal_spread(z, *, family_alpha: float = 1e-3, what: str = 
         f"{what}: variance of z {variance} outside [{lower:.3g}, {upper:.3g}] over {m} seeds"
     )
     assert np.all(np.abs(mean) * np.sqrt(m) <= bound), f"{what}: mean of z {mean} beyond ±{bound / np.sqrt(m):.3g}"
+
+
+def invoke(*args):
+    """``kalcal ARGS`` through typer's runner (arguments as strings, exceptions raised, not caught)."""
+    from typer.testing import CliRunner
+
+    from kalcal.cli import app
+
+    return CliRunner().invoke(app, [str(a) for a in args], catch_exceptions=False)
+
+
+def assert_one_line_error(result, message: str) -> None:
+    """``result`` is a refusal: exit 2, nothing on stdout, one ``kalcal: error:`` line holding ``message``."""
+    lines = result.stderr.strip().splitlines()
+    assert result.exit_code == 2 and result.stdout == "", result.output
+    assert len(lines) == 1 and lines[0].startswith("kalcal: error: ") and message in lines[0], result.stderr

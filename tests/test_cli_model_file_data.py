@@ -7,20 +7,9 @@ import json
 
 import numpy as np
 import pandas as pd
-from typer.testing import CliRunner
 
-from kalcal.cli import app
 from tests.scenarios.model_file.test_calibrate_simulate import DIFFUSE, TRACKER, diffuse_log, tracker_log
-
-
-def _invoke(*args):
-    return CliRunner().invoke(app, [str(a) for a in args], catch_exceptions=False)
-
-
-def _one_line_error(result, message: str) -> None:
-    lines = result.stderr.strip().splitlines()
-    assert result.exit_code == 2 and result.stdout == "", result.output
-    assert len(lines) == 1 and lines[0].startswith("kalcal: error: ") and message in lines[0], result.stderr
+from tests._helpers import invoke as _invoke, assert_one_line_error as _one_line_error
 
 
 def _files(tmp_path, text=TRACKER, log=None):

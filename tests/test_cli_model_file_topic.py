@@ -9,9 +9,8 @@ import json
 import numpy as np
 import pandas as pd
 import pytest
-from typer.testing import CliRunner
 
-from kalcal.cli import app
+from tests._helpers import invoke as _invoke, assert_one_line_error as _one_line_error
 
 #: the bag's two IMU topics: reference_k = scale * sensor_k + bias + noise, each topic its own scale and bias
 TOPICS = {"/imu": (1.01, 0.2), "/imu_b": (0.97, -0.3)}
@@ -36,16 +35,6 @@ measurement_names = ["x"]
 time = "time"
 measurements = ["linear_acceleration.x"]
 """
-
-
-def _invoke(*args):
-    return CliRunner().invoke(app, [str(a) for a in args], catch_exceptions=False)
-
-
-def _one_line_error(result, message: str) -> None:
-    lines = result.stderr.strip().splitlines()
-    assert result.exit_code == 2 and result.stdout == "", result.output
-    assert len(lines) == 1 and lines[0].startswith("kalcal: error: ") and message in lines[0], result.stderr
 
 
 @pytest.fixture(scope="module")

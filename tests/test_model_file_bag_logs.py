@@ -9,16 +9,11 @@ import shlex
 
 import numpy as np
 import pandas as pd
-from typer.testing import CliRunner
 
-from kalcal.cli import app
 from tests._logfiles import ORIGIN_NS, write_imu_bag
+from tests._helpers import invoke as _invoke
 
 N = 400
-
-
-def _invoke(*args):
-    return CliRunner().invoke(app, [str(a) for a in args], catch_exceptions=False)
 
 
 def _model(v: float = 0.01) -> str:

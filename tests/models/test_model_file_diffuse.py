@@ -15,15 +15,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from typer.testing import CliRunner
 
 from kalcal.analysis.fixed_gain import analyze_scenario
-from kalcal.cli import app
 from kalcal.core.timevarying import TimeVaryingModel
 from kalcal.core.timevarying_filter import reference_filter
 from kalcal.scenarios.model_file.diffuse import CheckedWindowProblem
 from kalcal.scenarios.model_file.model import parse_model
 from kalcal.scenarios.model_file.over_log import over_log
+from tests._helpers import invoke as _invoke
 
 #: a local level (a random walk seen in noise), started diffuse; the world's prior proper
 LOCAL_LEVEL = """
@@ -83,10 +82,6 @@ m0    = [[0.04, 0.0], [0.0, 0.25]]
 time = "t"
 measurements = ["y"]
 """
-
-
-def _invoke(*args):
-    return CliRunner().invoke(app, [str(a) for a in args], catch_exceptions=False)
 
 
 def _time_varying(scenario) -> tuple[TimeVaryingModel, np.ndarray]:

@@ -14,12 +14,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from typer.testing import CliRunner
 
-from kalcal.cli import app
 from kalcal.montecarlo.accumulators import MomentSums
 from kalcal.scenarios.model_file.model import parse_model
 from kalcal.scenarios.model_file.over_log import over_log
+from tests._helpers import invoke as _invoke
 
 CV = """
 name = "cv"
@@ -52,10 +51,6 @@ state_names = ["scale", "bias"]
 time = "t"
 measurements = ["y"]
 """
-
-
-def _invoke(*args):
-    return CliRunner().invoke(app, [str(a) for a in args], catch_exceptions=False)
 
 
 def _cv_log(path: Path, count: int = 301, every: int = 10, **columns) -> Path:

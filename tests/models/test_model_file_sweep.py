@@ -15,12 +15,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from typer.testing import CliRunner
 
 import kalcal
 from kalcal.api.sweep import sweep_settings
-from kalcal.cli import app
 from kalcal.scenarios.model_file.model import parse_model
+from tests._helpers import invoke as _invoke
 
 CV = """
 name = "cv"
@@ -39,10 +38,6 @@ m0    = [[25.0, 3.0], [3.0, 1.0]]
 CV_LOG = CV.replace('h     = [[1.0, 0.0]]', 'h     = [["c", 0.0]]') + '\n[data]\nmeasurements = ["z"]\n'
 #: the parts of a summary that differ between two runs of the same numbers (wall time, the command line)
 _RUN_RECORD = ("timing", "command")
-
-
-def _invoke(*args):
-    return CliRunner().invoke(app, [str(a) for a in args], catch_exceptions=False)
 
 
 def _cv_log(path: Path, count: int = 121, every: int = 10) -> Path:
