@@ -72,3 +72,20 @@ def test_magnified_window_is_last_two_thirds():
     window = single.magnified_window(times)
     assert window[-1] and not window[0]
     assert times[window][0] >= times[0] + (times[-1] - times[0]) / 3
+
+
+def test_residual_correlation_of_one_update_warns_nothing(tmp_path):
+    """A batch estimator's checks hold one update: its map is one cell, drawn without matplotlib's warning
+    about a zero-width extent (the spacing of the update times is undefined there)."""
+    import warnings
+
+    import xarray as xr
+
+    moment = np.eye(2).reshape(1, 2, 1, 2)
+    dataset = xr.Dataset({"residual_second_moment": (("k", "a", "j", "b"), moment)},
+                         coords={"time": ("k", [3.0]), "measurement": ("a", ["x", "y"])},
+                         attrs={"realizations": 400, "confidence": 0.99})
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        path = consistency.plot_residual_correlation(dataset, tmp_path / "one.png")
+    assert image.imread(path).shape[0] > 0

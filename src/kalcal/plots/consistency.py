@@ -178,7 +178,8 @@ def plot_residual_correlation(dataset: xr.Dataset, path: str | Path) -> Path:
     vmax = max(bound, float(finite.max()) if finite.size else bound)
     norm = TwoSlopeNorm(vcenter=0.0, vmin=-vmax, vmax=vmax)
     figure, axes = new_figure(p, p, height=CORRELATION_HEIGHT_PX, sharex=True)
-    step = (times[-1] - times[0]) / max(n_updates - 1, 1)
+    # one update (a batch estimator's final time) has no spacing: its cell is one unit wide, not zero
+    step = (times[-1] - times[0]) / (n_updates - 1) if n_updates > 1 else 1.0
     extent = (times[0] - step / 2, times[-1] + step / 2, times[0] - step / 2, times[-1] + step / 2)
     image = None
     for a in range(p):
