@@ -599,3 +599,25 @@ def test_detector_on_the_real_session_finds_the_six_faces_the_hand_labels_mark()
         assert abs(value - other) <= allowed, (label, value, other, allowed)
         beyond_noise.append(abs(value - other) > z * np.hypot(sigma, other_sigma))
     assert any(beyond_noise)
+
+
+def test_procedure_b_cannot_see_an_inverted_axis():
+    """docs/imu-3axis.md: |M^-1 (a - b)| = g holds for M and for M with an axis reflected, so procedure (b) fits a
+    sensor with its y axis wired reversed exactly as well as the same sensor wired right (the same chi-square, the
+    same scales: S is taken positive), and its correction of that sensor's y-up reading reads -g on y: only a
+    pose of known sign (procedure (a)'s faces) shows the reversal."""
+    rng = np.random.default_rng(3)
+    theta = random_sensor(rng)
+    ups = rng.standard_normal((12, 3))
+    ups /= np.linalg.norm(ups, axis=1, keepdims=True)
+    means = m.h(np.c_[np.tile(theta, (12, 1)), np.zeros((12, 2))], m.pose_data(ups), G)
+    means = means + 0.01 * rng.standard_normal(means.shape)
+    cov = np.tile(1e-4 * np.eye(3), (12, 1, 1))
+    flip = np.array([1.0, -1.0, 1.0])
+    right, reversed_ = fit_poses(means, cov, G), fit_poses(means * flip, cov, G)
+    assert right.chi2 > 1.0  # noisy means: the comparison below is not of two zeros
+    np.testing.assert_allclose(reversed_.chi2, right.chi2, rtol=1e-8)
+    np.testing.assert_allclose(reversed_.theta[:3], right.theta[:3], rtol=1e-8)
+    y_up = m.h(np.r_[theta, 0.0, 0.0][None], m.pose_data(np.array([[0.0, 1.0, 0.0]])), G) * flip  # the reversed sensor's reading
+    corrected = m.correct(y_up, m.sensor_matrix(reversed_.theta), reversed_.theta[6:])
+    assert corrected[0, 1] < -0.9 * G, corrected
