@@ -54,9 +54,9 @@ class UpdateWork(NamedTuple):
     hm: np.ndarray  #: H M, (p, d, m) (computed as (M H^T)^T: the same numbers for a symmetric M)
     lower: np.ndarray  #: the Cholesky factor of S, (p, p, m); filled only where p > 1
     a: np.ndarray  #: I - K H, (d, d, m) (Joseph form, p = 1)
-    ap: np.ndarray  #: (I - K H) M, (d, d, m) (Joseph form)
+    ap: np.ndarray  #: (I - K H) M, (d, d, m) (Joseph form, p = 1)
     acc: np.ndarray  #: one row of a tile, (m,)
-    kv: np.ndarray  #: C^T = ((I - K H) M H^T - K V)^T, (p, d, m) (Joseph form, p > 1)
+    kv: np.ndarray  #: G = S K^T - H M, (p, d, m) (Joseph form, p > 1)
     #: where H may be nonzero, bool (p, d): all True from :func:`update_work`; a caller whose H has entries
     #: that are identically zero (a model's printed Jacobian) sets them False, and the products with them
     #: (exact zeros: the same sums) are skipped where p > 1
@@ -132,13 +132,11 @@ def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, kv, h_nz)
     for i in range(p):  # H M, as (M H^T)^T
         for u in range(d):
             for j in range(m):
-                acc[j] = 0.0
+                hm[i, u, j] = 0.0
             for w in range(d):
                 if h_nz[i, w]:
                     for j in range(m):
-                        acc[j] += cov[u, w, j] * h[i, w, j]
-            for j in range(m):
-                hm[i, u, j] = acc[j]
+                        hm[i, u, j] += cov[u, w, j] * h[i, w, j]
     for i in range(p):  # S = H M H^T + V
         for k in range(p):
             for j in range(m):
@@ -195,20 +193,17 @@ def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, kv, h_nz)
                         acc[j] += s[i, k, j] * gain[k, u, j]
                 for j in range(m):
                     kv[i, u, j] = acc[j]
-        # P = M - (H M)^T K^T + K G: its lower triangle, mirrored (M is not needed any more: written in place)
+        # P = M - (H M)^T K^T + K G: its lower triangle, in place (measurement by measurement, both of its
+        # terms in one pass over the tile), mirrored
         for u in range(d):
             for w in range(u + 1):
-                for j in range(m):
-                    acc[j] = cov[u, w, j]
                 for i in range(p):
                     for j in range(m):
-                        acc[j] -= hm[i, u, j] * gain[i, w, j]
-                for i in range(p):
-                    for j in range(m):
-                        acc[j] += gain[i, u, j] * kv[i, w, j]
+                        cov[u, w, j] += gain[i, u, j] * kv[i, w, j] - hm[i, u, j] * gain[i, w, j]
+        for u in range(d):
+            for w in range(u):
                 for j in range(m):
-                    cov[u, w, j] = acc[j]
-                    cov[w, u, j] = acc[j]
+                    cov[w, u, j] = cov[u, w, j]
     else:
         for u in range(d):  # P = M - K (H M)
             for w in range(d):
