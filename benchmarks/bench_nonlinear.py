@@ -165,6 +165,7 @@ def profile(problem, chunk: int, repeats: int = 3) -> None:
 
     t = problem.scenario.loaded.truth
     k, d, p = problem.scenario.n_updates, t.state_dim, t.measurement_dim
+    drawn = (problem.normals_per_realization("exact") - d) // k  # each update's normals, as the block draws them
     best = {}
     # the whole profiled block with BLAS on one thread, as the engine runs each block (block_task): the pair
     # sums inside block_sums would otherwise run on BLAS's threads, and their waits for a loaded core count
@@ -174,7 +175,7 @@ def profile(problem, chunk: int, repeats: int = 3) -> None:
             rng = block_generator(0, 1)
             start = time.thread_time()
             rng.standard_normal((chunk, d))
-            rng.standard_normal((k, chunk, d + p))
+            rng.standard_normal((k, chunk, drawn))
             draws = time.thread_time() - start
             start = time.thread_time()
             problem.block_sums(block_generator(0, 1), chunk, "exact")

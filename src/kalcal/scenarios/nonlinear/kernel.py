@@ -10,7 +10,7 @@ NEES, NIS (and their shape histograms), whitened errors and innovations, the eff
 the effect sizes' on the checked states (all of them, or a scenario's subset: imu-3axis's 9 parameters,
 its pose's tilts nuisance states), the bound's on every state. The kernel's own state is a tile's (d, d, m)
 and the sums of one update held per lane of a tile, reduced at the update's end; but its inputs and
-outputs grow with K: the block's normals (K, n, d + p) and the sums, the residual pair sums (K p)^2 among
+outputs grow with K: the block's normals (K, n, q + r) and the sums, the residual pair sums (K p)^2 among
 them, so memory is flat in n, not in K.
 
 Layout: the block's realizations in tiles of m, structure of arrays (realizations on the last axis, as
@@ -111,10 +111,12 @@ def ekf_block(
         The filter's.
     first : ndarray, shape (n, d)
         The normals of x_0.
-    noise : ndarray, shape (K, n, d + p)
-        The normals of the process (first d) and measurement noises of each update.
+    noise : ndarray, shape (K, n, q + r)
+        The normals of the process (first q) and measurement noises (r) of each update, one per column of
+        ``t_qf`` and ``t_rf`` (the numpy path's draws, :func:`kalcal.scenarios.nonlinear.problem._drawn_factor`).
     t_x0, t_p0f, t_qf, t_rf : ndarray
-        The truth's prior mean (d,) and square roots C C^T of P0 (d, d), Q (d, d), R (p, p).
+        The truth's prior mean (d,) and square roots C C^T of P0 (d, d), Q (d, q), R (p, r): Q's and R's
+        the columns of their factors that are not all zero.
     t_dt, f_dt : float
         The truth's and the filter's time steps (s).
     q_inv : ndarray, shape (d, d)
@@ -192,17 +194,18 @@ def ekf_block(
                 for b in range(d):
                     cov[t, a, b, j] = f_p0[a, b]
     # the columns of each row of the truth's noise factors that are not zero, in order
-    q_cols = np.zeros((d, d), dtype=np.int64)
+    nq, nr = t_qf.shape[1], t_rf.shape[1]
+    q_cols = np.zeros((d, nq), dtype=np.int64)
     q_count = np.zeros(d, dtype=np.int64)
     for a in range(d):
-        for b in range(d):
+        for b in range(nq):
             if t_qf[a, b] != 0.0:
                 q_cols[a, q_count[a]] = b
                 q_count[a] += 1
-    r_cols = np.zeros((p, p), dtype=np.int64)
+    r_cols = np.zeros((p, nr), dtype=np.int64)
     r_count = np.zeros(p, dtype=np.int64)
     for a in range(p):
-        for b in range(p):
+        for b in range(nr):
             if t_rf[a, b] != 0.0:
                 r_cols[a, r_count[a]] = b
                 r_count[a] += 1
@@ -303,7 +306,7 @@ def ekf_block(
                     acc = 0.0
                     for i in range(r_count[a]):
                         b = r_cols[a, i]
-                        acc += noise[k, col, d + b] * t_rf[a, b]
+                        acc += noise[k, col, nq + b] * t_rf[a, b]
                     zt[a, j] = hz[a, j] + acc
             # the filter's prediction: xbar = f(xhat), M = F P F^T + Q (symmetrized), from P_{k-1} (last)
             # into c, only the products with F's entries that are not identically zero: a renewed state's
