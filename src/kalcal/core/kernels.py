@@ -61,13 +61,14 @@ class UpdateWork(NamedTuple):
     #: that are identically zero (a model's printed Jacobian) sets them False, and the products with them
     #: (exact zeros: the same sums) are skipped where p > 1
     h_nz: np.ndarray
+    pivot: np.ndarray  #: the reciprocals of the Cholesky factor's diagonal, (p, m) (p > 1)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def update_work(d, p, m):
     """The scratch :func:`covariance_update` needs, allocated once per tile (not once per update)."""
     return UpdateWork(np.empty((p, d, m)), np.empty((p, p, m)), np.empty((d, d, m)), np.empty((d, d, m)), np.empty(m),
-                      np.empty((p, d, m)), np.ones((p, d), dtype=np.bool_))
+                      np.empty((p, d, m)), np.ones((p, d), dtype=np.bool_), np.empty((p, m)))
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -112,11 +113,11 @@ def covariance_update(cov, h, v, joseph, gain, s, work):
         # the (d, m) rows of the (1, d, m) arrays, views by indexing (a reshape is a call per update)
         _scalar_update(cov, h[0], v[0, 0], joseph, gain[0], s[0, 0], hm[0], a, ap, acc)
     else:
-        _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, work.kv, work.h_nz)
+        _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, work.kv, work.h_nz, work.pivot)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, kv, h_nz):
+def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, kv, h_nz, pivot):
     """:func:`covariance_update` where p > 1: K by a Cholesky factor of S and two triangular solves.
 
     The Joseph form P = A M A^T + K V K^T (A = I - K H) by products of O(d^2 p) alone, expanded:
@@ -129,11 +130,19 @@ def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, kv, h_nz)
     that are not identically zero, about 800 multiply-adds per realization in place of 4,100 (1,130 with
     A M formed first, as before)."""
     d, p, m = cov.shape[0], h.shape[0], cov.shape[2]
-    for i in range(p):  # H M, as (M H^T)^T
+    for i in range(p):  # H M, as (M H^T)^T, from its first product (zeros where H's row is identically zero)
+        first = d
+        for w in range(d - 1, -1, -1):
+            if h_nz[i, w]:
+                first = w
         for u in range(d):
-            for j in range(m):
-                hm[i, u, j] = 0.0
-            for w in range(d):
+            if first == d:
+                for j in range(m):
+                    hm[i, u, j] = 0.0
+            else:
+                for j in range(m):
+                    hm[i, u, j] = cov[u, first, j] * h[i, first, j]
+            for w in range(first + 1, d):
                 if h_nz[i, w]:
                     for j in range(m):
                         hm[i, u, j] += cov[u, w, j] * h[i, w, j]
@@ -164,23 +173,29 @@ def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, kv, h_nz)
             for k in range(i + 1, p):
                 for j in range(m):
                     lower[i, k, j] = 0.0
+            for j in range(m):  # the pivot's reciprocal: the solves below multiply (a division per lane
+                pivot[i, j] = 1.0 / lower[i, i, j]  # and column costs several multiplications' time)
         for u in range(d):  # row u of K: S^{-1} (H M)[:, u], forward then back substitution
-            for i in range(p):
+            for j in range(m):
+                gain[0, u, j] = hm[0, u, j] * pivot[0, j]
+            for i in range(1, p):
                 for j in range(m):
-                    acc[j] = hm[i, u, j]
-                for c in range(i):
+                    acc[j] = hm[i, u, j] - lower[i, 0, j] * gain[0, u, j]
+                for c in range(1, i):
                     for j in range(m):
                         acc[j] -= lower[i, c, j] * gain[c, u, j]
                 for j in range(m):
-                    gain[i, u, j] = acc[j] / lower[i, i, j]
-            for i in range(p - 1, -1, -1):
+                    gain[i, u, j] = acc[j] * pivot[i, j]
+            for j in range(m):
+                gain[p - 1, u, j] = gain[p - 1, u, j] * pivot[p - 1, j]
+            for i in range(p - 2, -1, -1):
                 for j in range(m):
-                    acc[j] = gain[i, u, j]
-                for c in range(i + 1, p):
+                    acc[j] = gain[i, u, j] - lower[i + 1, i, j] * gain[i + 1, u, j]
+                for c in range(i + 2, p):
                     for j in range(m):
                         acc[j] -= lower[c, i, j] * gain[c, u, j]
                 for j in range(m):
-                    gain[i, u, j] = acc[j] / lower[i, i, j]
+                    gain[i, u, j] = acc[j] * pivot[i, j]
     if joseph:
         # G = S K^T - H M (p, d), as K^T is laid out: the solve's residual (zero but for rounding where
         # K = M H^T S^-1; whatever K, the term that keeps P the Joseph form's P)
