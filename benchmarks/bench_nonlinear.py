@@ -56,7 +56,7 @@ def main(n: int) -> None:
 
 
 
-def bench_verify(n: int, chunk: int = 4096, profile: bool = True) -> None:
+def bench_verify(n: int, chunk: int = 4096, with_profile: bool = True) -> None:
     """The EKF Monte Carlo of the range-bearing example, every statistic included (the checks' sums, the
     effect sizes' and the Cramér–Rao bound's), then the checks and effect sizes: wall time and this
     process's peak RSS (run once per N in its own process: ``python bench_nonlinear.py verify N``).
@@ -121,7 +121,7 @@ def bench_verify(n: int, chunk: int = 4096, profile: bool = True) -> None:
           f"({'meets' if ratio >= 10 else 'misses'} the 10x goal); of CPU seconds "
           f"(dynamax's filter {filter_cpu:.1f} s, kalcal's run {cpu:.2f} s): {filter_cpu / cpu:.2f}")
     print(f"load average {os.getloadavg()[0]:.1f} (1 min) at the end")
-    if ratio < 10 and profile:
+    if ratio < 10 and with_profile:
         profile(problem, chunk)
 
 
