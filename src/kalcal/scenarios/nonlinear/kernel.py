@@ -115,8 +115,8 @@ def ekf_block(
         The normals of the process (first q) and measurement noises (r) of each update, one per column of
         ``t_qf`` and ``t_rf`` (the numpy path's draws, :func:`kalcal.scenarios.nonlinear.problem._drawn_factor`).
     t_x0, t_p0f, t_qf, t_rf : ndarray
-        The truth's prior mean (d,) and square roots C C^T of P0 (d, d), Q (d, q), R (p, r): Q's and R's
-        the columns of their factors that are not all zero.
+        The truth's prior mean (d,) and square roots C C^T of P0 (d, d), Q (d, q) and R (p, r); of Q's and
+        R's, only the columns that are not all zero (q and r of them).
     t_dt, f_dt : float
         The truth's and the filter's time steps (s).
     q_inv : ndarray, shape (d, d)
