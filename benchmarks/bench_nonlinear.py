@@ -56,7 +56,7 @@ def main(n: int) -> None:
 
 
 
-def bench_verify(n: int, chunk: int = 4096, profile: bool = True) -> None:
+def bench_verify(n: int, chunk: int = 4096, with_profile: bool = True) -> None:
     """The EKF Monte Carlo of the range-bearing example, every statistic included (the checks' sums, the
     effect sizes' and the Cramér–Rao bound's), then the checks and effect sizes: wall time and this
     process's peak RSS (run once per N in its own process: ``python bench_nonlinear.py verify N``).
@@ -121,7 +121,7 @@ def bench_verify(n: int, chunk: int = 4096, profile: bool = True) -> None:
           f"({'meets' if ratio >= 10 else 'misses'} the 10x goal); of CPU seconds "
           f"(dynamax's filter {filter_cpu:.1f} s, kalcal's run {cpu:.2f} s): {filter_cpu / cpu:.2f}")
     print(f"load average {os.getloadavg()[0]:.1f} (1 min) at the end")
-    if ratio < 10 and profile:
+    if ratio < 10 and with_profile:
         profile(problem, chunk)
 
 
@@ -165,6 +165,7 @@ def profile(problem, chunk: int, repeats: int = 3) -> None:
 
     t = problem.scenario.loaded.truth
     k, d, p = problem.scenario.n_updates, t.state_dim, t.measurement_dim
+    drawn = (problem.normals_per_realization("exact") - d) // k  # each update's normals, as the block draws them
     best = {}
     # the whole profiled block with BLAS on one thread, as the engine runs each block (block_task): the pair
     # sums inside block_sums would otherwise run on BLAS's threads, and their waits for a loaded core count
@@ -174,7 +175,7 @@ def profile(problem, chunk: int, repeats: int = 3) -> None:
             rng = block_generator(0, 1)
             start = time.thread_time()
             rng.standard_normal((chunk, d))
-            rng.standard_normal((k, chunk, d + p))
+            rng.standard_normal((k, chunk, drawn))
             draws = time.thread_time() - start
             start = time.thread_time()
             problem.block_sums(block_generator(0, 1), chunk, "exact")

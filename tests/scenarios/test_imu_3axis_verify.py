@@ -1,10 +1,12 @@
 """kalcal verify imu-3axis: the estimators of procedure (b) on the nonlinear bench.
 
 Measured at N = 2000, seed 7 (each run a few seconds): in the near-linear case (a tight prior and a small
-noise) the EKF passes every check and the batch ML its mean error, covariance and NIS checks; at the
-default settings (12 poses, 2 deg of tilt spread, 0.0035 m/s^2 per pose mean) the EKF's scale factors
-are biased by about 4.8 of their own sigma at the last pose while the IEKF's largest bias is under 0.6
-sigma and the batch ML passes its exact checks; the bound never exceeds the batch ML's MSE beyond its
+noise) the EKF's bias is small (at most 0.06 sigma at the last pose, its mean-error tolerance outcome
+pass) but detected by the exact mean-error check (in 10 of seeds 0-19 at this N) and orthogonality's, and
+the batch ML passes its mean error, covariance and NIS checks; at the default settings (12 poses, 2 deg
+of tilt spread, 0.0035 m/s^2 per pose mean) the EKF's scale factors are biased by 4.5-4.9 of their own
+sigma at the last pose while the IEKF's largest bias is under 0.6 sigma and the batch ML passes its
+exact checks; the bound never exceeds the batch ML's MSE beyond its
 Monte Carlo error. The bound's marginalization and the batch ML are held to independent computations.
 docs/imu-3axis.md's verify table is held row by row (TABLE) to the runs at that N and seed.
 """
@@ -85,21 +87,23 @@ NEAR_LINEAR_CELL = ("near-linear: tilt 0.1 deg, scale 0.001, misalignment 0.05 d
                     "noise 0.001 m/s^2")
 DEFAULTS_CELL = "defaults (12 poses, tilt 2 deg, noise 0.0035 m/s^2)"
 NINE_POSES = ("truth.poses=9", "truth.noise=0.05")
-UKF_POOLED, UKF_LAST = "9-17", "2.9-4.9"  # the UKF's P over the error's variance: pooled - 1 in %, and at the last pose
+UKF_POOLED, UKF_LAST = "10-16", "3.0-5.1"  # the UKF's P over the error's variance: pooled - 1 in %, and at the last pose
 TABLE = [
-    Row(NEAR_LINEAR_CELL, "EKF", "pass", "at most 0.06", "0.96-1.03", ("filter.kind=ekf", *NEAR_LINEAR)),
-    Row("the same", "batch", "pass (mean error, covariance, NIS, shape)", "at most 0.05", "0.97-1.06",
+    Row(NEAR_LINEAR_CELL, "EKF", "fail (the mean error, its tolerance outcome pass, and orthogonality)", "at most 0.06",
+        "0.94-1.03", ("filter.kind=ekf", *NEAR_LINEAR), failed=frozenset({"mean_error", "orthogonality"}),
+        outcomes={"mean_error": "pass"}),
+    Row("the same", "batch", "pass (mean error, covariance, NIS, shape)", "at most 0.04", "0.96-1.03",
         ("filter.kind=batch", *NEAR_LINEAR), ran=frozenset({"mean_error", "covariance", "nis", "shape"})),
-    Row(DEFAULTS_CELL, "EKF", "fail: the scales biased", "4.7-4.8 on the scales", "13-37", ("filter.kind=ekf",),
+    Row(DEFAULTS_CELL, "EKF", "fail: the scales biased", "4.5-4.9 on the scales", "12-37", ("filter.kind=ekf",),
         failed=FILTER_CHECKS),
     Row("the same", "IEKF", "fail (every exact check; the mean error's and covariance's tolerance outcomes undecided)",
-        "at most 0.52 (bias_z)", "1.0-1.4", ("filter.kind=iekf",), failed=FILTER_CHECKS,
+        "at most 0.51 (bias_z)", "0.99-1.4", ("filter.kind=iekf",), failed=FILTER_CHECKS,
         outcomes={"mean_error": "undecided", "covariance": "undecided"}),
     Row("the same", "UKF", f"fail (all but the mean error: P {UKF_POOLED} % above the error's variance pooled over the poses, "
-        f"{UKF_LAST} times it at the last pose)", "at most 0.03", "15-21",
+        f"{UKF_LAST} times it at the last pose)", "at most 0.02", "14-20",
         ("filter.kind=ukf",), failed=FILTER_CHECKS - {"mean_error"}),
-    Row("the same", "batch", "pass", "at most 0.05", "0.96-1.06", ("filter.kind=batch",)),
-    Row("9 poses, noise 0.05 m/s^2", "EKF", "fail: the scales biased", "0.26-0.31 on the scales", "1.0-1.2",
+    Row("the same", "batch", "pass", "at most 0.04", "0.97-1.05", ("filter.kind=batch",)),
+    Row("9 poses, noise 0.05 m/s^2", "EKF", "fail: the scales biased", "0.27-0.32 on the scales", "1.0-1.2",
         ("filter.kind=ekf", *NINE_POSES), failed=frozenset({"mean_error", "covariance", "orthogonality", "shape"})),
 ]
 
@@ -159,7 +163,7 @@ def test_docs_table_row_holds_at_its_seed_and_n(row):
 def test_ukf_covariance_too_large_pooled_and_at_the_last_pose():
     """The UKF row's "P too large": the variance ratio E[e^2] / E[P] per parameter (the effect sizes'), pooled
     over the 12 poses, is below 1 with its interval (the covariance check fails for P too large, not too
-    small), P exceeding the error's variance by 9-17 %; at the last pose by 2.9-4.9 times."""
+    small), P exceeding the error's variance by 10-16 %; at the last pose by 3.0-5.1 times."""
     result = run("filter.kind=ukf")
     pooled = [e for e in result.summary["effect_sizes"]["overall"] if e["name"] == "variance_ratio"]
     assert len(pooled) == 9 and all(e["upper"] < 1 for e in pooled), pooled
@@ -168,9 +172,17 @@ def test_ukf_covariance_too_large_pooled_and_at_the_last_pose():
     assert np.all(last[:, 2] < 1) and spans(1 / last[:, 0], UKF_LAST), last
 
 
-def test_near_linear_ekf_passes_every_check():
+def test_near_linear_ekf_bias_is_within_tolerance_where_the_exact_checks_detect_it():
+    """Near-linear, what is left of the EKF's linearization bias is small, within the tolerance band (the
+    mean error's tolerance outcome pass, its final bias at most 0.06 sigma: the table's row), and the exact
+    checks that detect it at N = 2000 (the mean error in 10 of seeds 0-19, with the draws of every state
+    before as with the present ones) are the mean error and the orthogonality alone: the covariance,
+    whiteness, NIS and shape hold."""
     ekf = run("filter.kind=ekf", *NEAR_LINEAR)
-    assert ekf.summary["verdict"] == "pass", [(c.name, c.pvalue) for c in ekf.checks]
+    found = checks(ekf)
+    assert found["mean_error"].tolerance_outcome == "pass"
+    assert {name for name, c in found.items() if not c.passed} <= {"mean_error", "orthogonality"}, \
+        [(c.name, c.pvalue) for c in ekf.checks]
 
 
 def test_near_linear_batch_passes_its_final_time_checks():
@@ -190,10 +202,10 @@ def test_default_ekf_biased_iekf_and_batch_fare_better():
     assert not checks(ekf)["mean_error"].passed
     bias = final_bias(ekf)
     scales = slice(0, 3)
-    # the scales' bias in sigma: the interval at the run's confidence lies wholly above 1 sigma (measured 4.7-4.8)
+    # the scales' bias in sigma: the interval at the run's confidence lies wholly above 1 sigma (measured 4.5-4.9)
     assert np.all(bias[scales, 1] > 1.0), bias[scales]
     assert checks(ekf)["mean_error"].tolerance_outcome == "fail"
-    # the IEKF's worst final bias is a fraction of the EKF's (measured 0.52 against 4.8: upper ends compared)
+    # the IEKF's worst final bias is a fraction of the EKF's (measured 0.51 against 4.9: upper ends compared)
     worst_iekf = np.max(np.abs(final_bias(iekf)[:, 1:]))
     assert worst_iekf < np.min(bias[scales, 1]) / 4
     for name in ("mean_error", "covariance", "nis"):
@@ -344,7 +356,7 @@ def test_docs_speed_ratios_are_the_printed_runs_range():
     table = table[: table.index("\n\n")]
     ratios = [tuple(map(float, found.groups())) for row in table.splitlines()[2:]
               for found in [re.search(r"\| ([\d.]+) \(([\d.]+)\) \| \d+ \| [\d.]+ \|$", row)] if found]
-    assert len(ratios) == 5, table
+    assert len(ratios) == 7, table
     wall, cpu = (f"{min(r[k] for r in ratios):.2f}-{max(r[k] for r in ratios):.2f}" for k in (0, 1))
     docs = " ".join(DOCS.read_text().split())
     assert f"The ratio is {wall} in wall time and {cpu} in CPU seconds" in docs, (wall, cpu)

@@ -10,7 +10,7 @@ NEES, NIS (and their shape histograms), whitened errors and innovations, the eff
 the effect sizes' on the checked states (all of them, or a scenario's subset: imu-3axis's 9 parameters,
 its pose's tilts nuisance states), the bound's on every state. The kernel's own state is a tile's (d, d, m)
 and the sums of one update held per lane of a tile, reduced at the update's end; but its inputs and
-outputs grow with K: the block's normals (K, n, d + p) and the sums, the residual pair sums (K p)^2 among
+outputs grow with K: the block's normals (K, n, q + r) and the sums, the residual pair sums (K p)^2 among
 them, so memory is flat in n, not in K.
 
 Layout: the block's realizations in tiles of m, structure of arrays (realizations on the last axis, as
@@ -27,7 +27,7 @@ numpy path's rule, a prediction only) or a P or S is not positive definite: the 
 block on the numpy path from the same draws, which gives that case's numbers (or its error).
 """
 
-# numba cache stamp: kalcal.core.kernels 74dbd8a8dc28e025, kalcal.montecarlo.sum_kernels 1ed5637ca40b0768
+# numba cache stamp: kalcal.core.kernels 11df1701d982feae, kalcal.montecarlo.sum_kernels 1ed5637ca40b0768
 
 from __future__ import annotations
 
@@ -111,10 +111,12 @@ def ekf_block(
         The filter's.
     first : ndarray, shape (n, d)
         The normals of x_0.
-    noise : ndarray, shape (K, n, d + p)
-        The normals of the process (first d) and measurement noises of each update.
+    noise : ndarray, shape (K, n, q + r)
+        The normals of the process (first q) and measurement noises (r) of each update, one per column of
+        ``t_qf`` and ``t_rf`` (the numpy path's draws, :func:`kalcal.scenarios.nonlinear.problem._drawn_factor`).
     t_x0, t_p0f, t_qf, t_rf : ndarray
-        The truth's prior mean (d,) and square roots C C^T of P0 (d, d), Q (d, d), R (p, p).
+        The truth's prior mean (d,) and square roots C C^T of P0 (d, d), Q (d, q) and R (p, r); of Q's and
+        R's, only the columns that are not all zero (q and r of them).
     t_dt, f_dt : float
         The truth's and the filter's time steps (s).
     q_inv : ndarray, shape (d, d)
@@ -169,7 +171,10 @@ def ekf_block(
     # the block's state, tile-major so that each tile's arrays are contiguous
     xt = np.empty((tiles, d, m))
     xf = np.empty((tiles, d, m))
+    # P_{k-1} and P_k in turn (update k reads one and writes the other): the prediction reads P_{k-1}
+    # while it writes M, so that a row of F with one entry needs no product F P of its own
     cov = np.empty((tiles, d, d, m))
+    cov_next = np.empty((tiles, d, d, m))
     r_nees = np.zeros((tiles, m))
     r_nis = np.zeros((tiles, m))
     r_a = np.zeros((tiles, dc, m))
@@ -189,20 +194,29 @@ def ekf_block(
                 for b in range(d):
                     cov[t, a, b, j] = f_p0[a, b]
     # the columns of each row of the truth's noise factors that are not zero, in order
-    q_cols = np.zeros((d, d), dtype=np.int64)
+    nq, nr = t_qf.shape[1], t_rf.shape[1]
+    q_cols = np.zeros((d, nq), dtype=np.int64)
     q_count = np.zeros(d, dtype=np.int64)
     for a in range(d):
-        for b in range(d):
+        for b in range(nq):
             if t_qf[a, b] != 0.0:
                 q_cols[a, q_count[a]] = b
                 q_count[a] += 1
-    r_cols = np.zeros((p, p), dtype=np.int64)
+    r_cols = np.zeros((p, nr), dtype=np.int64)
     r_count = np.zeros(p, dtype=np.int64)
     for a in range(p):
-        for b in range(p):
+        for b in range(nr):
             if t_rf[a, b] != 0.0:
                 r_cols[a, r_count[a]] = b
                 r_count[a] += 1
+    # each row of the filter's F: its entries that are not identically zero, their columns in order
+    f_cols = np.zeros((d, d), dtype=np.int64)
+    f_count = np.zeros(d, dtype=np.int64)
+    for a in range(d):
+        for b in range(d):
+            if f_nz[a, b]:
+                f_cols[a, f_count[a]] = b
+                f_count[a] += 1
     # one tile's scratch (the Jacobians' zeros from the start: the printed F and H write only the others)
     tmp = np.empty((d, m))
     jf = np.zeros((d, d, m))
@@ -268,7 +282,8 @@ def ekf_block(
             mt = min(m, n - t * m)
             x = xt[t]
             xh = xf[t]
-            c = cov[t]
+            last = cov[t] if k % 2 == 0 else cov_next[t]  # P_{k-1}
+            c = cov_next[t] if k % 2 == 0 else cov[t]  # M, then P_k
             # the truth: F at x_{k-1} (the bound's), then x_k = f(x_{k-1}) + C_Q w, z_k = h(x_k) + C_R v
             for j in range(m):
                 jac_ft(x, uk, t_dt, jf, j)
@@ -291,32 +306,41 @@ def ekf_block(
                     acc = 0.0
                     for i in range(r_count[a]):
                         b = r_cols[a, i]
-                        acc += noise[k, col, d + b] * t_rf[a, b]
+                        acc += noise[k, col, nq + b] * t_rf[a, b]
                     zt[a, j] = hz[a, j] + acc
-            # the filter's prediction: xbar = f(xhat), M = F P F^T + Q (symmetrized), into c; the products
-            # with F's identically zero entries skipped (a kept state's F row is one 1, a renewed one's none)
+            # the filter's prediction: xbar = f(xhat), M = F P F^T + Q (symmetrized), from P_{k-1} (last)
+            # into c, only the products with F's entries that are not identically zero: a renewed state's
+            # row of F has none (its rows of M are Q's), a kept state's one 1, and a row of one entry
+            # F_aw gives (F P)_a = F_aw P_w (inline below); F P is formed for the rows of more entries
             for j in range(m):
                 jac_ff(xh, uk, f_dt, big_f, j)
                 ff(xh, uk, f_dt, xbar, j)
             for a in range(d):
-                for b in range(d):
-                    for j in range(m):
-                        fc[a, b, j] = 0.0
-                    for w in range(d):
-                        if f_nz[a, w]:
+                if f_count[a] > 1:
+                    for b in range(d):
+                        w = f_cols[a, 0]
+                        for j in range(m):
+                            fc[a, b, j] = big_f[a, w, j] * last[w, b, j]
+                        for i in range(1, f_count[a]):
+                            w = f_cols[a, i]
                             for j in range(m):
-                                fc[a, b, j] += big_f[a, w, j] * c[w, b, j]
+                                fc[a, b, j] += big_f[a, w, j] * last[w, b, j]
             for a in range(d):
+                wa = f_cols[a, 0]
                 for b in range(a + 1):
-                    for j in range(m):
-                        tmp[0, j] = 0.0
-                    for w in range(d):
-                        if f_nz[b, w]:
-                            for j in range(m):
-                                tmp[0, j] += fc[a, w, j] * big_f[b, w, j]
                     q_ab = 0.5 * (f_q[a, b] + f_q[b, a])
                     for j in range(m):
-                        c[a, b, j] = tmp[0, j] + q_ab
+                        c[a, b, j] = q_ab
+                    if f_count[a] == 1:
+                        for i in range(f_count[b]):
+                            w = f_cols[b, i]
+                            for j in range(m):
+                                c[a, b, j] += big_f[a, wa, j] * last[wa, w, j] * big_f[b, w, j]
+                    elif f_count[a] > 1:
+                        for i in range(f_count[b]):
+                            w = f_cols[b, i]
+                            for j in range(m):
+                                c[a, b, j] += fc[a, w, j] * big_f[b, w, j]
                     for j in range(m):
                         c[b, a, j] = c[a, b, j]
             # the update: H at xbar, r = z - h(xbar), then the one compiled covariance update (Joseph)

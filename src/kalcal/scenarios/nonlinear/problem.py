@@ -1,14 +1,18 @@
 """A nonlinear model's filter against its truth as a verification problem (the engine's Problem protocol).
 
-Each block of n realizations draws, from the block's generator, x_0 ~ N(x0, P0) then per update the
-process and measurement noises, all as (n, d) and (n, p) arrays (one call of f and h per update for the
-whole block), so a given seed gives the same realizations whatever the workers. The filter (EKF, IEKF or
+Each block of n realizations draws, from the block's generator, x_0 ~ N(x0, P0) as (n, d) normals, then
+the noises of every update at once as (K, n, q + r) normals: per update and realization the q normals of
+the columns of the truth's process-noise factor C_Q (C_Q C_Q^T = Q) that are not all zero, in order,
+then the r of the measurement-noise factor C_R's (:func:`_drawn_factor`; imu-3axis: q = 2 of d = 11, its
+pose's renewed tilts, and r = p = 3), so that no normal is drawn only to be multiplied by zero. The
+compiled kernel takes the same draws in the same order, so a given seed gives the same realizations on
+both paths, and whatever the workers (one call of f and h per update for the whole block). The filter (EKF, IEKF or
 UKF, :func:`kalcal.core.nonlinear_run.run_nonlinear_filter`) runs on the whole block; as each update ends
 its errors, each realization's own P_k and S_k, NEES, NIS and the whitened errors and innovations are
 added into the block's sums, with the effect
 sizes' sums (:mod:`kalcal.stats.effects`) and the Cramér–Rao bound's expectations at the true states.
 Memory is flat in N (a block of n realizations at a time, its sums merged as it ends) but not in K: per
-block the draws (K, n, d + p) (and, on the numpy path, the truth's states (K, n, d) and measurements
+block the draws (K, n, q + r) (and, on the numpy path, the truth's states (K, n, d) and measurements
 (n, K, p)), and per run the sums, which grow with K: the residual pair sums as (K p)^2.
 
 **Hooks** for a scenario built on this problem (:class:`ProblemHooks`, the scenario's ``problem_hooks``;
@@ -43,6 +47,17 @@ def _factor(cov: np.ndarray) -> np.ndarray:
     except np.linalg.LinAlgError:
         w, v = np.linalg.eigh(cov)
         return v * np.sqrt(np.clip(w, 0.0, None))
+
+
+def _drawn_factor(cov: np.ndarray) -> np.ndarray:
+    """The columns of the square root C (:func:`_factor`) that are not all zero, in order: (size, q).
+
+    Each realization and update draws one standard normal per column of the truth's Q and R factors that
+    it returns, so that no normal is drawn only to be multiplied by zeros: C w over the dropped columns
+    is an exact zero. A singular Q (static parameters kept, a pose's tilts renewed: imu-3axis's Q has
+    rank 2 of 11) draws its rank's normals; a covariance of full rank (a Cholesky factor) draws all."""
+    factor = _factor(cov)
+    return np.ascontiguousarray(factor[:, np.any(factor != 0.0, axis=0)])
 
 
 #: the run length, N K (realization-updates), from which ``filter.compiled=auto`` compiles a kernel that
@@ -261,7 +276,7 @@ class NonlinearProblem(ProblemDefaults):
 
     def normals_per_realization(self, engine: str) -> int:
         m = self.scenario.loaded.truth
-        return m.state_dim + self.scenario.n_updates * (m.state_dim + m.measurement_dim)
+        return m.state_dim + self.scenario.n_updates * (_drawn_factor(m.q).shape[1] + _drawn_factor(m.r).shape[1])
 
     def expected_mean_error(self) -> np.ndarray:
         """Zeros: no deterministic model error is predicted for a model written as code."""
@@ -278,8 +293,9 @@ class NonlinearProblem(ProblemDefaults):
             _known_rows("u", loaded.inputs, m.input_dim, k_count, loaded.source, "INPUTS")
             _known_rows("data", loaded.data, m.data_dim, k_count, loaded.source, "DATA")
         x = t.x0 + rng.standard_normal((n, d)) @ _factor(t.p0).T
-        noise = rng.standard_normal((k_count, n, d + p))
-        q_factor, r_factor = _factor(t.q), _factor(t.r)
+        q_factor, r_factor = _drawn_factor(t.q), _drawn_factor(t.r)
+        nq = q_factor.shape[1]
+        noise = rng.standard_normal((k_count, n, nq + r_factor.shape[1]))
         states = np.empty((k_count, n, d))
         z = np.empty((n, k_count, p))
         x0 = x
@@ -288,12 +304,12 @@ class NonlinearProblem(ProblemDefaults):
             # not a missing measurement (the filter's rule for a NaN in z), and is refused in one line
             # (numpy's warnings of the same NaN held back: the refusal names it)
             with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-                x = t.transition(x, _per_update(loaded.inputs, k)) + noise[k, :, :d] @ q_factor.T
+                x = t.transition(x, _per_update(loaded.inputs, k)) + noise[k, :, :nq] @ q_factor.T
                 _check_truth_finite(x, "f", k, loaded.source)
                 states[k] = x
                 hx = t.measure(x, _per_update(loaded.data, k))
             _check_truth_finite(hx, "h", k, loaded.source, x)
-            z[:, k] = hx + noise[k, :, d:] @ r_factor.T
+            z[:, k] = hx + noise[k, :, nq:] @ r_factor.T
         return x0, states, z
 
     def _run(self, z: np.ndarray, on_update, keep: bool):
@@ -434,8 +450,9 @@ class NonlinearProblem(ProblemDefaults):
         layout = self.layout
         checked = np.arange(d) if self.hooks.checked is None else np.asarray(self.hooks.checked, dtype=np.int64)
         # the numpy path's draws, in its order (_simulate)
+        q_factor, r_factor = _drawn_factor(t.q), _drawn_factor(t.r)
         first = rng.standard_normal((n, d))
-        noise = rng.standard_normal((k_count, n, d + p))
+        noise = rng.standard_normal((k_count, n, q_factor.shape[1] + r_factor.shape[1]))
         # the checks' sums on the checked states (layout.d of them), the bound's on the truth's d
         sums = SumBuffers.zeros(k_count, layout.d, p, n, self.residual_pairs, own_cov=True)
         flat = layout.zeros()
@@ -458,7 +475,7 @@ class NonlinearProblem(ProblemDefaults):
 
         ok = run_block(
             t, fm,
-            first, noise, t.x0, _factor(t.p0), _factor(t.q), _factor(t.r), float(t.dt),
+            first, noise, t.x0, _factor(t.p0), q_factor, r_factor, float(t.dt),
             q_inv, has_q_inv, np.linalg.cholesky(t.r),
             fm.x0, fm.p0, fm.q, fm.r, float(fm.dt),
             rows("u", loaded.inputs, t.input_dim), rows("data", loaded.data, t.data_dim), checked, sums, normalized, eff, _TILE,
