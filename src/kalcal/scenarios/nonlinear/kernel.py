@@ -86,9 +86,9 @@ def _forward_lanes(lower, v, out, m, acc):
 # width, then added together), which LLVM does only when allowed to reassociate. Written out as 4 or 8
 # running sums in plain Python, numba's loop did not vectorize (scalar: 83 ns per realization for the
 # 351 products of 26 rows against 22 ns reassociated, against 59 ns for the per-lane rows they replace).
-# The order stays fixed by the machine code: the same sums for the same draws on a machine, within a few
-# units in the last place of any other order (the tests hold them to the numpy path's to 1e-10). Not
-# inlined at numba's level, so that their flags stay theirs; LLVM inlines them.
+# The order stays fixed by the machine code: the same sums for the same draws on a machine, within
+# rounding of any other order (the tests hold them to the numpy path's to 1e-10). Not inlined at numba's
+# level, so that their flags stay theirs.
 @numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract", "reassoc"})
 def _lane_dot(a, b, m):
     """sum over j < m of a[j] * b[j] (rows of a tile's arrays): one product sum over the lanes."""
@@ -258,8 +258,8 @@ def ekf_block(
     zero_row = np.zeros(m)
     tile_nees = np.empty(m)  # the tile's NEES and NIS, binned into the shape histograms
     tile_nis = np.empty(m)
-    # one update's sums, per lane (reduced over the lanes at the update's end): the offsets of each (the
-    # checks' on the c checked states, the bound's on all d)
+    # one update's sums, each tile's reduced over its lanes into them: the offsets of each (the checks'
+    # on the c checked states, the bound's on all d)
     cd, dd, pp = dc * dc, d * d, p * p
     o_err = 0
     o_eo = o_err + dc
