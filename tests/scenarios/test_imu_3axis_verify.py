@@ -356,7 +356,8 @@ def test_docs_speed_ratios_are_the_printed_runs_range():
     table = table[: table.index("\n\n")]
     ratios = [tuple(map(float, found.groups())) for row in table.splitlines()[2:]
               for found in [re.search(r"\| ([\d.]+) \(([\d.]+)\) \| \d+ \| [\d.]+ \|$", row)] if found]
-    assert len(ratios) == 7, table
+    compiled_rows = [row for row in table.splitlines()[2:] if "batched numpy path" not in row]
+    assert ratios and len(ratios) == len(compiled_rows), table  # every compiled run's row is read
     wall, cpu = (f"{min(r[k] for r in ratios):.2f}-{max(r[k] for r in ratios):.2f}" for k in (0, 1))
     docs = " ".join(DOCS.read_text().split())
     assert f"The ratio is {wall} in wall time and {cpu} in CPU seconds" in docs, (wall, cpu)

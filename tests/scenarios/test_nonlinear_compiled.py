@@ -27,6 +27,7 @@ from kalcal.core import xmath as xm
 from kalcal.core.nonlinear import NonlinearModel, load_nonlinear_model
 from kalcal.montecarlo.engine import block_count, block_generator, run_monte_carlo
 from kalcal.scenarios import build_scenario, load_code_model
+from kalcal.scenarios.nonlinear.problem import _TILE
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "examples" / "range_bearing.py"
@@ -100,7 +101,7 @@ def _assert_same_sums(compiled, oracle, rtol=1e-10, layout=None):
         assert np.max(np.abs(a - b)) <= rtol * scale, (f.name, np.max(np.abs(a - b)) / scale)
 
 
-@pytest.mark.parametrize("n", [300, 64])  # 300: a last tile of 44 realizations in 64 lanes
+@pytest.mark.parametrize("n", [300, 64])  # 300: a full tile of 216 lanes and a last of 84; 64: one tile, not full
 def test_range_bearing_compiled_block_sums_equal_the_numpy_path(n):
     problem = load_code_model(str(EXAMPLE), ["scenario.updates=12", "filter.compiled=yes"]).problem()
     assert problem.compiled_path == (True, "")
@@ -122,7 +123,7 @@ def test_linear_model_with_another_truth_compiled_block_sums_equal_the_numpy_pat
     _assert_same_sums(compiled, oracle, layout=problem.layout)
 
 
-@pytest.mark.parametrize("n", [300, 64])
+@pytest.mark.parametrize("n", [300, 64, 2 * _TILE])  # the last: full tiles alone
 def test_imu_3axis_compiled_block_sums_equal_the_numpy_path(n):
     """The checked hook (9 parameters of 11 states) in the kernel: the checks' sums on the 9, the bound's
     expectations on all 11 (its renewed tilts are marginalized from them afterwards, on either path)."""

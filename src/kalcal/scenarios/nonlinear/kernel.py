@@ -9,7 +9,7 @@ NEES, NIS (and their shape histograms), whitened errors and innovations, the eff
 (F, F^T Q^-1 F at the true x_{k-1}, H^T R^-1 H at the true x_k) into the block's sums: the checks' and
 the effect sizes' on the checked states (all of them, or a scenario's subset: imu-3axis's 9 parameters,
 its pose's tilts nuisance states), the bound's on every state. The kernel's own state is a tile's (d, d, m)
-and the sums of one update held per lane of a tile, reduced at the update's end; but its inputs and
+and one update's totals, each tile's sums reduced over its lanes into them at once; but its inputs and
 outputs grow with K: the block's normals (K, n, q + r) and the sums, the residual pair sums (K p)^2 among
 them, so memory is flat in n, not in K.
 
@@ -79,6 +79,32 @@ def _forward_lanes(lower, v, out, m, acc):
                 acc[j] = acc[j] - lower[i, b, j] * out[b, j]
         for j in range(m):
             out[i, j] = acc[j] / lower[i, i, j]
+
+
+# The two reductions over a tile's lanes below are the kernel's only code compiled with 'reassoc': a sum
+# over the lanes may be taken in whatever order vectorizes it (running sums by lane modulo the vector
+# width, then added together), which LLVM does only when allowed to reassociate. Written out as 4 or 8
+# running sums in plain Python, numba's loop did not vectorize (scalar: 83 ns per realization for the
+# 351 products of 26 rows against 22 ns reassociated, against 59 ns for the per-lane rows they replace).
+# The order stays fixed by the machine code: the same sums for the same draws on a machine, within
+# rounding of any other order (the tests hold them to the numpy path's to 1e-10). Not inlined at numba's
+# level, so that their flags stay theirs.
+@numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract", "reassoc"})
+def _lane_dot(a, b, m):
+    """sum over j < m of a[j] * b[j] (rows of a tile's arrays): one product sum over the lanes."""
+    acc = 0.0
+    for j in range(m):
+        acc += a[j] * b[j]
+    return acc
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract", "reassoc"})
+def _lane_sum(a, m):
+    """sum over j < m of a[j]."""
+    acc = 0.0
+    for j in range(m):
+        acc += a[j]
+    return acc
 
 
 @numba.njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -246,8 +272,8 @@ def ekf_block(
     zero_row = np.zeros(m)
     tile_nees = np.empty(m)  # the tile's NEES and NIS, binned into the shape histograms
     tile_nis = np.empty(m)
-    # one update's sums, per lane (reduced over the lanes at the update's end): the offsets of each (the
-    # checks' on the c checked states, the bound's on all d)
+    # one update's sums, each tile's reduced over its lanes into them: the offsets of each (the checks'
+    # on the c checked states, the bound's on all d)
     cd, dd, pp = dc * dc, d * d, p * p
     o_err = 0
     o_eo = o_err + dc
@@ -273,9 +299,9 @@ def ekf_block(
     o_ftqf = o_f + dd
     o_htrh = o_ftqf + dd
     width = o_htrh + dd
-    lane = np.empty((width, m))
+    upd = np.empty(width)
     for k in range(n_updates):
-        lane[:, :] = 0.0
+        upd[:] = 0.0
         uk = inputs[k]
         dk = data[k]
         for t in range(tiles):
@@ -387,21 +413,23 @@ def ekf_block(
                 return False
             _forward_lanes(lp, e, eps, mt, row)
             _forward_lanes(ls, res, u, mt, row)
+            # the update's sums on the checked states, each reduced over the tile's lanes at once (products
+            # of rows in the cache) into its one total: the symmetric ones' lower triangles (their upper
+            # ones the same numbers, mirrored at the update's end)
             for a in range(dc):
-                _add_lanes(lane[o_err + a], e[a], mt)
-                _add_lanes(lane[o_est + a], xc[a], mt)
-                _add_lanes(lane[o_we + a], eps[a], mt)
+                upd[o_err + a] += _lane_sum(e[a], mt)
+                upd[o_est + a] += _lane_sum(xc[a], mt)
+                upd[o_we + a] += _lane_sum(eps[a], mt)
                 for b in range(dc):
                     ab = a * dc + b
-                    _add_products(lane[o_ee + ab], e[a], xc[b], mt)
-                    _add_products(lane[o_wx + ab], eps[a], xc[b], mt)
-                # the symmetric sums' lower triangles (their upper ones the same numbers, mirrored below)
+                    upd[o_ee + ab] += _lane_dot(e[a], xc[b], mt)
+                    upd[o_wx + ab] += _lane_dot(eps[a], xc[b], mt)
                 for b in range(a + 1):
                     ab = a * dc + b
-                    _add_products(lane[o_eo + ab], e[a], e[b], mt)
-                    _add_products(lane[o_esto + ab], xc[a], xc[b], mt)
-                    _add_lanes(lane[o_fc + ab], cc[a, b], mt)
-                    _add_products(lane[o_wo + ab], eps[a], eps[b], mt)
+                    upd[o_eo + ab] += _lane_dot(e[a], e[b], mt)
+                    upd[o_esto + ab] += _lane_dot(xc[a], xc[b], mt)
+                    upd[o_fc + ab] += _lane_sum(cc[a, b], mt)
+                    upd[o_wo + ab] += _lane_dot(eps[a], eps[b], mt)
             for j in range(mt):
                 tile_nees[j] = 0.0
             for a in range(dc):
@@ -416,9 +444,9 @@ def ekf_block(
             for a in range(p):
                 for j in range(mt):
                     last_u[t, a, j] = u[a, j]
-            _add_lanes(lane[o_nees], tile_nees, mt)
-            _add_lanes(lane[o_nis], tile_nis, mt)
-            _add_products(lane[o_nsq], tile_nees, tile_nees, mt)
+            upd[o_nees] += _lane_sum(tile_nees, mt)
+            upd[o_nis] += _lane_sum(tile_nis, mt)
+            upd[o_nsq] += _lane_dot(tile_nees, tile_nees, mt)
             _add_lanes(r_nees[t], tile_nees, mt)
             _add_lanes(r_nis[t], tile_nis, mt)
             # the shape check's histograms, by the fixed-gain kernels' binning (the same floor of the same
@@ -426,10 +454,10 @@ def ekf_block(
             add_shape(k, tile_nees[:mt], sums.nees_grid.scale, sums.nees_histogram)
             add_shape(k, tile_nis[:mt], sums.nis_grid.scale, sums.nis_histogram)
             for a in range(p):
-                _add_lanes(lane[o_res + a], res[a], mt)
-                _add_lanes(lane[o_nr + a], u[a], mt)
-                for b in range(p):
-                    _add_products(lane[o_reso + a * p + b], res[a], res[b], mt)
+                upd[o_res + a] += _lane_sum(res[a], mt)
+                upd[o_nr + a] += _lane_sum(u[a], mt)
+                for b in range(a + 1):
+                    upd[o_reso + a * p + b] += _lane_dot(res[a], res[b], mt)
             if keep_pairs:
                 for a in range(p):
                     for j in range(mt):
@@ -439,11 +467,11 @@ def ekf_block(
                     zrow[0, j] = e[a, j] / np.sqrt(cc[a, a, j])  # e / sqrt(P_ii)
                 for j in range(mt):
                     zrow[1, j] = e[a, j] * e[a, j]
-                _add_products(lane[o_e4 + a], zrow[1], zrow[1], mt)
-                _add_products(lane[o_p2 + a], cc[a, a], cc[a, a], mt)
-                _add_products(lane[o_e2p + a], zrow[1], cc[a, a], mt)
-                _add_lanes(lane[o_z + a], zrow[0], mt)
-                _add_products(lane[o_z2 + a], zrow[0], zrow[0], mt)
+                upd[o_e4 + a] += _lane_dot(zrow[1], zrow[1], mt)
+                upd[o_p2 + a] += _lane_dot(cc[a, a], cc[a, a], mt)
+                upd[o_e2p + a] += _lane_dot(zrow[1], cc[a, a], mt)
+                upd[o_z + a] += _lane_sum(zrow[0], mt)
+                upd[o_z2 + a] += _lane_dot(zrow[0], zrow[0], mt)
                 _add_lanes(r_a[t, a], zrow[1], mt)
                 _add_lanes(r_b[t, a], cc[a, a], mt)
                 _add_lanes(r_z[t, a], zrow[0], mt)
@@ -451,8 +479,7 @@ def ekf_block(
             for a in range(d):
                 for b in range(d):
                     if t_nz[a, b]:
-                        for j in range(mt):
-                            lane[o_f + a * d + b, j] += jf[a, b, j]
+                        upd[o_f + a * d + b] += _lane_sum(jf[a, b], mt)
             if has_q_inv:
                 for a in range(d):
                     for b in range(d):
@@ -466,8 +493,7 @@ def ekf_block(
                     for b in range(d):
                         for w in range(d):
                             if t_nz[w, a]:
-                                for j in range(mt):
-                                    lane[o_ftqf + a * d + b, j] += jf[w, a, j] * g[w, b, j]
+                                upd[o_ftqf + a * d + b] += _lane_dot(jf[w, a], g[w, b], mt)
             for i in range(p):  # R^-1/2 H by forward substitution, the lane loops innermost; its
                 for b in range(d):  # identically zero entries stay the zeros they start as
                     if w_nz[i, b]:
@@ -482,41 +508,40 @@ def ekf_block(
                 for b in range(a + 1):  # R^-1/2 H's identically zero entries skipped
                     for i in range(p):
                         if w_nz[i, a] and w_nz[i, b]:
-                            for j in range(mt):
-                                lane[o_htrh + a * d + b, j] += wh[i, a, j] * wh[i, b, j]
-        # the update's sums: the lanes reduced
+                            upd[o_htrh + a * d + b] += _lane_dot(wh[i, a], wh[i, b], mt)
+        # the update's sums (the symmetric ones from their lower triangles)
         for a in range(dc):
-            sums.error[k, a] += lane[o_err + a].sum()
-            sums.estimate[k, a] += lane[o_est + a].sum()
-            sums.whitened_error[k, a] += lane[o_we + a].sum()
-            e4[k, a] += lane[o_e4 + a].sum()
-            p2[k, a] += lane[o_p2 + a].sum()
-            e2p[k, a] += lane[o_e2p + a].sum()
-            zsum[k, a] += lane[o_z + a].sum()
-            z2sum[k, a] += lane[o_z2 + a].sum()
+            sums.error[k, a] += upd[o_err + a]
+            sums.estimate[k, a] += upd[o_est + a]
+            sums.whitened_error[k, a] += upd[o_we + a]
+            e4[k, a] += upd[o_e4 + a]
+            p2[k, a] += upd[o_p2 + a]
+            e2p[k, a] += upd[o_e2p + a]
+            zsum[k, a] += upd[o_z + a]
+            z2sum[k, a] += upd[o_z2 + a]
             for b in range(dc):
                 ab = a * dc + b
                 low = max(a, b) * dc + min(a, b)
-                sums.error_outer[k, a, b] += lane[o_eo + low].sum()
-                sums.estimate_outer[k, a, b] += lane[o_esto + low].sum()
-                sums.error_estimate[k, a, b] += lane[o_ee + ab].sum()
-                sums.filter_cov[k, a, b] += lane[o_fc + low].sum()
-                sums.whitened_outer[k, a, b] += lane[o_wo + low].sum()
-                sums.whitened_estimate[k, a, b] += lane[o_wx + ab].sum()
+                sums.error_outer[k, a, b] += upd[o_eo + low]
+                sums.estimate_outer[k, a, b] += upd[o_esto + low]
+                sums.error_estimate[k, a, b] += upd[o_ee + ab]
+                sums.filter_cov[k, a, b] += upd[o_fc + low]
+                sums.whitened_outer[k, a, b] += upd[o_wo + low]
+                sums.whitened_estimate[k, a, b] += upd[o_wx + ab]
         for a in range(d):
             for b in range(d):
                 ab = a * d + b
-                fsum[k, a, b] += lane[o_f + ab].sum()
-                ftqf[k, a, b] += lane[o_ftqf + ab].sum()
-                htrh[k, a, b] += lane[o_htrh + max(a, b) * d + min(a, b)].sum()
-        sums.nees[k] += lane[o_nees].sum()
-        sums.nis[k] += lane[o_nis].sum()
-        nees_sq[k] += lane[o_nsq].sum()
+                fsum[k, a, b] += upd[o_f + ab]
+                ftqf[k, a, b] += upd[o_ftqf + ab]
+                htrh[k, a, b] += upd[o_htrh + max(a, b) * d + min(a, b)]
+        sums.nees[k] += upd[o_nees]
+        sums.nis[k] += upd[o_nis]
+        nees_sq[k] += upd[o_nsq]
         for a in range(p):
-            sums.residual[k, a] += lane[o_res + a].sum()
-            normalized[k, a] += lane[o_nr + a].sum()
+            sums.residual[k, a] += upd[o_res + a]
+            normalized[k, a] += upd[o_nr + a]
             for b in range(p):
-                sums.residual_own[k, a, b] += lane[o_reso + a * p + b].sum()
+                sums.residual_own[k, a, b] += upd[o_reso + max(a, b) * p + min(a, b)]
     # the per-realization averages over the updates (EffectAccumulator.finish)
     for t in range(tiles):
         mt = min(m, n - t * m)
