@@ -423,6 +423,94 @@ def test_refits_at_the_floor_make_the_entry_not_applicable_near_its_bound(ar1):
     assert v.at_range_end == 0 and v.ci_low is not None and v.ci_high is not None and v.reason == ""
 
 
+# The 120-row log of seed 1011 (w interior: its likelihood interval 0.17-2.11), B = 99, seed 11: replicate 88's
+# search stops at w = 1.10e-6, short of the floor 1e-6 where log L is 3.2e-7 higher (a variance's log L is flat
+# on the log scale near 0): its maximum along w is at the bound, so it is moved there and counts at it. The
+# 2.5% end (the 2.5th smallest of 99: order statistics 1 and 2, 0-based) rests on it: near its bound, not
+# applicable. Counted only where it stopped within 1e-6 of the floor, the entry was an ordinary interval.
+# Replicate 27's refit, 4.4e-4, keeps its value: log L at the floor is 3.2e-6 lower there, its maximum
+# inside the range (a full fit of that log puts it at 2.8e-4), so it is no refit at the bound.
+def test_a_refit_stopped_short_of_the_floor_counts_at_the_bound(ar1):
+    result = _boot(ar1, _log(120, 1011), 99, seed=11, threads=2)
+    w = result.bootstrap.parameters["filter.w"]
+    assert not result.parameters["filter.w"].at_bound and result.parameters["filter.w"].ci_low > 0.1
+    low = sorted(w.values)[:3]
+    assert low[:2] == pytest.approx([1e-6, 1e-6], rel=1e-12) and 1e-4 < low[2] < 1e-3, low
+    assert w.values[88] == 1e-6 and 1e-4 < w.values[27] < 1e-3 and w.at_range_end == 2
+    assert not w.applicable and w.reason.startswith("near its bound: refits at the bound (consistent with 0)")
+    assert result.bootstrap.parameters["filter.v"].applicable
+
+
+def _bound_free():
+    from kalcal.fitting.mle import Free
+
+    return [Free("filter.w", 1.0, 1e-3, 1e3), Free("filter.phi", 0.0, -1.0, 1.0, scale="linear", bounded=True),
+            Free("filter.lag", 0.0, -1.0, 1.0, scale="linear")]
+
+
+# snap_to_bounds on hand-built log-likelihoods: a setting whose log L does not rise from a bound of the
+# parameter space to the refit (its maximum along it is at the bound) moves there, log L never lower than the
+# refit's; a maximum inside the range, however near the bound, stays; an end that bounds nothing (the log
+# scale's ceiling, a plain linear range such as a latency's) is never moved to, and a log L that fails at the
+# bound moves nothing.
+def test_snap_to_bounds_moves_a_refit_whose_maximum_is_at_the_bound():
+    from kalcal.fitting.bootstrap import snap_to_bounds
+
+    free = _bound_free()
+
+    def loglik(values):  # w's maximum at 0 (below the floor), phi's at 1.2 (beyond 1), lag's at 1.5 (beyond 1)
+        return -values["filter.w"] - (values["filter.phi"] - 1.2) ** 2 - (values["filter.lag"] - 1.5) ** 2
+
+    stopped = {"filter.w": 3e-3, "filter.phi": 0.99, "filter.lag": 0.99}
+    point, at_end = snap_to_bounds(loglik, free, stopped, loglik(stopped))
+    assert point == {"filter.w": 1e-3, "filter.phi": 1.0, "filter.lag": 0.99}
+    assert at_end == [(True, False), (False, True), (False, False)]
+    assert loglik(point) >= loglik(stopped)
+    # a flat log L (the search stops anywhere): the bound is as good, so the refit is at it
+    assert snap_to_bounds(lambda values: 0.0, free[:1], {"filter.w": 5.0}, 0.0) == ({"filter.w": 1e-3}, [(True, False)])
+    # a maximum at 2e-3, twice the floor: log L at the floor is lower, so it stays
+    inside = lambda values: -((np.log(values["filter.w"]) - np.log(2e-3)) ** 2)  # noqa: E731
+    assert snap_to_bounds(inside, free[:1], {"filter.w": 2e-3}, 0.0) == ({"filter.w": 2e-3}, [(False, False)])
+    # log L rising towards the ceiling 1e3 (no bound): the ceiling is not evaluated, the refit stays
+    rising = lambda values: np.log(values["filter.w"])  # noqa: E731
+    assert snap_to_bounds(rising, free[:1], {"filter.w": 500.0}, rising({"filter.w": 500.0}))[1] == [(False, False)]
+    # within 1e-6 (relative) of an end: at it, without an evaluation
+    assert snap_to_bounds(None, free[:1], {"filter.w": 1e-3 * (1 + 1e-7)}, 0.0)[1] == [(True, False)]
+
+    def fails(values):
+        if values["filter.w"] < 2e-3:
+            raise ValueError("refused")
+        return 0.0
+    assert snap_to_bounds(fails, free[:1], {"filter.w": 5.0}, 0.0) == ({"filter.w": 5.0}, [(False, False)])
+
+
+# In the bootstrap: refits stopped short of the floor (a point_estimate that stops at three times the floor
+# wherever the maximum is at it) are moved to the floor and counted at the bound, so the entry is near its
+# bound, as it is with the search reaching the floor; the draws: ln m ~ N(-0.5, 0.5) against a floor at
+# ln 1 = 0, so about 16% of the maxima are at it.
+def test_refits_stopped_short_of_the_floor_are_moved_to_it(monkeypatch):
+    from kalcal.fitting import bootstrap
+    from kalcal.fitting.mle import Free, point_estimate
+
+    free = Free("filter.w", 1.0, 1.0, 1e3)
+    reached = _toy(free, -0.5, 0.5)
+    short = []
+
+    def stops_short(loglik, spec):
+        values, best, converged = point_estimate(loglik, spec)
+        if values["filter.w"] <= 1.0 * (1 + 1e-9):
+            values = {"filter.w": 3.0}
+            short.append(True)
+            return values, loglik(values), converged
+        return values, best, converged
+
+    monkeypatch.setattr(bootstrap, "point_estimate", stops_short)
+    snapped = _toy(free, -0.5, 0.5)
+    assert len(short) == reached.at_range_end == snapped.at_range_end >= 2
+    assert snapped.values == reached.values and min(snapped.values) == 1.0
+    assert not snapped.applicable and snapped.reason.startswith("near its bound: refits at the bound (consistent with 0)")
+
+
 def _toy(free, location, spread, *, ci=(0.5, 2.0), estimate=1.0, b=39, at_bound=False):
     """A bootstrap of one setting over a hand-built draw: replicate b's log-likelihood peaks at m_b, drawn
     ``location + spread z`` on the search's scale (the log of the value on a log scale), so each refit is m_b
