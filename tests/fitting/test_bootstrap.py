@@ -55,7 +55,8 @@ def _log(n: int, seed: int) -> pd.DataFrame:
 
 
 def _boot(scenario, log, b, seed=0, threads=1, confidence=0.95):
-    return fit_model_file(scenario, log, options=FitOptions(bootstrap=b, seed=seed, threads=threads, confidence=confidence))
+    return fit_model_file(scenario, log, confidence=confidence,
+                          options=FitOptions(bootstrap=b, seed=seed, threads=threads, confidence=confidence))
 
 
 # Same seed, 1 and 2 threads: the same replicates, so identical intervals, se and bias; another seed differs.
@@ -312,6 +313,45 @@ def test_bootstrap_refused_in_one_line(ar1):
             kalcal.fit(ar1, data=_log(60, 1), bootstrap=b, confidence=confidence)
 
 
+# A level whose fewest replicates exceed MAX_REPLICATES (0.99999 needs 2/(1 - c) - 1 = 199999): no B serves it,
+# said with the level's own digits (at 4 significant digits 0.99999 was printed "1", beside a minimum above
+# the maximum); below that, the minimum is named with the level's digits too.
+def test_a_level_no_b_serves_is_refused_with_its_digits(ar1):
+    import kalcal
+    from kalcal.errors import KalcalError
+    from kalcal.fitting.bootstrap import check_replicates
+
+    for b in (40, 100_000):
+        with pytest.raises(KalcalError, match=r"^--bootstrap: no B within 100000 replicates serves a 0\.99999 percentile "
+                                              r"interval: it needs B >= 199999 \(\(B \+ 1\)\(1 - c\)/2 >= 1\), got "):
+            kalcal.fit(ar1, data=_log(60, 1), bootstrap=b, confidence=0.99999)
+    with pytest.raises(KalcalError, match=r"a 0\.9999 percentile interval needs at least 19999 replicates"):
+        check_replicates(40, 0.9999)
+    check_replicates(19_999, 0.9999)  # the minimum itself is accepted
+
+
+# bootstrap=False is no bootstrap, as 0 is; True names no B (it would run as B = 1) and is refused in one line.
+def test_bootstrap_false_is_none_and_true_is_refused(ar1):
+    import kalcal
+    from kalcal.errors import KalcalError
+
+    assert kalcal.fit(ar1, data=_log(60, 1), bootstrap=False).bootstrap is None
+    with pytest.raises(KalcalError, match=r"^--bootstrap: expected a number of replicates .*got True$"):
+        kalcal.fit(ar1, data=_log(60, 1), bootstrap=True)
+
+
+# A scenario's fit given one level for its likelihood intervals (confidence=) and another for the bootstrap
+# (FitOptions.confidence) refuses, in one line naming both: the percentile interval would sit beside a
+# likelihood interval of another level and be judged by that interval's limits. One level runs.
+def test_mixed_confidence_levels_are_refused(ar1):
+    from kalcal.errors import KalcalError
+
+    with pytest.raises(KalcalError, match=r"the fit's intervals at 0\.95 and the bootstrap's at 0\.9 differ"):
+        fit_model_file(ar1, _log(60, 1), confidence=0.95, options=FitOptions(bootstrap=19, threads=1, confidence=0.9))
+    same = fit_model_file(ar1, _log(60, 1), confidence=0.9, options=FitOptions(bootstrap=19, threads=1, confidence=0.9))
+    assert same.bootstrap.confidence == 0.9
+
+
 # A B too large (1e20 overflowed the replicate list, 1e12 ran out of memory) or not a number (nan, inf, 40.5,
 # "40"): one line naming --bootstrap, a KalcalError in Python and exit status 2 from the command, before any fit.
 def test_bootstrap_too_large_or_not_a_number_refused_in_one_line(ar1, tmp_path):
@@ -324,7 +364,7 @@ def test_bootstrap_too_large_or_not_a_number_refused_in_one_line(ar1, tmp_path):
 
     assert MAX_REPLICATES == 100_000  # the number the help texts print
     for b in (float("nan"), float("inf"), 40.5, "40"):
-        with pytest.raises(KalcalError, match=r"--bootstrap: expected 0 \(none\) or a whole number"):
+        with pytest.raises(KalcalError, match=r"--bootstrap: expected 0 \(none\) or a positive whole number"):
             kalcal.fit(ar1, data=_log(60, 1), bootstrap=b)
     for b in (10**20, 10**12, MAX_REPLICATES + 1):
         with pytest.raises(KalcalError, match=r"--bootstrap: at most 100000 replicates"):
@@ -358,7 +398,7 @@ def test_dask_gives_the_intervals_of_threads(ar1):
         distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None) as cluster,
         distributed.Client(cluster) as client,
     ):
-        on_dask = fit_model_file(ar1, log, options=FitOptions(bootstrap=8, seed=4, client=client, confidence=0.75))
+        on_dask = fit_model_file(ar1, log, confidence=0.75, options=FitOptions(bootstrap=8, seed=4, client=client, confidence=0.75))
     assert on_dask.bootstrap.parameters == threads.bootstrap.parameters
     assert on_dask.bootstrap.parameters["filter.v"].applicable
 
@@ -830,7 +870,7 @@ def test_scale_bias_bootstrap_same_seed_one_and_two_threads_identical():
 
     sc, t, reference, sensor = _scale_bias_log(5, 120)
     one, two, other = (fit_scale_bias(sc, t, reference, sensor,
-                                      options=FitOptions(bootstrap=8, seed=seed, threads=n, confidence=0.75))
+                                      confidence=0.75, options=FitOptions(bootstrap=8, seed=seed, threads=n, confidence=0.75))
                        for seed, n in ((3, 1), (3, 2), (4, 2)))
     assert one.bootstrap.parameters == two.bootstrap.parameters
     assert all(p.values for p in one.bootstrap.parameters.values())

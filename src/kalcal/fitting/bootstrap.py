@@ -189,8 +189,10 @@ def minimum_replicates(confidence: float) -> int:
     exists only where k >= 1, i.e. B >= 2/(1 - c) - 1 (39 at 95%: the smallest and largest of 39 refits;
     19 at 90%). Fewer, and the "interval" is the sample's range, whatever c says.
     """
-    # the small allowance keeps 2/(1 - 0.95) - 1, 39.00000000000004 in floating point, at 39
-    return max(2, math.ceil(2.0 / (1.0 - confidence) - 1.0 - 1e-9))
+    # the small allowance, relative (the rounding of 1 - c grows with 1/(1 - c)), keeps 2/(1 - 0.95) - 1,
+    # 39.00000000000004 in floating point, at 39, and 0.99999's 199999.0000013 at 199999
+    least = 2.0 / (1.0 - confidence) - 1.0
+    return max(2, math.ceil(least - 1e-9 * max(1.0, least)))
 
 
 #: the most replicates a bootstrap runs. At B = 1e5 a 95% percentile end's own Monte Carlo error,
@@ -212,11 +214,17 @@ def whole_number(value) -> bool:
 
 def check_replicates(replicates, confidence: float) -> None:
     """Raise KalcalError, one line, unless ``replicates`` is a whole number within
-    [:func:`minimum_replicates`, :data:`MAX_REPLICATES`]."""
+    [:func:`minimum_replicates`, :data:`MAX_REPLICATES`]; where that range is empty (c above 1 - 2/100001,
+    0.99998), say that no B serves the level."""
     least = minimum_replicates(confidence)
+    # the level with the digits it has (0.99999, not 0.99999's "1" at 4 significant digits)
+    level = f"{confidence:.12g}"
+    if least > MAX_REPLICATES:
+        raise KalcalError(f"--bootstrap: no B within {MAX_REPLICATES} replicates serves a {level} percentile interval: "
+                          f"it needs B >= {least} ((B + 1)(1 - c)/2 >= 1), got {replicates!r}")
     if not whole_number(replicates) or replicates < least:
-        raise KalcalError(f"--bootstrap: a {confidence:.4g} percentile interval needs at least {least} replicates "
-                          f"((B + 1)(1 - c)/2 >= 1, a refit beyond each end), got {replicates!r}")
+        raise KalcalError(f"--bootstrap: a {level} percentile interval needs at least {least} replicates "
+                          f"((B + 1)(1 - c)/2 >= 1), got {replicates!r}")
     if replicates > MAX_REPLICATES:
         raise KalcalError(f"--bootstrap: at most {MAX_REPLICATES} replicates (there a percentile end's Monte Carlo "
                           f"error is under 1% of the bootstrap se; more costs hours and memory), got {replicates!r}")
@@ -442,11 +450,18 @@ def parametric_bootstrap(
     return BootstrapResult(replicates, int(seed), float(confidence), parameters, failed, seconds)
 
 
-def bootstrap_fit(options, draw: Draw, free: Sequence[Free], fit) -> BootstrapResult | None:
+def bootstrap_fit(options, draw: Draw, free: Sequence[Free], fit, confidence: float) -> BootstrapResult | None:
     """The bootstrap ``options`` ask for (:class:`~kalcal.fitting.run.FitOptions`: ``bootstrap`` B, ``seed``,
-    ``threads``, ``client``), or None where B is 0: what each scenario's fit calls with its own ``draw``."""
+    ``threads``, ``client``, ``confidence``), or None where B is 0: what each scenario's fit calls with its own
+    ``draw`` and the ``confidence`` of ``fit``'s likelihood intervals.
+
+    Raises KalcalError where ``options.confidence`` is not ``confidence``: the percentile interval would be
+    printed beside a likelihood interval of another level, and judged by that interval's limits."""
     replicates = getattr(options, "bootstrap", 0) or 0
     if not replicates:
         return None
+    if options.confidence != confidence:
+        raise KalcalError(f"confidence: the fit's intervals at {confidence:.12g} and the bootstrap's at "
+                          f"{options.confidence:.12g} differ: give one level (FitOptions.confidence and confidence=)")
     return parametric_bootstrap(draw, free, fit, replicates, seed=options.seed, confidence=options.confidence,
                                 threads=options.threads, client=options.client)
