@@ -123,21 +123,29 @@ def coverage_power_sentence() -> str:
             f"95%), the slow test over {slow} logs fails with probability {p[slow, 0.85]} or {p[slow, 0.9]}")
 
 
-def _coverage(scenario, logs: int, n: int, b: int, confidence: float = 0.95):
+def _coverage(scenario, logs: int, n: int, b: int, confidence: float = 0.95, records: list | None = None):
     """Per setting: how many of ``logs`` simulated logs' percentile intervals hold the truth, and the misses
     by kind. A log whose entry is not applicable counts as a miss (conservative: it gives no interval), by its
     reason's kind ("not applicable: near its bound", "... at its lower bound", ...); an interval with an end
     given as none (at a search range's end that is no bound) counts by its kept end, a one-sided bound:
     "one-sided below/above" where that end is on the wrong side of the truth; "below", "above" (the truth
-    against a two-sided interval)."""
+    against a two-sided interval). Third, per setting: how many of the fit's own likelihood intervals (at the
+    same level) hold the truth, an end the fit gives as none counting as unbounded on that side. ``records``,
+    where given, gets each log's fit result."""
     from collections import Counter
 
+    likelihood = dict.fromkeys(TRUTH, 0)
     covered = dict.fromkeys(TRUTH, 0)
     misses = {name: Counter() for name in TRUTH}
     one_sided = dict.fromkeys(TRUTH, 0)
     for m in range(logs):
         result = _boot(scenario, _log(n, 1000 + m), b, seed=m, threads=2, confidence=confidence)
+        if records is not None:
+            records.append(result)
         for name, truth in TRUTH.items():
+            fitted = result.parameters[name]
+            likelihood[name] += ((fitted.ci_low is None or fitted.ci_low <= truth)
+                                 and (fitted.ci_high is None or truth <= fitted.ci_high))
             p = result.bootstrap.parameters[name]
             if not p.applicable:
                 misses[name]["not applicable: " + p.reason.split(":")[0]] += 1
@@ -154,16 +162,18 @@ def _coverage(scenario, logs: int, n: int, b: int, confidence: float = 0.95):
                 covered[name] += 1
     for name in TRUTH:
         misses[name]["(one-sided covered)"] = one_sided[name]
-    return covered, misses
+    return covered, misses, likelihood
 
 
-def _check_coverage(coverage, logs, confidence=0.95):
-    covered, misses = coverage
+def _check_coverage(coverage, logs, confidence=0.95, names=tuple(TRUTH)):
+    covered, misses, likelihood = coverage
     # covered ~ Binomial(logs, confidence) at the nominal level: fewer than its 0.001 quantile is a failure
     floor = coverage_floor(logs, confidence)
     # shown with -s: the counts docs/fit.md quotes
-    print(f"coverage at {confidence:g} over {logs} logs: {covered}, floor {floor}; misses {misses}")
-    for name, count in covered.items():
+    print(f"coverage at {confidence:g} over {logs} logs: {covered}, floor {floor}; misses {misses}; "
+          f"likelihood intervals {likelihood}")
+    for name in names:
+        count = covered[name]
         assert count >= floor, (f"{name}: {count}/{logs} percentile intervals covered the truth, below {floor}; "
                                 f"misses {dict(misses[name])}")
 
@@ -179,45 +189,26 @@ def test_coverage_small(ar1):
     _check_coverage(_coverage(ar1, logs, interior_rows(), b, confidence=confidence), logs, confidence=confidence)
 
 
-#: what the slow coverage test measured (fixed seeds, so the same counts on a rerun), as docs/fit.md quotes it:
-#: covering logs of 200 per setting, and w's misses by kind
-COVERAGE_MEASURED = {"filter.w": 182, "filter.v": 190}
-COVERAGE_W_MISSES = {"not applicable: near its bound": 6, "below": 4, "above": 8}
-#: 120-row logs (not interior: w's sd there 0.41), 100 of them at 95% with B = 99, a measured property of short
-#: logs, not a pass: covering logs per setting, and w's entries not applicable by reason
-SHORT_MEASURED = {"filter.w": 86, "filter.v": 97}
-SHORT_W_NOT_APPLICABLE = {"near its bound": 11, "at its lower bound (consistent with 0)": 2}
-
-
-def measured_sentence() -> str:
-    """The measured counts as docs/fit.md states them, from :data:`COVERAGE_MEASURED` and :data:`SHORT_MEASURED`."""
-    m, w, s, n = COVERAGE_MEASURED, COVERAGE_W_MISSES, SHORT_MEASURED, SHORT_W_NOT_APPLICABLE
-    return (f"w {m['filter.w']}/200 ({w['not applicable: near its bound']} not applicable near its bound, "
-            f"{w['below']} intervals above the truth, {w['above']} below it), v {m['filter.v']}/200; on 120-row logs, "
-            f"{n['near its bound']} of 100 intervals of w are not applicable near its bound and "
-            f"{n['at its lower bound (consistent with 0)']} at it, and w covers {s['filter.w']}/100 counting them as "
-            f"misses (v {s['filter.v']}/100)")
-
-
 @pytest.mark.slow
 def test_coverage(ar1):
     logs, confidence, b = COVERAGE_SLOW
-    coverage = _coverage(ar1, logs, interior_rows(), b, confidence=confidence)
-    _check_coverage(coverage, logs, confidence=confidence)
-    # the counts docs/fit.md quotes (its claim, not the test's pass: the floor above is)
-    covered, misses = coverage
-    assert covered == COVERAGE_MEASURED
-    assert {k: v for k, v in misses["filter.w"].items() if not k.startswith("(")} == COVERAGE_W_MISSES
+    _check_coverage(_coverage(ar1, logs, interior_rows(), b, confidence=confidence), logs, confidence=confidence)
 
 
-# 120-row logs put w's bound 2.4 of its sds below the truth: what the bootstrap gives there, quoted by
-# docs/fit.md as a property of short logs (below the coverage floor, 87: not a pass, and not asserted as one).
+# 120-row logs put w's bound 2.4 of its sds below the truth (not interior): there the rule refuses w's interval
+# on the logs near the bound. What it gives must not be wrong: v's interval covers over the 100 logs, and w's
+# intervals, over the logs where one is given, each against the 0.001 quantile of Binomial(count, 95%). (The
+# refusals are counted neither way in w's: an honest "not applicable" is no interval, right or wrong; docs/fit.md
+# quotes w's coverage counting them as misses too, below the floor.)
 @pytest.mark.slow
 def test_short_logs_near_the_bound(ar1):
-    covered, misses = _coverage(ar1, 100, 120, 99)
-    assert covered == SHORT_MEASURED
-    assert {k.removeprefix("not applicable: "): v for k, v in misses["filter.w"].items()
-            if k.startswith("not applicable")} == SHORT_W_NOT_APPLICABLE
+    logs = 100
+    covered, misses, likelihood = _coverage(ar1, logs, 120, 99)
+    refused = sum(v for k, v in misses["filter.w"].items() if k.startswith("not applicable"))
+    given = logs - refused
+    print(f"120-row logs: covered {covered} of {logs}, w refused {refused}, misses {misses}, likelihood {likelihood}")
+    assert covered["filter.v"] >= coverage_floor(logs, 0.95)
+    assert covered["filter.w"] >= coverage_floor(given, 0.95), (covered, given)
 
 
 # The rule: 190 rows, w's sd there 0.330 (at 120 rows, 0.414: the bound 2.4 sds away).
@@ -239,7 +230,13 @@ def test_coverage_power_is_the_stated_one():
     docs = flat((Path(__file__).resolve().parents[2] / "docs" / "fit.md").read_text())
     assert sentence in flat(test_coverage_small.__doc__)
     assert sentence in docs
-    assert measured_sentence() in docs
+    # the measured counts are quoted as measured: their shape is held here, not their values (Monte Carlo
+    # counts of fixed seeds; each test's pass is its binomial floor)
+    import re
+
+    assert re.search(r"are what the fixed seeds gave, measured, not pass conditions\. The small test measured w "
+                     r"\d+/30 and v \d+/30\. The slow test measured w \d+/200 \(\d+ not applicable near its bound, \d+ "
+                     r"intervals above the truth, \d+ below it\), v \d+/200\.", docs)
 
 
 # On a long log the bootstrap se and the observed information's (delta method to the variance's unit)
@@ -301,11 +298,51 @@ def test_bootstrap_se_exceeds_the_information_on_short_logs_at_a_bound(ar1):
     assert ratios.mean() - 1.0 > bound, (ratios.mean(), error, bound, ratios.size)
 
 
+#: the short-log coverage tests: (logs, confidence, B), small (default suite) and slow
+SHORT_V_SMALL, SHORT_V_SLOW = (30, 0.9, 19), (200, 0.95, 99)
+
+
+def _short_v(scenario, logs: int, confidence: float, b: int):
+    """v's percentile intervals over ``logs`` 50-row logs (seeds 1000 on) cover the truth 2 in at least the
+    :func:`coverage_floor` of the logs where one is given (a refusal near or at v's bound is counted neither
+    way: an honest "not applicable" is no interval), and so do those given on the logs whose w is at its bound,
+    where v's observed information holds w there. Measured beside them (printed with -s): the likelihood
+    intervals' counts."""
+    records = []
+    covered, misses, likelihood = _coverage(scenario, logs, 50, b, confidence=confidence, records=records)
+    refused = sum(k for key, k in misses["filter.v"].items() if key.startswith("not applicable"))
+    at_bound = [r for r in records if r.parameters["filter.w"].at_bound]
+    holds = lambda low, high: (low is None or low <= V) and (high is None or V <= high)  # noqa: E731
+    boot = [r.bootstrap.parameters["filter.v"] for r in at_bound]
+    given = [e for e in boot if e.applicable]
+    held = sum(holds(e.ci_low, e.ci_high) for e in given)
+    print(f"50-row logs at {confidence:g}: v covered by {covered['filter.v']} of {logs - refused} bootstrap intervals "
+          f"given ({refused} refused), by {likelihood['filter.v']} of {logs} likelihood intervals; w at its bound on "
+          f"{len(at_bound)}: v's bootstrap covers {held} of {len(given)} given, its likelihood interval "
+          f"{sum(holds(r.parameters['filter.v'].ci_low, r.parameters['filter.v'].ci_high) for r in at_bound)}")
+    assert covered["filter.v"] >= coverage_floor(logs - refused, confidence), (covered, refused, misses["filter.v"])
+    # and on the logs whose w is at its bound, where the information holds w there
+    assert given and held >= coverage_floor(len(given), confidence), (held, len(given))
+
+
+# Where the information is a poor guide (50-row logs: about a fifth have w consistent with 0, where v's
+# observed information holds w at its bound), the bootstrap's intervals cover: where it gives v one, it holds
+# the truth at its nominal level against the binomial floor. Small version: 30 logs at 90% with B = 19.
+def test_short_logs_v_bootstrap_covers_small(ar1):
+    _short_v(ar1, *SHORT_V_SMALL)
+
+
+@pytest.mark.slow
+def test_short_logs_v_bootstrap_covers(ar1):
+    _short_v(ar1, *SHORT_V_SLOW)
+
+
 def test_bootstrap_refused_in_one_line(ar1):
     from kalcal.errors import KalcalError
     import kalcal
 
-    with pytest.raises(KalcalError, match="--bootstrap: expected 0"):
+    # -1 is a whole number: the message asks for a positive one
+    with pytest.raises(KalcalError, match=r"--bootstrap: expected 0 \(none\) or a positive whole number of replicates, got -1$"):
         kalcal.fit(ar1, data=_log(60, 1), bootstrap=-1)
     # too few replicates for the level: B = 2 would print the range of two refits as a "95%" interval
     for b, confidence, least in ((1, 0.95, 39), (2, 0.95, 39), (38, 0.95, 39), (18, 0.9, 19)):
