@@ -478,8 +478,8 @@ def test_negative_seed_refused_in_one_line(ar1, tmp_path):
 
 
 # A 50-row log (seed 1001 of the fixed list) whose w is interior but two of 39 refits stop at w's search floor
-# (1e-06, the log scale's stand-in for the bound 0: those refits are consistent with 0): the 2.5% quantile rests
-# on order statistics 0 and 1, both that floor. The estimate is near its bound, where the percentile interval is
+# (1e-06, the log scale's stand-in for the bound 0: those refits are consistent with 0): the 2.5% quantile is
+# the smallest refit ((B + 1) 0.025 = 1), that floor. The estimate is near its bound, where the percentile interval is
 # not valid (Andrews 2000): the entry is not applicable, with no end kept, its se, bias and refits kept; v's is
 # not touched.
 def test_refits_at_the_floor_make_the_entry_not_applicable_near_its_bound(ar1):
