@@ -299,7 +299,7 @@ def test_bootstrap_se_exceeds_the_information_on_short_logs_at_a_bound(ar1):
 
 
 #: the short-log coverage tests: (logs, confidence, B), small (default suite) and slow
-SHORT_V_SMALL, SHORT_V_SLOW = (30, 0.9, 19), (200, 0.95, 99)
+SHORT_V_SMALL, SHORT_V_SLOW = (12, 0.9, 19), (200, 0.95, 99)
 
 
 def _short_v(scenario, logs: int, confidence: float, b: int):
@@ -327,7 +327,8 @@ def _short_v(scenario, logs: int, confidence: float, b: int):
 
 # Where the information is a poor guide (50-row logs: about a fifth have w consistent with 0, where v's
 # observed information holds w at its bound), the bootstrap's intervals cover: where it gives v one, it holds
-# the truth at its nominal level against the binomial floor. Small version: 30 logs at 90% with B = 19.
+# the truth at its nominal level against the binomial floor. Small version: 12 logs at 90% with B = 19 (2 of
+# them with w at its bound: the first 12 seeds are fixed, not picked).
 def test_short_logs_v_bootstrap_covers_small(ar1):
     _short_v(ar1, *SHORT_V_SMALL)
 
