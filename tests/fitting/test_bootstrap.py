@@ -55,7 +55,8 @@ def _log(n: int, seed: int) -> pd.DataFrame:
 
 
 def _boot(scenario, log, b, seed=0, threads=1, confidence=0.95):
-    return fit_model_file(scenario, log, options=FitOptions(bootstrap=b, seed=seed, threads=threads, confidence=confidence))
+    return fit_model_file(scenario, log, confidence=confidence,
+                          options=FitOptions(bootstrap=b, seed=seed, threads=threads, confidence=confidence))
 
 
 # Same seed, 1 and 2 threads: the same replicates, so identical intervals, se and bias; another seed differs.
@@ -122,21 +123,29 @@ def coverage_power_sentence() -> str:
             f"95%), the slow test over {slow} logs fails with probability {p[slow, 0.85]} or {p[slow, 0.9]}")
 
 
-def _coverage(scenario, logs: int, n: int, b: int, confidence: float = 0.95):
+def _coverage(scenario, logs: int, n: int, b: int, confidence: float = 0.95, records: list | None = None):
     """Per setting: how many of ``logs`` simulated logs' percentile intervals hold the truth, and the misses
     by kind. A log whose entry is not applicable counts as a miss (conservative: it gives no interval), by its
     reason's kind ("not applicable: near its bound", "... at its lower bound", ...); an interval with an end
     given as none (at a search range's end that is no bound) counts by its kept end, a one-sided bound:
     "one-sided below/above" where that end is on the wrong side of the truth; "below", "above" (the truth
-    against a two-sided interval)."""
+    against a two-sided interval). Third, per setting: how many of the fit's own likelihood intervals (at the
+    same level) hold the truth, an end the fit gives as none counting as unbounded on that side. ``records``,
+    where given, gets each log's fit result."""
     from collections import Counter
 
+    likelihood = dict.fromkeys(TRUTH, 0)
     covered = dict.fromkeys(TRUTH, 0)
     misses = {name: Counter() for name in TRUTH}
     one_sided = dict.fromkeys(TRUTH, 0)
     for m in range(logs):
         result = _boot(scenario, _log(n, 1000 + m), b, seed=m, threads=2, confidence=confidence)
+        if records is not None:
+            records.append(result)
         for name, truth in TRUTH.items():
+            fitted = result.parameters[name]
+            likelihood[name] += ((fitted.ci_low is None or fitted.ci_low <= truth)
+                                 and (fitted.ci_high is None or truth <= fitted.ci_high))
             p = result.bootstrap.parameters[name]
             if not p.applicable:
                 misses[name]["not applicable: " + p.reason.split(":")[0]] += 1
@@ -153,16 +162,18 @@ def _coverage(scenario, logs: int, n: int, b: int, confidence: float = 0.95):
                 covered[name] += 1
     for name in TRUTH:
         misses[name]["(one-sided covered)"] = one_sided[name]
-    return covered, misses
+    return covered, misses, likelihood
 
 
-def _check_coverage(coverage, logs, confidence=0.95):
-    covered, misses = coverage
+def _check_coverage(coverage, logs, confidence=0.95, names=tuple(TRUTH)):
+    covered, misses, likelihood = coverage
     # covered ~ Binomial(logs, confidence) at the nominal level: fewer than its 0.001 quantile is a failure
     floor = coverage_floor(logs, confidence)
     # shown with -s: the counts docs/fit.md quotes
-    print(f"coverage at {confidence:g} over {logs} logs: {covered}, floor {floor}; misses {misses}")
-    for name, count in covered.items():
+    print(f"coverage at {confidence:g} over {logs} logs: {covered}, floor {floor}; misses {misses}; "
+          f"likelihood intervals {likelihood}")
+    for name in names:
+        count = covered[name]
         assert count >= floor, (f"{name}: {count}/{logs} percentile intervals covered the truth, below {floor}; "
                                 f"misses {dict(misses[name])}")
 
@@ -178,45 +189,26 @@ def test_coverage_small(ar1):
     _check_coverage(_coverage(ar1, logs, interior_rows(), b, confidence=confidence), logs, confidence=confidence)
 
 
-#: what the slow coverage test measured (fixed seeds, so the same counts on a rerun), as docs/fit.md quotes it:
-#: covering logs of 200 per setting, and w's misses by kind
-COVERAGE_MEASURED = {"filter.w": 182, "filter.v": 190}
-COVERAGE_W_MISSES = {"not applicable: near its bound": 6, "below": 4, "above": 8}
-#: 120-row logs (not interior: w's sd there 0.41), 100 of them at 95% with B = 99, a measured property of short
-#: logs, not a pass: covering logs per setting, and w's entries not applicable by reason
-SHORT_MEASURED = {"filter.w": 86, "filter.v": 97}
-SHORT_W_NOT_APPLICABLE = {"near its bound": 11, "at its lower bound (consistent with 0)": 2}
-
-
-def measured_sentence() -> str:
-    """The measured counts as docs/fit.md states them, from :data:`COVERAGE_MEASURED` and :data:`SHORT_MEASURED`."""
-    m, w, s, n = COVERAGE_MEASURED, COVERAGE_W_MISSES, SHORT_MEASURED, SHORT_W_NOT_APPLICABLE
-    return (f"w {m['filter.w']}/200 ({w['not applicable: near its bound']} not applicable near its bound, "
-            f"{w['below']} intervals above the truth, {w['above']} below it), v {m['filter.v']}/200; on 120-row logs, "
-            f"{n['near its bound']} of 100 intervals of w are not applicable near its bound and "
-            f"{n['at its lower bound (consistent with 0)']} at it, and w covers {s['filter.w']}/100 counting them as "
-            f"misses (v {s['filter.v']}/100)")
-
-
 @pytest.mark.slow
 def test_coverage(ar1):
     logs, confidence, b = COVERAGE_SLOW
-    coverage = _coverage(ar1, logs, interior_rows(), b, confidence=confidence)
-    _check_coverage(coverage, logs, confidence=confidence)
-    # the counts docs/fit.md quotes (its claim, not the test's pass: the floor above is)
-    covered, misses = coverage
-    assert covered == COVERAGE_MEASURED
-    assert {k: v for k, v in misses["filter.w"].items() if not k.startswith("(")} == COVERAGE_W_MISSES
+    _check_coverage(_coverage(ar1, logs, interior_rows(), b, confidence=confidence), logs, confidence=confidence)
 
 
-# 120-row logs put w's bound 2.4 of its sds below the truth: what the bootstrap gives there, quoted by
-# docs/fit.md as a property of short logs (below the coverage floor, 87: not a pass, and not asserted as one).
+# 120-row logs put w's bound 2.4 of its sds below the truth (not interior): there the rule refuses w's interval
+# on the logs near the bound. What it gives must not be wrong: v's interval covers over the 100 logs, and w's
+# intervals, over the logs where one is given, each against the 0.001 quantile of Binomial(count, 95%). (The
+# refusals are counted neither way in w's: an honest "not applicable" is no interval, right or wrong; docs/fit.md
+# quotes w's coverage counting them as misses too, below the floor.)
 @pytest.mark.slow
 def test_short_logs_near_the_bound(ar1):
-    covered, misses = _coverage(ar1, 100, 120, 99)
-    assert covered == SHORT_MEASURED
-    assert {k.removeprefix("not applicable: "): v for k, v in misses["filter.w"].items()
-            if k.startswith("not applicable")} == SHORT_W_NOT_APPLICABLE
+    logs = 100
+    covered, misses, likelihood = _coverage(ar1, logs, 120, 99)
+    refused = sum(v for k, v in misses["filter.w"].items() if k.startswith("not applicable"))
+    given = logs - refused
+    print(f"120-row logs: covered {covered} of {logs}, w refused {refused}, misses {misses}, likelihood {likelihood}")
+    assert covered["filter.v"] >= coverage_floor(logs, 0.95)
+    assert covered["filter.w"] >= coverage_floor(given, 0.95), (covered, given)
 
 
 # The rule: 190 rows, w's sd there 0.330 (at 120 rows, 0.414: the bound 2.4 sds away).
@@ -238,7 +230,13 @@ def test_coverage_power_is_the_stated_one():
     docs = flat((Path(__file__).resolve().parents[2] / "docs" / "fit.md").read_text())
     assert sentence in flat(test_coverage_small.__doc__)
     assert sentence in docs
-    assert measured_sentence() in docs
+    # the measured counts are quoted as measured: their shape is held here, not their values (Monte Carlo
+    # counts of fixed seeds; each test's pass is its binomial floor)
+    import re
+
+    assert re.search(r"are what the fixed seeds gave, measured, not pass conditions\. The small test measured w "
+                     r"\d+/30 and v \d+/30\. The slow test measured w \d+/200 \(\d+ not applicable near its bound, \d+ "
+                     r"intervals above the truth, \d+ below it\), v \d+/200\.", docs)
 
 
 # On a long log the bootstrap se and the observed information's (delta method to the variance's unit)
@@ -300,16 +298,96 @@ def test_bootstrap_se_exceeds_the_information_on_short_logs_at_a_bound(ar1):
     assert ratios.mean() - 1.0 > bound, (ratios.mean(), error, bound, ratios.size)
 
 
+#: the short-log coverage tests: (logs, confidence, B), small (default suite) and slow
+SHORT_V_SMALL, SHORT_V_SLOW = (12, 0.9, 19), (200, 0.95, 99)
+
+
+def _short_v(scenario, logs: int, confidence: float, b: int):
+    """v's percentile intervals over ``logs`` 50-row logs (seeds 1000 on) cover the truth 2 in at least the
+    :func:`coverage_floor` of the logs where one is given (a refusal near or at v's bound is counted neither
+    way: an honest "not applicable" is no interval), and so do those given on the logs whose w is at its bound,
+    where v's observed information holds w there. Measured beside them (printed with -s): the likelihood
+    intervals' counts."""
+    records = []
+    covered, misses, likelihood = _coverage(scenario, logs, 50, b, confidence=confidence, records=records)
+    refused = sum(k for key, k in misses["filter.v"].items() if key.startswith("not applicable"))
+    at_bound = [r for r in records if r.parameters["filter.w"].at_bound]
+    holds = lambda low, high: (low is None or low <= V) and (high is None or V <= high)  # noqa: E731
+    boot = [r.bootstrap.parameters["filter.v"] for r in at_bound]
+    given = [e for e in boot if e.applicable]
+    held = sum(holds(e.ci_low, e.ci_high) for e in given)
+    print(f"50-row logs at {confidence:g}: v covered by {covered['filter.v']} of {logs - refused} bootstrap intervals "
+          f"given ({refused} refused), by {likelihood['filter.v']} of {logs} likelihood intervals; w at its bound on "
+          f"{len(at_bound)}: v's bootstrap covers {held} of {len(given)} given, its likelihood interval "
+          f"{sum(holds(r.parameters['filter.v'].ci_low, r.parameters['filter.v'].ci_high) for r in at_bound)}")
+    assert covered["filter.v"] >= coverage_floor(logs - refused, confidence), (covered, refused, misses["filter.v"])
+    # and on the logs whose w is at its bound, where the information holds w there
+    assert given and held >= coverage_floor(len(given), confidence), (held, len(given))
+
+
+# Where the information is a poor guide (50-row logs: about a fifth have w consistent with 0, where v's
+# observed information holds w at its bound), the bootstrap's intervals cover: where it gives v one, it holds
+# the truth at its nominal level against the binomial floor. Small version: 12 logs at 90% with B = 19 (2 of
+# them with w at its bound: the first 12 seeds are fixed, not picked).
+def test_short_logs_v_bootstrap_covers_small(ar1):
+    _short_v(ar1, *SHORT_V_SMALL)
+
+
+@pytest.mark.slow
+def test_short_logs_v_bootstrap_covers(ar1):
+    _short_v(ar1, *SHORT_V_SLOW)
+
+
 def test_bootstrap_refused_in_one_line(ar1):
     from kalcal.errors import KalcalError
     import kalcal
 
-    with pytest.raises(KalcalError, match="--bootstrap: expected 0"):
+    # -1 is a whole number: the message asks for a positive one
+    with pytest.raises(KalcalError, match=r"--bootstrap: expected 0 \(none\) or a positive whole number of replicates, got -1$"):
         kalcal.fit(ar1, data=_log(60, 1), bootstrap=-1)
     # too few replicates for the level: B = 2 would print the range of two refits as a "95%" interval
     for b, confidence, least in ((1, 0.95, 39), (2, 0.95, 39), (38, 0.95, 39), (18, 0.9, 19)):
         with pytest.raises(KalcalError, match=f"at least {least} replicates"):
             kalcal.fit(ar1, data=_log(60, 1), bootstrap=b, confidence=confidence)
+
+
+# A level whose fewest replicates exceed MAX_REPLICATES (0.99999 needs 2/(1 - c) - 1 = 199999): no B serves it,
+# said with the level's own digits (at 4 significant digits 0.99999 was printed "1", beside a minimum above
+# the maximum); below that, the minimum is named with the level's digits too.
+def test_a_level_no_b_serves_is_refused_with_its_digits(ar1):
+    import kalcal
+    from kalcal.errors import KalcalError
+    from kalcal.fitting.bootstrap import check_replicates
+
+    for b in (40, 100_000):
+        with pytest.raises(KalcalError, match=r"^--bootstrap: no B within 100000 replicates serves a 0\.99999 percentile "
+                                              r"interval: it needs B >= 199999 \(\(B \+ 1\)\(1 - c\)/2 >= 1\), got "):
+            kalcal.fit(ar1, data=_log(60, 1), bootstrap=b, confidence=0.99999)
+    with pytest.raises(KalcalError, match=r"a 0\.9999 percentile interval needs at least 19999 replicates"):
+        check_replicates(40, 0.9999)
+    check_replicates(19_999, 0.9999)  # the minimum itself is accepted
+
+
+# bootstrap=False is no bootstrap, as 0 is; True names no B (it would run as B = 1) and is refused in one line.
+def test_bootstrap_false_is_none_and_true_is_refused(ar1):
+    import kalcal
+    from kalcal.errors import KalcalError
+
+    assert kalcal.fit(ar1, data=_log(60, 1), bootstrap=False).bootstrap is None
+    with pytest.raises(KalcalError, match=r"^--bootstrap: expected a number of replicates .*got True$"):
+        kalcal.fit(ar1, data=_log(60, 1), bootstrap=True)
+
+
+# A scenario's fit given one level for its likelihood intervals (confidence=) and another for the bootstrap
+# (FitOptions.confidence) refuses, in one line naming both: the percentile interval would sit beside a
+# likelihood interval of another level and be judged by that interval's limits. One level runs.
+def test_mixed_confidence_levels_are_refused(ar1):
+    from kalcal.errors import KalcalError
+
+    with pytest.raises(KalcalError, match=r"the fit's intervals at 0\.95 and the bootstrap's at 0\.9 differ"):
+        fit_model_file(ar1, _log(60, 1), confidence=0.95, options=FitOptions(bootstrap=19, threads=1, confidence=0.9))
+    same = fit_model_file(ar1, _log(60, 1), confidence=0.9, options=FitOptions(bootstrap=19, threads=1, confidence=0.9))
+    assert same.bootstrap.confidence == 0.9
 
 
 # A B too large (1e20 overflowed the replicate list, 1e12 ran out of memory) or not a number (nan, inf, 40.5,
@@ -324,7 +402,7 @@ def test_bootstrap_too_large_or_not_a_number_refused_in_one_line(ar1, tmp_path):
 
     assert MAX_REPLICATES == 100_000  # the number the help texts print
     for b in (float("nan"), float("inf"), 40.5, "40"):
-        with pytest.raises(KalcalError, match=r"--bootstrap: expected 0 \(none\) or a whole number"):
+        with pytest.raises(KalcalError, match=r"--bootstrap: expected 0 \(none\) or a positive whole number"):
             kalcal.fit(ar1, data=_log(60, 1), bootstrap=b)
     for b in (10**20, 10**12, MAX_REPLICATES + 1):
         with pytest.raises(KalcalError, match=r"--bootstrap: at most 100000 replicates"):
@@ -358,7 +436,7 @@ def test_dask_gives_the_intervals_of_threads(ar1):
         distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None) as cluster,
         distributed.Client(cluster) as client,
     ):
-        on_dask = fit_model_file(ar1, log, options=FitOptions(bootstrap=8, seed=4, client=client, confidence=0.75))
+        on_dask = fit_model_file(ar1, log, confidence=0.75, options=FitOptions(bootstrap=8, seed=4, client=client, confidence=0.75))
     assert on_dask.bootstrap.parameters == threads.bootstrap.parameters
     assert on_dask.bootstrap.parameters["filter.v"].applicable
 
@@ -401,8 +479,8 @@ def test_negative_seed_refused_in_one_line(ar1, tmp_path):
 
 
 # A 50-row log (seed 1001 of the fixed list) whose w is interior but two of 39 refits stop at w's search floor
-# (1e-06, the log scale's stand-in for the bound 0: those refits are consistent with 0): the 2.5% quantile rests
-# on order statistics 0 and 1, both that floor. The estimate is near its bound, where the percentile interval is
+# (1e-06, the log scale's stand-in for the bound 0: those refits are consistent with 0): the 2.5% quantile is
+# the smallest refit ((B + 1) 0.025 = 1), that floor. The estimate is near its bound, where the percentile interval is
 # not valid (Andrews 2000): the entry is not applicable, with no end kept, its se, bias and refits kept; v's is
 # not touched.
 def test_refits_at_the_floor_make_the_entry_not_applicable_near_its_bound(ar1):
@@ -421,6 +499,94 @@ def test_refits_at_the_floor_make_the_entry_not_applicable_near_its_bound(ar1):
     assert document["applicable"] is False and document["ci_low"] is None and document["ci_high"] is None
     v = result.bootstrap.parameters["filter.v"]
     assert v.at_range_end == 0 and v.ci_low is not None and v.ci_high is not None and v.reason == ""
+
+
+# The 120-row log of seed 1011 (w interior: its likelihood interval 0.17-2.11), B = 99, seed 11: replicate 88's
+# search stops at w = 1.10e-6, short of the floor 1e-6 where log L is 3.2e-7 higher (a variance's log L is flat
+# on the log scale near 0): its maximum along w is at the bound, so it is moved there and counts at it. The
+# 2.5% end (the 2.5th smallest of 99: order statistics 1 and 2, 0-based) rests on it: near its bound, not
+# applicable. Counted only where it stopped within 1e-6 of the floor, the entry was an ordinary interval.
+# Replicate 27's refit, 4.4e-4, keeps its value: log L at the floor is 3.2e-6 lower there, its maximum
+# inside the range (a full fit of that log puts it at 2.8e-4), so it is no refit at the bound.
+def test_a_refit_stopped_short_of_the_floor_counts_at_the_bound(ar1):
+    result = _boot(ar1, _log(120, 1011), 99, seed=11, threads=2)
+    w = result.bootstrap.parameters["filter.w"]
+    assert not result.parameters["filter.w"].at_bound and result.parameters["filter.w"].ci_low > 0.1
+    low = sorted(w.values)[:3]
+    assert low[:2] == pytest.approx([1e-6, 1e-6], rel=1e-12) and 1e-4 < low[2] < 1e-3, low
+    assert w.values[88] == 1e-6 and 1e-4 < w.values[27] < 1e-3 and w.at_range_end == 2
+    assert not w.applicable and w.reason.startswith("near its bound: refits at the bound (consistent with 0)")
+    assert result.bootstrap.parameters["filter.v"].applicable
+
+
+def _bound_free():
+    from kalcal.fitting.mle import Free
+
+    return [Free("filter.w", 1.0, 1e-3, 1e3), Free("filter.phi", 0.0, -1.0, 1.0, scale="linear", bounded=True),
+            Free("filter.lag", 0.0, -1.0, 1.0, scale="linear")]
+
+
+# snap_to_bounds on hand-built log-likelihoods: a setting whose log L does not rise from a bound of the
+# parameter space to the refit (its maximum along it is at the bound) moves there, log L never lower than the
+# refit's; a maximum inside the range, however near the bound, stays; an end that bounds nothing (the log
+# scale's ceiling, a plain linear range such as a latency's) is never moved to, and a log L that fails at the
+# bound moves nothing.
+def test_snap_to_bounds_moves_a_refit_whose_maximum_is_at_the_bound():
+    from kalcal.fitting.bootstrap import snap_to_bounds
+
+    free = _bound_free()
+
+    def loglik(values):  # w's maximum at 0 (below the floor), phi's at 1.2 (beyond 1), lag's at 1.5 (beyond 1)
+        return -values["filter.w"] - (values["filter.phi"] - 1.2) ** 2 - (values["filter.lag"] - 1.5) ** 2
+
+    stopped = {"filter.w": 3e-3, "filter.phi": 0.99, "filter.lag": 0.99}
+    point, at_end = snap_to_bounds(loglik, free, stopped, loglik(stopped))
+    assert point == {"filter.w": 1e-3, "filter.phi": 1.0, "filter.lag": 0.99}
+    assert at_end == [(True, False), (False, True), (False, False)]
+    assert loglik(point) >= loglik(stopped)
+    # a flat log L (the search stops anywhere): the bound is as good, so the refit is at it
+    assert snap_to_bounds(lambda values: 0.0, free[:1], {"filter.w": 5.0}, 0.0) == ({"filter.w": 1e-3}, [(True, False)])
+    # a maximum at 2e-3, twice the floor: log L at the floor is lower, so it stays
+    inside = lambda values: -((np.log(values["filter.w"]) - np.log(2e-3)) ** 2)  # noqa: E731
+    assert snap_to_bounds(inside, free[:1], {"filter.w": 2e-3}, 0.0) == ({"filter.w": 2e-3}, [(False, False)])
+    # log L rising towards the ceiling 1e3 (no bound): the ceiling is not evaluated, the refit stays
+    rising = lambda values: np.log(values["filter.w"])  # noqa: E731
+    assert snap_to_bounds(rising, free[:1], {"filter.w": 500.0}, rising({"filter.w": 500.0}))[1] == [(False, False)]
+    # within 1e-6 (relative) of an end: at it, without an evaluation
+    assert snap_to_bounds(None, free[:1], {"filter.w": 1e-3 * (1 + 1e-7)}, 0.0)[1] == [(True, False)]
+
+    def fails(values):
+        if values["filter.w"] < 2e-3:
+            raise ValueError("refused")
+        return 0.0
+    assert snap_to_bounds(fails, free[:1], {"filter.w": 5.0}, 0.0) == ({"filter.w": 5.0}, [(False, False)])
+
+
+# In the bootstrap: refits stopped short of the floor (a point_estimate that stops at three times the floor
+# wherever the maximum is at it) are moved to the floor and counted at the bound, so the entry is near its
+# bound, as it is with the search reaching the floor; the draws: ln m ~ N(-0.5, 0.5) against a floor at
+# ln 1 = 0, so about 16% of the maxima are at it.
+def test_refits_stopped_short_of_the_floor_are_moved_to_it(monkeypatch):
+    from kalcal.fitting import bootstrap
+    from kalcal.fitting.mle import Free, point_estimate
+
+    free = Free("filter.w", 1.0, 1.0, 1e3)
+    reached = _toy(free, -0.5, 0.5)
+    short = []
+
+    def stops_short(loglik, spec):
+        values, best, converged = point_estimate(loglik, spec)
+        if values["filter.w"] <= 1.0 * (1 + 1e-9):
+            values = {"filter.w": 3.0}
+            short.append(True)
+            return values, loglik(values), converged
+        return values, best, converged
+
+    monkeypatch.setattr(bootstrap, "point_estimate", stops_short)
+    snapped = _toy(free, -0.5, 0.5)
+    assert len(short) == reached.at_range_end == snapped.at_range_end >= 2
+    assert snapped.values == reached.values and min(snapped.values) == 1.0
+    assert not snapped.applicable and snapped.reason.startswith("near its bound: refits at the bound (consistent with 0)")
 
 
 def _toy(free, location, spread, *, ci=(0.5, 2.0), estimate=1.0, b=39, at_bound=False):
@@ -464,6 +630,90 @@ def test_an_end_at_the_ceiling_is_one_sided_and_at_the_floor_near_its_bound():
     floor = _toy(Free("filter.w", 1.0, 1.0, 1e3), -0.5, 0.5)
     assert not floor.applicable and floor.ci_low is None and floor.ci_high is None and floor.at_range_end >= 2
     assert floor.reason.startswith("near its bound: refits at the bound (consistent with 0)")
+
+
+# The percentile ends are the (B + 1) p-th smallest refits: with B = 39 at 95%, the 1st and the 39th, the
+# smallest and the largest; with B = 99, halfway between the 2nd and 3rd smallest (97th and 98th). (numpy's
+# default, the 1 + (B - 1) p-th, gave the 1.95th and 38.05th of 39: a narrower interval, 90% for a pivot.)
+def test_percentile_ends_are_the_b_plus_one_order_statistics():
+    from kalcal.fitting.mle import Free
+
+    free = Free("filter.w", 1.0, 1e-3, 1e3)
+    for b, (low, high) in ((39, (0, 38)), (99, (1.5, 96.5))):
+        entry = _toy(free, 0.0, 0.3, b=b)
+        ordered = np.sort(entry.values)
+        at = lambda k: ordered[int(k)] + (k % 1) * (ordered[min(int(k) + 1, b - 1)] - ordered[int(k)])  # noqa: E731
+        assert entry.ci_low == pytest.approx(at(low), rel=1e-12) and entry.ci_high == pytest.approx(at(high), rel=1e-12)
+
+
+def _pivot_lower_ends(logs: int, confidence: float, b: int):
+    """The lower percentile ends of ``logs`` bootstraps of a pivot: a setting whose log-scale estimate is the
+    truth (ln w = 0) plus N(0, 0.5^2), and whose refits are the estimate plus N(0, 0.5^2) (the draw's log L
+    peaks there, sharply), clipped to a search range whose ceiling, no bound, is z + 0.35 sds above the truth
+    (z the (1 + c)/2 normal quantile), so that a third to a half of the entries lose their upper end there and
+    are one-sided. Log m's estimate draws from default_rng(m), its bootstrap from seed m. Returns each log's entry."""
+    from types import SimpleNamespace
+
+    from kalcal.fitting.bootstrap import parametric_bootstrap
+    from kalcal.fitting.mle import Free
+    from kalcal.stats.distributions import normal_isf
+
+    sd = 0.5
+    ceiling = (float(normal_isf((1.0 - confidence) / 2.0)) + 0.35) * sd
+    entries = []
+    for m in range(logs):
+        estimate = float(np.exp(min(sd * np.random.default_rng(m).standard_normal(), ceiling)))
+
+        def draw(rng, estimate=estimate):
+            peak = np.log(estimate) + sd * rng.standard_normal()
+            return lambda values: -0.5 * ((np.log(values["filter.w"]) - peak) / 0.01) ** 2
+
+        # the likelihood interval's ends are not the subject here: given, so that the percentile ends are judged
+        parameter = SimpleNamespace(identified=True, trades_off=(), held=False, at_bound=False, ci_low=0.1, ci_high=10.0)
+        fit = SimpleNamespace(values={"filter.w": estimate}, parameters={"filter.w": parameter})
+        free = [Free("filter.w", estimate, float(np.exp(-12 * sd)), float(np.exp(ceiling)))]
+        entries.append(parametric_bootstrap(draw, free, fit, b, seed=m, threads=1, confidence=confidence).parameters["filter.w"])
+    return entries
+
+
+def _check_one_sided(logs: int, confidence: float, b: int):
+    """Every entry's lower end, one-sided ones' included, covers the truth 1 in at least the 0.001 quantile of
+    Binomial(logs, (1 + c)/2) logs, an entry with no interval (both ends at the search range's ends: all B
+    refits at the ceiling, 1 in 2^B of the logs whose estimate is there) counting as a miss; a fifth of them
+    or more are one-sided (the level they state is that one)."""
+    from kalcal.stats.distributions import binom_ppf
+
+    entries = _pivot_lower_ends(logs, confidence, b)
+    assert all(e.ci_low is not None or e.reason.startswith("both ends at the search range's ends") for e in entries)
+    entries = [e for e in entries if e.ci_low is not None]
+    one_sided = [e for e in entries if e.ci_high is None]
+    assert all(e.reason.startswith(f"one-sided {100 * (1 + confidence) / 2:g}% lower bound") for e in one_sided)
+    covered = sum(e.ci_low <= 1.0 for e in entries)
+    floor = int(binom_ppf(0.001, logs, (1.0 + confidence) / 2.0))
+    # shown with -s: the counts docs/fit.md quotes (the one-sided entries' own share covered is measured, not
+    # held: they are the logs whose estimate is high, where a lower bound misses, so it is below the level)
+    print(f"lower ends covering at {confidence:g}, B = {b}: {covered}/{logs}, floor {floor}; one-sided "
+          f"{len(one_sided)}, covering {sum(e.ci_low <= 1.0 for e in one_sided)}")
+    assert len(one_sided) >= logs / 5
+    assert covered >= floor, (covered, logs, floor)
+
+
+# A percentile end lost at a ceiling leaves the other end claimed as a one-sided bound at (1 + c)/2. The real
+# models' variance ceilings sit 1e6 times (a model file) or 1e3 times (the built-in fits) above the start, out
+# of reach of an interior truth's refits, so the level is held on a pivot whose ceiling is near the truth:
+# every entry's lower end, whether the upper end was lost or not, covers at (1 + c)/2 (the lower end of a c
+# percentile interval is a (1 + c)/2 lower bound: exact for a pivot with the (B + 1) p-th smallest refit).
+# Small version, 87.5% one-sided from c = 0.75 with B = 7, over 400 logs: floor 329; with numpy's default
+# quantile the bound covered 78% (power about 0.99 against it).
+def test_one_sided_bound_covers_at_its_level_small():
+    _check_one_sided(400, 0.75, 7)
+
+
+# Slow: 97.5% one-sided from c = 0.95 with B = 39 (the level the docs quote), over 3000 logs: floor 2897;
+# numpy's default quantile covered 95.2% there (power 0.9999 against it).
+@pytest.mark.slow
+def test_one_sided_bound_covers_at_its_level():
+    _check_one_sided(3000, 0.95, 39)
 
 
 # A linear setting: refits past both ends of a range that bounds nothing (a latency's search) lose both
@@ -658,7 +908,7 @@ def test_scale_bias_bootstrap_same_seed_one_and_two_threads_identical():
 
     sc, t, reference, sensor = _scale_bias_log(5, 120)
     one, two, other = (fit_scale_bias(sc, t, reference, sensor,
-                                      options=FitOptions(bootstrap=8, seed=seed, threads=n, confidence=0.75))
+                                      confidence=0.75, options=FitOptions(bootstrap=8, seed=seed, threads=n, confidence=0.75))
                        for seed, n in ((3, 1), (3, 2), (4, 2)))
     assert one.bootstrap.parameters == two.bootstrap.parameters
     assert all(p.values for p in one.bootstrap.parameters.values())

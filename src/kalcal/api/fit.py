@@ -72,11 +72,12 @@ def fit(
         accel-gps: the chi-square innovation gate's confidence, as ``calibrate``'s (off by default).
     confidence : float
         Of the intervals (0.95).
-    bootstrap : int
+    bootstrap : int or False
         B >= 2/(1 - confidence) - 1 (39 at 95%), at most 100000 (``MAX_REPLICATES``): a parametric bootstrap (:mod:`kalcal.fitting.bootstrap`): B logs simulated from the fitted
         model with the log's length, sampling, missing measurements and inputs, each refitted (a point
         estimate from the fitted point); per setting the percentile interval, the bootstrap standard error
-        and the estimator's bias, in the result's ``bootstrap``, fit.json and fit-bootstrap.png. 0: none.
+        and the estimator's bias, in the result's ``bootstrap``, fit.json and fit-bootstrap.png. 0 or False:
+        none (True is refused: it names no B).
     seed : int, optional
         The bootstrap's root seed (default 0): the same seed gives the same intervals, whatever ``threads``,
         ``workers`` or ``client``. Like ``threads``, ``workers`` and ``scheduler``, only with ``bootstrap``.
@@ -108,8 +109,11 @@ def fit(
         raise KalcalError(f"confidence=: expected a number in (0, 1), got {confidence!r}")  # kalcal fit has no --confidence
     from kalcal.fitting.bootstrap import whole_number
 
-    if not whole_number(bootstrap) or bootstrap < 0:  # nan, inf, 40.5, "40": one line, not int()'s error
-        raise KalcalError(f"--bootstrap: expected 0 (none) or a whole number of replicates, got {bootstrap!r}")
+    if bootstrap is True:  # a bool is no count: True would otherwise run as B = 1
+        raise KalcalError("--bootstrap: expected a number of replicates (B >= 39 at 95%; 0 or False: none), got True")
+    bootstrap = 0 if bootstrap is False else bootstrap
+    if not whole_number(bootstrap) or bootstrap < 0:  # nan, inf, 40.5, "40", -1: one line, not int()'s error
+        raise KalcalError(f"--bootstrap: expected 0 (none) or a positive whole number of replicates, got {bootstrap!r}")
     unused = [flag for flag, value in (("--seed", seed), ("--threads", threads), ("--workers", workers),
                                        ("--scheduler", scheduler)) if value is not None]
     if unused and not bootstrap:  # each sets the bootstrap's run alone: a fit without one would ignore it

@@ -6,7 +6,12 @@ log-likelihood as a function of the settings), and the fit's search refits it as
 (:func:`kalcal.fitting.mle.point_estimate`: L-BFGS-B started at the fitted point, no intervals, curves or
 profiles). From the B estimates theta*_b of each setting:
 
-* the percentile interval [q_{alpha/2}, q_{1-alpha/2}] of theta*_b, alpha = 1 - confidence (Efron);
+* the percentile interval [q_{alpha/2}, q_{1-alpha/2}] of theta*_b, alpha = 1 - confidence (Efron), the
+  quantile q_p the (B + 1) p-th smallest refit (interpolated between order statistics where (B + 1) p is not
+  whole: numpy's ``weibull`` method). For an estimator whose spread about the truth is the refits' about the
+  estimate (a pivot), the k-th smallest of B refits lies above the truth with probability k/(B + 1) exactly,
+  so that each end's level is the one stated whatever B. numpy's default (the 1 + (B - 1) p-th smallest) is
+  nearer the middle: with B = 39 at 95% a pivot's interval from it covers 90%, with B = 19 at 90%, 82%;
 * the bootstrap standard error, the sample std of theta*_b (ddof = 1), in the setting's unit;
 * the estimator's bias, mean(theta*_b) - theta_hat, with its own Monte Carlo standard error se / sqrt(B).
 
@@ -16,9 +21,18 @@ Econometrica 68(2) 399-405). Nor does one NEAR its bound: where a percentile end
 that stopped at an end of the search range that stands for a bound of the parameter space (a log-scale
 setting's floor, the variance's 0: those refits are consistent with 0; either end of a ``bounded`` linear
 range, such as an AR(1) coefficient's [-1, 1]), the estimate is within the estimator's spread of the bound,
-where the percentile interval's ends are not valid (Andrews 2000). A refit counts as at the floor where it
-stopped there (within 1e-6 of it): one that L-BFGS-B stopped short of the floor where log L is flat near 0
-is not counted, though it may be as consistent with 0.
+where the percentile interval's ends are not valid (Andrews 2000). A refit is at a bound where its maximum
+along the setting is there (:func:`snap_to_bounds`): where it stopped within 1e-6 (relative) of the end, or
+where log L with the setting at the end, the others held at the refit, is not below the refit's own log L.
+That catches the refits L-BFGS-B stops short of the bound: a variance's log L flattens on the log scale as it
+nears 0 and the search stops on the flatness (1.1e-6 for a floor at 1e-6, log L there 3e-7 higher). The end
+is then the better point: it becomes the refit's value, and the refit counts at the bound. A refit whose log
+L at the end is lower, by however little, has its maximum inside the range (log L rises from the bound): it
+is not at the bound, however near it lies. (A rule calling a refit at the bound where log L at the end is
+within chi2(c, 1)/2 of its maximum, "consistent with 0", would flag interior fixtures: a (1 - c)/2 quantile
+about z_{(1+c)/2} se below the estimate is itself consistent with 0 wherever the estimate is within about
+2 z_{(1+c)/2} se of 0, far stricter than Andrews' condition, a truth on or within the estimator's spread of
+the bound.)
 A percentile end resting on refits stopped at an end of the search range that is NOT a bound (a variance's
 ceiling: the log scale does not bound it above; accel-gps's latency range) is that range's end, not a
 quantile: that end is None and the interval claims only its other end, a one-sided bound at level
@@ -111,8 +125,9 @@ class BootstrapParameter:
     bias_se : float or None
         The Monte Carlo standard error of ``bias``: se / sqrt(B).
     at_range_end : int
-        Refits that ended at an end of the search range: at a bound (a variance's floor) a maximum on the
-        boundary, consistent with 0; at an end that is no bound, that end, not a maximum.
+        Refits at an end of the search range: at a bound (a variance's floor) a maximum on the boundary,
+        consistent with 0, whether the search reached it or stopped short of it on a flat log L
+        (:func:`snap_to_bounds`); at an end that is no bound, that end, not a maximum.
     values : tuple of float
         The refits' estimates in replicate order (for the figure; in fit.json too).
     """
@@ -170,12 +185,14 @@ class BootstrapResult:
 def minimum_replicates(confidence: float) -> int:
     """The fewest replicates B whose percentile interval at ``confidence`` c has refits beyond each end.
 
-    The c interval's ends are the (1 - c)/2 and (1 + c)/2 quantiles of the B refits; the lower is an order
-    statistic above the smallest refit only where (B + 1)(1 - c)/2 >= 1, i.e. B >= 2/(1 - c) - 1 (39 at 95%,
+    The c interval's lower end is the k-th smallest refit, k = (B + 1)(1 - c)/2 (module docstring), which
+    exists only where k >= 1, i.e. B >= 2/(1 - c) - 1 (39 at 95%: the smallest and largest of 39 refits;
     19 at 90%). Fewer, and the "interval" is the sample's range, whatever c says.
     """
-    # the small allowance keeps 2/(1 - 0.95) - 1, 39.00000000000004 in floating point, at 39
-    return max(2, math.ceil(2.0 / (1.0 - confidence) - 1.0 - 1e-9))
+    # the small allowance, relative (the rounding of 1 - c grows with 1/(1 - c)), keeps 2/(1 - 0.95) - 1,
+    # 39.00000000000004 in floating point, at 39, and 0.99999's 199999.0000013 at 199999
+    least = 2.0 / (1.0 - confidence) - 1.0
+    return max(2, math.ceil(least - 1e-9 * max(1.0, least)))
 
 
 #: the most replicates a bootstrap runs. At B = 1e5 a 95% percentile end's own Monte Carlo error,
@@ -197,19 +214,33 @@ def whole_number(value) -> bool:
 
 def check_replicates(replicates, confidence: float) -> None:
     """Raise KalcalError, one line, unless ``replicates`` is a whole number within
-    [:func:`minimum_replicates`, :data:`MAX_REPLICATES`]."""
+    [:func:`minimum_replicates`, :data:`MAX_REPLICATES`]; where that range is empty (c above 1 - 2/100001,
+    0.99998), say that no B serves the level."""
     least = minimum_replicates(confidence)
+    # the level with the digits it has (0.99999, not 0.99999's "1" at 4 significant digits)
+    level = f"{confidence:.12g}"
+    if least > MAX_REPLICATES:
+        raise KalcalError(f"--bootstrap: no B within {MAX_REPLICATES} replicates serves a {level} percentile interval: "
+                          f"it needs B >= {least} ((B + 1)(1 - c)/2 >= 1), got {replicates!r}")
     if not whole_number(replicates) or replicates < least:
-        raise KalcalError(f"--bootstrap: a {confidence:.4g} percentile interval needs at least {least} replicates "
-                          f"((B + 1)(1 - c)/2 >= 1, a refit beyond each end), got {replicates!r}")
+        raise KalcalError(f"--bootstrap: a {level} percentile interval needs at least {least} replicates "
+                          f"((B + 1)(1 - c)/2 >= 1), got {replicates!r}")
     if replicates > MAX_REPLICATES:
         raise KalcalError(f"--bootstrap: at most {MAX_REPLICATES} replicates (there a percentile end's Monte Carlo "
                           f"error is under 1% of the bootstrap se; more costs hours and memory), got {replicates!r}")
 
 
+#: numpy's quantile method of the percentile ends: the (B + 1) p-th smallest of B (module docstring)
+QUANTILE_METHOD = "weibull"
+
+
 def _order_statistics(replicates: int, q: float) -> list[int]:
-    """The (0-based) order statistics of ``replicates`` values that numpy's linear quantile ``q`` rests on."""
-    position = (replicates - 1) * q
+    """The (0-based) order statistics of ``replicates`` values that the quantile ``q`` (:data:`QUANTILE_METHOD`,
+    the (B + 1) q-th smallest, 1-based) rests on."""
+    position = min(max((replicates + 1) * q - 1.0, 0.0), replicates - 1.0)
+    # (B + 1) q is whole at the B the levels are chosen for (40 x 0.025): 1e-15 of rounding is no interpolation
+    if abs(position - round(position)) < 1e-9:
+        position = float(round(position))
     return sorted({math.floor(position), math.ceil(position)})
 
 
@@ -218,8 +249,58 @@ def _held_reason(p) -> str:
     return "trades off with " + ", ".join(p.trades_off) if p.trades_off else "not resolved" if p.held else "unidentified"
 
 
-def _replicate(draw: Draw, free: Sequence[Free], seed: int, index: int) -> tuple[list[float], bool]:
-    """Replicate ``index``: its log drawn from block ``index``'s generator, refitted from the fitted point."""
+def snap_to_bounds(
+    loglik: Callable[[Mapping[str, float]], float], free: Sequence[Free], values: Mapping[str, float], best: float
+) -> tuple[dict[str, float], list[tuple[bool, bool]]]:
+    """A refit's values with each setting whose maximum is at a bound of the parameter space moved there.
+
+    For each setting of ``free`` in order, and each end of its search range (lower, upper): the refit is at
+    that end where its value is within 1e-6 (relative) of it; where the end is a bound of the parameter space
+    (:func:`boundary_ends`) and the value is not at it, log L is evaluated with the setting at the end and the
+    others at the point so far (:func:`kalcal.fitting.mle.guarded`); where that is >= ``best``, log L does
+    not rise from the bound to the refit: the search stopped short on a flat log L, its maximum along the
+    setting is at the bound, and the point moves there (``best`` becomes its log L, so each move keeps log L
+    at least the refit's).
+
+    Parameters
+    ----------
+    loglik : callable
+        The replicate's log-likelihood, ``loglik({name: value})``.
+    free : sequence of Free
+        The refit's settings and their search ranges.
+    values : mapping of str to float
+        The refit's estimates, in the settings' units.
+    best : float
+        log L at ``values``.
+
+    Returns
+    -------
+    values : dict of str to float
+        The refit's values, a setting moved to an end where its maximum is there.
+    at_end : list of (bool, bool)
+        Per setting of ``free``: whether the refit is at the lower and at the upper end of its range.
+    """
+    from kalcal.fitting.mle import guarded
+
+    point, at_end = dict(values), []
+    for p in free:
+        flags = []
+        for end, bound in zip((p.lower, p.upper), boundary_ends(p)):
+            at = math.isclose(point[p.name], end, rel_tol=1e-6, abs_tol=0.0)
+            if not at and bound:
+                trial = {**point, p.name: end}
+                there = guarded(loglik, trial)
+                if there >= best:
+                    point, best, at = trial, there, True
+            flags.append(at)
+        at_end.append((flags[0], flags[1]))
+    return point, at_end
+
+
+def _replicate(draw: Draw, free: Sequence[Free], seed: int, index: int) -> tuple[list[float], bool, list[tuple[bool, bool]]]:
+    """Replicate ``index``: its log drawn from block ``index``'s generator, refitted from the fitted point, each
+    setting whose maximum is at a bound moved there (:func:`snap_to_bounds`); with the refit's convergence and
+    per setting whether it is at the (lower, upper) end of its range."""
     from kalcal.fitting import local_search
     from kalcal.montecarlo.engine import block_generator
 
@@ -229,10 +310,11 @@ def _replicate(draw: Draw, free: Sequence[Free], seed: int, index: int) -> tuple
     local_search._IN_POOL.active = True
     try:
         loglik = draw(block_generator(seed, index))
-        values, _, converged = point_estimate(loglik, free)
+        values, best, converged = point_estimate(loglik, free)
+        values, at_end = snap_to_bounds(loglik, free, values, best)
     finally:
         local_search._IN_POOL.active = before
-    return [values[p.name] for p in free], converged
+    return [values[p.name] for p in free], converged, at_end
 
 
 def parametric_bootstrap(
@@ -286,7 +368,7 @@ def parametric_bootstrap(
         held = ", ".join(f"{name} ({_held_reason(p)})" for name, p in fit.parameters.items())
         raise KalcalError(f"--bootstrap: no free setting is identified, so there is nothing to refit: {held}")
     started = time.perf_counter()
-    rows: list[tuple[list[float], bool] | None] = [None] * replicates
+    rows: list[tuple[list[float], bool, list[tuple[bool, bool]]] | None] = [None] * replicates
     if client is not None:
         futures = client.map(_replicate, [draw] * replicates, [refit] * replicates, [seed] * replicates,
                              range(replicates), pure=False)
@@ -305,6 +387,8 @@ def parametric_bootstrap(
     seconds = time.perf_counter() - started
     estimates = np.array([row[0] for row in rows], dtype=float).reshape(replicates, len(refit))
     failed = sum(not row[1] for row in rows)
+    # (replicate, setting, end): whether the refit is at the lower (0) or upper (1) end of the setting's range
+    ends_of = np.array([row[2] for row in rows], dtype=bool).reshape(replicates, len(refit), 2)
     parameters = {}
     column = {p.name: j for j, p in enumerate(refit)}
     for name, p in fit.parameters.items():
@@ -314,8 +398,7 @@ def parametric_bootstrap(
             continue
         spec = refit[column[name]]
         draws = estimates[:, column[name]]
-        at_range = {"lower": np.isclose(draws, spec.lower, rtol=1e-6, atol=0.0),
-                    "upper": np.isclose(draws, spec.upper, rtol=1e-6, atol=0.0)}
+        at_range = {"lower": ends_of[:, column[name], 0], "upper": ends_of[:, column[name], 1]}
         ends = int(np.count_nonzero(at_range["lower"] | at_range["upper"]))
         se = float(np.std(draws, ddof=1))
         summary = dict(se=se, bias=float(np.mean(draws) - fit.values[name]), bias_se=se / float(np.sqrt(replicates)),
@@ -334,7 +417,7 @@ def parametric_bootstrap(
             parameters[name] = BootstrapParameter(name, False, reason, **summary)
         else:
             tail = (1.0 - confidence) / 2.0
-            low, high = np.quantile(draws, [tail, 1.0 - tail])
+            low, high = np.quantile(draws, [tail, 1.0 - tail], method=QUANTILE_METHOD)
             # an end whose quantile rests on a refit stopped at an end of the search range is that end, not a quantile
             order = np.argsort(draws, kind="stable")
             # per percentile end, the range ends its order statistics' refits stopped at
@@ -367,11 +450,18 @@ def parametric_bootstrap(
     return BootstrapResult(replicates, int(seed), float(confidence), parameters, failed, seconds)
 
 
-def bootstrap_fit(options, draw: Draw, free: Sequence[Free], fit) -> BootstrapResult | None:
+def bootstrap_fit(options, draw: Draw, free: Sequence[Free], fit, confidence: float) -> BootstrapResult | None:
     """The bootstrap ``options`` ask for (:class:`~kalcal.fitting.run.FitOptions`: ``bootstrap`` B, ``seed``,
-    ``threads``, ``client``), or None where B is 0: what each scenario's fit calls with its own ``draw``."""
+    ``threads``, ``client``, ``confidence``), or None where B is 0: what each scenario's fit calls with its own
+    ``draw`` and the ``confidence`` of ``fit``'s likelihood intervals.
+
+    Raises KalcalError where ``options.confidence`` is not ``confidence``: the percentile interval would be
+    printed beside a likelihood interval of another level, and judged by that interval's limits."""
     replicates = getattr(options, "bootstrap", 0) or 0
     if not replicates:
         return None
+    if options.confidence != confidence:
+        raise KalcalError(f"confidence: the fit's intervals at {confidence:.12g} and the bootstrap's at "
+                          f"{options.confidence:.12g} differ: give one level (FitOptions.confidence and confidence=)")
     return parametric_bootstrap(draw, free, fit, replicates, seed=options.seed, confidence=options.confidence,
                                 threads=options.threads, client=options.client)

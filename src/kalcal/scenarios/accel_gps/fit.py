@@ -250,7 +250,7 @@ def fit_accel_gps(
             notes.append(f"{key}: the log's {column} column times one fitted multiplier, instead of a constant std")
     rejected = getattr(calibration, "rejected_rows", None)
     settings, comments, per_sample_values = filter_toml(scenario, chosen, fit, rates, std_medians or {}, max_updates, rate=rate)
-    boot = _bootstrap(options, log, chosen, parameters, fit, None if gate is None else mask)
+    boot = _bootstrap(options, log, chosen, parameters, fit, None if gate is None else mask, confidence)
     return FitResult.from_search(
         scenario.NAME,
         fit,
@@ -269,11 +269,12 @@ def fit_accel_gps(
     )
 
 
-def _bootstrap(options, log: RateFreeLog, chosen: Mapping[str, float], parameters: Sequence[Free], fit, rejected):
+def _bootstrap(options, log: RateFreeLog, chosen: Mapping[str, float], parameters: Sequence[Free], fit, rejected,
+               confidence: float):
     """The parametric bootstrap ``options`` ask for (None without one): each replicate's fixes drawn from the
     filter at the fitted point ``chosen`` over the prepared log (:func:`~kalcal.scenarios.accel_gps.resample.simulate_fixes`),
     refitted over the same fixes as the fit: with a gate, its ``rejected`` set is held out of every refit (the
-    drawn fixes have no gross outliers to gate)."""
+    drawn fixes have no gross outliers to gate); ``confidence``: of the fit's intervals."""
     from kalcal.fitting.bootstrap import bootstrap_fit
     from kalcal.scenarios.accel_gps.log import AccelGpsLog
     from kalcal.scenarios.accel_gps.resample import simulate_fixes
@@ -290,7 +291,7 @@ def _bootstrap(options, log: RateFreeLog, chosen: Mapping[str, float], parameter
         # a setting not refitted (unidentified, held) stays where the fixes were drawn from
         return lambda values: simulated.loglik({**chosen, **values}, rejected=rejected)
 
-    return bootstrap_fit(options, draw, parameters, fit)
+    return bootstrap_fit(options, draw, parameters, fit, confidence)
 
 
 def per_sample_parameters(parameters: Mapping[str, FitParameter], per_sample_values: Mapping[str, Any]) -> dict[str, FitParameter]:

@@ -392,7 +392,7 @@ def fit_model_file(
         z = draw_log(fitted, bound.z, rng)
         return lambda values: loglik(like.model_at({**chosen, **values}), z)
 
-    boot = bootstrap_fit(options, draw, parameters, fit)
+    boot = bootstrap_fit(options, draw, parameters, fit, confidence)
     run = filter_model(like.model_at(chosen), bound.z)
     # the series calibrate tests (one function for both): rows that measure different components are
     # pooled, component by component, rather than dropped (a log whose rows never measure every

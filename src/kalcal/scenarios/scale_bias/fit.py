@@ -101,7 +101,7 @@ def fit_scale_bias(
         # a setting not refitted (unidentified) stays where the log was drawn from
         return lambda values: diffuse_loglik(simulated, sensor, *(({**chosen, **values})[key] for key in (NOISE, DRIFT)))[0]
 
-    boot = bootstrap_fit(options, draw, parameters, fit)
+    boot = bootstrap_fit(options, draw, parameters, fit, confidence)
     notes = [IDENTIFIABILITY, "theta has a diffuse prior: the likelihood is the conditional one, after the first samples that determine theta"]
     return FitResult.from_search(
         scenario.NAME,
