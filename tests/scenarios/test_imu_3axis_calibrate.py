@@ -398,3 +398,30 @@ def test_cli_detector_refuses_too_few_poses_in_one_line(tmp_path):
     assert done.returncode == 2, (done.stdout, done.stderr)
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and "5 static poses; at least 9 are needed" in lines[0] and "scenario.min_duration" in lines[0], done.stderr
+
+
+def test_procedure_b_bootstrap_ends_are_the_fits_percentile_ends(tmp_path, monkeypatch):
+    """Procedure (b)'s bootstrap interval takes its ends as the fit's bootstrap does, the (B + 1) p-th smallest
+    replicates: at B = 39 and level 0.95 the smallest and the largest (numpy's default quantile put them between
+    the first and second, too narrow); fewer than 39 replicates at 0.95 are refused in one line."""
+    from kalcal import calibrate
+    from kalcal.errors import KalcalError
+    from kalcal.scenarios.imu_3axis import job
+
+    regions = write_log(tmp_path / "log.csv", general_ups(), sigma=0.05, seed=3)
+    (tmp_path / "poses.json").write_text(json.dumps({f"p{k}": {"start": s, "end": e} for k, (s, e) in enumerate(regions)}))
+    runs = []
+    fit = job.fit_poses
+    monkeypatch.setattr(job, "fit_poses", lambda *a, **k: runs.append(fit(*a, **k)) or runs[-1])
+    result = calibrate("imu-3axis", imu=tmp_path / "log.csv", poses=tmp_path / "poses.json",
+                       settings={"scenario": {"bootstrap": 39}})
+    replicates = runs[0].bootstrap
+    assert replicates.shape == (39, 9)
+    for k, name in enumerate(m.PARAM_NAMES):
+        entry, column = result.bootstrap_table[name], np.sort(replicates[:, k])
+        # to the rounding of numpy's interpolation weight at (B + 1) p = 1: far below the gap to the next one
+        tolerance = 1e-9 * (column[-1] - column[0])
+        assert abs(entry["lower"] - column[0]) <= tolerance < (column[1] - column[0]) / 2, (name, entry, column[:2])
+        assert abs(entry["upper"] - column[-1]) <= tolerance < (column[-1] - column[-2]) / 2, (name, entry, column[-2:])
+    with pytest.raises(KalcalError, match="at least 39 replicates"):
+        calibrate("imu-3axis", imu=tmp_path / "log.csv", poses=tmp_path / "poses.json", settings={"scenario": {"bootstrap": 38}})

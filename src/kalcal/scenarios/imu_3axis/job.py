@@ -302,7 +302,11 @@ def _poses_result(scenario, run, regions, name, columns, notes, quantized=(), re
     boot = {}
     level = scenario.scenario.level
     if run.bootstrap.shape[0]:
-        low, high = np.quantile(run.bootstrap, [(1 - level) / 2, (1 + level) / 2], axis=0)
+        from kalcal.fitting.bootstrap import QUANTILE_METHOD
+
+        # the fit's bootstrap's percentile ends: the (B + 1) p-th smallest replicates (numpy's default puts them
+        # nearer the middle: too narrow for small B)
+        low, high = np.quantile(run.bootstrap, [(1 - level) / 2, (1 + level) / 2], axis=0, method=QUANTILE_METHOD)
         boot = {label: {"std": float(s), "lower": float(lo), "upper": float(hi)}
                 for label, s, lo, hi in zip(PARAM_NAMES, run.bootstrap.std(axis=0, ddof=1), low, high)}
     warnings = []

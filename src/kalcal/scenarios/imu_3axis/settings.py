@@ -61,6 +61,13 @@ class Imu3AxisSettings:
             raise SettingError("scenario.tilt_bound", "a tilt below 45 deg", show(self.tilt_bound))
         if int(self.bootstrap) != self.bootstrap or int(self.seed) != self.seed:
             raise SettingError("scenario.bootstrap", "whole numbers for bootstrap and seed", f"{show(self.bootstrap)}, {show(self.seed)}")
+        from kalcal.fitting.bootstrap import minimum_replicates
+
+        fewest = minimum_replicates(self.level)
+        if 0 < self.bootstrap < fewest:
+            # fewer, and the percentile interval's ends are the replicates' smallest and largest, whatever level says
+            raise SettingError("scenario.bootstrap", f"0 (none) or at least {fewest} replicates for a {self.level:g} "
+                               "percentile interval (scenario.level)", show(self.bootstrap))
 
 
 @dataclass(frozen=True)
