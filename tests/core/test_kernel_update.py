@@ -88,3 +88,28 @@ def test_compiled_missing_rule_equals_the_reference_rule_component_by_component(
         if rng.random() < 0.3:
             h[rng.integers(p), rng.integers(d)] = np.nan
         assert measured(z, h) == bool(measured_reference(z, h))
+
+
+@pytest.mark.parametrize("p", [2, 3])
+def test_the_joseph_form_keeps_precise_measurements_variances_with_several_components(p):
+    """The same where p > 1 (its own code path: a Cholesky factor of S): p components each measure one state
+    with V = 1e-12 I against M ~ 1e4. The exact posterior covariance of the measured block is
+    V - V (M_mm + V)^-1 V (no cancellation: the correction is 1e-16 of V); the update keeps it to a relative
+    1e-6 and P positive definite (as a correlation matrix). The algebraically equal expansion M - (H M)^T K^T + K (S K^T - H M) sums
+    terms of M's size and gives that block at M's rounding (about 2e-12, as large as the value, or 0)."""
+    rng = np.random.default_rng(40 + p)
+    d, m = 4, 50
+    prior = _spd(rng, d, m) * 1e4
+    h = np.zeros((m, p, d))
+    h[:, np.arange(p), np.arange(p)] = 1.0
+    v = 1e-12 * np.eye(p)
+    cov = _tile(prior)
+    covariance_update(cov, _tile(h), v, True, np.empty((p, d, m)), np.empty((p, p, m)), update_work(d, p, m))
+    block = prior[:, :p, :p]
+    exact = v - v @ np.linalg.solve(block + v, np.broadcast_to(v, block.shape))
+    got = np.moveaxis(cov, -1, 0)
+    np.testing.assert_allclose(got[:, :p, :p], exact, rtol=1e-6, atol=1e-6 * 1e-12)
+    # positive definite as a correlation matrix (P's variances span 1e-12 to 1e4: its eigenvalues below
+    # about 1e4 eps are below eigvalsh's rounding)
+    scale = np.sqrt(np.einsum("nii->ni", got))
+    assert np.linalg.eigvalsh(got / (scale[:, :, None] * scale[:, None, :])).min() > 0.0

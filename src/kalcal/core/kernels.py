@@ -54,9 +54,9 @@ class UpdateWork(NamedTuple):
     hm: np.ndarray  #: H M, (p, d, m) (computed as (M H^T)^T: the same numbers for a symmetric M)
     lower: np.ndarray  #: the Cholesky factor of S, (p, p, m); filled only where p > 1
     a: np.ndarray  #: I - K H, (d, d, m) (Joseph form, p = 1)
-    ap: np.ndarray  #: (I - K H) M, (d, d, m) (Joseph form, p = 1)
+    ap: np.ndarray  #: (I - K H) M, (d, d, m) (Joseph form)
     acc: np.ndarray  #: one row of a tile, (m,)
-    kv: np.ndarray  #: G = S K^T - H M, (p, d, m) (Joseph form, p > 1)
+    kv: np.ndarray  #: B H^T - K V, (p, d, m) as K^T is laid out (Joseph form, p > 1)
     #: where H may be nonzero, bool (p, d): all True from :func:`update_work`; a caller whose H has entries
     #: that are identically zero (a model's printed Jacobian) sets them False, and the products with them
     #: (exact zeros: the same sums) are skipped where p > 1
@@ -120,15 +120,12 @@ def covariance_update(cov, h, v, joseph, gain, s, work):
 def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, kv, h_nz, pivot):
     """:func:`covariance_update` where p > 1: K by a Cholesky factor of S and two triangular solves.
 
-    The Joseph form P = A M A^T + K V K^T (A = I - K H) by products of O(d^2 p) alone, expanded:
-    A M A^T + K V K^T = M - K (H M) - (H M)^T K^T + K S K^T for any K (S = H M H^T + V as computed above),
-    so P = M - (H M)^T K^T + K G with G = S K^T - H M, the solve's residual (H M is at hand); its lower
-    triangle, mirrored (P symmetric by construction). G keeps what makes the Joseph form the Joseph form:
-    P is the Joseph form's function of K (an error in K changes P to second order only), where the
-    standard form M - K H M drops that term. The same expression as the two d x d x d products it
-    replaces (associated otherwise: the numbers agree to rounding): at d = 11, p = 3 and H's 15 entries
-    that are not identically zero, about 800 multiply-adds per realization in place of 4,100 (1,130 with
-    A M formed first, as before)."""
+    The Joseph form P = A M A^T + K V K^T (A = I - K H) by products of O(d^2 p) alone: B = A M =
+    M - K (H M), then P = B A^T + K V K^T = B - (B H^T - K V) K^T, its lower triangle mirrored. The
+    order keeps the factored form's numbers: B carries M's rounding, which A^T then multiplies (as the
+    factored form's A, formed at the rounding of 1, does), so a huge prior against a precise measurement
+    leaves P at K V K^T's scale (tests/core/test_kernel_update.py); the algebraically equal expansion
+    M - (H M)^T K^T + K (S K^T - H M) sums terms of M's size and there loses P entirely."""
     d, p, m = cov.shape[0], h.shape[0], cov.shape[2]
     for i in range(p):  # H M, as (M H^T)^T, from its first product (zeros where H's row is identically zero)
         first = d
@@ -197,24 +194,44 @@ def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, kv, h_nz,
                 for j in range(m):
                     gain[i, u, j] = acc[j] * pivot[i, j]
     if joseph:
-        # G = S K^T - H M (p, d), as K^T is laid out: the solve's residual (zero but for rounding where
-        # K = M H^T S^-1; whatever K, the term that keeps P the Joseph form's P)
+        # B = A M = M - K (H M), all of it (d, d): the cancellation of M against K H M (a huge prior, a
+        # precise measurement) leaves B at the rounding of M, as A = I - K H is at the rounding of 1
+        for u in range(d):
+            for w in range(d):
+                for j in range(m):
+                    acc[j] = cov[u, w, j] - gain[0, u, j] * hm[0, w, j]
+                for i in range(1, p):
+                    for j in range(m):
+                        acc[j] -= gain[i, u, j] * hm[i, w, j]
+                for j in range(m):
+                    ap[u, w, j] = acc[j]
+        # D = B H^T - K V (p, d), as K^T is laid out: P = B A^T + K V K^T = B - D K^T, B's rounding
+        # multiplied by A^T (the factored form's second factor) and K V K^T added at its own scale: the
+        # Joseph form's numbers (a sum of the two symmetric terms), in O(d^2 p), not the expanded
+        # M - K H M - M H^T K^T + K S K^T, whose terms of M's size leave P at M's rounding
         for i in range(p):
             for u in range(d):
                 for j in range(m):
-                    acc[j] = -hm[i, u, j]
+                    acc[j] = 0.0
+                for w in range(d):
+                    if h_nz[i, w]:
+                        for j in range(m):
+                            acc[j] += ap[u, w, j] * h[i, w, j]
                 for k in range(p):
                     for j in range(m):
-                        acc[j] += s[i, k, j] * gain[k, u, j]
+                        acc[j] -= gain[k, u, j] * v[k, i]
                 for j in range(m):
                     kv[i, u, j] = acc[j]
-        # P = M - (H M)^T K^T + K G: its lower triangle, in place (measurement by measurement, both of its
-        # terms in one pass over the tile), mirrored
+        # P = B - D K^T: its lower triangle, mirrored (symmetric by construction)
         for u in range(d):
             for w in range(u + 1):
-                for i in range(p):
+                for j in range(m):
+                    acc[j] = ap[u, w, j] - kv[0, u, j] * gain[0, w, j]
+                for i in range(1, p):
                     for j in range(m):
-                        cov[u, w, j] += gain[i, u, j] * kv[i, w, j] - hm[i, u, j] * gain[i, w, j]
+                        acc[j] -= kv[i, u, j] * gain[i, w, j]
+                for j in range(m):
+                    cov[u, w, j] = acc[j]
         for u in range(d):
             for w in range(u):
                 for j in range(m):
