@@ -179,26 +179,25 @@ def test_refits_at_one_point_make_a_panel(interior):
     assert _lines(v_ax, "likelihood-interval") == pytest.approx([p.ci_low, p.ci_high], rel=1e-12)
 
 
-# A one-sided entry (its upper end lost at a search range's end that is no bound: here v's refits as they are,
-# with the entry's upper end and reason those of test_bootstrap's hand-built draw past a variance's ceiling):
-# the panel draws its kept end alone, its legend names a one-sided 95% lower bound (the fit's 90% level), its
-# title the reason in short; summary()'s row shows "[low, —]" and the note says one-sided.
-def test_a_one_sided_entry_is_drawn_and_shown_as_one_sided(interior):
+# An entry whose upper end is lost at a search range's end that is no bound (here v's refits as they are, with
+# the reason of test_bootstrap's hand-built draw past a variance's ceiling) is not applicable, never a one-sided
+# bound: the panel draws no percentile line, its title says "not applicable" and the reason in short, its
+# legend names no bound; summary()'s row says "not applicable" with the reason.
+def test_an_entry_with_an_end_at_the_ceiling_is_shown_not_applicable(interior):
     from dataclasses import replace
 
-    from kalcal.fitting.bootstrap import one_sided_level
     from kalcal.fitting.mle import Free
     from tests.fitting.test_bootstrap import _toy
 
-    toy = _toy(Free("filter.v", 1.0, 1e-3, 1.0), 0.5, 0.5)  # at 95%: its reason's level is re-made at 90% below
-    assert toy.applicable and toy.ci_high is None
+    toy = _toy(Free("filter.v", 1.0, 1e-3, 1.0), 0.5, 0.5)
+    assert not toy.applicable and toy.reason.startswith("one end at the search range's end")
     v = interior.bootstrap.parameters["filter.v"]
-    reason = toy.reason.replace(one_sided_level(0.95), one_sided_level(0.9))
-    one_sided = replace(interior, bootstrap=replace(interior.bootstrap, parameters={
-        **interior.bootstrap.parameters, "filter.v": replace(v, ci_high=None, reason=reason)}))
-    _, v_ax = _panels(one_sided)
-    assert _lines(v_ax, "percentile-interval") == pytest.approx([v.ci_low], rel=1e-12)
-    assert "one-sided 95% lower bound" in v_ax.get_title()
-    assert "one-sided 95% lower bound" in [text.get_text() for text in v_ax.get_legend().get_texts()]
-    row = next(line for line in one_sided.summary().splitlines()[::-1] if line.startswith("filter.v"))
-    assert f"[{v.ci_low:.4g}, —]" in row and "one-sided 95% lower bound: the upper end is at the search range's end" in row
+    lost = replace(interior, bootstrap=replace(interior.bootstrap, parameters={
+        **interior.bootstrap.parameters, "filter.v": replace(v, applicable=False, ci_low=None, ci_high=None, reason=toy.reason)}))
+    _, v_ax = _panels(lost)
+    assert _lines(v_ax, "percentile-interval") == []
+    assert v_ax.get_title().startswith("filter.v: percentile interval not applicable\none end at the search range's end")
+    legend = [text.get_text() for text in v_ax.get_legend().get_texts()]
+    assert not any("bound" in text or "percentile" in text for text in legend), legend
+    row = next(line for line in lost.summary().splitlines()[::-1] if line.startswith("filter.v"))
+    assert "not applicable" in row and "one end at the search range's end: the upper end" in row and "one-sided" not in row

@@ -441,11 +441,11 @@ def likelihood_text(p: FitParameter) -> str:
 
 
 def percentile_text(b) -> str:
-    """A bootstrap entry's percentile interval, "—" for an end lost at a search range's end that is no bound
-    (the other end is then a one-sided bound at (1 + c)/2, the note says), or "not applicable"."""
+    """A bootstrap entry's percentile interval "[low, high]", or "not applicable" (the note says why: an
+    applicable entry has both ends, :class:`~kalcal.fitting.bootstrap.BootstrapParameter`)."""
     if not b.applicable:
         return "not applicable"
-    return "[" + ", ".join("—" if end is None else f"{end:.4g}" for end in (b.ci_low, b.ci_high)) + "]"
+    return f"[{b.ci_low:.4g}, {b.ci_high:.4g}]"
 
 
 def bootstrap_note(b) -> str:

@@ -89,9 +89,8 @@ def bootstrap_figure(result):
     ``bootstrap``), in its order: the histogram of the B refits' estimates, the estimate, the likelihood
     interval (the fit's method) shaded with solid lines at its ends (``gid`` "likelihood-interval"; an
     estimate consistent with 0 has 0 as its lower end, drawn on a linear axis only) and the percentile
-    interval's ends as dashed lines (``gid`` "percentile-interval") where it applies (one end only, labelled
-    a one-sided bound at (1 + c)/2, where the other is at a search range's end that is no bound). Where it does not, the
-    title says "not applicable" and why, in short (the reason in full is the table's and fit.json's); a
+    interval's ends as dashed lines (``gid`` "percentile-interval") where it applies (an applicable entry has
+    both ends). Where it does not, the title says "not applicable" and why, in short (the reason in full is the table's and fit.json's); a
     setting held in every refit has no histogram, only its reason.
 
     The x axis is logarithmic for a setting searched on a log scale whose drawn values (refits, estimate,
@@ -100,8 +99,6 @@ def bootstrap_figure(result):
     import textwrap
 
     from matplotlib.ticker import MaxNLocator, NullFormatter
-
-    from kalcal.fitting.bootstrap import one_sided_level
 
     boot = result.bootstrap
     names = list(boot.parameters)
@@ -139,13 +136,9 @@ def bootstrap_figure(result):
         for end in ends:
             ax.axvline(end, color=BAND, linewidth=1.4, gid="likelihood-interval")
         if b.applicable:
-            for end in (end for end in (b.ci_low, b.ci_high) if end is not None):  # None: at the range's end
+            for end in (b.ci_low, b.ci_high):
                 ax.axvline(end, color="tab:red", linestyle="--", linewidth=1.0, gid="percentile-interval")
-            # an end lost (None) leaves a one-sided bound at (1 + c)/2, and the legend says so
-            one_sided = b.ci_low is None or b.ci_high is None
-            ax.plot([], [], color="tab:red", linestyle="--",
-                    label=(f"{one_sided_level(boot.confidence)} {'lower' if b.ci_high is None else 'upper'} bound"
-                           if one_sided else f"{boot.confidence:.0%} percentile interval"))
+            ax.plot([], [], color="tab:red", linestyle="--", label=f"{boot.confidence:.0%} percentile interval")
             title = f"{name}: bias {b.bias:.3g} ± {b.bias_se:.2g}"
         else:
             title = f"{name}: percentile interval not applicable"
@@ -162,5 +155,5 @@ def bootstrap_figure(result):
 
 def _short_reason(reason: str) -> str:
     """A bootstrap entry's reason in short, for a panel's title: each "; "-separated part up to its first
-    ": " ("at its lower bound (consistent with 0)", "near its bound", "one-sided 97.5% lower bound")."""
+    ": " ("at its lower bound (consistent with 0)", "near its bound", "one end at the search range's end")."""
     return "; ".join(part.split(": ", 1)[0] for part in reason.split("; ") if part)
