@@ -533,8 +533,9 @@ def test_snap_to_bounds_moves_a_refit_whose_maximum_is_at_the_bound():
     assert point == {"filter.w": 1e-3, "filter.phi": 1.0, "filter.lag": 0.99}
     assert at_end == [(True, False), (False, True), (False, False)]
     assert loglik(point) >= loglik(stopped)
-    # a flat log L (the search stops anywhere): the bound is as good, so the refit is at it
-    assert snap_to_bounds(lambda values: 0.0, free[:1], {"filter.w": 5.0}, 0.0) == ({"filter.w": 1e-3}, [(True, False)])
+    # a flat log L (the search stops anywhere): as high at both ends, so it tells nothing of a bound: the refit
+    # stays, at neither end
+    assert snap_to_bounds(lambda values: 0.0, free[:1], {"filter.w": 5.0}, 0.0) == ({"filter.w": 5.0}, [(False, False)])
     # a maximum at 2e-3, twice the floor: log L at the floor is lower, so it stays
     inside = lambda values: -((np.log(values["filter.w"]) - np.log(2e-3)) ** 2)  # noqa: E731
     assert snap_to_bounds(inside, free[:1], {"filter.w": 2e-3}, 0.0) == ({"filter.w": 2e-3}, [(False, False)])
@@ -549,6 +550,69 @@ def test_snap_to_bounds_moves_a_refit_whose_maximum_is_at_the_bound():
             raise ValueError("refused")
         return 0.0
     assert snap_to_bounds(fails, free[:1], {"filter.w": 5.0}, 0.0) == ({"filter.w": 5.0}, [(False, False)])
+
+
+# A bounded linear setting (phi in [-1, 1]) with a flat log L: log L at both ends is the refit's, so it is flat
+# along phi, not at a bound: neither moved nor counted. (Tested at -1, moved there, then tested at +1 from the
+# moved point and moved again, it was flagged at both ends with the value +1, and the entry's reason named -1.)
+def test_snap_to_bounds_leaves_a_flat_bounded_setting_where_it_is():
+    from kalcal.fitting.bootstrap import snap_to_bounds
+
+    phi = _bound_free()[1]
+    assert snap_to_bounds(lambda values: 0.0, [phi], {"filter.phi": 0.3}, 0.0) == ({"filter.phi": 0.3}, [(False, False)])
+    # and in the bootstrap: no refit counted at an end, an interval of the refits as they stopped
+    entry = _flat_phi_entry()
+    assert entry.at_range_end == 0 and entry.applicable and entry.ci_low == entry.ci_high == 0.3, entry
+
+
+def _flat_phi_entry():
+    from types import SimpleNamespace
+
+    from kalcal.fitting.bootstrap import parametric_bootstrap
+
+    phi = replace(_bound_free()[1], start=0.3)
+    parameter = SimpleNamespace(identified=True, trades_off=(), held=False, at_bound=False, ci_low=-0.5, ci_high=0.9)
+    fit = SimpleNamespace(values={"filter.phi": 0.3}, parameters={"filter.phi": parameter})
+    return parametric_bootstrap(lambda rng: (lambda values: 0.0), [phi], fit, 39, seed=0, threads=1).parameters["filter.phi"]
+
+
+# Each setting is judged from the refit's own point, so the order of the settings does not matter. The tie
+# L = -(v - 1)^2 (w - 1e-3) at w = v = 1: along w (v = 1) log L is 0 everywhere, flat, so w is not at its
+# floor; along v (w = 1) it falls from v = 1 both ways, an interior maximum. Neither moves, in either order.
+# (Judged in order from the moved point, w then v moved both to their floors, where log L is 0 again; v then w,
+# w alone.)
+def test_snap_to_bounds_does_not_depend_on_the_settings_order():
+    from kalcal.fitting.bootstrap import snap_to_bounds
+    from kalcal.fitting.mle import Free
+
+    w, v = Free("filter.w", 1.0, 1e-3, 1e3), Free("filter.v", 1.0, 1e-3, 1e3)
+    tie = lambda values: -((values["filter.v"] - 1.0) ** 2) * (values["filter.w"] - 1e-3)  # noqa: E731
+    refit = {"filter.w": 1.0, "filter.v": 1.0}
+    for order in ([w, v], [v, w]):
+        point, at_end = snap_to_bounds(tie, order, refit, tie(refit))
+        assert point == refit and at_end == [(False, False), (False, False)], ([p.name for p in order], point, at_end)
+
+
+# Two settings that pass, each with the other at the refit: moved together where log L at the joint point is
+# not below the refit's; where it is (the moves undo each other), only the one whose end has the higher log L,
+# whatever the order. phi and rho in [-1, 1], the refit at (0, 0), log L 0.
+def test_snap_to_bounds_moves_passing_settings_together_or_the_best_alone():
+    from kalcal.fitting.bootstrap import snap_to_bounds
+
+    phi = _bound_free()[1]
+    rho = replace(phi, name="filter.rho")
+    refit = {"filter.phi": 0.0, "filter.rho": 0.0}
+    # both maxima at +1 and no interaction: both move, log L 2 there
+    apart = lambda values: values["filter.phi"] + values["filter.rho"]  # noqa: E731
+    for order in ([phi, rho], [rho, phi]):
+        point, at_end = snap_to_bounds(apart, order, refit, 0.0)
+        assert point == {"filter.phi": 1.0, "filter.rho": 1.0} and at_end == [(False, True), (False, True)]
+    # log L phi + 2 rho - 4 phi rho: 1 at phi = 1, 2 at rho = 1, -1 at both: rho alone moves
+    undo = lambda values: values["filter.phi"] + 2 * values["filter.rho"] - 4 * values["filter.phi"] * values["filter.rho"]  # noqa: E731
+    for order in ([phi, rho], [rho, phi]):
+        point, at_end = snap_to_bounds(undo, order, refit, 0.0)
+        assert point == {"filter.phi": 0.0, "filter.rho": 1.0} and undo(point) >= 0.0
+        assert dict(zip([p.name for p in order], at_end)) == {"filter.phi": (False, False), "filter.rho": (False, True)}
 
 
 # In the bootstrap: refits stopped short of the floor (a point_estimate that stops at three times the floor

@@ -23,8 +23,11 @@ setting's floor, the variance's 0: those refits are consistent with 0; either en
 range, such as an AR(1) coefficient's [-1, 1]), the estimate is within the estimator's spread of the bound,
 where the percentile interval's ends are not valid (Andrews 2000). A refit is at a bound where its maximum
 along the setting is there (:func:`snap_to_bounds`): where it stopped within 1e-6 (relative) of the end, or
-where log L with the setting at the end, the others held at the refit, is not below the refit's own log L.
-That catches the refits L-BFGS-B stops short of the bound: a variance's log L flattens on the log scale as it
+where log L with the setting at the end, the others held at the refit's own values, is not below the
+refit's own log L, unless log L is as high at both ends of the setting's range (then it is flat along the
+setting at the refit, which tells nothing of a bound: not moved, not counted). The settings that pass move
+together where log L at the joint point is not below the refit's, else only the one whose end has the
+highest log L, so the result does not depend on the settings' order. That catches the refits L-BFGS-B stops short of the bound: a variance's log L flattens on the log scale as it
 nears 0 and the search stops on the flatness (1.1e-6 for a floor at 1e-6, log L there 3e-7 higher). The end
 is then the better point: it becomes the refit's value, and the refit counts at the bound. A refit whose log
 L at the end is lower, by however little, has its maximum inside the range (log L rises from the bound): it
@@ -252,13 +255,23 @@ def snap_to_bounds(
 ) -> tuple[dict[str, float], list[tuple[bool, bool]]]:
     """A refit's values with each setting whose maximum is at a bound of the parameter space moved there.
 
-    For each setting of ``free`` in order, and each end of its search range (lower, upper): the refit is at
-    that end where its value is within 1e-6 (relative) of it; where the end is a bound of the parameter space
-    (:func:`boundary_ends`) and the value is not at it, log L is evaluated with the setting at the end and the
-    others at the point so far (:func:`kalcal.fitting.mle.guarded`); where that is >= ``best``, log L does
-    not rise from the bound to the refit: the search stopped short on a flat log L, its maximum along the
-    setting is at the bound, and the point moves there (``best`` becomes its log L, so each move keeps log L
-    at least the refit's).
+    Each setting of ``free`` is judged from the refit's own point, the others held at the refit's values, so
+    that the result does not depend on the settings' order:
+
+    * within 1e-6 (relative) of an end of its search range, it is at that end (no evaluation);
+    * otherwise, at each end that is a bound of the parameter space (:func:`boundary_ends`), log L is evaluated
+      with the setting there (:func:`kalcal.fitting.mle.guarded`); an end where it is >= ``best`` is one where
+      log L does not rise from the bound to the refit: the search stopped short on a flat log L and the
+      setting's maximum along it is at that bound;
+    * unless log L is >= ``best`` at BOTH ends of its range (the other end evaluated too where it is no
+      bound: a variance's ceiling): then log L is flat along the setting at the refit (it does not tell the
+      setting there), which is not at a bound, and the setting is neither moved nor counted at an end (a
+      bounded linear setting, phi in [-1, 1], with a flat log L is not "at -1" nor "at +1").
+
+    The passing moves (one end per setting) are applied together where log L at the joint point is not below
+    ``best`` (each move was judged with the others at the refit, and two moves can undo each other); otherwise
+    only the one with the highest log L at its end is (ties broken by the setting's name, so the order of
+    ``free`` does not matter). Either way the returned point's log L is at least the refit's.
 
     Parameters
     ----------
@@ -274,25 +287,41 @@ def snap_to_bounds(
     Returns
     -------
     values : dict of str to float
-        The refit's values, a setting moved to an end where its maximum is there.
+        The refit's values, the settings moved to an end where their maximum is there.
     at_end : list of (bool, bool)
         Per setting of ``free``: whether the refit is at the lower and at the upper end of its range.
     """
     from kalcal.fitting.mle import guarded
 
-    point, at_end = dict(values), []
+    refit = dict(values)
+    at_end = {p.name: [math.isclose(refit[p.name], end, rel_tol=1e-6, abs_tol=0.0) for end in (p.lower, p.upper)]
+              for p in free}
+    moves: dict[str, tuple[int, float]] = {}  # setting -> (end index, log L there)
     for p in free:
-        flags = []
-        for end, bound in zip((p.lower, p.upper), boundary_ends(p)):
-            at = math.isclose(point[p.name], end, rel_tol=1e-6, abs_tol=0.0)
-            if not at and bound:
-                trial = {**point, p.name: end}
-                there = guarded(loglik, trial)
-                if there >= best:
-                    point, best, at = trial, there, True
-            flags.append(at)
-        at_end.append((flags[0], flags[1]))
-    return point, at_end
+        if any(at_end[p.name]):
+            continue
+        ends = (p.lower, p.upper)
+        there = [guarded(loglik, {**refit, p.name: end}) if bound else None for end, bound in zip(ends, boundary_ends(p))]
+        passing = [k for k in (0, 1) if there[k] is not None and there[k] >= best]
+        if not passing:
+            continue
+        # a flat log L along the setting is no maximum at a bound: the other end (no bound) is looked at too
+        other = [guarded(loglik, {**refit, p.name: ends[k]}) if there[k] is None else there[k] for k in (0, 1)]
+        if all(value >= best for value in other):
+            continue
+        moves[p.name] = (passing[0], there[passing[0]])
+    if not moves:
+        return refit, [tuple(at_end[p.name]) for p in free]
+    range_of = {p.name: (p.lower, p.upper) for p in free}
+    joint = {**refit, **{name: range_of[name][k] for name, (k, _) in moves.items()}}
+    if len(moves) > 1 and guarded(loglik, joint) < best:
+        # the moves undo each other together: the single one with the highest log L at its end, still >= best
+        keep = max(sorted(moves), key=lambda name: moves[name][1])
+        moves = {keep: moves[keep]}
+        joint = {**refit, keep: joint[keep]}
+    for name, (k, _) in moves.items():
+        at_end[name][k] = True
+    return joint, [tuple(at_end[p.name]) for p in free]
 
 
 def _replicate(draw: Draw, free: Sequence[Free], seed: int, index: int) -> tuple[list[float], bool, list[tuple[bool, bool]]]:
@@ -426,8 +455,7 @@ def parametric_bootstrap(
             at_bound = [end for side in lost for end in touched[side] if bounds[end]]
             if at_bound:
                 # refits at a bound (consistent with 0) reach the end: the estimate is near the bound, where
-                # the percentile interval is not valid (Andrews 2000), whatever its other end says: no
-                # interval, not a one-sided one
+                # the percentile interval is not valid (Andrews 2000), whatever its other end says: no interval
                 reason = NEAR_BOUND.format(at=_bound_text(spec, at_bound[0]))
                 parameters[name] = BootstrapParameter(name, False, reason, **summary)
             elif len(lost) == 2:
