@@ -425,3 +425,23 @@ def test_procedure_b_bootstrap_ends_are_the_fits_percentile_ends(tmp_path, monke
         assert abs(entry["upper"] - column[-1]) <= tolerance < (column[-1] - column[-2]) / 2, (name, entry, column[-2:])
     with pytest.raises(KalcalError, match="at least 39 replicates"):
         calibrate("imu-3axis", imu=tmp_path / "log.csv", poses=tmp_path / "poses.json", settings={"scenario": {"bootstrap": 38}})
+
+
+# scenario.bootstrap has the fit's maximum (MAX_REPLICATES): 1e12 replicates asked numpy for a 65 TiB array and
+# ended in a traceback with exit 1; now one line naming the key and the value, exit 2, and no output folder.
+# The maximum itself is accepted.
+def test_scenario_bootstrap_above_the_maximum_is_one_line_exit_2(tmp_path):
+    from kalcal.errors import KalcalError
+    from kalcal.fitting.bootstrap import MAX_REPLICATES
+    from kalcal.scenarios import build_scenario
+
+    assert build_scenario("imu-3axis", None, [f"scenario.bootstrap={MAX_REPLICATES}"]).scenario.bootstrap == MAX_REPLICATES
+    with pytest.raises(KalcalError, match=r"scenario\.bootstrap.*at most 100000 replicates.*100001"):
+        build_scenario("imu-3axis", None, [f"scenario.bootstrap={MAX_REPLICATES + 1}"])
+    write_log(tmp_path / "twelve.csv", general_ups())
+    done = kalcal("calibrate", "imu-3axis", "--imu", "twelve.csv", "--set", "scenario.bootstrap=1000000000000",
+                  "--out", "out", cwd=tmp_path)
+    assert done.returncode == 2, (done.returncode, done.stderr)
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "scenario.bootstrap" in lines[0] and "at most 100000 replicates" in lines[0], done.stderr
+    assert "1000000000000" in lines[0] and "Traceback" not in done.stderr and not (tmp_path / "out").exists()

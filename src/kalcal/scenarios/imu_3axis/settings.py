@@ -16,7 +16,7 @@ rate                 0.0         Hz of a log with no ``time`` column (0: read it
 window               0.5         s: the static detector's moving window
 threshold            0.05        m/s^2: the moving standard deviation of every axis below which a sample is static
 min_duration         1.0         s: the shortest static pose the detector keeps
-bootstrap            200         procedure (b)'s parametric bootstrap replicates (0: none)
+bootstrap            200         procedure (b)'s parametric bootstrap replicates (0: none; at most 100000)
 seed                 0           the bootstrap's seed
 max_condition        1e8         procedure (b) refuses poses whose information's condition number exceeds it
 ===================  ==========  =============================================================================
@@ -61,7 +61,11 @@ class Imu3AxisSettings:
             raise SettingError("scenario.tilt_bound", "a tilt below 45 deg", show(self.tilt_bound))
         if int(self.bootstrap) != self.bootstrap or int(self.seed) != self.seed:
             raise SettingError("scenario.bootstrap", "whole numbers for bootstrap and seed", f"{show(self.bootstrap)}, {show(self.seed)}")
-        from kalcal.fitting.bootstrap import minimum_replicates
+        from kalcal.fitting.bootstrap import MAX_REPLICATES, minimum_replicates
+
+        if self.bootstrap > MAX_REPLICATES:
+            # the fit's own cap, for its reason (fitting.bootstrap): 1e12 replicates asked for a 65 TiB array
+            raise SettingError("scenario.bootstrap", f"at most {MAX_REPLICATES} replicates", show(self.bootstrap))
 
         fewest = minimum_replicates(self.level)
         if 0 < self.bootstrap < fewest:
