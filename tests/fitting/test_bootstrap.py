@@ -454,7 +454,8 @@ def test_bootstrap_too_large_or_not_a_number_refused_in_one_line(ar1, tmp_path):
     assert not (tmp_path / "out").exists()
 
 
-# B >= 2/(1 - c) - 1: the (B + 1)(1 - c)/2 >= 1 refits beyond each end of the percentile interval.
+# B >= 2/(1 - c) - 1, so that (B + 1)(1 - c)/2 >= 1: each end of the percentile interval is a refit (at the
+# fewest B, the smallest and the largest: test_percentile_ends_are_the_b_plus_one_order_statistics).
 def test_minimum_replicates():
     from kalcal.fitting.bootstrap import minimum_replicates
 

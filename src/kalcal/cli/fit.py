@@ -75,7 +75,7 @@ def fit(
     imu_columns: Annotated[Optional[str], typer.Option("--imu-columns", help="accel-gps: map roles to columns.")] = None,
     gps_columns: Annotated[Optional[str], typer.Option("--gps-columns", help="accel-gps: map roles to columns.")] = None,
     bootstrap: Annotated[
-        int, typer.Option("--bootstrap", help="B >= 39 (the fewest whose 95% percentile interval has refits beyond each end), at most 100000: also a parametric bootstrap of B logs simulated from the fit and refitted (percentile intervals, bootstrap se, bias; fit-bootstrap.png).")
+        int, typer.Option("--bootstrap", help="B >= 39 (the fewest whose 95% percentile interval has its ends among the refits: the smallest and largest of 39), at most 100000: also a parametric bootstrap of B logs simulated from the fit and refitted (percentile intervals, bootstrap se, bias; fit-bootstrap.png).")
     ] = 0,
     seed: Annotated[Optional[int], typer.Option("--seed", help="The bootstrap's root seed (default 0); the same seed gives the same intervals.")] = None,
     threads: Annotated[Optional[int], typer.Option("--threads", help="The bootstrap's local threads (default: all cores).")] = None,

@@ -188,11 +188,13 @@ class BootstrapResult:
 
 
 def minimum_replicates(confidence: float) -> int:
-    """The fewest replicates B whose percentile interval at ``confidence`` c has refits beyond each end.
+    """The fewest replicates B whose percentile interval at ``confidence`` c has its ends among the refits.
 
     The c interval's lower end is the k-th smallest refit, k = (B + 1)(1 - c)/2 (module docstring), which
-    exists only where k >= 1, i.e. B >= 2/(1 - c) - 1 (39 at 95%: the smallest and largest of 39 refits;
-    19 at 90%). Fewer, and the "interval" is the sample's range, whatever c says.
+    exists only where k >= 1, i.e. B >= 2/(1 - c) - 1. At that fewest B the ends ARE the smallest and largest
+    refits, none beyond them (39 at 95%: the smallest and largest of 39; 19 at 90%). Fewer, and k < 1: the
+    level asks for a quantile beyond the smallest refit, which the sample's range would stand in for, whatever
+    c says.
     """
     # the small allowance, relative (the rounding of 1 - c grows with 1/(1 - c)), keeps 2/(1 - 0.95) - 1,
     # 39.00000000000004 in floating point, at 39, and 0.99999's 199999.0000013 at 199999
