@@ -29,7 +29,7 @@ GRADIENT_STEP = 1e-4
 #: a profile point's search stops when an iteration changes log L by less than this (log L units)
 PROFILE_TOL = 1e-4
 #: an evaluation shorter than this (s) is not worth a thread: handing it over and sharing the GIL cost
-#: more (a log of a few hundred fixes, a scale-bias fit); one of a long log's filter runs takes ~10 ms
+#: more (a log of a few hundred measurements, a two-state model); one of a long log's filter runs takes ~10 ms
 THREAD_MIN_S = 2e-3
 
 #: the evaluation threads' names start with this
