@@ -62,13 +62,23 @@ class UpdateWork(NamedTuple):
     #: (exact zeros: the same sums) are skipped where p > 1
     h_nz: np.ndarray
     pivot: np.ndarray  #: the reciprocals of the Cholesky factor's diagonal, (p, m) (p > 1)
+    #: where M may be nonzero, bool (d, d), symmetric: all True from :func:`update_work`; a caller whose M
+    #: has entries that are identically zero (a state renewed by the prediction has no covariance with the
+    #: states kept, where Q has none) sets them False, and H M skips the products with them where p > 1
+    m_nz: np.ndarray
+    #: the states whose rows and columns of P the caller reads after the update, bool (d,): all True from
+    #: :func:`update_work`; where p > 1 and the Joseph form, P's entries of two kept states alone are
+    #: updated, the others keep M's values (a caller that never reads them: its next prediction and its
+    #: statistics read only the kept states'); K (all d rows) and S are whole whatever ``keep`` says
+    keep: np.ndarray
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def update_work(d, p, m):
     """The scratch :func:`covariance_update` needs, allocated once per tile (not once per update)."""
     return UpdateWork(np.empty((p, d, m)), np.empty((p, p, m)), np.empty((d, d, m)), np.empty((d, d, m)), np.empty(m),
-                      np.empty((p, d, m)), np.ones((p, d), dtype=np.bool_), np.empty((p, m)))
+                      np.empty((p, d, m)), np.ones((p, d), dtype=np.bool_), np.empty((p, m)),
+                      np.ones((d, d), dtype=np.bool_), np.ones(d, dtype=np.bool_))
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -113,11 +123,12 @@ def covariance_update(cov, h, v, joseph, gain, s, work):
         # the (d, m) rows of the (1, d, m) arrays, views by indexing (a reshape is a call per update)
         _scalar_update(cov, h[0], v[0, 0], joseph, gain[0], s[0, 0], hm[0], a, ap, acc)
     else:
-        _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, work.kv, work.h_nz, work.pivot)
+        _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, work.kv, work.h_nz, work.pivot,
+                        work.m_nz, work.keep)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, kv, h_nz, pivot):
+def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, kv, h_nz, pivot, m_nz, keep):
     """:func:`covariance_update` where p > 1: K by a Cholesky factor of S and two triangular solves.
 
     The Joseph form P = A M A^T + K V K^T (A = I - K H) by products of O(d^2 p) alone, expanded:
@@ -130,12 +141,12 @@ def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, kv, h_nz,
     that are not identically zero, about 800 multiply-adds per realization in place of 4,100 (1,130 with
     A M formed first, as before)."""
     d, p, m = cov.shape[0], h.shape[0], cov.shape[2]
-    for i in range(p):  # H M, as (M H^T)^T, from its first product (zeros where H's row is identically zero)
-        first = d
-        for w in range(d - 1, -1, -1):
-            if h_nz[i, w]:
-                first = w
+    for i in range(p):  # H M, as (M H^T)^T, from its first product (zeros where every product is identically zero)
         for u in range(d):
+            first = d
+            for w in range(d - 1, -1, -1):
+                if h_nz[i, w] and m_nz[u, w]:
+                    first = w
             if first == d:
                 for j in range(m):
                     hm[i, u, j] = 0.0
@@ -143,7 +154,7 @@ def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, kv, h_nz,
                 for j in range(m):
                     hm[i, u, j] = cov[u, first, j] * h[i, first, j]
             for w in range(first + 1, d):
-                if h_nz[i, w]:
+                if h_nz[i, w] and m_nz[u, w]:
                     for j in range(m):
                         hm[i, u, j] += cov[u, w, j] * h[i, w, j]
     for i in range(p):  # S = H M H^T + V
@@ -201,6 +212,8 @@ def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, kv, h_nz,
         # K = M H^T S^-1; whatever K, the term that keeps P the Joseph form's P)
         for i in range(p):
             for u in range(d):
+                if not keep[u]:
+                    continue
                 for j in range(m):
                     acc[j] = -hm[i, u, j]
                 for k in range(p):
@@ -209,16 +222,22 @@ def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, kv, h_nz,
                 for j in range(m):
                     kv[i, u, j] = acc[j]
         # P = M - (H M)^T K^T + K G: its lower triangle, in place (measurement by measurement, both of its
-        # terms in one pass over the tile), mirrored
+        # terms in one pass over the tile), mirrored; the kept states' entries alone
         for u in range(d):
+            if not keep[u]:
+                continue
             for w in range(u + 1):
-                for i in range(p):
-                    for j in range(m):
-                        cov[u, w, j] += gain[i, u, j] * kv[i, w, j] - hm[i, u, j] * gain[i, w, j]
+                if keep[w]:
+                    for i in range(p):
+                        for j in range(m):
+                            cov[u, w, j] += gain[i, u, j] * kv[i, w, j] - hm[i, u, j] * gain[i, w, j]
         for u in range(d):
+            if not keep[u]:
+                continue
             for w in range(u):
-                for j in range(m):
-                    cov[w, u, j] = cov[u, w, j]
+                if keep[w]:
+                    for j in range(m):
+                        cov[w, u, j] = cov[u, w, j]
     else:
         for u in range(d):  # P = M - K (H M)
             for w in range(d):

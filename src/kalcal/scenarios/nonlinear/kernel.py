@@ -27,7 +27,7 @@ numpy path's rule, a prediction only) or a P or S is not positive definite: the 
 block on the numpy path from the same draws, which gives that case's numbers (or its error).
 """
 
-# numba cache stamp: kalcal.core.kernels 11df1701d982feae, kalcal.montecarlo.sum_kernels 1ed5637ca40b0768
+# numba cache stamp: kalcal.core.kernels b59e1c99211d3973, kalcal.montecarlo.sum_kernels 1ed5637ca40b0768
 
 from __future__ import annotations
 
@@ -260,6 +260,19 @@ def ekf_block(
     s = np.empty((p, p, m))
     work = update_work(d, p, m)
     work.h_nz[:, :] = hf_nz  # the covariance update skips the filter's H's identically zero entries
+    # M's pattern: M_ab = Q_ab + sum F_aw P_ww' F_bw' is identically zero where Q_ab is zero and row a or b
+    # of F has no entry (a renewed state: no covariance with any other where Q gives it none); and the
+    # states whose entries of P anything reads after the update: the next prediction reads P's entries
+    # of F's columns that are not identically zero, the statistics the checked states'. H M skips M's
+    # zeros, the Joseph form updates the read entries alone (the others keep M's values, never read)
+    for a in range(d):
+        work.keep[a] = False
+        for b in range(d):
+            if f_nz[b, a]:
+                work.keep[a] = True
+            work.m_nz[a, b] = f_q[a, b] != 0.0 or f_q[b, a] != 0.0 or (f_count[a] > 0 and f_count[b] > 0)
+    for a in range(dc):
+        work.keep[checked[a]] = True
     cc = np.empty((dc, dc, m))  # the checked states' block of P, their estimate
     xc = np.empty((dc, m))
     lp = np.empty((dc, dc, m))

@@ -20,7 +20,7 @@ then :func:`kalcal.filters.regression.run_regression_filter` then
 :func:`kalcal.core.likelihood.innovation_loglik` (tests/fitting/test_scale_bias_likelihood_steps.py).
 """
 
-# numba cache stamp: kalcal.core.kernels 11df1701d982feae
+# numba cache stamp: kalcal.core.kernels b59e1c99211d3973
 
 from __future__ import annotations
 
