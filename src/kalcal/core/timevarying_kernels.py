@@ -18,7 +18,7 @@ The exact diffuse period (rows whose prior still has an infinite part) runs in n
 few rows in any model whose diffuse states the first measurements determine.
 """
 
-# numba cache stamp: kalcal.core.kernels b59e1c99211d3973
+# numba cache stamp: kalcal.core.kernels f4de63de4ddf9ee2
 
 from __future__ import annotations
 

@@ -19,7 +19,7 @@ test the compiled :func:`kalcal.core.kernels.measured`; tests/filters/test_seque
 to the reference steps fix by fix.
 """
 
-# numba cache stamp: kalcal.core.kernels b59e1c99211d3973
+# numba cache stamp: kalcal.core.kernels f4de63de4ddf9ee2
 
 from __future__ import annotations
 

@@ -20,7 +20,7 @@ The filter step itself is compiled without fast-math (each realization's numbers
 machine and in any tile); only the sums over realizations are reassociated.
 """
 
-# numba cache stamp: kalcal.core.kernels b59e1c99211d3973, kalcal.montecarlo.sum_kernels 1ed5637ca40b0768
+# numba cache stamp: kalcal.core.kernels f4de63de4ddf9ee2, kalcal.montecarlo.sum_kernels 1ed5637ca40b0768
 
 from __future__ import annotations
 

@@ -20,7 +20,7 @@ then :func:`kalcal.filters.regression.run_regression_filter` then
 :func:`kalcal.core.likelihood.innovation_loglik` (tests/fitting/test_scale_bias_likelihood_steps.py).
 """
 
-# numba cache stamp: kalcal.core.kernels b59e1c99211d3973
+# numba cache stamp: kalcal.core.kernels f4de63de4ddf9ee2
 
 from __future__ import annotations
 
