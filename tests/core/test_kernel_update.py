@@ -113,3 +113,48 @@ def test_the_joseph_form_keeps_precise_measurements_variances_with_several_compo
     # about 1e4 eps are below eigvalsh's rounding)
     scale = np.sqrt(np.einsum("nii->ni", got))
     assert np.linalg.eigvalsh(got / (scale[:, :, None] * scale[:, None, :])).min() > 0.0
+
+
+@pytest.mark.parametrize("form", ["joseph", "standard"])
+def test_the_update_with_m_s_zeros_and_kept_states_gives_the_kept_entries_of_the_whole_update_bit_for_bit(form):
+    """``UpdateWork.m_nz`` and ``keep`` (a caller's M with a renewed state's zeros, P read on some states
+    alone): H M skips the products with M's identically zero entries, the update computes the kept states'
+    rows of K and entries of P alone. Those and S are the whole update's bit for bit (a skipped product is
+    an exact zero), P's others keep M's values; and the kept entries equal the reference step's."""
+    rng = np.random.default_rng(41)
+    d, p, m = 6, 3, 9
+    renewed = [4, 5]  # no covariance with the others (a renewed state's M row is Q's)
+    prior = _spd(rng, d, m)
+    prior[:, :4, 4:] = 0.0
+    prior[:, 4:, :4] = 0.0
+    h = rng.standard_normal((m, p, d))
+    h_nz = rng.random((p, d)) < 0.7
+    h_nz[:, renewed] = True  # the renewed states measured, as a pose's tilts are
+    h = h * h_nz
+    v = _spd(rng, p)
+    keep = np.ones(d, dtype=bool)
+    keep[renewed] = False
+    m_nz = np.abs(prior).max(axis=0) != 0.0
+    out = {}
+    for name in ("whole", "masked"):
+        work = update_work(d, p, m)
+        work.h_nz[:, :] = h_nz
+        if name == "masked":
+            work.m_nz[:, :] = m_nz
+            work.keep[:] = keep
+        gain, s, cov = np.empty((p, d, m)), np.empty((p, p, m)), _tile(prior)
+        covariance_update(cov, _tile(h), v, form == "joseph", gain, s, work)
+        out[name] = gain, s, cov
+    (gain_w, s_w, cov_w), (gain_m, s_m, cov_m) = out["whole"], out["masked"]
+    np.testing.assert_array_equal(gain_m[:, keep], gain_w[:, keep])
+    np.testing.assert_array_equal(s_m, s_w)
+    kept = np.ix_(keep, keep)
+    np.testing.assert_array_equal(cov_m[kept], cov_w[kept])
+    np.testing.assert_array_equal(cov_m[renewed], _tile(prior)[renewed])  # M's values, not P's
+    np.testing.assert_array_equal(cov_m[:, renewed], _tile(prior)[:, renewed])
+    assert not np.array_equal(cov_w[renewed], _tile(prior)[renewed])  # the whole update does change them
+    want_gain, want_cov, _ = gain_and_covariance(prior, h, v, form)
+    np.testing.assert_allclose(np.moveaxis(gain_m, -1, 0)[:, :, keep], np.swapaxes(want_gain, -1, -2)[:, :, keep],
+                               rtol=1e-12, atol=1e-13 * np.abs(want_gain).max())
+    got = np.moveaxis(cov_m, -1, 0)[:, keep][:, :, keep]
+    np.testing.assert_allclose(got, want_cov[:, keep][:, :, keep], rtol=1e-12, atol=1e-13 * np.abs(want_cov).max())

@@ -62,13 +62,23 @@ class UpdateWork(NamedTuple):
     #: (exact zeros: the same sums) are skipped where p > 1
     h_nz: np.ndarray
     pivot: np.ndarray  #: the reciprocals of the Cholesky factor's diagonal, (p, m) (p > 1)
+    #: where M may be nonzero, bool (d, d), symmetric: all True from :func:`update_work`; a caller whose M
+    #: has entries that are identically zero (a state renewed by the prediction has no covariance with the
+    #: states kept, where Q has none) sets them False, and H M skips the products with them where p > 1
+    m_nz: np.ndarray
+    #: the states whose rows of K and rows and columns of P the caller reads after the update, bool (d,):
+    #: all True from :func:`update_work`; where p > 1, K's rows of the kept states alone are computed (the
+    #: others hold what they held) and P's entries of two kept states alone are updated, the others keep M's values (a caller that never reads them: its next prediction and its
+    #: statistics read only the kept states'); S and H M are whole whatever ``keep`` says
+    keep: np.ndarray
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def update_work(d, p, m):
     """The scratch :func:`covariance_update` needs, allocated once per tile (not once per update)."""
     return UpdateWork(np.empty((p, d, m)), np.empty((p, p, m)), np.empty((d, d, m)), np.empty((d, d, m)), np.empty(m),
-                      np.empty((p, d, m)), np.ones((p, d), dtype=np.bool_), np.empty((p, m)))
+                      np.empty((p, d, m)), np.ones((p, d), dtype=np.bool_), np.empty((p, m)),
+                      np.ones((d, d), dtype=np.bool_), np.ones(d, dtype=np.bool_))
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -113,11 +123,12 @@ def covariance_update(cov, h, v, joseph, gain, s, work):
         # the (d, m) rows of the (1, d, m) arrays, views by indexing (a reshape is a call per update)
         _scalar_update(cov, h[0], v[0, 0], joseph, gain[0], s[0, 0], hm[0], a, ap, acc)
     else:
-        _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, work.kv, work.h_nz, work.pivot)
+        _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, work.kv, work.h_nz, work.pivot,
+                        work.m_nz, work.keep)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, kv, h_nz, pivot):
+def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, kv, h_nz, pivot, m_nz, keep):
     """:func:`covariance_update` where p > 1: K by a Cholesky factor of S and two triangular solves.
 
     The Joseph form P = A M A^T + K V K^T (A = I - K H) by products of O(d^2 p) alone: B = A M =
@@ -125,14 +136,16 @@ def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, kv, h_nz,
     order keeps the factored form's numbers: B carries M's rounding, which A^T then multiplies (as the
     factored form's A, formed at the rounding of 1, does), so a huge prior against a precise measurement
     leaves P at K V K^T's scale (tests/core/test_kernel_update.py); the algebraically equal expansion
-    M - (H M)^T K^T + K (S K^T - H M) sums terms of M's size and there loses P entirely."""
+    M - (H M)^T K^T + K (S K^T - H M) sums terms of M's size and there loses P entirely. ``m_nz`` and
+    ``keep`` (:class:`UpdateWork`) skip M's identically zero entries in H M and the states the caller does
+    not read after the update."""
     d, p, m = cov.shape[0], h.shape[0], cov.shape[2]
-    for i in range(p):  # H M, as (M H^T)^T, from its first product (zeros where H's row is identically zero)
-        first = d
-        for w in range(d - 1, -1, -1):
-            if h_nz[i, w]:
-                first = w
+    for i in range(p):  # H M, as (M H^T)^T, from its first product (zeros where every product is identically zero)
         for u in range(d):
+            first = d
+            for w in range(d - 1, -1, -1):
+                if h_nz[i, w] and m_nz[u, w]:
+                    first = w
             if first == d:
                 for j in range(m):
                     hm[i, u, j] = 0.0
@@ -140,7 +153,7 @@ def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, kv, h_nz,
                 for j in range(m):
                     hm[i, u, j] = cov[u, first, j] * h[i, first, j]
             for w in range(first + 1, d):
-                if h_nz[i, w]:
+                if h_nz[i, w] and m_nz[u, w]:
                     for j in range(m):
                         hm[i, u, j] += cov[u, w, j] * h[i, w, j]
     for i in range(p):  # S = H M H^T + V
@@ -172,7 +185,9 @@ def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, kv, h_nz,
                     lower[i, k, j] = 0.0
             for j in range(m):  # the pivot's reciprocal: the solves below multiply (a division per lane
                 pivot[i, j] = 1.0 / lower[i, i, j]  # and column costs several multiplications' time)
-        for u in range(d):  # row u of K: S^{-1} (H M)[:, u], forward then back substitution
+        for u in range(d):  # row u of K: S^{-1} (H M)[:, u], forward then back substitution (kept states')
+            if not keep[u]:
+                continue
             for j in range(m):
                 gain[0, u, j] = hm[0, u, j] * pivot[0, j]
             for i in range(1, p):
@@ -194,9 +209,12 @@ def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, kv, h_nz,
                 for j in range(m):
                     gain[i, u, j] = acc[j] * pivot[i, j]
     if joseph:
-        # B = A M = M - K (H M), all of it (d, d): the cancellation of M against K H M (a huge prior, a
-        # precise measurement) leaves B at the rounding of M, as A = I - K H is at the rounding of 1
+        # B = A M = M - K (H M), the kept states' rows, all columns (D below reads them all): the
+        # cancellation of M against K H M (a huge prior, a precise measurement) leaves B at the rounding of
+        # M, as A = I - K H is at the rounding of 1
         for u in range(d):
+            if not keep[u]:
+                continue
             for w in range(d):
                 for j in range(m):
                     acc[j] = cov[u, w, j] - gain[0, u, j] * hm[0, w, j]
@@ -211,6 +229,8 @@ def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, kv, h_nz,
         # M - K H M - M H^T K^T + K S K^T, whose terms of M's size leave P at M's rounding
         for i in range(p):
             for u in range(d):
+                if not keep[u]:
+                    continue
                 for j in range(m):
                     acc[j] = 0.0
                 for w in range(d):
@@ -222,32 +242,44 @@ def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, kv, h_nz,
                         acc[j] -= gain[k, u, j] * v[k, i]
                 for j in range(m):
                     kv[i, u, j] = acc[j]
-        # P = B - D K^T: its lower triangle, mirrored (symmetric by construction)
+        # P = B - D K^T: its lower triangle, the kept states' entries, mirrored (symmetric by construction)
         for u in range(d):
+            if not keep[u]:
+                continue
             for w in range(u + 1):
-                for j in range(m):
-                    acc[j] = ap[u, w, j] - kv[0, u, j] * gain[0, w, j]
-                for i in range(1, p):
+                if keep[w]:
                     for j in range(m):
-                        acc[j] -= kv[i, u, j] * gain[i, w, j]
-                for j in range(m):
-                    cov[u, w, j] = acc[j]
+                        acc[j] = ap[u, w, j] - kv[0, u, j] * gain[0, w, j]
+                    for i in range(1, p):
+                        for j in range(m):
+                            acc[j] -= kv[i, u, j] * gain[i, w, j]
+                    for j in range(m):
+                        cov[u, w, j] = acc[j]
         for u in range(d):
+            if not keep[u]:
+                continue
             for w in range(u):
-                for j in range(m):
-                    cov[w, u, j] = cov[u, w, j]
-    else:
-        for u in range(d):  # P = M - K (H M)
-            for w in range(d):
-                for i in range(p):
+                if keep[w]:
                     for j in range(m):
-                        cov[u, w, j] -= gain[i, u, j] * hm[i, w, j]
+                        cov[w, u, j] = cov[u, w, j]
+    else:
+        for u in range(d):  # P = M - K (H M), the kept states' entries
+            if not keep[u]:
+                continue
+            for w in range(d):
+                if keep[w]:
+                    for i in range(p):
+                        for j in range(m):
+                            cov[u, w, j] -= gain[i, u, j] * hm[i, w, j]
         for u in range(d):
+            if not keep[u]:
+                continue
             for w in range(u + 1, d):
-                for j in range(m):
-                    mid = 0.5 * (cov[u, w, j] + cov[w, u, j])
-                    cov[u, w, j] = mid
-                    cov[w, u, j] = mid
+                if keep[w]:
+                    for j in range(m):
+                        mid = 0.5 * (cov[u, w, j] + cov[w, u, j])
+                        cov[u, w, j] = mid
+                        cov[w, u, j] = mid
 
 
 @numba.njit(cache=True, nogil=True, inline="always")

@@ -27,7 +27,7 @@ numpy path's rule, a prediction only) or a P or S is not positive definite: the 
 block on the numpy path from the same draws, which gives that case's numbers (or its error).
 """
 
-# numba cache stamp: kalcal.core.kernels 2ae69012c9df6612, kalcal.montecarlo.sum_kernels 1ed5637ca40b0768
+# numba cache stamp: kalcal.core.kernels a5dbbb626c1a87c1, kalcal.montecarlo.sum_kernels 1ed5637ca40b0768
 
 from __future__ import annotations
 
@@ -260,6 +260,20 @@ def ekf_block(
     s = np.empty((p, p, m))
     work = update_work(d, p, m)
     work.h_nz[:, :] = hf_nz  # the covariance update skips the filter's H's identically zero entries
+    # M's pattern: M_ab = Q_ab + sum F_aw P_ww' F_bw' is identically zero where Q_ab is zero and row a or b
+    # of F has no entry (a renewed state: no covariance with any other where Q gives it none); and the
+    # states whose entries of P anything reads after the update: the next prediction reads P's entries
+    # of F's columns that are not identically zero (and f reads those states of x alone), the statistics
+    # the checked states'. H M skips M's zeros, the update computes K's rows and P's entries of those
+    # states alone (P's others keep M's values, never read)
+    for a in range(d):
+        work.keep[a] = False
+        for b in range(d):
+            if f_nz[b, a]:
+                work.keep[a] = True
+            work.m_nz[a, b] = f_q[a, b] != 0.0 or f_q[b, a] != 0.0 or (f_count[a] > 0 and f_count[b] > 0)
+    for a in range(dc):
+        work.keep[checked[a]] = True
     cc = np.empty((dc, dc, m))  # the checked states' block of P, their estimate
     xc = np.empty((dc, m))
     lp = np.empty((dc, dc, m))
@@ -388,11 +402,14 @@ def ekf_block(
                 if row[j] != 0.0:
                     return False
             covariance_update(c, big_h, f_r, True, gain, s, work)
+            # (a state that is not kept, which neither f nor the statistics read, stays at its prediction:
+            # the update computed no row of K for it)
             for a in range(d):
                 for j in range(m):
                     xh[a, j] = xbar[a, j]
-                for i in range(p):
-                    _add_products(xh[a], gain[i, a], res[i], m)
+                if work.keep[a]:
+                    for i in range(p):
+                        _add_products(xh[a], gain[i, a], res[i], m)
             # the statistics on the checked states: e = x - xhat, eps = L_P^-1 e, u = L_S^-1 r, each
             # realization's own factors (of P's checked block)
             # (each lane loop below stores into one array row: a loop that stores into several rows of
