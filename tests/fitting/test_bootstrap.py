@@ -563,11 +563,10 @@ def _bound_free():
             Free("filter.lag", 0.0, -1.0, 1.0, scale="linear")]
 
 
-# snap_to_bounds on hand-built log-likelihoods: a setting whose log L does not rise from a bound of the
-# parameter space to the refit (its maximum along it is at the bound) moves there, log L never lower than the
-# refit's; a maximum inside the range, however near the bound, stays; an end that bounds nothing (the log
-# scale's ceiling, a plain linear range such as a latency's) is never moved to, and a log L that fails at the
-# bound moves nothing.
+# snap_to_bounds on hand-built log-likelihoods: a setting whose log L is higher at an end of its range than at
+# the refit (the search stopped short of it) moves to the higher end, a bound or not, log L never lower than the
+# refit's; a maximum inside the range, however near the bound, stays; a log L as high at an end as at the refit
+# does not tell the setting (flat), and a log L that fails at an end moves nothing there.
 def test_snap_to_bounds_moves_a_refit_whose_maximum_is_at_the_bound():
     from kalcal.fitting.bootstrap import snap_to_bounds
 
@@ -577,40 +576,50 @@ def test_snap_to_bounds_moves_a_refit_whose_maximum_is_at_the_bound():
         return -values["filter.w"] - (values["filter.phi"] - 1.2) ** 2 - (values["filter.lag"] - 1.5) ** 2
 
     stopped = {"filter.w": 3e-3, "filter.phi": 0.99, "filter.lag": 0.99}
-    point, at_end = snap_to_bounds(loglik, free, stopped, loglik(stopped))
-    assert point == {"filter.w": 1e-3, "filter.phi": 1.0, "filter.lag": 0.99}
-    assert at_end == [(True, False), (False, True), (False, False)]
+    point, at_end, flat = snap_to_bounds(loglik, free, stopped, loglik(stopped))
+    # lag's end bounds nothing, but log L is higher there: the search stopped short of it too
+    assert point == {"filter.w": 1e-3, "filter.phi": 1.0, "filter.lag": 1.0}
+    assert at_end == [(True, False), (False, True), (False, True)] and flat == set()
     assert loglik(point) >= loglik(stopped)
-    # a flat log L (the search stops anywhere): as high at both ends, so it tells nothing of a bound: the refit
-    # stays, at neither end
-    assert snap_to_bounds(lambda values: 0.0, free[:1], {"filter.w": 5.0}, 0.0) == ({"filter.w": 5.0}, [(False, False)])
+    # a flat log L (the search stops anywhere): as high at the ends as at the refit: not told, not moved
+    assert snap_to_bounds(lambda values: 0.0, free[:1], {"filter.w": 5.0}, 0.0) == ({"filter.w": 5.0}, [(False, False)], {"filter.w"})
     # a maximum at 2e-3, twice the floor: log L at the floor is lower, so it stays
     inside = lambda values: -((np.log(values["filter.w"]) - np.log(2e-3)) ** 2)  # noqa: E731
-    assert snap_to_bounds(inside, free[:1], {"filter.w": 2e-3}, 0.0) == ({"filter.w": 2e-3}, [(False, False)])
-    # log L rising towards the ceiling 1e3 (no bound): the ceiling is not evaluated, the refit stays
+    assert snap_to_bounds(inside, free[:1], {"filter.w": 2e-3}, 0.0) == ({"filter.w": 2e-3}, [(False, False)], set())
+    # log L rising towards the ceiling 1e3 (no bound): the ceiling is the better point, the refit ran to it
     rising = lambda values: np.log(values["filter.w"])  # noqa: E731
-    assert snap_to_bounds(rising, free[:1], {"filter.w": 500.0}, rising({"filter.w": 500.0}))[1] == [(False, False)]
+    assert snap_to_bounds(rising, free[:1], {"filter.w": 500.0}, rising({"filter.w": 500.0}))[1:] == ([(False, True)], set())
     # within 1e-6 (relative) of an end: at it, without an evaluation
     assert snap_to_bounds(None, free[:1], {"filter.w": 1e-3 * (1 + 1e-7)}, 0.0)[1] == [(True, False)]
 
-    def fails(values):
+    def fails(values):  # log L failing below 2e-3 and flat above: the ceiling is as high as the refit
         if values["filter.w"] < 2e-3:
             raise ValueError("refused")
         return 0.0
-    assert snap_to_bounds(fails, free[:1], {"filter.w": 5.0}, 0.0) == ({"filter.w": 5.0}, [(False, False)])
+    assert snap_to_bounds(fails, free[:1], {"filter.w": 5.0}, 0.0) == ({"filter.w": 5.0}, [(False, False)], {"filter.w"})
+
+    def falls_after_a_rise(values):  # phi's maximum at +1 (1.5), -1 higher than the refit too (0.5)
+        phi = values["filter.phi"]
+        return -5 * phi**2 + 6 * phi**4 + 0.5 * phi**3
+    # the end where log L is highest, whatever the other end's value
+    assert snap_to_bounds(falls_after_a_rise, free[1:2], {"filter.phi": 0.0}, 0.0) == ({"filter.phi": 1.0}, [(False, True)], set())
 
 
-# A bounded linear setting (phi in [-1, 1]) with a flat log L: log L at both ends is the refit's, so it is flat
-# along phi, not at a bound: neither moved nor counted. (Tested at -1, moved there, then tested at +1 from the
-# moved point and moved again, it was flagged at both ends with the value +1, and the entry's reason named -1.)
+# A bounded linear setting (phi in [-1, 1]) with a flat log L: log L at both ends is the refit's, so the refit
+# does not tell phi: neither moved nor counted at an end, and the entry gets no interval. (Tested at -1, moved
+# there, then tested at +1 from the moved point and moved again, it was flagged at both ends with the value +1,
+# and the entry's reason named -1; left where the searches stopped, the refits gave an "interval" of zero width.)
 def test_snap_to_bounds_leaves_a_flat_bounded_setting_where_it_is():
     from kalcal.fitting.bootstrap import snap_to_bounds
 
     phi = _bound_free()[1]
-    assert snap_to_bounds(lambda values: 0.0, [phi], {"filter.phi": 0.3}, 0.0) == ({"filter.phi": 0.3}, [(False, False)])
-    # and in the bootstrap: no refit counted at an end, an interval of the refits as they stopped
+    assert snap_to_bounds(lambda values: 0.0, [phi], {"filter.phi": 0.3}, 0.0) == ({"filter.phi": 0.3}, [(False, False)], {"filter.phi"})
+    # equally higher at both ends than at the refit: neither end is the maximum
+    assert snap_to_bounds(lambda values: values["filter.phi"] ** 2, [phi], {"filter.phi": 0.0}, 0.0)[2] == {"filter.phi"}
+    # and in the bootstrap: no refit counted at an end, and no interval of the refits as they stopped
     entry = _flat_phi_entry()
-    assert entry.at_range_end == 0 and entry.applicable and entry.ci_low == entry.ci_high == 0.3, entry
+    assert entry.at_range_end == 0 and not entry.applicable and entry.ci_low is None and entry.ci_high is None, entry
+    assert entry.reason.startswith("39 of 39 refits do not tell it"), entry.reason
 
 
 def _flat_phi_entry():
@@ -637,8 +646,9 @@ def test_snap_to_bounds_does_not_depend_on_the_settings_order():
     tie = lambda values: -((values["filter.v"] - 1.0) ** 2) * (values["filter.w"] - 1e-3)  # noqa: E731
     refit = {"filter.w": 1.0, "filter.v": 1.0}
     for order in ([w, v], [v, w]):
-        point, at_end = snap_to_bounds(tie, order, refit, tie(refit))
+        point, at_end, flat = snap_to_bounds(tie, order, refit, tie(refit))
         assert point == refit and at_end == [(False, False), (False, False)], ([p.name for p in order], point, at_end)
+        assert flat == {"filter.w"}
 
 
 # Two settings that pass, each with the other at the refit: moved together where log L at the joint point is
@@ -653,12 +663,12 @@ def test_snap_to_bounds_moves_passing_settings_together_or_the_best_alone():
     # both maxima at +1 and no interaction: both move, log L 2 there
     apart = lambda values: values["filter.phi"] + values["filter.rho"]  # noqa: E731
     for order in ([phi, rho], [rho, phi]):
-        point, at_end = snap_to_bounds(apart, order, refit, 0.0)
+        point, at_end, _ = snap_to_bounds(apart, order, refit, 0.0)
         assert point == {"filter.phi": 1.0, "filter.rho": 1.0} and at_end == [(False, True), (False, True)]
     # log L phi + 2 rho - 4 phi rho: 1 at phi = 1, 2 at rho = 1, -1 at both: rho alone moves
     undo = lambda values: values["filter.phi"] + 2 * values["filter.rho"] - 4 * values["filter.phi"] * values["filter.rho"]  # noqa: E731
     for order in ([phi, rho], [rho, phi]):
-        point, at_end = snap_to_bounds(undo, order, refit, 0.0)
+        point, at_end, _ = snap_to_bounds(undo, order, refit, 0.0)
         assert point == {"filter.phi": 0.0, "filter.rho": 1.0} and undo(point) >= 0.0
         assert dict(zip([p.name for p in order], at_end)) == {"filter.phi": (False, False), "filter.rho": (False, True)}
 
@@ -813,7 +823,7 @@ def _pivot_lower_ends(logs: int, confidence: float, b: int):
     return entries
 
 
-def _check_lost_end_refused(logs: int, confidence: float, b: int) -> tuple[int, int]:
+def _check_lost_end_refused(logs: int, confidence: float, b: int) -> tuple[int, int, int]:
     """The refusal of an entry whose upper end is lost at the ceiling, and the measurement that justifies it.
 
     Each such entry (a fifth of the logs or more, so that the count below means something) is not applicable:

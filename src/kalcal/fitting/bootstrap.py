@@ -25,14 +25,16 @@ Econometrica 68(2) 399-405). Nor does one NEAR its bound: where a percentile end
 that stopped at an end of the search range that stands for a bound of the parameter space (a log-scale
 setting's floor, the variance's 0: those refits are consistent with 0; either end of a ``bounded`` linear
 range, such as an AR(1) coefficient's [-1, 1]), the estimate is within the estimator's spread of the bound,
-where the percentile interval's ends are not valid (Andrews 2000). A refit is at a bound where its maximum
-along the setting is there (:func:`snap_to_bounds`): where it stopped within 1e-6 (relative) of the end, or
-where log L with the setting at the end, the others held at the refit's own values, is not below the
-refit's own log L, unless log L is as high at both ends of the setting's range (then it is flat along the
-setting at the refit, which tells nothing of a bound: not moved, not counted). The settings that pass move
-together where log L at the joint point is not below the refit's, else only the one whose end has the
-highest log L, so the result does not depend on the settings' order. That catches the refits L-BFGS-B stops short of the bound: a variance's log L flattens on the log scale as it
-nears 0 and the search stops on the flatness (1.1e-6 for a floor at 1e-6, log L there 3e-7 higher). The end
+where the percentile interval's ends are not valid (Andrews 2000). A refit is at an end of its range
+(:func:`snap_to_bounds`) where it stopped within 1e-6 (relative) of it, or where log L with the setting at
+that end, the others held at the refit's own values, is higher than the refit's own log L (of the two ends,
+the higher): the search stopped short of it. That catches the refits L-BFGS-B stops short of the bound: a
+variance's log L flattens on the log scale as it nears 0 and the search stops on the flatness (1.1e-6 for a
+floor at 1e-6, log L there 3e-7 higher). Where log L is as high at an end as at the refit (or equally higher
+at both ends), the refit does not tell the setting: it is not moved, and the entry gets no interval (its
+refits' values would be where their searches stopped). Judged with the others at the refit, the moves are
+applied together where log L at the joint point is not below the refit's, else only the one whose end has
+the highest log L, so the result does not depend on the settings' order. The end
 is then the better point: it becomes the refit's value, and the refit counts at the bound. A refit whose log
 L at the end is lower, by however little, has its maximum inside the range (log L rises from the bound): it
 is not at the bound, however near it lies. (A rule calling a refit at the bound where log L at the end is
@@ -43,7 +45,7 @@ the bound.)
 A percentile end resting on refits stopped at an end of the search range that is NOT a bound (a variance's
 ceiling: the log scale does not bound it above; a latency's search range) is that range's end, not a
 quantile, and the other end alone holds no stated level there: over all logs a c interval's lower end
-covers at (1 + c)/2, but the logs that lose the upper end are those whose estimate is high, where a lower
+covers at (1 + c)/2 (for an estimator symmetric about the truth), but the logs that lose the upper end are those whose estimate is high, where a lower
 bound misses most, so among them, the only logs where it would be shown alone, it covers less (a normal
 estimator whose ceiling is near the truth, in the tests: 145 of 192 such logs, 76%, where it would say
 87.5%; 1266 of 1319, 96.0%, where it would say 97.5%). Such an entry is "not applicable" (no interval and
@@ -191,8 +193,9 @@ def minimum_replicates(confidence: float) -> int:
     """The fewest replicates B whose percentile interval at ``confidence`` c has its ends among the refits.
 
     The c interval's lower end is the k-th smallest refit, k = (B + 1)(1 - c)/2 (module docstring), which
-    exists only where k >= 1, i.e. B >= 2/(1 - c) - 1. At that fewest B the ends ARE the smallest and largest
-    refits, none beyond them (39 at 95%: the smallest and largest of 39; 19 at 90%). Fewer, and k < 1: the
+    exists only where k >= 1, i.e. B >= 2/(1 - c) - 1. At that fewest B, where 2/(1 - c) is whole, the ends are
+    the smallest and largest refits (39 at 95%: the smallest and largest of 39; 19 at 90%); elsewhere k is just
+    above 1 and the ends lie between the two smallest and the two largest refits (13 at 85%). Fewer, and k < 1: the
     level asks for a quantile beyond the smallest refit, which the sample's range would stand in for, whatever
     c says.
     """
@@ -258,23 +261,24 @@ def _held_reason(p) -> str:
 
 def snap_to_bounds(
     loglik: Callable[[Mapping[str, float]], float], free: Sequence[Free], values: Mapping[str, float], best: float
-) -> tuple[dict[str, float], list[tuple[bool, bool]]]:
-    """A refit's values with each setting whose maximum is at a bound of the parameter space moved there.
+) -> tuple[dict[str, float], list[tuple[bool, bool]], set[str]]:
+    """A refit's values with each setting whose log L is higher at an end of its search range moved there.
 
     Each setting of ``free`` is judged from the refit's own point, the others held at the refit's values, so
     that the result does not depend on the settings' order:
 
     * within 1e-6 (relative) of an end of its search range, it is at that end (no evaluation);
-    * otherwise, at each end that is a bound of the parameter space (:func:`boundary_ends`), log L is evaluated
-      with the setting there (:func:`kalcal.fitting.mle.guarded`); an end where it is >= ``best`` is one where
-      log L does not rise from the bound to the refit: the search stopped short on a flat log L and the
-      setting's maximum along it is at that bound;
-    * unless log L is >= ``best`` at BOTH ends of its range (the other end evaluated too where it is no
-      bound: a variance's ceiling): then log L is flat along the setting at the refit (it does not tell the
-      setting there), which is not at a bound, and the setting is neither moved nor counted at an end (a
-      bounded linear setting, phi in [-1, 1], with a flat log L is not "at -1" nor "at +1").
+    * otherwise log L is evaluated with the setting at each end of its range (:func:`kalcal.fitting.mle.guarded`).
+      Where it is higher than ``best`` at an end, the search stopped short of it (on a log L that is flat
+      near the end) and that end is the better point: the setting moves to the end where log L is highest
+      and counts at it (at a bound of the parameter space, a variance's floor or phi's +-1, the refit is
+      then "consistent with the bound"; at an end that bounds nothing, a variance's ceiling, the refit ran
+      to the range's end);
+    * where log L is as high (to 1e-12) at an end as at the refit, or equally higher at both ends, the log
+      does not tell the setting in this refit: it is neither moved nor counted at an end, and is returned
+      among the flat settings (the bootstrap then gives that setting no interval).
 
-    The passing moves (one end per setting) are applied together where log L at the joint point is not below
+    The moves (one end per setting) are applied together where log L at the joint point is not below
     ``best`` (each move was judged with the others at the refit, and two moves can undo each other); otherwise
     only the one with the highest log L at its end is (ties broken by the setting's name, so the order of
     ``free`` does not matter). Either way the returned point's log L is at least the refit's.
@@ -293,9 +297,11 @@ def snap_to_bounds(
     Returns
     -------
     values : dict of str to float
-        The refit's values, the settings moved to an end where their maximum is there.
+        The refit's values, the settings moved to an end where log L is higher there.
     at_end : list of (bool, bool)
         Per setting of ``free``: whether the refit is at the lower and at the upper end of its range.
+    flat : set of str
+        The settings along which log L is as high at an end as at the refit (not told by this refit).
     """
     from kalcal.fitting.mle import guarded
 
@@ -303,21 +309,22 @@ def snap_to_bounds(
     at_end = {p.name: [math.isclose(refit[p.name], end, rel_tol=1e-6, abs_tol=0.0) for end in (p.lower, p.upper)]
               for p in free}
     moves: dict[str, tuple[int, float]] = {}  # setting -> (end index, log L there)
+    flat: set[str] = set()
     for p in free:
         if any(at_end[p.name]):
             continue
-        ends = (p.lower, p.upper)
-        there = [guarded(loglik, {**refit, p.name: end}) if bound else None for end, bound in zip(ends, boundary_ends(p))]
-        passing = [k for k in (0, 1) if there[k] is not None and there[k] >= best]
-        if not passing:
-            continue
-        # a flat log L along the setting is no maximum at a bound: the other end (no bound) is looked at too
-        other = [guarded(loglik, {**refit, p.name: ends[k]}) if there[k] is None else there[k] for k in (0, 1)]
-        if all(value >= best for value in other):
-            continue
-        moves[p.name] = (passing[0], there[passing[0]])
+        there = [guarded(loglik, {**refit, p.name: end}) for end in (p.lower, p.upper)]
+        same = [math.isclose(value, best, rel_tol=1e-12, abs_tol=1e-12) for value in there]
+        higher = [k for k in (0, 1) if there[k] > best and not same[k]]
+        if len(higher) == 2 and math.isclose(there[0], there[1], rel_tol=1e-12, abs_tol=1e-12):
+            flat.add(p.name)  # as high at both ends, higher than the refit: no end is its maximum
+        elif higher:
+            k = max(higher, key=lambda k: there[k])  # the end where log L is highest: the better point
+            moves[p.name] = (k, there[k])
+        elif any(same):
+            flat.add(p.name)  # log L as high at an end as at the refit: the log does not tell the setting there
     if not moves:
-        return refit, [tuple(at_end[p.name]) for p in free]
+        return refit, [tuple(at_end[p.name]) for p in free], flat
     range_of = {p.name: (p.lower, p.upper) for p in free}
     joint = {**refit, **{name: range_of[name][k] for name, (k, _) in moves.items()}}
     if len(moves) > 1 and guarded(loglik, joint) < best:
@@ -327,13 +334,14 @@ def snap_to_bounds(
         joint = {**refit, keep: joint[keep]}
     for name, (k, _) in moves.items():
         at_end[name][k] = True
-    return joint, [tuple(at_end[p.name]) for p in free]
+    return joint, [tuple(at_end[p.name]) for p in free], flat
 
 
-def _replicate(draw: Draw, free: Sequence[Free], seed: int, index: int) -> tuple[list[float], bool, list[tuple[bool, bool]]]:
+def _replicate(draw: Draw, free: Sequence[Free], seed: int, index: int) -> tuple[list[float], bool, list[tuple[bool, bool, bool]]]:
     """Replicate ``index``: its log drawn from block ``index``'s generator, refitted from the fitted point, each
-    setting whose maximum is at a bound moved there (:func:`snap_to_bounds`); with the refit's convergence and
-    per setting whether it is at the (lower, upper) end of its range."""
+    setting whose log L is higher at an end of its range moved there (:func:`snap_to_bounds`); with the
+    refit's convergence and per setting whether it is at the (lower, upper) end of its range and whether log L
+    is flat along it."""
     from kalcal.fitting import local_search
     from kalcal.montecarlo.engine import block_generator
 
@@ -344,10 +352,10 @@ def _replicate(draw: Draw, free: Sequence[Free], seed: int, index: int) -> tuple
     try:
         loglik = draw(block_generator(seed, index))
         values, best, converged = point_estimate(loglik, free)
-        values, at_end = snap_to_bounds(loglik, free, values, best)
+        values, at_end, flat = snap_to_bounds(loglik, free, values, best)
     finally:
         local_search._IN_POOL.active = before
-    return [values[p.name] for p in free], converged, at_end
+    return [values[p.name] for p in free], converged, [(*ends, p.name in flat) for p, ends in zip(free, at_end)]
 
 
 def parametric_bootstrap(
@@ -420,8 +428,9 @@ def parametric_bootstrap(
     seconds = time.perf_counter() - started
     estimates = np.array([row[0] for row in rows], dtype=float).reshape(replicates, len(refit))
     failed = sum(not row[1] for row in rows)
-    # (replicate, setting, end): whether the refit is at the lower (0) or upper (1) end of the setting's range
-    ends_of = np.array([row[2] for row in rows], dtype=bool).reshape(replicates, len(refit), 2)
+    # (replicate, setting, k): whether the refit is at the lower (k = 0) or upper (1) end of the setting's
+    # range, and (2) whether its log L is flat along the setting (snap_to_bounds)
+    ends_of = np.array([row[2] for row in rows], dtype=bool).reshape(replicates, len(refit), 3)
     parameters = {}
     column = {p.name: j for j, p in enumerate(refit)}
     for name, p in fit.parameters.items():
@@ -436,8 +445,15 @@ def parametric_bootstrap(
         se = float(np.std(draws, ddof=1))
         summary = dict(se=se, bias=float(np.mean(draws) - fit.values[name]), bias_se=se / float(np.sqrt(replicates)),
                        at_range_end=ends, values=tuple(draws.tolist()))
+        flat = int(np.count_nonzero(ends_of[:, column[name], 2]))
         if p.at_bound:
             reason = f"at its lower bound (consistent with 0): no percentile interval ({ANDREWS})"
+            parameters[name] = BootstrapParameter(name, False, reason, **summary)
+        elif flat:
+            # such a refit's value is where its search stopped, not an estimate: its quantiles would be no
+            # quantiles of the estimator (all of them flat: an interval of zero width)
+            reason = (f"{flat} of {replicates} refits do not tell it: their log L is as high at an end of its search "
+                      "range as at the refit, so their values are where the search stopped: no percentile interval")
             parameters[name] = BootstrapParameter(name, False, reason, **summary)
         elif p.ci_low is None or p.ci_high is None:
             side = "lower" if p.ci_low is None else "upper"
