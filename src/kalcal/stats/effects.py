@@ -68,6 +68,7 @@ says so.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -137,7 +138,7 @@ class EffectLayout:
     truth_updates: int = 0
     truth_d: int = 0
 
-    @property
+    @cached_property  # once per layout (frozen): every view of every block and group asks for it
     def slices(self) -> dict[str, tuple[slice, tuple[int, ...]]]:
         k, d = self.n_updates, self.d
         kt, dt = self.truth_updates or k, self.truth_d or d

@@ -121,11 +121,19 @@ def _add_products(out, a, b, m):
         out[j] += a[j] * b[j]
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def arena_size(n, d, p, dc, m):
+    """float64 values of :func:`ekf_block`'s arena for n realizations, d states, p measurements, dc checked
+    states and tiles of m: per realization slot (n rounded up to whole tiles) the truth's and the
+    filter's states (2 d), P_{k-1} and P_k (2 d^2), and the statistics' sums over the updates (3 + 3 dc + p)."""
+    return -(-n // m) * m * (2 * d * (d + 1) + 3 + 3 * dc + p)
+
+
 @numba.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def ekf_block(
     ft, jac_ft, hh_t, ff, jac_ff, hh_f,
     first, noise, t_x0, t_p0f, t_qf, t_rf, t_dt, q_inv, has_q_inv, r_chol,
-    f_x0, f_p0, f_q, f_r, f_dt, inputs, data, structure, sums, normalized, eff, m,
+    f_x0, f_p0, f_q, f_r, f_dt, inputs, data, structure, sums, normalized, eff, m, arena,
 ):
     """One block's sums (module docstring). K updates, n realizations, d states, p measurements.
 
@@ -170,6 +178,9 @@ def ekf_block(
         nis_avg, e4, p2, e2p, pooled, z, z2, zbar, lag1, f, ftqf, htrh; added into.
     m : int
         The tile's width (realizations).
+    arena : ndarray, shape (>= arena_size(n, d, p, c, m),)
+        float64 room for the block's state and per-realization sums, overwritten (its contents on entry
+        are not read): the caller keeps one per thread and passes it to every block.
 
     Returns
     -------
@@ -194,20 +205,36 @@ def ekf_block(
     tiles = (n + m - 1) // m
     nees_sq, nees_avg, nis_avg, e4, p2, e2p, pooled, zsum, z2sum, zbar, lag1, fsum, ftqf, htrh = eff
     keep_pairs = sums.residuals.shape[0] > 0
-    # the block's state, tile-major so that each tile's arrays are contiguous
-    xt = np.empty((tiles, d, m))
-    xf = np.empty((tiles, d, m))
+    # the block's state, tile-major so that each tile's arrays are contiguous, carved from the caller's
+    # arena (:func:`arena_size`), which a thread reuses block after block: memory fresh from the system
+    # costs a page fault at its first touch, and the block's 10 MB (at imu-3axis's d = 11) went back to
+    # the system as each block ended
+    if arena.shape[0] < arena_size(n, d, p, dc, m):
+        raise ValueError("ekf_block: the arena is smaller than arena_size(n, d, p, dc, m)")
+    size = tiles * m
+    xt = arena[:size * d].reshape((tiles, d, m))
+    xf = arena[size * d:2 * size * d].reshape((tiles, d, m))
     # P_{k-1} and P_k in turn (update k reads one and writes the other): the prediction reads P_{k-1}
     # while it writes M, so that a row of F with one entry needs no product F P of its own
-    cov = np.empty((tiles, d, d, m))
-    cov_next = np.empty((tiles, d, d, m))
-    r_nees = np.zeros((tiles, m))
-    r_nis = np.zeros((tiles, m))
-    r_a = np.zeros((tiles, dc, m))
-    r_b = np.zeros((tiles, dc, m))
-    r_z = np.zeros((tiles, dc, m))
-    r_lag = np.zeros((tiles, m))
-    last_u = np.zeros((tiles, p, m))
+    at = 2 * size * d
+    cov = arena[at:at + size * d * d].reshape((tiles, d, d, m))
+    at += size * d * d
+    cov_next = arena[at:at + size * d * d].reshape((tiles, d, d, m))
+    # the statistics' per-realization sums over the updates, from zero (the arena holds the last block's)
+    at += size * d * d
+    stats = arena[at:at + size * (3 + 3 * dc + p)]
+    stats[:] = 0.0
+    r_nees = stats[:size].reshape((tiles, m))
+    r_nis = stats[size:2 * size].reshape((tiles, m))
+    r_lag = stats[2 * size:3 * size].reshape((tiles, m))
+    at = 3 * size
+    r_a = stats[at:at + size * dc].reshape((tiles, dc, m))
+    at += size * dc
+    r_b = stats[at:at + size * dc].reshape((tiles, dc, m))
+    at += size * dc
+    r_z = stats[at:at + size * dc].reshape((tiles, dc, m))
+    at += size * dc
+    last_u = stats[at:at + size * p].reshape((tiles, p, m))
     for t in range(tiles):
         for j in range(m):
             col = min(t * m + j, n - 1)
