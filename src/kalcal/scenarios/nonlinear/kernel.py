@@ -27,7 +27,7 @@ numpy path's rule, a prediction only) or a P or S is not positive definite: the 
 block on the numpy path from the same draws, which gives that case's numbers (or its error).
 """
 
-# numba cache stamp: kalcal.core.kernels 11df1701d982feae, kalcal.montecarlo.sum_kernels 1ed5637ca40b0768
+# numba cache stamp: kalcal.core.kernels 11df1701d982feae
 
 from __future__ import annotations
 
@@ -35,7 +35,6 @@ import numba
 import numpy as np
 
 from kalcal.core.kernels import covariance_update, update_work
-from kalcal.montecarlo.sum_kernels import add_shape
 
 
 @numba.njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -165,6 +164,20 @@ def arena_size(n, d, p, dc, m):
     states and tiles of m: per realization slot (n rounded up to whole tiles) the truth's and the
     filter's states (2 d), P_{k-1} and P_k (2 d^2), and the statistics' sums over the updates (3 + 3 dc + p)."""
     return -(-n // m) * m * (2 * d * (d + 1) + 3 + 3 * dc + p)
+
+
+@numba.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _add_shape_lanes(k, values, scale, histogram, where, m):
+    """:func:`kalcal.montecarlo.sum_kernels.add_shape` of values[:m], its roots taken first in one lane loop
+    (vectorized: a square root rounds alike in a vector), then counted: the same floor of the same product,
+    the same bins (NaN in the last); ``where`` (>= m,) is scratch."""
+    last = histogram.shape[1] - 1.0
+    for j in range(m):
+        x = values[j]
+        where[j] = np.sqrt(x if x > 0.0 else 0.0) * scale
+    for j in range(m):
+        w = where[j]
+        histogram[k, int(w if w < last else last) if values[j] == values[j] else int(last)] += 1
 
 
 @numba.njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -550,8 +563,8 @@ def ekf_block(
             _add_lanes(r_nis[t], tile_nis, mt)
             # the shape check's histograms, by the fixed-gain kernels' binning (the same floor of the same
             # product as numpy's shape_histogram)
-            add_shape(k, tile_nees[:mt], sums.nees_grid.scale, sums.nees_histogram)
-            add_shape(k, tile_nis[:mt], sums.nis_grid.scale, sums.nis_histogram)
+            _add_shape_lanes(k, tile_nees, sums.nees_grid.scale, sums.nees_histogram, zrow[0], mt)
+            _add_shape_lanes(k, tile_nis, sums.nis_grid.scale, sums.nis_histogram, zrow[0], mt)
             for a in range(p):
                 upd[o_res + a] += _lane_sum(res[a], mt)
                 upd[o_nr + a] += _lane_sum(u[a], mt)
@@ -593,8 +606,22 @@ def ekf_block(
                         for w in range(d):
                             if t_nz[w, a]:
                                 upd[o_ftqf + a * d + b] += _lane_dot(jf[w, a], g[w, b], mt)
-            for i in range(p):  # R^-1/2 H by forward substitution, the lane loops innermost; its
-                for b in range(d):  # identically zero entries stay the zeros they start as
+            diagonal_r = True
+            for i in range(p):
+                for w in range(i):
+                    diagonal_r = diagonal_r and r_chol[i, w] == 0.0
+            if diagonal_r:
+                # R diagonal: (R^-1/2 H)_ia = H_ia / R_ii^(1/2), so each update's sum of products is
+                # H's over the lanes divided by R_ii once (not every lane by R_ii^(1/2))
+                for i in range(p):
+                    r_ii = r_chol[i, i] * r_chol[i, i]
+                    for a in range(d):
+                        if w_nz[i, a]:
+                            for b in range(a + 1):
+                                if w_nz[i, b]:
+                                    upd[o_htrh + a * d + b] += _lane_dot(jh[i, a], jh[i, b], mt) / r_ii
+            for i in range(p if not diagonal_r else 0):  # R^-1/2 H by forward substitution, the lane
+                for b in range(d):  # loops innermost; its identically zero entries stay zeros
                     if w_nz[i, b]:
                         for j in range(mt):
                             row[j] = jh[i, b, j]
@@ -603,8 +630,8 @@ def ekf_block(
                                 row[j] = row[j] - r_chol[i, w] * wh[w, b, j]
                         for j in range(mt):
                             wh[i, b, j] = row[j] / r_chol[i, i]
-            for a in range(d):  # symmetric: the lower triangle, mirrored below; the products with
-                for b in range(a + 1):  # R^-1/2 H's identically zero entries skipped
+            for a in range(d if not diagonal_r else 0):  # symmetric: the lower triangle, mirrored
+                for b in range(a + 1):  # below; the products with R^-1/2 H's zero entries skipped
                     for i in range(p):
                         if w_nz[i, a] and w_nz[i, b]:
                             upd[o_htrh + a * d + b] += _lane_dot(wh[i, a], wh[i, b], mt)
