@@ -254,6 +254,36 @@ def test_renewed_bound_is_the_parameter_block_of_the_dense_inverse():
         np.testing.assert_allclose(bound.bound[last], expected, rtol=1e-9, atol=1e-12)
 
 
+def test_renewed_bounds_of_a_stack_are_each_groups_own_and_a_refused_group_refuses_the_stack():
+    """The jackknife's leave-one-out bounds run as one stacked recursion (``_renewed_bounds``): each group's
+    bound is the one its sums give alone, bit for bit (no group's numbers leak into another's), and one group
+    whose transition does not keep the parameters static refuses the stack (the jackknife then gives no error)."""
+    from kalcal.stats.effects import _renewed_bound, _renewed_bounds
+
+    rng = np.random.default_rng(5)
+    d, k_count = 11, 3
+    layout = EffectLayout(k_count, 9, 3, truth_updates=k_count, truth_d=d)
+    p0 = np.diag(rng.uniform(0.5, 2.0, d))
+    q = np.zeros((d, d))
+    q[9:, 9:] = np.diag([0.3, 0.7])
+    flats, counts = [], np.array([7, 9, 12])
+    for count in counts:
+        flat = layout.zeros()
+        layout.view(flat, "f")[:] = count * np.diag(np.r_[np.ones(9), 0.0, 0.0])
+        a = rng.standard_normal((k_count, 3, d))
+        layout.view(flat, "htrh")[:] = np.einsum("kai,kaj->kij", a, a)
+        flats.append(flat)
+    ok, stacked = _renewed_bounds(layout, np.stack(flats), counts, q, p0, (9, 10))
+    assert ok.all() and stacked.shape == (3, k_count, 9, 9)
+    for flat, count, got in zip(flats, counts, stacked):
+        alone = _renewed_bound(layout, flat, int(count), q, p0, (9, 10))
+        assert alone[0] and np.array_equal(got, alone[2])
+    layout.view(flats[1], "f")[0, 0, 0] = 1.5 * counts[1]  # a parameter that does not keep its value
+    ok, stacked = _renewed_bounds(layout, np.stack(flats), counts, q, p0, (9, 10))
+    assert ok.tolist() == [True, False, True] and stacked is None
+    assert _renewed_bound(layout, flats[1], int(counts[1]), q, p0, (9, 10))[0] is False
+
+
 def test_batch_ml_is_procedure_b_fit():
     truth = v.TruthSection()
     model, data = v.pose_model(truth)

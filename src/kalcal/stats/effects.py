@@ -68,6 +68,7 @@ says so.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -137,7 +138,7 @@ class EffectLayout:
     truth_updates: int = 0
     truth_d: int = 0
 
-    @property
+    @cached_property  # once per layout (frozen): every view of every block and group asks for it
     def slices(self) -> dict[str, tuple[slice, tuple[int, ...]]]:
         k, d = self.n_updates, self.d
         kt, dt = self.truth_updates or k, self.truth_d or d
@@ -443,7 +444,13 @@ def cramer_rao_bound(
         total_mse = sum(g[2] for g in groups)
         total_n = sum(int(g[0]) for g in groups)
         diag_b, diag_d = [], []
-        for count, part, part_mse in groups:
+        if renewed:  # every leave-one-out total's recursion at once
+            counts = np.array([total_n - int(g[0]) for g in groups])
+            ok, stacked = _renewed_bounds(layout, total_flat - np.stack([g[1] for g in groups]), counts, q, p0, tuple(renewed))
+            diag_b = None if stacked is None else [np.diagonal(b, axis1=1, axis2=2) for b in stacked]
+            if diag_b is not None:
+                diag_d = [(total_mse - g[2])[-1] / rest - bd[-1] for g, rest, bd in zip(groups, counts, diag_b)]
+        for count, part, part_mse in groups if not renewed else ():
             rest = total_n - int(count)
             ok, _, b = _bound_matrices(layout, total_flat - part, rest, q, p0, tuple(renewed))
             if not ok:  # a leave-one-out total outside the recursion's conditions: no error given
@@ -519,40 +526,68 @@ def _check_finite_expectations(layout: EffectLayout, flat: np.ndarray) -> None:
             )
 
 
+_RENEWED_REASON = "static with renewed nuisance states: J_k = J_0 + sum_j (A_j - C_j D_j^-1 C_j^T), the parameters' block"
+_RENEWED_REFUSED = "renewed states with a transition that does not keep the others static: no bound given here"
+
+
 def _renewed_bound(layout, flat, n, q, p0, renewed):
     """The static parameters' bound with each update's nuisance states marginalized (module docstring)."""
+    ok, bounds = _renewed_bounds(layout, flat[None], np.array([n]), q, p0, renewed)
+    if not ok[0]:
+        return False, _RENEWED_REFUSED, None
+    return True, _RENEWED_REASON, bounds[0]
+
+
+def _renewed_bounds(layout, flats, counts, q, p0, renewed):
+    """:func:`_renewed_bound` of G sets of effect sums at once (the jackknife's leave-one-out totals): flats
+    (G, size), counts (G,). Returns ``ok`` (G,) and the bounds (G, K, t, t) of the t parameters, each
+    group's the numbers :func:`_renewed_bound` gives it alone (numpy's and scipy's stacked solves and
+    factors run the same routine on each matrix); None for the bounds where any group is refused. One
+    recursion over the K updates for every group, not one per group (26 recursions in Python were 12 ms
+    of a run of imu-3axis's 10^5 realizations)."""
     d = layout.truth_d or layout.d
     eta = np.asarray(renewed)
     theta = np.setdiff1d(np.arange(d), eta)
-    mean_f = layout.view(flat, "f") / n
-    htrh = layout.view(flat, "htrh") / n
-    static = mean_f[:, theta[:, None], theta]
+    counts = np.asarray(counts, dtype=float)
+    g = flats.shape[0]
+
+    def view(name):
+        where, shape = layout.slices[name]
+        return flats[:, where].reshape((g,) + shape) / counts.reshape((g,) + (1,) * len(shape))
+
+    mean_f = view("f")
+    htrh = view("htrh")
+    static = mean_f[:, :, theta[:, None], theta]
     # the parameters keep their value (F = I on them, no leak into or out of the nuisance states), the
     # nuisance states are drawn afresh (F = 0 on them) with their own block of Q and none of the parameters'
-    if not (np.allclose(static, np.eye(theta.size), rtol=0.0, atol=1e-12) and np.allclose(mean_f[:, :, eta], 0.0, atol=1e-12)
-            and np.allclose(mean_f[:, eta[:, None], theta], 0.0, atol=1e-12) and not np.any(q[theta[:, None], theta])
-            and not np.any(q[theta[:, None], eta])):
-        return False, "renewed states with a transition that does not keep the others static: no bound given here", None
+    # (|x - y| <= atol, NaN failing, as np.allclose(rtol=0) has it, per group)
+    ok = (np.all(np.abs(static - np.eye(theta.size)) <= 1e-12, axis=(1, 2, 3))
+          & np.all(np.abs(mean_f[:, :, :, eta]) <= 1e-12, axis=(1, 2, 3))
+          & np.all(np.abs(mean_f[:, :, eta[:, None], theta]) <= 1e-12, axis=(1, 2, 3)))
+    if np.any(q[theta[:, None], theta]) or np.any(q[theta[:, None], eta]):
+        ok[:] = False
+    if not ok.all():
+        return ok, None
     q_eta_inv = _spd_inverse(q[eta[:, None], eta])
-    j = _spd_inverse(p0[theta[:, None], theta])  # J_0 of the parameters alone
-    bounds = np.empty((htrh.shape[0], theta.size, theta.size))
-    for k in range(htrh.shape[0]):
-        a, c = htrh[k][theta[:, None], theta], htrh[k][theta[:, None], eta]
-        block = q_eta_inv + htrh[k][eta[:, None], eta]
-        j = j + a - c @ np.linalg.solve(block, c.T)  # the update's nuisance marginalized by a solve
-        j = 0.5 * (j + j.T)
-        bounds[k] = _spd_inverse(j)
-    reason = "static with renewed nuisance states: J_k = J_0 + sum_j (A_j - C_j D_j^-1 C_j^T), the parameters' block"
-    return True, reason, bounds
+    j = np.broadcast_to(_spd_inverse(p0[theta[:, None], theta]), (g, theta.size, theta.size))  # J_0 of the parameters
+    bounds = np.empty((g, htrh.shape[1], theta.size, theta.size))
+    for k in range(htrh.shape[1]):
+        a, c = htrh[:, k][:, theta[:, None], theta], htrh[:, k][:, theta[:, None], eta]
+        block = q_eta_inv + htrh[:, k][:, eta[:, None], eta]
+        j = j + a - c @ np.linalg.solve(block, np.swapaxes(c, 1, 2))  # the update's nuisance marginalized by a solve
+        j = 0.5 * (j + np.swapaxes(j, 1, 2))
+        bounds[:, k] = _spd_inverse(j)
+    return ok, bounds
 
 
 def _spd_inverse(a: np.ndarray, chol: np.ndarray | None = None) -> np.ndarray:
-    """The inverse of a symmetric positive definite matrix by its Cholesky factor (d x d, once per update)."""
+    """The inverse of a symmetric positive definite matrix by its Cholesky factor ((..., d, d): one, or a
+    stack of them each on its own, once per update)."""
     from scipy.linalg import cho_solve
 
     c = np.linalg.cholesky(a) if chol is None else chol
-    out = cho_solve((c, True), np.eye(a.shape[0]))
-    return 0.5 * (out + out.T)
+    out = cho_solve((c, True), np.broadcast_to(np.eye(a.shape[-1]), a.shape))
+    return 0.5 * (out + np.swapaxes(out, -1, -2))
 
 
 @dataclass(frozen=True)

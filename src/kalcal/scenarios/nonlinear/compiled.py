@@ -23,7 +23,7 @@ from kalcal.core.nonlinear_codegen import compilable, load_generated, model_sour
 __all__ = ["block_kernel", "is_compiled", "refuse"]
 
 _ARGS = ("first, noise, t_x0, t_p0f, t_qf, t_rf, t_dt, q_inv, has_q_inv, r_chol, "
-         "f_x0, f_p0, f_q, f_r, f_dt, inputs, data, structure, sums, normalized, eff, m")
+         "f_x0, f_p0, f_q, f_r, f_dt, inputs, data, structure, sums, normalized, eff, m, arena")
 
 #: truth model -> {filter model -> (driver or None, reason)}: once per pair of models in a process
 _KERNELS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
@@ -124,11 +124,11 @@ def run_block(truth: NonlinearModel, filter_model: NonlinearModel, *args) -> boo
     # the checked states (the argument ``structure`` arrives as them alone) and the printed patterns of
     # the truth's and the filter's F and H, as arrays, in one tuple (numba inlines no function of more
     # than about 30 arguments)
-    *head, checked, sums, normalized, eff, m = args
+    *head, checked, sums, normalized, eff, m, arena = args
     structure = (np.array(module.truth_F_nz, dtype=np.bool_), np.array(filter_nz, dtype=np.bool_),
                  np.array(module.truth_H_nz, dtype=np.bool_), np.array(filter_h_nz, dtype=np.bool_), checked)
     try:
-        return kernel(*head, structure, sums, normalized, eff, m)
+        return kernel(*head, structure, sums, normalized, eff, m, arena)
     except Exception as error:
         if not type(error).__module__.startswith("numba"):  # numba's own errors: printed code it cannot compile
             raise

@@ -27,7 +27,7 @@ numpy path's rule, a prediction only) or a P or S is not positive definite: the 
 block on the numpy path from the same draws, which gives that case's numbers (or its error).
 """
 
-# numba cache stamp: kalcal.core.kernels a5dbbb626c1a87c1, kalcal.montecarlo.sum_kernels 1ed5637ca40b0768
+# numba cache stamp: kalcal.core.kernels a5dbbb626c1a87c1
 
 from __future__ import annotations
 
@@ -35,7 +35,6 @@ import numba
 import numpy as np
 
 from kalcal.core.kernels import covariance_update, update_work
-from kalcal.montecarlo.sum_kernels import add_shape
 
 
 @numba.njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -81,14 +80,16 @@ def _forward_lanes(lower, v, out, m, acc):
             out[i, j] = acc[j] / lower[i, i, j]
 
 
-# The two reductions over a tile's lanes below are the kernel's only code compiled with 'reassoc': a sum
+# The reductions over a tile's lanes below are the kernel's only code compiled with 'reassoc': a sum
 # over the lanes may be taken in whatever order vectorizes it (running sums by lane modulo the vector
 # width, then added together), which LLVM does only when allowed to reassociate. Written out as 4 or 8
 # running sums in plain Python, numba's loop did not vectorize (scalar: 83 ns per realization for the
 # 351 products of 26 rows against 22 ns reassociated, against 59 ns for the per-lane rows they replace).
 # The order stays fixed by the machine code: the same sums for the same draws on a machine, within
 # rounding of any other order (the tests hold them to the numpy path's to 1e-10). Not inlined at numba's
-# level, so that their flags stay theirs.
+# level, so that their flags stay theirs. The four- and eight-sum ones take the outer products' rows in
+# fours: a row loaded once for four products, one call for four or eight sums (the kernel 360 -> 344 and
+# 387 -> 354 ns per update per realization, best of 25-30 interleaved blocks).
 @numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract", "reassoc"})
 def _lane_dot(a, b, m):
     """sum over j < m of a[j] * b[j] (rows of a tile's arrays): one product sum over the lanes."""
@@ -96,6 +97,42 @@ def _lane_dot(a, b, m):
     for j in range(m):
         acc += a[j] * b[j]
     return acc
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract", "reassoc"})
+def _lane_dot4(a, b0, b1, b2, b3, m):
+    """The four product sums a . b0, ..., a . b3 over j < m in one pass: a row loaded once for four
+    products (the reductions' loads, not their multiply-adds, bound them)."""
+    s0 = s1 = s2 = s3 = 0.0
+    for j in range(m):
+        v = a[j]
+        s0 += v * b0[j]
+        s1 += v * b1[j]
+        s2 += v * b2[j]
+        s3 += v * b3[j]
+    return s0, s1, s2, s3
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract", "reassoc"})
+def _lane_dot24(a0, a1, b0, b1, b2, b3, m):
+    """The eight product sums a0 . b0..b3 and a1 . b0..b3 over j < m in one pass."""
+    s0 = s1 = s2 = s3 = t0 = t1 = t2 = t3 = 0.0
+    for j in range(m):
+        u = a0[j]
+        w = a1[j]
+        x0 = b0[j]
+        x1 = b1[j]
+        x2 = b2[j]
+        x3 = b3[j]
+        s0 += u * x0
+        s1 += u * x1
+        s2 += u * x2
+        s3 += u * x3
+        t0 += w * x0
+        t1 += w * x1
+        t2 += w * x2
+        t3 += w * x3
+    return s0, s1, s2, s3, t0, t1, t2, t3
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract", "reassoc"})
@@ -121,11 +158,33 @@ def _add_products(out, a, b, m):
         out[j] += a[j] * b[j]
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def arena_size(n, d, p, dc, m):
+    """float64 values of :func:`ekf_block`'s arena for n realizations, d states, p measurements, dc checked
+    states and tiles of m: per realization slot (n rounded up to whole tiles) the truth's and the
+    filter's states (2 d), P_{k-1} and P_k (2 d^2), and the statistics' sums over the updates (3 + 3 dc + p)."""
+    return -(-n // m) * m * (2 * d * (d + 1) + 3 + 3 * dc + p)
+
+
+@numba.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _add_shape_lanes(k, values, scale, histogram, where, m):
+    """:func:`kalcal.montecarlo.sum_kernels.add_shape` of values[:m], its roots taken first in one lane loop
+    (vectorized: a square root rounds alike in a vector), then counted: the same floor of the same product,
+    the same bins (NaN in the last); ``where`` (>= m,) is scratch."""
+    last = histogram.shape[1] - 1.0
+    for j in range(m):
+        x = values[j]
+        where[j] = np.sqrt(x if x > 0.0 else 0.0) * scale
+    for j in range(m):
+        w = where[j]
+        histogram[k, int(w if w < last else last) if values[j] == values[j] else int(last)] += 1
+
+
 @numba.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def ekf_block(
     ft, jac_ft, hh_t, ff, jac_ff, hh_f,
     first, noise, t_x0, t_p0f, t_qf, t_rf, t_dt, q_inv, has_q_inv, r_chol,
-    f_x0, f_p0, f_q, f_r, f_dt, inputs, data, structure, sums, normalized, eff, m,
+    f_x0, f_p0, f_q, f_r, f_dt, inputs, data, structure, sums, normalized, eff, m, arena,
 ):
     """One block's sums (module docstring). K updates, n realizations, d states, p measurements.
 
@@ -170,6 +229,9 @@ def ekf_block(
         nis_avg, e4, p2, e2p, pooled, z, z2, zbar, lag1, f, ftqf, htrh; added into.
     m : int
         The tile's width (realizations).
+    arena : ndarray, shape (>= arena_size(n, d, p, c, m),)
+        float64 room for the block's state and per-realization sums, overwritten (its contents on entry
+        are not read): the caller keeps one per thread and passes it to every block.
 
     Returns
     -------
@@ -194,20 +256,36 @@ def ekf_block(
     tiles = (n + m - 1) // m
     nees_sq, nees_avg, nis_avg, e4, p2, e2p, pooled, zsum, z2sum, zbar, lag1, fsum, ftqf, htrh = eff
     keep_pairs = sums.residuals.shape[0] > 0
-    # the block's state, tile-major so that each tile's arrays are contiguous
-    xt = np.empty((tiles, d, m))
-    xf = np.empty((tiles, d, m))
+    # the block's state, tile-major so that each tile's arrays are contiguous, carved from the caller's
+    # arena (:func:`arena_size`), which a thread reuses block after block: memory fresh from the system
+    # costs a page fault at its first touch, and the block's 10 MB (at imu-3axis's d = 11) went back to
+    # the system as each block ended
+    if arena.shape[0] < arena_size(n, d, p, dc, m):
+        raise ValueError("ekf_block: the arena is smaller than arena_size(n, d, p, dc, m)")
+    size = tiles * m
+    xt = arena[:size * d].reshape((tiles, d, m))
+    xf = arena[size * d:2 * size * d].reshape((tiles, d, m))
     # P_{k-1} and P_k in turn (update k reads one and writes the other): the prediction reads P_{k-1}
     # while it writes M, so that a row of F with one entry needs no product F P of its own
-    cov = np.empty((tiles, d, d, m))
-    cov_next = np.empty((tiles, d, d, m))
-    r_nees = np.zeros((tiles, m))
-    r_nis = np.zeros((tiles, m))
-    r_a = np.zeros((tiles, dc, m))
-    r_b = np.zeros((tiles, dc, m))
-    r_z = np.zeros((tiles, dc, m))
-    r_lag = np.zeros((tiles, m))
-    last_u = np.zeros((tiles, p, m))
+    at = 2 * size * d
+    cov = arena[at:at + size * d * d].reshape((tiles, d, d, m))
+    at += size * d * d
+    cov_next = arena[at:at + size * d * d].reshape((tiles, d, d, m))
+    # the statistics' per-realization sums over the updates, from zero (the arena holds the last block's)
+    at += size * d * d
+    stats = arena[at:at + size * (3 + 3 * dc + p)]
+    stats[:] = 0.0
+    r_nees = stats[:size].reshape((tiles, m))
+    r_nis = stats[size:2 * size].reshape((tiles, m))
+    r_lag = stats[2 * size:3 * size].reshape((tiles, m))
+    at = 3 * size
+    r_a = stats[at:at + size * dc].reshape((tiles, dc, m))
+    at += size * dc
+    r_b = stats[at:at + size * dc].reshape((tiles, dc, m))
+    at += size * dc
+    r_z = stats[at:at + size * dc].reshape((tiles, dc, m))
+    at += size * dc
+    last_u = stats[at:at + size * p].reshape((tiles, p, m))
     for t in range(tiles):
         for j in range(m):
             col = min(t * m + j, n - 1)
@@ -433,20 +511,54 @@ def ekf_block(
             # the update's sums on the checked states, each reduced over the tile's lanes at once (products
             # of rows in the cache) into its one total: the symmetric ones' lower triangles (their upper
             # ones the same numbers, mirrored at the update's end)
+            # (four or eight sums a pass where the columns come in fours: each row loaded once for them)
             for a in range(dc):
                 upd[o_err + a] += _lane_sum(e[a], mt)
                 upd[o_est + a] += _lane_sum(xc[a], mt)
                 upd[o_we + a] += _lane_sum(eps[a], mt)
-                for b in range(dc):
+                b = 0
+                while b + 4 <= dc:
+                    ab = a * dc + b
+                    s0, s1, s2, s3, t0, t1, t2, t3 = _lane_dot24(e[a], eps[a], xc[b], xc[b + 1], xc[b + 2], xc[b + 3], mt)
+                    upd[o_ee + ab] += s0
+                    upd[o_ee + ab + 1] += s1
+                    upd[o_ee + ab + 2] += s2
+                    upd[o_ee + ab + 3] += s3
+                    upd[o_wx + ab] += t0
+                    upd[o_wx + ab + 1] += t1
+                    upd[o_wx + ab + 2] += t2
+                    upd[o_wx + ab + 3] += t3
+                    b += 4
+                for b in range(b, dc):
                     ab = a * dc + b
                     upd[o_ee + ab] += _lane_dot(e[a], xc[b], mt)
                     upd[o_wx + ab] += _lane_dot(eps[a], xc[b], mt)
-                for b in range(a + 1):
+                b = 0
+                while b + 4 <= a + 1:
+                    ab = a * dc + b
+                    s0, s1, s2, s3 = _lane_dot4(e[a], e[b], e[b + 1], e[b + 2], e[b + 3], mt)
+                    upd[o_eo + ab] += s0
+                    upd[o_eo + ab + 1] += s1
+                    upd[o_eo + ab + 2] += s2
+                    upd[o_eo + ab + 3] += s3
+                    s0, s1, s2, s3 = _lane_dot4(xc[a], xc[b], xc[b + 1], xc[b + 2], xc[b + 3], mt)
+                    upd[o_esto + ab] += s0
+                    upd[o_esto + ab + 1] += s1
+                    upd[o_esto + ab + 2] += s2
+                    upd[o_esto + ab + 3] += s3
+                    s0, s1, s2, s3 = _lane_dot4(eps[a], eps[b], eps[b + 1], eps[b + 2], eps[b + 3], mt)
+                    upd[o_wo + ab] += s0
+                    upd[o_wo + ab + 1] += s1
+                    upd[o_wo + ab + 2] += s2
+                    upd[o_wo + ab + 3] += s3
+                    b += 4
+                for b in range(b, a + 1):
                     ab = a * dc + b
                     upd[o_eo + ab] += _lane_dot(e[a], e[b], mt)
                     upd[o_esto + ab] += _lane_dot(xc[a], xc[b], mt)
-                    upd[o_fc + ab] += _lane_sum(cc[a, b], mt)
                     upd[o_wo + ab] += _lane_dot(eps[a], eps[b], mt)
+                for b in range(a + 1):
+                    upd[o_fc + a * dc + b] += _lane_sum(cc[a, b], mt)
             for j in range(mt):
                 tile_nees[j] = 0.0
             for a in range(dc):
@@ -468,8 +580,8 @@ def ekf_block(
             _add_lanes(r_nis[t], tile_nis, mt)
             # the shape check's histograms, by the fixed-gain kernels' binning (the same floor of the same
             # product as numpy's shape_histogram)
-            add_shape(k, tile_nees[:mt], sums.nees_grid.scale, sums.nees_histogram)
-            add_shape(k, tile_nis[:mt], sums.nis_grid.scale, sums.nis_histogram)
+            _add_shape_lanes(k, tile_nees, sums.nees_grid.scale, sums.nees_histogram, zrow[0], mt)
+            _add_shape_lanes(k, tile_nis, sums.nis_grid.scale, sums.nis_histogram, zrow[0], mt)
             for a in range(p):
                 upd[o_res + a] += _lane_sum(res[a], mt)
                 upd[o_nr + a] += _lane_sum(u[a], mt)
@@ -511,8 +623,22 @@ def ekf_block(
                         for w in range(d):
                             if t_nz[w, a]:
                                 upd[o_ftqf + a * d + b] += _lane_dot(jf[w, a], g[w, b], mt)
-            for i in range(p):  # R^-1/2 H by forward substitution, the lane loops innermost; its
-                for b in range(d):  # identically zero entries stay the zeros they start as
+            diagonal_r = True
+            for i in range(p):
+                for w in range(i):
+                    diagonal_r = diagonal_r and r_chol[i, w] == 0.0
+            if diagonal_r:
+                # R diagonal: (R^-1/2 H)_ia = H_ia / R_ii^(1/2), so each update's sum of products is
+                # H's over the lanes divided by R_ii once (not every lane by R_ii^(1/2))
+                for i in range(p):
+                    r_ii = r_chol[i, i] * r_chol[i, i]
+                    for a in range(d):
+                        if w_nz[i, a]:
+                            for b in range(a + 1):
+                                if w_nz[i, b]:
+                                    upd[o_htrh + a * d + b] += _lane_dot(jh[i, a], jh[i, b], mt) / r_ii
+            for i in range(p if not diagonal_r else 0):  # R^-1/2 H by forward substitution, the lane
+                for b in range(d):  # loops innermost; its identically zero entries stay zeros
                     if w_nz[i, b]:
                         for j in range(mt):
                             row[j] = jh[i, b, j]
@@ -521,8 +647,8 @@ def ekf_block(
                                 row[j] = row[j] - r_chol[i, w] * wh[w, b, j]
                         for j in range(mt):
                             wh[i, b, j] = row[j] / r_chol[i, i]
-            for a in range(d):  # symmetric: the lower triangle, mirrored below; the products with
-                for b in range(a + 1):  # R^-1/2 H's identically zero entries skipped
+            for a in range(d if not diagonal_r else 0):  # symmetric: the lower triangle, mirrored
+                for b in range(a + 1):  # below; the products with R^-1/2 H's zero entries skipped
                     for i in range(p):
                         if w_nz[i, a] and w_nz[i, b]:
                             upd[o_htrh + a * d + b] += _lane_dot(wh[i, a], wh[i, b], mt)

@@ -25,6 +25,7 @@ are the final-time ones, :func:`kalcal.stats.suite.final_time_checks`).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import threading
 from dataclasses import dataclass, field
 from typing import Any, Callable
@@ -82,6 +83,25 @@ COMPILED_MODES = SETTINGS_COMPILED_MODES
 #: on the store before it, 4K aliasing). Measured on imu-3axis's kernel (benchmarks/README.md, section
 #: bench_imu_3axis).
 _TILE = 216
+
+
+#: each thread's arena of the compiled kernel (:func:`_thread_arena`)
+_THREAD = threading.local()
+
+
+def _thread_arena(size: int) -> np.ndarray:
+    """This thread's float64 arena of at least ``size`` values for the compiled kernel's block state
+    (:func:`kalcal.scenarios.nonlinear.kernel.arena_size`), kept from block to block and grown as needed.
+
+    A block's state is about 10 MB at imu-3axis's d = 11 (its P_{k-1} and P_k, 4 MB each); allocated per
+    block, the allocator gave it back to the system as the block ended and took it again at the next
+    block's start, a page fault at the first touch of each 4 KB page (2,400 a block, 5-6 ms of a 23 ms
+    block on the development machine). The kernel overwrites what it reads, so one arena serves every
+    block of the thread (the engine's threads run one block at a time each); it is freed with the thread."""
+    arena = getattr(_THREAD, "arena", None)
+    if arena is None or arena.shape[0] < size:
+        arena = _THREAD.arena = np.empty(size)
+    return arena
 
 
 def _q_inverse(q: np.ndarray) -> tuple[np.ndarray, bool]:
@@ -448,26 +468,18 @@ class NonlinearProblem(ProblemDefaults):
         self.tally.add("numpy")
         return out
 
-    def _compiled_block_sums(self, rng: np.random.Generator, n: int) -> MomentSums | None:
+    @functools.cached_property
+    def _kernel_inputs(self) -> tuple:
+        """What the compiled kernel takes that depends on the models alone, derived once per problem (not
+        once per block: the factors, Q's rank, the effect layout's views and the input rows cost about
+        1 ms of Python a block): the checked states, the truth's drawn factors of Q and R, its P0 factor,
+        Q^-1 and whether Q has full rank, R's Cholesky factor, the inputs' and data's rows (K, size), the
+        effect layout and the names of its views in the kernel's order. The problem is frozen and its
+        models are immutable, so the values stay valid (a problem of other models is another instance)."""
         s, loaded = self.scenario, self.scenario.loaded
-        t, fm = loaded.truth, loaded.filter
-        d, p, k_count = t.state_dim, t.measurement_dim, s.n_updates
-        layout = self.layout
-        checked = np.arange(d) if self.hooks.checked is None else np.asarray(self.hooks.checked, dtype=np.int64)
-        # the numpy path's draws, in its order (_simulate)
-        q_factor, r_factor = _drawn_factor(t.q), _drawn_factor(t.r)
-        first = rng.standard_normal((n, d))
-        noise = rng.standard_normal((k_count, n, q_factor.shape[1] + r_factor.shape[1]))
-        # the checks' sums on the checked states (layout.d of them), the bound's on the truth's d
-        sums = SumBuffers.zeros(k_count, layout.d, p, n, self.residual_pairs, own_cov=True)
-        flat = layout.zeros()
-        names = ("nees_sq", "nees_avg", "nis_avg", "e4", "p2", "e2p", "pooled", "z", "z2", "zbar", "lag1", "f", "ftqf", "htrh")
-        eff = tuple(layout.view(flat, name) for name in names)
-        normalized = np.zeros((k_count, p))
-        q_inv, has_q_inv = _q_inverse(t.q)
-
-        if t.input_dim != fm.input_dim or t.data_dim != fm.data_dim:
-            return None
+        t = loaded.truth
+        k_count = s.n_updates
+        checked = np.arange(t.state_dim) if self.hooks.checked is None else np.asarray(self.hooks.checked, dtype=np.int64)
 
         def rows(name, value, size):
             # the numpy path's checks (the model's own, then one row per update) before any broadcast
@@ -476,14 +488,40 @@ class NonlinearProblem(ProblemDefaults):
             value = _known_rows(name, value, size, k_count, loaded.source, "DATA" if name == "data" else "INPUTS")
             return np.ascontiguousarray(np.broadcast_to(value, (k_count, size)) if value.ndim == 1 else value[:k_count])
 
+        q_inv, has_q_inv = _q_inverse(t.q)
+        layout = self.layout
+        names = ("nees_sq", "nees_avg", "nis_avg", "e4", "p2", "e2p", "pooled", "z", "z2", "zbar", "lag1", "f", "ftqf", "htrh")
+        return (checked, _drawn_factor(t.q), _drawn_factor(t.r), _factor(t.p0), q_inv, has_q_inv, np.linalg.cholesky(t.r),
+                rows("u", loaded.inputs, t.input_dim), rows("data", loaded.data, t.data_dim), layout,
+                tuple(layout.slices[name] for name in names))
+
+    def _compiled_block_sums(self, rng: np.random.Generator, n: int) -> MomentSums | None:
+        s, loaded = self.scenario, self.scenario.loaded
+        t, fm = loaded.truth, loaded.filter
+        d, p, k_count = t.state_dim, t.measurement_dim, s.n_updates
+        checked, q_factor, r_factor, p0_factor, q_inv, has_q_inv, r_chol, u_rows, data_rows, layout, views = self._kernel_inputs
+        # the numpy path's draws, in its order (_simulate)
+        first = rng.standard_normal((n, d))
+        noise = rng.standard_normal((k_count, n, q_factor.shape[1] + r_factor.shape[1]))
+        # the checks' sums on the checked states (layout.d of them), the bound's on the truth's d
+        sums = SumBuffers.zeros(k_count, layout.d, p, n, self.residual_pairs, own_cov=True)
+        flat = layout.zeros()
+        eff = tuple(flat[where].reshape(shape) for where, shape in views)
+        normalized = np.zeros((k_count, p))
+
+        if t.input_dim != fm.input_dim or t.data_dim != fm.data_dim:
+            return None
+
         from kalcal.scenarios.nonlinear.compiled import run_block
+        from kalcal.scenarios.nonlinear.kernel import arena_size
 
         ok = run_block(
             t, fm,
-            first, noise, t.x0, _factor(t.p0), q_factor, r_factor, float(t.dt),
-            q_inv, has_q_inv, np.linalg.cholesky(t.r),
+            first, noise, t.x0, p0_factor, q_factor, r_factor, float(t.dt),
+            q_inv, has_q_inv, r_chol,
             fm.x0, fm.p0, fm.q, fm.r, float(fm.dt),
-            rows("u", loaded.inputs, t.input_dim), rows("data", loaded.data, t.data_dim), checked, sums, normalized, eff, _TILE,
+            u_rows, data_rows, checked, sums, normalized, eff, _TILE,
+            _thread_arena(arena_size(n, d, p, checked.shape[0], _TILE)),
         )
         if not ok:
             return None
