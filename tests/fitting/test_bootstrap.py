@@ -563,10 +563,10 @@ def _bound_free():
             Free("filter.lag", 0.0, -1.0, 1.0, scale="linear")]
 
 
-# snap_to_bounds on hand-built log-likelihoods: a setting whose log L is higher at an end of its range than at
-# the refit (the search stopped short of it) moves to the higher end, a bound or not, log L never lower than the
-# refit's; a maximum inside the range, however near the bound, stays; a log L as high at an end as at the refit
-# does not tell the setting (flat), and a log L that fails at an end moves nothing there.
+# snap_to_bounds on hand-built log-likelihoods: a setting whose log L at an end of its range is as high as at the
+# refit (to the refit's resolution) or higher moves to the higher end, a bound or not; a maximum inside the
+# range, however near the bound, stays; a log L as high at both ends does not tell the setting (flat), and an
+# end where log L fails is no maximum.
 def test_snap_to_bounds_moves_a_refit_whose_maximum_is_at_the_bound():
     from kalcal.fitting.bootstrap import snap_to_bounds
 
@@ -581,8 +581,14 @@ def test_snap_to_bounds_moves_a_refit_whose_maximum_is_at_the_bound():
     assert point == {"filter.w": 1e-3, "filter.phi": 1.0, "filter.lag": 1.0}
     assert at_end == [(True, False), (False, True), (False, True)] and flat == set()
     assert loglik(point) >= loglik(stopped)
-    # a flat log L (the search stops anywhere): as high at the ends as at the refit: not told, not moved
+    # a flat log L (the search stops anywhere): as high at both ends as at the refit: not told, not moved
     assert snap_to_bounds(lambda values: 0.0, free[:1], {"filter.w": 5.0}, 0.0) == ({"filter.w": 5.0}, [(False, False)], {"filter.w"})
+    # a refit stopped 5e-5 above the floor where log L (about -1e4) is higher there by 5e-11 of a unit, below
+    # what its search resolves (1e-10 of |log L|, 1e-6): as high as the refit's, so at the floor, not flat (the
+    # ceiling is far lower)
+    far = lambda values: -1e4 - 1e-6 * values["filter.w"]  # noqa: E731
+    stopped_near = {"filter.w": 1e-3 * (1 + 5e-5)}
+    assert snap_to_bounds(far, free[:1], stopped_near, far(stopped_near)) == ({"filter.w": 1e-3}, [(True, False)], set())
     # a maximum at 2e-3, twice the floor: log L at the floor is lower, so it stays
     inside = lambda values: -((np.log(values["filter.w"]) - np.log(2e-3)) ** 2)  # noqa: E731
     assert snap_to_bounds(inside, free[:1], {"filter.w": 2e-3}, 0.0) == ({"filter.w": 2e-3}, [(False, False)], set())
@@ -592,11 +598,11 @@ def test_snap_to_bounds_moves_a_refit_whose_maximum_is_at_the_bound():
     # within 1e-6 (relative) of an end: at it, without an evaluation
     assert snap_to_bounds(None, free[:1], {"filter.w": 1e-3 * (1 + 1e-7)}, 0.0)[1] == [(True, False)]
 
-    def fails(values):  # log L failing below 2e-3 and flat above: the ceiling is as high as the refit
+    def fails(values):  # log L failing below 2e-3 and flat above: the ceiling is as high, the floor no maximum
         if values["filter.w"] < 2e-3:
             raise ValueError("refused")
         return 0.0
-    assert snap_to_bounds(fails, free[:1], {"filter.w": 5.0}, 0.0) == ({"filter.w": 5.0}, [(False, False)], {"filter.w"})
+    assert snap_to_bounds(fails, free[:1], {"filter.w": 5.0}, 0.0) == ({"filter.w": 1e3}, [(False, True)], set())
 
     def falls_after_a_rise(values):  # phi's maximum at +1 (1.5), -1 higher than the refit too (0.5)
         phi = values["filter.phi"]
@@ -620,9 +626,22 @@ def test_snap_to_bounds_leaves_a_flat_bounded_setting_where_it_is():
     entry = _flat_phi_entry()
     assert entry.at_range_end == 0 and not entry.applicable and entry.ci_low is None and entry.ci_high is None, entry
     assert entry.reason.startswith("39 of 39 refits do not tell it"), entry.reason
+    # some refits flat among peaked ones: any of them makes the entry not applicable, the count named
+    some = _flat_phi_entry(lambda rng: (lambda values: 0.0) if rng.random() < 0.3 else
+                           (lambda values, c=0.3 + 0.1 * rng.standard_normal(): -((values["filter.phi"] - c) ** 2)))
+    count = int(some.reason.split(" of ")[0])
+    assert not some.applicable and 0 < count < 39 and some.reason.startswith(f"{count} of 39 refits do not tell it"), some
+    # a log L flat in phi that fails at both ends (no end evaluates): the refits do not spread, and an
+    # interval of zero width is refused all the same
+    def fails_at_the_ends(values):
+        if abs(values["filter.phi"]) >= 1.0:
+            raise ZeroDivisionError("1 - phi^2")
+        return 0.0
+    none = _flat_phi_entry(lambda rng: fails_at_the_ends)
+    assert not none.applicable and none.reason.startswith("the refits do not spread"), none
 
 
-def _flat_phi_entry():
+def _flat_phi_entry(draw=None):
     from types import SimpleNamespace
 
     from kalcal.fitting.bootstrap import parametric_bootstrap
@@ -630,7 +649,8 @@ def _flat_phi_entry():
     phi = replace(_bound_free()[1], start=0.3)
     parameter = SimpleNamespace(identified=True, trades_off=(), held=False, at_bound=False, ci_low=-0.5, ci_high=0.9)
     fit = SimpleNamespace(values={"filter.phi": 0.3}, parameters={"filter.phi": parameter})
-    return parametric_bootstrap(lambda rng: (lambda values: 0.0), [phi], fit, 39, seed=0, threads=1).parameters["filter.phi"]
+    draw = draw or (lambda rng: (lambda values: 0.0))
+    return parametric_bootstrap(draw, [phi], fit, 39, seed=0, threads=1).parameters["filter.phi"]
 
 
 # Each setting is judged from the refit's own point, so the order of the settings does not matter. The tie

@@ -27,17 +27,18 @@ setting's floor, the variance's 0: those refits are consistent with 0; either en
 range, such as an AR(1) coefficient's [-1, 1]), the estimate is within the estimator's spread of the bound,
 where the percentile interval's ends are not valid (Andrews 2000). A refit is at an end of its range
 (:func:`snap_to_bounds`) where it stopped within 1e-6 (relative) of it, or where log L with the setting at
-that end, the others held at the refit's own values, is higher than the refit's own log L (of the two ends,
-the higher): the search stopped short of it. That catches the refits L-BFGS-B stops short of the bound: a
-variance's log L flattens on the log scale as it nears 0 and the search stops on the flatness (1.1e-6 for a
-floor at 1e-6, log L there 3e-7 higher). Where log L is as high at an end as at the refit (or equally higher
-at both ends), the refit does not tell the setting: it is not moved, and the entry gets no interval (its
-refits' values would be where their searches stopped). Judged with the others at the refit, the moves are
-applied together where log L at the joint point is not below the refit's, else only the one whose end has
-the highest log L, so the result does not depend on the settings' order. The end
-is then the better point: it becomes the refit's value, and the refit counts at the bound. A refit whose log
-L at the end is lower, by however little, has its maximum inside the range (log L rises from the bound): it
-is not at the bound, however near it lies. (A rule calling a refit at the bound where log L at the end is
+that end, the others held at the refit's own values, is as high as the refit's own log L, to what the
+refit's search resolves (``REFIT_FTOL`` of |log L|), or higher (of the two ends, the higher): the end is as
+good a maximum along the setting, it becomes the refit's value, and the refit counts at that end. That
+catches the refits L-BFGS-B stops short of the bound: a variance's log L flattens on the log scale as it
+nears 0 and the search stops on the flatness (1.1e-6 for a floor at 1e-6, log L there 3e-7 higher). Where
+log L is as high at both ends, the refit does not tell the setting: it is not moved, and the entry gets no
+interval (its refits' values would be where their searches stopped). Judged with the others at the refit,
+the moves are applied together where log L at the joint point is as high as the refit's, else only the one
+whose end has the highest log L, so the result does not depend on the settings' order. A refit whose log L
+at the end is lower beyond that resolution has its maximum inside the range (log L rises from the bound): it
+is not at the bound, however near it lies. An entry whose percentile ends coincide (refits that do not
+spread, whatever the reason) gets no interval either. (A rule calling a refit at the bound where log L at the end is
 within chi2(c, 1)/2 of its maximum, "consistent with 0", would flag interior fixtures: a (1 - c)/2 quantile
 about z_{(1+c)/2} se below the estimate is itself consistent with 0 wherever the estimate is within about
 2 z_{(1+c)/2} se of 0, far stricter than Andrews' condition, a truth on or within the estimator's spread of
@@ -74,7 +75,7 @@ from typing import Any
 import numpy as np
 
 from kalcal.errors import KalcalError
-from kalcal.fitting.mle import Free, point_estimate
+from kalcal.fitting.mle import REFIT_FTOL, Free, point_estimate
 
 #: the reference for "not applicable" at a bound
 ANDREWS = "Andrews 2000: the percentile bootstrap is not consistent when the true value is on the boundary of the parameter space"
@@ -268,20 +269,25 @@ def snap_to_bounds(
     that the result does not depend on the settings' order:
 
     * within 1e-6 (relative) of an end of its search range, it is at that end (no evaluation);
-    * otherwise log L is evaluated with the setting at each end of its range (:func:`kalcal.fitting.mle.guarded`).
-      Where it is higher than ``best`` at an end, the search stopped short of it (on a log L that is flat
-      near the end) and that end is the better point: the setting moves to the end where log L is highest
-      and counts at it (at a bound of the parameter space, a variance's floor or phi's +-1, the refit is
-      then "consistent with the bound"; at an end that bounds nothing, a variance's ceiling, the refit ran
-      to the range's end);
-    * where log L is as high (to 1e-12) at an end as at the refit, or equally higher at both ends, the log
-      does not tell the setting in this refit: it is neither moved nor counted at an end, and is returned
-      among the flat settings (the bootstrap then gives that setting no interval).
+    * otherwise log L is evaluated with the setting at each end of its range (:func:`kalcal.fitting.mle.guarded`),
+      and compared with ``best`` to the refit's own resolution, ``REFIT_FTOL`` |log L| (its search stops where an
+      iteration changes log L by that much: a value within it is as high as the refit's, to what the search
+      can tell). Where log L at an end is as high as at the refit or higher, that end is as good a maximum
+      along the setting (the search stopped short of it on a log L that is flat near it, or the end is the
+      higher point): the setting moves to the end where log L is highest and counts at it (at a bound of the
+      parameter space, a variance's floor or phi's +-1, the refit is then "consistent with the bound"; at an
+      end that bounds nothing, a variance's ceiling or a latency's range end, the refit ran to the range's
+      end);
+    * where log L is as high at both ends (each as high as at the refit, and the two within the resolution
+      of each other), the refit does not tell the setting: it is neither moved nor counted at an end, and is
+      returned among the flat settings (the bootstrap then gives that setting no interval). An end where
+      log L fails (:data:`kalcal.fitting.mle.FAILED`) is no maximum.
 
-    The moves (one end per setting) are applied together where log L at the joint point is not below
-    ``best`` (each move was judged with the others at the refit, and two moves can undo each other); otherwise
-    only the one with the highest log L at its end is (ties broken by the setting's name, so the order of
-    ``free`` does not matter). Either way the returned point's log L is at least the refit's.
+    The moves (one end per setting) are applied together where log L at the joint point is as high as at
+    the refit (each move was judged with the others at the refit, and two moves can undo each other);
+    otherwise only the one with the highest log L at its end is (ties broken by the setting's name, so the
+    order of ``free`` does not matter). Either way the returned point's log L is the refit's or higher, to the
+    refit's resolution.
 
     Parameters
     ----------
@@ -297,11 +303,11 @@ def snap_to_bounds(
     Returns
     -------
     values : dict of str to float
-        The refit's values, the settings moved to an end where log L is higher there.
+        The refit's values, the settings moved to an end where log L is as high there or higher.
     at_end : list of (bool, bool)
         Per setting of ``free``: whether the refit is at the lower and at the upper end of its range.
     flat : set of str
-        The settings along which log L is as high at an end as at the refit (not told by this refit).
+        The settings along which log L is as high at both ends as at the refit (not told by this refit).
     """
     from kalcal.fitting.mle import guarded
 
@@ -310,24 +316,24 @@ def snap_to_bounds(
               for p in free}
     moves: dict[str, tuple[int, float]] = {}  # setting -> (end index, log L there)
     flat: set[str] = set()
+    # what the refit's own search resolves of log L: it stops where an iteration changes log L by REFIT_FTOL of
+    # itself, so a value within this of ``best`` is as high as the refit's, to what the search can tell
+    resolution = REFIT_FTOL * max(abs(best), 1.0)
     for p in free:
         if any(at_end[p.name]):
             continue
         there = [guarded(loglik, {**refit, p.name: end}) for end in (p.lower, p.upper)]
-        same = [math.isclose(value, best, rel_tol=1e-12, abs_tol=1e-12) for value in there]
-        higher = [k for k in (0, 1) if there[k] > best and not same[k]]
-        if len(higher) == 2 and math.isclose(there[0], there[1], rel_tol=1e-12, abs_tol=1e-12):
-            flat.add(p.name)  # as high at both ends, higher than the refit: no end is its maximum
-        elif higher:
-            k = max(higher, key=lambda k: there[k])  # the end where log L is highest: the better point
+        passing = [k for k in (0, 1) if there[k] >= best - resolution]
+        if len(passing) == 2 and abs(there[0] - there[1]) <= resolution:
+            flat.add(p.name)  # as high at both ends: the refit does not tell the setting
+        elif passing:
+            k = max(passing, key=lambda k: there[k])  # the end where log L is highest: the better point
             moves[p.name] = (k, there[k])
-        elif any(same):
-            flat.add(p.name)  # log L as high at an end as at the refit: the log does not tell the setting there
     if not moves:
         return refit, [tuple(at_end[p.name]) for p in free], flat
     range_of = {p.name: (p.lower, p.upper) for p in free}
     joint = {**refit, **{name: range_of[name][k] for name, (k, _) in moves.items()}}
-    if len(moves) > 1 and guarded(loglik, joint) < best:
+    if len(moves) > 1 and guarded(loglik, joint) < best - resolution:
         # the moves undo each other together: the single one with the highest log L at its end, still >= best
         keep = max(sorted(moves), key=lambda name: moves[name][1])
         moves = {keep: moves[keep]}
@@ -452,7 +458,7 @@ def parametric_bootstrap(
         elif flat:
             # such a refit's value is where its search stopped, not an estimate: its quantiles would be no
             # quantiles of the estimator (all of them flat: an interval of zero width)
-            reason = (f"{flat} of {replicates} refits do not tell it: their log L is as high at an end of its search "
+            reason = (f"{flat} of {replicates} refits do not tell it: their log L is as high at both ends of its search "
                       "range as at the refit, so their values are where the search stopped: no percentile interval")
             parameters[name] = BootstrapParameter(name, False, reason, **summary)
         elif p.ci_low is None or p.ci_high is None:
@@ -495,6 +501,12 @@ def parametric_bootstrap(
                           f"where the log does not bound the setting (no bound of the parameter space), and the {kept} "
                           f"end alone holds no stated level there: where the {side} end is lost it covers less often "
                           f"than {100.0 * (1.0 + confidence) / 2.0:g}%, so no percentile interval")
+                parameters[name] = BootstrapParameter(name, False, reason, **summary)
+            elif not high > low:
+                # refits that do not spread (a log L flat where no end shows it, or failing at both ends): an
+                # interval of zero width would claim the setting exactly
+                reason = (f"the refits do not spread: the percentile ends are both {float(low):.4g}, so the log does not "
+                          "tell the setting in them: no percentile interval")
                 parameters[name] = BootstrapParameter(name, False, reason, **summary)
             else:
                 parameters[name] = BootstrapParameter(name, True, "", float(low), float(high), **summary)
