@@ -36,6 +36,10 @@ class _Recording:
     def block_sums(self, rng, n, engine):
         self.seen.append(_blas_threads())
 
+    def normals_per_realization(self, engine):
+        """x_0's 4 normals and, at each of the 3 updates, a full-rank Q's 4 and R's 2."""
+        return 4 + 3 * (4 + 2)
+
 
 @pytest.mark.parametrize("bench, profile", [("bench_nonlinear", "profile"), ("bench_imu_3axis", "profile")])
 def test_a_benchmark_profile_runs_the_whole_block_with_blas_on_one_thread(bench, profile, capsys):

@@ -56,7 +56,8 @@ def _drawn_factor(cov: np.ndarray) -> np.ndarray:
     Each realization and update draws one standard normal per column of the truth's Q and R factors that
     it returns, so that no normal is drawn only to be multiplied by zeros: C w over the dropped columns
     is an exact zero. A singular Q (static parameters kept, a pose's tilts renewed: imu-3axis's Q has
-    rank 2 of 11) draws its rank's normals; a covariance of full rank (a Cholesky factor) draws all."""
+    rank 2 of 11) draws one normal per column its factor keeps (the rank's, or more where an eigenvalue is
+    tiny but not zero); a covariance of full rank (a Cholesky factor) draws all."""
     factor = _factor(cov)
     return np.ascontiguousarray(factor[:, np.any(factor != 0.0, axis=0)])
 
