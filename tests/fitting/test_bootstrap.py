@@ -583,9 +583,9 @@ def test_snap_to_bounds_moves_a_refit_whose_maximum_is_at_the_bound():
     assert loglik(point) >= loglik(stopped)
     # a flat log L (the search stops anywhere): as high at both ends as at the refit: not told, not moved
     assert snap_to_bounds(lambda values: 0.0, free[:1], {"filter.w": 5.0}, 0.0) == ({"filter.w": 5.0}, [(False, False)], {"filter.w"})
-    # a refit stopped 5e-5 above the floor where log L (about -1e4) is higher there by 5e-11 of a unit, below
-    # what its search resolves (1e-10 of |log L|, 1e-6): as high as the refit's, so at the floor, not flat (the
-    # ceiling is far lower)
+    # a refit stopped 5e-5 above the floor where log L (about -1e4) is the same there to rounding, below what its
+    # search resolves (1e-10 of |log L|, 1e-6): as high as the refit's, so at the floor, not flat (the ceiling is
+    # far lower; a strict 1e-12 "as high" had called it flat)
     far = lambda values: -1e4 - 1e-6 * values["filter.w"]  # noqa: E731
     stopped_near = {"filter.w": 1e-3 * (1 + 5e-5)}
     assert snap_to_bounds(far, free[:1], stopped_near, far(stopped_near)) == ({"filter.w": 1e-3}, [(True, False)], set())
@@ -602,7 +602,19 @@ def test_snap_to_bounds_moves_a_refit_whose_maximum_is_at_the_bound():
         if values["filter.w"] < 2e-3:
             raise ValueError("refused")
         return 0.0
-    assert snap_to_bounds(fails, free[:1], {"filter.w": 5.0}, 0.0) == ({"filter.w": 1e3}, [(False, True)], set())
+    # flat where it evaluates, failing at the floor: nothing shows where the maximum is: flat, not moved (moved
+    # to the ceiling, one such refit among 99 made an applicable entry's se 300 times too large)
+    assert snap_to_bounds(fails, free[:1], {"filter.w": 5.0}, 0.0) == ({"filter.w": 5.0}, [(False, False)], {"filter.w"})
+    # the same failing floor with log L strictly higher at the ceiling: the ceiling is the better point
+    assert snap_to_bounds(lambda v: fails(v) + 1e-3 * v["filter.w"], free[:1], {"filter.w": 5.0}, 5e-3)[1:] == ([(False, True)], set())
+    # the resolution from below, at log L about -1e4 (1e-10 of it: 1e-6): a maximum at 2e-3 on the log scale
+    # whose log L at the floor 1e-3 is lower by half the resolution is as high there (at the floor); lower by
+    # twice it, an interior maximum that stays (the ceiling far lower either way)
+    for below, at_floor in ((0.5e-6, True), (2e-6, False)):
+        a = below / np.log(2.0) ** 2
+        peaked = lambda v, a=a: -1e4 - a * (np.log(v["filter.w"]) - np.log(2e-3)) ** 2  # noqa: E731
+        point, at_end, flat = snap_to_bounds(peaked, free[:1], {"filter.w": 2e-3}, peaked({"filter.w": 2e-3}))
+        assert at_end == [(at_floor, False)] and flat == set() and point["filter.w"] == (1e-3 if at_floor else 2e-3), below
 
     def falls_after_a_rise(values):  # phi's maximum at +1 (1.5), -1 higher than the refit too (0.5)
         phi = values["filter.phi"]

@@ -28,12 +28,13 @@ range, such as an AR(1) coefficient's [-1, 1]), the estimate is within the estim
 where the percentile interval's ends are not valid (Andrews 2000). A refit is at an end of its range
 (:func:`snap_to_bounds`) where it stopped within 1e-6 (relative) of it, or where log L with the setting at
 that end, the others held at the refit's own values, is as high as the refit's own log L, to what the
-refit's search resolves (``REFIT_FTOL`` of |log L|), or higher (of the two ends, the higher): the end is as
+refit's search resolves (``REFIT_FTOL`` max(|log L|, 1)), or higher (of the two ends, the higher): the end is as
 good a maximum along the setting, it becomes the refit's value, and the refit counts at that end. That
 catches the refits L-BFGS-B stops short of the bound: a variance's log L flattens on the log scale as it
 nears 0 and the search stops on the flatness (1.1e-6 for a floor at 1e-6, log L there 3e-7 higher). Where
-log L is as high at both ends, the refit does not tell the setting: it is not moved, and the entry gets no
-interval (its refits' values would be where their searches stopped). Judged with the others at the refit,
+log L is as high at both ends (or as high at one and failing at the other), the refit does not tell the
+setting: it is not moved, and the entry gets no interval (its refits' values would be where their searches
+stopped). Judged with the others at the refit,
 the moves are applied together where log L at the joint point is as high as the refit's, else only the one
 whose end has the highest log L, so the result does not depend on the settings' order. A refit whose log L
 at the end is lower beyond that resolution has its maximum inside the range (log L rises from the bound): it
@@ -75,7 +76,7 @@ from typing import Any
 import numpy as np
 
 from kalcal.errors import KalcalError
-from kalcal.fitting.mle import REFIT_FTOL, Free, point_estimate
+from kalcal.fitting.mle import FAILED, REFIT_FTOL, Free, point_estimate
 
 #: the reference for "not applicable" at a bound
 ANDREWS = "Andrews 2000: the percentile bootstrap is not consistent when the true value is on the boundary of the parameter space"
@@ -263,7 +264,7 @@ def _held_reason(p) -> str:
 def snap_to_bounds(
     loglik: Callable[[Mapping[str, float]], float], free: Sequence[Free], values: Mapping[str, float], best: float
 ) -> tuple[dict[str, float], list[tuple[bool, bool]], set[str]]:
-    """A refit's values with each setting whose log L is higher at an end of its search range moved there.
+    """A refit's values with each setting whose log L is as high at an end of its search range moved there.
 
     Each setting of ``free`` is judged from the refit's own point, the others held at the refit's values, so
     that the result does not depend on the settings' order:
@@ -278,10 +279,13 @@ def snap_to_bounds(
       parameter space, a variance's floor or phi's +-1, the refit is then "consistent with the bound"; at an
       end that bounds nothing, a variance's ceiling or a latency's range end, the refit ran to the range's
       end);
-    * where log L is as high at both ends (each as high as at the refit, and the two within the resolution
-      of each other), the refit does not tell the setting: it is neither moved nor counted at an end, and is
+    * where log L is as high at both ends (each as high as at the refit or higher, and the two within the
+      resolution of each other), or as high (not higher) at one end and failing (:data:`kalcal.fitting.mle.FAILED`)
+      at the other, the refit does not tell the setting: it is neither moved nor counted at an end, and is
       returned among the flat settings (the bootstrap then gives that setting no interval). An end where
-      log L fails (:data:`kalcal.fitting.mle.FAILED`) is no maximum.
+      log L fails is no maximum.
+
+    The resolution is ``REFIT_FTOL`` max(|log L|, 1).
 
     The moves (one end per setting) are applied together where log L at the joint point is as high as at
     the refit (each move was judged with the others at the refit, and two moves can undo each other);
@@ -324,8 +328,13 @@ def snap_to_bounds(
             continue
         there = [guarded(loglik, {**refit, p.name: end}) for end in (p.lower, p.upper)]
         passing = [k for k in (0, 1) if there[k] >= best - resolution]
+        failed = [k for k in (0, 1) if there[k] <= FAILED]
         if len(passing) == 2 and abs(there[0] - there[1]) <= resolution:
             flat.add(p.name)  # as high at both ends: the refit does not tell the setting
+        elif len(passing) == 1 and failed and there[passing[0]] <= best + resolution:
+            # as high at one end, log L failing at the other: nothing shows where along the setting its
+            # maximum is (the end would be as arbitrary a point as the refit's)
+            flat.add(p.name)
         elif passing:
             k = max(passing, key=lambda k: there[k])  # the end where log L is highest: the better point
             moves[p.name] = (k, there[k])
@@ -334,7 +343,7 @@ def snap_to_bounds(
     range_of = {p.name: (p.lower, p.upper) for p in free}
     joint = {**refit, **{name: range_of[name][k] for name, (k, _) in moves.items()}}
     if len(moves) > 1 and guarded(loglik, joint) < best - resolution:
-        # the moves undo each other together: the single one with the highest log L at its end, still >= best
+        # the moves undo each other together: the single one with the highest log L at its end, still as high
         keep = max(sorted(moves), key=lambda name: moves[name][1])
         moves = {keep: moves[keep]}
         joint = {**refit, keep: joint[keep]}
@@ -345,7 +354,7 @@ def snap_to_bounds(
 
 def _replicate(draw: Draw, free: Sequence[Free], seed: int, index: int) -> tuple[list[float], bool, list[tuple[bool, bool, bool]]]:
     """Replicate ``index``: its log drawn from block ``index``'s generator, refitted from the fitted point, each
-    setting whose log L is higher at an end of its range moved there (:func:`snap_to_bounds`); with the
+    setting whose log L is as high at an end of its range moved there (:func:`snap_to_bounds`); with the
     refit's convergence and per setting whether it is at the (lower, upper) end of its range and whether log L
     is flat along it."""
     from kalcal.fitting import local_search
@@ -459,7 +468,8 @@ def parametric_bootstrap(
             # such a refit's value is where its search stopped, not an estimate: its quantiles would be no
             # quantiles of the estimator (all of them flat: an interval of zero width)
             reason = (f"{flat} of {replicates} refits do not tell it: their log L is as high at both ends of its search "
-                      "range as at the refit, so their values are where the search stopped: no percentile interval")
+                      "range (or at one, failing at the other), so their values are where the search stopped: no "
+                      "percentile interval")
             parameters[name] = BootstrapParameter(name, False, reason, **summary)
         elif p.ci_low is None or p.ci_high is None:
             side = "lower" if p.ci_low is None else "upper"
