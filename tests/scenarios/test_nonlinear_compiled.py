@@ -396,3 +396,40 @@ def test_memory_is_flat_in_n_not_in_k(compiled):
 
     assert sizes(6, 40) == sizes(6, 130)  # flat in n
     assert sizes(6, 40)["residual_outer"] == (12, 12) and sizes(12, 40)["residual_outer"] == (24, 24)
+
+
+@pytest.mark.slow  # a new model's kernel: about a minute's compile on a cold cache
+@pytest.mark.parametrize("checked", [None, (0, 3), (0, 1, 3), (2,), (1,)])
+def test_the_update_s_kept_states_and_m_s_zeros_hold_where_q_couples_a_renewed_state(checked):
+    """The kernel derives which states the update keeps (F's columns that are not identically zero, and the
+    checked states) and where M is identically zero (F's zero pattern and Q) from the model; imu-3axis's
+    block-diagonal Q and F rows of I or 0 do not exercise the rest: here a random walk a, a state b renewed at
+    each update whose process noise is correlated with a's (Q_ab != 0), a state c that copies a (its F row is
+    not zero, its F column is: nothing reads it but h), a static d; p = 3 (the general update). Whatever states
+    are checked, a renewed one among them, the compiled sums equal the numpy path's."""
+    from kalcal.scenarios.nonlinear.problem import NonlinearProblem, ProblemHooks
+    from kalcal.scenarios.nonlinear.settings import register_models
+
+    def f(x, u, dt):
+        return xm.stack([x[:, 0], 0.1 + 0.0 * x[:, 1], x[:, 0], x[:, 3]])
+
+    def h(x, data):
+        return xm.stack([x[:, 0] + 0.3 * xm.sin(x[:, 1]) * x[:, 3], x[:, 1] + 0.1 * x[:, 0] * x[:, 0], x[:, 3] + 0.5 * x[:, 2]])
+
+    q = np.zeros((4, 4))
+    q[0, 0], q[1, 1], q[0, 1], q[1, 0] = 0.01, 0.04, 0.015, 0.015
+    model = NonlinearModel(f=f, h=h, q=q, r=np.diag([0.01, 0.02, 0.01]), x0=[1.0, 0.1, 1.0, 0.5],
+                           p0=np.diag([0.2, 0.04, 0.2, 0.1]), dt=1.0, state_names=("a", "b", "c", "d"),
+                           state_units=("1",) * 4, measurement_names=("y1", "y2", "y3"), measurement_units=("1",) * 3)
+    scenario = load_code_model(register_models(model, model, n_updates=8), ["filter.compiled=yes"])
+
+    class Hooked:  # the scenario with the checked states as its hooks
+        problem_hooks = ProblemHooks(checked=checked)
+
+        def __getattr__(self, name):
+            return getattr(scenario, name)
+
+    problem = NonlinearProblem(Hooked(), compiled="yes")
+    compiled = problem._compiled_block_sums(block_generator(3, 0), 300)
+    assert compiled is not None  # the kernel ran
+    _assert_same_sums(compiled, problem.numpy_block_sums(block_generator(3, 0), 300, "exact"), layout=problem.layout)

@@ -8,10 +8,11 @@ the same realizations on both paths) it simulates the truth with the truth's f a
 NEES, NIS (and their shape histograms), whitened errors and innovations, the effect sizes' sums and the Cramér–Rao bound's expectations
 (F, F^T Q^-1 F at the true x_{k-1}, H^T R^-1 H at the true x_k) into the block's sums: the checks' and
 the effect sizes' on the checked states (all of them, or a scenario's subset: imu-3axis's 9 parameters,
-its pose's tilts nuisance states), the bound's on every state. The kernel's own state is a tile's (d, d, m)
-and one update's totals, each tile's sums reduced over its lanes into them at once; but its inputs and
-outputs grow with K: the block's normals (K, n, q + r) and the sums, the residual pair sums (K p)^2 among
-them, so memory is flat in n, not in K.
+its pose's tilts nuisance states), the bound's on every state. The kernel's own state is the block's
+(P_{k-1} and P_k, (d, d) for each of its n realizations, in the thread's arena) and one update's totals, each
+tile's sums reduced over its lanes into them at once; its inputs and outputs grow with K: the block's normals
+(K, n, q + r) and the sums, the residual pair sums (K p)^2 among them. Memory is flat in the run's N (blocks of
+at most 4,096), not in K.
 
 Layout: the block's realizations in tiles of m, structure of arrays (realizations on the last axis, as
 covariance_update takes them), updates outer and tiles inner. A last tile that is not full repeats the
