@@ -140,18 +140,18 @@ def test_imu_3axis_compiled_block_sums_equal_the_numpy_path(n):
 def test_the_threads_arena_is_overwritten_not_read():
     """The kernel's block state lives in its thread's arena, kept from block to block (no page faults of
     fresh memory per block): what an earlier block or anything else left there (NaN here, or a larger
-    block's state) changes no sum, bit for bit; the arena grows for a larger block and is reused."""
+    arena's state) changes no sum, bit for bit; the arena grows where a larger one is asked for and is reused."""
     from kalcal.scenarios.nonlinear import problem as nonlinear_problem
     from kalcal.scenarios.nonlinear.kernel import arena_size
 
     problem = build_scenario("imu-3axis", None, ["filter.kind=ekf", "filter.compiled=yes"]).problem()
     n = _TILE + 84
-    clean = nonlinear_problem._thread_arena(arena_size(n, 11, 3, 9, _TILE))
+    clean = nonlinear_problem._thread_arena(arena_size(11, 3, 9, _TILE))
     clean[:] = 0.0
     want = problem._compiled_block_sums(block_generator(5, 0), n)
-    nonlinear_problem._thread_arena(arena_size(3 * _TILE, 11, 3, 9, _TILE))[:] = np.nan  # grown, then poisoned
-    dirty = nonlinear_problem._thread_arena(arena_size(n, 11, 3, 9, _TILE))
-    assert dirty.shape[0] >= arena_size(3 * _TILE, 11, 3, 9, _TILE) and np.isnan(dirty).all()
+    nonlinear_problem._thread_arena(arena_size(11, 3, 9, 3 * _TILE))[:] = np.nan  # grown, then poisoned
+    dirty = nonlinear_problem._thread_arena(arena_size(11, 3, 9, _TILE))
+    assert dirty.shape[0] >= arena_size(11, 3, 9, 3 * _TILE) and np.isnan(dirty).all()
     got = problem._compiled_block_sums(block_generator(5, 0), n)
     assert got is not None and nonlinear_problem._thread_arena(1) is dirty  # the same arena, reused
     _assert_same_sums(got, want, rtol=0.0, layout=problem.layout)

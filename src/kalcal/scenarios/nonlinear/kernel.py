@@ -8,14 +8,17 @@ the same realizations on both paths) it simulates the truth with the truth's f a
 NEES, NIS (and their shape histograms), whitened errors and innovations, the effect sizes' sums and the Cramér–Rao bound's expectations
 (F, F^T Q^-1 F at the true x_{k-1}, H^T R^-1 H at the true x_k) into the block's sums: the checks' and
 the effect sizes' on the checked states (all of them, or a scenario's subset: imu-3axis's 9 parameters,
-its pose's tilts nuisance states), the bound's on every state. The kernel's own state is the block's
-(P_{k-1} and P_k, (d, d) for each of its n realizations, in the thread's arena) and one update's totals, each
-tile's sums reduced over its lanes into them at once; its inputs and outputs grow with K: the block's normals
-(K, n, q + r) and the sums, the residual pair sums (K p)^2 among them. Memory is flat in the run's N (blocks of
-at most 4,096), not in K.
+its pose's tilts nuisance states), the bound's on every state. The kernel's own state is one tile's
+(P_{k-1} and P_k, (d, d) for each of its m realizations, in the thread's arena) and each update's totals,
+each tile's sums reduced over its lanes into them at once; its inputs and outputs grow with K: the block's
+normals (K, n, q + r) and the sums, the residual pair sums (K p)^2 among them. Memory is flat in the run's N
+(blocks of at most 4,096), not in K.
 
 Layout: the block's realizations in tiles of m, structure of arrays (realizations on the last axis, as
-covariance_update takes them), updates outer and tiles inner. A last tile that is not full repeats the
+covariance_update takes them), tiles outer and updates inner: a tile's state (418 KB at imu-3axis's
+d = 11 and m = 216) stays in the core's cache through its K updates, where with updates outer every
+update brought each tile's from memory (at 2 threads, 16% of imu-3axis's run; benchmarks/README.md). Each
+update's totals take the tiles' sums in tile order, the same additions either way. A last tile that is not full repeats the
 block's last realization in its spare lanes (finite numbers through every step) and leaves them out of
 every sum.
 
@@ -28,7 +31,7 @@ numpy path's rule, a prediction only) or a P or S is not positive definite: the 
 block on the numpy path from the same draws, which gives that case's numbers (or its error).
 """
 
-# numba cache stamp: kalcal.core.kernels a5dbbb626c1a87c1
+# numba cache stamp: kalcal.core.kernels 0d2252911ea6e4a8
 
 from __future__ import annotations
 
@@ -160,11 +163,12 @@ def _add_products(out, a, b, m):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def arena_size(n, d, p, dc, m):
-    """float64 values of :func:`ekf_block`'s arena for n realizations, d states, p measurements, dc checked
-    states and tiles of m: per realization slot (n rounded up to whole tiles) the truth's and the
-    filter's states (2 d), P_{k-1} and P_k (2 d^2), and the statistics' sums over the updates (3 + 3 dc + p)."""
-    return -(-n // m) * m * (2 * d * (d + 1) + 3 + 3 * dc + p)
+def arena_size(d, p, dc, m):
+    """float64 values of :func:`ekf_block`'s arena for d states, p measurements, dc checked states and tiles
+    of m: one tile's state (the kernel takes the tiles one at a time, each through every update), per
+    realization the truth's and the filter's states (2 d), P_{k-1} and P_k (2 d^2), and the statistics'
+    sums over the updates (3 + 3 dc + p)."""
+    return m * (2 * d * (d + 1) + 3 + 3 * dc + p)
 
 
 @numba.njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -230,8 +234,8 @@ def ekf_block(
         nis_avg, e4, p2, e2p, pooled, z, z2, zbar, lag1, f, ftqf, htrh; added into.
     m : int
         The tile's width (realizations).
-    arena : ndarray, shape (>= arena_size(n, d, p, c, m),)
-        float64 room for the block's state and per-realization sums, overwritten (its contents on entry
+    arena : ndarray, shape (>= arena_size(d, p, c, m),)
+        float64 room for a tile's state and per-realization sums, overwritten (its contents on entry
         are not read): the caller keeps one per thread and passes it to every block.
 
     Returns
@@ -257,47 +261,32 @@ def ekf_block(
     tiles = (n + m - 1) // m
     nees_sq, nees_avg, nis_avg, e4, p2, e2p, pooled, zsum, z2sum, zbar, lag1, fsum, ftqf, htrh = eff
     keep_pairs = sums.residuals.shape[0] > 0
-    # the block's state, tile-major so that each tile's arrays are contiguous, carved from the caller's
-    # arena (:func:`arena_size`), which a thread reuses block after block: memory fresh from the system
-    # costs a page fault at its first touch, and the block's 10 MB (at imu-3axis's d = 11) went back to
-    # the system as each block ended
-    if arena.shape[0] < arena_size(n, d, p, dc, m):
-        raise ValueError("ekf_block: the arena is smaller than arena_size(n, d, p, dc, m)")
-    size = tiles * m
-    xt = arena[:size * d].reshape((tiles, d, m))
-    xf = arena[size * d:2 * size * d].reshape((tiles, d, m))
+    # one tile's state, carved from the caller's arena (:func:`arena_size`), which a thread reuses tile
+    # after tile and block after block (memory fresh from the system costs a page fault at its first touch)
+    if arena.shape[0] < arena_size(d, p, dc, m):
+        raise ValueError("ekf_block: the arena is smaller than arena_size(d, p, dc, m)")
+    xt = arena[:m * d].reshape((d, m))
+    xf = arena[m * d:2 * m * d].reshape((d, m))
     # P_{k-1} and P_k in turn (update k reads one and writes the other): the prediction reads P_{k-1}
     # while it writes M, so that a row of F with one entry needs no product F P of its own
-    at = 2 * size * d
-    cov = arena[at:at + size * d * d].reshape((tiles, d, d, m))
-    at += size * d * d
-    cov_next = arena[at:at + size * d * d].reshape((tiles, d, d, m))
-    # the statistics' per-realization sums over the updates, from zero (the arena holds the last block's)
-    at += size * d * d
-    stats = arena[at:at + size * (3 + 3 * dc + p)]
-    stats[:] = 0.0
-    r_nees = stats[:size].reshape((tiles, m))
-    r_nis = stats[size:2 * size].reshape((tiles, m))
-    r_lag = stats[2 * size:3 * size].reshape((tiles, m))
-    at = 3 * size
-    r_a = stats[at:at + size * dc].reshape((tiles, dc, m))
-    at += size * dc
-    r_b = stats[at:at + size * dc].reshape((tiles, dc, m))
-    at += size * dc
-    r_z = stats[at:at + size * dc].reshape((tiles, dc, m))
-    at += size * dc
-    last_u = stats[at:at + size * p].reshape((tiles, p, m))
-    for t in range(tiles):
-        for j in range(m):
-            col = min(t * m + j, n - 1)
-            for a in range(d):
-                acc = 0.0
-                for b in range(d):
-                    acc += first[col, b] * t_p0f[a, b]
-                xt[t, a, j] = t_x0[a] + acc
-                xf[t, a, j] = f_x0[a]
-                for b in range(d):
-                    cov[t, a, b, j] = f_p0[a, b]
+    at = 2 * m * d
+    cov = arena[at:at + m * d * d].reshape((d, d, m))
+    at += m * d * d
+    cov_next = arena[at:at + m * d * d].reshape((d, d, m))
+    # the statistics' per-realization sums over the updates (from zero at each tile's start)
+    at += m * d * d
+    stats = arena[at:at + m * (3 + 3 * dc + p)]
+    r_nees = stats[:m]
+    r_nis = stats[m:2 * m]
+    r_lag = stats[2 * m:3 * m]
+    at = 3 * m
+    r_a = stats[at:at + m * dc].reshape((dc, m))
+    at += m * dc
+    r_b = stats[at:at + m * dc].reshape((dc, m))
+    at += m * dc
+    r_z = stats[at:at + m * dc].reshape((dc, m))
+    at += m * dc
+    last_u = stats[at:at + m * p].reshape((p, m))
     # the columns of each row of the truth's noise factors that are not zero, in order
     nq, nr = t_qf.shape[1], t_rf.shape[1]
     q_cols = np.zeros((d, nq), dtype=np.int64)
@@ -392,17 +381,32 @@ def ekf_block(
     o_ftqf = o_f + dd
     o_htrh = o_ftqf + dd
     width = o_htrh + dd
-    upd = np.empty(width)
-    for k in range(n_updates):
-        upd[:] = 0.0
-        uk = inputs[k]
-        dk = data[k]
-        for t in range(tiles):
-            mt = min(m, n - t * m)
-            x = xt[t]
-            xh = xf[t]
-            last = cov[t] if k % 2 == 0 else cov_next[t]  # P_{k-1}
-            c = cov_next[t] if k % 2 == 0 else cov[t]  # M, then P_k
+    # tiles outer, updates inner: a tile's state (its P_{k-1} and P_k: 418 KB at d = 11) stays in the
+    # core's cache through its K updates; each update's sums are reduced into that update's row of
+    # totals, tile after tile in order (the same additions as with updates outer)
+    upd = np.zeros((n_updates, width))
+    for t in range(tiles):
+        # the tile's realizations: x_0 drawn, the filter's prior, the per-realization sums from zero
+        for j in range(m):
+            col = min(t * m + j, n - 1)
+            for a in range(d):
+                acc = 0.0
+                for b in range(d):
+                    acc += first[col, b] * t_p0f[a, b]
+                xt[a, j] = t_x0[a] + acc
+                xf[a, j] = f_x0[a]
+                for b in range(d):
+                    cov[a, b, j] = f_p0[a, b]
+        stats[:] = 0.0
+        mt = min(m, n - t * m)
+        for k in range(n_updates):
+            uk = inputs[k]
+            dk = data[k]
+            tot = upd[k]
+            x = xt
+            xh = xf
+            last = cov if k % 2 == 0 else cov_next  # P_{k-1}
+            c = cov_next if k % 2 == 0 else cov  # M, then P_k
             # the truth: F at x_{k-1} (the bound's), then x_k = f(x_{k-1}) + C_Q w, z_k = h(x_k) + C_R v
             for j in range(m):
                 jac_ft(x, uk, t_dt, jf, j)
@@ -448,10 +452,17 @@ def ekf_block(
                 wa = f_cols[a, 0]
                 for b in range(a + 1):
                     q_ab = 0.5 * (f_q[a, b] + f_q[b, a])
-                    for j in range(m):
-                        c[a, b, j] = q_ab
+                    if f_count[a] == 1 and f_count[b] == 1:  # (the first product in the same pass)
+                        w = f_cols[b, 0]
+                        for j in range(m):
+                            c[a, b, j] = q_ab + big_f[a, wa, j] * last[wa, w, j] * big_f[b, w, j]
+                        continue_at = 1
+                    else:
+                        for j in range(m):
+                            c[a, b, j] = q_ab
+                        continue_at = 0
                     if f_count[a] == 1:
-                        for i in range(f_count[b]):
+                        for i in range(continue_at, f_count[b]):
                             w = f_cols[b, i]
                             for j in range(m):
                                 c[a, b, j] += big_f[a, wa, j] * last[wa, w, j] * big_f[b, w, j]
@@ -499,7 +510,7 @@ def ekf_block(
                     e[a, j] = x[ca, j] - xh[ca, j]
                 for j in range(m):
                     xc[a, j] = xh[ca, j]
-                for b in range(dc):
+                for b in range(a + 1):  # (the lower triangle: the factor and the sums read no other)
                     cb = checked[b]
                     for j in range(m):
                         cc[a, b, j] = c[ca, cb, j]
@@ -514,52 +525,52 @@ def ekf_block(
             # ones the same numbers, mirrored at the update's end)
             # (four or eight sums a pass where the columns come in fours: each row loaded once for them)
             for a in range(dc):
-                upd[o_err + a] += _lane_sum(e[a], mt)
-                upd[o_est + a] += _lane_sum(xc[a], mt)
-                upd[o_we + a] += _lane_sum(eps[a], mt)
+                tot[o_err + a] += _lane_sum(e[a], mt)
+                tot[o_est + a] += _lane_sum(xc[a], mt)
+                tot[o_we + a] += _lane_sum(eps[a], mt)
                 b = 0
                 while b + 4 <= dc:
                     ab = a * dc + b
                     s0, s1, s2, s3, t0, t1, t2, t3 = _lane_dot24(e[a], eps[a], xc[b], xc[b + 1], xc[b + 2], xc[b + 3], mt)
-                    upd[o_ee + ab] += s0
-                    upd[o_ee + ab + 1] += s1
-                    upd[o_ee + ab + 2] += s2
-                    upd[o_ee + ab + 3] += s3
-                    upd[o_wx + ab] += t0
-                    upd[o_wx + ab + 1] += t1
-                    upd[o_wx + ab + 2] += t2
-                    upd[o_wx + ab + 3] += t3
+                    tot[o_ee + ab] += s0
+                    tot[o_ee + ab + 1] += s1
+                    tot[o_ee + ab + 2] += s2
+                    tot[o_ee + ab + 3] += s3
+                    tot[o_wx + ab] += t0
+                    tot[o_wx + ab + 1] += t1
+                    tot[o_wx + ab + 2] += t2
+                    tot[o_wx + ab + 3] += t3
                     b += 4
                 for b in range(b, dc):
                     ab = a * dc + b
-                    upd[o_ee + ab] += _lane_dot(e[a], xc[b], mt)
-                    upd[o_wx + ab] += _lane_dot(eps[a], xc[b], mt)
+                    tot[o_ee + ab] += _lane_dot(e[a], xc[b], mt)
+                    tot[o_wx + ab] += _lane_dot(eps[a], xc[b], mt)
                 b = 0
                 while b + 4 <= a + 1:
                     ab = a * dc + b
                     s0, s1, s2, s3 = _lane_dot4(e[a], e[b], e[b + 1], e[b + 2], e[b + 3], mt)
-                    upd[o_eo + ab] += s0
-                    upd[o_eo + ab + 1] += s1
-                    upd[o_eo + ab + 2] += s2
-                    upd[o_eo + ab + 3] += s3
+                    tot[o_eo + ab] += s0
+                    tot[o_eo + ab + 1] += s1
+                    tot[o_eo + ab + 2] += s2
+                    tot[o_eo + ab + 3] += s3
                     s0, s1, s2, s3 = _lane_dot4(xc[a], xc[b], xc[b + 1], xc[b + 2], xc[b + 3], mt)
-                    upd[o_esto + ab] += s0
-                    upd[o_esto + ab + 1] += s1
-                    upd[o_esto + ab + 2] += s2
-                    upd[o_esto + ab + 3] += s3
+                    tot[o_esto + ab] += s0
+                    tot[o_esto + ab + 1] += s1
+                    tot[o_esto + ab + 2] += s2
+                    tot[o_esto + ab + 3] += s3
                     s0, s1, s2, s3 = _lane_dot4(eps[a], eps[b], eps[b + 1], eps[b + 2], eps[b + 3], mt)
-                    upd[o_wo + ab] += s0
-                    upd[o_wo + ab + 1] += s1
-                    upd[o_wo + ab + 2] += s2
-                    upd[o_wo + ab + 3] += s3
+                    tot[o_wo + ab] += s0
+                    tot[o_wo + ab + 1] += s1
+                    tot[o_wo + ab + 2] += s2
+                    tot[o_wo + ab + 3] += s3
                     b += 4
                 for b in range(b, a + 1):
                     ab = a * dc + b
-                    upd[o_eo + ab] += _lane_dot(e[a], e[b], mt)
-                    upd[o_esto + ab] += _lane_dot(xc[a], xc[b], mt)
-                    upd[o_wo + ab] += _lane_dot(eps[a], eps[b], mt)
+                    tot[o_eo + ab] += _lane_dot(e[a], e[b], mt)
+                    tot[o_esto + ab] += _lane_dot(xc[a], xc[b], mt)
+                    tot[o_wo + ab] += _lane_dot(eps[a], eps[b], mt)
                 for b in range(a + 1):
-                    upd[o_fc + a * dc + b] += _lane_sum(cc[a, b], mt)
+                    tot[o_fc + a * dc + b] += _lane_sum(cc[a, b], mt)
             for j in range(mt):
                 tile_nees[j] = 0.0
             for a in range(dc):
@@ -570,24 +581,24 @@ def ekf_block(
                 _add_products(tile_nis, u[a], u[a], mt)
             if k > 0:
                 for a in range(p):
-                    _add_products(r_lag[t], last_u[t, a], u[a], mt)
+                    _add_products(r_lag, last_u[a], u[a], mt)
             for a in range(p):
                 for j in range(mt):
-                    last_u[t, a, j] = u[a, j]
-            upd[o_nees] += _lane_sum(tile_nees, mt)
-            upd[o_nis] += _lane_sum(tile_nis, mt)
-            upd[o_nsq] += _lane_dot(tile_nees, tile_nees, mt)
-            _add_lanes(r_nees[t], tile_nees, mt)
-            _add_lanes(r_nis[t], tile_nis, mt)
+                    last_u[a, j] = u[a, j]
+            tot[o_nees] += _lane_sum(tile_nees, mt)
+            tot[o_nis] += _lane_sum(tile_nis, mt)
+            tot[o_nsq] += _lane_dot(tile_nees, tile_nees, mt)
+            _add_lanes(r_nees, tile_nees, mt)
+            _add_lanes(r_nis, tile_nis, mt)
             # the shape check's histograms, by the fixed-gain kernels' binning (the same floor of the same
             # product as numpy's shape_histogram)
             _add_shape_lanes(k, tile_nees, sums.nees_grid.scale, sums.nees_histogram, zrow[0], mt)
             _add_shape_lanes(k, tile_nis, sums.nis_grid.scale, sums.nis_histogram, zrow[0], mt)
             for a in range(p):
-                upd[o_res + a] += _lane_sum(res[a], mt)
-                upd[o_nr + a] += _lane_sum(u[a], mt)
+                tot[o_res + a] += _lane_sum(res[a], mt)
+                tot[o_nr + a] += _lane_sum(u[a], mt)
                 for b in range(a + 1):
-                    upd[o_reso + a * p + b] += _lane_dot(res[a], res[b], mt)
+                    tot[o_reso + a * p + b] += _lane_dot(res[a], res[b], mt)
             if keep_pairs:
                 for a in range(p):
                     for j in range(mt):
@@ -597,19 +608,19 @@ def ekf_block(
                     zrow[0, j] = e[a, j] / np.sqrt(cc[a, a, j])  # e / sqrt(P_ii)
                 for j in range(mt):
                     zrow[1, j] = e[a, j] * e[a, j]
-                upd[o_e4 + a] += _lane_dot(zrow[1], zrow[1], mt)
-                upd[o_p2 + a] += _lane_dot(cc[a, a], cc[a, a], mt)
-                upd[o_e2p + a] += _lane_dot(zrow[1], cc[a, a], mt)
-                upd[o_z + a] += _lane_sum(zrow[0], mt)
-                upd[o_z2 + a] += _lane_dot(zrow[0], zrow[0], mt)
-                _add_lanes(r_a[t, a], zrow[1], mt)
-                _add_lanes(r_b[t, a], cc[a, a], mt)
-                _add_lanes(r_z[t, a], zrow[0], mt)
+                tot[o_e4 + a] += _lane_dot(zrow[1], zrow[1], mt)
+                tot[o_p2 + a] += _lane_dot(cc[a, a], cc[a, a], mt)
+                tot[o_e2p + a] += _lane_dot(zrow[1], cc[a, a], mt)
+                tot[o_z + a] += _lane_sum(zrow[0], mt)
+                tot[o_z2 + a] += _lane_dot(zrow[0], zrow[0], mt)
+                _add_lanes(r_a[a], zrow[1], mt)
+                _add_lanes(r_b[a], cc[a, a], mt)
+                _add_lanes(r_z[a], zrow[0], mt)
             # the Cramér–Rao bound's expectations at the truth's states: F, F^T Q^-1 F, (R^-1/2 H)^T (R^-1/2 H)
             for a in range(d):
                 for b in range(d):
                     if t_nz[a, b]:
-                        upd[o_f + a * d + b] += _lane_sum(jf[a, b], mt)
+                        tot[o_f + a * d + b] += _lane_sum(jf[a, b], mt)
             if has_q_inv:
                 for a in range(d):
                     for b in range(d):
@@ -623,7 +634,7 @@ def ekf_block(
                     for b in range(d):
                         for w in range(d):
                             if t_nz[w, a]:
-                                upd[o_ftqf + a * d + b] += _lane_dot(jf[w, a], g[w, b], mt)
+                                tot[o_ftqf + a * d + b] += _lane_dot(jf[w, a], g[w, b], mt)
             diagonal_r = True
             for i in range(p):
                 for w in range(i):
@@ -637,7 +648,7 @@ def ekf_block(
                         if w_nz[i, a]:
                             for b in range(a + 1):
                                 if w_nz[i, b]:
-                                    upd[o_htrh + a * d + b] += _lane_dot(jh[i, a], jh[i, b], mt) / r_ii
+                                    tot[o_htrh + a * d + b] += _lane_dot(jh[i, a], jh[i, b], mt) / r_ii
             for i in range(p if not diagonal_r else 0):  # R^-1/2 H by forward substitution, the lane
                 for b in range(d):  # loops innermost; its identically zero entries stay zeros
                     if w_nz[i, b]:
@@ -652,62 +663,62 @@ def ekf_block(
                 for b in range(a + 1):  # below; the products with R^-1/2 H's zero entries skipped
                     for i in range(p):
                         if w_nz[i, a] and w_nz[i, b]:
-                            upd[o_htrh + a * d + b] += _lane_dot(wh[i, a], wh[i, b], mt)
-        # the update's sums (the symmetric ones from their lower triangles)
-        for a in range(dc):
-            sums.error[k, a] += upd[o_err + a]
-            sums.estimate[k, a] += upd[o_est + a]
-            sums.whitened_error[k, a] += upd[o_we + a]
-            e4[k, a] += upd[o_e4 + a]
-            p2[k, a] += upd[o_p2 + a]
-            e2p[k, a] += upd[o_e2p + a]
-            zsum[k, a] += upd[o_z + a]
-            z2sum[k, a] += upd[o_z2 + a]
-            for b in range(dc):
-                ab = a * dc + b
-                low = max(a, b) * dc + min(a, b)
-                sums.error_outer[k, a, b] += upd[o_eo + low]
-                sums.estimate_outer[k, a, b] += upd[o_esto + low]
-                sums.error_estimate[k, a, b] += upd[o_ee + ab]
-                sums.filter_cov[k, a, b] += upd[o_fc + low]
-                sums.whitened_outer[k, a, b] += upd[o_wo + low]
-                sums.whitened_estimate[k, a, b] += upd[o_wx + ab]
-        for a in range(d):
-            for b in range(d):
-                ab = a * d + b
-                fsum[k, a, b] += upd[o_f + ab]
-                ftqf[k, a, b] += upd[o_ftqf + ab]
-                htrh[k, a, b] += upd[o_htrh + max(a, b) * d + min(a, b)]
-        sums.nees[k] += upd[o_nees]
-        sums.nis[k] += upd[o_nis]
-        nees_sq[k] += upd[o_nsq]
-        for a in range(p):
-            sums.residual[k, a] += upd[o_res + a]
-            normalized[k, a] += upd[o_nr + a]
-            for b in range(p):
-                sums.residual_own[k, a, b] += upd[o_reso + max(a, b) * p + min(a, b)]
-    # the per-realization averages over the updates (EffectAccumulator.finish)
-    for t in range(tiles):
-        mt = min(m, n - t * m)
+                            tot[o_htrh + a * d + b] += _lane_dot(wh[i, a], wh[i, b], mt)
+        # the per-realization averages over the updates (EffectAccumulator.finish)
         for j in range(mt):
-            avg = r_nees[t, j] / n_updates
+            avg = r_nees[j] / n_updates
             nees_avg[0] += avg
             nees_avg[1] += avg * avg
-            avg = r_nis[t, j] / n_updates
+            avg = r_nis[j] / n_updates
             nis_avg[0] += avg
             nis_avg[1] += avg * avg
             for a in range(dc):
-                ra, rb = r_a[t, a, j], r_b[t, a, j]
+                ra, rb = r_a[a, j], r_b[a, j]
                 pooled[0, a] += ra
                 pooled[1, a] += rb
                 pooled[2, a] += ra * ra
                 pooled[3, a] += rb * rb
                 pooled[4, a] += ra * rb
-                zb = r_z[t, a, j] / n_updates
+                zb = r_z[a, j] / n_updates
                 zbar[0, a] += zb
                 zbar[1, a] += zb * zb
             if n_updates > 1:
-                lag = r_lag[t, j] / ((n_updates - 1) * p)
+                lag = r_lag[j] / ((n_updates - 1) * p)
                 lag1[0] += lag
                 lag1[1] += lag * lag
+    for k in range(n_updates):
+        tot = upd[k]
+        # the update's sums (the symmetric ones from their lower triangles)
+        for a in range(dc):
+            sums.error[k, a] += tot[o_err + a]
+            sums.estimate[k, a] += tot[o_est + a]
+            sums.whitened_error[k, a] += tot[o_we + a]
+            e4[k, a] += tot[o_e4 + a]
+            p2[k, a] += tot[o_p2 + a]
+            e2p[k, a] += tot[o_e2p + a]
+            zsum[k, a] += tot[o_z + a]
+            z2sum[k, a] += tot[o_z2 + a]
+            for b in range(dc):
+                ab = a * dc + b
+                low = max(a, b) * dc + min(a, b)
+                sums.error_outer[k, a, b] += tot[o_eo + low]
+                sums.estimate_outer[k, a, b] += tot[o_esto + low]
+                sums.error_estimate[k, a, b] += tot[o_ee + ab]
+                sums.filter_cov[k, a, b] += tot[o_fc + low]
+                sums.whitened_outer[k, a, b] += tot[o_wo + low]
+                sums.whitened_estimate[k, a, b] += tot[o_wx + ab]
+        for a in range(d):
+            for b in range(d):
+                ab = a * d + b
+                fsum[k, a, b] += tot[o_f + ab]
+                ftqf[k, a, b] += tot[o_ftqf + ab]
+                htrh[k, a, b] += tot[o_htrh + max(a, b) * d + min(a, b)]
+        sums.nees[k] += tot[o_nees]
+        sums.nis[k] += tot[o_nis]
+        nees_sq[k] += tot[o_nsq]
+        for a in range(p):
+            sums.residual[k, a] += tot[o_res + a]
+            normalized[k, a] += tot[o_nr + a]
+            for b in range(p):
+                sums.residual_own[k, a, b] += tot[o_reso + max(a, b) * p + min(a, b)]
     return True

@@ -91,14 +91,14 @@ _THREAD = threading.local()
 
 
 def _thread_arena(size: int) -> np.ndarray:
-    """This thread's float64 arena of at least ``size`` values for the compiled kernel's block state
+    """This thread's float64 arena of at least ``size`` values for the compiled kernel's tile state
     (:func:`kalcal.scenarios.nonlinear.kernel.arena_size`), kept from block to block and grown as needed.
 
-    A block's state is about 10 MB at imu-3axis's d = 11 (its P_{k-1} and P_k, 4 MB each); allocated per
-    block, the allocator gave it back to the system as the block ended and took it again at the next
-    block's start, a page fault at the first touch of each 4 KB page (2,400 a block, 5-6 ms of a 23 ms
-    block on the development machine). The kernel overwrites what it reads, so one arena serves every
-    block of the thread (the engine's threads run one block at a time each); it is freed with the thread."""
+    A tile's state is about 0.45 MB at imu-3axis's d = 11 (its P_{k-1} and P_k, 209 KB each); memory
+    fresh from the system costs a page fault at the first touch of each 4 KB page, and when the kernel held
+    a whole block's state (10 MB) that cost 5-6 ms of a 23 ms block. The kernel overwrites what it reads,
+    so one arena serves every block of the thread (the engine's threads run one block at a time each);
+    it is freed with the thread."""
     arena = getattr(_THREAD, "arena", None)
     if arena is None or arena.shape[0] < size:
         arena = _THREAD.arena = np.empty(size)
@@ -522,7 +522,7 @@ class NonlinearProblem(ProblemDefaults):
             q_inv, has_q_inv, r_chol,
             fm.x0, fm.p0, fm.q, fm.r, float(fm.dt),
             u_rows, data_rows, checked, sums, normalized, eff, _TILE,
-            _thread_arena(arena_size(n, d, p, checked.shape[0], _TILE)),
+            _thread_arena(arena_size(d, p, checked.shape[0], _TILE)),
         )
         if not ok:
             return None
