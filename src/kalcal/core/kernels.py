@@ -71,9 +71,6 @@ class UpdateWork(NamedTuple):
     #: others hold what they held) and P's entries of two kept states alone are updated, the others keep M's values (a caller that never reads them: its next prediction and its
     #: statistics read only the kept states'); S and H M are whole whatever ``keep`` says
     keep: np.ndarray
-    #: scratch (p + 1, d + 1) int (p > 1): row 0 the columns of one sum's products, row i + 1 H's row i's
-    #: columns that are not identically zero and, in its last entry, their count
-    cols: np.ndarray
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -81,7 +78,7 @@ def update_work(d, p, m):
     """The scratch :func:`covariance_update` needs, allocated once per tile (not once per update)."""
     return UpdateWork(np.empty((p, d, m)), np.empty((p, p, m)), np.empty((d, d, m)), np.empty((d, d, m)), np.empty(m),
                       np.empty((p, d, m)), np.ones((p, d), dtype=np.bool_), np.empty((p, m)),
-                      np.ones((d, d), dtype=np.bool_), np.ones(d, dtype=np.bool_), np.empty((p + 1, d + 1), dtype=np.int64))
+                      np.ones((d, d), dtype=np.bool_), np.ones(d, dtype=np.bool_))
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -127,89 +124,11 @@ def covariance_update(cov, h, v, joseph, gain, s, work):
         _scalar_update(cov, h[0], v[0, 0], joseph, gain[0], s[0, 0], hm[0], a, ap, acc)
     else:
         _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, work.kv, work.h_nz, work.pivot,
-                        work.m_nz, work.keep, work.cols)
+                        work.m_nz, work.keep)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _row_products(out, oi, ou, start, sign, a, au, b, bi, cols, count, m):
-    """out[oi, ou, :m] = (out[oi, ou, :m] if ``start`` else 0) + sign sum_k a[au, w_k] b[bi, w_k] over the
-    columns w_k = cols[k], k < count, of the (., ., m) arrays a and b; three products a pass over the lanes.
-
-    The same numbers as a running row updated by one product a pass (each step one fused multiply-add
-    where the caller contracts; which product of a pass's first sum fuses is the compiler's), at one load
-    and store of the row per three products, not per product. The rows are indexed in the arrays
-    themselves, not passed as views: the compiler then checks the arrays, not each row, for overlap with
-    ``out``, few enough checks for the pass to vectorize (a view per row measured a third slower than
-    one product a pass). ``sign`` is 1.0 or -1.0 (a constant at the call: the negation is exact)."""
-    k = 0
-    if not start:
-        if count == 0:
-            for j in range(m):
-                out[oi, ou, j] = 0.0
-            return
-        k = min(count, 3)
-        w0, w1, w2 = cols[0], cols[min(1, k - 1)], cols[min(2, k - 1)]
-        if k == 1:
-            for j in range(m):
-                out[oi, ou, j] = sign * a[au, w0, j] * b[bi, w0, j]
-        elif k == 2:
-            for j in range(m):
-                out[oi, ou, j] = sign * a[au, w0, j] * b[bi, w0, j] + sign * a[au, w1, j] * b[bi, w1, j]
-        else:
-            for j in range(m):
-                out[oi, ou, j] = (sign * a[au, w0, j] * b[bi, w0, j] + sign * a[au, w1, j] * b[bi, w1, j]
-                                  + sign * a[au, w2, j] * b[bi, w2, j])
-    while k < count:
-        n = min(count - k, 3)
-        w0, w1, w2 = cols[k], cols[k + min(1, n - 1)], cols[k + min(2, n - 1)]
-        if n == 1:
-            for j in range(m):
-                out[oi, ou, j] += sign * a[au, w0, j] * b[bi, w0, j]
-        elif n == 2:
-            for j in range(m):
-                out[oi, ou, j] += sign * a[au, w0, j] * b[bi, w0, j] + sign * a[au, w1, j] * b[bi, w1, j]
-        else:
-            for j in range(m):
-                out[oi, ou, j] += (sign * a[au, w0, j] * b[bi, w0, j] + sign * a[au, w1, j] * b[bi, w1, j]
-                                   + sign * a[au, w2, j] * b[bi, w2, j])
-        k += n
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def _column_products(out, ou, ow, base, cu, cw, sign, a, au, b, bw, m):
-    """out[ou, ow, :m] = base[cu, cw, :m] + sign sum_i a[i, au] b[i, bw] over the measurements i < p
-    (a, b (p, ., m); ``base`` not ``out``), three products a pass (:func:`_row_products`)."""
-    p = a.shape[0]
-    n = min(p, 3)
-    if n == 1:
-        for j in range(m):
-            out[ou, ow, j] = base[cu, cw, j] + sign * a[0, au, j] * b[0, bw, j]
-    elif n == 2:
-        for j in range(m):
-            out[ou, ow, j] = base[cu, cw, j] + sign * a[0, au, j] * b[0, bw, j] + sign * a[1, au, j] * b[1, bw, j]
-    else:
-        for j in range(m):
-            out[ou, ow, j] = (base[cu, cw, j] + sign * a[0, au, j] * b[0, bw, j] + sign * a[1, au, j] * b[1, bw, j]
-                              + sign * a[2, au, j] * b[2, bw, j])
-    i = n
-    while i < p:
-        n = min(p - i, 3)
-        i0, i1, i2 = i, i + min(1, n - 1), i + min(2, n - 1)
-        if n == 1:
-            for j in range(m):
-                out[ou, ow, j] += sign * a[i0, au, j] * b[i0, bw, j]
-        elif n == 2:
-            for j in range(m):
-                out[ou, ow, j] += sign * a[i0, au, j] * b[i0, bw, j] + sign * a[i1, au, j] * b[i1, bw, j]
-        else:
-            for j in range(m):
-                out[ou, ow, j] += (sign * a[i0, au, j] * b[i0, bw, j] + sign * a[i1, au, j] * b[i1, bw, j]
-                                   + sign * a[i2, au, j] * b[i2, bw, j])
-        i += n
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, kv, h_nz, pivot, m_nz, keep, cols):
+def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, kv, h_nz, pivot, m_nz, keep):
     """:func:`covariance_update` where p > 1: K by a Cholesky factor of S and two triangular solves.
 
     The Joseph form P = A M A^T + K V K^T (A = I - K H) by products of O(d^2 p) alone: B = A M =
@@ -219,17 +138,24 @@ def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, kv, h_nz,
     leaves P at K V K^T's scale (tests/core/test_kernel_update.py); the algebraically equal expansion
     M - (H M)^T K^T + K (S K^T - H M) sums terms of M's size and there loses P entirely. ``m_nz`` and
     ``keep`` (:class:`UpdateWork`) skip M's identically zero entries in H M and the states the caller does
-    not read after the update. Its sums of products run three products a pass over the lanes
-    (:func:`_row_products`, :func:`_column_products`)."""
+    not read after the update."""
     d, p, m = cov.shape[0], h.shape[0], cov.shape[2]
-    for i in range(p):  # H M, as (M H^T)^T (zeros where every product is identically zero)
+    for i in range(p):  # H M, as (M H^T)^T, from its first product (zeros where every product is identically zero)
         for u in range(d):
-            count = 0
-            for w in range(d):
+            first = d
+            for w in range(d - 1, -1, -1):
                 if h_nz[i, w] and m_nz[u, w]:
-                    cols[0, count] = w
-                    count += 1
-            _row_products(hm, i, u, False, 1.0, cov, u, h, i, cols[0], count, m)
+                    first = w
+            if first == d:
+                for j in range(m):
+                    hm[i, u, j] = 0.0
+            else:
+                for j in range(m):
+                    hm[i, u, j] = cov[u, first, j] * h[i, first, j]
+            for w in range(first + 1, d):
+                if h_nz[i, w] and m_nz[u, w]:
+                    for j in range(m):
+                        hm[i, u, j] += cov[u, w, j] * h[i, w, j]
     for i in range(p):  # S = H M H^T + V
         for k in range(p):
             for j in range(m):
@@ -283,37 +209,52 @@ def _general_update(cov, h, v, joseph, gain, s, hm, lower, a, ap, acc, kv, h_nz,
                 for j in range(m):
                     gain[i, u, j] = acc[j] * pivot[i, j]
     if joseph:
-        # row by row of the kept states u (B's row u is all that D's column u and P's row u read, so that it
-        # stays in the core's nearest cache, one (d, m) row of ``ap``, from its making to its last use):
-        # B = A M = M - K (H M): the cancellation of M against K H M (a huge prior, a precise measurement)
-        # leaves B at the rounding of M, as A = I - K H is at the rounding of 1;
-        # D = B H^T - K V (p, d), as K^T is laid out: P = B A^T + K V K^T = B - D K^T, B's rounding
-        # multiplied by A^T (the factored form's second factor) and K V K^T added at its own scale: the
-        # Joseph form's numbers (a sum of the two symmetric terms), in O(d^2 p), not the expanded
-        # M - K H M - M H^T K^T + K S K^T, whose terms of M's size leave P at M's rounding;
-        # P = B - D K^T: its lower triangle, the kept states' entries (row u reads M's rows u and later
-        # alone, still whole), mirrored at the end (symmetric by construction)
-        for i in range(p):  # H's columns that are not identically zero, row by row: count, then columns
-            count = 0
-            for w in range(d):
-                if h_nz[i, w]:
-                    cols[i + 1, count] = w
-                    count += 1
-            cols[i + 1, d] = count
+        # B = A M = M - K (H M), the kept states' rows, all columns (D below reads them all): the
+        # cancellation of M against K H M (a huge prior, a precise measurement) leaves B at the rounding of
+        # M, as A = I - K H is at the rounding of 1
         for u in range(d):
             if not keep[u]:
                 continue
             for w in range(d):
-                _column_products(ap, 0, w, cov, u, w, -1.0, gain, u, hm, w, m)
-            for i in range(p):
-                _row_products(kv, i, u, False, 1.0, ap, 0, h, i, cols[i + 1], cols[i + 1, d], m)
-                for k in range(p):
-                    if v[k, i] != 0.0:  # (V's zeros skipped: the product would be an exact zero)
+                for j in range(m):
+                    acc[j] = cov[u, w, j] - gain[0, u, j] * hm[0, w, j]
+                for i in range(1, p):
+                    for j in range(m):
+                        acc[j] -= gain[i, u, j] * hm[i, w, j]
+                for j in range(m):
+                    ap[u, w, j] = acc[j]
+        # D = B H^T - K V (p, d), as K^T is laid out: P = B A^T + K V K^T = B - D K^T, B's rounding
+        # multiplied by A^T (the factored form's second factor) and K V K^T added at its own scale: the
+        # Joseph form's numbers (a sum of the two symmetric terms), in O(d^2 p), not the expanded
+        # M - K H M - M H^T K^T + K S K^T, whose terms of M's size leave P at M's rounding
+        for i in range(p):
+            for u in range(d):
+                if not keep[u]:
+                    continue
+                for j in range(m):
+                    acc[j] = 0.0
+                for w in range(d):
+                    if h_nz[i, w]:
                         for j in range(m):
-                            kv[i, u, j] -= gain[k, u, j] * v[k, i]
+                            acc[j] += ap[u, w, j] * h[i, w, j]
+                for k in range(p):
+                    for j in range(m):
+                        acc[j] -= gain[k, u, j] * v[k, i]
+                for j in range(m):
+                    kv[i, u, j] = acc[j]
+        # P = B - D K^T: its lower triangle, the kept states' entries, mirrored (symmetric by construction)
+        for u in range(d):
+            if not keep[u]:
+                continue
             for w in range(u + 1):
                 if keep[w]:
-                    _column_products(cov, u, w, ap, 0, w, -1.0, kv, u, gain, w, m)
+                    for j in range(m):
+                        acc[j] = ap[u, w, j] - kv[0, u, j] * gain[0, w, j]
+                    for i in range(1, p):
+                        for j in range(m):
+                            acc[j] -= kv[i, u, j] * gain[i, w, j]
+                    for j in range(m):
+                        cov[u, w, j] = acc[j]
         for u in range(d):
             if not keep[u]:
                 continue

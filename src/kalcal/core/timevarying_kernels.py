@@ -18,7 +18,7 @@ The exact diffuse period (rows whose prior still has an infinite part) runs in n
 few rows in any model whose diffuse states the first measurements determine.
 """
 
-# numba cache stamp: kalcal.core.kernels 0d2252911ea6e4a8
+# numba cache stamp: kalcal.core.kernels a5dbbb626c1a87c1
 
 from __future__ import annotations
 

@@ -19,7 +19,7 @@ test the compiled :func:`kalcal.core.kernels.measured`; tests/filters/test_seque
 to the reference steps fix by fix.
 """
 
-# numba cache stamp: kalcal.core.kernels 0d2252911ea6e4a8
+# numba cache stamp: kalcal.core.kernels a5dbbb626c1a87c1
 
 from __future__ import annotations
 

@@ -31,7 +31,7 @@ numpy path's rule, a prediction only) or a P or S is not positive definite: the 
 block on the numpy path from the same draws, which gives that case's numbers (or its error).
 """
 
-# numba cache stamp: kalcal.core.kernels 0d2252911ea6e4a8
+# numba cache stamp: kalcal.core.kernels a5dbbb626c1a87c1
 
 from __future__ import annotations
 

@@ -20,7 +20,7 @@ The filter step itself is compiled without fast-math (each realization's numbers
 machine and in any tile); only the sums over realizations are reassociated.
 """
 
-# numba cache stamp: kalcal.core.kernels 0d2252911ea6e4a8, kalcal.montecarlo.sum_kernels 1ed5637ca40b0768
+# numba cache stamp: kalcal.core.kernels a5dbbb626c1a87c1, kalcal.montecarlo.sum_kernels 1ed5637ca40b0768
 
 from __future__ import annotations
 

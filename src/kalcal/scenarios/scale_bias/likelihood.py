@@ -20,7 +20,7 @@ then :func:`kalcal.filters.regression.run_regression_filter` then
 :func:`kalcal.core.likelihood.innovation_loglik` (tests/fitting/test_scale_bias_likelihood_steps.py).
 """
 
-# numba cache stamp: kalcal.core.kernels 0d2252911ea6e4a8
+# numba cache stamp: kalcal.core.kernels a5dbbb626c1a87c1
 
 from __future__ import annotations
 
