@@ -17,7 +17,7 @@ normals (K, n, q + r) and the sums, the residual pair sums (K p)^2 among them. M
 Layout: the block's realizations in tiles of m, structure of arrays (realizations on the last axis, as
 covariance_update takes them), tiles outer and updates inner: a tile's state (418 KB at imu-3axis's
 d = 11 and m = 216) stays in the core's cache through its K updates, where with updates outer every
-update brought each tile's from memory (at 2 threads, 16% of imu-3axis's run; benchmarks/README.md). Each
+update brought each tile's from memory (7-16% of imu-3axis's run at 2 threads in three sittings; benchmarks/README.md). Each
 update's totals take the tiles' sums in tile order, the same additions either way. A last tile that is not full repeats the
 block's last realization in its spare lanes (finite numbers through every step) and leaves them out of
 every sum.
