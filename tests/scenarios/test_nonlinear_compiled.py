@@ -138,8 +138,8 @@ def test_imu_3axis_compiled_block_sums_equal_the_numpy_path(n):
 
 
 def test_the_threads_arena_is_overwritten_not_read():
-    """The kernel's block state lives in its thread's arena, kept from block to block (no page faults of
-    fresh memory per block): what an earlier block or anything else left there (NaN here, or a larger
+    """The kernel's tile state lives in its thread's arena, kept from tile to tile and block to block (no
+    page faults of fresh memory per block): what an earlier block or anything else left there (NaN here, or a larger
     arena's state) changes no sum, bit for bit; the arena grows where a larger one is asked for and is reused."""
     from kalcal.scenarios.nonlinear import problem as nonlinear_problem
     from kalcal.scenarios.nonlinear.kernel import arena_size
@@ -247,26 +247,30 @@ def test_filters_and_models_the_kernel_does_not_take_keep_the_numpy_path_and_say
 
 class _PlantedNaN:
     """A generator whose draws are another's, with one measurement noise made NaN (a missing measurement
-    of realization 5 at update 3); its state is the wrapped one's, so a path that restores it redraws the same."""
+    of realization ``at`` at update 3); its state is the wrapped one's, so a path that restores it redraws the same."""
 
-    def __init__(self, seed):
+    def __init__(self, seed, at=5):
         self._rng = block_generator(seed, 0)
         self.bit_generator = self._rng.bit_generator
+        self._at = at
 
     def standard_normal(self, shape):
         out = self._rng.standard_normal(shape)
         if len(shape) == 3:
-            out[3, 5, shape[2] - 1] = np.nan
+            out[3, self._at, shape[2] - 1] = np.nan
         return out
 
 
-def test_a_missing_measurement_stops_the_kernel_and_the_block_runs_on_the_numpy_path_from_the_same_draws():
+@pytest.mark.parametrize("n, at", [(100, 5), (_TILE + 84, _TILE + 40)])  # in the first tile, or in a later one
+def test_a_missing_measurement_stops_the_kernel_and_the_block_runs_on_the_numpy_path_from_the_same_draws(n, at):
+    """The kernel stops at the NaN, in whichever tile (a later tile's stop leaves the earlier tiles' sums in
+    buffers the caller drops), and the block's numbers are the numpy path's from the same draws."""
     problem = load_code_model(str(EXAMPLE), ["scenario.updates=6", "filter.compiled=yes"]).problem()
     assert problem.compiled_path[0]
-    assert problem._compiled_block_sums(_PlantedNaN(4), 100) is None  # the kernel stops at the NaN
-    got = problem.block_sums(_PlantedNaN(4), 100, "exact")
+    assert problem._compiled_block_sums(_PlantedNaN(4, at), n) is None  # the kernel stops at the NaN
+    got = problem.block_sums(_PlantedNaN(4, at), n, "exact")
     assert (problem.tally.compiled, problem.tally.fallback) == (0, 1)  # counted as the fallback it was
-    want = problem.numpy_block_sums(_PlantedNaN(4), 100, "exact")
+    want = problem.numpy_block_sums(_PlantedNaN(4, at), n, "exact")
     for f in dataclasses.fields(want):
         a, b = getattr(got, f.name), getattr(want, f.name)
         if f.name == "effect_blocks":

@@ -15,9 +15,11 @@ normals (K, n, q + r) and the sums, the residual pair sums (K p)^2 among them. M
 (blocks of at most 4,096), not in K.
 
 Layout: the block's realizations in tiles of m, structure of arrays (realizations on the last axis, as
-covariance_update takes them), tiles outer and updates inner: a tile's state (418 KB at imu-3axis's
-d = 11 and m = 216) stays in the core's cache through its K updates, where with updates outer every
-update brought each tile's from memory (7-16% of imu-3axis's run at 2 threads in three sittings; benchmarks/README.md). Each
+covariance_update takes them), tiles outer and updates inner: a tile's P_{k-1} and P_k (418 KB at
+imu-3axis's d = 11 and m = 216) are used by its K updates one after another, where with updates outer
+every update went through the whole block's (10 MB) before it came back to a tile: 7-16% of imu-3axis's
+run at 2 threads in three sittings (benchmarks/README.md; the caches' part in it is the likely cause, not
+measured: the development machine gives no cache counters). Each
 update's totals take the tiles' sums in tile order, the same additions either way. A last tile that is not full repeats the
 block's last realization in its spare lanes (finite numbers through every step) and leaves them out of
 every sum.
@@ -381,8 +383,8 @@ def ekf_block(
     o_ftqf = o_f + dd
     o_htrh = o_ftqf + dd
     width = o_htrh + dd
-    # tiles outer, updates inner: a tile's state (its P_{k-1} and P_k: 418 KB at d = 11) stays in the
-    # core's cache through its K updates; each update's sums are reduced into that update's row of
+    # tiles outer, updates inner: a tile's state (its P_{k-1} and P_k: 418 KB at d = 11) is used by its K
+    # updates one after another (module docstring); each update's sums are reduced into that update's row of
     # totals, tile after tile in order (the same additions as with updates outer)
     upd = np.zeros((n_updates, width))
     for t in range(tiles):

@@ -94,7 +94,7 @@ def _thread_arena(size: int) -> np.ndarray:
     """This thread's float64 arena of at least ``size`` values for the compiled kernel's tile state
     (:func:`kalcal.scenarios.nonlinear.kernel.arena_size`), kept from block to block and grown as needed.
 
-    A tile's state is about 0.45 MB at imu-3axis's d = 11 (its P_{k-1} and P_k, 209 KB each); memory
+    A tile's state is 0.51 MB at imu-3axis's d = 11 (its P_{k-1} and P_k, 209 KB each at 216 realizations); memory
     fresh from the system costs a page fault at the first touch of each 4 KB page, and when the kernel held
     a whole block's state (10 MB) that cost 5-6 ms of a 23 ms block. The kernel overwrites what it reads,
     so one arena serves every block of the thread (the engine's threads run one block at a time each);
