@@ -17,9 +17,9 @@ normals (K, n, q + r) and the sums, the residual pair sums (K p)^2 among them. M
 Layout: the block's realizations in tiles of m, structure of arrays (realizations on the last axis, as
 covariance_update takes them), tiles outer and updates inner: a tile's P_{k-1} and P_k (418 KB at
 imu-3axis's d = 11 and m = 216) are used by its K updates one after another, where with updates outer
-every update went through the whole block's (10 MB) before it came back to a tile: 7-16% of imu-3axis's
-run at 2 threads in three sittings (benchmarks/README.md; the caches' part in it is the likely cause, not
-measured: the development machine gives no cache counters). Each
+every update went through the whole block's (7.9 MB) before it came back to a tile: 7-16% of imu-3axis's
+run at 2 threads in three sittings, two of them with a withdrawn change of about 1% (benchmarks/README.md;
+the caches' part in it is the likely cause, not measured: the development machine gives no cache counters). Each
 update's totals take the tiles' sums in tile order, the same additions either way. A last tile that is not full repeats the
 block's last realization in its spare lanes (finite numbers through every step) and leaves them out of
 every sum.

@@ -77,8 +77,8 @@ COMPILE_WORTH = 10_000_000
 COMPILED_MODES = SETTINGS_COMPILED_MODES
 
 #: realizations per tile of the compiled kernel: the kernel's many short loops over the lanes each pay a
-#: fixed cost (their runtime overlap checks) that a longer run spreads, while a tile's arrays stay in the
-#: core's cache (a (d, d, 216) array is 209 KB at d = 11, 28 KB at d = 4). Not a power of two: 128 and 256
+#: fixed cost (their runtime overlap checks) that a longer run spreads, while a tile's arrays stay small
+#: (a (d, d, 216) array is 209 KB at d = 11, 28 KB at d = 4). Not a power of two: 128 and 256
 #: lanes measured slower than 192-216 and 320 (the likely cause, not measured apart: rows of 2^k floats
 #: put the same entries of a tile's arrays a multiple of 4 KB apart, and a load from such an address waits
 #: on the store before it, 4K aliasing). Measured on imu-3axis's kernel (benchmarks/README.md, section
